@@ -1,1 +1,24 @@
-pub fn placeholder() {}
+//! cutlab-sim: a pre-tensioned particle model of soft tissue on a tetrahedral mesh, after
+//! Nakao et al., "Combining Volumetric Soft Tissue Cuts for Interventional Surgery
+//! Simulation".
+//!
+//! Pure, deterministic data and functions: no threads, clocks, files of sessions, databases or
+//! the web. SI units throughout (metres, kilograms, seconds, newtons), `f64` everywhere.
+//!
+//! - [`mesh`]: the tetrahedral mesh, its topology, validation and quality measures;
+//! - [`io`]: mesh readers (Gmsh, TetGen, VTK) and the `.vtu` writer, NIfTI segmentations;
+//! - [`generate`]: built-in structured meshes (slabs, sheets, bars);
+//! - [`model`]: the particle/spring/damper model with pre-tension;
+//! - [`solver`]: time integrators and static equilibrium;
+//! - [`scene`]: scene files and built-in scenes.
+
+pub mod error;
+pub mod mesh;
+
+pub use error::{MeshError, ReadError};
+pub use mesh::TetMesh;
+
+/// 3-D point in metres.
+pub type Point3 = nalgebra::Point3<f64>;
+/// 3-D vector (displacement in metres, velocity in m/s, force in N, by context).
+pub type Vector3 = nalgebra::Vector3<f64>;

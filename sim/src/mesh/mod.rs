@@ -1,0 +1,209 @@
+//! The tetrahedral mesh: vertices (metres), positively oriented tetrahedra, per-tet material
+//! regions, and the topology derived from them (see [`Topology`]).
+
+mod geometry;
+mod quality;
+mod topology;
+mod validate;
+
+pub use geometry::{dihedral_angles, tet_signed_volume, triangle_normal};
+pub use quality::QualityStats;
+pub use topology::{Csr, TET_EDGES, TET_FACES, Topology, NONE};
+pub use validate::ValidationReport;
+
+use crate::{MeshError, Point3};
+
+/// Index of a vertex (particle).
+pub type VertexId = u32;
+/// Index of a tetrahedron.
+pub type TetId = u32;
+
+/// A tetrahedral mesh with derived topology.
+///
+/// Invariants kept by construction: every vertex id of a tetrahedron is in range and the four
+/// ids of a tetrahedron are distinct; there is one region id per tetrahedron. Geometric
+/// properties (orientation, degeneracy, conformity) are *checked* by [`TetMesh::validate`],
+/// not assumed, because they depend on the data and on the current deformation.
+#[derive(Debug, Clone)]
+pub struct TetMesh {
+    positions: Vec<Point3>,
+    tets: Vec<[VertexId; 4]>,
+    regions: Vec<u32>,
+    topology: Topology,
+}
+
+impl TetMesh {
+    /// Builds a mesh from vertex positions (metres), tetrahedra and one region id per
+    /// tetrahedron. The vertex order of each tetrahedron is kept as given; call
+    /// [`TetMesh::orient_positively`] to fix files written with the opposite convention.
+    pub fn new(
+        positions: Vec<Point3>,
+        tets: Vec<[VertexId; 4]>,
+        regions: Vec<u32>,
+    ) -> Result<Self, MeshError> {
+        if tets.is_empty() {
+            return Err(MeshError::Empty);
+        }
+        if positions.len() > u32::MAX as usize - 1 {
+            return Err(MeshError::TooManyVertices(positions.len()));
+        }
+        if regions.len() != tets.len() {
+            return Err(MeshError::RegionCount { regions: regions.len(), tets: tets.len() });
+        }
+        for (t, tet) in tets.iter().enumerate() {
+            for (i, &v) in tet.iter().enumerate() {
+                if v as usize >= positions.len() {
+                    return Err(MeshError::VertexOutOfRange {
+                        tet: t,
+                        vertex: v,
+                        vertex_count: positions.len(),
+                    });
+                }
+                if tet[..i].contains(&v) {
+                    return Err(MeshError::RepeatedVertex { tet: t, vertex: v });
+                }
+            }
+        }
+        let topology = Topology::build(positions.len(), &tets);
+        Ok(Self { positions, tets, regions, topology })
+    }
+
+    /// Builds a mesh where every tetrahedron has region 0.
+    pub fn with_single_region(
+        positions: Vec<Point3>,
+        tets: Vec<[VertexId; 4]>,
+    ) -> Result<Self, MeshError> {
+        let regions = vec![0; tets.len()];
+        Self::new(positions, tets, regions)
+    }
+
+    /// Swaps two vertices of every negatively oriented tetrahedron (signed volume < 0) so that
+    /// all are positively oriented. Degenerate tetrahedra are left alone. Returns how many
+    /// were flipped.
+    pub fn orient_positively(&mut self) -> usize {
+        let mut flipped = 0;
+        for tet in &mut self.tets {
+            let [a, b, c, d] = tet.map(|v| self.positions[v as usize]);
+            if tet_signed_volume(&a, &b, &c, &d) < 0.0 {
+                tet.swap(2, 3);
+                flipped += 1;
+            }
+        }
+        if flipped > 0 {
+            self.topology = Topology::build(self.positions.len(), &self.tets);
+        }
+        flipped
+    }
+
+    /// Vertex positions in metres.
+    pub fn positions(&self) -> &[Point3] {
+        &self.positions
+    }
+
+    /// Mutable vertex positions (topology is unaffected by moving vertices).
+    pub fn positions_mut(&mut self) -> &mut [Point3] {
+        &mut self.positions
+    }
+
+    /// Tetrahedra as four vertex ids each.
+    pub fn tets(&self) -> &[[VertexId; 4]] {
+        &self.tets
+    }
+
+    /// Material region id of each tetrahedron.
+    pub fn regions(&self) -> &[u32] {
+        &self.regions
+    }
+
+    /// Derived topology: edges, faces, surface and adjacency.
+    pub fn topology(&self) -> &Topology {
+        &self.topology
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn tet_count(&self) -> usize {
+        self.tets.len()
+    }
+
+    /// The four corner positions of tetrahedron `t`.
+    pub fn tet_corners(&self, t: usize) -> [Point3; 4] {
+        self.tets[t].map(|v| self.positions[v as usize])
+    }
+
+    /// Signed volume of tetrahedron `t` in m^3 (positive when positively oriented).
+    pub fn tet_volume(&self, t: usize) -> f64 {
+        let [a, b, c, d] = self.tet_corners(t);
+        tet_signed_volume(&a, &b, &c, &d)
+    }
+
+    /// Sum of signed tetrahedron volumes in m^3.
+    pub fn volume(&self) -> f64 {
+        (0..self.tets.len()).map(|t| self.tet_volume(t)).sum()
+    }
+
+    /// Axis-aligned bounding box `(min, max)` of the vertices.
+    pub fn bounding_box(&self) -> (Point3, Point3) {
+        let mut lo = Point3::new(f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        let mut hi = Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+        for p in &self.positions {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        (lo, hi)
+    }
+
+    /// Distinct region ids, ascending.
+    pub fn region_ids(&self) -> Vec<u32> {
+        let mut ids = self.regions.clone();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
+    /// Checks geometry and conformity; see [`ValidationReport`].
+    pub fn validate(&self) -> ValidationReport {
+        validate::validate(self)
+    }
+
+    /// Dihedral-angle statistics over all tetrahedra.
+    pub fn quality(&self) -> QualityStats {
+        quality::quality(self)
+    }
+
+    /// Removes vertices that no tetrahedron uses, renumbering the rest in order.
+    /// Returns the number removed.
+    pub fn remove_dangling_vertices(&mut self) -> usize {
+        let mut used = vec![false; self.positions.len()];
+        for tet in &self.tets {
+            for &v in tet {
+                used[v as usize] = true;
+            }
+        }
+        let mut new_id = vec![NONE; self.positions.len()];
+        let mut next = 0u32;
+        for (v, &u) in used.iter().enumerate() {
+            if u {
+                new_id[v] = next;
+                next += 1;
+            }
+        }
+        let removed = self.positions.len() - next as usize;
+        if removed == 0 {
+            return 0;
+        }
+        let mut i = 0;
+        self.positions.retain(|_| {
+            let keep = used[i];
+            i += 1;
+            keep
+        });
+        for tet in &mut self.tets {
+            *tet = tet.map(|v| new_id[v as usize]);
+        }
+        self.topology = Topology::build(self.positions.len(), &self.tets);
+        removed
+    }
+}
