@@ -22,3 +22,6 @@ pub use mesh::TetMesh;
 pub type Point3 = nalgebra::Point3<f64>;
 /// 3-D vector (displacement in metres, velocity in m/s, force in N, by context).
 pub type Vector3 = nalgebra::Vector3<f64>;
+pub mod generate;
+pub mod model;
+pub mod solver;

@@ -1,0 +1,145 @@
+//! The paper's particle model: particles at the mesh vertices with lumped masses, springs and
+//! dampers along the tetrahedron edges, pre-tension by shortened rest lengths, held vertices
+//! and gravity.
+
+mod material;
+mod springs;
+
+pub use material::{Material, SpringStiffness};
+pub use springs::SpringSet;
+
+use crate::{Point3, TetMesh, Vector3};
+
+/// A problem with the model's set-up.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    #[error("region {region}: {message}")]
+    Material { region: u32, message: String },
+    #[error("no material for region {0}")]
+    MissingMaterial(u32),
+    #[error("held vertex {vertex} is out of range (mesh has {vertex_count} vertices)")]
+    HeldOutOfRange { vertex: u32, vertex_count: usize },
+    #[error("gravity must be finite")]
+    NonFiniteGravity,
+    #[error("vertex {vertex} has zero mass (it belongs to no tetrahedron of positive volume)")]
+    ZeroMass { vertex: u32 },
+}
+
+/// The particle model (everything but the changing state).
+#[derive(Debug, Clone)]
+pub struct Model {
+    /// The mesh in its reference (initial, unstressed-geometry) configuration.
+    pub mesh: TetMesh,
+    /// Materials by region id, sorted by id.
+    pub materials: Vec<(u32, Material)>,
+    /// Lumped mass `m_i = sum over tets k around i of rho_k V_k / 4`, in kg.
+    pub mass: Vec<f64>,
+    /// `1 / m_i` for free vertices, 0 for held ones.
+    pub inv_mass: Vec<f64>,
+    /// Vertices held at their position.
+    pub held: Vec<bool>,
+    pub springs: SpringSet,
+    /// Gravitational acceleration in m/s^2 (zero when gravity is off).
+    pub gravity: Vector3,
+}
+
+/// Positions (m) and velocities (m/s) of the particles.
+#[derive(Debug, Clone, PartialEq)]
+pub struct State {
+    pub positions: Vec<Point3>,
+    pub velocities: Vec<Vector3>,
+}
+
+impl State {
+    /// At rest in the mesh's reference positions.
+    pub fn at_rest(mesh: &TetMesh) -> Self {
+        Self { positions: mesh.positions().to_vec(), velocities: vec![Vector3::zeros(); mesh.vertex_count()] }
+    }
+
+    /// Largest particle speed in m/s.
+    pub fn max_speed(&self) -> f64 {
+        self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max)
+    }
+
+    /// A hash of the exact bits of every position and velocity (FNV-1a, 64 bit): equal states
+    /// give equal hashes on every platform.
+    pub fn bit_hash(&self) -> u64 {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |x: f64| {
+            for byte in x.to_bits().to_le_bytes() {
+                h ^= byte as u64;
+                h = h.wrapping_mul(0x0100_0000_01b3);
+            }
+        };
+        for p in &self.positions {
+            p.iter().for_each(|&c| eat(c));
+        }
+        for v in &self.velocities {
+            v.iter().for_each(|&c| eat(c));
+        }
+        h
+    }
+}
+
+impl Model {
+    /// Builds the model: materials per region (`materials`, any order), held vertices, gravity.
+    pub fn new(
+        mesh: TetMesh,
+        materials: &[(u32, Material)],
+        held_vertices: &[u32],
+        gravity: Vector3,
+    ) -> Result<Self, ModelError> {
+        let mut materials = materials.to_vec();
+        materials.sort_by_key(|(id, _)| *id);
+        materials.dedup_by_key(|(id, _)| *id);
+        for (region, m) in &materials {
+            m.check().map_err(|message| ModelError::Material { region: *region, message })?;
+        }
+        if !gravity.iter().all(|g| g.is_finite()) {
+            return Err(ModelError::NonFiniteGravity);
+        }
+        let mut material_of_tet = Vec::with_capacity(mesh.tet_count());
+        for &r in mesh.regions() {
+            let i = materials.binary_search_by_key(&r, |(id, _)| *id).map_err(|_| ModelError::MissingMaterial(r))?;
+            material_of_tet.push(materials[i].1);
+        }
+        let n = mesh.vertex_count();
+        let mut held = vec![false; n];
+        for &v in held_vertices {
+            *held.get_mut(v as usize).ok_or(ModelError::HeldOutOfRange { vertex: v, vertex_count: n })? = true;
+        }
+        let mass = lumped_masses(&mesh, &material_of_tet);
+        if let Some(v) = mass.iter().position(|&m| !(m > 0.0)) {
+            return Err(ModelError::ZeroMass { vertex: v as u32 });
+        }
+        let inv_mass = mass.iter().zip(&held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
+        let springs = SpringSet::from_mesh(&mesh, &material_of_tet);
+        Ok(Self { mesh, materials, mass, inv_mass, held, springs, gravity })
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.mass.len()
+    }
+
+    /// Total mass in kg.
+    pub fn total_mass(&self) -> f64 {
+        self.mass.iter().sum()
+    }
+
+    /// Number of held vertices.
+    pub fn held_count(&self) -> usize {
+        self.held.iter().filter(|&&h| h).count()
+    }
+}
+
+/// `m_i = sum over tets k containing i of rho_k V_k / 4` (the paper's equation 2).
+pub fn lumped_masses(mesh: &TetMesh, material_of_tet: &[Material]) -> Vec<f64> {
+    let mut mass = vec![0.0; mesh.vertex_count()];
+    for (t, tet) in mesh.tets().iter().enumerate() {
+        let quarter = 0.25 * material_of_tet[t].density_kg_per_m3 * mesh.tet_volume(t).abs();
+        for &v in tet {
+            mass[v as usize] += quarter;
+        }
+    }
+    mass
+}

@@ -1,0 +1,62 @@
+//! Springs and dampers along the edges of the mesh.
+
+use super::{Material, SpringStiffness};
+use crate::TetMesh;
+
+/// One spring + damper per mesh edge, stored as a structure of arrays.
+#[derive(Debug, Clone, Default)]
+pub struct SpringSet {
+    /// First and second particle of each spring (`a < b`).
+    pub ends: Vec<[u32; 2]>,
+    /// Rest length `l = d (1 - s)` in metres.
+    pub rest_length: Vec<f64>,
+    /// Spring constant in N/m.
+    pub stiffness: Vec<f64>,
+    /// Damper coefficient in N s/m.
+    pub damping: Vec<f64>,
+}
+
+impl SpringSet {
+    pub fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ends.is_empty()
+    }
+
+    /// Springs on every edge of `mesh`, with parameters averaged over the tetrahedra around the
+    /// edge (`material_of_tet[t]` gives each tet's material). The pre-tension rule sets
+    /// `l = d (1 - s)` with `d` the edge's length in the mesh's (reference) positions.
+    pub fn from_mesh(mesh: &TetMesh, material_of_tet: &[Material]) -> Self {
+        let topo = mesh.topology();
+        let pos = mesh.positions();
+        let n = topo.edges.len();
+        let mut set = Self {
+            ends: Vec::with_capacity(n),
+            rest_length: Vec::with_capacity(n),
+            stiffness: Vec::with_capacity(n),
+            damping: Vec::with_capacity(n),
+        };
+        for (e, &[a, b]) in topo.edges.iter().enumerate() {
+            let d = (pos[b as usize] - pos[a as usize]).norm();
+            let tets = topo.edge_tets.row(e);
+            let count = tets.len() as f64;
+            let (mut k, mut c, mut s) = (0.0, 0.0, 0.0);
+            for &t in tets {
+                let m = &material_of_tet[t as usize];
+                k += match m.stiffness {
+                    SpringStiffness::Uniform { newtons_per_metre } => newtons_per_metre / count,
+                    SpringStiffness::YoungsModulus { pascals } => pascals * mesh.tet_volume(t as usize) / (d * d),
+                };
+                c += m.damping_newton_seconds_per_metre / count;
+                s += m.pretension / count;
+            }
+            set.ends.push([a, b]);
+            set.rest_length.push(d * (1.0 - s));
+            set.stiffness.push(k);
+            set.damping.push(c);
+        }
+        set
+    }
+}

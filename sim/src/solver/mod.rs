@@ -1,0 +1,247 @@
+//! Time integration and static equilibrium of the particle model.
+//!
+//! [`Simulation`] owns the model, the state, the external forces and scratch buffers only; a
+//! step never allocates once the buffers have grown. Steps are deterministic: the same inputs
+//! give bit-identical states (sequential loops in a fixed order, no hash-map iteration).
+//! A step that would produce a non-finite value is rejected and the state left unchanged
+//! (quarantine), with the offending particles named in the error.
+
+pub mod explicit;
+pub mod forces;
+pub mod implicit;
+pub mod statics;
+pub mod system;
+
+use serde::{Deserialize, Serialize};
+
+pub use statics::{StaticReport, StaticSettings};
+pub use system::{CgReport, CgSettings};
+
+use crate::Vector3;
+use crate::model::{Model, State};
+
+/// Time integrator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Integrator {
+    /// Symplectic Euler, explicitly sub-stepped below the estimated stability limit.
+    SymplecticEuler,
+    /// Linearised backward Euler solved by PCG with warm start.
+    #[default]
+    ImplicitEuler,
+}
+
+impl Integrator {
+    pub const ALL: [Integrator; 2] = [Integrator::SymplecticEuler, Integrator::ImplicitEuler];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::SymplecticEuler => "symplectic-euler",
+            Integrator::ImplicitEuler => "implicit-euler",
+        }
+    }
+}
+
+impl std::str::FromStr for Integrator {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|i| i.name() == s)
+            .ok_or_else(|| format!("unknown integrator {s:?} (expected symplectic-euler or implicit-euler)"))
+    }
+}
+
+/// Solver settings (also the `[solver]` table of a scene file).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SolverSettings {
+    pub integrator: Integrator,
+    /// Fixed simulation step in seconds (default 1 ms).
+    pub time_step_s: f64,
+    /// Explicit sub-steps are kept below `explicit_safety` times the stability limit.
+    pub explicit_safety: f64,
+    /// Relative residual at which the implicit CG stops.
+    pub cg_relative_tolerance: f64,
+    pub cg_max_iterations: usize,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        Self {
+            integrator: Integrator::ImplicitEuler,
+            time_step_s: 1e-3,
+            explicit_safety: 0.9,
+            cg_relative_tolerance: 1e-6,
+            cg_max_iterations: 500,
+        }
+    }
+}
+
+impl SolverSettings {
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.time_step_s > 0.0 && self.time_step_s.is_finite()) {
+            return Err(format!("time_step_s must be positive, got {}", self.time_step_s));
+        }
+        if !(self.explicit_safety > 0.0 && self.explicit_safety <= 1.0) {
+            return Err(format!("explicit_safety must be in (0, 1], got {}", self.explicit_safety));
+        }
+        if !(self.cg_relative_tolerance > 0.0 && self.cg_relative_tolerance < 1.0) {
+            return Err(format!("cg_relative_tolerance must be in (0, 1), got {}", self.cg_relative_tolerance));
+        }
+        if self.cg_max_iterations == 0 {
+            return Err("cg_max_iterations must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// A step that was rejected; the state is unchanged.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum StepError {
+    #[error("non-finite external force on particles {}", list(.vertices))]
+    NonFiniteInput { vertices: Vec<u32> },
+    #[error("step rejected: it would make the state of particles {} non-finite", list(.vertices))]
+    NonFinite { vertices: Vec<u32> },
+}
+
+fn list(v: &[u32]) -> String {
+    let shown: Vec<String> = v.iter().take(8).map(u32::to_string).collect();
+    if v.len() > 8 { format!("{}, ... ({} in all)", shown.join(", "), v.len()) } else { shown.join(", ") }
+}
+
+/// What one step did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepReport {
+    pub substeps: u32,
+    pub cg_iterations: usize,
+    pub cg_relative_residual: f64,
+}
+
+/// Buffers reused by every step.
+#[derive(Debug, Clone, Default)]
+struct Scratch {
+    backup: Option<State>,
+    forces: Vec<Vector3>,
+    implicit: implicit::ImplicitScratch,
+}
+
+/// The particle simulation: model, state, inputs and scratch.
+#[derive(Debug, Clone)]
+pub struct Simulation {
+    pub model: Model,
+    pub state: State,
+    pub settings: SolverSettings,
+    /// External force on each particle for the next steps (N), e.g. the scalpel contact.
+    external_forces: Vec<Vector3>,
+    /// Sub-steps per step of the explicit integrator (recomputed when the model changes).
+    explicit_substeps: u32,
+    step_index: u64,
+    scratch: Scratch,
+}
+
+impl Simulation {
+    /// A simulation at rest in the mesh's reference positions.
+    pub fn new(model: Model, settings: SolverSettings) -> Self {
+        let state = State::at_rest(&model.mesh);
+        let n = model.vertex_count();
+        let explicit_substeps = explicit::substeps_for(&model, settings.time_step_s, settings.explicit_safety);
+        Self {
+            model,
+            state,
+            settings,
+            external_forces: vec![Vector3::zeros(); n],
+            explicit_substeps,
+            step_index: 0,
+            scratch: Scratch::default(),
+        }
+    }
+
+    /// Steps taken so far.
+    pub fn step_index(&self) -> u64 {
+        self.step_index
+    }
+
+    /// Simulated time in seconds.
+    pub fn time_s(&self) -> f64 {
+        self.step_index as f64 * self.settings.time_step_s
+    }
+
+    /// Sub-steps the explicit integrator takes per step.
+    pub fn explicit_substeps(&self) -> u32 {
+        self.explicit_substeps
+    }
+
+    /// Call after changing the model's springs or masses.
+    pub fn model_changed(&mut self) {
+        self.explicit_substeps =
+            explicit::substeps_for(&self.model, self.settings.time_step_s, self.settings.explicit_safety);
+        self.external_forces.resize(self.model.vertex_count(), Vector3::zeros());
+    }
+
+    /// External forces for the next steps (N per particle).
+    pub fn external_forces_mut(&mut self) -> &mut [Vector3] {
+        &mut self.external_forces
+    }
+
+    /// Sets every external force to zero.
+    pub fn clear_external_forces(&mut self) {
+        self.external_forces.iter_mut().for_each(|f| *f = Vector3::zeros());
+    }
+
+    /// Moves the free particles to static equilibrium (velocities zero).
+    pub fn settle(&mut self, settings: StaticSettings) -> StaticReport {
+        statics::solve(&self.model, &mut self.state, settings)
+    }
+
+    /// Advances one fixed step of `settings.time_step_s`.
+    pub fn step(&mut self) -> Result<StepReport, StepError> {
+        let bad_input: Vec<u32> = (0..self.external_forces.len())
+            .filter(|&i| !self.external_forces[i].iter().all(|c| c.is_finite()))
+            .map(|i| i as u32)
+            .collect();
+        if !bad_input.is_empty() {
+            return Err(StepError::NonFiniteInput { vertices: bad_input });
+        }
+        let backup = self.scratch.backup.get_or_insert_with(|| self.state.clone());
+        backup.positions.clone_from(&self.state.positions);
+        backup.velocities.clone_from(&self.state.velocities);
+
+        let dt = self.settings.time_step_s;
+        let mut report = StepReport::default();
+        match self.settings.integrator {
+            Integrator::SymplecticEuler => {
+                report.substeps = self.explicit_substeps;
+                explicit::step(&self.model, &mut self.state, &self.external_forces, dt, self.explicit_substeps, &mut self.scratch.forces);
+            }
+            Integrator::ImplicitEuler => {
+                let cg = CgSettings {
+                    relative_tolerance: self.settings.cg_relative_tolerance,
+                    max_iterations: self.settings.cg_max_iterations,
+                };
+                let r = implicit::step(&self.model, &mut self.state, &self.external_forces, dt, cg, &mut self.scratch.implicit);
+                report.substeps = 1;
+                report.cg_iterations = r.iterations;
+                report.cg_relative_residual = r.relative_residual;
+            }
+        }
+        let bad: Vec<u32> = (0..self.state.positions.len())
+            .filter(|&i| {
+                !(self.state.positions[i].iter().all(|c| c.is_finite())
+                    && self.state.velocities[i].iter().all(|c| c.is_finite()))
+            })
+            .map(|i| i as u32)
+            .collect();
+        if !bad.is_empty() {
+            if let Some(backup) = &self.scratch.backup {
+                self.state.positions.clone_from(&backup.positions);
+                self.state.velocities.clone_from(&backup.velocities);
+            }
+            // the warm start may be poisoned too
+            self.scratch.implicit.dv.iter_mut().for_each(|d| *d = Vector3::zeros());
+            return Err(StepError::NonFinite { vertices: bad });
+        }
+        self.step_index += 1;
+        Ok(report)
+    }
+}

@@ -1,0 +1,115 @@
+//! Static equilibrium `f(x) = 0` by Newton's method on the potential energy: each iteration
+//! solves `K dx = f(x)` by PCG (`K` the positive part of the stiffness matrix, see
+//! [`super::system::stiffness_block`]), then backtracks on the residual norm.
+
+use crate::Vector3;
+use crate::model::{Model, State};
+
+use super::forces::{max_free_force, total_forces};
+use super::system::{self, CgScratch, CgSettings, SpringSystem, stiffness_block};
+
+/// Settings of the static solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StaticSettings {
+    /// Converged when the largest force on a free particle is below this fraction of the
+    /// largest spring force in the initial state.
+    pub relative_force_tolerance: f64,
+    pub max_newton_iterations: usize,
+}
+
+impl Default for StaticSettings {
+    fn default() -> Self {
+        Self { relative_force_tolerance: 1e-12, max_newton_iterations: 60 }
+    }
+}
+
+/// What the static solve did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StaticReport {
+    pub newton_iterations: usize,
+    pub cg_iterations: usize,
+    /// Largest force on a free particle at the end, N.
+    pub residual_newtons: f64,
+    /// The residual the tolerance asked for, N.
+    pub tolerance_newtons: f64,
+    pub converged: bool,
+}
+
+/// Moves the free particles of `state` to static equilibrium and zeroes all velocities.
+pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> StaticReport {
+    let n = model.vertex_count();
+    let zero_ext = vec![Vector3::zeros(); n];
+    state.velocities.iter_mut().for_each(|v| *v = Vector3::zeros());
+    let mut f = vec![Vector3::zeros(); n];
+    let mut dx = vec![Vector3::zeros(); n];
+    let mut trial = state.positions.clone();
+    let mut f_trial = f.clone();
+    let mut sys = SpringSystem { mass_weight: 0.0, ..Default::default() };
+    let mut cg_scratch = CgScratch::default();
+    let s = &model.springs;
+
+    // Scale: the largest spring force in the initial state (and the weight of a particle).
+    let mut scale = 0.0f64;
+    for (e, &[a, b]) in s.ends.iter().enumerate() {
+        let l = (state.positions[b as usize] - state.positions[a as usize]).norm();
+        scale = scale.max((s.stiffness[e] * (l - s.rest_length[e])).abs());
+    }
+    for &m in &model.mass {
+        scale = scale.max(m * model.gravity.norm());
+    }
+    let tolerance = settings.relative_force_tolerance * scale;
+
+    total_forces(model, &state.positions, &state.velocities, &zero_ext, &mut f);
+    let norm2 = |f: &[Vector3]| -> f64 { f.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm_squared()).sum() };
+    let mut residual = max_free_force(model, &f);
+    let mut cg_total = 0;
+    let mut iter = 0;
+    let mut stalls = 0;
+    while residual > tolerance && iter < settings.max_newton_iterations && stalls < 4 {
+        iter += 1;
+        sys.beta.resize(s.len(), 0.0);
+        sys.gamma.resize(s.len(), 0.0);
+        sys.direction.resize(s.len(), Vector3::zeros());
+        for (e, &[a, b]) in s.ends.iter().enumerate() {
+            let d = state.positions[b as usize] - state.positions[a as usize];
+            let (ka, kn, dir) = stiffness_block(s.stiffness[e], s.rest_length[e], &d);
+            sys.beta[e] = ka;
+            sys.gamma[e] = kn;
+            sys.direction[e] = dir;
+        }
+        sys.update_preconditioner(model);
+        dx.iter_mut().for_each(|d| *d = Vector3::zeros());
+        let cg = CgSettings { relative_tolerance: 1e-10, max_iterations: 10 * n.max(100) };
+        cg_total += system::solve(&sys, model, &f, &mut dx, cg, &mut cg_scratch).iterations;
+
+        // Backtracking on |f|.
+        let f0 = norm2(&f);
+        let mut step = 1.0;
+        let mut accepted = false;
+        for _ in 0..12 {
+            for i in 0..n {
+                trial[i] = state.positions[i] + dx[i] * step;
+            }
+            total_forces(model, &trial, &state.velocities, &zero_ext, &mut f_trial);
+            if norm2(&f_trial) < f0 {
+                accepted = true;
+                break;
+            }
+            step *= 0.5;
+        }
+        if !accepted {
+            stalls += 1;
+            continue;
+        }
+        std::mem::swap(&mut state.positions, &mut trial);
+        std::mem::swap(&mut f, &mut f_trial);
+        residual = max_free_force(model, &f);
+    }
+    StaticReport {
+        newton_iterations: iter,
+        cg_iterations: cg_total,
+        residual_newtons: residual,
+        tolerance_newtons: tolerance,
+        converged: residual <= tolerance,
+    }
+}

@@ -1,0 +1,167 @@
+//! The sparse symmetric system shared by implicit Euler and the static solve, and its
+//! preconditioned conjugate-gradient solver.
+//!
+//! The matrix is `A = a_m M + sum over springs e of B_e`, where each spring contributes the
+//! 3x3 block `B_e = beta_e I + gamma_e n_e n_e^T` with the pattern `[+B, -B; -B, +B]` on its
+//! two particles. Held particles are removed (their rows and columns act as identity on a
+//! zero right-hand side). With `beta, gamma >= 0` the matrix is symmetric positive
+//! semi-definite, and positive definite once a particle of every piece is held or `a_m > 0`.
+
+use nalgebra::Matrix3;
+
+use crate::Vector3;
+use crate::model::Model;
+
+/// Per-spring block coefficients and the lumped-mass weight.
+#[derive(Debug, Clone, Default)]
+pub struct SpringSystem {
+    pub mass_weight: f64,
+    pub beta: Vec<f64>,
+    pub gamma: Vec<f64>,
+    pub direction: Vec<Vector3>,
+    /// Inverse 3x3 diagonal blocks (zero for held particles): the block-Jacobi preconditioner.
+    pub inv_diag: Vec<Matrix3<f64>>,
+}
+
+/// Stiffness blocks `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0 / l)`:
+/// the exact spring Hessian for stretched springs, its positive part for compressed ones.
+/// Returns `(alpha k, (1 - alpha) k, n)`; a zero-length spring gives zeros.
+#[inline]
+pub fn stiffness_block(k: f64, rest: f64, d: &Vector3) -> (f64, f64, Vector3) {
+    let l = d.norm();
+    if l == 0.0 {
+        return (0.0, 0.0, Vector3::zeros());
+    }
+    let alpha = (1.0 - rest / l).max(0.0);
+    (alpha * k, (1.0 - alpha) * k, d / l)
+}
+
+impl SpringSystem {
+    /// Recomputes the preconditioner from the current coefficients.
+    pub fn update_preconditioner(&mut self, model: &Model) {
+        let n = model.vertex_count();
+        let mut diag = vec![Matrix3::zeros(); n];
+        for (i, d) in diag.iter_mut().enumerate() {
+            *d = Matrix3::identity() * (self.mass_weight * model.mass[i]);
+        }
+        for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
+            let nn = self.direction[e] * self.direction[e].transpose();
+            let block = Matrix3::identity() * self.beta[e] + nn * self.gamma[e];
+            diag[a as usize] += block;
+            diag[b as usize] += block;
+        }
+        self.inv_diag.clear();
+        self.inv_diag.extend(diag.iter().zip(&model.held).map(|(d, &h)| {
+            if h { Matrix3::zeros() } else { d.try_inverse().unwrap_or_else(Matrix3::zeros) }
+        }));
+    }
+
+    /// `y = A p` with held rows zeroed.
+    pub fn apply(&self, model: &Model, p: &[Vector3], y: &mut [Vector3]) {
+        for ((y, p), &m) in y.iter_mut().zip(p).zip(&model.mass) {
+            *y = p * (self.mass_weight * m);
+        }
+        for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
+            let (a, b) = (a as usize, b as usize);
+            let d = p[a] - p[b];
+            let n = &self.direction[e];
+            let w = d * self.beta[e] + n * (self.gamma[e] * n.dot(&d));
+            y[a] += w;
+            y[b] -= w;
+        }
+        for (y, &h) in y.iter_mut().zip(&model.held) {
+            if h {
+                *y = Vector3::zeros();
+            }
+        }
+    }
+}
+
+/// Settings of the conjugate-gradient solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CgSettings {
+    /// Stop when `|r| <= relative_tolerance |b|`.
+    pub relative_tolerance: f64,
+    pub max_iterations: usize,
+}
+
+/// Outcome of a conjugate-gradient solve.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CgReport {
+    pub iterations: usize,
+    pub relative_residual: f64,
+    pub converged: bool,
+}
+
+/// Scratch vectors of the solver (kept between calls so steps do not allocate).
+#[derive(Debug, Clone, Default)]
+pub struct CgScratch {
+    r: Vec<Vector3>,
+    z: Vec<Vector3>,
+    p: Vec<Vector3>,
+    q: Vec<Vector3>,
+}
+
+fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a.dot(b)).sum()
+}
+
+/// Solves `A x = b` by block-Jacobi preconditioned conjugate gradients, starting from the
+/// `x` given (warm start). Held entries of `b` and `x` are treated as zero.
+pub fn solve(
+    sys: &SpringSystem,
+    model: &Model,
+    b: &[Vector3],
+    x: &mut [Vector3],
+    settings: CgSettings,
+    scratch: &mut CgScratch,
+) -> CgReport {
+    let n = b.len();
+    let CgScratch { r, z, p, q } = scratch;
+    for buf in [&mut *r, &mut *z, &mut *p, &mut *q] {
+        buf.clear();
+        buf.resize(n, Vector3::zeros());
+    }
+    for (xi, &h) in x.iter_mut().zip(&model.held) {
+        if h {
+            *xi = Vector3::zeros();
+        }
+    }
+    let b_norm = dot(b, b).sqrt();
+    if b_norm == 0.0 {
+        x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
+        return CgReport { iterations: 0, relative_residual: 0.0, converged: true };
+    }
+    sys.apply(model, x, q);
+    for i in 0..n {
+        r[i] = if model.held[i] { Vector3::zeros() } else { b[i] - q[i] };
+        z[i] = sys.inv_diag[i] * r[i];
+        p[i] = z[i];
+    }
+    let mut rz = dot(r, z);
+    let target = settings.relative_tolerance * b_norm;
+    let mut r_norm = dot(r, r).sqrt();
+    let mut iterations = 0;
+    while r_norm > target && iterations < settings.max_iterations {
+        sys.apply(model, p, q);
+        let pq = dot(p, q);
+        if !(pq > 0.0) {
+            break; // breakdown: the matrix is singular along p, or the numbers are bad
+        }
+        let alpha = rz / pq;
+        for i in 0..n {
+            x[i] += p[i] * alpha;
+            r[i] -= q[i] * alpha;
+            z[i] = sys.inv_diag[i] * r[i];
+        }
+        let rz_next = dot(r, z);
+        let beta = rz_next / rz;
+        rz = rz_next;
+        for i in 0..n {
+            p[i] = z[i] + p[i] * beta;
+        }
+        r_norm = dot(r, r).sqrt();
+        iterations += 1;
+    }
+    CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
+}
