@@ -25,3 +25,4 @@ pub type Vector3 = nalgebra::Vector3<f64>;
 pub mod generate;
 pub mod model;
 pub mod solver;
+pub mod scene;

@@ -46,12 +46,22 @@ impl SpringSet {
             for &t in tets {
                 let m = &material_of_tet[t as usize];
                 k += match m.stiffness {
-                    SpringStiffness::Uniform { newtons_per_metre } => newtons_per_metre / count,
+                    SpringStiffness::Uniform { newtons_per_metre } => newtons_per_metre,
                     SpringStiffness::YoungsModulus { pascals } => pascals * mesh.tet_volume(t as usize) / (d * d),
                 };
-                c += m.damping_newton_seconds_per_metre / count;
-                s += m.pretension / count;
+                c += m.damping_newton_seconds_per_metre;
+                s += m.pretension;
             }
+            // Averages over the tets around the edge (sums of equal values divided by their
+            // count are exact, so uniform materials give exactly their parameters).
+            let uniform_share = tets
+                .iter()
+                .filter(|&&t| matches!(material_of_tet[t as usize].stiffness, SpringStiffness::Uniform { .. }))
+                .count() as f64;
+            if uniform_share == count {
+                k /= count;
+            }
+            let (c, s) = (c / count, s / count);
             set.ends.push([a, b]);
             set.rest_length.push(d * (1.0 - s));
             set.stiffness.push(k);

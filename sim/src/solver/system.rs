@@ -127,7 +127,7 @@ pub fn solve(
             *xi = Vector3::zeros();
         }
     }
-    let b_norm = dot(b, b).sqrt();
+    let b_norm = b.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
     if b_norm == 0.0 {
         x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
         return CgReport { iterations: 0, relative_residual: 0.0, converged: true };

@@ -1,0 +1,177 @@
+//! Building a [`Scene`] from its spec: mesh, model, held vertices.
+
+use std::path::Path;
+
+use super::spec::{HeldSelection, MeshSource, SceneSpec, Target, Viewpoint};
+use super::{SceneError, SpecOrigin};
+use crate::generate::{self, GridCells};
+use crate::model::{Material, Model};
+use crate::solver::{Simulation, SolverSettings};
+use crate::{Point3, TetMesh, Vector3};
+
+const MM: f64 = 1e-3;
+
+/// Overrides applied when building a scene.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BuildOptions {
+    /// Replaces `min_tets` of a generated mesh (the resolution knob).
+    pub min_tets: Option<usize>,
+}
+
+/// A built scene, ready to simulate.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub spec: SceneSpec,
+    pub model: Model,
+    pub targets: Vec<Target>,
+    pub viewpoint: Option<Viewpoint>,
+    pub solver: SolverSettings,
+}
+
+impl Scene {
+    /// Builds a built-in scene or a scene file.
+    pub fn load(name_or_path: &str, options: BuildOptions) -> Result<Self, SceneError> {
+        let (spec, origin) = super::find_spec(name_or_path)?;
+        Self::build(spec, &origin, options)
+    }
+
+    /// Builds a scene from its spec.
+    pub fn build(spec: SceneSpec, origin: &SpecOrigin, options: BuildOptions) -> Result<Self, SceneError> {
+        let invalid = |message: String| SceneError::Invalid { scene: spec.name.clone(), message };
+        spec.solver.check().map_err(invalid)?;
+        let base_dir = match origin {
+            SpecOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),
+            SpecOrigin::BuiltIn => std::path::PathBuf::new(),
+        };
+        let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options)?;
+        let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(invalid)?;
+        let materials: Vec<(u32, Material)> = spec.materials.iter().map(|m| (m.region, m.material)).collect();
+        let gravity = Vector3::from(spec.gravity_m_per_s2);
+        let model = Model::new(mesh, &materials, &held, gravity)
+            .map_err(|source| SceneError::Model { scene: spec.name.clone(), source })?;
+        Ok(Self {
+            targets: spec.targets.clone(),
+            viewpoint: spec.viewpoint.clone(),
+            solver: spec.solver,
+            model,
+            spec,
+        })
+    }
+
+    /// A simulation of this scene, at rest in the reference positions (not yet settled).
+    pub fn simulation(&self) -> Simulation {
+        Simulation::new(self.model.clone(), self.solver)
+    }
+}
+
+fn build_mesh(
+    spec: &SceneSpec,
+    base_dir: &Path,
+    options: BuildOptions,
+) -> Result<(TetMesh, Option<Vec<u32>>), SceneError> {
+    let mesh_err = |source| SceneError::Mesh { scene: spec.name.clone(), source };
+    let invalid = |message: String| SceneError::Invalid { scene: spec.name.clone(), message };
+    let check_size = |size_mm: &[f64; 3], min_tets: usize| -> Result<(), SceneError> {
+        if !size_mm.iter().all(|s| *s > 0.0 && s.is_finite()) {
+            return Err(invalid(format!("mesh size must be positive, got {size_mm:?} mm")));
+        }
+        if !(1..=50_000_000).contains(&min_tets) {
+            return Err(invalid(format!("min_tets must be between 1 and 50,000,000, got {min_tets}")));
+        }
+        Ok(())
+    };
+    match &spec.mesh {
+        MeshSource::CurvedSlab { size_mm, radius_mm, min_tets } => {
+            let min_tets = options.min_tets.unwrap_or(*min_tets);
+            check_size(size_mm, min_tets)?;
+            if !(*radius_mm > size_mm[2]) || size_mm[0] / radius_mm > std::f64::consts::PI {
+                return Err(invalid(format!(
+                    "radius_mm must exceed the thickness and the arc must span less than half a turn, got {radius_mm}"
+                )));
+            }
+            let size = size_mm.map(|s| s * MM);
+            let cells = GridCells::for_tet_count(size, min_tets);
+            let g = generate::curved_slab(size, radius_mm * MM, cells).map_err(mesh_err)?;
+            Ok((g.mesh, Some(g.rim)))
+        }
+        MeshSource::Box { size_mm, min_tets } => {
+            let min_tets = options.min_tets.unwrap_or(*min_tets);
+            check_size(size_mm, min_tets)?;
+            let size = size_mm.map(|s| s * MM);
+            let cells = GridCells::for_tet_count(size, min_tets);
+            let g = generate::boxed(Point3::origin(), size, cells).map_err(mesh_err)?;
+            Ok((g.mesh, Some(g.rim)))
+        }
+        MeshSource::File { path, unit_m } => {
+            if !(*unit_m > 0.0 && unit_m.is_finite()) {
+                return Err(invalid(format!("unit_m must be positive, got {unit_m}")));
+            }
+            let mut mesh = load_mesh_file(&base_dir.join(path))?;
+            for p in mesh.positions_mut() {
+                *p *= *unit_m;
+            }
+            Ok((mesh, None))
+        }
+        MeshSource::Segmentation { .. } => Err(invalid("segmentation meshes are not available in this build".into())),
+    }
+}
+
+fn load_mesh_file(path: &Path) -> Result<TetMesh, SceneError> {
+    Err(SceneError::Invalid { scene: path.display().to_string(), message: "mesh files are not available in this build".into() })
+}
+
+fn held_vertices(spec: &SceneSpec, mesh: &TetMesh, generated_rim: Option<&[u32]>) -> Result<Vec<u32>, String> {
+    let mut held = Vec::new();
+    for sel in &spec.held {
+        match sel {
+            HeldSelection::Rim { width_mm } => match (generated_rim, width_mm) {
+                (Some(rim), None) => held.extend_from_slice(rim),
+                _ => held.extend(bounding_box_rim(mesh, width_mm.map(|w| w * MM))),
+            },
+            HeldSelection::Box { min_mm, max_mm } => {
+                let lo = Point3::from(min_mm.map(|v| v * MM));
+                let hi = Point3::from(max_mm.map(|v| v * MM));
+                held.extend(
+                    mesh.positions()
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, p)| (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]))
+                        .map(|(i, _)| i as u32),
+                );
+            }
+            HeldSelection::Region { region } => {
+                let before = held.len();
+                for (t, tet) in mesh.tets().iter().enumerate() {
+                    if mesh.regions()[t] == *region {
+                        held.extend_from_slice(tet);
+                    }
+                }
+                if held.len() == before {
+                    return Err(format!("held region {region} has no tetrahedra"));
+                }
+            }
+        }
+    }
+    held.sort_unstable();
+    held.dedup();
+    Ok(held)
+}
+
+/// Boundary vertices within `width` (default 2 % of the diagonal) of the bounding-box faces
+/// across the two longest axes.
+fn bounding_box_rim(mesh: &TetMesh, width: Option<f64>) -> Vec<u32> {
+    let (lo, hi) = mesh.bounding_box();
+    let extent = hi - lo;
+    let width = width.unwrap_or(0.02 * extent.norm());
+    let mut axes = [0usize, 1, 2];
+    axes.sort_by(|&a, &b| extent[b].total_cmp(&extent[a]));
+    let pos = mesh.positions();
+    mesh.topology()
+        .boundary_vertices()
+        .into_iter()
+        .filter(|&v| {
+            let p = pos[v as usize];
+            axes[..2].iter().any(|&k| p[k] - lo[k] <= width || hi[k] - p[k] <= width)
+        })
+        .collect()
+}

@@ -1,0 +1,101 @@
+//! Scenes: a mesh, its materials, what is held, the targets behind the tissue, the planned
+//! viewpoint and the solver settings. Built-in scenes are TOML files compiled into the crate
+//! (`sim/scenes/`), which double as documented examples of the format.
+
+mod build;
+mod spec;
+
+pub use build::{BuildOptions, Scene};
+pub use spec::{HeldSelection, MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint};
+
+use std::path::{Path, PathBuf};
+
+use crate::ReadError;
+
+/// Built-in scenes: name and TOML text.
+pub const BUILTIN: [(&str, &str); 3] = [
+    ("chest-wall", include_str!("../../scenes/chest-wall.toml")),
+    ("sheet", include_str!("../../scenes/sheet.toml")),
+    ("bar", include_str!("../../scenes/bar.toml")),
+];
+
+/// Why a scene could not be loaded or built.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("unknown scene {name:?}: not a built-in scene ({}) nor an existing file", builtin_names())]
+    Unknown { name: String },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("scene {scene:?}: {message}")]
+    Invalid { scene: String, message: String },
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    #[error("scene {scene:?}: {source}")]
+    Model { scene: String, source: crate::model::ModelError },
+    #[error("scene {scene:?}: {source}")]
+    Mesh { scene: String, source: crate::MeshError },
+}
+
+fn builtin_names() -> String {
+    BUILTIN.map(|(n, _)| n).join(", ")
+}
+
+/// Parses a scene from TOML (or JSON when `path` ends in `.json`); `path` names the source in
+/// errors.
+pub fn parse_spec(text: &str, path: &Path) -> Result<SceneSpec, SceneError> {
+    let parsed = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+        serde_json::from_str(text).map_err(|e| e.to_string())
+    } else {
+        toml::from_str(text).map_err(|e| e.to_string())
+    };
+    parsed.map_err(|message| SceneError::Parse { path: path.to_path_buf(), message })
+}
+
+/// The spec of a built-in scene.
+pub fn builtin_spec(name: &str) -> Option<SceneSpec> {
+    let (n, text) = BUILTIN.iter().find(|(n, _)| *n == name)?;
+    // The built-in files are tested to parse; a failure here is a bug in the crate.
+    parse_spec(text, Path::new(&format!("<built-in {n}>"))).ok()
+}
+
+/// Where a scene spec came from, for resolving relative paths.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SpecOrigin {
+    BuiltIn,
+    File(PathBuf),
+}
+
+/// Finds a scene by built-in name or scene-file path (`.toml` / `.json`).
+pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneError> {
+    if let Some(spec) = builtin_spec(name_or_path) {
+        return Ok((spec, SpecOrigin::BuiltIn));
+    }
+    let path = Path::new(name_or_path);
+    if !path.exists() {
+        return Err(SceneError::Unknown { name: name_or_path.to_owned() });
+    }
+    let text = std::fs::read_to_string(path)
+        .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
+    Ok((parse_spec(&text, path)?, SpecOrigin::File(path.to_path_buf())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_scenes_parse() {
+        for (name, _) in BUILTIN {
+            let spec = builtin_spec(name).expect(name);
+            assert_eq!(spec.name, name);
+        }
+    }
+
+    #[test]
+    fn unknown_fields_and_bad_values_are_errors() {
+        let bad = BUILTIN[0].1.replace("pretension = 0.04", "pretension = 0.04\ncolour = 3");
+        let err = parse_spec(&bad, Path::new("x.toml")).unwrap_err().to_string();
+        assert!(err.contains("x.toml") && err.contains("colour"), "{err}");
+        assert!(matches!(find_spec("no-such-scene"), Err(SceneError::Unknown { .. })));
+    }
+}

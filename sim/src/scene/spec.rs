@@ -1,0 +1,122 @@
+//! The scene file: TOML (or JSON) describing mesh source, materials, held vertices, targets,
+//! viewpoint and solver settings. See `sim/scenes/*.toml` for documented examples; the
+//! built-in scenes are exactly those files.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::Material;
+use crate::solver::SolverSettings;
+
+/// A scene as written in a scene file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Gravitational acceleration in m/s^2; zero (the default) turns gravity off.
+    #[serde(default)]
+    pub gravity_m_per_s2: [f64; 3],
+    pub mesh: MeshSource,
+    /// Material per region id of the mesh.
+    pub materials: Vec<RegionMaterial>,
+    /// Which vertices are held fixed (the union of all selections).
+    #[serde(default)]
+    pub held: Vec<HeldSelection>,
+    /// Structures behind the tissue that an incision must expose (for the field-of-view
+    /// metric).
+    #[serde(default)]
+    pub targets: Vec<Target>,
+    /// Where the surgeon looks from.
+    pub viewpoint: Option<Viewpoint>,
+    #[serde(default)]
+    pub solver: SolverSettings,
+}
+
+/// Where the tetrahedral mesh comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum MeshSource {
+    /// A slab curved about an axis parallel to y (see [`crate::generate::curved_slab`]).
+    CurvedSlab { size_mm: [f64; 3], radius_mm: f64, min_tets: usize },
+    /// An axis-aligned box with its minimum corner at the origin.
+    Box { size_mm: [f64; 3], min_tets: usize },
+    /// A mesh file (.msh, .node/.ele, .vtk, .vtu); relative paths are relative to the scene
+    /// file. `unit_m` is the length of one file unit in metres (0.001 for millimetres).
+    File {
+        path: PathBuf,
+        #[serde(default = "one")]
+        unit_m: f64,
+    },
+    /// A NIfTI label volume meshed voxel by voxel; each kept label becomes a region.
+    Segmentation {
+        /// A label volume, or binary masks (one per region, see `masks`).
+        #[serde(default)]
+        path: Option<PathBuf>,
+        /// Labels of `path` to keep.
+        #[serde(default)]
+        labels: Vec<u32>,
+        /// Binary masks on one grid, each becoming the region given.
+        #[serde(default)]
+        masks: Vec<MaskFile>,
+        /// Coarsen the voxel grid by this integer factor before meshing (majority vote).
+        #[serde(default)]
+        coarsen: Option<usize>,
+    },
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A binary mask file and the region id its voxels get.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaskFile {
+    pub path: PathBuf,
+    pub region: u32,
+}
+
+/// A material for one region.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RegionMaterial {
+    pub region: u32,
+    #[serde(flatten)]
+    pub material: Material,
+}
+
+/// A selection of vertices to hold.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum HeldSelection {
+    /// The rim: for generated slabs and sheets their lateral sides; for other meshes the
+    /// boundary vertices within `width_mm` of the bounding-box faces across the two longest
+    /// axes (default: 2 % of the bounding-box diagonal).
+    Rim {
+        #[serde(default)]
+        width_mm: Option<f64>,
+    },
+    /// Vertices inside an axis-aligned box.
+    Box { min_mm: [f64; 3], max_mm: [f64; 3] },
+    /// All vertices of tetrahedra of a region.
+    Region { region: u32 },
+}
+
+/// An ellipsoidal target behind the tissue (e.g. the heart).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Target {
+    pub name: String,
+    pub centre_mm: [f64; 3],
+    pub radii_mm: [f64; 3],
+}
+
+/// The planned viewpoint: an eye position looking at a point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Viewpoint {
+    pub eye_mm: [f64; 3],
+    pub look_at_mm: [f64; 3],
+}
