@@ -1,1 +1,97 @@
-fn main() {}
+//! cutlab: the command line. Thin commands that wire the crates together.
+
+mod bench;
+mod demo;
+mod scene_info;
+mod stats;
+mod stroke;
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+/// Training and assessment platform for surgical soft-tissue cutting.
+#[derive(Debug, Parser)]
+#[command(name = "cutlab", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Build the default scene, settle it, run a scripted scalpel stroke and report.
+    Demo {
+        /// Directory for the results (`.vtu` meshes).
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+        /// Resolution of the chest wall: at least this many tetrahedra.
+        #[arg(long)]
+        min_tets: Option<usize>,
+    },
+    /// Scenes: built-in ones and scene files.
+    Scene {
+        #[command(subcommand)]
+        command: SceneCommand,
+    },
+    /// Benchmarks that print figures.
+    Bench {
+        #[command(subcommand)]
+        command: BenchCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum SceneCommand {
+    /// Counts, volume, mass, bounding box and mesh quality of a scene or mesh file.
+    Info {
+        /// A built-in scene (chest-wall, sheet, bar), a scene file (.toml/.json) or a mesh file.
+        scene: String,
+        /// Resolution of a generated mesh: at least this many tetrahedra.
+        #[arg(long)]
+        min_tets: Option<usize>,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// List the built-in scenes.
+    List,
+}
+
+#[derive(Debug, Subcommand)]
+enum BenchCommand {
+    /// Step time per integrator on the chest wall at about 1k, 10k and 100k tetrahedra, and
+    /// the settle time of the default scene.
+    Step {
+        /// A reduced set (1k and 10k only, fewer steps).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> anyhow::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Demo { out, min_tets } => demo::run(&out, min_tets),
+        Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
+            scene_info::run(&scene, min_tets, json)
+        }
+        Command::Scene { command: SceneCommand::List } => {
+            for (name, _) in cutlab_sim::scene::BUILTIN {
+                let spec = cutlab_sim::scene::builtin_spec(name);
+                println!("{name:12} {}", spec.map(|s| s.description).unwrap_or_default());
+            }
+            Ok(())
+        }
+        Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
+    }
+}

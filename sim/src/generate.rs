@@ -125,7 +125,7 @@ mod tests {
         assert!(g.mesh.topology().boundary_non_manifold_edges().is_empty());
         assert!((g.mesh.volume() - 6.0).abs() < 1e-12);
         // 2 triangles per boundary cell face
-        assert_eq!(g.mesh.topology().boundary.len(), 2 * 2 * (3 * 2 + 3 * 1 + 2 * 1));
+        assert_eq!(g.mesh.topology().boundary.len(), 2 * 2 * (6 + 3 + 2));
     }
 
     #[test]

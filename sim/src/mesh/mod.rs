@@ -2,10 +2,11 @@
 //! regions, and the topology derived from them (see [`Topology`]).
 
 mod geometry;
-mod quality;
+pub mod quality;
 mod topology;
 mod validate;
 
+pub use quality::tet_mu;
 pub use geometry::{dihedral_angles, tet_signed_volume, triangle_normal};
 pub use quality::QualityStats;
 pub use topology::{Csr, TET_EDGES, TET_FACES, Topology, NONE};

@@ -1,0 +1,96 @@
+//! `cutlab bench`: figures of speed, printed (not asserted).
+
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use cutlab_sim::scene::{BuildOptions, Scene};
+use cutlab_sim::solver::{Integrator, StaticSettings};
+use cutlab_sim::Point3;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+use crate::stats::Summary;
+use crate::stroke::Stroke;
+
+#[derive(Debug, Serialize)]
+struct StepRow {
+    requested_tets: usize,
+    tets: usize,
+    particles: usize,
+    integrator: &'static str,
+    settle_ms: f64,
+    substeps: u32,
+    steps: usize,
+    step_us: Summary,
+    cg_iterations_mean: f64,
+    /// Simulated time per wall time at the median step.
+    realtime_factor: f64,
+}
+
+/// Step time per integrator on the chest wall (single thread), while a stroke presses on it.
+pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
+    let sizes: &[usize] = if quick { &[1_000, 10_000] } else { &[1_000, 10_000, 100_000] };
+    let budget = if quick { Duration::from_secs(2) } else { Duration::from_secs(10) };
+    let max_steps = if quick { 500 } else { 2_000 };
+    let bar = ProgressBar::new((sizes.len() * Integrator::ALL.len()) as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    if json {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let mut rows = Vec::new();
+    for &n in sizes {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(n) }).context("chest-wall")?;
+        for integrator in Integrator::ALL {
+            bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
+            let mut sim = scene.simulation();
+            sim.settings.integrator = integrator;
+            sim.model_changed();
+            let t = Instant::now();
+            let settle = sim.settle(StaticSettings::default());
+            let settle_ms = t.elapsed().as_secs_f64() * 1e3;
+            anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
+            let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+            let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), 1.5, 0.3);
+            let dt = sim.settings.time_step_s;
+            let mut times = Vec::new();
+            let mut cg = 0;
+            let started = Instant::now();
+            while times.len() < max_steps && (times.len() < 20 || started.elapsed() < budget) {
+                stroke.apply(&mut sim, times.len() as f64 * dt);
+                let ts = Instant::now();
+                let r = sim.step().context("step")?;
+                times.push(ts.elapsed().as_secs_f64() * 1e6);
+                cg += r.cg_iterations;
+            }
+            let s = Summary::of(&times);
+            rows.push(StepRow {
+                requested_tets: n,
+                tets: scene.model.mesh.tet_count(),
+                particles: scene.model.vertex_count(),
+                integrator: integrator.name(),
+                settle_ms,
+                substeps: sim.explicit_substeps().max(1) * u32::from(integrator == Integrator::SymplecticEuler)
+                    + u32::from(integrator == Integrator::ImplicitEuler),
+                steps: times.len(),
+                cg_iterations_mean: cg as f64 / times.len() as f64,
+                realtime_factor: dt * 1e6 / s.median,
+                step_us: s,
+            });
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!("chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall, single thread");
+    println!("| tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
+    println!("|---:|---:|---|---:|---:|---:|---:|---:|---:|");
+    for r in &rows {
+        println!("| {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
+            r.tets, r.particles, r.integrator, r.substeps, r.cg_iterations_mean, r.step_us.median, r.step_us.p99,
+            r.realtime_factor, r.settle_ms);
+    }
+    Ok(())
+}

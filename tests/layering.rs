@@ -1,0 +1,84 @@
+//! The layering of the workspace, checked over `cargo metadata`: the simulation and haptics
+//! crates stay free of async runtimes, databases, web frameworks and recording formats, and
+//! no crate depends on a crate above it.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::process::Command;
+
+use serde_json::Value;
+
+/// Every package id reachable from `root` through normal (non-dev, non-build) dependencies.
+fn closure(resolve: &BTreeMap<String, Vec<String>>, root: &str) -> BTreeSet<String> {
+    let mut seen = BTreeSet::new();
+    let mut stack = vec![root.to_owned()];
+    while let Some(id) = stack.pop() {
+        if seen.insert(id.clone()) {
+            stack.extend(resolve.get(&id).into_iter().flatten().cloned());
+        }
+    }
+    seen
+}
+
+fn metadata() -> (BTreeMap<String, Vec<String>>, BTreeMap<String, String>) {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--manifest-path"])
+        .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml"))
+        .output()
+        .expect("cargo metadata runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: Value = serde_json::from_slice(&out.stdout).expect("metadata is JSON");
+    let mut names = BTreeMap::new();
+    for p in v["packages"].as_array().expect("packages") {
+        names.insert(p["id"].as_str().expect("id").to_owned(), p["name"].as_str().expect("name").to_owned());
+    }
+    let mut resolve = BTreeMap::new();
+    for node in v["resolve"]["nodes"].as_array().expect("nodes") {
+        let id = node["id"].as_str().expect("id").to_owned();
+        let deps = node["deps"]
+            .as_array()
+            .expect("deps")
+            .iter()
+            .filter(|d| {
+                d["dep_kinds"].as_array().is_some_and(|k| k.iter().any(|k| k["kind"].is_null()))
+            })
+            .map(|d| d["pkg"].as_str().expect("pkg").to_owned())
+            .collect();
+        resolve.insert(id, deps);
+    }
+    (resolve, names)
+}
+
+fn reachable_names(crate_name: &str) -> BTreeSet<String> {
+    let (resolve, names) = metadata();
+    let root = names.iter().find(|(_, n)| *n == crate_name).map(|(id, _)| id.clone()).expect("crate in workspace");
+    closure(&resolve, &root).into_iter().map(|id| names[&id].clone()).collect()
+}
+
+const FORBIDDEN_BELOW_RECORDER: [&str; 7] = ["tokio", "sqlx", "axum", "mcap", "rerun", "re_sdk", "hyper"];
+
+#[test]
+fn sim_and_haptics_are_free_of_runtime_database_web_and_recording_crates() {
+    for krate in ["cutlab-sim", "cutlab-haptics"] {
+        let deps = reachable_names(krate);
+        let bad: Vec<&str> = FORBIDDEN_BELOW_RECORDER.iter().copied().filter(|f| deps.contains(*f)).collect();
+        assert!(bad.is_empty(), "{krate} depends (maybe indirectly) on {bad:?}");
+    }
+}
+
+#[test]
+fn no_crate_depends_on_a_crate_above_it() {
+    let layers = ["cutlab-sim", "cutlab-haptics", "cutlab-recorder", "cutlab-assessor", "cutlab-dashboard", "cutlab"];
+    for (i, krate) in layers.iter().enumerate() {
+        let deps = reachable_names(krate);
+        for above in &layers[i + 1..] {
+            assert!(!deps.contains(*above), "{krate} must not depend on {above}");
+        }
+    }
+}
+
+#[test]
+fn the_check_sees_real_dependencies() {
+    // Guards the test itself: the sim closure does contain nalgebra.
+    assert!(reachable_names("cutlab-sim").contains("nalgebra"));
+}
