@@ -5,7 +5,9 @@
 
 use std::time::Instant;
 
-use cutlab_sim::segmentation::{LabelVolume, MeshingOptions, NonManifold, Resample, mesh_labels_with_report};
+use cutlab_sim::segmentation::{
+    LabelVolume, MeshingOptions, NonManifold, Resample, mesh_labels_with_report,
+};
 
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/totalsegmentator/");
 
@@ -19,27 +21,68 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (format!("{DATA}subcutaneous_fat.nii.gz"), 2),
     ])?;
     let read_wall = t.elapsed();
-    println!("read example_seg: {:.1} ms; read + combine 2 masks: {:.1} ms", ms(read_seg), ms(read_wall));
+    println!(
+        "read example_seg: {:.1} ms; read + combine 2 masks: {:.1} ms",
+        ms(read_seg),
+        ms(read_wall)
+    );
     println!(
         "{:<34} {:>8} {:>9} {:>9} {:>11} {:>8} {:>6} {:>6} {:>9}",
-        "case", "voxels", "vertices", "tets", "volume cm3", "mesh ms", "nm-vx", "filled", "valid ms"
+        "case",
+        "voxels",
+        "vertices",
+        "tets",
+        "volume cm3",
+        "mesh ms",
+        "nm-vx",
+        "filled",
+        "valid ms"
     );
     let cases: Vec<(&str, &LabelVolume, MeshingOptions)> = vec![
         ("liver", &seg, MeshingOptions::new([5])),
-        ("liver, resample x2", &seg, MeshingOptions { resample: Some(Resample::Factor(2)), ..MeshingOptions::new([5]) }),
-        ("liver, largest comp., fill", &seg, MeshingOptions {
-            keep_largest_component: true,
-            non_manifold: NonManifold::Fill,
-            ..MeshingOptions::new([5])
-        }),
-        ("liver, smooth 5", &seg, MeshingOptions { smooth_iterations: 5, ..MeshingOptions::new([5]) }),
+        (
+            "liver, resample x2",
+            &seg,
+            MeshingOptions {
+                resample: Some(Resample::Factor(2)),
+                ..MeshingOptions::new([5])
+            },
+        ),
+        (
+            "liver, largest comp., fill",
+            &seg,
+            MeshingOptions {
+                keep_largest_component: true,
+                non_manifold: NonManifold::Fill,
+                ..MeshingOptions::new([5])
+            },
+        ),
+        (
+            "liver, smooth 5",
+            &seg,
+            MeshingOptions {
+                smooth_iterations: 5,
+                ..MeshingOptions::new([5])
+            },
+        ),
         ("body wall", &wall, MeshingOptions::new([1, 2])),
-        ("body wall, resample x2", &wall, MeshingOptions { resample: Some(Resample::Factor(2)), ..MeshingOptions::new([1, 2]) }),
-        ("body wall, largest comp., fill", &wall, MeshingOptions {
-            keep_largest_component: true,
-            non_manifold: NonManifold::Fill,
-            ..MeshingOptions::new([1, 2])
-        }),
+        (
+            "body wall, resample x2",
+            &wall,
+            MeshingOptions {
+                resample: Some(Resample::Factor(2)),
+                ..MeshingOptions::new([1, 2])
+            },
+        ),
+        (
+            "body wall, largest comp., fill",
+            &wall,
+            MeshingOptions {
+                keep_largest_component: true,
+                non_manifold: NonManifold::Fill,
+                ..MeshingOptions::new([1, 2])
+            },
+        ),
     ];
     for (name, vol, opts) in cases {
         let t = Instant::now();
@@ -62,10 +105,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if valid { "" } else { "  INVALID" },
         );
         if report.components > 0 {
-            println!("    {} components, {} island voxels removed", report.components, report.island_voxels_removed);
+            println!(
+                "    {} components, {} island voxels removed",
+                report.components, report.island_voxels_removed
+            );
         }
         if opts.smooth_iterations > 0 {
-            println!("    {} smoothing moves rejected", report.smoothing_moves_rejected);
+            println!(
+                "    {} smoothing moves rejected",
+                report.smoothing_moves_rejected
+            );
         }
     }
     Ok(())

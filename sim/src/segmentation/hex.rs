@@ -45,7 +45,8 @@ pub(super) fn voxel_tets(vol: &LabelVolume) -> Option<VoxelMesh> {
     let (lo, hi) = super::voxels::occupied_bounds(dims, labels)?;
     // Corner grid covering the occupied box: corners lo ..= hi + 1 along each axis.
     let cd = [0, 1, 2].map(|a| hi[a] - lo[a] + 2);
-    let corner = |i: usize, j: usize, k: usize| (i - lo[0]) + cd[0] * ((j - lo[1]) + cd[1] * (k - lo[2]));
+    let corner =
+        |i: usize, j: usize, k: usize| (i - lo[0]) + cd[0] * ((j - lo[1]) + cd[1] * (k - lo[2]));
     let mut ids = vec![NONE; cd[0] * cd[1] * cd[2]];
     let mut voxels = 0usize;
     for k in lo[2]..=hi[2] {
@@ -85,8 +86,9 @@ pub(super) fn voxel_tets(vol: &LabelVolume) -> Option<VoxelMesh> {
                 if label == 0 {
                     continue;
                 }
-                let v: [u32; 8] =
-                    std::array::from_fn(|c| ids[corner(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1))]);
+                let v: [u32; 8] = std::array::from_fn(|c| {
+                    ids[corner(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1))]
+                });
                 for t in KUHN_TETS {
                     let mut tet = t.map(|c| v[c]);
                     if flip {
@@ -108,7 +110,8 @@ mod tests {
 
     #[test]
     fn kuhn_tets_are_positive_and_fill_the_cube() {
-        let corner = |c: usize| Point3::new((c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64);
+        let corner =
+            |c: usize| Point3::new((c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64);
         let mut total = 0.0;
         for t in KUHN_TETS {
             let [a, b, c, d] = t.map(corner);

@@ -64,7 +64,9 @@ impl Resample {
             }
         };
         if f.contains(&0) {
-            return Err(SegmentationError::InvalidOptions(format!("coarsening factors {f:?} must be >= 1")));
+            return Err(SegmentationError::InvalidOptions(format!(
+                "coarsening factors {f:?} must be >= 1"
+            )));
         }
         Ok(f)
     }
@@ -146,7 +148,10 @@ impl MeshingReport {
 }
 
 /// Meshes the voxels carrying `options.labels`; see the module documentation.
-pub fn mesh_labels(volume: &LabelVolume, options: &MeshingOptions) -> Result<TetMesh, SegmentationError> {
+pub fn mesh_labels(
+    volume: &LabelVolume,
+    options: &MeshingOptions,
+) -> Result<TetMesh, SegmentationError> {
     mesh_labels_with_report(volume, options).map(|(mesh, _)| mesh)
 }
 
@@ -156,12 +161,19 @@ pub fn mesh_labels_with_report(
     options: &MeshingOptions,
 ) -> Result<(TetMesh, MeshingReport), SegmentationError> {
     if options.labels.is_empty() {
-        return Err(SegmentationError::InvalidOptions("no labels selected".into()));
+        return Err(SegmentationError::InvalidOptions(
+            "no labels selected".into(),
+        ));
     }
     if options.labels.contains(&0) {
-        return Err(SegmentationError::InvalidOptions("label 0 is the background and cannot be meshed".into()));
+        return Err(SegmentationError::InvalidOptions(
+            "label 0 is the background and cannot be meshed".into(),
+        ));
     }
-    let mut report = MeshingReport { factors: [1; 3], ..Default::default() };
+    let mut report = MeshingReport {
+        factors: [1; 3],
+        ..Default::default()
+    };
     let mut vol = volume.select(&options.labels);
     if let Some(resample) = options.resample {
         report.factors = resample.factors(volume.spacing())?;
@@ -183,7 +195,9 @@ pub fn mesh_labels_with_report(
     }
     report.voxels_per_label = vol.label_counts();
     let Some(m) = hex::voxel_tets(&vol) else {
-        return Err(SegmentationError::NoVoxels { labels: options.labels.clone() });
+        return Err(SegmentationError::NoVoxels {
+            labels: options.labels.clone(),
+        });
     };
     let mut mesh = TetMesh::new(m.positions, m.tets, m.regions)?;
     report.smoothing_moves_rejected = smooth::smooth_boundary(&mut mesh, options.smooth_iterations);

@@ -31,13 +31,18 @@ pub(super) struct RawLabels {
 }
 
 fn format_err(path: &Path, message: impl Into<String>) -> ReadError {
-    ReadError::Format { path: path.to_path_buf(), message: message.into() }
+    ReadError::Format {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
 }
 
 /// Reads the whole file, gunzipping it when it starts with the gzip magic bytes.
 fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
-    let raw = std::fs::read(path)
-        .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
+    let raw = std::fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
     if !raw.starts_with(&[0x1f, 0x8b]) {
         return Ok(raw);
     }
@@ -54,13 +59,19 @@ fn check_signature(path: &Path, bytes: &[u8]) -> Result<(), ReadError> {
     if bytes.len() < HEADER_SIZE + 4 {
         return Err(format_err(
             path,
-            format!("not a NIfTI-1 file: {} bytes, shorter than a NIfTI-1 header", bytes.len()),
+            format!(
+                "not a NIfTI-1 file: {} bytes, shorter than a NIfTI-1 header",
+                bytes.len()
+            ),
         ));
     }
     let size = [bytes[0], bytes[1], bytes[2], bytes[3]];
     let (le, be) = (i32::from_le_bytes(size), i32::from_be_bytes(size));
     if le == 540 || be == 540 {
-        return Err(format_err(path, "NIfTI-2 files are not supported (NIfTI-1 only)"));
+        return Err(format_err(
+            path,
+            "NIfTI-2 files are not supported (NIfTI-1 only)",
+        ));
     }
     if le != HEADER_SIZE as i32 && be != HEADER_SIZE as i32 {
         return Err(format_err(
@@ -74,7 +85,10 @@ fn check_signature(path: &Path, bytes: &[u8]) -> Result<(), ReadError> {
             path,
             "header-only NIfTI-1 (.hdr/.img pair) is not supported; use a single .nii/.nii.gz",
         )),
-        m => Err(format_err(path, format!("not a NIfTI-1 file: bad magic {m:?}"))),
+        m => Err(format_err(
+            path,
+            format!("not a NIfTI-1 file: bad magic {m:?}"),
+        )),
     }
 }
 
@@ -88,7 +102,11 @@ pub(super) fn read_labels(path: &Path) -> Result<RawLabels, ReadError> {
     let dims = dims_3d(&header).map_err(|m| format_err(path, m))?;
     let world_from_voxel = affine_metres(&header).map_err(|m| format_err(path, m))?;
     let labels = decode_labels(&header, &bytes, dims).map_err(|m| format_err(path, m))?;
-    Ok(RawLabels { dims, labels, world_from_voxel })
+    Ok(RawLabels {
+        dims,
+        labels,
+        world_from_voxel,
+    })
 }
 
 /// The three spatial dimensions; volumes with fewer axes are padded with 1, volumes with more
@@ -133,7 +151,15 @@ fn metres_per_unit(h: &NiftiHeader) -> Result<f64, String> {
 pub(super) fn affine_metres(h: &NiftiHeader) -> Result<Matrix4<f64>, String> {
     let mut a = if h.sform_code > 0 {
         let r = [h.srow_x, h.srow_y, h.srow_z];
-        Matrix4::from_fn(|i, j| if i < 3 { r[i][j] as f64 } else if j == 3 { 1.0 } else { 0.0 })
+        Matrix4::from_fn(|i, j| {
+            if i < 3 {
+                r[i][j] as f64
+            } else if j == 3 {
+                1.0
+            } else {
+                0.0
+            }
+        })
     } else if h.qform_code > 0 {
         qform(h)?
     } else {
@@ -158,7 +184,9 @@ pub(super) fn affine_metres(h: &NiftiHeader) -> Result<Matrix4<f64>, String> {
 fn spacing(h: &NiftiHeader) -> Result<[f64; 3], String> {
     let s = [h.pixdim[1], h.pixdim[2], h.pixdim[3]].map(f64::from);
     if !s.iter().all(|&x| x.is_finite() && x > 0.0) {
-        return Err(format!("voxel spacing pixdim[1..4] = {s:?} must be positive"));
+        return Err(format!(
+            "voxel spacing pixdim[1..4] = {s:?} must be positive"
+        ));
     }
     Ok(s)
 }
@@ -211,7 +239,11 @@ fn decode_labels(h: &NiftiHeader, bytes: &[u8], dims: [usize; 3]) -> Result<Vec<
         1280 => (8, Kind::U),
         16 => (4, Kind::F),
         64 => (8, Kind::F),
-        t => return Err(format!("unsupported voxel datatype code {t} for a label volume")),
+        t => {
+            return Err(format!(
+                "unsupported voxel datatype code {t} for a label volume"
+            ));
+        }
     };
     let count = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
     let offset = h.vox_offset;
@@ -219,7 +251,9 @@ fn decode_labels(h: &NiftiHeader, bytes: &[u8], dims: [usize; 3]) -> Result<Vec<
         return Err(format!("invalid vox_offset {offset}"));
     }
     let offset = offset as usize;
-    let needed = count.and_then(|n| n.checked_mul(size)).and_then(|n| n.checked_add(offset));
+    let needed = count
+        .and_then(|n| n.checked_mul(size))
+        .and_then(|n| n.checked_add(offset));
     let Some(needed) = needed else {
         return Err(format!("volume {dims:?} is too large"));
     };
@@ -232,7 +266,8 @@ fn decode_labels(h: &NiftiHeader, bytes: &[u8], dims: [usize; 3]) -> Result<Vec<
     }
     let big = h.endianness == Endianness::Big;
     let (slope, inter) = (h.scl_slope as f64, h.scl_inter as f64);
-    let scaled = slope != 0.0 && slope.is_finite() && inter.is_finite() && (slope != 1.0 || inter != 0.0);
+    let scaled =
+        slope != 0.0 && slope.is_finite() && inter.is_finite() && (slope != 1.0 || inter != 0.0);
     let data = &bytes[offset..needed];
     let mut labels = Vec::with_capacity(data.len() / size);
     for (n, chunk) in data.chunks_exact(size).enumerate() {

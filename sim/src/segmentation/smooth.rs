@@ -45,7 +45,9 @@ pub(super) fn smooth_boundary(mesh: &mut TetMesh, iterations: usize) -> usize {
             steps.clear();
             for &v in &boundary {
                 let nb = neighbours.row(v as usize);
-                let sum = nb.iter().fold(crate::Vector3::zeros(), |s, &u| s + pos[u as usize].coords);
+                let sum = nb
+                    .iter()
+                    .fold(crate::Vector3::zeros(), |s, &u| s + pos[u as usize].coords);
                 let avg = sum / nb.len().max(1) as f64;
                 steps.push(factor * (avg - pos[v as usize].coords));
             }

@@ -47,7 +47,11 @@ impl LabelVolume {
         if world_from_voxel.fixed_view::<3, 3>(0, 0).determinant() == 0.0 {
             return bad("voxel-to-world affine is singular".into());
         }
-        Ok(Self { dims, labels, world_from_voxel })
+        Ok(Self {
+            dims,
+            labels,
+            world_from_voxel,
+        })
     }
 
     /// Reads a NIfTI-1 label volume (`.nii` or `.nii.gz`, gzip detected from the content).
@@ -79,7 +83,9 @@ impl LabelVolume {
     /// Labels must be non-zero (0 is background).
     pub fn from_mask_files<P: AsRef<Path>>(masks: &[(P, u32)]) -> Result<Self, SegmentationError> {
         let Some(((first_path, _), _)) = masks.split_first() else {
-            return Err(SegmentationError::InvalidOptions("no mask files given".into()));
+            return Err(SegmentationError::InvalidOptions(
+                "no mask files given".into(),
+            ));
         };
         if let Some((_, l)) = masks.iter().find(|(_, l)| *l == 0) {
             return Err(SegmentationError::InvalidOptions(format!(
@@ -91,7 +97,11 @@ impl LabelVolume {
             let path = path.as_ref();
             let mask = Self::read(path)?;
             let Some(out) = combined.as_mut() else {
-                let labels = mask.labels.iter().map(|&v| if v != 0 { *label } else { 0 }).collect();
+                let labels = mask
+                    .labels
+                    .iter()
+                    .map(|&v| if v != 0 { *label } else { 0 })
+                    .collect();
                 combined = Some(Self { labels, ..mask });
                 continue;
             };
@@ -119,7 +129,10 @@ impl LabelVolume {
         if self.dims != other.dims {
             return Some(format!("dimensions {:?} vs {:?}", other.dims, self.dims));
         }
-        let scale = self.world_from_voxel.amax().max(other.world_from_voxel.amax());
+        let scale = self
+            .world_from_voxel
+            .amax()
+            .max(other.world_from_voxel.amax());
         let diff = (self.world_from_voxel - other.world_from_voxel).amax();
         if diff > 1e-6 * scale {
             return Some(format!(
@@ -201,8 +214,15 @@ impl LabelVolume {
 
     /// A copy where every label not in `keep` is replaced by 0.
     pub fn select(&self, keep: &[u32]) -> LabelVolume {
-        let labels = self.labels.iter().map(|&v| if keep.contains(&v) { v } else { 0 }).collect();
-        Self { labels, ..self.clone() }
+        let labels = self
+            .labels
+            .iter()
+            .map(|&v| if keep.contains(&v) { v } else { 0 })
+            .collect();
+        Self {
+            labels,
+            ..self.clone()
+        }
     }
 
     /// Coarsens by integer `factors` per axis with a majority vote: coarse voxel `(I, J, K)`
@@ -215,7 +235,9 @@ impl LabelVolume {
     /// (full-size) block; blocks that stick out of the fine grid extend beyond it.
     pub fn coarsen(&self, factors: [usize; 3]) -> Result<LabelVolume, SegmentationError> {
         if factors.contains(&0) {
-            return Err(SegmentationError::InvalidOptions("coarsening factor 0".into()));
+            return Err(SegmentationError::InvalidOptions(
+                "coarsening factor 0".into(),
+            ));
         }
         let [fx, fy, fz] = factors;
         let cd = [0, 1, 2].map(|a| self.dims[a].div_ceil(factors[a]));

@@ -11,7 +11,10 @@
 const NONE: u32 = u32::MAX;
 
 /// Inclusive index bounding box `[lo, hi]` of the non-zero voxels, or `None`.
-pub(super) fn occupied_bounds(dims: [usize; 3], labels: &[u32]) -> Option<([usize; 3], [usize; 3])> {
+pub(super) fn occupied_bounds(
+    dims: [usize; 3],
+    labels: &[u32],
+) -> Option<([usize; 3], [usize; 3])> {
     let mut lo = dims;
     let mut hi = [0usize; 3];
     let mut any = false;
@@ -28,7 +31,11 @@ pub(super) fn occupied_bounds(dims: [usize; 3], labels: &[u32]) -> Option<([usiz
 
 #[inline]
 fn unindex(dims: [usize; 3], n: usize) -> [usize; 3] {
-    [n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1])]
+    [
+        n % dims[0],
+        (n / dims[0]) % dims[1],
+        n / (dims[0] * dims[1]),
+    ]
 }
 
 /// Keeps only the largest 6-connected (face-connected) component of the non-zero voxels,
@@ -152,7 +159,11 @@ pub(super) fn non_manifold_vertices(dims: [usize; 3], labels: &[u32]) -> Vec<[us
 /// (the occupied set only grows, and a block whose in-grid voxels are all occupied is always
 /// manifold) but may fill a lot in a very ragged segmentation; `max_passes` bounds it.
 /// Returns `(voxels filled, offending vertices left)`.
-pub(super) fn fill_non_manifold(dims: [usize; 3], labels: &mut [u32], max_passes: usize) -> (usize, usize) {
+pub(super) fn fill_non_manifold(
+    dims: [usize; 3],
+    labels: &mut [u32],
+    max_passes: usize,
+) -> (usize, usize) {
     let table = manifold_table();
     let mut filled = 0;
     for _ in 0..max_passes {
@@ -173,10 +184,15 @@ pub(super) fn fill_non_manifold(dims: [usize; 3], labels: &mut [u32], max_passes
             }
             // An earlier fill in this pass may have fixed the block already; refilling a
             // manifold block is harmless but changes more than needed, so re-check.
-            let Some(&(fill, _)) = votes.iter().max_by_key(|&&(l, k)| (k, std::cmp::Reverse(l))) else {
+            let Some(&(fill, _)) = votes
+                .iter()
+                .max_by_key(|&&(l, k)| (k, std::cmp::Reverse(l)))
+            else {
                 continue;
             };
-            let mask = block(dims, c).filter(|&(_, n)| labels[n] != 0).fold(0usize, |m, (b, _)| m | 1 << b);
+            let mask = block(dims, c)
+                .filter(|&(_, n)| labels[n] != 0)
+                .fold(0usize, |m, (b, _)| m | 1 << b);
             if table[mask] {
                 continue;
             }
@@ -210,7 +226,10 @@ mod tests {
     fn fill_repairs_edge_contact() {
         let dims = [2, 2, 1];
         let mut labels = vec![1, 0, 0, 2];
-        assert_eq!(non_manifold_vertices(dims, &labels), vec![[1, 1, 0], [1, 1, 1]]);
+        assert_eq!(
+            non_manifold_vertices(dims, &labels),
+            vec![[1, 1, 0], [1, 1, 1]]
+        );
         let (filled, left) = fill_non_manifold(dims, &mut labels, 10);
         assert_eq!((filled, left), (2, 0));
         assert_eq!(labels, vec![1, 1, 1, 2]);
