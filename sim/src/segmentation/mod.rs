@@ -99,9 +99,11 @@ pub struct MeshingOptions {
     pub keep_largest_component: bool,
     /// Handling of edge/vertex contacts of the voxel surface.
     pub non_manifold: NonManifold,
-    /// Taubin smoothing iterations of the boundary vertices (0 = none); see the `smooth`
-    /// module notes: moves that would shrink a tetrahedron below
-    /// [`MIN_VOLUME_RATIO`] of its volume are rejected.
+    /// Taubin (lambda = 0.5, mu = -0.53) smoothing iterations of the boundary vertices
+    /// (0 = none), neighbours taken along boundary edges; the negative mu step undoes the
+    /// shrinkage of plain Laplacian smoothing. Vertices move one at a time and a move is
+    /// undone when a tetrahedron around the vertex would fall below [`MIN_VOLUME_RATIO`] of
+    /// its unsmoothed volume, so all tetrahedra stay positively oriented.
     pub smooth_iterations: usize,
 }
 
