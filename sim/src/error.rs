@@ -28,3 +28,23 @@ pub enum ReadError {
     #[error("{path}: {source}")]
     Mesh { path: std::path::PathBuf, source: MeshError },
 }
+
+/// A label volume that could not be turned into a mesh (see [`crate::segmentation`]).
+#[derive(Debug, thiserror::Error)]
+pub enum SegmentationError {
+    /// A segmentation file could not be read; the error names the file.
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// None of the requested labels occurs in the volume (after resampling).
+    #[error("no voxel carries labels {labels:?}")]
+    NoVoxels { labels: Vec<u32> },
+    /// Inconsistent data handed to [`crate::segmentation::LabelVolume::new`].
+    #[error("invalid label volume: {0}")]
+    InvalidVolume(String),
+    /// Meaningless [`crate::segmentation::MeshingOptions`] or mask labels.
+    #[error("invalid meshing options: {0}")]
+    InvalidOptions(String),
+    /// The generated mesh was rejected by [`crate::TetMesh::new`].
+    #[error("building the mesh: {0}")]
+    Mesh(#[from] MeshError),
+}

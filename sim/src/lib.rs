@@ -7,6 +7,7 @@
 //!
 //! - [`mesh`]: the tetrahedral mesh, its topology, validation and quality measures;
 //! - [`io`]: mesh readers (Gmsh, TetGen, VTK) and the `.vtu` writer, NIfTI segmentations;
+//! - [`segmentation`]: NIfTI label volumes to conforming voxel tetrahedral meshes;
 //! - [`generate`]: built-in structured meshes (slabs, sheets, bars);
 //! - [`model`]: the particle/spring/damper model with pre-tension;
 //! - [`solver`]: time integrators and static equilibrium;
@@ -14,8 +15,9 @@
 
 pub mod error;
 pub mod mesh;
+pub mod segmentation;
 
-pub use error::{MeshError, ReadError};
+pub use error::{MeshError, ReadError, SegmentationError};
 pub use mesh::TetMesh;
 
 /// 3-D point in metres.
