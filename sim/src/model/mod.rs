@@ -121,6 +121,36 @@ impl Model {
         self.mass.len()
     }
 
+    /// Material of each tetrahedron, by its region.
+    pub fn material_of_tets(&self, mesh: &TetMesh) -> Result<Vec<Material>, ModelError> {
+        mesh.regions()
+            .iter()
+            .map(|&r| {
+                self.materials
+                    .binary_search_by_key(&r, |(id, _)| *id)
+                    .map(|i| self.materials[i].1)
+                    .map_err(|_| ModelError::MissingMaterial(r))
+            })
+            .collect()
+    }
+
+    /// Replaces the mesh after a topology change (a cut): masses, springs and held flags are
+    /// rebuilt by the same rules as at the start (`m = sum rho V / 4`, `l = d (1 - s)` with `d`
+    /// from the reference positions).
+    pub fn rebuild(&mut self, mesh: TetMesh, held: Vec<bool>) -> Result<(), ModelError> {
+        let material_of_tet = self.material_of_tets(&mesh)?;
+        let mass = lumped_masses(&mesh, &material_of_tet);
+        if let Some(v) = mass.iter().position(|&m| !(m > 0.0)) {
+            return Err(ModelError::ZeroMass { vertex: v as u32 });
+        }
+        self.inv_mass = mass.iter().zip(&held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
+        self.springs = SpringSet::from_mesh(&mesh, &material_of_tet);
+        self.mass = mass;
+        self.held = held;
+        self.mesh = mesh;
+        Ok(())
+    }
+
     /// Total mass in kg.
     pub fn total_mass(&self) -> f64 {
         self.mass.iter().sum()

@@ -41,7 +41,8 @@ impl Scene {
         spec.solver.check().map_err(invalid)?;
         let base_dir = match origin {
             SpecOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),
-            SpecOrigin::BuiltIn => std::path::PathBuf::new(),
+            // Built-in scenes refer to the repository's data relative to `sim/scenes/`.
+            SpecOrigin::BuiltIn => std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes")),
         };
         let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options)?;
         let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(invalid)?;
@@ -103,21 +104,34 @@ fn build_mesh(
             Ok((g.mesh, Some(g.rim)))
         }
         MeshSource::File { path, unit_m } => {
+            let path = base_dir.join(path);
             if !(*unit_m > 0.0 && unit_m.is_finite()) {
                 return Err(invalid(format!("unit_m must be positive, got {unit_m}")));
             }
-            let mut mesh = load_mesh_file(&base_dir.join(path))?;
+            let mut mesh = crate::io::read_mesh(&path)?;
             for p in mesh.positions_mut() {
                 *p *= *unit_m;
             }
             Ok((mesh, None))
         }
-        MeshSource::Segmentation { .. } => Err(invalid("segmentation meshes are not available in this build".into())),
+        MeshSource::Segmentation { path, labels, masks, coarsen } => {
+            use crate::segmentation::{LabelVolume, MeshingOptions, NonManifold, Resample, mesh_labels};
+            let seg_err = |source: crate::SegmentationError| SceneError::Segmentation { scene: spec.name.clone(), source };
+            let (volume, labels) = match (path, masks.is_empty()) {
+                (Some(p), true) => (LabelVolume::read(base_dir.join(p))?, labels.clone()),
+                (None, false) => {
+                    let files: Vec<_> = masks.iter().map(|m| (base_dir.join(&m.path), m.region)).collect();
+                    (LabelVolume::from_mask_files(&files).map_err(seg_err)?, masks.iter().map(|m| m.region).collect())
+                }
+                _ => return Err(invalid("a segmentation mesh needs either `path` (with `labels`) or `masks`".into())),
+            };
+            let mut opts = MeshingOptions::new(labels);
+            opts.resample = coarsen.map(Resample::Factor);
+            opts.keep_largest_component = true;
+            opts.non_manifold = NonManifold::Fill;
+            Ok((mesh_labels(&volume, &opts).map_err(seg_err)?, None))
+        }
     }
-}
-
-fn load_mesh_file(path: &Path) -> Result<TetMesh, SceneError> {
-    Err(SceneError::Invalid { scene: path.display().to_string(), message: "mesh files are not available in this build".into() })
 }
 
 fn held_vertices(spec: &SceneSpec, mesh: &TetMesh, generated_rim: Option<&[u32]>) -> Result<Vec<u32>, String> {
@@ -128,6 +142,16 @@ fn held_vertices(spec: &SceneSpec, mesh: &TetMesh, generated_rim: Option<&[u32]>
                 (Some(rim), None) => held.extend_from_slice(rim),
                 _ => held.extend(bounding_box_rim(mesh, width_mm.map(|w| w * MM))),
             },
+            HeldSelection::BoundingBoxFaces { axes, width_mm } => {
+                let axes: Vec<usize> = axes
+                    .chars()
+                    .map(|c| "xyz".find(c).ok_or_else(|| format!("axes must be letters of \"xyz\", got {axes:?}")))
+                    .collect::<Result<_, _>>()?;
+                if !(*width_mm >= 0.0) {
+                    return Err(format!("width_mm must be non-negative, got {width_mm}"));
+                }
+                held.extend(near_box_faces(mesh, &axes, width_mm * MM));
+            }
             HeldSelection::Box { min_mm, max_mm } => {
                 let lo = Point3::from(min_mm.map(|v| v * MM));
                 let hi = Point3::from(max_mm.map(|v| v * MM));
@@ -165,13 +189,19 @@ fn bounding_box_rim(mesh: &TetMesh, width: Option<f64>) -> Vec<u32> {
     let width = width.unwrap_or(0.02 * extent.norm());
     let mut axes = [0usize, 1, 2];
     axes.sort_by(|&a, &b| extent[b].total_cmp(&extent[a]));
+    near_box_faces(mesh, &axes[..2], width)
+}
+
+/// Boundary vertices within `width` of the bounding-box faces across `axes`.
+fn near_box_faces(mesh: &TetMesh, axes: &[usize], width: f64) -> Vec<u32> {
+    let (lo, hi) = mesh.bounding_box();
     let pos = mesh.positions();
     mesh.topology()
         .boundary_vertices()
         .into_iter()
         .filter(|&v| {
             let p = pos[v as usize];
-            axes[..2].iter().any(|&k| p[k] - lo[k] <= width || hi[k] - p[k] <= width)
+            axes.iter().any(|&k| p[k] - lo[k] <= width || hi[k] - p[k] <= width)
         })
         .collect()
 }

@@ -13,10 +13,11 @@ use std::path::{Path, PathBuf};
 use crate::ReadError;
 
 /// Built-in scenes: name and TOML text.
-pub const BUILTIN: [(&str, &str); 3] = [
+pub const BUILTIN: [(&str, &str); 4] = [
     ("chest-wall", include_str!("../../scenes/chest-wall.toml")),
     ("sheet", include_str!("../../scenes/sheet.toml")),
     ("bar", include_str!("../../scenes/bar.toml")),
+    ("body-wall", include_str!("../../scenes/body-wall.toml")),
 ];
 
 /// Why a scene could not be loaded or built.
@@ -32,6 +33,8 @@ pub enum SceneError {
     Read(#[from] ReadError),
     #[error("scene {scene:?}: {source}")]
     Model { scene: String, source: crate::model::ModelError },
+    #[error("scene {scene:?}: {source}")]
+    Segmentation { scene: String, source: crate::SegmentationError },
     #[error("scene {scene:?}: {source}")]
     Mesh { scene: String, source: crate::MeshError },
 }

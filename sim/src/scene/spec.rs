@@ -98,6 +98,9 @@ pub enum HeldSelection {
         #[serde(default)]
         width_mm: Option<f64>,
     },
+    /// Vertices within `width_mm` of the bounding-box faces across the given axes
+    /// (`axes` is a subset of "xyz"), e.g. the two cut ends of a scanned slab.
+    BoundingBoxFaces { axes: String, width_mm: f64 },
     /// Vertices inside an axis-aligned box.
     Box { min_mm: [f64; 3], max_mm: [f64; 3] },
     /// All vertices of tetrahedra of a region.

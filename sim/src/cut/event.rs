@@ -1,0 +1,58 @@
+//! Topology events: everything a cut changed, so a recording can replay it and a viewer can
+//! update its mesh incrementally.
+
+use serde::{Deserialize, Serialize};
+
+/// A vertex created on a cut edge at `a + t (b - a)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CreatedVertex {
+    pub id: u32,
+    pub edge: [u32; 2],
+    pub t: f64,
+}
+
+/// A vertex moved onto the clipping plane (current and reference positions, metres).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MovedVertex {
+    pub id: u32,
+    pub from: [f64; 3],
+    pub to: [f64; 3],
+}
+
+/// A vertex split in two: `copy` takes over the tetrahedra on one side.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SplitVertex {
+    pub original: u32,
+    pub copy: u32,
+}
+
+/// Everything one cut changed.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CutEvent {
+    /// Tetrahedra replaced by their children (ids before the cut).
+    pub tets_removed: Vec<u32>,
+    /// New tetrahedra `(id, vertices)` after the cut (the first child of a tetrahedron reuses
+    /// its id; the others are appended).
+    pub tets_added: Vec<(u32, [u32; 4])>,
+    /// Tetrahedra whose vertices changed because a vertex was split.
+    pub tets_relinked: Vec<(u32, [u32; 4])>,
+    pub vertices_created: Vec<CreatedVertex>,
+    pub vertices_moved: Vec<MovedVertex>,
+    pub vertices_split: Vec<SplitVertex>,
+    /// Springs (edges) removed and added.
+    pub springs_removed: Vec<[u32; 2]>,
+    pub springs_added: Vec<[u32; 2]>,
+    /// Triangles of the new cut surface (one per side).
+    pub cut_faces: usize,
+    /// Smallest child volume relative to its parent's (1 when nothing was split).
+    pub min_child_volume_fraction: f64,
+    /// Edges split beyond the blade's reach because no vertex could move (fallback).
+    pub forced_splits: usize,
+}
+
+impl CutEvent {
+    /// True when the cut changed nothing.
+    pub fn is_empty(&self) -> bool {
+        self.tets_removed.is_empty() && self.vertices_moved.is_empty() && self.vertices_split.is_empty()
+    }
+}

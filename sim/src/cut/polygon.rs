@@ -1,0 +1,148 @@
+//! The clipping surface C swept by the blade between two poses, as a planar polygon, and the
+//! blade itself.
+
+use crate::{Point3, Vector3};
+
+/// A scalpel blade: the cutting edge runs from the tip along `edge_direction` for `depth_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Blade {
+    pub tip: Point3,
+    /// Unit vector from the tip along the cutting edge (towards the handle).
+    pub edge_direction: Vector3,
+    pub depth_m: f64,
+}
+
+impl Blade {
+    /// The far end of the cutting edge.
+    pub fn heel(&self) -> Point3 {
+        self.tip + self.edge_direction * self.depth_m
+    }
+
+    /// True when every number is finite and the depth positive.
+    pub fn is_finite(&self) -> bool {
+        self.tip.iter().chain(self.edge_direction.iter()).all(|c| c.is_finite())
+            && self.depth_m.is_finite()
+            && self.depth_m > 0.0
+            && self.edge_direction.norm() > 0.0
+    }
+}
+
+/// A planar convex or simple polygon C with its plane `n . x = offset` (`n` unit).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CutPolygon {
+    pub corners: Vec<Point3>,
+    pub normal: Vector3,
+    pub offset: f64,
+    /// In-plane basis for point-in-polygon tests.
+    u: Vector3,
+    v: Vector3,
+    corners_2d: Vec<[f64; 2]>,
+    /// Length scale (longest side) for tolerances.
+    pub scale: f64,
+}
+
+impl CutPolygon {
+    /// The polygon through `corners` projected onto their best-fit plane (Newell's normal
+    /// through the centroid). None when the corners are non-finite or span no area.
+    pub fn new(corners: &[Point3]) -> Option<Self> {
+        if corners.len() < 3 || !corners.iter().all(|p| p.iter().all(|c| c.is_finite())) {
+            return None;
+        }
+        let mut normal = Vector3::zeros();
+        let mut centroid = Vector3::zeros();
+        for (i, a) in corners.iter().enumerate() {
+            let b = corners[(i + 1) % corners.len()];
+            normal.x += (a.y - b.y) * (a.z + b.z);
+            normal.y += (a.z - b.z) * (a.x + b.x);
+            normal.z += (a.x - b.x) * (a.y + b.y);
+            centroid += a.coords;
+        }
+        centroid /= corners.len() as f64;
+        let scale = (0..corners.len())
+            .map(|i| (corners[(i + 1) % corners.len()] - corners[i]).norm())
+            .fold(0.0, f64::max);
+        let area2 = normal.norm();
+        if !(scale > 0.0) || !(area2 > 1e-12 * scale * scale) {
+            return None;
+        }
+        let normal = normal / area2;
+        let offset = normal.dot(&centroid);
+        let projected: Vec<Point3> = corners.iter().map(|p| p - normal * (normal.dot(&p.coords) - offset)).collect();
+        let u = (projected[1] - projected[0]).normalize();
+        let v = normal.cross(&u);
+        let corners_2d = projected.iter().map(|p| [u.dot(&p.coords), v.dot(&p.coords)]).collect();
+        Some(Self { corners: projected, normal, offset, u, v, corners_2d, scale })
+    }
+
+    /// The quadrilateral swept by a blade moving from `a` to `b`.
+    pub fn swept(a: &Blade, b: &Blade) -> Option<Self> {
+        Self::new(&[a.tip, b.tip, b.heel(), a.heel()])
+    }
+
+    /// Signed distance of `p` from the plane.
+    #[inline]
+    pub fn signed_distance(&self, p: &Point3) -> f64 {
+        self.normal.dot(&p.coords) - self.offset
+    }
+
+    /// True when the projection of `p` onto the plane lies inside the polygon or within `tol`
+    /// of its boundary.
+    pub fn contains_projection(&self, p: &Point3, tol: f64) -> bool {
+        let q = [self.u.dot(&p.coords), self.v.dot(&p.coords)];
+        let n = self.corners_2d.len();
+        // crossing-number test, then a distance test for points close to the boundary
+        let mut inside = false;
+        for i in 0..n {
+            let (a, b) = (self.corners_2d[i], self.corners_2d[(i + 1) % n]);
+            if (a[1] > q[1]) != (b[1] > q[1]) {
+                let x = a[0] + (q[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]);
+                if q[0] < x {
+                    inside = !inside;
+                }
+            }
+        }
+        inside || (0..n).any(|i| segment_distance_2d(q, self.corners_2d[i], self.corners_2d[(i + 1) % n]) <= tol)
+    }
+
+    /// Axis-aligned bounds of the polygon.
+    pub fn bounds(&self) -> (Point3, Point3) {
+        let mut lo = self.corners[0];
+        let mut hi = self.corners[0];
+        for p in &self.corners {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        (lo, hi)
+    }
+}
+
+fn segment_distance_2d(q: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let ab = [b[0] - a[0], b[1] - a[1]];
+    let aq = [q[0] - a[0], q[1] - a[1]];
+    let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+    let t = if len2 > 0.0 { ((aq[0] * ab[0] + aq[1] * ab[1]) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let d = [aq[0] - t * ab[0], aq[1] - t * ab[1]];
+    (d[0] * d[0] + d[1] * d[1]).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn square_contains_its_inside_only() {
+        let c = CutPolygon::new(&[
+            Point3::new(0.0, 0.0, 1.0),
+            Point3::new(1.0, 0.0, 1.0),
+            Point3::new(1.0, 1.0, 1.0),
+            Point3::new(0.0, 1.0, 1.0),
+        ])
+        .unwrap();
+        assert!((c.normal.z.abs() - 1.0).abs() < 1e-15);
+        assert!(c.contains_projection(&Point3::new(0.5, 0.5, 7.0), 0.0));
+        assert!(!c.contains_projection(&Point3::new(1.5, 0.5, 1.0), 0.0));
+        assert!(c.contains_projection(&Point3::new(1.05, 0.5, 1.0), 0.1));
+        assert!((c.signed_distance(&Point3::new(0.3, 0.3, 3.0)).abs() - 2.0).abs() < 1e-15);
+        assert!(CutPolygon::new(&[Point3::origin(), Point3::new(1.0, 0.0, 0.0), Point3::new(2.0, 0.0, 0.0)]).is_none());
+    }
+}

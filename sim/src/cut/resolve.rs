@@ -1,0 +1,267 @@
+//! Edge/plane intersections and the resolution of incomplete intersections by vertex
+//! movement (the paper's section 4.1).
+//!
+//! An edge *crosses* C when its two vertices lie strictly on opposite sides of C's plane and
+//! the crossing point lies inside C. A tetrahedron some of whose plane-crossing edges cross
+//! inside C and some outside is *incompletely* intersected: C's boundary B runs through it.
+//! Such tetrahedra are resolved by moving a vertex of an outside crossing onto the plane, by
+//! the mean of its intersecting edge vectors (`x_v += mean_e t_e (x_w - x_v)`), after which
+//! none of its edges cross and the tetrahedron is either fully cut or not cut. Vertices very
+//! close to the plane (crossing parameter below `snap`) move onto it too, so that no sliver
+//! is created. A vertex moves only if every tetrahedron around it keeps at least
+//! [`MIN_VOLUME_KEPT`] of its volume in both the current and the reference configuration;
+//! held vertices and vertices on a strongly curved surface do not move. When neither end of
+//! an outside crossing can move, the edge is split anyway (the cut reaches a little past B).
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use super::CutPolygon;
+use crate::mesh::{NONE, TET_EDGES, TET_FACES, TetMesh, tet_signed_volume, triangle_normal};
+use crate::{Point3, Vector3};
+
+/// A moved vertex keeps every tetrahedron around it at no less than this fraction of its
+/// volume.
+pub const MIN_VOLUME_KEPT: f64 = 0.1;
+
+/// A plane-crossing edge.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Crossing {
+    /// Sorted vertex ids.
+    pub edge: [u32; 2],
+    /// Crossing parameter from `edge[0]`.
+    pub t: f64,
+    /// The crossing lies inside C (or was forced).
+    pub split: bool,
+}
+
+/// Result of classification.
+#[derive(Debug, Clone, Default)]
+pub struct Classification {
+    /// Side of each vertex of the candidate tetrahedra: +1, -1, or 0 on the plane.
+    pub sign: BTreeMap<u32, i8>,
+    /// Crossing edges by sorted vertex pair.
+    pub crossings: BTreeMap<[u32; 2], Crossing>,
+    /// Vertices moved: (id, current from, current to, reference from, reference to).
+    pub moved: Vec<(u32, Point3, Point3)>,
+    pub forced: usize,
+}
+
+pub struct Resolver<'a> {
+    pub mesh: &'a TetMesh,
+    pub x: &'a mut [Point3],
+    pub x_ref: &'a mut [Point3],
+    pub held: &'a [bool],
+    pub plane: &'a CutPolygon,
+    pub candidates: &'a [u32],
+    /// Crossing parameters below this (or above 1 - this) move the near vertex onto the plane.
+    pub snap: f64,
+    /// Distance tolerance for "inside C".
+    pub inside_tolerance: f64,
+}
+
+impl Resolver<'_> {
+    fn side(&self, s: f64, zero: f64) -> i8 {
+        if s > zero {
+            1
+        } else if s < -zero {
+            -1
+        } else {
+            0
+        }
+    }
+
+    fn classify(&self, on_plane: &BTreeSet<u32>, forced: &BTreeSet<[u32; 2]>) -> Classification {
+        let zero = 1e-12 * self.plane.scale;
+        let mut c = Classification::default();
+        let mut dist = BTreeMap::new();
+        for &t in self.candidates {
+            for &v in &self.mesh.tets()[t as usize] {
+                dist.entry(v).or_insert_with(|| {
+                    if on_plane.contains(&v) { 0.0 } else { self.plane.signed_distance(&self.x[v as usize]) }
+                });
+            }
+        }
+        for (&v, &s) in &dist {
+            c.sign.insert(v, self.side(s, zero));
+        }
+        for &t in self.candidates {
+            let tet = self.mesh.tets()[t as usize];
+            for [i, j] in TET_EDGES {
+                let (a, b) = (tet[i].min(tet[j]), tet[i].max(tet[j]));
+                if c.crossings.contains_key(&[a, b]) || c.sign[&a] * c.sign[&b] >= 0 {
+                    continue;
+                }
+                let (sa, sb) = (dist[&a], dist[&b]);
+                let tt = sa / (sa - sb);
+                let p = self.x[a as usize] + (self.x[b as usize] - self.x[a as usize]) * tt;
+                let split = forced.contains(&[a, b]) || self.plane.contains_projection(&p, self.inside_tolerance);
+                c.crossings.insert([a, b], Crossing { edge: [a, b], t: tt, split });
+            }
+        }
+        c
+    }
+
+    /// Where `v` would move: onto the plane by the mean of its intersecting edge vectors
+    /// (tangentially for a vertex on a nearly flat surface). None when it may not move.
+    fn movement(&self, v: u32, c: &Classification) -> Option<(Vector3, Vector3)> {
+        if self.held[v as usize] {
+            return None;
+        }
+        let (mut dx, mut dref, mut k) = (Vector3::zeros(), Vector3::zeros(), 0.0);
+        for cr in c.crossings.values() {
+            let (w, t) = if cr.edge[0] == v {
+                (cr.edge[1], cr.t)
+            } else if cr.edge[1] == v {
+                (cr.edge[0], 1.0 - cr.t)
+            } else {
+                continue;
+            };
+            dx += (self.x[w as usize] - self.x[v as usize]) * t;
+            dref += (self.x_ref[w as usize] - self.x_ref[v as usize]) * t;
+            k += 1.0;
+        }
+        if k == 0.0 {
+            return None;
+        }
+        let (mut dx, mut dref) = (dx / k, dref / k);
+        if let Some(n_s) = self.surface_normal(v)? {
+            // stay on the (flat) surface: move within its tangent plane onto C's plane
+            let n_c = self.plane.normal;
+            let dir = n_c - n_s * n_c.dot(&n_s);
+            let along = dir.dot(&n_c);
+            if along < 0.1 {
+                return None; // the cut plane is nearly parallel to the surface here
+            }
+            let s = self.plane.signed_distance(&self.x[v as usize]);
+            dx = dir * (-s / along);
+            dref = dx;
+        }
+        Some((dx, dref))
+    }
+
+    /// Outward normal of the surface at `v`: `Some(None)` for an interior vertex,
+    /// `Some(Some(n))` on a nearly flat surface, `None` on a crease or corner.
+    fn surface_normal(&self, v: u32) -> Option<Option<Vector3>> {
+        let topo = self.mesh.topology();
+        let mut normals = Vec::new();
+        for &t in topo.vertex_tets.row(v as usize) {
+            let tet = self.mesh.tets()[t as usize];
+            for (l, f) in TET_FACES.iter().enumerate() {
+                let fid = topo.tet_faces[t as usize][l] as usize;
+                if topo.face_tets[fid][1] != NONE || !f.iter().any(|&k| tet[k] == v) {
+                    continue;
+                }
+                let p = f.map(|k| self.x[tet[k] as usize]);
+                let n = triangle_normal(&p[0], &p[1], &p[2]);
+                if n.norm() > 0.0 {
+                    normals.push(n.normalize());
+                }
+            }
+        }
+        if normals.is_empty() {
+            return Some(None);
+        }
+        let mean = normals.iter().sum::<Vector3>().normalize();
+        if normals.iter().all(|n| n.dot(&mean) > 0.98) { Some(Some(mean)) } else { None }
+    }
+
+    /// True when moving `v` by (dx, dref) keeps every tetrahedron around it healthy.
+    fn movement_ok(&self, v: u32, dx: &Vector3, dref: &Vector3) -> bool {
+        let topo = self.mesh.topology();
+        for &t in topo.vertex_tets.row(v as usize) {
+            let tet = self.mesh.tets()[t as usize];
+            for (pos, d) in [(&*self.x, dx), (&*self.x_ref, dref)] {
+                let before = tet.map(|w| pos[w as usize]);
+                let after = tet.map(|w| if w == v { pos[w as usize] + d } else { pos[w as usize] });
+                let v0 = tet_signed_volume(&before[0], &before[1], &before[2], &before[3]);
+                let v1 = tet_signed_volume(&after[0], &after[1], &after[2], &after[3]);
+                if !(v1 >= MIN_VOLUME_KEPT * v0.abs()) || v0 <= 0.0 {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// Classifies, then moves vertices and forces splits until every candidate tetrahedron
+    /// is either fully cut or not cut.
+    pub fn resolve(&mut self) -> Classification {
+        let mut on_plane = BTreeSet::new();
+        let mut forced = BTreeSet::new();
+        let mut moved = Vec::new();
+        let max_rounds = 4 * self.candidates.len() + 16;
+        for _ in 0..max_rounds {
+            let c = self.classify(&on_plane, &forced);
+            // Wanted moves, in order: slivers first, then incomplete intersections.
+            let mut wanted: Vec<(u32, Option<[u32; 2]>)> = Vec::new();
+            for cr in c.crossings.values().filter(|cr| cr.split) {
+                if cr.t < self.snap {
+                    wanted.push((cr.edge[0], None));
+                } else if cr.t > 1.0 - self.snap {
+                    wanted.push((cr.edge[1], None));
+                }
+            }
+            for &t in self.candidates {
+                let tet = self.mesh.tets()[t as usize];
+                let edges: Vec<&Crossing> = TET_EDGES
+                    .iter()
+                    .filter_map(|&[i, j]| c.crossings.get(&[tet[i].min(tet[j]), tet[i].max(tet[j])]))
+                    .collect();
+                let splits = edges.iter().filter(|e| e.split).count();
+                if splits == 0 || splits == edges.len() {
+                    continue;
+                }
+                for e in edges.iter().filter(|e| !e.split) {
+                    let near = if e.t < 0.5 { e.edge[0] } else { e.edge[1] };
+                    wanted.push((near, Some(e.edge)));
+                }
+            }
+            if wanted.is_empty() {
+                return Classification { moved, forced: forced.len(), ..c };
+            }
+            let mut changed = false;
+            let mut done = BTreeSet::new();
+            for (v, edge) in wanted {
+                if on_plane.contains(&v) || !done.insert((v, edge)) {
+                    continue;
+                }
+                let mut try_move = |v: u32, on_plane: &mut BTreeSet<u32>| -> bool {
+                    if on_plane.contains(&v) {
+                        return true;
+                    }
+                    match self.movement(v, &c) {
+                        Some((dx, dref)) if self.movement_ok(v, &dx, &dref) => {
+                            let from = self.x[v as usize];
+                            self.x[v as usize] += dx;
+                            self.x_ref[v as usize] += dref;
+                            moved.push((v, from, self.x[v as usize]));
+                            on_plane.insert(v);
+                            true
+                        }
+                        _ => false,
+                    }
+                };
+                if try_move(v, &mut on_plane) {
+                    changed = true;
+                    break; // positions changed: classify again
+                }
+                if let Some(e) = edge {
+                    let other = if e[0] == v { e[1] } else { e[0] };
+                    if try_move(other, &mut on_plane) {
+                        changed = true;
+                        break;
+                    }
+                    if forced.insert(e) {
+                        changed = true;
+                        break;
+                    }
+                }
+            }
+            if !changed {
+                return Classification { moved, forced: forced.len(), ..c };
+            }
+        }
+        let c = self.classify(&on_plane, &forced);
+        Classification { moved, forced: forced.len(), ..c }
+    }
+}
