@@ -93,7 +93,8 @@ pub(super) fn validate(mesh: &TetMesh) -> ValidationReport {
         let p = mesh.tet_corners(t);
         let l2: f64 = super::TET_EDGES.iter().map(|&[i, j]| (p[i] - p[j]).norm_squared()).sum::<f64>() / 6.0;
         let q = 6.0 * std::f64::consts::SQRT_2 * vol / l2.powf(1.5);
-        if !(q.abs() >= DEGENERATE_QUALITY) {
+        // NaN quality (e.g. all corners coincide) counts as degenerate.
+        if q.is_nan() || q.abs() < DEGENERATE_QUALITY {
             r.degenerate_tets.push(t as TetId);
         } else if vol < 0.0 {
             r.inverted_tets.push(t as TetId);
@@ -127,7 +128,7 @@ fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
         return Vec::new();
     }
     mean_len /= n as f64;
-    if !(mean_len > 0.0) {
+    if mean_len.is_nan() || mean_len <= 0.0 {
         return Vec::new();
     }
     let cell = |p: &Point3| -> [i64; 3] { [0, 1, 2].map(|k| (p[k] / mean_len).floor() as i64) };
