@@ -13,6 +13,7 @@
 //! - [`scene`]: scene files and built-in scenes.
 
 pub mod error;
+pub mod io;
 pub mod mesh;
 
 pub use error::{MeshError, ReadError};
