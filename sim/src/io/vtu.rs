@@ -82,8 +82,8 @@ struct Vtu<'a> {
     path: &'a Path,
     lines: LineIndex,
     reader: Reader<&'a [u8]>,
-    /// Names of the open elements.
-    stack: Vec<String>,
+    /// Names of the open elements and the lines they start on.
+    stack: Vec<(String, usize)>,
     piece: Option<Piece>,
     positions: Vec<Point3>,
     tets: Vec<[u32; 4]>,
@@ -112,7 +112,7 @@ impl<'a> Vtu<'a> {
                         self.data_array(info, true)?;
                     } else {
                         self.start(&name, &e, line)?;
-                        self.stack.push(name);
+                        self.stack.push((name, line));
                     }
                 }
                 Event::Empty(e) => {
@@ -126,11 +126,19 @@ impl<'a> Vtu<'a> {
                     }
                 }
                 Event::End(_) => {
-                    if let Some(name) = self.stack.pop() {
+                    if let Some((name, _)) = self.stack.pop() {
                         self.end(&name, line)?;
                     }
                 }
-                Event::Eof => break,
+                Event::Eof => {
+                    if let Some((name, start)) = self.stack.last() {
+                        return Err(self.error(
+                            self.lines.line_of(self.reader.buffer_position()),
+                            format!("unexpected end of file inside <{name}> (opened on line {start})"),
+                        ));
+                    }
+                    break;
+                }
                 _ => {}
             }
         }
@@ -267,7 +275,12 @@ impl<'a> Vtu<'a> {
                     }
                     depth -= 1;
                 }
-                Event::Eof => return Err(self.error(line, "unterminated <DataArray>")),
+                Event::Eof => {
+                    return Err(self.error(
+                        self.lines.line_of(self.reader.buffer_position()),
+                        format!("unexpected end of file inside <DataArray> (opened on line {line})"),
+                    ));
+                }
                 _ => {}
             }
         }
@@ -277,7 +290,7 @@ impl<'a> Vtu<'a> {
     /// for `<DataArray/>`.
     fn data_array(&mut self, info: ArrayInfo, has_content: bool) -> Result<(), ReadError> {
         let chunks = if has_content { self.content(info.line)? } else { Vec::new() };
-        let parent = self.stack.last().map(String::as_str).unwrap_or_default();
+        let parent = self.stack.last().map(|(name, _)| name.as_str()).unwrap_or_default();
         let path = self.path;
         let Some(piece) = self.piece.as_mut() else {
             return Ok(());
