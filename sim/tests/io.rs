@@ -902,3 +902,74 @@ fn round_trip_keeps_awkward_floats_and_regions() {
     assert_eq!(back.tets(), mesh.tets());
     assert_eq!(back.regions(), CUBE_REGIONS);
 }
+
+// ---------------------------------------------------------------------------------------
+// robustness: no input may make a reader panic
+
+/// Every reader on `text` (TetGen with `text` as either file), ignoring the result.
+fn read_all_ways(text: &str) {
+    let _ = gmsh(text);
+    let _ = vtk(text);
+    let _ = vtu(text);
+    let _ = tetgen(text, ELE);
+    let _ = tetgen(NODE, text);
+}
+
+fn samples() -> Vec<String> {
+    vec![cube_msh22(), MSH41.to_owned(), NODE.to_owned(), ELE.to_owned(), cube_vtk(), VTU.to_owned()]
+}
+
+#[test]
+fn truncation_anywhere_never_panics() {
+    for sample in samples() {
+        for (cut, _) in sample.char_indices() {
+            read_all_ways(&sample[..cut]);
+        }
+    }
+}
+
+#[test]
+fn random_corruption_never_panics() {
+    // A fixed linear congruential generator: deterministic, no extra dependency.
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move |n: usize| {
+        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 33) as usize) % n.max(1)
+    };
+    const REPLACEMENTS: [&str; 14] = [
+        "", " ", "\n", "0", "-1", "99", "1e309", "nan", "18446744073709551615", "$End", "<", "\"", "x", "4",
+    ];
+    for sample in samples() {
+        for _ in 0..1500 {
+            let mut text = sample.clone();
+            for _ in 0..1 + next(3) {
+                let bytes = text.as_bytes();
+                let mut at = next(bytes.len());
+                while !text.is_char_boundary(at) {
+                    at -= 1;
+                }
+                let len = next(6).min(text.len() - at);
+                let mut end = at + len;
+                while !text.is_char_boundary(end) {
+                    end -= 1;
+                }
+                text.replace_range(at..end, REPLACEMENTS[next(REPLACEMENTS.len())]);
+            }
+            read_all_ways(&text);
+        }
+    }
+}
+
+#[test]
+fn huge_counts_do_not_allocate_or_panic() {
+    let text = cube_msh22().replace("$Nodes\n8\n", "$Nodes\n18446744073709551615\n");
+    assert_parse_error(gmsh(&text), "small.msh", 19, "section ends early");
+    let text = with_line(MSH41, 9, "18446744073709551615 18446744073709551615 10 50");
+    assert_parse_error(gmsh(&text), "small.msh", 22, "section ends early");
+    let text = with_line(&cube_vtk(), 5, "POINTS 18446744073709551615 double");
+    assert_parse_error(vtk(&text), "small.vtk", 10, "invalid point coordinate `CELLS`");
+    let text = VTU.replace(r#"NumberOfCells="3""#, r#"NumberOfCells="18446744073709551615""#);
+    assert_parse_error(vtu(&text), "small.vtu", 9, "has 3 values, expected NumberOfCells = 18446744073709551615");
+    let text = with_line(NODE, 2, "18446744073709551615 3 0 1");
+    assert_parse_error(tetgen(&text, ELE), "small.node", 8, "expected point 6 of 18446744073709551615");
+}

@@ -394,7 +394,7 @@ impl<'a> Vtu<'a> {
         let (mut offsets, offsets_line) = piece.offsets.ok_or_else(|| missing("`offsets` array in <Cells>"))?;
         let types = piece.types.ok_or_else(|| missing("`types` array in <Cells>"))?;
         // Offsets are the ends of the cells; some writers add a leading 0.
-        if offsets.len() == piece.cells + 1 && offsets.first() == Some(&0) {
+        if Some(offsets.len()) == piece.cells.checked_add(1) && offsets.first() == Some(&0) {
             offsets.remove(0);
         }
         if offsets.len() != piece.cells {
