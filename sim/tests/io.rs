@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use cutlab_sim::io::{
-    MeshFormat, PointData, WriteError, read_mesh, read_mesh_from_str, read_tetgen_str, vtu_string, write_vtu,
+    MeshFormat, PointData, WriteError, read_mesh, read_mesh_from_str, read_tetgen_str, vtu_string,
+    write_vtu,
 };
 use cutlab_sim::{Point3, ReadError, TetMesh, Vector3};
 
@@ -97,8 +98,10 @@ fn tetgen(node: &str, ele: &str) -> Result<TetMesh, ReadError> {
 /// The unit cube split into six tetrahedra around the diagonal 0-7 (Kuhn); half of them are
 /// negatively oriented as listed. Vertex `i` is at `(i & 1, i >> 1 & 1, i >> 2 & 1)`.
 fn cube() -> (Vec<[f64; 3]>, Vec<[usize; 4]>) {
-    let points = (0..8).map(|i| [(i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64]).collect();
-    let tets = vec![[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]];
+    let points =
+        (0..8).map(|i| [(i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64]).collect();
+    let tets =
+        vec![[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]];
     (points, tets)
 }
 
@@ -180,8 +183,8 @@ fn armadillo_tetgen_from_either_file() {
     assert_eq!(a.positions(), b.positions());
     assert_eq!(a.tets(), b.tets());
     // Index base 0: the first point of the file is vertex 0.
-    let first: [f64; 3] =
-        ["-1.0329299999999999", "1.35422", "-1.1708700000000001"].map(|s| s.parse().expect("float"));
+    let first: [f64; 3] = ["-1.0329299999999999", "1.35422", "-1.1708700000000001"]
+        .map(|s| s.parse().expect("float"));
     let p = a.positions()[0];
     assert_eq!([p.x, p.y, p.z], first);
 }
@@ -332,7 +335,12 @@ fn gmsh22_truncated() {
     // 3 + 5 header lines, `$Nodes`, count, 8 nodes (lines 11-18), `$EndNodes` (19),
     // `$Elements` (20), count (21), 3 skipped elements (22-24), tets on lines 25-30.
     let cut = first_lines(&text, 27);
-    assert_parse_error(gmsh(&cut), "small.msh", 28, "unexpected end of file: expected element 7 of 9");
+    assert_parse_error(
+        gmsh(&cut),
+        "small.msh",
+        28,
+        "unexpected end of file: expected element 7 of 9",
+    );
     let cut = first_lines(&text, 14);
     assert_parse_error(gmsh(&cut), "small.msh", 15, "expected node 5 of 8");
     let cut = first_lines(&text, 30);
@@ -346,12 +354,32 @@ fn gmsh22_truncated() {
 fn gmsh22_wrong_counts() {
     let text = cube_msh22();
     // Node count too large: the section ends early at `$EndNodes` (line 19).
-    assert_parse_error(gmsh(&with_line(&text, 10, "9")), "small.msh", 19, "section ends early: expected node 9 of 9");
+    assert_parse_error(
+        gmsh(&with_line(&text, 10, "9")),
+        "small.msh",
+        19,
+        "section ends early: expected node 9 of 9",
+    );
     // Node count too small: line 18 holds a node where `$EndNodes` belongs.
-    assert_parse_error(gmsh(&with_line(&text, 10, "7")), "small.msh", 18, "expected `$EndNodes` after 7 nodes");
+    assert_parse_error(
+        gmsh(&with_line(&text, 10, "7")),
+        "small.msh",
+        18,
+        "expected `$EndNodes` after 7 nodes",
+    );
     // Element count too large / too small.
-    assert_parse_error(gmsh(&with_line(&text, 21, "10")), "small.msh", 31, "expected element 10 of 10");
-    assert_parse_error(gmsh(&with_line(&text, 21, "8")), "small.msh", 30, "expected `$EndElements` after 8 elements");
+    assert_parse_error(
+        gmsh(&with_line(&text, 21, "10")),
+        "small.msh",
+        31,
+        "expected element 10 of 10",
+    );
+    assert_parse_error(
+        gmsh(&with_line(&text, 21, "8")),
+        "small.msh",
+        30,
+        "expected `$EndElements` after 8 elements",
+    );
 }
 
 #[test]
@@ -383,10 +411,20 @@ fn gmsh22_garbage_numbers() {
 #[test]
 fn gmsh22_wrong_element_types() {
     let hex = "5 5 2 1 5 10 20 30 40 50 60 70 80";
-    assert_parse_error(gmsh(&with_line(&cube_msh22(), 26, hex)), "small.msh", 26, "type 5 (a hexahedron)");
+    assert_parse_error(
+        gmsh(&with_line(&cube_msh22(), 26, hex)),
+        "small.msh",
+        26,
+        "type 5 (a hexahedron)",
+    );
     let tet10 = "5 11 2 1 5 10 20 30 40 50 60 70 80 10 20";
     assert_parse_error(gmsh(&with_line(&cube_msh22(), 26, tet10)), "small.msh", 26, "second-order");
-    assert_parse_error(gmsh(&with_line(&cube_msh22(), 26, "5 999 0 1 2")), "small.msh", 26, "type 999");
+    assert_parse_error(
+        gmsh(&with_line(&cube_msh22(), 26, "5 999 0 1 2")),
+        "small.msh",
+        26,
+        "type 999",
+    );
 }
 
 #[test]
@@ -405,7 +443,12 @@ fn gmsh22_missing_sections() {
     let text = "$MeshFormat\n2.2 0 8\n";
     assert_parse_error(gmsh(text), "small.msh", 3, "`$EndMeshFormat`");
     let text = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Comments\nhello\n";
-    assert_parse_error(gmsh(text), "small.msh", 6, "section `$Comments` (line 4) has no `$EndComments`");
+    assert_parse_error(
+        gmsh(text),
+        "small.msh",
+        6,
+        "section `$Comments` (line 4) has no `$EndComments`",
+    );
 }
 
 #[test]
@@ -428,27 +471,67 @@ fn gmsh_binary_and_unsupported_versions() {
 
 #[test]
 fn gmsh41_truncated() {
-    assert_parse_error(gmsh(&first_lines(MSH41, 28)), "small.msh", 29, "expected element 2 of 2 in block 2");
-    assert_parse_error(gmsh(&first_lines(MSH41, 13)), "small.msh", 14, "coordinates of node 1 of 3 in block 1");
+    assert_parse_error(
+        gmsh(&first_lines(MSH41, 28)),
+        "small.msh",
+        29,
+        "expected element 2 of 2 in block 2",
+    );
+    assert_parse_error(
+        gmsh(&first_lines(MSH41, 13)),
+        "small.msh",
+        14,
+        "coordinates of node 1 of 3 in block 1",
+    );
 }
 
 #[test]
 fn gmsh41_wrong_counts() {
-    assert_parse_error(gmsh(&with_line(MSH41, 9, "2 6 10 50")), "small.msh", 9, "declares 6 nodes but the blocks hold 5");
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 9, "2 6 10 50")),
+        "small.msh",
+        9,
+        "declares 6 nodes but the blocks hold 5",
+    );
     // The block claims 3 nodes but has 2: its third "tag" line is a coordinate line.
-    assert_parse_error(gmsh(&with_line(MSH41, 17, "3 7 0 3")), "small.msh", 20, "unexpected extra value `0`");
-    assert_parse_error(gmsh(&with_line(MSH41, 24, "2 4 1 3")), "small.msh", 24, "declares 4 elements but the blocks hold 3");
-    assert_parse_error(gmsh(&with_line(MSH41, 27, "3 7 4 3")), "small.msh", 30, "section ends early");
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 17, "3 7 0 3")),
+        "small.msh",
+        20,
+        "unexpected extra value `0`",
+    );
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 24, "2 4 1 3")),
+        "small.msh",
+        24,
+        "declares 4 elements but the blocks hold 3",
+    );
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 27, "3 7 4 3")),
+        "small.msh",
+        30,
+        "section ends early",
+    );
 }
 
 #[test]
 fn gmsh41_unknown_node_tag() {
-    assert_parse_error(gmsh(&with_line(MSH41, 29, "3 30 20 50 41")), "small.msh", 29, "unknown node tag 41");
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 29, "3 30 20 50 41")),
+        "small.msh",
+        29,
+        "unknown node tag 41",
+    );
 }
 
 #[test]
 fn gmsh41_nan() {
-    assert_parse_error(gmsh(&with_line(MSH41, 21, "1 NaN 1")), "small.msh", 21, "y coordinate is not finite");
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 21, "1 NaN 1")),
+        "small.msh",
+        21,
+        "y coordinate is not finite",
+    );
 }
 
 #[test]
@@ -504,8 +587,14 @@ fn generated_tetgen_cube_base_zero_files() {
     let dir = scratch_dir("tetgen");
     std::fs::write(dir.join("cube.1.node"), node).expect("write");
     std::fs::write(dir.join("cube.1.ele"), ele).expect("write");
-    assert_cube(&read_mesh(&dir.join("cube.1.node")).unwrap_or_else(|e| panic!("{e}")), &CUBE_REGIONS);
-    assert_cube(&read_mesh(&dir.join("cube.1.ele")).unwrap_or_else(|e| panic!("{e}")), &CUBE_REGIONS);
+    assert_cube(
+        &read_mesh(&dir.join("cube.1.node")).unwrap_or_else(|e| panic!("{e}")),
+        &CUBE_REGIONS,
+    );
+    assert_cube(
+        &read_mesh(&dir.join("cube.1.ele")).unwrap_or_else(|e| panic!("{e}")),
+        &CUBE_REGIONS,
+    );
     // Without the sibling: an I/O error naming the missing file.
     std::fs::remove_file(dir.join("cube.1.ele")).expect("remove");
     let e = read_mesh(&dir.join("cube.1.node")).expect_err("error");
@@ -523,48 +612,138 @@ fn tetgen_empty() {
 
 #[test]
 fn tetgen_truncated() {
-    assert_parse_error(tetgen(&first_lines(NODE, 6), ELE), "small.node", 7, "expected point 5 of 5");
-    assert_parse_error(tetgen(NODE, &first_lines(ELE, 2)), "small.ele", 3, "expected tetrahedron 2 of 2");
-    assert_parse_error(tetgen(NODE, "2 4 1\n1 1 2 3 4 2\n2 2 4 3"), "small.ele", 3, "line ends early");
+    assert_parse_error(
+        tetgen(&first_lines(NODE, 6), ELE),
+        "small.node",
+        7,
+        "expected point 5 of 5",
+    );
+    assert_parse_error(
+        tetgen(NODE, &first_lines(ELE, 2)),
+        "small.ele",
+        3,
+        "expected tetrahedron 2 of 2",
+    );
+    assert_parse_error(
+        tetgen(NODE, "2 4 1\n1 1 2 3 4 2\n2 2 4 3"),
+        "small.ele",
+        3,
+        "line ends early",
+    );
 }
 
 #[test]
 fn tetgen_wrong_counts() {
-    assert_parse_error(tetgen(&with_line(NODE, 2, "4 3 0 1"), ELE), "small.node", 7, "more points than the 4 declared on line 2");
+    assert_parse_error(
+        tetgen(&with_line(NODE, 2, "4 3 0 1"), ELE),
+        "small.node",
+        7,
+        "more points than the 4 declared on line 2",
+    );
     // Six declared: the end of the file comes where point 6 should be.
-    assert_parse_error(tetgen(&with_line(NODE, 2, "6 3 0 1"), ELE), "small.node", 8, "expected point 6 of 6");
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "1 4 1")), "small.ele", 3, "more tetrahedra than the 1 declared");
+    assert_parse_error(
+        tetgen(&with_line(NODE, 2, "6 3 0 1"), ELE),
+        "small.node",
+        8,
+        "expected point 6 of 6",
+    );
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 1, "1 4 1")),
+        "small.ele",
+        3,
+        "more tetrahedra than the 1 declared",
+    );
     // Attribute count wrong: the region value becomes an extra value.
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "2 4 0")), "small.ele", 2, "unexpected extra value `2`");
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 1, "2 4 0")),
+        "small.ele",
+        2,
+        "unexpected extra value `2`",
+    );
 }
 
 #[test]
 fn tetgen_out_of_range_ids() {
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 3, "2 2 4 3 6 5")), "small.ele", 3, "refers to node 6");
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 3, "2 0 4 3 5 5")), "small.ele", 3, "refers to node 0, but the .node file has nodes 1..=5");
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 3, "2 2 4 3 -1 5")), "small.ele", 3, "refers to node -1");
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 3, "2 2 4 4 5 5")), "small.ele", 3, "lists node 4 twice");
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 3, "2 2 4 3 6 5")),
+        "small.ele",
+        3,
+        "refers to node 6",
+    );
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 3, "2 0 4 3 5 5")),
+        "small.ele",
+        3,
+        "refers to node 0, but the .node file has nodes 1..=5",
+    );
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 3, "2 2 4 3 -1 5")),
+        "small.ele",
+        3,
+        "refers to node -1",
+    );
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 3, "2 2 4 4 5 5")),
+        "small.ele",
+        3,
+        "lists node 4 twice",
+    );
 }
 
 #[test]
 fn tetgen_nan() {
-    assert_parse_error(tetgen(&with_line(NODE, 5, "3 0 nan 0 1"), ELE), "small.node", 5, "y coordinate is not finite");
-    assert_parse_error(tetgen(&with_line(NODE, 5, "3 0 1 inf 1"), ELE), "small.node", 5, "z coordinate is not finite");
+    assert_parse_error(
+        tetgen(&with_line(NODE, 5, "3 0 nan 0 1"), ELE),
+        "small.node",
+        5,
+        "y coordinate is not finite",
+    );
+    assert_parse_error(
+        tetgen(&with_line(NODE, 5, "3 0 1 inf 1"), ELE),
+        "small.node",
+        5,
+        "z coordinate is not finite",
+    );
 }
 
 #[test]
 fn tetgen_wrong_element_type() {
     assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "2 10 1")), "small.ele", 1, "second-order");
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "2 3 1")), "small.ele", 1, "3 nodes per tetrahedron");
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 1, "2 3 1")),
+        "small.ele",
+        1,
+        "3 nodes per tetrahedron",
+    );
     assert_parse_error(tetgen(&with_line(NODE, 2, "5 2 0 1"), ELE), "small.node", 2, "dimension 2");
 }
 
 #[test]
 fn tetgen_numbering_and_garbage() {
-    assert_parse_error(tetgen(&with_line(NODE, 4, "7 1 0 0 0"), ELE), "small.node", 4, "expected 2 (points must be numbered consecutively)");
-    assert_parse_error(tetgen(&with_line(NODE, 3, "2 0 0 0 0"), ELE), "small.node", 3, "first point index is 2");
-    assert_parse_error(tetgen(&with_line(NODE, 4, "2 1 0 O 0"), ELE), "small.node", 4, "invalid z coordinate `O`");
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 2, "1 1 2 3 4 2.5")), "small.ele", 2, "region attribute 2.5");
+    assert_parse_error(
+        tetgen(&with_line(NODE, 4, "7 1 0 0 0"), ELE),
+        "small.node",
+        4,
+        "expected 2 (points must be numbered consecutively)",
+    );
+    assert_parse_error(
+        tetgen(&with_line(NODE, 3, "2 0 0 0 0"), ELE),
+        "small.node",
+        3,
+        "first point index is 2",
+    );
+    assert_parse_error(
+        tetgen(&with_line(NODE, 4, "2 1 0 O 0"), ELE),
+        "small.node",
+        4,
+        "invalid z coordinate `O`",
+    );
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 2, "1 1 2 3 4 2.5")),
+        "small.ele",
+        2,
+        "region attribute 2.5",
+    );
     assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "0 4 1")), "small.ele", 1, "no tetrahedra");
 }
 
@@ -575,7 +754,8 @@ fn tetgen_numbering_and_garbage() {
 /// `material` cell array.
 fn cube_vtk() -> String {
     let (points, tets) = cube();
-    let mut s = String::from("# vtk DataFile Version 3.0\ncube\nASCII\nDATASET UNSTRUCTURED_GRID\n");
+    let mut s =
+        String::from("# vtk DataFile Version 3.0\ncube\nASCII\nDATASET UNSTRUCTURED_GRID\n");
     s += &format!("POINTS {} double\n", points.len());
     for pair in points.chunks(2) {
         let row: Vec<String> = pair.iter().flatten().map(|c| c.to_string()).collect();
@@ -587,7 +767,8 @@ fn cube_vtk() -> String {
     }
     s += &format!("CELL_TYPES {}\n5\n", tets.len() + 1);
     s += &"10\n".repeat(tets.len());
-    s += &format!("CELL_DATA {}\nSCALARS material int 1\nLOOKUP_TABLE default\n0\n", tets.len() + 1);
+    s +=
+        &format!("CELL_DATA {}\nSCALARS material int 1\nLOOKUP_TABLE default\n0\n", tets.len() + 1);
     s += &CUBE_REGIONS.map(|r| r.to_string()).join(" ");
     s += "\nPOINT_DATA 8\nVECTORS velocity double\n";
     s += &"0 0 0\n".repeat(8);
@@ -617,7 +798,8 @@ fn legacy_vtk_field_region_and_no_region() {
 #[test]
 fn legacy_vtk_51_offsets_connectivity() {
     let (points, tets) = cube();
-    let mut s = String::from("# vtk DataFile Version 5.1\ncube\nASCII\nDATASET UNSTRUCTURED_GRID\n");
+    let mut s =
+        String::from("# vtk DataFile Version 5.1\ncube\nASCII\nDATASET UNSTRUCTURED_GRID\n");
     s += &format!("POINTS {} double\n", points.len());
     for p in &points {
         s += &format!("{} {} {}\n", p[0], p[1], p[2]);
@@ -644,7 +826,12 @@ fn legacy_vtk_empty_and_not_vtk() {
 fn legacy_vtk_truncated() {
     let text = cube_vtk();
     assert_parse_error(vtk(&first_lines(&text, 8)), "small.vtk", 9, "expected point coordinate");
-    assert_parse_error(vtk(&first_lines(&text, 17)), "small.vtk", 18, "without a CELL_TYPES section");
+    assert_parse_error(
+        vtk(&first_lines(&text, 17)),
+        "small.vtk",
+        18,
+        "without a CELL_TYPES section",
+    );
     assert_parse_error(vtk(&first_lines(&text, 4)), "small.vtk", 5, "without a POINTS section");
     assert_parse_error(vtk(&first_lines(&text, 2)), "small.vtk", 3, "expected `ASCII` or `BINARY`");
     assert_parse_error(vtk(&first_lines(&text, 29)), "small.vtk", 30, "expected a region value");
@@ -653,24 +840,59 @@ fn legacy_vtk_truncated() {
 #[test]
 fn legacy_vtk_wrong_counts() {
     let text = cube_vtk();
-    assert_parse_error(vtk(&with_line(&text, 10, "CELLS 7 35")), "small.vtk", 10, "CELLS declares 35 values but its 7 cells hold 34");
-    assert_parse_error(vtk(&with_line(&text, 10, "CELLS 7 30")), "small.vtk", 17, "more than the 30 values declared on line 10");
-    assert_parse_error(vtk(&with_line(&text, 18, "CELL_TYPES 6")), "small.vtk", 25, "unexpected `10`");
+    assert_parse_error(
+        vtk(&with_line(&text, 10, "CELLS 7 35")),
+        "small.vtk",
+        10,
+        "CELLS declares 35 values but its 7 cells hold 34",
+    );
+    assert_parse_error(
+        vtk(&with_line(&text, 10, "CELLS 7 30")),
+        "small.vtk",
+        17,
+        "more than the 30 values declared on line 10",
+    );
+    assert_parse_error(
+        vtk(&with_line(&text, 18, "CELL_TYPES 6")),
+        "small.vtk",
+        25,
+        "unexpected `10`",
+    );
     // Too many points declared: the CELLS keyword is read as a coordinate.
-    assert_parse_error(vtk(&with_line(&text, 5, "POINTS 9 double")), "small.vtk", 10, "invalid point coordinate `CELLS`");
+    assert_parse_error(
+        vtk(&with_line(&text, 5, "POINTS 9 double")),
+        "small.vtk",
+        10,
+        "invalid point coordinate `CELLS`",
+    );
     // Too few region values declared: the last one is left over as a keyword.
-    assert_parse_error(vtk(&with_line(&text, 26, "CELL_DATA 6")), "small.vtk", 30, "unexpected `2`");
+    assert_parse_error(
+        vtk(&with_line(&text, 26, "CELL_DATA 6")),
+        "small.vtk",
+        30,
+        "unexpected `2`",
+    );
 }
 
 #[test]
 fn legacy_vtk_out_of_range_point() {
     let text = with_line(&cube_vtk(), 14, "4 0 2 3 8");
-    assert_parse_error(vtk(&text), "small.vtk", 14, "cell 3 refers to point 8, but there are 8 points");
+    assert_parse_error(
+        vtk(&text),
+        "small.vtk",
+        14,
+        "cell 3 refers to point 8, but there are 8 points",
+    );
     let text = with_line(&cube_vtk(), 14, "4 0 2 3 -7");
     assert_parse_error(vtk(&text), "small.vtk", 14, "invalid point id `-7`");
     let text = with_line(&cube_vtk(), 14, "3 0 2 3");
     let text = text.replace("CELLS 7 34", "CELLS 7 33");
-    assert_parse_error(vtk(&text), "small.vtk", 14, "cell 3 is a tetrahedron (type 10) but has 3 points");
+    assert_parse_error(
+        vtk(&text),
+        "small.vtk",
+        14,
+        "cell 3 is a tetrahedron (type 10) but has 3 points",
+    );
 }
 
 #[test]
@@ -683,17 +905,52 @@ fn legacy_vtk_nan() {
 
 #[test]
 fn legacy_vtk_wrong_cell_type() {
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 21, "12")), "small.vtk", 21, "cell 2 has VTK cell type 12 (a hexahedron)");
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 21, "24")), "small.vtk", 21, "a quadratic tetrahedron");
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 4, "DATASET POLYDATA")), "small.vtk", 4, "only DATASET UNSTRUCTURED_GRID");
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 3, "BINARY")), "small.vtk", 3, "binary legacy VTK files are not supported");
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 21, "12")),
+        "small.vtk",
+        21,
+        "cell 2 has VTK cell type 12 (a hexahedron)",
+    );
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 21, "24")),
+        "small.vtk",
+        21,
+        "a quadratic tetrahedron",
+    );
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 4, "DATASET POLYDATA")),
+        "small.vtk",
+        4,
+        "only DATASET UNSTRUCTURED_GRID",
+    );
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 3, "BINARY")),
+        "small.vtk",
+        3,
+        "binary legacy VTK files are not supported",
+    );
 }
 
 #[test]
 fn legacy_vtk_garbage_and_bad_regions() {
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 8, "0 1 0 1 1 O")), "small.vtk", 8, "invalid point coordinate `O`");
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 30, "1 1 1 2 -2 2")), "small.vtk", 30, "region value `-2`");
-    assert_parse_error(vtk(&with_line(&cube_vtk(), 19, "five")), "small.vtk", 19, "invalid cell type `five`");
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 8, "0 1 0 1 1 O")),
+        "small.vtk",
+        8,
+        "invalid point coordinate `O`",
+    );
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 30, "1 1 1 2 -2 2")),
+        "small.vtk",
+        30,
+        "region value `-2`",
+    );
+    assert_parse_error(
+        vtk(&with_line(&cube_vtk(), 19, "five")),
+        "small.vtk",
+        19,
+        "invalid cell type `five`",
+    );
 }
 
 #[test]
@@ -771,8 +1028,9 @@ fn vtu_writer_output_reads_back() {
     let mesh = cube_mesh();
     let v: Vec<Vector3> = (0..8).map(|i| Vector3::new(i as f64, 0.5, -1e-300)).collect();
     let s: Vec<f64> = (0..8).map(|i| 0.1 * i as f64).collect();
-    let text = vtu_string(&mesh, &[("velocity", PointData::Vector(&v)), ("p<&>", PointData::Scalar(&s))])
-        .unwrap_or_else(|e| panic!("{e}"));
+    let text =
+        vtu_string(&mesh, &[("velocity", PointData::Vector(&v)), ("p<&>", PointData::Scalar(&s))])
+            .unwrap_or_else(|e| panic!("{e}"));
     assert!(text.contains(r#"Name="velocity" NumberOfComponents="3""#));
     assert!(text.contains(r#"Name="p&lt;&amp;&gt;""#));
     assert!(text.contains(r#"Name="region""#));
@@ -790,7 +1048,8 @@ fn vtu_writer_refuses_bad_point_data() {
     let e = vtu_string(&mesh, &[("p", PointData::Scalar(&nan))]).err();
     assert!(matches!(e, Some(WriteError::NonFinite { vertex: 3, .. })), "{e:?}");
     let ok = [0.0; 8];
-    let e = vtu_string(&mesh, &[("p", PointData::Scalar(&ok)), ("p", PointData::Scalar(&ok))]).err();
+    let e =
+        vtu_string(&mesh, &[("p", PointData::Scalar(&ok)), ("p", PointData::Scalar(&ok))]).err();
     assert!(matches!(e, Some(WriteError::Name { .. })), "{e:?}");
     let e = write_vtu(Path::new("/nonexistent/cutlab/out.vtu"), &mesh, &[]).expect_err("error");
     assert!(e.to_string().contains("/nonexistent/cutlab/out.vtu"), "{e}");
@@ -799,28 +1058,58 @@ fn vtu_writer_refuses_bad_point_data() {
 #[test]
 fn vtu_empty_and_not_vtk() {
     assert_parse_error(vtu(""), "small.vtu", 1, "no <VTKFile> element");
-    assert_parse_error(vtu("<?xml version=\"1.0\"?>\n<html/>\n"), "small.vtu", 2, "root element is <html>");
+    assert_parse_error(
+        vtu("<?xml version=\"1.0\"?>\n<html/>\n"),
+        "small.vtu",
+        2,
+        "root element is <html>",
+    );
     let text = VTU.replace(r#"type="UnstructuredGrid" version"#, r#"type="PolyData" version"#);
     assert_parse_error(vtu(&text), "small.vtu", 2, "only VTKFile type=\"UnstructuredGrid\"");
 }
 
 #[test]
 fn vtu_truncated() {
-    assert_parse_error(vtu(&first_lines(VTU, 18)), "small.vtu", 19, "inside <DataArray> (opened on line 12)");
-    assert_parse_error(vtu(&first_lines(VTU, 23)), "small.vtu", 24, "inside <Cells> (opened on line 23)");
+    assert_parse_error(
+        vtu(&first_lines(VTU, 18)),
+        "small.vtu",
+        19,
+        "inside <DataArray> (opened on line 12)",
+    );
+    assert_parse_error(
+        vtu(&first_lines(VTU, 23)),
+        "small.vtu",
+        24,
+        "inside <Cells> (opened on line 23)",
+    );
     // A Piece without cells.
     let mut lines: Vec<&str> = VTU.lines().collect();
     lines.drain(22..35);
     let text = lines.join("\n") + "\n";
-    assert_parse_error(vtu(&text), "small.vtu", 23, "the <Piece> on line 4 has no `connectivity` array");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        23,
+        "the <Piece> on line 4 has no `connectivity` array",
+    );
 }
 
 #[test]
 fn vtu_wrong_counts() {
     let text = VTU.replace(r#"NumberOfPoints="5""#, r#"NumberOfPoints="6""#);
-    assert_parse_error(vtu(&text), "small.vtu", 12, "the Points array has 15 values, expected 3 x NumberOfPoints = 3 x 6");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        12,
+        "the Points array has 15 values, expected 3 x NumberOfPoints = 3 x 6",
+    );
     let text = VTU.replace(r#"NumberOfCells="3""#, r#"NumberOfCells="4""#);
-    assert_parse_error(vtu(&text), "small.vtu", 9, "cell array `MaterialID` has 3 values, expected NumberOfCells = 4");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        9,
+        "cell array `MaterialID` has 3 values, expected NumberOfCells = 4",
+    );
     let text = VTU.replace("0 3 7 11", "3 7 12");
     assert_parse_error(vtu(&text), "small.vtu", 29, "invalid offset 12");
     let text = VTU.replace(r#"NumberOfPoints="5""#, r#"NumberOfPoints="many""#);
@@ -830,7 +1119,12 @@ fn vtu_wrong_counts() {
 #[test]
 fn vtu_out_of_range_point() {
     let text = VTU.replace("1 2 3 4\n", "1 2 3 5\n");
-    assert_parse_error(vtu(&text), "small.vtu", 27, "cell 2 refers to point 5, but there are 5 points");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        27,
+        "cell 2 refers to point 5, but there are 5 points",
+    );
 }
 
 #[test]
@@ -850,8 +1144,16 @@ fn vtu_wrong_cell_type() {
 #[test]
 fn vtu_binary_and_appended_unsupported() {
     let text = VTU.replace(r#"Name="offsets" format="ascii""#, r#"Name="offsets" format="binary""#);
-    assert_parse_error(vtu(&text), "small.vtu", 29, "binary and appended .vtu data are not supported");
-    let text = VTU.replace("  </UnstructuredGrid>\n", "  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">_</AppendedData>\n");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        29,
+        "binary and appended .vtu data are not supported",
+    );
+    let text = VTU.replace(
+        "  </UnstructuredGrid>\n",
+        "  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">_</AppendedData>\n",
+    );
     assert_parse_error(vtu(&text), "small.vtu", 38, "appended data");
 }
 
@@ -916,7 +1218,14 @@ fn read_all_ways(text: &str) {
 }
 
 fn samples() -> Vec<String> {
-    vec![cube_msh22(), MSH41.to_owned(), NODE.to_owned(), ELE.to_owned(), cube_vtk(), VTU.to_owned()]
+    vec![
+        cube_msh22(),
+        MSH41.to_owned(),
+        NODE.to_owned(),
+        ELE.to_owned(),
+        cube_vtk(),
+        VTU.to_owned(),
+    ]
 }
 
 #[test]
@@ -933,11 +1242,25 @@ fn random_corruption_never_panics() {
     // A fixed linear congruential generator: deterministic, no extra dependency.
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut next = move |n: usize| {
-        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        state =
+            state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
         ((state >> 33) as usize) % n.max(1)
     };
     const REPLACEMENTS: [&str; 14] = [
-        "", " ", "\n", "0", "-1", "99", "1e309", "nan", "18446744073709551615", "$End", "<", "\"", "x", "4",
+        "",
+        " ",
+        "\n",
+        "0",
+        "-1",
+        "99",
+        "1e309",
+        "nan",
+        "18446744073709551615",
+        "$End",
+        "<",
+        "\"",
+        "x",
+        "4",
     ];
     for sample in samples() {
         for _ in 0..1500 {
@@ -969,7 +1292,17 @@ fn huge_counts_do_not_allocate_or_panic() {
     let text = with_line(&cube_vtk(), 5, "POINTS 18446744073709551615 double");
     assert_parse_error(vtk(&text), "small.vtk", 10, "invalid point coordinate `CELLS`");
     let text = VTU.replace(r#"NumberOfCells="3""#, r#"NumberOfCells="18446744073709551615""#);
-    assert_parse_error(vtu(&text), "small.vtu", 9, "has 3 values, expected NumberOfCells = 18446744073709551615");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        9,
+        "has 3 values, expected NumberOfCells = 18446744073709551615",
+    );
     let text = with_line(NODE, 2, "18446744073709551615 3 0 1");
-    assert_parse_error(tetgen(&text, ELE), "small.node", 8, "expected point 6 of 18446744073709551615");
+    assert_parse_error(
+        tetgen(&text, ELE),
+        "small.node",
+        8,
+        "expected point 6 of 18446744073709551615",
+    );
 }

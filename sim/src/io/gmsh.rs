@@ -95,7 +95,9 @@ impl Nodes {
         let next = u32::try_from(self.positions.len())
             .map_err(|_| line.error("too many nodes for 32-bit vertex ids"))?;
         match self.index.entry(tag) {
-            Entry::Occupied(_) => return Err(line.error(format!("node tag {tag} is defined twice"))),
+            Entry::Occupied(_) => {
+                return Err(line.error(format!("node tag {tag} is defined twice")));
+            }
             Entry::Vacant(e) => e.insert(next),
         };
         self.positions.push(p);
@@ -104,10 +106,9 @@ impl Nodes {
 
     /// The vertex index of node `tag`, referred to by element `element` on `line`.
     fn lookup(&self, tag: u64, element: u64, line: &Line<'_>) -> Result<u32, ReadError> {
-        self.index
-            .get(&tag)
-            .copied()
-            .ok_or_else(|| line.error(format!("element {element} refers to unknown node tag {tag}")))
+        self.index.get(&tag).copied().ok_or_else(|| {
+            line.error(format!("element {element} refers to unknown node tag {tag}"))
+        })
     }
 }
 
@@ -143,7 +144,10 @@ fn reject_message(what: &str, element_type: u32, description: &str) -> String {
 
 /// The next line of a section's data; the end of the file or a `$` line (the section ended
 /// early) is an error saying what was `expected`.
-fn data_line<'a>(cur: &mut Cursor<'a>, expected: impl Fn() -> String) -> Result<Line<'a>, ReadError> {
+fn data_line<'a>(
+    cur: &mut Cursor<'a>,
+    expected: impl Fn() -> String,
+) -> Result<Line<'a>, ReadError> {
     let Some(line) = cur.next_line() else {
         return Err(cur.eof_error(&expected()));
     };
@@ -172,7 +176,11 @@ fn expect_end(cur: &mut Cursor<'_>, end: &str, after: &str) -> Result<(), ReadEr
 }
 
 /// Converts a physical/elementary tag to a region id.
-fn region_of(physical: Option<i64>, elementary: Option<i64>, line: &Line<'_>) -> Result<u32, ReadError> {
+fn region_of(
+    physical: Option<i64>,
+    elementary: Option<i64>,
+    line: &Line<'_>,
+) -> Result<u32, ReadError> {
     let tag = match (physical, elementary) {
         (Some(p), _) if p != 0 => p,
         (_, Some(e)) => e,
@@ -277,7 +285,9 @@ impl Reader {
                 }
                 self.elements_seen = true;
                 let Some(nodes) = self.nodes.take() else {
-                    return Err(line.error(format!("`{name}` section before the `{nodes_name}` section")));
+                    return Err(
+                        line.error(format!("`{name}` section before the `{nodes_name}` section"))
+                    );
                 };
                 let result = match self.version {
                     Version::V1 | Version::V2 => self.read_elements_v12(cur, &nodes, &line),
@@ -294,10 +304,15 @@ impl Reader {
             }
         }
         let Some(nodes) = self.nodes else {
-            return Err(cur.error(cur.eof_line(), format!("end of file without a `{nodes_name}` section")));
+            return Err(
+                cur.error(cur.eof_line(), format!("end of file without a `{nodes_name}` section"))
+            );
         };
         if !self.elements_seen {
-            return Err(cur.error(cur.eof_line(), format!("end of file without an `{elements_name}` section")));
+            return Err(cur.error(
+                cur.eof_line(),
+                format!("end of file without an `{elements_name}` section"),
+            ));
         }
         if self.tets.is_empty() {
             return Err(ReadError::Format {
@@ -310,9 +325,15 @@ impl Reader {
 
     /// Version 1 `$ELM` (`tag type physical elementary node-count nodes...`) or version 2
     /// `$Elements` (`tag type tag-count tags... nodes...`).
-    fn read_elements_v12(&mut self, cur: &mut Cursor<'_>, nodes: &Nodes, header: &Line<'_>) -> Result<(), ReadError> {
+    fn read_elements_v12(
+        &mut self,
+        cur: &mut Cursor<'_>,
+        nodes: &Nodes,
+        header: &Line<'_>,
+    ) -> Result<(), ReadError> {
         let v1 = self.version == Version::V1;
-        let mut line = data_line(cur, || format!("the number of elements after `{}`", header.text))?;
+        let mut line =
+            data_line(cur, || format!("the number of elements after `{}`", header.text))?;
         let n: usize = line.parse("number of elements")?;
         line.finish("the number of elements")?;
         self.tets.reserve(capped(n));
@@ -326,7 +347,9 @@ impl Reader {
                 let e: i64 = line.parse("elementary region tag")?;
                 let count: usize = line.parse("number of nodes")?;
                 if count != 4 && matches!(classify(element_type), Kind::Tet) {
-                    return Err(line.error(format!("tetrahedron {tag} has {count} nodes, expected 4")));
+                    return Err(
+                        line.error(format!("tetrahedron {tag} has {count} nodes, expected 4"))
+                    );
                 }
                 (Some(p), Some(e))
             } else {
@@ -342,7 +365,13 @@ impl Reader {
             };
             match classify(element_type) {
                 Kind::Skip => continue,
-                Kind::Reject(d) => return Err(line.error(reject_message(&format!("element {tag}"), element_type, d))),
+                Kind::Reject(d) => {
+                    return Err(line.error(reject_message(
+                        &format!("element {tag}"),
+                        element_type,
+                        d,
+                    )));
+                }
                 Kind::Tet => {}
             }
             let tet = read_tet(nodes, tag, &mut line)?;
@@ -355,7 +384,8 @@ impl Reader {
 
     /// Version 4.1 `$Entities`: records the first physical tag of each volume.
     fn read_entities(&mut self, cur: &mut Cursor<'_>) -> Result<(), ReadError> {
-        let mut line = data_line(cur, || "the entity counts `points curves surfaces volumes`".into())?;
+        let mut line =
+            data_line(cur, || "the entity counts `points curves surfaces volumes`".into())?;
         let mut counts = [0usize; 4];
         for (c, what) in counts.iter_mut().zip(["points", "curves", "surfaces", "volumes"]) {
             *c = line.parse(&format!("number of {what}"))?;
@@ -373,7 +403,8 @@ impl Reader {
                 line.token("bounding box coordinate")?;
             }
             let physical_count: usize = line.parse("number of physical tags")?;
-            let physical = if physical_count > 0 { Some(line.parse::<i64>("physical tag")?) } else { None };
+            let physical =
+                if physical_count > 0 { Some(line.parse::<i64>("physical tag")?) } else { None };
             self.volume_physical.insert(tag, physical);
         }
         expect_end(cur, "$EndEntities", &format!("{} entities", lower.saturating_add(volumes)))
@@ -382,7 +413,9 @@ impl Reader {
     /// Version 4.1 `$Elements`: blocks of `dim entity-tag type count` followed by `count`
     /// lines `tag nodes...`.
     fn read_elements_v41(&mut self, cur: &mut Cursor<'_>, nodes: &Nodes) -> Result<(), ReadError> {
-        let mut header = data_line(cur, || "the element section header `blocks elements min-tag max-tag`".into())?;
+        let mut header = data_line(cur, || {
+            "the element section header `blocks elements min-tag max-tag`".into()
+        })?;
         let blocks: usize = header.parse("number of element blocks")?;
         let total: usize = header.parse("number of elements")?;
         header.parse::<u64>("minimum element tag")?;
@@ -392,7 +425,8 @@ impl Reader {
         self.regions.reserve(capped(total));
         let mut seen = 0usize;
         for b in 0..blocks {
-            let mut block = data_line(cur, || format!("element block header {} of {blocks}", b + 1))?;
+            let mut block =
+                data_line(cur, || format!("element block header {} of {blocks}", b + 1))?;
             let _dim: u32 = block.parse("entity dimension")?;
             let entity: i64 = block.parse("entity tag")?;
             let element_type: u32 = block.parse("element type")?;
@@ -402,7 +436,9 @@ impl Reader {
             let region = match classify(element_type) {
                 Kind::Skip => {
                     for i in 0..count {
-                        data_line(cur, || format!("element {} of {count} in block {}", i + 1, b + 1))?;
+                        data_line(cur, || {
+                            format!("element {} of {count} in block {}", i + 1, b + 1)
+                        })?;
                     }
                     continue;
                 }
@@ -416,7 +452,8 @@ impl Reader {
                 }
             };
             for i in 0..count {
-                let mut line = data_line(cur, || format!("element {} of {count} in block {}", i + 1, b + 1))?;
+                let mut line =
+                    data_line(cur, || format!("element {} of {count} in block {}", i + 1, b + 1))?;
                 let tag: u64 = line.parse("element tag")?;
                 let tet = read_tet(nodes, tag, &mut line)?;
                 self.tets.push(tet);
@@ -424,7 +461,9 @@ impl Reader {
             }
         }
         if seen != total {
-            return Err(header.error(format!("the header declares {total} elements but the blocks hold {seen}")));
+            return Err(header.error(format!(
+                "the header declares {total} elements but the blocks hold {seen}"
+            )));
         }
         expect_end(cur, "$EndElements", &format!("{blocks} element blocks"))
     }
@@ -433,7 +472,8 @@ impl Reader {
 /// Version 4.1 `$Nodes`: blocks of `dim entity-tag parametric count`, then `count` tag
 /// lines, then `count` coordinate lines.
 fn read_nodes_v41(cur: &mut Cursor<'_>) -> Result<Nodes, ReadError> {
-    let mut header = data_line(cur, || "the node section header `blocks nodes min-tag max-tag`".into())?;
+    let mut header =
+        data_line(cur, || "the node section header `blocks nodes min-tag max-tag`".into())?;
     let blocks: usize = header.parse("number of node blocks")?;
     let total: usize = header.parse("number of nodes")?;
     header.parse::<u64>("minimum node tag")?;
@@ -454,23 +494,34 @@ fn read_nodes_v41(cur: &mut Cursor<'_>) -> Result<Nodes, ReadError> {
         let parameters = match parametric {
             0 => 0,
             1 => dim,
-            _ => return Err(block.error(format!("invalid parametric flag {parametric}: expected 0 or 1"))),
+            _ => {
+                return Err(
+                    block.error(format!("invalid parametric flag {parametric}: expected 0 or 1"))
+                );
+            }
         };
         tags.clear();
         tags.reserve(capped(count));
         for i in 0..count {
-            let mut line = data_line(cur, || format!("node tag {} of {count} in block {}", i + 1, b + 1))?;
+            let mut line =
+                data_line(cur, || format!("node tag {} of {count} in block {}", i + 1, b + 1))?;
             let tag: u64 = line.parse("node tag")?;
             line.finish("the node tag")?;
             tags.push((tag, line));
         }
         for (i, (tag, tag_line)) in tags.iter().enumerate() {
-            let mut line = data_line(cur, || format!("coordinates of node {} of {count} in block {}", i + 1, b + 1))?;
+            let mut line = data_line(cur, || {
+                format!("coordinates of node {} of {count} in block {}", i + 1, b + 1)
+            })?;
             let p = read_xyz(&mut line)?;
             for _ in 0..parameters {
                 line.finite("parametric coordinate")?;
             }
-            line.finish(if parameters > 0 { "the parametric coordinates" } else { "the z coordinate" })?;
+            line.finish(if parameters > 0 {
+                "the parametric coordinates"
+            } else {
+                "the z coordinate"
+            })?;
             nodes.add(*tag, p, tag_line)?;
         }
     }
@@ -495,6 +546,9 @@ fn skip_section(cur: &mut Cursor<'_>, start: &Line<'_>) -> Result<(), ReadError>
     }
     Err(cur.error(
         cur.eof_line(),
-        format!("unexpected end of file: section `{}` (line {}) has no `{end}`", start.text, start.no),
+        format!(
+            "unexpected end of file: section `{}` (line {}) has no `{end}`",
+            start.text, start.no
+        ),
     ))
 }

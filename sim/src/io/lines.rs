@@ -35,14 +35,22 @@ pub(crate) fn quoted(token: &str) -> String {
 }
 
 /// Parses `token` as a `T`, naming `what` in the error.
-pub(crate) fn parse_token<T: FromStr>(path: &Path, line: usize, token: &str, what: &str) -> Result<T, ReadError> {
-    token
-        .parse()
-        .map_err(|_| parse_error(path, line, format!("invalid {what} {}", quoted(token))))
+pub(crate) fn parse_token<T: FromStr>(
+    path: &Path,
+    line: usize,
+    token: &str,
+    what: &str,
+) -> Result<T, ReadError> {
+    token.parse().map_err(|_| parse_error(path, line, format!("invalid {what} {}", quoted(token))))
 }
 
 /// Parses `token` as a finite `f64` (NaN and infinities are errors).
-pub(crate) fn parse_finite(path: &Path, line: usize, token: &str, what: &str) -> Result<f64, ReadError> {
+pub(crate) fn parse_finite(
+    path: &Path,
+    line: usize,
+    token: &str,
+    what: &str,
+) -> Result<f64, ReadError> {
     let v: f64 = parse_token(path, line, token, what)?;
     if v.is_finite() {
         Ok(v)
@@ -262,7 +270,9 @@ impl<'a> Line<'a> {
     pub fn finish(&mut self, after: &str) -> Result<(), ReadError> {
         match self.next_token() {
             None => Ok(()),
-            Some(t) => Err(self.error(format!("unexpected extra value {} after {after}", quoted(t)))),
+            Some(t) => {
+                Err(self.error(format!("unexpected extra value {} after {after}", quoted(t))))
+            }
         }
     }
 }

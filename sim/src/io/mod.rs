@@ -26,7 +26,7 @@ use std::path::Path;
 
 pub use gmsh::read_gmsh_str;
 pub use tetgen::{read_tetgen, read_tetgen_str};
-pub use vtk::read_vtk_str;
+pub use vtk::{REGION_ARRAY_NAMES, read_vtk_str};
 pub use vtu::read_vtu_str;
 pub use vtu_writer::{PointData, WriteError, vtu_string, write_vtu};
 
@@ -47,18 +47,16 @@ pub enum MeshFormat {
 /// `.node` or `.ele` (TetGen; the sibling file with the other extension is read too),
 /// `.vtk` (legacy VTK) or `.vtu` (VTK XML).
 pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
+    let ext =
+        path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     let format = match ext.as_str() {
         "msh" => MeshFormat::Gmsh,
         "vtk" => MeshFormat::VtkLegacy,
         "vtu" => MeshFormat::Vtu,
         "node" | "ele" => return read_tetgen(path),
         _ => {
-            let found = if ext.is_empty() { "no extension".to_owned() } else { format!("`.{ext}`") };
+            let found =
+                if ext.is_empty() { "no extension".to_owned() } else { format!("`.{ext}`") };
             return Err(ReadError::Format {
                 path: path.to_path_buf(),
                 message: format!(
@@ -73,7 +71,11 @@ pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
 }
 
 /// Reads a tetrahedral mesh from `text` in `format`; `path` is only used in error messages.
-pub fn read_mesh_from_str(text: &str, format: MeshFormat, path: &Path) -> Result<TetMesh, ReadError> {
+pub fn read_mesh_from_str(
+    text: &str,
+    format: MeshFormat,
+    path: &Path,
+) -> Result<TetMesh, ReadError> {
     match format {
         MeshFormat::Gmsh => read_gmsh_str(text, path),
         MeshFormat::VtkLegacy => read_vtk_str(text, path),
@@ -84,8 +86,8 @@ pub fn read_mesh_from_str(text: &str, format: MeshFormat, path: &Path) -> Result
 /// Reads a whole file as text. Invalid UTF-8 is replaced rather than rejected so that the
 /// readers can still recognise headers (e.g. of binary files) and report a precise error.
 pub(crate) fn read_text(path: &Path) -> Result<String, ReadError> {
-    let bytes = std::fs::read(path)
-        .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
+    let bytes =
+        std::fs::read(path).map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
     Ok(match String::from_utf8(bytes) {
         Ok(s) => s,
         Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),

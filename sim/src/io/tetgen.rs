@@ -41,13 +41,15 @@ pub fn read_tetgen_str(
     ele_path: &Path,
 ) -> Result<TetMesh, ReadError> {
     let (positions, base) = read_nodes(&mut Cursor::new(node_text, node_path).with_comments('#'))?;
-    let (tets, regions) = read_tets(&mut Cursor::new(ele_text, ele_path).with_comments('#'), positions.len(), base)?;
+    let (tets, regions) =
+        read_tets(&mut Cursor::new(ele_text, ele_path).with_comments('#'), positions.len(), base)?;
     build_mesh(ele_path, positions, tets, regions)
 }
 
 /// Reads the `.node` file: positions and the index base (0 or 1).
 fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
-    let mut header = cur.line("the header `points dimension attributes boundary-markers`: the file is empty")?;
+    let mut header =
+        cur.line("the header `points dimension attributes boundary-markers`: the file is empty")?;
     let n: usize = header.parse("number of points")?;
     let dim: usize = header.parse_opt("dimension")?.unwrap_or(3);
     let attributes: usize = header.parse_opt("number of attributes")?.unwrap_or(0);
@@ -65,11 +67,14 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
     let mut positions = Vec::with_capacity(capped(n));
     let mut base = 0i64;
     for i in 0..n {
-        let mut line = cur.line(&format!("point {} of {n} (declared on line {})", i + 1, header.no))?;
+        let mut line =
+            cur.line(&format!("point {} of {n} (declared on line {})", i + 1, header.no))?;
         let index: i64 = line.parse("point index")?;
         if i == 0 {
             if index != 0 && index != 1 {
-                return Err(line.error(format!("the first point index is {index}: expected 0 or 1")));
+                return Err(
+                    line.error(format!("the first point index is {index}: expected 0 or 1"))
+                );
             }
             base = index;
         } else if i64::try_from(i).ok().and_then(|i| i.checked_add(base)) != Some(index) {
@@ -105,8 +110,13 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
 }
 
 /// Reads the `.ele` file given the number of points and their index base.
-fn read_tets(cur: &mut Cursor<'_>, points: usize, base: i64) -> Result<(Vec<[u32; 4]>, Vec<u32>), ReadError> {
-    let mut header = cur.line("the header `tetrahedra nodes-per-tetrahedron attributes`: the file is empty")?;
+fn read_tets(
+    cur: &mut Cursor<'_>,
+    points: usize,
+    base: i64,
+) -> Result<(Vec<[u32; 4]>, Vec<u32>), ReadError> {
+    let mut header =
+        cur.line("the header `tetrahedra nodes-per-tetrahedron attributes`: the file is empty")?;
     let n: usize = header.parse("number of tetrahedra")?;
     let per_tet: usize = header.parse_opt("nodes per tetrahedron")?.unwrap_or(4);
     let attributes: usize = header.parse_opt("number of attributes")?.unwrap_or(0);
@@ -127,7 +137,8 @@ fn read_tets(cur: &mut Cursor<'_>, points: usize, base: i64) -> Result<(Vec<[u32
     let mut tets = Vec::with_capacity(capped(n));
     let mut regions = Vec::with_capacity(capped(n));
     for i in 0..n {
-        let mut line = cur.line(&format!("tetrahedron {} of {n} (declared on line {})", i + 1, header.no))?;
+        let mut line =
+            cur.line(&format!("tetrahedron {} of {n} (declared on line {})", i + 1, header.no))?;
         let index: i64 = line.parse("tetrahedron index")?;
         let mut tet = [0u32; 4];
         for v in &mut tet {
@@ -161,7 +172,10 @@ fn read_tets(cur: &mut Cursor<'_>, points: usize, base: i64) -> Result<(Vec<[u32
                 })?;
             }
         }
-        line.finish(&format!("the 4 nodes and {attributes} attribute(s) declared on line {}", header.no))?;
+        line.finish(&format!(
+            "the 4 nodes and {attributes} attribute(s) declared on line {}",
+            header.no
+        ))?;
         tets.push(tet);
         regions.push(region);
     }

@@ -66,12 +66,20 @@ impl RegionArray {
 }
 
 /// Converts a region value token to a region id.
-pub(crate) fn parse_region(path: &Path, line: usize, text: &str, array: &str) -> Result<u32, ReadError> {
+pub(crate) fn parse_region(
+    path: &Path,
+    line: usize,
+    text: &str,
+    array: &str,
+) -> Result<u32, ReadError> {
     text.parse::<f64>().ok().and_then(region_id).ok_or_else(|| {
         parse_error(
             path,
             line,
-            format!("region value {} in cell array `{array}` is not a non-negative integer", quoted(text)),
+            format!(
+                "region value {} in cell array `{array}` is not a non-negative integer",
+                quoted(text)
+            ),
         )
     })
 }
@@ -146,7 +154,10 @@ pub(crate) fn assemble_tets(
             return Err(parse_error(
                 path,
                 line,
-                format!("cell {c} is a tetrahedron (type 10) but has {} points, expected 4", ids.len()),
+                format!(
+                    "cell {c} is a tetrahedron (type 10) but has {} points, expected 4",
+                    ids.len()
+                ),
             ));
         };
         let mut tet = [0u32; 4];
@@ -187,26 +198,38 @@ pub fn read_vtk_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
     if !first.trim().to_ascii_lowercase().starts_with("# vtk datafile") {
         return Err(cur.error(
             no,
-            format!("not a legacy VTK file: expected `# vtk DataFile Version ...`, found {}", quoted(first)),
+            format!(
+                "not a legacy VTK file: expected `# vtk DataFile Version ...`, found {}",
+                quoted(first)
+            ),
         ));
     }
     cur.raw_line().ok_or_else(|| cur.eof_error("the title line"))?;
     let encoding = cur.line("`ASCII` or `BINARY`")?;
     if encoding.text.eq_ignore_ascii_case("BINARY") {
-        return Err(encoding.error("binary legacy VTK files are not supported; save the file as ASCII"));
+        return Err(
+            encoding.error("binary legacy VTK files are not supported; save the file as ASCII")
+        );
     }
     if !encoding.text.eq_ignore_ascii_case("ASCII") {
-        return Err(encoding.error(format!("expected `ASCII` or `BINARY`, found {}", quoted(encoding.text))));
+        return Err(encoding
+            .error(format!("expected `ASCII` or `BINARY`, found {}", quoted(encoding.text))));
     }
     let t = cur.token("`DATASET UNSTRUCTURED_GRID`")?;
     if !t.text.eq_ignore_ascii_case("DATASET") {
-        return Err(cur.error(t.line, format!("expected `DATASET UNSTRUCTURED_GRID`, found {}", quoted(t.text))));
+        return Err(cur.error(
+            t.line,
+            format!("expected `DATASET UNSTRUCTURED_GRID`, found {}", quoted(t.text)),
+        ));
     }
     let t = cur.token("the dataset type")?;
     if !t.text.eq_ignore_ascii_case("UNSTRUCTURED_GRID") {
         return Err(cur.error(
             t.line,
-            format!("only DATASET UNSTRUCTURED_GRID is supported, found DATASET {}", quoted(t.text)),
+            format!(
+                "only DATASET UNSTRUCTURED_GRID is supported, found DATASET {}",
+                quoted(t.text)
+            ),
         ));
     }
     let mut legacy = Legacy::default();
@@ -247,7 +270,12 @@ fn skip_values(cur: &mut Cursor<'_>, count: usize, what: &str) -> Result<(), Rea
 }
 
 impl Legacy {
-    fn section(&mut self, cur: &mut Cursor<'_>, keyword: &str, line: usize) -> Result<(), ReadError> {
+    fn section(
+        &mut self,
+        cur: &mut Cursor<'_>,
+        keyword: &str,
+        line: usize,
+    ) -> Result<(), ReadError> {
         let upper = keyword.to_ascii_uppercase();
         match upper.as_str() {
             "POINTS" => {
@@ -293,11 +321,23 @@ impl Legacy {
             }
             "METADATA" => skip_metadata(cur),
             "FIELD" => self.field(cur)?,
-            "SCALARS" | "VECTORS" | "NORMALS" | "TENSORS" | "TENSORS6" | "TEXTURE_COORDINATES"
-            | "COLOR_SCALARS" | "LOOKUP_TABLE" | "GLOBAL_IDS" | "PEDIGREE_IDS" => {
+            "SCALARS"
+            | "VECTORS"
+            | "NORMALS"
+            | "TENSORS"
+            | "TENSORS6"
+            | "TEXTURE_COORDINATES"
+            | "COLOR_SCALARS"
+            | "LOOKUP_TABLE"
+            | "GLOBAL_IDS"
+            | "PEDIGREE_IDS" => {
                 let n = match self.mode {
                     Some(Mode::Point(n) | Mode::Cell(n)) => n,
-                    None => return Err(cur.error(line, format!("{upper} before POINT_DATA or CELL_DATA"))),
+                    None => {
+                        return Err(
+                            cur.error(line, format!("{upper} before POINT_DATA or CELL_DATA"))
+                        );
+                    }
                 };
                 self.attribute(cur, &upper, line, n)?;
             }
@@ -316,12 +356,19 @@ impl Legacy {
     }
 
     /// One `POINT_DATA`/`CELL_DATA` attribute other than `FIELD`, with `n` tuples.
-    fn attribute(&mut self, cur: &mut Cursor<'_>, keyword: &str, line: usize, n: usize) -> Result<(), ReadError> {
+    fn attribute(
+        &mut self,
+        cur: &mut Cursor<'_>,
+        keyword: &str,
+        line: usize,
+        n: usize,
+    ) -> Result<(), ReadError> {
         let name = cur.token("the array name")?.text;
         match keyword {
             "SCALARS" => {
                 cur.token("the data type")?;
-                let components = cur.rest_of_line().parse_opt::<usize>("number of components")?.unwrap_or(1);
+                let components =
+                    cur.rest_of_line().parse_opt::<usize>("number of components")?.unwrap_or(1);
                 if cur.peek_token().is_some_and(|t| t.text.eq_ignore_ascii_case("LOOKUP_TABLE")) {
                     cur.token("LOOKUP_TABLE")?;
                     cur.token("the lookup table name")?;
@@ -396,8 +443,10 @@ impl Legacy {
 
     fn finish(self, cur: &Cursor<'_>) -> Result<TetMesh, ReadError> {
         let eof = cur.eof_line();
-        let points = self.points.ok_or_else(|| cur.error(eof, "end of file without a POINTS section"))?;
-        let (cells, cells_line) = self.cells.ok_or_else(|| cur.error(eof, "end of file without a CELLS section"))?;
+        let points =
+            self.points.ok_or_else(|| cur.error(eof, "end of file without a POINTS section"))?;
+        let (cells, cells_line) =
+            self.cells.ok_or_else(|| cur.error(eof, "end of file without a CELLS section"))?;
         let (types, types_line) =
             self.types.ok_or_else(|| cur.error(eof, "end of file without a CELL_TYPES section"))?;
         if types.len() != cells.len() {
@@ -413,9 +462,13 @@ impl Legacy {
         if let Some((n, line)) = self.cell_data
             && n != cells.len()
         {
-            return Err(cur.error(line, format!("CELL_DATA has {n} values but there are {} cells", cells.len())));
+            return Err(cur.error(
+                line,
+                format!("CELL_DATA has {n} values but there are {} cells", cells.len()),
+            ));
         }
-        let (tets, regions) = assemble_tets(cur.path(), points.len(), &cells, &types, self.region.as_ref())?;
+        let (tets, regions) =
+            assemble_tets(cur.path(), points.len(), &cells, &types, self.region.as_ref())?;
         build_mesh(cur.path(), points, tets, regions)
     }
 }
@@ -465,11 +518,16 @@ fn read_cells(cur: &mut Cursor<'_>, line: usize) -> Result<CellList, ReadError> 
             offsets_line = l;
         }
         if a > 0 && cells.start.last() != Some(&size) {
-            return Err(cur.error(offsets_line, format!("the last offset must equal the connectivity size {size}")));
+            return Err(cur.error(
+                offsets_line,
+                format!("the last offset must equal the connectivity size {size}"),
+            ));
         }
         let t = cur.token("`CONNECTIVITY`")?;
         if !t.text.eq_ignore_ascii_case("CONNECTIVITY") {
-            return Err(cur.error(t.line, format!("expected `CONNECTIVITY`, found {}", quoted(t.text))));
+            return Err(
+                cur.error(t.line, format!("expected `CONNECTIVITY`, found {}", quoted(t.text)))
+            );
         }
         cur.token("the data type of the connectivity")?;
         let mut value_lines = Vec::with_capacity(capped(size));
@@ -481,7 +539,9 @@ fn read_cells(cur: &mut Cursor<'_>, line: usize) -> Result<CellList, ReadError> 
         }
         let cell_count = a.saturating_sub(1);
         cells.lines = (0..cell_count)
-            .map(|c| cells.start.get(c).and_then(|&s| value_lines.get(s)).copied().unwrap_or(t.line))
+            .map(|c| {
+                cells.start.get(c).and_then(|&s| value_lines.get(s)).copied().unwrap_or(t.line)
+            })
             .collect();
     } else {
         cells.start.reserve(capped(a) + 1);

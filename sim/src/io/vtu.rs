@@ -134,7 +134,9 @@ impl<'a> Vtu<'a> {
                     if let Some((name, start)) = self.stack.last() {
                         return Err(self.error(
                             self.lines.line_of(self.reader.buffer_position()),
-                            format!("unexpected end of file inside <{name}> (opened on line {start})"),
+                            format!(
+                                "unexpected end of file inside <{name}> (opened on line {start})"
+                            ),
                         ));
                     }
                     break;
@@ -152,20 +154,30 @@ impl<'a> Vtu<'a> {
     }
 
     /// The value of attribute `key` of element `e` on `line`.
-    fn attribute(&self, e: &BytesStart<'_>, key: &str, line: usize) -> Result<Option<String>, ReadError> {
+    fn attribute(
+        &self,
+        e: &BytesStart<'_>,
+        key: &str,
+        line: usize,
+    ) -> Result<Option<String>, ReadError> {
         for a in e.attributes() {
             let a = a.map_err(|err| self.error(line, format!("malformed XML attribute: {err}")))?;
             if a.key.local_name().as_ref() == key.as_bytes() {
-                let value = a
-                    .decode_and_unescape_value(self.reader.decoder())
-                    .map_err(|err| self.error(line, format!("malformed XML attribute `{key}`: {err}")))?;
+                let value = a.decode_and_unescape_value(self.reader.decoder()).map_err(|err| {
+                    self.error(line, format!("malformed XML attribute `{key}`: {err}"))
+                })?;
                 return Ok(Some(value.into_owned()));
             }
         }
         Ok(None)
     }
 
-    fn count_attribute(&self, e: &BytesStart<'_>, key: &str, line: usize) -> Result<usize, ReadError> {
+    fn count_attribute(
+        &self,
+        e: &BytesStart<'_>,
+        key: &str,
+        line: usize,
+    ) -> Result<usize, ReadError> {
         let name = String::from_utf8_lossy(e.local_name().as_ref()).into_owned();
         let value = self
             .attribute(e, key, line)?
@@ -180,7 +192,10 @@ impl<'a> Vtu<'a> {
     fn start(&mut self, name: &str, e: &BytesStart<'_>, line: usize) -> Result<(), ReadError> {
         if !self.root_seen {
             if name != "VTKFile" {
-                return Err(self.error(line, format!("not a VTK XML file: the root element is <{name}>, expected <VTKFile>")));
+                return Err(self.error(
+                    line,
+                    format!("not a VTK XML file: the root element is <{name}>, expected <VTKFile>"),
+                ));
             }
             self.root_seen = true;
             let kind = self.attribute(e, "type", line)?.unwrap_or_default();
@@ -236,10 +251,9 @@ impl<'a> Vtu<'a> {
         }
         let components = match self.attribute(e, "NumberOfComponents", line)? {
             None => 1,
-            Some(v) => v
-                .trim()
-                .parse()
-                .map_err(|_| self.error(line, format!("invalid NumberOfComponents {}", quoted(&v))))?,
+            Some(v) => v.trim().parse().map_err(|_| {
+                self.error(line, format!("invalid NumberOfComponents {}", quoted(&v)))
+            })?,
         };
         Ok(ArrayInfo { name, components, line })
     }
@@ -278,7 +292,9 @@ impl<'a> Vtu<'a> {
                 Event::Eof => {
                     return Err(self.error(
                         self.lines.line_of(self.reader.buffer_position()),
-                        format!("unexpected end of file inside <DataArray> (opened on line {line})"),
+                        format!(
+                            "unexpected end of file inside <DataArray> (opened on line {line})"
+                        ),
                     ));
                 }
                 _ => {}
@@ -298,7 +314,11 @@ impl<'a> Vtu<'a> {
         match parent {
             "Points" => {
                 if info.components != 3 {
-                    return Err(parse_error(path, info.line, format!("the Points array has {} components, expected 3", info.components)));
+                    return Err(parse_error(
+                        path,
+                        info.line,
+                        format!("the Points array has {} components, expected 3", info.components),
+                    ));
                 }
                 let mut coords = Vec::with_capacity(capped(piece.points.saturating_mul(3)));
                 for_each_token(path, &chunks, |t| {
@@ -316,7 +336,8 @@ impl<'a> Vtu<'a> {
                         ),
                     ));
                 }
-                let positions = coords.chunks_exact(3).map(|c| Point3::new(c[0], c[1], c[2])).collect();
+                let positions =
+                    coords.chunks_exact(3).map(|c| Point3::new(c[0], c[1], c[2])).collect();
                 piece.positions = Some(positions);
             }
             "Cells" => match info.name.as_str() {
@@ -348,7 +369,11 @@ impl<'a> Vtu<'a> {
                         return Err(parse_error(
                             path,
                             info.line,
-                            format!("the types array has {} values, expected NumberOfCells = {}", types.len(), piece.cells),
+                            format!(
+                                "the types array has {} values, expected NumberOfCells = {}",
+                                types.len(),
+                                piece.cells
+                            ),
                         ));
                     }
                     piece.types = Some(types);
@@ -391,7 +416,8 @@ impl<'a> Vtu<'a> {
         let positions = piece.positions.ok_or_else(|| missing("<Points> array"))?;
         let (conn, value_lines, conn_line) =
             piece.connectivity.ok_or_else(|| missing("`connectivity` array in <Cells>"))?;
-        let (mut offsets, offsets_line) = piece.offsets.ok_or_else(|| missing("`offsets` array in <Cells>"))?;
+        let (mut offsets, offsets_line) =
+            piece.offsets.ok_or_else(|| missing("`offsets` array in <Cells>"))?;
         let types = piece.types.ok_or_else(|| missing("`types` array in <Cells>"))?;
         // Offsets are the ends of the cells; some writers add a leading 0.
         if Some(offsets.len()) == piece.cells.checked_add(1) && offsets.first() == Some(&0) {
@@ -401,7 +427,11 @@ impl<'a> Vtu<'a> {
             return Err(parse_error(
                 path,
                 offsets_line,
-                format!("the offsets array has {} values, expected NumberOfCells = {}", offsets.len(), piece.cells),
+                format!(
+                    "the offsets array has {} values, expected NumberOfCells = {}",
+                    offsets.len(),
+                    piece.cells
+                ),
             ));
         }
         let mut start = Vec::with_capacity(offsets.len() + 1);
@@ -426,7 +456,8 @@ impl<'a> Vtu<'a> {
             .map(|&s| value_lines.get(s).copied().unwrap_or(conn_line))
             .collect();
         let cells = CellList { start, conn, lines };
-        let (tets, regions) = assemble_tets(path, positions.len(), &cells, &types, piece.region.as_ref())?;
+        let (tets, regions) =
+            assemble_tets(path, positions.len(), &cells, &types, piece.region.as_ref())?;
         let base = u32::try_from(self.positions.len())
             .map_err(|_| parse_error(path, piece.line, "too many points for 32-bit vertex ids"))?;
         self.positions.extend(positions);

@@ -53,7 +53,11 @@ pub enum WriteError {
 /// cell array `region`, and the named per-vertex `point_data` (e.g.
 /// `&[("velocity", PointData::Vector(&v))]`). NaN or infinite values are refused because
 /// VTK's ASCII parser cannot read them.
-pub fn write_vtu(path: &Path, mesh: &TetMesh, point_data: &[(&str, PointData<'_>)]) -> Result<(), WriteError> {
+pub fn write_vtu(
+    path: &Path,
+    mesh: &TetMesh,
+    point_data: &[(&str, PointData<'_>)],
+) -> Result<(), WriteError> {
     check(mesh, point_data)?;
     let io_error = |source| WriteError::Io { path: path.to_path_buf(), source };
     let file = std::fs::File::create(path).map_err(io_error)?;
@@ -63,7 +67,10 @@ pub fn write_vtu(path: &Path, mesh: &TetMesh, point_data: &[(&str, PointData<'_>
 }
 
 /// The `.vtu` text [`write_vtu`] would write.
-pub fn vtu_string(mesh: &TetMesh, point_data: &[(&str, PointData<'_>)]) -> Result<String, WriteError> {
+pub fn vtu_string(
+    mesh: &TetMesh,
+    point_data: &[(&str, PointData<'_>)],
+) -> Result<String, WriteError> {
     check(mesh, point_data)?;
     let mut out = Vec::new();
     write_body(&mut out, mesh, point_data)
@@ -97,7 +104,10 @@ fn check(mesh: &TetMesh, point_data: &[(&str, PointData<'_>)]) -> Result<(), Wri
 const PER_LINE: usize = 10;
 
 /// Writes `values` in rows of `PER_LINE`, indented, each line ending in a newline.
-fn write_rows<T: Display>(out: &mut impl Write, values: impl Iterator<Item = T>) -> std::io::Result<()> {
+fn write_rows<T: Display>(
+    out: &mut impl Write,
+    values: impl Iterator<Item = T>,
+) -> std::io::Result<()> {
     for (i, v) in values.enumerate() {
         if i % PER_LINE == 0 {
             if i > 0 {
@@ -120,7 +130,11 @@ impl Display for Float {
     }
 }
 
-fn write_body(out: &mut impl Write, mesh: &TetMesh, point_data: &[(&str, PointData<'_>)]) -> std::io::Result<()> {
+fn write_body(
+    out: &mut impl Write,
+    mesh: &TetMesh,
+    point_data: &[(&str, PointData<'_>)],
+) -> std::io::Result<()> {
     writeln!(out, r#"<?xml version="1.0"?>"#)?;
     writeln!(out, r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">"#)?;
     writeln!(out, "  <UnstructuredGrid>")?;
@@ -136,7 +150,10 @@ fn write_body(out: &mut impl Write, mesh: &TetMesh, point_data: &[(&str, PointDa
             let name = quick_xml::escape::escape(*name);
             match data {
                 PointData::Scalar(v) => {
-                    writeln!(out, r#"        <DataArray type="Float64" Name="{name}" format="ascii">"#)?;
+                    writeln!(
+                        out,
+                        r#"        <DataArray type="Float64" Name="{name}" format="ascii">"#
+                    )?;
                     write_rows(out, v.iter().map(|&x| Float(x)))?;
                 }
                 PointData::Vector(v) => {
