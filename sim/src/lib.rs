@@ -14,6 +14,7 @@
 //! - [`scene`]: scene files and built-in scenes.
 
 pub mod error;
+pub mod io;
 pub mod mesh;
 pub mod segmentation;
 

@@ -93,6 +93,7 @@ pub(super) fn validate(mesh: &TetMesh) -> ValidationReport {
         let p = mesh.tet_corners(t);
         let l2: f64 = super::TET_EDGES.iter().map(|&[i, j]| (p[i] - p[j]).norm_squared()).sum::<f64>() / 6.0;
         let q = 6.0 * std::f64::consts::SQRT_2 * vol / l2.powf(1.5);
+        // NaN quality (e.g. all corners coincide) counts as degenerate.
         if q.is_nan() || q.abs() < DEGENERATE_QUALITY {
             r.degenerate_tets.push(t as TetId);
         } else if vol < 0.0 {
