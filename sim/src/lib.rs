@@ -6,17 +6,23 @@
 //! the web. SI units throughout (metres, kilograms, seconds, newtons), `f64` everywhere.
 //!
 //! - [`mesh`]: the tetrahedral mesh, its topology, validation and quality measures;
-//! - [`io`]: mesh readers (Gmsh, TetGen, VTK) and the `.vtu` writer, NIfTI segmentations;
+//! - [`io`]: mesh readers (Gmsh, TetGen, VTK) and the `.vtu` writer;
 //! - [`segmentation`]: NIfTI label volumes to conforming voxel tetrahedral meshes;
 //! - [`generate`]: built-in structured meshes (slabs, sheets, bars);
 //! - [`model`]: the particle/spring/damper model with pre-tension;
 //! - [`solver`]: time integrators and static equilibrium;
+//! - [`cut`]: volumetric cutting: vertex movement, minimal subdivision, particle remodelling;
 //! - [`scene`]: scene files and built-in scenes.
 
+pub mod cut;
 pub mod error;
+pub mod generate;
 pub mod io;
 pub mod mesh;
+pub mod model;
+pub mod scene;
 pub mod segmentation;
+pub mod solver;
 
 pub use error::{MeshError, ReadError, SegmentationError};
 pub use mesh::TetMesh;
@@ -25,7 +31,3 @@ pub use mesh::TetMesh;
 pub type Point3 = nalgebra::Point3<f64>;
 /// 3-D vector (displacement in metres, velocity in m/s, force in N, by context).
 pub type Vector3 = nalgebra::Vector3<f64>;
-pub mod generate;
-pub mod model;
-pub mod solver;
-pub mod scene;

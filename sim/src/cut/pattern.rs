@@ -16,15 +16,16 @@
 //! as an input and refuses cyclic prisms; the caller chooses them (by the paper's mu or by the
 //! fixed smallest-vertex rule, which never makes a cycle).
 
-use crate::mesh::{NONE, TET_EDGES};
+use crate::mesh::TET_EDGES;
 
 /// Identifies a quadrilateral whose diagonal must be chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum QuadKey {
     /// A face of the tetrahedron (sorted original vertex ids): shared with the neighbour.
     Face([u32; 3]),
-    /// The section of a 2 | 2 cut, seen from the positive (0) or negative (1) side.
-    Section(u8),
+    /// The section of a 2 | 2 cut: both sides use the same diagonal, so the two cut faces
+    /// match vertex for vertex.
+    Section,
 }
 
 /// A quadrilateral with its vertices in cyclic order.
@@ -60,7 +61,7 @@ pub fn sorted3(mut f: [u32; 3]) -> [u32; 3] {
 }
 
 /// A tetrahedron to be split: its vertices, their sides and the new vertex on each crossing
-/// edge (in the order of [`TET_EDGES`], [`NONE`] where the edge does not cross).
+/// edge (in the order of [`TET_EDGES`], [`crate::mesh::NONE`] where the edge does not cross).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TetSplit {
     pub verts: [u32; 4],
@@ -130,8 +131,8 @@ impl TetSplit {
                     Quad { key: self.face([a, b, d]), ring: [xad, v(a), v(b), xbd] },
                     Quad { key: self.face([a, c, d]), ring: [v(c), xac, xad, v(d)] },
                     Quad { key: self.face([b, c, d]), ring: [xbc, v(c), v(d), xbd] },
-                    Quad { key: QuadKey::Section(0), ring: [xac, xad, xbd, xbc] },
-                    Quad { key: QuadKey::Section(1), ring: [xac, xbc, xbd, xad] },
+                    Quad { key: QuadKey::Section, ring: [xac, xad, xbd, xbc] },
+                    Quad { key: QuadKey::Section, ring: [xac, xbc, xbd, xad] },
                 ]
             }
             (1, 2, 1) => {
@@ -169,16 +170,10 @@ impl TetSplit {
                 out.tets.extend(prism([v(a), xac, xad], [v(b), xbc, xbd], [diag(0), diag(4), diag(1)])?);
                 // negative prism (c, xac, xbc) - (d, xad, xbd): quads [a c d], section, [b c d]
                 out.tets.extend(prism([v(c), xac, xbc], [v(d), xad, xbd], [diag(2), diag(5), diag(3)])?);
-                for k in [4, 5] {
-                    let [s, t] = diag(k);
-                    let ring = quads[k].ring;
-                    let others: Vec<u32> = ring.iter().copied().filter(|&w| w != s && w != t).collect();
-                    for &o in &others {
-                        out.section.push(sorted3([s, t, o]));
-                    }
+                let [s, t] = diag(4);
+                for o in quads[4].ring.into_iter().filter(|&w| w != s && w != t) {
+                    out.section.push(sorted3([s, t, o]));
                 }
-                out.section.sort_unstable();
-                out.section.dedup();
             }
             (1, 2, 1) => {
                 let (a, b, c, d) = (p[0], n[0], n[1], z[0]);

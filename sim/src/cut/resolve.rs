@@ -124,8 +124,12 @@ impl Resolver<'_> {
             return None;
         }
         let (mut dx, mut dref) = (dx / k, dref / k);
-        if let Some(n_s) = self.surface_normal(v)? {
-            // stay on the (flat) surface: move within its tangent plane onto C's plane
+
+
+        if let Some((n_s, n_ref)) = self.surface_normal(v, self.x)?.zip(self.surface_normal(v, self.x_ref)?) {
+            // stay on the (flat) surface: move within its tangent plane onto C's plane; in the
+            // reference configuration, within the reference tangent plane (so a flat surface
+            // keeps the rest volume exactly)
             let n_c = self.plane.normal;
             let dir = n_c - n_s * n_c.dot(&n_s);
             let along = dir.dot(&n_c);
@@ -134,14 +138,57 @@ impl Resolver<'_> {
             }
             let s = self.plane.signed_distance(&self.x[v as usize]);
             dx = dir * (-s / along);
-            dref = dx;
+            dref = dx - n_ref * n_ref.dot(&dx);
         }
         Some((dx, dref))
     }
 
-    /// Outward normal of the surface at `v`: `Some(None)` for an interior vertex,
-    /// `Some(Some(n))` on a nearly flat surface, `None` on a crease or corner.
-    fn surface_normal(&self, v: u32) -> Option<Option<Vector3>> {
+    /// Moves `v` away from the plane, along the plane normal (within the surface's tangent
+    /// plane for a surface vertex), until each of its crossing edges has parameter at least
+    /// `snap` from it. None when it may not move.
+    fn push_away(&self, v: u32, c: &Classification) -> Option<(Vector3, Vector3)> {
+        if self.held[v as usize] {
+            return None;
+        }
+        let s_v = self.plane.signed_distance(&self.x[v as usize]);
+        let mut need = 0.0f64;
+        for cr in c.crossings.values() {
+            let w = if cr.edge[0] == v {
+                cr.edge[1]
+            } else if cr.edge[1] == v {
+                cr.edge[0]
+            } else {
+                continue;
+            };
+            let s_w = self.plane.signed_distance(&self.x[w as usize]).abs();
+            need = need.max(self.snap / (1.0 - self.snap) * s_w * 1.01);
+        }
+        if !(need > s_v.abs()) {
+            return None;
+        }
+        let target = need * s_v.signum();
+        let dir = match self.surface_normal(v, self.x)?.zip(self.surface_normal(v, self.x_ref)?) {
+            None => self.plane.normal,
+            Some((n_s, _)) => {
+                let d = self.plane.normal - n_s * self.plane.normal.dot(&n_s);
+                let along = d.dot(&self.plane.normal);
+                if along < 0.1 {
+                    return None;
+                }
+                d / along
+            }
+        };
+        let dx = dir * (target - s_v);
+        let dref = match self.surface_normal(v, self.x_ref)? {
+            Some(n_ref) => dx - n_ref * n_ref.dot(&dx),
+            None => dx,
+        };
+        Some((dx, dref))
+    }
+
+    /// Outward normal of the surface at `v` in configuration `x`: `Some(None)` for an interior
+    /// vertex, `Some(Some(n))` on a nearly flat surface, `None` on a crease or corner.
+    fn surface_normal(&self, v: u32, x: &[Point3]) -> Option<Option<Vector3>> {
         let topo = self.mesh.topology();
         let mut normals = Vec::new();
         for &t in topo.vertex_tets.row(v as usize) {
@@ -151,7 +198,7 @@ impl Resolver<'_> {
                 if topo.face_tets[fid][1] != NONE || !f.iter().any(|&k| tet[k] == v) {
                     continue;
                 }
-                let p = f.map(|k| self.x[tet[k] as usize]);
+                let p = f.map(|k| x[tet[k] as usize]);
                 let n = triangle_normal(&p[0], &p[1], &p[2]);
                 if n.norm() > 0.0 {
                     normals.push(n.normalize());
@@ -183,12 +230,27 @@ impl Resolver<'_> {
         true
     }
 
+    /// Moves `v` by `delta` if that keeps its tetrahedra healthy; records the move.
+    fn apply(&mut self, v: u32, delta: Option<(Vector3, Vector3)>, moved: &mut Vec<(u32, Point3, Point3)>) -> bool {
+        match delta {
+            Some((dx, dref)) if self.movement_ok(v, &dx, &dref) => {
+                let from = self.x[v as usize];
+                self.x[v as usize] += dx;
+                self.x_ref[v as usize] += dref;
+                moved.push((v, from, self.x[v as usize]));
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// Classifies, then moves vertices and forces splits until every candidate tetrahedron
     /// is either fully cut or not cut.
     pub fn resolve(&mut self) -> Classification {
         let mut on_plane = BTreeSet::new();
         let mut forced = BTreeSet::new();
         let mut moved = Vec::new();
+        let mut pushed = BTreeSet::new();
         let max_rounds = 4 * self.candidates.len() + 16;
         for _ in 0..max_rounds {
             let c = self.classify(&on_plane, &forced);
@@ -212,7 +274,15 @@ impl Resolver<'_> {
                     continue;
                 }
                 for e in edges.iter().filter(|e| !e.split) {
-                    let near = if e.t < 0.5 { e.edge[0] } else { e.edge[1] };
+                    // the paper moves the vertex outside C; when both (or neither) project
+                    // outside, the one nearer the plane
+                    let out = e.edge.map(|v| !self.plane.contains_projection(&self.x[v as usize], 0.0));
+                    let near = match out {
+                        [true, false] => e.edge[0],
+                        [false, true] => e.edge[1],
+                        _ if e.t < 0.5 => e.edge[0],
+                        _ => e.edge[1],
+                    };
                     wanted.push((near, Some(e.edge)));
                 }
             }
@@ -225,29 +295,24 @@ impl Resolver<'_> {
                 if on_plane.contains(&v) || !done.insert((v, edge)) {
                     continue;
                 }
-                let mut try_move = |v: u32, on_plane: &mut BTreeSet<u32>| -> bool {
-                    if on_plane.contains(&v) {
-                        return true;
-                    }
-                    match self.movement(v, &c) {
-                        Some((dx, dref)) if self.movement_ok(v, &dx, &dref) => {
-                            let from = self.x[v as usize];
-                            self.x[v as usize] += dx;
-                            self.x_ref[v as usize] += dref;
-                            moved.push((v, from, self.x[v as usize]));
-                            on_plane.insert(v);
-                            true
-                        }
-                        _ => false,
-                    }
-                };
-                if try_move(v, &mut on_plane) {
+                if self.apply(v, self.movement(v, &c), &mut moved) {
+                    on_plane.insert(v);
                     changed = true;
                     break; // positions changed: classify again
                 }
+                if edge.is_none() && !pushed.contains(&v) && self.apply(v, self.push_away(v, &c), &mut moved) {
+                    // a sliver whose vertex cannot move onto the plane: pushed off instead
+                    pushed.insert(v);
+                    changed = true;
+                    break;
+                }
                 if let Some(e) = edge {
                     let other = if e[0] == v { e[1] } else { e[0] };
-                    if try_move(other, &mut on_plane) {
+                    if on_plane.contains(&other) {
+                        continue;
+                    }
+                    if self.apply(other, self.movement(other, &c), &mut moved) {
+                        on_plane.insert(other);
                         changed = true;
                         break;
                     }

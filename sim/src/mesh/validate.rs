@@ -106,11 +106,22 @@ pub(super) fn validate(mesh: &TetMesh) -> ValidationReport {
 }
 
 /// Finds boundary triangles that lie on top of another boundary triangle with the opposite
-/// normal, inside the body, without matching it vertex for vertex. A conforming mesh has none;
-/// a cut (two coincident sides with duplicated vertices) matches vertex for vertex and is not
-/// reported.
+/// normal, inside the body, without matching it vertex for vertex, where the surface does not
+/// close up (an edge of the triangle is not shared by exactly two boundary triangles). That is
+/// a T-junction: a hanging node on an edge or face. The two sides of a cut lie on top of each
+/// other too, but each side is a closed surface, so they are not reported.
 fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
     let topo = mesh.topology();
+    let open_edges: std::collections::BTreeSet<[u32; 2]> = topo.boundary_non_manifold_edges().into_iter().collect();
+    if open_edges.is_empty() {
+        return Vec::new();
+    }
+    let is_open = |t: &[u32; 3]| {
+        (0..3).any(|k| {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            open_edges.contains(&[a.min(b), a.max(b)])
+        })
+    };
     let pos = mesh.positions();
     let tris = &topo.boundary;
     if tris.is_empty() {
@@ -163,7 +174,7 @@ fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
         for a in i..j {
             for b in i..j {
                 let (ta, tb) = (entries[a].1 as usize, entries[b].1 as usize);
-                if ta != tb && !hanging[ta] && covers(pos, &tris[tb], &tris[ta], tol) {
+                if ta != tb && !hanging[ta] && (is_open(&tris[ta]) || is_open(&tris[tb])) && covers(pos, &tris[tb], &tris[ta], tol) {
                     hanging[ta] = true;
                     hanging[tb] = true;
                 }

@@ -1,0 +1,74 @@
+//! Progressive cutting: a stroke of many steps gives one continuous incision.
+//!
+//! Each step cuts along the surface swept by the blade over a trailing window of recent poses
+//! (not only since the previous pose), projected onto its best-fit plane. Tetrahedra that the
+//! blade has crossed over several steps are therefore cut whole once the blade has passed
+//! them, while those at the blade's front are resolved by vertex movement; re-cutting the
+//! part already cut changes nothing (its vertices lie on the plane and are already split).
+
+use std::collections::VecDeque;
+
+use super::{Blade, CutError, CutEvent, CutOptions, CutPolygon, cut};
+use crate::solver::Simulation;
+
+/// Cuts a simulation along the path of a blade, pose by pose.
+#[derive(Debug, Clone)]
+pub struct Cutter {
+    pub options: CutOptions,
+    /// Length of tip path behind the blade that each step cuts along, metres.
+    pub window_m: f64,
+    trail: VecDeque<Blade>,
+}
+
+impl Default for Cutter {
+    fn default() -> Self {
+        Self::new(CutOptions::default())
+    }
+}
+
+impl Cutter {
+    pub fn new(options: CutOptions) -> Self {
+        Self { options, window_m: 0.01, trail: VecDeque::new() }
+    }
+
+    /// Ends the current stroke: the next pose starts a new one.
+    pub fn end_stroke(&mut self) {
+        self.trail.clear();
+    }
+
+    /// True while a stroke is in progress.
+    pub fn in_stroke(&self) -> bool {
+        !self.trail.is_empty()
+    }
+
+    /// Moves the blade to `blade`, cutting along its trailing swept surface.
+    pub fn advance(&mut self, sim: &mut Simulation, blade: Blade) -> Result<CutEvent, CutError> {
+        if !blade.is_finite() {
+            return Err(CutError::NonFiniteBlade);
+        }
+        self.trail.push_back(blade);
+        // keep the poses within the window behind the tip (at least the previous one)
+        let mut length = 0.0;
+        let mut keep = 1;
+        for i in (1..self.trail.len()).rev() {
+            keep += 1;
+            length += (self.trail[i].tip - self.trail[i - 1].tip).norm();
+            if length >= self.window_m {
+                break;
+            }
+        }
+        while self.trail.len() > keep {
+            self.trail.pop_front();
+        }
+        let empty = CutEvent { min_child_volume_fraction: 1.0, ..Default::default() };
+        if self.trail.len() < 2 {
+            return Ok(empty);
+        }
+        let mut corners: Vec<_> = self.trail.iter().map(|b| b.tip).collect();
+        corners.extend(self.trail.iter().rev().map(Blade::heel));
+        match CutPolygon::new(&corners) {
+            Some(polygon) => cut(sim, &polygon, &self.options),
+            None => Ok(empty),
+        }
+    }
+}

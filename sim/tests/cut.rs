@@ -1,0 +1,137 @@
+//! Cutting against known answers and invariants.
+
+use cutlab_sim::cut::{self, CutOptions, CutPolygon, PatternChoice};
+use cutlab_sim::generate::{GridCells, boxed};
+use cutlab_sim::model::{Material, Model};
+use cutlab_sim::solver::{Simulation, SolverSettings, StaticSettings};
+use cutlab_sim::{Point3, TetMesh, Vector3};
+
+fn sim_of(mesh: TetMesh, held: &[u32], pretension: f64) -> Simulation {
+    let material = Material { pretension, ..Material::PAPER_CHEST_WALL };
+    let model = Model::new(mesh, &[(0, material)], held, Vector3::zeros()).expect("model");
+    Simulation::new(model, SolverSettings::default())
+}
+
+fn square(centre: Point3, normal: Vector3, half: f64) -> CutPolygon {
+    let n = normal.normalize();
+    let u = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let u = (u - n * n.dot(&u)).normalize();
+    let v = n.cross(&u);
+    CutPolygon::new(&[centre + (u + v) * half, centre + (u - v) * half, centre + (-u - v) * half, centre + (-u + v) * half])
+        .expect("polygon")
+}
+
+/// Number of pieces: tetrahedra connected through shared faces.
+fn pieces(mesh: &TetMesh) -> usize {
+    let topo = mesh.topology();
+    let mut parent: Vec<usize> = (0..mesh.tet_count()).collect();
+    fn find(p: &mut [usize], mut i: usize) -> usize {
+        while p[i] != i {
+            p[i] = p[p[i]];
+            i = p[i];
+        }
+        i
+    }
+    for ft in &topo.face_tets {
+        if ft[1] != cutlab_sim::mesh::NONE {
+            let (a, b) = (find(&mut parent, ft[0] as usize), find(&mut parent, ft[1] as usize));
+            parent[a] = b;
+        }
+    }
+    (0..mesh.tet_count()).filter(|&i| find(&mut parent, i) == i).count()
+}
+
+fn single_tet() -> TetMesh {
+    TetMesh::with_single_region(
+        vec![Point3::origin(), Point3::new(1.0, 0.0, 0.0), Point3::new(0.0, 1.0, 0.0), Point3::new(0.0, 0.0, 1.0)],
+        vec![[0, 1, 2, 3]],
+    )
+    .expect("tet")
+}
+
+#[test]
+fn single_tet_one_three_gives_four_tets_in_two_pieces() {
+    for pattern in [PatternChoice::MinMu, PatternChoice::MinVertexId] {
+        // separates vertex 0 (origin) from the other three
+        let mut sim = sim_of(single_tet(), &[], 0.0);
+        let c = square(Point3::new(0.2, 0.2, 0.2), Vector3::new(1.0, 1.0, 1.0), 5.0);
+        let ev = cut::cut(&mut sim, &c, &CutOptions { pattern, snap: 0.0 }).expect("cut");
+        let mesh = &sim.model.mesh;
+        assert_eq!(mesh.tet_count(), 4, "{pattern:?}");
+        assert_eq!(ev.vertices_created.len(), 3);
+        assert_eq!(ev.vertices_split.len(), 3, "each new vertex becomes a pair");
+        assert_eq!(mesh.vertex_count(), 10);
+        assert_eq!(pieces(mesh), 2);
+        assert!(mesh.validate().is_ok(), "{}", mesh.validate());
+        assert!(mesh.topology().boundary_non_manifold_edges().is_empty());
+        assert!((mesh.volume() - 1.0 / 6.0).abs() < 1e-15);
+    }
+}
+
+#[test]
+fn single_tet_two_two_gives_six_tets_in_two_pieces() {
+    for pattern in [PatternChoice::MinMu, PatternChoice::MinVertexId] {
+        // x + y = 0.5 separates {0, 3} from {1, 2}
+        let mut sim = sim_of(single_tet(), &[], 0.0);
+        let c = square(Point3::new(0.25, 0.25, 0.3), Vector3::new(1.0, 1.0, 0.0), 5.0);
+        let ev = cut::cut(&mut sim, &c, &CutOptions { pattern, snap: 0.0 }).expect("cut");
+        let mesh = &sim.model.mesh;
+        assert_eq!(mesh.tet_count(), 6, "{pattern:?}");
+        assert_eq!(ev.vertices_created.len(), 4);
+        assert_eq!(mesh.vertex_count(), 12);
+        assert_eq!(pieces(mesh), 2);
+        assert!(mesh.validate().is_ok(), "{}", mesh.validate());
+        assert!(mesh.topology().boundary_non_manifold_edges().is_empty());
+        assert!((mesh.volume() - 1.0 / 6.0).abs() < 1e-15);
+    }
+}
+
+fn slab() -> (TetMesh, Vec<u32>) {
+    let g = boxed(Point3::origin(), [0.04, 0.04, 0.01], GridCells { nx: 8, ny: 8, nz: 2 }).expect("slab");
+    (g.mesh, g.rim)
+}
+
+fn check_invariants(sim: &Simulation, mass0: f64, volume0: f64) {
+    let mesh = &sim.model.mesh;
+    let report = mesh.validate();
+    if !report.hanging_faces.is_empty() {
+        for f in report.hanging_faces.iter().take(4) {
+            let p: Vec<_> = f.iter().map(|&v| (v, sim.model.mesh.positions()[v as usize].coords.map(|c| (c * 1e4).round() / 10.0))).collect();
+            eprintln!("hanging {f:?}: {p:?}");
+        }
+    }
+    assert!(report.is_ok(), "{report}");
+    let bad = mesh.topology().boundary_non_manifold_edges();
+    for e in &bad {
+        let faces: Vec<_> = mesh.topology().boundary.iter().filter(|f| f.contains(&e[0]) && f.contains(&e[1])).collect();
+        eprintln!("edge {e:?}: boundary faces {faces:?}");
+    }
+    assert!(bad.is_empty(), "non-manifold surface edges {bad:?}");
+    let mass = sim.model.total_mass();
+    assert!((mass - mass0).abs() <= 1e-12 * mass0, "mass {mass} vs {mass0}");
+    let volume = mesh.volume();
+    assert!((volume - volume0).abs() <= 1e-9 * volume0, "volume {volume} vs {volume0}");
+    assert!(sim.state.positions.iter().all(|p| p.iter().all(|c| c.is_finite())));
+}
+
+#[test]
+fn a_stroke_through_a_slab_cuts_and_keeps_the_invariants() {
+    let (mesh, rim) = slab();
+    let mut sim = sim_of(mesh, &rim, 0.04);
+    sim.settle(StaticSettings::default());
+    let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
+    let tets0 = sim.model.mesh.tet_count();
+    // blade vertical, depth 15 mm, moving along x at y = 0.0223 from 8 mm to 32 mm in 12 steps
+    let mut cutter = cut::Cutter::default();
+    for k in 0..=12 {
+        let next = cut::blade(Point3::new(0.008 + 0.002 * k as f64, 0.0223, -0.003), Vector3::z(), 0.015);
+        let ev = cutter.advance(&mut sim, next).expect("cut");
+        assert!(ev.min_child_volume_fraction > 0.0);
+        check_invariants(&sim, mass0, volume0);
+        for _ in 0..5 {
+            sim.step().expect("stable after the cut");
+        }
+    }
+    assert!(sim.model.mesh.tet_count() > tets0);
+    assert!(sim.model.vertex_count() > tets0 / 6, "vertices were split");
+}
