@@ -79,12 +79,26 @@ pub struct MaskFile {
     pub region: u32,
 }
 
-/// A material for one region.
+/// A material for one region (the fields of [`Material`] plus the region id).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RegionMaterial {
     pub region: u32,
-    #[serde(flatten)]
-    pub material: Material,
+    pub density_kg_per_m3: f64,
+    pub stiffness: crate::model::SpringStiffness,
+    pub damping_newton_seconds_per_metre: f64,
+    pub pretension: f64,
+}
+
+impl RegionMaterial {
+    pub fn material(&self) -> Material {
+        Material {
+            density_kg_per_m3: self.density_kg_per_m3,
+            stiffness: self.stiffness,
+            damping_newton_seconds_per_metre: self.damping_newton_seconds_per_metre,
+            pretension: self.pretension,
+        }
+    }
 }
 
 /// A selection of vertices to hold.
