@@ -23,6 +23,9 @@ use crate::{Point3, Vector3};
 /// volume.
 pub const MIN_VOLUME_KEPT: f64 = 0.1;
 
+/// Split points stay at least this fraction of their edge away from its ends.
+pub const MIN_EDGE_FRACTION: f64 = 0.05;
+
 /// A plane-crossing edge.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Crossing {
@@ -92,7 +95,11 @@ impl Resolver<'_> {
                     continue;
                 }
                 let (sa, sb) = (dist[&a], dist[&b]);
-                let tt = sa / (sa - sb);
+                // Crossing parameter, kept off the ends: a split point closer than
+                // `MIN_EDGE_FRACTION` to a vertex (where that vertex could neither move onto
+                // the plane nor away from it) sits at that fraction instead, a little off the
+                // plane, so that no child is a sliver.
+                let tt = (sa / (sa - sb)).clamp(MIN_EDGE_FRACTION, 1.0 - MIN_EDGE_FRACTION);
                 let p = self.x[a as usize] + (self.x[b as usize] - self.x[a as usize]) * tt;
                 let split = forced.contains(&[a, b]) || self.plane.contains_projection(&p, self.inside_tolerance);
                 c.crossings.insert([a, b], Crossing { edge: [a, b], t: tt, split });
@@ -209,7 +216,10 @@ impl Resolver<'_> {
             return Some(None);
         }
         let mean = normals.iter().sum::<Vector3>().normalize();
-        if normals.iter().all(|n| n.dot(&mean) > 0.98) { Some(Some(mean)) } else { None }
+        // Nearly flat in the current configuration; exactly flat in the reference one, so that
+        // a move within the tangent plane keeps the rest volume (and mass) exactly.
+        let flat = if std::ptr::eq(x, &*self.x_ref) { 1.0 - 1e-12 } else { 0.98 };
+        if normals.iter().all(|n| n.dot(&mean) > flat) { Some(Some(mean)) } else { None }
     }
 
     /// True when moving `v` by (dx, dref) keeps every tetrahedron around it healthy.
