@@ -191,3 +191,82 @@ mod random_strokes {
         }
     }
 }
+
+/// Cuts a 30 mm slit through the middle of the built-in sheet along x, settles, and returns
+/// the largest gap between a vertex and its split copy (metres) and the gap profile.
+fn sheet_gap(pretension: f64) -> (f64, Vec<(f64, f64)>) {
+    use cutlab_sim::scene::{BuildOptions, Scene};
+    let mut scene = Scene::load("sheet", BuildOptions::default()).expect("sheet");
+    let materials: Vec<_> = scene.model.materials.iter().map(|(r, m)| (*r, Material { pretension, ..*m })).collect();
+    let held: Vec<u32> = (0..scene.model.vertex_count() as u32).filter(|&v| scene.model.held[v as usize]).collect();
+    scene.model = Model::new(scene.model.mesh.clone(), &materials, &held, Vector3::zeros()).expect("model");
+    let mut sim = scene.simulation();
+    sim.settle(StaticSettings::default());
+    let mut cutter = cut::Cutter::default();
+    let y = 0.0503; // a little off the grid lines
+    for k in 0..=15 {
+        let x = 0.035 + 0.002 * k as f64;
+        cutter.advance(&mut sim, cut::blade(Point3::new(x, y, -0.002), Vector3::z(), 0.006)).expect("cut");
+    }
+    let report = sim.settle(StaticSettings::default());
+    assert!(report.converged, "{report:?}");
+    // pairs of coincident rest positions on the two sides
+    let mesh = &sim.model.mesh;
+    let mut profile = Vec::new();
+    let mut max_gap = 0.0f64;
+    let rest = mesh.positions();
+    for a in 0..mesh.vertex_count() {
+        for b in a + 1..mesh.vertex_count() {
+            if (rest[a] - rest[b]).norm() < 1e-12 {
+                let gap = (sim.state.positions[a] - sim.state.positions[b]).norm();
+                max_gap = max_gap.max(gap);
+                profile.push((rest[a].x, gap));
+            }
+        }
+    }
+    profile.sort_by(|p, q| p.0.total_cmp(&q.0));
+    (max_gap, profile)
+}
+
+#[test]
+fn an_incision_in_a_pretensioned_sheet_opens_and_without_tension_it_does_not() {
+    let (gap, profile) = sheet_gap(0.04);
+    assert!(profile.len() > 10, "the slit split vertices: {profile:?}");
+    assert!(gap > 1e-3, "the wound gapes by {gap} m");
+    // widest in the middle of the slit, closed at its ends
+    let mid = profile.iter().filter(|(x, _)| (x - 0.05).abs() < 0.005).map(|p| p.1).fold(0.0, f64::max);
+    let end = profile.iter().filter(|(x, _)| (x - 0.05).abs() > 0.013).map(|p| p.1).fold(0.0, f64::max);
+    assert!(mid > 2.0 * end, "mid {mid} vs ends {end}");
+    let (gap0, _) = sheet_gap(0.0);
+    assert!(gap0 < 1e-9, "no tension, no opening: {gap0} m");
+}
+
+#[test]
+fn mu_chosen_patterns_are_better_than_a_fixed_pattern() {
+    let mut results = Vec::new();
+    for pattern in [PatternChoice::MinMu, PatternChoice::MinVertexId] {
+        let (mesh, rim) = slab();
+        let mut sim = sim_of(mesh, &rim, 0.04);
+        let mut cutter = cut::Cutter::new(CutOptions { pattern, ..CutOptions::default() });
+        let mut mus = Vec::new();
+        let mut min_angle = f64::INFINITY;
+        for (i, y) in [0.0113, 0.0187, 0.0262, 0.0338].into_iter().enumerate() {
+            cutter.end_stroke();
+            for k in 0..=10 {
+                let x = 0.004 + 0.0032 * k as f64;
+                let tilt = 0.2 * i as f64;
+                let edge = Vector3::new(0.0, tilt, 1.0).normalize();
+                let ev = cutter.advance(&mut sim, cut::blade(Point3::new(x, y, -0.002), edge, 0.016)).expect("cut");
+                for (t, _) in &ev.tets_added {
+                    let a = cutlab_sim::mesh::dihedral_angles(&sim.model.mesh.tet_corners(*t as usize));
+                    mus.push(cutlab_sim::mesh::tet_mu(&a));
+                    min_angle = a.iter().copied().fold(min_angle, f64::min);
+                }
+            }
+        }
+        let mean = mus.iter().sum::<f64>() / mus.len() as f64;
+        eprintln!("{pattern:?}: {} new tets, mean mu {mean:.3}, min dihedral {:.2} deg", mus.len(), min_angle.to_degrees());
+        results.push((mean, min_angle));
+    }
+    assert!(results[0].0 < results[1].0, "mean mu {:?}", results);
+}
