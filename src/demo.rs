@@ -6,10 +6,11 @@ use std::time::Instant;
 use anyhow::Context;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
-use cutlab_sim::Point3;
+use cutlab_sim::cut;
+use cutlab_sim::io::PointData;
+use cutlab_sim::{Point3, Vector3};
 
 use crate::stats::Summary;
-use crate::stroke::Stroke;
 
 pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
     let t0 = Instant::now();
@@ -31,34 +32,78 @@ pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
         }).unwrap_or(0.0),
         t1.elapsed().as_secs_f64() * 1e3, settle.newton_iterations, settle.residual_newtons, moved_mm);
 
-    // The stroke: 60 mm across the top of the wall in 1.5 s, pressing with 0.3 N.
-    let apex_z = settled.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
-    let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, apex_z), Point3::new(0.03, 0.0, apex_z), 1.5, 0.3);
+    // The incision: 60 mm across the top of the wall in 1.5 s, the blade 8 mm deep and normal
+    // to the surface, cutting at every 1 ms step; then 0.5 s for the wound to open.
+    let radius = 0.15;
+    let depth = 0.008;
+    let blade_at = |x: f64| {
+        let z_top = (radius * radius - x * x).sqrt() - radius;
+        let outward = Vector3::new(x, 0.0, z_top + radius).normalize();
+        let tip = Point3::new(x, 0.0003, z_top) - outward * depth;
+        cut::blade(tip, outward, depth + 0.005)
+    };
     let dt = sim.settings.time_step_s;
-    let steps = ((stroke.duration_s + 0.5) / dt).round() as usize;
-    let mut step_us = Vec::with_capacity(steps);
-    let mut max_indent_mm = 0.0f64;
-    let mut cg = 0usize;
-    for k in 0..steps {
-        let t = k as f64 * dt;
-        stroke.apply(&mut sim, t);
+    let stroke_steps = 1500;
+    let mut cutter = cut::Cutter::default();
+    let mut cut_us = Vec::with_capacity(stroke_steps);
+    let mut step_us = Vec::new();
+    let (mut created, mut split, mut moved, mut removed, mut added) = (0, 0, 0, 0, 0);
+    let tets_before = sim.model.mesh.tet_count();
+    for k in 0..stroke_steps + 500 {
+        if k <= stroke_steps {
+            let x = -0.03 + 0.06 * k as f64 / stroke_steps as f64;
+            let tc = Instant::now();
+            let ev = cutter.advance(&mut sim, blade_at(x)).context("cutting")?;
+            cut_us.push(tc.elapsed().as_secs_f64() * 1e6);
+            created += ev.vertices_created.len();
+            split += ev.vertices_split.len();
+            moved += ev.vertices_moved.len();
+            removed += ev.tets_removed.len();
+            added += ev.tets_added.len();
+        }
         let ts = Instant::now();
-        let r = sim.step().context("simulation step")?;
+        sim.step().context("simulation step")?;
         step_us.push(ts.elapsed().as_secs_f64() * 1e6);
-        cg += r.cg_iterations;
-        if t <= stroke.duration_s {
-            let indent = settled.iter().zip(&sim.state.positions).map(|(a, b)| a.z - b.z).fold(0.0, f64::max);
-            max_indent_mm = max_indent_mm.max(indent * 1e3);
+    }
+    let c = Summary::of(&cut_us);
+    let s = Summary::of(&step_us);
+    println!("incision: 60 mm, 8 mm deep, in {} steps of {} ms ({}), then 0.5 s to open",
+        stroke_steps, dt * 1e3, sim.settings.integrator.name());
+    println!("  topology: {removed} tets split into {added}; {created} vertices created on cut edges, {split} split, {moved} moved onto the cut; {} -> {} tets",
+        tets_before, sim.model.mesh.tet_count());
+    println!("  cut latency per step: median {:.0} us, p99 {:.0} us; sim step: median {:.0} us, p99 {:.0} us",
+        c.median, c.p99, s.median, s.p99);
+
+    // The wound at rest: gap between the two copies of each split vertex, along the cut.
+    let settle = sim.settle(StaticSettings::default());
+    anyhow::ensure!(settle.converged, "settling after the cut did not converge: {settle:?}");
+    let rest = sim.model.mesh.positions();
+    let mut order: Vec<u32> = (0..rest.len() as u32).collect();
+    order.sort_by(|&a, &b| rest[a as usize].coords.iter().zip(rest[b as usize].coords.iter())
+        .map(|(p, q)| p.total_cmp(q)).find(|o| o.is_ne()).unwrap_or(std::cmp::Ordering::Equal));
+    let mut gaps: Vec<(f64, f64)> = Vec::new();
+    for w in order.windows(2) {
+        let (a, b) = (w[0] as usize, w[1] as usize);
+        if (rest[a] - rest[b]).norm() < 1e-12 {
+            gaps.push((rest[a].x, (sim.state.positions[a] - sim.state.positions[b]).norm()));
         }
     }
-    let residual_mm = settled.iter().zip(&sim.state.positions).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max) * 1e3;
-    let s = Summary::of(&step_us);
-    println!("stroke: 60 mm along the wall in {:.1} s pressing 0.3 N, then 0.5 s released; {} steps of {} ms ({})",
-        stroke.duration_s, steps, dt * 1e3, sim.settings.integrator.name());
-    println!("  deepest indentation {max_indent_mm:.3} mm; {residual_mm:.4} mm from the settled shape 0.5 s after release; max speed now {:.2e} m/s",
-        sim.state.max_speed());
-    println!("  step wall time: median {:.0} us, p99 {:.0} us, max {:.0} us; {:.1} CG iterations per step",
-        s.median, s.p99, s.max, cg as f64 / steps as f64);
+    println!("  wound opening under {:.0} % tension (gap across the cut at rest, by position along it):",
+        100.0 * scene.spec.materials.first().map(|m| m.pretension).unwrap_or(0.0));
+    let mut line = String::from("   ");
+    for i in -6..=6 {
+        let x0 = i as f64 * 0.005;
+        let g = gaps.iter().filter(|(x, _)| (x - x0).abs() <= 0.0025).map(|p| p.1).fold(0.0, f64::max);
+        line.push_str(&format!(" {:+.0}mm:{:.2}", x0 * 1e3, g * 1e3));
+    }
+    println!("{line} (mm)");
+    println!("  widest gap {:.2} mm", gaps.iter().map(|p| p.1).fold(0.0, f64::max) * 1e3);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let deformed = cutlab_sim::TetMesh::new(sim.state.positions.clone(), sim.model.mesh.tets().to_vec(), sim.model.mesh.regions().to_vec())?;
+    let displacement: Vec<Vector3> = sim.state.positions.iter().zip(sim.model.mesh.positions()).map(|(p, q)| p - q).collect();
+    let path = out.join("final.vtu");
+    cutlab_sim::io::write_vtu(&path, &deformed, &[("displacement", PointData::Vector(&displacement))])
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("wrote {} (open it in ParaView)", path.display());
     Ok(())
 }
