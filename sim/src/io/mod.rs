@@ -43,6 +43,13 @@ pub enum MeshFormat {
     Vtu,
 }
 
+/// True when `path` has the extension of a mesh format [`read_mesh`] reads.
+pub fn is_mesh_file(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| ["msh", "node", "ele", "vtk", "vtu"].iter().any(|m| e.eq_ignore_ascii_case(m)))
+}
+
 /// Reads a tetrahedral mesh, choosing the reader by the file extension: `.msh` (Gmsh),
 /// `.node` or `.ele` (TetGen; the sibling file with the other extension is read too),
 /// `.vtk` (legacy VTK) or `.vtu` (VTK XML).

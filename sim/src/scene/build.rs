@@ -46,7 +46,11 @@ impl Scene {
         };
         let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options)?;
         let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(invalid)?;
-        let materials: Vec<(u32, Material)> = spec.materials.iter().map(|m| (m.region, m.material())).collect();
+        let mut materials: Vec<(u32, Material)> = spec.materials.iter().map(|m| (m.region, m.material())).collect();
+        if materials.is_empty() {
+            // no materials given (a bare mesh file): the default material on every region
+            materials = mesh.region_ids().into_iter().map(|r| (r, Material::default())).collect();
+        }
         let gravity = Vector3::from(spec.gravity_m_per_s2);
         let model = Model::new(mesh, &materials, &held, gravity)
             .map_err(|source| SceneError::Model { scene: spec.name.clone(), source })?;

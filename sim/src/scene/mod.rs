@@ -77,6 +77,21 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
     if !path.exists() {
         return Err(SceneError::Unknown { name: name_or_path.to_owned() });
     }
+    if crate::io::is_mesh_file(path) {
+        // A bare mesh file: the default material on every region, nothing held.
+        let spec = SceneSpec {
+            name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+            description: format!("mesh file {}", path.display()),
+            gravity_m_per_s2: [0.0; 3],
+            mesh: MeshSource::File { path: path.file_name().map(Into::into).unwrap_or_default(), unit_m: 1.0 },
+            materials: Vec::new(),
+            held: Vec::new(),
+            targets: Vec::new(),
+            viewpoint: None,
+            solver: Default::default(),
+        };
+        return Ok((spec, SpecOrigin::File(path.to_path_buf())));
+    }
     let text = std::fs::read_to_string(path)
         .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
     Ok((parse_spec(&text, path)?, SpecOrigin::File(path.to_path_buf())))
