@@ -299,22 +299,32 @@ impl Resolver<'_> {
             if wanted.is_empty() {
                 return Classification { moved, forced: forced.len(), ..c };
             }
+            // Apply every wanted move whose tetrahedra no other move of this round touched
+            // (so the moves are independent), then classify again.
             let mut changed = false;
             let mut done = BTreeSet::new();
+            let mut touched: BTreeSet<u32> = BTreeSet::new();
+            let topo = self.mesh.topology();
             for (v, edge) in wanted {
                 if on_plane.contains(&v) || !done.insert((v, edge)) {
                     continue;
                 }
+                let free = |w: u32, touched: &BTreeSet<u32>| topo.vertex_tets.row(w as usize).iter().all(|t| !touched.contains(t));
+                if edge.is_some_and(|e| !free(e[0], &touched) || !free(e[1], &touched)) || !free(v, &touched) {
+                    continue;
+                }
                 if self.apply(v, self.movement(v, &c), &mut moved) {
                     on_plane.insert(v);
+                    touched.extend(topo.vertex_tets.row(v as usize));
                     changed = true;
-                    break; // positions changed: classify again
+                    continue;
                 }
                 if edge.is_none() && !pushed.contains(&v) && self.apply(v, self.push_away(v, &c), &mut moved) {
                     // a sliver whose vertex cannot move onto the plane: pushed off instead
                     pushed.insert(v);
+                    touched.extend(topo.vertex_tets.row(v as usize));
                     changed = true;
-                    break;
+                    continue;
                 }
                 if let Some(e) = edge {
                     let other = if e[0] == v { e[1] } else { e[0] };
@@ -323,12 +333,14 @@ impl Resolver<'_> {
                     }
                     if self.apply(other, self.movement(other, &c), &mut moved) {
                         on_plane.insert(other);
+                        touched.extend(topo.vertex_tets.row(other as usize));
                         changed = true;
-                        break;
+                        continue;
                     }
                     if forced.insert(e) {
+                        touched.extend(topo.vertex_tets.row(e[0] as usize));
+                        touched.extend(topo.vertex_tets.row(e[1] as usize));
                         changed = true;
-                        break;
                     }
                 }
             }
