@@ -22,6 +22,8 @@ pub struct ImplicitScratch {
     pub rhs: Vec<Vector3>,
     /// The previous step's velocity change: the warm start.
     pub dv: Vec<Vector3>,
+    /// The velocity change of the step before: with `dv`, the linear extrapolation.
+    pub dv_previous: Vec<Vector3>,
     pub cg: CgScratch,
 }
 
@@ -35,10 +37,11 @@ pub fn step(
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, forces, rhs, dv, cg: cg_scratch } = scratch;
+    let ImplicitScratch { system: sys, forces, rhs, dv, dv_previous, cg: cg_scratch } = scratch;
     forces.resize(n, Vector3::zeros());
     rhs.resize(n, Vector3::zeros());
     dv.resize(n, Vector3::zeros());
+    dv_previous.resize(n, Vector3::zeros());
 
     // One pass over the springs: forces, the blocks `B_e`, `rhs = h (f - h K v)` and the
     // diagonal blocks of `A` (into `sys.inv_diag`, inverted afterwards).
@@ -86,6 +89,11 @@ pub fn step(
         sys.inv_diag[b] += block;
     }
     sys.invert_diagonal(model, n);
+    for (d, p) in dv.iter_mut().zip(dv_previous.iter_mut()) {
+        let last = *d;
+        *d = last * 2.0 - *p;
+        *p = last;
+    }
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
     for i in 0..n {
         if model.held[i] {
