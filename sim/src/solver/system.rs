@@ -64,13 +64,29 @@ impl SpringSystem {
         for ((y, p), &m) in y.iter_mut().zip(p).zip(&model.mass) {
             *y = p * (self.mass_weight * m);
         }
-        for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
+        // Springs come sorted by their first particle: the products on the current first
+        // particle are summed in a register and stored once per run, which takes the store to
+        // y[a] off the critical path. The summation order is fixed, so results stay
+        // deterministic (and correct for any order).
+        let mut run = usize::MAX;
+        let mut y_run = Vector3::zeros();
+        let springs = model.springs.ends.iter().zip(&self.direction).zip(&self.beta).zip(&self.gamma);
+        for (((&[a, b], n), &beta), &gamma) in springs {
             let (a, b) = (a as usize, b as usize);
+            if a != run {
+                if run != usize::MAX {
+                    y[run] += y_run;
+                }
+                run = a;
+                y_run = Vector3::zeros();
+            }
             let d = p[a] - p[b];
-            let n = &self.direction[e];
-            let w = d * self.beta[e] + n * (self.gamma[e] * n.dot(&d));
-            y[a] += w;
+            let w = d * beta + n * (gamma * n.dot(&d));
+            y_run += w;
             y[b] -= w;
+        }
+        if run != usize::MAX {
+            y[run] += y_run;
         }
         for (y, &h) in y.iter_mut().zip(&model.held) {
             if h {
