@@ -4,8 +4,10 @@
 //!
 //! Spring blocks: `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0/l)`,
 //! `C_e = c n n^T`, so each spring adds `B_e = h^2 alpha k I + (h c + h^2 (1 - alpha) k) n n^T`.
-//! The system is solved by block-Jacobi preconditioned CG, warm-started from the previous
-//! `dv`.
+//! The system is solved by block-Jacobi preconditioned CG, warm-started from the linear
+//! extrapolation `2 dv_prev - dv_prev2` of the last two steps' velocity changes. The forces,
+//! the blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
+//! springs.
 
 use crate::Vector3;
 use crate::model::{Model, State};
@@ -18,7 +20,6 @@ use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem};
 #[derive(Debug, Clone, Default)]
 pub struct ImplicitScratch {
     pub system: SpringSystem,
-    pub forces: Vec<Vector3>,
     pub rhs: Vec<Vector3>,
     /// The previous step's velocity change: the warm start.
     pub dv: Vec<Vector3>,
@@ -37,8 +38,7 @@ pub fn step(
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, forces, rhs, dv, dv_previous, cg: cg_scratch } = scratch;
-    forces.resize(n, Vector3::zeros());
+    let ImplicitScratch { system: sys, rhs, dv, dv_previous, cg: cg_scratch } = scratch;
     rhs.resize(n, Vector3::zeros());
     dv.resize(n, Vector3::zeros());
     dv_previous.resize(n, Vector3::zeros());
