@@ -15,17 +15,19 @@ pub fn total_forces(model: &Model, x: &[Point3], v: &[Vector3], external: &[Vect
         *f = model.gravity * m + fe;
     }
     let s = &model.springs;
-    for e in 0..s.ends.len() {
-        let [a, b] = s.ends[e];
+    let springs = s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping);
+    for (((&[a, b], &rest), &k), &c) in springs {
         let (a, b) = (a as usize, b as usize);
         let d = x[b] - x[a];
-        let l = d.norm();
-        if l == 0.0 {
+        let l2 = d.norm_squared();
+        if l2 == 0.0 {
             continue; // direction undefined; a zero-length spring exerts no force
         }
-        let n = d / l;
-        let magnitude = s.stiffness[e] * (l - s.rest_length[e]) + s.damping[e] * (v[b] - v[a]).dot(&n);
-        let f = n * magnitude;
+        let l = l2.sqrt();
+        let inv_l = 1.0 / l;
+        // f = n (k (l - l0) + c (v_b - v_a) . n) with n = d / l
+        let magnitude = k * (l - rest) + c * (v[b] - v[a]).dot(&d) * inv_l;
+        let f = d * (magnitude * inv_l);
         out[a] += f;
         out[b] -= f;
     }

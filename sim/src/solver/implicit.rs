@@ -4,23 +4,27 @@
 //!
 //! Spring blocks: `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0/l)`,
 //! `C_e = c n n^T`, so each spring adds `B_e = h^2 alpha k I + (h c + h^2 (1 - alpha) k) n n^T`.
-//! The system is solved by block-Jacobi preconditioned CG, warm-started from the previous
-//! `dv`.
+//! The system is solved by block-Jacobi preconditioned CG, warm-started from the linear
+//! extrapolation `2 dv_prev - dv_prev2` of the last two steps' velocity changes. The forces,
+//! the blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
+//! springs.
 
 use crate::Vector3;
 use crate::model::{Model, State};
 
-use super::forces::total_forces;
-use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, stiffness_block};
+use nalgebra::Matrix3;
+
+use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem};
 
 /// Buffers kept between implicit steps.
 #[derive(Debug, Clone, Default)]
 pub struct ImplicitScratch {
     pub system: SpringSystem,
-    pub forces: Vec<Vector3>,
     pub rhs: Vec<Vector3>,
     /// The previous step's velocity change: the warm start.
     pub dv: Vec<Vector3>,
+    /// The velocity change of the step before: with `dv`, the linear extrapolation.
+    pub dv_previous: Vec<Vector3>,
     pub cg: CgScratch,
 }
 
@@ -34,35 +38,62 @@ pub fn step(
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, forces, rhs, dv, cg: cg_scratch } = scratch;
-    forces.resize(n, Vector3::zeros());
+    let ImplicitScratch { system: sys, rhs, dv, dv_previous, cg: cg_scratch } = scratch;
     rhs.resize(n, Vector3::zeros());
     dv.resize(n, Vector3::zeros());
-    total_forces(model, &state.positions, &state.velocities, external, forces);
+    dv_previous.resize(n, Vector3::zeros());
 
+    // One pass over the springs: forces, the blocks `B_e`, `rhs = h (f - h K v)` and the
+    // diagonal blocks of `A` (into `sys.inv_diag`, inverted afterwards).
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
     sys.beta.resize(m, 0.0);
     sys.gamma.resize(m, 0.0);
     sys.direction.resize(m, Vector3::zeros());
+    sys.inv_diag.clear();
     for i in 0..n {
-        rhs[i] = forces[i] * h;
+        rhs[i] = (model.gravity * model.mass[i] + external[i]) * h;
+        sys.inv_diag.push(Matrix3::identity() * model.mass[i]);
     }
     let (x, v) = (&state.positions, &state.velocities);
-    for (e, &[a, b]) in s.ends.iter().enumerate() {
+    let (hh, springs) = (h * h, s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping));
+    for (e, (((&[a, b], &rest), &k), &c)) in springs.enumerate() {
         let (a, b) = (a as usize, b as usize);
-        let (ka, kn, dir) = stiffness_block(s.stiffness[e], s.rest_length[e], &(x[b] - x[a]));
-        sys.beta[e] = h * h * ka;
-        sys.gamma[e] = h * s.damping[e] + h * h * kn;
-        sys.direction[e] = dir;
-        // rhs -= h^2 K v on both ends
+        let d = x[b] - x[a];
+        let l = d.norm();
+        if l == 0.0 {
+            // direction undefined: no force and a zero block
+            sys.beta[e] = 0.0;
+            sys.gamma[e] = 0.0;
+            sys.direction[e] = Vector3::zeros();
+            continue;
+        }
+        let dir = d * (1.0 / l);
         let dvel = v[a] - v[b];
-        let kv = dvel * ka + dir * (kn * dir.dot(&dvel));
-        rhs[a] -= kv * (h * h);
-        rhs[b] += kv * (h * h);
+        let dvel_n = dir.dot(&dvel);
+        // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
+        let f = dir * (k * (l - rest) - c * dvel_n);
+        let alpha = (1.0 - rest / l).max(0.0);
+        let (ka, kn) = (alpha * k, (1.0 - alpha) * k);
+        let (beta, gamma) = (hh * ka, h * c + hh * kn);
+        sys.beta[e] = beta;
+        sys.gamma[e] = gamma;
+        sys.direction[e] = dir;
+        // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
+        let w = f * h - (dvel * ka + dir * (kn * dvel_n)) * hh;
+        rhs[a] += w;
+        rhs[b] -= w;
+        let block = Matrix3::identity() * beta + (dir * dir.transpose()) * gamma;
+        sys.inv_diag[a] += block;
+        sys.inv_diag[b] += block;
     }
-    sys.update_preconditioner(model);
+    sys.invert_diagonal(model, n);
+    for (d, p) in dv.iter_mut().zip(dv_previous.iter_mut()) {
+        let last = *d;
+        *d = last * 2.0 - *p;
+        *p = last;
+    }
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
     for i in 0..n {
         if model.held[i] {

@@ -40,20 +40,23 @@ impl SpringSystem {
     /// Recomputes the preconditioner from the current coefficients.
     pub fn update_preconditioner(&mut self, model: &Model) {
         let n = model.vertex_count();
-        let mut diag = vec![Matrix3::zeros(); n];
-        for (i, d) in diag.iter_mut().enumerate() {
-            *d = Matrix3::identity() * (self.mass_weight * model.mass[i]);
-        }
+        self.inv_diag.clear();
+        self.inv_diag.extend(model.mass.iter().map(|&m| Matrix3::identity() * (self.mass_weight * m)));
         for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
             let nn = self.direction[e] * self.direction[e].transpose();
             let block = Matrix3::identity() * self.beta[e] + nn * self.gamma[e];
-            diag[a as usize] += block;
-            diag[b as usize] += block;
+            self.inv_diag[a as usize] += block;
+            self.inv_diag[b as usize] += block;
         }
-        self.inv_diag.clear();
-        self.inv_diag.extend(diag.iter().zip(&model.held).map(|(d, &h)| {
-            if h { Matrix3::zeros() } else { d.try_inverse().unwrap_or_else(Matrix3::zeros) }
-        }));
+        self.invert_diagonal(model, n);
+    }
+
+    /// Replaces the diagonal blocks held in `inv_diag` by their inverses (zero for held
+    /// particles and singular blocks).
+    pub fn invert_diagonal(&mut self, model: &Model, n: usize) {
+        for (d, &h) in self.inv_diag[..n].iter_mut().zip(&model.held) {
+            *d = if h { Matrix3::zeros() } else { d.try_inverse().unwrap_or_else(Matrix3::zeros) };
+        }
     }
 
     /// `y = A p` with held rows zeroed.
@@ -61,13 +64,29 @@ impl SpringSystem {
         for ((y, p), &m) in y.iter_mut().zip(p).zip(&model.mass) {
             *y = p * (self.mass_weight * m);
         }
-        for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
+        // Springs come sorted by their first particle: the products on the current first
+        // particle are summed in a register and stored once per run, which takes the store to
+        // y[a] off the critical path. The summation order is fixed, so results stay
+        // deterministic (and correct for any order).
+        let mut run = usize::MAX;
+        let mut y_run = Vector3::zeros();
+        let springs = model.springs.ends.iter().zip(&self.direction).zip(&self.beta).zip(&self.gamma);
+        for (((&[a, b], n), &beta), &gamma) in springs {
             let (a, b) = (a as usize, b as usize);
+            if a != run {
+                if run != usize::MAX {
+                    y[run] += y_run;
+                }
+                run = a;
+                y_run = Vector3::zeros();
+            }
             let d = p[a] - p[b];
-            let n = &self.direction[e];
-            let w = d * self.beta[e] + n * (self.gamma[e] * n.dot(&d));
-            y[a] += w;
+            let w = d * beta + n * (gamma * n.dot(&d));
+            y_run += w;
             y[b] -= w;
+        }
+        if run != usize::MAX {
+            y[run] += y_run;
         }
         for (y, &h) in y.iter_mut().zip(&model.held) {
             if h {
@@ -149,18 +168,21 @@ pub fn solve(
             break; // breakdown: the matrix is singular along p, or the numbers are bad
         }
         let alpha = rz / pq;
+        // One pass: x and r updated, z = P r, and the dot products r.z and r.r.
+        let (mut rz_next, mut rr) = (0.0, 0.0);
         for i in 0..n {
             x[i] += p[i] * alpha;
             r[i] -= q[i] * alpha;
             z[i] = sys.inv_diag[i] * r[i];
+            rz_next += r[i].dot(&z[i]);
+            rr += r[i].norm_squared();
         }
-        let rz_next = dot(r, z);
         let beta = rz_next / rz;
         rz = rz_next;
         for i in 0..n {
             p[i] = z[i] + p[i] * beta;
         }
-        r_norm = dot(r, r).sqrt();
+        r_norm = rr.sqrt();
         iterations += 1;
     }
     CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
