@@ -232,17 +232,41 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
     // Separate the two sides: split vertices of the cut surface by star components. A cut
     // face that would only pinch the surface (an edge of it on the outer surface whose ends
     // both stay whole) is given up, and the split redone.
-    let subdivided = TetMesh::new(x_ref.clone(), tets.clone(), regions.clone())?;
-    let mut relinked = BTreeSet::new();
+    let old_tet_count = mesh.tet_count();
+    let topo = mesh.topology();
+    let star_of = |on_cut: &BTreeSet<u32>| -> separate::Stars {
+        let mut stars: separate::Stars = BTreeMap::new();
+        for &v in on_cut {
+            let star = stars.entry(v).or_default();
+            if (v as usize) < n {
+                star.extend(topo.vertex_tets.row(v as usize).iter().filter(|&&t| tets[t as usize].contains(&v)));
+            }
+        }
+        for (id, c) in &event.tets_added {
+            if (*id as usize) >= old_tet_count || !mesh.tets()[*id as usize].eq(c) {
+                for v in c {
+                    if let Some(star) = stars.get_mut(v) {
+                        star.push(*id);
+                    }
+                }
+            }
+        }
+        for star in stars.values_mut() {
+            star.sort_unstable();
+            star.dedup();
+        }
+        stars
+    };
     let base_vertices = x.len();
     let mut split_tets = tets.clone();
     let mut splits = Vec::new();
+    let mut relinked = BTreeSet::new();
     for _ in 0..64 {
         let on_cut: BTreeSet<u32> = cut_faces.iter().flatten().copied().collect();
-        splits = separate::star_components(&subdivided, &cut_faces, &on_cut);
-        split_tets.clone_from(&tets);
+        let stars = star_of(&on_cut);
+        splits = separate::star_components(&tets, &stars, &cut_faces);
         relinked.clear();
-        let mut original_of: Vec<u32> = (0..base_vertices as u32).collect();
+        let mut original_of: Vec<u32> = Vec::with_capacity(splits.len());
         for (k, (v, moved_tets)) in splits.iter().enumerate() {
             let copy = (base_vertices + k) as u32;
             original_of.push(*v);
@@ -255,12 +279,17 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
                 relinked.insert(t);
             }
         }
-        let pinched = pinched_edges(&split_tets, base_vertices + splits.len());
+        let original = |v: u32| if (v as usize) < base_vertices { v } else { original_of[v as usize - base_vertices] };
+        let local: BTreeSet<u32> = stars.values().flatten().copied().collect();
+        let pinched = separate::pinched_edges(&split_tets, &local, &|v| on_cut.contains(&original(v)));
         if pinched.is_empty() {
             break;
         }
-        let pinched: BTreeSet<[u32; 2]> =
-            pinched.iter().map(|e| pattern::sorted2(original_of[e[0] as usize], original_of[e[1] as usize])).collect();
+        // undo this round's relabelling before trying again
+        for &t in &local {
+            split_tets[t as usize] = tets[t as usize];
+        }
+        let pinched: BTreeSet<[u32; 2]> = pinched.iter().map(|e| pattern::sorted2(original(e[0]), original(e[1]))).collect();
         let before = cut_faces.len();
         cut_faces.retain(|f| !pinched.iter().any(|e| f.contains(&e[0]) && f.contains(&e[1])));
         if cut_faces.len() == before {
@@ -280,23 +309,19 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
     event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
 
     // Commit: new mesh, rebuilt model, extended state.
-    let old_edges = sim.model.mesh.topology().edges.clone();
     let new_mesh = TetMesh::new(x_ref, tets, regions)?;
-    let mut model = sim.model.clone();
-    model.rebuild(new_mesh, held)?;
-    let new_edges = &model.mesh.topology().edges;
+    let old_edges = std::mem::take(&mut sim.model.springs.ends);
+    if let Err(e) = sim.model.rebuild(new_mesh, held) {
+        sim.model.springs.ends = old_edges;
+        return Err(e.into());
+    }
+    let new_edges = &sim.model.mesh.topology().edges;
     event.springs_removed = sorted_difference(&old_edges, new_edges);
     event.springs_added = sorted_difference(new_edges, &old_edges);
-    sim.model = model;
     sim.state.positions = x;
     sim.state.velocities = vel;
     sim.model_changed();
     Ok(event)
-}
-
-/// Surface edges used by more than two boundary triangles (or unpaired), in `tets`.
-fn pinched_edges(tets: &[[u32; 4]], vertex_count: usize) -> Vec<[u32; 2]> {
-    crate::mesh::Topology::build(vertex_count, tets).boundary_non_manifold_edges()
 }
 
 fn sorted_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {

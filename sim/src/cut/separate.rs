@@ -3,23 +3,38 @@
 //! it, connected through faces that were not cut). A vertex inside the cut surface gets two
 //! copies, one per side; a vertex on the cut front keeps a connected star and is not split, so
 //! the incision ends cleanly there.
+//!
+//! Everything here is local to the stars of the vertices on the cut: no full-mesh pass.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
-use crate::mesh::{NONE, TET_FACES, TetMesh};
+use crate::mesh::TET_FACES;
 
 use super::pattern::sorted3;
 
-/// For each split, the original vertex and the tetrahedra that move to a new copy.
-pub fn star_components(mesh: &TetMesh, cut_faces: &BTreeSet<[u32; 3]>, vertices: &BTreeSet<u32>) -> Vec<(u32, Vec<u32>)> {
-    let topo = mesh.topology();
+/// Stars of the vertices of the cut: for each, the ids of the tetrahedra around it, ascending.
+pub type Stars = BTreeMap<u32, Vec<u32>>;
+
+/// For each split, the original vertex and the tetrahedra (of its star) that move to a new
+/// copy. The piece holding the smallest tetrahedron id keeps the vertex.
+pub fn star_components(tets: &[[u32; 4]], stars: &Stars, cut_faces: &BTreeSet<[u32; 3]>) -> Vec<(u32, Vec<u32>)> {
     let mut out = Vec::new();
-    for &v in vertices {
-        let star = topo.vertex_tets.row(v as usize);
+    let mut faces: Vec<([u32; 3], usize)> = Vec::new();
+    for (&v, star) in stars {
         if star.len() < 2 {
             continue;
         }
-        // union-find over the star
+        // faces through v, keyed by their sorted vertices, with the star index of their tet
+        faces.clear();
+        for (si, &t) in star.iter().enumerate() {
+            let tet = tets[t as usize];
+            for f in TET_FACES {
+                if f.iter().any(|&k| tet[k] == v) {
+                    faces.push((sorted3(f.map(|k| tet[k])), si));
+                }
+            }
+        }
+        faces.sort_unstable();
         let mut parent: Vec<usize> = (0..star.len()).collect();
         fn find(p: &mut [usize], mut i: usize) -> usize {
             while p[i] != i {
@@ -28,36 +43,74 @@ pub fn star_components(mesh: &TetMesh, cut_faces: &BTreeSet<[u32; 3]>, vertices:
             }
             i
         }
-        for (si, &t) in star.iter().enumerate() {
-            let tet = mesh.tets()[t as usize];
-            for (l, f) in TET_FACES.iter().enumerate() {
-                if !f.iter().any(|&k| tet[k] == v) {
-                    continue;
-                }
-                let fid = topo.tet_faces[t as usize][l] as usize;
-                let [t0, t1] = topo.face_tets[fid];
-                let other = if t0 == t { t1 } else { t0 };
-                if other == NONE || cut_faces.contains(&sorted3(topo.faces[fid])) {
-                    continue;
-                }
-                if let Ok(oi) = star.binary_search(&other) {
-                    let (a, b) = (find(&mut parent, si), find(&mut parent, oi));
-                    if a != b {
-                        parent[a.max(b)] = a.min(b);
-                    }
+        for w in faces.windows(2) {
+            if w[0].0 == w[1].0 && !cut_faces.contains(&w[0].0) {
+                let (a, b) = (find(&mut parent, w[0].1), find(&mut parent, w[1].1));
+                if a != b {
+                    parent[a.max(b)] = a.min(b);
                 }
             }
         }
         let roots: Vec<usize> = (0..star.len()).map(|i| find(&mut parent, i)).collect();
-        let mut distinct: Vec<usize> = roots.clone();
+        let mut distinct = roots.clone();
         distinct.sort_unstable();
         distinct.dedup();
-        // the component holding the smallest tet id keeps the vertex (root 0 after the
-        // min-linking above, since star is ascending)
         for &r in distinct.iter().skip(1) {
-            let tets = star.iter().zip(&roots).filter(|(_, rr)| **rr == r).map(|(t, _)| *t).collect();
-            out.push((v, tets));
+            let moved = star.iter().zip(&roots).filter(|(_, rr)| **rr == r).map(|(t, _)| *t).collect();
+            out.push((v, moved));
         }
     }
     out
+}
+
+/// Surface edges around the cut that are not closed 2-manifold edges (used by other than
+/// exactly two boundary triangles in opposite directions), among the tetrahedra `local` (the
+/// union of the stars, after splitting). `on_cut(v)` tells whether a vertex (or a copy) lies on
+/// the cut; only edges with such an end are judged, since all faces around them are local.
+pub fn pinched_edges(tets: &[[u32; 4]], local: &BTreeSet<u32>, on_cut: &dyn Fn(u32) -> bool) -> Vec<[u32; 2]> {
+    let mut faces: Vec<([u32; 3], [u32; 3])> = Vec::new();
+    for &t in local {
+        let tet = tets[t as usize];
+        for f in TET_FACES {
+            let oriented = f.map(|k| tet[k]);
+            if oriented.iter().any(|&v| on_cut(v)) {
+                faces.push((sorted3(oriented), oriented));
+            }
+        }
+    }
+    faces.sort_unstable();
+    let mut half: Vec<([u32; 2], i8)> = Vec::new();
+    let mut i = 0;
+    while i < faces.len() {
+        let mut j = i;
+        while j < faces.len() && faces[j].0 == faces[i].0 {
+            j += 1;
+        }
+        if j - i == 1 {
+            let tri = faces[i].1;
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                if on_cut(a) || on_cut(b) {
+                    half.push(if a < b { ([a, b], 1) } else { ([b, a], -1) });
+                }
+            }
+        }
+        i = j;
+    }
+    half.sort_unstable();
+    let mut bad = Vec::new();
+    let mut i = 0;
+    while i < half.len() {
+        let mut j = i;
+        let mut sum = 0i32;
+        while j < half.len() && half[j].0 == half[i].0 {
+            sum += half[j].1 as i32;
+            j += 1;
+        }
+        if j - i != 2 || sum != 0 {
+            bad.push(half[i].0);
+        }
+        i = j;
+    }
+    bad
 }

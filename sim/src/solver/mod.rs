@@ -135,7 +135,9 @@ pub struct Simulation {
     /// External force on each particle for the next steps (N), e.g. the scalpel contact.
     external_forces: Vec<Vector3>,
     /// Sub-steps per step of the explicit integrator (recomputed when the model changes).
-    explicit_substeps: u32,
+    /// Computed on first use after a model change (the estimate costs a few milliseconds,
+    /// worth paying only when the explicit integrator runs).
+    explicit_substeps: Option<u32>,
     step_index: u64,
     scratch: Scratch,
 }
@@ -145,7 +147,7 @@ impl Simulation {
     pub fn new(model: Model, settings: SolverSettings) -> Self {
         let state = State::at_rest(&model.mesh);
         let n = model.vertex_count();
-        let explicit_substeps = explicit::substeps_for(&model, settings.time_step_s, settings.explicit_safety);
+        let explicit_substeps = None;
         Self {
             model,
             state,
@@ -168,14 +170,15 @@ impl Simulation {
     }
 
     /// Sub-steps the explicit integrator takes per step.
-    pub fn explicit_substeps(&self) -> u32 {
-        self.explicit_substeps
+    pub fn explicit_substeps(&mut self) -> u32 {
+        *self.explicit_substeps.get_or_insert_with(|| {
+            explicit::substeps_for(&self.model, self.settings.time_step_s, self.settings.explicit_safety)
+        })
     }
 
     /// Call after changing the model's springs or masses.
     pub fn model_changed(&mut self) {
-        self.explicit_substeps =
-            explicit::substeps_for(&self.model, self.settings.time_step_s, self.settings.explicit_safety);
+        self.explicit_substeps = None;
         self.external_forces.resize(self.model.vertex_count(), Vector3::zeros());
     }
 
@@ -211,8 +214,9 @@ impl Simulation {
         let mut report = StepReport::default();
         match self.settings.integrator {
             Integrator::SymplecticEuler => {
-                report.substeps = self.explicit_substeps;
-                explicit::step(&self.model, &mut self.state, &self.external_forces, dt, self.explicit_substeps, &mut self.scratch.forces);
+                let substeps = self.explicit_substeps();
+                report.substeps = substeps;
+                explicit::step(&self.model, &mut self.state, &self.external_forces, dt, substeps, &mut self.scratch.forces);
             }
             Integrator::ImplicitEuler => {
                 let cg = CgSettings {
