@@ -47,13 +47,22 @@ pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
     let mut cutter = cut::Cutter::default();
     let mut cut_us = Vec::with_capacity(stroke_steps);
     let mut step_us = Vec::new();
-    let (mut created, mut split, mut moved, mut removed, mut added) = (0, 0, 0, 0, 0);
+    let (mut created, mut split, mut moved, mut removed, mut added, mut skipped) = (0, 0, 0, 0, 0, 0);
     let tets_before = sim.model.mesh.tet_count();
     for k in 0..stroke_steps + 500 {
         if k <= stroke_steps {
             let x = -0.03 + 0.06 * k as f64 / stroke_steps as f64;
             let tc = Instant::now();
-            let ev = cutter.advance(&mut sim, blade_at(x)).context("cutting")?;
+            let ev = match cutter.advance(&mut sim, blade_at(x)) {
+                Ok(ev) => ev,
+                Err(cut::CutError::Unresolved(_)) => {
+                    skipped += 1;
+                    cut_us.push(tc.elapsed().as_secs_f64() * 1e6);
+                    continue_sim(&mut sim, &mut step_us)?;
+                    continue;
+                }
+                Err(e) => return Err(e).context("cutting"),
+            };
             cut_us.push(tc.elapsed().as_secs_f64() * 1e6);
             created += ev.vertices_created.len();
             split += ev.vertices_split.len();
@@ -61,9 +70,7 @@ pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
             removed += ev.tets_removed.len();
             added += ev.tets_added.len();
         }
-        let ts = Instant::now();
-        sim.step().context("simulation step")?;
-        step_us.push(ts.elapsed().as_secs_f64() * 1e6);
+        continue_sim(&mut sim, &mut step_us)?;
     }
     let c = Summary::of(&cut_us);
     let s = Summary::of(&step_us);
@@ -71,8 +78,8 @@ pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
         stroke_steps, dt * 1e3, sim.settings.integrator.name());
     println!("  topology: {removed} tets split into {added}; {created} vertices created on cut edges, {split} split, {moved} moved onto the cut; {} -> {} tets",
         tets_before, sim.model.mesh.tet_count());
-    println!("  cut latency per step: median {:.0} us, p99 {:.0} us; sim step: median {:.0} us, p99 {:.0} us",
-        c.median, c.p99, s.median, s.p99);
+    println!("  cut latency per step: median {:.0} us, p99 {:.0} us, max {:.0} us; {skipped} steps skipped (unresolved); sim step: median {:.0} us, p99 {:.0} us",
+        c.median, c.p99, c.max, s.median, s.p99);
 
     // The wound at rest: gap between the two copies of each split vertex, along the cut.
     let settle = sim.settle(StaticSettings::default());
@@ -98,6 +105,8 @@ pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
     }
     println!("{line} (mm)");
     println!("  widest gap {:.2} mm", gaps.iter().map(|p| p.1).fold(0.0, f64::max) * 1e3);
+    let (xlo, xhi) = gaps.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+    println!("  the cut spans x = {:.1} .. {:.1} mm (the blade went from -30 to +30 mm)", xlo * 1e3, xhi * 1e3);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let deformed = cutlab_sim::TetMesh::new(sim.state.positions.clone(), sim.model.mesh.tets().to_vec(), sim.model.mesh.regions().to_vec())?;
     let displacement: Vec<Vector3> = sim.state.positions.iter().zip(sim.model.mesh.positions()).map(|(p, q)| p - q).collect();
@@ -105,5 +114,13 @@ pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
     cutlab_sim::io::write_vtu(&path, &deformed, &[("displacement", PointData::Vector(&displacement))])
         .with_context(|| format!("writing {}", path.display()))?;
     println!("wrote {} (open it in ParaView)", path.display());
+    Ok(())
+}
+
+/// One timed simulation step.
+fn continue_sim(sim: &mut cutlab_sim::solver::Simulation, step_us: &mut Vec<f64>) -> anyhow::Result<()> {
+    let ts = Instant::now();
+    sim.step().context("simulation step")?;
+    step_us.push(ts.elapsed().as_secs_f64() * 1e6);
     Ok(())
 }

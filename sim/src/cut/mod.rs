@@ -56,7 +56,9 @@ impl Default for CutOptions {
 pub enum CutError {
     #[error("the blade pose is not finite")]
     NonFiniteBlade,
-    #[error("cut left tetrahedron {0} incompletely intersected")]
+    /// The step's cut could not be resolved; nothing changed, and the next step (whose
+    /// trailing window covers the same place) tries again.
+    #[error("cut left tetrahedron {0} incompletely intersected; step skipped")]
     Unresolved(u32),
     #[error("cut produced an invalid mesh: {0}")]
     Mesh(#[from] MeshError),
@@ -297,6 +299,10 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
         }
     }
     event.cut_faces = cut_faces.len();
+    if splits.is_empty() && event.tets_removed.is_empty() && event.vertices_moved.is_empty() {
+        // nothing changed (the part of the window already cut): no rebuild
+        return Ok(event);
+    }
     for (v, _) in &splits {
         let copy = x.len() as u32;
         x.push(x[*v as usize]);

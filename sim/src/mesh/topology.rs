@@ -78,6 +78,31 @@ pub struct Topology {
     pub edge_tets: Csr,
 }
 
+/// Sorts `keys` (ascending, as `sort_unstable` would) by a counting sort on their first
+/// vertex, then a small sort within each bucket: linear in the mesh size, since a vertex has
+/// only a handful of edges and faces. The result is the same total order as a full sort.
+fn sort_by_first_vertex<K: Ord + Copy>(keys: &mut Vec<K>, vertex_count: usize, first: impl Fn(&K) -> u32) {
+    let mut offsets = vec![0usize; vertex_count + 1];
+    for k in keys.iter() {
+        offsets[first(k) as usize + 1] += 1;
+    }
+    for i in 0..vertex_count {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut fill = offsets.clone();
+    let mut sorted: Vec<K> = Vec::with_capacity(keys.len());
+    sorted.extend_from_slice(keys);
+    for k in keys.iter() {
+        let slot = &mut fill[first(k) as usize];
+        sorted[*slot] = *k;
+        *slot += 1;
+    }
+    for v in 0..vertex_count {
+        sorted[offsets[v]..offsets[v + 1]].sort_unstable();
+    }
+    *keys = sorted;
+}
+
 impl Topology {
     /// Derives the topology of `tets` over `vertex_count` vertices.
     pub fn build(vertex_count: usize, tets: &[[VertexId; 4]]) -> Self {
@@ -89,7 +114,7 @@ impl Topology {
                 edge_keys.push(([a.min(b), a.max(b)], t as u32, l as u8));
             }
         }
-        edge_keys.sort_unstable();
+        sort_by_first_vertex(&mut edge_keys, vertex_count, |k| k.0[0]);
         let mut edges = Vec::with_capacity(tets.len() * 2);
         let mut tet_edges = vec![[0u32; 6]; tets.len()];
         let mut edge_tet_pairs = Vec::with_capacity(edge_keys.len());
@@ -112,7 +137,7 @@ impl Topology {
                 face_keys.push((key, t as u32, l as u8));
             }
         }
-        face_keys.sort_unstable();
+        sort_by_first_vertex(&mut face_keys, vertex_count, |k| k.0[0]);
         let mut faces = Vec::with_capacity(tets.len() * 2 + 16);
         let mut face_tets: Vec<[u32; 2]> = Vec::with_capacity(faces.capacity());
         let mut face_use: Vec<u32> = Vec::with_capacity(faces.capacity());
