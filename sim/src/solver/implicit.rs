@@ -7,14 +7,15 @@
 //! The system is solved by block-Jacobi preconditioned CG, warm-started from the linear
 //! extrapolation `2 dv_prev - dv_prev2` of the last two steps' velocity changes. The forces,
 //! the blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
-//! springs.
+//! springs (chunk by chunk, after a vectorised pass for the inverse lengths).
 
 use crate::Vector3;
 use crate::model::{Model, State};
 
-use nalgebra::Matrix3;
+use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 
-use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem};
+/// Springs per chunk of the assembly's vectorised square roots.
+const CHUNK: usize = 256;
 
 /// Buffers kept between implicit steps.
 #[derive(Debug, Clone, Default)]
@@ -44,7 +45,9 @@ pub fn step(
     dv_previous.resize(n, Vector3::zeros());
 
     // One pass over the springs: forces, the blocks `B_e`, `rhs = h (f - h K v)` and the
-    // diagonal blocks of `A` (into `sys.inv_diag`, inverted afterwards).
+    // diagonal blocks of `A` (into `sys.inv_diag`, inverted afterwards). The springs come
+    // sorted by their first particle: the sums on the current first particle are kept in
+    // registers and stored once per run (a fixed order, so results stay deterministic).
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
@@ -54,39 +57,70 @@ pub fn step(
     sys.inv_diag.clear();
     for i in 0..n {
         rhs[i] = (model.gravity * model.mass[i] + external[i]) * h;
-        sys.inv_diag.push(Matrix3::identity() * model.mass[i]);
+        sys.inv_diag.push(Sym3::scalar(model.mass[i]));
     }
-    let (x, v) = (&state.positions, &state.velocities);
-    let (hh, springs) = (h * h, s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping));
-    for (e, (((&[a, b], &rest), &k), &c)) in springs.enumerate() {
-        let (a, b) = (a as usize, b as usize);
-        let d = x[b] - x[a];
-        let l = d.norm();
-        if l == 0.0 {
-            // direction undefined: no force and a zero block
-            sys.beta[e] = 0.0;
-            sys.gamma[e] = 0.0;
-            sys.direction[e] = Vector3::zeros();
-            continue;
+    let (x, v) = (&state.positions[..n], &state.velocities[..n]);
+    let (rhs, diag) = (&mut rhs[..n], &mut sys.inv_diag[..n]);
+    let hh = h * h;
+    let mut run = usize::MAX;
+    let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
+    // The square roots and divisions go first, chunk by chunk, in a loop that vectorises: in
+    // the main loop they would put a long latency chain into every spring.
+    let mut inv_len = [0.0; CHUNK];
+    for start in (0..m).step_by(CHUNK) {
+        let end = (start + CHUNK).min(m);
+        let inv_len = &mut inv_len[..end - start];
+        for (il, &[a, b]) in inv_len.iter_mut().zip(&s.ends[start..end]) {
+            *il = (x[b as usize] - x[a as usize]).norm_squared();
         }
-        let dir = d * (1.0 / l);
-        let dvel = v[a] - v[b];
-        let dvel_n = dir.dot(&dvel);
-        // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
-        let f = dir * (k * (l - rest) - c * dvel_n);
-        let alpha = (1.0 - rest / l).max(0.0);
-        let (ka, kn) = (alpha * k, (1.0 - alpha) * k);
-        let (beta, gamma) = (hh * ka, h * c + hh * kn);
-        sys.beta[e] = beta;
-        sys.gamma[e] = gamma;
-        sys.direction[e] = dir;
-        // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
-        let w = f * h - (dvel * ka + dir * (kn * dvel_n)) * hh;
-        rhs[a] += w;
-        rhs[b] -= w;
-        let block = Matrix3::identity() * beta + (dir * dir.transpose()) * gamma;
-        sys.inv_diag[a] += block;
-        sys.inv_diag[b] += block;
+        for il in inv_len.iter_mut() {
+            *il = 1.0 / il.sqrt();
+        }
+        let springs = s.ends[start..end].iter().zip(&s.rest_length[start..end]).zip(&s.stiffness[start..end]).zip(&s.damping[start..end]);
+        let blocks = sys.beta[start..end].iter_mut().zip(&mut sys.gamma[start..end]).zip(&mut sys.direction[start..end]);
+        for (((((&[a, b], &rest), &k), &c), ((beta_e, gamma_e), dir_e)), &inv_l) in springs.zip(blocks).zip(inv_len.iter()) {
+            let (a, b) = (a as usize, b as usize);
+            let d = x[b] - x[a];
+            if a != run {
+                if run != usize::MAX {
+                    rhs[run] += rhs_run;
+                    diag[run] += diag_run;
+                }
+                run = a;
+                rhs_run = Vector3::zeros();
+                diag_run = Sym3::default();
+            }
+            if inv_l == f64::INFINITY {
+                // zero length: no direction, no force and a zero block
+                *beta_e = 0.0;
+                *gamma_e = 0.0;
+                *dir_e = Vector3::zeros();
+                continue;
+            }
+            let dir = d * inv_l;
+            let l = d.dot(&dir);
+            let dvel = v[a] - v[b];
+            let dvel_n = dir.dot(&dvel);
+            // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
+            let f = dir * (k * (l - rest) - c * dvel_n);
+            let alpha = (1.0 - rest * inv_l).max(0.0);
+            let (ka, kn) = (alpha * k, (1.0 - alpha) * k);
+            let (beta, gamma) = (hh * ka, h * c + hh * kn);
+            *beta_e = beta;
+            *gamma_e = gamma;
+            *dir_e = dir;
+            // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
+            let w = f * h - (dvel * ka + dir * (kn * dvel_n)) * hh;
+            rhs_run += w;
+            rhs[b] -= w;
+            let block = Sym3::spring_block(beta, gamma, &dir);
+            diag_run += block;
+            diag[b] += block;
+        }
+    }
+    if run != usize::MAX {
+        rhs[run] += rhs_run;
+        diag[run] += diag_run;
     }
     sys.invert_diagonal(model, n);
     for (d, p) in dv.iter_mut().zip(dv_previous.iter_mut()) {

@@ -7,10 +7,78 @@
 //! zero right-hand side). With `beta, gamma >= 0` the matrix is symmetric positive
 //! semi-definite, and positive definite once a particle of every piece is held or `a_m > 0`.
 
-use nalgebra::Matrix3;
-
 use crate::Vector3;
 use crate::model::Model;
+
+/// A symmetric 3x3 matrix stored by its six distinct entries.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sym3 {
+    pub xx: f64,
+    pub yy: f64,
+    pub zz: f64,
+    pub xy: f64,
+    pub xz: f64,
+    pub yz: f64,
+}
+
+impl Sym3 {
+    /// `s I`.
+    #[inline]
+    pub fn scalar(s: f64) -> Self {
+        Self { xx: s, yy: s, zz: s, xy: 0.0, xz: 0.0, yz: 0.0 }
+    }
+
+    /// `beta I + gamma n n^T`.
+    #[inline]
+    pub fn spring_block(beta: f64, gamma: f64, n: &Vector3) -> Self {
+        let g = n * gamma;
+        Self { xx: beta + g.x * n.x, yy: beta + g.y * n.y, zz: beta + g.z * n.z, xy: g.x * n.y, xz: g.x * n.z, yz: g.y * n.z }
+    }
+
+    /// The matrix-vector product.
+    #[inline]
+    pub fn mul(&self, v: &Vector3) -> Vector3 {
+        Vector3::new(
+            self.xx * v.x + self.xy * v.y + self.xz * v.z,
+            self.xy * v.x + self.yy * v.y + self.yz * v.z,
+            self.xz * v.x + self.yz * v.y + self.zz * v.z,
+        )
+    }
+
+    /// The inverse by cofactors, or zero when the determinant is not positive and finite
+    /// (the blocks inverted here are positive definite or the particle is cut off).
+    #[inline]
+    pub fn inverse_or_zero(&self) -> Self {
+        let c_xx = self.yy * self.zz - self.yz * self.yz;
+        let c_xy = self.xz * self.yz - self.xy * self.zz;
+        let c_xz = self.xy * self.yz - self.xz * self.yy;
+        let det = self.xx * c_xx + self.xy * c_xy + self.xz * c_xz;
+        if !(det > 0.0 && det.is_finite()) {
+            return Self::default();
+        }
+        let inv = 1.0 / det;
+        Self {
+            xx: c_xx * inv,
+            yy: (self.xx * self.zz - self.xz * self.xz) * inv,
+            zz: (self.xx * self.yy - self.xy * self.xy) * inv,
+            xy: c_xy * inv,
+            xz: c_xz * inv,
+            yz: (self.xy * self.xz - self.xx * self.yz) * inv,
+        }
+    }
+}
+
+impl std::ops::AddAssign for Sym3 {
+    #[inline]
+    fn add_assign(&mut self, o: Self) {
+        self.xx += o.xx;
+        self.yy += o.yy;
+        self.zz += o.zz;
+        self.xy += o.xy;
+        self.xz += o.xz;
+        self.yz += o.yz;
+    }
+}
 
 /// Per-spring block coefficients and the lumped-mass weight.
 #[derive(Debug, Clone, Default)]
@@ -20,7 +88,7 @@ pub struct SpringSystem {
     pub gamma: Vec<f64>,
     pub direction: Vec<Vector3>,
     /// Inverse 3x3 diagonal blocks (zero for held particles): the block-Jacobi preconditioner.
-    pub inv_diag: Vec<Matrix3<f64>>,
+    pub inv_diag: Vec<Sym3>,
 }
 
 /// Stiffness blocks `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0 / l)`:
@@ -41,10 +109,9 @@ impl SpringSystem {
     pub fn update_preconditioner(&mut self, model: &Model) {
         let n = model.vertex_count();
         self.inv_diag.clear();
-        self.inv_diag.extend(model.mass.iter().map(|&m| Matrix3::identity() * (self.mass_weight * m)));
+        self.inv_diag.extend(model.mass.iter().map(|&m| Sym3::scalar(self.mass_weight * m)));
         for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
-            let nn = self.direction[e] * self.direction[e].transpose();
-            let block = Matrix3::identity() * self.beta[e] + nn * self.gamma[e];
+            let block = Sym3::spring_block(self.beta[e], self.gamma[e], &self.direction[e]);
             self.inv_diag[a as usize] += block;
             self.inv_diag[b as usize] += block;
         }
@@ -55,7 +122,7 @@ impl SpringSystem {
     /// particles and singular blocks).
     pub fn invert_diagonal(&mut self, model: &Model, n: usize) {
         for (d, &h) in self.inv_diag[..n].iter_mut().zip(&model.held) {
-            *d = if h { Matrix3::zeros() } else { d.try_inverse().unwrap_or_else(Matrix3::zeros) };
+            *d = if h { Sym3::default() } else { d.inverse_or_zero() };
         }
     }
 
@@ -154,7 +221,7 @@ pub fn solve(
     sys.apply(model, x, q);
     for i in 0..n {
         r[i] = if model.held[i] { Vector3::zeros() } else { b[i] - q[i] };
-        z[i] = sys.inv_diag[i] * r[i];
+        z[i] = sys.inv_diag[i].mul(&r[i]);
         p[i] = z[i];
     }
     let mut rz = dot(r, z);
@@ -173,7 +240,7 @@ pub fn solve(
         for i in 0..n {
             x[i] += p[i] * alpha;
             r[i] -= q[i] * alpha;
-            z[i] = sys.inv_diag[i] * r[i];
+            z[i] = sys.inv_diag[i].mul(&r[i]);
             rz_next += r[i].dot(&z[i]);
             rr += r[i].norm_squared();
         }
