@@ -45,7 +45,7 @@ pub fn step(
     dv_previous.resize(n, Vector3::zeros());
 
     // One pass over the springs: forces, the blocks `B_e`, `rhs = h (f - h K v)` and the
-    // diagonal blocks of `A` (into `sys.inv_diag`, inverted afterwards). The springs come
+    // diagonal blocks of `A` (then the preconditioner is built from them). The springs come
     // sorted by their first particle: the sums on the current first particle are kept in
     // registers and stored once per run (a fixed order, so results stay deterministic).
     let s = &model.springs;
@@ -54,13 +54,13 @@ pub fn step(
     sys.beta.resize(m, 0.0);
     sys.gamma.resize(m, 0.0);
     sys.direction.resize(m, Vector3::zeros());
-    sys.inv_diag.clear();
+    sys.diag.clear();
     for i in 0..n {
         rhs[i] = (model.gravity * model.mass[i] + external[i]) * h;
-        sys.inv_diag.push(Sym3::scalar(model.mass[i]));
+        sys.diag.push(Sym3::scalar(model.mass[i]));
     }
     let (x, v) = (&state.positions[..n], &state.velocities[..n]);
-    let (rhs, diag) = (&mut rhs[..n], &mut sys.inv_diag[..n]);
+    let (rhs, diag) = (&mut rhs[..n], &mut sys.diag[..n]);
     let hh = h * h;
     let mut run = usize::MAX;
     let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
@@ -122,7 +122,7 @@ pub fn step(
         rhs[run] += rhs_run;
         diag[run] += diag_run;
     }
-    sys.invert_diagonal(model, n);
+    sys.prepare(model);
     for (d, p) in dv.iter_mut().zip(dv_previous.iter_mut()) {
         let last = *d;
         *d = last * 2.0 - *p;

@@ -44,7 +44,7 @@ pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> Stat
     let mut dx = vec![Vector3::zeros(); n];
     let mut trial = state.positions.clone();
     let mut f_trial = f.clone();
-    let mut sys = SpringSystem { mass_weight: 0.0, ..Default::default() };
+    let mut sys = SpringSystem::default(); // mass weight 0: the stiffness alone
     let mut cg_scratch = CgScratch::default();
     let s = &model.springs;
 

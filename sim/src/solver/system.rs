@@ -1,6 +1,17 @@
 //! The sparse symmetric system shared by implicit Euler and the static solve, and its
 //! preconditioned conjugate-gradient solver.
 //!
+//! Preconditioner: block SSOR, `M = (D/w + L) D^-1 (D/w + L^T)` (up to a constant factor) with
+//! `D` the 3x3 diagonal blocks, `L` the strictly lower block triangle in the particle order and
+//! `w` = [`SSOR_OMEGA`], applied with Eisenstat's trick: with `P = D/w + L`, `G` the Cholesky
+//! factors of `D` (`G G^T = D`) and `K = (2/w - 1) D`, so that `A = P + P^T - K`, CG runs on
+//! `C^-1 A C^-T` with `C = P G^-T` (so `C C^T = M`), whose product with `v` is
+//! `G^T [t + P^-1 (G v - K t)]` with `t = P^-T G v`: one backward and one forward block sweep
+//! over the springs per iteration, and no separate product with `A`. The iterate is kept in the
+//! original variables (`x += alpha t`, as `C^-T v = t`). Systems that do not fit (a free
+//! diagonal block that is not positive definite, springs not sorted by first particle) fall
+//! back to block-Jacobi.
+//!
 //! The matrix is `A = a_m M + sum over springs e of B_e`, where each spring contributes the
 //! 3x3 block `B_e = beta_e I + gamma_e n_e n_e^T` with the pattern `[+B, -B; -B, +B]` on its
 //! two particles. Held particles are removed (their rows and columns act as identity on a
@@ -80,6 +91,47 @@ impl std::ops::AddAssign for Sym3 {
     }
 }
 
+/// A lower-triangular 3x3 matrix.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Lower3 {
+    pub xx: f64,
+    pub yx: f64,
+    pub yy: f64,
+    pub zx: f64,
+    pub zy: f64,
+    pub zz: f64,
+}
+
+impl Lower3 {
+    /// The Cholesky factor `G` (`G G^T = d`), or `None` when `d` is not positive definite.
+    pub fn cholesky(d: &Sym3) -> Option<Self> {
+        let xx = d.xx.sqrt();
+        let (yx, zx) = (d.xy / xx, d.xz / xx);
+        let yy = (d.yy - yx * yx).sqrt();
+        let zy = (d.yz - zx * yx) / yy;
+        let zz = (d.zz - zx * zx - zy * zy).sqrt();
+        let g = Self { xx, yx, yy, zx, zy, zz };
+        // positive pivots (NaN from a negative square root fails the comparisons too)
+        (xx > 0.0 && yy > 0.0 && zz > 0.0 && [yx, zx, zy, zz].iter().all(|v| v.is_finite())).then_some(g)
+    }
+
+    /// `G v`.
+    #[inline]
+    pub fn mul(&self, v: &Vector3) -> Vector3 {
+        Vector3::new(self.xx * v.x, self.yx * v.x + self.yy * v.y, self.zx * v.x + self.zy * v.y + self.zz * v.z)
+    }
+
+    /// `G^T v`.
+    #[inline]
+    pub fn mul_transpose(&self, v: &Vector3) -> Vector3 {
+        Vector3::new(self.xx * v.x + self.yx * v.y + self.zx * v.z, self.yy * v.y + self.zy * v.z, self.zz * v.z)
+    }
+}
+
+/// Relaxation factor of the SSOR preconditioner (iterations at 12.8k tets, relative tolerance
+/// 1e-6: 11.9 at 1.0, 10.6 at 1.2, 10.3 at 1.4, 11.6 at 1.6).
+pub const SSOR_OMEGA: f64 = 1.3;
+
 /// Per-spring block coefficients and the lumped-mass weight.
 #[derive(Debug, Clone, Default)]
 pub struct SpringSystem {
@@ -87,8 +139,16 @@ pub struct SpringSystem {
     pub beta: Vec<f64>,
     pub gamma: Vec<f64>,
     pub direction: Vec<Vector3>,
-    /// Inverse 3x3 diagonal blocks (zero for held particles): the block-Jacobi preconditioner.
+    /// The 3x3 diagonal blocks `D_i` of `A` (zero for held particles after [`Self::prepare`]).
+    pub diag: Vec<Sym3>,
+    /// Their inverses (zero for held particles and singular blocks).
     pub inv_diag: Vec<Sym3>,
+    /// Cholesky factors of the diagonal blocks (zero for held particles).
+    pub(crate) chol: Vec<Lower3>,
+    /// Springs of particle `i` as first particle: `run_start[i]..run_start[i + 1]`.
+    pub(crate) run_start: Vec<usize>,
+    /// Whether [`solve`] uses SSOR (otherwise block-Jacobi).
+    pub(crate) ssor: bool,
 }
 
 /// Stiffness blocks `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0 / l)`:
@@ -105,25 +165,52 @@ pub fn stiffness_block(k: f64, rest: f64, d: &Vector3) -> (f64, f64, Vector3) {
 }
 
 impl SpringSystem {
-    /// Recomputes the preconditioner from the current coefficients.
+    /// Recomputes the diagonal blocks and the preconditioner from the current coefficients.
     pub fn update_preconditioner(&mut self, model: &Model) {
-        let n = model.vertex_count();
-        self.inv_diag.clear();
-        self.inv_diag.extend(model.mass.iter().map(|&m| Sym3::scalar(self.mass_weight * m)));
+        self.diag.clear();
+        self.diag.extend(model.mass.iter().map(|&m| Sym3::scalar(self.mass_weight * m)));
         for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
             let block = Sym3::spring_block(self.beta[e], self.gamma[e], &self.direction[e]);
-            self.inv_diag[a as usize] += block;
-            self.inv_diag[b as usize] += block;
+            self.diag[a as usize] += block;
+            self.diag[b as usize] += block;
         }
-        self.invert_diagonal(model, n);
+        self.prepare(model);
     }
 
-    /// Replaces the diagonal blocks held in `inv_diag` by their inverses (zero for held
-    /// particles and singular blocks).
-    pub fn invert_diagonal(&mut self, model: &Model, n: usize) {
-        for (d, &h) in self.inv_diag[..n].iter_mut().zip(&model.held) {
-            *d = if h { Sym3::default() } else { d.inverse_or_zero() };
+    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones):
+    /// their inverses and Cholesky factors, and the runs of springs by first particle.
+    pub fn prepare(&mut self, model: &Model) {
+        let n = model.vertex_count();
+        self.inv_diag.clear();
+        self.chol.clear();
+        let mut ssor = true;
+        for (d, &h) in self.diag[..n].iter_mut().zip(&model.held) {
+            if h {
+                *d = Sym3::default();
+                self.inv_diag.push(Sym3::default());
+                self.chol.push(Lower3::default());
+                continue;
+            }
+            self.inv_diag.push(d.inverse_or_zero());
+            let g = Lower3::cholesky(d);
+            ssor &= g.is_some();
+            self.chol.push(g.unwrap_or_default());
         }
+        self.run_start.clear();
+        self.run_start.resize(n + 1, 0);
+        let mut previous = 0;
+        for &[a, b] in &model.springs.ends {
+            if a < previous || a >= b || b as usize >= n {
+                ssor = false;
+                break;
+            }
+            previous = a;
+            self.run_start[a as usize + 1] += 1;
+        }
+        for i in 0..n {
+            self.run_start[i + 1] += self.run_start[i];
+        }
+        self.ssor = ssor;
     }
 
     /// `y = A p` with held rows zeroed.
@@ -186,14 +273,22 @@ pub struct CgScratch {
     z: Vec<Vector3>,
     p: Vec<Vector3>,
     q: Vec<Vector3>,
+    t: Vec<Vector3>,
 }
 
 fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a.dot(b)).sum()
 }
 
-/// Solves `A x = b` by block-Jacobi preconditioned conjugate gradients, starting from the
-/// `x` given (warm start). Held entries of `b` and `x` are treated as zero.
+/// `B_e v = beta v + gamma n (n . v)`.
+#[inline(always)]
+fn spring_mul(n: &Vector3, beta: f64, gamma: f64, v: &Vector3) -> Vector3 {
+    v * beta + n * (gamma * n.dot(v))
+}
+
+/// Solves `A x = b` by preconditioned conjugate gradients (SSOR, or block-Jacobi when SSOR does
+/// not apply; see the module documentation), starting from the `x` given (warm start). Held
+/// entries of `b` and `x` are treated as zero. Stops when `|b - A x| <= relative_tolerance |b|`.
 pub fn solve(
     sys: &SpringSystem,
     model: &Model,
@@ -203,8 +298,7 @@ pub fn solve(
     scratch: &mut CgScratch,
 ) -> CgReport {
     let n = b.len();
-    let CgScratch { r, z, p, q } = scratch;
-    for buf in [&mut *r, &mut *z, &mut *p, &mut *q] {
+    for buf in [&mut scratch.r, &mut scratch.z, &mut scratch.p, &mut scratch.q, &mut scratch.t] {
         buf.clear();
         buf.resize(n, Vector3::zeros());
     }
@@ -218,15 +312,43 @@ pub fn solve(
         x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
         return CgReport { iterations: 0, relative_residual: 0.0, converged: true };
     }
-    sys.apply(model, x, q);
+    if sys.ssor && sys.run_start.len() == n + 1 && sys.chol.len() == n {
+        solve_ssor(sys, model, b, x, b_norm, settings, scratch)
+    } else {
+        solve_jacobi(sys, model, b, x, b_norm, settings, scratch)
+    }
+}
+
+/// `r = b - A x` (held entries zero); returns `|r|`.
+fn residual(sys: &SpringSystem, model: &Model, b: &[Vector3], x: &[Vector3], r: &mut [Vector3], ax: &mut [Vector3]) -> f64 {
+    sys.apply(model, x, ax);
+    let mut rr = 0.0;
+    for i in 0..b.len() {
+        r[i] = if model.held[i] { Vector3::zeros() } else { b[i] - ax[i] };
+        rr += r[i].norm_squared();
+    }
+    rr.sqrt()
+}
+
+/// Block-Jacobi preconditioned CG.
+fn solve_jacobi(
+    sys: &SpringSystem,
+    model: &Model,
+    b: &[Vector3],
+    x: &mut [Vector3],
+    b_norm: f64,
+    settings: CgSettings,
+    scratch: &mut CgScratch,
+) -> CgReport {
+    let n = b.len();
+    let CgScratch { r, z, p, q, .. } = scratch;
+    let mut r_norm = residual(sys, model, b, x, r, q);
     for i in 0..n {
-        r[i] = if model.held[i] { Vector3::zeros() } else { b[i] - q[i] };
         z[i] = sys.inv_diag[i].mul(&r[i]);
         p[i] = z[i];
     }
     let mut rz = dot(r, z);
     let target = settings.relative_tolerance * b_norm;
-    let mut r_norm = dot(r, r).sqrt();
     let mut iterations = 0;
     while r_norm > target && iterations < settings.max_iterations {
         sys.apply(model, p, q);
@@ -251,6 +373,105 @@ pub fn solve(
         }
         r_norm = rr.sqrt();
         iterations += 1;
+    }
+    CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
+}
+
+/// SSOR preconditioned CG in Eisenstat's form (see the module documentation). The recursive
+/// residual is the transformed `r^ = C^-1 (b - A x)`; iterations stop once `|r^|` has fallen
+/// by the factor the tolerance asks of `|b - A x|`, and the true residual is then checked (and
+/// the iteration continued with a tighter target in the rare case it is not yet small enough).
+fn solve_ssor(
+    sys: &SpringSystem,
+    model: &Model,
+    b: &[Vector3],
+    x: &mut [Vector3],
+    b_norm: f64,
+    settings: CgSettings,
+    scratch: &mut CgScratch,
+) -> CgReport {
+    let n = b.len();
+    let CgScratch { r, z: acc, p, q, t } = scratch;
+    let (r, acc, p, q, t) = (&mut r[..n], &mut acc[..n], &mut p[..n], &mut q[..n], &mut t[..n]);
+    let (diag, inv_diag, chol, runs) = (&sys.diag[..n], &sys.inv_diag[..n], &sys.chol[..n], &sys.run_start[..=n]);
+    let ends = &model.springs.ends;
+    let m = ends.len();
+    let (dir, beta_e, gamma_e) = (&sys.direction[..m], &sys.beta[..m], &sys.gamma[..m]);
+    let omega = SSOR_OMEGA;
+    let c_k = 2.0 / omega - 1.0;
+    let target = settings.relative_tolerance * b_norm;
+
+    let mut r_norm = residual(sys, model, b, x, acc, q);
+    if r_norm <= target {
+        return CgReport { iterations: 0, relative_residual: r_norm / b_norm, converged: true };
+    }
+    // r^ = G^T P^-1 r: forward sweep on acc = r.
+    for i in 0..n {
+        let u = inv_diag[i].mul(&acc[i]) * omega;
+        for e in runs[i]..runs[i + 1] {
+            let bb = ends[e][1] as usize;
+            acc[bb] += spring_mul(&dir[e], beta_e[e], gamma_e[e], &u);
+        }
+        r[i] = chol[i].mul_transpose(&u);
+        p[i] = Vector3::zeros();
+    }
+    let mut rr = dot(r, r);
+    let mut target_hat = rr.sqrt() * (target / r_norm);
+    let mut beta = 0.0;
+    let mut iterations = 0;
+    while iterations < settings.max_iterations {
+        // Backward sweep: p = r^ + beta p, t = P^-T G p, acc = G p - K t. The run of i is
+        // summed from its last spring down, so that the product with t_(i+1) (usually the
+        // first spring) comes last in the dependency chain from one particle to the next.
+        for i in (0..n).rev() {
+            let pi = r[i] + p[i] * beta;
+            p[i] = pi;
+            let g = chol[i].mul(&pi);
+            let mut sum = g;
+            for e in (runs[i]..runs[i + 1]).rev() {
+                let bb = ends[e][1] as usize;
+                sum += spring_mul(&dir[e], beta_e[e], gamma_e[e], &t[bb]);
+            }
+            let ti = inv_diag[i].mul(&sum) * omega;
+            t[i] = ti;
+            acc[i] = g - diag[i].mul(&ti) * c_k;
+        }
+        // Forward sweep: u = P^-1 acc, q = G^T (t + u), and p . q.
+        let mut pq = 0.0;
+        for i in 0..n {
+            let u = inv_diag[i].mul(&acc[i]) * omega;
+            for e in runs[i]..runs[i + 1] {
+                let bb = ends[e][1] as usize;
+                acc[bb] += spring_mul(&dir[e], beta_e[e], gamma_e[e], &u);
+            }
+            let qi = chol[i].mul_transpose(&(t[i] + u));
+            q[i] = qi;
+            pq += p[i].dot(&qi);
+        }
+        if !(pq > 0.0) {
+            break; // breakdown: the matrix is singular along p, or the numbers are bad
+        }
+        let alpha = rr / pq;
+        let mut rr_next = 0.0;
+        for i in 0..n {
+            x[i] += t[i] * alpha;
+            r[i] -= q[i] * alpha;
+            rr_next += r[i].norm_squared();
+        }
+        beta = rr_next / rr;
+        rr = rr_next;
+        iterations += 1;
+        if rr.sqrt() <= target_hat {
+            r_norm = residual(sys, model, b, x, acc, q);
+            if r_norm <= target {
+                break;
+            }
+            // not there yet in the true norm: tighten the transformed target accordingly
+            target_hat *= 0.5 * target / r_norm;
+        }
+    }
+    if iterations == settings.max_iterations || !(r_norm <= target) {
+        r_norm = residual(sys, model, b, x, acc, q);
     }
     CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
 }
