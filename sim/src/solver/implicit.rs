@@ -12,7 +12,7 @@
 use crate::Vector3;
 use crate::model::{Model, State};
 
-use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
+use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3, block_coefficients, block_matrix};
 
 /// Springs per chunk of the assembly's vectorised square roots.
 const CHUNK: usize = 256;
@@ -51,16 +51,15 @@ pub fn step(
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
-    sys.beta.resize(m, 0.0);
-    sys.gamma.resize(m, 0.0);
-    sys.direction.resize(m, Vector3::zeros());
-    sys.diag.clear();
+    sys.begin(model);
+    let (slots, coef, diag) = sys.parts_mut();
+    diag.clear();
     for i in 0..n {
         rhs[i] = (model.gravity * model.mass[i] + external[i]) * h;
-        sys.diag.push(Sym3::scalar(model.mass[i]));
+        diag.push(Sym3::scalar(model.mass[i]));
     }
     let (x, v) = (&state.positions[..n], &state.velocities[..n]);
-    let (rhs, diag) = (&mut rhs[..n], &mut sys.diag[..n]);
+    let (rhs, diag) = (&mut rhs[..n], &mut diag[..n]);
     let hh = h * h;
     let mut run = usize::MAX;
     let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
@@ -77,8 +76,7 @@ pub fn step(
             *il = 1.0 / il.sqrt();
         }
         let springs = s.ends[start..end].iter().zip(&s.rest_length[start..end]).zip(&s.stiffness[start..end]).zip(&s.damping[start..end]);
-        let blocks = sys.beta[start..end].iter_mut().zip(&mut sys.gamma[start..end]).zip(&mut sys.direction[start..end]);
-        for (((((&[a, b], &rest), &k), &c), ((beta_e, gamma_e), dir_e)), &inv_l) in springs.zip(blocks).zip(inv_len.iter()) {
+        for ((((&[a, b], &rest), &k), &c), (&inv_l, &slot)) in springs.zip(inv_len.iter().zip(&slots[start..end])) {
             let (a, b) = (a as usize, b as usize);
             let d = x[b] - x[a];
             if a != run {
@@ -92,9 +90,7 @@ pub fn step(
             }
             if inv_l == f64::INFINITY {
                 // zero length: no direction, no force and a zero block
-                *beta_e = 0.0;
-                *gamma_e = 0.0;
-                *dir_e = Vector3::zeros();
+                coef[slot as usize] = [0.0; 4];
                 continue;
             }
             let dir = d * inv_l;
@@ -105,15 +101,13 @@ pub fn step(
             let f = dir * (k * (l - rest) - c * dvel_n);
             let alpha = (1.0 - rest * inv_l).max(0.0);
             let (ka, kn) = (alpha * k, (1.0 - alpha) * k);
-            let (beta, gamma) = (hh * ka, h * c + hh * kn);
-            *beta_e = beta;
-            *gamma_e = gamma;
-            *dir_e = dir;
+            let block = block_coefficients(hh * ka, h * c + hh * kn, &dir);
+            coef[slot as usize] = block;
             // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
             let w = f * h - (dvel * ka + dir * (kn * dvel_n)) * hh;
             rhs_run += w;
             rhs[b] -= w;
-            let block = Sym3::spring_block(beta, gamma, &dir);
+            let block = block_matrix(&block);
             diag_run += block;
             diag[b] += block;
         }

@@ -9,12 +9,12 @@
 //! `G^T [t + P^-1 (G v - K t)]` with `t = P^-T G v`: one backward and one forward block sweep
 //! over the springs per iteration, and no separate product with `A`. The iterate is kept in the
 //! original variables (`x += alpha t`, as `C^-T v = t`). Systems that do not fit (a free
-//! diagonal block that is not positive definite, springs not sorted by first particle) fall
-//! back to block-Jacobi.
+//! diagonal block that is not positive definite, a spring from a particle to itself) fall back
+//! to block-Jacobi.
 //!
 //! The matrix is `A = a_m M + sum over springs e of B_e`, where each spring contributes the
-//! 3x3 block `B_e = beta_e I + gamma_e n_e n_e^T` with the pattern `[+B, -B; -B, +B]` on its
-//! two particles. Held particles are removed (their rows and columns act as identity on a
+//! 3x3 block `B_e = beta_e I + gamma_e n_e n_e^T` (stored as `beta_e I + g_e g_e^T`,
+//! `g_e = sqrt(gamma_e) n_e`) with the pattern `[+B, -B; -B, +B]` on its two particles. Held particles are removed (their rows and columns act as identity on a
 //! zero right-hand side). With `beta, gamma >= 0` the matrix is symmetric positive
 //! semi-definite, and positive definite once a particle of every piece is held or `a_m > 0`.
 
@@ -132,23 +132,78 @@ impl Lower3 {
 /// 1e-6: 11.9 at 1.0, 10.6 at 1.2, 10.3 at 1.4, 11.6 at 1.6).
 pub const SSOR_OMEGA: f64 = 1.3;
 
-/// Per-spring block coefficients and the lumped-mass weight.
+/// Where the spring blocks are stored: by the lower-numbered ("first") particle of each spring,
+/// in particle order, each particle's springs sorted by the other particle.
+#[derive(Debug, Clone, Default)]
+struct BlockLayout {
+    /// The springs this was built for.
+    ends: Vec<[u32; 2]>,
+    /// Slots of the springs whose first particle is `i`: `start[i]..start[i + 1]`.
+    start: Vec<usize>,
+    /// The other (higher-numbered) particle of each slot.
+    other: Vec<u32>,
+    /// The slot of each spring.
+    slot: Vec<u32>,
+    /// Whether some spring joins a particle to itself.
+    has_loop: bool,
+}
+
+impl BlockLayout {
+    fn build(&mut self, n: usize, ends: &[[u32; 2]]) {
+        self.ends.clear();
+        self.ends.extend_from_slice(ends);
+        self.has_loop = ends.iter().any(|&[a, b]| a == b);
+        self.start.clear();
+        self.start.resize(n + 1, 0);
+        for &[a, b] in ends {
+            self.start[a.min(b) as usize + 1] += 1;
+        }
+        for i in 0..n {
+            self.start[i + 1] += self.start[i];
+        }
+        // (spring, other) per slot, stably by first particle, then each run sorted by other
+        let mut fill = self.start.clone();
+        let mut by_slot = vec![(0u32, 0u32); ends.len()];
+        for (e, &[a, b]) in ends.iter().enumerate() {
+            let s = &mut fill[a.min(b) as usize];
+            by_slot[*s] = (a.max(b), e as u32);
+            *s += 1;
+        }
+        for i in 0..n {
+            by_slot[self.start[i]..self.start[i + 1]].sort_unstable();
+        }
+        self.other.clear();
+        self.other.extend(by_slot.iter().map(|&(o, _)| o));
+        self.slot.clear();
+        self.slot.resize(ends.len(), 0);
+        for (s, &(_, e)) in by_slot.iter().enumerate() {
+            self.slot[e as usize] = s as u32;
+        }
+    }
+}
+
+/// The system matrix: per-spring blocks, diagonal blocks and the preconditioner.
+///
+/// Each spring block is stored as `B_e = beta I + g g^T` with `g = sqrt(gamma) n` (which needs
+/// `gamma >= 0`, as non-negative stiffness and damping give), in the slot of [`BlockLayout`].
+/// Fill it with [`Self::begin`] and [`Self::set_block`] (or [`Self::parts_mut`]), then the
+/// diagonal blocks (directly, or by [`Self::update_preconditioner`]) and [`Self::prepare`].
 #[derive(Debug, Clone, Default)]
 pub struct SpringSystem {
+    /// Weight `a_m` of the lumped masses in `A`.
     pub mass_weight: f64,
-    pub beta: Vec<f64>,
-    pub gamma: Vec<f64>,
-    pub direction: Vec<Vector3>,
     /// The 3x3 diagonal blocks `D_i` of `A` (zero for held particles after [`Self::prepare`]).
     pub diag: Vec<Sym3>,
-    /// Their inverses (zero for held particles and singular blocks).
-    pub inv_diag: Vec<Sym3>,
+    layout: BlockLayout,
+    /// `[g_x, g_y, g_z, beta]` per slot.
+    coef: Vec<[f64; 4]>,
+    /// `w D_i^-1` (zero for held particles and singular blocks): the sweeps' diagonal solves,
+    /// and (the factor `w` changes nothing there) the block-Jacobi preconditioner.
+    inv_diag: Vec<Sym3>,
     /// Cholesky factors of the diagonal blocks (zero for held particles).
-    pub(crate) chol: Vec<Lower3>,
-    /// Springs of particle `i` as first particle: `run_start[i]..run_start[i + 1]`.
-    pub(crate) run_start: Vec<usize>,
+    chol: Vec<Lower3>,
     /// Whether [`solve`] uses SSOR (otherwise block-Jacobi).
-    pub(crate) ssor: bool,
+    ssor: bool,
 }
 
 /// Stiffness blocks `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0 / l)`:
@@ -164,26 +219,73 @@ pub fn stiffness_block(k: f64, rest: f64, d: &Vector3) -> (f64, f64, Vector3) {
     (alpha * k, (1.0 - alpha) * k, d / l)
 }
 
+/// The stored form `[g_x, g_y, g_z, beta]` of `B = beta I + gamma n n^T`.
+#[inline(always)]
+pub fn block_coefficients(beta: f64, gamma: f64, n: &Vector3) -> [f64; 4] {
+    let g = n * gamma.sqrt();
+    [g.x, g.y, g.z, beta]
+}
+
+/// `B v = beta v + g (g . v)` from the stored form.
+#[inline(always)]
+fn block_mul(c: &[f64; 4], v: &Vector3) -> Vector3 {
+    let g = Vector3::new(c[0], c[1], c[2]);
+    v * c[3] + g * g.dot(v)
+}
+
+/// The diagonal contribution `beta I + g g^T` of a stored block.
+#[inline(always)]
+pub fn block_matrix(c: &[f64; 4]) -> Sym3 {
+    let [gx, gy, gz, beta] = *c;
+    Sym3 { xx: beta + gx * gx, yy: beta + gy * gy, zz: beta + gz * gz, xy: gx * gy, xz: gx * gz, yz: gy * gz }
+}
+
 impl SpringSystem {
-    /// Recomputes the diagonal blocks and the preconditioner from the current coefficients.
+    /// Sizes the block storage for the springs of `model` (the layout is rebuilt only when the
+    /// springs changed).
+    pub fn begin(&mut self, model: &Model) {
+        let n = model.vertex_count();
+        let ends = &model.springs.ends;
+        if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
+            self.layout.build(n, ends);
+        }
+        self.coef.resize(ends.len(), [0.0; 4]);
+    }
+
+    /// For assembling in one pass: the slot of each spring (after [`Self::begin`]), the block
+    /// storage by slot (see [`block_coefficients`]) and the diagonal blocks.
+    pub fn parts_mut(&mut self) -> (&[u32], &mut [[f64; 4]], &mut Vec<Sym3>) {
+        (&self.layout.slot, &mut self.coef, &mut self.diag)
+    }
+
+    /// Sets the block of spring `e` to `beta I + gamma n n^T` (`gamma >= 0`).
+    pub fn set_block(&mut self, e: usize, beta: f64, gamma: f64, n: &Vector3) {
+        self.coef[self.layout.slot[e] as usize] = block_coefficients(beta, gamma, n);
+    }
+
+    /// Recomputes the diagonal blocks from the spring blocks and the masses, then the
+    /// preconditioner.
     pub fn update_preconditioner(&mut self, model: &Model) {
+        let n = model.vertex_count();
         self.diag.clear();
         self.diag.extend(model.mass.iter().map(|&m| Sym3::scalar(self.mass_weight * m)));
-        for (e, &[a, b]) in model.springs.ends.iter().enumerate() {
-            let block = Sym3::spring_block(self.beta[e], self.gamma[e], &self.direction[e]);
-            self.diag[a as usize] += block;
-            self.diag[b as usize] += block;
+        for i in 0..n {
+            let slots = self.layout.start[i]..self.layout.start[i + 1];
+            for (&other, c) in self.layout.other[slots.clone()].iter().zip(&self.coef[slots]) {
+                let block = block_matrix(c);
+                self.diag[i] += block;
+                self.diag[other as usize] += block;
+            }
         }
         self.prepare(model);
     }
 
-    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones):
-    /// their inverses and Cholesky factors, and the runs of springs by first particle.
+    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones).
     pub fn prepare(&mut self, model: &Model) {
         let n = model.vertex_count();
         self.inv_diag.clear();
         self.chol.clear();
-        let mut ssor = true;
+        let mut ssor = !self.layout.has_loop;
         for (d, &h) in self.diag[..n].iter_mut().zip(&model.held) {
             if h {
                 *d = Sym3::default();
@@ -191,56 +293,42 @@ impl SpringSystem {
                 self.chol.push(Lower3::default());
                 continue;
             }
-            self.inv_diag.push(d.inverse_or_zero());
+            let inv = d.inverse_or_zero();
+            self.inv_diag.push(Sym3 {
+                xx: SSOR_OMEGA * inv.xx,
+                yy: SSOR_OMEGA * inv.yy,
+                zz: SSOR_OMEGA * inv.zz,
+                xy: SSOR_OMEGA * inv.xy,
+                xz: SSOR_OMEGA * inv.xz,
+                yz: SSOR_OMEGA * inv.yz,
+            });
             let g = Lower3::cholesky(d);
             ssor &= g.is_some();
             self.chol.push(g.unwrap_or_default());
-        }
-        self.run_start.clear();
-        self.run_start.resize(n + 1, 0);
-        let mut previous = 0;
-        for &[a, b] in &model.springs.ends {
-            if a < previous || a >= b || b as usize >= n {
-                ssor = false;
-                break;
-            }
-            previous = a;
-            self.run_start[a as usize + 1] += 1;
-        }
-        for i in 0..n {
-            self.run_start[i + 1] += self.run_start[i];
         }
         self.ssor = ssor;
     }
 
     /// `y = A p` with held rows zeroed.
     pub fn apply(&self, model: &Model, p: &[Vector3], y: &mut [Vector3]) {
+        let n = model.vertex_count();
+        let (p, y) = (&p[..n], &mut y[..n]);
         for ((y, p), &m) in y.iter_mut().zip(p).zip(&model.mass) {
             *y = p * (self.mass_weight * m);
         }
-        // Springs come sorted by their first particle: the products on the current first
-        // particle are summed in a register and stored once per run, which takes the store to
-        // y[a] off the critical path. The summation order is fixed, so results stay
-        // deterministic (and correct for any order).
-        let mut run = usize::MAX;
-        let mut y_run = Vector3::zeros();
-        let springs = model.springs.ends.iter().zip(&self.direction).zip(&self.beta).zip(&self.gamma);
-        for (((&[a, b], n), &beta), &gamma) in springs {
-            let (a, b) = (a as usize, b as usize);
-            if a != run {
-                if run != usize::MAX {
-                    y[run] += y_run;
-                }
-                run = a;
-                y_run = Vector3::zeros();
+        // The products on the first particle are summed in a register and stored once per
+        // particle; the summation order is fixed, so results stay deterministic.
+        let (start, other) = (&self.layout.start[..=n], &self.layout.other);
+        for i in 0..n {
+            let slots = start[i]..start[i + 1];
+            let pi = p[i];
+            let mut yi = Vector3::zeros();
+            for (&o, c) in other[slots.clone()].iter().zip(&self.coef[slots]) {
+                let w = block_mul(c, &(pi - p[o as usize]));
+                yi += w;
+                y[o as usize] -= w;
             }
-            let d = p[a] - p[b];
-            let w = d * beta + n * (gamma * n.dot(&d));
-            y_run += w;
-            y[b] -= w;
-        }
-        if run != usize::MAX {
-            y[run] += y_run;
+            y[i] += yi;
         }
         for (y, &h) in y.iter_mut().zip(&model.held) {
             if h {
@@ -280,12 +368,6 @@ fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a.dot(b)).sum()
 }
 
-/// `B_e v = beta v + gamma n (n . v)`.
-#[inline(always)]
-fn spring_mul(n: &Vector3, beta: f64, gamma: f64, v: &Vector3) -> Vector3 {
-    v * beta + n * (gamma * n.dot(v))
-}
-
 /// Solves `A x = b` by preconditioned conjugate gradients (SSOR, or block-Jacobi when SSOR does
 /// not apply; see the module documentation), starting from the `x` given (warm start). Held
 /// entries of `b` and `x` are treated as zero. Stops when `|b - A x| <= relative_tolerance |b|`.
@@ -312,7 +394,7 @@ pub fn solve(
         x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
         return CgReport { iterations: 0, relative_residual: 0.0, converged: true };
     }
-    if sys.ssor && sys.run_start.len() == n + 1 && sys.chol.len() == n {
+    if sys.ssor && sys.chol.len() == n && sys.layout.start.len() == n + 1 {
         solve_ssor(sys, model, b, x, b_norm, settings, scratch)
     } else {
         solve_jacobi(sys, model, b, x, b_norm, settings, scratch)
@@ -393,12 +475,9 @@ fn solve_ssor(
     let n = b.len();
     let CgScratch { r, z: acc, p, q, t } = scratch;
     let (r, acc, p, q, t) = (&mut r[..n], &mut acc[..n], &mut p[..n], &mut q[..n], &mut t[..n]);
-    let (diag, inv_diag, chol, runs) = (&sys.diag[..n], &sys.inv_diag[..n], &sys.chol[..n], &sys.run_start[..=n]);
-    let ends = &model.springs.ends;
-    let m = ends.len();
-    let (dir, beta_e, gamma_e) = (&sys.direction[..m], &sys.beta[..m], &sys.gamma[..m]);
-    let omega = SSOR_OMEGA;
-    let c_k = 2.0 / omega - 1.0;
+    let (inv_diag, chol) = (&sys.inv_diag[..n], &sys.chol[..n]);
+    let (start, other, coef) = (&sys.layout.start[..=n], &sys.layout.other[..], &sys.coef[..]);
+    let two_minus_omega = 2.0 - SSOR_OMEGA;
     let target = settings.relative_tolerance * b_norm;
 
     let mut r_norm = residual(sys, model, b, x, acc, q);
@@ -407,10 +486,10 @@ fn solve_ssor(
     }
     // r^ = G^T P^-1 r: forward sweep on acc = r.
     for i in 0..n {
-        let u = inv_diag[i].mul(&acc[i]) * omega;
-        for e in runs[i]..runs[i + 1] {
-            let bb = ends[e][1] as usize;
-            acc[bb] += spring_mul(&dir[e], beta_e[e], gamma_e[e], &u);
+        let u = inv_diag[i].mul(&acc[i]);
+        let slots = start[i]..start[i + 1];
+        for (&o, c) in other[slots.clone()].iter().zip(&coef[slots]) {
+            acc[o as usize] += block_mul(c, &u);
         }
         r[i] = chol[i].mul_transpose(&u);
         p[i] = Vector3::zeros();
@@ -420,29 +499,29 @@ fn solve_ssor(
     let mut beta = 0.0;
     let mut iterations = 0;
     while iterations < settings.max_iterations {
-        // Backward sweep: p = r^ + beta p, t = P^-T G p, acc = G p - K t. The run of i is
-        // summed from its last spring down, so that the product with t_(i+1) (usually the
-        // first spring) comes last in the dependency chain from one particle to the next.
+        // Backward sweep: p = r^ + beta p, t = P^-T G p, acc = G p - K t. With
+        // `s = G p + sum of B t` over the later particles, `t = w D^-1 s` and `K t = (2 - w) s`.
+        // A particle's springs are summed from the last down, so that the product with the
+        // most recent result comes last in the dependency chain from one particle to the next.
         for i in (0..n).rev() {
             let pi = r[i] + p[i] * beta;
             p[i] = pi;
             let g = chol[i].mul(&pi);
             let mut sum = g;
-            for e in (runs[i]..runs[i + 1]).rev() {
-                let bb = ends[e][1] as usize;
-                sum += spring_mul(&dir[e], beta_e[e], gamma_e[e], &t[bb]);
+            let slots = start[i]..start[i + 1];
+            for (&o, c) in other[slots.clone()].iter().zip(&coef[slots]).rev() {
+                sum += block_mul(c, &t[o as usize]);
             }
-            let ti = inv_diag[i].mul(&sum) * omega;
-            t[i] = ti;
-            acc[i] = g - diag[i].mul(&ti) * c_k;
+            t[i] = inv_diag[i].mul(&sum);
+            acc[i] = g - sum * two_minus_omega;
         }
         // Forward sweep: u = P^-1 acc, q = G^T (t + u), and p . q.
         let mut pq = 0.0;
         for i in 0..n {
-            let u = inv_diag[i].mul(&acc[i]) * omega;
-            for e in runs[i]..runs[i + 1] {
-                let bb = ends[e][1] as usize;
-                acc[bb] += spring_mul(&dir[e], beta_e[e], gamma_e[e], &u);
+            let u = inv_diag[i].mul(&acc[i]);
+            let slots = start[i]..start[i + 1];
+            for (&o, c) in other[slots.clone()].iter().zip(&coef[slots]) {
+                acc[o as usize] += block_mul(c, &u);
             }
             let qi = chol[i].mul_transpose(&(t[i] + u));
             q[i] = qi;
