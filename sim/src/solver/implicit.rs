@@ -4,28 +4,31 @@
 //!
 //! Spring blocks: `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0/l)`,
 //! `C_e = c n n^T`, so each spring adds `B_e = h^2 alpha k I + (h c + h^2 (1 - alpha) k) n n^T`.
-//! The system is solved by block-Jacobi preconditioned CG, warm-started from the linear
-//! extrapolation `2 dv_prev - dv_prev2` of the last two steps' velocity changes. The forces,
-//! the blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
-//! springs (chunk by chunk, after a vectorised pass for the inverse lengths).
+//! The system is solved by SSOR preconditioned CG (see [`super::system`]), warm-started from
+//! the quadratic extrapolation `3 dv_1 - 3 dv_2 + dv_3` of the last three steps' velocity
+//! changes. The forces, the blocks, the right-hand side and the diagonal blocks are assembled
+//! in one pass over the springs, chunk by chunk (gather, vectorised arithmetic, scatter).
 
 use crate::Vector3;
 use crate::model::{Model, State};
 
-use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3, block_coefficients, block_matrix};
+use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 
-/// Springs per chunk of the assembly's vectorised square roots.
-const CHUNK: usize = 256;
+/// Springs per chunk of the assembly (its buffers stay in the L1 cache).
+const CHUNK: usize = 64;
 
 /// Buffers kept between implicit steps.
 #[derive(Debug, Clone, Default)]
 pub struct ImplicitScratch {
     pub system: SpringSystem,
     pub rhs: Vec<Vector3>,
-    /// The previous step's velocity change: the warm start.
+    /// The previous step's velocity change, then the warm start and the solution.
     pub dv: Vec<Vector3>,
-    /// The velocity change of the step before: with `dv`, the linear extrapolation.
+    /// The velocity change of the step before.
     pub dv_previous: Vec<Vector3>,
+    /// The velocity change of the step before that: with the two above, the quadratic
+    /// extrapolation.
+    pub dv_previous2: Vec<Vector3>,
     pub cg: CgScratch,
 }
 
@@ -39,15 +42,18 @@ pub fn step(
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, rhs, dv, dv_previous, cg: cg_scratch } = scratch;
+    let ImplicitScratch { system: sys, rhs, dv, dv_previous, dv_previous2, cg: cg_scratch } = scratch;
     rhs.resize(n, Vector3::zeros());
     dv.resize(n, Vector3::zeros());
     dv_previous.resize(n, Vector3::zeros());
+    dv_previous2.resize(n, Vector3::zeros());
 
-    // One pass over the springs: forces, the blocks `B_e`, `rhs = h (f - h K v)` and the
-    // diagonal blocks of `A` (then the preconditioner is built from them). The springs come
-    // sorted by their first particle: the sums on the current first particle are kept in
-    // registers and stored once per run (a fixed order, so results stay deterministic).
+    // The springs go in chunks, each in three passes: the differences of positions and of
+    // velocities are gathered, everything per spring (forces, blocks `B_e`, the contributions
+    // to `rhs = h (f - h K v)` and to the diagonal blocks of `A`) is computed in loops that
+    // vectorise, and the results are scattered. The springs come sorted by their first
+    // particle: the sums on the current first particle are kept in registers and stored once
+    // per run (a fixed order, so results stay deterministic).
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
@@ -63,22 +69,67 @@ pub fn step(
     let hh = h * h;
     let mut run = usize::MAX;
     let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
-    // The square roots and divisions go first, chunk by chunk, in a loop that vectorises: in
-    // the main loop they would put a long latency chain into every spring.
-    let mut inv_len = [0.0; CHUNK];
+    let mut buf = [[0.0; CHUNK]; 19];
+    let (mut inv_len, mut length, mut sqrt_gamma, mut ka_buf) = ([0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK]);
     for start in (0..m).step_by(CHUNK) {
         let end = (start + CHUNK).min(m);
-        let inv_len = &mut inv_len[..end - start];
-        for (il, &[a, b]) in inv_len.iter_mut().zip(&s.ends[start..end]) {
-            *il = (x[b as usize] - x[a as usize]).norm_squared();
-        }
-        for il in inv_len.iter_mut() {
-            *il = 1.0 / il.sqrt();
-        }
-        let springs = s.ends[start..end].iter().zip(&s.rest_length[start..end]).zip(&s.stiffness[start..end]).zip(&s.damping[start..end]);
-        for ((((&[a, b], &rest), &k), &c), (&inv_l, &slot)) in springs.zip(inv_len.iter().zip(&slots[start..end])) {
+        let len = end - start;
+        let ends = &s.ends[start..end];
+        let [dx, dy, dz, ux, uy, uz, gx, gy, gz, beta, wx, wy, wz, bxx, byy, bzz, bxy, bxz, byz] = &mut buf;
+        // d = x_b - x_a and u = v_a - v_b
+        for (j, &[a, b]) in ends.iter().enumerate() {
             let (a, b) = (a as usize, b as usize);
             let d = x[b] - x[a];
+            let u = v[a] - v[b];
+            (dx[j], dy[j], dz[j]) = (d.x, d.y, d.z);
+            (ux[j], uy[j], uz[j]) = (u.x, u.y, u.z);
+        }
+        let (rest, k, c) = (&s.rest_length[start..end], &s.stiffness[start..end], &s.damping[start..end]);
+        let (dx, dy, dz, ux, uy, uz) = (&dx[..len], &dy[..len], &dz[..len], &ux[..len], &uy[..len], &uz[..len]);
+        let (gx, gy, gz, beta) = (&mut gx[..len], &mut gy[..len], &mut gz[..len], &mut beta[..len]);
+        let (wx, wy, wz) = (&mut wx[..len], &mut wy[..len], &mut wz[..len]);
+        let (bxx, byy, bzz, bxy, bxz, byz) =
+            (&mut bxx[..len], &mut byy[..len], &mut bzz[..len], &mut bxy[..len], &mut bxz[..len], &mut byz[..len]);
+        // (three loops: one long chain of square roots and divisions per spring would leave the
+        // processor waiting)
+        let (inv_len, length, sqrt_gamma, ka_buf) =
+            (&mut inv_len[..len], &mut length[..len], &mut sqrt_gamma[..len], &mut ka_buf[..len]);
+        for j in 0..len {
+            let l2 = dx[j] * dx[j] + dy[j] * dy[j] + dz[j] * dz[j];
+            // a zero-length spring has no direction: no force and a zero block
+            let inv_l = if l2 == 0.0 { 0.0 } else { 1.0 / l2.sqrt() };
+            inv_len[j] = inv_l;
+            length[j] = l2 * inv_l;
+        }
+        for j in 0..len {
+            let inv_l = inv_len[j];
+            let alpha = 1.0 - rest[j] * inv_l;
+            let alpha = if alpha > 0.0 { alpha } else { 0.0 };
+            ka_buf[j] = if inv_l == 0.0 { 0.0 } else { alpha * k[j] };
+            // B = h^2 ka I + (h c + h^2 kn) n n^T, stored as beta I + g g^T
+            sqrt_gamma[j] = (h * c[j] + hh * ((1.0 - alpha) * k[j])).sqrt();
+        }
+        for j in 0..len {
+            let inv_l = inv_len[j];
+            let (nx, ny, nz) = (dx[j] * inv_l, dy[j] * inv_l, dz[j] * inv_l);
+            let l = length[j];
+            let dvel_n = nx * ux[j] + ny * uy[j] + nz * uz[j];
+            // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
+            let f = k[j] * (l - rest[j]) - c[j] * dvel_n;
+            let ka = ka_buf[j];
+            let kn = k[j] - ka;
+            let b = hh * ka;
+            let sg = sqrt_gamma[j];
+            let (px, py, pz) = (nx * sg, ny * sg, nz * sg);
+            (gx[j], gy[j], gz[j], beta[j]) = (px, py, pz, b);
+            // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
+            let along = f * h - kn * dvel_n * hh;
+            (wx[j], wy[j], wz[j]) = (nx * along - ux[j] * b, ny * along - uy[j] * b, nz * along - uz[j] * b);
+            (bxx[j], byy[j], bzz[j]) = (b + px * px, b + py * py, b + pz * pz);
+            (bxy[j], bxz[j], byz[j]) = (px * py, px * pz, py * pz);
+        }
+        for (j, (&[a, b], &slot)) in ends.iter().zip(&slots[start..end]).enumerate() {
+            let (a, b) = (a as usize, b as usize);
             if a != run {
                 if run != usize::MAX {
                     rhs[run] += rhs_run;
@@ -88,26 +139,11 @@ pub fn step(
                 rhs_run = Vector3::zeros();
                 diag_run = Sym3::default();
             }
-            if inv_l == f64::INFINITY {
-                // zero length: no direction, no force and a zero block
-                coef[slot as usize] = [0.0; 4];
-                continue;
-            }
-            let dir = d * inv_l;
-            let l = d.dot(&dir);
-            let dvel = v[a] - v[b];
-            let dvel_n = dir.dot(&dvel);
-            // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
-            let f = dir * (k * (l - rest) - c * dvel_n);
-            let alpha = (1.0 - rest * inv_l).max(0.0);
-            let (ka, kn) = (alpha * k, (1.0 - alpha) * k);
-            let block = block_coefficients(hh * ka, h * c + hh * kn, &dir);
-            coef[slot as usize] = block;
-            // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
-            let w = f * h - (dvel * ka + dir * (kn * dvel_n)) * hh;
+            coef[slot as usize] = [gx[j], gy[j], gz[j], beta[j]];
+            let w = Vector3::new(wx[j], wy[j], wz[j]);
             rhs_run += w;
             rhs[b] -= w;
-            let block = block_matrix(&block);
+            let block = Sym3 { xx: bxx[j], yy: byy[j], zz: bzz[j], xy: bxy[j], xz: bxz[j], yz: byz[j] };
             diag_run += block;
             diag[b] += block;
         }
@@ -117,9 +153,11 @@ pub fn step(
         diag[run] += diag_run;
     }
     sys.prepare(model);
-    for (d, p) in dv.iter_mut().zip(dv_previous.iter_mut()) {
+    // warm start: the quadratic extrapolation 3 dv_1 - 3 dv_2 + dv_3 of the last three steps
+    for ((d, p), p2) in dv.iter_mut().zip(dv_previous.iter_mut()).zip(dv_previous2.iter_mut()) {
         let last = *d;
-        *d = last * 2.0 - *p;
+        *d = (last - *p) * 3.0 + *p2;
+        *p2 = *p;
         *p = last;
     }
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);

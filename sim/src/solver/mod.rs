@@ -244,6 +244,7 @@ impl Simulation {
             // the warm start may be poisoned too
             self.scratch.implicit.dv.iter_mut().for_each(|d| *d = Vector3::zeros());
             self.scratch.implicit.dv_previous.iter_mut().for_each(|d| *d = Vector3::zeros());
+            self.scratch.implicit.dv_previous2.iter_mut().for_each(|d| *d = Vector3::zeros());
             return Err(StepError::NonFinite { vertices: bad });
         }
         self.step_index += 1;
