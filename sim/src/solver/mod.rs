@@ -197,7 +197,18 @@ impl Simulation {
 
     /// Moves the free particles to static equilibrium (velocities zero).
     pub fn settle(&mut self, settings: StaticSettings) -> StaticReport {
+        self.reset_warm_start();
         statics::solve(&self.model, &mut self.state, settings)
+    }
+
+    /// Forgets the implicit integrator's past velocity changes (after a jump of the state).
+    fn reset_warm_start(&mut self) {
+        let implicit = &mut self.scratch.implicit;
+        let [p1, p2, p3] = &mut implicit.dv_previous;
+        for buf in [&mut implicit.dv, p1, p2, p3] {
+            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
+        }
+        implicit.history = 0;
     }
 
     /// Advances one fixed step of `settings.time_step_s`.
@@ -245,9 +256,7 @@ impl Simulation {
                 self.state.velocities.clone_from(&backup.velocities);
             }
             // the warm start may be poisoned too
-            self.scratch.implicit.dv.iter_mut().for_each(|d| *d = Vector3::zeros());
-            self.scratch.implicit.dv_previous.iter_mut().for_each(|d| *d = Vector3::zeros());
-            self.scratch.implicit.dv_previous2.iter_mut().for_each(|d| *d = Vector3::zeros());
+            self.reset_warm_start();
             return Err(StepError::NonFinite { vertices: bad });
         }
         self.step_index += 1;

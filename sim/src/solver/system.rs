@@ -382,8 +382,8 @@ pub fn solve(
     scratch: &mut CgScratch,
 ) -> CgReport {
     let n = b.len();
+    // (every entry is written before it is read: no need to clear)
     for buf in [&mut scratch.r, &mut scratch.z, &mut scratch.p, &mut scratch.q, &mut scratch.t] {
-        buf.clear();
         buf.resize(n, Vector3::zeros());
     }
     for (xi, &h) in x.iter_mut().zip(&model.held) {
