@@ -561,3 +561,109 @@ fn solve_ssor(
     }
     CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{BuildOptions, Scene};
+
+    fn sym(xx: f64, yy: f64, zz: f64, xy: f64, xz: f64, yz: f64) -> Sym3 {
+        Sym3 { xx, yy, zz, xy, xz, yz }
+    }
+
+    #[test]
+    fn inverse_and_cholesky_of_a_positive_definite_block() {
+        let d = sym(4.0, 3.0, 2.0, 0.5, -0.3, 0.2);
+        let inv = d.inverse_or_zero();
+        for v in [Vector3::x(), Vector3::y(), Vector3::z(), Vector3::new(0.3, -1.2, 2.5)] {
+            assert!((inv.mul(&d.mul(&v)) - v).norm() < 1e-14 * v.norm());
+        }
+        let g = Lower3::cholesky(&d).expect("positive definite");
+        for v in [Vector3::x(), Vector3::new(1.0, -2.0, 0.5)] {
+            assert!((g.mul(&g.mul_transpose(&v)) - d.mul(&v)).norm() < 1e-14 * d.mul(&v).norm());
+        }
+        assert!(Lower3::cholesky(&sym(1.0, 1.0, 1.0, 2.0, 0.0, 0.0)).is_none());
+        assert!(Lower3::cholesky(&Sym3::default()).is_none());
+        assert_eq!(sym(1.0, 1.0, 0.0, 1.0, 0.0, 0.0).inverse_or_zero(), Sym3::default());
+    }
+
+    /// An implicit-Euler-like system on the chest wall (1 ms step, current positions).
+    fn system(model: &Model, x: &[crate::Point3]) -> (SpringSystem, Vec<Vector3>) {
+        let s = &model.springs;
+        let h = 1e-3;
+        let mut sys = SpringSystem { mass_weight: 1.0, ..Default::default() };
+        sys.begin(model);
+        for (e, &[a, b]) in s.ends.iter().enumerate() {
+            let (ka, kn, n) = stiffness_block(s.stiffness[e], s.rest_length[e], &(x[b as usize] - x[a as usize]));
+            sys.set_block(e, h * h * ka, h * s.damping[e] + h * h * kn, &n);
+        }
+        sys.update_preconditioner(model);
+        let rhs = (0..model.vertex_count()).map(|i| Vector3::new((i as f64).sin(), (0.7 * i as f64).cos(), 0.3) * 1e-6).collect();
+        (sys, rhs)
+    }
+
+    fn true_residual(sys: &SpringSystem, model: &Model, b: &[Vector3], x: &[Vector3]) -> f64 {
+        let n = b.len();
+        let (mut r, mut ax) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
+        let r_norm = residual(sys, model, b, x, &mut r, &mut ax);
+        let b_norm = b.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
+        r_norm / b_norm
+    }
+
+    #[test]
+    fn ssor_and_jacobi_solve_the_same_system() {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let model = &scene.model;
+        let (mut sys, b) = system(model, model.mesh.positions());
+        assert!(sys.ssor);
+        let settings = CgSettings { relative_tolerance: 1e-10, max_iterations: 1000 };
+        let n = b.len();
+        let mut x_ssor = vec![Vector3::zeros(); n];
+        let ssor = solve(&sys, model, &b, &mut x_ssor, settings, &mut CgScratch::default());
+        assert!(ssor.converged, "{ssor:?}");
+        assert!(true_residual(&sys, model, &b, &x_ssor) <= 1e-10);
+        sys.ssor = false;
+        let mut x_jacobi = vec![Vector3::zeros(); n];
+        let jacobi = solve(&sys, model, &b, &mut x_jacobi, settings, &mut CgScratch::default());
+        assert!(jacobi.converged, "{jacobi:?}");
+        assert!(ssor.iterations * 2 < jacobi.iterations, "{ssor:?} vs {jacobi:?}");
+        let scale = x_jacobi.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        let diff = x_ssor.iter().zip(&x_jacobi).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        assert!(diff < 1e-8 * scale, "{diff} vs {scale}");
+        for (x, &h) in x_ssor.iter().zip(&model.held) {
+            assert!(!h || *x == Vector3::zeros());
+        }
+    }
+
+    #[test]
+    fn springs_in_any_order_and_orientation_give_the_same_solution() {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let model = &scene.model;
+        let (sys, b) = system(model, model.mesh.positions());
+        let settings = CgSettings { relative_tolerance: 1e-10, max_iterations: 1000 };
+        let n = b.len();
+        let mut x = vec![Vector3::zeros(); n];
+        assert!(solve(&sys, model, &b, &mut x, settings, &mut CgScratch::default()).converged);
+
+        // the springs reversed in order, every other one with its ends swapped
+        let mut shuffled = model.clone();
+        let m = shuffled.springs.len();
+        let order: Vec<usize> = (0..m).rev().collect();
+        let s = &model.springs;
+        shuffled.springs.ends = order.iter().map(|&e| if e % 2 == 0 { s.ends[e] } else { [s.ends[e][1], s.ends[e][0]] }).collect();
+        shuffled.springs.rest_length = order.iter().map(|&e| s.rest_length[e]).collect();
+        shuffled.springs.stiffness = order.iter().map(|&e| s.stiffness[e]).collect();
+        shuffled.springs.damping = order.iter().map(|&e| s.damping[e]).collect();
+        let (sys2, _) = system(&shuffled, model.mesh.positions());
+        assert!(sys2.ssor);
+        let (mut y, mut y2) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
+        sys.apply(model, &b, &mut y);
+        sys2.apply(&shuffled, &b, &mut y2);
+        let scale = y.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        assert!(y.iter().zip(&y2).all(|(a, b)| (a - b).norm() <= 1e-12 * scale));
+        let mut x2 = vec![Vector3::zeros(); n];
+        assert!(solve(&sys2, &shuffled, &b, &mut x2, settings, &mut CgScratch::default()).converged);
+        let scale = x.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        assert!(x.iter().zip(&x2).all(|(a, b)| (a - b).norm() <= 1e-8 * scale));
+    }
+}
