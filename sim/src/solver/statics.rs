@@ -44,7 +44,7 @@ pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> Stat
     let mut dx = vec![Vector3::zeros(); n];
     let mut trial = state.positions.clone();
     let mut f_trial = f.clone();
-    let mut sys = SpringSystem { mass_weight: 0.0, ..Default::default() };
+    let mut sys = SpringSystem::default(); // mass weight 0: the stiffness alone
     let mut cg_scratch = CgScratch::default();
     let s = &model.springs;
 
@@ -67,15 +67,11 @@ pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> Stat
     let mut stalls = 0;
     while residual > tolerance && iter < settings.max_newton_iterations && stalls < 4 {
         iter += 1;
-        sys.beta.resize(s.len(), 0.0);
-        sys.gamma.resize(s.len(), 0.0);
-        sys.direction.resize(s.len(), Vector3::zeros());
+        sys.begin(model);
         for (e, &[a, b]) in s.ends.iter().enumerate() {
             let d = state.positions[b as usize] - state.positions[a as usize];
             let (ka, kn, dir) = stiffness_block(s.stiffness[e], s.rest_length[e], &d);
-            sys.beta[e] = ka;
-            sys.gamma[e] = kn;
-            sys.direction[e] = dir;
+            sys.set_block(e, ka, kn, &dir);
         }
         sys.update_preconditioner(model);
         dx.iter_mut().for_each(|d| *d = Vector3::zeros());
