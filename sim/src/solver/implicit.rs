@@ -6,8 +6,9 @@
 //! `C_e = c n n^T`, so each spring adds `B_e = h^2 alpha k I + (h c + h^2 (1 - alpha) k) n n^T`.
 //! The system is solved by SSOR preconditioned CG (see [`super::system`]), warm-started from
 //! the cubic extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4` of the last four steps' velocity
-//! changes (of lower order while fewer are known). The forces, the blocks, the right-hand side and the diagonal blocks are assembled
-//! in one pass over the springs, chunk by chunk (gather, vectorised arithmetic, scatter).
+//! changes (of lower order while fewer are known). The forces, the blocks, the right-hand side
+//! and the diagonal blocks are assembled in one pass over the springs, chunk by chunk (gather,
+//! vectorised arithmetic, scatter).
 
 use crate::Vector3;
 use crate::model::{Model, State};
@@ -15,7 +16,7 @@ use crate::model::{Model, State};
 use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 
 /// Velocity change below which the solve need not resolve: the CG stops at the latest when
-/// `|r| <= VELOCITY_FLOOR sqrt(sum m_i^2)` over the free particles (`r = b - A dv` is a
+/// `|r| <= VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free particles (`r = b - A dv` is a
 /// momentum and `A` is close to `M` for the slow motions, so this is an error of about this
 /// many m/s). It matters only near rest, where `rhs` is round-off and a relative tolerance
 /// would have the solver chase noise (9 iterations per step on the settled chest wall).
