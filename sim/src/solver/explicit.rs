@@ -19,7 +19,7 @@
 use crate::Vector3;
 use crate::model::{Model, State};
 
-use super::forces::total_forces;
+use super::forces::add_spring_forces;
 
 /// Power iterations of the spectral estimate.
 pub const POWER_ITERATIONS: usize = 64;
@@ -142,14 +142,22 @@ pub fn substeps_for(model: &Model, dt: f64, safety: f64) -> u32 {
 /// position and zero velocity.
 pub fn step(model: &Model, state: &mut State, external: &[Vector3], dt: f64, substeps: u32, forces: &mut Vec<Vector3>) {
     let h = dt / substeps as f64;
-    forces.resize(model.vertex_count(), Vector3::zeros());
+    let n = model.vertex_count();
+    forces.resize(n, Vector3::zeros());
+    // The forces that do not depend on the state (gravity, external) are set before the first
+    // sub-step and again in the update pass, ready for the next.
+    let constant = |i: usize| model.gravity * model.mass[i] + external[i];
+    for (i, f) in forces.iter_mut().enumerate() {
+        *f = constant(i);
+    }
     for _ in 0..substeps {
-        total_forces(model, &state.positions, &state.velocities, external, forces);
-        for i in 0..model.vertex_count() {
+        add_spring_forces(model, &state.positions, &state.velocities, forces);
+        for i in 0..n {
             let w = model.inv_mass[i];
             let v = &mut state.velocities[i];
             *v += forces[i] * (h * w);
             state.positions[i] += *v * h;
+            forces[i] = constant(i);
         }
     }
 }

@@ -14,6 +14,11 @@ pub fn total_forces(model: &Model, x: &[Point3], v: &[Vector3], external: &[Vect
     for ((f, &m), fe) in out.iter_mut().zip(&model.mass).zip(external) {
         *f = model.gravity * m + fe;
     }
+    add_spring_forces(model, x, v, out);
+}
+
+/// Adds the spring and damper forces to `out`.
+pub fn add_spring_forces(model: &Model, x: &[Point3], v: &[Vector3], out: &mut [Vector3]) {
     let s = &model.springs;
     let springs = s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping);
     for (((&[a, b], &rest), &k), &c) in springs {

@@ -6,13 +6,21 @@
 //! `C_e = c n n^T`, so each spring adds `B_e = h^2 alpha k I + (h c + h^2 (1 - alpha) k) n n^T`.
 //! The system is solved by SSOR preconditioned CG (see [`super::system`]), warm-started from
 //! the cubic extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4` of the last four steps' velocity
-//! changes (of lower order while fewer are known). The forces, the blocks, the right-hand side and the diagonal blocks are assembled
-//! in one pass over the springs, chunk by chunk (gather, vectorised arithmetic, scatter).
+//! changes (of lower order while fewer are known). The forces, the blocks, the right-hand side
+//! and the diagonal blocks are assembled in one pass over the springs, chunk by chunk (gather,
+//! vectorised arithmetic, scatter).
 
 use crate::Vector3;
 use crate::model::{Model, State};
 
 use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
+
+/// Velocity change below which the solve need not resolve: the CG stops at the latest when
+/// `|r| <= VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free particles (`r = b - A dv` is a
+/// momentum and `A` is close to `M` for the slow motions, so this is an error of about this
+/// many m/s). It matters only near rest, where `rhs` is round-off and a relative tolerance
+/// would have the solver chase noise (9 iterations per step on the settled chest wall).
+pub const VELOCITY_FLOOR_M_PER_S: f64 = 1e-12;
 
 /// Springs per chunk of the assembly (its buffers stay in the L1 cache).
 const CHUNK: usize = 64;
@@ -169,6 +177,8 @@ pub fn step(
         *d3 = *d2;
         *d2 = last;
     }
+    let mass_norm = model.mass.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
+    let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(VELOCITY_FLOOR_M_PER_S * mass_norm), ..cg };
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
     *history = (*history + 1).min(4);
     for i in 0..n {

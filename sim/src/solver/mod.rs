@@ -235,6 +235,7 @@ impl Simulation {
             Integrator::ImplicitEuler => {
                 let cg = CgSettings {
                     relative_tolerance: self.settings.cg_relative_tolerance,
+                    absolute_tolerance: 0.0,
                     max_iterations: self.settings.cg_max_iterations,
                 };
                 let r = implicit::step(&self.model, &mut self.state, &self.external_forces, dt, cg, &mut self.scratch.implicit);

@@ -75,7 +75,7 @@ pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> Stat
         }
         sys.update_preconditioner(model);
         dx.iter_mut().for_each(|d| *d = Vector3::zeros());
-        let cg = CgSettings { relative_tolerance: 1e-10, max_iterations: 10 * n.max(100) };
+        let cg = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 10 * n.max(100) };
         cg_total += system::solve(&sys, model, &f, &mut dx, cg, &mut cg_scratch).iterations;
 
         // Backtracking on |f|.

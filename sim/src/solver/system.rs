@@ -344,8 +344,10 @@ impl SpringSystem {
 /// Settings of the conjugate-gradient solve.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CgSettings {
-    /// Stop when `|r| <= relative_tolerance |b|`.
+    /// Stop when `|r| <= max(relative_tolerance |b|, absolute_tolerance)`.
     pub relative_tolerance: f64,
+    /// In the units of `b`; zero for a purely relative tolerance.
+    pub absolute_tolerance: f64,
     pub max_iterations: usize,
 }
 
@@ -375,7 +377,8 @@ fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
 
 /// Solves `A x = b` by preconditioned conjugate gradients (SSOR, or block-Jacobi when SSOR does
 /// not apply; see the module documentation), starting from the `x` given (warm start). Held
-/// entries of `b` and `x` are treated as zero. Stops when `|b - A x| <= relative_tolerance |b|`.
+/// entries of `b` and `x` are treated as zero. Stops when
+/// `|b - A x| <= max(relative_tolerance |b|, absolute_tolerance)`.
 pub fn solve(
     sys: &SpringSystem,
     model: &Model,
@@ -435,7 +438,7 @@ fn solve_jacobi(
         p[i] = z[i];
     }
     let mut rz = dot(r, z);
-    let target = settings.relative_tolerance * b_norm;
+    let target = (settings.relative_tolerance * b_norm).max(settings.absolute_tolerance);
     let mut iterations = 0;
     while r_norm > target && iterations < settings.max_iterations {
         sys.apply(model, p, q);
@@ -485,7 +488,7 @@ fn solve_ssor(
     let (inv_diag, chol) = (&sys.inv_diag[..n], &sys.chol[..n]);
     let (start, other, coef) = (&sys.layout.start[..=n], &sys.layout.other[..], &sys.coef[..]);
     let two_minus_omega = 2.0 - SSOR_OMEGA;
-    let target = settings.relative_tolerance * b_norm;
+    let target = (settings.relative_tolerance * b_norm).max(settings.absolute_tolerance);
 
     let mut r_norm = residual(sys, model, b, x, acc, q);
     if r_norm <= target {
@@ -619,7 +622,7 @@ mod tests {
         let model = &scene.model;
         let (mut sys, b) = system(model, model.mesh.positions());
         assert!(sys.ssor);
-        let settings = CgSettings { relative_tolerance: 1e-10, max_iterations: 1000 };
+        let settings = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 1000 };
         let n = b.len();
         let mut x_ssor = vec![Vector3::zeros(); n];
         let ssor = solve(&sys, model, &b, &mut x_ssor, settings, &mut CgScratch::default());
@@ -643,7 +646,7 @@ mod tests {
         let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
         let model = &scene.model;
         let (sys, b) = system(model, model.mesh.positions());
-        let settings = CgSettings { relative_tolerance: 1e-10, max_iterations: 1000 };
+        let settings = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 1000 };
         let n = b.len();
         let mut x = vec![Vector3::zeros(); n];
         assert!(solve(&sys, model, &b, &mut x, settings, &mut CgScratch::default()).converged);
