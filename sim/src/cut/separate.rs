@@ -9,6 +9,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::mesh::TET_FACES;
+use crate::mesh::non_manifold_edges;
 
 use super::pattern::sorted3;
 
@@ -79,7 +80,7 @@ pub fn pinched_edges(tets: &[[u32; 4]], local: &BTreeSet<u32>, on_cut: &dyn Fn(u
         }
     }
     faces.sort_unstable();
-    let mut half: Vec<([u32; 2], i8)> = Vec::new();
+    let mut boundary: Vec<[u32; 3]> = Vec::new();
     let mut i = 0;
     while i < faces.len() {
         let mut j = i;
@@ -87,30 +88,9 @@ pub fn pinched_edges(tets: &[[u32; 4]], local: &BTreeSet<u32>, on_cut: &dyn Fn(u
             j += 1;
         }
         if j - i == 1 {
-            let tri = faces[i].1;
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                if on_cut(a) || on_cut(b) {
-                    half.push(if a < b { ([a, b], 1) } else { ([b, a], -1) });
-                }
-            }
+            boundary.push(faces[i].1);
         }
         i = j;
     }
-    half.sort_unstable();
-    let mut bad = Vec::new();
-    let mut i = 0;
-    while i < half.len() {
-        let mut j = i;
-        let mut sum = 0i32;
-        while j < half.len() && half[j].0 == half[i].0 {
-            sum += half[j].1 as i32;
-            j += 1;
-        }
-        if j - i != 2 || sum != 0 {
-            bad.push(half[i].0);
-        }
-        i = j;
-    }
-    bad
+    non_manifold_edges(&boundary, |a, b| on_cut(a) || on_cut(b))
 }

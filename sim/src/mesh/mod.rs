@@ -9,7 +9,7 @@ mod validate;
 pub use quality::tet_mu;
 pub use geometry::{dihedral_angles, tet_signed_volume, triangle_normal};
 pub use quality::QualityStats;
-pub use topology::{Csr, TET_EDGES, TET_FACES, Topology, NONE};
+pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};
 pub use validate::ValidationReport;
 
 use crate::{MeshError, Point3};

@@ -207,28 +207,36 @@ impl Topology {
     /// Checks that the boundary is a closed 2-manifold: every boundary edge is used by exactly
     /// two boundary triangles, in opposite directions. Returns the offending edges.
     pub fn boundary_non_manifold_edges(&self) -> Vec<[VertexId; 2]> {
-        let mut half: Vec<([u32; 2], i8)> = Vec::with_capacity(self.boundary.len() * 3);
-        for tri in &self.boundary {
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+        non_manifold_edges(&self.boundary, |_, _| true)
+    }
+}
+
+/// Edges of the oriented triangles `tris` (those `judge(a, b)` accepts) that are not used by
+/// exactly two of them in opposite directions, sorted.
+pub fn non_manifold_edges(tris: &[[VertexId; 3]], judge: impl Fn(u32, u32) -> bool) -> Vec<[VertexId; 2]> {
+    let mut half: Vec<([u32; 2], i8)> = Vec::with_capacity(tris.len() * 3);
+    for tri in tris {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            if judge(a, b) {
                 half.push(if a < b { ([a, b], 1) } else { ([b, a], -1) });
             }
         }
-        half.sort_unstable();
-        let mut bad = Vec::new();
-        let mut i = 0;
-        while i < half.len() {
-            let mut j = i;
-            let mut sum = 0i32;
-            while j < half.len() && half[j].0 == half[i].0 {
-                sum += half[j].1 as i32;
-                j += 1;
-            }
-            if j - i != 2 || sum != 0 {
-                bad.push(half[i].0);
-            }
-            i = j;
-        }
-        bad
     }
+    half.sort_unstable();
+    let mut bad = Vec::new();
+    let mut i = 0;
+    while i < half.len() {
+        let mut j = i;
+        let mut sum = 0i32;
+        while j < half.len() && half[j].0 == half[i].0 {
+            sum += half[j].1 as i32;
+            j += 1;
+        }
+        if j - i != 2 || sum != 0 {
+            bad.push(half[i].0);
+        }
+        i = j;
+    }
+    bad
 }
