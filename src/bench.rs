@@ -69,8 +69,10 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
                 particles: scene.model.vertex_count(),
                 integrator: integrator.name(),
                 settle_ms,
-                substeps: sim.explicit_substeps().max(1) * u32::from(integrator == Integrator::SymplecticEuler)
-                    + u32::from(integrator == Integrator::ImplicitEuler),
+                substeps: match integrator {
+                    Integrator::SymplecticEuler => sim.explicit_substeps(),
+                    Integrator::ImplicitEuler => 1,
+                },
                 steps: times.len(),
                 cg_iterations_mean: cg as f64 / times.len() as f64,
                 realtime_factor: dt * 1e6 / s.median,

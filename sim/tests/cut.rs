@@ -222,14 +222,10 @@ fn sheet_gap(pretension: f64) -> (f64, Vec<(f64, f64)>) {
     let mut profile = Vec::new();
     let mut max_gap = 0.0f64;
     let rest = mesh.positions();
-    for a in 0..mesh.vertex_count() {
-        for b in a + 1..mesh.vertex_count() {
-            if (rest[a] - rest[b]).norm() < 1e-12 {
-                let gap = (sim.state.positions[a] - sim.state.positions[b]).norm();
-                max_gap = max_gap.max(gap);
-                profile.push((rest[a].x, gap));
-            }
-        }
+    for [a, b] in mesh.coincident_vertices(1e-12) {
+        let gap = (sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm();
+        max_gap = max_gap.max(gap);
+        profile.push((rest[a as usize].x, gap));
     }
     profile.sort_by(|p, q| p.0.total_cmp(&q.0));
     (max_gap, profile)

@@ -60,15 +60,14 @@ impl Cutter {
         while self.trail.len() > keep {
             self.trail.pop_front();
         }
-        let empty = CutEvent { min_child_volume_fraction: 1.0, ..Default::default() };
         if self.trail.len() < 2 {
-            return Ok(empty);
+            return Ok(CutEvent::default());
         }
         let mut corners: Vec<_> = self.trail.iter().map(|b| b.tip).collect();
         corners.extend(self.trail.iter().rev().map(Blade::heel));
         match CutPolygon::new(&corners) {
             Some(polygon) => cut(sim, &polygon, &self.options),
-            None => Ok(empty),
+            None => Ok(CutEvent::default()),
         }
     }
 }

@@ -27,7 +27,7 @@ pub struct SplitVertex {
 }
 
 /// Everything one cut changed.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CutEvent {
     /// Tetrahedra replaced by their children (ids before the cut).
     pub tets_removed: Vec<u32>,
@@ -48,6 +48,25 @@ pub struct CutEvent {
     pub min_child_volume_fraction: f64,
     /// Edges split beyond the blade's reach because no vertex could move (fallback).
     pub forced_splits: usize,
+}
+
+impl Default for CutEvent {
+    /// Nothing changed (and so no child is smaller than its parent: fraction 1).
+    fn default() -> Self {
+        Self {
+            tets_removed: Vec::new(),
+            tets_added: Vec::new(),
+            tets_relinked: Vec::new(),
+            vertices_created: Vec::new(),
+            vertices_moved: Vec::new(),
+            vertices_split: Vec::new(),
+            springs_removed: Vec::new(),
+            springs_added: Vec::new(),
+            cut_faces: 0,
+            min_child_volume_fraction: 1.0,
+            forced_splits: 0,
+        }
+    }
 }
 
 impl CutEvent {

@@ -66,17 +66,6 @@ pub enum CutError {
     Model(#[from] ModelError),
 }
 
-/// Cuts along the surface swept by the blade from `from` to `to`.
-pub fn cut_swept(sim: &mut Simulation, from: &Blade, to: &Blade, options: &CutOptions) -> Result<CutEvent, CutError> {
-    if !from.is_finite() || !to.is_finite() {
-        return Err(CutError::NonFiniteBlade);
-    }
-    match CutPolygon::swept(from, to) {
-        Some(polygon) => cut(sim, &polygon, options),
-        None => Ok(CutEvent { min_child_volume_fraction: 1.0, ..Default::default() }),
-    }
-}
-
 /// Tetrahedra whose bounds meet the polygon's (inflated by `margin`) and that touch or cross
 /// its plane.
 fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64) -> Vec<u32> {
@@ -107,7 +96,7 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
     let n = mesh.vertex_count();
     let margin = 1e-9 * polygon.scale;
     let cand = candidates(mesh.tets(), &sim.state.positions, polygon, margin);
-    let mut event = CutEvent { min_child_volume_fraction: 1.0, ..Default::default() };
+    let mut event = CutEvent::default();
     if cand.is_empty() {
         return Ok(event);
     }

@@ -74,11 +74,6 @@ impl CutPolygon {
         Some(Self { corners: projected, normal, offset, u, v, corners_2d, scale })
     }
 
-    /// The quadrilateral swept by a blade moving from `a` to `b`.
-    pub fn swept(a: &Blade, b: &Blade) -> Option<Self> {
-        Self::new(&[a.tip, b.tip, b.heel(), a.heel()])
-    }
-
     /// Signed distance of `p` from the plane.
     #[inline]
     pub fn signed_distance(&self, p: &Point3) -> f64 {

@@ -174,6 +174,31 @@ impl TetMesh {
         quality::quality(self)
     }
 
+    /// Pairs of distinct vertices at the same position (within `tolerance_m`), such as the two
+    /// copies of a vertex split by a cut, found by sorting (not by comparing every pair).
+    /// Every pair within a group of coincident vertices is listed, smaller id first.
+    pub fn coincident_vertices(&self, tolerance_m: f64) -> Vec<[VertexId; 2]> {
+        let pos = &self.positions;
+        let mut order: Vec<u32> = (0..pos.len() as u32).collect();
+        order.sort_by(|&a, &b| {
+            let (p, q) = (&pos[a as usize], &pos[b as usize]);
+            p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(a.cmp(&b))
+        });
+        let mut pairs = Vec::new();
+        for (i, &a) in order.iter().enumerate() {
+            for &b in &order[i + 1..] {
+                if pos[b as usize].x - pos[a as usize].x > tolerance_m {
+                    break;
+                }
+                if (pos[a as usize] - pos[b as usize]).norm() <= tolerance_m {
+                    pairs.push([a.min(b), a.max(b)]);
+                }
+            }
+        }
+        pairs.sort_unstable();
+        pairs
+    }
+
     /// Removes vertices that no tetrahedron uses, renumbering the rest in order.
     /// Returns the number removed.
     pub fn remove_dangling_vertices(&mut self) -> usize {

@@ -98,22 +98,12 @@ impl Model {
         if !gravity.iter().all(|g| g.is_finite()) {
             return Err(ModelError::NonFiniteGravity);
         }
-        let mut material_of_tet = Vec::with_capacity(mesh.tet_count());
-        for &r in mesh.regions() {
-            let i = materials.binary_search_by_key(&r, |(id, _)| *id).map_err(|_| ModelError::MissingMaterial(r))?;
-            material_of_tet.push(materials[i].1);
-        }
         let n = mesh.vertex_count();
         let mut held = vec![false; n];
         for &v in held_vertices {
             *held.get_mut(v as usize).ok_or(ModelError::HeldOutOfRange { vertex: v, vertex_count: n })? = true;
         }
-        let mass = lumped_masses(&mesh, &material_of_tet);
-        if let Some(v) = mass.iter().position(|&m| !(m > 0.0)) {
-            return Err(ModelError::ZeroMass { vertex: v as u32 });
-        }
-        let inv_mass = mass.iter().zip(&held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
-        let springs = SpringSet::from_mesh(&mesh, &material_of_tet);
+        let (mass, inv_mass, springs) = derive(&materials, &mesh, &held)?;
         Ok(Self { mesh, materials, mass, inv_mass, held, springs, gravity })
     }
 
@@ -121,31 +111,14 @@ impl Model {
         self.mass.len()
     }
 
-    /// Material of each tetrahedron, by its region.
-    pub fn material_of_tets(&self, mesh: &TetMesh) -> Result<Vec<Material>, ModelError> {
-        mesh.regions()
-            .iter()
-            .map(|&r| {
-                self.materials
-                    .binary_search_by_key(&r, |(id, _)| *id)
-                    .map(|i| self.materials[i].1)
-                    .map_err(|_| ModelError::MissingMaterial(r))
-            })
-            .collect()
-    }
-
     /// Replaces the mesh after a topology change (a cut): masses, springs and held flags are
     /// rebuilt by the same rules as at the start (`m = sum rho V / 4`, `l = d (1 - s)` with `d`
     /// from the reference positions).
     pub fn rebuild(&mut self, mesh: TetMesh, held: Vec<bool>) -> Result<(), ModelError> {
-        let material_of_tet = self.material_of_tets(&mesh)?;
-        let mass = lumped_masses(&mesh, &material_of_tet);
-        if let Some(v) = mass.iter().position(|&m| !(m > 0.0)) {
-            return Err(ModelError::ZeroMass { vertex: v as u32 });
-        }
-        self.inv_mass = mass.iter().zip(&held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
-        self.springs = SpringSet::from_mesh(&mesh, &material_of_tet);
+        let (mass, inv_mass, springs) = derive(&self.materials, &mesh, &held)?;
         self.mass = mass;
+        self.inv_mass = inv_mass;
+        self.springs = springs;
         self.held = held;
         self.mesh = mesh;
         Ok(())
@@ -160,6 +133,35 @@ impl Model {
     pub fn held_count(&self) -> usize {
         self.held.iter().filter(|&&h| h).count()
     }
+}
+
+/// Material of each tetrahedron from `materials` (sorted by region id).
+fn material_of_tets(materials: &[(u32, Material)], mesh: &TetMesh) -> Result<Vec<Material>, ModelError> {
+    mesh.regions()
+        .iter()
+        .map(|&r| {
+            materials
+                .binary_search_by_key(&r, |(id, _)| *id)
+                .map(|i| materials[i].1)
+                .map_err(|_| ModelError::MissingMaterial(r))
+        })
+        .collect()
+}
+
+/// What the model derives from mesh, materials and held flags: masses, inverse masses (zero
+/// where held) and springs.
+fn derive(
+    materials: &[(u32, Material)],
+    mesh: &TetMesh,
+    held: &[bool],
+) -> Result<(Vec<f64>, Vec<f64>, SpringSet), ModelError> {
+    let material_of_tet = material_of_tets(materials, mesh)?;
+    let mass = lumped_masses(mesh, &material_of_tet);
+    if let Some(v) = mass.iter().position(|&m| !(m > 0.0)) {
+        return Err(ModelError::ZeroMass { vertex: v as u32 });
+    }
+    let inv_mass = mass.iter().zip(held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
+    Ok((mass, inv_mass, SpringSet::from_mesh(mesh, &material_of_tet)))
 }
 
 /// `m_i = sum over tets k containing i of rho_k V_k / 4` (the paper's equation 2).
