@@ -38,7 +38,7 @@ fn bad_scene_arguments_give_a_clear_error() {
 #[test]
 fn demo_cuts_the_chest_wall_and_writes_the_result() {
     let dir = std::env::temp_dir().join(format!("cutlab-demo-{}", std::process::id()));
-    let (ok, out, err) = cutlab(&["demo", "--min-tets", "1500", "--out", dir.to_str().expect("utf8")]);
+    let (ok, out, err) = cutlab(&["demo", "--min-tets", "3000", "--out", dir.to_str().expect("utf8")]);
     assert!(ok, "{err}");
     assert!(out.contains("widest gap"), "{out}");
     let gap_mm: f64 = out

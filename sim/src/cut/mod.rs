@@ -67,8 +67,9 @@ pub enum CutError {
 }
 
 /// Tetrahedra whose bounds meet the polygon's (inflated by `margin`) and that touch or cross
-/// its plane.
-fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64) -> Vec<u32> {
+/// its plane, or come within `near` times their longest edge of it (where vertices of the
+/// stroke's cut that drifted off the plane still count as on it).
+fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
     let (lo, hi) = polygon.bounds();
     let mut out = Vec::new();
     for (t, tet) in mesh_tets.iter().enumerate() {
@@ -83,19 +84,74 @@ fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin
         }
         let s = p.map(|q| polygon.signed_distance(&q));
         let (smin, smax) = s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        if smin <= margin && smax >= -margin {
+        let reach = if near > 0.0 {
+            let longest = TET_EDGES.iter().map(|&[i, j]| (p[i] - p[j]).norm_squared()).fold(0.0, f64::max).sqrt();
+            margin.max(near * longest)
+        } else {
+            margin
+        };
+        if smin <= reach && smax >= -reach {
             out.push(t as u32);
         }
     }
     out
 }
 
+/// The side of a stroke's cut each of its vertices is on: +1 or -1 for the two copies of a
+/// split vertex, 0 for a vertex left on the cut plane (moved onto it, or on the cut front).
+/// The [`Cutter`] keeps it for one stroke, so that the vertices of the cut, drifting a little
+/// across the plane as the wound opens, are not cut again when the trailing window passes
+/// over them.
+#[derive(Debug, Clone, Default)]
+pub struct StrokeSides {
+    side: Vec<i8>,
+}
+
+impl StrokeSides {
+    const UNKNOWN: i8 = i8::MIN;
+
+    /// The known side of `v`, if any.
+    pub fn get(&self, v: u32) -> Option<i8> {
+        self.side.get(v as usize).copied().filter(|&s| s != Self::UNKNOWN)
+    }
+
+    fn set(&mut self, v: u32, side: i8) {
+        let i = v as usize;
+        if self.side.len() <= i {
+            self.side.resize(i + 1, Self::UNKNOWN);
+        }
+        self.side[i] = side;
+    }
+
+    /// True when no side is known.
+    pub fn is_empty(&self) -> bool {
+        self.side.is_empty()
+    }
+
+    /// Forgets every side (a new stroke).
+    pub fn clear(&mut self) {
+        self.side.clear();
+    }
+}
+
 /// Cuts the simulation's tissue along a planar polygon C.
 pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> Result<CutEvent, CutError> {
+    cut_remembering(sim, polygon, options, &mut StrokeSides::default())
+}
+
+/// [`cut`] as one step of a stroke: vertices whose side `sides` knows keep it when they have
+/// drifted a little across the plane, and `sides` learns the sides of this step's cut.
+pub fn cut_remembering(
+    sim: &mut Simulation,
+    polygon: &CutPolygon,
+    options: &CutOptions,
+    sides: &mut StrokeSides,
+) -> Result<CutEvent, CutError> {
     let mesh = &sim.model.mesh;
     let n = mesh.vertex_count();
     let margin = 1e-9 * polygon.scale;
-    let cand = candidates(mesh.tets(), &sim.state.positions, polygon, margin);
+    let near = if sides.is_empty() { 0.0 } else { resolve::near_fraction(options.snap) };
+    let cand = candidates(mesh.tets(), &sim.state.positions, polygon, margin, near);
     let mut event = CutEvent::default();
     if cand.is_empty() {
         return Ok(event);
@@ -121,6 +177,7 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
             candidates: &cand,
             snap: options.snap,
             inside_tolerance: 1e-9 * polygon.scale,
+            sides,
         }
         .resolve();
         moved_all.extend_from_slice(&class.moved);
@@ -252,9 +309,11 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
     let mut split_tets = tets.clone();
     let mut splits = Vec::new();
     let mut relinked = BTreeSet::new();
+    let mut on_cut = BTreeSet::new();
+    let mut stars = separate::Stars::new();
     for _ in 0..64 {
-        let on_cut: BTreeSet<u32> = cut_faces.iter().flatten().copied().collect();
-        let stars = star_of(&on_cut);
+        on_cut = cut_faces.iter().flatten().copied().collect();
+        stars = star_of(&on_cut);
         splits = separate::star_components(&tets, &stars, &cut_faces);
         relinked.clear();
         let mut original_of: Vec<u32> = Vec::with_capacity(splits.len());
@@ -276,16 +335,18 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
         if pinched.is_empty() {
             break;
         }
-        // undo this round's relabelling before trying again
+        let pinched: BTreeSet<[u32; 2]> = pinched.iter().map(|e| pattern::sorted2(original(e[0]), original(e[1]))).collect();
+        let before = cut_faces.len();
+        let kept: BTreeSet<[u32; 3]> =
+            cut_faces.iter().filter(|f| !pinched.iter().any(|e| f.contains(&e[0]) && f.contains(&e[1]))).copied().collect();
+        if kept.len() == before {
+            break; // not ours to fix: the invariant checks will report it
+        }
+        // undo this round's relabelling and try again without the pinching faces
         for &t in &local {
             split_tets[t as usize] = tets[t as usize];
         }
-        let pinched: BTreeSet<[u32; 2]> = pinched.iter().map(|e| pattern::sorted2(original(e[0]), original(e[1]))).collect();
-        let before = cut_faces.len();
-        cut_faces.retain(|f| !pinched.iter().any(|e| f.contains(&e[0]) && f.contains(&e[1])));
-        if cut_faces.len() == before {
-            break; // not ours to fix: the invariant checks will report it
-        }
+        cut_faces = kept;
     }
     event.cut_faces = cut_faces.len();
     if splits.is_empty() && event.tets_removed.is_empty() && event.vertices_moved.is_empty() {
@@ -301,6 +362,7 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
         event.vertices_split.push(SplitVertex { original: *v, copy });
     }
     let tets = split_tets;
+    let new_sides = sides_of_cut(&tets, &x, polygon, &on_cut, &stars, &splits, base_vertices, &class.moved);
     event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
 
     // Commit: new mesh, rebuilt model, extended state.
@@ -316,7 +378,49 @@ pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> 
     sim.state.positions = x;
     sim.state.velocities = vel;
     sim.model_changed();
+    for (v, side) in new_sides {
+        sides.set(v, side);
+    }
     Ok(event)
+}
+
+/// The sides of this cut's vertices: a split vertex and its copies by where their tetrahedra
+/// lie (the sign of the summed plane distances of their corners), every other vertex of the
+/// cut faces and every moved vertex 0 (on the plane).
+fn sides_of_cut(
+    tets: &[[u32; 4]],
+    x: &[Point3],
+    polygon: &CutPolygon,
+    on_cut: &BTreeSet<u32>,
+    stars: &separate::Stars,
+    splits: &[(u32, Vec<u32>)],
+    first_copy: usize,
+    moved: &[(u32, Point3, Point3)],
+) -> Vec<(u32, i8)> {
+    let side_of = |star: &mut dyn Iterator<Item = u32>| -> i8 {
+        let s: f64 = star.flat_map(|t| tets[t as usize]).map(|w| polygon.signed_distance(&x[w as usize])).sum();
+        if s > 0.0 {
+            1
+        } else if s < 0.0 {
+            -1
+        } else {
+            0
+        }
+    };
+    let mut out: Vec<(u32, i8)> = moved.iter().map(|m| (m.0, 0)).collect();
+    for &v in on_cut {
+        let copies: Vec<usize> = splits.iter().enumerate().filter(|(_, s)| s.0 == v).map(|(k, _)| k).collect();
+        if copies.is_empty() {
+            out.push((v, 0));
+            continue;
+        }
+        let star = stars.get(&v).map(Vec::as_slice).unwrap_or_default();
+        out.push((v, side_of(&mut star.iter().copied().filter(|&t| tets[t as usize].contains(&v)))));
+        for k in copies {
+            out.push(((first_copy + k) as u32, side_of(&mut splits[k].1.iter().copied())));
+        }
+    }
+    out
 }
 
 fn sorted_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {
@@ -394,9 +498,10 @@ fn choose_fixed(splits: &[(u32, TetSplit)], x_ref: &[Point3]) -> Option<Vec<Chil
     splits
         .iter()
         .map(|(_, s)| {
+            // positive at rest (required); in the current configuration, as the springs
+            // allow, a child may start inverted where no pattern avoids it
             let mut ch = s.children(&|q: &Quad| q.min_vertex_diagonal())?;
-            orient(&mut ch, x_ref, x_ref);
-            Some(ch)
+            orient(&mut ch, x_ref, x_ref).then_some(ch)
         })
         .collect()
 }

@@ -4,19 +4,32 @@
 //! An edge *crosses* C when its two vertices lie strictly on opposite sides of C's plane and
 //! the crossing point lies inside C. A tetrahedron some of whose plane-crossing edges cross
 //! inside C and some outside is *incompletely* intersected: C's boundary B runs through it.
-//! Such tetrahedra are resolved by moving a vertex of an outside crossing onto the plane, by
-//! the mean of its intersecting edge vectors (`x_v += mean_e t_e (x_w - x_v)`), after which
-//! none of its edges cross and the tetrahedron is either fully cut or not cut. Vertices very
-//! close to the plane (crossing parameter below `snap`) move onto it too, so that no sliver
-//! is created. A vertex moves only if every tetrahedron around it keeps at least
-//! [`MIN_VOLUME_KEPT`] of its volume in both the current and the reference configuration;
-//! held vertices and vertices on a strongly curved surface do not move. When neither end of
-//! an outside crossing can move, the edge is split anyway (the cut reaches a little past B).
+//! It is resolved, for each outside crossing, by the first of:
+//!
+//! 1. when the crossing point lies within [`FORCE_REACH`] of the edge's length of C, the edge
+//!    is split too: the cut reaches a little past B rather than a vertex being pulled across
+//!    half an element (which would snap the cut to the mesh's faces, quantising its depth);
+//! 2. the paper's vertex movement: a vertex of the edge (the one outside C, or the nearer)
+//!    moves onto the plane by the mean of its intersecting edge vectors,
+//!    `x_v += mean_e t_e (x_w - x_v)`, after which none of its edges cross;
+//! 3. when neither end may move, the edge is split anyway.
+//!
+//! Vertices very close to the plane (crossing parameter below `snap`) move onto it too, so
+//! that no sliver is created. A vertex moves only if every tetrahedron around it keeps at
+//! least [`MIN_VOLUME_KEPT`] of its volume in both the current and the reference
+//! configuration; held vertices, and surface vertices on a crease or corner, do not move. A
+//! surface vertex moves within its tangent plane, and every reference-configuration step is
+//! made volume-conserving (see `volume_conserving`), so that the rest volume and the masses
+//! stay exact on curved surfaces too.
+//!
+//! Within a stroke, vertices of the cut made by earlier steps ([`super::StrokeSides`]) that
+//! drifted off the plane by less than [`near_fraction`] of their shortest edge count as on it,
+//! so that the opening wound is not cut again.
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::CutPolygon;
-use crate::mesh::{NONE, TET_EDGES, TET_FACES, TetMesh, tet_signed_volume, triangle_normal};
+use crate::mesh::{NONE, TET_EDGES, TET_FACES, TetMesh, tet_signed_volume, tet_volume_gradients, triangle_normal};
 use crate::{Point3, Vector3};
 
 /// A moved vertex keeps every tetrahedron around it at no less than this fraction of its
@@ -25,6 +38,16 @@ pub const MIN_VOLUME_KEPT: f64 = 0.1;
 
 /// Split points stay at least this fraction of their edge away from its ends.
 pub const MIN_EDGE_FRACTION: f64 = 0.05;
+
+/// A vertex of the stroke's cut within this fraction of its shortest edge of the plane
+/// counts as on it (at least [`MIN_EDGE_FRACTION`], else the snapping fraction).
+pub fn near_fraction(snap: f64) -> f64 {
+    snap.max(MIN_EDGE_FRACTION)
+}
+
+/// An edge crossing the plane outside C but within this fraction of its length of C is split
+/// (the cut reaches a little past B) instead of moving a vertex.
+pub const FORCE_REACH: f64 = 0.5;
 
 /// A plane-crossing edge.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,6 +83,8 @@ pub struct Resolver<'a> {
     pub snap: f64,
     /// Distance tolerance for "inside C".
     pub inside_tolerance: f64,
+    /// Sides known from earlier steps of the stroke ([`super::StrokeSides`]).
+    pub sides: &'a super::StrokeSides,
 }
 
 impl Resolver<'_> {
@@ -108,6 +133,28 @@ impl Resolver<'_> {
         c
     }
 
+    /// True when the crossing point of `cr` lies within [`FORCE_REACH`] of its edge's length
+    /// of C.
+    fn within_reach(&self, cr: &Crossing) -> bool {
+        let [a, b] = cr.edge.map(|v| self.x[v as usize]);
+        let p = a + (b - a) * cr.t;
+        self.plane.contains_projection(&p, FORCE_REACH * (b - a).norm())
+    }
+
+    /// Length of the shortest edge at `v` in the current configuration.
+    fn shortest_edge(&self, v: u32) -> f64 {
+        let topo = self.mesh.topology();
+        let mut shortest = f64::INFINITY;
+        for &t in topo.vertex_tets.row(v as usize) {
+            for &w in &self.mesh.tets()[t as usize] {
+                if w != v {
+                    shortest = shortest.min((self.x[w as usize] - self.x[v as usize]).norm());
+                }
+            }
+        }
+        shortest
+    }
+
     /// Where `v` would move: onto the plane by the mean of its intersecting edge vectors
     /// (tangentially for a vertex on a nearly flat surface). None when it may not move.
     fn movement(&self, v: u32, c: &Classification) -> Option<(Vector3, Vector3)> {
@@ -131,12 +178,9 @@ impl Resolver<'_> {
             return None;
         }
         let (mut dx, mut dref) = (dx / k, dref / k);
-
-
-        if let Some((n_s, n_ref)) = self.surface_normal(v, self.x)?.zip(self.surface_normal(v, self.x_ref)?) {
-            // stay on the (flat) surface: move within its tangent plane onto C's plane; in the
-            // reference configuration, within the reference tangent plane (so a flat surface
-            // keeps the rest volume exactly)
+        if let Some(n_s) = self.surface_normal(v)? {
+            // stay on the (nearly flat) surface: move within its tangent plane onto C's plane,
+            // and by the same step in the reference configuration (made volume-conserving)
             let n_c = self.plane.normal;
             let dir = n_c - n_s * n_c.dot(&n_s);
             let along = dir.dot(&n_c);
@@ -145,9 +189,9 @@ impl Resolver<'_> {
             }
             let s = self.plane.signed_distance(&self.x[v as usize]);
             dx = dir * (-s / along);
-            dref = dx - n_ref * n_ref.dot(&dx);
+            dref = dx;
         }
-        Some((dx, dref))
+        Some((dx, self.volume_conserving(v, dref)))
     }
 
     /// Moves `v` away from the plane, along the plane normal (within the surface's tangent
@@ -174,9 +218,9 @@ impl Resolver<'_> {
             return None;
         }
         let target = need * s_v.signum();
-        let dir = match self.surface_normal(v, self.x)?.zip(self.surface_normal(v, self.x_ref)?) {
+        let dir = match self.surface_normal(v)? {
             None => self.plane.normal,
-            Some((n_s, _)) => {
+            Some(n_s) => {
                 let d = self.plane.normal - n_s * self.plane.normal.dot(&n_s);
                 let along = d.dot(&self.plane.normal);
                 if along < 0.1 {
@@ -186,16 +230,50 @@ impl Resolver<'_> {
             }
         };
         let dx = dir * (target - s_v);
-        let dref = match self.surface_normal(v, self.x_ref)? {
-            Some(n_ref) => dx - n_ref * n_ref.dot(&dx),
-            None => dx,
-        };
-        Some((dx, dref))
+        Some((dx, self.volume_conserving(v, dx)))
+    }
+
+    /// The reference-configuration step `d` of `v`, made to keep the rest volume of every
+    /// region around `v`. A region's volume is linear in one vertex,
+    /// `V_r(x_v + d) = V_r(x_v) + g_r . d` with `g_r = sum_(t in r) dV_t / dx_v`, so `d` loses
+    /// its components along the `g_r` (orthonormalised). For an interior vertex of one region
+    /// `g_r = 0` and `d` is unchanged; on a flat surface `g_r` is the surface normal, so the
+    /// vertex slides within the surface; on a curved one it slides across it by the second-order
+    /// amount that keeps the volume. Region volumes kept, the masses `m = rho V / 4` sum to the
+    /// same total whatever the densities.
+    fn volume_conserving(&self, v: u32, d: Vector3) -> Vector3 {
+        let topo = self.mesh.topology();
+        let regions = self.mesh.regions();
+        // (region, gradient, sum of the gradients' norms as the scale of round-off)
+        let mut gradients: Vec<(u32, Vector3, f64)> = Vec::new();
+        for &t in topo.vertex_tets.row(v as usize) {
+            let tet = self.mesh.tets()[t as usize];
+            let Some(l) = tet.iter().position(|&w| w == v) else { continue };
+            let g = tet_volume_gradients(&tet.map(|w| self.x_ref[w as usize]))[l];
+            let r = regions[t as usize];
+            match gradients.iter_mut().find(|e| e.0 == r) {
+                Some(e) => {
+                    e.1 += g;
+                    e.2 += g.norm();
+                }
+                None => gradients.push((r, g, g.norm())),
+            }
+        }
+        let mut basis: Vec<Vector3> = Vec::with_capacity(3);
+        for (_, g, scale) in gradients {
+            let u = basis.iter().fold(g, |u, b| u - b * b.dot(&u));
+            let norm = u.norm();
+            if norm > 1e-9 * scale {
+                basis.push(u / norm);
+            }
+        }
+        basis.iter().fold(d, |d, b| d - b * b.dot(&d))
     }
 
     /// Outward normal of the surface at `v` in configuration `x`: `Some(None)` for an interior
     /// vertex, `Some(Some(n))` on a nearly flat surface, `None` on a crease or corner.
-    fn surface_normal(&self, v: u32, x: &[Point3]) -> Option<Option<Vector3>> {
+    fn surface_normal(&self, v: u32) -> Option<Option<Vector3>> {
+        let x = &*self.x;
         let topo = self.mesh.topology();
         let mut normals = Vec::new();
         for &t in topo.vertex_tets.row(v as usize) {
@@ -216,10 +294,8 @@ impl Resolver<'_> {
             return Some(None);
         }
         let mean = normals.iter().sum::<Vector3>().normalize();
-        // Nearly flat in the current configuration; exactly flat in the reference one, so that
-        // a move within the tangent plane keeps the rest volume (and mass) exactly.
-        let flat = if std::ptr::eq(x, &*self.x_ref) { 1.0 - 1e-12 } else { 0.98 };
-        if normals.iter().all(|n| n.dot(&mean) > flat) { Some(Some(mean)) } else { None }
+        // nearly flat: a crease or corner keeps its shape
+        if normals.iter().all(|n| n.dot(&mean) > 0.98) { Some(Some(mean)) } else { None }
     }
 
     /// True when moving `v` by (dx, dref) keeps every tetrahedron around it healthy.
@@ -257,7 +333,19 @@ impl Resolver<'_> {
     /// Classifies, then moves vertices and forces splits until every candidate tetrahedron
     /// is either fully cut or not cut.
     pub fn resolve(&mut self) -> Classification {
-        let mut on_plane = BTreeSet::new();
+        // Vertices of this stroke's cut that drifted a little off the plane (as the wound opens)
+        // count as on it, so that the open wound is not cut again.
+        let mut on_plane: BTreeSet<u32> = BTreeSet::new();
+        for &t in self.candidates {
+            for &v in &self.mesh.tets()[t as usize] {
+                if self.sides.get(v).is_some()
+                    && !on_plane.contains(&v)
+                    && self.plane.signed_distance(&self.x[v as usize]).abs() <= near_fraction(self.snap) * self.shortest_edge(v)
+                {
+                    on_plane.insert(v);
+                }
+            }
+        }
         let mut forced = BTreeSet::new();
         let mut moved = Vec::new();
         let mut pushed = BTreeSet::new();
@@ -311,6 +399,16 @@ impl Resolver<'_> {
                 }
                 let free = |w: u32, touched: &BTreeSet<u32>| topo.vertex_tets.row(w as usize).iter().all(|t| !touched.contains(t));
                 if edge.is_some_and(|e| !free(e[0], &touched) || !free(e[1], &touched)) || !free(v, &touched) {
+                    continue;
+                }
+                if let Some(e) = edge.filter(|e| self.within_reach(&c.crossings[e])) {
+                    // the crossing lies just past B: split it (the cut reaches a little
+                    // further) rather than pull a vertex across half an element
+                    if forced.insert(e) {
+                        touched.extend(topo.vertex_tets.row(e[0] as usize));
+                        touched.extend(topo.vertex_tets.row(e[1] as usize));
+                        changed = true;
+                    }
                     continue;
                 }
                 if self.apply(v, self.movement(v, &c), &mut moved) {

@@ -9,6 +9,18 @@ pub fn tet_signed_volume(a: &Point3, b: &Point3, c: &Point3, d: &Point3) -> f64 
     (b - a).cross(&(c - a)).dot(&(d - a)) / 6.0
 }
 
+/// Gradients of [`tet_signed_volume`] with respect to each corner: `V` is linear in each
+/// corner, `V(p_l + d) = V + g_l . d` exactly, with `g_3 = (b - a) x (c - a) / 6`,
+/// `g_2 = (d - a) x (b - a) / 6`, `g_1 = (c - a) x (d - a) / 6` and `g_0 = -(g_1 + g_2 + g_3)`.
+#[inline]
+pub fn tet_volume_gradients(p: &[Point3; 4]) -> [Vector3; 4] {
+    let [a, b, c, d] = p;
+    let g3 = (b - a).cross(&(c - a)) / 6.0;
+    let g2 = (d - a).cross(&(b - a)) / 6.0;
+    let g1 = (c - a).cross(&(d - a)) / 6.0;
+    [-(g1 + g2 + g3), g1, g2, g3]
+}
+
 /// Right-hand normal `(b - a) x (c - a)` of a triangle (length = twice its area).
 #[inline]
 pub fn triangle_normal(a: &Point3, b: &Point3, c: &Point3) -> Vector3 {

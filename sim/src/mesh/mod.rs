@@ -7,7 +7,7 @@ mod topology;
 mod validate;
 
 pub use quality::tet_mu;
-pub use geometry::{dihedral_angles, tet_signed_volume, triangle_normal};
+pub use geometry::{dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal};
 pub use quality::QualityStats;
 pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};
 pub use validate::ValidationReport;
