@@ -161,6 +161,23 @@ impl ServoReport {
     }
 }
 
+/// Waiting without burning a shared core: spin briefly, then yield, then sleep in short naps.
+#[derive(Debug, Default)]
+pub struct Backoff(u32);
+
+impl Backoff {
+    pub fn wait(&mut self) {
+        self.0 = self.0.saturating_add(1);
+        if self.0 < 64 {
+            std::hint::spin_loop();
+        } else if self.0 < 128 {
+            std::thread::yield_now();
+        } else {
+            std::thread::sleep(Duration::from_micros(20));
+        }
+    }
+}
+
 /// Sleeps until `spin` before `deadline`, then spins to it.
 fn wait_until(deadline: Instant, spin: Duration) {
     loop {
@@ -231,11 +248,12 @@ pub fn spawn<D: HapticDevice + 'static>(
                 }
                 Clock::Virtual => {
                     let needed = tick / tps * tps;
+                    let mut backoff = Backoff::default();
                     while links.sim_ticks_done.load(Ordering::Acquire) < needed {
                         if links.abort.load(Ordering::Acquire) {
                             break;
                         }
-                        std::thread::yield_now();
+                        backoff.wait();
                     }
                 }
             }

@@ -119,8 +119,14 @@ impl Session {
     pub fn new(scene: &Scene) -> Result<Self, HapticsError> {
         let mut sim = scene.simulation();
         let report = sim.settle(StaticSettings::default());
+        if !report.residual_newtons.is_finite() {
+            return Err(HapticsError::Simulation(format!("settling the scene failed: {report:?}")));
+        }
         if !report.converged {
-            return Err(HapticsError::Simulation(format!("settling the scene did not converge: {report:?}")));
+            tracing::warn!(
+                "settling stopped after {} Newton iterations at a residual of {:.1e} N (tolerance {:.1e} N); starting from there",
+                report.newton_iterations, report.residual_newtons, report.tolerance_newtons
+            );
         }
         let collider = SurfaceCollider::build(&sim)?;
         Ok(Self { sim, collider })
@@ -332,6 +338,7 @@ impl SimWorker {
 
     /// The sample for a step whose last tick is `target` (None: the servo loop has ended).
     fn next_sample(&mut self, target: u64, latest: &mut Option<ServoSample>) -> Option<ServoSample> {
+        let mut backoff = servo::Backoff::default();
         loop {
             while let Ok(s) = self.samples.pop() {
                 *latest = Some(s);
@@ -346,7 +353,7 @@ impl SimWorker {
             }
             self.log_events();
             match self.clock {
-                Clock::Virtual => std::thread::yield_now(),
+                Clock::Virtual => backoff.wait(),
                 Clock::Live => std::thread::sleep(Duration::from_micros(50)),
             }
         }
