@@ -10,7 +10,7 @@
 //! Simulation step `n` consumes the sample of tick `(n + 1) * ticks_per_step - 1`: with the
 //! virtual clock exactly that one (lock-step, so a run is reproducible bit for bit); with the
 //! live clock the newest available (a simulation that fell behind skips ahead instead of
-//! lagging further). Which tick each step consumed is recorded (`tick_of_step`), so a replay
+//! lagging further, and then runs fewer steps than the session has ticks). Which tick each step consumed is recorded (`tick_of_step`), so a replay
 //! can feed the same inputs. The step applies the tool's reaction force to the tissue, cuts
 //! when the renderer says the blade is in the tissue, advances the simulation, refits the
 //! surface BVH (rebuilt after a cut) and publishes the contact model around the proxy.
@@ -369,7 +369,13 @@ impl SimWorker {
         let mut last_hit: Option<SurfaceHit> = None;
         let mut last_cut_tip: Option<Point3> = None;
         for n in 0..steps as u64 {
-            let target = (n + 1) * self.ticks_per_step - 1;
+            // The step's own tick; once a lagging live simulation skipped ahead, the tick
+            // after the last one consumed (never the same tick twice).
+            let own = (n + 1) * self.ticks_per_step - 1;
+            let target = match out_ticks.last() {
+                Some(&last) => own.max(last + self.ticks_per_step),
+                None => own,
+            };
             let Some(sample) = self.next_sample(target, &mut latest) else { break };
             let began = Instant::now();
             let render = sample.render;
