@@ -42,3 +42,48 @@ fn virtual_clock_session_cuts_and_is_reproducible_bit_for_bit() {
     let c = run(2);
     assert_ne!(a.servo.force_hash, c.servo.force_hash, "another seed, another hand");
 }
+
+/// A trainee whose device fails for a while: NaN poses, then a lost connection.
+#[derive(Debug)]
+struct Faulty {
+    inner: Box<dyn HapticDevice>,
+    nan: std::ops::Range<u64>,
+    lost: std::ops::Range<u64>,
+}
+
+impl HapticDevice for Faulty {
+    fn name(&self) -> &str {
+        "faulty"
+    }
+    fn read(&mut self, tick: u64, time_s: f64) -> Result<cutlab_haptics::ToolPose, cutlab_haptics::DeviceFault> {
+        let mut pose = self.inner.read(tick, time_s)?;
+        if self.lost.contains(&tick) {
+            return Err(cutlab_haptics::DeviceFault::Disconnected);
+        }
+        if self.nan.contains(&tick) {
+            pose.tip_in_world.x = f64::NAN;
+        }
+        Ok(pose)
+    }
+    fn write_force(&mut self, f: cutlab_haptics::Vector3) -> Result<(), cutlab_haptics::DeviceFault> {
+        self.inner.write_force(f)
+    }
+}
+
+#[test]
+fn nan_poses_and_a_lost_device_fade_the_force_and_the_session_survives() {
+    let scene = block();
+    let session = Session::new(&scene).expect("session");
+    // the expert presses on the surface from about tick 1000 and cuts from about 1600
+    let device = Box::new(Faulty { inner: trainee(&session, "expert", 1), nan: 1200..1300, lost: 1400..1450 });
+    let config = SessionConfig { clock: Clock::Virtual, duration_s: 1.55, ..SessionConfig::default() };
+    let r = session.run(device, &config).expect("run");
+    assert_eq!(r.servo.ticks, 1550);
+    assert_eq!(r.sim_steps, 1550);
+    assert_eq!(r.servo.non_finite_count, 100, "every NaN pose counted");
+    assert_eq!(r.servo.fault_ticks, 150);
+    // 5 ticks to fade out in each window, then zero force
+    assert_eq!(r.servo.faded_ticks, (100 - 4) + (50 - 4));
+    assert!(r.servo.max_force_newtons > 0.2 && r.servo.max_force_newtons <= 3.3);
+    assert_eq!(r.rejected_steps, 0, "no NaN reached the simulation");
+}
