@@ -214,6 +214,12 @@ pub fn spawn<D: HapticDevice + 'static>(
 ) -> std::io::Result<std::thread::JoinHandle<(ServoReport, D)>> {
     std::thread::Builder::new().name("cutlab-servo".into()).spawn(move || {
         let realtime_priority = (config.clock == Clock::Live && config.realtime_priority).then(try_realtime);
+        // Logged before the first tick (logging may allocate or lock; the loop never logs).
+        match &realtime_priority {
+            Some(Ok(())) => tracing::info!("servo thread: real-time priority (SCHED_FIFO) granted"),
+            Some(Err(e)) => tracing::warn!("servo thread: real-time priority not permitted ({e}); running at normal priority"),
+            None => {}
+        }
         let n = config.ticks as usize;
         let mut report = ServoReport {
             ticks: 0,

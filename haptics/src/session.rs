@@ -257,11 +257,6 @@ impl Session {
         let (servo, _device) = servo_result.map_err(|_| HapticsError::Panicked("cutlab-servo"))?;
         let outcome = sim_result.map_err(|_| HapticsError::Panicked("cutlab-sim"))?;
         let wall_s = started.elapsed().as_secs_f64();
-        match &servo.realtime_priority {
-            Some(Ok(())) => tracing::info!("servo thread ran at real-time priority (SCHED_FIFO)"),
-            Some(Err(e)) => tracing::warn!("real-time priority not permitted ({e}); the servo thread ran at normal priority"),
-            None => {}
-        }
         Ok(SessionReport {
             period_nanos: config.period_nanos,
             sim_steps: outcome.tick_of_step.len() as u64,
@@ -436,7 +431,10 @@ impl SimWorker {
 
             if let Err(e) = self.sim.step() {
                 rejected += 1;
-                tracing::warn!("simulation step at tick {} rejected: {e}", sample.tick);
+                // the first, then every hundredth: a diverging model would flood the log
+                if rejected % 100 == 1 {
+                    tracing::warn!("simulation step at tick {} rejected ({rejected} so far): {e}", sample.tick);
+                }
             }
             self.collider.refit(&self.sim.state.positions);
             let (model, hit) = self.collider.contact_model(&self.sim, &render.proxy, self.reach_m, sample.tick);
