@@ -101,7 +101,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     println!("  servo work per tick: mean {:.1} us, max {:.1} us", p.mean_work_us, p.max_work_us);
     let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
     let s = Summary::of(&steps_us);
-    println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us", s.median, s.p99, s.max);
+    println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.cg_iterations as f64 / r.sim_steps.max(1) as f64);
     println!("  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
 
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
@@ -117,7 +117,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,
         "period_us": { "mean": p.mean_us, "p50": p.p50_us, "p99": p.p99_us, "p99_deviation": p.p99_deviation_us,
                        "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },
-        "sim_step_us": s, "speed": r.speed(), "wall_s": r.wall_s,
+        "sim_step_us": s, "cg_iterations_per_step": r.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
         "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
     });
     write_json(&o.out.join("summary.json"), &summary)?;

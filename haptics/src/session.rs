@@ -91,6 +91,8 @@ pub struct SessionReport {
     pub failed_cuts: u64,
     /// Steps the simulation rejected (non-finite state).
     pub rejected_steps: u64,
+    /// Conjugate-gradient iterations of the implicit solver over all steps.
+    pub cg_iterations: u64,
     pub collider_rebuilds: u64,
     pub surface_triangles: usize,
     /// The simulation at the end.
@@ -268,6 +270,7 @@ impl Session {
             unresolved_cuts: outcome.unresolved_cuts,
             failed_cuts: outcome.failed_cuts,
             rejected_steps: outcome.rejected_steps,
+            cg_iterations: outcome.cg_iterations,
             collider_rebuilds: outcome.collider.rebuilds,
             surface_triangles: outcome.collider.triangle_count(),
             state_hash: outcome.sim.state.bit_hash(),
@@ -315,6 +318,7 @@ struct SimOutcome {
     unresolved_cuts: u64,
     failed_cuts: u64,
     rejected_steps: u64,
+    cg_iterations: u64,
 }
 
 impl SimWorker {
@@ -360,6 +364,7 @@ impl SimWorker {
         let mut out_nanos = Vec::with_capacity(steps);
         let (mut cut_steps, mut tets_split, mut unresolved, mut failed, mut rejected) = (0, 0, 0, 0, 0);
         let mut cut_length = 0.0;
+        let mut cg_iterations = 0u64;
         let mut latest = None;
         let mut last_hit: Option<SurfaceHit> = None;
         let mut last_cut_tip: Option<Point3> = None;
@@ -429,7 +434,11 @@ impl SimWorker {
                 last_cut_tip = None;
             }
 
-            if let Err(e) = self.sim.step() {
+            let stepped = self.sim.step();
+            if let Ok(report) = &stepped {
+                cg_iterations += report.cg_iterations as u64;
+            }
+            if let Err(e) = stepped {
                 rejected += 1;
                 // the first, then every hundredth: a diverging model would flood the log
                 if rejected % 100 == 1 {
@@ -464,6 +473,7 @@ impl SimWorker {
             unresolved_cuts: unresolved,
             failed_cuts: failed,
             rejected_steps: rejected,
+            cg_iterations,
         }
     }
 }
