@@ -101,3 +101,29 @@ fn session_reports_a_port_in_use() {
     assert!(!ok);
     assert!(err.contains(&format!("cannot listen on port {port}")), "{err}");
 }
+
+#[test]
+fn session_plays_a_csv_trajectory() {
+    let dir = std::env::temp_dir().join(format!("cutlab-session-csv-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let csv = dir.join("stroke.csv");
+    // down onto the top of the chest wall (z = 0 at x = 0), press 4 mm in, slide 10 mm
+    std::fs::write(
+        &csv,
+        "# a short stroke\nt_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n0.0, 0, 0, 0.02, 1, 0, 0, 0, 0\n0.5, 0, 0, -0.004, 1, 0, 0, 0, 1\n1.0, 0.01, 0, -0.004, 1, 0, 0, 0, 1\n",
+    )
+    .expect("csv");
+    let device = format!("csv:{}", csv.display());
+    let out = dir.join("out");
+    let (ok, stdout, err) = cutlab(&["session", "--scene", "chest-wall", "--min-tets", "1500", "--device", &device, "--duration", "1.2", "--out", out.to_str().expect("utf8")]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("ticks 1200, sim steps 1200"), "{stdout}");
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary")).expect("json");
+    assert!(summary["max_force_newtons"].as_f64().expect("force") > 0.05, "the stroke pressed on the wall: {summary}");
+    // a malformed trajectory is a clear error
+    std::fs::write(&csv, "t_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n0.0, 0, 0, oops, 1, 0, 0, 0, 0\n").expect("csv");
+    let (ok, _, err) = cutlab(&["session", "--device", &device, "--duration", "1"]);
+    assert!(!ok);
+    assert!(err.contains("stroke.csv:2: column 4 (z_m): `oops` is not a number"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

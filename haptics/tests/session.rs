@@ -87,3 +87,18 @@ fn nan_poses_and_a_lost_device_fade_the_force_and_the_session_survives() {
     assert!(r.servo.max_force_newtons > 0.2 && r.servo.max_force_newtons <= 3.3);
     assert_eq!(r.rejected_steps, 0, "no NaN reached the simulation");
 }
+
+#[test]
+fn live_clock_ticks_at_one_kilohertz() {
+    let scene = block();
+    let session = Session::new(&scene).expect("session");
+    let device = trainee(&session, "expert", 1);
+    let config = SessionConfig { clock: Clock::Live, duration_s: 0.5, realtime_priority: false, ..SessionConfig::default() };
+    let r = session.run(device, &config).expect("run");
+    let p = r.servo.period_stats(r.period_nanos);
+    println!("live 0.5 s: {p:?}; {} sim steps", r.sim_steps);
+    assert_eq!(r.servo.ticks, 500);
+    assert!(r.wall_s >= 0.499, "real time: {} s", r.wall_s);
+    assert!((p.mean_us - 1000.0).abs() < 20.0, "{p:?}");
+    assert!(r.sim_steps > 0 && r.tick_of_step.windows(2).all(|w| w[1] > w[0]), "each step a newer tick");
+}
