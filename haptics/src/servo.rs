@@ -161,6 +161,19 @@ impl ServoReport {
     }
 }
 
+/// A buffer of `n` zeros whose memory has been written once, so the servo loop's first write
+/// to each page does not page-fault (a fault takes the process's memory-map lock, which a
+/// simulation thread busy allocating can hold for milliseconds).
+fn prefaulted<T: Copy + Default>(n: usize) -> Vec<T> {
+    let mut v = Vec::with_capacity(n);
+    v.resize(n, T::default());
+    for x in v.iter_mut() {
+        // written element by element: a zeroed allocation may map untouched zero pages
+        *x = std::hint::black_box(T::default());
+    }
+    v
+}
+
 /// Waiting without burning a shared core: spin briefly, then yield, then sleep in short naps.
 #[derive(Debug, Default)]
 pub struct Backoff(u32);
@@ -224,8 +237,8 @@ pub fn spawn<D: HapticDevice + 'static>(
         let mut report = ServoReport {
             ticks: 0,
             clock: config.clock,
-            tick_start_nanos: Vec::with_capacity(n),
-            tick_work_nanos: Vec::with_capacity(n),
+            tick_start_nanos: prefaulted(n),
+            tick_work_nanos: prefaulted(n),
             wall_nanos: 0,
             realtime_priority,
             max_force_newtons: 0.0,
@@ -264,7 +277,7 @@ pub fn spawn<D: HapticDevice + 'static>(
                 }
             }
             let began = Instant::now();
-            report.tick_start_nanos.push((began - start).as_nanos() as u64);
+            report.tick_start_nanos[tick as usize] = (began - start).as_nanos() as u64;
             let time_s = tick as f64 * config.period_nanos as f64 * 1e-9;
             let contact = *links.contact.read();
             let read = device.read(tick, time_s);
@@ -310,10 +323,13 @@ pub fn spawn<D: HapticDevice + 'static>(
             if links.samples.push(sample).is_err() {
                 report.dropped_samples += 1;
             }
-            report.tick_work_nanos.push(began.elapsed().as_nanos().min(u32::MAX as u128) as u32);
+            report.tick_work_nanos[tick as usize] = began.elapsed().as_nanos().min(u32::MAX as u128) as u32;
             report.ticks = tick + 1;
         }
         report.wall_nanos = start.elapsed().as_nanos() as u64;
+        let done = report.ticks as usize;
+        report.tick_start_nanos.truncate(done);
+        report.tick_work_nanos.truncate(done);
         report.non_finite_count = renderer.non_finite_count;
         let _ = device.write_force(Vector3::zeros());
         (report, device)

@@ -195,7 +195,10 @@ impl Session {
         let ticks = (config.duration_s * 1e9 / config.period_nanos as f64).round() as u64;
 
         let (contact_in, contact_out) = triple_buffer::triple_buffer(&ContactModel::default());
-        let (samples_in, samples_out) = rtrb::RingBuffer::new(config.queue_capacity);
+        let (mut samples_in, mut samples_out) = rtrb::RingBuffer::new(config.queue_capacity);
+        // Touch every slot of the queue once now, so the servo loop never page-faults on it.
+        while samples_in.push(ServoSample::default()).is_ok() {}
+        while samples_out.pop().is_ok() {}
         let (events_in, events_out) = rtrb::RingBuffer::new(1024);
         let sim_ticks_done = Arc::new(AtomicU64::new(0));
         let abort = Arc::new(AtomicBool::new(false));
