@@ -102,3 +102,50 @@ fn live_clock_ticks_at_one_kilohertz() {
     assert!((p.mean_us - 1000.0).abs() < 20.0, "{p:?}");
     assert!(r.sim_steps > 0 && r.tick_of_step.windows(2).all(|w| w[1] > w[0]), "each step a newer tick");
 }
+
+#[test]
+fn a_live_session_survives_an_openigtlink_client_reconnecting() {
+    use std::io::{Read, Write};
+    use cutlab_haptics::device::IgtlDevice;
+    use cutlab_haptics::device::igtl::{HEADER_BYTES, Header, POINT_ELEMENT_BYTES};
+
+    let scene = block();
+    let session = Session::new(&scene).expect("session");
+    let device = IgtlDevice::listen_on("127.0.0.1:0".parse().expect("address")).expect("listen");
+    let address = device.address();
+    let config = SessionConfig { clock: Clock::Live, duration_s: 1.5, realtime_priority: false, ..SessionConfig::default() };
+    let run = std::thread::spawn(move || session.run(Box::new(device), &config));
+
+    // a tracker above the block: 300 ms of poses, gone for 250 ms, back for 300 ms
+    let stream_poses = |ms: u64| {
+        let mut s = std::net::TcpStream::connect(address).expect("connect");
+        let t = std::time::Instant::now();
+        let mut replies = 0;
+        while t.elapsed() < std::time::Duration::from_millis(ms) {
+            let mut body = Vec::new();
+            for v in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 30.0, 20.0, 60.0] {
+                body.extend_from_slice(&v.to_be_bytes());
+            }
+            let mut packet = Vec::new();
+            Header::write("TRANSFORM", "Tool", 0, &body, &mut packet);
+            packet.extend_from_slice(&body);
+            s.write_all(&packet).expect("send");
+            let mut reply = [0u8; HEADER_BYTES + POINT_ELEMENT_BYTES];
+            s.read_exact(&mut reply).expect("force reply");
+            replies += 1;
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        replies
+    };
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    let first = stream_poses(300);
+    std::thread::sleep(std::time::Duration::from_millis(250));
+    let second = stream_poses(300);
+    let r = run.join().expect("session thread").expect("session");
+    assert!(first > 20 && second > 20, "{first} {second} force replies");
+    assert_eq!(r.servo.ticks, 1500);
+    assert_eq!(r.servo.non_finite_count, 0);
+    // faults: before the first connection, during the gap and after the end; not while connected
+    assert!(r.servo.fault_ticks >= 200 && r.servo.fault_ticks <= 1500 - 300, "{} fault ticks", r.servo.fault_ticks);
+    assert!(r.sim_steps > 0);
+}
