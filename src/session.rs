@@ -1,6 +1,6 @@
 //! `cutlab session`: one training session: a device drives the scalpel through the 1 kHz
 //! servo loop while the simulation runs at its fixed step; prints a summary and writes the
-//! final tissue (and `summary.json`).
+//! final tissue, `summary.json` and `steps.csv` (the servo tick each simulation step consumed).
 
 use std::path::{Path, PathBuf};
 
@@ -121,7 +121,15 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
     });
     write_json(&o.out.join("summary.json"), &summary)?;
-    println!("wrote {} and summary.json", path.display());
+    // which servo tick each simulation step consumed (what a replay feeds back)
+    let mut steps = String::with_capacity(16 * r.tick_of_step.len() + 16);
+    steps.push_str("step,tick\n");
+    for (n, t) in r.tick_of_step.iter().enumerate() {
+        steps.push_str(&format!("{n},{t}\n"));
+    }
+    let steps_path = o.out.join("steps.csv");
+    std::fs::write(&steps_path, steps).with_context(|| format!("writing {}", steps_path.display()))?;
+    println!("wrote {}, summary.json and steps.csv", path.display());
     Ok(())
 }
 

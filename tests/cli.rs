@@ -65,6 +65,9 @@ fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result()
     assert!(max_force > 0.1 && max_force <= 3.3, "{max_force}");
     let mesh = cutlab_sim::io::read_mesh(&dir.join("final.vtu")).expect("final.vtu reads back");
     assert!(mesh.tet_count() >= 1500);
+    let steps = std::fs::read_to_string(dir.join("steps.csv")).expect("steps.csv");
+    assert_eq!(steps.lines().count(), 2501);
+    assert_eq!(steps.lines().nth(2500), Some("2499,2499"), "virtual clock: step n consumed tick n");
     // the same seed gives the same session, bit for bit
     let (ok, _, err) = cutlab(&args);
     assert!(ok, "{err}");
