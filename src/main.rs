@@ -3,6 +3,7 @@
 mod bench;
 mod demo;
 mod scene_info;
+mod session;
 mod stats;
 mod stroke;
 
@@ -28,6 +29,35 @@ enum Command {
         /// Resolution of the chest wall: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,
+    },
+    /// Run one training session: a device drives the scalpel through the 1 kHz servo loop
+    /// while the simulation runs; prints a summary and writes DIR/final.vtu.
+    Session {
+        /// A built-in scene (chest-wall, sheet, bar, body-wall) or a scene/mesh file.
+        #[arg(long, default_value = "chest-wall")]
+        scene: String,
+        /// Resolution of a generated mesh: at least this many tetrahedra.
+        #[arg(long)]
+        min_tets: Option<usize>,
+        /// expert | intermediate | novice (synthetic trainee), csv:PATH (trajectory file) or
+        /// igtl:PORT (OpenIGTLink server).
+        #[arg(long, default_value = "expert")]
+        device: session::DeviceArg,
+        /// live (real time) or virtual (as fast as possible, same ticks).
+        #[arg(long, default_value = "virtual", value_parser = parse_clock)]
+        clock: cutlab_haptics::servo::Clock,
+        /// Session length in seconds.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Seed of the synthetic trainee.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Directory for final.vtu and summary.json.
+        #[arg(long, default_value = "out/session")]
+        out: PathBuf,
+        /// Do not ask for real-time priority for the servo thread.
+        #[arg(long)]
+        no_realtime: bool,
     },
     /// Scenes: built-in ones and scene files.
     Scene {
@@ -72,6 +102,10 @@ enum BenchCommand {
     },
 }
 
+fn parse_clock(s: &str) -> Result<cutlab_haptics::servo::Clock, String> {
+    s.parse()
+}
+
 fn main() -> std::process::ExitCode {
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -96,6 +130,16 @@ fn run() -> anyhow::Result<()> {
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
+        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime } => session::run(&session::Options {
+            scene,
+            min_tets,
+            device,
+            clock,
+            duration_s: duration,
+            seed,
+            out,
+            realtime_priority: !no_realtime,
+        }),
         Command::Scene { command: SceneCommand::List } => {
             for (name, _) in cutlab_sim::scene::BUILTIN {
                 let spec = cutlab_sim::scene::builtin_spec(name);

@@ -51,3 +51,82 @@ fn demo_cuts_the_chest_wall_and_writes_the_result() {
     assert!(mesh.tet_count() > 1500);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result() {
+    let dir = std::env::temp_dir().join(format!("cutlab-session-{}", std::process::id()));
+    let args = ["session", "--scene", "chest-wall", "--min-tets", "1500", "--device", "expert", "--clock", "virtual", "--duration", "2.5", "--seed", "3", "--out", dir.to_str().expect("utf8")];
+    let (ok, out, err) = cutlab(&args);
+    assert!(ok, "{err}");
+    assert!(out.contains("ticks 2500, sim steps 2500"), "{out}");
+    assert!(out.contains("non-finite values 0"), "{out}");
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary")).expect("json");
+    let max_force = summary["max_force_newtons"].as_f64().expect("max force");
+    assert!(max_force > 0.1 && max_force <= 3.3, "{max_force}");
+    let mesh = cutlab_sim::io::read_mesh(&dir.join("final.vtu")).expect("final.vtu reads back");
+    assert!(mesh.tet_count() >= 1500);
+    let steps = std::fs::read_to_string(dir.join("steps.csv")).expect("steps.csv");
+    assert_eq!(steps.lines().count(), 2501);
+    assert_eq!(steps.lines().nth(2500), Some("2499,2499"), "virtual clock: step n consumed tick n");
+    // the same seed gives the same session, bit for bit
+    let (ok, _, err) = cutlab(&args);
+    assert!(ok, "{err}");
+    let again: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary")).expect("json");
+    assert_eq!(summary["state_hash"], again["state_hash"]);
+    assert_eq!(summary["force_hash"], again["force_hash"]);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn bad_session_arguments_give_a_clear_error() {
+    let cases: [(&[&str], &str); 6] = [
+        (&["session", "--scene", "no-such-scene", "--duration", "1"], "unknown scene \"no-such-scene\""),
+        (&["session", "--device", "surgeon"], "unknown device \"surgeon\""),
+        (&["session", "--device", "csv:/no/such/file.csv", "--min-tets", "500", "--duration", "0.1"], "/no/such/file.csv"),
+        (&["session", "--device", "igtl:99999"], "port number"),
+        (&["session", "--clock", "sundial"], "unknown clock"),
+        (&["session", "--duration=-1"], "--duration must be"),
+    ];
+    for (args, expected) in cases {
+        let (ok, _, err) = cutlab(args);
+        assert!(!ok, "{args:?}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
+fn session_reports_a_port_in_use() {
+    let listener = std::net::TcpListener::bind("0.0.0.0:0").expect("bind");
+    let port = listener.local_addr().expect("addr").port().to_string();
+    let device = format!("igtl:{port}");
+    let (ok, _, err) = cutlab(&["session", "--scene", "no-such-scene", "--device", &device, "--duration", "0.1", "--out", "/tmp/cutlab-port-test"]);
+    assert!(!ok);
+    assert!(err.contains(&format!("cannot listen on port {port}")), "{err}");
+}
+
+#[test]
+fn session_plays_a_csv_trajectory() {
+    let dir = std::env::temp_dir().join(format!("cutlab-session-csv-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let csv = dir.join("stroke.csv");
+    // down onto the top of the chest wall (z = 0 at x = 0), press 4 mm in, slide 10 mm
+    std::fs::write(
+        &csv,
+        "# a short stroke\nt_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n0.0, 0, 0, 0.02, 1, 0, 0, 0, 0\n0.5, 0, 0, -0.004, 1, 0, 0, 0, 1\n1.0, 0.01, 0, -0.004, 1, 0, 0, 0, 1\n",
+    )
+    .expect("csv");
+    let device = format!("csv:{}", csv.display());
+    let out = dir.join("out");
+    let (ok, stdout, err) = cutlab(&["session", "--scene", "chest-wall", "--min-tets", "1500", "--device", &device, "--duration", "1.2", "--out", out.to_str().expect("utf8")]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("ticks 1200, sim steps 1200"), "{stdout}");
+    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary")).expect("json");
+    assert!(summary["max_force_newtons"].as_f64().expect("force") > 0.05, "the stroke pressed on the wall: {summary}");
+    // a malformed trajectory is a clear error
+    std::fs::write(&csv, "t_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n0.0, 0, 0, oops, 1, 0, 0, 0, 0\n").expect("csv");
+    let (ok, _, err) = cutlab(&["session", "--device", &device, "--duration", "1"]);
+    assert!(!ok);
+    assert!(err.contains("stroke.csv:2: column 4 (z_m): `oops` is not a number"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

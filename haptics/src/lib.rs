@@ -1,4 +1,40 @@
-//! cutlab-haptics: the trainee's hand. Owns real time: the 1 kHz servo loop, devices and
-//! force rendering. Content arrives with issue 4; for now it only fixes its place in the
-//! layering (it may depend on `cutlab-sim` and nothing above it).
+//! cutlab-haptics: the trainee's hand. Owns real time: the 1 kHz servo loop, the devices and
+//! force rendering, and the simulation thread that feeds the servo loop its local contact
+//! model.
+//!
+//! - [`device`]: the [`HapticDevice`] trait and its devices: a plan-following synthetic
+//!   trainee ([`device::SyntheticTrainee`]), a CSV trajectory ([`device::CsvDevice`]) and an
+//!   OpenIGTLink network device ([`device::IgtlDevice`]).
+//! - [`collision`]: the tissue surface as a parry BVH, refitted as it deforms, rebuilt after
+//!   cuts; the local contact model (plane, stiffness) it yields.
+//! - [`render`]: the god-object proxy, spring-damper coupling, cutting resistance, cut
+//!   threshold and the safety layer (clamp, rate limit, fade on faults).
+//! - [`servo`]: the servo thread (1 kHz, sleep-then-spin, live or virtual clock) and its
+//!   period statistics.
+//! - [`session`]: a whole session: servo thread + simulation thread at a fixed step,
+//!   exchanging data through lock-free queues and triple buffers.
+//!
+//! Units: SI inside (metres, newtons, seconds); durations in integer nanoseconds where
+//! named `_nanos`; a tick is one servo period.
+
+pub mod collision;
+pub mod device;
+pub mod error;
+pub mod pose;
+pub mod render;
+pub mod servo;
+pub mod session;
+
 pub use cutlab_sim as sim;
+pub use cutlab_sim::scene;
+pub use device::{DeviceFault, DeviceLimits, HapticDevice};
+pub use error::HapticsError;
+pub use pose::ToolPose;
+pub use session::{Session, SessionConfig, SessionReport};
+
+/// 3-D point in metres.
+pub type Point3 = cutlab_sim::Point3;
+/// 3-D vector (metres, newtons, metres per second by context).
+pub type Vector3 = cutlab_sim::Vector3;
+/// Orientation of the tool in the world.
+pub type Rotation = nalgebra::UnitQuaternion<f64>;

@@ -1,0 +1,227 @@
+//! The tissue surface as seen by the tool: a parry triangle mesh (with its BVH) over the
+//! boundary triangles of the tetrahedral mesh, refitted in place as the tissue deforms and
+//! rebuilt when a cut changes the surface. Queries give the closest surface point to the
+//! proxy and the local contact model (plane and stiffness) the servo loop renders from.
+//!
+//! parry works on glam vectors (`DVec3`); the conversion happens here and nowhere else.
+
+use parry3d_f64::math::Vector as PVec;
+use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::shape::{TriMesh, TriMeshFlags};
+
+use cutlab_sim::solver::Simulation;
+
+use crate::render::ContactModel;
+use crate::{HapticsError, Point3, Vector3};
+
+fn to_parry(p: &Point3) -> PVec {
+    PVec::new(p.x, p.y, p.z)
+}
+
+fn from_parry(v: PVec) -> Vector3 {
+    Vector3::new(v.x, v.y, v.z)
+}
+
+/// The closest surface point to a query point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfaceHit {
+    pub point: Point3,
+    /// Outward unit normal of the triangle hit.
+    pub normal: Vector3,
+    /// Particles (simulation vertex ids) of the triangle and the point's barycentric weights.
+    pub vertices: [u32; 3],
+    pub weights: [f64; 3],
+    pub distance_m: f64,
+}
+
+/// The surface collider.
+#[derive(Debug)]
+pub struct SurfaceCollider {
+    /// Simulation vertex id of each collider vertex.
+    vertex_ids: Vec<u32>,
+    mesh: TriMesh,
+    /// Collider positions, reused by every refit.
+    scratch: Vec<PVec>,
+    /// Springs around each simulation vertex (compressed rows).
+    spring_offsets: Vec<u32>,
+    spring_ids: Vec<u32>,
+    /// Rebuilds so far (one at construction, one per surface-changing cut).
+    pub rebuilds: u64,
+}
+
+impl SurfaceCollider {
+    /// Builds the collider over `sim`'s current surface and positions.
+    pub fn build(sim: &Simulation) -> Result<Self, HapticsError> {
+        let mut me = Self {
+            vertex_ids: Vec::new(),
+            mesh: TriMesh::new(vec![PVec::ZERO; 3], vec![[0, 1, 2]]).map_err(|e| HapticsError::Surface(e.to_string()))?,
+            scratch: Vec::new(),
+            spring_offsets: Vec::new(),
+            spring_ids: Vec::new(),
+            rebuilds: 0,
+        };
+        me.rebuild(sim)?;
+        Ok(me)
+    }
+
+    /// Rebuilds the triangle mesh and its BVH from the simulation's surface (after a cut).
+    pub fn rebuild(&mut self, sim: &Simulation) -> Result<(), HapticsError> {
+        let mesh = &sim.model.mesh;
+        let boundary = &mesh.topology().boundary;
+        if boundary.is_empty() {
+            return Err(HapticsError::Surface("the mesh has no boundary triangles".into()));
+        }
+        let n = mesh.vertex_count();
+        let mut local = vec![u32::MAX; n];
+        self.vertex_ids.clear();
+        let mut triangles = Vec::with_capacity(boundary.len());
+        for tri in boundary {
+            let mut t = [0u32; 3];
+            for (k, &v) in tri.iter().enumerate() {
+                if local[v as usize] == u32::MAX {
+                    local[v as usize] = self.vertex_ids.len() as u32;
+                    self.vertex_ids.push(v);
+                }
+                t[k] = local[v as usize];
+            }
+            triangles.push(t);
+        }
+        let x = &sim.state.positions;
+        let vertices: Vec<PVec> = self.vertex_ids.iter().map(|&v| to_parry(&x[v as usize])).collect();
+        self.scratch.clone_from(&vertices);
+        self.mesh = TriMesh::with_flags(vertices, triangles, TriMeshFlags::DEFORMABLE).map_err(|e| HapticsError::Surface(e.to_string()))?;
+
+        // springs around each vertex, for the local stiffness
+        let springs = &sim.model.springs;
+        let mut counts = vec![0u32; n + 1];
+        for e in &springs.ends {
+            counts[e[0] as usize + 1] += 1;
+            counts[e[1] as usize + 1] += 1;
+        }
+        for i in 0..n {
+            counts[i + 1] += counts[i];
+        }
+        let mut fill = counts.clone();
+        let mut ids = vec![0u32; counts[n] as usize];
+        for (s, e) in springs.ends.iter().enumerate() {
+            for &v in e {
+                ids[fill[v as usize] as usize] = s as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        self.spring_offsets = counts;
+        self.spring_ids = ids;
+        self.rebuilds += 1;
+        Ok(())
+    }
+
+    /// Moves the collider's vertices to the simulation's positions and refits the BVH (no
+    /// allocation once built).
+    pub fn refit(&mut self, positions: &[Point3]) {
+        for (dst, &v) in self.scratch.iter_mut().zip(&self.vertex_ids) {
+            *dst = to_parry(&positions[v as usize]);
+        }
+        self.mesh.set_vertices(&self.scratch);
+    }
+
+    /// The simulation particles on the surface.
+    pub fn vertex_ids(&self) -> &[u32] {
+        &self.vertex_ids
+    }
+
+    /// Number of surface triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.mesh.num_triangles()
+    }
+
+    /// The closest surface point to `p`, if finite.
+    pub fn closest(&self, p: &Point3) -> Option<SurfaceHit> {
+        if !p.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        let (proj, (tri, location)) = self.mesh.project_local_point_and_get_location(to_parry(p), false);
+        let idx = *self.mesh.indices().get(tri as usize)?;
+        let triangle = self.mesh.triangle(tri);
+        let normal = from_parry(triangle.normal()?);
+        let weights = location.barycentric_coordinates().unwrap_or([1.0 / 3.0; 3]);
+        let point = Point3::from(from_parry(proj.point));
+        Some(SurfaceHit {
+            point,
+            normal,
+            vertices: idx.map(|i| self.vertex_ids[i as usize]),
+            weights,
+            distance_m: (point - p).norm(),
+        })
+    }
+
+    /// Local stiffness of the tissue along `normal` at a hit: the springs around the
+    /// triangle's particles projected onto the normal, `sum k (n . e)^2`, weighted
+    /// barycentrically (held particles are rigid: they count as the stiffest neighbour).
+    pub fn stiffness_at(&self, sim: &Simulation, hit: &SurfaceHit) -> f64 {
+        let springs = &sim.model.springs;
+        let x = &sim.state.positions;
+        let mut k = 0.0;
+        for (&v, &w) in hit.vertices.iter().zip(&hit.weights) {
+            let v = v as usize;
+            let Some(range) = self.spring_offsets.get(v..v + 2) else { continue };
+            let mut kv = 0.0;
+            for &s in &self.spring_ids[range[0] as usize..range[1] as usize] {
+                let [a, b] = springs.ends[s as usize];
+                let Some(e) = (x[b as usize] - x[a as usize]).try_normalize(1e-15) else { continue };
+                kv += springs.stiffness[s as usize] * e.dot(&hit.normal).powi(2);
+            }
+            k += w * kv;
+        }
+        k
+    }
+
+    /// The contact model around the closest surface point to `proxy`: valid when the surface
+    /// is within `reach_m`.
+    pub fn contact_model(&self, sim: &Simulation, proxy: &Point3, reach_m: f64, source_tick: u64) -> (ContactModel, Option<SurfaceHit>) {
+        let hit = self.closest(proxy);
+        let model = match &hit {
+            Some(h) if h.distance_m <= reach_m => ContactModel {
+                published: true,
+                source_tick,
+                valid: true,
+                plane_point: h.point,
+                plane_normal: h.normal,
+                stiffness_newtons_per_m: self.stiffness_at(sim, h),
+            },
+            _ => ContactModel { published: true, source_tick, ..ContactModel::default() },
+        };
+        (model, hit)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cutlab_sim::scene::{BuildOptions, Scene};
+
+    #[test]
+    fn closest_point_normal_and_refit_on_the_sheet() {
+        let scene = Scene::load("sheet", BuildOptions { min_tets: Some(600) }).expect("sheet");
+        let mut sim = scene.simulation();
+        let mut c = SurfaceCollider::build(&sim).expect("collider");
+        assert!(c.triangle_count() > 100);
+        // the sheet spans 0..100 mm x 0..100 mm x 0..2 mm
+        let hit = c.closest(&Point3::new(0.05, 0.05, 0.01)).expect("hit");
+        assert!((hit.point.z - 0.002).abs() < 1e-12, "{hit:?}");
+        assert!((hit.normal - Vector3::z()).norm() < 1e-9);
+        assert!((hit.distance_m - 0.008).abs() < 1e-12);
+        assert!((hit.weights.iter().sum::<f64>() - 1.0).abs() < 1e-9);
+        let k = c.stiffness_at(&sim, &hit);
+        assert!(k > 10.0 && k < 5000.0, "{k}");
+        // deform: lift everything 1 mm, refit, the surface follows
+        for p in sim.state.positions.iter_mut() {
+            p.z += 0.001;
+        }
+        c.refit(&sim.state.positions);
+        let hit = c.closest(&Point3::new(0.05, 0.05, 0.01)).expect("hit");
+        assert!((hit.point.z - 0.003).abs() < 1e-12, "{hit:?}");
+        assert!(c.closest(&Point3::new(f64::NAN, 0.0, 0.0)).is_none());
+        let (far, _) = c.contact_model(&sim, &Point3::new(0.05, 0.05, 1.0), 0.05, 7);
+        assert!(far.published && !far.valid && far.source_tick == 7);
+    }
+}

@@ -1,0 +1,594 @@
+//! An OpenIGTLink network device (the protocol of 3D Slicer, PLUS and most image-guided
+//! therapy tools), for real hardware and trackers behind a bridge.
+//!
+//! The device is a TCP server. A client (one at a time; a new one may connect after the last
+//! left, so a session survives a reconnect) sends:
+//! - `TRANSFORM` messages: the tool's pose, `world_from_tool` as the usual OpenIGTLink 3x4
+//!   matrix of float32, translation in **millimetres** (the convention of Slicer and PLUS);
+//! - optionally `STRING` messages with device name `Button` and content `0` or `1`: the blade
+//!   button (OpenIGTLink has no buttons; without this message the blade counts as engaged and
+//!   the cut force threshold alone decides when cutting starts).
+//!
+//! For every `TRANSFORM` received the device answers with the latest rendered force as a
+//! `POINT` message (device name `Force`, one point named `force`, group `haptics`, its
+//! x y z the force in **newtons**, world frame, its diameter the force's magnitude). `POINT`
+//! is read by Slicer (as a markups list), pyigtl, PLUS and the OpenIGTLink C++ library.
+//!
+//! Packets are checked: header version 1 or 2, a printable message type, a body of at most
+//! [`MAX_BODY_BYTES`], the header's CRC-64 (ECMA-182) over the body, the exact body size of a
+//! TRANSFORM, finite numbers and an orthonormal right-handed rotation. A packet that fails a
+//! check is dropped and counted; a header that cannot be trusted (bad version, huge body,
+//! garbage type) closes the connection, since the stream can no longer be framed. Nothing a
+//! client sends can panic the device or block the servo loop: all socket I/O runs on the
+//! device's own thread, which hands poses to the servo loop through a triple buffer.
+
+use std::io::{ErrorKind, Read, Write};
+use std::net::{SocketAddr, TcpListener, TcpStream};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use super::{DeviceFault, HapticDevice};
+use crate::pose::BUTTON_BLADE;
+use crate::{HapticsError, Point3, Rotation, ToolPose, Vector3};
+
+/// Size of the OpenIGTLink header.
+pub const HEADER_BYTES: usize = 58;
+/// Largest body accepted (a TRANSFORM is 48 bytes; room for metadata of version 2).
+pub const MAX_BODY_BYTES: u64 = 64 * 1024;
+/// Body of a version-1 TRANSFORM: 12 float32.
+pub const TRANSFORM_BODY_BYTES: usize = 48;
+/// Body of one POINT element.
+pub const POINT_ELEMENT_BYTES: usize = 136;
+
+/// CRC-64 with the ECMA-182 polynomial, as OpenIGTLink uses it (MSB first, initial value 0,
+/// no final xor).
+pub fn crc64_ecma(bytes: &[u8]) -> u64 {
+    const POLY: u64 = 0x42F0_E1EB_A9EA_3693;
+    const TABLE: [u64; 256] = {
+        let mut table = [0u64; 256];
+        let mut i = 0;
+        while i < 256 {
+            let mut c = (i as u64) << 56;
+            let mut k = 0;
+            while k < 8 {
+                c = if c & (1 << 63) != 0 { (c << 1) ^ POLY } else { c << 1 };
+                k += 1;
+            }
+            table[i] = c;
+            i += 1;
+        }
+        table
+    };
+    bytes.iter().fold(0u64, |crc, &b| TABLE[((crc >> 56) as u8 ^ b) as usize] ^ (crc << 8))
+}
+
+/// A parsed OpenIGTLink header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Header {
+    pub version: u16,
+    pub message_type: [u8; 12],
+    pub device_name: [u8; 20],
+    pub timestamp: u64,
+    pub body_bytes: u64,
+    pub crc: u64,
+}
+
+/// Why a packet was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum PacketError {
+    #[error("unsupported header version {0}")]
+    Version(u16),
+    #[error("message type is not printable ASCII")]
+    MessageType,
+    #[error("body of {0} bytes exceeds the limit")]
+    TooLarge(u64),
+    #[error("CRC mismatch")]
+    Crc,
+    #[error("body of {0} bytes does not fit the message")]
+    Size(usize),
+    #[error("non-finite or non-rigid transform")]
+    Transform,
+}
+
+fn trimmed(field: &[u8]) -> &[u8] {
+    let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
+    &field[..end]
+}
+
+impl Header {
+    /// Parses and checks a header (not yet the CRC: that needs the body).
+    pub fn parse(bytes: &[u8; HEADER_BYTES]) -> Result<Self, PacketError> {
+        let be16 = |i: usize| u16::from_be_bytes([bytes[i], bytes[i + 1]]);
+        let be64 = |i: usize| {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&bytes[i..i + 8]);
+            u64::from_be_bytes(b)
+        };
+        let version = be16(0);
+        if version != 1 && version != 2 {
+            return Err(PacketError::Version(version));
+        }
+        let mut message_type = [0u8; 12];
+        message_type.copy_from_slice(&bytes[2..14]);
+        let t = trimmed(&message_type);
+        if t.is_empty() || !t.iter().all(|b| b.is_ascii_graphic()) || message_type[t.len()..].iter().any(|&b| b != 0) {
+            return Err(PacketError::MessageType);
+        }
+        let mut device_name = [0u8; 20];
+        device_name.copy_from_slice(&bytes[14..34]);
+        let body_bytes = be64(42);
+        if body_bytes > MAX_BODY_BYTES {
+            return Err(PacketError::TooLarge(body_bytes));
+        }
+        Ok(Self { version, message_type, device_name, timestamp: be64(34), body_bytes, crc: be64(50) })
+    }
+
+    pub fn message_type(&self) -> &[u8] {
+        trimmed(&self.message_type)
+    }
+
+    pub fn device_name(&self) -> &[u8] {
+        trimmed(&self.device_name)
+    }
+
+    /// Writes a version-1 header for `body` into `out`.
+    pub fn write(message_type: &str, device_name: &str, timestamp: u64, body: &[u8], out: &mut Vec<u8>) {
+        out.extend_from_slice(&1u16.to_be_bytes());
+        let mut field = [0u8; 12];
+        let n = message_type.len().min(12);
+        field[..n].copy_from_slice(&message_type.as_bytes()[..n]);
+        out.extend_from_slice(&field);
+        let mut field = [0u8; 20];
+        let n = device_name.len().min(20);
+        field[..n].copy_from_slice(&device_name.as_bytes()[..n]);
+        out.extend_from_slice(&field);
+        out.extend_from_slice(&timestamp.to_be_bytes());
+        out.extend_from_slice(&(body.len() as u64).to_be_bytes());
+        out.extend_from_slice(&crc64_ecma(body).to_be_bytes());
+    }
+}
+
+/// The content of a message body, without the version-2 extended header and metadata.
+pub fn content<'a>(header: &Header, body: &'a [u8]) -> Result<&'a [u8], PacketError> {
+    if crc64_ecma(body) != header.crc {
+        return Err(PacketError::Crc);
+    }
+    if header.version == 1 {
+        return Ok(body);
+    }
+    if body.len() < 12 {
+        return Err(PacketError::Size(body.len()));
+    }
+    let ext = u16::from_be_bytes([body[0], body[1]]) as usize;
+    let meta_header = u16::from_be_bytes([body[2], body[3]]) as usize;
+    let meta_body = u32::from_be_bytes([body[4], body[5], body[6], body[7]]) as usize;
+    let end = body.len().checked_sub(meta_header.saturating_add(meta_body)).ok_or(PacketError::Size(body.len()))?;
+    if ext < 12 || ext > end {
+        return Err(PacketError::Size(body.len()));
+    }
+    Ok(&body[ext..end])
+}
+
+/// Decodes a TRANSFORM's content: `world_from_tool`, translation in millimetres.
+pub fn decode_transform(content: &[u8]) -> Result<(Point3, Rotation), PacketError> {
+    if content.len() != TRANSFORM_BODY_BYTES {
+        return Err(PacketError::Size(content.len()));
+    }
+    let mut v = [0.0f64; 12];
+    for (k, x) in v.iter_mut().enumerate() {
+        let b = [content[4 * k], content[4 * k + 1], content[4 * k + 2], content[4 * k + 3]];
+        *x = f32::from_be_bytes(b) as f64;
+    }
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err(PacketError::Transform);
+    }
+    // R11 R21 R31 R12 R22 R32 R13 R23 R33 TX TY TZ: the rotation's columns, then translation.
+    let m = nalgebra::Matrix3::new(v[0], v[3], v[6], v[1], v[4], v[7], v[2], v[5], v[8]);
+    let orthonormal = (m.transpose() * m - nalgebra::Matrix3::identity()).abs().max() < 1e-3;
+    if !orthonormal || m.determinant() < 0.0 {
+        return Err(PacketError::Transform);
+    }
+    let q = Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m));
+    let q = Rotation::new_normalize(q.into_inner());
+    let tip = Point3::new(v[9], v[10], v[11]) * 1e-3;
+    Ok((tip, q))
+}
+
+/// Encodes the force as a POINT message (header + body) into `out`.
+pub fn encode_force(force_newtons: &Vector3, timestamp: u64, out: &mut Vec<u8>) {
+    let mut body = [0u8; POINT_ELEMENT_BYTES];
+    body[..5].copy_from_slice(b"force");
+    body[64..71].copy_from_slice(b"haptics");
+    body[96..100].copy_from_slice(&[255, 0, 0, 255]);
+    for k in 0..3 {
+        body[100 + 4 * k..104 + 4 * k].copy_from_slice(&(force_newtons[k] as f32).to_be_bytes());
+    }
+    body[112..116].copy_from_slice(&(force_newtons.norm() as f32).to_be_bytes());
+    out.clear();
+    Header::write("POINT", "Force", timestamp, &body, out);
+    out.extend_from_slice(&body);
+}
+
+/// OpenIGTLink timestamp of now: seconds since 1970 in the high 32 bits, fraction in the low.
+fn timestamp_now() -> u64 {
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let frac = ((now.subsec_nanos() as u64) << 32) / 1_000_000_000;
+    ((now.as_secs() & 0xffff_ffff) << 32) | frac
+}
+
+/// What the network thread hands the servo loop.
+#[derive(Debug, Clone, Copy, Default)]
+struct Received {
+    pose: ToolPose,
+    /// Nanoseconds since the device's epoch when the pose arrived; 0: never.
+    at_nanos: u64,
+}
+
+/// Counters of the network thread.
+#[derive(Debug, Default)]
+pub struct IgtlCounters {
+    pub connections: AtomicU64,
+    pub transforms: AtomicU64,
+    pub forces_sent: AtomicU64,
+    pub rejected: AtomicU64,
+    pub ignored: AtomicU64,
+}
+
+/// The OpenIGTLink device (see the module documentation).
+#[derive(Debug)]
+pub struct IgtlDevice {
+    name: String,
+    address: SocketAddr,
+    poses: triple_buffer::Output<Received>,
+    forces: triple_buffer::Input<Vector3>,
+    connected: Arc<AtomicBool>,
+    stop: Arc<AtomicBool>,
+    counters: Arc<IgtlCounters>,
+    epoch: Instant,
+    /// A pose older than this is stale.
+    pub stale_after_nanos: u64,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl IgtlDevice {
+    /// Listens on `port` of every interface (port 0: any free port, see [`Self::address`]).
+    pub fn listen(port: u16) -> Result<Self, HapticsError> {
+        Self::listen_on(SocketAddr::from(([0, 0, 0, 0], port)))
+    }
+
+    /// Listens on `address`.
+    pub fn listen_on(address: SocketAddr) -> Result<Self, HapticsError> {
+        let listen_err = |source| HapticsError::Listen { port: address.port(), source };
+        let listener = TcpListener::bind(address).map_err(listen_err)?;
+        listener.set_nonblocking(true).map_err(listen_err)?;
+        let address = listener.local_addr().map_err(listen_err)?;
+        let (pose_in, poses) = triple_buffer::triple_buffer(&Received::default());
+        let (forces, force_out) = triple_buffer::triple_buffer(&Vector3::zeros());
+        let connected = Arc::new(AtomicBool::new(false));
+        let stop = Arc::new(AtomicBool::new(false));
+        let counters = Arc::new(IgtlCounters::default());
+        let epoch = Instant::now();
+        let server = Server {
+            listener,
+            poses: pose_in,
+            forces: force_out,
+            connected: connected.clone(),
+            stop: stop.clone(),
+            counters: counters.clone(),
+            epoch,
+            button: BUTTON_BLADE,
+        };
+        let thread = std::thread::Builder::new()
+            .name("cutlab-igtl".into())
+            .spawn(move || server.run())
+            .map_err(|source| HapticsError::Thread { name: "cutlab-igtl", source })?;
+        Ok(Self {
+            name: format!("igtl:{}", address.port()),
+            address,
+            poses,
+            forces,
+            connected,
+            stop,
+            counters,
+            epoch,
+            stale_after_nanos: 100_000_000,
+            thread: Some(thread),
+        })
+    }
+
+    /// The address the device listens on.
+    pub fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    /// Counters of messages and connections.
+    pub fn counters(&self) -> &IgtlCounters {
+        &self.counters
+    }
+
+    pub fn is_connected(&self) -> bool {
+        self.connected.load(Ordering::Acquire)
+    }
+}
+
+impl Drop for IgtlDevice {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+impl HapticDevice for IgtlDevice {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn read(&mut self, _tick: u64, _time_s: f64) -> Result<ToolPose, DeviceFault> {
+        let r = *self.poses.read();
+        if !self.connected.load(Ordering::Acquire) || r.at_nanos == 0 {
+            return Err(DeviceFault::Disconnected);
+        }
+        let now = self.epoch.elapsed().as_nanos() as u64;
+        let age_nanos = now.saturating_sub(r.at_nanos);
+        if age_nanos > self.stale_after_nanos {
+            return Err(DeviceFault::Stale { age_nanos });
+        }
+        Ok(r.pose)
+    }
+
+    fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
+        self.forces.write(force_newtons);
+        if self.connected.load(Ordering::Acquire) { Ok(()) } else { Err(DeviceFault::Disconnected) }
+    }
+}
+
+/// The network side, on its own thread.
+struct Server {
+    listener: TcpListener,
+    poses: triple_buffer::Input<Received>,
+    forces: triple_buffer::Output<Vector3>,
+    connected: Arc<AtomicBool>,
+    stop: Arc<AtomicBool>,
+    counters: Arc<IgtlCounters>,
+    epoch: Instant,
+    button: u32,
+}
+
+/// How long a client may take to finish a message it started.
+const MESSAGE_TIMEOUT: Duration = Duration::from_secs(2);
+
+enum Fill {
+    Done,
+    /// Nothing arrived (only at a message boundary).
+    Idle,
+    Closed,
+}
+
+impl Server {
+    fn run(mut self) {
+        while !self.stop.load(Ordering::Acquire) {
+            match self.listener.accept() {
+                Ok((stream, peer)) => {
+                    self.counters.connections.fetch_add(1, Ordering::Relaxed);
+                    tracing::info!("OpenIGTLink client connected from {peer}");
+                    self.serve(stream);
+                    self.connected.store(false, Ordering::Release);
+                    tracing::warn!("OpenIGTLink client {peer} disconnected");
+                }
+                Err(e) if e.kind() == ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(5)),
+                Err(e) => {
+                    tracing::warn!("OpenIGTLink accept failed: {e}");
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+        }
+    }
+
+    /// Reads exactly `buf.len()` bytes, giving up when the client stalls mid-message.
+    fn fill(&self, stream: &mut TcpStream, buf: &mut [u8], boundary: bool) -> Fill {
+        let mut filled = 0;
+        let started = Instant::now();
+        while filled < buf.len() {
+            if self.stop.load(Ordering::Acquire) {
+                return Fill::Closed;
+            }
+            match stream.read(&mut buf[filled..]) {
+                Ok(0) => return Fill::Closed,
+                Ok(n) => filled += n,
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted) => {
+                    if boundary && filled == 0 {
+                        return Fill::Idle;
+                    }
+                    if started.elapsed() > MESSAGE_TIMEOUT {
+                        return Fill::Closed;
+                    }
+                }
+                Err(_) => return Fill::Closed,
+            }
+        }
+        Fill::Done
+    }
+
+    fn serve(&mut self, mut stream: TcpStream) {
+        if stream.set_nonblocking(false).is_err()
+            || stream.set_read_timeout(Some(Duration::from_millis(20))).is_err()
+            || stream.set_write_timeout(Some(Duration::from_millis(100))).is_err()
+        {
+            return;
+        }
+        let _ = stream.set_nodelay(true);
+        self.connected.store(true, Ordering::Release);
+        let mut header = [0u8; HEADER_BYTES];
+        let mut body = vec![0u8; MAX_BODY_BYTES as usize];
+        let mut reply = Vec::with_capacity(HEADER_BYTES + POINT_ELEMENT_BYTES);
+        loop {
+            match self.fill(&mut stream, &mut header, true) {
+                Fill::Done => {}
+                Fill::Idle => continue,
+                Fill::Closed => return,
+            }
+            let h = match Header::parse(&header) {
+                Ok(h) => h,
+                Err(e) => {
+                    self.counters.rejected.fetch_add(1, Ordering::Relaxed);
+                    tracing::warn!("OpenIGTLink: rejected a packet ({e}); closing the connection (the stream cannot be framed)");
+                    return;
+                }
+            };
+            let body = &mut body[..h.body_bytes as usize];
+            match self.fill(&mut stream, body, false) {
+                Fill::Done => {}
+                Fill::Idle | Fill::Closed => return,
+            }
+            match self.handle(&h, body) {
+                Ok(true) => {
+                    encode_force(self.forces.read(), timestamp_now(), &mut reply);
+                    if stream.write_all(&reply).is_err() {
+                        return;
+                    }
+                    self.counters.forces_sent.fetch_add(1, Ordering::Relaxed);
+                }
+                Ok(false) => {}
+                Err(e) => {
+                    self.counters.rejected.fetch_add(1, Ordering::Relaxed);
+                    tracing::warn!("OpenIGTLink: rejected a {} message ({e})", String::from_utf8_lossy(h.message_type()));
+                }
+            }
+        }
+    }
+
+    /// Handles one checked message; true when a force reply is due.
+    fn handle(&mut self, h: &Header, body: &[u8]) -> Result<bool, PacketError> {
+        let content = content(h, body)?;
+        match h.message_type() {
+            b"TRANSFORM" => {
+                let (tip, rotation) = decode_transform(content)?;
+                let at_nanos = (self.epoch.elapsed().as_nanos() as u64).max(1);
+                self.poses.write(Received { pose: ToolPose { tip_in_world: tip, world_from_tool: rotation, buttons: self.button }, at_nanos });
+                self.counters.transforms.fetch_add(1, Ordering::Relaxed);
+                Ok(true)
+            }
+            b"STRING" if h.device_name() == b"Button" => {
+                if content.len() < 4 {
+                    return Err(PacketError::Size(content.len()));
+                }
+                let n = u16::from_be_bytes([content[2], content[3]]) as usize;
+                match content.get(4..4 + n) {
+                    Some(b"1") => self.button = BUTTON_BLADE,
+                    Some(b"0") => self.button = 0,
+                    _ => return Err(PacketError::Size(content.len())),
+                }
+                Ok(false)
+            }
+            _ => {
+                self.counters.ignored.fetch_add(1, Ordering::Relaxed);
+                Ok(false)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A TRANSFORM packet: identity rotation, translation in mm.
+    pub(crate) fn transform_packet(t_mm: [f32; 3]) -> Vec<u8> {
+        let mut body = Vec::new();
+        for v in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, t_mm[0], t_mm[1], t_mm[2]] {
+            body.extend_from_slice(&v.to_be_bytes());
+        }
+        let mut out = Vec::new();
+        Header::write("TRANSFORM", "Tool", 0, &body, &mut out);
+        out.extend_from_slice(&body);
+        out
+    }
+
+    #[test]
+    fn crc64_ecma_check_value() {
+        // CRC-64/ECMA-182 of "123456789" (the catalogue's check value).
+        assert_eq!(crc64_ecma(b"123456789"), 0x6C40_DF5F_0B49_7347);
+    }
+
+    #[test]
+    fn transform_round_trip_and_rejections() {
+        let p = transform_packet([10.0, -20.0, 5.0]);
+        let mut hb = [0u8; HEADER_BYTES];
+        hb.copy_from_slice(&p[..HEADER_BYTES]);
+        let h = Header::parse(&hb).expect("header");
+        assert_eq!(h.message_type(), b"TRANSFORM");
+        let (tip, q) = decode_transform(content(&h, &p[HEADER_BYTES..]).expect("content")).expect("transform");
+        assert!((tip - Point3::new(0.01, -0.02, 0.005)).norm() < 1e-9);
+        assert!(q.angle() < 1e-6);
+
+        // bad CRC
+        let mut bad = p.clone();
+        bad[HEADER_BYTES + 3] ^= 1;
+        assert_eq!(content(&h, &bad[HEADER_BYTES..]), Err(PacketError::Crc));
+        // bad version, garbage type, huge body
+        let mut hv = hb;
+        hv[1] = 9;
+        assert_eq!(Header::parse(&hv), Err(PacketError::Version(9)));
+        let mut ht = hb;
+        ht[2] = 0x07;
+        assert_eq!(Header::parse(&ht), Err(PacketError::MessageType));
+        let mut hs = hb;
+        hs[42..50].copy_from_slice(&u64::MAX.to_be_bytes());
+        assert_eq!(Header::parse(&hs), Err(PacketError::TooLarge(u64::MAX)));
+        // wrong size, NaN, non-rigid
+        assert_eq!(decode_transform(&[0u8; 40]), Err(PacketError::Size(40)));
+        let mut nan = p[HEADER_BYTES..].to_vec();
+        nan[36..40].copy_from_slice(&f32::NAN.to_be_bytes());
+        assert_eq!(decode_transform(&nan), Err(PacketError::Transform));
+        let mut scaled = p[HEADER_BYTES..].to_vec();
+        scaled[0..4].copy_from_slice(&2.0f32.to_be_bytes());
+        assert_eq!(decode_transform(&scaled), Err(PacketError::Transform));
+        let mut mirrored = p[HEADER_BYTES..].to_vec();
+        mirrored[0..4].copy_from_slice(&(-1.0f32).to_be_bytes());
+        assert_eq!(decode_transform(&mirrored), Err(PacketError::Transform));
+    }
+
+    #[test]
+    fn version_2_extended_header_and_metadata_are_skipped() {
+        let mut body = vec![0u8; 12];
+        body[0..2].copy_from_slice(&12u16.to_be_bytes());
+        body[2..4].copy_from_slice(&2u16.to_be_bytes()); // metadata header: count 0
+        body[4..8].copy_from_slice(&3u32.to_be_bytes());
+        let inner = &transform_packet([1.0, 2.0, 3.0])[HEADER_BYTES..];
+        body.extend_from_slice(inner);
+        body.extend_from_slice(&[0, 0, b'a', b'b', b'c']);
+        let mut p = Vec::new();
+        Header::write("TRANSFORM", "Tool", 0, &body, &mut p);
+        p[1] = 2;
+        let mut hb = [0u8; HEADER_BYTES];
+        hb.copy_from_slice(&p[..HEADER_BYTES]);
+        let h = Header::parse(&hb).expect("header");
+        assert_eq!(content(&h, &body).expect("content"), inner);
+        // lying sizes are rejected, not sliced out of range
+        let mut lying = body.clone();
+        lying[4..8].copy_from_slice(&u32::MAX.to_be_bytes());
+        let mut p2 = Vec::new();
+        Header::write("TRANSFORM", "Tool", 0, &lying, &mut p2);
+        p2[1] = 2;
+        hb.copy_from_slice(&p2[..HEADER_BYTES]);
+        let h2 = Header::parse(&hb).expect("header");
+        assert!(matches!(content(&h2, &lying), Err(PacketError::Size(_))));
+    }
+
+    #[test]
+    fn force_is_a_point_message() {
+        let mut out = Vec::new();
+        encode_force(&Vector3::new(0.5, -1.0, 2.0), 0, &mut out);
+        assert_eq!(out.len(), HEADER_BYTES + POINT_ELEMENT_BYTES);
+        let mut hb = [0u8; HEADER_BYTES];
+        hb.copy_from_slice(&out[..HEADER_BYTES]);
+        let h = Header::parse(&hb).expect("header");
+        assert_eq!((h.message_type(), h.device_name()), (&b"POINT"[..], &b"Force"[..]));
+        let c = content(&h, &out[HEADER_BYTES..]).expect("crc");
+        let y = f32::from_be_bytes([c[104], c[105], c[106], c[107]]);
+        assert_eq!(y, -1.0);
+    }
+}

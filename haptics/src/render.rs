@@ -1,0 +1,456 @@
+//! Force rendering at the servo rate: a god-object proxy held on the tissue surface by the
+//! local contact model the simulation refreshes, coupled to the tool by a spring-damper;
+//! cutting resistance once the blade is in the tissue; and the safety layer.
+//!
+//! Between simulation updates the servo loop uses the latest [`ContactModel`] (a plane and a
+//! stiffness), so the force is smooth at 1 kHz even when the simulation runs slower.
+//!
+//! - Touching: the proxy is the tool's tip projected onto the contact plane; the force is
+//!   `k (proxy - tip) - b v_n` (never pulling into the surface).
+//! - A light touch does not cut: only when the blade is engaged and the contact force
+//!   exceeds `cut_threshold_newtons` does the blade enter the tissue (mode `Cutting`); the
+//!   proxy then follows the tip and the force is a cutting resistance opposing the blade's
+//!   motion, `-R tanh(|v| / v0) v/|v|`. Lifting the tip above the plane where the cut
+//!   began, or releasing the blade, ends the cut.
+//! - Safety: the force is clamped to the device's limit and rate-limited; a non-finite pose or
+//!   model, a stalled simulation (no refresh for `stale_after_ticks`) or a lost device fades
+//!   the force to zero within `fade_ticks`; when the fault clears the force ramps back in.
+//!   The output is always finite.
+
+use crate::device::{DeviceFault, DeviceLimits};
+use crate::{Point3, ToolPose, Vector3};
+
+/// The local linear contact model the simulation publishes for the servo loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactModel {
+    /// False until the simulation published its first model.
+    pub published: bool,
+    /// The servo tick whose sample the simulation step consumed to make this model.
+    pub source_tick: u64,
+    /// A surface is near the proxy.
+    pub valid: bool,
+    /// Closest surface point to the proxy and the outward normal there.
+    pub plane_point: Point3,
+    pub plane_normal: Vector3,
+    /// Local stiffness of the tissue along the normal, N/m.
+    pub stiffness_newtons_per_m: f64,
+}
+
+impl Default for ContactModel {
+    fn default() -> Self {
+        Self {
+            published: false,
+            source_tick: 0,
+            valid: false,
+            plane_point: Point3::origin(),
+            plane_normal: Vector3::z(),
+            stiffness_newtons_per_m: 0.0,
+        }
+    }
+}
+
+impl ContactModel {
+    fn is_finite(&self) -> bool {
+        self.plane_point.iter().chain(self.plane_normal.iter()).all(|c| c.is_finite())
+            && self.stiffness_newtons_per_m.is_finite()
+    }
+}
+
+/// Settings of the force renderer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    pub limits: DeviceLimits,
+    /// Servo period, s.
+    pub period_s: f64,
+    /// Damping of the proxy coupling along the normal, N s/m.
+    pub damping_newton_seconds_per_m: f64,
+    /// Upper bound on the model's stiffness (stability of the 1 kHz loop), N/m.
+    pub max_stiffness_newtons_per_m: f64,
+    /// Contact force above which an engaged blade enters the tissue, N.
+    pub cut_threshold_newtons: f64,
+    /// Cutting resistance at speed (N) and the speed scale of its onset (m/s).
+    pub cut_resistance_newtons: f64,
+    pub cut_resistance_speed_m_per_s: f64,
+    /// A model older than this many ticks means the simulation stalled.
+    pub stale_after_ticks: u64,
+    /// Ticks to fade the force out on a fault, and to ramp it back in after.
+    pub fade_ticks: u32,
+    pub recover_ticks: u32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            limits: DeviceLimits::default(),
+            period_s: 1e-3,
+            damping_newton_seconds_per_m: 0.3,
+            max_stiffness_newtons_per_m: 2000.0,
+            cut_threshold_newtons: 1.0,
+            cut_resistance_newtons: 0.8,
+            cut_resistance_speed_m_per_s: 0.005,
+            stale_after_ticks: 50,
+            fade_ticks: 5,
+            recover_ticks: 100,
+        }
+    }
+}
+
+impl RenderSettings {
+    pub fn check(&self) -> Result<(), String> {
+        let l = &self.limits;
+        let positive = [
+            ("max force", l.max_force_newtons),
+            ("max force rate", l.max_force_rate_newtons_per_s),
+            ("period", self.period_s),
+            ("max stiffness", self.max_stiffness_newtons_per_m),
+            ("cut threshold", self.cut_threshold_newtons),
+            ("cut resistance speed", self.cut_resistance_speed_m_per_s),
+        ];
+        for (name, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(format!("{name} must be positive and finite, got {v}"));
+            }
+        }
+        if !(self.damping_newton_seconds_per_m >= 0.0 && self.cut_resistance_newtons >= 0.0) {
+            return Err("damping and cut resistance must not be negative".into());
+        }
+        if self.fade_ticks == 0 || self.recover_ticks == 0 || self.stale_after_ticks == 0 {
+            return Err("fade, recover and stale tick counts must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// What the tool is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Mode {
+    /// Not touching the tissue.
+    #[default]
+    Free,
+    /// Pressing on the surface (the proxy on the contact plane).
+    Touching,
+    /// The blade is in the tissue.
+    Cutting,
+}
+
+/// Fault bits of a tick.
+pub mod fault {
+    pub const DEVICE_LOST: u8 = 1;
+    pub const DEVICE_STALE: u8 = 2;
+    pub const NON_FINITE: u8 = 4;
+    pub const SIM_STALLED: u8 = 8;
+
+    /// Names of the set bits, for logs.
+    pub fn describe(bits: u8) -> &'static str {
+        match bits {
+            0 => "none",
+            DEVICE_LOST => "device lost",
+            DEVICE_STALE => "device data stale",
+            NON_FINITE => "non-finite value",
+            SIM_STALLED => "simulation stalled",
+            _ => "several faults",
+        }
+    }
+}
+
+/// What the renderer produced this tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RenderOutput {
+    pub force_newtons: Vector3,
+    pub proxy: Point3,
+    pub mode: Mode,
+    pub faults: u8,
+    /// Fade gain applied, 0..1.
+    pub gain: f64,
+}
+
+/// The force renderer's state.
+#[derive(Debug, Clone)]
+pub struct ForceRenderer {
+    pub settings: RenderSettings,
+    mode: Mode,
+    proxy: Point3,
+    last_pose: Option<ToolPose>,
+    velocity: Vector3,
+    /// Plane where the current cut began.
+    cut_plane: (Point3, Vector3),
+    /// Desired (clamped, rate-limited, un-faded) force of the last tick.
+    desired: Vector3,
+    gain: f64,
+    /// Non-finite values met so far (poses, models or forces).
+    pub non_finite_count: u64,
+}
+
+impl ForceRenderer {
+    pub fn new(settings: RenderSettings) -> Self {
+        Self {
+            settings,
+            mode: Mode::Free,
+            proxy: Point3::origin(),
+            last_pose: None,
+            velocity: Vector3::zeros(),
+            cut_plane: (Point3::origin(), Vector3::z()),
+            desired: Vector3::zeros(),
+            gain: 1.0,
+            non_finite_count: 0,
+        }
+    }
+
+    /// One servo tick: the device's pose (or its fault) and the latest contact model.
+    pub fn update(&mut self, tick: u64, pose: Result<ToolPose, DeviceFault>, contact: &ContactModel) -> RenderOutput {
+        let s = self.settings;
+        let mut faults = 0u8;
+        let pose = match pose {
+            Ok(p) if p.is_finite() => Some(p),
+            Ok(_) => {
+                faults |= fault::NON_FINITE;
+                None
+            }
+            Err(DeviceFault::Disconnected) => {
+                faults |= fault::DEVICE_LOST;
+                None
+            }
+            Err(DeviceFault::Stale { .. }) => {
+                faults |= fault::DEVICE_STALE;
+                None
+            }
+        };
+        let stale = if contact.published { tick.saturating_sub(contact.source_tick) > s.stale_after_ticks } else { tick > s.stale_after_ticks };
+        if stale {
+            faults |= fault::SIM_STALLED;
+        }
+        if contact.published && !contact.is_finite() {
+            faults |= fault::NON_FINITE;
+        }
+        if faults & fault::NON_FINITE != 0 {
+            self.non_finite_count += 1;
+        }
+
+        let mut desired = self.desired;
+        if let Some(p) = pose {
+            if let Some(last) = self.last_pose {
+                let v = (p.tip_in_world - last.tip_in_world) / s.period_s;
+                self.velocity += (v - self.velocity) * 0.2;
+            }
+            self.last_pose = Some(p);
+            if faults == 0 {
+                desired = self.desired_force(&p, contact);
+                if !desired.iter().all(|c| c.is_finite()) {
+                    self.non_finite_count += 1;
+                    faults |= fault::NON_FINITE;
+                    desired = self.desired;
+                }
+            }
+        }
+
+        // Clamp, then rate-limit the change.
+        let max = s.limits.max_force_newtons;
+        if desired.norm() > max {
+            desired *= max / desired.norm();
+        }
+        let step_max = s.limits.max_force_rate_newtons_per_s * s.period_s;
+        let change = desired - self.desired;
+        if change.norm() > step_max {
+            desired = self.desired + change * (step_max / change.norm());
+        }
+        self.desired = desired;
+
+        // Fade out on faults, ramp back in when they clear.
+        self.gain = if faults != 0 {
+            self.gain - 1.0 / s.fade_ticks as f64
+        } else {
+            self.gain + 1.0 / s.recover_ticks as f64
+        };
+        // snap the ends exactly (the steps do not add up to 1 in floating point)
+        if self.gain < 1e-9 {
+            self.gain = 0.0;
+        } else if self.gain > 1.0 - 1e-9 {
+            self.gain = 1.0;
+        }
+        let mut force = desired * self.gain;
+        if !force.iter().all(|c| c.is_finite()) || force.norm() > max * (1.0 + 1e-12) {
+            force = Vector3::zeros();
+            self.desired = Vector3::zeros();
+        }
+        if faults != 0 && self.gain == 0.0 {
+            // Faded out: forget the held force and leave the tissue.
+            self.desired = Vector3::zeros();
+            self.mode = Mode::Free;
+        }
+        RenderOutput { force_newtons: force, proxy: self.proxy, mode: self.mode, faults, gain: self.gain }
+    }
+
+    fn desired_force(&mut self, pose: &ToolPose, c: &ContactModel) -> Vector3 {
+        let s = &self.settings;
+        let tip = pose.tip_in_world;
+        if !c.valid {
+            self.mode = Mode::Free;
+            self.proxy = tip;
+            return Vector3::zeros();
+        }
+        let n = c.plane_normal;
+        match self.mode {
+            Mode::Cutting => {
+                let (p0, n0) = self.cut_plane;
+                if !pose.blade_engaged() || (tip - p0).dot(&n0) > 0.0 {
+                    self.mode = Mode::Free;
+                    self.proxy = tip;
+                    return Vector3::zeros();
+                }
+                self.proxy = tip;
+                let speed = self.velocity.norm();
+                if speed < 1e-9 {
+                    return Vector3::zeros();
+                }
+                -self.velocity / speed * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
+            }
+            Mode::Free | Mode::Touching => {
+                let depth = (tip - c.plane_point).dot(&n);
+                if depth >= 0.0 {
+                    self.mode = Mode::Free;
+                    self.proxy = tip;
+                    return Vector3::zeros();
+                }
+                self.mode = Mode::Touching;
+                self.proxy = tip - n * depth;
+                let k = c.stiffness_newtons_per_m.clamp(0.0, s.max_stiffness_newtons_per_m);
+                let mut f = (self.proxy - tip) * k - n * (s.damping_newton_seconds_per_m * self.velocity.dot(&n));
+                if f.dot(&n) < 0.0 {
+                    f = Vector3::zeros();
+                }
+                if pose.blade_engaged() && f.norm() >= s.cut_threshold_newtons {
+                    self.mode = Mode::Cutting;
+                    self.cut_plane = (c.plane_point, n);
+                    self.proxy = tip;
+                }
+                f
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pose::BUTTON_BLADE;
+
+    fn plane(tick: u64, k: f64) -> ContactModel {
+        ContactModel {
+            published: true,
+            source_tick: tick,
+            valid: true,
+            plane_point: Point3::origin(),
+            plane_normal: Vector3::z(),
+            stiffness_newtons_per_m: k,
+        }
+    }
+
+    fn at(z: f64, buttons: u32) -> Result<ToolPose, DeviceFault> {
+        Ok(ToolPose { tip_in_world: Point3::new(0.0, 0.0, z), buttons, ..ToolPose::default() })
+    }
+
+    /// Presses `depth` into a plane of stiffness `k` for `ticks` ticks.
+    fn press(r: &mut ForceRenderer, depth: f64, k: f64, ticks: u64) -> RenderOutput {
+        let mut out = RenderOutput::default();
+        for t in 0..ticks {
+            out = r.update(t, at(-depth, 0), &plane(t, k));
+        }
+        out
+    }
+
+    #[test]
+    fn pressing_gives_spring_force_along_the_normal_rate_limited() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let first = r.update(0, at(-0.002, 0), &plane(0, 500.0));
+        assert!((first.force_newtons.norm() - 0.2).abs() < 1e-12, "rate limit 0.2 N per tick: {first:?}");
+        let out = press(&mut r, 0.002, 500.0, 50);
+        assert!((out.force_newtons - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-9, "{out:?}");
+        assert_eq!(out.mode, Mode::Touching);
+        assert!((out.proxy - Point3::origin()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn force_is_clamped_to_the_device_limit() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let out = press(&mut r, 0.05, 2000.0, 200);
+        assert!((out.force_newtons.norm() - 3.3).abs() < 1e-9, "{out:?}");
+        let mut r = ForceRenderer::new(RenderSettings { limits: DeviceLimits { max_force_newtons: 1.5, ..DeviceLimits::default() }, ..RenderSettings::default() });
+        assert!((press(&mut r, 0.05, 2000.0, 200).force_newtons.norm() - 1.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn nan_pose_fades_the_force_to_zero_within_a_few_ticks() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let before = press(&mut r, 0.004, 500.0, 100).force_newtons.norm();
+        assert!(before > 1.9);
+        let mut norms = Vec::new();
+        for t in 100..110 {
+            let out = r.update(t, at(f64::NAN, 0), &plane(t, 500.0));
+            assert!(out.force_newtons.iter().all(|c| c.is_finite()));
+            assert_eq!(out.faults, fault::NON_FINITE);
+            norms.push(out.force_newtons.norm());
+        }
+        assert!(norms.windows(2).all(|w| w[1] <= w[0]), "{norms:?}");
+        assert_eq!(norms[4], 0.0, "zero after fade_ticks = 5: {norms:?}");
+        assert_eq!(r.non_finite_count, 10);
+        // a NaN model does the same
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        press(&mut r, 0.004, 500.0, 100);
+        let mut bad = plane(100, f64::NAN);
+        bad.plane_point.x = f64::NAN;
+        let out = (100..105).map(|t| r.update(t, at(-0.004, 0), &bad)).last().expect("ticks");
+        assert_eq!(out.force_newtons, Vector3::zeros());
+        // recovery ramps back in
+        let back = press(&mut r, 0.004, 500.0, 200);
+        assert!((back.force_newtons.norm() - before).abs() < 1e-9);
+    }
+
+    #[test]
+    fn stalled_sim_and_lost_device_fade_the_force() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        press(&mut r, 0.004, 500.0, 100);
+        // the model stops at tick 99
+        let frozen = plane(99, 500.0);
+        let mut first_zero = None;
+        for t in 100..200 {
+            let out = r.update(t, at(-0.004, 0), &frozen);
+            if out.force_newtons.norm() == 0.0 && first_zero.is_none() {
+                first_zero = Some(t);
+                assert_eq!(out.faults, fault::SIM_STALLED);
+            }
+        }
+        assert_eq!(first_zero, Some(99 + 50 + 5), "stale after 50 ticks, faded in 5");
+
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        press(&mut r, 0.004, 500.0, 100);
+        let out = (100..105).map(|t| r.update(t, Err(DeviceFault::Disconnected), &plane(t, 500.0))).last().expect("ticks");
+        assert_eq!((out.force_newtons.norm(), out.faults), (0.0, fault::DEVICE_LOST));
+    }
+
+    #[test]
+    fn a_light_touch_does_not_cut_a_firm_press_with_the_blade_does() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let light = (0..100).map(|t| r.update(t, at(-0.001, BUTTON_BLADE), &plane(t, 500.0))).last().expect("ticks");
+        assert_eq!(light.mode, Mode::Touching, "0.5 N < 1 N threshold");
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let firm_no_blade = press(&mut r, 0.004, 500.0, 100);
+        assert_eq!(firm_no_blade.mode, Mode::Touching, "blade not engaged");
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let mut mode = Mode::Free;
+        for t in 0..100 {
+            mode = r.update(t, at(-0.004, BUTTON_BLADE), &plane(t, 500.0)).mode;
+        }
+        assert_eq!(mode, Mode::Cutting);
+        // moving through the tissue meets resistance against the motion
+        let mut out = RenderOutput::default();
+        for t in 100..400 {
+            let x = (t - 100) as f64 * 2e-5; // 20 mm/s
+            out = r.update(t, Ok(ToolPose { tip_in_world: Point3::new(x, 0.0, -0.004), buttons: BUTTON_BLADE, ..ToolPose::default() }), &plane(t, 500.0));
+        }
+        assert_eq!(out.mode, Mode::Cutting);
+        assert!(out.force_newtons.x < -0.7 && out.force_newtons.x > -0.81, "{out:?}");
+        // lifting out ends the cut
+        let out = r.update(400, at(0.001, BUTTON_BLADE), &plane(400, 500.0));
+        assert_eq!(out.mode, Mode::Free);
+    }
+}

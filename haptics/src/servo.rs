@@ -1,0 +1,337 @@
+//! The servo loop: a dedicated, named thread ticking at 1 kHz.
+//!
+//! Each tick reads the device, renders the force from the latest contact model (a triple
+//! buffer the simulation writes), writes the force to the device and pushes the tick's sample
+//! to the simulation thread (a bounded lock-free queue). Nothing in the loop allocates, locks
+//! or blocks: the buffers for the statistics are allocated before the first tick, and log
+//! messages go through a lock-free queue to the simulation thread, which logs them.
+//!
+//! Clocks:
+//! - live: tick `k` starts at `start + k * period`; the thread sleeps until `spin_nanos`
+//!   before the deadline, then spins; it asks for real-time priority (SCHED_FIFO) and says in
+//!   the log when that is not permitted;
+//! - virtual: no waiting on wall time; tick `k` starts as soon as the simulation has consumed
+//!   the ticks before it (lock-step), so a session runs as fast as the machine allows with the
+//!   same tick sequence, the same device reads and the same contact models: bit for bit
+//!   reproducible.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use crate::device::HapticDevice;
+use crate::render::{ContactModel, ForceRenderer, Mode, RenderOutput};
+use crate::{Point3, ToolPose, Vector3};
+
+/// Which clock drives the servo loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    /// Real time (live sessions).
+    Live,
+    /// As fast as possible, same tick sequence (scripted sessions, tests).
+    Virtual,
+}
+
+impl std::str::FromStr for Clock {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "live" => Ok(Clock::Live),
+            "virtual" => Ok(Clock::Virtual),
+            _ => Err(format!("unknown clock {s:?} (expected live or virtual)")),
+        }
+    }
+}
+
+/// Settings of the servo thread.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoConfig {
+    pub clock: Clock,
+    pub period_nanos: u64,
+    /// Ticks to run.
+    pub ticks: u64,
+    /// Spin (instead of sleeping) for the last this many nanoseconds before a deadline.
+    pub spin_nanos: u64,
+    /// Ask for real-time scheduling (live clock only).
+    pub realtime_priority: bool,
+    /// Simulation steps last this many ticks (virtual clock lock-step).
+    pub ticks_per_step: u64,
+}
+
+/// One tick as the simulation (and a recorder) sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ServoSample {
+    pub tick: u64,
+    /// The device's pose (the last good one when `faults` say the device failed).
+    pub pose: ToolPose,
+    pub render: RenderOutput,
+}
+
+/// Something the log should hear about, sent from the servo thread without allocating.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ServoEvent {
+    FaultBegan { tick: u64, faults: u8 },
+    FaultCleared { tick: u64 },
+    FadedOut { tick: u64 },
+}
+
+/// The channels between the servo thread and the simulation thread.
+#[derive(Debug)]
+pub struct ServoLinks {
+    pub contact: triple_buffer::Output<ContactModel>,
+    pub samples: rtrb::Producer<ServoSample>,
+    pub events: rtrb::Producer<ServoEvent>,
+    /// Ticks the simulation has consumed (the last consumed tick + 1).
+    pub sim_ticks_done: Arc<AtomicU64>,
+    /// Set when the session must end early (the simulation thread failed).
+    pub abort: Arc<AtomicBool>,
+}
+
+/// What the servo thread measured.
+#[derive(Debug, Clone)]
+pub struct ServoReport {
+    pub ticks: u64,
+    pub clock: Clock,
+    /// Start of each tick after the session's start, ns.
+    pub tick_start_nanos: Vec<u64>,
+    /// Work per tick (read, render, write, push), ns.
+    pub tick_work_nanos: Vec<u32>,
+    pub wall_nanos: u64,
+    /// Outcome of asking for real-time priority (`None`: not asked).
+    pub realtime_priority: Option<Result<(), String>>,
+    pub max_force_newtons: f64,
+    pub non_finite_count: u64,
+    /// Ticks with any fault, and ticks when the force was faded out completely.
+    pub fault_ticks: u64,
+    pub faded_ticks: u64,
+    /// Samples the simulation could not take in time (queue full).
+    pub dropped_samples: u64,
+    /// Path of the blade's tip while cutting, m.
+    pub blade_path_in_tissue_m: f64,
+    /// FNV-1a hash of every tick's force bits (determinism checks).
+    pub force_hash: u64,
+}
+
+/// Period statistics of a live run.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PeriodStats {
+    pub mean_us: f64,
+    pub p50_us: f64,
+    pub p99_us: f64,
+    /// Largest |period - nominal|, us.
+    pub max_deviation_us: f64,
+    /// 99th percentile of |period - nominal|, us.
+    pub p99_deviation_us: f64,
+    /// Ticks that started a whole period or more after their deadline.
+    pub missed_deadlines: u64,
+    /// Latest start after a deadline, us.
+    pub max_lateness_us: f64,
+    pub mean_work_us: f64,
+    pub max_work_us: f64,
+}
+
+impl ServoReport {
+    /// Statistics of the periods between tick starts and of the lateness behind deadlines.
+    pub fn period_stats(&self, period_nanos: u64) -> PeriodStats {
+        let starts = &self.tick_start_nanos;
+        if starts.len() < 2 {
+            return PeriodStats::default();
+        }
+        let mut periods: Vec<f64> = starts.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-3).collect();
+        let nominal = period_nanos as f64 * 1e-3;
+        let mut deviations: Vec<f64> = periods.iter().map(|p| (p - nominal).abs()).collect();
+        periods.sort_by(f64::total_cmp);
+        deviations.sort_by(f64::total_cmp);
+        let q = |s: &[f64], p: f64| s[((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)];
+        let lateness = |k: usize| starts[k].saturating_sub(k as u64 * period_nanos);
+        let missed = (0..starts.len()).filter(|&k| lateness(k) >= period_nanos).count() as u64;
+        let max_lateness = (0..starts.len()).map(lateness).max().unwrap_or(0);
+        let work = &self.tick_work_nanos;
+        PeriodStats {
+            mean_us: periods.iter().sum::<f64>() / periods.len() as f64,
+            p50_us: q(&periods, 0.5),
+            p99_us: q(&periods, 0.99),
+            max_deviation_us: deviations[deviations.len() - 1],
+            p99_deviation_us: q(&deviations, 0.99),
+            missed_deadlines: missed,
+            max_lateness_us: max_lateness as f64 * 1e-3,
+            mean_work_us: work.iter().map(|&w| w as f64).sum::<f64>() / work.len().max(1) as f64 * 1e-3,
+            max_work_us: work.iter().copied().max().unwrap_or(0) as f64 * 1e-3,
+        }
+    }
+}
+
+/// A buffer of `n` zeros whose memory has been written once, so the servo loop's first write
+/// to each page does not page-fault (a fault takes the process's memory-map lock, which a
+/// simulation thread busy allocating can hold for milliseconds).
+fn prefaulted<T: Copy + Default>(n: usize) -> Vec<T> {
+    let mut v = Vec::with_capacity(n);
+    v.resize(n, T::default());
+    for x in v.iter_mut() {
+        // written element by element: a zeroed allocation may map untouched zero pages
+        *x = std::hint::black_box(T::default());
+    }
+    v
+}
+
+/// Waiting without burning a shared core: spin briefly, then yield, then sleep in short naps.
+#[derive(Debug, Default)]
+pub struct Backoff(u32);
+
+impl Backoff {
+    pub fn wait(&mut self) {
+        self.0 = self.0.saturating_add(1);
+        if self.0 < 64 {
+            std::hint::spin_loop();
+        } else if self.0 < 128 {
+            std::thread::yield_now();
+        } else {
+            std::thread::sleep(Duration::from_micros(20));
+        }
+    }
+}
+
+/// Sleeps until `spin` before `deadline`, then spins to it.
+fn wait_until(deadline: Instant, spin: Duration) {
+    loop {
+        let now = Instant::now();
+        if now >= deadline {
+            return;
+        }
+        let left = deadline - now;
+        if left > spin {
+            std::thread::sleep(left - spin);
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
+
+fn try_realtime() -> Result<(), String> {
+    use thread_priority::{RealtimeThreadSchedulePolicy, ThreadPriority, ThreadSchedulePolicy};
+    let priority = ThreadPriority::Crossplatform(80u8.try_into().map_err(|e| format!("{e:?}"))?);
+    thread_priority::set_thread_priority_and_policy(
+        thread_priority::thread_native_id(),
+        priority,
+        ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+    )
+    .map_err(|e| format!("{e:?}"))
+}
+
+/// Starts the servo thread (named `cutlab-servo`).
+pub fn spawn<D: HapticDevice + 'static>(
+    config: ServoConfig,
+    mut device: D,
+    mut renderer: ForceRenderer,
+    mut links: ServoLinks,
+) -> std::io::Result<std::thread::JoinHandle<(ServoReport, D)>> {
+    std::thread::Builder::new().name("cutlab-servo".into()).spawn(move || {
+        let realtime_priority = (config.clock == Clock::Live && config.realtime_priority).then(try_realtime);
+        // Logged before the first tick (logging may allocate or lock; the loop never logs).
+        match &realtime_priority {
+            Some(Ok(())) => tracing::info!("servo thread: real-time priority (SCHED_FIFO) granted"),
+            Some(Err(e)) => tracing::warn!("servo thread: real-time priority not permitted ({e}); running at normal priority"),
+            None => {}
+        }
+        let n = config.ticks as usize;
+        let mut report = ServoReport {
+            ticks: 0,
+            clock: config.clock,
+            tick_start_nanos: prefaulted(n),
+            tick_work_nanos: prefaulted(n),
+            wall_nanos: 0,
+            realtime_priority,
+            max_force_newtons: 0.0,
+            non_finite_count: 0,
+            fault_ticks: 0,
+            faded_ticks: 0,
+            dropped_samples: 0,
+            blade_path_in_tissue_m: 0.0,
+            force_hash: 0xcbf2_9ce4_8422_2325,
+        };
+        let spin = Duration::from_nanos(config.spin_nanos);
+        let tps = config.ticks_per_step.max(1);
+        let mut last_pose = ToolPose::default();
+        let mut last_tip: Option<Point3> = None;
+        let mut previous_faults = 0u8;
+        let mut previous_gain = 1.0;
+        let start = Instant::now();
+        for tick in 0..config.ticks {
+            if links.abort.load(Ordering::Acquire) {
+                break;
+            }
+            match config.clock {
+                Clock::Live => {
+                    let deadline = start + Duration::from_nanos(tick * config.period_nanos);
+                    wait_until(deadline, spin);
+                }
+                Clock::Virtual => {
+                    let needed = tick / tps * tps;
+                    let mut backoff = Backoff::default();
+                    while links.sim_ticks_done.load(Ordering::Acquire) < needed {
+                        if links.abort.load(Ordering::Acquire) {
+                            break;
+                        }
+                        backoff.wait();
+                    }
+                }
+            }
+            let began = Instant::now();
+            report.tick_start_nanos[tick as usize] = (began - start).as_nanos() as u64;
+            let time_s = tick as f64 * config.period_nanos as f64 * 1e-9;
+            let contact = *links.contact.read();
+            let read = device.read(tick, time_s);
+            if let Ok(p) = read
+                && p.is_finite()
+            {
+                last_pose = p;
+            }
+            let out = renderer.update(tick, read, &contact);
+            // a device that fails to take the force is noticed by its next read
+            let _ = device.write_force(out.force_newtons);
+
+            report.max_force_newtons = report.max_force_newtons.max(out.force_newtons.norm());
+            for c in out.force_newtons.iter() {
+                for byte in c.to_bits().to_le_bytes() {
+                    report.force_hash = (report.force_hash ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
+                }
+            }
+            if out.mode == Mode::Cutting {
+                if let Some(t) = last_tip {
+                    report.blade_path_in_tissue_m += (last_pose.tip_in_world - t).norm();
+                }
+                last_tip = Some(last_pose.tip_in_world);
+            } else {
+                last_tip = None;
+            }
+            if out.faults != 0 {
+                report.fault_ticks += 1;
+                if out.gain == 0.0 {
+                    report.faded_ticks += 1;
+                }
+            }
+            if out.faults != previous_faults {
+                let event = if out.faults == 0 { ServoEvent::FaultCleared { tick } } else { ServoEvent::FaultBegan { tick, faults: out.faults } };
+                let _ = links.events.push(event);
+            }
+            if out.faults != 0 && out.gain == 0.0 && previous_gain > 0.0 {
+                let _ = links.events.push(ServoEvent::FadedOut { tick });
+            }
+            previous_faults = out.faults;
+            previous_gain = out.gain;
+            let sample = ServoSample { tick, pose: last_pose, render: out };
+            if links.samples.push(sample).is_err() {
+                report.dropped_samples += 1;
+            }
+            report.tick_work_nanos[tick as usize] = began.elapsed().as_nanos().min(u32::MAX as u128) as u32;
+            report.ticks = tick + 1;
+        }
+        report.wall_nanos = start.elapsed().as_nanos() as u64;
+        let done = report.ticks as usize;
+        report.tick_start_nanos.truncate(done);
+        report.tick_work_nanos.truncate(done);
+        report.non_finite_count = renderer.non_finite_count;
+        let _ = device.write_force(Vector3::zeros());
+        (report, device)
+    })
+}

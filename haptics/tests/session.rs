@@ -1,0 +1,151 @@
+//! Whole sessions: servo thread + simulation thread on a small block.
+
+use cutlab_haptics::device::{HapticDevice, Skill, SyntheticTrainee};
+use cutlab_haptics::scene::{BuildOptions, Scene};
+use cutlab_haptics::servo::Clock;
+use cutlab_haptics::{Session, SessionConfig};
+
+fn block() -> Scene {
+    Scene::load(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/block.toml"), BuildOptions::default()).expect("block scene")
+}
+
+fn trainee(session: &Session, skill: &str, seed: u64) -> Box<dyn HapticDevice> {
+    let plan = session.plan_across_top(0.03, 0.006).expect("plan");
+    Box::new(SyntheticTrainee::new(skill, plan, Skill::preset(skill).expect("preset"), seed).expect("trainee"))
+}
+
+#[test]
+fn virtual_clock_session_cuts_and_is_reproducible_bit_for_bit() {
+    let scene = block();
+    let config = SessionConfig { clock: Clock::Virtual, duration_s: 3.5, ..SessionConfig::default() };
+    let run = |seed| {
+        let session = Session::new(&scene).expect("session");
+        let device = trainee(&session, "intermediate", seed);
+        session.run(device, &config).expect("run")
+    };
+    let a = run(1);
+    println!(
+        "ticks {} steps {} cut steps {} tets split {} blade path {:.1} mm max force {:.2} N faults {} wall {:.2} s speed {:.2}x",
+        a.servo.ticks, a.sim_steps, a.cut_steps, a.tets_split, a.servo.blade_path_in_tissue_m * 1e3,
+        a.servo.max_force_newtons, a.servo.fault_ticks, a.wall_s, a.speed()
+    );
+    assert_eq!(a.servo.ticks, 3500);
+    assert_eq!(a.sim_steps, 3500);
+    assert!(a.tick_of_step.iter().enumerate().all(|(n, &t)| t == n as u64), "lock-step: step n consumed tick n");
+    assert_eq!(a.servo.non_finite_count, 0);
+    assert!(a.servo.max_force_newtons > 0.5 && a.servo.max_force_newtons <= 3.3 + 1e-12);
+    assert!(a.tets_split > 0, "the trainee cut the block");
+    assert!(a.servo.blade_path_in_tissue_m > 0.005);
+    let b = run(1);
+    assert_eq!((a.state_hash, a.servo.force_hash), (b.state_hash, b.servo.force_hash), "same seed, same bits");
+    assert_eq!(a.tets_split, b.tets_split);
+    let c = run(2);
+    assert_ne!(a.servo.force_hash, c.servo.force_hash, "another seed, another hand");
+}
+
+/// A trainee whose device fails for a while: NaN poses, then a lost connection.
+#[derive(Debug)]
+struct Faulty {
+    inner: Box<dyn HapticDevice>,
+    nan: std::ops::Range<u64>,
+    lost: std::ops::Range<u64>,
+}
+
+impl HapticDevice for Faulty {
+    fn name(&self) -> &str {
+        "faulty"
+    }
+    fn read(&mut self, tick: u64, time_s: f64) -> Result<cutlab_haptics::ToolPose, cutlab_haptics::DeviceFault> {
+        let mut pose = self.inner.read(tick, time_s)?;
+        if self.lost.contains(&tick) {
+            return Err(cutlab_haptics::DeviceFault::Disconnected);
+        }
+        if self.nan.contains(&tick) {
+            pose.tip_in_world.x = f64::NAN;
+        }
+        Ok(pose)
+    }
+    fn write_force(&mut self, f: cutlab_haptics::Vector3) -> Result<(), cutlab_haptics::DeviceFault> {
+        self.inner.write_force(f)
+    }
+}
+
+#[test]
+fn nan_poses_and_a_lost_device_fade_the_force_and_the_session_survives() {
+    let scene = block();
+    let session = Session::new(&scene).expect("session");
+    // the expert presses on the surface from about tick 1000 and cuts from about 1600
+    let device = Box::new(Faulty { inner: trainee(&session, "expert", 1), nan: 1200..1300, lost: 1400..1450 });
+    let config = SessionConfig { clock: Clock::Virtual, duration_s: 1.55, ..SessionConfig::default() };
+    let r = session.run(device, &config).expect("run");
+    assert_eq!(r.servo.ticks, 1550);
+    assert_eq!(r.sim_steps, 1550);
+    assert_eq!(r.servo.non_finite_count, 100, "every NaN pose counted");
+    assert_eq!(r.servo.fault_ticks, 150);
+    // 5 ticks to fade out in each window, then zero force
+    assert_eq!(r.servo.faded_ticks, (100 - 4) + (50 - 4));
+    assert!(r.servo.max_force_newtons > 0.2 && r.servo.max_force_newtons <= 3.3);
+    assert_eq!(r.rejected_steps, 0, "no NaN reached the simulation");
+}
+
+#[test]
+fn live_clock_ticks_at_one_kilohertz() {
+    let scene = block();
+    let session = Session::new(&scene).expect("session");
+    let device = trainee(&session, "expert", 1);
+    let config = SessionConfig { clock: Clock::Live, duration_s: 0.5, realtime_priority: false, ..SessionConfig::default() };
+    let r = session.run(device, &config).expect("run");
+    let p = r.servo.period_stats(r.period_nanos);
+    println!("live 0.5 s: {p:?}; {} sim steps", r.sim_steps);
+    assert_eq!(r.servo.ticks, 500);
+    assert!(r.wall_s >= 0.499, "real time: {} s", r.wall_s);
+    assert!((p.mean_us - 1000.0).abs() < 20.0, "{p:?}");
+    assert!(r.sim_steps > 0 && r.tick_of_step.windows(2).all(|w| w[1] > w[0]), "each step a newer tick");
+}
+
+#[test]
+fn a_live_session_survives_an_openigtlink_client_reconnecting() {
+    use std::io::{Read, Write};
+    use cutlab_haptics::device::IgtlDevice;
+    use cutlab_haptics::device::igtl::{HEADER_BYTES, Header, POINT_ELEMENT_BYTES};
+
+    let scene = block();
+    let session = Session::new(&scene).expect("session");
+    let device = IgtlDevice::listen_on("127.0.0.1:0".parse().expect("address")).expect("listen");
+    let address = device.address();
+    let config = SessionConfig { clock: Clock::Live, duration_s: 1.5, realtime_priority: false, ..SessionConfig::default() };
+    let run = std::thread::spawn(move || session.run(Box::new(device), &config));
+
+    // a tracker above the block: 300 ms of poses, gone for 250 ms, back for 300 ms
+    let stream_poses = |ms: u64| {
+        let mut s = std::net::TcpStream::connect(address).expect("connect");
+        let t = std::time::Instant::now();
+        let mut replies = 0;
+        while t.elapsed() < std::time::Duration::from_millis(ms) {
+            let mut body = Vec::new();
+            for v in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 30.0, 20.0, 60.0] {
+                body.extend_from_slice(&v.to_be_bytes());
+            }
+            let mut packet = Vec::new();
+            Header::write("TRANSFORM", "Tool", 0, &body, &mut packet);
+            packet.extend_from_slice(&body);
+            s.write_all(&packet).expect("send");
+            let mut reply = [0u8; HEADER_BYTES + POINT_ELEMENT_BYTES];
+            s.read_exact(&mut reply).expect("force reply");
+            replies += 1;
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        replies
+    };
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    let first = stream_poses(300);
+    std::thread::sleep(std::time::Duration::from_millis(250));
+    let second = stream_poses(300);
+    let r = run.join().expect("session thread").expect("session");
+    assert!(first > 20 && second > 20, "{first} {second} force replies");
+    assert_eq!(r.servo.ticks, 1500);
+    assert_eq!(r.servo.non_finite_count, 0);
+    // faults: before the first connection, during the gap and after the end; not while connected
+    assert!(r.servo.fault_ticks >= 200 && r.servo.fault_ticks <= 1500 - 300, "{} fault ticks", r.servo.fault_ticks);
+    assert!(r.sim_steps > 0);
+}

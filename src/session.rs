@@ -1,0 +1,138 @@
+//! `cutlab session`: one training session: a device drives the scalpel through the 1 kHz
+//! servo loop while the simulation runs at its fixed step; prints a summary and writes the
+//! final tissue, `summary.json` and `steps.csv` (the servo tick each simulation step consumed).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use cutlab_haptics::device::{CsvDevice, HapticDevice, IgtlDevice, Skill, SyntheticTrainee};
+use cutlab_haptics::servo::Clock;
+use cutlab_haptics::{Session, SessionConfig};
+use cutlab_sim::io::PointData;
+use cutlab_sim::scene::{BuildOptions, Scene};
+use cutlab_sim::Vector3;
+
+use crate::stats::Summary;
+
+/// What `--device` names.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DeviceArg {
+    Trainee(String),
+    Csv(PathBuf),
+    Igtl(u16),
+}
+
+impl std::str::FromStr for DeviceArg {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if Skill::PRESETS.contains(&s) {
+            return Ok(DeviceArg::Trainee(s.to_owned()));
+        }
+        if let Some(path) = s.strip_prefix("csv:") {
+            if path.is_empty() {
+                return Err("csv: needs a file path, e.g. csv:stroke.csv".into());
+            }
+            return Ok(DeviceArg::Csv(PathBuf::from(path)));
+        }
+        if let Some(port) = s.strip_prefix("igtl:") {
+            return port.parse::<u16>().map(DeviceArg::Igtl).map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
+        }
+        Err(format!("unknown device {s:?} (expected expert, intermediate, novice, csv:PATH or igtl:PORT)"))
+    }
+}
+
+/// Options of `cutlab session`.
+#[derive(Debug)]
+pub struct Options {
+    pub scene: String,
+    pub min_tets: Option<usize>,
+    pub device: DeviceArg,
+    pub clock: Clock,
+    pub duration_s: f64,
+    pub seed: u64,
+    pub out: PathBuf,
+    pub realtime_priority: bool,
+}
+
+pub fn run(o: &Options) -> anyhow::Result<()> {
+    if !(o.duration_s > 0.0 && o.duration_s <= 86_400.0) {
+        bail!("--duration must be between 0 and 86400 seconds, got {}", o.duration_s);
+    }
+    // Devices that need no scene first: a bad file or a busy port is reported at once.
+    let mut device: Option<Box<dyn HapticDevice>> = match &o.device {
+        DeviceArg::Trainee(_) => None,
+        DeviceArg::Csv(path) => Some(Box::new(CsvDevice::open(path).context("reading the trajectory")?)),
+        DeviceArg::Igtl(port) => {
+            let d = IgtlDevice::listen(*port)?;
+            println!("OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)", d.address());
+            Some(Box::new(d))
+        }
+    };
+    let scene = Scene::load(&o.scene, BuildOptions { min_tets: o.min_tets }).with_context(|| format!("loading scene {:?}", o.scene))?;
+    let session = Session::new(&scene).context("preparing the session")?;
+    if let DeviceArg::Trainee(skill) = &o.device {
+        let (lo, hi) = scene.model.mesh.bounding_box();
+        let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
+        let plan = session.plan_across_top(0.06, depth_m).context("planning the incision across the top of the tissue")?;
+        let preset = Skill::preset(skill).context("skill preset")?;
+        device = Some(Box::new(SyntheticTrainee::new(skill, plan, preset, o.seed)?));
+    }
+    let device = device.context("no device")?;
+    let device_name = device.name().to_owned();
+    let tets = scene.model.mesh.tet_count();
+    let config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
+    let r = session.run(device, &config).context("running the session")?;
+
+    let clock = if o.clock == Clock::Live { "live" } else { "virtual" };
+    println!("session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
+    let max_lag = r.tick_of_step.iter().enumerate().map(|(n, &t)| t.saturating_sub(n as u64)).max().unwrap_or(0);
+    println!("  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
+    println!("  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.cut_length_m * 1e3, r.cut_steps, r.tets_split, r.unresolved_cuts, r.failed_cuts, r.simulation.model.mesh.tet_count());
+    println!("  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.rejected_steps);
+    let p = r.servo.period_stats(r.period_nanos);
+    if o.clock == Clock::Live {
+        println!("  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline", p.mean_us, p.p50_us, p.p99_us, p.p99_deviation_us, p.max_deviation_us, p.missed_deadlines, p.max_lateness_us);
+        match &r.servo.realtime_priority {
+            Some(Ok(())) => println!("  servo thread at real-time priority (SCHED_FIFO)"),
+            Some(Err(e)) => println!("  real-time priority not permitted ({e}); normal priority"),
+            None => println!("  real-time priority not requested"),
+        }
+    }
+    println!("  servo work per tick: mean {:.1} us, max {:.1} us", p.mean_work_us, p.max_work_us);
+    let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
+    let s = Summary::of(&steps_us);
+    println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.cg_iterations as f64 / r.sim_steps.max(1) as f64);
+    println!("  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
+
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let sim = &r.simulation;
+    let deformed = cutlab_sim::TetMesh::new(sim.state.positions.clone(), sim.model.mesh.tets().to_vec(), sim.model.mesh.regions().to_vec())?;
+    let displacement: Vec<Vector3> = sim.state.positions.iter().zip(sim.model.mesh.positions()).map(|(p, q)| p - q).collect();
+    let path = o.out.join("final.vtu");
+    cutlab_sim::io::write_vtu(&path, &deformed, &[("displacement", PointData::Vector(&displacement))]).with_context(|| format!("writing {}", path.display()))?;
+    let summary = serde_json::json!({
+        "scene": scene.spec.name, "tets": tets, "device": device_name, "seed": o.seed, "clock": clock,
+        "duration_s": o.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
+        "cut_length_mm": r.cut_length_m * 1e3, "tets_split": r.tets_split, "max_force_newtons": r.servo.max_force_newtons,
+        "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,
+        "period_us": { "mean": p.mean_us, "p50": p.p50_us, "p99": p.p99_us, "p99_deviation": p.p99_deviation_us,
+                       "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },
+        "sim_step_us": s, "cg_iterations_per_step": r.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
+        "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
+    });
+    write_json(&o.out.join("summary.json"), &summary)?;
+    // which servo tick each simulation step consumed (what a replay feeds back)
+    let mut steps = String::with_capacity(16 * r.tick_of_step.len() + 16);
+    steps.push_str("step,tick\n");
+    for (n, t) in r.tick_of_step.iter().enumerate() {
+        steps.push_str(&format!("{n},{t}\n"));
+    }
+    let steps_path = o.out.join("steps.csv");
+    std::fs::write(&steps_path, steps).with_context(|| format!("writing {}", steps_path.display()))?;
+    println!("wrote {}, summary.json and steps.csv", path.display());
+    Ok(())
+}
+
+fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", path.display()))
+}
