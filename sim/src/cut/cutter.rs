@@ -48,7 +48,14 @@ impl Cutter {
         if !blade.is_finite() {
             return Err(CutError::NonFiniteBlade);
         }
-        self.trail.push_back(blade);
+        // poses closer than a 32nd of the window to the one before the newest replace the
+        // newest, so a hand that trembles at 1 kHz keeps the swept polygon to a few dozen
+        // corners
+        let min_spacing = self.window_m / 32.0;
+        match self.trail.len() {
+            n if n >= 2 && (blade.tip - self.trail[n - 2].tip).norm() < min_spacing => self.trail[n - 1] = blade,
+            _ => self.trail.push_back(blade),
+        }
         // keep the poses within the window behind the tip (at least the previous one)
         let mut length = 0.0;
         let mut keep = 1;
