@@ -10,12 +10,14 @@
 //! - [`segmentation`]: NIfTI label volumes to conforming voxel tetrahedral meshes;
 //! - [`generate`]: built-in structured meshes (slabs, sheets, bars);
 //! - [`model`]: the particle/spring/damper model with pre-tension;
+//! - [`fem`]: co-rotational linear tetrahedral finite elements (the converging alternative);
 //! - [`solver`]: time integrators and static equilibrium;
 //! - [`cut`]: volumetric cutting: vertex movement, minimal subdivision, particle remodelling;
 //! - [`scene`]: scene files and built-in scenes.
 
 pub mod cut;
 pub mod error;
+pub mod fem;
 pub mod generate;
 pub mod io;
 pub mod mesh;
