@@ -13,7 +13,9 @@
 //! - [`fem`]: co-rotational linear tetrahedral finite elements (the converging alternative);
 //! - [`solver`]: time integrators and static equilibrium;
 //! - [`cut`]: volumetric cutting: vertex movement, minimal subdivision, particle remodelling;
-//! - [`scene`]: scene files and built-in scenes.
+//! - [`scene`]: scene files and built-in scenes;
+//! - [`reference`]: reference problems with known answers (patch test, cantilever, wound
+//!   opening, free vibration).
 
 pub mod cut;
 pub mod error;
@@ -22,6 +24,7 @@ pub mod generate;
 pub mod io;
 pub mod mesh;
 pub mod model;
+pub mod reference;
 pub mod scene;
 pub mod segmentation;
 pub mod solver;

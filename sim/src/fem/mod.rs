@@ -195,6 +195,60 @@ impl FemModel {
     }
 }
 
+impl FemModel {
+    /// The exact stiffness blocks `K_ij = -d f_i / d x_j` of tetrahedron `t` at positions `x`,
+    /// including the change of the rotation (the warped stiffness leaves it out; it matters for
+    /// pre-stressed bodies, whose stress makes a rotated element push back: membrane tension).
+    /// With `Y = R^T dF`, the rotation changes by `dR = R [w]_x` with
+    /// `(tr(S) I - S) w = axial(Y - Y^T)`, and the stress by
+    /// `dP = 2 mu dF + lambda tr(Y) R + (lambda tr(S - I) - 2 mu) dR`.
+    /// `None` where `tr(S) I - S` is close to singular (an element near inversion): use the
+    /// warped stiffness there.
+    pub fn exact_stiffness_blocks(&self, t: usize, x: &[Point3]) -> Option<[[Matrix3<f64>; 4]; 4]> {
+        let w_rest = self.rest_volume_m3[t];
+        if w_rest == 0.0 {
+            return None;
+        }
+        let (mu, lambda) = (self.mu_pa[t], self.lambda_pa[t]);
+        let f = self.deformation_gradient(t, x);
+        let r = rotation(&f);
+        let s = r.transpose() * f;
+        let s = (s + s.transpose()) * 0.5;
+        let trace = s.trace();
+        let m = Matrix3::identity() * trace - s;
+        // eigenvalues of m are the pairwise sums of those of S: all near 2 at rest
+        let m_inv = m.cholesky().filter(|c| c.l().diagonal().iter().all(|&d| d * d > 0.2))?.inverse();
+        let coefficient = lambda * (trace - 3.0) - 2.0 * mu;
+        let mut dp = [[Matrix3::zeros(); 3]; 3];
+        for bb in 0..3 {
+            for d in 0..3 {
+                let mut df = Matrix3::zeros();
+                df[(bb, d)] = 1.0;
+                let y = r.transpose() * df;
+                let axial = Vector3::new(y[(2, 1)] - y[(1, 2)], y[(0, 2)] - y[(2, 0)], y[(1, 0)] - y[(0, 1)]);
+                let w = m_inv * axial;
+                dp[bb][d] = df * (2.0 * mu) + r * (lambda * y.trace()) + r * w.cross_matrix() * coefficient;
+            }
+        }
+        let b = gradients(&self.rest_inverse[t]);
+        let mut k = [[Matrix3::zeros(); 4]; 4];
+        for i in 0..4 {
+            for j in 0..4 {
+                let mut block = Matrix3::zeros();
+                for bb in 0..3 {
+                    let mut col = Vector3::zeros();
+                    for d in 0..3 {
+                        col += dp[bb][d] * b[i] * b[j][d];
+                    }
+                    block.set_column(bb, &(col * w_rest));
+                }
+                k[i][j] = block;
+            }
+        }
+        Some(k)
+    }
+}
+
 /// The shape-function gradients `b_0 .. b_3` from `D_m^-1` (rows 1..3, and minus their sum).
 #[inline]
 pub fn gradients(rest_inverse: &Matrix3<f64>) -> [Vector3; 4] {

@@ -93,7 +93,11 @@ fn add_stiffness(fem: &FemModel, t: usize, r: &Matrix3<f64>, weight: f64, sys: &
     if fem.rest_volume_m3[t] == 0.0 || weight == 0.0 {
         return;
     }
-    let k = fem.stiffness_blocks(t, r);
+    add_blocks(fem, t, &fem.stiffness_blocks(t, r), weight, sys);
+}
+
+/// Adds `weight k` (element blocks of tetrahedron `t`) to the blocks of `sys`.
+fn add_blocks(fem: &FemModel, t: usize, k: &[[Matrix3<f64>; 4]; 4], weight: f64, sys: &mut BlockSystem) {
     let tet = fem.tets[t];
     for i in 0..4 {
         sys.diag[tet[i] as usize] += k[i][i] * weight;
@@ -239,16 +243,28 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
     total_forces(model, fem, &state.positions, &zero_v, external, &mut f);
     let mut residual = max_free(&f);
     let (mut iter, mut cg_total, mut stalls) = (0, 0, 0);
+    let mut exact = true;
     while residual > tolerance && iter < settings.max_newton_iterations && stalls < 4 {
         iter += 1;
-        sys.begin(n, &fem.edges);
-        for t in 0..fem.len() {
-            let r = rotation(&fem.deformation_gradient(t, &state.positions));
-            add_stiffness(fem, t, &r, 1.0, &mut sys);
+        // Newton with the exact tangent where it is positive definite; where the solve breaks
+        // down on it (an indefinite tangent far from equilibrium), the warped stiffness.
+        for attempt in [exact, false] {
+            sys.begin(n, &fem.edges);
+            for t in 0..fem.len() {
+                match attempt.then(|| fem.exact_stiffness_blocks(t, &state.positions)).flatten() {
+                    Some(k) => add_blocks(fem, t, &k, 1.0, &mut sys),
+                    None => add_stiffness(fem, t, &rotation(&fem.deformation_gradient(t, &state.positions)), 1.0, &mut sys),
+                }
+            }
+            sys.prepare(&model.held);
+            dx.iter_mut().for_each(|d| *d = Vector3::zeros());
+            let report = sys.solve(&f, &mut dx, 1e-10, 0.0, 10 * n.max(100), &mut cg);
+            cg_total += report.iterations;
+            if report.converged || !attempt {
+                break;
+            }
+            exact = false; // the exact tangent was not positive definite here: stay warped
         }
-        sys.prepare(&model.held);
-        dx.iter_mut().for_each(|d| *d = Vector3::zeros());
-        cg_total += sys.solve(&f, &mut dx, 1e-10, 0.0, 10 * n.max(100), &mut cg).iterations;
         let f0 = norm2(&f);
         let mut step = 1.0;
         let mut accepted = false;
@@ -337,6 +353,44 @@ mod tests {
         let (mut fp, mut fm) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
         total_forces(&model, &fem, &xp, &v, &zero, &mut fp);
         total_forces(&model, &fem, &xm, &v, &zero, &mut fm);
+        let k_scale = kd.iter().map(|k| k.norm()).fold(0.0, f64::max);
+        for i in 0..n {
+            let fd = -(fp[i] - fm[i]) / (2.0 * eps);
+            assert!((fd - kd[i]).norm() < 1e-5 * k_scale, "{i}: {fd} vs {}", kd[i]);
+        }
+    }
+
+    /// The exact tangent is the derivative of the forces in a deformed, rotated, pre-stressed
+    /// state.
+    #[test]
+    fn exact_stiffness_matches_finite_differences() {
+        let (model, fem) = model(0.04);
+        let n = model.vertex_count();
+        let rot = nalgebra::Rotation3::from_euler_angles(0.2, 0.4, -0.3);
+        let x: Vec<Point3> = model
+            .mesh
+            .positions()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| rot * p + Vector3::new((i as f64).sin(), (2.0 * i as f64).cos(), 0.5) * 1e-3)
+            .collect();
+        let mut sys = BlockSystem::default();
+        sys.begin(n, &fem.edges);
+        for t in 0..fem.len() {
+            let k = fem.exact_stiffness_blocks(t, &x).expect("not near inversion");
+            add_blocks(&fem, t, &k, 1.0, &mut sys);
+        }
+        sys.prepare(&model.held);
+        let v = vec![Vector3::zeros(); n];
+        let dir: Vec<Vector3> = (0..n).map(|i| Vector3::new((0.7 * i as f64).cos(), (1.1 * i as f64).sin(), -0.4)).collect();
+        let mut kd = vec![Vector3::zeros(); n];
+        sys.apply(&dir, &mut kd);
+        let eps = 1e-7;
+        let xp: Vec<Point3> = x.iter().zip(&dir).map(|(p, d)| p + d * eps).collect();
+        let xm: Vec<Point3> = x.iter().zip(&dir).map(|(p, d)| p - d * eps).collect();
+        let (mut fp, mut fm) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
+        total_forces(&model, &fem, &xp, &v, &v, &mut fp);
+        total_forces(&model, &fem, &xm, &v, &v, &mut fm);
         let k_scale = kd.iter().map(|k| k.norm()).fold(0.0, f64::max);
         for i in 0..n {
             let fd = -(fp[i] - fm[i]) / (2.0 * eps);
