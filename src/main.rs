@@ -1,6 +1,8 @@
 //! cutlab: the command line. Thin commands that wire the crates together.
 
 mod bench;
+mod bench_accuracy;
+mod bench_stability;
 mod demo;
 mod scene_info;
 mod stats;
@@ -70,6 +72,30 @@ enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Run time against error per force model (springs, springs from E, co-rotational FEM),
+    /// mesh and integrator on problems with known answers: patch test, cantilever on the IPC
+    /// bars, wound opening of a pre-stressed sheet, first frequency of a bar.
+    Accuracy {
+        /// A reduced set (about a minute).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the CSV table and the SVG plot.
+        #[arg(long, default_value = "out/bench-accuracy")]
+        out: PathBuf,
+    },
+    /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
+    /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
+    Stability {
+        /// A reduced set.
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 fn main() -> std::process::ExitCode {
@@ -104,5 +130,7 @@ fn run() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
+        Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
+        Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
     }
 }

@@ -15,7 +15,8 @@
 //! - [`cut`]: volumetric cutting: vertex movement, minimal subdivision, particle remodelling;
 //! - [`scene`]: scene files and built-in scenes;
 //! - [`reference`]: reference problems with known answers (patch test, cantilever, wound
-//!   opening, free vibration).
+//!   opening, free vibration);
+//! - [`stability`]: stability stress cases (sweeps of step, stiffness, damping, mass ratio).
 
 pub mod cut;
 pub mod error;
@@ -28,6 +29,7 @@ pub mod reference;
 pub mod scene;
 pub mod segmentation;
 pub mod solver;
+pub mod stability;
 
 pub use error::{MeshError, ReadError, SegmentationError};
 pub use mesh::TetMesh;

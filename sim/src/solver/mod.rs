@@ -106,6 +106,10 @@ pub enum StepError {
     NonFiniteInput { vertices: Vec<u32> },
     #[error("step rejected: it would make the state of particles {} non-finite", list(.vertices))]
     NonFinite { vertices: Vec<u32> },
+    /// The implicit solve produced a non-finite residual (e.g. forces so large that their
+    /// squares overflow): its result cannot be trusted.
+    #[error("step rejected: the implicit solve failed (residual {residual})")]
+    SolverFailed { residual: f64 },
 }
 
 fn list(v: &[u32]) -> String {
@@ -290,6 +294,14 @@ impl Simulation {
                 report.cg_iterations = r.iterations;
                 report.cg_relative_residual = r.relative_residual;
             }
+        }
+        if !report.cg_relative_residual.is_finite() {
+            if let Some(backup) = &self.scratch.backup {
+                self.state.positions.clone_from(&backup.positions);
+                self.state.velocities.clone_from(&backup.velocities);
+            }
+            self.reset_warm_start();
+            return Err(StepError::SolverFailed { residual: report.cg_relative_residual });
         }
         let bad: Vec<u32> = (0..self.state.positions.len())
             .filter(|&i| {
