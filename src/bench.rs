@@ -14,6 +14,8 @@ use crate::stroke::Stroke;
 
 #[derive(Debug, Serialize)]
 struct StepRow {
+    /// `springs` or `corotational-fem`.
+    model: &'static str,
     requested_tets: usize,
     tets: usize,
     particles: usize,
@@ -27,20 +29,32 @@ struct StepRow {
     realtime_factor: f64,
 }
 
-/// Step time per integrator on the chest wall (single thread), while a stroke presses on it.
+/// Step time per integrator on the chest wall (single thread), while a stroke presses on it:
+/// the paper's springs with both integrators, and the finite elements (`chest-wall-fem`) with
+/// implicit Euler (symplectic Euler would need thousands of sub-steps with their
+/// stiffness-proportional damping) up to 10k tets.
 pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
     let sizes: &[usize] = if quick { &[1_000, 10_000] } else { &[1_000, 10_000, 100_000] };
+    let mut runs: Vec<(&str, usize, Integrator)> = Vec::new();
+    for &n in sizes {
+        for integrator in Integrator::ALL {
+            runs.push(("chest-wall", n, integrator));
+        }
+        if n <= 10_000 {
+            runs.push(("chest-wall-fem", n, Integrator::ImplicitEuler));
+        }
+    }
     let budget = if quick { Duration::from_secs(2) } else { Duration::from_secs(10) };
     let max_steps = if quick { 500 } else { 2_000 };
-    let bar = ProgressBar::new((sizes.len() * Integrator::ALL.len()) as u64);
+    let bar = ProgressBar::new(runs.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     if json {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let mut rows = Vec::new();
-    for &n in sizes {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(n) }).context("chest-wall")?;
-        for integrator in Integrator::ALL {
+    for &(name, n, integrator) in &runs {
+        let scene = Scene::load(name, BuildOptions { min_tets: Some(n) }).context(name)?;
+        {
             bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
             let mut sim = scene.simulation();
             sim.settings.integrator = integrator;
@@ -64,6 +78,7 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
             }
             let s = Summary::of(&times);
             rows.push(StepRow {
+                model: if scene.model.fem.is_some() { "corotational-fem" } else { "springs" },
                 requested_tets: n,
                 tets: scene.model.mesh.tet_count(),
                 particles: scene.model.vertex_count(),
@@ -87,11 +102,11 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall, single thread");
-    println!("| tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
-    println!("|---:|---:|---|---:|---:|---:|---:|---:|---:|");
+    println!("| model | tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
+    println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|");
     for r in &rows {
-        println!("| {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
-            r.tets, r.particles, r.integrator, r.substeps, r.cg_iterations_mean, r.step_us.median, r.step_us.p99,
+        println!("| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
+            r.model, r.tets, r.particles, r.integrator, r.substeps, r.cg_iterations_mean, r.step_us.median, r.step_us.p99,
             r.realtime_factor, r.settle_ms);
     }
     Ok(())
