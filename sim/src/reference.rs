@@ -416,6 +416,9 @@ pub fn vibration(
     integrator: Integrator,
     time_step_s: f64,
 ) -> Result<VibrationResult, ReferenceError> {
+    if !(time_step_s > 0.0 && time_step_s.is_finite()) {
+        return Err(ReferenceError::Failed(format!("time step must be positive, got {time_step_s} s")));
+    }
     let (lo, hi) = mesh.bounding_box();
     let length = hi.x - lo.x;
     let tol = 1e-6 * length;

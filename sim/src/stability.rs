@@ -127,6 +127,9 @@ pub fn energy(sim: &Simulation) -> f64 {
 /// `duration_s` of simulated time; explicit runs needing more than `max_substeps` per step are
 /// not run.
 pub fn run(case: &StabilityCase, cells: GridCells, duration_s: f64, max_substeps: u32) -> Result<StabilityResult, ReferenceError> {
+    if !(case.time_step_s > 0.0 && case.time_step_s.is_finite() && duration_s.is_finite()) {
+        return Err(ReferenceError::Failed(format!("bad time step {} s or duration {duration_s} s", case.time_step_s)));
+    }
     let mut sim = build(case, cells)?;
     let substeps = if case.integrator == Integrator::SymplecticEuler { sim.explicit_substeps() } else { 1 };
     let mut result = StabilityResult { outcome: Outcome::Stable, steps: 0, substeps, energy_ratio: 1.0, max_speed_m_per_s: 0.0 };

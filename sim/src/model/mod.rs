@@ -1,6 +1,7 @@
 //! The paper's particle model: particles at the mesh vertices with lumped masses, springs and
 //! dampers along the tetrahedron edges, pre-tension by shortened rest lengths, held vertices
-//! and gravity.
+//! and gravity; optionally ([`Model::with_fem`]) co-rotational finite elements instead of the
+//! springs (see [`crate::fem`]).
 
 mod material;
 mod springs;
