@@ -14,7 +14,8 @@
 //!
 //! With the deformed edge matrix `D_s = [x_1 - x_0, x_2 - x_0, x_3 - x_0]`, the deformation
 //! gradient is `F = D_s D_m^-1`. Its rotation `R` comes from the polar decomposition
-//! `F = R S`, computed from the singular value decomposition `F = U Sigma V^T` with the
+//! `F = R S` (Newton's iteration for the polar factor where `det F > 0`, see [`rotation`]),
+//! for inverted elements from the singular value decomposition `F = U Sigma V^T` with the
 //! reflection fix (when `det U < 0` or `det V < 0` the column of the smallest singular value is
 //! negated, so `R = U V^T` is a proper rotation even for an inverted element, whose `S` then has
 //! a negative eigenvalue and whose forces push it back out). In the element's rotated frame the
@@ -258,10 +259,57 @@ pub fn gradients(rest_inverse: &Matrix3<f64>) -> [Vector3; 4] {
     [-(b1 + b2 + b3), b1, b2, b3]
 }
 
-/// The rotation `R` of the polar decomposition `F = R S`, by SVD with the reflection fix: a
-/// proper rotation (`det R = 1`) even when `det F <= 0`. Non-finite or undecomposable `F`
-/// gives the identity (the step is then rejected by the solver's non-finite check anyway).
+/// The rotation `R` of the polar decomposition `F = R S`: a proper rotation (`det R = 1`) even
+/// when `det F <= 0`. For `det F > 0`, by Higham's Newton iteration
+/// `X <- (g X + X^-T / g) / 2` from `X = F` (scaled by `g = det(X)^(-1/3)` while far from
+/// convergence, when `det F` is far from 1), which converges quadratically to `R`; otherwise, or if it does not converge in
+/// [`POLAR_MAX_ITERATIONS`], by SVD with the reflection fix (when `det U < 0` or `det V < 0` the
+/// singular vector of the smallest singular value is negated, so `R = U V^T`). Non-finite or
+/// undecomposable `F` gives the identity (the step is then rejected by the solver's non-finite
+/// check anyway).
 pub fn rotation(f: &Matrix3<f64>) -> Matrix3<f64> {
+    if !f.iter().all(|c| c.is_finite()) {
+        return Matrix3::identity();
+    }
+    if f.determinant() > 0.0
+        && let Some(r) = polar_newton(f)
+    {
+        return r;
+    }
+    rotation_by_svd(f)
+}
+
+/// Iterations of the polar Newton iteration before falling back to the SVD.
+pub const POLAR_MAX_ITERATIONS: usize = 40;
+
+/// The polar factor of `f` (`det f > 0`) by the scaled Newton iteration; `None` if it does not
+/// converge (a nearly singular `f`).
+fn polar_newton(f: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let mut x = *f;
+    // scaling pays only for large volume changes (near rest, plain Newton takes ~4 steps)
+    let mut scaled = (f.determinant() - 1.0).abs() > 0.2;
+    for _ in 0..POLAR_MAX_ITERATIONS {
+        let det = x.determinant();
+        if !(det > 0.0 && det.is_finite()) {
+            return None;
+        }
+        let inv_t = x.try_inverse()?.transpose();
+        let g = if scaled { 1.0 / det.cbrt() } else { 1.0 };
+        let next = (x * g + inv_t * (1.0 / g)) * 0.5;
+        let change = (next - x).norm();
+        x = next;
+        if change < 1e-3 {
+            scaled = false; // close: plain Newton converges quadratically
+        }
+        if change < 1e-14 {
+            return Some(x);
+        }
+    }
+    None
+}
+
+/// The rotation by SVD with the reflection fix (see [`rotation`]).
+pub fn rotation_by_svd(f: &Matrix3<f64>) -> Matrix3<f64> {
     if !f.iter().all(|c| c.is_finite()) {
         return Matrix3::identity();
     }

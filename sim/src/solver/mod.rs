@@ -234,7 +234,7 @@ impl Simulation {
             buf.iter_mut().for_each(|d| *d = Vector3::zeros());
         }
         implicit.history = 0;
-        self.scratch.fem.dv.iter_mut().for_each(|d| *d = Vector3::zeros());
+        self.scratch.fem.reset_warm_start();
     }
 
     /// Advances one fixed step of `settings.time_step_s`.
