@@ -30,6 +30,10 @@ enum Command {
         /// Resolution of the chest wall: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,
+        /// The scene: `chest-wall` (the paper's springs) or `chest-wall-fem` (co-rotational
+        /// finite elements), or another chest-wall-like scene.
+        #[arg(long, default_value = "chest-wall")]
+        scene: String,
     },
     /// Scenes: built-in ones and scene files.
     Scene {
@@ -118,7 +122,7 @@ fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Demo { out, min_tets } => demo::run(&out, min_tets),
+        Command::Demo { out, min_tets, scene } => demo::run(&out, min_tets, &scene),
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
