@@ -54,47 +54,45 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for &(name, n, integrator) in &runs {
         let scene = Scene::load(name, BuildOptions { min_tets: Some(n) }).context(name)?;
-        {
-            bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
-            let mut sim = scene.simulation();
-            sim.settings.integrator = integrator;
-            sim.model_changed();
-            let t = Instant::now();
-            let settle = sim.settle(StaticSettings::default());
-            let settle_ms = t.elapsed().as_secs_f64() * 1e3;
-            anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
-            let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
-            let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), 1.5, 0.3);
-            let dt = sim.settings.time_step_s;
-            let mut times = Vec::new();
-            let mut cg = 0;
-            let started = Instant::now();
-            while times.len() < max_steps && (times.len() < 20 || started.elapsed() < budget) {
-                stroke.apply(&mut sim, times.len() as f64 * dt);
-                let ts = Instant::now();
-                let r = sim.step().context("step")?;
-                times.push(ts.elapsed().as_secs_f64() * 1e6);
-                cg += r.cg_iterations;
-            }
-            let s = Summary::of(&times);
-            rows.push(StepRow {
-                model: if scene.model.fem.is_some() { "corotational-fem" } else { "springs" },
-                requested_tets: n,
-                tets: scene.model.mesh.tet_count(),
-                particles: scene.model.vertex_count(),
-                integrator: integrator.name(),
-                settle_ms,
-                substeps: match integrator {
-                    Integrator::SymplecticEuler => sim.explicit_substeps(),
-                    Integrator::ImplicitEuler => 1,
-                },
-                steps: times.len(),
-                cg_iterations_mean: cg as f64 / times.len() as f64,
-                realtime_factor: dt * 1e6 / s.median,
-                step_us: s,
-            });
-            bar.inc(1);
+        bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
+        let mut sim = scene.simulation();
+        sim.settings.integrator = integrator;
+        sim.model_changed();
+        let t = Instant::now();
+        let settle = sim.settle(StaticSettings::default());
+        let settle_ms = t.elapsed().as_secs_f64() * 1e3;
+        anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
+        let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), 1.5, 0.3);
+        let dt = sim.settings.time_step_s;
+        let mut times = Vec::new();
+        let mut cg = 0;
+        let started = Instant::now();
+        while times.len() < max_steps && (times.len() < 20 || started.elapsed() < budget) {
+            stroke.apply(&mut sim, times.len() as f64 * dt);
+            let ts = Instant::now();
+            let r = sim.step().context("step")?;
+            times.push(ts.elapsed().as_secs_f64() * 1e6);
+            cg += r.cg_iterations;
         }
+        let s = Summary::of(&times);
+        rows.push(StepRow {
+            model: if scene.model.fem.is_some() { "corotational-fem" } else { "springs" },
+            requested_tets: n,
+            tets: scene.model.mesh.tet_count(),
+            particles: scene.model.vertex_count(),
+            integrator: integrator.name(),
+            settle_ms,
+            substeps: match integrator {
+                Integrator::SymplecticEuler => sim.explicit_substeps(),
+                Integrator::ImplicitEuler => 1,
+            },
+            steps: times.len(),
+            cg_iterations_mean: cg as f64 / times.len() as f64,
+            realtime_factor: dt * 1e6 / s.median,
+            step_us: s,
+        });
+        bar.inc(1);
     }
     bar.finish_and_clear();
     if json {
