@@ -80,7 +80,7 @@ enum BenchCommand {
     /// mesh and integrator on problems with known answers: patch test, cantilever on the IPC
     /// bars, wound opening of a pre-stressed sheet, first frequency of a bar.
     Accuracy {
-        /// A reduced set (about a minute).
+        /// A reduced set (coarser sheets and bars, implicit Euler only; seconds).
         #[arg(long)]
         quick: bool,
         /// Machine-readable output.
