@@ -14,6 +14,8 @@ use crate::stroke::Stroke;
 
 #[derive(Debug, Serialize)]
 struct StepRow {
+    /// `springs` or `corotational-fem`.
+    model: &'static str,
     requested_tets: usize,
     tets: usize,
     particles: usize,
@@ -27,59 +29,70 @@ struct StepRow {
     realtime_factor: f64,
 }
 
-/// Step time per integrator on the chest wall (single thread), while a stroke presses on it.
+/// Step time per integrator on the chest wall (single thread), while a stroke presses on it:
+/// the paper's springs with both integrators, and the finite elements (`chest-wall-fem`) with
+/// implicit Euler (symplectic Euler would need thousands of sub-steps with their
+/// stiffness-proportional damping) up to 10k tets.
 pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
     let sizes: &[usize] = if quick { &[1_000, 10_000] } else { &[1_000, 10_000, 100_000] };
+    let mut runs: Vec<(&str, usize, Integrator)> = Vec::new();
+    for &n in sizes {
+        for integrator in Integrator::ALL {
+            runs.push(("chest-wall", n, integrator));
+        }
+        if n <= 10_000 {
+            runs.push(("chest-wall-fem", n, Integrator::ImplicitEuler));
+        }
+    }
     let budget = if quick { Duration::from_secs(2) } else { Duration::from_secs(10) };
     let max_steps = if quick { 500 } else { 2_000 };
-    let bar = ProgressBar::new((sizes.len() * Integrator::ALL.len()) as u64);
+    let bar = ProgressBar::new(runs.len() as u64);
     bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
     if json {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let mut rows = Vec::new();
-    for &n in sizes {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(n) }).context("chest-wall")?;
-        for integrator in Integrator::ALL {
-            bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
-            let mut sim = scene.simulation();
-            sim.settings.integrator = integrator;
-            sim.model_changed();
-            let t = Instant::now();
-            let settle = sim.settle(StaticSettings::default());
-            let settle_ms = t.elapsed().as_secs_f64() * 1e3;
-            anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
-            let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
-            let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), 1.5, 0.3);
-            let dt = sim.settings.time_step_s;
-            let mut times = Vec::new();
-            let mut cg = 0;
-            let started = Instant::now();
-            while times.len() < max_steps && (times.len() < 20 || started.elapsed() < budget) {
-                stroke.apply(&mut sim, times.len() as f64 * dt);
-                let ts = Instant::now();
-                let r = sim.step().context("step")?;
-                times.push(ts.elapsed().as_secs_f64() * 1e6);
-                cg += r.cg_iterations;
-            }
-            let s = Summary::of(&times);
-            rows.push(StepRow {
-                requested_tets: n,
-                tets: scene.model.mesh.tet_count(),
-                particles: scene.model.vertex_count(),
-                integrator: integrator.name(),
-                settle_ms,
-                substeps: match integrator {
-                    Integrator::SymplecticEuler => sim.explicit_substeps(),
-                    Integrator::ImplicitEuler => 1,
-                },
-                steps: times.len(),
-                cg_iterations_mean: cg as f64 / times.len() as f64,
-                realtime_factor: dt * 1e6 / s.median,
-                step_us: s,
-            });
-            bar.inc(1);
+    for &(name, n, integrator) in &runs {
+        let scene = Scene::load(name, BuildOptions { min_tets: Some(n) }).context(name)?;
+        bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
+        let mut sim = scene.simulation();
+        sim.settings.integrator = integrator;
+        sim.model_changed();
+        let t = Instant::now();
+        let settle = sim.settle(StaticSettings::default());
+        let settle_ms = t.elapsed().as_secs_f64() * 1e3;
+        anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
+        let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), 1.5, 0.3);
+        let dt = sim.settings.time_step_s;
+        let mut times = Vec::new();
+        let mut cg = 0;
+        let started = Instant::now();
+        while times.len() < max_steps && (times.len() < 20 || started.elapsed() < budget) {
+            stroke.apply(&mut sim, times.len() as f64 * dt);
+            let ts = Instant::now();
+            let r = sim.step().context("step")?;
+            times.push(ts.elapsed().as_secs_f64() * 1e6);
+            cg += r.cg_iterations;
         }
+        let s = Summary::of(&times);
+        rows.push(StepRow {
+            model: if scene.model.fem.is_some() { "corotational-fem" } else { "springs" },
+            requested_tets: n,
+            tets: scene.model.mesh.tet_count(),
+            particles: scene.model.vertex_count(),
+            integrator: integrator.name(),
+            settle_ms,
+            substeps: match integrator {
+                Integrator::SymplecticEuler => sim.explicit_substeps(),
+                Integrator::ImplicitEuler => 1,
+            },
+            steps: times.len(),
+            cg_iterations_mean: cg as f64 / times.len() as f64,
+            realtime_factor: dt * 1e6 / s.median,
+            step_us: s,
+        });
+        bar.inc(1);
     }
     bar.finish_and_clear();
     if json {
@@ -87,11 +100,11 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall, single thread");
-    println!("| tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
-    println!("|---:|---:|---|---:|---:|---:|---:|---:|---:|");
+    println!("| model | tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
+    println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|");
     for r in &rows {
-        println!("| {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
-            r.tets, r.particles, r.integrator, r.substeps, r.cg_iterations_mean, r.step_us.median, r.step_us.p99,
+        println!("| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
+            r.model, r.tets, r.particles, r.integrator, r.substeps, r.cg_iterations_mean, r.step_us.median, r.step_us.p99,
             r.realtime_factor, r.settle_ms);
     }
     Ok(())

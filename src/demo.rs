@@ -12,11 +12,12 @@ use cutlab_sim::{Point3, Vector3};
 
 use crate::stats::Summary;
 
-pub fn run(out: &Path, min_tets: Option<usize>) -> anyhow::Result<()> {
+pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Result<()> {
     let t0 = Instant::now();
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets }).context("building the chest-wall scene")?;
+    let scene = Scene::load(scene_name, BuildOptions { min_tets }).with_context(|| format!("building the {scene_name} scene"))?;
     let m = &scene.model;
-    println!("scene chest-wall: {} tets, {} particles ({} held), {} springs, mass {:.1} g, built in {:.0} ms",
+    let model_name = if m.fem.is_some() { "co-rotational finite elements" } else { "springs" };
+    println!("scene {scene_name} ({model_name}): {} tets, {} particles ({} held), {} springs, mass {:.1} g, built in {:.0} ms",
         m.mesh.tet_count(), m.vertex_count(), m.held_count(), m.springs.len(), m.total_mass() * 1e3,
         t0.elapsed().as_secs_f64() * 1e3);
 

@@ -1,6 +1,8 @@
 //! cutlab: the command line. Thin commands that wire the crates together.
 
 mod bench;
+mod bench_accuracy;
+mod bench_stability;
 mod demo;
 mod scene_info;
 mod session;
@@ -29,6 +31,10 @@ enum Command {
         /// Resolution of the chest wall: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,
+        /// The scene: `chest-wall` (the paper's springs) or `chest-wall-fem` (co-rotational
+        /// finite elements), or another chest-wall-like scene.
+        #[arg(long, default_value = "chest-wall")]
+        scene: String,
     },
     /// Run one training session: a device drives the scalpel through the 1 kHz servo loop
     /// while the simulation runs; prints a summary and writes DIR/final.vtu.
@@ -100,6 +106,30 @@ enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Run time against error per force model (springs, springs from E, co-rotational FEM),
+    /// mesh and integrator on problems with known answers: patch test, cantilever on the IPC
+    /// bars, wound opening of a pre-stressed sheet, first frequency of a bar.
+    Accuracy {
+        /// A reduced set (coarser sheets and bars, implicit Euler only; seconds).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the CSV table and the SVG plot.
+        #[arg(long, default_value = "out/bench-accuracy")]
+        out: PathBuf,
+    },
+    /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
+    /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
+    Stability {
+        /// A reduced set.
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 fn parse_clock(s: &str) -> Result<cutlab_haptics::servo::Clock, String> {
@@ -126,7 +156,7 @@ fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Demo { out, min_tets } => demo::run(&out, min_tets),
+        Command::Demo { out, min_tets, scene } => demo::run(&out, min_tets, &scene),
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
@@ -148,5 +178,7 @@ fn run() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
+        Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
+        Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
     }
 }

@@ -8,6 +8,8 @@ use serde::Serialize;
 #[derive(Debug, Serialize)]
 struct Info {
     name: String,
+    /// `springs` or `corotational-fem`.
+    force_model: &'static str,
     tets: usize,
     vertices: usize,
     edges: usize,
@@ -31,6 +33,10 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
     let report = mesh.validate();
     let info = Info {
         name: built.spec.name.clone(),
+        force_model: match m.force_model() {
+            cutlab_sim::model::ForceModel::Springs => "springs",
+            cutlab_sim::model::ForceModel::CorotationalFem => "corotational-fem",
+        },
         tets: mesh.tet_count(),
         vertices: mesh.vertex_count(),
         edges: mesh.topology().edges.len(),
@@ -50,6 +56,7 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
         return Ok(());
     }
     println!("scene      {}", info.name);
+    println!("model      {}", info.force_model);
     println!("tets       {}", info.tets);
     println!("vertices   {} ({} held)", info.vertices, info.held_vertices.unwrap_or(0));
     println!("edges      {}", info.edges);

@@ -10,19 +10,26 @@
 //! - [`segmentation`]: NIfTI label volumes to conforming voxel tetrahedral meshes;
 //! - [`generate`]: built-in structured meshes (slabs, sheets, bars);
 //! - [`model`]: the particle/spring/damper model with pre-tension;
+//! - [`fem`]: co-rotational linear tetrahedral finite elements (the converging alternative);
 //! - [`solver`]: time integrators and static equilibrium;
 //! - [`cut`]: volumetric cutting: vertex movement, minimal subdivision, particle remodelling;
-//! - [`scene`]: scene files and built-in scenes.
+//! - [`scene`]: scene files and built-in scenes;
+//! - [`reference`]: reference problems with known answers (patch test, cantilever, wound
+//!   opening, free vibration);
+//! - [`stability`]: stability stress cases (sweeps of step, stiffness, damping, mass ratio).
 
 pub mod cut;
 pub mod error;
+pub mod fem;
 pub mod generate;
 pub mod io;
 pub mod mesh;
 pub mod model;
+pub mod reference;
 pub mod scene;
 pub mod segmentation;
 pub mod solver;
+pub mod stability;
 
 pub use error::{MeshError, ReadError, SegmentationError};
 pub use mesh::TetMesh;

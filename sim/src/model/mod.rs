@@ -1,6 +1,7 @@
 //! The paper's particle model: particles at the mesh vertices with lumped masses, springs and
 //! dampers along the tetrahedron edges, pre-tension by shortened rest lengths, held vertices
-//! and gravity.
+//! and gravity; optionally ([`Model::with_fem`]) co-rotational finite elements instead of the
+//! springs (see [`crate::fem`]).
 
 mod material;
 mod springs;
@@ -8,6 +9,7 @@ mod springs;
 pub use material::{Material, SpringStiffness};
 pub use springs::SpringSet;
 
+use crate::fem::{FemMaterial, FemModel};
 use crate::{Point3, TetMesh, Vector3};
 
 /// A problem with the model's set-up.
@@ -17,6 +19,8 @@ pub enum ModelError {
     Material { region: u32, message: String },
     #[error("no material for region {0}")]
     MissingMaterial(u32),
+    #[error("no finite-element material for region {0}")]
+    MissingFemMaterial(u32),
     #[error("held vertex {vertex} is out of range (mesh has {vertex_count} vertices)")]
     HeldOutOfRange { vertex: u32, vertex_count: usize },
     #[error("gravity must be finite")]
@@ -41,6 +45,19 @@ pub struct Model {
     pub springs: SpringSet,
     /// Gravitational acceleration in m/s^2 (zero when gravity is off).
     pub gravity: Vector3,
+    /// The co-rotational finite elements, when the model uses them instead of the springs
+    /// (see [`Model::with_fem`]); the springs are still derived (for the cutter's events), but
+    /// the solvers then ignore them.
+    pub fem: Option<FemModel>,
+}
+
+/// Which force model a [`Model`] runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ForceModel {
+    /// The paper's springs and dampers on the edges.
+    Springs,
+    /// Co-rotational linear tetrahedral finite elements.
+    CorotationalFem,
 }
 
 /// Positions (m) and velocities (m/s) of the particles.
@@ -104,7 +121,22 @@ impl Model {
             *held.get_mut(v as usize).ok_or(ModelError::HeldOutOfRange { vertex: v, vertex_count: n })? = true;
         }
         let (mass, inv_mass, springs) = derive(&materials, &mesh, &held)?;
-        Ok(Self { mesh, materials, mass, inv_mass, held, springs, gravity })
+        Ok(Self { mesh, materials, mass, inv_mass, held, springs, gravity, fem: None })
+    }
+
+    /// Switches the model to co-rotational finite elements with the given materials per region
+    /// (any order); density and pre-tension stay those of [`Self::materials`].
+    pub fn with_fem(mut self, fem_materials: &[(u32, FemMaterial)]) -> Result<Self, ModelError> {
+        let mut fem_materials = fem_materials.to_vec();
+        fem_materials.sort_by_key(|(id, _)| *id);
+        fem_materials.dedup_by_key(|(id, _)| *id);
+        self.fem = Some(FemModel::build(&self.mesh, &self.materials, &fem_materials)?);
+        Ok(self)
+    }
+
+    /// The force model the solvers run.
+    pub fn force_model(&self) -> ForceModel {
+        if self.fem.is_some() { ForceModel::CorotationalFem } else { ForceModel::Springs }
     }
 
     pub fn vertex_count(&self) -> usize {
@@ -114,8 +146,13 @@ impl Model {
     /// Replaces the mesh after a topology change (a cut): masses, springs and held flags are
     /// rebuilt by the same rules as at the start (`m = sum rho V / 4`, `l = d (1 - s)` with `d`
     /// from the reference positions).
+    /// With finite elements, the elements are rebuilt too: new tetrahedra get their rest shapes
+    /// by the same pre-strain rule (`D_m = (1 - s) D_ref`).
     pub fn rebuild(&mut self, mesh: TetMesh, held: Vec<bool>) -> Result<(), ModelError> {
         let (mass, inv_mass, springs) = derive(&self.materials, &mesh, &held)?;
+        if let Some(fem) = &mut self.fem {
+            *fem = FemModel::build(&mesh, &self.materials, &fem.materials)?;
+        }
         self.mass = mass;
         self.inv_mass = inv_mass;
         self.springs = springs;

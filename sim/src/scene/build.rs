@@ -2,8 +2,9 @@
 
 use std::path::Path;
 
-use super::spec::{HeldSelection, MeshSource, SceneSpec, Target, Viewpoint};
+use super::spec::{ForceModelSpec, HeldSelection, MeshSource, SceneSpec, Target, Viewpoint};
 use super::{SceneError, SpecOrigin};
+use crate::fem::FemMaterial;
 use crate::generate::{self, GridCells};
 use crate::model::{Material, Model};
 use crate::solver::{Simulation, SolverSettings};
@@ -52,8 +53,16 @@ impl Scene {
             materials = mesh.region_ids().into_iter().map(|r| (r, Material::default())).collect();
         }
         let gravity = Vector3::from(spec.gravity_m_per_s2);
-        let model = Model::new(mesh, &materials, &held, gravity)
-            .map_err(|source| SceneError::Model { scene: spec.name.clone(), source })?;
+        let model_error = |source| SceneError::Model { scene: spec.name.clone(), source };
+        let mut model = Model::new(mesh, &materials, &held, gravity).map_err(model_error)?;
+        if spec.force_model == ForceModelSpec::CorotationalFem {
+            let fem: Vec<(u32, FemMaterial)> = if spec.materials.is_empty() {
+                materials.iter().map(|(r, _)| (*r, FemMaterial::default())).collect()
+            } else {
+                spec.materials.iter().map(|m| (m.region, m.fem.unwrap_or_default())).collect()
+            };
+            model = model.with_fem(&fem).map_err(model_error)?;
+        }
         Ok(Self {
             targets: spec.targets.clone(),
             viewpoint: spec.viewpoint.clone(),

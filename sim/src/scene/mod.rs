@@ -6,15 +6,16 @@ mod build;
 mod spec;
 
 pub use build::{BuildOptions, Scene};
-pub use spec::{HeldSelection, MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint};
+pub use spec::{ForceModelSpec, HeldSelection, MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint};
 
 use std::path::{Path, PathBuf};
 
 use crate::ReadError;
 
 /// Built-in scenes: name and TOML text.
-pub const BUILTIN: [(&str, &str); 4] = [
+pub const BUILTIN: [(&str, &str); 5] = [
     ("chest-wall", include_str!("../../scenes/chest-wall.toml")),
+    ("chest-wall-fem", include_str!("../../scenes/chest-wall-fem.toml")),
     ("sheet", include_str!("../../scenes/sheet.toml")),
     ("bar", include_str!("../../scenes/bar.toml")),
     ("body-wall", include_str!("../../scenes/body-wall.toml")),
@@ -89,6 +90,7 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
             targets: Vec::new(),
             viewpoint: None,
             solver: Default::default(),
+            force_model: Default::default(),
         };
         return Ok((spec, SpecOrigin::File(path.to_path_buf())));
     }

@@ -33,6 +33,18 @@ pub struct SceneSpec {
     pub viewpoint: Option<Viewpoint>,
     #[serde(default)]
     pub solver: SolverSettings,
+    /// The force model: the paper's `springs` (default) or `corotational-fem`.
+    #[serde(default)]
+    pub force_model: ForceModelSpec,
+}
+
+/// The force model of a scene.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ForceModelSpec {
+    #[default]
+    Springs,
+    CorotationalFem,
 }
 
 /// Where the tetrahedral mesh comes from.
@@ -88,6 +100,10 @@ pub struct RegionMaterial {
     pub stiffness: crate::model::SpringStiffness,
     pub damping_newton_seconds_per_metre: f64,
     pub pretension: f64,
+    /// Finite-element parameters, used when the scene's `force_model` is `corotational-fem`
+    /// (default: [`crate::fem::FemMaterial::CHEST_WALL`]).
+    #[serde(default)]
+    pub fem: Option<crate::fem::FemMaterial>,
 }
 
 impl RegionMaterial {

@@ -106,6 +106,10 @@ pub enum StepError {
     NonFiniteInput { vertices: Vec<u32> },
     #[error("step rejected: it would make the state of particles {} non-finite", list(.vertices))]
     NonFinite { vertices: Vec<u32> },
+    /// The implicit solve produced a non-finite residual (e.g. forces so large that their
+    /// squares overflow): its result cannot be trusted.
+    #[error("step rejected: the implicit solve failed (residual {residual})")]
+    SolverFailed { residual: f64 },
 }
 
 fn list(v: &[u32]) -> String {
@@ -127,6 +131,7 @@ struct Scratch {
     backup: Option<State>,
     forces: Vec<Vector3>,
     implicit: implicit::ImplicitScratch,
+    fem: crate::fem::solve::FemScratch,
 }
 
 /// The particle simulation: model, state, inputs and scratch.
@@ -175,7 +180,11 @@ impl Simulation {
     /// Sub-steps the explicit integrator takes per step.
     pub fn explicit_substeps(&mut self) -> u32 {
         *self.explicit_substeps.get_or_insert_with(|| {
-            explicit::substeps_for(&self.model, self.settings.time_step_s, self.settings.explicit_safety)
+            let (dt, safety) = (self.settings.time_step_s, self.settings.explicit_safety);
+            match &self.model.fem {
+                Some(fem) => crate::fem::solve::substeps_for(&self.model, fem, dt, safety),
+                None => explicit::substeps_for(&self.model, dt, safety),
+            }
         })
     }
 
@@ -195,10 +204,26 @@ impl Simulation {
         self.external_forces.iter_mut().for_each(|f| *f = Vector3::zeros());
     }
 
-    /// Moves the free particles to static equilibrium (velocities zero).
+    /// Moves the free particles to static equilibrium (velocities zero), ignoring the external
+    /// forces.
     pub fn settle(&mut self, settings: StaticSettings) -> StaticReport {
         self.reset_warm_start();
-        statics::solve(&self.model, &mut self.state, settings)
+        let none = vec![Vector3::zeros(); self.model.vertex_count()];
+        match &self.model.fem {
+            Some(fem) => crate::fem::solve::statics(&self.model, fem, &mut self.state, &none, settings),
+            None => statics::solve(&self.model, &mut self.state, settings),
+        }
+    }
+
+    /// Moves the free particles to static equilibrium under the current external forces
+    /// (e.g. a static load), velocities zero.
+    pub fn settle_loaded(&mut self, settings: StaticSettings) -> StaticReport {
+        self.reset_warm_start();
+        let external = &self.external_forces;
+        match &self.model.fem {
+            Some(fem) => crate::fem::solve::statics(&self.model, fem, &mut self.state, external, settings),
+            None => statics::solve_loaded(&self.model, &mut self.state, external, settings),
+        }
     }
 
     /// Forgets the implicit integrator's past velocity changes (after a jump of the state).
@@ -209,6 +234,7 @@ impl Simulation {
             buf.iter_mut().for_each(|d| *d = Vector3::zeros());
         }
         implicit.history = 0;
+        self.scratch.fem.reset_warm_start();
     }
 
     /// Advances one fixed step of `settings.time_step_s`.
@@ -226,13 +252,38 @@ impl Simulation {
 
         let dt = self.settings.time_step_s;
         let mut report = StepReport::default();
-        match self.settings.integrator {
-            Integrator::SymplecticEuler => {
+        let fem = self.model.fem.as_ref();
+        match (self.settings.integrator, fem) {
+            (Integrator::SymplecticEuler, Some(_)) => {
+                let substeps = self.explicit_substeps();
+                report.substeps = substeps;
+                if let Some(fem) = &self.model.fem {
+                    let forces = &mut self.scratch.forces;
+                    crate::fem::solve::explicit_step(&self.model, fem, &mut self.state, &self.external_forces, dt, substeps, forces);
+                }
+            }
+            (Integrator::ImplicitEuler, Some(fem)) => {
+                let (tol, max_it) = (self.settings.cg_relative_tolerance, self.settings.cg_max_iterations);
+                let r = crate::fem::solve::implicit_step(
+                    &self.model,
+                    fem,
+                    &mut self.state,
+                    &self.external_forces,
+                    dt,
+                    tol,
+                    max_it,
+                    &mut self.scratch.fem,
+                );
+                report.substeps = 1;
+                report.cg_iterations = r.iterations;
+                report.cg_relative_residual = r.relative_residual;
+            }
+            (Integrator::SymplecticEuler, None) => {
                 let substeps = self.explicit_substeps();
                 report.substeps = substeps;
                 explicit::step(&self.model, &mut self.state, &self.external_forces, dt, substeps, &mut self.scratch.forces);
             }
-            Integrator::ImplicitEuler => {
+            (Integrator::ImplicitEuler, None) => {
                 let cg = CgSettings {
                     relative_tolerance: self.settings.cg_relative_tolerance,
                     absolute_tolerance: 0.0,
@@ -243,6 +294,14 @@ impl Simulation {
                 report.cg_iterations = r.iterations;
                 report.cg_relative_residual = r.relative_residual;
             }
+        }
+        if !report.cg_relative_residual.is_finite() {
+            if let Some(backup) = &self.scratch.backup {
+                self.state.positions.clone_from(&backup.positions);
+                self.state.velocities.clone_from(&backup.velocities);
+            }
+            self.reset_warm_start();
+            return Err(StepError::SolverFailed { residual: report.cg_relative_residual });
         }
         let bad: Vec<u32> = (0..self.state.positions.len())
             .filter(|&i| {

@@ -37,8 +37,13 @@ pub struct StaticReport {
 
 /// Moves the free particles of `state` to static equilibrium and zeroes all velocities.
 pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> StaticReport {
+    solve_loaded(model, state, &vec![Vector3::zeros(); model.vertex_count()], settings)
+}
+
+/// [`solve`] under the constant external forces `external` (N per particle).
+pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], settings: StaticSettings) -> StaticReport {
     let n = model.vertex_count();
-    let zero_ext = vec![Vector3::zeros(); n];
+    let zero_ext = external;
     state.velocities.iter_mut().for_each(|v| *v = Vector3::zeros());
     let mut f = vec![Vector3::zeros(); n];
     let mut dx = vec![Vector3::zeros(); n];
@@ -54,12 +59,12 @@ pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> Stat
         let l = (state.positions[b as usize] - state.positions[a as usize]).norm();
         scale = scale.max((s.stiffness[e] * (l - s.rest_length[e])).abs());
     }
-    for &m in &model.mass {
-        scale = scale.max(m * model.gravity.norm());
+    for (&m, fe) in model.mass.iter().zip(external) {
+        scale = scale.max(m * model.gravity.norm()).max(fe.norm());
     }
     let tolerance = settings.relative_force_tolerance * scale;
 
-    total_forces(model, &state.positions, &state.velocities, &zero_ext, &mut f);
+    total_forces(model, &state.positions, &state.velocities, zero_ext, &mut f);
     let norm2 = |f: &[Vector3]| -> f64 { f.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm_squared()).sum() };
     let mut residual = max_free_force(model, &f);
     let mut cg_total = 0;
@@ -86,7 +91,7 @@ pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> Stat
             for i in 0..n {
                 trial[i] = state.positions[i] + dx[i] * step;
             }
-            total_forces(model, &trial, &state.velocities, &zero_ext, &mut f_trial);
+            total_forces(model, &trial, &state.velocities, zero_ext, &mut f_trial);
             // Close to equilibrium the (modified) Newton iteration contracts on its own and
             // round-off makes |f| an unreliable merit: take full steps there.
             if norm2(&f_trial) < f0 || residual < 1e-6 * scale {

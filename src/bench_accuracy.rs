@@ -1,0 +1,319 @@
+//! `cutlab bench accuracy`: run time against error per force model, mesh and integrator on
+//! the reference problems of `cutlab_sim::reference`; a Markdown table (or CSV, or JSON) and an
+//! SVG plot of error against run time with the Pareto front of each problem.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use cutlab_sim::generate::GridCells;
+use cutlab_sim::reference::{
+    self, CantileverResult, Elasticity, IPC_BARS, IPC_UNIT_M, Solid, ipc_dir, read_bar,
+};
+use cutlab_sim::solver::Integrator;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+/// One measurement.
+#[derive(Debug, Clone, Serialize)]
+pub struct AccuracyRow {
+    pub problem: &'static str,
+    pub model: &'static str,
+    pub tets: usize,
+    /// `static` for a static solve, else the integrator and its step.
+    pub solver: String,
+    /// Wall time of the solve (static problems) or per simulated second (dynamic), ms.
+    pub wall_ms: f64,
+    /// What `wall_ms` measures.
+    pub wall_kind: &'static str,
+    /// Relative error against the analytic answer.
+    pub error: f64,
+    pub value: f64,
+    pub analytic: f64,
+}
+
+enum Job {
+    Patch(Elasticity),
+    Cantilever(Elasticity, &'static str),
+    Wound(Elasticity, usize),
+    Vibration(Elasticity, &'static str, Integrator, f64),
+}
+
+fn jobs(quick: bool) -> Vec<Job> {
+    let mut jobs = Vec::new();
+    for kind in Elasticity::ALL {
+        jobs.push(Job::Patch(kind));
+    }
+    for kind in Elasticity::ALL {
+        for bar in IPC_BARS {
+            jobs.push(Job::Cantilever(kind, bar));
+        }
+    }
+    let refinements: &[usize] = if quick { &[4, 8] } else { &[4, 8, 16] };
+    for kind in Elasticity::ALL {
+        for &m in refinements {
+            jobs.push(Job::Wound(kind, m));
+        }
+    }
+    let bars: &[&'static str] = if quick { &IPC_BARS[..2] } else { &IPC_BARS };
+    let steppers: &[(Integrator, f64)] = if quick {
+        &[(Integrator::ImplicitEuler, 1e-4), (Integrator::ImplicitEuler, 1e-3)]
+    } else {
+        &[(Integrator::ImplicitEuler, 1e-4), (Integrator::ImplicitEuler, 1e-3), (Integrator::SymplecticEuler, 1e-4)]
+    };
+    for kind in Elasticity::ALL {
+        for &bar in bars {
+            for &(integrator, dt) in steppers {
+                jobs.push(Job::Vibration(kind, bar, integrator, dt));
+            }
+        }
+    }
+    jobs
+}
+
+fn run_job(job: &Job, solid: Solid) -> anyhow::Result<AccuracyRow> {
+    let bar = |name: &str| read_bar(&ipc_dir().join(name), IPC_UNIT_M).with_context(|| format!("reading {name}"));
+    Ok(match *job {
+        Job::Patch(kind) => {
+            let cells = GridCells { nx: 4, ny: 3, nz: 3 };
+            let t = Instant::now();
+            let r = reference::patch_test(kind, solid, cells, 1e-3)?;
+            let wall_ms = t.elapsed().as_secs_f64() * 1e3;
+            AccuracyRow {
+                problem: "patch test (axial force)",
+                model: kind.name(),
+                tets: r.tets,
+                solver: "static".into(),
+                wall_ms,
+                wall_kind: "solve",
+                error: r.axial_force_error.max(r.displacement_error),
+                value: r.axial_force_error,
+                analytic: 0.0,
+            }
+        }
+        Job::Cantilever(kind, name) => {
+            let mesh = bar(name)?;
+            let t = Instant::now();
+            let r = reference::cantilever(mesh, kind, solid)?;
+            let wall_ms = t.elapsed().as_secs_f64() * 1e3;
+            AccuracyRow {
+                problem: "cantilever tip deflection",
+                model: kind.name(),
+                tets: r.tets,
+                solver: "static".into(),
+                wall_ms,
+                wall_kind: "solve",
+                error: r.relative_error,
+                value: r.deflection_m,
+                analytic: r.analytic_m,
+            }
+        }
+        Job::Wound(kind, m) => {
+            let t = Instant::now();
+            let r = reference::wound_opening(kind, solid, 0.01, m)?;
+            let wall_ms = t.elapsed().as_secs_f64() * 1e3;
+            AccuracyRow {
+                problem: "wound opening (centre gap)",
+                model: kind.name(),
+                tets: r.tets,
+                solver: "static".into(),
+                wall_ms,
+                wall_kind: "solve",
+                error: r.centre_error,
+                value: r.centre_gap_m,
+                analytic: r.analytic_centre_gap_m,
+            }
+        }
+        Job::Vibration(kind, name, integrator, dt) => {
+            let mesh = bar(name)?;
+            let t = Instant::now();
+            let r = reference::vibration(mesh, kind, solid, integrator, dt)?;
+            let wall_s = t.elapsed().as_secs_f64();
+            let simulated_s = r.steps as f64 * dt;
+            AccuracyRow {
+                problem: "first frequency (fixed-free bar)",
+                model: kind.name(),
+                tets: r.tets,
+                solver: format!("{} {} ms", integrator.name(), dt * 1e3),
+                wall_ms: 1e3 * wall_s / simulated_s,
+                wall_kind: "per simulated s",
+                error: r.relative_error,
+                value: r.frequency_hz,
+                analytic: r.analytic_hz,
+            }
+        }
+    })
+}
+
+/// Runs the benchmark; writes the plot to `out/accuracy.svg` and the CSV to `out/accuracy.csv`.
+pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
+    let solid = Solid::CHEST_WALL;
+    let jobs = jobs(quick);
+    let bar = ProgressBar::new(jobs.len() as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    if json {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    let mut rows = Vec::new();
+    for job in &jobs {
+        bar.set_message(match job {
+            Job::Patch(k) => format!("patch test, {}", k.name()),
+            Job::Cantilever(k, b) => format!("cantilever {b}, {}", k.name()),
+            Job::Wound(k, m) => format!("wound opening, {m} cells per half length, {}", k.name()),
+            Job::Vibration(k, b, i, dt) => format!("vibration {b}, {} {} ms, {}", i.name(), dt * 1e3, k.name()),
+        });
+        rows.push(run_job(job, solid)?);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    // Richardson extrapolation of the finite elements' cantilever on the two finest bars.
+    let fem_bars: Vec<CantileverResult> = IPC_BARS[1..]
+        .iter()
+        .map(|b| reference::cantilever(read_bar(&ipc_dir().join(b), IPC_UNIT_M)?, Elasticity::CorotationalFem, solid))
+        .collect::<Result<_, _>>()?;
+    let extrapolated = reference::richardson(&fem_bars[0], &fem_bars[1]);
+    let extrapolated_error = (extrapolated - fem_bars[1].analytic_m).abs() / fem_bars[1].analytic_m;
+
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let csv_path = out.join("accuracy.csv");
+    std::fs::write(&csv_path, csv(&rows)).with_context(|| format!("writing {}", csv_path.display()))?;
+    let svg_path = out.join("accuracy.svg");
+    std::fs::write(&svg_path, svg(&rows)).with_context(|| format!("writing {}", svg_path.display()))?;
+    if json {
+        let doc = serde_json::json!({
+            "solid": solid,
+            "rows": rows,
+            "fem_cantilever_richardson_error": extrapolated_error,
+        });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+        return Ok(());
+    }
+    println!(
+        "chest-wall solid: E {} kPa, nu {}, rho {} kg/m3; single thread; errors relative to the analytic answer",
+        solid.youngs_modulus_pa / 1e3,
+        solid.poisson_ratio,
+        solid.density_kg_per_m3
+    );
+    println!("| problem | model | tets | solver | wall ms | error % |");
+    println!("|---|---|---:|---|---:|---:|");
+    for r in &rows {
+        let wall = if r.wall_kind == "solve" { format!("{:.1}", r.wall_ms) } else { format!("{:.0} / sim s", r.wall_ms) };
+        println!("| {} | {} | {} | {} | {} | {:.2} |", r.problem, r.model, r.tets, r.solver, wall, 100.0 * r.error);
+    }
+    let finest_wound = rows
+        .iter()
+        .filter(|r| r.problem.starts_with("wound") && r.model == Elasticity::CorotationalFem.name())
+        .max_by_key(|r| r.tets);
+    let finest_bar = rows
+        .iter()
+        .filter(|r| r.problem.starts_with("cantilever") && r.model == Elasticity::CorotationalFem.name())
+        .max_by_key(|r| r.tets);
+    println!();
+    if let Some(w) = finest_wound {
+        let verdict = if w.error < 0.05 { "reached" } else { "NOT reached" };
+        println!("goal, FEM within 5 % of the wound opening ({} tets): {:.1} %, {verdict}", w.tets, 100.0 * w.error);
+    }
+    if let Some(c) = finest_bar {
+        let verdict = if c.error < 0.05 { "reached" } else { "NOT reached (linear tetrahedra lock in bending)" };
+        println!("goal, FEM within 5 % of the cantilever at the finest IPC bar ({} tets): {:.1} %, {verdict}", c.tets, 100.0 * c.error);
+    }
+    println!("FEM cantilever, Richardson extrapolation of the two finest bars: {:.1} % (error ~ h^2)", 100.0 * extrapolated_error);
+    println!("wrote {} and {}", csv_path.display(), svg_path.display());
+    Ok(())
+}
+
+fn csv(rows: &[AccuracyRow]) -> String {
+    let mut s = String::from("problem,model,tets,solver,wall_ms,wall_kind,error,value,analytic\n");
+    for r in rows {
+        s.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            r.problem, r.model, r.tets, r.solver, r.wall_ms, r.wall_kind, r.error, r.value, r.analytic
+        ));
+    }
+    s
+}
+
+/// Log-log plot of error against wall time, one colour per model, one panel row per problem,
+/// with each problem's Pareto front (no other run is both faster and more accurate).
+fn svg(rows: &[AccuracyRow]) -> String {
+    let problems: Vec<&str> = {
+        let mut p: Vec<&str> = rows.iter().map(|r| r.problem).filter(|p| !p.starts_with("patch")).collect();
+        p.dedup();
+        p
+    };
+    let colours = [("springs-uniform", "#d62728"), ("springs-youngs", "#ff7f0e"), ("corotational-fem", "#1f77b4")];
+    let (w, panel_h, left, top) = (640.0, 220.0, 70.0, 30.0);
+    let height = top + panel_h * problems.len() as f64 + 40.0;
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"11\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
+    );
+    for (k, (name, colour)) in colours.iter().enumerate() {
+        let x = left + 170.0 * k as f64;
+        s.push_str(&format!("<circle cx=\"{x}\" cy=\"14\" r=\"4\" fill=\"{colour}\"/><text x=\"{}\" y=\"18\">{name}</text>\n", x + 8.0));
+    }
+    let plot_w = w - left - 20.0;
+    for (pi, problem) in problems.iter().enumerate() {
+        let y0 = top + panel_h * pi as f64;
+        let ph = panel_h - 50.0;
+        let sel: Vec<&AccuracyRow> = rows.iter().filter(|r| r.problem == *problem && r.error > 0.0 && r.wall_ms > 0.0).collect();
+        if sel.is_empty() {
+            continue;
+        }
+        let lx = |v: f64| v.log10();
+        let (mut xmin, mut xmax, mut ymin, mut ymax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for r in &sel {
+            xmin = xmin.min(lx(r.wall_ms).floor());
+            xmax = xmax.max(lx(r.wall_ms).ceil());
+            ymin = ymin.min(lx(100.0 * r.error).floor());
+            ymax = ymax.max(lx(100.0 * r.error).ceil());
+        }
+        if xmax <= xmin {
+            xmax = xmin + 1.0;
+        }
+        if ymax <= ymin {
+            ymax = ymin + 1.0;
+        }
+        let px = |v: f64| left + (lx(v) - xmin) / (xmax - xmin) * plot_w;
+        let py = |e: f64| y0 + 20.0 + (ymax - lx(100.0 * e)) / (ymax - ymin) * ph;
+        s.push_str(&format!(
+            "<rect x=\"{left}\" y=\"{}\" width=\"{plot_w}\" height=\"{ph}\" fill=\"none\" stroke=\"#888\"/>\n<text x=\"{left}\" y=\"{}\">{problem}: error % (log) against wall ms, {} (log)</text>\n",
+            y0 + 20.0,
+            y0 + 14.0,
+            sel[0].wall_kind
+        ));
+        for d in (xmin as i32)..=(xmax as i32) {
+            let x = left + (d as f64 - xmin) / (xmax - xmin) * plot_w;
+            s.push_str(&format!("<text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{d}</text>\n", y0 + 20.0 + ph + 14.0));
+        }
+        for d in (ymin as i32)..=(ymax as i32) {
+            let y = y0 + 20.0 + (ymax - d as f64) / (ymax - ymin) * ph;
+            s.push_str(&format!("<text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{d} %</text>\n", left - 4.0, y + 4.0));
+        }
+        // Pareto front: sorted by time, keep the runs more accurate than every faster one
+        let mut by_time = sel.clone();
+        by_time.sort_by(|a, b| a.wall_ms.total_cmp(&b.wall_ms));
+        let mut best = f64::INFINITY;
+        let mut front = Vec::new();
+        for r in by_time {
+            if r.error < best {
+                best = r.error;
+                front.push(format!("{:.1},{:.1}", px(r.wall_ms), py(r.error)));
+            }
+        }
+        s.push_str(&format!("<polyline points=\"{}\" fill=\"none\" stroke=\"#999\" stroke-dasharray=\"4 3\"/>\n", front.join(" ")));
+        for r in &sel {
+            let colour = colours.iter().find(|(n, _)| *n == r.model).map_or("#000", |(_, c)| c);
+            s.push_str(&format!(
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{colour}\"><title>{} {} tets {}: {:.2} %</title></circle>\n",
+                px(r.wall_ms),
+                py(r.error),
+                r.model,
+                r.tets,
+                r.solver,
+                100.0 * r.error
+            ));
+        }
+    }
+    s.push_str("</svg>\n");
+    s
+}
