@@ -20,6 +20,9 @@ use super::{FemModel, rotation, strain, stress};
 use crate::mesh::TET_EDGES;
 use crate::model::{Model, State};
 use crate::solver::explicit::critical_time_step;
+use crate::solver::forces::max_free_force;
+use crate::solver::implicit::{apply_velocity_change, extrapolate_warm_start, velocity_floor};
+use crate::solver::statics::line_search;
 use crate::solver::{StaticReport, StaticSettings};
 use crate::{Point3, Vector3};
 
@@ -150,33 +153,9 @@ pub fn implicit_step(
         add_stiffness(fem, t, &r, kw, sys);
     }
     sys.prepare(&model.held);
-    // Warm start: the cubic extrapolation 4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4 of the last four
-    // velocity changes, of lower order while fewer are known (as for the springs).
-    let c = match *history {
-        0 => [0.0, 0.0, 0.0, 0.0],
-        1 => [1.0, 0.0, 0.0, 0.0],
-        2 => [2.0, -1.0, 0.0, 0.0],
-        3 => [3.0, -3.0, 1.0, 0.0],
-        _ => [4.0, -6.0, 4.0, -1.0],
-    };
-    for (((d, d2), d3), d4) in dv.iter_mut().zip(p1.iter_mut()).zip(p2.iter_mut()).zip(p3.iter_mut()) {
-        let last = *d;
-        *d = last * c[0] + *d2 * c[1] + *d3 * c[2] + *d4 * c[3];
-        *d4 = *d3;
-        *d3 = *d2;
-        *d2 = last;
-    }
-    *history = (*history + 1).min(4);
-    let mass_norm = model.mass.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
-    let floor = crate::solver::implicit::VELOCITY_FLOOR_M_PER_S * mass_norm;
-    let report = sys.solve(rhs, dv, relative_tolerance, floor, max_iterations, cg);
-    for i in 0..n {
-        if model.held[i] {
-            continue;
-        }
-        state.velocities[i] += dv[i];
-        state.positions[i] += state.velocities[i] * h;
-    }
+    extrapolate_warm_start(dv, [p1, p2, p3], history);
+    let report = sys.solve(rhs, dv, relative_tolerance, velocity_floor(model), max_iterations, cg);
+    apply_velocity_change(model, state, dv, h);
     report
 }
 
@@ -254,10 +233,6 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
     let mut trial = state.positions.clone();
     let mut sys = BlockSystem::default();
     let mut cg = BlockCgScratch::default();
-    let norm2 = |f: &[Vector3]| -> f64 { f.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm_squared()).sum() };
-    let max_free = |f: &[Vector3]| -> f64 {
-        f.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm()).fold(0.0, f64::max)
-    };
 
     // Scale: the largest elastic nodal force magnitude of an element in the initial state, the
     // largest weight and the largest external force.
@@ -271,7 +246,7 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
     }
     let tolerance = settings.relative_force_tolerance * scale;
     total_forces(model, fem, &state.positions, &zero_v, external, &mut f);
-    let mut residual = max_free(&f);
+    let mut residual = max_free_force(model, &f);
     let (mut iter, mut cg_total, mut stalls) = (0, 0, 0);
     let mut exact = true;
     while residual > tolerance && iter < settings.max_newton_iterations && stalls < 4 {
@@ -295,27 +270,12 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
             }
             exact = false; // the exact tangent was not positive definite here: stay warped
         }
-        let f0 = norm2(&f);
-        let mut step = 1.0;
-        let mut accepted = false;
-        for _ in 0..12 {
-            for i in 0..n {
-                trial[i] = state.positions[i] + dx[i] * step;
-            }
-            total_forces(model, fem, &trial, &zero_v, external, &mut f_trial);
-            if norm2(&f_trial) < f0 || residual < 1e-6 * scale {
-                accepted = true;
-                break;
-            }
-            step *= 0.5;
+        match line_search(model, &mut state.positions, &mut f, &dx, residual, scale, &mut trial, &mut f_trial, |x, out| {
+            total_forces(model, fem, x, &zero_v, external, out)
+        }) {
+            Some(r) => residual = r,
+            None => stalls += 1,
         }
-        if !accepted {
-            stalls += 1;
-            continue;
-        }
-        std::mem::swap(&mut state.positions, &mut trial);
-        std::mem::swap(&mut f, &mut f_trial);
-        residual = max_free(&f);
     }
     StaticReport {
         newton_iterations: iter,

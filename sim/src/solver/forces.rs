@@ -58,6 +58,12 @@ pub fn kinetic_energy(model: &Model, v: &[Vector3]) -> f64 {
     v.iter().zip(&model.mass).map(|(v, &m)| 0.5 * m * v.norm_squared()).sum()
 }
 
+/// Sum of the squared force magnitudes on the free particles, N^2 (the merit of the static
+/// line search).
+pub fn free_force_norm_squared(model: &Model, forces: &[Vector3]) -> f64 {
+    forces.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm_squared()).sum()
+}
+
 /// Largest force magnitude on a free particle (the equilibrium residual), in newtons.
 pub fn max_free_force(model: &Model, forces: &[Vector3]) -> f64 {
     forces.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm()).fold(0.0, f64::max)

@@ -159,10 +159,20 @@ pub fn step(
         diag[run] += diag_run;
     }
     sys.prepare(model);
-    // Warm start: the cubic extrapolation 4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4 of the last four
-    // velocity changes, of lower order while fewer are known. (Benchmark stroke on the chest
-    // wall at 12.8k tets, default tolerance: 7.4 iterations from the last change alone, 5.9
-    // from the linear, 5.1 from the quadratic and 4.6 from the cubic extrapolation.)
+    extrapolate_warm_start(dv, [p1, p2, p3], history);
+    let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
+    let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
+    apply_velocity_change(model, state, dv, h);
+    report
+}
+
+/// Warm start of the velocity change `dv` (which holds the last one on entry): the cubic
+/// extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4` of the last four velocity changes, of lower
+/// order while fewer are known (`history`, which this advances); `previous` shifts by one.
+/// (Benchmark stroke on the chest wall at 12.8k tets, default tolerance: 7.4 iterations from the
+/// last change alone, 5.9 from the linear, 5.1 from the quadratic and 4.6 from the cubic
+/// extrapolation.) Shared by the springs and the finite elements.
+pub(crate) fn extrapolate_warm_start(dv: &mut [Vector3], previous: [&mut Vec<Vector3>; 3], history: &mut usize) {
     let c = match *history {
         0 => [0.0, 0.0, 0.0, 0.0],
         1 => [1.0, 0.0, 0.0, 0.0],
@@ -170,6 +180,7 @@ pub fn step(
         3 => [3.0, -3.0, 1.0, 0.0],
         _ => [4.0, -6.0, 4.0, -1.0],
     };
+    let [p1, p2, p3] = previous;
     for (((d, d2), d3), d4) in dv.iter_mut().zip(p1.iter_mut()).zip(p2.iter_mut()).zip(p3.iter_mut()) {
         let last = *d;
         *d = last * c[0] + *d2 * c[1] + *d3 * c[2] + *d4 * c[3];
@@ -177,16 +188,23 @@ pub fn step(
         *d3 = *d2;
         *d2 = last;
     }
-    let mass_norm = model.mass.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
-    let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(VELOCITY_FLOOR_M_PER_S * mass_norm), ..cg };
-    let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
     *history = (*history + 1).min(4);
-    for i in 0..n {
+}
+
+/// The absolute floor of the CG residual, `VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free
+/// particles (see [`VELOCITY_FLOOR_M_PER_S`]).
+pub(crate) fn velocity_floor(model: &Model) -> f64 {
+    let mass_norm = model.mass.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
+    VELOCITY_FLOOR_M_PER_S * mass_norm
+}
+
+/// `v += dv`, then `x += h v`, for the free particles (the end of an implicit Euler step).
+pub(crate) fn apply_velocity_change(model: &Model, state: &mut State, dv: &[Vector3], h: f64) {
+    for i in 0..model.vertex_count() {
         if model.held[i] {
             continue;
         }
         state.velocities[i] += dv[i];
         state.positions[i] += state.velocities[i] * h;
     }
-    report
 }

@@ -2,10 +2,10 @@
 //! solves `K dx = f(x)` by PCG (`K` the positive part of the stiffness matrix, see
 //! [`super::system::stiffness_block`]), then backtracks on the residual norm.
 
-use crate::Vector3;
+use crate::{Point3, Vector3};
 use crate::model::{Model, State};
 
-use super::forces::{max_free_force, total_forces};
+use super::forces::{free_force_norm_squared, max_free_force, total_forces};
 use super::system::{self, CgScratch, CgSettings, SpringSystem, stiffness_block};
 
 /// Settings of the static solve.
@@ -65,7 +65,6 @@ pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], sett
     let tolerance = settings.relative_force_tolerance * scale;
 
     total_forces(model, &state.positions, &state.velocities, zero_ext, &mut f);
-    let norm2 = |f: &[Vector3]| -> f64 { f.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm_squared()).sum() };
     let mut residual = max_free_force(model, &f);
     let mut cg_total = 0;
     let mut iter = 0;
@@ -83,30 +82,12 @@ pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], sett
         let cg = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 10 * n.max(100) };
         cg_total += system::solve(&sys, model, &f, &mut dx, cg, &mut cg_scratch).iterations;
 
-        // Backtracking on |f|.
-        let f0 = norm2(&f);
-        let mut step = 1.0;
-        let mut accepted = false;
-        for _ in 0..12 {
-            for i in 0..n {
-                trial[i] = state.positions[i] + dx[i] * step;
-            }
-            total_forces(model, &trial, &state.velocities, zero_ext, &mut f_trial);
-            // Close to equilibrium the (modified) Newton iteration contracts on its own and
-            // round-off makes |f| an unreliable merit: take full steps there.
-            if norm2(&f_trial) < f0 || residual < 1e-6 * scale {
-                accepted = true;
-                break;
-            }
-            step *= 0.5;
+        match line_search(model, &mut state.positions, &mut f, &dx, residual, scale, &mut trial, &mut f_trial, |x, out| {
+            total_forces(model, x, &state.velocities, zero_ext, out)
+        }) {
+            Some(r) => residual = r,
+            None => stalls += 1,
         }
-        if !accepted {
-            stalls += 1;
-            continue;
-        }
-        std::mem::swap(&mut state.positions, &mut trial);
-        std::mem::swap(&mut f, &mut f_trial);
-        residual = max_free_force(model, &f);
     }
     StaticReport {
         newton_iterations: iter,
@@ -115,4 +96,39 @@ pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], sett
         tolerance_newtons: tolerance,
         converged: residual <= tolerance,
     }
+}
+
+/// The backtracking step of the static Newton iterations (the springs' and the finite
+/// elements'): tries `x + s dx` for `s = 1, 1/2, 1/4, ...` (12 halvings) and takes the first
+/// that lowers `sum |f|^2` over the free particles. Close to equilibrium (`residual < 1e-6
+/// scale`) the (modified) Newton iteration contracts on its own and round-off makes `|f|` an
+/// unreliable merit, so the full step is taken there. On success `x` and `f` hold the new
+/// positions and forces (`forces(x, out)` computes them) and the new residual is returned;
+/// `None` when no step was taken.
+pub(crate) fn line_search(
+    model: &Model,
+    x: &mut Vec<Point3>,
+    f: &mut Vec<Vector3>,
+    dx: &[Vector3],
+    residual: f64,
+    scale: f64,
+    trial: &mut Vec<Point3>,
+    f_trial: &mut Vec<Vector3>,
+    mut forces: impl FnMut(&[Point3], &mut [Vector3]),
+) -> Option<f64> {
+    let f0 = free_force_norm_squared(model, f);
+    let mut step = 1.0;
+    for _ in 0..12 {
+        for ((t, p), d) in trial.iter_mut().zip(x.iter()).zip(dx) {
+            *t = p + d * step;
+        }
+        forces(trial, f_trial);
+        if free_force_norm_squared(model, f_trial) < f0 || residual < 1e-6 * scale {
+            std::mem::swap(x, trial);
+            std::mem::swap(f, f_trial);
+            return Some(max_free_force(model, f));
+        }
+        step *= 0.5;
+    }
+    None
 }
