@@ -5,22 +5,18 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use cutlab_haptics::device::igtl::{HEADER_BYTES, Header, POINT_ELEMENT_BYTES};
+use cutlab_haptics::device::igtl::{HEADER_BYTES, Header, POINT_ELEMENT_BYTES, encode_transform};
 use cutlab_haptics::device::{DeviceFault, HapticDevice, IgtlDevice};
-use cutlab_haptics::{Point3, Vector3};
+use cutlab_haptics::{Point3, Rotation, Vector3};
 
 fn local_device() -> IgtlDevice {
     IgtlDevice::listen_on("127.0.0.1:0".parse().expect("address")).expect("listen")
 }
 
-fn transform_packet(t_mm: [f32; 3]) -> Vec<u8> {
-    let mut body = Vec::new();
-    for v in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, t_mm[0], t_mm[1], t_mm[2]] {
-        body.extend_from_slice(&v.to_be_bytes());
-    }
+/// A TRANSFORM packet: identity rotation, translation in mm.
+fn transform_packet(t_mm: [f64; 3]) -> Vec<u8> {
     let mut out = Vec::new();
-    Header::write("TRANSFORM", "Tool", 0, &body, &mut out);
-    out.extend_from_slice(&body);
+    encode_transform("Tool", &(Point3::from(t_mm) * 1e-3), &Rotation::identity(), 0, &mut out);
     out
 }
 

@@ -195,6 +195,21 @@ pub fn decode_transform(content: &[u8]) -> Result<(Point3, Rotation), PacketErro
     Ok((tip, q))
 }
 
+/// Encodes a TRANSFORM message (header + body) into `out`: the inverse of
+/// [`decode_transform`] (`world_from_tool`, the tip in metres; millimetres on the wire), as a
+/// tracker or a bridge sends it.
+pub fn encode_transform(device_name: &str, tip_in_world: &Point3, world_from_tool: &Rotation, timestamp: u64, out: &mut Vec<u8>) {
+    let m = world_from_tool.to_rotation_matrix().into_inner();
+    let mut body = Vec::with_capacity(TRANSFORM_BODY_BYTES);
+    // R11 R21 R31 R12 R22 R32 R13 R23 R33 (the rotation's columns), then TX TY TZ in mm
+    for v in m.iter().copied().chain(tip_in_world.coords.iter().map(|c| c * 1e3)) {
+        body.extend_from_slice(&(v as f32).to_be_bytes());
+    }
+    out.clear();
+    Header::write("TRANSFORM", device_name, timestamp, &body, out);
+    out.extend_from_slice(&body);
+}
+
 /// Encodes the force as a POINT message (header + body) into `out`.
 pub fn encode_force(force_newtons: &Vector3, timestamp: u64, out: &mut Vec<u8>) {
     let mut body = [0u8; POINT_ELEMENT_BYTES];
@@ -496,14 +511,9 @@ mod tests {
     use super::*;
 
     /// A TRANSFORM packet: identity rotation, translation in mm.
-    pub(crate) fn transform_packet(t_mm: [f32; 3]) -> Vec<u8> {
-        let mut body = Vec::new();
-        for v in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, t_mm[0], t_mm[1], t_mm[2]] {
-            body.extend_from_slice(&v.to_be_bytes());
-        }
+    fn transform_packet(t_mm: [f64; 3]) -> Vec<u8> {
         let mut out = Vec::new();
-        Header::write("TRANSFORM", "Tool", 0, &body, &mut out);
-        out.extend_from_slice(&body);
+        encode_transform("Tool", &(Point3::from(t_mm) * 1e-3), &Rotation::identity(), 0, &mut out);
         out
     }
 
