@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use super::{Blade, CutError, CutEvent, CutOptions, CutPolygon, StrokeSides, cut_remembering};
+use super::{Blade, CutError, CutEvent, CutOptions, CutPolygon, StrokeVertices, cut_remembering};
 use crate::solver::Simulation;
 
 /// Cuts a simulation along the path of a blade, pose by pose.
@@ -18,7 +18,7 @@ pub struct Cutter {
     /// Length of tip path behind the blade that each step cuts along, metres.
     pub window_m: f64,
     trail: VecDeque<Blade>,
-    sides: StrokeSides,
+    stroke: StrokeVertices,
 }
 
 impl Default for Cutter {
@@ -29,13 +29,13 @@ impl Default for Cutter {
 
 impl Cutter {
     pub fn new(options: CutOptions) -> Self {
-        Self { options, window_m: 0.01, trail: VecDeque::new(), sides: StrokeSides::default() }
+        Self { options, window_m: 0.01, trail: VecDeque::new(), stroke: StrokeVertices::default() }
     }
 
     /// Ends the current stroke: the next pose starts a new one.
     pub fn end_stroke(&mut self) {
         self.trail.clear();
-        self.sides.clear();
+        self.stroke.clear();
     }
 
     /// True while a stroke is in progress.
@@ -75,7 +75,7 @@ impl Cutter {
         let mut corners: Vec<_> = self.trail.iter().map(|b| b.tip).collect();
         corners.extend(self.trail.iter().rev().map(Blade::heel));
         match CutPolygon::new(&corners) {
-            Some(polygon) => cut_remembering(sim, &polygon, &self.options, &mut self.sides),
+            Some(polygon) => cut_remembering(sim, &polygon, &self.options, &mut self.stroke),
             None => Ok(CutEvent::default()),
         }
     }

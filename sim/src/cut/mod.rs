@@ -97,60 +97,57 @@ fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin
     out
 }
 
-/// The side of a stroke's cut each of its vertices is on: +1 or -1 for the two copies of a
-/// split vertex, 0 for a vertex left on the cut plane (moved onto it, or on the cut front).
-/// The [`Cutter`] keeps it for one stroke, so that the vertices of the cut, drifting a little
-/// across the plane as the wound opens, are not cut again when the trailing window passes
-/// over them.
+/// The vertices of a stroke's cut: those moved onto the cut plane, those of the cut faces and
+/// the copies of the split ones. The [`Cutter`] keeps them for one stroke, so that, drifting a
+/// little across the plane as the wound opens, they are not cut again when the trailing window
+/// passes over them.
 #[derive(Debug, Clone, Default)]
-pub struct StrokeSides {
-    side: Vec<i8>,
+pub struct StrokeVertices {
+    member: Vec<bool>,
 }
 
-impl StrokeSides {
-    const UNKNOWN: i8 = i8::MIN;
-
-    /// The known side of `v`, if any.
-    pub fn get(&self, v: u32) -> Option<i8> {
-        self.side.get(v as usize).copied().filter(|&s| s != Self::UNKNOWN)
+impl StrokeVertices {
+    /// True when `v` belongs to the stroke's cut.
+    pub fn contains(&self, v: u32) -> bool {
+        self.member.get(v as usize).copied().unwrap_or(false)
     }
 
-    fn set(&mut self, v: u32, side: i8) {
+    fn insert(&mut self, v: u32) {
         let i = v as usize;
-        if self.side.len() <= i {
-            self.side.resize(i + 1, Self::UNKNOWN);
+        if self.member.len() <= i {
+            self.member.resize(i + 1, false);
         }
-        self.side[i] = side;
+        self.member[i] = true;
     }
 
-    /// True when no side is known.
+    /// True before the stroke has cut anything.
     pub fn is_empty(&self) -> bool {
-        self.side.is_empty()
+        self.member.is_empty()
     }
 
-    /// Forgets every side (a new stroke).
+    /// Forgets every vertex (a new stroke).
     pub fn clear(&mut self) {
-        self.side.clear();
+        self.member.clear();
     }
 }
 
 /// Cuts the simulation's tissue along a planar polygon C.
 pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> Result<CutEvent, CutError> {
-    cut_remembering(sim, polygon, options, &mut StrokeSides::default())
+    cut_remembering(sim, polygon, options, &mut StrokeVertices::default())
 }
 
-/// [`cut`] as one step of a stroke: vertices whose side `sides` knows keep it when they have
-/// drifted a little across the plane, and `sides` learns the sides of this step's cut.
+/// [`cut`] as one step of a stroke: vertices of the stroke's cut (`stroke`) that drifted a
+/// little off the plane count as on it, and `stroke` learns this step's cut vertices.
 pub fn cut_remembering(
     sim: &mut Simulation,
     polygon: &CutPolygon,
     options: &CutOptions,
-    sides: &mut StrokeSides,
+    stroke: &mut StrokeVertices,
 ) -> Result<CutEvent, CutError> {
     let mesh = &sim.model.mesh;
     let n = mesh.vertex_count();
     let margin = 1e-9 * polygon.scale;
-    let near = if sides.is_empty() { 0.0 } else { resolve::near_fraction(options.snap) };
+    let near = if stroke.is_empty() { 0.0 } else { resolve::near_fraction(options.snap) };
     let cand = candidates(mesh.tets(), &sim.state.positions, polygon, margin, near);
     let mut event = CutEvent::default();
     if cand.is_empty() {
@@ -177,7 +174,7 @@ pub fn cut_remembering(
             candidates: &cand,
             snap: options.snap,
             inside_tolerance: 1e-9 * polygon.scale,
-            sides,
+            stroke,
         }
         .resolve();
         moved_all.extend_from_slice(&class.moved);
@@ -310,10 +307,9 @@ pub fn cut_remembering(
     let mut splits = Vec::new();
     let mut relinked = BTreeSet::new();
     let mut on_cut = BTreeSet::new();
-    let mut stars = separate::Stars::new();
     for _ in 0..64 {
         on_cut = cut_faces.iter().flatten().copied().collect();
-        stars = star_of(&on_cut);
+        let stars = star_of(&on_cut);
         splits = separate::star_components(&tets, &stars, &cut_faces);
         relinked.clear();
         let mut original_of: Vec<u32> = Vec::with_capacity(splits.len());
@@ -362,7 +358,6 @@ pub fn cut_remembering(
         event.vertices_split.push(SplitVertex { original: *v, copy });
     }
     let tets = split_tets;
-    let new_sides = sides_of_cut(&tets, &x, polygon, &on_cut, &stars, &splits, base_vertices, &class.moved);
     event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
 
     // Commit: new mesh, rebuilt model, extended state.
@@ -378,49 +373,11 @@ pub fn cut_remembering(
     sim.state.positions = x;
     sim.state.velocities = vel;
     sim.model_changed();
-    for (v, side) in new_sides {
-        sides.set(v, side);
+    let copies = base_vertices as u32..(base_vertices + splits.len()) as u32;
+    for v in class.moved.iter().map(|m| m.0).chain(on_cut).chain(copies) {
+        stroke.insert(v);
     }
     Ok(event)
-}
-
-/// The sides of this cut's vertices: a split vertex and its copies by where their tetrahedra
-/// lie (the sign of the summed plane distances of their corners), every other vertex of the
-/// cut faces and every moved vertex 0 (on the plane).
-fn sides_of_cut(
-    tets: &[[u32; 4]],
-    x: &[Point3],
-    polygon: &CutPolygon,
-    on_cut: &BTreeSet<u32>,
-    stars: &separate::Stars,
-    splits: &[(u32, Vec<u32>)],
-    first_copy: usize,
-    moved: &[(u32, Point3, Point3)],
-) -> Vec<(u32, i8)> {
-    let side_of = |star: &mut dyn Iterator<Item = u32>| -> i8 {
-        let s: f64 = star.flat_map(|t| tets[t as usize]).map(|w| polygon.signed_distance(&x[w as usize])).sum();
-        if s > 0.0 {
-            1
-        } else if s < 0.0 {
-            -1
-        } else {
-            0
-        }
-    };
-    let mut out: Vec<(u32, i8)> = moved.iter().map(|m| (m.0, 0)).collect();
-    for &v in on_cut {
-        let copies: Vec<usize> = splits.iter().enumerate().filter(|(_, s)| s.0 == v).map(|(k, _)| k).collect();
-        if copies.is_empty() {
-            out.push((v, 0));
-            continue;
-        }
-        let star = stars.get(&v).map(Vec::as_slice).unwrap_or_default();
-        out.push((v, side_of(&mut star.iter().copied().filter(|&t| tets[t as usize].contains(&v)))));
-        for k in copies {
-            out.push(((first_copy + k) as u32, side_of(&mut splits[k].1.iter().copied())));
-        }
-    }
-    out
 }
 
 fn sorted_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {

@@ -22,7 +22,7 @@
 //! made volume-conserving (see `volume_conserving`), so that the rest volume and the masses
 //! stay exact on curved surfaces too.
 //!
-//! Within a stroke, vertices of the cut made by earlier steps ([`super::StrokeSides`]) that
+//! Within a stroke, vertices of the cut made by earlier steps ([`super::StrokeVertices`]) that
 //! drifted off the plane by less than [`near_fraction`] of their shortest edge count as on it,
 //! so that the opening wound is not cut again.
 
@@ -83,8 +83,8 @@ pub struct Resolver<'a> {
     pub snap: f64,
     /// Distance tolerance for "inside C".
     pub inside_tolerance: f64,
-    /// Sides known from earlier steps of the stroke ([`super::StrokeSides`]).
-    pub sides: &'a super::StrokeSides,
+    /// Vertices of the cut made by earlier steps of the stroke.
+    pub stroke: &'a super::StrokeVertices,
 }
 
 impl Resolver<'_> {
@@ -338,7 +338,7 @@ impl Resolver<'_> {
         let mut on_plane: BTreeSet<u32> = BTreeSet::new();
         for &t in self.candidates {
             for &v in &self.mesh.tets()[t as usize] {
-                if self.sides.get(v).is_some()
+                if self.stroke.contains(v)
                     && !on_plane.contains(&v)
                     && self.plane.signed_distance(&self.x[v as usize]).abs() <= near_fraction(self.snap) * self.shortest_edge(v)
                 {
