@@ -87,8 +87,8 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     println!("session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
     let max_lag = r.tick_of_step.iter().enumerate().map(|(n, &t)| t.saturating_sub(n as u64)).max().unwrap_or(0);
     println!("  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
-    println!("  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.cut_length_m * 1e3, r.cut_steps, r.tets_split, r.unresolved_cuts, r.failed_cuts, r.simulation.model.mesh.tet_count());
-    println!("  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.rejected_steps);
+    println!("  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count());
+    println!("  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
     let p = r.servo.period_stats(r.period_nanos);
     if o.clock == Clock::Live {
         println!("  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline", p.mean_us, p.p50_us, p.p99_us, p.p99_deviation_us, p.max_deviation_us, p.missed_deadlines, p.max_lateness_us);
@@ -101,7 +101,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     println!("  servo work per tick: mean {:.1} us, max {:.1} us", p.mean_work_us, p.max_work_us);
     let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
     let s = Summary::of(&steps_us);
-    println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.cg_iterations as f64 / r.sim_steps.max(1) as f64);
+    println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64);
     println!("  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
 
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
@@ -113,11 +113,11 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let summary = serde_json::json!({
         "scene": scene.spec.name, "tets": tets, "device": device_name, "seed": o.seed, "clock": clock,
         "duration_s": o.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
-        "cut_length_mm": r.cut_length_m * 1e3, "tets_split": r.tets_split, "max_force_newtons": r.servo.max_force_newtons,
+        "cut_length_mm": r.stats.cut_length_m * 1e3, "tets_split": r.stats.tets_split, "max_force_newtons": r.servo.max_force_newtons,
         "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,
         "period_us": { "mean": p.mean_us, "p50": p.p50_us, "p99": p.p99_us, "p99_deviation": p.p99_deviation_us,
                        "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },
-        "sim_step_us": s, "cg_iterations_per_step": r.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
+        "sim_step_us": s, "cg_iterations_per_step": r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
         "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
     });
     write_json(&o.out.join("summary.json"), &summary)?;

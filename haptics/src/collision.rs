@@ -129,6 +129,11 @@ impl SurfaceCollider {
         &self.vertex_ids
     }
 
+    /// The surface triangles, over [`Self::vertex_ids`] (outward by the right-hand rule).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        self.mesh.indices()
+    }
+
     /// Number of surface triangles.
     pub fn triangle_count(&self) -> usize {
         self.mesh.num_triangles()

@@ -13,6 +13,10 @@
 //!   period statistics.
 //! - [`session`]: a whole session: servo thread + simulation thread at a fixed step,
 //!   exchanging data through lock-free queues and triple buffers.
+//! - [`stepper`]: the simulation side of a session, one step per servo sample (also what a
+//!   replay drives), and the state hash.
+//! - [`tap`]: what a session hands a recorder (every tick, every step's tick, cuts,
+//!   keyframes, the surface), through bounded lock-free queues.
 //!
 //! Units: SI inside (metres, newtons, seconds); durations in integer nanoseconds where
 //! named `_nanos`; a tick is one servo period.
@@ -24,6 +28,8 @@ pub mod pose;
 pub mod render;
 pub mod servo;
 pub mod session;
+pub mod stepper;
+pub mod tap;
 
 pub use cutlab_sim as sim;
 pub use cutlab_sim::scene;
@@ -31,6 +37,8 @@ pub use device::{DeviceFault, DeviceLimits, HapticDevice};
 pub use error::HapticsError;
 pub use pose::ToolPose;
 pub use session::{Session, SessionConfig, SessionReport};
+pub use stepper::{SessionStepper, StateHash, StepOutput};
+pub use tap::{RecordTap, SimRecord, TapFeed, TapSettings};
 
 /// 3-D point in metres.
 pub type Point3 = cutlab_sim::Point3;

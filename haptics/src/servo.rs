@@ -85,6 +85,8 @@ pub struct ServoLinks {
     pub sim_ticks_done: Arc<AtomicU64>,
     /// Set when the session must end early (the simulation thread failed).
     pub abort: Arc<AtomicBool>,
+    /// Every tick's sample for a recorder (never waited on: a full queue drops the record).
+    pub record: Option<rtrb::Producer<ServoSample>>,
 }
 
 /// What the servo thread measured.
@@ -106,6 +108,8 @@ pub struct ServoReport {
     pub faded_ticks: u64,
     /// Samples the simulation could not take in time (queue full).
     pub dropped_samples: u64,
+    /// Tick records a recorder could not take in time (its queue full).
+    pub dropped_records: u64,
     /// Path of the blade's tip while cutting, m.
     pub blade_path_in_tissue_m: f64,
     /// FNV-1a hash of every tick's force bits (determinism checks).
@@ -246,8 +250,9 @@ pub fn spawn<D: HapticDevice + 'static>(
             fault_ticks: 0,
             faded_ticks: 0,
             dropped_samples: 0,
+            dropped_records: 0,
             blade_path_in_tissue_m: 0.0,
-            force_hash: 0xcbf2_9ce4_8422_2325,
+            force_hash: 0,
         };
         let spin = Duration::from_nanos(config.spin_nanos);
         let tps = config.ticks_per_step.max(1);
@@ -255,6 +260,7 @@ pub fn spawn<D: HapticDevice + 'static>(
         let mut last_tip: Option<Point3> = None;
         let mut previous_faults = 0u8;
         let mut previous_gain = 1.0;
+        let mut force_hash = cutlab_sim::hash::Fnv1a::default();
         let start = Instant::now();
         for tick in 0..config.ticks {
             if links.abort.load(Ordering::Acquire) {
@@ -291,11 +297,7 @@ pub fn spawn<D: HapticDevice + 'static>(
             let _ = device.write_force(out.force_newtons);
 
             report.max_force_newtons = report.max_force_newtons.max(out.force_newtons.norm());
-            for c in out.force_newtons.iter() {
-                for byte in c.to_bits().to_le_bytes() {
-                    report.force_hash = (report.force_hash ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
-                }
-            }
+            out.force_newtons.iter().for_each(|&c| force_hash.f64(c));
             if out.mode == Mode::Cutting {
                 if let Some(t) = last_tip {
                     report.blade_path_in_tissue_m += (last_pose.tip_in_world - t).norm();
@@ -323,10 +325,16 @@ pub fn spawn<D: HapticDevice + 'static>(
             if links.samples.push(sample).is_err() {
                 report.dropped_samples += 1;
             }
+            if let Some(record) = &mut links.record
+                && record.push(sample).is_err()
+            {
+                report.dropped_records += 1;
+            }
             report.tick_work_nanos[tick as usize] = began.elapsed().as_nanos().min(u32::MAX as u128) as u32;
             report.ticks = tick + 1;
         }
         report.wall_nanos = start.elapsed().as_nanos() as u64;
+        report.force_hash = force_hash.finish();
         let done = report.ticks as usize;
         report.tick_start_nanos.truncate(done);
         report.tick_work_nanos.truncate(done);

@@ -19,14 +19,15 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use cutlab_sim::cut::{self, CutError, Cutter};
 use cutlab_sim::scene::Scene;
 use cutlab_sim::solver::{Simulation, StaticSettings};
 
-use crate::collision::{SurfaceCollider, SurfaceHit};
+use crate::collision::SurfaceCollider;
 use crate::device::{HapticDevice, Plan};
-use crate::render::{ContactModel, ForceRenderer, Mode, RenderSettings, fault};
+use crate::render::{ContactModel, ForceRenderer, RenderSettings, fault};
 use crate::servo::{self, Clock, ServoConfig, ServoEvent, ServoLinks, ServoReport, ServoSample};
+use crate::stepper::{SessionStepper, StepperStats};
+use crate::tap::{Keyframe, RecordTap, SimRecord, SurfaceSnapshot};
 use crate::{HapticsError, Point3};
 
 /// Settings of a session.
@@ -81,18 +82,8 @@ pub struct SessionReport {
     pub tick_of_step: Vec<u64>,
     /// Work of each simulation step (contact, cut, step, refit), ns.
     pub step_nanos: Vec<u64>,
-    /// Steps whose cut changed the tissue, tetrahedra split, cuts skipped as unresolved and
-    /// cuts that failed.
-    pub cut_steps: u64,
-    /// Length of the blade tip's path while it cut (sampled every `cut_step_m`), m.
-    pub cut_length_m: f64,
-    pub tets_split: u64,
-    pub unresolved_cuts: u64,
-    pub failed_cuts: u64,
-    /// Steps the simulation rejected (non-finite state).
-    pub rejected_steps: u64,
-    /// Conjugate-gradient iterations of the implicit solver over all steps.
-    pub cg_iterations: u64,
+    /// Cuts, cut length, rejected steps, solver iterations.
+    pub stats: StepperStats,
     pub collider_rebuilds: u64,
     pub surface_triangles: usize,
     /// The simulation at the end.
@@ -138,6 +129,11 @@ impl Session {
         &self.collider
     }
 
+    /// The settled simulation and its collider.
+    pub fn into_parts(self) -> (Simulation, SurfaceCollider) {
+        (self.sim, self.collider)
+    }
+
     /// A straight incision of `length_m` across the top of the tissue (along x, through the
     /// middle of its bounding box), projected onto the surface, cut `depth_m` deep.
     pub fn plan_across_top(&self, length_m: f64, depth_m: f64) -> Result<Plan, HapticsError> {
@@ -169,6 +165,11 @@ impl Session {
 
     /// Runs the session with `device` until `config.duration_s` has passed on the clock.
     pub fn run(self, device: Box<dyn HapticDevice>, config: &SessionConfig) -> Result<SessionReport, HapticsError> {
+        self.run_recorded(device, config, None)
+    }
+
+    /// [`Self::run`], handing every tick and every simulation record to `tap` (a recorder).
+    pub fn run_recorded(self, device: Box<dyn HapticDevice>, config: &SessionConfig, tap: Option<RecordTap>) -> Result<SessionReport, HapticsError> {
         let mut render = config.render;
         let limits = device.limits();
         render.limits.max_force_newtons = render.limits.max_force_newtons.min(limits.max_force_newtons);
@@ -202,7 +203,18 @@ impl Session {
         let (events_in, events_out) = rtrb::RingBuffer::new(1024);
         let sim_ticks_done = Arc::new(AtomicU64::new(0));
         let abort = Arc::new(AtomicBool::new(false));
-        let links = ServoLinks { contact: contact_out, samples: samples_in, events: events_in, sim_ticks_done: sim_ticks_done.clone(), abort: abort.clone() };
+        let (record_ticks, record_sim) = match tap {
+            Some(t) => (Some(t.ticks), Some((t.sim, t.settings))),
+            None => (None, None),
+        };
+        let links = ServoLinks {
+            contact: contact_out,
+            samples: samples_in,
+            events: events_in,
+            sim_ticks_done: sim_ticks_done.clone(),
+            abort: abort.clone(),
+            record: record_ticks,
+        };
         let servo_config = ServoConfig {
             clock: config.clock,
             period_nanos: config.period_nanos,
@@ -222,21 +234,15 @@ impl Session {
 
         let started = Instant::now();
         let worker = SimWorker {
-            sim: self.sim,
-            collider: self.collider,
-            cutter: Cutter::default(),
+            stepper: SessionStepper::new(self, config),
             contact: contact_in,
             samples: samples_out,
             events: events_out,
             sim_ticks_done,
             clock: config.clock,
             ticks_per_step,
-            blade_length_m: config.blade_length_m,
-            reach_m: config.contact_reach_m,
-            patch_radius_m: config.contact_patch_radius_m,
-            patch: Vec::new(),
-            cut_step_m: config.cut_step_m,
             period_nanos: config.period_nanos,
+            record: record_sim,
         };
         let sim_abort = abort.clone();
         let sim_thread = std::thread::Builder::new()
@@ -267,17 +273,11 @@ impl Session {
             sim_steps: outcome.tick_of_step.len() as u64,
             tick_of_step: outcome.tick_of_step,
             step_nanos: outcome.step_nanos,
-            cut_steps: outcome.cut_steps,
-            cut_length_m: outcome.cut_length_m,
-            tets_split: outcome.tets_split,
-            unresolved_cuts: outcome.unresolved_cuts,
-            failed_cuts: outcome.failed_cuts,
-            rejected_steps: outcome.rejected_steps,
-            cg_iterations: outcome.cg_iterations,
-            collider_rebuilds: outcome.collider.rebuilds,
-            surface_triangles: outcome.collider.triangle_count(),
-            state_hash: outcome.sim.state.bit_hash(),
-            simulation: outcome.sim,
+            stats: outcome.stepper.stats,
+            collider_rebuilds: outcome.stepper.collider.rebuilds,
+            surface_triangles: outcome.stepper.collider.triangle_count(),
+            state_hash: outcome.stepper.sim.state.bit_hash(),
+            simulation: outcome.stepper.sim,
             servo,
             wall_s,
         })
@@ -293,35 +293,22 @@ impl Drop for AbortOnExit {
 }
 
 struct SimWorker {
-    sim: Simulation,
-    collider: SurfaceCollider,
-    cutter: Cutter,
+    stepper: SessionStepper,
     contact: triple_buffer::Input<ContactModel>,
     samples: rtrb::Consumer<ServoSample>,
     events: rtrb::Consumer<ServoEvent>,
     sim_ticks_done: Arc<AtomicU64>,
     clock: Clock,
     ticks_per_step: u64,
-    blade_length_m: f64,
-    reach_m: f64,
-    patch_radius_m: f64,
-    patch: Vec<(u32, f64)>,
-    cut_step_m: f64,
     period_nanos: u64,
+    /// The recorder's queue and what to record (None: not recording, or the recorder quit).
+    record: Option<(rtrb::Producer<SimRecord>, crate::tap::TapSettings)>,
 }
 
 struct SimOutcome {
-    sim: Simulation,
-    collider: SurfaceCollider,
+    stepper: SessionStepper,
     tick_of_step: Vec<u64>,
     step_nanos: Vec<u64>,
-    cut_steps: u64,
-    cut_length_m: f64,
-    tets_split: u64,
-    unresolved_cuts: u64,
-    failed_cuts: u64,
-    rejected_steps: u64,
-    cg_iterations: u64,
 }
 
 impl SimWorker {
@@ -365,12 +352,7 @@ impl SimWorker {
         let steps = (ticks / self.ticks_per_step) as usize;
         let mut out_ticks = Vec::with_capacity(steps);
         let mut out_nanos = Vec::with_capacity(steps);
-        let (mut cut_steps, mut tets_split, mut unresolved, mut failed, mut rejected) = (0, 0, 0, 0, 0);
-        let mut cut_length = 0.0;
-        let mut cg_iterations = 0u64;
         let mut latest = None;
-        let mut last_hit: Option<SurfaceHit> = None;
-        let mut last_cut_tip: Option<Point3> = None;
         for n in 0..steps as u64 {
             // The step's own tick; once a lagging live simulation skipped ahead, the tick
             // after the last one consumed (never the same tick twice).
@@ -381,102 +363,51 @@ impl SimWorker {
             };
             let Some(sample) = self.next_sample(target, &mut latest) else { break };
             let began = Instant::now();
-            let render = sample.render;
-
-            // The tool's reaction on the tissue, spread over the contact patch around the
-            // touched point (weights (1 - r / R)^2 over the surface particles within R).
-            self.sim.clear_external_forces();
-            if render.mode == Mode::Touching
-                && let Some(hit) = &last_hit
-            {
-                self.patch.clear();
-                let mut total = 0.0;
-                let x = &self.sim.state.positions;
-                for &v in self.collider.vertex_ids() {
-                    let r = (x[v as usize] - hit.point).norm();
-                    if r < self.patch_radius_m && !self.sim.model.held[v as usize] {
-                        let w = (1.0 - r / self.patch_radius_m).powi(2);
-                        self.patch.push((v, w));
-                        total += w;
-                    }
-                }
-                if total > 0.0 {
-                    let f = self.sim.external_forces_mut();
-                    for &(v, w) in &self.patch {
-                        f[v as usize] -= render.force_newtons * (w / total);
-                    }
-                }
-            }
-
-            // Cutting while the renderer says the blade is in the tissue.
-            let moved_enough = |last: &Option<Point3>| last.is_none_or(|p| (sample.pose.tip_in_world - p).norm() >= self.cut_step_m);
-            if render.mode == Mode::Cutting && moved_enough(&last_cut_tip) {
-                if let Some(p) = last_cut_tip {
-                    cut_length += (sample.pose.tip_in_world - p).norm();
-                }
-                last_cut_tip = Some(sample.pose.tip_in_world);
-                let blade = cut::Blade { tip: sample.pose.tip_in_world, edge_direction: sample.pose.edge_direction(), depth_m: self.blade_length_m };
-                match self.cutter.advance(&mut self.sim, blade) {
-                    Ok(ev) if !ev.is_empty() => {
-                        cut_steps += 1;
-                        tets_split += ev.tets_removed.len() as u64;
-                        if let Err(e) = self.collider.rebuild(&self.sim) {
-                            tracing::error!("rebuilding the surface after a cut failed: {e}");
-                        }
-                    }
-                    Ok(_) => {}
-                    Err(CutError::Unresolved(_)) => unresolved += 1,
-                    Err(e) => {
-                        failed += 1;
-                        tracing::warn!("cut failed at tick {}: {e}; stroke ended", sample.tick);
-                        self.cutter.end_stroke();
-                    }
-                }
-            } else if render.mode != Mode::Cutting && self.cutter.in_stroke() {
-                self.cutter.end_stroke();
-                last_cut_tip = None;
-            }
-
-            let stepped = self.sim.step();
-            if let Ok(report) = &stepped {
-                cg_iterations += report.cg_iterations as u64;
-            }
-            if let Err(e) = stepped {
-                rejected += 1;
-                // the first, then every hundredth: a diverging model would flood the log
-                if rejected % 100 == 1 {
-                    tracing::warn!("simulation step at tick {} rejected ({rejected} so far): {e}", sample.tick);
-                }
-            }
-            self.collider.refit(&self.sim.state.positions);
-            let (model, hit) = self.collider.contact_model(&self.sim, &render.proxy, self.reach_m, sample.tick);
-            last_hit = hit;
-            if sample.tick % 100 == 0 {
-                tracing::debug!(
-                    "tick {} mode {:?} force {:.3} N stiffness {:.0} N/m tip z {:.2} mm plane z {:.2} mm",
-                    sample.tick, render.mode, render.force_newtons.norm(), model.stiffness_newtons_per_m,
-                    sample.pose.tip_in_world.z * 1e3, model.plane_point.z * 1e3
-                );
-            }
-            self.contact.write(model);
+            let out = self.stepper.step(&sample);
+            self.contact.write(out.contact);
             self.sim_ticks_done.store(sample.tick + 1, Ordering::Release);
             out_ticks.push(sample.tick);
             out_nanos.push(began.elapsed().as_nanos() as u64);
+            let last = n + 1 == steps as u64;
+            self.record(n, &sample, out.cut, out.rejected, last);
             self.log_events();
         }
+        if let Some(&tick) = out_ticks.last()
+            && out_ticks.len() < steps
+        {
+            // ended early (the servo loop stopped): the state there is a keyframe too
+            let n = out_ticks.len() as u64 - 1;
+            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper.sim, n, tick))));
+        }
         self.log_events();
-        SimOutcome {
-            sim: self.sim,
-            collider: self.collider,
-            tick_of_step: out_ticks,
-            step_nanos: out_nanos,
-            cut_steps,
-            cut_length_m: cut_length,
-            tets_split,
-            unresolved_cuts: unresolved,
-            failed_cuts: failed,
-            rejected_steps: rejected,
-            cg_iterations,
+        SimOutcome { stepper: self.stepper, tick_of_step: out_ticks, step_nanos: out_nanos }
+    }
+
+    /// Hands step `n`'s records to the recorder, if one listens.
+    fn record(&mut self, n: u64, sample: &ServoSample, cut: Option<(cutlab_sim::cut::Blade, cutlab_sim::cut::CutEvent)>, rejected: bool, last: bool) {
+        let Some((_, settings)) = &self.record else { return };
+        let settings = *settings;
+        let tick = sample.tick;
+        self.push(SimRecord::Step { step: n, tick, rejected });
+        if let Some((blade, event)) = cut {
+            self.push(SimRecord::Cut { step: n, tick, blade, event: Box::new(event) });
+        }
+        let every = |k: u64| k > 0 && (n + 1) % k == 0;
+        if every(settings.surface_every_steps) {
+            let s = SurfaceSnapshot::of(&self.stepper.collider, &self.stepper.sim.state.positions, n, tick);
+            self.push(SimRecord::Surface(Box::new(s)));
+        }
+        if every(settings.keyframe_every_steps.max(1)) || last {
+            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper.sim, n, tick))));
+        }
+    }
+
+    fn push(&mut self, record: SimRecord) {
+        if let Some((queue, _)) = &mut self.record
+            && !RecordTap::push_sim(queue, record)
+        {
+            tracing::error!("the recorder stopped taking records; the session goes on unrecorded");
+            self.record = None;
         }
     }
 }

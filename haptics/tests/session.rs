@@ -26,7 +26,7 @@ fn virtual_clock_session_cuts_and_is_reproducible_bit_for_bit() {
     let a = run(1);
     println!(
         "ticks {} steps {} cut steps {} tets split {} blade path {:.1} mm max force {:.2} N faults {} wall {:.2} s speed {:.2}x",
-        a.servo.ticks, a.sim_steps, a.cut_steps, a.tets_split, a.servo.blade_path_in_tissue_m * 1e3,
+        a.servo.ticks, a.sim_steps, a.stats.cut_steps, a.stats.tets_split, a.servo.blade_path_in_tissue_m * 1e3,
         a.servo.max_force_newtons, a.servo.fault_ticks, a.wall_s, a.speed()
     );
     assert_eq!(a.servo.ticks, 3500);
@@ -34,11 +34,11 @@ fn virtual_clock_session_cuts_and_is_reproducible_bit_for_bit() {
     assert!(a.tick_of_step.iter().enumerate().all(|(n, &t)| t == n as u64), "lock-step: step n consumed tick n");
     assert_eq!(a.servo.non_finite_count, 0);
     assert!(a.servo.max_force_newtons > 0.5 && a.servo.max_force_newtons <= 3.3 + 1e-12);
-    assert!(a.tets_split > 0, "the trainee cut the block");
+    assert!(a.stats.tets_split > 0, "the trainee cut the block");
     assert!(a.servo.blade_path_in_tissue_m > 0.005);
     let b = run(1);
     assert_eq!((a.state_hash, a.servo.force_hash), (b.state_hash, b.servo.force_hash), "same seed, same bits");
-    assert_eq!(a.tets_split, b.tets_split);
+    assert_eq!(a.stats.tets_split, b.stats.tets_split);
     let c = run(2);
     assert_ne!(a.servo.force_hash, c.servo.force_hash, "another seed, another hand");
 }
@@ -85,7 +85,7 @@ fn nan_poses_and_a_lost_device_fade_the_force_and_the_session_survives() {
     // 5 ticks to fade out in each window, then zero force
     assert_eq!(r.servo.faded_ticks, (100 - 4) + (50 - 4));
     assert!(r.servo.max_force_newtons > 0.2 && r.servo.max_force_newtons <= 3.3);
-    assert_eq!(r.rejected_steps, 0, "no NaN reached the simulation");
+    assert_eq!(r.stats.rejected_steps, 0, "no NaN reached the simulation");
 }
 
 #[test]

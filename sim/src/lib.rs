@@ -22,6 +22,7 @@ pub mod cut;
 pub mod error;
 pub mod fem;
 pub mod generate;
+pub mod hash;
 pub mod io;
 pub mod mesh;
 pub mod model;

@@ -81,20 +81,10 @@ impl State {
     /// A hash of the exact bits of every position and velocity (FNV-1a, 64 bit): equal states
     /// give equal hashes on every platform.
     pub fn bit_hash(&self) -> u64 {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut eat = |x: f64| {
-            for byte in x.to_bits().to_le_bytes() {
-                h ^= byte as u64;
-                h = h.wrapping_mul(0x0100_0000_01b3);
-            }
-        };
-        for p in &self.positions {
-            p.iter().for_each(|&c| eat(c));
-        }
-        for v in &self.velocities {
-            v.iter().for_each(|&c| eat(c));
-        }
-        h
+        let mut h = crate::hash::Fnv1a::default();
+        let coords = self.positions.iter().flat_map(|p| p.coords.iter()).chain(self.velocities.iter().flat_map(|v| v.iter()));
+        coords.for_each(|&c| h.f64(c));
+        h.finish()
     }
 }
 

@@ -1,0 +1,198 @@
+//! The simulation side of a session, one step per servo sample: apply the tool's reaction,
+//! cut while the blade is in the tissue, advance the simulation, refit the surface and build
+//! the contact model for the servo loop.
+//!
+//! A live session drives a [`SessionStepper`] from its simulation thread; a replay drives
+//! the same stepper from the recorded samples, so a replay runs exactly the code of the
+//! session it checks.
+
+use cutlab_sim::cut::{self, Blade, CutError, CutEvent, Cutter};
+use cutlab_sim::hash::Fnv1a;
+use cutlab_sim::solver::Simulation;
+
+use crate::collision::{SurfaceCollider, SurfaceHit};
+use crate::render::{ContactModel, Mode};
+use crate::servo::ServoSample;
+use crate::session::{Session, SessionConfig};
+use crate::Point3;
+
+/// What the stepper counted.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepperStats {
+    /// Steps whose cut changed the tissue, tetrahedra split, cuts skipped as unresolved and
+    /// cuts that failed.
+    pub cut_steps: u64,
+    /// Length of the blade tip's path while it cut (sampled every `cut_step_m`), m.
+    pub cut_length_m: f64,
+    pub tets_split: u64,
+    pub unresolved_cuts: u64,
+    pub failed_cuts: u64,
+    /// Steps the simulation rejected (non-finite state).
+    pub rejected_steps: u64,
+    /// Conjugate-gradient iterations of the implicit solver over all steps.
+    pub cg_iterations: u64,
+}
+
+/// What one step did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepOutput {
+    /// The contact model around the proxy, for the servo loop.
+    pub contact: ContactModel,
+    /// The cut this step made: the blade and every topology change.
+    pub cut: Option<(Blade, CutEvent)>,
+    /// The simulation rejected the step (non-finite state; the state was kept).
+    pub rejected: bool,
+}
+
+/// The simulation, its surface collider and the cutter, stepped one servo sample at a time.
+#[derive(Debug)]
+pub struct SessionStepper {
+    pub sim: Simulation,
+    pub collider: SurfaceCollider,
+    cutter: Cutter,
+    blade_length_m: f64,
+    reach_m: f64,
+    patch_radius_m: f64,
+    cut_step_m: f64,
+    patch: Vec<(u32, f64)>,
+    last_hit: Option<SurfaceHit>,
+    last_cut_tip: Option<Point3>,
+    pub stats: StepperStats,
+}
+
+impl SessionStepper {
+    pub fn new(session: Session, config: &SessionConfig) -> Self {
+        let (sim, collider) = session.into_parts();
+        Self {
+            sim,
+            collider,
+            cutter: Cutter::default(),
+            blade_length_m: config.blade_length_m,
+            reach_m: config.contact_reach_m,
+            patch_radius_m: config.contact_patch_radius_m,
+            cut_step_m: config.cut_step_m,
+            patch: Vec::new(),
+            last_hit: None,
+            last_cut_tip: None,
+            stats: StepperStats::default(),
+        }
+    }
+
+    /// One simulation step driven by `sample`.
+    pub fn step(&mut self, sample: &ServoSample) -> StepOutput {
+        let render = sample.render;
+
+        // The tool's reaction on the tissue, spread over the contact patch around the
+        // touched point (weights (1 - r / R)^2 over the surface particles within R).
+        self.sim.clear_external_forces();
+        if render.mode == Mode::Touching
+            && let Some(hit) = &self.last_hit
+        {
+            self.patch.clear();
+            let mut total = 0.0;
+            let x = &self.sim.state.positions;
+            for &v in self.collider.vertex_ids() {
+                let r = (x[v as usize] - hit.point).norm();
+                if r < self.patch_radius_m && !self.sim.model.held[v as usize] {
+                    let w = (1.0 - r / self.patch_radius_m).powi(2);
+                    self.patch.push((v, w));
+                    total += w;
+                }
+            }
+            if total > 0.0 {
+                let f = self.sim.external_forces_mut();
+                for &(v, w) in &self.patch {
+                    f[v as usize] -= render.force_newtons * (w / total);
+                }
+            }
+        }
+
+        // Cutting while the renderer says the blade is in the tissue.
+        let mut made = None;
+        let tip = sample.pose.tip_in_world;
+        let moved_enough = self.last_cut_tip.is_none_or(|p| (tip - p).norm() >= self.cut_step_m);
+        if render.mode == Mode::Cutting && moved_enough {
+            if let Some(p) = self.last_cut_tip {
+                self.stats.cut_length_m += (tip - p).norm();
+            }
+            self.last_cut_tip = Some(tip);
+            let blade = cut::Blade { tip, edge_direction: sample.pose.edge_direction(), depth_m: self.blade_length_m };
+            match self.cutter.advance(&mut self.sim, blade) {
+                Ok(ev) if !ev.is_empty() => {
+                    self.stats.cut_steps += 1;
+                    self.stats.tets_split += ev.tets_removed.len() as u64;
+                    if let Err(e) = self.collider.rebuild(&self.sim) {
+                        tracing::error!("rebuilding the surface after a cut failed: {e}");
+                    }
+                    made = Some((blade, ev));
+                }
+                Ok(_) => {}
+                Err(CutError::Unresolved(_)) => self.stats.unresolved_cuts += 1,
+                Err(e) => {
+                    self.stats.failed_cuts += 1;
+                    tracing::warn!("cut failed at tick {}: {e}; stroke ended", sample.tick);
+                    self.cutter.end_stroke();
+                }
+            }
+        } else if render.mode != Mode::Cutting && self.cutter.in_stroke() {
+            self.cutter.end_stroke();
+            self.last_cut_tip = None;
+        }
+
+        let stepped = self.sim.step();
+        let rejected = match &stepped {
+            Ok(report) => {
+                self.stats.cg_iterations += report.cg_iterations as u64;
+                false
+            }
+            Err(e) => {
+                self.stats.rejected_steps += 1;
+                // the first, then every hundredth: a diverging model would flood the log
+                if self.stats.rejected_steps % 100 == 1 {
+                    tracing::warn!("simulation step at tick {} rejected ({} so far): {e}", sample.tick, self.stats.rejected_steps);
+                }
+                true
+            }
+        };
+        self.collider.refit(&self.sim.state.positions);
+        let (contact, hit) = self.collider.contact_model(&self.sim, &render.proxy, self.reach_m, sample.tick);
+        self.last_hit = hit;
+        if sample.tick % 100 == 0 {
+            tracing::debug!(
+                "tick {} mode {:?} force {:.3} N stiffness {:.0} N/m tip z {:.2} mm plane z {:.2} mm",
+                sample.tick, render.mode, render.force_newtons.norm(), contact.stiffness_newtons_per_m,
+                tip.z * 1e3, contact.plane_point.z * 1e3
+            );
+        }
+        StepOutput { contact, cut: made, rejected }
+    }
+
+    /// Hash of the simulation state's bits (positions and velocities) and of its topology
+    /// (the tetrahedra): what a recording's keyframes carry and a replay checks.
+    pub fn state_hash(&self) -> StateHash {
+        StateHash::of(&self.sim)
+    }
+}
+
+/// The bits of a simulation at one step, hashed (FNV-1a, 64 bits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct StateHash {
+    /// Positions and velocities.
+    pub state: u64,
+    /// Tetrahedra (vertex ids) and reference positions.
+    pub topology: u64,
+}
+
+impl StateHash {
+    pub fn of(sim: &Simulation) -> Self {
+        let mesh = &sim.model.mesh;
+        let mut h = Fnv1a::default();
+        for t in mesh.tets() {
+            t.iter().for_each(|&v| h.u32(v));
+        }
+        for p in mesh.positions() {
+            p.iter().for_each(|&c| h.f64(c));
+        }
+        Self { state: sim.state.bit_hash(), topology: h.finish() }
+    }
+}

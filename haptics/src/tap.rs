@@ -1,0 +1,146 @@
+//! The recording tap: what a session hands to a recorder, through bounded lock-free queues.
+//!
+//! - the servo thread pushes every tick's [`ServoSample`] (pose, force, contact state) into
+//!   a wait-free SPSC queue; it never waits: a full queue drops the record and counts it
+//!   (`ServoReport::dropped_records`), so a slow disk can never delay a tick;
+//! - the simulation thread pushes [`SimRecord`]s: which tick each step consumed, every cut's
+//!   topology event, keyframes of the full state and the tissue surface at visual rate. It
+//!   waits for room when the queue is full (a recording must not lose a topology change),
+//!   and gives up on the recorder if the consumer is gone.
+//!
+//! The consumer side ([`TapFeed`]) belongs to the recorder's writer thread.
+
+use cutlab_sim::cut::{Blade, CutEvent};
+use cutlab_sim::solver::Simulation;
+
+use crate::collision::SurfaceCollider;
+use crate::servo::{Backoff, ServoSample};
+use crate::stepper::StateHash;
+use crate::Point3;
+
+/// How much a session records, and the queue sizes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TapSettings {
+    /// A keyframe (the full state and its hash) every this many simulation steps (and after
+    /// the last step).
+    pub keyframe_every_steps: u64,
+    /// The tissue surface every this many simulation steps (0: never).
+    pub surface_every_steps: u64,
+    /// Capacity of the tick queue, records (a 1 kHz servo fills 1,000 per second).
+    pub tick_capacity: usize,
+    /// Capacity of the simulation queue, records.
+    pub sim_capacity: usize,
+}
+
+impl Default for TapSettings {
+    fn default() -> Self {
+        Self { keyframe_every_steps: 1000, surface_every_steps: 33, tick_capacity: 1 << 16, sim_capacity: 1 << 14 }
+    }
+}
+
+/// The full simulation state at one step: what a viewer seeks to, and what a replay checks
+/// (through `hash`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Keyframe {
+    pub step: u64,
+    pub tick: u64,
+    pub hash: StateHash,
+    pub positions: Vec<Point3>,
+    pub velocities: Vec<cutlab_sim::Vector3>,
+    /// Reference (rest) positions of the vertices.
+    pub rest_positions: Vec<Point3>,
+    pub tets: Vec<[u32; 4]>,
+    pub regions: Vec<u32>,
+}
+
+impl Keyframe {
+    pub fn of(sim: &Simulation, step: u64, tick: u64) -> Self {
+        let mesh = &sim.model.mesh;
+        Self {
+            step,
+            tick,
+            hash: StateHash::of(sim),
+            positions: sim.state.positions.clone(),
+            velocities: sim.state.velocities.clone(),
+            rest_positions: mesh.positions().to_vec(),
+            tets: mesh.tets().to_vec(),
+            regions: mesh.regions().to_vec(),
+        }
+    }
+}
+
+/// The deformed tissue surface: triangles over its own vertex list.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SurfaceSnapshot {
+    pub step: u64,
+    pub tick: u64,
+    pub vertices: Vec<Point3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl SurfaceSnapshot {
+    pub fn of(collider: &SurfaceCollider, positions: &[Point3], step: u64, tick: u64) -> Self {
+        Self {
+            step,
+            tick,
+            vertices: collider.vertex_ids().iter().map(|&v| positions[v as usize]).collect(),
+            triangles: collider.triangles().to_vec(),
+        }
+    }
+}
+
+/// One record of the simulation thread.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SimRecord {
+    /// Step `step` consumed the sample of servo tick `tick`.
+    Step { step: u64, tick: u64, rejected: bool },
+    /// The cut step `step` made.
+    Cut { step: u64, tick: u64, blade: Blade, event: Box<CutEvent> },
+    Keyframe(Box<Keyframe>),
+    Surface(Box<SurfaceSnapshot>),
+}
+
+/// The producer side, held by the session.
+#[derive(Debug)]
+pub struct RecordTap {
+    pub settings: TapSettings,
+    pub(crate) ticks: rtrb::Producer<ServoSample>,
+    pub(crate) sim: rtrb::Producer<SimRecord>,
+}
+
+/// The consumer side, held by the recorder's writer thread. A queue whose producer is gone
+/// (`is_abandoned`) and empty has ended.
+#[derive(Debug)]
+pub struct TapFeed {
+    pub ticks: rtrb::Consumer<ServoSample>,
+    pub sim: rtrb::Consumer<SimRecord>,
+}
+
+/// A tap and its feed. The tick queue is written through once here, so the servo loop never
+/// page-faults on it.
+pub fn tap(settings: TapSettings) -> (RecordTap, TapFeed) {
+    let (mut ticks_in, mut ticks_out) = rtrb::RingBuffer::new(settings.tick_capacity.max(2));
+    while ticks_in.push(ServoSample::default()).is_ok() {}
+    while ticks_out.pop().is_ok() {}
+    let (sim_in, sim_out) = rtrb::RingBuffer::new(settings.sim_capacity.max(2));
+    (RecordTap { settings, ticks: ticks_in, sim: sim_in }, TapFeed { ticks: ticks_out, sim: sim_out })
+}
+
+impl RecordTap {
+    /// Pushes a simulation record, waiting for room; false when the recorder is gone.
+    pub(crate) fn push_sim(sim: &mut rtrb::Producer<SimRecord>, mut record: SimRecord) -> bool {
+        let mut backoff = Backoff::default();
+        loop {
+            match sim.push(record) {
+                Ok(()) => return true,
+                Err(rtrb::PushError::Full(r)) => {
+                    if sim.is_abandoned() {
+                        return false;
+                    }
+                    record = r;
+                    backoff.wait();
+                }
+            }
+        }
+    }
+}
