@@ -1,3 +1,27 @@
-//! cutlab-recorder: session recordings (MCAP, rerun) and deterministic replay. Content
-//! arrives with issue 5; it may depend on `cutlab-haptics` and `cutlab-sim`.
+//! cutlab-recorder: session recordings and deterministic replay.
+//!
+//! - [`channels`]: the channels of a recording (topics, schemas, messages; documented
+//!   there and in the README).
+//! - [`writer`]: [`McapSink`] writes a session's records into a chunked, zstd-compressed,
+//!   indexed MCAP file, flushed at least every second; [`writer::spawn`] runs it on the
+//!   `cutlab-recorder` thread fed by the session's lock-free tap.
+//! - [`reader`]: [`Recording`] reads a recording back (a complete one, or a damaged one up to
+//!   its last complete chunk), and [`reader::Info`] summarises it.
+//! - [`recover`]: salvages a recording cut short into a complete file.
+//! - [`replay`]: re-simulates a recording from its inputs and checks every keyframe's hash
+//!   bit for bit.
+//!
+//! May depend on `cutlab-haptics` and `cutlab-sim`; nothing below depends on it.
+
+pub mod channels;
+pub mod error;
+pub mod reader;
+pub mod record;
+pub mod recover;
+pub mod replay;
+pub mod writer;
+
 pub use cutlab_haptics as haptics;
+pub use error::RecorderError;
+pub use reader::Recording;
+pub use writer::{McapSink, WriterOptions};

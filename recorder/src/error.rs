@@ -1,0 +1,26 @@
+//! The recorder's errors.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong writing, reading, recovering or replaying a recording.
+#[derive(Debug, thiserror::Error)]
+pub enum RecorderError {
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("MCAP: {0}")]
+    Mcap(#[from] mcap::McapError),
+    #[error("encoding a message: {0}")]
+    Encode(String),
+    #[error("malformed recording: {0}")]
+    Malformed(String),
+    #[error("not a cutlab recording: {0}")]
+    NotCutlab(String),
+    #[error("replay: {0}")]
+    Replay(String),
+    #[error(transparent)]
+    Haptics(#[from] cutlab_haptics::HapticsError),
+    #[error("scene: {0}")]
+    Scene(String),
+    #[error("rerun: {0}")]
+    Rerun(String),
+}

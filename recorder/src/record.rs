@@ -1,0 +1,121 @@
+//! Recording a session: the session runs as usual while its tap feeds the writer thread, and
+//! the file is finished with the session's end figures — also when the session fails, so an
+//! interrupted session never loses its recording.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use cutlab_haptics::device::{HapticDevice, Plan};
+use cutlab_haptics::tap::{self, TapSettings};
+use cutlab_haptics::{HapticsError, Session, SessionConfig, SessionReport, StateHash};
+
+use crate::channels::{self, Hex, PlanMsg, SessionMeta};
+use crate::writer::{self, McapSink, RecordObserver, WriteStats, WriterOptions};
+use crate::RecorderError;
+
+/// Who and what a recording is of (the session metadata that is not a setting).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Provenance {
+    /// Built-in scene name or scene file, as given (a replay loads it again).
+    pub scene: String,
+    pub min_tets: Option<usize>,
+    pub seed: u64,
+    pub trainee: String,
+    pub exercise: String,
+    pub device: String,
+}
+
+/// How much to record.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RecordSettings {
+    pub tap: TapSettings,
+    pub writer: WriterOptions,
+}
+
+/// A recorded session.
+pub struct RecordedSession {
+    /// The session's report, or why it failed (the recording is finished either way).
+    pub report: Result<SessionReport, HapticsError>,
+    pub write: WriteStats,
+    pub path: PathBuf,
+    /// The observer, handed back to be finished by its owner.
+    pub observer: Option<Box<dyn RecordObserver>>,
+}
+
+impl std::fmt::Debug for RecordedSession {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RecordedSession").field("report", &self.report).field("write", &self.write).field("path", &self.path).finish_non_exhaustive()
+    }
+}
+
+/// Runs `session` with `device`, recording it to `path` (MCAP), and every record to
+/// `observer` too.
+#[allow(clippy::too_many_arguments)]
+pub fn run_recorded(
+    session: Session,
+    device: Box<dyn HapticDevice>,
+    config: &SessionConfig,
+    provenance: &Provenance,
+    plan: Option<&Plan>,
+    scene_spec: &cutlab_sim::scene::SceneSpec,
+    path: &Path,
+    settings: RecordSettings,
+    observer: Option<Box<dyn RecordObserver>>,
+) -> Result<RecordedSession, RecorderError> {
+    let initial = StateHash::of(&session.sim);
+    let meta = SessionMeta {
+        cutlab_version: env!("CARGO_PKG_VERSION").to_owned(),
+        scene: provenance.scene.clone(),
+        min_tets: provenance.min_tets,
+        seed: provenance.seed,
+        trainee: provenance.trainee.clone(),
+        exercise: provenance.exercise.clone(),
+        device: provenance.device.clone(),
+        clock: format!("{:?}", config.clock).to_lowercase(),
+        period_nanos: config.period_nanos,
+        time_step_nanos: (session.sim.settings.time_step_s * 1e9).round() as u64,
+        duration_s: config.duration_s,
+        blade_length_m: config.blade_length_m,
+        contact_reach_m: config.contact_reach_m,
+        contact_patch_radius_m: config.contact_patch_radius_m,
+        cut_step_m: config.cut_step_m,
+        keyframe_every_steps: settings.tap.keyframe_every_steps,
+        surface_every_steps: settings.tap.surface_every_steps,
+        initial_state_hash: Hex(initial.state),
+        initial_topology_hash: Hex(initial.topology),
+        started_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64()),
+    };
+    let mut attachments = vec![(channels::SCENE_ATTACHMENT, "application/json", json(scene_spec)?)];
+    if let Some(plan) = plan {
+        attachments.push((channels::PLAN_ATTACHMENT, "application/json", json(&PlanMsg::from(plan))?));
+    }
+    let sink = McapSink::create(path, &meta, &attachments, settings.writer)?;
+    let (tap, feed) = tap::tap(settings.tap);
+    let writer = writer::spawn(sink, feed, observer).map_err(|source| RecorderError::Io { path: path.to_owned(), source })?;
+    let report = session.run_recorded(device, config, Some(tap));
+    let (sink, observer) = writer.join().map_err(|_| RecorderError::Encode("the recorder thread panicked".into()))??;
+    let mut end = BTreeMap::new();
+    match &report {
+        Ok(r) => {
+            end.insert("status".to_owned(), "complete".to_owned());
+            end.insert("ticks".to_owned(), r.servo.ticks.to_string());
+            end.insert("sim_steps".to_owned(), r.sim_steps.to_string());
+            end.insert("dropped_tick_records".to_owned(), r.servo.dropped_records.to_string());
+            end.insert("dropped_samples".to_owned(), r.servo.dropped_samples.to_string());
+            end.insert("tets_split".to_owned(), r.stats.tets_split.to_string());
+            end.insert("cut_length_m".to_owned(), r.stats.cut_length_m.to_string());
+            end.insert("final_state_hash".to_owned(), format!("{:016x}", r.state_hash));
+            end.insert("wall_s".to_owned(), r.wall_s.to_string());
+        }
+        Err(e) => {
+            end.insert("status".to_owned(), "failed".to_owned());
+            end.insert("error".to_owned(), e.to_string());
+        }
+    }
+    let write = sink.finish(&end)?;
+    Ok(RecordedSession { report, write, path: path.to_owned(), observer })
+}
+
+fn json<T: serde::Serialize>(v: &T) -> Result<Vec<u8>, RecorderError> {
+    serde_json::to_vec_pretty(v).map_err(|e| RecorderError::Encode(e.to_string()))
+}

@@ -1,0 +1,286 @@
+//! Deterministic replay: re-simulate a recording from its recorded inputs and check it.
+//!
+//! The replay rebuilds the scene named in the session metadata, settles it (checking the
+//! initial state hash), then drives a [`SessionStepper`] — the code the session's simulation
+//! thread ran — with the servo sample of exactly the tick each recorded step consumed
+//! (`/sim/step`). After every step it compares what the step did with the recording: the cut
+//! (`/sim/topology`, every field, bit for bit) and, at keyframes, the hashes of the state and
+//! topology bits (`/sim/state_hash`). The first difference is reported precisely: the step,
+//! the tick, what differed, and for a state difference the largest position difference
+//! against the keyframe and the vertex where it is.
+//!
+//! Seeking: a replay from `from_s` re-simulates the steps before it as fast as possible
+//! (still checking every hash on the way) and plays from there; there is no shortcut that
+//! would skip the checks.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use cutlab_haptics::stepper::{SessionStepper, StateHash};
+use cutlab_haptics::tap::{Keyframe, SimRecord, SurfaceSnapshot};
+use cutlab_haptics::{Session, SessionConfig};
+use cutlab_sim::scene::{BuildOptions, Scene};
+
+use crate::channels::{KeyframeMsg, SessionMeta, StateHashMsg, TopologyMsg};
+use crate::writer::RecordObserver;
+use crate::{RecorderError, Recording};
+
+/// How fast a replay plays.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Speed {
+    /// As fast as the machine allows.
+    Max,
+    /// This many times real time (1: real time).
+    Factor(f64),
+}
+
+impl std::str::FromStr for Speed {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "max" => Ok(Speed::Max),
+            "realtime" | "real-time" => Ok(Speed::Factor(1.0)),
+            _ => {
+                let f: f64 = s.trim_start_matches('x').parse().map_err(|_| format!("speed must be max, realtime or a factor such as 4 or x4, got {s:?}"))?;
+                if f > 0.0 && f.is_finite() {
+                    Ok(Speed::Factor(f))
+                } else {
+                    Err(format!("speed factor must be positive, got {s:?}"))
+                }
+            }
+        }
+    }
+}
+
+/// Settings of a replay.
+#[derive(Default)]
+pub struct ReplayOptions {
+    pub speed: Option<Speed>,
+    /// Play from this session time (s); earlier steps are re-simulated without pacing.
+    pub from_s: Option<f64>,
+    /// Stop after this session time (s).
+    pub to_s: Option<f64>,
+    /// Receives the replayed ticks and records in the played window (rerun export).
+    pub observer: Option<Box<dyn RecordObserver>>,
+    /// Keep going after the first divergence (count them all).
+    pub keep_going: bool,
+}
+
+impl std::fmt::Debug for ReplayOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReplayOptions").field("speed", &self.speed).field("from_s", &self.from_s).field("to_s", &self.to_s).field("keep_going", &self.keep_going).finish_non_exhaustive()
+    }
+}
+
+/// The first place where the replay differs from the recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Divergence {
+    pub step: u64,
+    pub tick: u64,
+    pub what: String,
+    /// For a state difference: the largest position difference against the keyframe, m, and
+    /// the vertex.
+    pub max_position_difference_m: Option<(f64, usize)>,
+}
+
+impl std::fmt::Display for Divergence {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "step {} (tick {}): {}", self.step, self.tick, self.what)?;
+        if let Some((d, v)) = self.max_position_difference_m {
+            write!(f, "; largest position difference {:.3e} m at vertex {v}", d)?;
+        }
+        Ok(())
+    }
+}
+
+/// What a replay did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplayReport {
+    pub steps: u64,
+    pub keyframes_checked: u64,
+    pub keyframes_matched: u64,
+    pub cuts_recorded: u64,
+    pub cuts_replayed: u64,
+    pub divergences: u64,
+    pub first_divergence: Option<Divergence>,
+    /// Session time replayed, s.
+    pub simulated_s: f64,
+    pub wall_s: f64,
+    /// The final state's hash.
+    pub final_hash: StateHash,
+}
+
+impl ReplayReport {
+    /// Every keyframe matched and every cut was the same.
+    pub fn verified(&self) -> bool {
+        self.first_divergence.is_none() && self.keyframes_checked > 0
+    }
+
+    /// Simulated seconds per wall second.
+    pub fn speed(&self) -> f64 {
+        self.simulated_s / self.wall_s.max(1e-12)
+    }
+}
+
+/// The stepper a recording's session started from: its scene, settled, with its settings.
+pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> {
+    let scene = Scene::load(&meta.scene, BuildOptions { min_tets: meta.min_tets }).map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.scene)))?;
+    let session = Session::new(&scene)?;
+    let config = SessionConfig {
+        blade_length_m: meta.blade_length_m,
+        contact_reach_m: meta.contact_reach_m,
+        contact_patch_radius_m: meta.contact_patch_radius_m,
+        cut_step_m: meta.cut_step_m,
+        ..SessionConfig::default()
+    };
+    Ok(SessionStepper::new(session, &config))
+}
+
+/// The largest position difference between the stepper and a keyframe, and its vertex.
+fn position_difference(stepper: &SessionStepper, k: &KeyframeMsg) -> Option<(f64, usize)> {
+    let x = &stepper.sim.state.positions;
+    if x.len() != k.positions_m.len() {
+        return None;
+    }
+    x.iter().zip(&k.positions_m).map(|(p, q)| (p - cutlab_sim::Point3::from(*q)).norm()).enumerate().map(|(i, d)| (d, i)).max_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Replays `rec`; see the module documentation.
+pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayReport, RecorderError> {
+    let meta = rec.meta()?;
+    if rec.steps.is_empty() {
+        return Err(RecorderError::Replay("the recording has no simulation steps".into()));
+    }
+    let started = Instant::now();
+    let mut stepper = stepper_for(meta)?;
+    let period = meta.period_nanos.max(1);
+    let samples = rec.samples();
+    let hashes: BTreeMap<u64, &StateHashMsg> = rec.hashes.iter().map(|h| (h.step, h)).collect();
+    let keyframes: BTreeMap<u64, &KeyframeMsg> = rec.keyframes.iter().map(|k| (k.step, k)).collect();
+    let cuts: BTreeMap<u64, &TopologyMsg> = rec.topology.iter().map(|t| (t.step, t)).collect();
+    let mut report = ReplayReport {
+        steps: 0,
+        keyframes_checked: 0,
+        keyframes_matched: 0,
+        cuts_recorded: 0,
+        cuts_replayed: 0,
+        divergences: 0,
+        first_divergence: None,
+        simulated_s: 0.0,
+        wall_s: 0.0,
+        final_hash: stepper.state_hash(),
+    };
+    let diverge = |report: &mut ReplayReport, d: Divergence| {
+        report.divergences += 1;
+        if report.first_divergence.is_none() {
+            report.first_divergence = Some(d);
+        }
+    };
+    let initial = StateHash { state: meta.initial_state_hash.0, topology: meta.initial_topology_hash.0 };
+    if stepper.state_hash() != initial {
+        diverge(&mut report, Divergence {
+            step: 0,
+            tick: 0,
+            what: format!(
+                "the settled scene {:?} differs from the recorded one before the first step (hashes {:016x}/{:016x}, recorded {:016x}/{:016x}): a different scene file or cutlab build",
+                meta.scene, stepper.state_hash().state, stepper.state_hash().topology, initial.state, initial.topology
+            ),
+            max_position_difference_m: None,
+        });
+        report.wall_s = started.elapsed().as_secs_f64();
+        return Ok(report);
+    }
+
+    let from_tick = options.from_s.map_or(0, |s| (s.max(0.0) * 1e9 / period as f64) as u64);
+    let to_tick = options.to_s.map_or(u64::MAX, |s| (s.max(0.0) * 1e9 / period as f64).ceil() as u64);
+    let mut play_started: Option<(Instant, u64)> = None;
+    let mut previous_tick: Option<u64> = None;
+    for (n, step) in rec.steps.iter().enumerate() {
+        if step.step != n as u64 {
+            return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
+        }
+        if step.tick > to_tick {
+            break;
+        }
+        let sample = samples.get(&step.tick).ok_or_else(|| {
+            RecorderError::Replay(format!("the pose or tool state of tick {} (consumed by step {n}) is missing from the recording", step.tick))
+        })?;
+        let playing = step.tick >= from_tick;
+        if playing {
+            let (t0, tick0) = *play_started.get_or_insert((Instant::now(), step.tick));
+            if let Some(Speed::Factor(f)) = options.speed {
+                let due = Duration::from_secs_f64((step.tick - tick0) as f64 * period as f64 * 1e-9 / f);
+                if let Some(wait) = (t0 + due).checked_duration_since(Instant::now()) {
+                    std::thread::sleep(wait);
+                }
+            }
+            if let Some(o) = options.observer.as_mut() {
+                let first = previous_tick.map_or(step.tick, |t| t + 1).max(from_tick);
+                for (_, s) in samples.range(first..=step.tick) {
+                    o.on_tick(s)?;
+                }
+            }
+        }
+        previous_tick = Some(step.tick);
+
+        let out = stepper.step(sample);
+        report.steps += 1;
+        let recorded_cut = cuts.get(&step.step);
+        report.cuts_recorded += recorded_cut.is_some() as u64;
+        report.cuts_replayed += out.cut.is_some() as u64;
+        let cut_differs = match (&out.cut, recorded_cut) {
+            (None, None) => None,
+            (Some(_), None) => Some("the replay cut, the recording did not".to_owned()),
+            (None, Some(_)) => Some("the recording cut, the replay did not".to_owned()),
+            (Some((blade, event)), Some(r)) => {
+                if crate::channels::BladeMsg::from(blade) != r.blade {
+                    Some("the blade of the cut differs".to_owned())
+                } else if *event != r.event {
+                    Some(format!(
+                        "the cut's topology differs ({} tets split, recorded {}; {} vertices created, recorded {})",
+                        event.tets_removed.len(), r.event.tets_removed.len(), event.vertices_created.len(), r.event.vertices_created.len()
+                    ))
+                } else {
+                    None
+                }
+            }
+        };
+        if out.rejected != step.rejected {
+            diverge(&mut report, Divergence { step: step.step, tick: step.tick, what: format!("step rejected: {}, recorded {}", out.rejected, step.rejected), max_position_difference_m: None });
+        }
+        if let Some(what) = cut_differs {
+            diverge(&mut report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m: None });
+        }
+        if let Some(h) = hashes.get(&step.step) {
+            report.keyframes_checked += 1;
+            let now = stepper.state_hash();
+            if now == h.hash() {
+                report.keyframes_matched += 1;
+            } else {
+                let what = format!("state hash {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}", now.state, now.topology, h.state.0, h.topology.0);
+                let max_position_difference_m = keyframes.get(&step.step).and_then(|k| position_difference(&stepper, k));
+                diverge(&mut report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m });
+            }
+        }
+        if playing && let Some(o) = options.observer.as_mut() {
+            o.on_sim(&SimRecord::Step { step: step.step, tick: step.tick, rejected: out.rejected })?;
+            if let Some((blade, event)) = out.cut {
+                o.on_sim(&SimRecord::Cut { step: step.step, tick: step.tick, blade, event: Box::new(event) })?;
+            }
+            let every = meta.surface_every_steps;
+            if every > 0 && (step.step + 1) % every == 0 {
+                o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(&stepper.collider, &stepper.sim.state.positions, step.step, step.tick))))?;
+            }
+            if hashes.contains_key(&step.step) {
+                o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(&stepper.sim, step.step, step.tick))))?;
+            }
+        }
+        report.simulated_s = (step.tick + 1) as f64 * period as f64 * 1e-9;
+        if report.first_divergence.is_some() && !options.keep_going {
+            break;
+        }
+    }
+    report.final_hash = stepper.state_hash();
+    report.wall_s = started.elapsed().as_secs_f64();
+    Ok(report)
+}

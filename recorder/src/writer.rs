@@ -1,0 +1,269 @@
+//! Writing a recording: [`McapSink`] encodes a session's records into an MCAP file (chunked,
+//! zstd-compressed, indexed, with a summary), and [`spawn`] runs it on its own thread, fed by
+//! a session's [`TapFeed`].
+//!
+//! Crash safety: the sink finishes its chunk and flushes the file at least every
+//! `flush_interval` (default one second of wall time), so a killed process leaves a file
+//! readable up to its last complete chunk (`cutlab recording recover` salvages it).
+
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Seek, Write};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use cutlab_haptics::servo::ServoSample;
+use cutlab_haptics::tap::{SimRecord, TapFeed};
+use foxglove::Encode;
+use mcap::records::{MessageHeader, Metadata};
+
+use crate::channels::{self, KeyframeMsg, SessionMeta, SimStepMsg, StateHashMsg, ToolStateMsg, TopologyMsg};
+use crate::RecorderError;
+
+/// Settings of the writer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WriterOptions {
+    /// Longest wall time between two flushes to disk.
+    pub flush_interval: Duration,
+    /// Target size of a chunk before compression, bytes.
+    pub chunk_size: u64,
+}
+
+impl Default for WriterOptions {
+    fn default() -> Self {
+        Self { flush_interval: Duration::from_secs(1), chunk_size: 1 << 20 }
+    }
+}
+
+/// What was written.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct WriteStats {
+    /// Messages per topic.
+    pub messages: BTreeMap<String, u64>,
+    /// Bytes of message payload before compression.
+    pub payload_bytes: u64,
+    /// Wall time spent encoding and writing, s.
+    pub busy_s: f64,
+    pub flushes: u64,
+}
+
+/// Channel ids of the recording.
+#[derive(Debug, Clone, Copy)]
+struct Ids {
+    pose: u16,
+    tool_state: u16,
+    step: u16,
+    topology: u16,
+    state_hash: u16,
+    keyframe: u16,
+    surface: u16,
+}
+
+/// An MCAP file being written.
+pub struct McapSink<W: Write + Seek> {
+    writer: mcap::Writer<W>,
+    ids: Ids,
+    period_nanos: u64,
+    sequence: u32,
+    buf: Vec<u8>,
+    stats: WriteStats,
+    last_flush: Instant,
+    options: WriterOptions,
+}
+
+impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("McapSink").field("period_nanos", &self.period_nanos).field("stats", &self.stats).finish_non_exhaustive()
+    }
+}
+
+impl McapSink<BufWriter<File>> {
+    /// Creates `path` (replacing it) and writes the header, the channels, the session
+    /// metadata and the attachments `(name, media type, bytes)`.
+    pub fn create(path: &Path, meta: &SessionMeta, attachments: &[(&str, &str, Vec<u8>)], options: WriterOptions) -> Result<Self, RecorderError> {
+        let file = File::create(path).map_err(|source| RecorderError::Io { path: path.to_owned(), source })?;
+        Self::new(BufWriter::with_capacity(1 << 16, file), meta, attachments, options)
+    }
+}
+
+fn protobuf_schema<T: Encode>() -> Result<foxglove::Schema, RecorderError> {
+    T::get_schema().ok_or_else(|| RecorderError::Encode("a Foxglove message without a schema".into()))
+}
+
+impl<W: Write + Seek> McapSink<W> {
+    pub fn new(out: W, meta: &SessionMeta, attachments: &[(&str, &str, Vec<u8>)], options: WriterOptions) -> Result<Self, RecorderError> {
+        let mut writer = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .chunk_size(Some(options.chunk_size))
+            .profile("cutlab")
+            .library(format!("cutlab {}", env!("CARGO_PKG_VERSION")))
+            .create(out)?;
+        let no_meta = BTreeMap::new();
+        let protobuf = |w: &mut mcap::Writer<W>, schema: foxglove::Schema, topic: &str| -> Result<u16, RecorderError> {
+            let id = w.add_schema(&schema.name, &schema.encoding, &schema.data)?;
+            Ok(w.add_channel(id, topic, "protobuf", &no_meta)?)
+        };
+        let pose = protobuf(&mut writer, protobuf_schema::<foxglove::messages::PoseInFrame>()?, channels::POSE)?;
+        let surface = protobuf(&mut writer, protobuf_schema::<foxglove::messages::SceneUpdate>()?, channels::SURFACE)?;
+        let mut json = [0u16; 5];
+        for (slot, (topic, name, schema)) in json.iter_mut().zip(channels::JSON_CHANNELS) {
+            let id = writer.add_schema(name, "jsonschema", schema.as_bytes())?;
+            *slot = writer.add_channel(id, topic, "json", &no_meta)?;
+        }
+        let [tool_state, step, topology, state_hash, keyframe] = json;
+        writer.write_metadata(&Metadata { name: channels::SESSION_METADATA.into(), metadata: meta.to_map()? })?;
+        for (name, media_type, data) in attachments {
+            writer.attach(&mcap::Attachment {
+                log_time: 0,
+                create_time: 0,
+                name: (*name).to_owned(),
+                media_type: (*media_type).to_owned(),
+                data: Cow::Borrowed(data),
+            })?;
+        }
+        writer.flush()?;
+        Ok(Self {
+            writer,
+            ids: Ids { pose, tool_state, step, topology, state_hash, keyframe, surface },
+            period_nanos: meta.period_nanos,
+            sequence: 0,
+            buf: Vec::with_capacity(1 << 12),
+            stats: WriteStats::default(),
+            last_flush: Instant::now(),
+            options,
+        })
+    }
+
+    fn write(&mut self, channel_id: u16, topic: &str, tick: u64) -> Result<(), RecorderError> {
+        let time = tick.saturating_mul(self.period_nanos);
+        self.sequence = self.sequence.wrapping_add(1);
+        let header = MessageHeader { channel_id, sequence: self.sequence, log_time: time, publish_time: time };
+        self.writer.write_to_known_channel(&header, &self.buf)?;
+        self.stats.payload_bytes += self.buf.len() as u64;
+        *self.stats.messages.entry(topic.to_owned()).or_default() += 1;
+        Ok(())
+    }
+
+    fn write_json<T: serde::Serialize>(&mut self, channel_id: u16, topic: &str, tick: u64, msg: &T) -> Result<(), RecorderError> {
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, msg).map_err(|e| RecorderError::Encode(e.to_string()))?;
+        self.write(channel_id, topic, tick)
+    }
+
+    fn write_protobuf<T: Encode>(&mut self, channel_id: u16, topic: &str, tick: u64, msg: &T) -> Result<(), RecorderError> {
+        self.buf.clear();
+        msg.encode(&mut self.buf).map_err(|e| RecorderError::Encode(e.to_string()))?;
+        self.write(channel_id, topic, tick)
+    }
+
+    /// Records one servo tick: the pose and what the servo loop rendered.
+    pub fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
+        let began = Instant::now();
+        let time = sample.tick.saturating_mul(self.period_nanos);
+        self.write_protobuf(self.ids.pose, channels::POSE, sample.tick, &channels::pose_message(&sample.pose, time))?;
+        self.write_json(self.ids.tool_state, channels::TOOL_STATE, sample.tick, &ToolStateMsg::of(sample))?;
+        self.stats.busy_s += began.elapsed().as_secs_f64();
+        self.flush_if_due()
+    }
+
+    /// Records one record of the simulation thread.
+    pub fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
+        let began = Instant::now();
+        match record {
+            &SimRecord::Step { step, tick, rejected } => self.write_json(self.ids.step, channels::SIM_STEP, tick, &SimStepMsg { step, tick, rejected })?,
+            SimRecord::Cut { step, tick, blade, event } => {
+                let msg = TopologyMsg { step: *step, tick: *tick, blade: blade.into(), event: (**event).clone() };
+                self.write_json(self.ids.topology, channels::TOPOLOGY, *tick, &msg)?;
+            }
+            SimRecord::Keyframe(k) => {
+                let hash = StateHashMsg { step: k.step, tick: k.tick, state: channels::Hex(k.hash.state), topology: channels::Hex(k.hash.topology) };
+                self.write_json(self.ids.state_hash, channels::STATE_HASH, k.tick, &hash)?;
+                self.write_json(self.ids.keyframe, channels::KEYFRAME, k.tick, &KeyframeMsg::from(&**k))?;
+            }
+            SimRecord::Surface(s) => {
+                let msg = channels::surface_message(&s.vertices, &s.triangles, s.tick.saturating_mul(self.period_nanos));
+                self.write_protobuf(self.ids.surface, channels::SURFACE, s.tick, &msg)?;
+            }
+        }
+        self.stats.busy_s += began.elapsed().as_secs_f64();
+        self.flush_if_due()
+    }
+
+    fn flush_if_due(&mut self) -> Result<(), RecorderError> {
+        if self.last_flush.elapsed() >= self.options.flush_interval {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Ends the current chunk and writes everything to the file.
+    pub fn flush(&mut self) -> Result<(), RecorderError> {
+        self.writer.flush()?;
+        self.stats.flushes += 1;
+        self.last_flush = Instant::now();
+        Ok(())
+    }
+
+    pub fn stats(&self) -> &WriteStats {
+        &self.stats
+    }
+
+    /// Writes `end` as the `cutlab.session_end` metadata, then the summary and footer.
+    pub fn finish(mut self, end: &BTreeMap<String, String>) -> Result<WriteStats, RecorderError> {
+        self.writer.write_metadata(&Metadata { name: channels::SESSION_END_METADATA.into(), metadata: end.clone() })?;
+        self.writer.finish()?;
+        self.writer.into_inner().flush().map_err(|source| RecorderError::Io { path: "recording".into(), source })?;
+        Ok(self.stats)
+    }
+}
+
+/// Something else that wants every record (the rerun logger).
+pub trait RecordObserver: Send {
+    fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError>;
+    fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError>;
+}
+
+/// The writer thread's result: the sink (flushed, not yet finished: the caller adds the
+/// session's end metadata) and the observer.
+pub type WriterOutcome<W> = (McapSink<W>, Option<Box<dyn RecordObserver>>);
+
+/// Runs `sink` on a thread named `cutlab-recorder` until both queues of `feed` have ended;
+/// records go to `observer` too. An error stops the writing, drops the feed (the session
+/// goes on unrecorded and says so) and is returned by the join.
+pub fn spawn<W: Write + Seek + Send + 'static>(
+    mut sink: McapSink<W>,
+    mut feed: TapFeed,
+    mut observer: Option<Box<dyn RecordObserver>>,
+) -> std::io::Result<std::thread::JoinHandle<Result<WriterOutcome<W>, RecorderError>>> {
+    std::thread::Builder::new().name("cutlab-recorder".into()).spawn(move || {
+        loop {
+            let mut idle = true;
+            // ticks first: their queue is the one that drops when full
+            while let Ok(sample) = feed.ticks.pop() {
+                idle = false;
+                sink.on_tick(&sample)?;
+                if let Some(o) = observer.as_mut() {
+                    o.on_tick(&sample)?;
+                }
+            }
+            if let Ok(record) = feed.sim.pop() {
+                idle = false;
+                sink.on_sim(&record)?;
+                if let Some(o) = observer.as_mut() {
+                    o.on_sim(&record)?;
+                }
+            }
+            let ended = |abandoned: bool, empty: bool| abandoned && empty;
+            if ended(feed.ticks.is_abandoned(), feed.ticks.is_empty()) && ended(feed.sim.is_abandoned(), feed.sim.is_empty()) {
+                break;
+            }
+            if idle {
+                sink.flush_if_due()?;
+                std::thread::sleep(Duration::from_micros(500));
+            }
+        }
+        sink.flush()?;
+        Ok((sink, observer))
+    })
+}
