@@ -4,6 +4,7 @@ mod bench;
 mod bench_accuracy;
 mod bench_stability;
 mod demo;
+mod recording;
 mod scene_info;
 mod session;
 mod stats;
@@ -64,6 +65,38 @@ enum Command {
         /// Do not ask for real-time priority for the servo thread.
         #[arg(long)]
         no_realtime: bool,
+        /// A keyframe of the full simulation state every this many seconds.
+        #[arg(long, default_value_t = 1.0)]
+        keyframe_every: f64,
+        /// The tissue surface is recorded this many times per second (0: never).
+        #[arg(long, default_value_t = 10.0)]
+        surface_hz: f64,
+    },
+    /// Session recordings (MCAP): what is in one, and salvaging one cut short.
+    Recording {
+        #[command(subcommand)]
+        command: RecordingCommand,
+    },
+    /// Re-simulate a recorded session from its inputs and check every keyframe's state hash
+    /// bit for bit; reports the first divergence precisely.
+    Replay {
+        /// The recording (DIR/session.mcap of `cutlab session`).
+        file: PathBuf,
+        /// max (as fast as possible), realtime, or a factor of real time (e.g. 4).
+        #[arg(long, default_value = "max")]
+        speed: cutlab_recorder::replay::Speed,
+        /// Play from this session time, s (earlier steps are re-simulated unpaced, still checked).
+        #[arg(long)]
+        from: Option<f64>,
+        /// Stop after this session time, s.
+        #[arg(long)]
+        to: Option<f64>,
+        /// Count every divergence instead of stopping at the first.
+        #[arg(long)]
+        keep_going: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
     },
     /// Scenes: built-in ones and scene files.
     Scene {
@@ -74,6 +107,25 @@ enum Command {
     Bench {
         #[command(subcommand)]
         command: BenchCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+enum RecordingCommand {
+    /// Channels, message counts, duration, metadata and whether the file is complete.
+    Info {
+        file: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Copy everything readable of a recording cut short (up to its last complete chunk) into
+    /// a new, complete file.
+    Recover {
+        file: PathBuf,
+        /// The new file (default: FILE with `.recovered.mcap`).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -160,7 +212,7 @@ fn run() -> anyhow::Result<()> {
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
-        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime } => session::run(&session::Options {
+        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz } => session::run(&session::Options {
             scene,
             min_tets,
             device,
@@ -169,7 +221,14 @@ fn run() -> anyhow::Result<()> {
             seed,
             out,
             realtime_priority: !no_realtime,
+            keyframe_every_s: keyframe_every,
+            surface_hz,
         }),
+        Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
+        Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),
+        Command::Replay { file, speed, from, to, keep_going, json } => {
+            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, to_s: to, keep_going, json })
+        }
         Command::Scene { command: SceneCommand::List } => {
             for (name, _) in cutlab_sim::scene::BUILTIN {
                 let spec = cutlab_sim::scene::builtin_spec(name);

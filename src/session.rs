@@ -7,7 +7,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use cutlab_haptics::device::{CsvDevice, HapticDevice, IgtlDevice, Skill, SyntheticTrainee};
 use cutlab_haptics::servo::Clock;
+use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig};
+use cutlab_recorder::record::{self, Provenance, RecordSettings};
+use cutlab_recorder::WriterOptions;
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::Vector3;
@@ -52,6 +55,10 @@ pub struct Options {
     pub seed: u64,
     pub out: PathBuf,
     pub realtime_priority: bool,
+    /// Keyframe interval, s.
+    pub keyframe_every_s: f64,
+    /// Surface recording rate, Hz (0: never).
+    pub surface_hz: f64,
 }
 
 pub fn run(o: &Options) -> anyhow::Result<()> {
@@ -70,18 +77,36 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     };
     let scene = Scene::load(&o.scene, BuildOptions { min_tets: o.min_tets }).with_context(|| format!("loading scene {:?}", o.scene))?;
     let session = Session::new(&scene).context("preparing the session")?;
+    let (lo, hi) = scene.model.mesh.bounding_box();
+    let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
+    // The planned incision (what a synthetic trainee follows; recorded with every session).
+    let plan = session.plan_across_top(0.06, depth_m).context("planning the incision across the top of the tissue");
     if let DeviceArg::Trainee(skill) = &o.device {
-        let (lo, hi) = scene.model.mesh.bounding_box();
-        let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
-        let plan = session.plan_across_top(0.06, depth_m).context("planning the incision across the top of the tissue")?;
         let preset = Skill::preset(skill).context("skill preset")?;
-        device = Some(Box::new(SyntheticTrainee::new(skill, plan, preset, o.seed)?));
+        device = Some(Box::new(SyntheticTrainee::new(skill, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), preset, o.seed)?));
     }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
     let config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
-    let r = session.run(device, &config).context("running the session")?;
+    if !(o.keyframe_every_s > 0.0 && o.keyframe_every_s.is_finite()) || !(o.surface_hz >= 0.0 && o.surface_hz.is_finite()) {
+        bail!("--keyframe-every must be positive and --surface-hz non-negative");
+    }
+    let step_s = scene.solver.time_step_s;
+    let settings = RecordSettings {
+        tap: TapSettings {
+            keyframe_every_steps: ((o.keyframe_every_s / step_s).round() as u64).max(1),
+            surface_every_steps: if o.surface_hz > 0.0 { ((1.0 / (o.surface_hz * step_s)).round() as u64).max(1) } else { 0 },
+            ..TapSettings::default()
+        },
+        writer: WriterOptions::default(),
+    };
+    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let mcap_path = o.out.join("session.mcap");
+    let provenance = Provenance { scene: o.scene.clone(), min_tets: o.min_tets, seed: o.seed, trainee: String::new(), exercise: String::new(), device: device_name.clone() };
+    let recorded = record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, None)
+        .with_context(|| format!("recording {}", mcap_path.display()))?;
+    let r = recorded.report.context("running the session")?;
 
     let clock = if o.clock == Clock::Live { "live" } else { "virtual" };
     println!("session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
@@ -104,7 +129,11 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64);
     println!("  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
 
-    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
+    let w = &recorded.write;
+    println!(
+        "  recording {}: {} messages, {:.1} MB of payload, writer busy {:.2} s; dropped tick records {}",
+        mcap_path.display(), w.messages.values().sum::<u64>(), w.payload_bytes as f64 * 1e-6, w.busy_s, r.servo.dropped_records
+    );
     let sim = &r.simulation;
     let deformed = cutlab_sim::TetMesh::new(sim.state.positions.clone(), sim.model.mesh.tets().to_vec(), sim.model.mesh.regions().to_vec())?;
     let displacement: Vec<Vector3> = sim.state.positions.iter().zip(sim.model.mesh.positions()).map(|(p, q)| p - q).collect();

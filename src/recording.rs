@@ -1,0 +1,129 @@
+//! `cutlab recording info|recover` and `cutlab replay`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use cutlab_recorder::replay::{self, ReplayOptions, Speed};
+use cutlab_recorder::{Recording, recover as salvage};
+
+pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
+    let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
+    if json {
+        let channels: Vec<_> = rec
+            .channels
+            .values()
+            .map(|c| serde_json::json!({ "topic": c.topic, "schema": c.schema, "encoding": c.message_encoding, "messages": c.messages }))
+            .collect();
+        let v = serde_json::json!({
+            "file": file.display().to_string(), "bytes": rec.file_bytes, "complete": rec.complete,
+            "damage": rec.damage.as_ref().map(|d| &d.reason), "duration_s": rec.duration_s(),
+            "channels": channels, "session": rec.meta, "session_end": rec.end,
+            "attachments": rec.attachments.iter().map(|a| serde_json::json!({ "name": a.0, "media_type": a.1, "bytes": a.2.len() })).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("{}: {:.1} MB, {}", file.display(), rec.file_bytes as f64 * 1e-6, if rec.complete { "complete" } else { "INCOMPLETE" });
+    if let Some(d) = &rec.damage {
+        println!("  reading stopped after {} records: {}", d.records_read, d.reason);
+        println!("  (`cutlab recording recover {}` writes a complete copy of what is readable)", file.display());
+    } else if !rec.complete {
+        println!("  the file ends without its footer: the session did not finish writing it");
+    }
+    println!("  duration {:.3} s", rec.duration_s());
+    if let Some(m) = &rec.meta {
+        println!(
+            "  cutlab {}, scene {}{}, device {}, seed {}, trainee {:?}, exercise {:?}, {} clock, servo period {} us, sim step {} us",
+            m.cutlab_version,
+            m.scene,
+            m.min_tets.map(|n| format!(" (min {n} tets)")).unwrap_or_default(),
+            m.device,
+            m.seed,
+            m.trainee,
+            m.exercise,
+            m.clock,
+            m.period_nanos / 1000,
+            m.time_step_nanos / 1000
+        );
+    }
+    println!("  {:<18} {:<26} {:<10} {:>10}", "channel", "schema", "encoding", "messages");
+    for c in rec.channels.values() {
+        println!("  {:<18} {:<26} {:<10} {:>10}", c.topic, c.schema, c.message_encoding, c.messages);
+    }
+    for (name, media, bytes) in &rec.attachments {
+        println!("  attachment {name} ({media}, {} bytes)", bytes.len());
+    }
+    match &rec.end {
+        Some(end) => println!("  session end: {}", end.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(", ")),
+        None => println!("  no session-end record (the session was interrupted)"),
+    }
+    Ok(())
+}
+
+pub fn recover(file: &Path, out: Option<&Path>) -> anyhow::Result<()> {
+    let out: PathBuf = out.map(Path::to_path_buf).unwrap_or_else(|| file.with_extension("recovered.mcap"));
+    let r = salvage::recover(file, &out).with_context(|| format!("recovering {}", file.display()))?;
+    if r.input_complete {
+        println!("{} was complete; copied {} messages to {}", file.display(), r.messages, out.display());
+    } else {
+        println!(
+            "salvaged {} messages ({} metadata, {} attachments) up to {:.3} s into {}",
+            r.messages,
+            r.metadata,
+            r.attachments,
+            r.last_log_time.unwrap_or(0) as f64 * 1e-9,
+            out.display()
+        );
+        if let Some(d) = &r.damage {
+            println!("  reading stopped at: {d}");
+        }
+    }
+    Ok(())
+}
+
+#[derive(Debug)]
+pub struct ReplayArgs {
+    pub speed: Speed,
+    pub from_s: Option<f64>,
+    pub to_s: Option<f64>,
+    pub keep_going: bool,
+    pub json: bool,
+}
+
+pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
+    let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
+    if !rec.complete {
+        eprintln!("warning: {} is incomplete; replaying what is readable", file.display());
+    }
+    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer: None, keep_going: a.keep_going };
+    let r = replay::replay(&rec, options).context("replaying")?;
+    if a.json {
+        let v = serde_json::json!({
+            "verified": r.verified(), "steps": r.steps, "keyframes_checked": r.keyframes_checked, "keyframes_matched": r.keyframes_matched,
+            "cuts_recorded": r.cuts_recorded, "cuts_replayed": r.cuts_replayed, "divergences": r.divergences,
+            "first_divergence": r.first_divergence.as_ref().map(|d| d.to_string()),
+            "simulated_s": r.simulated_s, "wall_s": r.wall_s, "speed": r.speed(),
+            "final_state_hash": format!("{:016x}", r.final_hash.state),
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "replayed {} steps ({:.2} s of session) in {:.2} s wall: {:.1}x real time",
+            r.steps,
+            r.simulated_s,
+            r.wall_s,
+            r.speed()
+        );
+        println!("  keyframes: {} of {} hashes equal; cuts: {} replayed, {} recorded", r.keyframes_matched, r.keyframes_checked, r.cuts_replayed, r.cuts_recorded);
+    }
+    match &r.first_divergence {
+        None if r.keyframes_checked > 0 => {
+            if !a.json {
+                println!("  verified: the replay is bit-exact");
+            }
+            Ok(())
+        }
+        None => bail!("no keyframe in the replayed range: nothing was verified"),
+        Some(d) => bail!("the replay diverged ({} divergences); first at {d}", r.divergences),
+    }
+}
