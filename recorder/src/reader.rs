@@ -74,23 +74,9 @@ impl Recording {
     }
 
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, RecorderError> {
-        if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
-            return Err(RecorderError::NotCutlab("not an MCAP file (no MCAP magic at the start)".into()));
-        }
         let mut rec = Recording { file_bytes: bytes.len() as u64, ..Default::default() };
         let mut schemas: HashMap<u16, String> = HashMap::new();
-        let mut records_read = 0u64;
-        let options = Options::IgnoreEndMagic | Options::ValidateChunkCrcs;
-        let mut footer = false;
-        for record in mcap::read::ChunkFlattener::new_with_options(bytes, options)? {
-            let record = match record {
-                Ok(r) => r,
-                Err(e) => {
-                    rec.damage = Some(Damage { records_read, reason: e.to_string() });
-                    break;
-                }
-            };
-            records_read += 1;
+        let end = for_each_record(bytes, |record| {
             match record {
                 Record::Schema { header, .. } => {
                     schemas.insert(header.id, header.name);
@@ -120,15 +106,14 @@ impl Recording {
                     rec.metadata.push((m.name, m.metadata));
                 }
                 Record::Attachment { header, data, .. } => rec.attachments.push((header.name, header.media_type, data.into_owned())),
-                Record::Footer(_) => footer = true,
                 _ => {}
             }
-        }
-        let ends_with_magic = bytes.len() >= 2 * mcap::MAGIC.len() && bytes.ends_with(mcap::MAGIC);
-        rec.complete = rec.damage.is_none() && footer && ends_with_magic;
+            Ok(())
+        })?;
+        rec.damage = end.damage.map(|reason| Damage { records_read: end.records_read, reason });
+        rec.complete = end.complete;
         Ok(rec)
     }
-
     fn take_message(&mut self, topic: &str, log_time: u64, data: &[u8]) -> Result<(), RecorderError> {
         match topic {
             channels::POSE => {
@@ -184,6 +169,77 @@ impl Recording {
     pub fn counts(&self) -> BTreeMap<String, u64> {
         self.channels.values().map(|c| (c.topic.clone(), c.messages)).collect()
     }
+}
+
+/// How reading the records of a file ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct ReadEnd {
+    pub records_read: u64,
+    /// Why reading stopped before the end, if it did.
+    pub damage: Option<String>,
+    /// The file ended with its footer and magic.
+    pub complete: bool,
+}
+
+/// Length of the prefix of `bytes` made of the magic and whole top-level records (opcode,
+/// little-endian u64 length, body); the closing magic counts too. A record that claims more
+/// bytes than the file has (a file cut short, or garbage) ends the prefix, so the MCAP parser
+/// never sees it.
+fn whole_records(bytes: &[u8]) -> (usize, Option<String>) {
+    let magic = mcap::MAGIC.len();
+    let mut at = magic;
+    while at < bytes.len() {
+        if bytes.len() - at == magic && &bytes[at..] == mcap::MAGIC {
+            return (bytes.len(), None);
+        }
+        let Some(header) = bytes.get(at..at + 9) else {
+            return (at, Some(format!("the file ends inside a record header at byte {at}")));
+        };
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&header[1..]);
+        let len = u64::from_le_bytes(len);
+        match (at as u64 + 9).checked_add(len) {
+            Some(end) if end <= bytes.len() as u64 => at = end as usize,
+            _ => return (at, Some(format!("the record at byte {at} (opcode 0x{:02x}) claims {len} bytes; {} are left", header[0], bytes.len() - at - 9))),
+        }
+    }
+    (at, None)
+}
+
+/// Calls `f` with every record of the file (chunks flattened, chunk CRCs checked), in file
+/// order, until the first damage; `f`'s error ends the reading and is returned.
+pub(crate) fn for_each_record(bytes: &[u8], mut f: impl FnMut(Record<'_>) -> Result<(), RecorderError>) -> Result<ReadEnd, RecorderError> {
+    if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
+        return Err(RecorderError::NotCutlab("not an MCAP file (no MCAP magic at the start)".into()));
+    }
+    let (prefix, mut damage) = whole_records(bytes);
+    let readable = &bytes[..prefix];
+    let mut records_read = 0u64;
+    let mut footer = false;
+    // The parser is given only whole records; should it still panic on a hostile record
+    // inside a chunk, that is damage like any other, not a crash.
+    let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| -> Result<Option<String>, RecorderError> {
+        for record in mcap::read::ChunkFlattener::new_with_options(readable, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)? {
+            let record = match record {
+                Ok(r) => r,
+                Err(e) => return Ok(Some(e.to_string())),
+            };
+            records_read += 1;
+            if matches!(record, Record::Footer(_)) {
+                footer = true;
+            }
+            f(record)?;
+        }
+        Ok(None)
+    }));
+    match parsed {
+        Ok(Ok(Some(e))) => damage = Some(e),
+        Ok(Ok(None)) => {}
+        Ok(Err(e)) => return Err(e),
+        Err(_) => damage = Some("the MCAP parser failed on malformed data".into()),
+    }
+    let complete = damage.is_none() && footer && prefix == bytes.len() && bytes.ends_with(mcap::MAGIC);
+    Ok(ReadEnd { records_read, damage, complete })
 }
 
 fn parse<T: serde::de::DeserializeOwned>(topic: &str, log_time: u64, data: &[u8]) -> Result<T, RecorderError> {

@@ -8,9 +8,9 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use mcap::read::Options;
 use mcap::records::{MessageHeader, Metadata, Record};
 
+use crate::reader::for_each_record;
 use crate::RecorderError;
 
 /// What a recovery kept.
@@ -34,7 +34,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
         return Err(RecorderError::Malformed("recover writes a new file: the output must not be the input".into()));
     }
     let bytes = std::fs::read(input).map_err(|source| RecorderError::Io { path: input.to_owned(), source })?;
-    if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
+    if !bytes.starts_with(mcap::MAGIC) {
         return Err(RecorderError::NotCutlab(format!("{}: not an MCAP file (no MCAP magic at the start)", input.display())));
     }
     let file = File::create(output).map_err(|source| RecorderError::Io { path: output.to_owned(), source })?;
@@ -55,22 +55,18 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
     // old id -> new id
     let mut schemas: HashMap<u16, u16> = HashMap::new();
     let mut channels: HashMap<u16, u16> = HashMap::new();
-    let mut footer = false;
-    for record in mcap::read::ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)? {
-        let record = match record {
-            Ok(r) => r,
-            Err(e) => {
-                report.damage = Some(e.to_string());
-                break;
-            }
-        };
+    let end = for_each_record(&bytes, |record| {
         match record {
             Record::Schema { header, data } => {
                 let id = w.add_schema(&header.name, &header.encoding, &data)?;
                 schemas.insert(header.id, id);
             }
             Record::Channel(c) => {
-                let schema = if c.schema_id == 0 { 0 } else { *schemas.get(&c.schema_id).ok_or_else(|| RecorderError::Malformed(format!("channel {} names unknown schema {}", c.topic, c.schema_id)))? };
+                let schema = if c.schema_id == 0 {
+                    0
+                } else {
+                    *schemas.get(&c.schema_id).ok_or_else(|| RecorderError::Malformed(format!("channel {} names unknown schema {}", c.topic, c.schema_id)))?
+                };
                 let id = w.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?;
                 channels.insert(c.id, id);
             }
@@ -88,11 +84,12 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
                 w.attach(&mcap::Attachment { log_time: header.log_time, create_time: header.create_time, name: header.name, media_type: header.media_type, data: Cow::Borrowed(&data) })?;
                 report.attachments += 1;
             }
-            Record::Footer(_) => footer = true,
             _ => {}
         }
-    }
-    report.input_complete = report.damage.is_none() && footer && bytes.ends_with(mcap::MAGIC);
+        Ok(())
+    })?;
+    report.damage = end.damage;
+    report.input_complete = end.complete;
     let mut note = BTreeMap::new();
     note.insert("source".to_owned(), input.display().to_string());
     note.insert("source_bytes".to_owned(), report.input_bytes.to_string());
