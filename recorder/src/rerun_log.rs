@@ -97,7 +97,7 @@ pub enum RerunLogError {
     #[error("invalid rerun sink settings: {0}")]
     Settings(String),
     /// No viewer could be started (most often: no `rerun` executable on `PATH`).
-    #[error("could not start the rerun viewer (install it with `cargo binstall rerun-cli@{}` or `pip install rerun-sdk=={}`, or record to a file with --rrd): {0}", rerun_version(), rerun_version())]
+    #[error("could not start the rerun viewer (install one, or record to a file with --rrd): {0}")]
     Spawn(#[source] rerun::SpawnError),
     /// The recording stream could not be created or refused data (file, url, chunk).
     #[error("rerun recording stream: {0}")]
@@ -117,11 +117,6 @@ impl From<RecordingStreamError> for RerunLogError {
             e => Self::Stream(e),
         }
     }
-}
-
-fn rerun_version() -> String {
-    let v = rerun::build_info().version;
-    format!("{}.{}.{}", v.major, v.minor, v.patch)
 }
 
 /// The 1 kHz series waiting to be sent.
@@ -189,6 +184,8 @@ impl RerunSink {
         }
         // `enabled(true)`: asked for explicitly, so the `RERUN` environment variable does not
         // silently turn it off.
+        let application = rerun::ApplicationId::try_new(application)
+            .map_err(|e| RerunLogError::Settings(format!("application id {application:?}: {e}")))?;
         let builder = RecordingStreamBuilder::new(application).enabled(true);
         let rec = match target {
             RerunTarget::File(path) => builder.save(path)?,
@@ -402,7 +399,7 @@ impl RerunSink {
             rerun::Mesh3D::new(positions)
                 .with_vertex_normals(normals)
                 .with_triangle_indices(s.triangles.iter())
-                .with_albedo_factor(rerun::AlbedoFactor::new(rerun::Rgba32::from_rgb(225, 150, 140)))
+                .with_albedo_factor(rerun::Rgba32::from_rgb(225, 150, 140))
         };
         self.rec.log(paths::TISSUE, &mesh)?;
         Ok(())
