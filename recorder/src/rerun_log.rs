@@ -313,14 +313,25 @@ impl RerunSink {
     }
 
     /// Sends what is buffered and waits for it to reach the file (or, at most
-    /// [`LIVE_FLUSH_TIMEOUT`], the viewer). A file is complete (footer written) on return.
-    pub fn finish(mut self) -> Result<(), RerunLogError> {
+    /// [`LIVE_FLUSH_TIMEOUT`], the viewer). The sink goes on logging after it.
+    pub fn flush(&mut self) -> Result<(), RerunLogError> {
         self.send_series()?;
         if self.live {
             self.rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT)?;
         } else {
             self.rec.flush_blocking()?;
-            // A file sink writes its footer when it is torn down: do it now, not at some drop.
+        }
+        Ok(())
+    }
+
+    /// [`Self::flush`], then closes the log: a file is complete (footer written) on return.
+    ///
+    /// Dropping the sink instead sends what is buffered and completes the file too, but says
+    /// nothing of what went wrong.
+    pub fn finish(mut self) -> Result<(), RerunLogError> {
+        self.flush()?;
+        if !self.live {
+            // A file sink writes its footer when it is torn down: now, not at some later drop.
             self.rec.finalize_deferred_sinks();
         }
         Ok(())
@@ -409,6 +420,16 @@ impl RerunSink {
         self.set_time(tick, Some(step));
         self.rec.log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
         Ok(())
+    }
+}
+
+impl Drop for RerunSink {
+    /// Sends the series still buffered (a sink dropped without [`RerunSink::finish`], e.g. held
+    /// as a boxed observer); the stream itself flushes (and a file gets its footer) when it drops.
+    fn drop(&mut self) {
+        if let Err(e) = self.send_series() {
+            tracing::warn!("rerun: the last {} ticks could not be sent: {e}", self.columns.len());
+        }
     }
 }
 

@@ -182,6 +182,40 @@ fn a_short_session_is_sent_at_finish() {
 }
 
 #[test]
+fn a_dropped_sink_still_sends_its_buffer_and_completes_the_file() {
+    let file = TempFile::new("dropped.rrd");
+    let mut sink = RerunSink::new(&RerunTarget::File(file.0.clone()), "cutlab-test", PERIOD_NANOS, 0.015).expect("sink");
+    for tick in 0..1500 {
+        sink.on_tick(&sample(tick)).expect("tick");
+    }
+    // Held the way the writer thread holds an observer.
+    let boxed: Box<dyn Send> = Box::new(sink);
+    drop(boxed);
+    let decoded = decode(&file.0);
+    assert_eq!(decoded.rows.get(paths::FORCE_NORM).copied(), Some(1501));
+}
+
+#[test]
+fn a_viewer_that_is_not_there_is_an_error_not_a_hang() {
+    // A port nobody listens on.
+    let port = std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port").port();
+    let target = RerunTarget::Connect(format!("rerun+http://127.0.0.1:{port}/proxy"));
+    let started = std::time::Instant::now();
+    let mut sink = RerunSink::new(&target, "cutlab-test", PERIOD_NANOS, 0.015).expect("connecting is lazy");
+    for tick in 0..200 {
+        sink.on_tick(&sample(tick)).expect("ticks are buffered or queued");
+    }
+    let result = sink.finish();
+    eprintln!("finish against no viewer: {result:?} after {:?}", started.elapsed());
+    assert!(result.is_err(), "no viewer took the data");
+    assert!(started.elapsed() < LIVE_FLUSH_TIMEOUT + Duration::from_secs(5));
+
+    let bad = RerunSink::new(&RerunTarget::Connect("not a url".into()), "cutlab-test", PERIOD_NANOS, 0.015);
+    assert!(matches!(bad, Err(RerunLogError::Stream(_))), "{bad:?}");
+    assert_eq!(RerunTarget::connect_default(), RerunTarget::Connect("rerun+http://127.0.0.1:9876/proxy".into()));
+}
+
+#[test]
 fn settings_and_paths_are_checked() {
     let file = TempFile::new("never.rrd");
     let target = RerunTarget::File(file.0.clone());
