@@ -14,7 +14,7 @@
 //! | `world/proxy` | `Points3D` (the force renderer's proxy) | ~30 Hz of ticks |
 //! | `world/tissue` | `Mesh3D` (f32, vertex normals) | each `SimRecord::Surface` |
 //! | `world/plan` | `LineStrips3D` (static) | [`RerunSink::log_plan`] |
-//! | `events` | `TextLog` | cuts, keyframes (with their hashes), rejected steps |
+//! | `events` | `TextLog` | cuts, keyframes (with their hashes), rejected steps, fault changes |
 //!
 //! The 1 kHz series never cost one rerun call per tick: [`RerunSink::on_tick`] appends to
 //! column buffers and sends them (`send_columns`) every [`FILE_BATCH_TICKS`] ticks to a file,
@@ -28,7 +28,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use cutlab_haptics::render::Mode;
+use cutlab_haptics::render::{Mode, fault};
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::sim::cut::{Blade, CutEvent};
 use cutlab_haptics::tap::{Keyframe, SurfaceSnapshot};
@@ -168,6 +168,8 @@ pub struct RerunSink {
     /// Triangles of the last surface logged: unchanged ones are not sent again.
     last_triangles: Vec<[u32; 3]>,
     rejected_steps: u64,
+    /// Fault bits of the last tick: a change is an event.
+    last_faults: u8,
     ticks_logged: u64,
 }
 
@@ -212,6 +214,7 @@ impl RerunSink {
             columns: Columns::with_capacity(batch_ticks),
             last_triangles: Vec::new(),
             rejected_steps: 0,
+            last_faults: 0,
             ticks_logged: 0,
         };
         sink.log_static_styles(blade_length_m)?;
@@ -275,6 +278,17 @@ impl RerunSink {
         c.penetration.push((sample.pose.tip_in_world - sample.render.proxy).norm());
         self.ticks_logged += 1;
 
+        let faults = sample.render.faults;
+        if faults != self.last_faults {
+            let (text, level) = if faults == 0 {
+                (format!("tick {}: faults cleared", sample.tick), rerun::TextLogLevel::INFO)
+            } else {
+                (format!("tick {}: fault: {} (bits {faults:#04b})", sample.tick, fault::describe(faults)), rerun::TextLogLevel::WARN)
+            };
+            self.last_faults = faults;
+            self.set_time(sample.tick, None);
+            self.rec.log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
+        }
         let due = self.last_visual_tick.is_none_or(|last| sample.tick.abs_diff(last) >= self.visual_every_ticks);
         if due {
             self.last_visual_tick = Some(sample.tick);

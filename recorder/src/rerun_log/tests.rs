@@ -44,7 +44,8 @@ fn sample(tick: u64) -> ServoSample {
             force_newtons: Vector3::new((3.0 * t).sin(), 0.5, 2.0 + t),
             proxy: tip + Vector3::new(0.0, 0.0, 0.001),
             mode,
-            faults: 0,
+            // The device is lost for ten ticks: two events (the fault, then its clearing).
+            faults: if (1000..1010).contains(&tick) { cutlab_haptics::render::fault::DEVICE_LOST } else { 0 },
             gain: 1.0,
         },
     }
@@ -141,6 +142,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
         }
     }
     events += 1; // the rejected step
+    events += 2; // the fault and its clearing
     assert_eq!(sink.ticks_logged(), TICKS);
     sink.finish().expect("finish");
 
