@@ -8,6 +8,8 @@
 //! - [`reader`]: [`Recording`] reads a recording back (a complete one, or a damaged one up to
 //!   its last complete chunk), and [`reader::Info`] summarises it.
 //! - [`recover`]: salvages a recording cut short into a complete file.
+//! - [`rerun_log`]: [`RerunSink`] logs a session or a replay to a rerun `.rrd` file or a
+//!   live viewer (only when asked).
 //! - [`replay`]: re-simulates a recording from its inputs and checks every keyframe's hash
 //!   bit for bit.
 //!
@@ -19,9 +21,11 @@ pub mod reader;
 pub mod record;
 pub mod recover;
 pub mod replay;
+pub mod rerun_log;
 pub mod writer;
 
 pub use cutlab_haptics as haptics;
 pub use error::RecorderError;
 pub use reader::Recording;
+pub use rerun_log::{RerunLogError, RerunSink, RerunTarget};
 pub use writer::{McapSink, WriterOptions};
