@@ -71,6 +71,12 @@ enum Command {
         /// The tissue surface is recorded this many times per second (0: never).
         #[arg(long, default_value_t = 10.0)]
         surface_hz: f64,
+        /// Also write DIR/session.rrd for the rerun viewer.
+        #[arg(long, conflicts_with = "rerun")]
+        rrd: bool,
+        /// Stream to a rerun viewer: spawn (start one) or connect[=URL].
+        #[arg(long)]
+        rerun: Option<recording::RerunArg>,
     },
     /// Session recordings (MCAP): what is in one, and salvaging one cut short.
     Recording {
@@ -94,6 +100,12 @@ enum Command {
         /// Count every divergence instead of stopping at the first.
         #[arg(long)]
         keep_going: bool,
+        /// Export the played part to this `.rrd` file.
+        #[arg(long, conflicts_with = "rerun")]
+        rrd: Option<PathBuf>,
+        /// Stream the played part to a rerun viewer: spawn or connect[=URL].
+        #[arg(long)]
+        rerun: Option<recording::RerunArg>,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -212,7 +224,7 @@ fn run() -> anyhow::Result<()> {
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
-        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz } => session::run(&session::Options {
+        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz, rrd, rerun } => session::run(&session::Options {
             scene,
             min_tets,
             device,
@@ -223,11 +235,13 @@ fn run() -> anyhow::Result<()> {
             realtime_priority: !no_realtime,
             keyframe_every_s: keyframe_every,
             surface_hz,
+            rerun: recording::rerun_target(rrd.then_some(std::path::Path::new("session.rrd")), rerun.as_ref()),
         }),
         Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
         Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),
-        Command::Replay { file, speed, from, to, keep_going, json } => {
-            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, to_s: to, keep_going, json })
+        Command::Replay { file, speed, from, to, keep_going, json, rrd, rerun } => {
+            let rerun = recording::rerun_target(rrd.as_deref(), rerun.as_ref());
+            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, to_s: to, keep_going, json, rerun })
         }
         Command::Scene { command: SceneCommand::List } => {
             for (name, _) in cutlab_sim::scene::BUILTIN {

@@ -4,7 +4,50 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use cutlab_recorder::replay::{self, ReplayOptions, Speed};
-use cutlab_recorder::{Recording, recover as salvage};
+use cutlab_recorder::writer::RecordObserver;
+use cutlab_recorder::{Recording, RerunSink, RerunTarget, recover as salvage};
+
+/// What `--rerun` names.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RerunArg {
+    Spawn,
+    Connect(Option<String>),
+}
+
+impl std::str::FromStr for RerunArg {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "spawn" => Ok(RerunArg::Spawn),
+            "connect" => Ok(RerunArg::Connect(None)),
+            _ => match s.strip_prefix("connect=") {
+                Some(url) if !url.is_empty() => Ok(RerunArg::Connect(Some(url.to_owned()))),
+                _ => Err(format!("--rerun takes spawn, connect or connect=URL, got {s:?}")),
+            },
+        }
+    }
+}
+
+/// The rerun target of `--rrd FILE` or `--rerun ...` (relative `.rrd` paths are resolved by
+/// the caller).
+pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<RerunTarget> {
+    match (rrd, rerun) {
+        (Some(path), _) => Some(RerunTarget::File(path.to_path_buf())),
+        (None, Some(RerunArg::Spawn)) => Some(RerunTarget::Spawn),
+        (None, Some(RerunArg::Connect(None))) => Some(RerunTarget::connect_default()),
+        (None, Some(RerunArg::Connect(Some(url)))) => Some(RerunTarget::Connect(url.clone())),
+        (None, None) => None,
+    }
+}
+
+/// A rerun sink for a recording's session, with its planned incision logged.
+pub fn rerun_sink(target: &RerunTarget, meta: &cutlab_recorder::channels::SessionMeta, plan: Option<&[cutlab_sim::Point3]>) -> anyhow::Result<Box<dyn RecordObserver>> {
+    let mut sink = RerunSink::new(target, "cutlab", meta.period_nanos, meta.blade_length_m).context("starting the rerun logger")?;
+    if let Some(line) = plan {
+        sink.log_plan(line).context("logging the plan to rerun")?;
+    }
+    Ok(Box::new(sink))
+}
 
 pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
     let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
@@ -88,6 +131,7 @@ pub struct ReplayArgs {
     pub to_s: Option<f64>,
     pub keep_going: bool,
     pub json: bool,
+    pub rerun: Option<RerunTarget>,
 }
 
 pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
@@ -95,7 +139,14 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
     if !rec.complete {
         eprintln!("warning: {} is incomplete; replaying what is readable", file.display());
     }
-    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer: None, keep_going: a.keep_going };
+    let observer = match &a.rerun {
+        Some(target) => {
+            let plan = rec.plan()?.map(|p| p.to_plan().line_m);
+            Some(rerun_sink(target, rec.meta()?, plan.as_deref())?)
+        }
+        None => None,
+    };
+    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going };
     let r = replay::replay(&rec, options).context("replaying")?;
     if a.json {
         let v = serde_json::json!({

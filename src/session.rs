@@ -10,7 +10,7 @@ use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
-use cutlab_recorder::WriterOptions;
+use cutlab_recorder::{RerunTarget, WriterOptions};
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::Vector3;
@@ -59,6 +59,8 @@ pub struct Options {
     pub keyframe_every_s: f64,
     /// Surface recording rate, Hz (0: never).
     pub surface_hz: f64,
+    /// Also log to rerun (a relative `.rrd` path is in `out`).
+    pub rerun: Option<RerunTarget>,
 }
 
 pub fn run(o: &Options) -> anyhow::Result<()> {
@@ -104,8 +106,22 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let mcap_path = o.out.join("session.mcap");
     let provenance = Provenance { scene: o.scene.clone(), min_tets: o.min_tets, seed: o.seed, trainee: String::new(), exercise: String::new(), device: device_name.clone() };
-    let recorded = record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, None)
+    let observer = match &o.rerun {
+        Some(target) => {
+            let target = match target {
+                RerunTarget::File(rrd) => RerunTarget::File(o.out.join(rrd)),
+                other => other.clone(),
+            };
+            let meta = record::meta_of(&session, &config, &provenance, settings);
+            Some(crate::recording::rerun_sink(&target, &meta, plan.as_ref().ok().map(|p| p.line_m.as_slice()))?)
+        }
+        None => None,
+    };
+    let recorded = record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, observer)
         .with_context(|| format!("recording {}", mcap_path.display()))?;
+    if let Some(observer) = recorded.observer {
+        observer.finish().context("finishing the rerun log")?;
+    }
     let r = recorded.report.context("running the session")?;
 
     let clock = if o.clock == Clock::Live { "live" } else { "virtual" };

@@ -392,7 +392,7 @@ impl SimWorker {
         if let Some((blade, event)) = cut {
             self.push(SimRecord::Cut { step: n, tick, blade, event: Box::new(event) });
         }
-        let every = |k: u64| k > 0 && (n + 1) % k == 0;
+        let every = |k: u64| k > 0 && (n + 1).is_multiple_of(k);
         if every(settings.surface_every_steps) {
             let s = SurfaceSnapshot::of(&self.stepper.collider, &self.stepper.sim.state.positions, n, tick);
             self.push(SimRecord::Surface(Box::new(s)));

@@ -157,7 +157,7 @@ impl SessionStepper {
         self.collider.refit(&self.sim.state.positions);
         let (contact, hit) = self.collider.contact_model(&self.sim, &render.proxy, self.reach_m, sample.tick);
         self.last_hit = hit;
-        if sample.tick % 100 == 0 {
+        if sample.tick.is_multiple_of(100) {
             tracing::debug!(
                 "tick {} mode {:?} force {:.3} N stiffness {:.0} N/m tip z {:.2} mm plane z {:.2} mm",
                 sample.tick, render.mode, render.force_newtons.norm(), contact.stiffness_newtons_per_m,

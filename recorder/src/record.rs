@@ -62,29 +62,7 @@ pub fn run_recorded(
     settings: RecordSettings,
     observer: Option<Box<dyn RecordObserver>>,
 ) -> Result<RecordedSession, RecorderError> {
-    let initial = StateHash::of(&session.sim);
-    let meta = SessionMeta {
-        cutlab_version: env!("CARGO_PKG_VERSION").to_owned(),
-        scene: provenance.scene.clone(),
-        min_tets: provenance.min_tets,
-        seed: provenance.seed,
-        trainee: provenance.trainee.clone(),
-        exercise: provenance.exercise.clone(),
-        device: provenance.device.clone(),
-        clock: format!("{:?}", config.clock).to_lowercase(),
-        period_nanos: config.period_nanos,
-        time_step_nanos: (session.sim.settings.time_step_s * 1e9).round() as u64,
-        duration_s: config.duration_s,
-        blade_length_m: config.blade_length_m,
-        contact_reach_m: config.contact_reach_m,
-        contact_patch_radius_m: config.contact_patch_radius_m,
-        cut_step_m: config.cut_step_m,
-        keyframe_every_steps: settings.tap.keyframe_every_steps,
-        surface_every_steps: settings.tap.surface_every_steps,
-        initial_state_hash: Hex(initial.state),
-        initial_topology_hash: Hex(initial.topology),
-        started_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64()),
-    };
+    let meta = meta_of(&session, config, provenance, settings);
     let mut attachments = vec![(channels::SCENE_ATTACHMENT, "application/json", json(scene_spec)?)];
     if let Some(plan) = plan {
         attachments.push((channels::PLAN_ATTACHMENT, "application/json", json(&PlanMsg::from(plan))?));
@@ -114,6 +92,33 @@ pub fn run_recorded(
     }
     let write = sink.finish(&end)?;
     Ok(RecordedSession { report, write, path: path.to_owned(), observer })
+}
+
+/// The session metadata a recording of `session` carries.
+pub fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, settings: RecordSettings) -> SessionMeta {
+    let initial = StateHash::of(&session.sim);
+    SessionMeta {
+        cutlab_version: env!("CARGO_PKG_VERSION").to_owned(),
+        scene: provenance.scene.clone(),
+        min_tets: provenance.min_tets,
+        seed: provenance.seed,
+        trainee: provenance.trainee.clone(),
+        exercise: provenance.exercise.clone(),
+        device: provenance.device.clone(),
+        clock: format!("{:?}", config.clock).to_lowercase(),
+        period_nanos: config.period_nanos,
+        time_step_nanos: (session.sim.settings.time_step_s * 1e9).round() as u64,
+        duration_s: config.duration_s,
+        blade_length_m: config.blade_length_m,
+        contact_reach_m: config.contact_reach_m,
+        contact_patch_radius_m: config.contact_patch_radius_m,
+        cut_step_m: config.cut_step_m,
+        keyframe_every_steps: settings.tap.keyframe_every_steps,
+        surface_every_steps: settings.tap.surface_every_steps,
+        initial_state_hash: Hex(initial.state),
+        initial_topology_hash: Hex(initial.topology),
+        started_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64()),
+    }
 }
 
 fn json<T: serde::Serialize>(v: &T) -> Result<Vec<u8>, RecorderError> {

@@ -268,7 +268,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
                 o.on_sim(&SimRecord::Cut { step: step.step, tick: step.tick, blade, event: Box::new(event) })?;
             }
             let every = meta.surface_every_steps;
-            if every > 0 && (step.step + 1) % every == 0 {
+            if every > 0 && (step.step + 1).is_multiple_of(every) {
                 o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(&stepper.collider, &stepper.sim.state.positions, step.step, step.tick))))?;
             }
             if hashes.contains_key(&step.step) {
@@ -279,6 +279,9 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         if report.first_divergence.is_some() && !options.keep_going {
             break;
         }
+    }
+    if let Some(o) = options.observer.take() {
+        o.finish()?;
     }
     report.final_hash = stepper.state_hash();
     report.wall_s = started.elapsed().as_secs_f64();

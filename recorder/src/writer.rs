@@ -222,6 +222,22 @@ impl<W: Write + Seek> McapSink<W> {
 pub trait RecordObserver: Send {
     fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError>;
     fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError>;
+    /// Sends what is buffered and closes (the last call).
+    fn finish(self: Box<Self>) -> Result<(), RecorderError> {
+        Ok(())
+    }
+}
+
+impl RecordObserver for crate::RerunSink {
+    fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
+        crate::RerunSink::on_tick(self, sample).map_err(|e| RecorderError::Rerun(e.to_string()))
+    }
+    fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
+        crate::RerunSink::on_sim(self, record).map_err(|e| RecorderError::Rerun(e.to_string()))
+    }
+    fn finish(self: Box<Self>) -> Result<(), RecorderError> {
+        crate::RerunSink::finish(*self).map_err(|e| RecorderError::Rerun(e.to_string()))
+    }
 }
 
 /// The writer thread's result: the sink (flushed, not yet finished: the caller adds the
