@@ -2,6 +2,7 @@
 
 mod bench;
 mod bench_accuracy;
+mod bench_recorder;
 mod bench_stability;
 mod demo;
 mod recording;
@@ -184,6 +185,22 @@ enum BenchCommand {
         #[arg(long, default_value = "out/bench-accuracy")]
         out: PathBuf,
     },
+    /// Recorder cost per servo tick (with and without), file size per minute, writer
+    /// throughput and replay speed, on a scripted chest-wall session.
+    Recorder {
+        /// Resolution of the chest wall (default: the default scene's).
+        #[arg(long)]
+        min_tets: Option<usize>,
+        /// Session length, s.
+        #[arg(long, default_value_t = 30.0)]
+        duration: f64,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the recording.
+        #[arg(long, default_value = "out/bench-recorder")]
+        out: PathBuf,
+    },
     /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
     /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
     Stability {
@@ -253,5 +270,6 @@ fn run() -> anyhow::Result<()> {
         Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
         Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
+        Command::Bench { command: BenchCommand::Recorder { min_tets, duration, json, out } } => bench_recorder::run(min_tets, duration, json, &out),
     }
 }

@@ -1,0 +1,119 @@
+//! `cutlab bench recorder`: what recording costs and gives. The same scripted session (the
+//! expert trainee on the chest wall, virtual clock) runs without and with the MCAP recorder;
+//! then the recording is replayed and checked.
+//!
+//! Figures: the servo loop's work per tick (p50/p99) without and with the recorder (its one
+//! extra cost on the servo thread is a push into a lock-free queue), the file size per minute
+//! of session, the writer's throughput (payload bytes per second of its busy time), and the
+//! replay speed against real time.
+
+use std::path::Path;
+
+use anyhow::Context;
+use cutlab_haptics::device::{Skill, SyntheticTrainee};
+use cutlab_haptics::tap::TapSettings;
+use cutlab_haptics::{Session, SessionConfig};
+use cutlab_recorder::record::{self, Provenance, RecordSettings};
+use cutlab_recorder::replay::{self, ReplayOptions};
+use cutlab_recorder::{Recording, WriterOptions};
+use cutlab_sim::scene::{BuildOptions, Scene};
+use serde::Serialize;
+
+use crate::stats::Summary;
+
+#[derive(Debug, Serialize)]
+struct Figures {
+    scene: String,
+    tets: usize,
+    session_s: f64,
+    tick_work_us_unrecorded: Summary,
+    tick_work_us_recorded: Summary,
+    dropped_tick_records: u64,
+    file_bytes: u64,
+    file_mb_per_minute: f64,
+    payload_mb: f64,
+    messages: u64,
+    writer_busy_s: f64,
+    writer_mb_per_s: f64,
+    replay_wall_s: f64,
+    replay_speed: f64,
+    replay_verified: bool,
+    keyframes_checked: u64,
+}
+
+pub fn run(min_tets: Option<usize>, duration_s: f64, json: bool, out: &Path) -> anyhow::Result<()> {
+    if !(duration_s > 0.0 && duration_s <= 3600.0) {
+        anyhow::bail!("--duration must be in (0, 3600] s");
+    }
+    let scene = Scene::load("chest-wall", BuildOptions { min_tets }).context("loading the chest wall")?;
+    let config = SessionConfig { duration_s, ..SessionConfig::default() };
+    let make = || -> anyhow::Result<(Session, cutlab_haptics::device::Plan, Box<SyntheticTrainee>)> {
+        let session = Session::new(&scene)?;
+        let plan = session.plan_across_top(0.06, 0.008)?;
+        let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), Skill::preset("expert").context("expert preset")?, 1)?);
+        Ok((session, plan, device))
+    };
+    let tick_us = |r: &cutlab_haptics::SessionReport| Summary::of(&r.servo.tick_work_nanos.iter().map(|&n| n as f64 * 1e-3).collect::<Vec<_>>());
+
+    if !json {
+        eprintln!("session without the recorder ({duration_s} s, {} tets)...", scene.model.mesh.tet_count());
+    }
+    let (session, _, device) = make()?;
+    let plain = session.run(device, &config)?;
+
+    if !json {
+        eprintln!("session with the recorder...");
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join("session.mcap");
+    let (session, plan, device) = make()?;
+    let provenance = Provenance { scene: "chest-wall".into(), min_tets, seed: 1, device: "expert".into(), ..Provenance::default() };
+    let settings = RecordSettings { tap: TapSettings::default(), writer: WriterOptions::default() };
+    let recorded = record::run_recorded(session, device, &config, &provenance, Some(&plan), &scene.spec, &path, settings, None)?;
+    let report = recorded.report?;
+    let file_bytes = std::fs::metadata(&path)?.len();
+
+    if !json {
+        eprintln!("replaying...");
+    }
+    let rec = Recording::open(&path)?;
+    let rp = replay::replay(&rec, ReplayOptions::default())?;
+    let w = &recorded.write;
+    let f = Figures {
+        scene: "chest-wall".into(),
+        tets: scene.model.mesh.tet_count(),
+        session_s: duration_s,
+        tick_work_us_unrecorded: tick_us(&plain),
+        tick_work_us_recorded: tick_us(&report),
+        dropped_tick_records: report.servo.dropped_records,
+        file_bytes,
+        file_mb_per_minute: file_bytes as f64 * 1e-6 * 60.0 / duration_s,
+        payload_mb: w.payload_bytes as f64 * 1e-6,
+        messages: w.messages.values().sum(),
+        writer_busy_s: w.busy_s,
+        writer_mb_per_s: w.payload_bytes as f64 * 1e-6 / w.busy_s.max(1e-9),
+        replay_wall_s: rp.wall_s,
+        replay_speed: rp.speed(),
+        replay_verified: rp.verified(),
+        keyframes_checked: rp.keyframes_checked,
+    };
+    if json {
+        println!("{}", serde_json::to_string_pretty(&f)?);
+        return Ok(());
+    }
+    println!("recorder on a {:.0} s session, {} ({} tets), expert trainee, virtual clock", f.session_s, f.scene, f.tets);
+    let t = |s: &Summary| format!("p50 {:.2} us, p99 {:.2} us, max {:.1} us", s.median, s.p99, s.max);
+    println!("  servo work per tick without the recorder: {}", t(&f.tick_work_us_unrecorded));
+    println!("  servo work per tick with the recorder:    {}", t(&f.tick_work_us_recorded));
+    println!("  dropped tick records: {}", f.dropped_tick_records);
+    println!("  file: {:.2} MB ({:.1} MB per minute of session); {} messages, {:.1} MB of payload before compression", f.file_bytes as f64 * 1e-6, f.file_mb_per_minute, f.messages, f.payload_mb);
+    println!("  writer thread: busy {:.2} s, {:.0} MB/s of payload", f.writer_busy_s, f.writer_mb_per_s);
+    println!(
+        "  replay: {:.2} s wall, {:.2}x real time, {} ({} keyframes)",
+        f.replay_wall_s,
+        f.replay_speed,
+        if f.replay_verified { "bit-exact" } else { "DIVERGED" },
+        f.keyframes_checked
+    );
+    Ok(())
+}
