@@ -1,9 +1,11 @@
 //! cutlab: the command line. Thin commands that wire the crates together.
 
+mod assess_cli;
 mod bench;
 mod bench_accuracy;
 mod bench_stability;
 mod demo;
+mod motion_metrics;
 mod scene_info;
 mod session;
 mod stats;
@@ -19,6 +21,9 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// The assessment database (else $CUTLAB_DB, else ./cutlab.db).
+    #[arg(long, global = true)]
+    db: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -75,6 +80,8 @@ enum Command {
         #[command(subcommand)]
         command: BenchCommand,
     },
+    #[command(flatten)]
+    Assess(assess_cli::AssessCommand),
 }
 
 #[derive(Debug, Subcommand)]
@@ -180,5 +187,6 @@ fn run() -> anyhow::Result<()> {
         Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
         Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
+        Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
     }
 }
