@@ -18,7 +18,7 @@ pub mod proficiency;
 
 pub use error::{AssessError, Result};
 pub use input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};
-pub use metrics::{Better, Metric, MetricValue, assess};
+pub use metrics::{Better, Metric, MetricSet, MetricValue, assess};
 pub use plan::ExpertPlan;
 pub use proficiency::{CusumParams, Threshold, Thresholds, Verdict};
 pub mod store;

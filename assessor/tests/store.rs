@@ -213,3 +213,56 @@ async fn open_creates_and_migrates_a_file() {
     again.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A scripted attempt on the built-in plan: approach 20 mm straight down at the entry, cut
+/// along the line `offset` to the side at `depth` below the curved surface, withdraw.
+fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData {
+    use cutlab_assessor::{AttemptData, CutSample, ForceSample, PoseSample};
+    let surface = |x: f64| (0.15f64 * 0.15 - x * x).sqrt() - 0.15;
+    let mut d = AttemptData::default();
+    let hz = 200.0;
+    let tip = |t: f64| -> [f64; 3] {
+        let ease = |u: f64| {
+            let u = u.clamp(0.0, 1.0);
+            10.0 * u.powi(3) - 15.0 * u.powi(4) + 6.0 * u.powi(5)
+        };
+        if t < 1.0 {
+            [-0.03, offset, surface(-0.03) + 0.02 - (0.02 + depth) * ease(t)]
+        } else if t < 7.0 {
+            let x = -0.03 + 0.06 * ease((t - 1.0) / 6.0);
+            [x, offset, surface(x) - depth]
+        } else {
+            [0.03, offset, surface(0.03) - depth + (0.02 + depth) * ease(t - 7.0)]
+        }
+    };
+    for i in 0..=(8.0 * hz) as usize {
+        let t = i as f64 / hz;
+        let p = tip(t);
+        let cutting = (1.0..7.0).contains(&t);
+        d.poses.push(PoseSample { t_s: t, tip_m: p, quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: cutting });
+        d.forces.push(ForceSample { t_s: t, force_newtons: [0.0, 0.0, if cutting { force } else { 0.0 }], touching: cutting, cutting });
+        if cutting && d.cuts.last().is_none_or(|c: &CutSample| (p[0] - c.tip_m[0]).abs() >= 0.0005) {
+            d.cuts.push(CutSample { t_s: t, tip_m: p, edge_dir: [0.0, 0.0, -1.0], depth_m: depth });
+        }
+    }
+    d
+}
+
+#[sqlx::test(migrations = "../migrations")]
+async fn score_attempts_on_the_builtin_exercise(pool: SqlitePool) {
+    let store = Store::from_pool(pool).await.expect("store");
+    let ex = store.ensure_builtins().await.expect("builtins").id;
+    let t = store.create_user("t", Role::Trainee, None).await.expect("user");
+    let good = store.start_attempt(t.id, ex, None, false).await.expect("start");
+    let good = store.score_attempt(good.id, &scripted(0.0002, 0.008, 1.0)).await.expect("score");
+    let failed: Vec<_> = good.verdict.metrics.iter().filter(|m| !m.pass).collect();
+    assert!(good.verdict.pass, "{failed:?}");
+    assert!(good.verdict.score > 0.5, "{} {:?}", good.verdict.score, good.verdict.metrics);
+    let bad = store.start_attempt(t.id, ex, None, false).await.expect("start");
+    let bad = store.score_attempt(bad.id, &scripted(0.004, 0.003, 3.2)).await.expect("score");
+    assert!(!bad.verdict.pass);
+    assert!(bad.verdict.score < good.verdict.score - 0.4, "{} vs {}", bad.verdict.score, good.verdict.score);
+    for key in ["lateral_mean_m", "depth_error_m", "peak_force_n"] {
+        assert!(!bad.verdict.metrics.iter().find(|m| m.key == key).expect(key).pass, "{key}");
+    }
+}

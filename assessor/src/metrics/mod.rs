@@ -86,6 +86,9 @@ impl MetricValue {
     }
 }
 
+/// One attempt's metrics, in catalogue order (what [`assess`] returns).
+pub type MetricSet = Vec<MetricValue>;
+
 /// The metric catalogue, in report order.
 pub const METRICS: &[Metric] = &[
     // incision
@@ -150,7 +153,7 @@ impl Values {
 
 /// Every metric of [`METRICS`] for one attempt, in catalogue order. Errors only on an invalid
 /// plan; unusable inputs give missing metrics.
-pub fn assess(plan: &ExpertPlan, data: &AttemptData) -> Result<Vec<MetricValue>> {
+pub fn assess(plan: &ExpertPlan, data: &AttemptData) -> Result<MetricSet> {
     plan.check()?;
     let mut values = Values::default();
     incision::assess(plan, &data.cuts, &data.poses, &mut values);

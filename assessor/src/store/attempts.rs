@@ -231,6 +231,15 @@ impl Store {
         Ok(Outcome { attempt: self.get_attempt(attempt_id).await?, verdict, proficiency: record })
     }
 
+    /// Computes the attempt's metrics from `data` against its exercise's plan
+    /// ([`metrics::assess`]) and scores it ([`Store::finish_attempt`]).
+    pub async fn score_attempt(&self, attempt_id: i64, data: &crate::input::AttemptData) -> Result<Outcome> {
+        let a = self.get_attempt(attempt_id).await?;
+        let plan = self.exercise_plan(a.exercise_id).await?;
+        let values = metrics::assess(&plan, data)?;
+        self.finish_attempt(attempt_id, &values).await
+    }
+
     /// The stored metric results of an attempt, by metric.
     pub async fn attempt_metrics(&self, attempt_id: i64) -> Result<Vec<StoredMetric>> {
         let rows: Vec<MetricRow> = sqlx::query_as("SELECT metric, value, unit, passed, missing FROM metric_results WHERE attempt_id = ? ORDER BY metric").bind(attempt_id).fetch_all(&self.pool).await?;
