@@ -33,7 +33,7 @@ pub fn parse_poses(text: &str, name: &str) -> anyhow::Result<Vec<PoseSample>> {
         if fields.len() != COLUMNS.len() {
             bail!("{name}:{line_no}: expected {} fields ({}), found {}", COLUMNS.len(), COLUMNS.join(", "), fields.len());
         }
-        let mut v = [0.0; 8];
+        let mut v = [0.0f64; 8];
         for (k, f) in fields.iter().enumerate() {
             v[k] = f.parse().map_err(|_| anyhow::anyhow!("{name}:{line_no}: {} {f:?} is not a number", COLUMNS[k]))?;
             if !v[k].is_finite() {
