@@ -51,26 +51,20 @@ pub(crate) fn closest_on_segment(p: V3, a: V3, b: V3) -> (V3, f64) {
     (add(a, scale(ab, t)), t)
 }
 
-/// Where `p` is closest to a polyline: the distance, the arc length there and the point.
+/// Where `p` is closest to a polyline: the distance.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct OnLine {
     pub distance: f64,
-    #[cfg_attr(not(test), allow(dead_code))]
-    pub arc: f64,
 }
 
 /// The closest point to `p` on the polyline `line` (at least 2 points).
 pub(crate) fn closest_on_polyline(p: V3, line: &[V3]) -> OnLine {
-    let mut best = OnLine { distance: f64::INFINITY, arc: 0.0 };
-    let mut s = 0.0;
+    let mut best = OnLine { distance: f64::INFINITY };
     for w in line.windows(2) {
-        let (q, t) = closest_on_segment(p, w[0], w[1]);
-        let d = dist(p, q);
-        let len = dist(w[0], w[1]);
+        let d = dist(p, closest_on_segment(p, w[0], w[1]).0);
         if d < best.distance {
-            best = OnLine { distance: d, arc: s + t * len };
+            best = OnLine { distance: d };
         }
-        s += len;
     }
     best
 }
@@ -115,7 +109,6 @@ mod tests {
         let line = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
         let on = closest_on_polyline([1.5, 0.5, 0.0], &line);
         assert!((on.distance - 0.5).abs() < 1e-12);
-        assert!((on.arc - 1.5).abs() < 1e-12);
         assert!((polyline_length(&line) - 2.0).abs() < 1e-12);
         let (p, t) = point_at_arc(&line, 1.25);
         assert!(dist(p, [1.0, 0.25, 0.0]) < 1e-12);

@@ -40,7 +40,8 @@ pub struct CutSample {
     pub edge_dir: [f64; 3],
     /// The tip's penetration below the tissue surface at this cut (m), measured along the
     /// plan's outward normal: `(s - tip) . n` with `s` the surface point above the tip. The
-    /// recorder fills it from the simulation's surface; positive inside the tissue.
+    /// recorder fills it from the simulation's surface (or, lacking it, with
+    /// [`crate::metrics::incision::depth_below_plan`]); positive inside the tissue.
     pub depth_m: f64,
 }
 

@@ -73,6 +73,25 @@ fn distance_to_strokes(p: V3, strokes: &[Vec<V3>]) -> f64 {
     best
 }
 
+/// The tip's depth below the plan's (rest) surface along the normal, `(q - tip) . n` with `q`
+/// the planned line's point nearest to the tip seen from above: an approximation of
+/// [`CutSample::depth_m`] for recorders without the deformed surface (exact for a line on a
+/// flat surface).
+pub fn depth_below_plan(plan: &ExpertPlan, tip: V3) -> f64 {
+    let n = plan.normal;
+    let p = geom::project(tip, n);
+    let mut best = (f64::INFINITY, plan.incision_m[0]);
+    for w in plan.incision_m.windows(2) {
+        // the nearest point seen from above, then the same parameter on the 3D segment
+        let (q, t) = geom::closest_on_segment(p, geom::project(w[0], n), geom::project(w[1], n));
+        let d = geom::dist(p, q);
+        if d < best.0 {
+            best = (d, geom::add(w[0], geom::scale(geom::sub(w[1], w[0]), t)));
+        }
+    }
+    geom::dot(geom::sub(best.1, tip), n)
+}
+
 /// The incision metrics of `cuts` (at least 2, finite tips) against `plan`.
 pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics> {
     if cuts.len() < 2 {
@@ -253,6 +272,16 @@ mod tests {
         assert!((m.cut_length_m - 0.040).abs() < 1e-12);
         // covered: [0, 22] and [38, 60] mm
         assert!((m.fraction_cut_in_tolerance - 44.0 / 60.0).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+    }
+
+    #[test]
+    fn depth_below_the_planned_line() {
+        let plan = straight_plan();
+        assert!((depth_below_plan(&plan, [0.02, 0.003, -0.008]) - 0.008).abs() < 1e-15);
+        let curved = ExpertPlan::chest_wall().unwrap();
+        // at x = 30 mm the surface is 3.031 mm below the apex
+        assert!((depth_below_plan(&curved, [0.03, 0.0, -0.011031]) - 0.008).abs() < 1e-9);
+        assert!((depth_below_plan(&curved, [0.0, 0.001, -0.008]) - 0.008).abs() < 1e-12);
     }
 
     #[test]
