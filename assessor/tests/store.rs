@@ -242,7 +242,7 @@ fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData
         d.poses.push(PoseSample { t_s: t, tip_m: p, quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: cutting });
         d.forces.push(ForceSample { t_s: t, force_newtons: [0.0, 0.0, if cutting { force } else { 0.0 }], touching: cutting, cutting });
         if cutting && d.cuts.last().is_none_or(|c: &CutSample| (p[0] - c.tip_m[0]).abs() >= 0.0005) {
-            d.cuts.push(CutSample { t_s: t, tip_m: p, edge_dir: [0.0, 0.0, -1.0], depth_m: depth });
+            d.cuts.push(CutSample { t_s: t, tip_m: p, edge_dir: [0.0, 0.0, 1.0], depth_m: depth });
         }
     }
     d

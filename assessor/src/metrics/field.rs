@@ -3,8 +3,9 @@
 //!
 //! The surface becomes a parry [`TriMesh`] (glam `DVec3` appears only in this file).
 //! - visible fraction: target point `p` is visible when the segment from the viewpoint `e` to
-//!   `p` meets no surface triangle before `p - eps (p - e)/|p - e|`, `eps` = [`VISIBILITY_EPS_M`];
-//!   the fraction of the plan's target points that are visible.
+//!   `p` meets no surface triangle before `p - eps (p - e)/|p - e|`, `eps` = [`VISIBILITY_EPS_M`]
+//!   (and neither do two rays to points 20 um beside `p`, see [`visible_fraction`]); the
+//!   fraction of the plan's target points that are visible.
 //! - opening width: at [`OPENING_STATIONS`] stations along the planned line, rays are cast along
 //!   `-n` (the plan's normal) from above the surface on a row across the line (perpendicular
 //!   to it and to `n`, every [`OPENING_STEP_M`] up to `max(3 x corridor, 10 mm)` to each
@@ -29,6 +30,8 @@ use crate::plan::ExpertPlan;
 
 /// A target point closer than this to the first hit counts as visible (m).
 pub const VISIBILITY_EPS_M: f64 = 1e-4;
+/// The sideways offset of the two extra rays per target (m).
+pub const VISIBILITY_JITTER_M: f64 = 2e-5;
 /// Stations along the planned line for the opening width.
 pub const OPENING_STATIONS: usize = 41;
 /// Spacing of the rays across the line (m).
@@ -56,20 +59,33 @@ pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
 }
 
 /// The fraction of `targets` visible from `eye` past `mesh`; `None` without targets.
+///
+/// A ray that runs exactly along mesh edges (targets and viewpoint on a grid plane of the
+/// mesh) can slip between two triangles. So each target is tested with three rays, to the
+/// point itself and to two points [`VISIBILITY_JITTER_M`] away from it across the ray, and is
+/// visible only when none of them hits: real openings are much wider than the jitter.
 pub fn visible_fraction(mesh: &TriMesh, eye: V3, targets: &[V3]) -> Option<f64> {
     if targets.is_empty() {
         return None;
     }
+    let clear = |p: V3| {
+        let d = geom::sub(p, eye);
+        let len = geom::norm(d);
+        if len <= VISIBILITY_EPS_M {
+            return true;
+        }
+        let ray = Ray::new(to_parry(eye), to_parry(d));
+        mesh.cast_local_ray(&ray, 1.0 - VISIBILITY_EPS_M / len, false).is_none()
+    };
     let visible = targets
         .iter()
         .filter(|&&p| {
             let d = geom::sub(p, eye);
-            let len = geom::norm(d);
-            if len <= VISIBILITY_EPS_M {
-                return true;
-            }
-            let ray = Ray::new(to_parry(eye), to_parry(d));
-            mesh.cast_local_ray(&ray, 1.0 - VISIBILITY_EPS_M / len, false).is_none()
+            let helper = if d[0].abs() < 0.9 * geom::norm(d) { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+            let (Some(u), Some(v)) = (geom::unit(geom::cross(d, helper)), geom::unit(geom::cross(d, geom::cross(d, helper)))) else {
+                return clear(p);
+            };
+            clear(p) && clear(geom::add(p, geom::scale(u, VISIBILITY_JITTER_M))) && clear(geom::add(p, geom::scale(v, VISIBILITY_JITTER_M)))
         })
         .count();
     Some(visible as f64 / targets.len() as f64)

@@ -1,14 +1,18 @@
 //! Incision metrics: how the cut the simulation made compares with the planned line.
 //!
-//! The cut's trace is the blade tip at each [`CutSample`], in time order. Everything lateral
+//! The cut's trace is where the blade crossed the tissue surface at each [`CutSample`], in
+//! time order: `tip + depth_m * edge_dir` (the blade runs from its tip along `edge_dir`, and
+//! the tip is `depth_m` below the surface), or the tip itself when the depth or edge direction
+//! is unusable. (On a curved surface, or with a tilted blade, the tip runs beside the line the
+//! trainee actually cut on the surface; the surface crossing is that line.) Everything lateral
 //! is measured seen from above: points are projected along the plan's unit normal `n` onto a
 //! plane, `P(x) = x - (x . n) n`, so the tip's depth below the surface does not count as
 //! lateral error. Consecutive cut samples more than [`STROKE_GAP_M`] apart (blade lifted and
 //! put back) start a new stroke; the trace's segments join samples within a stroke only.
 //!
-//! - entry / exit error: `|P(first tip) - P(entry)|`, `|P(last tip) - P(exit)|`;
+//! - entry / exit error: `|P(first trace point) - P(entry)|`, `|P(last) - P(exit)|`;
 //! - length error: projected length of the trace's strokes minus the plan's length (signed);
-//! - lateral deviation of sample `i`: the distance from `P(tip_i)` to the projected planned
+//! - lateral deviation of sample `i`: the distance from `P(trace_i)` to the projected planned
 //!   polyline; its mean, RMS and max over the samples;
 //! - fraction cut within tolerance: the planned line is split into intervals of at most
 //!   0.1 mm; an interval counts as cut when its midpoint is within `tolerance_m` of the
@@ -47,7 +51,16 @@ pub struct IncisionMetrics {
     pub depth_rms_error_m: Option<f64>,
 }
 
-/// The trace's strokes (projected tips), split where samples are more than `gap` apart.
+/// Where the blade of `c` crossed the surface: `tip + depth_m * edge_dir` when the depth is
+/// finite and non-negative and `edge_dir` a finite non-zero vector, else the tip.
+pub fn trace_point(c: &CutSample) -> V3 {
+    match geom::unit(c.edge_dir) {
+        Some(e) if c.depth_m.is_finite() && c.depth_m >= 0.0 => geom::add(c.tip_m, geom::scale(e, c.depth_m)),
+        _ => c.tip_m,
+    }
+}
+
+/// The trace's strokes (projected trace points), split where samples are more than `gap` apart.
 fn strokes(tips: &[V3], gap: f64) -> Vec<Vec<V3>> {
     let mut out: Vec<Vec<V3>> = Vec::new();
     for &p in tips {
@@ -103,7 +116,7 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     let mut cuts = cuts.to_vec();
     cuts.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     let n = plan.normal;
-    let tips: Vec<V3> = cuts.iter().map(|c| geom::project(c.tip_m, n)).collect();
+    let tips: Vec<V3> = cuts.iter().map(|c| geom::project(trace_point(c), n)).collect();
     let line: Vec<V3> = plan.incision_m.iter().map(|&p| geom::project(p, n)).collect();
     let (first, last) = (tips[0], tips[tips.len() - 1]);
     let strokes = strokes(&tips, STROKE_GAP_M);
@@ -224,7 +237,7 @@ mod tests {
     /// Cuts every 1 mm along y = `y` from x = `x0` to `x1` (mm), 8 mm deep.
     fn cuts(x0: i32, x1: i32, y: f64, depth: f64) -> Vec<CutSample> {
         (x0..=x1)
-            .map(|x| CutSample { t_s: x as f64 * 0.01, tip_m: [x as f64 * 1e-3, y, -depth], edge_dir: [0.0, 0.0, -1.0], depth_m: depth })
+            .map(|x| CutSample { t_s: x as f64 * 0.01, tip_m: [x as f64 * 1e-3, y, -depth], edge_dir: [0.0, 0.0, 1.0], depth_m: depth })
             .collect()
     }
 
@@ -253,7 +266,7 @@ mod tests {
         let c: Vec<CutSample> = (0..=50)
             .map(|i| {
                 let x = i as f64 * 1e-3;
-                CutSample { t_s: i as f64, tip_m: [x, x * tan, -0.006], edge_dir: [0.0, 0.0, -1.0], depth_m: 0.006 }
+                CutSample { t_s: i as f64, tip_m: [x, x * tan, -0.006], edge_dir: [0.0, 0.0, 1.0], depth_m: 0.006 }
             })
             .collect();
         let m = incision(&straight_plan(), &c).unwrap();
@@ -272,6 +285,21 @@ mod tests {
         assert!((m.cut_length_m - 0.040).abs() < 1e-12);
         // covered: [0, 22] and [38, 60] mm
         assert!((m.fraction_cut_in_tolerance - 44.0 / 60.0).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+    }
+
+    #[test]
+    fn the_trace_is_where_a_tilted_blade_crosses_the_surface() {
+        // tip 8 mm deep, blade tilted 45 degrees in y: it crosses the surface 8 mm beside the tip
+        let e = [0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2];
+        let c: Vec<CutSample> = (0..=60).map(|i| CutSample { t_s: i as f64, tip_m: [i as f64 * 1e-3, -0.008 * e[1], -0.008 * e[2]], edge_dir: e, depth_m: 0.008 }).collect();
+        let m = incision(&straight_plan(), &c).unwrap();
+        assert!(m.lateral_max_m < 1e-12, "{}", m.lateral_max_m);
+        let mut unusable = c.clone();
+        for s in &mut unusable {
+            s.edge_dir = [0.0; 3];
+        }
+        let m = incision(&straight_plan(), &unusable).unwrap();
+        assert!((m.lateral_mean_m - 0.008 * e[1]).abs() < 1e-12, "falls back to the tip");
     }
 
     #[test]

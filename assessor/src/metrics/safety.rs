@@ -6,8 +6,8 @@
 //! - time above the limit: `sum dt_k` over the samples with `|F_k| > limit` (each sample holds
 //!   until the next), limit = the plan's `force_limit_n`;
 //! - excessive-force events: upward crossings of the limit (a first sample above counts);
-//! - cut outside the corridor: the cut trace (projected along the plan's normal and split into
-//!   strokes as in [`crate::metrics::incision`]) is divided into pieces of at most 0.1 mm; a
+//! - cut outside the corridor: the cut trace (surface crossings, projected along the plan's
+//!   normal and split into strokes as in [`crate::metrics::incision`]) is divided into pieces of at most 0.1 mm; a
 //!   piece whose midpoint lies further than `corridor_half_width_m` from the projected planned
 //!   line is outside. The metric is the total length outside (m); the area outside (m^2) is
 //!   the sum of each outside piece's length times the mean recorded depth of its segment's
@@ -17,7 +17,7 @@ use crate::error::{AssessError, Result};
 use crate::geom::{self, V3};
 use crate::input::{CutSample, ForceSample};
 use crate::metrics::Values;
-use crate::metrics::incision::STROKE_GAP_M;
+use crate::metrics::incision::{STROKE_GAP_M, trace_point};
 use crate::plan::ExpertPlan;
 
 /// The force metrics of one attempt.
@@ -59,7 +59,7 @@ pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, O
     let line: Vec<V3> = plan.incision_m.iter().map(|&p| geom::project(p, n)).collect();
     let (mut length, mut area, mut area_ok) = (0.0, 0.0, true);
     for w in cuts.windows(2) {
-        let (a, b) = (geom::project(w[0].tip_m, n), geom::project(w[1].tip_m, n));
+        let (a, b) = (geom::project(trace_point(&w[0]), n), geom::project(trace_point(&w[1]), n));
         let len = geom::dist(a, b);
         if len > STROKE_GAP_M {
             continue;
@@ -135,7 +135,7 @@ mod tests {
 
     #[test]
     fn cut_outside_the_corridor_by_hand() {
-        let at = |x_mm: i32, y_mm: f64, t: f64| CutSample { t_s: t, tip_m: [x_mm as f64 * 1e-3, y_mm * 1e-3, -0.008], edge_dir: [0.0, 0.0, -1.0], depth_m: 0.008 };
+        let at = |x_mm: i32, y_mm: f64, t: f64| CutSample { t_s: t, tip_m: [x_mm as f64 * 1e-3, y_mm * 1e-3, -0.008], edge_dir: [0.0, 0.0, 1.0], depth_m: 0.008 };
         // 10 mm at y = 7 mm (outside the 5 mm corridor), then 20 mm on the line
         let mut cuts: Vec<CutSample> = (10..=20).map(|x| at(x, 7.0, x as f64)).collect();
         cuts.extend((30..=50).map(|x| at(x, 0.0, x as f64)));
