@@ -115,4 +115,7 @@ fn users_cohorts_exercises_and_xapi_on_a_fresh_database() {
     assert_eq!(v.as_array().map(Vec::len), Some(0), "no attempts yet");
     let (ok, _, err) = cutlab(&["--db", db, "export", "xapi", "--trainee", "nobody"], None);
     assert!(!ok && err.contains("not found"), "{err}");
+    for suffix in ["", "-wal", "-shm"] {
+        std::fs::remove_file(format!("{db}{suffix}")).ok();
+    }
 }

@@ -67,6 +67,8 @@ async fn cohorts_and_curricula(pool: SqlitePool) {
     let modules = store.curriculum_modules(cur.id).await.expect("modules");
     assert_eq!(modules.iter().map(|m| m.position).collect::<Vec<_>>(), [1, 2]);
     assert_eq!(modules[0].exercise_ids, [builtin.id, other]);
+    assert_eq!(store.get_curriculum(cur.id).await.expect("get").name, "basic incisions");
+    assert_eq!(store.list_plans().await.expect("plans").len(), 2);
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
 }
 

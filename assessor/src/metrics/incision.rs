@@ -220,9 +220,9 @@ pub(crate) fn assess(plan: &ExpertPlan, cuts: &[CutSample], poses: &[PoseSample]
         Err(e) => values.missing(&KEYS, &e.to_string()),
     }
     let first_cut = cuts.iter().map(|c| c.t_s).filter(|t| t.is_finite()).fold(f64::INFINITY, f64::min);
-    match approach_error_deg(plan, poses, first_cut) {
+    match approach_error_deg(plan, poses, first_cut).filter(|_| first_cut.is_finite()) {
         Some(a) => values.set("approach_error_deg", a),
-        None => values.missing(&["approach_error_deg"], "no approach before the first cut"),
+        None => values.missing(&["approach_error_deg"], "no approach before a first cut"),
     }
 }
 

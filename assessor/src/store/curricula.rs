@@ -36,6 +36,11 @@ impl Store {
         Ok(Curriculum { id, name: name.into(), description: description.into() })
     }
 
+    pub async fn get_curriculum(&self, id: i64) -> Result<Curriculum> {
+        let row: Option<(i64, String, String)> = sqlx::query_as("SELECT id, name, description FROM curricula WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
+        row.map(|(id, name, description)| Curriculum { id, name, description }).ok_or_else(|| AssessError::NotFound(format!("curriculum {id}")))
+    }
+
     pub async fn curriculum_by_name(&self, name: &str) -> Result<Curriculum> {
         let row: Option<(i64, String, String)> = sqlx::query_as("SELECT id, name, description FROM curricula WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
         row.map(|(id, name, description)| Curriculum { id, name, description }).ok_or_else(|| AssessError::NotFound(format!("curriculum {name:?}")))

@@ -82,6 +82,12 @@ impl Store {
         ExpertPlan::from_json(&json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?)
     }
 
+    /// All stored plans `(id, plan)`, oldest first.
+    pub async fn list_plans(&self) -> Result<Vec<(i64, ExpertPlan)>> {
+        let rows: Vec<(i64, String)> = sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id").fetch_all(&self.pool).await?;
+        rows.into_iter().map(|(id, json)| Ok((id, ExpertPlan::from_json(&json)?))).collect()
+    }
+
     /// Adds an exercise with its plan and hand-set thresholds (one transaction).
     pub async fn create_exercise(&self, new: &NewExercise<'_>) -> Result<Exercise> {
         new.plan.check()?;
