@@ -1,11 +1,13 @@
 //! cutlab: the command line. Thin commands that wire the crates together.
 
+mod assess_cli;
 mod bench;
 mod bench_accuracy;
 mod bench_recorder;
 mod bench_stability;
 mod demo;
 mod recording;
+mod motion_metrics;
 mod scene_info;
 mod session;
 mod stats;
@@ -21,6 +23,9 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// The assessment database (else $CUTLAB_DB, else ./cutlab.db).
+    #[arg(long, global = true)]
+    db: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -121,6 +126,8 @@ enum Command {
         #[command(subcommand)]
         command: BenchCommand,
     },
+    #[command(flatten)]
+    Assess(assess_cli::AssessCommand),
 }
 
 #[derive(Debug, Subcommand)]
@@ -271,5 +278,6 @@ fn run() -> anyhow::Result<()> {
         Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
         Command::Bench { command: BenchCommand::Recorder { min_tets, duration, json, out } } => bench_recorder::run(min_tets, duration, json, &out),
+        Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
     }
 }

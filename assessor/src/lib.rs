@@ -1,3 +1,27 @@
-//! cutlab-assessor: metrics, expert plans, proficiency and the SQLite store. Content arrives
-//! with issue 6; it may depend on `cutlab-recorder` and the crates below it.
-pub use cutlab_recorder as recorder;
+//! cutlab-assessor: what a trainee is measured on, and where it is kept.
+//!
+//! - [`input`]: the samples an attempt is assessed on (filled by the recorder);
+//! - [`plan`]: expert plans (TOML/JSON);
+//! - [`metrics`]: incision, path, safety and field metrics, [`metrics::assess`];
+//! - [`proficiency`]: thresholds from experts, pass/fail, score, CUSUM;
+//! - [`store`]: the SQLite database (sqlx);
+//! - [`xapi`]: xAPI statements of a trainee's attempts.
+//!
+//! SI units inside (metres, seconds, newtons); millimetres only for display.
+
+pub mod error;
+mod geom;
+pub mod input;
+pub mod metrics;
+pub mod plan;
+pub mod proficiency;
+
+pub use error::{AssessError, Result};
+pub use input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};
+pub use metrics::{Better, Metric, MetricSet, MetricValue, assess};
+pub use plan::ExpertPlan;
+pub use proficiency::{CusumParams, Threshold, Thresholds, Verdict};
+pub mod store;
+pub mod xapi;
+
+pub use store::{Store, default_db_path};

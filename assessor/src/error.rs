@@ -1,0 +1,39 @@
+//! The crate's one error type.
+
+/// Everything that can go wrong in the assessor: bad plans and inputs, the database, files.
+#[derive(Debug, thiserror::Error)]
+pub enum AssessError {
+    /// An expert plan that cannot be used (NaN, degenerate line, non-positive depth...).
+    #[error("invalid expert plan: {0}")]
+    InvalidPlan(String),
+    /// A plan or other file that does not parse.
+    #[error("cannot parse {what}: {message}")]
+    Parse { what: String, message: String },
+    /// Input data that cannot be assessed (too few samples, non-finite values...).
+    #[error("invalid input: {0}")]
+    InvalidInput(String),
+    /// A name or id that is not in the database.
+    #[error("not found: {0}")]
+    NotFound(String),
+    /// A name that is already taken, or another constraint the database refused.
+    #[error("conflict: {0}")]
+    Conflict(String),
+    /// Password hashing failed (not a wrong password: that is `Ok(None)`).
+    #[error("password hashing: {0}")]
+    Password(String),
+    /// The database.
+    #[error("database: {0}")]
+    Database(#[from] sqlx::Error),
+    /// Applying the migrations.
+    #[error("database migration: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    /// Reading a file.
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    /// JSON (de)serialisation of stored values.
+    #[error("json: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+/// Results of this crate.
+pub type Result<T, E = AssessError> = std::result::Result<T, E>;

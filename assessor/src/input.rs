@@ -1,0 +1,69 @@
+//! What an attempt is assessed on: plain samples the recorder fills from a session (SI units:
+//! metres, seconds, newtons).
+
+use serde::{Deserialize, Serialize};
+
+/// The tool's pose at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseSample {
+    /// Time since the start of the session (s).
+    pub t_s: f64,
+    /// The blade tip in world coordinates (m).
+    pub tip_m: [f64; 3],
+    /// The tool's orientation, unit quaternion `[w, x, y, z]`.
+    pub quat_wxyz: [f64; 4],
+    /// Whether the blade is in cutting mode (in the tissue and pressed beyond the cut threshold).
+    pub blade_engaged: bool,
+}
+
+/// The force rendered to the trainee's hand at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ForceSample {
+    /// Time since the start of the session (s).
+    pub t_s: f64,
+    /// The force on the hand (N), world coordinates.
+    pub force_newtons: [f64; 3],
+    /// The tool touches the tissue.
+    pub touching: bool,
+    /// The tool is cutting.
+    pub cutting: bool,
+}
+
+/// The blade at one cut the simulation made (one per cut step, e.g. every 0.5 mm of travel).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CutSample {
+    /// Time since the start of the session (s).
+    pub t_s: f64,
+    /// The blade tip (m).
+    pub tip_m: [f64; 3],
+    /// The cutting edge's direction (unit, pointing from the tip along the edge).
+    pub edge_dir: [f64; 3],
+    /// The tip's penetration below the tissue surface at this cut (m), measured along the
+    /// plan's outward normal: `(s - tip) . n` with `s` the surface point above the tip. The
+    /// recorder fills it from the simulation's surface (or, lacking it, with
+    /// [`crate::metrics::incision::depth_below_plan`]); positive inside the tissue.
+    pub depth_m: f64,
+}
+
+/// The tissue's boundary surface (deformed, after the cut), for the field-of-view metrics.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceMesh {
+    /// Vertex positions (m).
+    pub vertices_m: Vec<[f64; 3]>,
+    /// Triangles as indices into `vertices_m`, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Everything one attempt is assessed on.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct AttemptData {
+    /// Tool poses in time order (any rate; the path metrics resample).
+    pub poses: Vec<PoseSample>,
+    /// Rendered forces in time order.
+    pub forces: Vec<ForceSample>,
+    /// The cuts in time order.
+    pub cuts: Vec<CutSample>,
+    /// The deformed tissue surface at the end of the attempt, if recorded.
+    #[serde(default)]
+    pub surface: Option<SurfaceMesh>,
+}

@@ -1,0 +1,339 @@
+//! Incision metrics: how the cut the simulation made compares with the planned line.
+//!
+//! The cut's trace is where the blade crossed the tissue surface at each [`CutSample`], in
+//! time order: `tip + depth_m * edge_dir` (the blade runs from its tip along `edge_dir`, and
+//! the tip is `depth_m` below the surface), or the tip itself when the depth or edge direction
+//! is unusable. (On a curved surface, or with a tilted blade, the tip runs beside the line the
+//! trainee actually cut on the surface; the surface crossing is that line.) Everything lateral
+//! is measured seen from above: points are projected along the plan's unit normal `n` onto a
+//! plane, `P(x) = x - (x . n) n`, so the tip's depth below the surface does not count as
+//! lateral error. Consecutive cut samples more than [`STROKE_GAP_M`] apart (blade lifted and
+//! put back) start a new stroke; the trace's segments join samples within a stroke only.
+//!
+//! - entry / exit error: `|P(first trace point) - P(entry)|`, `|P(last) - P(exit)|`;
+//! - length error: projected length of the trace's strokes minus the plan's length (signed);
+//! - lateral deviation of sample `i`: the distance from `P(trace_i)` to the projected planned
+//!   polyline; its mean, RMS and max over the samples;
+//! - fraction cut within tolerance: the planned line is split into intervals of at most
+//!   0.1 mm; an interval counts as cut when its midpoint is within `tolerance_m` of the
+//!   projected trace; the fraction is the counted length over the plan's length;
+//! - direction error: the angle between `P(last - first)` and `P(exit - entry)` (deg);
+//! - depth error: the samples' mean `depth_m` (the recorder's penetration below the surface
+//!   along `n`, see [`CutSample::depth_m`]) minus the planned depth (signed), and its RMS.
+//! - approach error: the angle between the tip's displacement over the last 5 mm of travel
+//!   before the first cut and the plan's approach direction (deg).
+
+use crate::error::{AssessError, Result};
+use crate::geom::{self, V3};
+use crate::input::{CutSample, PoseSample};
+use crate::metrics::Values;
+use crate::plan::ExpertPlan;
+
+/// Consecutive cut samples further apart than this belong to different strokes (m).
+pub const STROKE_GAP_M: f64 = 0.003;
+/// The length of approach the approach direction is taken over (m).
+pub const APPROACH_LENGTH_M: f64 = 0.005;
+
+/// The incision metrics of one attempt (SI units, angles in degrees).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IncisionMetrics {
+    pub entry_error_m: f64,
+    pub exit_error_m: f64,
+    pub cut_length_m: f64,
+    pub length_error_m: f64,
+    pub lateral_mean_m: f64,
+    pub lateral_rms_m: f64,
+    pub lateral_max_m: f64,
+    pub fraction_cut_in_tolerance: f64,
+    pub direction_error_deg: f64,
+    /// `None` when a sample's depth is not finite.
+    pub depth_error_m: Option<f64>,
+    pub depth_rms_error_m: Option<f64>,
+}
+
+/// Where the blade of `c` crossed the surface: `tip + depth_m * edge_dir` when the depth is
+/// finite and non-negative and `edge_dir` a finite non-zero vector, else the tip.
+pub fn trace_point(c: &CutSample) -> V3 {
+    match geom::unit(c.edge_dir) {
+        Some(e) if c.depth_m.is_finite() && c.depth_m >= 0.0 => geom::add(c.tip_m, geom::scale(e, c.depth_m)),
+        _ => c.tip_m,
+    }
+}
+
+/// The trace's strokes (projected trace points), split where samples are more than `gap` apart.
+fn strokes(tips: &[V3], gap: f64) -> Vec<Vec<V3>> {
+    let mut out: Vec<Vec<V3>> = Vec::new();
+    for &p in tips {
+        match out.last_mut() {
+            Some(s) if s.last().is_some_and(|&q| geom::dist(p, q) <= gap) => s.push(p),
+            _ => out.push(vec![p]),
+        }
+    }
+    out
+}
+
+/// Distance from `p` to the nearest point of any stroke.
+fn distance_to_strokes(p: V3, strokes: &[Vec<V3>]) -> f64 {
+    let mut best = f64::INFINITY;
+    for s in strokes {
+        if s.len() == 1 {
+            best = best.min(geom::dist(p, s[0]));
+        }
+        for w in s.windows(2) {
+            best = best.min(geom::dist(p, geom::closest_on_segment(p, w[0], w[1]).0));
+        }
+    }
+    best
+}
+
+/// The tip's depth below the plan's (rest) surface along the normal, `(q - tip) . n` with `q`
+/// the planned line's point nearest to the tip seen from above: an approximation of
+/// [`CutSample::depth_m`] for recorders without the deformed surface (exact for a line on a
+/// flat surface).
+pub fn depth_below_plan(plan: &ExpertPlan, tip: V3) -> f64 {
+    let n = plan.normal;
+    let p = geom::project(tip, n);
+    let mut best = (f64::INFINITY, plan.incision_m[0]);
+    for w in plan.incision_m.windows(2) {
+        // the nearest point seen from above, then the same parameter on the 3D segment
+        let (q, t) = geom::closest_on_segment(p, geom::project(w[0], n), geom::project(w[1], n));
+        let d = geom::dist(p, q);
+        if d < best.0 {
+            best = (d, geom::add(w[0], geom::scale(geom::sub(w[1], w[0]), t)));
+        }
+    }
+    geom::dot(geom::sub(best.1, tip), n)
+}
+
+/// The incision metrics of `cuts` (at least 2, finite tips) against `plan`.
+pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics> {
+    if cuts.len() < 2 {
+        return Err(AssessError::InvalidInput(format!("{} cut samples: no incision to measure", cuts.len())));
+    }
+    if let Some(i) = cuts.iter().position(|c| !geom::finite(&c.tip_m) || !c.t_s.is_finite()) {
+        return Err(AssessError::InvalidInput(format!("cut sample {i}: time or tip not finite")));
+    }
+    let mut cuts = cuts.to_vec();
+    cuts.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    let n = plan.normal;
+    let tips: Vec<V3> = cuts.iter().map(|c| geom::project(trace_point(c), n)).collect();
+    let line: Vec<V3> = plan.incision_m.iter().map(|&p| geom::project(p, n)).collect();
+    let (first, last) = (tips[0], tips[tips.len() - 1]);
+    let strokes = strokes(&tips, STROKE_GAP_M);
+    let cut_length_m: f64 = strokes.iter().map(|s| geom::polyline_length(s)).sum();
+    let plan_length = geom::polyline_length(&line);
+
+    let lateral: Vec<f64> = tips.iter().map(|&p| geom::closest_on_polyline(p, &line).distance).collect();
+    let (lateral_mean_m, lateral_rms_m, lateral_max_m) = geom::mean_rms_max(&lateral);
+
+    let intervals = ((plan_length / 1e-4).ceil() as usize).max(1);
+    let step = plan_length / intervals as f64;
+    let covered = (0..intervals)
+        .filter(|&k| {
+            let (mid, _) = geom::point_at_arc(&line, (k as f64 + 0.5) * step);
+            distance_to_strokes(mid, &strokes) <= plan.tolerance_m
+        })
+        .count();
+    let fraction_cut_in_tolerance = covered as f64 / intervals as f64;
+
+    let planned_dir = geom::sub(geom::project(plan.exit_m, n), geom::project(plan.entry_m, n));
+    let direction_error_deg = geom::angle(geom::sub(last, first), planned_dir).map_or(180.0, f64::to_degrees);
+
+    let depths: Vec<f64> = cuts.iter().map(|c| c.depth_m - plan.depth_m).collect();
+    let (depth_error_m, depth_rms_error_m) = if geom::finite(&depths) {
+        let (mean, rms, _) = geom::mean_rms_max(&depths);
+        (Some(mean), Some(rms))
+    } else {
+        (None, None)
+    };
+
+    Ok(IncisionMetrics {
+        entry_error_m: geom::dist(first, geom::project(plan.entry_m, n)),
+        exit_error_m: geom::dist(last, geom::project(plan.exit_m, n)),
+        cut_length_m,
+        length_error_m: cut_length_m - plan_length,
+        lateral_mean_m,
+        lateral_rms_m,
+        lateral_max_m,
+        fraction_cut_in_tolerance,
+        direction_error_deg,
+        depth_error_m,
+        depth_rms_error_m,
+    })
+}
+
+/// The angle (deg) between the tip's displacement over the last [`APPROACH_LENGTH_M`] of
+/// travel up to time `t_first_cut` and the plan's approach direction; `None` without poses,
+/// with non-finite ones, or if the tip barely moved.
+pub fn approach_error_deg(plan: &ExpertPlan, poses: &[PoseSample], t_first_cut: f64) -> Option<f64> {
+    let before: Vec<&PoseSample> = poses.iter().filter(|p| p.t_s <= t_first_cut).collect();
+    let end = before.last()?.tip_m;
+    let mut travelled = 0.0;
+    let mut start = end;
+    for w in before.windows(2).rev() {
+        if !geom::finite(&w[0].tip_m) || !geom::finite(&w[1].tip_m) {
+            return None;
+        }
+        travelled += geom::dist(w[0].tip_m, w[1].tip_m);
+        start = w[0].tip_m;
+        if travelled >= APPROACH_LENGTH_M {
+            break;
+        }
+    }
+    if travelled < 0.2 * APPROACH_LENGTH_M {
+        return None;
+    }
+    geom::angle(geom::sub(end, start), plan.approach()).map(f64::to_degrees)
+}
+
+pub(crate) fn assess(plan: &ExpertPlan, cuts: &[CutSample], poses: &[PoseSample], values: &mut Values) {
+    const KEYS: [&str; 10] = [
+        "entry_error_m",
+        "exit_error_m",
+        "length_error_m",
+        "lateral_mean_m",
+        "lateral_rms_m",
+        "lateral_max_m",
+        "fraction_cut_in_tolerance",
+        "direction_error_deg",
+        "depth_error_m",
+        "depth_rms_error_m",
+    ];
+    match incision(plan, cuts) {
+        Ok(m) => {
+            values.set("entry_error_m", m.entry_error_m);
+            values.set("exit_error_m", m.exit_error_m);
+            values.set("length_error_m", m.length_error_m);
+            values.set("lateral_mean_m", m.lateral_mean_m);
+            values.set("lateral_rms_m", m.lateral_rms_m);
+            values.set("lateral_max_m", m.lateral_max_m);
+            values.set("fraction_cut_in_tolerance", m.fraction_cut_in_tolerance);
+            values.set("direction_error_deg", m.direction_error_deg);
+            match (m.depth_error_m, m.depth_rms_error_m) {
+                (Some(d), Some(r)) => {
+                    values.set("depth_error_m", d);
+                    values.set("depth_rms_error_m", r);
+                }
+                _ => values.missing(&["depth_error_m", "depth_rms_error_m"], "a cut depth is not finite"),
+            }
+        }
+        Err(e) => values.missing(&KEYS, &e.to_string()),
+    }
+    let first_cut = cuts.iter().map(|c| c.t_s).filter(|t| t.is_finite()).fold(f64::INFINITY, f64::min);
+    match approach_error_deg(plan, poses, first_cut).filter(|_| first_cut.is_finite()) {
+        Some(a) => values.set("approach_error_deg", a),
+        None => values.missing(&["approach_error_deg"], "no approach before a first cut"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn straight_plan() -> ExpertPlan {
+        ExpertPlan::from_json(r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#).unwrap()
+    }
+
+    /// Cuts every 1 mm along y = `y` from x = `x0` to `x1` (mm), 8 mm deep.
+    fn cuts(x0: i32, x1: i32, y: f64, depth: f64) -> Vec<CutSample> {
+        (x0..=x1)
+            .map(|x| CutSample { t_s: x as f64 * 0.01, tip_m: [x as f64 * 1e-3, y, -depth], edge_dir: [0.0, 0.0, 1.0], depth_m: depth })
+            .collect()
+    }
+
+    #[test]
+    fn a_parallel_offset_cut_by_hand() {
+        // cut from x = 5 to 55 mm, 1 mm to the side of the planned 0..60 mm line
+        let m = incision(&straight_plan(), &cuts(5, 55, 0.001, 0.008)).unwrap();
+        let e = (26.0f64).sqrt() * 1e-3; // sqrt(5^2 + 1^2) mm
+        assert!((m.entry_error_m - e).abs() < 1e-12);
+        assert!((m.exit_error_m - e).abs() < 1e-12);
+        assert!((m.length_error_m + 0.010).abs() < 1e-12);
+        assert!((m.lateral_mean_m - 0.001).abs() < 1e-12);
+        assert!((m.lateral_rms_m - 0.001).abs() < 1e-12);
+        assert!((m.lateral_max_m - 0.001).abs() < 1e-12);
+        // covered: x in [5 - sqrt(3), 55 + sqrt(3)] mm of 60 mm
+        let expected = (50.0 + 2.0 * 3f64.sqrt()) / 60.0;
+        assert!((m.fraction_cut_in_tolerance - expected).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+        assert!(m.direction_error_deg.abs() < 1e-9);
+        assert!(m.depth_error_m.unwrap().abs() < 1e-15);
+    }
+
+    #[test]
+    fn direction_depth_and_lateral_max_by_hand() {
+        // a straight cut rotated 10 degrees about the entry, 6 mm deep
+        let tan = 10f64.to_radians().tan();
+        let c: Vec<CutSample> = (0..=50)
+            .map(|i| {
+                let x = i as f64 * 1e-3;
+                CutSample { t_s: i as f64, tip_m: [x, x * tan, -0.006], edge_dir: [0.0, 0.0, 1.0], depth_m: 0.006 }
+            })
+            .collect();
+        let m = incision(&straight_plan(), &c).unwrap();
+        assert!((m.direction_error_deg - 10.0).abs() < 1e-9);
+        assert!((m.depth_error_m.unwrap() + 0.002).abs() < 1e-12);
+        assert!((m.depth_rms_error_m.unwrap() - 0.002).abs() < 1e-12);
+        assert!((m.lateral_max_m - 0.05 * tan).abs() < 1e-12);
+        assert!(m.entry_error_m < 1e-15);
+    }
+
+    #[test]
+    fn a_lifted_blade_makes_two_strokes_and_the_gap_is_not_cut() {
+        let mut c = cuts(0, 20, 0.0, 0.008);
+        c.extend(cuts(40, 60, 0.0, 0.008));
+        let m = incision(&straight_plan(), &c).unwrap();
+        assert!((m.cut_length_m - 0.040).abs() < 1e-12);
+        // covered: [0, 22] and [38, 60] mm
+        assert!((m.fraction_cut_in_tolerance - 44.0 / 60.0).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+    }
+
+    #[test]
+    fn the_trace_is_where_a_tilted_blade_crosses_the_surface() {
+        // tip 8 mm deep, blade tilted 45 degrees in y: it crosses the surface 8 mm beside the tip
+        let e = [0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2];
+        let c: Vec<CutSample> = (0..=60).map(|i| CutSample { t_s: i as f64, tip_m: [i as f64 * 1e-3, -0.008 * e[1], -0.008 * e[2]], edge_dir: e, depth_m: 0.008 }).collect();
+        let m = incision(&straight_plan(), &c).unwrap();
+        assert!(m.lateral_max_m < 1e-12, "{}", m.lateral_max_m);
+        let mut unusable = c.clone();
+        for s in &mut unusable {
+            s.edge_dir = [0.0; 3];
+        }
+        let m = incision(&straight_plan(), &unusable).unwrap();
+        assert!((m.lateral_mean_m - 0.008 * e[1]).abs() < 1e-12, "falls back to the tip");
+    }
+
+    #[test]
+    fn depth_below_the_planned_line() {
+        let plan = straight_plan();
+        assert!((depth_below_plan(&plan, [0.02, 0.003, -0.008]) - 0.008).abs() < 1e-15);
+        let curved = ExpertPlan::chest_wall().unwrap();
+        // at x = 30 mm the surface is 3.031 mm below the apex
+        assert!((depth_below_plan(&curved, [0.03, 0.0, -0.011031]) - 0.008).abs() < 1e-9);
+        assert!((depth_below_plan(&curved, [0.0, 0.001, -0.008]) - 0.008).abs() < 1e-12);
+    }
+
+    #[test]
+    fn too_few_or_nan_cuts_are_input_errors() {
+        assert!(incision(&straight_plan(), &cuts(0, 0, 0.0, 0.008)).is_err());
+        let mut c = cuts(0, 10, 0.0, 0.008);
+        c[3].tip_m[1] = f64::NAN;
+        assert!(incision(&straight_plan(), &c).unwrap_err().to_string().contains("cut sample 3"));
+        let mut c = cuts(0, 10, 0.0, 0.008);
+        c[3].depth_m = f64::NAN;
+        assert!(incision(&straight_plan(), &c).unwrap().depth_error_m.is_none());
+    }
+
+    #[test]
+    fn approach_straight_down_and_at_45_degrees() {
+        let plan = straight_plan();
+        let down: Vec<PoseSample> = (0..=20)
+            .map(|i| PoseSample { t_s: i as f64, tip_m: [0.0, 0.0, 0.01 - i as f64 * 1e-3], quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: false })
+            .collect();
+        assert!(approach_error_deg(&plan, &down, 20.0).unwrap() < 1e-9);
+        let slanted: Vec<PoseSample> = (0..=20)
+            .map(|i| PoseSample { t_s: i as f64, tip_m: [i as f64 * 1e-3, 0.0, -(i as f64) * 1e-3], quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: false })
+            .collect();
+        assert!((approach_error_deg(&plan, &slanted, 20.0).unwrap() - 45.0).abs() < 1e-9);
+        assert!(approach_error_deg(&plan, &[], 1.0).is_none());
+    }
+}

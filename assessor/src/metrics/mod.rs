@@ -1,0 +1,217 @@
+//! The metrics: pure functions of an [`AttemptData`] and an [`ExpertPlan`].
+//!
+//! Each group ([`incision`], [`path`], [`safety`], [`field`]) checks its own input; a group
+//! whose input is unusable (too few samples, NaN or infinite values, no surface) reports its
+//! metrics as missing (`value: None`, with the reason) instead of failing the whole
+//! assessment or panicking. Only an invalid plan is an error.
+
+pub mod field;
+pub mod incision;
+pub mod path;
+pub mod safety;
+pub mod smoothness;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::Result;
+use crate::input::AttemptData;
+use crate::plan::ExpertPlan;
+
+/// Which way a metric improves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Better {
+    /// Smaller is better (errors, times, forces): an upper threshold.
+    LowerIsBetter,
+    /// Larger is better (fractions cut or visible, economy): a lower threshold.
+    HigherIsBetter,
+    /// Closest to the expert mean is best (signed errors): thresholds on both sides.
+    TwoSided,
+}
+
+impl Better {
+    /// The name stored in the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Better::LowerIsBetter => "lower-is-better",
+            Better::HigherIsBetter => "higher-is-better",
+            Better::TwoSided => "two-sided",
+        }
+    }
+
+    /// The inverse of [`Better::as_str`].
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "lower-is-better" => Some(Better::LowerIsBetter),
+            "higher-is-better" => Some(Better::HigherIsBetter),
+            "two-sided" => Some(Better::TwoSided),
+            _ => None,
+        }
+    }
+}
+
+/// A metric's definition.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Metric {
+    /// Stable key (`snake_case`, SI unit suffix).
+    pub key: &'static str,
+    /// SI unit (`m`, `s`, `N`, `rad`, `deg`, `m^2`, `1` for ratios and counts).
+    pub unit: &'static str,
+    /// Which way it improves.
+    pub better: Better,
+    /// Whether pass/fail and the overall score use it (the others are reported only).
+    pub scored: bool,
+    /// One line for reports.
+    pub description: &'static str,
+}
+
+/// One metric's value for one attempt. `value` is `None` when the metric could not be
+/// computed (`missing` says why).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MetricValue {
+    pub key: String,
+    pub value: Option<f64>,
+    pub unit: String,
+    pub better: Better,
+    pub scored: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub missing: Option<String>,
+}
+
+impl MetricValue {
+    fn of(metric: &Metric, value: Option<f64>, missing: Option<String>) -> Self {
+        let value = value.filter(|v| v.is_finite());
+        let missing = if value.is_none() { Some(missing.unwrap_or_else(|| "not finite".into())) } else { None };
+        Self { key: metric.key.into(), value, unit: metric.unit.into(), better: metric.better, scored: metric.scored, missing }
+    }
+}
+
+/// One attempt's metrics, in catalogue order (what [`assess`] returns).
+pub type MetricSet = Vec<MetricValue>;
+
+/// The metric catalogue, in report order.
+pub const METRICS: &[Metric] = &[
+    // incision
+    m("entry_error_m", "m", Better::LowerIsBetter, true, "distance of the cut's start from the planned entry (seen along the normal)"),
+    m("exit_error_m", "m", Better::LowerIsBetter, true, "distance of the cut's end from the planned exit"),
+    m("length_error_m", "m", Better::TwoSided, true, "cut length minus planned length (signed)"),
+    m("lateral_mean_m", "m", Better::LowerIsBetter, true, "mean distance of the cut from the planned line"),
+    m("lateral_rms_m", "m", Better::LowerIsBetter, false, "RMS distance of the cut from the planned line"),
+    m("lateral_max_m", "m", Better::LowerIsBetter, true, "largest distance of the cut from the planned line"),
+    m("fraction_cut_in_tolerance", "1", Better::HigherIsBetter, true, "fraction of the planned line cut within the tolerance"),
+    m("direction_error_deg", "deg", Better::LowerIsBetter, true, "angle between the cut's overall direction and the plan's"),
+    m("depth_error_m", "m", Better::TwoSided, true, "mean cut depth minus planned depth (signed)"),
+    m("depth_rms_error_m", "m", Better::LowerIsBetter, false, "RMS of cut depth minus planned depth"),
+    m("approach_error_deg", "deg", Better::LowerIsBetter, false, "angle between the tip's motion entering the tissue and the planned approach"),
+    // path
+    m("time_s", "s", Better::LowerIsBetter, true, "duration of the attempt"),
+    m("path_length_m", "m", Better::LowerIsBetter, true, "distance travelled by the tip (filtered)"),
+    m("economy_of_motion", "1", Better::HigherIsBetter, false, "straight distance start to end over path length"),
+    m("idle_time_s", "s", Better::LowerIsBetter, false, "time with the tip (nearly) still"),
+    m("movements", "1", Better::LowerIsBetter, true, "number of movements (speed threshold crossings)"),
+    m("angular_path_rad", "rad", Better::LowerIsBetter, false, "total rotation of the tool"),
+    m("ldlj", "1", Better::HigherIsBetter, true, "log dimensionless jerk of the whole speed profile"),
+    m("sparc", "1", Better::HigherIsBetter, false, "spectral arc length of the whole speed profile"),
+    m("ldlj_per_movement", "1", Better::HigherIsBetter, false, "mean log dimensionless jerk per movement"),
+    m("sparc_per_movement", "1", Better::HigherIsBetter, false, "mean spectral arc length per movement"),
+    // safety
+    m("peak_force_n", "N", Better::LowerIsBetter, true, "largest force"),
+    m("mean_force_n", "N", Better::LowerIsBetter, false, "mean force while touching"),
+    m("time_above_force_limit_s", "s", Better::LowerIsBetter, false, "time above the plan's force limit"),
+    m("excessive_force_events", "1", Better::LowerIsBetter, false, "times the force rose above the limit"),
+    m("cut_outside_corridor_m", "m", Better::LowerIsBetter, true, "length of cut beyond the corridor"),
+    m("cut_area_outside_corridor_m2", "m^2", Better::LowerIsBetter, false, "cut area (length x depth) beyond the corridor"),
+    // field
+    m("target_visible_fraction", "1", Better::HigherIsBetter, false, "fraction of the target seen from the viewpoint"),
+    m("opening_width_m", "m", Better::HigherIsBetter, false, "widest gap between the wound's lips"),
+    m("opening_area_m2", "m^2", Better::HigherIsBetter, false, "area of the wound's opening seen along the normal"),
+];
+
+const fn m(key: &'static str, unit: &'static str, better: Better, scored: bool, description: &'static str) -> Metric {
+    Metric { key, unit, better, scored, description }
+}
+
+/// The definition of a metric key.
+pub fn metric(key: &str) -> Option<&'static Metric> {
+    METRICS.iter().find(|m| m.key == key)
+}
+
+/// Values keyed as in [`METRICS`], built by the groups.
+#[derive(Debug, Default)]
+pub(crate) struct Values(Vec<(&'static str, Option<f64>, Option<String>)>);
+
+impl Values {
+    pub(crate) fn set(&mut self, key: &'static str, value: f64) {
+        self.0.push((key, Some(value), None));
+    }
+    pub(crate) fn missing(&mut self, keys: &[&'static str], why: &str) {
+        for k in keys {
+            self.0.push((k, None, Some(why.to_owned())));
+        }
+    }
+}
+
+/// Every metric of [`METRICS`] for one attempt, in catalogue order. Errors only on an invalid
+/// plan; unusable inputs give missing metrics.
+pub fn assess(plan: &ExpertPlan, data: &AttemptData) -> Result<MetricSet> {
+    plan.check()?;
+    let mut values = Values::default();
+    incision::assess(plan, &data.cuts, &data.poses, &mut values);
+    path::assess(&data.poses, &path::PathParams::default(), &mut values);
+    safety::assess(plan, &data.forces, &data.cuts, &mut values);
+    field::assess(plan, data.surface.as_ref(), &mut values);
+    Ok(METRICS
+        .iter()
+        .map(|metric| {
+            let found = values.0.iter().find(|(k, _, _)| *k == metric.key);
+            match found {
+                Some((_, v, why)) => MetricValue::of(metric, *v, why.clone()),
+                None => MetricValue::of(metric, None, Some("not computed".into())),
+            }
+        })
+        .collect())
+}
+
+/// The value of `key` in a list of metric values, if present and finite.
+pub fn value_of(values: &[MetricValue], key: &str) -> Option<f64> {
+    values.iter().find(|v| v.key == key).and_then(|v| v.value)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_are_unique_and_empty_data_gives_missing_metrics_not_errors() {
+        let mut keys: Vec<_> = METRICS.iter().map(|m| m.key).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        assert_eq!(keys.len(), METRICS.len());
+        let plan = ExpertPlan::chest_wall().unwrap();
+        let out = assess(&plan, &AttemptData::default()).unwrap();
+        assert_eq!(out.len(), METRICS.len());
+        // no cuts: nothing cut outside the corridor (a true zero); everything else is missing
+        for v in &out {
+            if v.key.starts_with("cut_") {
+                assert_eq!(v.value, Some(0.0));
+            } else {
+                assert!(v.value.is_none() && v.missing.is_some(), "{v:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn nan_samples_are_quarantined() {
+        let plan = ExpertPlan::chest_wall().unwrap();
+        let mut data = AttemptData::default();
+        for i in 0..200 {
+            let t = i as f64 * 0.01;
+            data.poses.push(crate::input::PoseSample { t_s: t, tip_m: [t * 0.01, 0.0, 0.01], quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: false });
+        }
+        data.poses[50].tip_m[0] = f64::NAN;
+        let out = assess(&plan, &data).unwrap();
+        let time = out.iter().find(|v| v.key == "time_s").unwrap();
+        assert!(time.value.is_none());
+        assert!(time.missing.as_deref().unwrap().contains("not finite"), "{time:?}");
+    }
+}

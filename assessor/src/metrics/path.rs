@@ -1,0 +1,305 @@
+//! Path metrics from the tool poses: how the hand moved, independently of what it cut.
+//!
+//! The tip positions are resampled to a uniform `resample_hz` (linear interpolation on the
+//! time column, so any input rate works, uneven ones too), each coordinate is low-pass
+//! filtered with the zero-phase Butterworth of [`smoothness::lowpass_zero_phase`]
+//! (`cutoff_hz`, default 6 Hz: hand motion lies below it, tremor and sensor noise above), and
+//! only then differentiated (central differences) to the speed `v(t) = |dx/dt|`.
+//!
+//! - time: last minus first time stamp;
+//! - path length: `sum |x[k+1] - x[k]|` over the filtered samples;
+//! - economy of motion: `|x_last - x_first| / path length` (1 for a straight line);
+//! - idle time: total length of the intervals whose mean speed is below `idle_speed_m_s`;
+//! - movements: the runs where `v` exceeds `max(movement_floor_m_s, movement_fraction * peak v)`
+//!   lasting at least `min_movement_s` (each is one upward threshold crossing);
+//! - angular path: `sum 2 acos |q_i . q_(i+1)|` over the raw unit quaternions (rad);
+//! - smoothness: LDLJ and SPARC ([`smoothness`]) of the whole speed profile, and their mean
+//!   over the movements (each movement's own speed profile).
+
+use crate::error::{AssessError, Result};
+use crate::geom::{self, V3};
+use crate::input::PoseSample;
+use crate::metrics::Values;
+use crate::metrics::smoothness;
+
+/// Parameters of the path metrics.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathParams {
+    /// Uniform rate the poses are resampled to (Hz).
+    pub resample_hz: f64,
+    /// Cut-off of the zero-phase low-pass filter on positions (Hz).
+    pub cutoff_hz: f64,
+    /// Below this speed the tool counts as idle (m/s).
+    pub idle_speed_m_s: f64,
+    /// Movement threshold as a fraction of the peak speed ...
+    pub movement_fraction: f64,
+    /// ... but at least this (m/s).
+    pub movement_floor_m_s: f64,
+    /// Shorter runs above the threshold are not movements (s).
+    pub min_movement_s: f64,
+    /// SPARC: zero padding level, cut-off (Hz), amplitude threshold.
+    pub sparc_padlevel: u32,
+    pub sparc_fc_hz: f64,
+    pub sparc_amp_th: f64,
+}
+
+impl Default for PathParams {
+    fn default() -> Self {
+        Self {
+            resample_hz: 100.0,
+            cutoff_hz: 6.0,
+            idle_speed_m_s: 0.005,
+            movement_fraction: 0.1,
+            movement_floor_m_s: 0.005,
+            min_movement_s: 0.1,
+            sparc_padlevel: 4,
+            sparc_fc_hz: 10.0,
+            sparc_amp_th: 0.05,
+        }
+    }
+}
+
+/// Smoothness of one movement.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Movement {
+    pub start_s: f64,
+    pub end_s: f64,
+    pub peak_speed_m_s: f64,
+    pub ldlj: Option<f64>,
+    pub sparc: Option<f64>,
+}
+
+/// The path metrics of one trajectory.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PathMetrics {
+    pub time_s: f64,
+    pub path_length_m: f64,
+    /// `None` when the tool did not move.
+    pub economy_of_motion: Option<f64>,
+    pub idle_time_s: f64,
+    pub movements: usize,
+    pub angular_path_rad: f64,
+    pub ldlj: Option<f64>,
+    pub sparc: Option<f64>,
+    pub ldlj_per_movement: Option<f64>,
+    pub sparc_per_movement: Option<f64>,
+    pub per_movement: Vec<Movement>,
+    pub peak_speed_m_s: f64,
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    (n > 0).then(|| s / n as f64)
+}
+
+/// The path metrics of `poses` (at least 3 with distinct times, all finite, non-zero
+/// quaternions; sorted by time here).
+pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
+    if let Some(i) = poses.iter().position(|s| !s.t_s.is_finite() || !geom::finite(&s.tip_m) || !geom::finite(&s.quat_wxyz)) {
+        return Err(AssessError::InvalidInput(format!("pose {i}: a value is not finite")));
+    }
+    if let Some(i) = poses.iter().position(|s| s.quat_wxyz.iter().map(|c| c * c).sum::<f64>() < 1e-12) {
+        return Err(AssessError::InvalidInput(format!("pose {i}: zero quaternion")));
+    }
+    let mut poses = poses.to_vec();
+    poses.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    poses.dedup_by(|b, a| b.t_s <= a.t_s);
+    if poses.len() < 3 {
+        return Err(AssessError::InvalidInput(format!("{} poses with distinct times: need at least 3", poses.len())));
+    }
+    let fs = p.resample_hz;
+    let dt = 1.0 / fs;
+    let t: Vec<f64> = poses.iter().map(|s| s.t_s).collect();
+    let time_s = t[t.len() - 1] - t[0];
+    let coords: Vec<Vec<f64>> = (0..3)
+        .map(|c| {
+            let x: Vec<f64> = poses.iter().map(|s| s.tip_m[c]).collect();
+            smoothness::lowpass_zero_phase(&smoothness::resample(&t, &x, fs), fs, p.cutoff_hz)
+        })
+        .collect();
+    let n = coords[0].len();
+    let pos = |k: usize| -> V3 { [coords[0][k], coords[1][k], coords[2][k]] };
+    let vel: Vec<Vec<f64>> = coords.iter().map(|x| smoothness::derivative(x, dt)).collect();
+    let speed: Vec<f64> = (0..n).map(|k| geom::norm([vel[0][k], vel[1][k], vel[2][k]])).collect();
+
+    let path_length_m: f64 = (1..n).map(|k| geom::dist(pos(k), pos(k - 1))).sum();
+    let straight = geom::dist(pos(n - 1), pos(0));
+    let economy_of_motion = (path_length_m > 1e-9).then(|| (straight / path_length_m).min(1.0));
+    let idle_time_s = (1..n).filter(|&k| 0.5 * (speed[k] + speed[k - 1]) < p.idle_speed_m_s).count() as f64 * dt;
+
+    let peak = speed.iter().copied().fold(0.0, f64::max);
+    let threshold = p.movement_floor_m_s.max(p.movement_fraction * peak);
+    let mut runs = Vec::new();
+    let mut start = None;
+    for k in 0..=n {
+        let above = k < n && speed[k] > threshold;
+        match (above, start) {
+            (true, None) => start = Some(k),
+            (false, Some(s)) => {
+                runs.push((s, k - 1));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    let min_len = (p.min_movement_s * fs).round() as usize;
+    let per_movement: Vec<Movement> = runs
+        .into_iter()
+        .filter(|(s, e)| e - s >= min_len)
+        .map(|(s, e)| {
+            let v = &speed[s..=e];
+            Movement {
+                start_s: t[0] + s as f64 * dt,
+                end_s: t[0] + e as f64 * dt,
+                peak_speed_m_s: v.iter().copied().fold(0.0, f64::max),
+                ldlj: smoothness::ldlj(v, fs),
+                sparc: smoothness::sparc(v, fs, p.sparc_padlevel, p.sparc_fc_hz, p.sparc_amp_th),
+            }
+        })
+        .collect();
+
+    let quats: Vec<[f64; 4]> = poses
+        .iter()
+        .map(|s| {
+            let q = s.quat_wxyz;
+            let l = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+            [q[0] / l, q[1] / l, q[2] / l, q[3] / l]
+        })
+        .collect();
+    let angular_path_rad = quats
+        .windows(2)
+        .map(|w| {
+            let d: f64 = (0..4).map(|i| w[0][i] * w[1][i]).sum::<f64>().abs().min(1.0);
+            2.0 * d.acos()
+        })
+        .sum();
+
+    Ok(PathMetrics {
+        time_s,
+        path_length_m,
+        economy_of_motion,
+        idle_time_s,
+        movements: per_movement.len(),
+        angular_path_rad,
+        ldlj: smoothness::ldlj(&speed, fs),
+        sparc: smoothness::sparc(&speed, fs, p.sparc_padlevel, p.sparc_fc_hz, p.sparc_amp_th),
+        ldlj_per_movement: mean(per_movement.iter().filter_map(|m| m.ldlj)),
+        sparc_per_movement: mean(per_movement.iter().filter_map(|m| m.sparc)),
+        per_movement,
+        peak_speed_m_s: peak,
+    })
+}
+
+pub(crate) fn assess(poses: &[PoseSample], p: &PathParams, values: &mut Values) {
+    const KEYS: [&str; 10] = [
+        "time_s",
+        "path_length_m",
+        "economy_of_motion",
+        "idle_time_s",
+        "movements",
+        "angular_path_rad",
+        "ldlj",
+        "sparc",
+        "ldlj_per_movement",
+        "sparc_per_movement",
+    ];
+    match path(poses, p) {
+        Ok(m) => {
+            values.set("time_s", m.time_s);
+            values.set("path_length_m", m.path_length_m);
+            values.set("idle_time_s", m.idle_time_s);
+            values.set("movements", m.movements as f64);
+            values.set("angular_path_rad", m.angular_path_rad);
+            for (key, v) in [
+                ("economy_of_motion", m.economy_of_motion),
+                ("ldlj", m.ldlj),
+                ("sparc", m.sparc),
+                ("ldlj_per_movement", m.ldlj_per_movement),
+                ("sparc_per_movement", m.sparc_per_movement),
+            ] {
+                match v {
+                    Some(v) => values.set(key, v),
+                    None => values.missing(&[key], "no movement"),
+                }
+            }
+        }
+        Err(e) => values.missing(&KEYS, &e.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose(t: f64, x: V3, angle_z: f64) -> PoseSample {
+        let h = 0.5 * angle_z;
+        PoseSample { t_s: t, tip_m: x, quat_wxyz: [h.cos(), 0.0, 0.0, h.sin()], blade_engaged: false }
+    }
+
+    /// Minimum-jerk displacement from 0 to `d` over [0, 1].
+    fn min_jerk(tau: f64, d: f64) -> f64 {
+        let tau = tau.clamp(0.0, 1.0);
+        d * (10.0 * tau.powi(3) - 15.0 * tau.powi(4) + 6.0 * tau.powi(5))
+    }
+
+    #[test]
+    fn a_straight_constant_speed_line_with_a_quarter_turn() {
+        let poses: Vec<PoseSample> = (0..=1000).map(|i| i as f64 * 1e-3).map(|t| pose(t, [0.1 * t, 0.0, 0.0], t * std::f64::consts::FRAC_PI_2)).collect();
+        let m = path(&poses, &PathParams::default()).unwrap();
+        assert!((m.time_s - 1.0).abs() < 1e-12);
+        assert!((m.path_length_m - 0.1).abs() < 1e-6, "{}", m.path_length_m);
+        assert!((m.economy_of_motion.unwrap() - 1.0).abs() < 1e-6);
+        assert!(m.idle_time_s < 1e-12);
+        assert_eq!(m.movements, 1);
+        assert!((m.angular_path_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-6, "{}", m.angular_path_rad);
+    }
+
+    #[test]
+    fn minimum_jerk_reach_has_the_analytic_ldlj() {
+        // DJ of a minimum-jerk speed profile: -720 / 1.875^2 = -204.8, LDLJ = -ln 204.8
+        let poses: Vec<PoseSample> = (0..=1000).map(|i| i as f64 * 1e-3).map(|t| pose(t, [min_jerk(t, 0.1), 0.0, 0.0], 0.0)).collect();
+        let m = path(&poses, &PathParams::default()).unwrap();
+        let expected = -(204.8f64).ln();
+        assert!((m.ldlj.unwrap() - expected).abs() < 0.03 * expected.abs(), "{:?} vs {expected}", m.ldlj);
+        assert!(m.sparc.unwrap() > -1.8 && m.sparc.unwrap() < -1.3, "{:?}", m.sparc);
+        assert!((m.path_length_m - 0.1).abs() < 1e-4);
+    }
+
+    #[test]
+    fn rest_move_rest_move_rest_counts_two_movements_and_the_idle_time() {
+        // rest 1 s, reach 1 s, rest 1 s, reach back 1 s, rest 1 s, sampled unevenly near 60 Hz
+        let x = |t: f64| min_jerk(t - 1.0, 0.1) - min_jerk(t - 3.0, 0.1);
+        let mut t = 0.0;
+        let mut poses = Vec::new();
+        let mut k = 0u32;
+        while t <= 5.0 {
+            poses.push(pose(t, [x(t), 0.0, 0.0], 0.0));
+            k += 1;
+            t += if k.is_multiple_of(2) { 0.012 } else { 0.021 };
+        }
+        let m = path(&poses, &PathParams::default()).unwrap();
+        assert_eq!(m.movements, 2, "{:?}", m.per_movement);
+        assert!((m.path_length_m - 0.2).abs() < 0.002, "{}", m.path_length_m);
+        assert!(m.economy_of_motion.unwrap() < 0.01);
+        // idle: the 3 rests plus the slow starts and ends of each reach (speed < 5 mm/s)
+        assert!(m.idle_time_s > 3.0 && m.idle_time_s < 3.4, "{}", m.idle_time_s);
+        assert!(m.ldlj_per_movement.unwrap() > m.ldlj.unwrap(), "each reach is smoother than the whole");
+        assert!(m.per_movement[0].start_s > 1.0 && m.per_movement[0].end_s < 2.0);
+    }
+
+    #[test]
+    fn bad_poses_are_errors_not_panics() {
+        let good: Vec<PoseSample> = (0..10).map(|i| pose(i as f64 * 0.01, [0.0; 3], 0.0)).collect();
+        assert!(path(&good, &PathParams::default()).is_ok());
+        assert!(path(&good[..2], &PathParams::default()).is_err());
+        let mut bad = good.clone();
+        bad[4].tip_m[2] = f64::INFINITY;
+        assert!(path(&bad, &PathParams::default()).unwrap_err().to_string().contains("pose 4"));
+        let mut zero = good.clone();
+        zero[1].quat_wxyz = [0.0; 4];
+        assert!(path(&zero, &PathParams::default()).is_err());
+        let still = path(&good, &PathParams::default()).unwrap();
+        assert_eq!(still.movements, 0);
+        assert!(still.economy_of_motion.is_none() && still.ldlj.is_none());
+    }
+}

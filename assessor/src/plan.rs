@@ -1,0 +1,209 @@
+//! Expert plans: what the optimal incision looks like, read from TOML or JSON.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{AssessError, Result};
+use crate::geom::{self, V3};
+
+/// The plan an attempt is measured against (SI units: metres).
+///
+/// The incision is the polyline `incision_m` on the tissue surface from `entry_m` to `exit_m`,
+/// cut `depth_m` deep along `-normal`. Lateral distances are measured "seen from above": after
+/// projecting along `normal` onto a plane (see [`crate::metrics::incision`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExpertPlan {
+    /// A name for reports.
+    #[serde(default)]
+    pub name: String,
+    /// The scene the plan is for (e.g. `chest-wall`), informative.
+    #[serde(default)]
+    pub scene: Option<String>,
+    /// Where the incision starts, on the surface (m).
+    pub entry_m: V3,
+    /// Where it ends, on the surface (m).
+    pub exit_m: V3,
+    /// The planned line on the surface from entry to exit (m), at least 2 points. Empty means
+    /// the straight segment `[entry_m, exit_m]`.
+    #[serde(default)]
+    pub incision_m: Vec<V3>,
+    /// The planned depth below the surface (m), > 0.
+    pub depth_m: f64,
+    /// The surface's outward normal at the incision (unit after normalisation; default +z).
+    #[serde(default = "default_normal")]
+    pub normal: V3,
+    /// The direction the blade moves as it enters the tissue (default `-normal`).
+    #[serde(default)]
+    pub approach_dir: Option<V3>,
+    /// Points on the target that must become visible through the opening (m); may be empty
+    /// (then the visibility metric is missing).
+    #[serde(default)]
+    pub target_m: Vec<V3>,
+    /// Where the target is seen from (m).
+    pub viewpoint_m: V3,
+    /// How far from the planned line still counts as on it (m), default 2 mm.
+    #[serde(default = "default_tolerance")]
+    pub tolerance_m: f64,
+    /// Half the width of the corridor cuts may stay in without damage (m), default 5 mm.
+    #[serde(default = "default_corridor")]
+    pub corridor_half_width_m: f64,
+    /// The force the tissue should not be loaded beyond (N), default 2.5 N.
+    #[serde(default = "default_force_limit")]
+    pub force_limit_n: f64,
+}
+
+fn default_normal() -> V3 {
+    [0.0, 0.0, 1.0]
+}
+fn default_tolerance() -> f64 {
+    0.002
+}
+fn default_corridor() -> f64 {
+    0.005
+}
+fn default_force_limit() -> f64 {
+    2.5
+}
+
+/// The built-in `chest-wall-incision` plan (TOML, embedded).
+pub const CHEST_WALL_PLAN_TOML: &str = include_str!("../examples/plan.toml");
+
+impl ExpertPlan {
+    /// Parses TOML.
+    pub fn from_toml(text: &str) -> Result<Self> {
+        let plan: Self = toml::from_str(text).map_err(|e| AssessError::Parse { what: "expert plan (TOML)".into(), message: e.to_string() })?;
+        plan.normalised()
+    }
+
+    /// Parses JSON.
+    pub fn from_json(text: &str) -> Result<Self> {
+        let plan: Self = serde_json::from_str(text).map_err(|e| AssessError::Parse { what: "expert plan (JSON)".into(), message: e.to_string() })?;
+        plan.normalised()
+    }
+
+    /// Reads a `.toml` or `.json` file (by extension; anything else is tried as TOML, then JSON).
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io { path: path.display().to_string(), source })?;
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let at = |e: AssessError| match e {
+            AssessError::Parse { what, message } => AssessError::Parse { what: format!("{} ({what})", path.display()), message },
+            AssessError::InvalidPlan(m) => AssessError::InvalidPlan(format!("{}: {m}", path.display())),
+            e => e,
+        };
+        match ext.as_str() {
+            "json" => Self::from_json(&text).map_err(at),
+            "toml" => Self::from_toml(&text).map_err(at),
+            _ => Self::from_toml(&text).or_else(|_| Self::from_json(&text)).map_err(at),
+        }
+    }
+
+    /// The built-in plan of `chest-wall-incision`.
+    pub fn chest_wall() -> Result<Self> {
+        Self::from_toml(CHEST_WALL_PLAN_TOML)
+    }
+
+    /// Fills the defaults that depend on other fields (the polyline, the approach), normalises
+    /// the direction vectors and checks the result.
+    pub fn normalised(mut self) -> Result<Self> {
+        if self.incision_m.is_empty() {
+            self.incision_m = vec![self.entry_m, self.exit_m];
+        }
+        self.check()?;
+        self.normal = geom::unit(self.normal).ok_or_else(|| AssessError::InvalidPlan("zero normal".into()))?;
+        let approach = self.approach_dir.unwrap_or(geom::scale(self.normal, -1.0));
+        self.approach_dir = Some(geom::unit(approach).ok_or_else(|| AssessError::InvalidPlan("zero approach direction".into()))?);
+        Ok(self)
+    }
+
+    /// Rejects plans that cannot be assessed against: non-finite numbers, fewer than 2 line
+    /// points, a line shorter than 1 mm, a zero normal, non-positive depth, tolerance,
+    /// corridor or force limit.
+    pub fn check(&self) -> Result<()> {
+        let bad = |m: &str| Err(AssessError::InvalidPlan(m.into()));
+        let mut numbers: Vec<f64> = Vec::new();
+        for v in [self.entry_m, self.exit_m, self.normal, self.viewpoint_m].iter().chain(self.approach_dir.iter()).chain(&self.incision_m).chain(&self.target_m) {
+            numbers.extend_from_slice(v);
+        }
+        numbers.extend([self.depth_m, self.tolerance_m, self.corridor_half_width_m, self.force_limit_n]);
+        if !geom::finite(&numbers) {
+            return bad("a number is not finite (NaN or infinite)");
+        }
+        if self.incision_m.len() < 2 {
+            return bad("the incision line needs at least 2 points");
+        }
+        if geom::polyline_length(&self.incision_m) < 1e-3 {
+            return bad("the incision line is shorter than 1 mm");
+        }
+        if geom::unit(self.normal).is_none() {
+            return bad("the normal is zero");
+        }
+        if self.approach_dir.is_some_and(|a| geom::unit(a).is_none()) {
+            return bad("the approach direction is zero");
+        }
+        if !(self.depth_m > 0.0) {
+            return bad("depth_m must be > 0");
+        }
+        if !(self.tolerance_m > 0.0) {
+            return bad("tolerance_m must be > 0");
+        }
+        if !(self.corridor_half_width_m > 0.0) {
+            return bad("corridor_half_width_m must be > 0");
+        }
+        if !(self.force_limit_n > 0.0) {
+            return bad("force_limit_n must be > 0");
+        }
+        Ok(())
+    }
+
+    /// The planned incision's length along its polyline (m).
+    pub fn length_m(&self) -> f64 {
+        geom::polyline_length(&self.incision_m)
+    }
+
+    /// The approach direction (unit), `-normal` unless given.
+    pub fn approach(&self) -> V3 {
+        self.approach_dir.and_then(geom::unit).unwrap_or(geom::scale(self.normal, -1.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_builtin_plan_parses_and_is_60_mm_long() {
+        let plan = ExpertPlan::chest_wall().unwrap();
+        assert!((plan.length_m() - 0.060).abs() < 1e-3, "{}", plan.length_m());
+        assert!((plan.depth_m - 0.008).abs() < 1e-12);
+        assert!((plan.tolerance_m - 0.002).abs() < 1e-12);
+        assert!(!plan.target_m.is_empty());
+        assert_eq!(plan.approach(), [0.0, 0.0, -1.0]);
+    }
+
+    #[test]
+    fn json_round_trip_and_defaults() {
+        let text = r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
+        let plan = ExpertPlan::from_json(text).unwrap();
+        assert_eq!(plan.incision_m.len(), 2);
+        assert!((plan.tolerance_m - 0.002).abs() < 1e-15);
+        let back = ExpertPlan::from_json(&serde_json::to_string(&plan).unwrap()).unwrap();
+        assert_eq!(back, plan);
+    }
+
+    #[test]
+    fn degenerate_and_nan_plans_are_rejected_with_a_reason() {
+        let ok = r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
+        assert!(ExpertPlan::from_json(ok).is_ok());
+        let short = ok.replace("0.05,0,0", "0.0001,0,0");
+        assert!(ExpertPlan::from_json(&short).unwrap_err().to_string().contains("shorter than 1 mm"));
+        let no_depth = ok.replace("\"depth_m\":0.005", "\"depth_m\":0");
+        assert!(ExpertPlan::from_json(&no_depth).unwrap_err().to_string().contains("depth_m"));
+        let mut plan = ExpertPlan::from_json(ok).unwrap();
+        plan.exit_m[1] = f64::NAN;
+        assert!(plan.check().unwrap_err().to_string().contains("not finite"));
+        let typo = ok.replace("depth_m", "depht_m");
+        assert!(matches!(ExpertPlan::from_json(&typo), Err(AssessError::Parse { .. })));
+    }
+}

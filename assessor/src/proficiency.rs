@@ -1,0 +1,393 @@
+//! Proficiency: thresholds from expert attempts, pass/fail, the normalised score, the
+//! consecutive-pass rule and CUSUM.
+//!
+//! **Thresholds.** For each scored metric (see [`crate::metrics::METRICS`]) the experts'
+//! finite values `x_i` are taken; outliers with `|z_i| = |x_i - mean| / sd > 1.96` are removed
+//! (one pass, on the mean and sample SD of all values); of the rest the mean `mu` and sample
+//! SD `sigma` give the limits: `mu + k sigma` above for lower-is-better metrics, `mu - k sigma`
+//! below for higher-is-better ones, both for two-sided ones (`k` default 2). Metrics with fewer
+//! than 2 expert values get no threshold.
+//!
+//! **Pass.** An attempt passes a metric when its value is within the limits (inclusive); a
+//! missing value fails. It passes overall when it passes every thresholded metric (and there
+//! is at least one). A trainee is proficient in an exercise after
+//! [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes (and stays so).
+//!
+//! **Score.** Per metric, the distance to the limit in units of the expert margin
+//! `|limit - mu|`: lower-is-better `s = (upper - x) / (upper - mu)`, higher-is-better
+//! `s = (x - lower) / (mu - lower)`, two-sided `s = 1 - |x - mu| / (upper - mu)`; so `s = 1` at
+//! the expert mean, `0` at the threshold, negative beyond; clamped to `[-1, 1]` (a missing
+//! value is `-1`). The overall score is the mean of `s` over the thresholded metrics: in
+//! `[-1, 1]`, higher is better, an attempt at the expert mean scores 1, one on every threshold
+//! 0, and `score >= 0` is necessary (not sufficient) for a pass. (A degenerate margin, all
+//! experts equal, gives `s = 1` within the limit and `-1` beyond.)
+//!
+//! **CUSUM** of failures (Bolsin and Colson 2000; Rogers et al. 2004): with acceptable and
+//! unacceptable failure rates `p0 < p1` and error rates `alpha`, `beta`:
+//! `P = ln(p1 / p0)`, `Q = ln((1 - p0) / (1 - p1))`, `s = Q / (P + Q)`; each failure adds
+//! `1 - s`, each pass subtracts `s`. The chart signals an unacceptable rate when it reaches
+//! `h1 = ln((1 - beta) / alpha) / (P + Q)` and an acceptable one when it falls to
+//! `-h0 = -ln((1 - alpha) / beta) / (P + Q)`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{AssessError, Result};
+use crate::metrics::{Better, METRICS, MetricValue};
+
+/// Consecutive passes that make a trainee proficient.
+pub const REQUIRED_CONSECUTIVE_PASSES: u32 = 2;
+/// Expert values with `|z|` above this are outliers.
+pub const OUTLIER_Z: f64 = 1.96;
+/// The default `k` of `mean +/- k SD`.
+pub const DEFAULT_K: f64 = 2.0;
+
+/// The limits of one metric.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Threshold {
+    pub key: String,
+    pub better: Better,
+    /// The experts' mean (the reference value for the score).
+    pub mean: f64,
+    /// The experts' sample SD after outlier removal (0 for hand-set thresholds).
+    pub sd: f64,
+    /// Expert values used (0 for hand-set thresholds).
+    pub n_experts: usize,
+    pub lower: Option<f64>,
+    pub upper: Option<f64>,
+}
+
+impl Threshold {
+    /// A hand-set threshold: the reference (expert-like) value and the limit on the metric's
+    /// bad side (two-sided: symmetric about the reference).
+    pub fn fixed(key: &str, better: Better, reference: f64, limit: f64) -> Self {
+        let margin = (limit - reference).abs();
+        let (lower, upper) = match better {
+            Better::LowerIsBetter => (None, Some(reference + margin)),
+            Better::HigherIsBetter => (Some(reference - margin), None),
+            Better::TwoSided => (Some(reference - margin), Some(reference + margin)),
+        };
+        Self { key: key.into(), better, mean: reference, sd: 0.0, n_experts: 0, lower, upper }
+    }
+
+    /// Whether `value` is within the limits.
+    pub fn passes(&self, value: f64) -> bool {
+        value.is_finite() && self.lower.is_none_or(|l| value >= l) && self.upper.is_none_or(|u| value <= u)
+    }
+
+    /// The per-metric score in `[-1, 1]` (see the module documentation).
+    pub fn score(&self, value: f64) -> f64 {
+        if !value.is_finite() {
+            return -1.0;
+        }
+        let raw = match (self.better, self.lower, self.upper) {
+            (Better::LowerIsBetter, _, Some(u)) => ratio(u - value, u - self.mean),
+            (Better::HigherIsBetter, Some(l), _) => ratio(value - l, self.mean - l),
+            (Better::TwoSided, _, Some(u)) => 1.0 - ratio(value - self.mean, u - self.mean).abs(),
+            (Better::TwoSided, Some(l), None) => 1.0 - ratio(self.mean - value, self.mean - l).abs(),
+            _ => 1.0,
+        };
+        let raw = if raw.is_finite() { raw } else if self.passes(value) { 1.0 } else { -1.0 };
+        raw.clamp(-1.0, 1.0)
+    }
+}
+
+/// `a / b`, with a zero margin mapped to +-infinity (then clamped) or 1 for `a = 0`.
+fn ratio(a: f64, b: f64) -> f64 {
+    if b.abs() > 1e-300 {
+        a / b
+    } else if a == 0.0 {
+        1.0
+    } else {
+        f64::INFINITY.copysign(a)
+    }
+}
+
+/// The thresholds of one exercise.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Thresholds {
+    /// The `k` they were derived with (informative for hand-set ones).
+    pub k: f64,
+    pub metrics: Vec<Threshold>,
+}
+
+/// One metric's verdict.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MetricVerdict {
+    pub key: String,
+    pub value: Option<f64>,
+    pub pass: bool,
+    pub score: f64,
+}
+
+/// An attempt's verdict.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Verdict {
+    pub metrics: Vec<MetricVerdict>,
+    /// Every thresholded metric passes (and there is at least one).
+    pub pass: bool,
+    /// The normalised overall score in `[-1, 1]`.
+    pub score: f64,
+}
+
+fn mean_sd(x: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    let mean = x.iter().sum::<f64>() / n;
+    let sd = if x.len() > 1 { (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() } else { 0.0 };
+    (mean, sd)
+}
+
+/// Expert values of one metric without the outliers (`|z| > 1.96`).
+pub fn without_outliers(x: &[f64]) -> Vec<f64> {
+    let (mean, sd) = mean_sd(x);
+    if !(sd > 0.0) {
+        return x.to_vec();
+    }
+    x.iter().copied().filter(|v| ((v - mean) / sd).abs() <= OUTLIER_Z).collect()
+}
+
+impl Thresholds {
+    /// Thresholds from expert attempts' metric values (`k` > 0).
+    pub fn from_experts(attempts: &[Vec<MetricValue>], k: f64) -> Result<Self> {
+        if !(k > 0.0) || !k.is_finite() {
+            return Err(AssessError::InvalidInput(format!("k = {k}: must be > 0")));
+        }
+        let mut metrics = Vec::new();
+        for m in METRICS.iter().filter(|m| m.scored) {
+            let x: Vec<f64> = attempts.iter().filter_map(|a| crate::metrics::value_of(a, m.key)).collect();
+            if x.len() < 2 {
+                continue;
+            }
+            let kept = without_outliers(&x);
+            let (mean, sd) = mean_sd(&kept);
+            let (lower, upper) = match m.better {
+                Better::LowerIsBetter => (None, Some(mean + k * sd)),
+                Better::HigherIsBetter => (Some(mean - k * sd), None),
+                Better::TwoSided => (Some(mean - k * sd), Some(mean + k * sd)),
+            };
+            metrics.push(Threshold { key: m.key.into(), better: m.better, mean, sd, n_experts: kept.len(), lower, upper });
+        }
+        Ok(Self { k, metrics })
+    }
+
+    /// The verdict on one attempt's metric values.
+    pub fn verdict(&self, attempt: &[MetricValue]) -> Verdict {
+        let metrics: Vec<MetricVerdict> = self
+            .metrics
+            .iter()
+            .map(|t| {
+                let value = crate::metrics::value_of(attempt, &t.key);
+                MetricVerdict { key: t.key.clone(), value, pass: value.is_some_and(|v| t.passes(v)), score: value.map_or(-1.0, |v| t.score(v)) }
+            })
+            .collect();
+        let pass = !metrics.is_empty() && metrics.iter().all(|m| m.pass);
+        let score = if metrics.is_empty() { 0.0 } else { metrics.iter().map(|m| m.score).sum::<f64>() / metrics.len() as f64 };
+        Verdict { metrics, pass, score }
+    }
+}
+
+/// A trainee's standing in one exercise.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ProficiencyState {
+    pub attempts: u32,
+    pub passes: u32,
+    pub consecutive_passes: u32,
+    /// Reached [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes at some point.
+    pub proficient: bool,
+}
+
+impl ProficiencyState {
+    /// After one more scored attempt.
+    pub fn update(&mut self, pass: bool) {
+        self.attempts += 1;
+        if pass {
+            self.passes += 1;
+            self.consecutive_passes += 1;
+        } else {
+            self.consecutive_passes = 0;
+        }
+        self.proficient |= self.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES;
+    }
+
+    /// The state after a sequence of pass/fail outcomes.
+    pub fn from_outcomes(passes: &[bool]) -> Self {
+        let mut s = Self::default();
+        for &p in passes {
+            s.update(p);
+        }
+        s
+    }
+}
+
+/// Parameters of the CUSUM chart.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CusumParams {
+    /// Acceptable failure rate.
+    pub p0: f64,
+    /// Unacceptable failure rate.
+    pub p1: f64,
+    /// Type I error (signalling unacceptable when acceptable).
+    pub alpha: f64,
+    /// Type II error.
+    pub beta: f64,
+}
+
+impl Default for CusumParams {
+    fn default() -> Self {
+        Self { p0: 0.10, p1: 0.20, alpha: 0.10, beta: 0.10 }
+    }
+}
+
+impl CusumParams {
+    /// Checks `0 < p0 < p1 < 1` and `0 < alpha, beta < 1`.
+    pub fn check(&self) -> Result<()> {
+        let ok = 0.0 < self.p0 && self.p0 < self.p1 && self.p1 < 1.0 && 0.0 < self.alpha && self.alpha < 1.0 && 0.0 < self.beta && self.beta < 1.0;
+        if ok { Ok(()) } else { Err(AssessError::InvalidInput(format!("CUSUM parameters {self:?}: need 0 < p0 < p1 < 1, 0 < alpha, beta < 1"))) }
+    }
+    fn p_plus_q(&self) -> f64 {
+        (self.p1 / self.p0).ln() + ((1.0 - self.p0) / (1.0 - self.p1)).ln()
+    }
+    /// The decrement per pass, `s = Q / (P + Q)`.
+    pub fn s(&self) -> f64 {
+        ((1.0 - self.p0) / (1.0 - self.p1)).ln() / self.p_plus_q()
+    }
+    /// The lower decision limit's magnitude `h0` (acceptable at `-h0`).
+    pub fn h0(&self) -> f64 {
+        ((1.0 - self.alpha) / self.beta).ln() / self.p_plus_q()
+    }
+    /// The upper decision limit `h1` (unacceptable).
+    pub fn h1(&self) -> f64 {
+        ((1.0 - self.beta) / self.alpha).ln() / self.p_plus_q()
+    }
+}
+
+/// What a CUSUM point says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CusumSignal {
+    None,
+    /// At or below `-h0`: the failure rate is acceptable (`p0`).
+    Acceptable,
+    /// At or above `h1`: the failure rate is unacceptable (`p1`).
+    Unacceptable,
+}
+
+/// One point of the chart, after an attempt.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CusumPoint {
+    pub value: f64,
+    pub signal: CusumSignal,
+}
+
+/// The CUSUM chart of a pass/fail sequence (no reset at the limits).
+pub fn cusum(passes: &[bool], params: &CusumParams) -> Result<Vec<CusumPoint>> {
+    params.check()?;
+    let (s, h0, h1) = (params.s(), params.h0(), params.h1());
+    let mut value = 0.0;
+    Ok(passes
+        .iter()
+        .map(|&pass| {
+            value += if pass { -s } else { 1.0 - s };
+            let signal = if value >= h1 {
+                CusumSignal::Unacceptable
+            } else if value <= -h0 {
+                CusumSignal::Acceptable
+            } else {
+                CusumSignal::None
+            };
+            CusumPoint { value, signal }
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn attempt(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
+        pairs
+            .iter()
+            .map(|(k, v)| {
+                let m = crate::metrics::metric(k).unwrap();
+                MetricValue { key: (*k).into(), value: Some(*v), unit: m.unit.into(), better: m.better, scored: m.scored, missing: None }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn thresholds_by_hand_with_an_outlier_removed() {
+        // lateral_mean_m: 1..=9 mm and an outlier at 40 mm
+        let mut experts: Vec<Vec<MetricValue>> = (1..=9).map(|i| attempt(&[("lateral_mean_m", i as f64), ("fraction_cut_in_tolerance", 0.9), ("depth_error_m", if i % 2 == 0 { 1.0 } else { -1.0 })])).collect();
+        experts.push(attempt(&[("lateral_mean_m", 40.0), ("fraction_cut_in_tolerance", 0.9), ("depth_error_m", 0.0)]));
+        let t = Thresholds::from_experts(&experts, 2.0).unwrap();
+        let lat = t.metrics.iter().find(|m| m.key == "lateral_mean_m").unwrap();
+        // all 10: mean 8.5, sd 11.72; z(40) = 2.69 > 1.96 removed; 1..9: mean 5, sd sqrt(7.5)
+        assert_eq!(lat.n_experts, 9);
+        assert!((lat.mean - 5.0).abs() < 1e-12);
+        assert!((lat.sd - 7.5f64.sqrt()).abs() < 1e-12);
+        assert_eq!(lat.lower, None);
+        assert!((lat.upper.unwrap() - (5.0 + 2.0 * 7.5f64.sqrt())).abs() < 1e-12);
+        let frac = t.metrics.iter().find(|m| m.key == "fraction_cut_in_tolerance").unwrap();
+        assert!((frac.lower.unwrap() - 0.9).abs() < 1e-12 && frac.upper.is_none(), "all equal: sd 0, nothing removed");
+        assert_eq!(frac.n_experts, 10);
+        let depth = t.metrics.iter().find(|m| m.key == "depth_error_m").unwrap();
+        assert!(depth.lower.is_some() && depth.upper.is_some(), "two-sided");
+        assert_eq!(t.metrics.len(), 3, "metrics without expert values get no threshold");
+        assert!(Thresholds::from_experts(&experts, 0.0).is_err());
+    }
+
+    #[test]
+    fn pass_and_score_by_hand() {
+        let t = Thresholds {
+            k: 2.0,
+            metrics: vec![Threshold::fixed("lateral_mean_m", Better::LowerIsBetter, 1.0, 3.0), Threshold::fixed("fraction_cut_in_tolerance", Better::HigherIsBetter, 0.9, 0.7), Threshold::fixed("depth_error_m", Better::TwoSided, 0.0, 2.0)],
+        };
+        let at_mean = t.verdict(&attempt(&[("lateral_mean_m", 1.0), ("fraction_cut_in_tolerance", 0.9), ("depth_error_m", 0.0)]));
+        assert!(at_mean.pass);
+        assert!((at_mean.score - 1.0).abs() < 1e-12);
+        let on_limits = t.verdict(&attempt(&[("lateral_mean_m", 3.0), ("fraction_cut_in_tolerance", 0.7), ("depth_error_m", -2.0)]));
+        assert!(on_limits.pass);
+        assert!(on_limits.score.abs() < 1e-12);
+        // lateral 2 -> 0.5; fraction 0.6 -> -0.5 (fails); depth 1 -> 0.5: mean 1/6
+        let mixed = t.verdict(&attempt(&[("lateral_mean_m", 2.0), ("fraction_cut_in_tolerance", 0.6), ("depth_error_m", 1.0)]));
+        assert!(!mixed.pass);
+        assert!((mixed.score - 1.0 / 6.0).abs() < 1e-12, "{}", mixed.score);
+        assert_eq!(mixed.metrics.iter().map(|m| m.pass).collect::<Vec<_>>(), [true, false, true]);
+        // far beyond: clamped to -1; missing: -1 and a fail
+        let bad = t.verdict(&attempt(&[("lateral_mean_m", 100.0), ("fraction_cut_in_tolerance", 0.0)]));
+        assert!(!bad.pass);
+        assert!((bad.score + 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn proficient_after_two_consecutive_passes() {
+        assert!(!ProficiencyState::from_outcomes(&[true, false, true, false]).proficient);
+        let s = ProficiencyState::from_outcomes(&[false, true, true, false]);
+        assert!(s.proficient, "stays proficient");
+        assert_eq!((s.attempts, s.passes, s.consecutive_passes), (4, 2, 0));
+    }
+
+    #[test]
+    fn cusum_by_hand() {
+        let p = CusumParams::default();
+        // P = ln 2, Q = ln 1.125, s = Q / (P + Q), h0 = h1 = ln 9 / (P + Q)
+        let pq = 2f64.ln() + 1.125f64.ln();
+        assert!((p.s() - 0.145245).abs() < 1e-6, "{}", p.s());
+        assert!((p.h1() - 2.709511).abs() < 1e-6, "{}", p.h1());
+        assert!((p.h0() - 9f64.ln() / pq).abs() < 1e-12);
+        let c = cusum(&[false, true, true, false], &p).unwrap();
+        let expected = [0.8547556, 0.7095113, 0.5642669, 1.4190226];
+        for (point, e) in c.iter().zip(expected) {
+            assert!((point.value - e).abs() < 1e-6, "{c:?}");
+            assert_eq!(point.signal, CusumSignal::None);
+        }
+        // 2.709511 / 0.145245 = 18.65: acceptable at the 19th pass in a row
+        let passes = cusum(&[true; 19], &p).unwrap();
+        assert_eq!(passes[17].signal, CusumSignal::None);
+        assert_eq!(passes[18].signal, CusumSignal::Acceptable);
+        // 4 failures: 3.419 >= 2.7095
+        let fails = cusum(&[false; 4], &p).unwrap();
+        assert_eq!(fails[2].signal, CusumSignal::None);
+        assert_eq!(fails[3].signal, CusumSignal::Unacceptable);
+        assert!(cusum(&[true], &CusumParams { p0: 0.3, p1: 0.2, ..p }).is_err());
+    }
+}

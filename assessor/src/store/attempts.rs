@@ -1,0 +1,308 @@
+//! Attempts, their metric results and the proficiency state per trainee and exercise.
+
+use serde::{Deserialize, Serialize};
+
+use super::{Store, now_ns};
+use crate::error::{AssessError, Result};
+use crate::metrics::{self, Better, MetricValue};
+use crate::proficiency::{CusumParams, CusumPoint, ProficiencyState, REQUIRED_CONSECUTIVE_PASSES, Verdict, cusum};
+
+/// Where an attempt stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AttemptStatus {
+    /// Started, not ended.
+    Running,
+    /// Ended and scored.
+    Complete,
+    /// Interrupted: the recording is kept, nothing scored.
+    Incomplete,
+    /// The assessment itself failed (e.g. an unreadable recording).
+    Failed,
+}
+
+impl AttemptStatus {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AttemptStatus::Running => "running",
+            AttemptStatus::Complete => "complete",
+            AttemptStatus::Incomplete => "incomplete",
+            AttemptStatus::Failed => "failed",
+        }
+    }
+    fn parse(s: &str) -> Result<Self> {
+        match s {
+            "running" => Ok(AttemptStatus::Running),
+            "complete" => Ok(AttemptStatus::Complete),
+            "incomplete" => Ok(AttemptStatus::Incomplete),
+            "failed" => Ok(AttemptStatus::Failed),
+            _ => Err(AssessError::InvalidInput(format!("stored attempt status {s:?}"))),
+        }
+    }
+}
+
+/// One attempt at an exercise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Attempt {
+    pub id: i64,
+    pub trainee_id: i64,
+    pub exercise_id: i64,
+    pub recording_path: Option<String>,
+    pub started_ns: i64,
+    pub ended_ns: Option<i64>,
+    pub status: AttemptStatus,
+    /// A reference attempt by an expert (sets thresholds).
+    pub expert: bool,
+    pub scored: bool,
+    pub score: Option<f64>,
+    pub passed: Option<bool>,
+    pub note: Option<String>,
+}
+
+type MetricRow = (String, Option<f64>, String, Option<bool>, Option<String>);
+type ProficiencyRow = (i64, i64, i64, bool, Option<i64>, f64);
+type AttemptRow = (i64, i64, i64, Option<String>, i64, Option<i64>, String, bool, bool, Option<f64>, Option<bool>, Option<String>);
+const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note FROM attempts";
+
+fn attempt(r: AttemptRow) -> Result<Attempt> {
+    Ok(Attempt {
+        id: r.0,
+        trainee_id: r.1,
+        exercise_id: r.2,
+        recording_path: r.3,
+        started_ns: r.4,
+        ended_ns: r.5,
+        status: AttemptStatus::parse(&r.6)?,
+        expert: r.7,
+        scored: r.8,
+        score: r.9,
+        passed: r.10,
+        note: r.11,
+    })
+}
+
+/// One stored metric result.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StoredMetric {
+    pub metric: String,
+    pub value: Option<f64>,
+    pub unit: String,
+    /// Against the thresholds at scoring time; `None` for metrics without a threshold.
+    pub passed: Option<bool>,
+    pub missing: Option<String>,
+}
+
+/// A trainee's proficiency in one exercise.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ProficiencyRecord {
+    pub trainee_id: i64,
+    pub exercise_id: i64,
+    pub state: ProficiencyState,
+    /// The attempt that completed the consecutive passes.
+    pub proficient_attempt_id: Option<i64>,
+    /// The last CUSUM value (default parameters).
+    pub cusum: f64,
+}
+
+/// What scoring an attempt gave.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Outcome {
+    pub attempt: Attempt,
+    pub verdict: Verdict,
+    pub proficiency: ProficiencyRecord,
+}
+
+impl Store {
+    /// Records the start of an attempt (status `running`).
+    pub async fn start_attempt(&self, trainee_id: i64, exercise_id: i64, recording_path: Option<&str>, expert: bool) -> Result<Attempt> {
+        self.get_user(trainee_id).await?;
+        self.get_exercise(exercise_id).await?;
+        let id: i64 = sqlx::query_scalar("INSERT INTO attempts (trainee_id, exercise_id, recording_path, started_ns, status, expert) VALUES (?, ?, ?, ?, 'running', ?) RETURNING id")
+            .bind(trainee_id)
+            .bind(exercise_id)
+            .bind(recording_path)
+            .bind(now_ns())
+            .bind(expert)
+            .fetch_one(&self.pool)
+            .await?;
+        self.get_attempt(id).await
+    }
+
+    pub async fn get_attempt(&self, id: i64) -> Result<Attempt> {
+        let row: Option<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE id = ?"))).bind(id).fetch_optional(&self.pool).await?;
+        attempt(row.ok_or_else(|| AssessError::NotFound(format!("attempt {id}")))?)
+    }
+
+    /// Attempts, optionally of one trainee and/or exercise, oldest first.
+    pub async fn list_attempts(&self, trainee_id: Option<i64>, exercise_id: Option<i64>) -> Result<Vec<Attempt>> {
+        let rows: Vec<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE (? IS NULL OR trainee_id = ?) AND (? IS NULL OR exercise_id = ?) ORDER BY started_ns, id")))
+            .bind(trainee_id)
+            .bind(trainee_id)
+            .bind(exercise_id)
+            .bind(exercise_id)
+            .fetch_all(&self.pool)
+            .await?;
+        rows.into_iter().map(attempt).collect()
+    }
+
+    /// Sets the end time (if not set) of a running attempt, `status` and a note.
+    async fn end_unscored(&self, attempt_id: i64, status: AttemptStatus, note: Option<&str>) -> Result<Attempt> {
+        let done = sqlx::query("UPDATE attempts SET status = ?, ended_ns = COALESCE(ended_ns, ?), note = COALESCE(?, note) WHERE id = ? AND status = 'running'")
+            .bind(status.as_str())
+            .bind(now_ns())
+            .bind(note)
+            .bind(attempt_id)
+            .execute(&self.pool)
+            .await?;
+        if done.rows_affected() == 0 {
+            let a = self.get_attempt(attempt_id).await?;
+            return Err(AssessError::Conflict(format!("attempt {attempt_id} is {}, not running", a.status.as_str())));
+        }
+        self.get_attempt(attempt_id).await
+    }
+
+    /// An interrupted attempt: `incomplete`, the recording path kept, nothing scored.
+    pub async fn mark_incomplete(&self, attempt_id: i64, note: Option<&str>) -> Result<Attempt> {
+        self.end_unscored(attempt_id, AttemptStatus::Incomplete, note).await
+    }
+
+    /// An attempt whose assessment failed (`failed`, with the reason).
+    pub async fn mark_failed(&self, attempt_id: i64, reason: &str) -> Result<Attempt> {
+        self.end_unscored(attempt_id, AttemptStatus::Failed, Some(reason)).await
+    }
+
+    /// Scores an attempt (running, incomplete or failed; not already complete) against its
+    /// exercise's current thresholds, stores its metrics, marks it complete and updates the
+    /// trainee's proficiency, in one transaction.
+    pub async fn finish_attempt(&self, attempt_id: i64, metrics: &[MetricValue]) -> Result<Outcome> {
+        let a = self.get_attempt(attempt_id).await?;
+        let thresholds = self.thresholds(a.exercise_id).await?;
+        let verdict = thresholds.verdict(metrics);
+        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, ?), scored = TRUE, score = ?, passed = ? WHERE id = ? AND status <> 'complete'")
+            .bind(now_ns())
+            .bind(verdict.score)
+            .bind(verdict.pass)
+            .bind(attempt_id)
+            .execute(&mut *tx)
+            .await?;
+        if done.rows_affected() == 0 {
+            return Err(AssessError::Conflict(format!("attempt {attempt_id} is already scored")));
+        }
+        sqlx::query("DELETE FROM metric_results WHERE attempt_id = ?").bind(attempt_id).execute(&mut *tx).await?;
+        for m in metrics {
+            let passed = verdict.metrics.iter().find(|v| v.key == m.key).map(|v| v.pass);
+            sqlx::query("INSERT INTO metric_results (attempt_id, metric, value, unit, passed, missing) VALUES (?, ?, ?, ?, ?, ?)")
+                .bind(attempt_id)
+                .bind(&m.key)
+                .bind(m.value.filter(|v| v.is_finite()))
+                .bind(&m.unit)
+                .bind(passed)
+                .bind(&m.missing)
+                .execute(&mut *tx)
+                .await
+                .map_err(super::conflict(|| format!("metric {:?} given twice", m.key)))?;
+        }
+        let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = ? AND exercise_id = ? AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
+            .bind(a.trainee_id)
+            .bind(a.exercise_id)
+            .fetch_all(&mut *tx)
+            .await?;
+        let record = proficiency_of(a.trainee_id, a.exercise_id, &history)?;
+        sqlx::query(
+            "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum, updated_ns) \
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
+             ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET attempts = excluded.attempts, passes = excluded.passes, \
+             consecutive_passes = excluded.consecutive_passes, proficient = excluded.proficient, \
+             proficient_attempt_id = excluded.proficient_attempt_id, cusum = excluded.cusum, updated_ns = excluded.updated_ns",
+        )
+        .bind(record.trainee_id)
+        .bind(record.exercise_id)
+        .bind(i64::from(record.state.attempts))
+        .bind(i64::from(record.state.passes))
+        .bind(i64::from(record.state.consecutive_passes))
+        .bind(record.state.proficient)
+        .bind(record.proficient_attempt_id)
+        .bind(record.cusum)
+        .bind(now_ns())
+        .execute(&mut *tx)
+        .await?;
+        tx.commit().await?;
+        Ok(Outcome { attempt: self.get_attempt(attempt_id).await?, verdict, proficiency: record })
+    }
+
+    /// Computes the attempt's metrics from `data` against its exercise's plan
+    /// ([`metrics::assess`]) and scores it ([`Store::finish_attempt`]).
+    pub async fn score_attempt(&self, attempt_id: i64, data: &crate::input::AttemptData) -> Result<Outcome> {
+        let a = self.get_attempt(attempt_id).await?;
+        let plan = self.exercise_plan(a.exercise_id).await?;
+        let values = metrics::assess(&plan, data)?;
+        self.finish_attempt(attempt_id, &values).await
+    }
+
+    /// The stored metric results of an attempt, by metric.
+    pub async fn attempt_metrics(&self, attempt_id: i64) -> Result<Vec<StoredMetric>> {
+        let rows: Vec<MetricRow> = sqlx::query_as("SELECT metric, value, unit, passed, missing FROM metric_results WHERE attempt_id = ? ORDER BY metric").bind(attempt_id).fetch_all(&self.pool).await?;
+        Ok(rows.into_iter().map(|(metric, value, unit, passed, missing)| StoredMetric { metric, value, unit, passed, missing }).collect())
+    }
+
+    /// The stored metric results of an attempt as [`MetricValue`]s (direction and scoring
+    /// from the catalogue; unknown keys are two-sided and not scored).
+    pub async fn attempt_metric_values(&self, attempt_id: i64) -> Result<Vec<MetricValue>> {
+        Ok(self
+            .attempt_metrics(attempt_id)
+            .await?
+            .into_iter()
+            .map(|m| {
+                let def = metrics::metric(&m.metric);
+                MetricValue { better: def.map_or(Better::TwoSided, |d| d.better), scored: def.is_some_and(|d| d.scored), key: m.metric, value: m.value, unit: m.unit, missing: m.missing }
+            })
+            .collect())
+    }
+
+    /// A trainee's proficiency in an exercise (all zero before the first scored attempt).
+    pub async fn proficiency(&self, trainee_id: i64, exercise_id: i64) -> Result<ProficiencyRecord> {
+        let row: Option<ProficiencyRow> = sqlx::query_as("SELECT attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum FROM proficiency WHERE trainee_id = ? AND exercise_id = ?")
+                .bind(trainee_id)
+                .bind(exercise_id)
+                .fetch_optional(&self.pool)
+                .await?;
+        let u = |v: i64| u32::try_from(v).unwrap_or(0);
+        Ok(match row {
+            Some((attempts, passes, consecutive, proficient, at, cusum)) => ProficiencyRecord {
+                trainee_id,
+                exercise_id,
+                state: ProficiencyState { attempts: u(attempts), passes: u(passes), consecutive_passes: u(consecutive), proficient },
+                proficient_attempt_id: at,
+                cusum,
+            },
+            None => ProficiencyRecord { trainee_id, exercise_id, state: ProficiencyState::default(), proficient_attempt_id: None, cusum: 0.0 },
+        })
+    }
+
+    /// The CUSUM chart of a trainee's scored attempts at an exercise, oldest first, with
+    /// the attempt ids.
+    pub async fn cusum_chart(&self, trainee_id: i64, exercise_id: i64, params: &CusumParams) -> Result<Vec<(i64, CusumPoint)>> {
+        let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = ? AND exercise_id = ? AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
+            .bind(trainee_id)
+            .bind(exercise_id)
+            .fetch_all(&self.pool)
+            .await?;
+        let passes: Vec<bool> = history.iter().map(|h| h.1).collect();
+        Ok(history.iter().map(|h| h.0).zip(cusum(&passes, params)?).collect())
+    }
+}
+
+fn proficiency_of(trainee_id: i64, exercise_id: i64, history: &[(i64, bool)]) -> Result<ProficiencyRecord> {
+    let mut state = ProficiencyState::default();
+    let mut proficient_attempt_id = None;
+    for &(id, pass) in history {
+        state.update(pass);
+        if proficient_attempt_id.is_none() && state.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES {
+            proficient_attempt_id = Some(id);
+        }
+    }
+    let passes: Vec<bool> = history.iter().map(|h| h.1).collect();
+    let cusum = cusum(&passes, &CusumParams::default())?.last().map_or(0.0, |p| p.value);
+    Ok(ProficiencyRecord { trainee_id, exercise_id, state, proficient_attempt_id, cusum })
+}

@@ -1,0 +1,204 @@
+//! Expert plans, exercises (a scene, a plan and metric thresholds) and the thresholds.
+
+use serde::{Deserialize, Serialize};
+
+use super::{Store, conflict, now_ns};
+use crate::error::{AssessError, Result};
+use crate::metrics::{Better, MetricValue};
+use crate::plan::ExpertPlan;
+use crate::proficiency::{Threshold, Thresholds};
+
+/// An exercise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Exercise {
+    pub id: i64,
+    pub name: String,
+    pub scene: String,
+    pub description: String,
+    pub plan_id: i64,
+    /// The `k` of `mean +/- k SD` for expert-derived thresholds.
+    pub threshold_k: f64,
+    pub created_ns: i64,
+}
+
+/// What [`Store::create_exercise`] needs.
+#[derive(Debug, Clone)]
+pub struct NewExercise<'a> {
+    pub name: &'a str,
+    pub scene: &'a str,
+    pub description: &'a str,
+    pub plan: &'a ExpertPlan,
+    /// Hand-set thresholds until expert attempts replace them (may be empty).
+    pub thresholds: &'a [Threshold],
+    pub threshold_k: f64,
+}
+
+/// Where an exercise's thresholds came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ThresholdSource {
+    /// Set by hand (the built-in defaults, an import).
+    Default,
+    /// Derived from expert attempts.
+    Experts,
+}
+
+impl ThresholdSource {
+    fn as_str(self) -> &'static str {
+        match self {
+            ThresholdSource::Default => "default",
+            ThresholdSource::Experts => "experts",
+        }
+    }
+}
+
+type ThresholdRow = (String, String, f64, f64, i64, Option<f64>, Option<f64>);
+type ExerciseRow = (i64, String, String, String, i64, f64, i64);
+const EXERCISE_SELECT: &str = "SELECT id, name, scene, description, plan_id, threshold_k, created_ns FROM exercises";
+
+fn exercise((id, name, scene, description, plan_id, threshold_k, created_ns): ExerciseRow) -> Exercise {
+    Exercise { id, name, scene, description, plan_id, threshold_k, created_ns }
+}
+
+impl Store {
+    /// Stores a plan (checked first); returns its id.
+    pub async fn create_plan(&self, plan: &ExpertPlan) -> Result<i64> {
+        plan.check()?;
+        let id = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+            .bind(&plan.name)
+            .bind(&plan.scene)
+            .bind(plan.depth_m)
+            .bind(plan.tolerance_m)
+            .bind(serde_json::to_string(plan)?)
+            .bind(now_ns())
+            .fetch_one(&self.pool)
+            .await?;
+        Ok(id)
+    }
+
+    /// The plan with `id`.
+    pub async fn get_plan(&self, id: i64) -> Result<ExpertPlan> {
+        let json: Option<String> = sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
+        ExpertPlan::from_json(&json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?)
+    }
+
+    /// All stored plans `(id, plan)`, oldest first.
+    pub async fn list_plans(&self) -> Result<Vec<(i64, ExpertPlan)>> {
+        let rows: Vec<(i64, String)> = sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id").fetch_all(&self.pool).await?;
+        rows.into_iter().map(|(id, json)| Ok((id, ExpertPlan::from_json(&json)?))).collect()
+    }
+
+    /// Adds an exercise with its plan and hand-set thresholds (one transaction).
+    pub async fn create_exercise(&self, new: &NewExercise<'_>) -> Result<Exercise> {
+        new.plan.check()?;
+        if new.name.trim().is_empty() || new.scene.trim().is_empty() {
+            return Err(AssessError::InvalidInput("an exercise needs a name and a scene".into()));
+        }
+        if !(new.threshold_k > 0.0) {
+            return Err(AssessError::InvalidInput(format!("threshold k = {}: must be > 0", new.threshold_k)));
+        }
+        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+            .bind(&new.plan.name)
+            .bind(&new.plan.scene)
+            .bind(new.plan.depth_m)
+            .bind(new.plan.tolerance_m)
+            .bind(serde_json::to_string(new.plan)?)
+            .bind(now_ns())
+            .fetch_one(&mut *tx)
+            .await?;
+        let name = new.name.trim().to_owned();
+        let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+            .bind(&name)
+            .bind(new.scene)
+            .bind(new.description)
+            .bind(plan_id)
+            .bind(new.threshold_k)
+            .bind(now_ns())
+            .fetch_one(&mut *tx)
+            .await
+            .map_err(conflict(|| format!("an exercise named {name:?} exists")))?;
+        write_thresholds(&mut tx, id, new.thresholds, ThresholdSource::Default).await?;
+        tx.commit().await?;
+        self.get_exercise(id).await
+    }
+
+    pub async fn get_exercise(&self, id: i64) -> Result<Exercise> {
+        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{EXERCISE_SELECT} WHERE id = ?"))).bind(id).fetch_optional(&self.pool).await?;
+        row.map(exercise).ok_or_else(|| AssessError::NotFound(format!("exercise {id}")))
+    }
+
+    pub async fn exercise_by_name(&self, name: &str) -> Result<Exercise> {
+        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{EXERCISE_SELECT} WHERE name = ?"))).bind(name).fetch_optional(&self.pool).await?;
+        row.map(exercise).ok_or_else(|| AssessError::NotFound(format!("exercise {name:?}")))
+    }
+
+    pub async fn list_exercises(&self) -> Result<Vec<Exercise>> {
+        let rows: Vec<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{EXERCISE_SELECT} ORDER BY name"))).fetch_all(&self.pool).await?;
+        Ok(rows.into_iter().map(exercise).collect())
+    }
+
+    /// The exercise's expert plan.
+    pub async fn exercise_plan(&self, exercise_id: i64) -> Result<ExpertPlan> {
+        let e = self.get_exercise(exercise_id).await?;
+        self.get_plan(e.plan_id).await
+    }
+
+    /// The exercise's current thresholds.
+    pub async fn thresholds(&self, exercise_id: i64) -> Result<Thresholds> {
+        let e = self.get_exercise(exercise_id).await?;
+        let rows: Vec<ThresholdRow> = sqlx::query_as("SELECT metric, better, mean, sd, n_experts, lower_limit, upper_limit FROM metric_thresholds WHERE exercise_id = ? ORDER BY metric").bind(exercise_id).fetch_all(&self.pool).await?;
+        let mut metrics = Vec::with_capacity(rows.len());
+        for (key, better, mean, sd, n, lower, upper) in rows {
+            let better = Better::parse(&better).ok_or_else(|| AssessError::InvalidInput(format!("stored threshold of {key}: unknown direction {better:?}")))?;
+            metrics.push(Threshold { key, better, mean, sd, n_experts: usize::try_from(n).unwrap_or(0), lower, upper });
+        }
+        Ok(Thresholds { k: e.threshold_k, metrics })
+    }
+
+    /// Replaces the exercise's thresholds.
+    pub async fn set_thresholds(&self, exercise_id: i64, thresholds: &Thresholds, source: ThresholdSource) -> Result<()> {
+        self.get_exercise(exercise_id).await?;
+        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        sqlx::query("DELETE FROM metric_thresholds WHERE exercise_id = ?").bind(exercise_id).execute(&mut *tx).await?;
+        write_thresholds(&mut tx, exercise_id, &thresholds.metrics, source).await?;
+        tx.commit().await?;
+        Ok(())
+    }
+
+    /// Derives the exercise's thresholds from its complete expert attempts (`mean +/- k SD`
+    /// after outlier removal, `k` of the exercise), stores them and returns them. Errors when
+    /// no metric has at least 2 expert values.
+    pub async fn thresholds_from_experts(&self, exercise_id: i64) -> Result<Thresholds> {
+        let e = self.get_exercise(exercise_id).await?;
+        let ids: Vec<i64> = sqlx::query_scalar("SELECT id FROM attempts WHERE exercise_id = ? AND expert = TRUE AND status = 'complete' ORDER BY id").bind(exercise_id).fetch_all(&self.pool).await?;
+        let mut attempts: Vec<Vec<MetricValue>> = Vec::with_capacity(ids.len());
+        for id in ids {
+            attempts.push(self.attempt_metric_values(id).await?);
+        }
+        let t = Thresholds::from_experts(&attempts, e.threshold_k)?;
+        if t.metrics.is_empty() {
+            return Err(AssessError::InvalidInput(format!("exercise {:?}: {} complete expert attempts, need at least 2 with metric values", e.name, attempts.len())));
+        }
+        self.set_thresholds(exercise_id, &t, ThresholdSource::Experts).await?;
+        Ok(t)
+    }
+}
+
+async fn write_thresholds(tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>, exercise_id: i64, thresholds: &[Threshold], source: ThresholdSource) -> Result<()> {
+    for t in thresholds {
+        sqlx::query("INSERT INTO metric_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
+            .bind(exercise_id)
+            .bind(&t.key)
+            .bind(t.better.as_str())
+            .bind(t.mean)
+            .bind(t.sd)
+            .bind(i64::try_from(t.n_experts).unwrap_or(i64::MAX))
+            .bind(t.lower)
+            .bind(t.upper)
+            .bind(source.as_str())
+            .execute(&mut **tx)
+            .await?;
+    }
+    Ok(())
+}

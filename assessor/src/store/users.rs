@@ -1,0 +1,131 @@
+//! Users: instructors, trainees and administrators, with argon2id password hashes.
+
+use argon2::Argon2;
+use argon2::password_hash::rand_core::OsRng;
+use argon2::password_hash::{PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
+use serde::{Deserialize, Serialize};
+
+use super::{Store, conflict, now_ns};
+use crate::error::{AssessError, Result};
+
+/// What a user may do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    Instructor,
+    Trainee,
+    Admin,
+}
+
+impl Role {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Role::Instructor => "instructor",
+            Role::Trainee => "trainee",
+            Role::Admin => "admin",
+        }
+    }
+}
+
+impl std::str::FromStr for Role {
+    type Err = AssessError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "instructor" => Ok(Role::Instructor),
+            "trainee" => Ok(Role::Trainee),
+            "admin" => Ok(Role::Admin),
+            _ => Err(AssessError::InvalidInput(format!("unknown role {s:?} (instructor, trainee or admin)"))),
+        }
+    }
+}
+
+impl std::fmt::Display for Role {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A user (the password hash stays in the database).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct User {
+    pub id: i64,
+    pub name: String,
+    pub role: Role,
+    pub has_password: bool,
+    pub created_ns: i64,
+}
+
+type UserRow = (i64, String, String, Option<String>, i64);
+
+fn user(row: UserRow) -> Result<User> {
+    Ok(User { id: row.0, name: row.1, role: row.2.parse()?, has_password: row.3.is_some(), created_ns: row.4 })
+}
+
+
+/// An argon2id PHC string for `password` with a random salt.
+pub fn hash_password(password: &str) -> Result<String> {
+    let salt = SaltString::generate(&mut OsRng);
+    Argon2::default().hash_password(password.as_bytes(), &salt).map(|h| h.to_string()).map_err(|e| AssessError::Password(e.to_string()))
+}
+
+impl Store {
+    /// Adds a user; `password` is hashed (argon2id). Names are unique.
+    pub async fn create_user(&self, name: &str, role: Role, password: Option<&str>) -> Result<User> {
+        let name = name.trim();
+        if name.is_empty() {
+            return Err(AssessError::InvalidInput("empty user name".into()));
+        }
+        let hash = password.map(hash_password).transpose()?;
+        let id: i64 = sqlx::query_scalar("INSERT INTO users (name, role, password_hash, created_ns) VALUES (?, ?, ?, ?) RETURNING id")
+            .bind(name)
+            .bind(role.as_str())
+            .bind(&hash)
+            .bind(now_ns())
+            .fetch_one(&self.pool)
+            .await
+            .map_err(conflict(|| format!("a user named {name:?} exists")))?;
+        self.get_user(id).await
+    }
+
+    /// The user with `id`.
+    pub async fn get_user(&self, id: i64) -> Result<User> {
+        let row: Option<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
+        user(row.ok_or_else(|| AssessError::NotFound(format!("user {id}")))?)
+    }
+
+    /// The user named `name`.
+    pub async fn user_by_name(&self, name: &str) -> Result<User> {
+        let row: Option<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
+        user(row.ok_or_else(|| AssessError::NotFound(format!("user {name:?}")))?)
+    }
+
+    /// All users (of one role if given), by name.
+    pub async fn list_users(&self, role: Option<Role>) -> Result<Vec<User>> {
+        let rows: Vec<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE (? IS NULL OR role = ?) ORDER BY name")
+            .bind(role.map(Role::as_str))
+            .bind(role.map(Role::as_str))
+            .fetch_all(&self.pool)
+            .await?;
+        rows.into_iter().map(user).collect()
+    }
+
+    /// Sets (or replaces) a user's password.
+    pub async fn set_password(&self, user_id: i64, password: &str) -> Result<()> {
+        let hash = hash_password(password)?;
+        let done = sqlx::query("UPDATE users SET password_hash = ? WHERE id = ?").bind(hash).bind(user_id).execute(&self.pool).await?;
+        if done.rows_affected() == 0 {
+            return Err(AssessError::NotFound(format!("user {user_id}")));
+        }
+        Ok(())
+    }
+
+    /// The user if `name` exists, has a password and `password` matches it; `None` otherwise
+    /// (unknown user, no password or a wrong one alike).
+    pub async fn verify_password(&self, name: &str, password: &str) -> Result<Option<User>> {
+        let row: Option<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
+        let Some(row) = row else { return Ok(None) };
+        let Some(hash) = row.3.clone() else { return Ok(None) };
+        let parsed = PasswordHash::new(&hash).map_err(|e| AssessError::Password(format!("stored hash of {name:?}: {e}")))?;
+        if Argon2::default().verify_password(password.as_bytes(), &parsed).is_ok() { Ok(Some(user(row)?)) } else { Ok(None) }
+    }
+}

@@ -1,0 +1,196 @@
+//! The assessment commands: `motion-metrics`, `user`, `cohort`, `exercise`, `export xapi`.
+//! The database ones open `--db PATH`, else `$CUTLAB_DB`, else `./cutlab.db` (created and
+//! migrated on first use, with the built-in exercise).
+
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Subcommand;
+use cutlab_assessor::store::{NewExercise, Role, Store, default_db_path};
+use cutlab_assessor::{ExpertPlan, proficiency};
+
+/// The assessment commands, flattened into the top-level command enum.
+#[derive(Debug, Subcommand)]
+pub enum AssessCommand {
+    /// Path metrics of a tool trajectory: CSV `t_s, x_m, y_m, z_m, qw, qx, qy, qz` (optional
+    /// header, any sampling rate): time, path length, economy, idle time, movements,
+    /// angular path, LDLJ and SPARC.
+    MotionMetrics {
+        /// The trajectory file.
+        poses: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Users of the assessment database.
+    User {
+        #[command(subcommand)]
+        command: UserCommand,
+    },
+    /// Cohorts of trainees.
+    Cohort {
+        #[command(subcommand)]
+        command: CohortCommand,
+    },
+    /// Exercises: a scene and an expert plan.
+    Exercise {
+        #[command(subcommand)]
+        command: ExerciseCommand,
+    },
+    /// Exports for other systems.
+    Export {
+        #[command(subcommand)]
+        command: ExportCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum UserCommand {
+    /// Adds a user (the password is stored as an argon2id hash, never in plain text).
+    Add {
+        #[arg(long)]
+        name: String,
+        /// instructor | trainee | admin
+        #[arg(long)]
+        role: String,
+        /// Read the password from the first line of standard input.
+        #[arg(long, conflicts_with = "password")]
+        password_stdin: bool,
+        /// The password (visible in the process list: prefer --password-stdin).
+        #[arg(long)]
+        password: Option<String>,
+    },
+    /// Lists the users.
+    List,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CohortCommand {
+    /// Adds a cohort.
+    Add {
+        #[arg(long)]
+        name: String,
+        /// The instructor's user name.
+        #[arg(long)]
+        instructor: Option<String>,
+    },
+    /// Puts a user in a cohort.
+    Join {
+        #[arg(long)]
+        cohort: String,
+        #[arg(long)]
+        user: String,
+    },
+    /// Lists the cohorts and their members.
+    List,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExerciseCommand {
+    /// Adds an exercise: a scene and an expert plan file (TOML or JSON, see
+    /// assessor/examples/plan.toml). Thresholds come from expert attempts.
+    Add {
+        #[arg(long)]
+        name: String,
+        #[arg(long)]
+        scene: String,
+        #[arg(long)]
+        plan: PathBuf,
+        #[arg(long, default_value = "")]
+        description: String,
+        /// k of the thresholds mean +/- k SD.
+        #[arg(long, default_value_t = proficiency::DEFAULT_K)]
+        k: f64,
+    },
+    /// Lists the exercises.
+    List,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExportCommand {
+    /// xAPI statements (attempted / passed / failed / mastered) of a trainee's attempts, JSON.
+    Xapi {
+        #[arg(long)]
+        trainee: String,
+    },
+}
+
+/// Runs an assessment command; `db` is the global `--db`.
+pub fn run(db: Option<&Path>, command: AssessCommand) -> anyhow::Result<()> {
+    match command {
+        AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json),
+        command => {
+            let path = default_db_path(db);
+            let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
+            rt.block_on(async {
+                let store = Store::open(&path).await.with_context(|| format!("opening the database {}", path.display()))?;
+                store.ensure_builtins().await?;
+                let result = with_store(&store, command).await;
+                store.close().await;
+                result
+            })
+        }
+    }
+}
+
+async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()> {
+    match command {
+        AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
+        AssessCommand::User { command: UserCommand::Add { name, role, password_stdin, password } } => {
+            let role: Role = role.parse()?;
+            let password = if password_stdin {
+                let mut line = String::new();
+                std::io::stdin().lock().read_line(&mut line).context("reading the password from standard input")?;
+                let line = line.trim_end_matches(['\r', '\n']).to_owned();
+                anyhow::ensure!(!line.is_empty(), "empty password on standard input");
+                Some(line)
+            } else {
+                password
+            };
+            let u = store.create_user(&name, role, password.as_deref()).await?;
+            println!("added {} {} (id {}){}", u.role, u.name, u.id, if u.has_password { "" } else { ", no password" });
+        }
+        AssessCommand::User { command: UserCommand::List } => {
+            for u in store.list_users(None).await? {
+                println!("{:>4}  {:<11} {}", u.id, u.role.as_str(), u.name);
+            }
+        }
+        AssessCommand::Cohort { command: CohortCommand::Add { name, instructor } } => {
+            let instructor = match instructor {
+                Some(n) => Some(store.user_by_name(&n).await?.id),
+                None => None,
+            };
+            let c = store.create_cohort(&name, instructor).await?;
+            println!("added cohort {} (id {})", c.name, c.id);
+        }
+        AssessCommand::Cohort { command: CohortCommand::Join { cohort, user } } => {
+            let c = store.cohort_by_name(&cohort).await?;
+            let u = store.user_by_name(&user).await?;
+            store.join_cohort(c.id, u.id).await?;
+            println!("{} is in cohort {}", u.name, c.name);
+        }
+        AssessCommand::Cohort { command: CohortCommand::List } => {
+            for c in store.list_cohorts().await? {
+                let members: Vec<String> = store.cohort_members(c.id).await?.into_iter().map(|u| u.name).collect();
+                println!("{}: {}", c.name, members.join(", "));
+            }
+        }
+        AssessCommand::Exercise { command: ExerciseCommand::Add { name, scene, plan, description, k } } => {
+            let plan = ExpertPlan::load(&plan)?;
+            let e = store.create_exercise(&NewExercise { name: &name, scene: &scene, description: &description, plan: &plan, thresholds: &[], threshold_k: k }).await?;
+            println!("added exercise {} (id {}, scene {}, plan {:.1} mm long, {:.1} mm deep); thresholds come from expert attempts", e.name, e.id, e.scene, plan.length_m() * 1e3, plan.depth_m * 1e3);
+        }
+        AssessCommand::Exercise { command: ExerciseCommand::List } => {
+            for e in store.list_exercises().await? {
+                let t = store.thresholds(e.id).await?;
+                println!("{:>4}  {:<24} scene {:<12} {} thresholds", e.id, e.name, e.scene, t.metrics.len());
+            }
+        }
+        AssessCommand::Export { command: ExportCommand::Xapi { trainee } } => {
+            let statements = store.xapi_statements(&trainee).await?;
+            println!("{}", serde_json::to_string_pretty(&statements)?);
+        }
+    }
+    Ok(())
+}
