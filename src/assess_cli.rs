@@ -23,6 +23,24 @@ pub enum AssessCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Score a recorded session (`DIR/session.mcap`) against an exercise's expert plan: the
+    /// attempt, its metrics and verdict are stored; prints a report (`--json` for machines).
+    Assess {
+        /// The recording.
+        file: PathBuf,
+        /// The exercise (default: the built-in chest-wall incision).
+        #[arg(long, default_value = cutlab_assessor::store::BUILTIN_EXERCISE)]
+        exercise: String,
+        /// The trainee's user name (a new name is created as a trainee).
+        #[arg(long)]
+        trainee: String,
+        /// An expert's reference attempt (used to derive thresholds).
+        #[arg(long)]
+        expert: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Users of the assessment database.
     User {
         #[command(subcommand)]
@@ -136,6 +154,12 @@ pub fn run(db: Option<&Path>, command: AssessCommand) -> anyhow::Result<()> {
 
 async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()> {
     match command {
+        AssessCommand::Assess { file, exercise, trainee, expert, json } => {
+            let rec = cutlab_recorder::Recording::open(&file).with_context(|| format!("reading {}", file.display()))?;
+            let attempt = store.start_recorded_attempt(&exercise, &trainee, &file, expert).await?;
+            let (outcome, values) = store.score_recording(attempt.id, &rec).await.context("scoring the recording")?;
+            print_outcome(&outcome, &values, json)?;
+        }
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
         AssessCommand::User { command: UserCommand::Add { name, role, password_stdin, password } } => {
             let role: Role = role.parse()?;
@@ -192,5 +216,48 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             println!("{}", serde_json::to_string_pretty(&statements)?);
         }
     }
+    Ok(())
+}
+
+/// The report of a scored attempt: every metric with its verdict, the score, pass/fail and
+/// proficiency (JSON: the same, with the overall normalised `score`).
+pub fn print_outcome(o: &cutlab_assessor::store::Outcome, values: &[cutlab_assessor::MetricValue], json: bool) -> anyhow::Result<()> {
+    let verdict = |key: &str| o.verdict.metrics.iter().find(|m| m.key == key);
+    if json {
+        let metrics: Vec<_> = values
+            .iter()
+            .map(|v| {
+                let m = verdict(&v.key);
+                serde_json::json!({ "key": v.key, "value": v.value, "unit": v.unit, "missing": v.missing,
+                    "thresholded": m.is_some(), "pass": m.map(|m| m.pass), "score": m.map(|m| m.score) })
+            })
+            .collect();
+        let p = &o.proficiency.state;
+        let v = serde_json::json!({
+            "attempt": o.attempt.id, "score": o.verdict.score, "pass": o.verdict.pass, "metrics": metrics,
+            "proficiency": { "attempts": p.attempts, "passes": p.passes, "consecutive_passes": p.consecutive_passes, "proficient": p.proficient, "cusum": o.proficiency.cusum },
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("attempt {}: score {:+.2}, {}", o.attempt.id, o.verdict.score, if o.verdict.pass { "PASS" } else { "FAIL" });
+    println!("  {:<28} {:>12} {:<8} {}", "metric", "value", "unit", "verdict");
+    for v in values {
+        let value = v.value.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
+        let judged = match verdict(&v.key) {
+            Some(m) => format!("{} (score {:+.2})", if m.pass { "pass" } else { "FAIL" }, m.score),
+            None => v.missing.clone().map_or_else(String::new, |r| format!("missing: {r}")),
+        };
+        println!("  {:<28} {:>12} {:<8} {}", v.key, value, v.unit, judged);
+    }
+    let p = &o.proficiency.state;
+    println!(
+        "  proficiency: {} attempts, {} passed, {} consecutive; {}; CUSUM {:.2}",
+        p.attempts,
+        p.passes,
+        p.consecutive_passes,
+        if p.proficient { "proficient" } else { "not yet proficient" },
+        o.proficiency.cusum
+    );
     Ok(())
 }

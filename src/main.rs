@@ -83,6 +83,13 @@ enum Command {
         /// Stream to a rerun viewer: spawn (start one) or connect[=URL].
         #[arg(long)]
         rerun: Option<recording::RerunArg>,
+        /// The trainee at the station: the attempt is stored as running when the session
+        /// starts, then scored against `--exercise` (or marked incomplete if it fails).
+        #[arg(long)]
+        trainee: Option<String>,
+        /// The exercise attempted (with --trainee).
+        #[arg(long, default_value = cutlab_assessor::store::BUILTIN_EXERCISE, requires = "trainee")]
+        exercise: String,
     },
     /// Session recordings (MCAP): what is in one, and salvaging one cut short.
     Recording {
@@ -248,7 +255,7 @@ fn run() -> anyhow::Result<()> {
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
-        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz, rrd, rerun } => session::run(&session::Options {
+        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz, rrd, rerun, trainee, exercise } => session::run(&session::Options {
             scene,
             min_tets,
             device,
@@ -260,6 +267,7 @@ fn run() -> anyhow::Result<()> {
             keyframe_every_s: keyframe_every,
             surface_hz,
             rerun: recording::rerun_target(rrd.then_some(std::path::Path::new("session.rrd")), rerun.as_ref()),
+            attempt: trainee.map(|trainee| session::AttemptArgs { db: cutlab_assessor::default_db_path(cli.db.as_deref()), exercise, trainee }),
         }),
         Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
         Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),

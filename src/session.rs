@@ -15,6 +15,9 @@ use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::Vector3;
 
+use cutlab_assessor::Store;
+use cutlab_recorder::Recording;
+
 use crate::stats::Summary;
 
 /// What `--device` names.
@@ -61,6 +64,66 @@ pub struct Options {
     pub surface_hz: f64,
     /// Also log to rerun (a relative `.rrd` path is in `out`).
     pub rerun: Option<RerunTarget>,
+    /// Store the session as an attempt and score it.
+    pub attempt: Option<AttemptArgs>,
+}
+
+/// The attempt a session is (`--trainee`, `--exercise`, `--db`).
+#[derive(Debug)]
+pub struct AttemptArgs {
+    pub db: PathBuf,
+    pub exercise: String,
+    pub trainee: String,
+}
+
+/// The open attempt of a session, and the runtime its database needs.
+struct OpenAttempt {
+    rt: tokio::runtime::Runtime,
+    store: Store,
+    id: i64,
+}
+
+impl OpenAttempt {
+    fn start(a: &AttemptArgs, recording: &Path) -> anyhow::Result<Self> {
+        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
+        let (store, id) = rt.block_on(async {
+            let store = Store::open(&a.db).await.with_context(|| format!("opening the database {}", a.db.display()))?;
+            store.ensure_builtins().await?;
+            let attempt = store.start_recorded_attempt(&a.exercise, &a.trainee, recording, false).await?;
+            anyhow::Ok((store, attempt.id))
+        })?;
+        println!("attempt {id} of {} at {} (running; database {})", a.trainee, a.exercise, a.db.display());
+        Ok(Self { rt, store, id })
+    }
+
+    /// Scores the attempt from its recording, or marks it incomplete when the session failed.
+    fn finish(self, outcome: Result<&Path, String>) -> anyhow::Result<()> {
+        let Self { rt, store, id } = self;
+        rt.block_on(async {
+            let result = match outcome {
+                Ok(path) => match Recording::open(path) {
+                    Ok(rec) => match store.score_recording(id, &rec).await {
+                        Ok((o, values)) => crate::assess_cli::print_outcome(&o, &values, false),
+                        Err(e) => {
+                            store.mark_failed(id, &e.to_string()).await?;
+                            Err(anyhow::anyhow!("scoring attempt {id}: {e}"))
+                        }
+                    },
+                    Err(e) => {
+                        store.mark_incomplete(id, Some(&e.to_string())).await?;
+                        Err(anyhow::anyhow!("reading the recording of attempt {id}: {e}"))
+                    }
+                },
+                Err(why) => {
+                    store.mark_incomplete(id, Some(&why)).await?;
+                    println!("attempt {id} marked incomplete: {why}");
+                    Ok(())
+                }
+            };
+            store.close().await;
+            result
+        })
+    }
 }
 
 pub fn run(o: &Options) -> anyhow::Result<()> {
@@ -105,7 +168,8 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let mcap_path = o.out.join("session.mcap");
-    let provenance = Provenance { scene: o.scene.clone(), min_tets: o.min_tets, seed: o.seed, trainee: String::new(), exercise: String::new(), device: device_name.clone() };
+    let (trainee, exercise) = o.attempt.as_ref().map_or((String::new(), String::new()), |a| (a.trainee.clone(), a.exercise.clone()));
+    let provenance = Provenance { scene: o.scene.clone(), min_tets: o.min_tets, seed: o.seed, trainee, exercise, device: device_name.clone() };
     let observer = match &o.rerun {
         Some(target) => {
             let target = match target {
@@ -117,12 +181,28 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let recorded = record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, observer)
-        .with_context(|| format!("recording {}", mcap_path.display()))?;
+    let attempt = o.attempt.as_ref().map(|a| OpenAttempt::start(a, &mcap_path)).transpose()?;
+    let recorded = match record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, observer) {
+        Ok(r) => r,
+        Err(e) => {
+            if let Some(a) = attempt {
+                a.finish(Err(format!("recording failed: {e}")))?;
+            }
+            return Err(anyhow::Error::new(e).context(format!("recording {}", mcap_path.display())));
+        }
+    };
     if let Some(observer) = recorded.observer {
         observer.finish().context("finishing the rerun log")?;
     }
-    let r = recorded.report.context("running the session")?;
+    let r = match recorded.report {
+        Ok(r) => r,
+        Err(e) => {
+            if let Some(a) = attempt {
+                a.finish(Err(format!("the session failed: {e}")))?;
+            }
+            return Err(anyhow::Error::new(e).context("running the session"));
+        }
+    };
 
     let clock = if o.clock == Clock::Live { "live" } else { "virtual" };
     println!("session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
@@ -175,6 +255,9 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let steps_path = o.out.join("steps.csv");
     std::fs::write(&steps_path, steps).with_context(|| format!("writing {}", steps_path.display()))?;
     println!("wrote {}, summary.json and steps.csv", path.display());
+    if let Some(a) = attempt {
+        a.finish(Ok(&mcap_path))?;
+    }
     Ok(())
 }
 

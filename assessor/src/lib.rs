@@ -10,6 +10,7 @@
 //! SI units inside (metres, seconds, newtons); millimetres only for display.
 
 pub mod error;
+pub mod from_recording;
 mod geom;
 pub mod input;
 pub mod metrics;
@@ -17,6 +18,7 @@ pub mod plan;
 pub mod proficiency;
 
 pub use error::{AssessError, Result};
+pub use from_recording::attempt_data;
 pub use input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};
 pub use metrics::{Better, Metric, MetricSet, MetricValue, assess};
 pub use plan::ExpertPlan;
