@@ -241,7 +241,7 @@ pub fn print_outcome(o: &cutlab_assessor::store::Outcome, values: &[cutlab_asses
         return Ok(());
     }
     println!("attempt {}: score {:+.2}, {}", o.attempt.id, o.verdict.score, if o.verdict.pass { "PASS" } else { "FAIL" });
-    println!("  {:<28} {:>12} {:<8} {}", "metric", "value", "unit", "verdict");
+    println!("  {:<28} {:>12} {:<8} verdict", "metric", "value", "unit");
     for v in values {
         let value = v.value.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
         let judged = match verdict(&v.key) {

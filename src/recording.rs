@@ -78,12 +78,12 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
         println!(
             "  cutlab {}, scene {}{}, device {}, seed {}, trainee {:?}, exercise {:?}, {} clock, servo period {} us, sim step {} us",
             m.cutlab_version,
-            m.scene,
-            m.min_tets.map(|n| format!(" (min {n} tets)")).unwrap_or_default(),
-            m.device,
-            m.seed,
-            m.trainee,
-            m.exercise,
+            m.provenance.scene,
+            m.provenance.min_tets.map(|n| format!(" (min {n} tets)")).unwrap_or_default(),
+            m.provenance.device,
+            m.provenance.seed,
+            m.provenance.trainee,
+            m.provenance.exercise,
             m.clock,
             m.period_nanos / 1000,
             m.time_step_nanos / 1000

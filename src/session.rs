@@ -154,7 +154,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
     let config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
-    if !(o.keyframe_every_s > 0.0 && o.keyframe_every_s.is_finite()) || !(o.surface_hz >= 0.0 && o.surface_hz.is_finite()) {
+    if !(o.keyframe_every_s > 0.0 && o.keyframe_every_s.is_finite() && o.surface_hz >= 0.0 && o.surface_hz.is_finite()) {
         bail!("--keyframe-every must be positive and --surface-hz non-negative");
     }
     let step_s = scene.solver.time_step_s;

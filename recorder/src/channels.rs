@@ -253,17 +253,25 @@ impl KeyframeMsg {
     }
 }
 
-/// The session's settings a replay needs, and who did what (metadata `cutlab.session`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SessionMeta {
-    pub cutlab_version: String,
-    /// Built-in scene name or scene file, as given.
+/// Who and what a recording is of (the session metadata that is not a setting).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Provenance {
+    /// Built-in scene name or scene file, as given (a replay loads it again).
     pub scene: String,
+    #[serde(default)]
     pub min_tets: Option<usize>,
     pub seed: u64,
     pub trainee: String,
     pub exercise: String,
     pub device: String,
+}
+
+/// The session's settings a replay needs, and who did what (metadata `cutlab.session`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SessionMeta {
+    pub cutlab_version: String,
+    #[serde(flatten)]
+    pub provenance: Provenance,
     pub clock: String,
     pub period_nanos: u64,
     pub time_step_nanos: u64,

@@ -9,21 +9,10 @@ use cutlab_haptics::device::{HapticDevice, Plan};
 use cutlab_haptics::tap::{self, TapSettings};
 use cutlab_haptics::{HapticsError, Session, SessionConfig, SessionReport, StateHash};
 
+pub use crate::channels::Provenance;
 use crate::channels::{self, Hex, PlanMsg, SessionMeta};
 use crate::writer::{self, McapSink, RecordObserver, WriteStats, WriterOptions};
 use crate::RecorderError;
-
-/// Who and what a recording is of (the session metadata that is not a setting).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Provenance {
-    /// Built-in scene name or scene file, as given (a replay loads it again).
-    pub scene: String,
-    pub min_tets: Option<usize>,
-    pub seed: u64,
-    pub trainee: String,
-    pub exercise: String,
-    pub device: String,
-}
 
 /// How much to record.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -99,12 +88,7 @@ pub fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenanc
     let initial = StateHash::of(&session.sim);
     SessionMeta {
         cutlab_version: env!("CARGO_PKG_VERSION").to_owned(),
-        scene: provenance.scene.clone(),
-        min_tets: provenance.min_tets,
-        seed: provenance.seed,
-        trainee: provenance.trainee.clone(),
-        exercise: provenance.exercise.clone(),
-        device: provenance.device.clone(),
+        provenance: provenance.clone(),
         clock: format!("{:?}", config.clock).to_lowercase(),
         period_nanos: config.period_nanos,
         time_step_nanos: (session.sim.settings.time_step_s * 1e9).round() as u64,

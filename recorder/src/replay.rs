@@ -124,7 +124,7 @@ impl ReplayReport {
 
 /// The stepper a recording's session started from: its scene, settled, with its settings.
 pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> {
-    let scene = Scene::load(&meta.scene, BuildOptions { min_tets: meta.min_tets }).map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.scene)))?;
+    let scene = Scene::load(&meta.provenance.scene, BuildOptions { min_tets: meta.provenance.min_tets }).map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?;
     let session = Session::new(&scene)?;
     let config = SessionConfig {
         blade_length_m: meta.blade_length_m,
@@ -183,7 +183,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
             tick: 0,
             what: format!(
                 "the settled scene {:?} differs from the recorded one before the first step (hashes {:016x}/{:016x}, recorded {:016x}/{:016x}): a different scene file or cutlab build",
-                meta.scene, stepper.state_hash().state, stepper.state_hash().topology, initial.state, initial.topology
+                meta.provenance.scene, stepper.state_hash().state, stepper.state_hash().topology, initial.state, initial.topology
             ),
             max_position_difference_m: None,
         });

@@ -126,7 +126,7 @@ fn a_recording_reads_back_with_every_message_intact() {
     assert_eq!(keyframes, 30, "one keyframe a second");
     assert_eq!(surfaces, rec.surfaces);
     let meta = rec.meta().expect("metadata");
-    assert_eq!((meta.scene.as_str(), meta.min_tets, meta.seed, meta.trainee.as_str()), (SCENE, Some(MIN_TETS), 7, "t"));
+    assert_eq!((meta.provenance.scene.as_str(), meta.provenance.min_tets, meta.provenance.seed, meta.provenance.trainee.as_str()), (SCENE, Some(MIN_TETS), 7, "t"));
     assert!(rec.plan().expect("plan attachment").is_some());
     assert!(rec.attachment(channels::SCENE_ATTACHMENT).is_some());
     assert_eq!(rec.end.as_ref().and_then(|e| e.get("status")).map(String::as_str), Some("complete"));
@@ -165,7 +165,7 @@ fn a_different_scene_is_reported_before_the_first_step() {
     let r = recorded();
     let mut rec = Recording::open(&r.path).expect("readable");
     if let Some(m) = rec.meta.as_mut() {
-        m.min_tets = Some(2000);
+        m.provenance.min_tets = Some(2000);
     }
     let report = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
     let d = report.first_divergence.expect("found");
