@@ -154,6 +154,16 @@ fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line
     let r: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!((r["verified"].as_bool(), r["keyframes_checked"].as_u64(), r["steps"].as_u64()), (Some(true), Some(3), Some(3000)));
 
+    // scored against the built-in exercise on a fresh database
+    let db = dir.join("cutlab.db");
+    let (ok, out, err) = cutlab(&["--db", db.to_str().expect("utf8"), "assess", m, "--trainee", "tess", "--json"]);
+    assert!(ok, "{err}");
+    let a: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert!(a["score"].as_f64().is_some_and(|s| (-1.0..=1.0).contains(&s)), "{a}");
+    let time = a["metrics"].as_array().expect("metrics").iter().find(|m| m["key"] == "time_s").expect("time_s")["value"].as_f64();
+    assert!(time.is_some_and(|t| (t - 3.0).abs() < 0.01), "{time:?}");
+    assert_eq!(a["proficiency"]["attempts"], 1);
+
     // a recording cut short (a killed process): info says so, recover salvages it, the
     // salvaged part replays bit for bit
     let bytes = std::fs::read(&mcap).expect("bytes");

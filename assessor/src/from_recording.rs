@@ -1,5 +1,5 @@
 //! An attempt's data from its recording: the tool poses and forces of every servo tick, the
-//! blade of every cut the simulation made, and the deformed tissue surface of the last
+//! blade path while it was in the tissue, and the deformed tissue surface of the last
 //! keyframe.
 
 use cutlab_recorder::haptics::pose::BUTTON_BLADE;
@@ -12,8 +12,8 @@ use crate::metrics::incision::depth_below_plan;
 use crate::plan::ExpertPlan;
 use crate::AssessError;
 
-/// The data `plan` is assessed on, from `rec`. A cut's depth is its blade tip's depth below
-/// the planned surface (`depth_below_plan`).
+/// The data `plan` is assessed on, from `rec`. A cut sample's depth is its blade tip's depth
+/// below the planned surface (`depth_below_plan`).
 pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, AssessError> {
     let meta = rec.meta().map_err(|e| AssessError::InvalidInput(e.to_string()))?;
     let period_s = meta.period_nanos as f64 * 1e-9;
@@ -36,11 +36,18 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
         .iter()
         .map(|s| ForceSample { t_s: s.tick as f64 * period_s, force_newtons: s.force_newtons, touching: s.mode == ModeName::Touching, cutting: s.mode == ModeName::Cutting })
         .collect();
+    // The cut's trace: the blade at every tick the renderer had it in the tissue (the blade
+    // path; the topology events only mark where the mesh changed, a few per centimetre on a
+    // coarse mesh).
+    let modes: std::collections::HashMap<u64, ModeName> = rec.tool_states.iter().map(|s| (s.tick, s.mode)).collect();
     let cuts = rec
-        .topology
+        .poses
         .iter()
-        .map(|t| {
-            CutSample { t_s: t.tick as f64 * period_s, tip_m: t.blade.tip_m, edge_dir: t.blade.edge_direction, depth_m: depth_below_plan(plan, t.blade.tip_m) }
+        .filter(|(tick, _, _)| modes.get(tick) == Some(&ModeName::Cutting))
+        .map(|(tick, tip, rotation)| {
+            let edge = rotation * nalgebra::Vector3::z();
+            let tip_m: [f64; 3] = tip.coords.into();
+            CutSample { t_s: *tick as f64 * period_s, tip_m, edge_dir: edge.into(), depth_m: depth_below_plan(plan, tip_m) }
         })
         .collect();
     Ok(AttemptData { poses, forces, cuts, surface: last_surface(rec) })
