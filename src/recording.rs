@@ -41,8 +41,8 @@ pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<Reru
 }
 
 /// A rerun sink for a recording's session, with its planned incision logged.
-pub fn rerun_sink(target: &RerunTarget, meta: &cutlab_recorder::channels::SessionMeta, plan: Option<&[cutlab_sim::Point3]>) -> anyhow::Result<Box<dyn RecordObserver>> {
-    let mut sink = RerunSink::new(target, "cutlab", meta.period_nanos, meta.blade_length_m).context("starting the rerun logger")?;
+pub fn rerun_sink(target: &RerunTarget, period_nanos: u64, blade_length_m: f64, plan: Option<&[cutlab_sim::Point3]>) -> anyhow::Result<Box<dyn RecordObserver>> {
+    let mut sink = RerunSink::new(target, "cutlab", period_nanos, blade_length_m).context("starting the rerun logger")?;
     if let Some(line) = plan {
         sink.log_plan(line).context("logging the plan to rerun")?;
     }
@@ -142,7 +142,8 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
     let observer = match &a.rerun {
         Some(target) => {
             let plan = rec.plan()?.map(|p| p.to_plan().line_m);
-            Some(rerun_sink(target, rec.meta()?, plan.as_deref())?)
+            let meta = rec.meta()?;
+            Some(rerun_sink(target, meta.period_nanos, meta.blade_length_m, plan.as_deref())?)
         }
         None => None,
     };

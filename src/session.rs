@@ -176,8 +176,8 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
                 RerunTarget::File(rrd) => RerunTarget::File(o.out.join(rrd)),
                 other => other.clone(),
             };
-            let meta = record::meta_of(&session, &config, &provenance, settings);
-            Some(crate::recording::rerun_sink(&target, &meta, plan.as_ref().ok().map(|p| p.line_m.as_slice()))?)
+            let plan_line = plan.as_ref().ok().map(|p| p.line_m.as_slice());
+            Some(crate::recording::rerun_sink(&target, config.period_nanos, config.blade_length_m, plan_line)?)
         }
         None => None,
     };

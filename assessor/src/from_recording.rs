@@ -2,8 +2,7 @@
 //! blade path while it was in the tissue, and the deformed tissue surface of the last
 //! keyframe.
 
-use cutlab_recorder::haptics::pose::BUTTON_BLADE;
-use cutlab_recorder::channels::ModeName;
+use cutlab_recorder::haptics::render::Mode;
 use cutlab_recorder::Recording;
 use cutlab_sim::TetMesh;
 
@@ -17,37 +16,29 @@ use crate::AssessError;
 pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, AssessError> {
     let meta = rec.meta().map_err(|e| AssessError::InvalidInput(e.to_string()))?;
     let period_s = meta.period_nanos as f64 * 1e-9;
-    let buttons: std::collections::HashMap<u64, u32> = rec.tool_states.iter().map(|s| (s.tick, s.buttons)).collect();
-    let poses = rec
-        .poses
-        .iter()
-        .map(|(tick, tip, rotation)| {
-            let q = rotation.quaternion();
-            PoseSample {
-                t_s: *tick as f64 * period_s,
-                tip_m: tip.coords.into(),
-                quat_wxyz: [q.w, q.i, q.j, q.k],
-                blade_engaged: buttons.get(tick).is_some_and(|b| b & BUTTON_BLADE != 0),
-            }
+    // every tick with both its pose and its tool state, in tick order
+    let samples = rec.samples();
+    let t_s = |tick: u64| tick as f64 * period_s;
+    let poses = samples
+        .values()
+        .map(|s| {
+            let q = s.pose.world_from_tool.quaternion();
+            PoseSample { t_s: t_s(s.tick), tip_m: s.pose.tip_in_world.coords.into(), quat_wxyz: [q.w, q.i, q.j, q.k], blade_engaged: s.pose.blade_engaged() }
         })
         .collect();
-    let forces = rec
-        .tool_states
-        .iter()
-        .map(|s| ForceSample { t_s: s.tick as f64 * period_s, force_newtons: s.force_newtons, touching: s.mode == ModeName::Touching, cutting: s.mode == ModeName::Cutting })
+    let forces = samples
+        .values()
+        .map(|s| ForceSample { t_s: t_s(s.tick), force_newtons: s.render.force_newtons.into(), touching: s.render.mode == Mode::Touching, cutting: s.render.mode == Mode::Cutting })
         .collect();
     // The cut's trace: the blade at every tick the renderer had it in the tissue (the blade
     // path; the topology events only mark where the mesh changed, a few per centimetre on a
     // coarse mesh).
-    let modes: std::collections::HashMap<u64, ModeName> = rec.tool_states.iter().map(|s| (s.tick, s.mode)).collect();
-    let cuts = rec
-        .poses
-        .iter()
-        .filter(|(tick, _, _)| modes.get(tick) == Some(&ModeName::Cutting))
-        .map(|(tick, tip, rotation)| {
-            let edge = rotation * nalgebra::Vector3::z();
-            let tip_m: [f64; 3] = tip.coords.into();
-            CutSample { t_s: *tick as f64 * period_s, tip_m, edge_dir: edge.into(), depth_m: depth_below_plan(plan, tip_m) }
+    let cuts = samples
+        .values()
+        .filter(|s| s.render.mode == Mode::Cutting)
+        .map(|s| {
+            let tip_m: [f64; 3] = s.pose.tip_in_world.coords.into();
+            CutSample { t_s: t_s(s.tick), tip_m, edge_dir: s.pose.edge_direction().into(), depth_m: depth_below_plan(plan, tip_m) }
         })
         .collect();
     Ok(AttemptData { poses, forces, cuts, surface: last_surface(rec) })

@@ -374,6 +374,7 @@ impl SimWorker {
         }
         if let Some(&tick) = out_ticks.last()
             && out_ticks.len() < steps
+            && self.record.is_some()
         {
             // ended early (the servo loop stopped): the state there is a keyframe too
             let n = out_ticks.len() as u64 - 1;

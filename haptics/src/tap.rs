@@ -116,6 +116,13 @@ pub struct TapFeed {
     pub sim: rtrb::Consumer<SimRecord>,
 }
 
+impl TapFeed {
+    /// Both producers are gone and both queues are empty: nothing more will come.
+    pub fn ended(&self) -> bool {
+        self.ticks.is_abandoned() && self.ticks.is_empty() && self.sim.is_abandoned() && self.sim.is_empty()
+    }
+}
+
 /// A tap and its feed. The tick queue is written through once here, so the servo loop never
 /// page-faults on it.
 pub fn tap(settings: TapSettings) -> (RecordTap, TapFeed) {

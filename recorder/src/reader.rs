@@ -206,12 +206,19 @@ fn whole_records(bytes: &[u8]) -> (usize, Option<String>) {
     (at, None)
 }
 
+/// An error unless `bytes` start with the MCAP magic.
+pub(crate) fn check_magic(bytes: &[u8]) -> Result<(), RecorderError> {
+    if bytes.starts_with(mcap::MAGIC) {
+        Ok(())
+    } else {
+        Err(RecorderError::NotCutlab("not an MCAP file (no MCAP magic at the start)".into()))
+    }
+}
+
 /// Calls `f` with every record of the file (chunks flattened, chunk CRCs checked), in file
 /// order, until the first damage; `f`'s error ends the reading and is returned.
 pub(crate) fn for_each_record(bytes: &[u8], mut f: impl FnMut(Record<'_>) -> Result<(), RecorderError>) -> Result<ReadEnd, RecorderError> {
-    if bytes.len() < mcap::MAGIC.len() || &bytes[..mcap::MAGIC.len()] != mcap::MAGIC {
-        return Err(RecorderError::NotCutlab("not an MCAP file (no MCAP magic at the start)".into()));
-    }
+    check_magic(bytes)?;
     let (prefix, mut damage) = whole_records(bytes);
     let readable = &bytes[..prefix];
     let mut records_read = 0u64;

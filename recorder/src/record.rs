@@ -84,7 +84,7 @@ pub fn run_recorded(
 }
 
 /// The session metadata a recording of `session` carries.
-pub fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, settings: RecordSettings) -> SessionMeta {
+fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, settings: RecordSettings) -> SessionMeta {
     let initial = StateHash::of(&session.sim);
     SessionMeta {
         cutlab_version: env!("CARGO_PKG_VERSION").to_owned(),

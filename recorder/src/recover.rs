@@ -10,7 +10,7 @@ use std::path::Path;
 
 use mcap::records::{MessageHeader, Metadata, Record};
 
-use crate::reader::for_each_record;
+use crate::reader::{check_magic, for_each_record};
 use crate::RecorderError;
 
 /// What a recovery kept.
@@ -34,9 +34,8 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
         return Err(RecorderError::Malformed("recover writes a new file: the output must not be the input".into()));
     }
     let bytes = std::fs::read(input).map_err(|source| RecorderError::Io { path: input.to_owned(), source })?;
-    if !bytes.starts_with(mcap::MAGIC) {
-        return Err(RecorderError::NotCutlab(format!("{}: not an MCAP file (no MCAP magic at the start)", input.display())));
-    }
+    // before the output is created: a file that is no recording leaves nothing behind
+    check_magic(&bytes)?;
     let file = File::create(output).map_err(|source| RecorderError::Io { path: output.to_owned(), source })?;
     let mut w = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))

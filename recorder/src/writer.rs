@@ -270,8 +270,7 @@ pub fn spawn<W: Write + Seek + Send + 'static>(
                     o.on_sim(&record)?;
                 }
             }
-            let ended = |abandoned: bool, empty: bool| abandoned && empty;
-            if ended(feed.ticks.is_abandoned(), feed.ticks.is_empty()) && ended(feed.sim.is_abandoned(), feed.sim.is_empty()) {
+            if feed.ended() {
                 break;
             }
             if idle {

@@ -173,18 +173,10 @@ fn a_different_scene_is_reported_before_the_first_step() {
     assert!(d.what.contains("settled scene"), "{d}");
 }
 
-/// A deterministic sequence of offsets (SplitMix64).
+/// A deterministic sequence of offsets in `0..len`.
 fn offsets(len: u64, n: usize, seed: u64) -> Vec<u64> {
-    let mut state = seed;
-    (0..n)
-        .map(|_| {
-            state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-            (z ^ (z >> 31)) % len
-        })
-        .collect()
+    let mut rng = cutlab_haptics::pose::Rng::new(seed);
+    (0..n).map(|_| rng.next_u64() % len).collect()
 }
 
 #[test]
