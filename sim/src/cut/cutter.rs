@@ -19,6 +19,19 @@ pub struct Cutter {
     pub window_m: f64,
     trail: VecDeque<Blade>,
     stroke: StrokeVertices,
+    /// The snapping distance derived from the first mesh cut (when the options leave it
+    /// open): kept, so that it does not shrink as the cuts refine the mesh.
+    snap_distance_m: Option<f64>,
+}
+
+/// The median length of the springs' rest lengths (the mesh's edges), m.
+fn median_edge_length(sim: &Simulation) -> f64 {
+    let mut lengths = sim.model.springs.rest_length.clone();
+    if lengths.is_empty() {
+        return 0.0;
+    }
+    let mid = lengths.len() / 2;
+    *lengths.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 impl Default for Cutter {
@@ -29,7 +42,7 @@ impl Default for Cutter {
 
 impl Cutter {
     pub fn new(options: CutOptions) -> Self {
-        Self { options, window_m: 0.01, trail: VecDeque::new(), stroke: StrokeVertices::default() }
+        Self { options, window_m: 0.01, trail: VecDeque::new(), stroke: StrokeVertices::default(), snap_distance_m: None }
     }
 
     /// Ends the current stroke: the next pose starts a new one.
@@ -74,8 +87,13 @@ impl Cutter {
         }
         let mut corners: Vec<_> = self.trail.iter().map(|b| b.tip).collect();
         corners.extend(self.trail.iter().rev().map(Blade::heel));
+        let mut options = self.options;
+        if options.snap_distance_m.is_none() {
+            let snap = options.snap;
+            options.snap_distance_m = Some(*self.snap_distance_m.get_or_insert_with(|| snap * median_edge_length(sim)));
+        }
         match CutPolygon::new(&corners) {
-            Some(polygon) => cut_remembering(sim, &polygon, &self.options, &mut self.stroke),
+            Some(polygon) => cut_remembering(sim, &polygon, &options, &mut self.stroke),
             None => Ok(CutEvent::default()),
         }
     }

@@ -43,11 +43,17 @@ pub struct CutOptions {
     pub pattern: PatternChoice,
     /// Crossing parameters closer than this to an end move that vertex onto the plane.
     pub snap: f64,
+    /// Vertices closer than this to the plane (m) move onto it too, and vertices of the
+    /// stroke's cut this close count as on it, however short their edges: a floor under the
+    /// relative `snap`, so that a blade that trembles across cut tissue does not slice it into
+    /// ever thinner slivers. `None`: a [`Cutter`] derives it from the mesh it first cuts
+    /// (`snap` times the median edge length); [`cut`] then uses the relative rule only.
+    pub snap_distance_m: Option<f64>,
 }
 
 impl Default for CutOptions {
     fn default() -> Self {
-        Self { pattern: PatternChoice::MinMu, snap: 0.15 }
+        Self { pattern: PatternChoice::MinMu, snap: 0.15, snap_distance_m: None }
     }
 }
 
@@ -173,6 +179,7 @@ pub fn cut_remembering(
             plane: polygon,
             candidates: &cand,
             snap: options.snap,
+            snap_distance_m: options.snap_distance_m.unwrap_or(0.0),
             inside_tolerance: 1e-9 * polygon.scale,
             stroke,
         }

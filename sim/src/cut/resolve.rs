@@ -14,8 +14,9 @@
 //!    `x_v += mean_e t_e (x_w - x_v)`, after which none of its edges cross;
 //! 3. when neither end may move, the edge is split anyway.
 //!
-//! Vertices very close to the plane (crossing parameter below `snap`) move onto it too, so
-//! that no sliver is created. A vertex moves only if every tetrahedron around it keeps at
+//! Vertices very close to the plane (crossing parameter below `snap`, or nearer than
+//! `snap_distance_m`) move onto it too, so that no sliver is created; one nearer than
+//! `snap_distance_m` that may not move counts as on the plane where it stands. A vertex moves only if every tetrahedron around it keeps at
 //! least [`MIN_VOLUME_KEPT`] of its volume in both the current and the reference
 //! configuration; held vertices, and surface vertices on a crease or corner, do not move. A
 //! surface vertex moves within its tangent plane, and every reference-configuration step is
@@ -81,6 +82,9 @@ pub struct Resolver<'a> {
     pub candidates: &'a [u32],
     /// Crossing parameters below this (or above 1 - this) move the near vertex onto the plane.
     pub snap: f64,
+    /// Vertices nearer the plane than this (m) move onto it, and stroke vertices this near
+    /// count as on it (see [`super::CutOptions::snap_distance_m`]; 0: relative rules only).
+    pub snap_distance_m: f64,
     /// Distance tolerance for "inside C".
     pub inside_tolerance: f64,
     /// Vertices of the cut made by earlier steps of the stroke.
@@ -139,6 +143,11 @@ impl Resolver<'_> {
         let [a, b] = cr.edge.map(|v| self.x[v as usize]);
         let p = a + (b - a) * cr.t;
         self.plane.contains_projection(&p, FORCE_REACH * (b - a).norm())
+    }
+
+    /// True when `v` lies nearer the plane than the snapping distance.
+    fn near_plane(&self, v: u32) -> bool {
+        self.plane.signed_distance(&self.x[v as usize]).abs() < self.snap_distance_m
     }
 
     /// Length of the shortest edge at `v` in the current configuration.
@@ -340,7 +349,8 @@ impl Resolver<'_> {
             for &v in &self.mesh.tets()[t as usize] {
                 if self.stroke.contains(v)
                     && !on_plane.contains(&v)
-                    && self.plane.signed_distance(&self.x[v as usize]).abs() <= near_fraction(self.snap) * self.shortest_edge(v)
+                    && self.plane.signed_distance(&self.x[v as usize]).abs()
+                        <= (near_fraction(self.snap) * self.shortest_edge(v)).max(self.snap_distance_m)
                 {
                     on_plane.insert(v);
                 }
@@ -355,9 +365,9 @@ impl Resolver<'_> {
             // Wanted moves, in order: slivers first, then incomplete intersections.
             let mut wanted: Vec<(u32, Option<[u32; 2]>)> = Vec::new();
             for cr in c.crossings.values().filter(|cr| cr.split) {
-                if cr.t < self.snap {
+                if cr.t < self.snap || (cr.t <= 0.5 && self.near_plane(cr.edge[0])) {
                     wanted.push((cr.edge[0], None));
-                } else if cr.t > 1.0 - self.snap {
+                } else if cr.t > 1.0 - self.snap || self.near_plane(cr.edge[1]) {
                     wanted.push((cr.edge[1], None));
                 }
             }
@@ -412,6 +422,15 @@ impl Resolver<'_> {
                     continue;
                 }
                 if self.apply(v, self.movement(v, &c), &mut moved) {
+                    on_plane.insert(v);
+                    touched.extend(topo.vertex_tets.row(v as usize));
+                    changed = true;
+                    continue;
+                }
+                if edge.is_none() && self.near_plane(v) {
+                    // within the snapping distance but not free to move (held, on a crease,
+                    // or its tetrahedra would flatten): the cut passes through it as it
+                    // stands, off the plane by less than the snapping distance
                     on_plane.insert(v);
                     touched.extend(topo.vertex_tets.row(v as usize));
                     changed = true;
