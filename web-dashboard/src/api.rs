@@ -18,7 +18,7 @@
 //!
 //! Times are nanoseconds since the Unix epoch (UTC); values are SI (m, s, N).
 
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::routing::get;
 use axum::{Json, Router};
 use cutlab_assessor::proficiency::Thresholds;
@@ -26,6 +26,7 @@ use cutlab_assessor::store::{Curriculum, Exercise, Module, User};
 use cutlab_assessor::ExpertPlan;
 use serde::Serialize;
 
+use crate::extract::Id;
 use crate::AppState;
 use crate::access::{visible_attempt, visible_trainees, visible_user};
 use crate::auth::CurrentUser;
@@ -64,17 +65,17 @@ async fn trainees(State(state): State<AppState>, user: CurrentUser) -> ApiResult
     Ok(Json(visible_trainees(&state, &user).await?))
 }
 
-async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> ApiResult<Progress> {
+async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> ApiResult<Progress> {
     let t = visible_user(&state, &user, id).await?;
     Ok(Json(progress(&state, &t).await?))
 }
 
-async fn attempt(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> ApiResult<AttemptDetail> {
+async fn attempt(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> ApiResult<AttemptDetail> {
     let a = visible_attempt(&state, &user, id).await?;
     Ok(Json(detail(&state, a).await?))
 }
 
-async fn attempt_trace(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> Result<Json<std::sync::Arc<AttemptTrace>>, ApiError> {
+async fn attempt_trace(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Json<std::sync::Arc<AttemptTrace>>, ApiError> {
     let a = visible_attempt(&state, &user, id).await?;
     Ok(Json(trace(&state, &a).await?.ok_or(AppError::NotFound)?))
 }
@@ -101,7 +102,7 @@ async fn exercises(State(state): State<AppState>, _user: CurrentUser) -> ApiResu
     Ok(Json(out))
 }
 
-async fn exercise(State(state): State<AppState>, _user: CurrentUser, Path(id): Path<i64>) -> ApiResult<ExerciseView> {
+async fn exercise(State(state): State<AppState>, _user: CurrentUser, Id(id): Id) -> ApiResult<ExerciseView> {
     let e = state.store().get_exercise(id).await?;
     let plan = state.store().get_plan(e.plan_id).await?;
     let thresholds = state.store().thresholds(id).await?;

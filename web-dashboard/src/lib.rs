@@ -21,6 +21,7 @@ pub mod bench;
 pub mod charts;
 pub mod data;
 pub mod error;
+pub mod extract;
 pub mod pages;
 pub mod recordings;
 pub mod seed;

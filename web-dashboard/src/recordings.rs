@@ -15,6 +15,7 @@ use axum::routing::get;
 use maud::html;
 use re_web_viewer_server::WebViewerData;
 
+use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
@@ -92,13 +93,13 @@ pub fn router() -> Router<AppState> {
         .route("/viewer/{file}", get(viewer_file))
 }
 
-async fn mcap(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> Result<Response, AppError> {
+async fn mcap(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
     let (path, _) = recording_paths(&a).ok_or(AppError::NotFound)?;
     send_file(&path, &format!("attempt-{id}.mcap")).await
 }
 
-async fn rrd(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> Result<Response, AppError> {
+async fn rrd(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
     let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
     send_file(&path, &format!("attempt-{id}.rrd")).await
@@ -140,7 +141,7 @@ pub fn viewer_url(origin: &str, id: i64) -> String {
     format!("/viewer/?{q}&hide_welcome_screen")
 }
 
-async fn replay_page(State(state): State<AppState>, user: CurrentUser, headers: HeaderMap, Path(id): Path<i64>) -> Result<Response, AppError> {
+async fn replay_page(State(state): State<AppState>, user: CurrentUser, headers: HeaderMap, Id(id): Id) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
     let has_rrd = recording_paths(&a).is_some_and(|(_, rrd)| std::fs::metadata(rrd).is_ok_and(|m| m.is_file()));
     let origin = request_origin(&headers, state.config().secure_cookies);

@@ -195,7 +195,7 @@ async fn downloads_serve_only_the_stored_recording() {
     for path in [
         format!("/attempts/{a}/../../secret.txt"),
         format!("/attempts/{a}/recording.mcap/../../secret.txt"),
-        format!("/attempts/..%2f..%2fsecret.txt/recording.mcap"),
+        "/attempts/..%2f..%2fsecret.txt/recording.mcap".to_owned(),
         format!("/attempts/{a}/%2e%2e%2fsecret.txt"),
         "/viewer/..%2f..%2fCargo.toml".to_owned(),
         "/viewer/%2e%2e/secret.txt".to_owned(),

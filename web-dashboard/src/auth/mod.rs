@@ -100,7 +100,7 @@ impl<S: Send + Sync> FromRequestParts<S> for CurrentUser {
 }
 
 /// The path as the client sent it (routers nested under `/api` see it without the prefix).
-fn original_path(parts: &Parts) -> &str {
+pub(crate) fn original_path(parts: &Parts) -> &str {
     parts.extensions.get::<axum::extract::OriginalUri>().map_or_else(|| parts.uri.path(), |u| u.0.path())
 }
 

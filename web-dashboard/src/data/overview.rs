@@ -46,6 +46,8 @@ pub async fn cohorts_of(state: &AppState, viewer: &CurrentUser) -> Result<Vec<Co
 }
 
 type Row = (i64, i64, String, Option<bool>, bool, Option<f64>);
+/// Per (trainee, exercise): attempts, the scored attempts' passes, the last score.
+type CellAcc = (u32, Vec<bool>, Option<f64>);
 
 /// The grid of one cohort.
 pub async fn cohort_overview(state: &AppState, cohort: Cohort) -> Result<CohortOverview, AppError> {
@@ -64,7 +66,7 @@ pub async fn cohort_overview(state: &AppState, cohort: Cohort) -> Result<CohortO
     .fetch_all(store.pool())
     .await?;
     // (trainee, exercise) -> (attempts, scored passes, last score)
-    let mut cells: BTreeMap<(i64, i64), (u32, Vec<bool>, Option<f64>)> = BTreeMap::new();
+    let mut cells: BTreeMap<(i64, i64), CellAcc> = BTreeMap::new();
     for (trainee, exercise, status, passed, scored, score) in rows {
         let c = cells.entry((trainee, exercise)).or_default();
         c.0 += 1;

@@ -110,6 +110,8 @@ pub struct ModuleProgress {
 }
 
 type MetricRow = (i64, String, Option<f64>, String, Option<bool>);
+/// An attempt's stored metric: key, value, unit, verdict.
+type StoredValue = (String, Option<f64>, String, Option<bool>);
 
 /// The progress of `trainee` (whom the caller may see: checked by the caller).
 pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppError> {
@@ -119,7 +121,7 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
         .bind(trainee.id)
         .fetch_all(store.pool())
         .await?;
-    let mut by_attempt: HashMap<i64, Vec<(String, Option<f64>, String, Option<bool>)>> = HashMap::new();
+    let mut by_attempt: HashMap<i64, Vec<StoredValue>> = HashMap::new();
     for (a, metric, value, unit, passed) in rows {
         by_attempt.entry(a).or_default().push((metric, value, unit, passed));
     }

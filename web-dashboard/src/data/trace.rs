@@ -45,10 +45,11 @@ impl TraceCache {
     }
     fn put(&self, id: i64, len: u64, t: Arc<AttemptTrace>) {
         let mut map = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        if map.len() >= CACHE_ENTRIES && !map.contains_key(&id) {
-            if let Some(k) = map.keys().next().copied() {
-                map.remove(&k);
-            }
+        if map.len() >= CACHE_ENTRIES
+            && !map.contains_key(&id)
+            && let Some(k) = map.keys().next().copied()
+        {
+            map.remove(&k);
         }
         map.insert(id, (len, t));
     }

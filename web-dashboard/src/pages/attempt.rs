@@ -2,7 +2,7 @@
 //! against the planned line (top view), the force over time, downloads, replay review, and
 //! the debriefing (instructors comment and sign off; the trainee reads).
 
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
 use axum::{Form, Router};
@@ -10,6 +10,7 @@ use maud::{Markup, html};
 use serde::Deserialize;
 
 use super::layout::{num, page, verdict, when};
+use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
@@ -24,7 +25,7 @@ pub fn router() -> Router<AppState> {
     Router::new().route("/attempts/{id}", get(attempt)).route("/attempts/{id}/comments", post(comment)).route("/attempts/{id}/signoff", post(sign_off))
 }
 
-async fn attempt(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> PageResult<Markup> {
+async fn attempt(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
     let a = visible_attempt(&state, &user, id).await?;
     let t = trace(&state, &a).await?;
     let d = detail(&state, a).await?;
@@ -127,14 +128,14 @@ struct CommentForm {
     body: String,
 }
 
-async fn comment(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>, Form(f): Form<CommentForm>) -> PageResult<Redirect> {
+async fn comment(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(f): Form<CommentForm>) -> PageResult<Redirect> {
     user.require_staff()?;
     let a = visible_attempt(&state, &user, id).await?;
     debrief::add_comment(&state, a.id, user.id(), &f.body).await?;
     Ok(Redirect::to(&format!("/attempts/{id}")))
 }
 
-async fn sign_off(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> PageResult<Redirect> {
+async fn sign_off(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Redirect> {
     user.require_staff()?;
     let a = visible_attempt(&state, &user, id).await?;
     debrief::sign_off(&state, a.id, user.id()).await?;

@@ -1,7 +1,7 @@
 //! `/curriculum`: exercises (scene, expert plan, thresholds) and curricula (modules of
 //! exercises). Everyone reads; instructors and administrators create and edit.
 
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
 use axum::{Form, Router};
@@ -13,6 +13,7 @@ use maud::{Markup, html};
 use serde::Deserialize;
 
 use super::layout::{num, page};
+use crate::extract::Id;
 use crate::AppState;
 use crate::auth::CurrentUser;
 use crate::error::{AppError, PageResult};
@@ -142,7 +143,7 @@ async fn create_exercise(State(state): State<AppState>, user: CurrentUser, Form(
     Ok(Redirect::to(&format!("/exercises/{}", e.id)))
 }
 
-async fn edit_exercise(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>, Form(f): Form<ExerciseForm>) -> PageResult<Redirect> {
+async fn edit_exercise(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(f): Form<ExerciseForm>) -> PageResult<Redirect> {
     user.require_staff()?;
     let scene = name_ok("scene", &f.scene)?;
     let k = positive("k", &f.threshold_k)?;
@@ -151,7 +152,7 @@ async fn edit_exercise(State(state): State<AppState>, user: CurrentUser, Path(id
     Ok(Redirect::to(&format!("/exercises/{id}")))
 }
 
-async fn exercise(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> PageResult<Markup> {
+async fn exercise(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
     let store = state.store();
     let e = store.get_exercise(id).await?;
     let plan = store.get_plan(e.plan_id).await?;
@@ -268,7 +269,7 @@ fn thresholds_from_form(fields: &[(String, String)], k: f64) -> Result<Threshold
     Ok(Thresholds { k, metrics })
 }
 
-async fn edit_thresholds(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
+async fn edit_thresholds(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
     user.require_staff()?;
     let e = state.store().get_exercise(id).await?;
     let t = thresholds_from_form(&fields, e.threshold_k)?;
@@ -290,7 +291,7 @@ async fn create_curriculum(State(state): State<AppState>, user: CurrentUser, For
     Ok(Redirect::to("/curriculum"))
 }
 
-async fn add_module(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
+async fn add_module(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
     user.require_staff()?;
     let name = name_ok("module name", fields.iter().find(|(k, _)| k == "name").map_or("", |(_, v)| v.as_str()))?;
     let ids: Vec<i64> = fields

@@ -2,11 +2,12 @@
 //! and the pass limits, the normalised score, the CUSUM chart, the curriculum modules.
 
 use axum::Router;
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::routing::get;
 use maud::{Markup, html};
 
 use super::layout::{num, page, verdict, when};
+use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_user;
 use crate::auth::CurrentUser;
@@ -19,7 +20,7 @@ pub fn router() -> Router<AppState> {
     Router::new().route("/trainees/{id}", get(trainee))
 }
 
-async fn trainee(State(state): State<AppState>, user: CurrentUser, Path(id): Path<i64>) -> PageResult<Markup> {
+async fn trainee(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
     let trainee = visible_user(&state, &user, id).await?;
     let p = progress(&state, &trainee).await?;
     Ok(page(

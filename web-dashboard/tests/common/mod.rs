@@ -10,6 +10,7 @@ use cutlab_dashboard::{AppState, Config, app, seed_demo};
 use http_body_util::BodyExt;
 use tower::ServiceExt;
 
+#[derive(Debug)]
 pub struct Env {
     pub app: Router,
     pub store: Store,
