@@ -33,7 +33,7 @@ pub fn run_bench(o: &Options<'_>) -> anyhow::Result<()> {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
         let addr = listener.local_addr()?;
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-        let server = tokio::spawn(cutlab_dashboard::serve(listener, AppState::new(store, Config::default()), async move {
+        let server = tokio::spawn(cutlab_dashboard::serve(listener, AppState::new(store, Config::default())?, async move {
             let _ = stopped.await;
         }));
         let cookie = login(addr, LOAD_INSTRUCTOR.name, LOAD_INSTRUCTOR.password).await.map_err(anyhow::Error::msg)?;

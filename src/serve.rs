@@ -28,7 +28,7 @@ pub fn run(db: &Path, addr: &str, demo: bool) -> anyhow::Result<()> {
                 std::future::pending::<()>().await;
             }
         };
-        cutlab_dashboard::serve(listener, AppState::new(store, Config::default()), shutdown).await.context("serving")?;
+        cutlab_dashboard::serve(listener, AppState::new(store, Config::default())?, shutdown).await.context("serving")?;
         anyhow::Ok(())
     })
 }

@@ -140,10 +140,14 @@ async fn browse(port: u16, driver_port: u16, profile: &Path, shots: &Path) {
         c.wait().for_element(Locator::Id("the_canvas_id")).await?;
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
-            let fetched = c.execute("return performance.getEntriesByType('resource').filter(e => e.name.endsWith('re_viewer_bg.wasm') || e.name.includes('recording.rrd')).map(e => e.name)", vec![]).await?;
-            let names = fetched.as_array().cloned().unwrap_or_default();
-            if names.iter().any(|n| n.as_str().is_some_and(|n| n.contains("recording.rrd"))) || Instant::now() > deadline {
-                assert!(names.iter().any(|n| n.as_str().is_some_and(|n| n.ends_with("re_viewer_bg.wasm"))), "the viewer's wasm was loaded: {names:?}");
+            let fetched = c
+                .execute("return performance.getEntriesByType('resource').filter(e => e.name.endsWith('re_viewer_bg.wasm') || e.name.includes('recording.rrd')).map(e => [e.name, e.responseStatus])", vec![])
+                .await?;
+            let entries = fetched.as_array().cloned().unwrap_or_default();
+            let status_of = |suffix: &str| entries.iter().find(|e| e[0].as_str().is_some_and(|n| n.ends_with(suffix))).map(|e| e[1].as_u64());
+            if status_of("recording.rrd").is_some() || Instant::now() > deadline {
+                assert_eq!(status_of("re_viewer_bg.wasm"), Some(Some(200)), "the viewer's wasm was loaded: {entries:?}");
+                assert_eq!(status_of("recording.rrd"), Some(Some(200)), "the viewer fetched the attempt's .rrd: {entries:?}");
                 break;
             }
             tokio::time::sleep(Duration::from_millis(500)).await;

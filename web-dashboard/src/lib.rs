@@ -63,14 +63,16 @@ struct Inner {
     limiter: auth::rate_limit::RateLimiter,
     traces: data::trace::TraceCache,
     viewer: recordings::Viewer,
+    grants: auth::grants::GrantKey,
 }
 
 impl AppState {
     /// A state over an open store (its migrations, including the dashboard's tables, are
     /// applied by [`Store::open`]).
-    pub fn new(store: Store, config: Config) -> Self {
+    pub fn new(store: Store, config: Config) -> Result<Self, AppError> {
         let limiter = auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
-        Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load() }))
+        let grants = auth::grants::GrantKey::random()?;
+        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants })))
     }
     pub fn store(&self) -> &Store {
         &self.0.store
@@ -86,6 +88,9 @@ impl AppState {
     }
     pub(crate) fn viewer(&self) -> &recordings::Viewer {
         &self.0.viewer
+    }
+    pub(crate) fn grants(&self) -> &auth::grants::GrantKey {
+        &self.0.grants
     }
 }
 

@@ -89,6 +89,7 @@ pub fn router() -> Router<AppState> {
         .route("/attempts/{id}/recording.mcap", get(mcap))
         .route("/attempts/{id}/recording.rrd", get(rrd))
         .route("/attempts/{id}/replay", get(replay_page))
+        .route("/attempts/{id}/grant/{grant}/recording.rrd", get(granted_rrd))
         .route("/viewer/", get(viewer_index))
         .route("/viewer/{file}", get(viewer_file))
 }
@@ -101,6 +102,17 @@ async fn mcap(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> R
 
 async fn rrd(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
+    let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
+    send_file(&path, &format!("attempt-{id}.rrd")).await
+}
+
+/// The `.rrd` for rerun's web viewer, which fetches without cookies: the path carries a
+/// grant issued by the replay page (see [`crate::auth::grants`]).
+async fn granted_rrd(State(state): State<AppState>, axum::extract::Path((id, grant)): axum::extract::Path<(i64, String)>) -> Result<Response, AppError> {
+    if !state.grants().check(id, &grant) {
+        return Err(AppError::NotFound);
+    }
+    let a = state.store().get_attempt(id).await?;
     let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
     send_file(&path, &format!("attempt-{id}.rrd")).await
 }
@@ -134,9 +146,9 @@ fn request_origin(headers: &HeaderMap, https: bool) -> Option<String> {
     ok.then(|| format!("{}://{host}", if https { "https" } else { "http" }))
 }
 
-/// The viewer's URL opening attempt `id`'s `.rrd`.
-pub fn viewer_url(origin: &str, id: i64) -> String {
-    let rrd = format!("{origin}/attempts/{id}/recording.rrd");
+/// The viewer's URL opening attempt `id`'s `.rrd` through `grant`.
+pub fn viewer_url(origin: &str, id: i64, grant: &str) -> String {
+    let rrd = format!("{origin}/attempts/{id}/grant/{grant}/recording.rrd");
     let q: String = form_urlencoded::Serializer::new(String::new()).append_pair("url", &rrd).finish();
     format!("/viewer/?{q}&hide_welcome_screen")
 }
@@ -152,7 +164,7 @@ async fn replay_page(State(state): State<AppState>, user: CurrentUser, headers: 
         } @else if !has_rrd {
             p class="fail" { "Attempt " (id) " has no .rrd recording (record with " code { "cutlab session --rrd" } ")." }
         } @else if let Some(origin) = origin {
-            iframe id="replay" class="replay" title="rerun viewer" src=(viewer_url(&origin, id)) {}
+            iframe id="replay" class="replay" title="rerun viewer" src=(viewer_url(&origin, id, &state.grants().issue(id, user.id()))) {}
         } @else {
             p class="fail" { "Cannot tell the viewer where this server is (no usable Host header)." }
         }
@@ -204,6 +216,6 @@ mod tests {
 
     #[test]
     fn viewer_url_encodes_the_rrd_url() {
-        assert_eq!(viewer_url("http://127.0.0.1:8080", 7), "/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F7%2Frecording.rrd&hide_welcome_screen");
+        assert_eq!(viewer_url("http://127.0.0.1:8080", 7, "1-2-ab"), "/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F7%2Fgrant%2F1-2-ab%2Frecording.rrd&hide_welcome_screen");
     }
 }

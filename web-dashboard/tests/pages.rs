@@ -146,7 +146,17 @@ async fn the_replay_viewer_is_served_by_the_dashboard() {
     let mut req = get(&format!("/attempts/{a}/replay"), Some(&ana));
     req.headers_mut().insert(header::HOST, "127.0.0.1:8080".parse().unwrap());
     let page = body_text(send(&e.app, req).await).await;
-    assert!(page.contains(&format!("/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F{a}%2Frecording.rrd")), "{page}");
+    let prefix = format!("/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F{a}%2Fgrant%2F");
+    let at = page.find(&prefix).unwrap() + prefix.len();
+    let grant = &page[at..at + page[at..].find("%2F").unwrap()];
+    // the viewer fetches without cookies, through the grant; a wrong or foreign grant is 404
+    let no_cookie = |path: String| get(&path, None);
+    assert_eq!(body_text(send(&e.app, no_cookie(format!("/attempts/{a}/grant/{grant}/recording.rrd"))).await).await, "RRF2");
+    let ben = first_attempt(&e.store, "ben").await;
+    assert_eq!(send(&e.app, no_cookie(format!("/attempts/{ben}/grant/{grant}/recording.rrd"))).await.status(), StatusCode::NOT_FOUND);
+    let forged = format!("{}0", &grant[..grant.len() - 1]);
+    assert_eq!(send(&e.app, no_cookie(format!("/attempts/{a}/grant/{forged}/recording.rrd"))).await.status(), StatusCode::NOT_FOUND);
+    assert_eq!(send(&e.app, no_cookie(format!("/attempts/{a}/grant/1-99999999999-00/recording.rrd"))).await.status(), StatusCode::NOT_FOUND);
     let page = body_text(send(&e.app, get(&format!("/attempts/{a}"), Some(&ana))).await).await;
     assert!(page.contains("Review replay") && page.contains("Download .mcap"));
     assert_eq!(body_text(send(&e.app, get(&format!("/attempts/{a}/recording.rrd"), Some(&ana))).await).await, "RRF2");

@@ -73,7 +73,7 @@ async fn per_user_limit_counts_failures_from_any_address() {
     let e = env().await;
     // a fresh app per "address" is not possible with oneshot; instead a limiter of 3 per key
     // shows the user key alone blocks: 3 failures for ben, then ana still logs in
-    let state = cutlab_dashboard::AppState::new(e.store.clone(), cutlab_dashboard::Config { login_failures: 3, ..Default::default() });
+    let state = cutlab_dashboard::AppState::new(e.store.clone(), cutlab_dashboard::Config { login_failures: 3, ..Default::default() }).unwrap();
     let app = cutlab_dashboard::app(state);
     for _ in 0..2 {
         assert_eq!(try_login(&app, "ben", "nope").await.status(), StatusCode::UNAUTHORIZED);

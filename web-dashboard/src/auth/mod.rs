@@ -7,6 +7,7 @@
 //! logged-in browser, checks the session's CSRF token (form field `csrf`, or header
 //! `X-CSRF-Token`) before the handler sees the request: 403 when missing or wrong.
 
+pub mod grants;
 pub mod rate_limit;
 pub mod routes;
 pub mod sessions;

@@ -21,7 +21,7 @@ pub async fn env() -> Env {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(&dir.path().join("cutlab.db")).await.unwrap();
     seed_demo(&store).await.unwrap();
-    let app = app(AppState::new(store.clone(), Config::default()));
+    let app = app(AppState::new(store.clone(), Config::default()).unwrap());
     Env { app, store, dir }
 }
 
