@@ -17,11 +17,15 @@ pub async fn can_see_user(state: &AppState, viewer: &CurrentUser, target_id: i64
             if viewer.id() == target_id {
                 return Ok(true);
             }
+            if let Some(ok) = state.caches().access.get(&(viewer.id(), target_id)) {
+                return Ok(ok);
+            }
             let led: Option<i64> = sqlx::query_scalar("SELECT 1 FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = ? AND m.user_id = ? LIMIT 1")
                 .bind(viewer.id())
                 .bind(target_id)
                 .fetch_optional(state.store().pool())
                 .await?;
+            state.caches().access.put((viewer.id(), target_id), led.is_some());
             led.is_some()
         }
     })

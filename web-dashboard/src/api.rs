@@ -32,7 +32,7 @@ use crate::access::{visible_attempt, visible_trainees, visible_user};
 use crate::auth::CurrentUser;
 use crate::data::attempt::{AttemptDetail, detail};
 use crate::data::overview::{CohortOverview, overview};
-use crate::data::progress::{Progress, progress};
+use crate::data::progress::cached_progress;
 use crate::data::running::{RunningAttempt, running};
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::{ApiError, ApiResult, AppError};
@@ -65,9 +65,18 @@ async fn trainees(State(state): State<AppState>, user: CurrentUser) -> ApiResult
     Ok(Json(visible_trainees(&state, &user).await?))
 }
 
-async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> ApiResult<Progress> {
+async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<axum::response::Response, ApiError> {
+    use axum::response::IntoResponse;
     let t = visible_user(&state, &user, id).await?;
-    Ok(Json(progress(&state, &t).await?))
+    let c = cached_progress(&state, &t).await?;
+    let json = match c.json.get() {
+        Some(j) => j.clone(),
+        None => {
+            let j = serde_json::to_vec(&c.data).map_err(|e| AppError::Internal(e.to_string()))?;
+            c.json.get_or_init(|| j).clone()
+        }
+    };
+    Ok(([(axum::http::header::CONTENT_TYPE, "application/json")], json).into_response())
 }
 
 async fn attempt(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> ApiResult<AttemptDetail> {

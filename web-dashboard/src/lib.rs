@@ -18,6 +18,7 @@ pub mod access;
 pub mod api;
 pub mod auth;
 pub mod bench;
+pub mod cache;
 pub mod charts;
 pub mod data;
 pub mod error;
@@ -64,6 +65,15 @@ struct Inner {
     traces: data::trace::TraceCache,
     viewer: recordings::Viewer,
     grants: auth::grants::GrantKey,
+    caches: Caches,
+}
+
+/// The short-lived caches of the hot paths (see [`cache`]).
+#[derive(Debug)]
+pub(crate) struct Caches {
+    pub sessions: cache::TtlCache<String, auth::AuthSession>,
+    pub access: cache::TtlCache<(i64, i64), bool>,
+    pub progress: cache::TtlCache<i64, Arc<data::progress::Cached>>,
 }
 
 impl AppState {
@@ -72,7 +82,11 @@ impl AppState {
     pub fn new(store: Store, config: Config) -> Result<Self, AppError> {
         let limiter = auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
         let grants = auth::grants::GrantKey::random()?;
-        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants })))
+        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants, caches: Caches {
+            sessions: cache::TtlCache::new(cache::SESSION_TTL),
+            access: cache::TtlCache::new(cache::ACCESS_TTL),
+            progress: cache::TtlCache::new(cache::PROGRESS_TTL),
+        } })))
     }
     pub fn store(&self) -> &Store {
         &self.0.store
@@ -88,6 +102,9 @@ impl AppState {
     }
     pub(crate) fn viewer(&self) -> &recordings::Viewer {
         &self.0.viewer
+    }
+    pub(crate) fn caches(&self) -> &Caches {
+        &self.0.caches
     }
     pub(crate) fn grants(&self) -> &auth::grants::GrantKey {
         &self.0.grants

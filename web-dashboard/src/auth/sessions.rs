@@ -38,6 +38,9 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
         return Ok(None);
     }
     let hash = token_hash(token);
+    if let Some(s) = state.caches().sessions.get(&hash) {
+        return Ok(Some(s));
+    }
     let row: Option<Row> = sqlx::query_as(
         "SELECT u.id, u.name, u.role, u.password_hash, u.created_ns, s.csrf_token FROM login_sessions s JOIN users u ON u.id = s.user_id WHERE s.token_sha256 = ? AND s.expires_ns > ?",
     )
@@ -48,11 +51,14 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
     let Some((id, name, role, password_hash, created_ns, csrf)) = row else { return Ok(None) };
     let role: Role = role.parse().map_err(|e: cutlab_assessor::AssessError| AppError::Internal(e.to_string()))?;
     let user = User { id, name, role, has_password: password_hash.is_some(), created_ns };
-    Ok(Some(AuthSession { user, csrf, token_hash: hash }))
+    let s = AuthSession { user, csrf, token_hash: hash.clone() };
+    state.caches().sessions.put(hash, s.clone());
+    Ok(Some(s))
 }
 
 /// Ends a session.
 pub async fn delete(state: &AppState, token_hash: &str) -> Result<(), AppError> {
+    state.caches().sessions.remove(&token_hash.to_owned());
     sqlx::query("DELETE FROM login_sessions WHERE token_sha256 = ?").bind(token_hash).execute(state.store().pool()).await?;
     Ok(())
 }

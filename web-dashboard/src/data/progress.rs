@@ -109,6 +109,34 @@ pub struct ModuleProgress {
     pub exercises: Vec<(ExerciseRef, Standing)>,
 }
 
+/// A trainee's progress as cached (see [`crate::cache`]), with its page body and JSON made
+/// once.
+#[derive(Debug)]
+pub struct Cached {
+    pub data: Progress,
+    pub html: std::sync::OnceLock<String>,
+    pub json: std::sync::OnceLock<Vec<u8>>,
+}
+
+/// [`progress`] through the cache.
+pub async fn cached_progress(state: &AppState, trainee: &User) -> Result<std::sync::Arc<Cached>, AppError> {
+    if let Some((c, refresh)) = state.caches().progress.get_or_claim(&trainee.id) {
+        if refresh {
+            let (state, trainee) = (state.clone(), trainee.clone());
+            tokio::spawn(async move {
+                match progress(&state, &trainee).await {
+                    Ok(data) => state.caches().progress.put(trainee.id, std::sync::Arc::new(Cached { data, html: Default::default(), json: Default::default() })),
+                    Err(e) => tracing::warn!("refreshing the progress of {}: {e}", trainee.name),
+                }
+            });
+        }
+        return Ok(c);
+    }
+    let c = std::sync::Arc::new(Cached { data: progress(state, trainee).await?, html: Default::default(), json: Default::default() });
+    state.caches().progress.put(trainee.id, c.clone());
+    Ok(c)
+}
+
 type MetricRow = (i64, String, Option<f64>, String, Option<bool>);
 /// An attempt's stored metric: key, value, unit, verdict.
 type StoredValue = (String, Option<f64>, String, Option<bool>);

@@ -149,6 +149,7 @@ async fn edit_exercise(State(state): State<AppState>, user: CurrentUser, Id(id):
     let k = positive("k", &f.threshold_k)?;
     let plan = if f.plan.trim().is_empty() { None } else { Some(parse_plan(&f.plan)?) };
     state.store().update_exercise(id, &scene, f.description.trim(), k, plan.as_ref()).await?;
+    state.caches().progress.clear();
     Ok(Redirect::to(&format!("/exercises/{id}")))
 }
 
@@ -274,6 +275,7 @@ async fn edit_thresholds(State(state): State<AppState>, user: CurrentUser, Id(id
     let e = state.store().get_exercise(id).await?;
     let t = thresholds_from_form(&fields, e.threshold_k)?;
     state.store().set_thresholds(id, &t, ThresholdSource::Default).await?;
+    state.caches().progress.clear();
     Ok(Redirect::to(&format!("/exercises/{id}")))
 }
 
@@ -288,6 +290,7 @@ async fn create_curriculum(State(state): State<AppState>, user: CurrentUser, For
     user.require_staff()?;
     let name = name_ok("name", &f.name)?;
     state.store().create_curriculum(&name, f.description.trim()).await?;
+    state.caches().progress.clear();
     Ok(Redirect::to("/curriculum"))
 }
 
@@ -302,5 +305,6 @@ async fn add_module(State(state): State<AppState>, user: CurrentUser, Id(id): Id
         .collect::<Result<_, _>>()?;
     state.store().get_curriculum(id).await?;
     state.store().add_module(id, &name, &ids).await?;
+    state.caches().progress.clear();
     Ok(Redirect::to("/curriculum"))
 }

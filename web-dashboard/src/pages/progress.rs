@@ -4,7 +4,7 @@
 use axum::Router;
 use axum::extract::State;
 use axum::routing::get;
-use maud::{Markup, html};
+use maud::{Markup, PreEscaped, html};
 
 use super::layout::{num, page, verdict, when};
 use crate::extract::Id;
@@ -13,7 +13,7 @@ use crate::access::visible_user;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
 use crate::data::display_unit;
-use crate::data::progress::{ExerciseProgress, MetricSeries, progress};
+use crate::data::progress::{ExerciseProgress, MetricSeries, Progress, cached_progress};
 use crate::error::PageResult;
 
 pub fn router() -> Router<AppState> {
@@ -22,33 +22,34 @@ pub fn router() -> Router<AppState> {
 
 async fn trainee(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
     let trainee = visible_user(&state, &user, id).await?;
-    let p = progress(&state, &trainee).await?;
-    Ok(page(
-        &format!("Progress of {}", p.trainee.name),
-        Some(&user),
-        html! {
-            @if p.exercises.is_empty() { p class="muted" { "No attempts yet." } }
-            @for e in &p.exercises { (exercise_section(e)) }
-            h2 { "Curriculum" }
-            @if p.curricula.is_empty() { p class="muted" { "No curriculum defined." } }
-            @for c in &p.curricula {
-                h3 { (c.name) }
-                table {
-                    thead { tr { th { "#" } th { "Module" } th { "State" } th { "Exercises" } } }
-                    tbody {
-                        @for m in &c.modules {
-                            tr {
-                                td class="num" { (m.position) }
-                                td { (m.name) }
-                                td class=(format!("state-{}", m.standing.as_str().replace(' ', "-"))) { (m.standing.as_str()) }
-                                td { @for (e, s) in &m.exercises { (e.name) " (" (s.as_str()) ")" br; } }
-                            }
+    let c = cached_progress(&state, &trainee).await?;
+    let body = c.html.get_or_init(|| body(&c.data).into_string());
+    Ok(page(&format!("Progress of {}", c.data.trainee.name), Some(&user), PreEscaped(body.clone())))
+}
+
+fn body(p: &Progress) -> Markup {
+    html! {
+        @if p.exercises.is_empty() { p class="muted" { "No attempts yet." } }
+        @for e in &p.exercises { (exercise_section(e)) }
+        h2 { "Curriculum" }
+        @if p.curricula.is_empty() { p class="muted" { "No curriculum defined." } }
+        @for c in &p.curricula {
+            h3 { (c.name) }
+            table {
+                thead { tr { th { "#" } th { "Module" } th { "State" } th { "Exercises" } } }
+                tbody {
+                    @for m in &c.modules {
+                        tr {
+                            td class="num" { (m.position) }
+                            td { (m.name) }
+                            td class=(format!("state-{}", m.standing.as_str().replace(' ', "-"))) { (m.standing.as_str()) }
+                            td { @for (e, s) in &m.exercises { (e.name) " (" (s.as_str()) ")" br; } }
                         }
                     }
                 }
             }
-        },
-    ))
+        }
+    }
 }
 
 fn exercise_section(e: &ExerciseProgress) -> Markup {
