@@ -3,12 +3,14 @@
 mod assess_cli;
 mod bench;
 mod bench_accuracy;
+mod bench_dashboard;
 mod bench_recorder;
 mod bench_stability;
 mod demo;
 mod recording;
 mod motion_metrics;
 mod scene_info;
+mod serve;
 mod session;
 mod stats;
 mod stroke;
@@ -42,6 +44,20 @@ enum Command {
         /// finite elements), or another chest-wall-like scene.
         #[arg(long, default_value = "chest-wall")]
         scene: String,
+        /// Then serve the web dashboard on this address (e.g. 127.0.0.1:8080) with the demo
+        /// accounts, cohort and attempts in the database (`--db`).
+        #[arg(long)]
+        addr: Option<String>,
+    },
+    /// The web dashboard on the assessment database (`--db`): progress, curriculum,
+    /// supervision, replay review, JSON API.
+    Serve {
+        /// Address to listen on.
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        addr: String,
+        /// First create the demo accounts, cohort and synthetic attempts (see the README).
+        #[arg(long)]
+        demo: bool,
     },
     /// Run one training session: a device drives the scalpel through the 1 kHz servo loop
     /// while the simulation runs; prints a summary and writes DIR/final.vtu.
@@ -225,6 +241,25 @@ enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Load on the web dashboard: TRAINEES x ATTEMPTS synthetic attempts, CLIENTS concurrent
+    /// clients on the progress page and API; requests/s and latency percentiles.
+    Dashboard {
+        /// The database to seed and serve (reused if present).
+        #[arg(long, default_value = "out/bench-dashboard/cutlab.db")]
+        bench_db: PathBuf,
+        #[arg(long, default_value_t = 100)]
+        trainees: usize,
+        #[arg(long, default_value_t = 50)]
+        attempts: usize,
+        #[arg(long, default_value_t = 200)]
+        clients: usize,
+        /// Seconds per target.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 fn parse_clock(s: &str) -> Result<cutlab_haptics::servo::Clock, String> {
@@ -251,7 +286,14 @@ fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Demo { out, min_tets, scene } => demo::run(&out, min_tets, &scene),
+        Command::Demo { out, min_tets, scene, addr } => {
+            demo::run(&out, min_tets, &scene)?;
+            match addr {
+                Some(addr) => serve::run(&cutlab_assessor::default_db_path(cli.db.as_deref()), &addr, true),
+                None => Ok(()),
+            }
+        }
+        Command::Serve { addr, demo } => serve::run(&cutlab_assessor::default_db_path(cli.db.as_deref()), &addr, demo),
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
@@ -285,6 +327,9 @@ fn run() -> anyhow::Result<()> {
         Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
         Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
+        Command::Bench { command: BenchCommand::Dashboard { bench_db, trainees, attempts, clients, duration, json } } => {
+            bench_dashboard::run_bench(&bench_dashboard::Options { db: &bench_db, trainees, attempts, clients, duration_s: duration, json })
+        }
         Command::Bench { command: BenchCommand::Recorder { min_tets, duration, json, out } } => bench_recorder::run(min_tets, duration, json, &out),
         Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
     }

@@ -1,3 +1,130 @@
-//! cutlab-dashboard: the instructors' and trainees' web application (axum). Content
-//! arrives with issue 7; it may depend on `cutlab-assessor` and the crates below it.
+//! cutlab-dashboard: the instructors' and trainees' window on the assessment data, an axum
+//! application over the assessor's SQLite store.
+//!
+//! [`app`] builds the router (no `main` here: `cutlab serve` runs it). One router per area:
+//! [`auth`] (log in / log out), [`pages`] (cohort overview, trainee progress, attempt detail,
+//! supervision, curriculum), [`api`] (the same data as JSON), [`recordings`] (downloads and
+//! the rerun web viewer). Errors are [`error::AppError`], turned into responses in one place.
+//!
+//! Security: argon2id passwords (the store's); a session cookie `cutlab_session` (HttpOnly,
+//! SameSite=Strict, a random 256-bit token of which the database keeps the SHA-256, 12 h);
+//! a per-session CSRF token checked on every state-changing request before any handler;
+//! login rate-limited (5 failures a minute per user name and per IP address, then 429);
+//! roles on every route: a trainee sees only their own data, an instructor the members of
+//! the cohorts they lead, an administrator everything; anything else is a 404, so ids leak
+//! nothing. See [`api`] for the JSON API.
+
+pub mod access;
+pub mod api;
+pub mod auth;
+pub mod bench;
+pub mod cache;
+pub mod charts;
+pub mod data;
+pub mod error;
+pub mod extract;
+pub mod pages;
+pub mod recordings;
+pub mod seed;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use cutlab_assessor::store::Store;
+
 pub use cutlab_assessor as assessor;
+pub use error::AppError;
+pub use seed::{DEMO_ACCOUNTS, DemoAccount, seed_demo};
+
+/// Settings of a dashboard.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Mark cookies `Secure` (when served over HTTPS, e.g. behind a proxy).
+    pub secure_cookies: bool,
+    /// Failed logins per key (user name, IP address) within `login_window`.
+    pub login_failures: usize,
+    pub login_window: Duration,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self { secure_cookies: false, login_failures: 5, login_window: Duration::from_secs(60) }
+    }
+}
+
+/// What every handler shares: the store, the login limiter, the trace cache, the viewer.
+#[derive(Debug, Clone)]
+pub struct AppState(Arc<Inner>);
+
+#[derive(Debug)]
+struct Inner {
+    store: Store,
+    config: Config,
+    limiter: auth::rate_limit::RateLimiter,
+    traces: data::trace::TraceCache,
+    viewer: recordings::Viewer,
+    grants: auth::grants::GrantKey,
+    caches: Caches,
+}
+
+/// The short-lived caches of the hot paths (see [`cache`]).
+#[derive(Debug)]
+pub(crate) struct Caches {
+    pub sessions: cache::TtlCache<String, auth::AuthSession>,
+    pub access: cache::TtlCache<(i64, i64), bool>,
+    pub progress: cache::TtlCache<i64, Arc<data::progress::Cached>>,
+}
+
+impl AppState {
+    /// A state over an open store (its migrations, including the dashboard's tables, are
+    /// applied by [`Store::open`]).
+    pub fn new(store: Store, config: Config) -> Result<Self, AppError> {
+        let limiter = auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
+        let grants = auth::grants::GrantKey::random()?;
+        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants, caches: Caches {
+            sessions: cache::TtlCache::new(cache::SESSION_TTL),
+            access: cache::TtlCache::new(cache::ACCESS_TTL),
+            progress: cache::TtlCache::new(cache::PROGRESS_TTL),
+        } })))
+    }
+    pub fn store(&self) -> &Store {
+        &self.0.store
+    }
+    pub fn config(&self) -> &Config {
+        &self.0.config
+    }
+    pub(crate) fn limiter(&self) -> &auth::rate_limit::RateLimiter {
+        &self.0.limiter
+    }
+    pub(crate) fn traces(&self) -> &data::trace::TraceCache {
+        &self.0.traces
+    }
+    pub(crate) fn viewer(&self) -> &recordings::Viewer {
+        &self.0.viewer
+    }
+    pub(crate) fn caches(&self) -> &Caches {
+        &self.0.caches
+    }
+    pub(crate) fn grants(&self) -> &auth::grants::GrantKey {
+        &self.0.grants
+    }
+}
+
+/// The dashboard's router: every area's routes behind the session layer.
+pub fn app(state: AppState) -> Router {
+    Router::new()
+        .merge(auth::routes::router())
+        .merge(pages::router())
+        .merge(recordings::router())
+        .nest("/api", api::router())
+        .fallback(|| async { AppError::NotFound })
+        .layer(axum::middleware::from_fn_with_state(state.clone(), auth::session_layer))
+        .with_state(state)
+}
+
+/// Serves the dashboard on `listener` until the future `shutdown` completes.
+pub async fn serve(listener: tokio::net::TcpListener, state: AppState, shutdown: impl Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
+    let service = app(state).into_make_service_with_connect_info::<std::net::SocketAddr>();
+    axum::serve(listener, service).with_graceful_shutdown(shutdown).await
+}

@@ -138,6 +138,39 @@ impl Store {
         Ok(rows.into_iter().map(exercise).collect())
     }
 
+    /// Edits an exercise: its scene, description and `k`, and (if given) a new expert plan
+    /// (stored as a new plan; attempts already scored keep their results). One transaction.
+    pub async fn update_exercise(&self, id: i64, scene: &str, description: &str, threshold_k: f64, plan: Option<&ExpertPlan>) -> Result<Exercise> {
+        if scene.trim().is_empty() {
+            return Err(AssessError::InvalidInput("an exercise needs a scene".into()));
+        }
+        if !(threshold_k > 0.0) || !threshold_k.is_finite() {
+            return Err(AssessError::InvalidInput(format!("threshold k = {threshold_k}: must be > 0")));
+        }
+        if let Some(p) = plan {
+            p.check()?;
+        }
+        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
+        let done = sqlx::query("UPDATE exercises SET scene = ?, description = ?, threshold_k = ? WHERE id = ?").bind(scene.trim()).bind(description).bind(threshold_k).bind(id).execute(&mut *tx).await?;
+        if done.rows_affected() == 0 {
+            return Err(AssessError::NotFound(format!("exercise {id}")));
+        }
+        if let Some(p) = plan {
+            let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+                .bind(&p.name)
+                .bind(&p.scene)
+                .bind(p.depth_m)
+                .bind(p.tolerance_m)
+                .bind(serde_json::to_string(p)?)
+                .bind(now_ns())
+                .fetch_one(&mut *tx)
+                .await?;
+            sqlx::query("UPDATE exercises SET plan_id = ? WHERE id = ?").bind(plan_id).bind(id).execute(&mut *tx).await?;
+        }
+        tx.commit().await?;
+        self.get_exercise(id).await
+    }
+
     /// The exercise's expert plan.
     pub async fn exercise_plan(&self, exercise_id: i64) -> Result<ExpertPlan> {
         let e = self.get_exercise(exercise_id).await?;

@@ -1,0 +1,34 @@
+//! `cutlab serve`: the web dashboard on the assessment database (and the end of
+//! `cutlab demo --addr`).
+
+use std::path::Path;
+
+use anyhow::Context;
+use cutlab_assessor::store::Store;
+use cutlab_dashboard::{AppState, Config, seed_demo};
+
+/// Serves the dashboard on `addr` until Ctrl-C; with `demo`, first makes sure the demo
+/// accounts, cohort and attempts exist (and prints the accounts).
+pub fn run(db: &Path, addr: &str, demo: bool) -> anyhow::Result<()> {
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
+    rt.block_on(async {
+        let store = Store::open(db).await.with_context(|| format!("opening the database {}", db.display()))?;
+        store.ensure_builtins().await?;
+        if demo {
+            println!("demo accounts (user / password / role):");
+            for a in seed_demo(&store).await? {
+                println!("  {:8} {:16} {}", a.name, a.password, a.role);
+            }
+        }
+        let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
+        println!("dashboard: http://{} (database {}); Ctrl-C stops it", listener.local_addr()?, db.display());
+        let shutdown = async {
+            // no signal handler: run until killed
+            if tokio::signal::ctrl_c().await.is_err() {
+                std::future::pending::<()>().await;
+            }
+        };
+        cutlab_dashboard::serve(listener, AppState::new(store, Config::default())?, shutdown).await.context("serving")?;
+        anyhow::Ok(())
+    })
+}

@@ -1,0 +1,64 @@
+//! Login sessions in the database (`login_sessions`): the SHA-256 of the cookie's token, the
+//! user, the CSRF token of the session's forms, and an expiry.
+
+use cutlab_assessor::store::{Role, User, now_ns};
+
+use super::AuthSession;
+use super::tokens::{random_token, token_hash};
+use crate::AppState;
+use crate::error::AppError;
+
+/// How long a login lasts.
+pub const SESSION_TTL_NS: i64 = 12 * 3600 * 1_000_000_000;
+
+type Row = (i64, String, String, Option<String>, i64, String);
+
+/// A new session for `user`; returns the cookie's token (the database keeps only its hash).
+pub async fn create(state: &AppState, user: &User) -> Result<String, AppError> {
+    let token = random_token()?;
+    let csrf = random_token()?;
+    let now = now_ns();
+    let pool = state.store().pool();
+    // expired sessions go when someone logs in
+    sqlx::query("DELETE FROM login_sessions WHERE expires_ns < ?").bind(now).execute(pool).await?;
+    sqlx::query("INSERT INTO login_sessions (token_sha256, user_id, csrf_token, created_ns, expires_ns) VALUES (?, ?, ?, ?, ?)")
+        .bind(token_hash(&token))
+        .bind(user.id)
+        .bind(&csrf)
+        .bind(now)
+        .bind(now + SESSION_TTL_NS)
+        .execute(pool)
+        .await?;
+    Ok(token)
+}
+
+/// The live session of a cookie token, if any.
+pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>, AppError> {
+    if token.len() != 64 || !token.bytes().all(|c| c.is_ascii_hexdigit()) {
+        return Ok(None);
+    }
+    let hash = token_hash(token);
+    if let Some(s) = state.caches().sessions.get(&hash) {
+        return Ok(Some(s));
+    }
+    let row: Option<Row> = sqlx::query_as(
+        "SELECT u.id, u.name, u.role, u.password_hash, u.created_ns, s.csrf_token FROM login_sessions s JOIN users u ON u.id = s.user_id WHERE s.token_sha256 = ? AND s.expires_ns > ?",
+    )
+    .bind(&hash)
+    .bind(now_ns())
+    .fetch_optional(state.store().pool())
+    .await?;
+    let Some((id, name, role, password_hash, created_ns, csrf)) = row else { return Ok(None) };
+    let role: Role = role.parse().map_err(|e: cutlab_assessor::AssessError| AppError::Internal(e.to_string()))?;
+    let user = User { id, name, role, has_password: password_hash.is_some(), created_ns };
+    let s = AuthSession { user, csrf, token_hash: hash.clone() };
+    state.caches().sessions.put(hash, s.clone());
+    Ok(Some(s))
+}
+
+/// Ends a session.
+pub async fn delete(state: &AppState, token_hash: &str) -> Result<(), AppError> {
+    state.caches().sessions.remove(&token_hash.to_owned());
+    sqlx::query("DELETE FROM login_sessions WHERE token_sha256 = ?").bind(token_hash).execute(state.store().pool()).await?;
+    Ok(())
+}

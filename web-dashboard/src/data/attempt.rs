@@ -1,0 +1,99 @@
+//! One attempt: every metric with its threshold and verdict, the debriefing, its recordings.
+
+use std::path::PathBuf;
+
+use cutlab_assessor::metrics;
+use cutlab_assessor::store::Attempt;
+use serde::Serialize;
+
+use super::debrief::{self, Comment, SignOff};
+use super::{ExerciseRef, UserRef};
+use crate::AppState;
+use crate::error::AppError;
+
+#[derive(Debug, Serialize)]
+pub struct AttemptDetail {
+    pub attempt: Attempt,
+    pub trainee: UserRef,
+    pub exercise: ExerciseRef,
+    pub metrics: Vec<MetricRow>,
+    pub comments: Vec<Comment>,
+    pub signoff: Option<SignOff>,
+    pub recordings: RecordingFiles,
+}
+
+#[derive(Debug, Serialize)]
+pub struct MetricRow {
+    pub key: String,
+    pub unit: String,
+    pub description: String,
+    pub scored: bool,
+    pub value: Option<f64>,
+    pub missing: Option<String>,
+    pub passed: Option<bool>,
+    /// The threshold's reference (expert mean) and limits, if the metric has one.
+    pub mean: Option<f64>,
+    pub lower_limit: Option<f64>,
+    pub upper_limit: Option<f64>,
+}
+
+/// Which of the attempt's recordings exist on disk.
+#[derive(Debug, Serialize)]
+pub struct RecordingFiles {
+    pub mcap: bool,
+    pub rrd: bool,
+}
+
+/// The attempt's files: the stored `.mcap` path and the `.rrd` beside it (same stem), the
+/// only files the dashboard ever serves for it.
+pub fn recording_paths(a: &Attempt) -> Option<(PathBuf, PathBuf)> {
+    let mcap = PathBuf::from(a.recording_path.as_deref().filter(|p| !p.is_empty())?);
+    let rrd = mcap.with_extension("rrd");
+    Some((mcap, rrd))
+}
+
+fn is_file(p: &std::path::Path) -> bool {
+    std::fs::metadata(p).is_ok_and(|m| m.is_file())
+}
+
+pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppError> {
+    let store = state.store();
+    let trainee = UserRef::from(&store.get_user(a.trainee_id).await?);
+    let e = store.get_exercise(a.exercise_id).await?;
+    let thresholds = store.thresholds(a.exercise_id).await?;
+    let stored = store.attempt_metrics(a.id).await?;
+    let mut rows: Vec<MetricRow> = stored
+        .into_iter()
+        .map(|m| {
+            let def = metrics::metric(&m.metric);
+            let t = thresholds.metrics.iter().find(|t| t.key == m.metric);
+            MetricRow {
+                unit: m.unit,
+                description: def.map_or("", |d| d.description).to_owned(),
+                scored: def.is_some_and(|d| d.scored),
+                value: m.value,
+                missing: m.missing,
+                passed: m.passed,
+                mean: t.map(|t| t.mean),
+                lower_limit: t.and_then(|t| t.lower),
+                upper_limit: t.and_then(|t| t.upper),
+                key: m.metric,
+            }
+        })
+        .collect();
+    let rank = |key: &str| metrics::METRICS.iter().position(|m| m.key == key).unwrap_or(usize::MAX);
+    rows.sort_by_key(|r| rank(&r.key));
+    let recordings = match recording_paths(&a) {
+        Some((mcap, rrd)) => RecordingFiles { mcap: is_file(&mcap), rrd: is_file(&rrd) },
+        None => RecordingFiles { mcap: false, rrd: false },
+    };
+    Ok(AttemptDetail {
+        comments: debrief::comments(state, a.id).await?,
+        signoff: debrief::signoff(state, a.id).await?,
+        trainee,
+        exercise: ExerciseRef { id: e.id, name: e.name },
+        metrics: rows,
+        recordings,
+        attempt: a,
+    })
+}

@@ -1,0 +1,248 @@
+//! A trainee's progress: per exercise the attempts, per-metric learning curves with the
+//! expert band and the pass limits, the normalised score, the CUSUM chart with its limits;
+//! and the curriculum modules' state.
+
+use std::collections::{BTreeMap, HashMap};
+
+use cutlab_assessor::metrics::{self, Better};
+use cutlab_assessor::proficiency::{CusumParams, CusumSignal, cusum};
+use cutlab_assessor::store::{AttemptStatus, User};
+use serde::Serialize;
+
+use super::{ExerciseRef, ProficiencySummary, Standing, UserRef};
+use crate::AppState;
+use crate::error::AppError;
+
+#[derive(Debug, Serialize)]
+pub struct Progress {
+    pub trainee: UserRef,
+    pub exercises: Vec<ExerciseProgress>,
+    pub curricula: Vec<CurriculumProgress>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ExerciseProgress {
+    pub exercise: ExerciseRef,
+    /// Every attempt, oldest first.
+    pub attempts: Vec<AttemptPoint>,
+    pub proficiency: ProficiencySummary,
+    /// One series per metric with a threshold, then the others with values.
+    pub metrics: Vec<MetricSeries>,
+    pub cusum: CusumChart,
+}
+
+#[derive(Debug, Serialize)]
+pub struct AttemptPoint {
+    pub id: i64,
+    /// 1-based number among the scored attempts (None: not scored).
+    pub n: Option<u32>,
+    pub started_ns: i64,
+    pub status: AttemptStatus,
+    pub score: Option<f64>,
+    pub passed: Option<bool>,
+}
+
+/// The expert reference and limits of one metric.
+#[derive(Debug, Clone, Serialize)]
+pub struct Band {
+    pub mean: f64,
+    pub sd: f64,
+    pub k: f64,
+    /// `mean - k sd`, `mean + k sd`.
+    pub low: f64,
+    pub high: f64,
+    /// The pass limits.
+    pub lower_limit: Option<f64>,
+    pub upper_limit: Option<f64>,
+    pub n_experts: usize,
+}
+
+#[derive(Debug, Serialize)]
+pub struct MetricSeries {
+    pub key: String,
+    pub unit: String,
+    pub better: Option<Better>,
+    pub description: String,
+    pub band: Option<Band>,
+    /// `(n, attempt id, value, passed)` per scored attempt.
+    pub points: Vec<SeriesPoint>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct SeriesPoint {
+    pub n: u32,
+    pub attempt_id: i64,
+    pub value: Option<f64>,
+    pub passed: Option<bool>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct CusumChart {
+    pub params: CusumParams,
+    /// The acceptable limit is at `-h0`, the unacceptable one at `h1`.
+    pub h0: f64,
+    pub h1: f64,
+    pub points: Vec<CusumPointView>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct CusumPointView {
+    pub n: u32,
+    pub attempt_id: i64,
+    pub value: f64,
+    pub signal: CusumSignal,
+}
+
+#[derive(Debug, Serialize)]
+pub struct CurriculumProgress {
+    pub id: i64,
+    pub name: String,
+    pub modules: Vec<ModuleProgress>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ModuleProgress {
+    pub id: i64,
+    pub position: i64,
+    pub name: String,
+    pub standing: Standing,
+    pub exercises: Vec<(ExerciseRef, Standing)>,
+}
+
+/// A trainee's progress as cached (see [`crate::cache`]), with its page body and JSON made
+/// once.
+#[derive(Debug)]
+pub struct Cached {
+    pub data: Progress,
+    pub html: std::sync::OnceLock<String>,
+    pub json: std::sync::OnceLock<Vec<u8>>,
+}
+
+/// [`progress`] through the cache.
+pub async fn cached_progress(state: &AppState, trainee: &User) -> Result<std::sync::Arc<Cached>, AppError> {
+    if let Some((c, refresh)) = state.caches().progress.get_or_claim(&trainee.id) {
+        if refresh {
+            let (state, trainee) = (state.clone(), trainee.clone());
+            tokio::spawn(async move {
+                match progress(&state, &trainee).await {
+                    Ok(data) => state.caches().progress.put(trainee.id, std::sync::Arc::new(Cached { data, html: Default::default(), json: Default::default() })),
+                    Err(e) => tracing::warn!("refreshing the progress of {}: {e}", trainee.name),
+                }
+            });
+        }
+        return Ok(c);
+    }
+    let c = std::sync::Arc::new(Cached { data: progress(state, trainee).await?, html: Default::default(), json: Default::default() });
+    state.caches().progress.put(trainee.id, c.clone());
+    Ok(c)
+}
+
+type MetricRow = (i64, String, Option<f64>, String, Option<bool>);
+/// An attempt's stored metric: key, value, unit, verdict.
+type StoredValue = (String, Option<f64>, String, Option<bool>);
+
+/// The progress of `trainee` (whom the caller may see: checked by the caller).
+pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppError> {
+    let store = state.store();
+    let attempts = store.list_attempts(Some(trainee.id), None).await?;
+    let rows: Vec<MetricRow> = sqlx::query_as("SELECT r.attempt_id, r.metric, r.value, r.unit, r.passed FROM metric_results r JOIN attempts a ON a.id = r.attempt_id WHERE a.trainee_id = ?")
+        .bind(trainee.id)
+        .fetch_all(store.pool())
+        .await?;
+    let mut by_attempt: HashMap<i64, Vec<StoredValue>> = HashMap::new();
+    for (a, metric, value, unit, passed) in rows {
+        by_attempt.entry(a).or_default().push((metric, value, unit, passed));
+    }
+    let exercises = store.list_exercises().await?;
+    let mut standings: HashMap<i64, Standing> = HashMap::new();
+    let mut out = Vec::new();
+    for e in &exercises {
+        let mine: Vec<_> = attempts.iter().filter(|a| a.exercise_id == e.id && !a.expert).collect();
+        if mine.is_empty() {
+            continue;
+        }
+        let mut n = 0u32;
+        let points: Vec<AttemptPoint> = mine
+            .iter()
+            .map(|a| {
+                let scored = a.scored && a.status == AttemptStatus::Complete;
+                let this = scored.then(|| {
+                    n += 1;
+                    n
+                });
+                AttemptPoint { id: a.id, n: this, started_ns: a.started_ns, status: a.status, score: a.score, passed: a.passed }
+            })
+            .collect();
+        let scored: Vec<&AttemptPoint> = points.iter().filter(|p| p.n.is_some()).collect();
+        let proficiency = ProficiencySummary::of(scored.iter().map(|p| p.passed.unwrap_or(false)), true);
+        standings.insert(e.id, proficiency.standing);
+        let thresholds = store.thresholds(e.id).await?;
+        let mut series: BTreeMap<String, MetricSeries> = BTreeMap::new();
+        for t in &thresholds.metrics {
+            let def = metrics::metric(&t.key);
+            let band = Band {
+                mean: t.mean,
+                sd: t.sd,
+                k: thresholds.k,
+                low: t.mean - thresholds.k * t.sd,
+                high: t.mean + thresholds.k * t.sd,
+                lower_limit: t.lower,
+                upper_limit: t.upper,
+                n_experts: t.n_experts,
+            };
+            series.insert(t.key.clone(), MetricSeries { key: t.key.clone(), unit: def.map_or("", |d| d.unit).to_owned(), better: Some(t.better), description: def.map_or("", |d| d.description).to_owned(), band: Some(band), points: Vec::new() });
+        }
+        for p in &scored {
+            let n = p.n.unwrap_or(0);
+            for (metric, value, unit, passed) in by_attempt.get(&p.id).into_iter().flatten() {
+                let s = series.entry(metric.clone()).or_insert_with(|| {
+                    let def = metrics::metric(metric);
+                    MetricSeries { key: metric.clone(), unit: unit.clone(), better: def.map(|d| d.better), description: def.map_or("", |d| d.description).to_owned(), band: None, points: Vec::new() }
+                });
+                s.points.push(SeriesPoint { n, attempt_id: p.id, value: *value, passed: *passed });
+            }
+        }
+        // thresholded metrics first, in catalogue order, then the rest in catalogue order
+        let rank = |key: &str| metrics::METRICS.iter().position(|m| m.key == key).unwrap_or(usize::MAX);
+        let mut metric_list: Vec<MetricSeries> = series.into_values().filter(|s| s.band.is_some() || s.points.iter().any(|p| p.value.is_some())).collect();
+        metric_list.sort_by_key(|s| (s.band.is_none(), rank(&s.key)));
+        let params = CusumParams::default();
+        let passes: Vec<bool> = scored.iter().map(|p| p.passed.unwrap_or(false)).collect();
+        let chart = cusum(&passes, &params)?;
+        let cusum_points = scored.iter().zip(chart).map(|(p, c)| CusumPointView { n: p.n.unwrap_or(0), attempt_id: p.id, value: c.value, signal: c.signal }).collect();
+        out.push(ExerciseProgress {
+            exercise: ExerciseRef { id: e.id, name: e.name.clone() },
+            attempts: points,
+            proficiency,
+            metrics: metric_list,
+            cusum: CusumChart { params, h0: params.h0(), h1: params.h1(), points: cusum_points },
+        });
+    }
+    let names: HashMap<i64, &str> = exercises.iter().map(|e| (e.id, e.name.as_str())).collect();
+    let mut curricula = Vec::new();
+    for c in store.list_curricula().await? {
+        let mut modules = Vec::new();
+        for m in store.curriculum_modules(c.id).await? {
+            let ex: Vec<(ExerciseRef, Standing)> = m
+                .exercise_ids
+                .iter()
+                .map(|id| (ExerciseRef { id: *id, name: names.get(id).copied().unwrap_or("?").to_owned() }, standings.get(id).copied().unwrap_or(Standing::NotStarted)))
+                .collect();
+            let standing = module_standing(ex.iter().map(|e| e.1));
+            modules.push(ModuleProgress { id: m.id, position: m.position, name: m.name, standing, exercises: ex });
+        }
+        curricula.push(CurriculumProgress { id: c.id, name: c.name, modules });
+    }
+    Ok(Progress { trainee: UserRef::from(trainee), exercises: out, curricula })
+}
+
+/// A module is proficient when every exercise is, not started when none is started.
+fn module_standing(s: impl Iterator<Item = Standing> + Clone) -> Standing {
+    if s.clone().all(|s| s == Standing::Proficient) && s.clone().next().is_some() {
+        Standing::Proficient
+    } else if s.clone().all(|s| s == Standing::NotStarted) {
+        Standing::NotStarted
+    } else {
+        Standing::InProgress
+    }
+}

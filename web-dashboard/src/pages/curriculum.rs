@@ -1,0 +1,310 @@
+//! `/curriculum`: exercises (scene, expert plan, thresholds) and curricula (modules of
+//! exercises). Everyone reads; instructors and administrators create and edit.
+
+use axum::extract::State;
+use axum::response::Redirect;
+use axum::routing::{get, post};
+use axum::{Form, Router};
+use cutlab_assessor::metrics::{Better, METRICS};
+use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
+use cutlab_assessor::store::{NewExercise, ThresholdSource};
+use cutlab_assessor::ExpertPlan;
+use maud::{Markup, html};
+use serde::Deserialize;
+
+use super::layout::{num, page};
+use crate::extract::Id;
+use crate::AppState;
+use crate::auth::CurrentUser;
+use crate::error::{AppError, PageResult};
+
+/// The longest plan text taken.
+const MAX_PLAN_BYTES: usize = 64 * 1024;
+/// The most thresholds one exercise takes.
+const MAX_THRESHOLDS: usize = 100;
+const MAX_NAME: usize = 200;
+
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route("/curriculum", get(curriculum))
+        .route("/exercises", post(create_exercise))
+        .route("/exercises/{id}", get(exercise).post(edit_exercise))
+        .route("/exercises/{id}/thresholds", post(edit_thresholds))
+        .route("/curricula", post(create_curriculum))
+        .route("/curricula/{id}/modules", post(add_module))
+}
+
+/// A plan from TOML or JSON (JSON when it starts with `{`).
+pub fn parse_plan(text: &str) -> Result<ExpertPlan, AppError> {
+    if text.len() > MAX_PLAN_BYTES {
+        return Err(AppError::BadRequest(format!("a plan has at most {MAX_PLAN_BYTES} bytes")));
+    }
+    let t = text.trim();
+    Ok(if t.starts_with('{') { ExpertPlan::from_json(t)? } else { ExpertPlan::from_toml(t)? })
+}
+
+fn name_ok(what: &str, s: &str) -> Result<String, AppError> {
+    let s = s.trim();
+    if s.is_empty() || s.chars().count() > MAX_NAME || s.chars().any(char::is_control) {
+        return Err(AppError::BadRequest(format!("{what}: 1 to {MAX_NAME} printable characters")));
+    }
+    Ok(s.to_owned())
+}
+
+fn positive(what: &str, s: &str) -> Result<f64, AppError> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(AppError::BadRequest(format!("{what}: a number > 0"))),
+    }
+}
+
+async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageResult<Markup> {
+    let store = state.store();
+    let exercises = store.list_exercises().await?;
+    let mut curricula = Vec::new();
+    for c in store.list_curricula().await? {
+        let modules = store.curriculum_modules(c.id).await?;
+        curricula.push((c, modules));
+    }
+    let name_of = |id: i64| exercises.iter().find(|e| e.id == id).map_or("?", |e| e.name.as_str());
+    let sample_plan = ExpertPlan::chest_wall().ok().and_then(|p| serde_json::to_string_pretty(&p).ok()).unwrap_or_default();
+    Ok(page(
+        "Curriculum",
+        Some(&user),
+        html! {
+            h2 { "Exercises" }
+            table {
+                thead { tr { th { "Exercise" } th { "Scene" } th { "k" } th { "Description" } } }
+                tbody {
+                    @for e in &exercises {
+                        tr { td { a href=(format!("/exercises/{}", e.id)) { (e.name) } } td { (e.scene) } td class="num" { (num(Some(e.threshold_k), 1)) } td { (e.description) } }
+                    }
+                }
+            }
+            h2 { "Curricula" }
+            @if curricula.is_empty() { p class="muted" { "None yet." } }
+            @for (c, modules) in &curricula {
+                h3 { (c.name) } p class="muted" { (c.description) }
+                ol { @for m in modules { li { (m.name) ": " @for (i, e) in m.exercise_ids.iter().enumerate() { @if i > 0 { ", " } (name_of(*e)) } } } }
+                @if user.is_staff() {
+                    form method="post" action=(format!("/curricula/{}/modules", c.id)) {
+                        input type="hidden" name="csrf" value=(user.csrf());
+                        "Add module " input type="text" name="name" required maxlength=(MAX_NAME) placeholder="module name";
+                        select name="exercise_id" { @for e in &exercises { option value=(e.id) { (e.name) } } }
+                        button type="submit" { "Add" }
+                    }
+                }
+            }
+            @if user.is_staff() {
+                h2 { "New curriculum" }
+                form method="post" action="/curricula" {
+                    input type="hidden" name="csrf" value=(user.csrf());
+                    input type="text" name="name" required maxlength=(MAX_NAME) placeholder="name";
+                    input type="text" name="description" maxlength="2000" placeholder="description";
+                    button type="submit" { "Create" }
+                }
+                h2 { "New exercise" }
+                form method="post" action="/exercises" {
+                    input type="hidden" name="csrf" value=(user.csrf());
+                    p { input type="text" name="name" required maxlength=(MAX_NAME) placeholder="name";
+                        input type="text" name="scene" required maxlength=(MAX_NAME) value="chest-wall";
+                        " k " input type="text" name="threshold_k" value=(DEFAULT_K) size="4"; }
+                    p { input type="text" name="description" maxlength="2000" placeholder="description" size="80"; }
+                    p { "Expert plan (TOML or JSON; every field is documented in assessor/examples/plan.toml):" br;
+                        textarea name="plan" rows="12" { (sample_plan) } }
+                    p class="muted" { "The new exercise starts with the built-in provisional thresholds; edit them on its page." }
+                    button type="submit" { "Create exercise" }
+                }
+            }
+        },
+    ))
+}
+
+#[derive(Debug, Deserialize)]
+struct ExerciseForm {
+    #[serde(default)]
+    name: String,
+    scene: String,
+    #[serde(default)]
+    description: String,
+    threshold_k: String,
+    #[serde(default)]
+    plan: String,
+}
+
+async fn create_exercise(State(state): State<AppState>, user: CurrentUser, Form(f): Form<ExerciseForm>) -> PageResult<Redirect> {
+    user.require_staff()?;
+    let name = name_ok("name", &f.name)?;
+    let scene = name_ok("scene", &f.scene)?;
+    let k = positive("k", &f.threshold_k)?;
+    let plan = parse_plan(&f.plan)?;
+    let thresholds = cutlab_assessor::store::default_thresholds();
+    let e = state.store().create_exercise(&NewExercise { name: &name, scene: &scene, description: f.description.trim(), plan: &plan, thresholds: &thresholds, threshold_k: k }).await?;
+    Ok(Redirect::to(&format!("/exercises/{}", e.id)))
+}
+
+async fn edit_exercise(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(f): Form<ExerciseForm>) -> PageResult<Redirect> {
+    user.require_staff()?;
+    let scene = name_ok("scene", &f.scene)?;
+    let k = positive("k", &f.threshold_k)?;
+    let plan = if f.plan.trim().is_empty() { None } else { Some(parse_plan(&f.plan)?) };
+    state.store().update_exercise(id, &scene, f.description.trim(), k, plan.as_ref()).await?;
+    state.caches().progress.clear();
+    Ok(Redirect::to(&format!("/exercises/{id}")))
+}
+
+async fn exercise(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
+    let store = state.store();
+    let e = store.get_exercise(id).await?;
+    let plan = store.get_plan(e.plan_id).await?;
+    let t = store.thresholds(id).await?;
+    let plan_json = serde_json::to_string_pretty(&plan).map_err(|err| AppError::Internal(err.to_string()))?;
+    Ok(page(
+        &format!("Exercise {}", e.name),
+        Some(&user),
+        html! {
+            p { "Scene " code { (e.scene) } " · k = " (num(Some(e.threshold_k), 2)) } p { (e.description) }
+            h2 { "Thresholds" }
+            @if user.is_staff() {
+                form method="post" action=(format!("/exercises/{id}/thresholds")) {
+                    input type="hidden" name="csrf" value=(user.csrf());
+                    (thresholds_table(&t, true))
+                    p class="muted" { "SI units (m, s, N). Empty limit: none. Clear a metric's key to drop it; the last row adds one." }
+                    button type="submit" { "Save thresholds" }
+                }
+            } @else {
+                (thresholds_table(&t, false))
+            }
+            h2 { "Expert plan" }
+            @if user.is_staff() {
+                form method="post" action=(format!("/exercises/{id}")) {
+                    input type="hidden" name="csrf" value=(user.csrf());
+                    p { "Scene " input type="text" name="scene" value=(e.scene) required maxlength=(MAX_NAME);
+                        " k " input type="text" name="threshold_k" value=(e.threshold_k) size="4"; }
+                    p { input type="text" name="description" value=(e.description) size="80" maxlength="2000"; }
+                    textarea name="plan" rows="20" { (plan_json) }
+                    br; button type="submit" { "Save exercise" }
+                }
+            } @else {
+                pre { (plan_json) }
+            }
+        },
+    ))
+}
+
+fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
+    let f = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
+    html! {
+        table {
+            thead { tr { th { "Metric" } th { "Direction" } th { "Expert mean" } th { "SD" } th { "Lower limit" } th { "Upper limit" } th { "Experts" } } }
+            tbody {
+                @if editable {
+                    @for (i, m) in t.metrics.iter().map(Some).chain(std::iter::once(None)).enumerate() {
+                        tr {
+                            td { select name=(format!("key_{i}")) {
+                                option value="" { "–" }
+                                @for d in METRICS.iter().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (d.key) } }
+                            } }
+                            td { select name=(format!("better_{i}")) {
+                                @for b in [Better::LowerIsBetter, Better::HigherIsBetter, Better::TwoSided] { option value=(b.as_str()) selected[m.is_some_and(|m| m.better == b)] { (b.as_str()) } }
+                            } }
+                            td { input type="text" size="8" name=(format!("mean_{i}")) value=(f(m.map(|m| m.mean))); }
+                            td { input type="text" size="8" name=(format!("sd_{i}")) value=(f(m.map(|m| m.sd))); }
+                            td { input type="text" size="8" name=(format!("lower_{i}")) value=(f(m.and_then(|m| m.lower))); }
+                            td { input type="text" size="8" name=(format!("upper_{i}")) value=(f(m.and_then(|m| m.upper))); }
+                            td class="num" { @if let Some(m) = m { (m.n_experts) } }
+                        }
+                    }
+                } @else {
+                    @for m in &t.metrics {
+                        tr { td { (m.key) } td { (m.better.as_str()) } td class="num" { (m.mean) } td class="num" { (m.sd) } td class="num" { (f(m.lower)) } td class="num" { (f(m.upper)) } td class="num" { (m.n_experts) } }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Thresholds from the form's rows `key_i, better_i, mean_i, sd_i, lower_i, upper_i`.
+fn thresholds_from_form(fields: &[(String, String)], k: f64) -> Result<Thresholds, AppError> {
+    let get = |name: String| fields.iter().find(|(n, _)| *n == name).map(|(_, v)| v.trim());
+    let number = |name: String, what: &str, key: &str| -> Result<Option<f64>, AppError> {
+        match get(name).filter(|v| !v.is_empty()) {
+            None => Ok(None),
+            Some(v) => match v.parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(Some(x)),
+                _ => Err(AppError::BadRequest(format!("{key}: {what} is not a number"))),
+            },
+        }
+    };
+    let mut metrics: Vec<Threshold> = Vec::new();
+    for i in 0..=MAX_THRESHOLDS {
+        let Some(key) = get(format!("key_{i}")) else { break };
+        if key.is_empty() {
+            continue;
+        }
+        if i == MAX_THRESHOLDS {
+            return Err(AppError::BadRequest(format!("at most {MAX_THRESHOLDS} thresholds")));
+        }
+        let def = cutlab_assessor::metrics::metric(key).filter(|d| d.scored).ok_or_else(|| AppError::BadRequest(format!("{key:?} is not a scored metric")))?;
+        if metrics.iter().any(|m| m.key == def.key) {
+            return Err(AppError::BadRequest(format!("{} given twice", def.key)));
+        }
+        let better = get(format!("better_{i}")).and_then(Better::parse).ok_or_else(|| AppError::BadRequest(format!("{key}: unknown direction")))?;
+        let mean = number(format!("mean_{i}"), "the mean", key)?.ok_or_else(|| AppError::BadRequest(format!("{key}: the mean is needed")))?;
+        let sd = number(format!("sd_{i}"), "the SD", key)?.unwrap_or(0.0);
+        if sd < 0.0 {
+            return Err(AppError::BadRequest(format!("{key}: a negative SD")));
+        }
+        let (lower, upper) = (number(format!("lower_{i}"), "the lower limit", key)?, number(format!("upper_{i}"), "the upper limit", key)?);
+        if lower.is_none() && upper.is_none() {
+            return Err(AppError::BadRequest(format!("{key}: a threshold needs a limit")));
+        }
+        if let (Some(l), Some(u)) = (lower, upper)
+            && l > u
+        {
+            return Err(AppError::BadRequest(format!("{key}: lower limit above upper")));
+        }
+        metrics.push(Threshold { key: def.key.into(), better, mean, sd, n_experts: 0, lower, upper });
+    }
+    Ok(Thresholds { k, metrics })
+}
+
+async fn edit_thresholds(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
+    user.require_staff()?;
+    let e = state.store().get_exercise(id).await?;
+    let t = thresholds_from_form(&fields, e.threshold_k)?;
+    state.store().set_thresholds(id, &t, ThresholdSource::Default).await?;
+    state.caches().progress.clear();
+    Ok(Redirect::to(&format!("/exercises/{id}")))
+}
+
+#[derive(Debug, Deserialize)]
+struct CurriculumForm {
+    name: String,
+    #[serde(default)]
+    description: String,
+}
+
+async fn create_curriculum(State(state): State<AppState>, user: CurrentUser, Form(f): Form<CurriculumForm>) -> PageResult<Redirect> {
+    user.require_staff()?;
+    let name = name_ok("name", &f.name)?;
+    state.store().create_curriculum(&name, f.description.trim()).await?;
+    state.caches().progress.clear();
+    Ok(Redirect::to("/curriculum"))
+}
+
+async fn add_module(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
+    user.require_staff()?;
+    let name = name_ok("module name", fields.iter().find(|(k, _)| k == "name").map_or("", |(_, v)| v.as_str()))?;
+    let ids: Vec<i64> = fields
+        .iter()
+        .filter(|(k, _)| k == "exercise_id")
+        .take(MAX_THRESHOLDS)
+        .map(|(_, v)| v.trim().parse::<i64>().map_err(|_| AppError::BadRequest("exercise ids are numbers".into())))
+        .collect::<Result<_, _>>()?;
+    state.store().get_curriculum(id).await?;
+    state.store().add_module(id, &name, &ids).await?;
+    state.caches().progress.clear();
+    Ok(Redirect::to("/curriculum"))
+}

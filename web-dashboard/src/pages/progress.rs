@@ -1,0 +1,119 @@
+//! `/trainees/{id}`: a trainee's progress: learning curves per metric with the expert band
+//! and the pass limits, the normalised score, the CUSUM chart, the curriculum modules.
+
+use axum::Router;
+use axum::extract::State;
+use axum::routing::get;
+use maud::{Markup, PreEscaped, html};
+
+use super::layout::{num, page, verdict, when};
+use crate::extract::Id;
+use crate::AppState;
+use crate::access::visible_user;
+use crate::auth::CurrentUser;
+use crate::charts::{Chart, Layer};
+use crate::data::display_unit;
+use crate::data::progress::{ExerciseProgress, MetricSeries, Progress, cached_progress};
+use crate::error::PageResult;
+
+pub fn router() -> Router<AppState> {
+    Router::new().route("/trainees/{id}", get(trainee))
+}
+
+async fn trainee(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
+    let trainee = visible_user(&state, &user, id).await?;
+    let c = cached_progress(&state, &trainee).await?;
+    let body = c.html.get_or_init(|| body(&c.data).into_string());
+    Ok(page(&format!("Progress of {}", c.data.trainee.name), Some(&user), PreEscaped(body.clone())))
+}
+
+fn body(p: &Progress) -> Markup {
+    html! {
+        @if p.exercises.is_empty() { p class="muted" { "No attempts yet." } }
+        @for e in &p.exercises { (exercise_section(e)) }
+        h2 { "Curriculum" }
+        @if p.curricula.is_empty() { p class="muted" { "No curriculum defined." } }
+        @for c in &p.curricula {
+            h3 { (c.name) }
+            table {
+                thead { tr { th { "#" } th { "Module" } th { "State" } th { "Exercises" } } }
+                tbody {
+                    @for m in &c.modules {
+                        tr {
+                            td class="num" { (m.position) }
+                            td { (m.name) }
+                            td class=(format!("state-{}", m.standing.as_str().replace(' ', "-"))) { (m.standing.as_str()) }
+                            td { @for (e, s) in &m.exercises { (e.name) " (" (s.as_str()) ")" br; } }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn exercise_section(e: &ExerciseProgress) -> Markup {
+    let pr = &e.proficiency;
+    let score_points: Vec<(f64, Option<f64>)> = e.attempts.iter().filter_map(|a| a.n.map(|n| (f64::from(n), a.score))).collect();
+    let score_chart = Chart::new("Normalised score", "attempt", "score")
+        .layer(Layer::HLine { y: 0.0, class: "limit", label: "pass ≥ 0".into() })
+        .layer(Layer::HLine { y: 1.0, class: "mean", label: "expert".into() })
+        .layer(Layer::Line { points: score_points.clone(), class: "series" })
+        .layer(Layer::Points { points: e.attempts.iter().filter_map(|a| Some((f64::from(a.n?), a.score?, if a.passed == Some(true) { "pt-pass" } else { "pt-fail" }))).collect() });
+    let mut cusum = Chart::new("CUSUM of failures", "attempt", "CUSUM")
+        .layer(Layer::HLine { y: e.cusum.h1, class: "limit", label: format!("h1 {:.2}", e.cusum.h1) })
+        .layer(Layer::HLine { y: -e.cusum.h0, class: "ok", label: format!("−h0 {:.2}", e.cusum.h0) })
+        .layer(Layer::HLine { y: 0.0, class: "zero", label: String::new() })
+        .layer(Layer::Line { points: std::iter::once((0.0, Some(0.0))).chain(e.cusum.points.iter().map(|p| (f64::from(p.n), Some(p.value)))).collect(), class: "series" });
+    cusum.y_include = vec![e.cusum.h1, -e.cusum.h0];
+    html! {
+        h2 { (e.exercise.name) }
+        p {
+            (pr.attempts) " scored attempts, " (pr.passes) " passed, " (pr.consecutive_passes) " consecutive; "
+            @if let Some(t) = pr.trials_to_proficiency { strong class="pass" { "proficient after " (t) " attempts" } } @else { strong { (pr.standing.as_str()) } }
+        }
+        div class="charts" {
+            (score_chart.render())
+            (cusum.render())
+        }
+        h3 { "Learning curves" }
+        div class="charts learning-curves" {
+            @for m in &e.metrics { (metric_chart(m)) }
+        }
+        h3 { "Attempts" }
+        table {
+            thead { tr { th { "#" } th { "Attempt" } th { "Started (UTC)" } th { "Status" } th { "Score" } th { "Verdict" } } }
+            tbody {
+                @for a in e.attempts.iter().rev() {
+                    tr {
+                        td class="num" { @if let Some(n) = a.n { (n) } }
+                        td { a href=(format!("/attempts/{}", a.id)) { "attempt " (a.id) } }
+                        td { (when(a.started_ns)) }
+                        td { (a.status.as_str()) }
+                        td class="num" { (num(a.score, 2)) }
+                        td { (verdict(a.passed)) }
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn metric_chart(m: &MetricSeries) -> Markup {
+    let (f, unit) = display_unit(&m.unit);
+    let label = if unit.is_empty() { m.key.clone() } else { format!("{} ({unit})", m.key) };
+    let mut c = Chart::new(label, "attempt", unit);
+    if let Some(b) = &m.band {
+        if b.sd > 0.0 {
+            c = c.layer(Layer::HBand { low: b.low * f, high: b.high * f, class: "band" });
+        }
+        c = c.layer(Layer::HLine { y: b.mean * f, class: "mean", label: "expert".into() });
+        for l in [b.lower_limit, b.upper_limit].into_iter().flatten() {
+            c = c.layer(Layer::HLine { y: l * f, class: "limit", label: "pass".into() });
+        }
+    }
+    c = c
+        .layer(Layer::Line { points: m.points.iter().map(|p| (f64::from(p.n), p.value.map(|v| v * f))).collect(), class: "series" })
+        .layer(Layer::Points { points: m.points.iter().filter_map(|p| Some((f64::from(p.n), p.value? * f, match p.passed { Some(true) => "pt-pass", Some(false) => "pt-fail", None => "pt" }))).collect() });
+    c.render()
+}

@@ -1,0 +1,221 @@
+//! An attempt's recordings: downloads of its `.mcap` and `.rrd`, and replay review in rerun's
+//! own web viewer, served by this process from the `re_web_viewer_server` crate's embedded
+//! build (wasm + JavaScript, shipped in that crate's crates.io package: nothing is fetched
+//! from the network).
+//!
+//! Only the attempt's stored recording path (and the `.rrd` beside it) is ever served: the
+//! routes take an attempt id, never a path.
+
+use axum::Router;
+use axum::body::{Body, Bytes};
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, HeaderValue, header};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use maud::html;
+use re_web_viewer_server::WebViewerData;
+
+use crate::extract::Id;
+use crate::AppState;
+use crate::access::visible_attempt;
+use crate::auth::CurrentUser;
+use crate::data::attempt::recording_paths;
+use crate::error::AppError;
+use crate::pages::layout;
+
+/// rerun's web viewer files, read once.
+#[derive(Debug)]
+pub struct Viewer {
+    files: Option<ViewerFiles>,
+}
+
+#[derive(Debug)]
+struct ViewerFiles {
+    index_html: Bytes,
+    viewer_js: Bytes,
+    viewer_wasm: Bytes,
+    favicon: Bytes,
+    touch_icon: Bytes,
+    sw_js: Bytes,
+}
+
+impl Viewer {
+    /// The viewer embedded in `re_web_viewer_server` (none if that build has no assets).
+    pub fn load() -> Self {
+        match WebViewerData::load(None) {
+            Ok(d) => Self {
+                files: Some(ViewerFiles {
+                    index_html: Bytes::from(offline_index(d.index_html())),
+                    viewer_js: Bytes::copy_from_slice(d.viewer_js()),
+                    viewer_wasm: Bytes::copy_from_slice(d.viewer_wasm()),
+                    favicon: Bytes::copy_from_slice(d.favicon()),
+                    touch_icon: Bytes::copy_from_slice(d.apple_touch_icon()),
+                    sw_js: Bytes::copy_from_slice(d.sw_js()),
+                }),
+            },
+            Err(e) => {
+                tracing::error!("rerun web viewer unavailable: {e}");
+                Self { files: None }
+            }
+        }
+    }
+
+    pub fn available(&self) -> bool {
+        self.files.is_some()
+    }
+}
+
+/// The viewer's `index.html` without its links to Google's font servers (the viewer draws its
+/// own text; offline, those requests would only fail).
+fn offline_index(html: &[u8]) -> Vec<u8> {
+    let text = String::from_utf8_lossy(html);
+    let mut out = String::with_capacity(text.len());
+    let mut rest: &str = &text;
+    while let Some(start) = rest.find("<link") {
+        let Some(len) = rest[start..].find('>') else { break };
+        let tag = &rest[start..start + len + 1];
+        out.push_str(&rest[..start]);
+        if !(tag.contains("fonts.googleapis.com") || tag.contains("fonts.gstatic.com")) {
+            out.push_str(tag);
+        }
+        rest = &rest[start + len + 1..];
+    }
+    out.push_str(rest);
+    out.into_bytes()
+}
+
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route("/attempts/{id}/recording.mcap", get(mcap))
+        .route("/attempts/{id}/recording.rrd", get(rrd))
+        .route("/attempts/{id}/replay", get(replay_page))
+        .route("/attempts/{id}/grant/{grant}/recording.rrd", get(granted_rrd))
+        .route("/viewer/", get(viewer_index))
+        .route("/viewer/{file}", get(viewer_file))
+}
+
+async fn mcap(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
+    let a = visible_attempt(&state, &user, id).await?;
+    let (path, _) = recording_paths(&a).ok_or(AppError::NotFound)?;
+    send_file(&path, &format!("attempt-{id}.mcap")).await
+}
+
+async fn rrd(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
+    let a = visible_attempt(&state, &user, id).await?;
+    let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
+    send_file(&path, &format!("attempt-{id}.rrd")).await
+}
+
+/// The `.rrd` for rerun's web viewer, which fetches without cookies: the path carries a
+/// grant issued by the replay page (see [`crate::auth::grants`]).
+async fn granted_rrd(State(state): State<AppState>, axum::extract::Path((id, grant)): axum::extract::Path<(i64, String)>) -> Result<Response, AppError> {
+    if !state.grants().check(id, &grant) {
+        return Err(AppError::NotFound);
+    }
+    let a = state.store().get_attempt(id).await?;
+    let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
+    send_file(&path, &format!("attempt-{id}.rrd")).await
+}
+
+/// A regular file as an attachment, streamed.
+async fn send_file(path: &std::path::Path, download_name: &str) -> Result<Response, AppError> {
+    let file = match tokio::fs::File::open(path).await {
+        Ok(f) => f,
+        Err(_) => return Err(AppError::NotFound),
+    };
+    let meta = file.metadata().await.map_err(|_| AppError::NotFound)?;
+    if !meta.is_file() {
+        return Err(AppError::NotFound);
+    }
+    let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
+    let mut r = body.into_response();
+    let h = r.headers_mut();
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/octet-stream"));
+    h.insert(header::CONTENT_LENGTH, HeaderValue::from(meta.len()));
+    // the name is ours (attempt-N.ext), never the stored path
+    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{download_name}\"")) {
+        h.insert(header::CONTENT_DISPOSITION, v);
+    }
+    Ok(r)
+}
+
+/// The host the browser used, if it is a plain host[:port] (for the viewer's absolute URL).
+fn request_origin(headers: &HeaderMap, https: bool) -> Option<String> {
+    let host = headers.get(header::HOST)?.to_str().ok()?;
+    let ok = !host.is_empty() && host.len() <= 255 && host.bytes().all(|c| c.is_ascii_alphanumeric() || b".-:[]".contains(&c));
+    ok.then(|| format!("{}://{host}", if https { "https" } else { "http" }))
+}
+
+/// The viewer's URL opening attempt `id`'s `.rrd` through `grant`.
+pub fn viewer_url(origin: &str, id: i64, grant: &str) -> String {
+    let rrd = format!("{origin}/attempts/{id}/grant/{grant}/recording.rrd");
+    let q: String = form_urlencoded::Serializer::new(String::new()).append_pair("url", &rrd).finish();
+    format!("/viewer/?{q}&hide_welcome_screen")
+}
+
+async fn replay_page(State(state): State<AppState>, user: CurrentUser, headers: HeaderMap, Id(id): Id) -> Result<Response, AppError> {
+    let a = visible_attempt(&state, &user, id).await?;
+    let has_rrd = recording_paths(&a).is_some_and(|(_, rrd)| std::fs::metadata(rrd).is_ok_and(|m| m.is_file()));
+    let origin = request_origin(&headers, state.config().secure_cookies);
+    let body = html! {
+        p { a href=(format!("/attempts/{id}")) { "Back to attempt " (id) } " · " a href=(format!("/attempts/{id}/recording.rrd")) { "Download .rrd" } }
+        @if !state.viewer().available() {
+            p class="fail" { "This build has no rerun web viewer." }
+        } @else if !has_rrd {
+            p class="fail" { "Attempt " (id) " has no .rrd recording (record with " code { "cutlab session --rrd" } ")." }
+        } @else if let Some(origin) = origin {
+            iframe id="replay" class="replay" title="rerun viewer" src=(viewer_url(&origin, id, &state.grants().issue(id, user.id()))) {}
+        } @else {
+            p class="fail" { "Cannot tell the viewer where this server is (no usable Host header)." }
+        }
+    };
+    Ok(layout::page(&format!("Replay of attempt {id}"), Some(&user), body).into_response())
+}
+
+async fn viewer_index(State(state): State<AppState>, _user: CurrentUser) -> Result<Response, AppError> {
+    serve_viewer_file(&state, "index.html")
+}
+
+async fn viewer_file(State(state): State<AppState>, _user: CurrentUser, Path(file): Path<String>) -> Result<Response, AppError> {
+    serve_viewer_file(&state, &file)
+}
+
+fn serve_viewer_file(state: &AppState, name: &str) -> Result<Response, AppError> {
+    let files = state.viewer().files.as_ref().ok_or(AppError::NotFound)?;
+    let (mime, bytes) = match name {
+        "index.html" => ("text/html; charset=utf-8", &files.index_html),
+        "re_viewer.js" => ("text/javascript", &files.viewer_js),
+        "re_viewer_bg.wasm" => ("application/wasm", &files.viewer_wasm),
+        "favicon.ico" => ("image/x-icon", &files.favicon),
+        "apple-touch-icon.png" => ("image/png", &files.touch_icon),
+        "sw.js" => ("text/javascript", &files.sw_js),
+        _ => return Err(AppError::NotFound),
+    };
+    Ok(([(header::CONTENT_TYPE, mime), (header::CACHE_CONTROL, "private, max-age=3600")], bytes.clone()).into_response())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_viewer_index_loses_only_the_font_links() {
+        let html = b"<head><link rel=\"icon\" href=\"favicon.ico\" /><link rel=\"preconnect\" href=\"https://fonts.googleapis.com\" /><link\n href=\"https://fonts.googleapis.com/css2\"\n rel=\"stylesheet\"\n /></head>";
+        let out = String::from_utf8(offline_index(html)).unwrap();
+        assert_eq!(out, "<head><link rel=\"icon\" href=\"favicon.ico\" /></head>");
+    }
+
+    #[test]
+    fn the_embedded_viewer_is_there_and_offline() {
+        let v = Viewer::load();
+        let files = v.files.expect("re_web_viewer_server ships the viewer");
+        assert!(files.viewer_wasm.len() > 1_000_000 && files.viewer_wasm.starts_with(b"\0asm"));
+        let index = String::from_utf8_lossy(&files.index_html);
+        assert!(index.contains("re_viewer.js") && !index.contains("fonts.googleapis.com"));
+    }
+
+    #[test]
+    fn viewer_url_encodes_the_rrd_url() {
+        assert_eq!(viewer_url("http://127.0.0.1:8080", 7, "1-2-ab"), "/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F7%2Fgrant%2F1-2-ab%2Frecording.rrd&hide_welcome_screen");
+    }
+}

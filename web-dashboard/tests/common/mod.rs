@@ -1,0 +1,100 @@
+//! Shared by the HTTP tests: a fresh database per test (a temporary file) with the demo
+//! seeded, the app, and a tiny client over `tower::ServiceExt::oneshot`.
+#![allow(dead_code, clippy::unwrap_used)]
+
+use axum::Router;
+use axum::body::Body;
+use axum::http::{Method, Request, Response, StatusCode, header};
+use cutlab_dashboard::assessor::store::Store;
+use cutlab_dashboard::{AppState, Config, app, seed_demo};
+use http_body_util::BodyExt;
+use tower::ServiceExt;
+
+#[derive(Debug)]
+pub struct Env {
+    pub app: Router,
+    pub store: Store,
+    pub dir: tempfile::TempDir,
+}
+
+pub async fn env() -> Env {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("cutlab.db")).await.unwrap();
+    seed_demo(&store).await.unwrap();
+    let app = app(AppState::new(store.clone(), Config::default()).unwrap());
+    Env { app, store, dir }
+}
+
+/// A logged-in browser: its cookie and the session's CSRF token.
+#[derive(Debug, Clone)]
+pub struct Session {
+    pub cookie: String,
+    pub csrf: String,
+}
+
+pub async fn send(app: &Router, req: Request<Body>) -> Response<Body> {
+    app.clone().oneshot(req).await.unwrap()
+}
+
+pub async fn body_text(r: Response<Body>) -> String {
+    String::from_utf8_lossy(&r.into_body().collect().await.unwrap().to_bytes()).into_owned()
+}
+
+pub fn get(path: &str, s: Option<&Session>) -> Request<Body> {
+    let mut b = Request::get(path);
+    if let Some(s) = s {
+        b = b.header(header::COOKIE, &s.cookie);
+    }
+    b.body(Body::empty()).unwrap()
+}
+
+pub fn post_form(path: &str, cookie: Option<&str>, form: &[(&str, &str)]) -> Request<Body> {
+    let body: String = form_urlencoded::Serializer::new(String::new()).extend_pairs(form).finish();
+    let mut b = Request::builder().method(Method::POST).uri(path).header(header::CONTENT_TYPE, "application/x-www-form-urlencoded");
+    if let Some(c) = cookie {
+        b = b.header(header::COOKIE, c);
+    }
+    b.body(Body::from(body)).unwrap()
+}
+
+pub fn set_cookie(r: &Response<Body>, name: &str) -> Option<String> {
+    r.headers().get_all(header::SET_COOKIE).iter().filter_map(|v| v.to_str().ok()).find_map(|v| v.split(';').next()?.trim().strip_prefix(name)?.strip_prefix('=').map(str::to_owned))
+}
+
+/// The login form's CSRF cookie token.
+pub async fn login_csrf(app: &Router) -> String {
+    let r = send(app, get("/login", None)).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    set_cookie(&r, "cutlab_login_csrf").unwrap()
+}
+
+/// Posts the login form; returns the answer.
+pub async fn try_login(app: &Router, user: &str, password: &str) -> Response<Body> {
+    let csrf = login_csrf(app).await;
+    send(app, post_form("/login", Some(&format!("cutlab_login_csrf={csrf}")), &[("username", user), ("password", password), ("csrf", &csrf)])).await
+}
+
+/// Logs in (must succeed) and reads the session's CSRF token off a page.
+pub async fn login(app: &Router, user: &str, password: &str) -> Session {
+    let r = try_login(app, user, password).await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER, "login of {user}");
+    let token = set_cookie(&r, "cutlab_session").unwrap();
+    let cookie = format!("cutlab_session={token}");
+    let page = body_text(send(app, get("/curriculum", Some(&Session { cookie: cookie.clone(), csrf: String::new() }))).await).await;
+    let at = page.find("name=\"csrf\" value=\"").unwrap() + "name=\"csrf\" value=\"".len();
+    let csrf = page[at..at + 64].to_owned();
+    Session { cookie, csrf }
+}
+
+pub async fn user_id(store: &Store, name: &str) -> i64 {
+    store.user_by_name(name).await.unwrap().id
+}
+
+/// The first attempt of `name`.
+pub async fn first_attempt(store: &Store, name: &str) -> i64 {
+    store.list_attempts(Some(user_id(store, name).await), None).await.unwrap()[0].id
+}
+
+pub async fn count(store: &Store, table: &str) -> i64 {
+    sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT COUNT(*) FROM {table}"))).fetch_one(store.pool()).await.unwrap()
+}
