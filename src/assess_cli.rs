@@ -123,6 +123,15 @@ pub enum ExerciseCommand {
     },
     /// Lists the exercises.
     List,
+    /// Sets an exercise's thresholds from its complete expert attempts (mean +/- k SD after
+    /// removing outliers with |z| > 1.96) and prints them (`--json` for machines).
+    Thresholds {
+        /// The exercise.
+        #[arg(default_value = cutlab_assessor::store::BUILTIN_EXERCISE)]
+        name: String,
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -209,6 +218,20 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             for e in store.list_exercises().await? {
                 let t = store.thresholds(e.id).await?;
                 println!("{:>4}  {:<24} scene {:<12} {} thresholds", e.id, e.name, e.scene, t.metrics.len());
+            }
+        }
+        AssessCommand::Exercise { command: ExerciseCommand::Thresholds { name, json } } => {
+            let e = store.exercise_by_name(&name).await?;
+            let t = store.thresholds_from_experts(e.id).await?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&t)?);
+            } else {
+                println!("{}: thresholds from expert attempts, mean +/- {} SD", e.name, e.threshold_k);
+                println!("{:<28} {:>12} {:>12} {:>4} {:>12} {:>12}", "metric", "mean", "sd", "n", "lower", "upper");
+                let limit = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.4}"));
+                for m in &t.metrics {
+                    println!("{:<28} {:>12.4} {:>12.4} {:>4} {:>12} {:>12}", m.key, m.mean, m.sd, m.n_experts, limit(m.lower), limit(m.upper));
+                }
             }
         }
         AssessCommand::Export { command: ExportCommand::Xapi { trainee } } => {
