@@ -4,6 +4,7 @@
 //! around the exercise's thresholds by a seeded generator; they have no recording.
 
 use cutlab_assessor::metrics::{self, MetricValue};
+use cutlab_haptics::pose::Rng;
 use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Cohort, Role, Store, User};
 use cutlab_assessor::{AssessError, Better};
@@ -27,27 +28,6 @@ pub const DEMO_ACCOUNTS: [DemoAccount; 4] = [
 
 /// The demo cohort, led by `dr-kim`, with `ana` and `ben`.
 pub const DEMO_COHORT: &str = "demo-cohort";
-
-/// A small seeded generator (SplitMix64) for synthetic values.
-#[derive(Debug, Clone)]
-pub struct SplitMix(u64);
-
-impl SplitMix {
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[0, 1)`.
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// The user `a.name`, created with its role and password when missing; a password is set
 /// when the account has none. An existing account's password is never changed.
@@ -74,16 +54,16 @@ async fn ensure_cohort(store: &Store, name: &str, instructor: i64) -> Result<Coh
 
 /// Metric values of one synthetic attempt: each thresholded metric at `mean + q (limit -
 /// mean)` with `q` around `skill` (below 1 passes), plus noise.
-pub fn synthetic_metrics(t: &Thresholds, skill: f64, rng: &mut SplitMix) -> Vec<MetricValue> {
+pub fn synthetic_metrics(t: &Thresholds, skill: f64, rng: &mut Rng) -> Vec<MetricValue> {
     t.metrics
         .iter()
         .filter_map(|th| {
             let def = metrics::metric(&th.key)?;
-            let q = (skill + 0.35 * (rng.unit() - 0.5)).max(0.0);
+            let q = (skill + 0.35 * (rng.uniform() - 0.5)).max(0.0);
             let value = match (th.better, th.lower, th.upper) {
                 (Better::LowerIsBetter, _, Some(u)) => th.mean + q * (u - th.mean),
                 (Better::HigherIsBetter, Some(l), _) => th.mean - q * (th.mean - l),
-                (Better::TwoSided, _, Some(u)) => th.mean + if rng.unit() < 0.5 { -1.0 } else { 1.0 } * q * (u - th.mean),
+                (Better::TwoSided, _, Some(u)) => th.mean + if rng.uniform() < 0.5 { -1.0 } else { 1.0 } * q * (u - th.mean),
                 _ => th.mean,
             };
             let value = if th.better == Better::HigherIsBetter && def.unit == "1" { value.clamp(0.0, 1.0) } else { value.max(if th.better == Better::TwoSided { f64::NEG_INFINITY } else { 0.0 }) };
@@ -94,7 +74,7 @@ pub fn synthetic_metrics(t: &Thresholds, skill: f64, rng: &mut SplitMix) -> Vec<
 
 /// `n` scored synthetic attempts of `trainee` at `exercise_id`, skill improving from
 /// `skill0` to `skill1`.
-pub async fn synthetic_attempts(store: &Store, trainee: i64, exercise_id: i64, n: usize, skill0: f64, skill1: f64, rng: &mut SplitMix) -> Result<(), AssessError> {
+pub async fn synthetic_attempts(store: &Store, trainee: i64, exercise_id: i64, n: usize, skill0: f64, skill1: f64, rng: &mut Rng) -> Result<(), AssessError> {
     let t = store.thresholds(exercise_id).await?;
     for i in 0..n {
         let s = if n > 1 { skill0 + (skill1 - skill0) * i as f64 / (n - 1) as f64 } else { skill1 };
@@ -114,7 +94,7 @@ pub async fn seed_demo(store: &Store) -> Result<Vec<DemoAccount>, AssessError> {
         users.push(ensure_account(store, a).await?);
     }
     let cohort = ensure_cohort(store, DEMO_COHORT, users[1].id).await?;
-    let mut rng = SplitMix::new(7);
+    let mut rng = Rng::new(7);
     for (u, (n, s0, s1)) in users[2..].iter().zip([(8, 1.6, 0.3), (5, 1.8, 1.0)]) {
         store.join_cohort(cohort.id, u.id).await?;
         if store.list_attempts(Some(u.id), None).await?.is_empty() {
@@ -134,7 +114,7 @@ pub async fn seed_load(store: &Store, trainees: usize, attempts: usize) -> Resul
     let exercise = store.ensure_builtins().await?;
     let instructor = ensure_account(store, &LOAD_INSTRUCTOR).await?;
     let cohort = ensure_cohort(store, "load-cohort", instructor.id).await?;
-    let mut rng = SplitMix::new(11);
+    let mut rng = Rng::new(11);
     let mut ids = Vec::with_capacity(trainees);
     for i in 0..trainees {
         let name = format!("load-{i:04}");
@@ -145,8 +125,8 @@ pub async fn seed_load(store: &Store, trainees: usize, attempts: usize) -> Resul
         };
         store.join_cohort(cohort.id, u.id).await?;
         if store.list_attempts(Some(u.id), None).await?.is_empty() {
-            let start = 1.2 + 0.8 * rng.unit();
-            synthetic_attempts(store, u.id, exercise.id, attempts, start, 0.3 + 0.5 * rng.unit(), &mut rng).await?;
+            let start = 1.2 + 0.8 * rng.uniform();
+            synthetic_attempts(store, u.id, exercise.id, attempts, start, 0.3 + 0.5 * rng.uniform(), &mut rng).await?;
         }
         ids.push(u.id);
     }
