@@ -136,6 +136,11 @@ pub fn metric(key: &str) -> Option<&'static Metric> {
     METRICS.iter().find(|m| m.key == key)
 }
 
+/// Where a metric key stands in [`METRICS`] (unknown keys last): the order reports list them.
+pub fn catalogue_rank(key: &str) -> usize {
+    METRICS.iter().position(|m| m.key == key).unwrap_or(usize::MAX)
+}
+
 /// Values keyed as in [`METRICS`], built by the groups.
 #[derive(Debug, Default)]
 pub(crate) struct Values(Vec<(&'static str, Option<f64>, Option<String>)>);

@@ -19,9 +19,6 @@ pub struct Cutter {
     pub window_m: f64,
     trail: VecDeque<Blade>,
     stroke: StrokeVertices,
-    /// The snapping distance derived from the first mesh cut (when the options leave it
-    /// open): kept, so that it does not shrink as the cuts refine the mesh.
-    snap_distance_m: Option<f64>,
 }
 
 /// The median length of the springs' rest lengths (the mesh's edges), m.
@@ -42,7 +39,7 @@ impl Default for Cutter {
 
 impl Cutter {
     pub fn new(options: CutOptions) -> Self {
-        Self { options, window_m: 0.01, trail: VecDeque::new(), stroke: StrokeVertices::default(), snap_distance_m: None }
+        Self { options, window_m: 0.01, trail: VecDeque::new(), stroke: StrokeVertices::default() }
     }
 
     /// Ends the current stroke: the next pose starts a new one.
@@ -87,13 +84,13 @@ impl Cutter {
         }
         let mut corners: Vec<_> = self.trail.iter().map(|b| b.tip).collect();
         corners.extend(self.trail.iter().rev().map(Blade::heel));
-        let mut options = self.options;
-        if options.snap_distance_m.is_none() {
-            let snap = options.snap;
-            options.snap_distance_m = Some(*self.snap_distance_m.get_or_insert_with(|| snap * median_edge_length(sim)));
+        // a snapping distance left open is derived from the first mesh cut and then kept in
+        // the options, so that it does not shrink as the cuts refine the mesh
+        if self.options.snap_distance_m.is_none() {
+            self.options.snap_distance_m = Some(self.options.snap * median_edge_length(sim));
         }
         match CutPolygon::new(&corners) {
-            Some(polygon) => cut_remembering(sim, &polygon, &options, &mut self.stroke),
+            Some(polygon) => cut_remembering(sim, &polygon, &self.options, &mut self.stroke),
             None => Ok(CutEvent::default()),
         }
     }

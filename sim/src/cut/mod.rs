@@ -47,7 +47,8 @@ pub struct CutOptions {
     /// stroke's cut this close count as on it, however short their edges: a floor under the
     /// relative `snap`, so that a blade that trembles across cut tissue does not slice it into
     /// ever thinner slivers. `None`: a [`Cutter`] derives it from the mesh it first cuts
-    /// (`snap` times the median edge length); [`cut`] then uses the relative rule only.
+    /// (`snap` times the median edge length) and keeps it here; [`cut`] uses the relative
+    /// rule only.
     pub snap_distance_m: Option<f64>,
 }
 

@@ -81,8 +81,7 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
             }
         })
         .collect();
-    let rank = |key: &str| metrics::METRICS.iter().position(|m| m.key == key).unwrap_or(usize::MAX);
-    rows.sort_by_key(|r| rank(&r.key));
+    rows.sort_by_key(|r| metrics::catalogue_rank(&r.key));
     let recordings = match recording_paths(&a) {
         Some((mcap, rrd)) => RecordingFiles { mcap: is_file(&mcap), rrd: is_file(&rrd) },
         None => RecordingFiles { mcap: false, rrd: false },

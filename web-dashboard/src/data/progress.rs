@@ -203,9 +203,8 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
             }
         }
         // thresholded metrics first, in catalogue order, then the rest in catalogue order
-        let rank = |key: &str| metrics::METRICS.iter().position(|m| m.key == key).unwrap_or(usize::MAX);
         let mut metric_list: Vec<MetricSeries> = series.into_values().filter(|s| s.band.is_some() || s.points.iter().any(|p| p.value.is_some())).collect();
-        metric_list.sort_by_key(|s| (s.band.is_none(), rank(&s.key)));
+        metric_list.sort_by_key(|s| (s.band.is_none(), metrics::catalogue_rank(&s.key)));
         let params = CusumParams::default();
         let passes: Vec<bool> = scored.iter().map(|p| p.passed.unwrap_or(false)).collect();
         let chart = cusum(&passes, &params)?;
