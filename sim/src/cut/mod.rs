@@ -381,6 +381,15 @@ pub fn cut_remembering(
     sim.state.positions = x;
     sim.state.velocities = vel;
     sim.model_changed();
+    // a localised simulation wakes everything the cut touched
+    let touched: Vec<u32> = event
+        .tets_added
+        .iter()
+        .chain(&event.tets_relinked)
+        .flat_map(|(_, t)| *t)
+        .chain(event.vertices_moved.iter().map(|m| m.id))
+        .collect();
+    sim.wake(touched);
     let copies = base_vertices as u32..(base_vertices + splits.len()) as u32;
     for v in class.moved.iter().map(|m| m.0).chain(on_cut).chain(copies) {
         stroke.insert(v);

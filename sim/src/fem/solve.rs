@@ -154,8 +154,8 @@ pub fn implicit_step(
     }
     sys.prepare(&model.held);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
-    let report = sys.solve(rhs, dv, relative_tolerance, velocity_floor(model), max_iterations, cg);
-    apply_velocity_change(model, state, dv, h);
+    let report = sys.solve(rhs, dv, relative_tolerance, velocity_floor(&model.particles()), max_iterations, cg);
+    apply_velocity_change(&model.particles(), state, dv, h);
     report
 }
 

@@ -2,10 +2,12 @@
 //! regions, and the topology derived from them (see [`Topology`]).
 
 mod geometry;
+mod grid;
 pub mod quality;
 mod topology;
 mod validate;
 
+pub use grid::PointGrid;
 pub use quality::tet_mu;
 pub use geometry::{dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal};
 pub use quality::QualityStats;

@@ -51,6 +51,24 @@ pub struct Model {
     pub fem: Option<FemModel>,
 }
 
+/// What the spring solvers read of a model: lumped masses, held flags, springs and gravity.
+/// [`Model::particles`] lends the whole body; the localised step
+/// ([`crate::solver::localise`]) builds one of the active region, with its sleeping border
+/// held.
+#[derive(Debug, Clone, Copy)]
+pub struct Particles<'a> {
+    pub mass: &'a [f64],
+    pub held: &'a [bool],
+    pub springs: &'a SpringSet,
+    pub gravity: Vector3,
+}
+
+impl Particles<'_> {
+    pub fn vertex_count(&self) -> usize {
+        self.mass.len()
+    }
+}
+
 /// Which force model a [`Model`] runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ForceModel {
@@ -61,7 +79,7 @@ pub enum ForceModel {
 }
 
 /// Positions (m) and velocities (m/s) of the particles.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct State {
     pub positions: Vec<Point3>,
     pub velocities: Vec<Vector3>,
@@ -131,6 +149,11 @@ impl Model {
 
     pub fn vertex_count(&self) -> usize {
         self.mass.len()
+    }
+
+    /// What the spring solvers read of the whole body.
+    pub fn particles(&self) -> Particles<'_> {
+        Particles { mass: &self.mass, held: &self.held, springs: &self.springs, gravity: self.gravity }
     }
 
     /// Replaces the mesh after a topology change (a cut): masses, springs and held flags are

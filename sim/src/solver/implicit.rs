@@ -11,7 +11,7 @@
 //! vectorised arithmetic, scatter).
 
 use crate::Vector3;
-use crate::model::{Model, State};
+use crate::model::{Particles, State};
 
 use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 
@@ -41,7 +41,7 @@ pub struct ImplicitScratch {
 
 /// One backward-Euler step of `h` seconds.
 pub fn step(
-    model: &Model,
+    model: &Particles<'_>,
     state: &mut State,
     external: &[Vector3],
     h: f64,
@@ -193,13 +193,13 @@ pub(crate) fn extrapolate_warm_start(dv: &mut [Vector3], previous: [&mut Vec<Vec
 
 /// The absolute floor of the CG residual, `VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free
 /// particles (see [`VELOCITY_FLOOR_M_PER_S`]).
-pub(crate) fn velocity_floor(model: &Model) -> f64 {
-    let mass_norm = model.mass.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
+pub(crate) fn velocity_floor(model: &Particles<'_>) -> f64 {
+    let mass_norm = model.mass.iter().zip(model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
     VELOCITY_FLOOR_M_PER_S * mass_norm
 }
 
 /// `v += dv`, then `x += h v`, for the free particles (the end of an implicit Euler step).
-pub(crate) fn apply_velocity_change(model: &Model, state: &mut State, dv: &[Vector3], h: f64) {
+pub(crate) fn apply_velocity_change(model: &Particles<'_>, state: &mut State, dv: &[Vector3], h: f64) {
     for i in 0..model.vertex_count() {
         if model.held[i] {
             continue;

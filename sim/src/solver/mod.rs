@@ -9,15 +9,17 @@
 pub mod explicit;
 pub mod forces;
 pub mod implicit;
+pub mod localise;
 pub mod statics;
 pub mod system;
 
 use serde::{Deserialize, Serialize};
 
+pub use localise::LocalisationSettings;
 pub use statics::{StaticReport, StaticSettings};
 pub use system::{CgReport, CgSettings};
 
-use crate::Vector3;
+use crate::{Point3, Vector3};
 use crate::model::{Model, State};
 
 /// Time integrator.
@@ -67,6 +69,9 @@ pub struct SolverSettings {
     /// displacement, against 6e-3 between 1 ms and 0.5 ms steps.
     pub cg_relative_tolerance: f64,
     pub cg_max_iterations: usize,
+    /// Simulate only near the scalpel and the disturbance it causes (see [`localise`]);
+    /// `None` (the default) simulates every particle every step.
+    pub localisation: Option<LocalisationSettings>,
 }
 
 impl Default for SolverSettings {
@@ -77,6 +82,7 @@ impl Default for SolverSettings {
             explicit_safety: 0.9,
             cg_relative_tolerance: 1e-4,
             cg_max_iterations: 500,
+            localisation: None,
         }
     }
 }
@@ -94,6 +100,9 @@ impl SolverSettings {
         }
         if self.cg_max_iterations == 0 {
             return Err("cg_max_iterations must be at least 1".into());
+        }
+        if let Some(l) = &self.localisation {
+            l.check()?;
         }
         Ok(())
     }
@@ -123,6 +132,8 @@ pub struct StepReport {
     pub substeps: u32,
     pub cg_iterations: usize,
     pub cg_relative_residual: f64,
+    /// Particles the step simulated (all free ones unless localised).
+    pub awake_particles: usize,
 }
 
 /// Buffers reused by every step.
@@ -142,6 +153,13 @@ pub struct Simulation {
     pub settings: SolverSettings,
     /// External force on each particle for the next steps (N), e.g. the scalpel contact.
     external_forces: Vec<Vector3>,
+    /// Particles given an external force since the last clear ([`Self::add_external_force`]),
+    /// unless `loaded_unknown` (the forces were written through
+    /// [`Self::external_forces_mut`]): lets a localised step skip the unloaded particles.
+    loaded: Vec<u32>,
+    loaded_unknown: bool,
+    /// The awake particles of the localised step (see [`localise`]).
+    region: localise::ActiveRegion,
     /// Sub-steps per step of the explicit integrator (recomputed when the model changes).
     /// Computed on first use after a model change (the estimate costs a few milliseconds,
     /// worth paying only when the explicit integrator runs).
@@ -161,6 +179,9 @@ impl Simulation {
             state,
             settings,
             external_forces: vec![Vector3::zeros(); n],
+            loaded: Vec::new(),
+            loaded_unknown: false,
+            region: localise::ActiveRegion::default(),
             explicit_substeps,
             step_index: 0,
             scratch: Scratch::default(),
@@ -191,17 +212,62 @@ impl Simulation {
     /// Call after changing the model's springs or masses.
     pub fn model_changed(&mut self) {
         self.explicit_substeps = None;
-        self.external_forces.resize(self.model.vertex_count(), Vector3::zeros());
+        let n = self.model.vertex_count();
+        self.external_forces.resize(n, Vector3::zeros());
+        self.region.model_changed(n);
     }
 
-    /// External forces for the next steps (N per particle).
+    /// External forces for the next steps (N per particle). Prefer
+    /// [`Self::add_external_force`], which tells a localised step which particles are loaded.
+    pub fn external_forces(&self) -> &[Vector3] {
+        &self.external_forces
+    }
+
+    /// External forces for the next steps, to write (N per particle).
     pub fn external_forces_mut(&mut self) -> &mut [Vector3] {
+        self.loaded_unknown = true;
         &mut self.external_forces
+    }
+
+    /// Adds `force_newtons` to the external force on particle `vertex` (ignored when out of
+    /// range).
+    pub fn add_external_force(&mut self, vertex: u32, force_newtons: Vector3) {
+        if let Some(f) = self.external_forces.get_mut(vertex as usize) {
+            *f += force_newtons;
+            self.loaded.push(vertex);
+        }
     }
 
     /// Sets every external force to zero.
     pub fn clear_external_forces(&mut self) {
-        self.external_forces.iter_mut().for_each(|f| *f = Vector3::zeros());
+        if self.loaded_unknown {
+            self.external_forces.iter_mut().for_each(|f| *f = Vector3::zeros());
+        } else {
+            for &v in &self.loaded {
+                self.external_forces[v as usize] = Vector3::zeros();
+            }
+        }
+        self.loaded.clear();
+        self.loaded_unknown = false;
+    }
+
+    /// Where the scalpel is: particles near these points stay awake in a localised step.
+    pub fn set_focus(&mut self, points: &[Point3]) {
+        self.region.focus.clear();
+        self.region.focus.extend_from_slice(points);
+    }
+
+    /// Wakes `vertices` for the next localised step (e.g. those a cut touched); nothing
+    /// when the simulation is not localised.
+    pub fn wake(&mut self, vertices: impl IntoIterator<Item = u32>) {
+        if self.settings.localisation.is_some() {
+            self.region.wake(vertices);
+        }
+    }
+
+    /// Particles awake after the last localised step (0 before the first one).
+    pub fn awake_particles(&self) -> usize {
+        self.region.awake_count()
     }
 
     /// Moves the free particles to static equilibrium (velocities zero), ignoring the external
@@ -235,10 +301,17 @@ impl Simulation {
         }
         implicit.history = 0;
         self.scratch.fem.reset_warm_start();
+        self.region.reset_warm_start();
+        self.region.state_moved();
     }
 
     /// Advances one fixed step of `settings.time_step_s`.
     pub fn step(&mut self) -> Result<StepReport, StepError> {
+        if let (Some(localisation), Integrator::ImplicitEuler, None) =
+            (self.settings.localisation, self.settings.integrator, &self.model.fem)
+        {
+            return self.step_localised(&localisation);
+        }
         let bad_input: Vec<u32> = (0..self.external_forces.len())
             .filter(|&i| !self.external_forces[i].iter().all(|c| c.is_finite()))
             .map(|i| i as u32)
@@ -289,7 +362,7 @@ impl Simulation {
                     absolute_tolerance: 0.0,
                     max_iterations: self.settings.cg_max_iterations,
                 };
-                let r = implicit::step(&self.model, &mut self.state, &self.external_forces, dt, cg, &mut self.scratch.implicit);
+                let r = implicit::step(&self.model.particles(), &mut self.state, &self.external_forces, dt, cg, &mut self.scratch.implicit);
                 report.substeps = 1;
                 report.cg_iterations = r.iterations;
                 report.cg_relative_residual = r.relative_residual;
@@ -320,6 +393,38 @@ impl Simulation {
             return Err(StepError::NonFinite { vertices: bad });
         }
         self.step_index += 1;
+        report.awake_particles = self.model.held.iter().filter(|h| !**h).count();
         Ok(report)
+    }
+
+    /// [`Self::step`] on the awake particles only (see [`localise`]).
+    fn step_localised(&mut self, localisation: &LocalisationSettings) -> Result<StepReport, StepError> {
+        if self.loaded_unknown {
+            self.loaded.clear();
+            let loaded = self.external_forces.iter().enumerate().filter(|(_, f)| **f != Vector3::zeros());
+            self.loaded.extend(loaded.map(|(i, _)| i as u32));
+            self.loaded_unknown = false;
+        }
+        self.loaded.sort_unstable();
+        self.loaded.dedup();
+        let bad_input: Vec<u32> =
+            self.loaded.iter().copied().filter(|&v| !self.external_forces[v as usize].iter().all(|c| c.is_finite())).collect();
+        if !bad_input.is_empty() {
+            return Err(StepError::NonFiniteInput { vertices: bad_input });
+        }
+        let cg = CgSettings {
+            relative_tolerance: self.settings.cg_relative_tolerance,
+            absolute_tolerance: 0.0,
+            max_iterations: self.settings.cg_max_iterations,
+        };
+        let h = self.settings.time_step_s;
+        let r = self.region.step(&self.model, &mut self.state, &self.external_forces, &self.loaded, localisation, h, cg)?;
+        self.step_index += 1;
+        Ok(StepReport {
+            substeps: 1,
+            cg_iterations: r.iterations,
+            cg_relative_residual: r.relative_residual,
+            awake_particles: self.region.awake_count(),
+        })
     }
 }

@@ -71,16 +71,16 @@ pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], sett
     let mut stalls = 0;
     while residual > tolerance && iter < settings.max_newton_iterations && stalls < 4 {
         iter += 1;
-        sys.begin(model);
+        sys.begin(&model.particles());
         for (e, &[a, b]) in s.ends.iter().enumerate() {
             let d = state.positions[b as usize] - state.positions[a as usize];
             let (ka, kn, dir) = stiffness_block(s.stiffness[e], s.rest_length[e], &d);
             sys.set_block(e, ka, kn, &dir);
         }
-        sys.update_preconditioner(model);
+        sys.update_preconditioner(&model.particles());
         dx.iter_mut().for_each(|d| *d = Vector3::zeros());
         let cg = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 10 * n.max(100) };
-        cg_total += system::solve(&sys, model, &f, &mut dx, cg, &mut cg_scratch).iterations;
+        cg_total += system::solve(&sys, &model.particles(), &f, &mut dx, cg, &mut cg_scratch).iterations;
 
         match line_search(model, &mut state.positions, &mut f, &dx, residual, scale, &mut trial, &mut f_trial, |x, out| {
             total_forces(model, x, &state.velocities, zero_ext, out)

@@ -19,7 +19,7 @@
 //! semi-definite, and positive definite once a particle of every piece is held or `a_m > 0`.
 
 use crate::Vector3;
-use crate::model::Model;
+use crate::model::Particles;
 
 /// A symmetric 3x3 matrix stored by its six distinct entries.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -246,7 +246,7 @@ pub fn block_matrix(c: &[f64; 4]) -> Sym3 {
 impl SpringSystem {
     /// Sizes the block storage for the springs of `model` (the layout is rebuilt only when the
     /// springs changed).
-    pub fn begin(&mut self, model: &Model) {
+    pub fn begin(&mut self, model: &Particles<'_>) {
         let n = model.vertex_count();
         let ends = &model.springs.ends;
         if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
@@ -268,7 +268,7 @@ impl SpringSystem {
 
     /// Recomputes the diagonal blocks from the spring blocks and the masses, then the
     /// preconditioner.
-    pub fn update_preconditioner(&mut self, model: &Model) {
+    pub fn update_preconditioner(&mut self, model: &Particles<'_>) {
         let n = model.vertex_count();
         self.diag.clear();
         self.diag.extend(model.mass.iter().map(|&m| Sym3::scalar(self.mass_weight * m)));
@@ -284,12 +284,12 @@ impl SpringSystem {
     }
 
     /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones).
-    pub fn prepare(&mut self, model: &Model) {
+    pub fn prepare(&mut self, model: &Particles<'_>) {
         let n = model.vertex_count();
         self.inv_diag.clear();
         self.chol.clear();
         let mut ssor = !self.layout.has_loop;
-        for (d, &h) in self.diag[..n].iter_mut().zip(&model.held) {
+        for (d, &h) in self.diag[..n].iter_mut().zip(model.held) {
             if h {
                 *d = Sym3::default();
                 self.inv_diag.push(Sym3::default());
@@ -313,10 +313,10 @@ impl SpringSystem {
     }
 
     /// `y = A p` with held rows zeroed.
-    pub fn apply(&self, model: &Model, p: &[Vector3], y: &mut [Vector3]) {
+    pub fn apply(&self, model: &Particles<'_>, p: &[Vector3], y: &mut [Vector3]) {
         let n = model.vertex_count();
         let (p, y) = (&p[..n], &mut y[..n]);
-        for ((y, p), &m) in y.iter_mut().zip(p).zip(&model.mass) {
+        for ((y, p), &m) in y.iter_mut().zip(p).zip(model.mass) {
             *y = p * (self.mass_weight * m);
         }
         // The products on the first particle are summed in a register and stored once per
@@ -333,7 +333,7 @@ impl SpringSystem {
             }
             y[i] += yi;
         }
-        for (y, &h) in y.iter_mut().zip(&model.held) {
+        for (y, &h) in y.iter_mut().zip(model.held) {
             if h {
                 *y = Vector3::zeros();
             }
@@ -381,7 +381,7 @@ fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
 /// `|b - A x| <= max(relative_tolerance |b|, absolute_tolerance)`.
 pub fn solve(
     sys: &SpringSystem,
-    model: &Model,
+    model: &Particles<'_>,
     b: &[Vector3],
     x: &mut [Vector3],
     settings: CgSettings,
@@ -392,12 +392,12 @@ pub fn solve(
     for buf in [&mut scratch.r, &mut scratch.z, &mut scratch.p, &mut scratch.q, &mut scratch.t] {
         buf.resize(n, Vector3::zeros());
     }
-    for (xi, &h) in x.iter_mut().zip(&model.held) {
+    for (xi, &h) in x.iter_mut().zip(model.held) {
         if h {
             *xi = Vector3::zeros();
         }
     }
-    let b_norm = b.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
+    let b_norm = b.iter().zip(model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
     if b_norm == 0.0 {
         x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
         return CgReport { iterations: 0, relative_residual: 0.0, converged: true };
@@ -410,7 +410,7 @@ pub fn solve(
 }
 
 /// `r = b - A x` (held entries zero); returns `|r|`.
-fn residual(sys: &SpringSystem, model: &Model, b: &[Vector3], x: &[Vector3], r: &mut [Vector3], ax: &mut [Vector3]) -> f64 {
+fn residual(sys: &SpringSystem, model: &Particles<'_>, b: &[Vector3], x: &[Vector3], r: &mut [Vector3], ax: &mut [Vector3]) -> f64 {
     sys.apply(model, x, ax);
     let mut rr = 0.0;
     for i in 0..b.len() {
@@ -423,7 +423,7 @@ fn residual(sys: &SpringSystem, model: &Model, b: &[Vector3], x: &[Vector3], r: 
 /// Block-Jacobi preconditioned CG.
 fn solve_jacobi(
     sys: &SpringSystem,
-    model: &Model,
+    model: &Particles<'_>,
     b: &[Vector3],
     x: &mut [Vector3],
     b_norm: f64,
@@ -475,7 +475,7 @@ fn solve_jacobi(
 /// if it is not yet small enough.
 fn solve_ssor(
     sys: &SpringSystem,
-    model: &Model,
+    model: &Particles<'_>,
     b: &[Vector3],
     x: &mut [Vector3],
     b_norm: f64,
@@ -594,7 +594,7 @@ mod tests {
     }
 
     /// An implicit-Euler-like system on the chest wall (1 ms step, current positions).
-    fn system(model: &Model, x: &[crate::Point3]) -> (SpringSystem, Vec<Vector3>) {
+    fn system(model: &Particles<'_>, x: &[crate::Point3]) -> (SpringSystem, Vec<Vector3>) {
         let s = &model.springs;
         let h = 1e-3;
         let mut sys = SpringSystem { mass_weight: 1.0, ..Default::default() };
@@ -608,19 +608,20 @@ mod tests {
         (sys, rhs)
     }
 
-    fn true_residual(sys: &SpringSystem, model: &Model, b: &[Vector3], x: &[Vector3]) -> f64 {
+    fn true_residual(sys: &SpringSystem, model: &Particles<'_>, b: &[Vector3], x: &[Vector3]) -> f64 {
         let n = b.len();
         let (mut r, mut ax) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
         let r_norm = residual(sys, model, b, x, &mut r, &mut ax);
-        let b_norm = b.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
+        let b_norm = b.iter().zip(model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
         r_norm / b_norm
     }
 
     #[test]
     fn ssor_and_jacobi_solve_the_same_system() {
         let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
-        let model = &scene.model;
-        let (mut sys, b) = system(model, model.mesh.positions());
+        let positions = scene.model.mesh.positions();
+        let model = &scene.model.particles();
+        let (mut sys, b) = system(model, positions);
         assert!(sys.ssor);
         let settings = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 1000 };
         let n = b.len();
@@ -636,7 +637,7 @@ mod tests {
         let scale = x_jacobi.iter().map(|v| v.norm()).fold(0.0, f64::max);
         let diff = x_ssor.iter().zip(&x_jacobi).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
         assert!(diff < 1e-8 * scale, "{diff} vs {scale}");
-        for (x, &h) in x_ssor.iter().zip(&model.held) {
+        for (x, &h) in x_ssor.iter().zip(model.held.iter()) {
             assert!(!h || *x == Vector3::zeros());
         }
     }
@@ -644,23 +645,25 @@ mod tests {
     #[test]
     fn springs_in_any_order_and_orientation_give_the_same_solution() {
         let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
-        let model = &scene.model;
-        let (sys, b) = system(model, model.mesh.positions());
+        let positions = scene.model.mesh.positions();
+        let model = &scene.model.particles();
+        let (sys, b) = system(model, positions);
         let settings = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 1000 };
         let n = b.len();
         let mut x = vec![Vector3::zeros(); n];
         assert!(solve(&sys, model, &b, &mut x, settings, &mut CgScratch::default()).converged);
 
         // the springs reversed in order, every other one with its ends swapped
-        let mut shuffled = model.clone();
-        let m = shuffled.springs.len();
+        let mut shuffled = model.springs.clone();
+        let m = shuffled.len();
         let order: Vec<usize> = (0..m).rev().collect();
         let s = &model.springs;
-        shuffled.springs.ends = order.iter().map(|&e| if e % 2 == 0 { s.ends[e] } else { [s.ends[e][1], s.ends[e][0]] }).collect();
-        shuffled.springs.rest_length = order.iter().map(|&e| s.rest_length[e]).collect();
-        shuffled.springs.stiffness = order.iter().map(|&e| s.stiffness[e]).collect();
-        shuffled.springs.damping = order.iter().map(|&e| s.damping[e]).collect();
-        let (sys2, _) = system(&shuffled, model.mesh.positions());
+        shuffled.ends = order.iter().map(|&e| if e % 2 == 0 { s.ends[e] } else { [s.ends[e][1], s.ends[e][0]] }).collect();
+        shuffled.rest_length = order.iter().map(|&e| s.rest_length[e]).collect();
+        shuffled.stiffness = order.iter().map(|&e| s.stiffness[e]).collect();
+        shuffled.damping = order.iter().map(|&e| s.damping[e]).collect();
+        let shuffled = Particles { springs: &shuffled, ..*model };
+        let (sys2, _) = system(&shuffled, positions);
         assert!(sys2.ssor);
         let (mut y, mut y2) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
         sys.apply(model, &b, &mut y);

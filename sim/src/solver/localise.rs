@@ -1,0 +1,522 @@
+//! Localisation: the implicit step solves only where the scalpel and the disturbance it causes
+//! are; far particles sleep, held where they are, and wake when the disturbance reaches them.
+//!
+//! Every free particle is *awake* or *asleep*. A step assembles and solves the backward-Euler
+//! system (see [`super::implicit`]) of the awake particles alone, with their sleeping
+//! neighbours (the *border*) held at their positions: the system is gathered into a compact
+//! sub-body (particles in ascending global order, springs with at least one awake end), solved,
+//! and the awake particles scattered back. Nothing in a step runs over the whole mesh.
+//!
+//! A particle's *residual displacement* is `|f_i| / K_i`, with `f_i` the net force on it
+//! (springs, dampers, gravity, external force) and `K_i` the sum of its springs' constants:
+//! about how far it would move if it were released alone. For an awake particle it is read
+//! from the step, `f_i ~ m_i dv_i / h`.
+//!
+//! A particle wakes when
+//! - it lies within `focus_radius_m` of a focus point (the scalpel, [`super::Simulation::set_focus`]),
+//!   found through a [`PointGrid`] of the positions (rebinned once the awake particles have
+//!   moved by half a cell since);
+//! - an external force acts on it, or a cut touched it ([`super::Simulation::wake`]);
+//! - it neighbours (shares a spring with) an awake particle faster than `wake_speed_m_per_s`;
+//! - it is on the border and its residual displacement exceeds `wake_displacement_m`. Such a
+//!   border means the step just solved was held back: it is solved again with the border
+//!   awake, up to `max_growth_rounds` times per step (so a disturbance, such as a cut
+//!   releasing the pre-tension, spreads as far in one step as it does in the full solve).
+//!
+//! An awake particle outside the focus and unloaded falls asleep after `sleep_after_steps`
+//! consecutive steps with speed below `sleep_speed_m_per_s` and residual displacement below
+//! `sleep_displacement_m`; its velocity is then set to zero. Sleeping and waking are decided
+//! in ascending particle order from the state alone, so a localised run is as deterministic
+//! as a full one (a replay is bit-exact). Only the paper's springs with implicit Euler are
+//! localised; other combinations run the full step.
+
+use serde::{Deserialize, Serialize};
+
+use crate::mesh::{Csr, PointGrid};
+use crate::model::{Model, Particles, SpringSet, State};
+use crate::{Point3, Vector3};
+
+use super::implicit::{self, ImplicitScratch};
+use super::system::{CgReport, CgSettings};
+use super::StepError;
+
+/// Thresholds of the localisation (the `[solver.localisation]` table of a scene file).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LocalisationSettings {
+    /// Particles within this distance of a focus point are always awake, m.
+    pub focus_radius_m: f64,
+    /// An awake particle faster than this wakes its neighbours, m/s.
+    pub wake_speed_m_per_s: f64,
+    /// A border particle whose residual displacement exceeds this wakes, m.
+    pub wake_displacement_m: f64,
+    /// Below this speed (m/s) ...
+    pub sleep_speed_m_per_s: f64,
+    /// ... and this residual displacement (m) ...
+    pub sleep_displacement_m: f64,
+    /// ... for this many consecutive steps, an awake particle falls asleep.
+    pub sleep_after_steps: u32,
+    /// Solves per step at most (the first, and the re-solves after the border woke).
+    pub max_growth_rounds: u32,
+}
+
+impl Default for LocalisationSettings {
+    fn default() -> Self {
+        Self {
+            focus_radius_m: 0.01,
+            wake_speed_m_per_s: 1e-3,
+            wake_displacement_m: 2e-6,
+            sleep_speed_m_per_s: 2e-4,
+            sleep_displacement_m: 5e-7,
+            sleep_after_steps: 20,
+            max_growth_rounds: 4,
+        }
+    }
+}
+
+impl LocalisationSettings {
+    /// Every threshold (speeds and displacements) times `factor`: larger is faster and less
+    /// accurate.
+    pub fn scaled(self, factor: f64) -> Self {
+        Self {
+            wake_speed_m_per_s: self.wake_speed_m_per_s * factor,
+            wake_displacement_m: self.wake_displacement_m * factor,
+            sleep_speed_m_per_s: self.sleep_speed_m_per_s * factor,
+            sleep_displacement_m: self.sleep_displacement_m * factor,
+            ..self
+        }
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        let positive = [
+            ("focus_radius_m", self.focus_radius_m),
+            ("wake_speed_m_per_s", self.wake_speed_m_per_s),
+            ("wake_displacement_m", self.wake_displacement_m),
+            ("sleep_speed_m_per_s", self.sleep_speed_m_per_s),
+            ("sleep_displacement_m", self.sleep_displacement_m),
+        ];
+        for (name, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(format!("localisation.{name} must be positive, got {v}"));
+            }
+        }
+        if self.sleep_speed_m_per_s > self.wake_speed_m_per_s {
+            return Err("localisation.sleep_speed_m_per_s must not exceed wake_speed_m_per_s".into());
+        }
+        if self.sleep_displacement_m > self.wake_displacement_m {
+            return Err("localisation.sleep_displacement_m must not exceed wake_displacement_m".into());
+        }
+        if self.max_growth_rounds == 0 {
+            return Err("localisation.max_growth_rounds must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+const NONE: u32 = u32::MAX;
+
+/// The awake set, its sub-body and the buffers of the localised step.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct ActiveRegion {
+    /// Per particle: awake, steps it has been quiet, pinned awake this step (focus, load).
+    awake: Vec<bool>,
+    quiet_steps: Vec<u32>,
+    pinned: Vec<bool>,
+    pinned_list: Vec<u32>,
+    /// Awake particles (unsorted between rebuilds; entries put to sleep are dropped lazily).
+    awake_list: Vec<u32>,
+    awake_count: usize,
+    /// Particles to wake at the next step (cuts, neighbours, the border).
+    to_wake: Vec<u32>,
+    to_sleep: Vec<u32>,
+    /// The springs at each particle (rebuilt when the model changes).
+    springs_at: Option<Csr>,
+    /// `K_i`, the sum of the spring constants at each particle (with the adjacency).
+    stiffness_at: Vec<f64>,
+    /// Positions binned for the focus query, and how far an awake particle has moved since.
+    grid: Option<PointGrid>,
+    grid_slack_m: f64,
+    /// Focus points (the scalpel).
+    pub focus: Vec<Point3>,
+    /// The sub-body: its particles' global ids (ascending) and the local id of each particle.
+    dirty: bool,
+    global_of: Vec<u32>,
+    local_of: Vec<u32>,
+    local_spring_ids: Vec<u32>,
+    springs: SpringSet,
+    mass: Vec<f64>,
+    held: Vec<bool>,
+    state: State,
+    external: Vec<Vector3>,
+    implicit: ImplicitScratch,
+    /// The warm-start history by global particle: `dv` and the three before.
+    history: [Vec<Vector3>; 4],
+    /// The sub-body's warm start before this step's first solve (restored for a re-solve).
+    saved_history: [Vec<Vector3>; 4],
+    saved_history_count: usize,
+}
+
+impl ActiveRegion {
+    /// Particles awake after the last step.
+    pub fn awake_count(&self) -> usize {
+        self.awake_count
+    }
+
+    /// Call after the model changed (a cut): new particles wake; the adjacency, the grid and
+    /// the sub-body are rebuilt at the next step.
+    pub fn model_changed(&mut self, n: usize) {
+        if self.awake.is_empty() {
+            return; // not started: everything wakes at the first localised step
+        }
+        let old = self.awake.len().min(n);
+        self.awake.resize(n, false);
+        self.quiet_steps.resize(n, 0);
+        self.pinned.resize(n, false);
+        self.local_of.resize(n, NONE);
+        for h in &mut self.history {
+            h.resize(n, Vector3::zeros());
+        }
+        self.to_wake.extend(old as u32..n as u32);
+        self.springs_at = None;
+        self.grid = None;
+        self.dirty = true;
+    }
+
+    /// Call after the positions jumped outside a step (a static solve): the grid is rebinned.
+    pub fn state_moved(&mut self) {
+        self.grid = None;
+    }
+
+    /// Forgets the warm start.
+    pub fn reset_warm_start(&mut self) {
+        for h in &mut self.history {
+            h.iter_mut().for_each(|d| *d = Vector3::zeros());
+        }
+        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], history, .. } = &mut self.implicit;
+        for buf in [dv, p1, p2, p3] {
+            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
+        }
+        *history = 0;
+    }
+
+    /// Wakes `vertices` at the next step.
+    pub fn wake(&mut self, vertices: impl IntoIterator<Item = u32>) {
+        if !self.awake.is_empty() {
+            self.to_wake.extend(vertices);
+        }
+    }
+
+    /// Starts from everything awake (the first localised step), and rebuilds what a model
+    /// change invalidated.
+    fn ensure(&mut self, model: &Model, state: &State, settings: &LocalisationSettings) {
+        let n = model.vertex_count();
+        if self.awake.len() != n {
+            *self = Self { focus: std::mem::take(&mut self.focus), ..Self::default() };
+            self.awake = vec![false; n];
+            self.quiet_steps = vec![0; n];
+            self.pinned = vec![false; n];
+            self.local_of = vec![NONE; n];
+            self.history = std::array::from_fn(|_| vec![Vector3::zeros(); n]);
+            self.to_wake.extend(0..n as u32);
+            self.dirty = true;
+        }
+        if self.springs_at.is_none() {
+            let pairs: Vec<(u32, u32)> =
+                model.springs.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]).collect();
+            let csr = Csr::from_pairs(n, &pairs);
+            let stiffness = &model.springs.stiffness;
+            self.stiffness_at = (0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum()).collect();
+            self.springs_at = Some(csr);
+        }
+        if self.grid.is_none() {
+            self.grid = Some(PointGrid::build(&state.positions, settings.focus_radius_m));
+            self.grid_slack_m = 0.0;
+        }
+    }
+
+    /// One localised backward-Euler step of `h` seconds (see the module documentation).
+    /// `loaded` lists the particles with an external force (any order, duplicates allowed).
+    #[allow(clippy::too_many_arguments)]
+    pub fn step(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        external: &[Vector3],
+        loaded: &[u32],
+        settings: &LocalisationSettings,
+        h: f64,
+        cg: CgSettings,
+    ) -> Result<CgReport, StepError> {
+        self.ensure(model, state, settings);
+        self.pin(model, state, loaded, settings);
+        self.apply_wakes(model);
+        let mut total = CgReport { iterations: 0, relative_residual: 0.0, converged: true };
+        if self.dirty {
+            self.rebuild(model);
+        }
+        self.save_history();
+        for round in 1..=settings.max_growth_rounds {
+            let report = self.solve(model, state, external, h, cg)?;
+            total = CgReport { iterations: total.iterations + report.iterations, ..report };
+            // a border that was held back is woken, and the step solved again with it
+            let grew = self.wake_border(model, state, external, settings);
+            if grew == 0 || round == settings.max_growth_rounds {
+                break;
+            }
+            self.restore_history();
+            self.apply_wakes(model);
+            self.rebuild(model);
+            self.save_history();
+        }
+
+        // Scatter the awake particles.
+        let grid = self.grid.as_ref().expect("built by ensure");
+        for (l, &g) in self.global_of.iter().enumerate() {
+            if !self.held[l] {
+                let g = g as usize;
+                state.positions[g] = self.state.positions[l];
+                state.velocities[g] = self.state.velocities[l];
+                if g < grid.len() {
+                    self.grid_slack_m = self.grid_slack_m.max((state.positions[g] - grid.binned_position(g)).norm());
+                }
+            }
+        }
+        if self.grid_slack_m > 0.5 * settings.focus_radius_m {
+            self.grid = None;
+        }
+        self.decide(model, state, settings, h);
+        Ok(total)
+    }
+
+    /// Gathers the sub-body (the border held, at rest) and solves it; the global state is
+    /// not touched.
+    fn solve(&mut self, model: &Model, state: &State, external: &[Vector3], h: f64, cg: CgSettings) -> Result<CgReport, StepError> {
+        for (l, &g) in self.global_of.iter().enumerate() {
+            let g = g as usize;
+            self.state.positions[l] = state.positions[g];
+            self.state.velocities[l] = if self.held[l] { Vector3::zeros() } else { state.velocities[g] };
+            self.external[l] = external[g];
+        }
+        let particles = Particles { mass: &self.mass, held: &self.held, springs: &self.springs, gravity: model.gravity };
+        let report = implicit::step(&particles, &mut self.state, &self.external, h, cg, &mut self.implicit);
+        if !report.relative_residual.is_finite() {
+            self.reset_warm_start();
+            return Err(StepError::SolverFailed { residual: report.relative_residual });
+        }
+        let bad: Vec<u32> = (0..self.global_of.len())
+            .filter(|&l| {
+                !(self.state.positions[l].iter().all(|c| c.is_finite()) && self.state.velocities[l].iter().all(|c| c.is_finite()))
+            })
+            .map(|l| self.global_of[l])
+            .collect();
+        if !bad.is_empty() {
+            self.reset_warm_start();
+            return Err(StepError::NonFinite { vertices: bad });
+        }
+        Ok(report)
+    }
+
+    fn save_history(&mut self) {
+        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], history, .. } = &self.implicit;
+        for (saved, local) in self.saved_history.iter_mut().zip([dv, p1, p2, p3]) {
+            saved.clone_from(local);
+        }
+        self.saved_history_count = *history;
+    }
+
+    fn restore_history(&mut self) {
+        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], history, .. } = &mut self.implicit;
+        for (saved, local) in self.saved_history.iter().zip([dv, p1, p2, p3]) {
+            local.clone_from(saved);
+        }
+        *history = self.saved_history_count;
+    }
+
+    /// Queues the border particles whose residual displacement (with the sub-body's solved
+    /// positions) exceeds the wake threshold; returns how many.
+    fn wake_border(&mut self, model: &Model, state: &State, external: &[Vector3], settings: &LocalisationSettings) -> usize {
+        let springs_at = self.springs_at.as_ref().expect("built by ensure");
+        let s = &model.springs;
+        let before = self.to_wake.len();
+        let position = |g: usize| match self.local_of[g] {
+            NONE => (state.positions[g], state.velocities[g]),
+            l => (self.state.positions[l as usize], self.state.velocities[l as usize]),
+        };
+        for (l, &g) in self.global_of.iter().enumerate() {
+            let gi = g as usize;
+            if !self.held[l] || model.held[gi] {
+                continue;
+            }
+            let mut f = model.gravity * model.mass[gi] + external[gi];
+            for &e in springs_at.row(gi) {
+                let e = e as usize;
+                let [a, b] = s.ends[e].map(|v| v as usize);
+                let ((xa, va), (xb, vb)) = (position(a), position(b));
+                let d = xb - xa;
+                let l2 = d.norm_squared();
+                if l2 == 0.0 {
+                    continue;
+                }
+                let len = l2.sqrt();
+                let pull = d * ((s.stiffness[e] * (len - s.rest_length[e]) + s.damping[e] * (vb - va).dot(&d) / len) / len);
+                f += if a == gi { pull } else { -pull };
+            }
+            if f.norm() > settings.wake_displacement_m * self.stiffness_at[gi] {
+                self.to_wake.push(g);
+            }
+        }
+        self.to_wake.len() - before
+    }
+
+    /// Pins (and wakes) the particles near a focus point and the loaded ones for this step.
+    fn pin(&mut self, model: &Model, state: &State, loaded: &[u32], settings: &LocalisationSettings) {
+        for &v in &self.pinned_list {
+            self.pinned[v as usize] = false;
+        }
+        self.pinned_list.clear();
+        let (pinned, list) = (&mut self.pinned, &mut self.pinned_list);
+        let mut pin = |v: u32| {
+            let i = v as usize;
+            if i < pinned.len() && !model.held[i] && !pinned[i] {
+                pinned[i] = true;
+                list.push(v);
+            }
+        };
+        let grid = self.grid.as_ref().expect("built by ensure");
+        let r = settings.focus_radius_m;
+        for f in &self.focus {
+            grid.for_each_within(f, r + self.grid_slack_m, |v| {
+                if (state.positions[v as usize] - f).norm() <= r {
+                    pin(v);
+                }
+            });
+        }
+        loaded.iter().for_each(|&v| pin(v));
+        self.to_wake.extend_from_slice(&self.pinned_list);
+    }
+
+    fn apply_wakes(&mut self, model: &Model) {
+        for v in self.to_wake.drain(..) {
+            let i = v as usize;
+            if i < self.awake.len() && !self.awake[i] && !model.held[i] {
+                self.awake[i] = true;
+                self.quiet_steps[i] = 0;
+                self.awake_list.push(v);
+                self.awake_count += 1;
+                self.dirty = true;
+            }
+        }
+    }
+
+    /// Rebuilds the sub-body for the current awake set, carrying the warm start over.
+    fn rebuild(&mut self, model: &Model) {
+        // the old sub-body's warm start back to the global history (zero for sleepers)
+        for (l, &g) in self.global_of.iter().enumerate() {
+            let g = g as usize;
+            let ImplicitScratch { dv, dv_previous: [p1, p2, p3], .. } = &self.implicit;
+            let awake = self.awake[g];
+            for (h, local) in self.history.iter_mut().zip([dv, p1, p2, p3]) {
+                h[g] = if awake { local.get(l).copied().unwrap_or_default() } else { Vector3::zeros() };
+            }
+            self.local_of[g] = NONE;
+        }
+        let awake = &self.awake;
+        self.awake_list.retain(|&v| awake[v as usize]);
+        self.awake_list.sort_unstable();
+        let springs_at = self.springs_at.as_ref().expect("built by ensure");
+        let ends = &model.springs.ends;
+        self.global_of.clear();
+        self.local_spring_ids.clear();
+        for &g in &self.awake_list {
+            self.local_of[g as usize] = 0;
+            self.global_of.push(g);
+        }
+        for &g in &self.awake_list {
+            for &e in springs_at.row(g as usize) {
+                let [a, b] = ends[e as usize];
+                let other = if a == g { b } else { a };
+                if !self.awake[other as usize] {
+                    if self.local_of[other as usize] == NONE {
+                        self.local_of[other as usize] = 0;
+                        self.global_of.push(other);
+                    }
+                    self.local_spring_ids.push(e);
+                } else if g == a.min(b) {
+                    self.local_spring_ids.push(e);
+                }
+            }
+        }
+        self.global_of.sort_unstable();
+        for (l, &g) in self.global_of.iter().enumerate() {
+            self.local_of[g as usize] = l as u32;
+        }
+        self.local_spring_ids.sort_unstable();
+        let s = &model.springs;
+        let local = &mut self.springs;
+        local.ends.clear();
+        local.rest_length.clear();
+        local.stiffness.clear();
+        local.damping.clear();
+        for &e in &self.local_spring_ids {
+            let e = e as usize;
+            local.ends.push(s.ends[e].map(|v| self.local_of[v as usize]));
+            local.rest_length.push(s.rest_length[e]);
+            local.stiffness.push(s.stiffness[e]);
+            local.damping.push(s.damping[e]);
+        }
+        let m = self.global_of.len();
+        self.mass.clear();
+        self.held.clear();
+        for &g in &self.global_of {
+            self.mass.push(model.mass[g as usize]);
+            self.held.push(!self.awake[g as usize]);
+        }
+        self.state.positions.resize(m, Point3::origin());
+        self.state.velocities.resize(m, Vector3::zeros());
+        self.external.resize(m, Vector3::zeros());
+        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], .. } = &mut self.implicit;
+        for (h, local) in self.history.iter().zip([dv, p1, p2, p3]) {
+            local.clear();
+            local.extend(self.global_of.iter().map(|&g| h[g as usize]));
+        }
+        self.dirty = false;
+    }
+
+    /// Who wakes at the next step (the neighbours of fast particles) and who falls asleep now.
+    fn decide(&mut self, model: &Model, state: &mut State, settings: &LocalisationSettings, h: f64) {
+        let springs_at = self.springs_at.as_ref().expect("built by ensure");
+        let s = &model.springs;
+        self.to_sleep.clear();
+        for (l, &g) in self.global_of.iter().enumerate() {
+            let gi = g as usize;
+            if self.held[l] {
+                continue;
+            }
+            let speed = state.velocities[gi].norm();
+            if speed > settings.wake_speed_m_per_s {
+                for &e in springs_at.row(gi) {
+                    let [a, b] = s.ends[e as usize];
+                    let other = if a == g { b } else { a };
+                    if !self.awake[other as usize] && !model.held[other as usize] {
+                        self.to_wake.push(other);
+                    }
+                }
+            }
+            // residual displacement m |dv| / (h K)
+            let residual_m = model.mass[gi] * self.implicit.dv[l].norm() / (h * self.stiffness_at[gi]);
+            let quiet = !self.pinned[gi] && speed < settings.sleep_speed_m_per_s && residual_m < settings.sleep_displacement_m;
+            self.quiet_steps[gi] = if quiet { self.quiet_steps[gi] + 1 } else { 0 };
+            if self.quiet_steps[gi] >= settings.sleep_after_steps {
+                self.to_sleep.push(g);
+            }
+        }
+        for &g in &self.to_sleep {
+            let gi = g as usize;
+            self.awake[gi] = false;
+            self.quiet_steps[gi] = 0;
+            state.velocities[gi] = Vector3::zeros();
+            self.awake_count -= 1;
+            self.dirty = true;
+        }
+    }
+}
