@@ -106,6 +106,10 @@ enum Command {
         /// The exercise attempted (with --trainee).
         #[arg(long, default_value = cutlab_assessor::store::BUILTIN_EXERCISE, requires = "trainee")]
         exercise: String,
+        /// Simulate only near the scalpel and the disturbance it causes (default thresholds;
+        /// the recording keeps them, so the replay is localised too).
+        #[arg(long)]
+        localise: bool,
     },
     /// Session recordings (MCAP): what is in one, and salvaging one cut short.
     Recording {
@@ -297,7 +301,7 @@ fn run() -> anyhow::Result<()> {
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
-        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz, rrd, rerun, trainee, exercise } => session::run(&session::Options {
+        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz, rrd, rerun, trainee, exercise, localise } => session::run(&session::Options {
             scene,
             min_tets,
             device,
@@ -310,6 +314,7 @@ fn run() -> anyhow::Result<()> {
             surface_hz,
             rerun: recording::rerun_target(rrd.then_some(std::path::Path::new("session.rrd")), rerun.as_ref()),
             attempt: trainee.map(|trainee| session::AttemptArgs { db: cutlab_assessor::default_db_path(cli.db.as_deref()), exercise, trainee }),
+            localise,
         }),
         Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
         Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),

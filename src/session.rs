@@ -13,6 +13,7 @@ use cutlab_recorder::record::{self, Provenance, RecordSettings};
 use cutlab_recorder::{RerunTarget, WriterOptions};
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
+use cutlab_sim::solver::LocalisationSettings;
 use cutlab_sim::Vector3;
 
 use cutlab_assessor::Store;
@@ -66,6 +67,8 @@ pub struct Options {
     pub rerun: Option<RerunTarget>,
     /// Store the session as an attempt and score it.
     pub attempt: Option<AttemptArgs>,
+    /// Simulate only near the scalpel (the default localisation thresholds).
+    pub localise: bool,
 }
 
 /// The attempt a session is (`--trainee`, `--exercise`, `--db`).
@@ -141,7 +144,10 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         }
     };
     let scene = Scene::load(&o.scene, BuildOptions { min_tets: o.min_tets }).with_context(|| format!("loading scene {:?}", o.scene))?;
-    let session = Session::new(&scene).context("preparing the session")?;
+    let mut session = Session::new(&scene).context("preparing the session")?;
+    if o.localise {
+        session.sim.settings.localisation = Some(LocalisationSettings::default());
+    }
     let (lo, hi) = scene.model.mesh.bounding_box();
     let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
     // The planned incision (what a synthetic trainee follows; recorded with every session).

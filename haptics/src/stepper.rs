@@ -85,6 +85,8 @@ impl SessionStepper {
         // The tool's reaction on the tissue, spread over the contact patch around the
         // touched point (weights (1 - r / R)^2 over the surface particles within R).
         self.sim.clear_external_forces();
+        // the scalpel is where a localised simulation stays awake
+        self.sim.set_focus(&[sample.pose.tip_in_world]);
         if render.mode == Mode::Touching
             && let Some(hit) = &self.last_hit
         {
@@ -100,9 +102,8 @@ impl SessionStepper {
                 }
             }
             if total > 0.0 {
-                let f = self.sim.external_forces_mut();
                 for &(v, w) in &self.patch {
-                    f[v as usize] -= render.force_newtons * (w / total);
+                    self.sim.add_external_force(v, -(render.force_newtons * (w / total)));
                 }
             }
         }

@@ -282,6 +282,10 @@ pub struct SessionMeta {
     pub cut_step_m: f64,
     pub keyframe_every_steps: u64,
     pub surface_every_steps: u64,
+    /// The simulation's localisation, when it ran localised (absent in older recordings:
+    /// the scene's own solver settings).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub localisation: Option<cutlab_sim::solver::LocalisationSettings>,
     /// Hash of the settled scene before the first step.
     pub initial_state_hash: Hex,
     pub initial_topology_hash: Hex,

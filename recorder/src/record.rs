@@ -99,6 +99,7 @@ fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, s
         cut_step_m: config.cut_step_m,
         keyframe_every_steps: settings.tap.keyframe_every_steps,
         surface_every_steps: settings.tap.surface_every_steps,
+        localisation: session.sim.settings.localisation,
         initial_state_hash: Hex(initial.state),
         initial_topology_hash: Hex(initial.topology),
         started_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64()),

@@ -125,7 +125,10 @@ impl ReplayReport {
 /// The stepper a recording's session started from: its scene, settled, with its settings.
 pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> {
     let scene = Scene::load(&meta.provenance.scene, BuildOptions { min_tets: meta.provenance.min_tets }).map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?;
-    let session = Session::new(&scene)?;
+    let mut session = Session::new(&scene)?;
+    if meta.localisation.is_some() {
+        session.sim.settings.localisation = meta.localisation;
+    }
     let config = SessionConfig {
         blade_length_m: meta.blade_length_m,
         contact_reach_m: meta.contact_reach_m,

@@ -276,3 +276,27 @@ fn the_external_mcap_reader_reads_it_with_crc_checks() {
     let attachments: Vec<&str> = v["attachments"].as_array().expect("attachments").iter().filter_map(|m| m.as_str()).collect();
     assert!(attachments.contains(&channels::PLAN_ATTACHMENT) && attachments.contains(&channels::SCENE_ATTACHMENT));
 }
+
+#[test]
+fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
+    let scene = Scene::load(SCENE, BuildOptions { min_tets: Some(MIN_TETS) }).expect("scene");
+    let mut session = Session::new(&scene).expect("session");
+    session.sim.settings.localisation = Some(cutlab_sim::solver::LocalisationSettings::default());
+    let plan = session.plan_across_top(0.06, 0.008).expect("plan");
+    let preset = Skill::preset("expert").expect("preset");
+    let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
+    let config = SessionConfig { duration_s: 8.0, ..SessionConfig::default() };
+    let path = temp_dir("localised").join("session.mcap");
+    let provenance = Provenance { scene: SCENE.into(), min_tets: Some(MIN_TETS), seed: 7, trainee: "t".into(), exercise: "e".into(), device: "expert".into() };
+    let settings = RecordSettings { tap: TapSettings { keyframe_every_steps: 500, surface_every_steps: 0, ..TapSettings::default() }, writer: WriterOptions::default() };
+    let r = record::run_recorded(session, device, &config, &provenance, Some(&plan), &scene.spec, &path, settings, None).expect("recorded session");
+    let report = r.report.expect("session ran");
+    assert!(report.stats.cut_steps > 0, "{:?}", report.stats);
+
+    let rec = Recording::open(&path).expect("readable");
+    assert_eq!(rec.meta().expect("meta").localisation, Some(cutlab_sim::solver::LocalisationSettings::default()));
+    let replayed = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
+    assert!(replayed.verified(), "{:?}", replayed.first_divergence);
+    assert_eq!(replayed.cuts_replayed, report.stats.cut_steps);
+    assert_eq!(replayed.keyframes_checked, 16);
+}
