@@ -115,6 +115,9 @@ impl LocalisationSettings {
 
 const NONE: u32 = u32::MAX;
 
+/// Steps between the moments quiet particles fall asleep (see [`ActiveRegion::decide`]).
+pub const SLEEP_BATCH_STEPS: u64 = 10;
+
 /// The awake set, its sub-body and the buffers of the localised step.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct ActiveRegion {
@@ -126,6 +129,8 @@ pub(crate) struct ActiveRegion {
     /// Awake particles (unsorted between rebuilds; entries put to sleep are dropped lazily).
     awake_list: Vec<u32>,
     awake_count: usize,
+    /// Localised steps taken: particles fall asleep together every [`SLEEP_BATCH_STEPS`].
+    step_count: u64,
     /// Particles to wake at the next step (cuts, neighbours, the border).
     to_wake: Vec<u32>,
     to_sleep: Vec<u32>,
@@ -236,6 +241,7 @@ impl ActiveRegion {
 
     /// One localised backward-Euler step of `h` seconds (see the module documentation).
     /// `loaded` lists the particles with an external force (any order, duplicates allowed).
+    /// Returns the last solve's report (with the iterations of all) and the number of solves.
     #[allow(clippy::too_many_arguments)]
     pub fn step(
         &mut self,
@@ -246,7 +252,7 @@ impl ActiveRegion {
         settings: &LocalisationSettings,
         h: f64,
         cg: CgSettings,
-    ) -> Result<CgReport, StepError> {
+    ) -> Result<(CgReport, u32), StepError> {
         self.ensure(model, state, settings);
         self.pin(model, state, loaded, settings);
         self.apply_wakes(model);
@@ -255,7 +261,9 @@ impl ActiveRegion {
             self.rebuild(model);
         }
         self.save_history();
+        let mut solves = 0;
         for round in 1..=settings.max_growth_rounds {
+            solves = round;
             let report = self.solve(model, state, external, h, cg)?;
             total = CgReport { iterations: total.iterations + report.iterations, ..report };
             // a border that was held back is woken, and the step solved again with it
@@ -284,8 +292,9 @@ impl ActiveRegion {
         if self.grid_slack_m > 0.5 * settings.focus_radius_m {
             self.grid = None;
         }
+        self.step_count += 1;
         self.decide(model, state, settings, h);
-        Ok(total)
+        Ok((total, solves))
     }
 
     /// Gathers the sub-body (the border held, at rest) and solves it; the global state is
@@ -509,6 +518,11 @@ impl ActiveRegion {
             if self.quiet_steps[gi] >= settings.sleep_after_steps {
                 self.to_sleep.push(g);
             }
+        }
+        // Sleepers are let go in batches, so that the sub-body is not rebuilt at every step
+        // for one particle more or less (a quiet particle waits at most this many steps more).
+        if !self.step_count.is_multiple_of(SLEEP_BATCH_STEPS) {
+            return;
         }
         for &g in &self.to_sleep {
             let gi = g as usize;

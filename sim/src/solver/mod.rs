@@ -134,6 +134,8 @@ pub struct StepReport {
     pub cg_relative_residual: f64,
     /// Particles the step simulated (all free ones unless localised).
     pub awake_particles: usize,
+    /// Linear solves of the step (a localised step solves again when its border woke).
+    pub solves: u32,
 }
 
 /// Buffers reused by every step.
@@ -394,6 +396,7 @@ impl Simulation {
         }
         self.step_index += 1;
         report.awake_particles = self.model.held.iter().filter(|h| !**h).count();
+        report.solves = 1;
         Ok(report)
     }
 
@@ -418,13 +421,14 @@ impl Simulation {
             max_iterations: self.settings.cg_max_iterations,
         };
         let h = self.settings.time_step_s;
-        let r = self.region.step(&self.model, &mut self.state, &self.external_forces, &self.loaded, localisation, h, cg)?;
+        let (r, solves) = self.region.step(&self.model, &mut self.state, &self.external_forces, &self.loaded, localisation, h, cg)?;
         self.step_index += 1;
         Ok(StepReport {
             substeps: 1,
             cg_iterations: r.iterations,
             cg_relative_residual: r.relative_residual,
             awake_particles: self.region.awake_count(),
+            solves,
         })
     }
 }
