@@ -116,12 +116,19 @@ impl SurfaceCollider {
     }
 
     /// Moves the collider's vertices to the simulation's positions and refits the BVH (no
-    /// allocation once built).
-    pub fn refit(&mut self, positions: &[Point3]) {
+    /// allocation once built); skipped when no surface particle moved (a localised
+    /// simulation leaves the sleeping surface where it was). Returns whether it refitted.
+    pub fn refit(&mut self, positions: &[Point3]) -> bool {
+        let mut moved = false;
         for (dst, &v) in self.scratch.iter_mut().zip(&self.vertex_ids) {
-            *dst = to_parry(&positions[v as usize]);
+            let p = to_parry(&positions[v as usize]);
+            moved |= *dst != p;
+            *dst = p;
         }
-        self.mesh.set_vertices(&self.scratch);
+        if moved {
+            self.mesh.set_vertices(&self.scratch);
+        }
+        moved
     }
 
     /// The simulation particles on the surface.
@@ -222,7 +229,8 @@ mod tests {
         for p in sim.state.positions.iter_mut() {
             p.z += 0.001;
         }
-        c.refit(&sim.state.positions);
+        assert!(c.refit(&sim.state.positions), "moved: refitted");
+        assert!(!c.refit(&sim.state.positions), "nothing moved: skipped");
         let hit = c.closest(&Point3::new(0.05, 0.05, 0.01)).expect("hit");
         assert!((hit.point.z - 0.003).abs() < 1e-12, "{hit:?}");
         assert!(c.closest(&Point3::new(f64::NAN, 0.0, 0.0)).is_none());
