@@ -271,6 +271,7 @@ fn parse_clock(s: &str) -> Result<cutlab_haptics::servo::Clock, String> {
 }
 
 fn main() -> std::process::ExitCode {
+    stdout_errors_end_quietly();
     match run() {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
@@ -279,6 +280,29 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// `print!` panics when stdout is gone (`cutlab scene list | head -1`). Such a panic ends
+/// the process like a Unix tool: quietly with status 141 on a closed pipe, with a one-line
+/// error and status 1 on any other write error. (The SIGPIPE signal itself stays ignored, as
+/// Rust sets it, so that the dashboard and the OpenIGTLink device see a closed socket as an
+/// error instead of being killed.) Every other panic goes to the default hook.
+fn stdout_errors_end_quietly() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload.downcast_ref::<String>().map(String::as_str).or_else(|| payload.downcast_ref::<&str>().copied());
+        match message {
+            Some(m) if m.starts_with("failed printing to stdout") => {
+                if m.contains("Broken pipe") {
+                    std::process::exit(141);
+                }
+                eprintln!("error: {m}");
+                std::process::exit(1);
+            }
+            _ => default(info),
+        }
+    }));
 }
 
 fn run() -> anyhow::Result<()> {

@@ -191,3 +191,20 @@ fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line
     assert!(!ok && err.contains("not an MCAP file") && !err.contains("panicked"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn output_into_a_closed_pipe_or_a_full_disk_ends_without_a_panic() {
+    // a pipe whose reader is gone: the first write fails with EPIPE
+    let (reader, writer) = std::io::pipe().expect("pipe");
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_cutlab")).args(["scene", "list"]).stdout(writer).output().expect("cutlab runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(141), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    if let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") {
+        let out = Command::new(env!("CARGO_BIN_EXE_cutlab")).args(["scene", "list"]).stdout(full).output().expect("cutlab runs");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.starts_with("error: failed printing to stdout") && !err.contains("panicked"), "{err}");
+    }
+}
