@@ -9,6 +9,7 @@ use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::PointQueryWithLocation;
 use parry3d_f64::shape::{TriMesh, TriMeshFlags};
 
+use cutlab_sim::mesh::Csr;
 use cutlab_sim::solver::Simulation;
 
 use crate::render::ContactModel;
@@ -42,9 +43,8 @@ pub struct SurfaceCollider {
     mesh: TriMesh,
     /// Collider positions, reused by every refit.
     scratch: Vec<PVec>,
-    /// Springs around each simulation vertex (compressed rows).
-    spring_offsets: Vec<u32>,
-    spring_ids: Vec<u32>,
+    /// Springs around each simulation vertex.
+    springs_at: Csr,
     /// Rebuilds so far (one at construction, one per surface-changing cut).
     pub rebuilds: u64,
 }
@@ -56,8 +56,7 @@ impl SurfaceCollider {
             vertex_ids: Vec::new(),
             mesh: TriMesh::new(vec![PVec::ZERO; 3], vec![[0, 1, 2]]).map_err(|e| HapticsError::Surface(e.to_string()))?,
             scratch: Vec::new(),
-            spring_offsets: Vec::new(),
-            spring_ids: Vec::new(),
+            springs_at: Csr::default(),
             rebuilds: 0,
         };
         me.rebuild(sim)?;
@@ -92,25 +91,7 @@ impl SurfaceCollider {
         self.mesh = TriMesh::with_flags(vertices, triangles, TriMeshFlags::DEFORMABLE).map_err(|e| HapticsError::Surface(e.to_string()))?;
 
         // springs around each vertex, for the local stiffness
-        let springs = &sim.model.springs;
-        let mut counts = vec![0u32; n + 1];
-        for e in &springs.ends {
-            counts[e[0] as usize + 1] += 1;
-            counts[e[1] as usize + 1] += 1;
-        }
-        for i in 0..n {
-            counts[i + 1] += counts[i];
-        }
-        let mut fill = counts.clone();
-        let mut ids = vec![0u32; counts[n] as usize];
-        for (s, e) in springs.ends.iter().enumerate() {
-            for &v in e {
-                ids[fill[v as usize] as usize] = s as u32;
-                fill[v as usize] += 1;
-            }
-        }
-        self.spring_offsets = counts;
-        self.spring_ids = ids;
+        self.springs_at = sim.model.springs.by_particle(n);
         self.rebuilds += 1;
         Ok(())
     }
@@ -175,9 +156,11 @@ impl SurfaceCollider {
         let mut k = 0.0;
         for (&v, &w) in hit.vertices.iter().zip(&hit.weights) {
             let v = v as usize;
-            let Some(range) = self.spring_offsets.get(v..v + 2) else { continue };
+            if v >= self.springs_at.rows() {
+                continue;
+            }
             let mut kv = 0.0;
-            for &s in &self.spring_ids[range[0] as usize..range[1] as usize] {
+            for &s in self.springs_at.row(v) {
                 let [a, b] = springs.ends[s as usize];
                 let Some(e) = (x[b as usize] - x[a as usize]).try_normalize(1e-15) else { continue };
                 kv += springs.stiffness[s as usize] * e.dot(&hit.normal).powi(2);

@@ -25,6 +25,13 @@ impl SpringSet {
         self.ends.is_empty()
     }
 
+    /// The springs at each of `particle_count` particles (row `i`: the springs with an end at
+    /// `i`, ascending).
+    pub fn by_particle(&self, particle_count: usize) -> crate::mesh::Csr {
+        let pairs: Vec<(u32, u32)> = self.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]).collect();
+        crate::mesh::Csr::from_pairs(particle_count, &pairs)
+    }
+
     /// Springs on every edge of `mesh`, with parameters averaged over the tetrahedra around the
     /// edge (`material_of_tet[t]` gives each tet's material). The pre-tension rule sets
     /// `l = d (1 - s)` with `d` the edge's length in the mesh's (reference) positions.

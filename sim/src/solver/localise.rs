@@ -226,9 +226,7 @@ impl ActiveRegion {
             self.dirty = true;
         }
         if self.springs_at.is_none() {
-            let pairs: Vec<(u32, u32)> =
-                model.springs.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]).collect();
-            let csr = Csr::from_pairs(n, &pairs);
+            let csr = model.springs.by_particle(n);
             let stiffness = &model.springs.stiffness;
             self.stiffness_at = (0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum()).collect();
             self.springs_at = Some(csr);
