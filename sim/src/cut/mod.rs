@@ -397,8 +397,20 @@ pub fn cut_remembering(
     Ok(event)
 }
 
+/// The entries of `a` that are not in `b`, both sorted: one merge pass (a binary search per
+/// entry cost 10 ms per cut at 100k tets).
 fn sorted_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {
-    a.iter().filter(|e| b.binary_search(e).is_err()).copied().collect()
+    let mut out = Vec::new();
+    let mut j = 0;
+    for e in a {
+        while j < b.len() && b[j] < *e {
+            j += 1;
+        }
+        if b.get(j) != Some(e) {
+            out.push(*e);
+        }
+    }
+    out
 }
 
 /// Orients children positively in the reference configuration; false when one is degenerate
@@ -483,4 +495,21 @@ fn choose_fixed(splits: &[(u32, TetSplit)], x_ref: &[Point3]) -> Option<Vec<Chil
 /// A vector helper for callers building blades.
 pub fn blade(tip: Point3, edge_direction: Vector3, depth_m: f64) -> Blade {
     Blade { tip, edge_direction: edge_direction.normalize(), depth_m }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sorted_difference;
+
+    #[test]
+    fn sorted_difference_is_the_set_difference() {
+        let a: Vec<[u32; 2]> = (0..200u32).filter(|i| i % 3 != 0).map(|i| [i / 7, i]).collect();
+        let b: Vec<[u32; 2]> = (0..200u32).filter(|i| i % 2 == 0).map(|i| [i / 7, i]).chain([[99, 999]]).collect();
+        let naive = |a: &[[u32; 2]], b: &[[u32; 2]]| -> Vec<[u32; 2]> { a.iter().filter(|e| !b.contains(e)).copied().collect() };
+        assert_eq!(sorted_difference(&a, &b), naive(&a, &b));
+        assert_eq!(sorted_difference(&b, &a), naive(&b, &a));
+        assert_eq!(sorted_difference(&a, &[]), a);
+        assert!(sorted_difference(&[], &a).is_empty());
+        assert!(sorted_difference(&a, &a).is_empty());
+    }
 }
