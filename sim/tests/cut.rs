@@ -328,3 +328,24 @@ fn mu_chosen_patterns_are_better_than_a_fixed_pattern() {
     }
     assert!(results[0].0 < results[1].0, "mean mu {:?}", results);
 }
+
+#[test]
+fn the_topology_a_cut_carries_over_equals_the_one_built_from_scratch() {
+    let g = boxed(Point3::origin(), [0.04, 0.04, 0.01], GridCells { nx: 8, ny: 8, nz: 3 }).expect("slab");
+    let mut sim = sim_of(g.mesh, &[], 0.04);
+    // planes of every orientation through the slab, some crossing earlier cuts, the last one
+    // right through (a separated piece)
+    let mut made = 0;
+    for k in 0..14 {
+        let a = k as f64 * 0.7;
+        let centre = Point3::new(0.02 + 0.01 * (1.3 * a).sin(), 0.02 + 0.01 * (0.9 * a).cos(), 0.005);
+        let normal = Vector3::new(a.cos(), a.sin(), 0.3 * (2.1 * a).sin());
+        let half = if k == 13 { 0.05 } else { 0.006 };
+        let Ok(ev) = cut::cut(&mut sim, &square(centre, normal, half), &CutOptions::default()) else { continue };
+        made += usize::from(!ev.tets_removed.is_empty());
+        let mesh = &sim.model.mesh;
+        let built = cutlab_sim::mesh::Topology::build(mesh.vertex_count(), mesh.tets());
+        assert!(*mesh.topology() == built, "cut {k}: the carried-over topology differs from a fresh build");
+    }
+    assert!(made >= 8, "only {made} cuts split tets");
+}

@@ -369,7 +369,12 @@ pub fn cut_remembering(
     event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
 
     // Commit: new mesh, rebuilt model, extended state.
-    let new_mesh = TetMesh::new(x_ref, tets, regions)?;
+    // only the split parents (replaced in place by a child) and the relinked tets changed
+    let mut changed: Vec<u32> = event.tets_removed.iter().copied().chain(event.tets_relinked.iter().map(|(t, _)| *t)).collect();
+    changed.retain(|&t| (t as usize) < old_tet_count);
+    changed.sort_unstable();
+    changed.dedup();
+    let new_mesh = TetMesh::with_changes(mesh, x_ref, tets, regions, &changed)?;
     let old_edges = std::mem::take(&mut sim.model.springs.ends);
     if let Err(e) = sim.model.rebuild(new_mesh, held) {
         sim.model.springs.ends = old_edges;

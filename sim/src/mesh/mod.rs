@@ -5,6 +5,7 @@ mod geometry;
 mod grid;
 pub mod quality;
 mod topology;
+mod topology_update;
 mod validate;
 
 pub use grid::PointGrid;
@@ -68,6 +69,45 @@ impl TetMesh {
             }
         }
         let topology = Topology::build(positions.len(), &tets);
+        Ok(Self { positions, tets, regions, topology })
+    }
+
+    /// [`TetMesh::new`] for a local change of `previous`: the tets `changed` (ascending ids of
+    /// `previous` whose vertices changed) and the tets appended after those of `previous`;
+    /// tet ids do not move and vertices are only appended. Only those tets are checked, and
+    /// the topology is carried over from `previous` ([`Topology::updated`]) instead of built
+    /// again: what a cut needs at haptic rates.
+    pub fn with_changes(
+        previous: &TetMesh,
+        positions: Vec<Point3>,
+        tets: Vec<[VertexId; 4]>,
+        regions: Vec<u32>,
+        changed: &[u32],
+    ) -> Result<Self, MeshError> {
+        let old_count = previous.tets.len();
+        let local = positions.len() >= previous.positions.len()
+            && tets.len() >= old_count
+            && regions.len() == tets.len()
+            && changed.windows(2).all(|w| w[0] < w[1])
+            && changed.last().is_none_or(|&t| (t as usize) < old_count);
+        if !local || positions.len() > u32::MAX as usize - 1 {
+            return Self::new(positions, tets, regions);
+        }
+        for t in changed.iter().copied().chain(old_count as u32..tets.len() as u32) {
+            let tet = &tets[t as usize];
+            for (i, &v) in tet.iter().enumerate() {
+                if v as usize >= positions.len() {
+                    return Err(MeshError::VertexOutOfRange { tet: t as usize, vertex: v, vertex_count: positions.len() });
+                }
+                if tet[..i].contains(&v) {
+                    return Err(MeshError::RepeatedVertex { tet: t as usize, vertex: v });
+                }
+            }
+        }
+        let topology = previous
+            .topology
+            .updated(&previous.tets, &tets, changed, positions.len())
+            .unwrap_or_else(|| Topology::build(positions.len(), &tets));
         Ok(Self { positions, tets, regions, topology })
     }
 

@@ -14,7 +14,7 @@ pub const TET_EDGES: [[usize; 2]; 6] = [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], 
 pub const TET_FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 
 /// Compressed sparse rows: `items[offsets[i]..offsets[i + 1]]` are the entries of row `i`.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Csr {
     offsets: Vec<u32>,
     items: Vec<u32>,
@@ -41,6 +41,12 @@ impl Csr {
         Self { offsets, items }
     }
 
+    /// From its parts (`offsets` ascending from 0 to `items.len()`).
+    pub(crate) fn from_parts(offsets: Vec<u32>, items: Vec<u32>) -> Self {
+        debug_assert!(offsets.first() == Some(&0) && offsets.last().copied() == Some(items.len() as u32));
+        Self { offsets, items }
+    }
+
     /// Entries of row `i`.
     pub fn row(&self, i: usize) -> &[u32] {
         &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
@@ -53,7 +59,7 @@ impl Csr {
 }
 
 /// Edges, faces, surface and adjacency of a [`super::TetMesh`].
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Topology {
     /// Unique edges `[a, b]` with `a < b`, sorted.
     pub edges: Vec<[VertexId; 2]>,

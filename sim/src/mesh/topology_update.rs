@@ -1,0 +1,210 @@
+//! The topology of a mesh after a local change, derived from the topology before it: what a
+//! cut needs instead of [`Topology::build`] over the whole mesh. The result is the one `build`
+//! gives (tested field by field), at the cost of merging sorted lists (no sorting of the
+//! whole mesh): a few milliseconds instead of thirty at 100k tets.
+
+use super::topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology};
+use super::VertexId;
+
+/// Edges or faces (`K`), `L` per tetrahedron, after the change: the sorted keys, each tet's
+/// entity ids and each entity's tets (ascending).
+struct Entities<K, const L: usize> {
+    keys: Vec<K>,
+    tet_ids: Vec<[u32; L]>,
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+}
+
+/// Merges the entities of the tets that did not change (`old_*`, with `old_tets_of(e)` the
+/// ascending tets of old entity `e`) with those of the dirty tets (`dirty`: the changed ones,
+/// flagged in `changed`, and the new ones).
+fn merge_entities<'a, K: Ord + Copy, const L: usize>(
+    old_keys: &[K],
+    old_tet_ids: &[[u32; L]],
+    old_tets_of: impl Fn(usize) -> &'a [u32],
+    tets: &[[VertexId; 4]],
+    dirty: &[u32],
+    changed: &[bool],
+    keys_of: impl Fn(&[VertexId; 4]) -> [K; L],
+) -> Entities<K, L> {
+    let mut dirty_pairs: Vec<(K, u32, u8)> = Vec::with_capacity(dirty.len() * L);
+    for &t in dirty {
+        for (l, k) in keys_of(&tets[t as usize]).into_iter().enumerate() {
+            dirty_pairs.push((k, t, l as u8));
+        }
+    }
+    dirty_pairs.sort_unstable();
+    let alive = |t: &u32| !changed.get(*t as usize).copied().unwrap_or(false);
+
+    let mut out = Entities {
+        keys: Vec::with_capacity(old_keys.len() + dirty_pairs.len() / 2),
+        tet_ids: Vec::with_capacity(tets.len()),
+        offsets: Vec::with_capacity(old_keys.len() + 1),
+        items: Vec::with_capacity(old_tet_ids.len() * L / 2 + dirty_pairs.len()),
+    };
+    out.offsets.push(0);
+    let mut old_to_new = vec![NONE; old_keys.len()];
+    let mut dirty_ids: Vec<(u32, u8, u32)> = Vec::with_capacity(dirty_pairs.len());
+    let (mut e, mut j) = (0, 0);
+    while e < old_keys.len() || j < dirty_pairs.len() {
+        let key = match (old_keys.get(e), dirty_pairs.get(j)) {
+            (Some(a), Some(b)) => (*a).min(b.0),
+            (Some(a), None) => *a,
+            (None, Some(b)) => b.0,
+            (None, None) => break,
+        };
+        let id = out.keys.len() as u32;
+        let start = out.items.len();
+        let mut old_row: &[u32] = &[];
+        let old_index = (old_keys.get(e) == Some(&key)).then_some(e);
+        if let Some(i) = old_index {
+            old_row = old_tets_of(i);
+            old_to_new[i] = id;
+            e += 1;
+        }
+        let mut kept = old_row.iter().copied().filter(alive).peekable();
+        // merge the surviving old tets with the dirty ones of this key, both ascending
+        while let Some(&(_, t, l)) = dirty_pairs.get(j).filter(|p| p.0 == key) {
+            while let Some(o) = kept.next_if(|&o| o < t) {
+                out.items.push(o);
+            }
+            out.items.push(t);
+            dirty_ids.push((t, l, id));
+            j += 1;
+        }
+        out.items.extend(kept);
+        if out.items.len() == start {
+            // an old entity no tet uses any more
+            if let Some(i) = old_index {
+                old_to_new[i] = NONE;
+            }
+            continue;
+        }
+        out.keys.push(key);
+        out.offsets.push(out.items.len() as u32);
+    }
+
+    out.tet_ids.extend(old_tet_ids.iter().map(|ids| ids.map(|i| old_to_new[i as usize])));
+    out.tet_ids.resize(tets.len(), [NONE; L]);
+    for (t, l, id) in dirty_ids {
+        out.tet_ids[t as usize][l as usize] = id;
+    }
+    out
+}
+
+fn sorted3(mut k: [u32; 3]) -> [u32; 3] {
+    k.sort_unstable();
+    k
+}
+
+impl Topology {
+    /// The topology of `tets` over `vertex_count` vertices, given this topology of
+    /// `old_tets` and the tets that differ: `changed` (ascending ids below `old_tets.len()`
+    /// whose vertices changed) and every tet from `old_tets.len()` on (appended). Tet ids
+    /// never move and vertex ids only grow. Returns `None` where the old topology cannot be
+    /// carried over (faces shared by more than two tets), for [`Topology::build`] to do.
+    pub fn updated(&self, old_tets: &[[VertexId; 4]], tets: &[[VertexId; 4]], changed: &[u32], vertex_count: usize) -> Option<Self> {
+        let old_count = old_tets.len();
+        if !self.overshared_faces.is_empty() || tets.len() < old_count || self.tet_edges.len() != old_count {
+            return None;
+        }
+        let mut is_changed = vec![false; old_count];
+        for &t in changed {
+            *is_changed.get_mut(t as usize)? = true;
+        }
+        let dirty: Vec<u32> = changed.iter().copied().chain(old_count as u32..tets.len() as u32).collect();
+
+        let edges = merge_entities(
+            &self.edges,
+            &self.tet_edges,
+            |e| self.edge_tets.row(e),
+            tets,
+            &dirty,
+            &is_changed,
+            |tet| TET_EDGES.map(|[i, j]| [tet[i].min(tet[j]), tet[i].max(tet[j])]),
+        );
+        let faces = merge_entities(
+            &self.faces,
+            &self.tet_faces,
+            |f| {
+                let row = &self.face_tets[f];
+                let len = row.iter().take_while(|&&t| t != NONE).count();
+                &row[..len]
+            },
+            tets,
+            &dirty,
+            &is_changed,
+            |tet| TET_FACES.map(|f| sorted3([tet[f[0]], tet[f[1]], tet[f[2]]])),
+        );
+
+        let mut face_tets = Vec::with_capacity(faces.keys.len());
+        let (mut boundary, mut boundary_face_ids) = (Vec::new(), Vec::new());
+        for f in 0..faces.keys.len() {
+            let row = &faces.items[faces.offsets[f] as usize..faces.offsets[f + 1] as usize];
+            match *row {
+                [t] => {
+                    face_tets.push([t, NONE]);
+                    let tet = &tets[t as usize];
+                    let l = faces.tet_ids[t as usize].iter().position(|&id| id == f as u32)?;
+                    let lf = TET_FACES[l];
+                    boundary.push([tet[lf[0]], tet[lf[1]], tet[lf[2]]]);
+                    boundary_face_ids.push(f as u32);
+                }
+                [a, b] => face_tets.push([a, b]),
+                _ => return None, // shared by more than two tets: a full build reports it
+            }
+        }
+
+        // Vertex -> tets: the rows of the vertices the dirty tets touch (before or after)
+        // are merged again, the others copied.
+        let mut touched = vec![false; vertex_count];
+        let mut vertex_pairs: Vec<(u32, u32)> = Vec::with_capacity(dirty.len() * 4);
+        for &t in &dirty {
+            for &v in &tets[t as usize] {
+                *touched.get_mut(v as usize)? = true;
+                vertex_pairs.push((v, t));
+            }
+            if let Some(old) = old_tets.get(t as usize) {
+                for &v in old {
+                    *touched.get_mut(v as usize)? = true;
+                }
+            }
+        }
+        vertex_pairs.sort_unstable();
+        let old_rows = self.vertex_tets.rows();
+        let mut offsets = Vec::with_capacity(vertex_count + 1);
+        let mut items = Vec::with_capacity(tets.len() * 4);
+        offsets.push(0u32);
+        let mut j = 0;
+        for v in 0..vertex_count {
+            let old_row: &[u32] = if v < old_rows { self.vertex_tets.row(v) } else { &[] };
+            if !touched[v] {
+                items.extend_from_slice(old_row);
+            } else {
+                let mut kept = old_row.iter().copied().filter(|&t| !is_changed[t as usize]).peekable();
+                while let Some(&(_, t)) = vertex_pairs.get(j).filter(|p| p.0 as usize == v) {
+                    while let Some(o) = kept.next_if(|&o| o < t) {
+                        items.push(o);
+                    }
+                    items.push(t);
+                    j += 1;
+                }
+                items.extend(kept);
+            }
+            offsets.push(items.len() as u32);
+        }
+
+        Some(Self {
+            edges: edges.keys,
+            tet_edges: edges.tet_ids,
+            faces: faces.keys,
+            face_tets,
+            tet_faces: faces.tet_ids,
+            boundary,
+            boundary_face_ids,
+            overshared_faces: Vec::new(),
+            vertex_tets: Csr::from_parts(offsets, items),
+            edge_tets: Csr::from_parts(edges.offsets, edges.items),
+        })
+    }
+}
