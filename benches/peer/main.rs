@@ -17,11 +17,10 @@ mod stats;
 
 use cutlab_sim::reference::{Elasticity, Solid};
 use indicatif::{ProgressBar, ProgressStyle};
-use rapier3d_f64::prelude::SoftBodySolver;
 
 use crate::cantilever::CantileverLoad;
 use crate::cases::Case;
-use crate::rapier_side::CellDamping;
+use crate::rapier_side::{CellDamping, Setup};
 use crate::report::{CantileverRow, Config, CutRow, Results, StepRow};
 
 /// How much to measure.
@@ -31,6 +30,8 @@ struct Plan {
     json: bool,
     steps: usize,
     cut_repeats: usize,
+    /// Rapier at 1 substep too (steps and cantilever).
+    single_substep: bool,
     /// Step caps of Rapier's cantilever runs with its default and with the mapped damping
     /// (`None`: not run).
     cantilever_max_steps: usize,
@@ -42,42 +43,85 @@ impl Plan {
     fn from_args() -> Self {
         let args: Vec<String> = std::env::args().skip(1).collect();
         let has = |flag: &str| args.iter().any(|a| a == flag);
-        let quick = has("--quick");
+        let (quick, json) = (has("--quick"), has("--json"));
         if quick {
-            Self { quick, json: has("--json"), steps: 60, cut_repeats: 2, cantilever_max_steps: 2_000, mapped_cantilever_max_steps: None }
+            Self { quick, json, steps: 60, cut_repeats: 2, single_substep: false, cantilever_max_steps: 2_000, mapped_cantilever_max_steps: None }
         } else {
-            Self { quick, json: has("--json"), steps: 300, cut_repeats: 5, cantilever_max_steps: 5_000, mapped_cantilever_max_steps: Some(3_000) }
+            Self {
+                quick,
+                json,
+                steps: 300,
+                cut_repeats: 5,
+                single_substep: true,
+                cantilever_max_steps: 5_000,
+                mapped_cantilever_max_steps: Some(3_000),
+            }
         }
     }
 
-    /// Jobs: per case and configuration steps and a cut; the cantilevers.
+    /// The configurations measured.
+    fn configs(&self) -> Vec<Config> {
+        Config::ALL.into_iter().filter(|c| self.single_substep || !matches!(c, Config::Rapier { substeps: 1, .. })).collect()
+    }
+
+    /// The configurations cut: cutlab's and Rapier's at its default substeps (a cut does not
+    /// depend on them).
+    fn cut_configs(&self) -> Vec<Config> {
+        self.configs().into_iter().filter(|c| c.engine() == "cutlab" || c.is_rapier_default()).collect()
+    }
+
+    /// Rapier's cantilever runs: every Rapier configuration with its default damping, those
+    /// at the default substeps with the mapped damping too (full run).
+    fn rapier_cantilevers(&self) -> Vec<(Config, CellDamping, usize)> {
+        let rapier: Vec<Config> = self.configs().into_iter().filter(|c| c.engine() == "Rapier").collect();
+        let mut runs: Vec<(Config, CellDamping, usize)> =
+            rapier.iter().map(|&c| (c, CellDamping::Default, self.cantilever_max_steps)).collect();
+        if let Some(max_steps) = self.mapped_cantilever_max_steps {
+            runs.extend(rapier.iter().filter(|c| c.is_rapier_default()).map(|&c| (c, CellDamping::Mapped, max_steps)));
+        }
+        runs
+    }
+
     fn job_count(&self) -> u64 {
-        let per_case = 2 * Config::ALL.len();
-        let cantilevers = 2 + 2 * (1 + usize::from(self.mapped_cantilever_max_steps.is_some()));
-        (2 * per_case + cantilevers) as u64
+        (2 * (self.configs().len() + self.cut_configs().len()) + 2 + self.rapier_cantilevers().len()) as u64
     }
 }
 
-/// A progress bar on stderr.
-fn progress(plan: &Plan) -> ProgressBar {
-    let bar = ProgressBar::new(plan.job_count());
-    let style = ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar());
-    bar.set_style(style);
-    bar
+/// Progress on stderr: a bar on a terminal, a line per job otherwise.
+struct Progress(ProgressBar);
+
+impl Progress {
+    fn new(plan: &Plan) -> Self {
+        let bar = ProgressBar::new(plan.job_count());
+        let style = ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar());
+        bar.set_style(style);
+        Self(bar)
+    }
+
+    fn start(&self, message: String) {
+        if self.0.is_hidden() {
+            eprintln!("[{}/{}] {message}", self.0.position() + 1, self.0.length().unwrap_or(0));
+        }
+        self.0.set_message(message);
+    }
+
+    fn done(&self) {
+        self.0.inc(1);
+    }
 }
 
-fn rapier_solver(config: Config) -> Option<SoftBodySolver> {
+/// Rapier's setup for `config` (`None` for cutlab's).
+fn rapier_setup(config: Config, cell_damping: CellDamping) -> Option<Setup> {
     match config {
-        Config::RapierConstraints => Some(SoftBodySolver::Constraints),
-        Config::RapierFem => Some(SoftBodySolver::Fem),
+        Config::Rapier { solver, substeps } => Some(Setup { solver: solver.soft_body_solver(), substeps, cell_damping }),
         Config::CutlabFem | Config::CutlabSprings => None,
     }
 }
 
 /// Step times of `config` on `case`.
 fn step_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<StepRow> {
-    let (step_us, cg) = match (config, rapier_solver(config)) {
-        (_, Some(solver)) => (rapier_side::steps(case, solver, plan.steps)?, None),
+    let (step_us, cg) = match (config, rapier_setup(config, CellDamping::Mapped)) {
+        (_, Some(setup)) => (rapier_side::steps(case, setup, plan.steps)?, None),
         (Config::CutlabSprings, None) => {
             let run = cutlab_side::steps(case, &case.springs, plan.steps)?;
             (run.step_us, Some(run.cg_iterations_mean))
@@ -92,9 +136,9 @@ fn step_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<StepRow>
 
 /// Cut times of `config` on `case`.
 fn cut_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<CutRow> {
-    Ok(match (config, rapier_solver(config)) {
-        (_, Some(solver)) => {
-            let run = rapier_side::cut(case, solver, plan.cut_repeats)?;
+    Ok(match (config, rapier_setup(config, CellDamping::Mapped)) {
+        (_, Some(setup)) => {
+            let run = rapier_side::cut(case, setup, plan.cut_repeats)?;
             CutRow {
                 config,
                 mesh: case.name,
@@ -123,53 +167,51 @@ fn cut_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<CutRow> {
 
 /// The cantilever rows: cutlab's two models (Newton statics), Rapier's two solvers run to rest
 /// with its default cell damping and (full run) the mapped one.
-fn cantilever_rows(bar: &Case, plan: &Plan, progress: &ProgressBar) -> anyhow::Result<Vec<CantileverRow>> {
+fn cantilever_rows(bar: &Case, plan: &Plan, progress: &Progress) -> anyhow::Result<Vec<CantileverRow>> {
     let solid = Solid::CHEST_WALL;
     let load = CantileverLoad::new(&bar.fem.mesh, solid);
     let held: Vec<u32> = (0..bar.fem.vertex_count() as u32).filter(|&v| bar.fem.held[v as usize]).collect();
     anyhow::ensure!(held == load.clamped, "the bar's held vertices are not the cantilever's clamped face");
     let mut rows = Vec::new();
     for (config, kind) in [(Config::CutlabFem, Elasticity::CorotationalFem), (Config::CutlabSprings, Elasticity::SpringsYoungs)] {
-        progress.set_message(format!("cantilever, {}", config.label()));
+        progress.start(format!("cantilever, {}", config.label()));
         let (result, wall_ms) = cutlab_side::cantilever(kind, solid)?;
         anyhow::ensure!(
             (result.analytic_m - load.analytic_m).abs() <= 1e-12 * load.analytic_m,
             "the bench's cantilever load differs from cutlab_sim::reference's"
         );
         rows.push(CantileverRow::cutlab(config, result.deflection_m, load.analytic_m, wall_ms));
-        progress.inc(1);
+        progress.done();
     }
-    let mut runs = vec![(CellDamping::Default, plan.cantilever_max_steps)];
-    runs.extend(plan.mapped_cantilever_max_steps.map(|n| (CellDamping::Mapped, n)));
-    for (damping, max_steps) in runs {
-        for config in [Config::RapierConstraints, Config::RapierFem] {
-            let Some(solver) = rapier_solver(config) else { continue };
-            progress.set_message(format!("cantilever, {}, {damping:?} cell damping", config.label()));
-            let run = rapier_side::cantilever(&bar.fem, &bar.material, &load, solver, damping, max_steps)?;
-            rows.push(CantileverRow::rapier(config, damping, &run, load.analytic_m, rapier_side::TIME_STEP_S));
-            progress.inc(1);
-        }
+    for (config, damping, max_steps) in plan.rapier_cantilevers() {
+        let Some(setup) = rapier_setup(config, damping) else { continue };
+        progress.start(format!("cantilever, {}, {damping:?} cell damping", config.label()));
+        let run = rapier_side::cantilever(&bar.fem, &bar.material, &load, setup, max_steps)?;
+        rows.push(CantileverRow::rapier(config, damping, &run, load.analytic_m, rapier_side::TIME_STEP_S));
+        progress.done();
     }
     Ok(rows)
 }
 
 fn measure(plan: &Plan) -> anyhow::Result<Results> {
-    let progress = progress(plan);
-    progress.set_message("building the meshes");
+    let progress = Progress::new(plan);
+    progress.0.set_message("building the meshes");
     let cases = [cases::bar()?, cases::chest_wall()?];
     let mut results = Results::new(&cases, plan.quick, plan.steps);
     for case in &cases {
-        for config in Config::ALL {
-            progress.set_message(format!("{}: steps, {}", case.name, config.label()));
+        for config in plan.configs() {
+            progress.start(format!("{}: steps, {}", case.name, config.label()));
             results.steps.push(step_row(case, config, plan)?);
-            progress.inc(1);
-            progress.set_message(format!("{}: cut, {}", case.name, config.label()));
+            progress.done();
+        }
+        for config in plan.cut_configs() {
+            progress.start(format!("{}: cut, {}", case.name, config.label()));
             results.cuts.push(cut_row(case, config, plan)?);
-            progress.inc(1);
+            progress.done();
         }
     }
     results.cantilevers = cantilever_rows(&cases[0], plan, &progress)?;
-    progress.finish_and_clear();
+    progress.0.finish_and_clear();
     Ok(results)
 }
 

@@ -1,6 +1,6 @@
 //! Rapier's side (`rapier3d-f64`, its soft bodies): the same tet mesh as co-rotational cells
 //! with the same lumped masses and pinned (held) particles, no collider (cutlab's step has no
-//! collision either), never asleep, 1 ms steps at Rapier's default 4 substeps.
+//! collision either), never asleep, 1 ms steps.
 
 use std::time::Instant;
 
@@ -18,6 +18,14 @@ use crate::stats::Summary;
 
 /// The time step of both engines, s.
 pub const TIME_STEP_S: f64 = 1e-3;
+
+/// How Rapier runs: its soft-body solver, substeps per step, the cells' damping ratio.
+#[derive(Debug, Clone, Copy)]
+pub struct Setup {
+    pub solver: SoftBodySolver,
+    pub substeps: usize,
+    pub cell_damping: CellDamping,
+}
 
 /// A world holding one soft body.
 pub struct World {
@@ -111,7 +119,7 @@ fn particle_radius_m(model: &Model) -> f64 {
 
 /// A world with `model`'s mesh, masses and held vertices as one soft body; `linear_damping`
 /// (1/s, Rapier's particle damping, mass-proportional) plays cutlab's Rayleigh `alpha`.
-pub fn world(model: &Model, fem: &FemMaterial, solver: SoftBodySolver, linear_damping_per_s: f64, damping: CellDamping) -> World {
+pub fn world(model: &Model, fem: &FemMaterial, setup: Setup, linear_damping_per_s: f64) -> World {
     let mesh = &model.mesh;
     let held: Vec<u32> = (0..model.vertex_count() as u32).filter(|&v| model.held[v as usize]).collect();
     let builder = SoftBodyBuilder::new(mesh.positions().iter().map(point).collect())
@@ -119,8 +127,8 @@ pub fn world(model: &Model, fem: &FemMaterial, solver: SoftBodySolver, linear_da
         .masses(model.mass.clone())
         .pinned_particles(held)
         .cell_model(SoftBodyCellModel::Corotational)
-        .solver(solver)
-        .material(material(mesh, &model.inv_mass, fem, damping))
+        .solver(setup.solver)
+        .material(material(mesh, &model.inv_mass, fem, setup.cell_damping))
         .no_surface_collider()
         .can_sleep(false)
         .linear_damping(linear_damping_per_s)
@@ -128,6 +136,7 @@ pub fn world(model: &Model, fem: &FemMaterial, solver: SoftBodySolver, linear_da
     let mut world = PhysicsWorld::new();
     world.gravity = vector(&model.gravity);
     world.integration_parameters.dt = TIME_STEP_S;
+    world.integration_parameters.num_solver_iterations = setup.substeps;
     let body = world.insert_soft_body(builder);
     World { world, body }
 }
@@ -150,8 +159,8 @@ impl World {
 }
 
 /// `steps` timed steps while the case's press slides along the body.
-pub fn steps(case: &Case, solver: SoftBodySolver, steps: usize) -> anyhow::Result<Summary> {
-    let mut w = world(&case.fem, &case.material, solver, case.material.rayleigh_mass_per_s, CellDamping::Mapped);
+pub fn steps(case: &Case, setup: Setup, steps: usize) -> anyhow::Result<Summary> {
+    let mut w = world(&case.fem, &case.material, setup, case.material.rayleigh_mass_per_s);
     let mut forces = Vec::new();
     let mut times_us = Vec::with_capacity(steps);
     for i in 0..steps {
@@ -176,12 +185,12 @@ pub struct CutRun {
 
 /// `repeats` times the cut along the case's quad (`PhysicsWorld::cut_soft_body` with its two
 /// triangles) on fresh worlds stepped once.
-pub fn cut(case: &Case, solver: SoftBodySolver, repeats: usize) -> anyhow::Result<CutRun> {
+pub fn cut(case: &Case, setup: Setup, repeats: usize) -> anyhow::Result<CutRun> {
     let [a, b, c, d] = case.cut_quad.map(|p| point(&p));
     let mut times_ms = Vec::with_capacity(repeats);
     let mut counts = (0, 0, 0);
     for _ in 0..repeats {
-        let mut w = world(&case.fem, &case.material, solver, case.material.rayleigh_mass_per_s, CellDamping::Mapped);
+        let mut w = world(&case.fem, &case.material, setup, case.material.rayleigh_mass_per_s);
         w.world.step();
         let before = particles(&w);
         let t = Instant::now();
@@ -218,11 +227,10 @@ pub fn cantilever(
     model: &Model,
     fem: &FemMaterial,
     load: &CantileverLoad,
-    solver: SoftBodySolver,
-    damping: CellDamping,
+    setup: Setup,
     max_steps: usize,
 ) -> anyhow::Result<CantileverRun> {
-    let mut w = world(model, fem, solver, 2.0 * load.first_mode_rad_per_s, damping);
+    let mut w = world(model, fem, setup, 2.0 * load.first_mode_rad_per_s);
     let tip: Vec<(u32, Vector3)> = load
         .tip
         .iter()

@@ -2,11 +2,31 @@
 
 use std::fmt::Write as _;
 
+use rapier3d_f64::prelude::SoftBodySolver;
 use serde::Serialize;
 
 use crate::cases::Case;
 use crate::rapier_side::{CantileverRun, CellDamping, damping_ratio_for};
 use crate::stats::Summary;
+
+/// Rapier's two soft-body solvers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RapierSolver {
+    /// Every element a constraint, swept Gauss-Seidel (XPBD-like) with contacts and joints.
+    Constraints,
+    /// Implicit Euler elasticity over the whole body, CG per substep (the `fem` feature).
+    Fem,
+}
+
+impl RapierSolver {
+    pub fn soft_body_solver(self) -> SoftBodySolver {
+        match self {
+            RapierSolver::Constraints => SoftBodySolver::Constraints,
+            RapierSolver::Fem => SoftBodySolver::Fem,
+        }
+    }
+}
 
 /// An engine with a force model and a solver.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -14,26 +34,53 @@ use crate::stats::Summary;
 pub enum Config {
     CutlabFem,
     CutlabSprings,
-    RapierConstraints,
-    RapierFem,
+    /// Rapier's co-rotational cells; `substeps` per 1 ms step (Rapier's
+    /// `num_solver_iterations`, default 4).
+    Rapier { solver: RapierSolver, substeps: usize },
 }
 
 impl Config {
-    pub const ALL: [Config; 4] = [Config::CutlabFem, Config::CutlabSprings, Config::RapierConstraints, Config::RapierFem];
+    pub const ALL: [Config; 6] = [
+        Config::CutlabFem,
+        Config::CutlabSprings,
+        Config::Rapier { solver: RapierSolver::Constraints, substeps: 4 },
+        Config::Rapier { solver: RapierSolver::Fem, substeps: 4 },
+        Config::Rapier { solver: RapierSolver::Constraints, substeps: 1 },
+        Config::Rapier { solver: RapierSolver::Fem, substeps: 1 },
+    ];
+
+    /// Rapier at its default substeps: the configurations the cut and the mapped damping
+    /// run with.
+    pub fn is_rapier_default(self) -> bool {
+        matches!(self, Config::Rapier { substeps: 4, .. })
+    }
 
     pub fn engine(self) -> &'static str {
         match self {
             Config::CutlabFem | Config::CutlabSprings => "cutlab",
-            Config::RapierConstraints | Config::RapierFem => "Rapier",
+            Config::Rapier { .. } => "Rapier",
         }
     }
 
-    pub fn label(self) -> &'static str {
+    pub fn label(self) -> String {
         match self {
-            Config::CutlabFem => "co-rotational FEM, implicit Euler (1 linear solve, PCG to 1e-4)",
-            Config::CutlabSprings => "paper's springs (van Gelder k on the bar), implicit Euler",
-            Config::RapierConstraints => "co-rotational cells, constraints solver (4 substeps x 4 sweeps)",
-            Config::RapierFem => "co-rotational cells, FEM solver (4 substeps, CG to 1e-5, at most 20 it.)",
+            Config::CutlabFem => "co-rotational FEM, implicit Euler (1 linear solve, PCG to 1e-4)".into(),
+            Config::CutlabSprings => "paper's springs (van Gelder k on the bar), implicit Euler".into(),
+            Config::Rapier { solver: RapierSolver::Constraints, substeps } => {
+                format!("co-rotational cells, constraints solver ({substeps} substeps x 4 sweeps)")
+            }
+            Config::Rapier { solver: RapierSolver::Fem, substeps } => {
+                format!("co-rotational cells, FEM solver ({substeps} substeps, CG to 1e-5, at most 20 it.)")
+            }
+        }
+    }
+
+    pub fn short(self) -> String {
+        match self {
+            Config::CutlabFem => "FEM".into(),
+            Config::CutlabSprings => "springs".into(),
+            Config::Rapier { solver: RapierSolver::Constraints, substeps } => format!("constraints, {substeps} substeps"),
+            Config::Rapier { solver: RapierSolver::Fem, substeps } => format!("FEM solver, {substeps} substeps"),
         }
     }
 }
@@ -163,6 +210,11 @@ impl Results {
         meshes
     }
 
+    /// The configurations measured, in [`Config::ALL`]'s order.
+    fn configs(&self) -> Vec<Config> {
+        Config::ALL.into_iter().filter(|c| self.steps.iter().any(|r| r.config == *c)).collect()
+    }
+
     fn step(&self, config: Config, mesh: &str) -> Option<&StepRow> {
         self.steps.iter().find(|r| r.config == config && r.mesh == mesh)
     }
@@ -211,7 +263,7 @@ fn step_table(out: &mut String, r: &Results) {
         let _ = write!(out, " {m} ({t} tets) |");
     });
     let _ = writeln!(out, "\n|---|---|{}", "---:|".repeat(meshes.len()));
-    for config in Config::ALL {
+    for config in r.configs() {
         let _ = write!(out, "| {} | {} |", config.engine(), config.label());
         for (mesh, _) in &meshes {
             let cell = r.step(config, mesh).map_or_else(|| "-".to_owned(), |s| {
@@ -233,7 +285,7 @@ fn cut_table(out: &mut String, r: &Results) {
         let _ = write!(out, " {m} |");
     });
     let _ = writeln!(out, "\n|---|---|{}", "---:|".repeat(meshes.len()));
-    for config in Config::ALL {
+    for config in r.configs().into_iter().filter(|c| r.cuts.iter().any(|row| row.config == *c)) {
         let _ = write!(out, "| {} | {} |", config.engine(), config.label());
         for (mesh, _) in &meshes {
             let cell = r.cut(config, mesh).map_or_else(|| "-".to_owned(), |c| {
@@ -290,9 +342,10 @@ fn ratio_table(out: &mut String, r: &Results) {
         let _ = write!(out, " step {m} | step p99 {m} | cut {m} |");
     }
     let _ = writeln!(out, "\n|---|---|{}", "---:|".repeat(3 * meshes.len()));
+    let configs = r.configs();
     for ours in [Config::CutlabFem, Config::CutlabSprings] {
-        for theirs in [Config::RapierConstraints, Config::RapierFem] {
-            let _ = write!(out, "| {} | {} |", short(ours), short(theirs));
+        for &theirs in configs.iter().filter(|c| c.engine() == "Rapier") {
+            let _ = write!(out, "| {} | {} |", ours.short(), theirs.short());
             for (mesh, _) in &meshes {
                 let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
                     (Some(a), Some(b)) if b > 0.0 => format!("{:.2}", a / b),
@@ -310,14 +363,5 @@ fn ratio_table(out: &mut String, r: &Results) {
             }
             let _ = writeln!(out);
         }
-    }
-}
-
-fn short(config: Config) -> &'static str {
-    match config {
-        Config::CutlabFem => "FEM",
-        Config::CutlabSprings => "springs",
-        Config::RapierConstraints => "constraints",
-        Config::RapierFem => "FEM solver",
     }
 }
