@@ -3,7 +3,7 @@
 //! `x = max` face by area along the larger cross dimension, `P` such that Timoshenko's
 //! deflection `P L^3 / (3 E I) + P L / (kappa G A)` (`kappa = 5/6`) is 1e-3 of the length.
 
-use cutlab_sim::TetMesh;
+use cutlab_sim::{Point3, TetMesh};
 use cutlab_sim::reference::Solid;
 
 use crate::cases::end_face;
@@ -57,7 +57,7 @@ impl CantileverLoad {
     }
 
     /// Mean displacement of the tip face along the load, m, from the current positions.
-    pub fn deflection_m(&self, rest: &TetMesh, current: impl Fn(u32) -> [f64; 3]) -> f64 {
+    pub fn deflection_m(&self, rest: &TetMesh, current: impl Fn(u32) -> Point3) -> f64 {
         let sum: f64 = self.tip.iter().map(|&(v, _)| current(v)[self.axis] - rest.positions()[v as usize][self.axis]).sum();
         sum / self.tip.len().max(1) as f64
     }

@@ -8,7 +8,7 @@ use cutlab_sim::cut::{self, CutOptions, CutPolygon};
 use cutlab_sim::model::Model;
 use cutlab_sim::reference::{self, Elasticity, Solid};
 use cutlab_sim::solver::{Simulation, SolverSettings, StaticSettings};
-use cutlab_sim::{Point3, Vector3};
+use cutlab_sim::Vector3;
 
 use crate::cases::{Case, bar_mesh};
 use crate::stats::Summary;
@@ -90,9 +90,4 @@ pub fn cantilever(kind: Elasticity, solid: Solid) -> anyhow::Result<(reference::
     let t = Instant::now();
     let result = reference::cantilever(mesh, kind, solid).context("cutlab cantilever")?;
     Ok((result, t.elapsed().as_secs_f64() * 1e3))
-}
-
-/// A point's coordinates as an array.
-pub fn coords(p: &Point3) -> [f64; 3] {
-    [p.x, p.y, p.z]
 }

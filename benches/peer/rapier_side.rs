@@ -241,7 +241,7 @@ pub fn cantilever(
         })
         .collect();
     w.set_forces(&tip)?;
-    let deflection = |w: &World| load.deflection_m(&model.mesh, |v| crate::cutlab_side::coords(&w.position(v)));
+    let deflection = |w: &World| load.deflection_m(&model.mesh, |v| w.position(v));
     let t = Instant::now();
     let mut previous = f64::INFINITY;
     let mut steps = 0;
