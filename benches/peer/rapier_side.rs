@@ -249,6 +249,7 @@ pub fn cantilever(
     while steps < max_steps {
         w.world.step();
         steps += 1;
+        anyhow::ensure!(w.world.quarantine().is_empty(), "Rapier quarantined the bar at step {steps} (non-finite state)");
         if steps % 100 == 0 {
             let d = deflection(&w);
             if (d - previous).abs() < 1e-4 * d.abs() {

@@ -65,12 +65,12 @@ impl Config {
     pub fn label(self) -> String {
         match self {
             Config::CutlabFem => "co-rotational FEM, implicit Euler (1 linear solve, PCG to 1e-4)".into(),
-            Config::CutlabSprings => "paper's springs (van Gelder k on the bar), implicit Euler".into(),
+            Config::CutlabSprings => "paper's springs (chest wall 100 N/m, bar van Gelder's k from E), implicit Euler".into(),
             Config::Rapier { solver: RapierSolver::Constraints, substeps } => {
-                format!("co-rotational cells, constraints solver ({substeps} substeps x 4 sweeps)")
+                format!("co-rotational cells, constraints solver ({}, 4 sweeps each)", substeps_text(substeps))
             }
             Config::Rapier { solver: RapierSolver::Fem, substeps } => {
-                format!("co-rotational cells, FEM solver ({substeps} substeps, CG to 1e-5, at most 20 it.)")
+                format!("co-rotational cells, FEM solver ({}, CG to 1e-5, at most 20 it.)", substeps_text(substeps))
             }
         }
     }
@@ -79,10 +79,14 @@ impl Config {
         match self {
             Config::CutlabFem => "FEM".into(),
             Config::CutlabSprings => "springs".into(),
-            Config::Rapier { solver: RapierSolver::Constraints, substeps } => format!("constraints, {substeps} substeps"),
-            Config::Rapier { solver: RapierSolver::Fem, substeps } => format!("FEM solver, {substeps} substeps"),
+            Config::Rapier { solver: RapierSolver::Constraints, substeps } => format!("constraints, {}", substeps_text(substeps)),
+            Config::Rapier { solver: RapierSolver::Fem, substeps } => format!("FEM solver, {}", substeps_text(substeps)),
         }
     }
+}
+
+fn substeps_text(substeps: usize) -> String {
+    if substeps == 1 { "1 substep".into() } else { format!("{substeps} substeps") }
 }
 
 #[derive(Debug, Clone, Serialize)]
