@@ -20,7 +20,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cantilever::CantileverLoad;
 use crate::cases::Case;
-use crate::rapier_side::{CellDamping, Setup};
+use crate::rapier_side::{CellDamping, Settle, Setup};
 use crate::report::{CantileverRow, Config, CutRow, Results, StepRow};
 
 /// How much to measure.
@@ -32,10 +32,10 @@ struct Plan {
     cut_repeats: usize,
     /// Rapier at 1 substep too (steps and cantilever).
     single_substep: bool,
-    /// Step caps of Rapier's cantilever runs with its default and with the mapped damping
-    /// (`None`: not run).
-    cantilever_max_steps: usize,
-    mapped_cantilever_max_steps: Option<usize>,
+    /// When Rapier's cantilever runs with its default and with the mapped damping count as
+    /// settled (`None`: not run).
+    cantilever: Settle,
+    mapped_cantilever: Option<Settle>,
 }
 
 impl Plan {
@@ -45,7 +45,15 @@ impl Plan {
         let has = |flag: &str| args.iter().any(|a| a == flag);
         let (quick, json) = (has("--quick"), has("--json"));
         if quick {
-            Self { quick, json, steps: 60, cut_repeats: 2, single_substep: false, cantilever_max_steps: 2_000, mapped_cantilever_max_steps: None }
+            Self {
+                quick,
+                json,
+                steps: 60,
+                cut_repeats: 2,
+                single_substep: false,
+                cantilever: Settle { relative_change: 1e-3, max_steps: 2_000 },
+                mapped_cantilever: None,
+            }
         } else {
             Self {
                 quick,
@@ -53,8 +61,8 @@ impl Plan {
                 steps: 300,
                 cut_repeats: 5,
                 single_substep: true,
-                cantilever_max_steps: 5_000,
-                mapped_cantilever_max_steps: Some(3_000),
+                cantilever: Settle { relative_change: 1e-4, max_steps: 5_000 },
+                mapped_cantilever: Some(Settle { relative_change: 1e-4, max_steps: 3_000 }),
             }
         }
     }
@@ -72,12 +80,12 @@ impl Plan {
 
     /// Rapier's cantilever runs: every Rapier configuration with its default damping, those
     /// at the default substeps with the mapped damping too (full run).
-    fn rapier_cantilevers(&self) -> Vec<(Config, CellDamping, usize)> {
+    fn rapier_cantilevers(&self) -> Vec<(Config, CellDamping, Settle)> {
         let rapier: Vec<Config> = self.configs().into_iter().filter(|c| c.engine() == "Rapier").collect();
-        let mut runs: Vec<(Config, CellDamping, usize)> =
-            rapier.iter().map(|&c| (c, CellDamping::Default, self.cantilever_max_steps)).collect();
-        if let Some(max_steps) = self.mapped_cantilever_max_steps {
-            runs.extend(rapier.iter().filter(|c| c.is_rapier_default()).map(|&c| (c, CellDamping::Mapped, max_steps)));
+        let mut runs: Vec<(Config, CellDamping, Settle)> =
+            rapier.iter().map(|&c| (c, CellDamping::Default, self.cantilever)).collect();
+        if let Some(settle) = self.mapped_cantilever {
+            runs.extend(rapier.iter().filter(|c| c.is_rapier_default()).map(|&c| (c, CellDamping::Mapped, settle)));
         }
         runs
     }
@@ -183,11 +191,11 @@ fn cantilever_rows(bar: &Case, plan: &Plan, progress: &Progress) -> anyhow::Resu
         rows.push(CantileverRow::cutlab(config, result.deflection_m, load.analytic_m, wall_ms));
         progress.done();
     }
-    for (config, damping, max_steps) in plan.rapier_cantilevers() {
+    for (config, damping, settle) in plan.rapier_cantilevers() {
         let Some(setup) = rapier_setup(config, damping) else { continue };
         progress.start(format!("cantilever, {}, {damping:?} cell damping", config.label()));
-        let run = rapier_side::cantilever(&bar.fem, &bar.material, &load, setup, max_steps)?;
-        rows.push(CantileverRow::rapier(config, damping, &run, load.analytic_m, rapier_side::TIME_STEP_S));
+        let run = rapier_side::cantilever(&bar.fem, &bar.material, &load, setup, settle)?;
+        rows.push(CantileverRow::rapier(config, damping, &run, settle, load.analytic_m, rapier_side::TIME_STEP_S));
         progress.done();
     }
     Ok(rows)

@@ -6,7 +6,7 @@ use rapier3d_f64::prelude::SoftBodySolver;
 use serde::Serialize;
 
 use crate::cases::Case;
-use crate::rapier_side::{CantileverRun, CellDamping, damping_ratio_for};
+use crate::rapier_side::{CantileverRun, CellDamping, Settle, damping_ratio_for};
 use crate::stats::Summary;
 
 /// Rapier's two soft-body solvers.
@@ -127,6 +127,9 @@ pub struct CantileverRow {
     pub settled: bool,
     /// Rapier only: simulated time until it settled (or the cap).
     pub simulated_s: Option<f64>,
+    /// Rapier only: settled when the tip deflection changed by less than this fraction of
+    /// itself over 100 steps.
+    pub settle_relative_change: Option<f64>,
     pub wall_ms: f64,
 }
 
@@ -141,11 +144,12 @@ impl CantileverRow {
             relative_error: (deflection_m - analytic_m).abs() / analytic_m,
             settled: true,
             simulated_s: None,
+            settle_relative_change: None,
             wall_ms,
         }
     }
 
-    pub fn rapier(config: Config, damping: CellDamping, run: &CantileverRun, analytic_m: f64, time_step_s: f64) -> Self {
+    pub fn rapier(config: Config, damping: CellDamping, run: &CantileverRun, settle: Settle, analytic_m: f64, time_step_s: f64) -> Self {
         Self {
             config,
             cell_damping: Some(damping),
@@ -155,6 +159,7 @@ impl CantileverRow {
             relative_error: run.relative_error,
             settled: run.converged,
             simulated_s: Some(run.steps as f64 * time_step_s),
+            settle_relative_change: Some(settle.relative_change),
             wall_ms: run.wall_ms,
         }
     }
@@ -321,10 +326,14 @@ fn cantilever_table(out: &mut String, r: &Results) {
             Some(CellDamping::Mapped) => "mapped from beta".to_owned(),
         };
         let vs_fe = fe.map_or_else(|| "-".to_owned(), |d| format!("{:.3}", c.deflection_m / d));
+        let tolerance = c.settle_relative_change.unwrap_or(0.0);
         let how = match c.simulated_s {
             None => format!("Newton statics, {:.0} ms", c.wall_ms),
-            Some(t) if c.settled => format!("dynamics to rest, settled after {t:.1} s simulated ({:.1} s wall)", c.wall_ms / 1e3),
-            Some(t) => format!("dynamics, NOT settled after {t:.1} s simulated ({:.1} s wall)", c.wall_ms / 1e3),
+            Some(t) if c.settled => format!(
+                "dynamics to rest (tip moving < {tolerance:.0e} of itself per 100 steps) after {t:.1} s simulated ({:.1} s wall)",
+                c.wall_ms / 1e3
+            ),
+            Some(t) => format!("dynamics, NOT at rest after {t:.1} s simulated ({:.1} s wall)", c.wall_ms / 1e3),
         };
         let _ = writeln!(
             out,
