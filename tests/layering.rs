@@ -82,3 +82,16 @@ fn the_check_sees_real_dependencies() {
     // Guards the test itself: the sim closure does contain nalgebra.
     assert!(reachable_names("cutlab-sim").contains("nalgebra"));
 }
+
+#[test]
+fn the_peer_engine_is_a_bench_only_dependency() {
+    // Rapier is compared with in `benches/peer` only (a dev-dependency of the root package):
+    // no crate, the command line included, may depend on it. (It is in the metadata, as a
+    // dev-dependency: the check below is not vacuous.)
+    let (_, names) = metadata();
+    assert!(names.values().any(|n| n == "rapier3d-f64"), "rapier3d-f64 is in the workspace's metadata");
+    for krate in ["cutlab-sim", "cutlab-haptics", "cutlab-recorder", "cutlab-assessor", "cutlab-dashboard", "cutlab"] {
+        let rapier: Vec<String> = reachable_names(krate).into_iter().filter(|d| d.starts_with("rapier")).collect();
+        assert!(rapier.is_empty(), "{krate} depends on {rapier:?}");
+    }
+}
