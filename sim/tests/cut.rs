@@ -330,7 +330,7 @@ fn mu_chosen_patterns_are_better_than_a_fixed_pattern() {
 }
 
 #[test]
-fn the_topology_a_cut_carries_over_equals_the_one_built_from_scratch() {
+fn the_topology_masses_and_springs_a_cut_carries_over_equal_those_built_from_scratch() {
     let g = boxed(Point3::origin(), [0.04, 0.04, 0.01], GridCells { nx: 8, ny: 8, nz: 3 }).expect("slab");
     let mut sim = sim_of(g.mesh, &[], 0.04);
     // planes of every orientation through the slab, some crossing earlier cuts, the last one
@@ -346,6 +346,13 @@ fn the_topology_a_cut_carries_over_equals_the_one_built_from_scratch() {
         let mesh = &sim.model.mesh;
         let built = cutlab_sim::mesh::Topology::build(mesh.vertex_count(), mesh.tets());
         assert!(*mesh.topology() == built, "cut {k}: the carried-over topology differs from a fresh build");
+        // and the masses and springs derived again locally equal those of a full rebuild
+        let mut full = sim.model.clone();
+        full.rebuild(mesh.clone(), sim.model.held.clone()).expect("rebuild");
+        let (m, f) = (&sim.model, &full);
+        assert!(m.mass == f.mass && m.inv_mass == f.inv_mass, "cut {k}: masses");
+        let (s, t) = (&m.springs, &f.springs);
+        assert!(s.ends == t.ends && s.rest_length == t.rest_length && s.stiffness == t.stiffness && s.damping == t.damping, "cut {k}: springs");
     }
     assert!(made >= 8, "only {made} cuts split tets");
 }

@@ -375,11 +375,16 @@ pub fn cut_remembering(
     changed.sort_unstable();
     changed.dedup();
     let new_mesh = TetMesh::with_changes(mesh, x_ref, tets, regions, &changed)?;
-    let old_edges = std::mem::take(&mut sim.model.springs.ends);
-    if let Err(e) = sim.model.rebuild(new_mesh, held) {
-        sim.model.springs.ends = old_edges;
-        return Err(e.into());
+    // the masses and springs to derive again: those of the changed and new tets, and of the
+    // tets around the vertices moved onto the plane (their reference geometry changed)
+    let mut dirty: Vec<u32> = changed.iter().copied().chain(old_tet_count as u32..new_mesh.tet_count() as u32).collect();
+    for &(v, _, _) in &class.moved {
+        dirty.extend_from_slice(new_mesh.topology().vertex_tets.row(v as usize));
     }
+    dirty.sort_unstable();
+    dirty.dedup();
+    let old_edges = sim.model.springs.ends.clone();
+    sim.model.rebuild_local(new_mesh, held, &dirty, &changed)?;
     let new_edges = &sim.model.mesh.topology().edges;
     event.springs_removed = sorted_difference(&old_edges, new_edges);
     event.springs_added = sorted_difference(new_edges, &old_edges);

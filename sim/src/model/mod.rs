@@ -174,6 +174,90 @@ impl Model {
         Ok(())
     }
 
+    /// [`Self::rebuild`] after a local change (a cut), by the same rules and with the same
+    /// bits, recomputing only what the change reached: `dirty` lists (ascending) the tets of
+    /// `mesh` whose vertices or reference geometry changed or that are new (ids past the old
+    /// tet count), and `changed` those of them that existed before with other vertices. The
+    /// masses of the vertices of those tets (before and after) and the springs on their edges
+    /// are derived again; everything else is carried over. Finite elements are rebuilt whole.
+    pub fn rebuild_local(&mut self, mesh: TetMesh, held: Vec<bool>, dirty: &[u32], changed: &[u32]) -> Result<(), ModelError> {
+        if self.fem.is_some() {
+            return self.rebuild(mesh, held);
+        }
+        let old_mesh = &self.mesh;
+        let material = |t: usize| -> Result<Material, ModelError> {
+            let r = mesh.regions()[t];
+            let i = self.materials.binary_search_by_key(&r, |(id, _)| *id).map_err(|_| ModelError::MissingMaterial(r))?;
+            Ok(self.materials[i].1)
+        };
+        let topo = mesh.topology();
+        let n = mesh.vertex_count();
+
+        // masses: m_i summed over the tets around i in ascending order, as lumped_masses does
+        let mut touched: Vec<u32> = dirty.iter().flat_map(|&t| mesh.tets()[t as usize]).collect();
+        touched.extend(changed.iter().filter_map(|&t| old_mesh.tets().get(t as usize)).flatten());
+        touched.sort_unstable();
+        touched.dedup();
+        let mut mass = self.mass.clone();
+        mass.resize(n, 0.0);
+        for &v in &touched {
+            let mut m = 0.0;
+            for &t in topo.vertex_tets.row(v as usize) {
+                m += 0.25 * material(t as usize)?.density_kg_per_m3 * mesh.tet_volume(t as usize).abs();
+            }
+            if !(m > 0.0) {
+                return Err(ModelError::ZeroMass { vertex: v });
+            }
+            mass[v as usize] = m;
+        }
+        let mut inv_mass = self.inv_mass.clone();
+        inv_mass.resize(n, 0.0);
+        for (v, ((inv, &m), &h)) in inv_mass.iter_mut().zip(&mass).zip(&held).enumerate() {
+            if v >= self.held.len() || touched.binary_search(&(v as u32)).is_ok() || h != self.held[v] {
+                *inv = if h { 0.0 } else { 1.0 / m };
+            }
+        }
+
+        // springs: derived again on the edges of the dirty tets and on those that lost a
+        // changed tet; copied (matched by their ends) elsewhere
+        let mut dirty_edge = vec![false; topo.edges.len()];
+        for &t in dirty {
+            for &e in &topo.tet_edges[t as usize] {
+                dirty_edge[e as usize] = true;
+            }
+        }
+        let mut is_changed = vec![false; old_mesh.tet_count()];
+        changed.iter().for_each(|&t| is_changed[t as usize] = true);
+        let (old, old_topo) = (&self.springs, old_mesh.topology());
+        let same_edges = old.ends == old_topo.edges;
+        let mut springs = SpringSet::default();
+        let mut j = 0;
+        for (e, &ends) in topo.edges.iter().enumerate() {
+            while j < old.ends.len() && old.ends[j] < ends {
+                j += 1;
+            }
+            let old_match = (j < old.ends.len() && old.ends[j] == ends).then_some(j);
+            let lost_a_tet = |j: usize| !same_edges || old_topo.edge_tets.row(j).iter().any(|&t| is_changed[t as usize]);
+            match old_match {
+                Some(j) if !dirty_edge[e] && !lost_a_tet(j) => {
+                    springs.push(ends, [old.rest_length[j], old.stiffness[j], old.damping[j]]);
+                }
+                _ => {
+                    // (every tet's material was found above, with the masses: the default
+                    // is never used)
+                    let params = SpringSet::edge_parameters(&mesh, e, &|t| material(t).unwrap_or(Material::PAPER_CHEST_WALL));
+                    springs.push(ends, params);
+                }
+            }
+        }
+        self.mass = mass;
+        self.inv_mass = inv_mass;
+        self.springs = springs;
+        self.held = held;
+        self.mesh = mesh;
+        Ok(())
+    }
+
     /// Total mass in kg.
     pub fn total_mass(&self) -> f64 {
         self.mass.iter().sum()

@@ -32,12 +32,51 @@ impl SpringSet {
         crate::mesh::Csr::from_pairs(particle_count, &pairs)
     }
 
+    /// Appends a spring with `[rest length, stiffness, damping]`.
+    pub(crate) fn push(&mut self, ends: [u32; 2], [rest, k, c]: [f64; 3]) {
+        self.ends.push(ends);
+        self.rest_length.push(rest);
+        self.stiffness.push(k);
+        self.damping.push(c);
+    }
+
+    /// `[rest length, stiffness, damping]` of the spring on edge `e` of `mesh`: the materials
+    /// (`material_of_tet(t)`) averaged over the tets around the edge, `l = d (1 - s)`.
+    pub(crate) fn edge_parameters(mesh: &TetMesh, e: usize, material_of_tet: &dyn Fn(usize) -> Material) -> [f64; 3] {
+        let topo = mesh.topology();
+        let pos = mesh.positions();
+        let [a, b] = topo.edges[e];
+        let d = (pos[b as usize] - pos[a as usize]).norm();
+        let tets = topo.edge_tets.row(e);
+        let count = tets.len() as f64;
+        let (mut k, mut c, mut s) = (0.0, 0.0, 0.0);
+        let mut uniform_share = 0.0;
+        for &t in tets {
+            let m = material_of_tet(t as usize);
+            k += match m.stiffness {
+                SpringStiffness::Uniform { newtons_per_metre } => {
+                    uniform_share += 1.0;
+                    newtons_per_metre
+                }
+                SpringStiffness::YoungsModulus { pascals } => pascals * mesh.tet_volume(t as usize) / (d * d),
+            };
+            c += m.damping_newton_seconds_per_metre;
+            s += m.pretension;
+        }
+        // Averages over the tets around the edge (sums of equal values divided by their
+        // count are exact, so uniform materials give exactly their parameters).
+        if uniform_share == count {
+            k /= count;
+        }
+        let (c, s) = (c / count, s / count);
+        [d * (1.0 - s), k, c]
+    }
+
     /// Springs on every edge of `mesh`, with parameters averaged over the tetrahedra around the
     /// edge (`material_of_tet[t]` gives each tet's material). The pre-tension rule sets
     /// `l = d (1 - s)` with `d` the edge's length in the mesh's (reference) positions.
     pub fn from_mesh(mesh: &TetMesh, material_of_tet: &[Material]) -> Self {
         let topo = mesh.topology();
-        let pos = mesh.positions();
         let n = topo.edges.len();
         let mut set = Self {
             ends: Vec::with_capacity(n),
@@ -45,34 +84,8 @@ impl SpringSet {
             stiffness: Vec::with_capacity(n),
             damping: Vec::with_capacity(n),
         };
-        for (e, &[a, b]) in topo.edges.iter().enumerate() {
-            let d = (pos[b as usize] - pos[a as usize]).norm();
-            let tets = topo.edge_tets.row(e);
-            let count = tets.len() as f64;
-            let (mut k, mut c, mut s) = (0.0, 0.0, 0.0);
-            for &t in tets {
-                let m = &material_of_tet[t as usize];
-                k += match m.stiffness {
-                    SpringStiffness::Uniform { newtons_per_metre } => newtons_per_metre,
-                    SpringStiffness::YoungsModulus { pascals } => pascals * mesh.tet_volume(t as usize) / (d * d),
-                };
-                c += m.damping_newton_seconds_per_metre;
-                s += m.pretension;
-            }
-            // Averages over the tets around the edge (sums of equal values divided by their
-            // count are exact, so uniform materials give exactly their parameters).
-            let uniform_share = tets
-                .iter()
-                .filter(|&&t| matches!(material_of_tet[t as usize].stiffness, SpringStiffness::Uniform { .. }))
-                .count() as f64;
-            if uniform_share == count {
-                k /= count;
-            }
-            let (c, s) = (c / count, s / count);
-            set.ends.push([a, b]);
-            set.rest_length.push(d * (1.0 - s));
-            set.stiffness.push(k);
-            set.damping.push(c);
+        for (e, &ends) in topo.edges.iter().enumerate() {
+            set.push(ends, Self::edge_parameters(mesh, e, &|t| material_of_tet[t]));
         }
         set
     }
