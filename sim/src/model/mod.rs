@@ -166,11 +166,7 @@ impl Model {
         if let Some(fem) = &mut self.fem {
             *fem = FemModel::build(&mesh, &self.materials, &fem.materials)?;
         }
-        self.mass = mass;
-        self.inv_mass = inv_mass;
-        self.springs = springs;
-        self.held = held;
-        self.mesh = mesh;
+        self.install(mesh, held, mass, inv_mass, springs);
         Ok(())
     }
 
@@ -250,12 +246,16 @@ impl Model {
                 }
             }
         }
+        self.install(mesh, held, mass, inv_mass, springs);
+        Ok(())
+    }
+
+    fn install(&mut self, mesh: TetMesh, held: Vec<bool>, mass: Vec<f64>, inv_mass: Vec<f64>, springs: SpringSet) {
         self.mass = mass;
         self.inv_mass = inv_mass;
         self.springs = springs;
         self.held = held;
         self.mesh = mesh;
-        Ok(())
     }
 
     /// Total mass in kg.
