@@ -118,17 +118,44 @@ pub struct PerfRow {
     pub unresolved_cuts: usize,
     pub tets_split: usize,
     pub cg_iterations_mean: f64,
-    /// After the first cut: the mean of the 10 steps that follow each cut.
+    /// The mean over the 10 steps from each cut on.
     pub cg_iterations_after_cut_mean: f64,
     pub awake_mean: f64,
+    /// The slowest 1 % of the steps (from the p99 up): what they had in common.
+    pub slowest: SlowSteps,
     /// Localised runs: the largest position difference from the full run over the compared
     /// steps, relative to the full run's largest displacement.
     pub error: Option<f64>,
     /// Localised runs: steps compared (while the vertex counts and cuts agree).
     pub compared_steps: Option<usize>,
+    /// Localised runs: where and when the largest difference was.
+    pub worst: Option<Worst>,
     /// Localised runs: `identical`, `same topology` (positions of the cut differ) or where the
     /// cuts diverged.
     pub cut_events: Option<String>,
+}
+
+/// The slowest steps of a run.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct SlowSteps {
+    pub count: usize,
+    pub awake_mean: f64,
+    pub cg_iterations_mean: f64,
+    /// The share of them within 10 steps of a cut.
+    pub after_cut_share: f64,
+}
+
+/// The largest difference of a localised run from the full one.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Worst {
+    /// Time since the stroke began, ms.
+    pub at_ms: f64,
+    /// Time since the last cut, ms (None: before the first).
+    pub since_cut_ms: Option<f64>,
+    pub vertex: u32,
+    /// From the blade's tip (its last position after the stroke), mm.
+    pub from_tool_mm: f64,
+    pub difference_mm: f64,
 }
 
 /// One size: the settle, the rebuild every cut pays, the simulation state counted from the
@@ -232,17 +259,24 @@ struct Run {
     last_cut_tip: Option<Point3>,
     clock: Stopwatch,
     step_us: Timings,
-    step_after_cut_us: Vec<f64>,
     cut_us: Timings,
     cut_idle_us: Vec<f64>,
     whole_us: Timings,
     unresolved: usize,
     tets_split: usize,
-    cg: usize,
-    /// CG iterations of the 10 steps after each cut, and how many such steps.
-    cg_after_cut: (usize, usize),
+    /// Per timed step.
+    records: Vec<StepRecord>,
     steps_since_cut: Option<usize>,
+}
+
+/// One timed step.
+#[derive(Debug, Clone, Copy)]
+struct StepRecord {
+    busy_us: f64,
     awake: usize,
+    cg: usize,
+    /// Steps since the last cut that changed the tissue (0: this step's own cut).
+    since_cut: Option<usize>,
 }
 
 impl Run {
@@ -260,16 +294,13 @@ impl Run {
             last_cut_tip: None,
             clock: Stopwatch::new(),
             step_us: Timings::default(),
-            step_after_cut_us: Vec::new(),
             cut_us: Timings::default(),
             cut_idle_us: Vec::new(),
             whole_us: Timings::default(),
             unresolved: 0,
             tets_split: 0,
-            cg: 0,
-            cg_after_cut: (0, 0),
+            records: Vec::new(),
             steps_since_cut: None,
-            awake: 0,
         }
     }
 
@@ -301,7 +332,7 @@ impl Run {
                         self.cut_us.push(took);
                         self.tets_split += ev.tets_removed.len();
                         self.stroke.cut(&ev);
-                        self.steps_since_cut = Some(0);
+                        self.steps_since_cut = None;
                         made = Some(ev);
                     }
                     Ok(_) => self.cut_idle_us.push(took.busy_us),
@@ -320,18 +351,16 @@ impl Run {
         self.whole_us.push(self.clock.stop(whole));
         let report = report.with_context(|| format!("{} step {k}", self.mode.name()))?;
         self.step_us.push(took);
-        if made.is_some() {
-            self.step_after_cut_us.push(took.busy_us);
-        }
-        self.cg += report.cg_iterations;
-        self.awake += report.awake_particles;
-        if let Some(s) = self.steps_since_cut.as_mut() {
-            if *s < 10 {
-                self.cg_after_cut.0 += report.cg_iterations;
-                self.cg_after_cut.1 += 1;
-            }
-            *s += 1;
-        }
+        self.steps_since_cut = match (made.is_some(), self.steps_since_cut) {
+            (true, _) => Some(0),
+            (false, since) => since.map(|s| s + 1),
+        };
+        self.records.push(StepRecord {
+            busy_us: took.busy_us,
+            awake: report.awake_particles,
+            cg: report.cg_iterations,
+            since_cut: self.steps_since_cut,
+        });
         Ok((made, tip))
     }
 }
@@ -357,13 +386,16 @@ fn max_distance(a: &[Point3], b: &[Point3]) -> f64 {
 #[derive(Debug, Default)]
 struct Comparison {
     worst_m: f64,
+    worst: Option<Worst>,
     compared: usize,
     positions_differ: bool,
-    diverged_at: Option<usize>,
+    /// When the cuts diverged, ms from the stroke's start.
+    diverged_at: Option<f64>,
 }
 
 impl Comparison {
-    fn step(&mut self, k: usize, full: (&Run, &Option<CutEvent>), local: (&Run, &Option<CutEvent>)) {
+    /// The step `at_ms` after the stroke began, the blade's tip at `tool`.
+    fn step(&mut self, at_ms: f64, tool: Option<Point3>, full: (&Run, &Option<CutEvent>), local: (&Run, &Option<CutEvent>)) {
         if self.diverged_at.is_some() {
             return;
         }
@@ -377,16 +409,29 @@ impl Comparison {
         };
         let (a, b) = (&full.0.sim.state.positions, &local.0.sim.state.positions);
         if !agree || a.len() != b.len() {
-            self.diverged_at = Some(k);
+            self.diverged_at = Some(at_ms);
             return;
         }
-        self.worst_m = self.worst_m.max(max_distance(a, b));
         self.compared += 1;
+        let Some((vertex, d)) = a.iter().zip(b).map(|(p, q)| (p - q).norm()).enumerate().max_by(|x, y| x.1.total_cmp(&y.1)) else {
+            return;
+        };
+        if d > self.worst_m {
+            self.worst_m = d;
+            let since_cut = full.0.records.last().and_then(|s| s.since_cut);
+            self.worst = Some(Worst {
+                at_ms,
+                since_cut_ms: since_cut.map(|s| s as f64 * full.0.sim.settings.time_step_s * 1e3),
+                vertex: vertex as u32,
+                from_tool_mm: tool.map_or(f64::NAN, |t| (a[vertex] - t).norm() * 1e3),
+                difference_mm: d * 1e3,
+            });
+        }
     }
 
-    fn verdict(&self, dt: f64) -> String {
+    fn verdict(&self) -> String {
         match self.diverged_at {
-            Some(k) => format!("diverged at {:.0} ms", (k as f64 * dt - LEAD_IN_S) * 1e3),
+            Some(ms) => format!("diverged at {ms:.0} ms"),
             None if self.positions_differ => "same topology".into(),
             None => "identical".into(),
         }
@@ -503,17 +548,20 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
     let mut comparisons: Vec<Comparison> = (1..runs.len()).map(|_| Comparison::default()).collect();
     let dt = runs[0].sim.settings.time_step_s;
     let mut peak_m = 0.0f64;
+    let mut tool = None;
     bar.set_message(format!("{}: {}", label(tets), modes.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ")));
     for k in 0..((LEAD_IN_S + stroke_s + after_s) / dt).round() as usize {
-        let (first, tool) = runs[0].step(k, None)?;
+        let (first, tip) = runs[0].step(k, None)?;
+        tool = tip.or(tool);
         let mut events = vec![first];
         for run in &mut runs[1..] {
-            events.push(run.step(k, tool)?.0);
+            events.push(run.step(k, tip)?.0);
         }
         let full = &runs[0].sim.state.positions;
         peak_m = peak_m.max(max_distance(&full[..start.len()], &start));
+        let at_ms = (k as f64 * dt - LEAD_IN_S) * 1e3;
         for (j, c) in comparisons.iter_mut().enumerate() {
-            c.step(k, (&runs[0], &events[0]), (&runs[j + 1], &events[j + 1]));
+            c.step(at_ms, tool, (&runs[0], &events[0]), (&runs[j + 1], &events[j + 1]));
         }
         bar.inc(1);
     }
@@ -533,7 +581,7 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
                 mode: r.mode.name(),
                 steps: r.step_us.busy.len(),
                 step_us: Summary::of(&r.step_us.busy),
-                step_after_cut_us: Summary::of(&r.step_after_cut_us),
+                step_after_cut_us: Summary::of(&r.records.iter().filter(|s| s.since_cut == Some(0)).map(|s| s.busy_us).collect::<Vec<_>>()),
                 cut_us: Summary::of(&r.cut_us.busy),
                 cut_idle_us: Summary::of(&r.cut_idle_us),
                 whole_step_us: Summary::of(&r.whole_us.busy),
@@ -542,16 +590,38 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
                 whole_step_wall_us: Summary::of(&r.whole_us.wall),
                 unresolved_cuts: r.unresolved,
                 tets_split: r.tets_split,
-                cg_iterations_mean: r.cg as f64 / r.step_us.busy.len().max(1) as f64,
-                cg_iterations_after_cut_mean: r.cg_after_cut.0 as f64 / r.cg_after_cut.1.max(1) as f64,
-                awake_mean: r.awake as f64 / r.step_us.busy.len().max(1) as f64,
+                cg_iterations_mean: mean(r.records.iter().map(|s| s.cg as f64)),
+                cg_iterations_after_cut_mean: mean(r.records.iter().filter(|s| after_cut(s)).map(|s| s.cg as f64)),
+                awake_mean: mean(r.records.iter().map(|s| s.awake as f64)),
+                slowest: slowest(&r.records),
                 error: comparison.map(|c| if peak_m > 0.0 { c.worst_m / peak_m } else { 0.0 }),
                 compared_steps: comparison.map(|c| c.compared),
-                cut_events: comparison.map(|c| c.verdict(dt)),
+                worst: comparison.and_then(|c| c.worst),
+                cut_events: comparison.map(Comparison::verdict),
             }
         })
         .collect();
     Ok((rows, size))
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if n > 0 { sum / n as f64 } else { 0.0 }
+}
+
+fn after_cut(s: &StepRecord) -> bool {
+    s.since_cut.is_some_and(|k| k < 10)
+}
+
+fn slowest(records: &[StepRecord]) -> SlowSteps {
+    let p99 = Summary::of(&records.iter().map(|s| s.busy_us).collect::<Vec<_>>()).p99;
+    let slow: Vec<&StepRecord> = records.iter().filter(|s| s.busy_us >= p99).collect();
+    SlowSteps {
+        count: slow.len(),
+        awake_mean: mean(slow.iter().map(|s| s.awake as f64)),
+        cg_iterations_mean: mean(slow.iter().map(|s| s.cg as f64)),
+        after_cut_share: mean(slow.iter().map(|s| if after_cut(s) { 1.0 } else { 0.0 })),
+    }
 }
 
 /// The load average of the machine (1, 5, 15 min), if known: other work competes for the cores.
@@ -626,6 +696,28 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
             r.cg_iterations_after_cut_mean,
             r.error.map_or("".into(), |e| format!("{:.2}", 100.0 * e)),
             r.cut_events.as_deref().unwrap_or(""),
+        );
+    }
+    println!();
+    println!(
+        "| scene | tets | mode | slowest 1 % of steps: awake | CG it. | within 10 steps of a cut % | largest difference mm | at ms | after a cut ms | from the tool mm |"
+    );
+    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|");
+    let opt = |v: Option<f64>, digits: usize| v.map_or(String::new(), |v| format!("{v:.digits$}"));
+    for r in &rows {
+        let w = r.worst.as_ref();
+        println!(
+            "| {} | {} | {} | {:.0} | {:.1} | {:.0} | {} | {} | {} | {} |",
+            r.scene,
+            r.tets,
+            r.mode,
+            r.slowest.awake_mean,
+            r.slowest.cg_iterations_mean,
+            100.0 * r.slowest.after_cut_share,
+            opt(w.map(|w| w.difference_mm), 3),
+            opt(w.map(|w| w.at_ms), 0),
+            opt(w.and_then(|w| w.since_cut_ms), 0),
+            opt(w.map(|w| w.from_tool_mm), 1),
         );
     }
     println!();
