@@ -171,7 +171,7 @@ pub struct SizeRow {
     pub rebuild_ms: f64,
     /// The full run's largest displacement from the settled start, mm.
     pub peak_displacement_mm: f64,
-    /// Positions and velocities (capacities).
+    /// Positions, velocities (capacities) and external forces.
     pub state_bytes: usize,
     /// Masses, inverse masses, held flags, springs (capacities).
     pub model_bytes: usize,
@@ -332,7 +332,6 @@ impl Run {
                         self.cut_us.push(took);
                         self.tets_split += ev.tets_removed.len();
                         self.stroke.cut(&ev);
-                        self.steps_since_cut = None;
                         made = Some(ev);
                     }
                     Ok(_) => self.cut_idle_us.push(took.busy_us),
