@@ -5,8 +5,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{Integrator, StaticSettings};
-use cutlab_sim::Point3;
-use indicatif::{ProgressBar, ProgressStyle};
+use cutlab_sim::{Point3, Vector3};
 use serde::Serialize;
 
 use crate::stats::Summary;
@@ -46,11 +45,7 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
     }
     let budget = if quick { Duration::from_secs(2) } else { Duration::from_secs(10) };
     let max_steps = if quick { 500 } else { 2_000 };
-    let bar = ProgressBar::new(runs.len() as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
-    if json {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = crate::progress::bar(runs.len() as u64, json);
     let mut rows = Vec::new();
     for &(name, n, integrator) in &runs {
         let scene = Scene::load(name, BuildOptions { min_tets: Some(n) }).context(name)?;
@@ -63,7 +58,7 @@ pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
         let settle_ms = t.elapsed().as_secs_f64() * 1e3;
         anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
         let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
-        let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), 1.5, 0.3);
+        let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), -Vector3::z(), 1.5, 0.3);
         let dt = sim.settings.time_step_s;
         let mut times = Vec::new();
         let mut cg = 0;

@@ -11,8 +11,9 @@ use cutlab_sim::reference::{
     self, CantileverResult, Elasticity, IPC_BARS, IPC_UNIT_M, Solid, ipc_dir, read_bar,
 };
 use cutlab_sim::solver::Integrator;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
+
+use crate::plot;
 
 /// One measurement.
 #[derive(Debug, Clone, Serialize)]
@@ -149,11 +150,7 @@ fn run_job(job: &Job, solid: Solid) -> anyhow::Result<AccuracyRow> {
 pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     let solid = Solid::CHEST_WALL;
     let jobs = jobs(quick);
-    let bar = ProgressBar::new(jobs.len() as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
-    if json {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = crate::progress::bar(jobs.len() as u64, json);
     let mut rows = Vec::new();
     for job in &jobs {
         bar.set_message(match job {
@@ -233,7 +230,7 @@ fn csv(rows: &[AccuracyRow]) -> String {
     s
 }
 
-/// Log-log plot of error against wall time, one colour per model, one panel row per problem,
+/// Log-log plot of error against wall time, one colour per model, one panel per problem,
 /// with each problem's Pareto front (no other run is both faster and more accurate).
 fn svg(rows: &[AccuracyRow]) -> String {
     let problems: Vec<&str> = {
@@ -242,78 +239,44 @@ fn svg(rows: &[AccuracyRow]) -> String {
         p
     };
     let colours = [("springs-uniform", "#d62728"), ("springs-youngs", "#ff7f0e"), ("corotational-fem", "#1f77b4")];
-    let (w, panel_h, left, top) = (640.0, 220.0, 70.0, 30.0);
-    let height = top + panel_h * problems.len() as f64 + 40.0;
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{height}\" font-family=\"sans-serif\" font-size=\"11\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
-    );
-    for (k, (name, colour)) in colours.iter().enumerate() {
-        let x = left + 170.0 * k as f64;
-        s.push_str(&format!("<circle cx=\"{x}\" cy=\"14\" r=\"4\" fill=\"{colour}\"/><text x=\"{}\" y=\"18\">{name}</text>\n", x + 8.0));
-    }
-    let plot_w = w - left - 20.0;
-    for (pi, problem) in problems.iter().enumerate() {
-        let y0 = top + panel_h * pi as f64;
-        let ph = panel_h - 50.0;
-        let sel: Vec<&AccuracyRow> = rows.iter().filter(|r| r.problem == *problem && r.error > 0.0 && r.wall_ms > 0.0).collect();
-        if sel.is_empty() {
-            continue;
-        }
-        let lx = |v: f64| v.log10();
-        let (mut xmin, mut xmax, mut ymin, mut ymax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-        for r in &sel {
-            xmin = xmin.min(lx(r.wall_ms).floor());
-            xmax = xmax.max(lx(r.wall_ms).ceil());
-            ymin = ymin.min(lx(100.0 * r.error).floor());
-            ymax = ymax.max(lx(100.0 * r.error).ceil());
-        }
-        if xmax <= xmin {
-            xmax = xmin + 1.0;
-        }
-        if ymax <= ymin {
-            ymax = ymin + 1.0;
-        }
-        let px = |v: f64| left + (lx(v) - xmin) / (xmax - xmin) * plot_w;
-        let py = |e: f64| y0 + 20.0 + (ymax - lx(100.0 * e)) / (ymax - ymin) * ph;
-        s.push_str(&format!(
-            "<rect x=\"{left}\" y=\"{}\" width=\"{plot_w}\" height=\"{ph}\" fill=\"none\" stroke=\"#888\"/>\n<text x=\"{left}\" y=\"{}\">{problem}: error % (log) against wall ms, {} (log)</text>\n",
-            y0 + 20.0,
-            y0 + 14.0,
-            sel[0].wall_kind
-        ));
-        for d in (xmin as i32)..=(xmax as i32) {
-            let x = left + (d as f64 - xmin) / (xmax - xmin) * plot_w;
-            s.push_str(&format!("<text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{d}</text>\n", y0 + 20.0 + ph + 14.0));
-        }
-        for d in (ymin as i32)..=(ymax as i32) {
-            let y = y0 + 20.0 + (ymax - d as f64) / (ymax - ymin) * ph;
-            s.push_str(&format!("<text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{d} %</text>\n", left - 4.0, y + 4.0));
-        }
-        // Pareto front: sorted by time, keep the runs more accurate than every faster one
-        let mut by_time = sel.clone();
-        by_time.sort_by(|a, b| a.wall_ms.total_cmp(&b.wall_ms));
-        let mut best = f64::INFINITY;
-        let mut front = Vec::new();
-        for r in by_time {
-            if r.error < best {
-                best = r.error;
-                front.push(format!("{:.1},{:.1}", px(r.wall_ms), py(r.error)));
+    let point = |r: &AccuracyRow| plot::Point {
+        x: r.wall_ms,
+        y: 100.0 * r.error,
+        title: format!("{} {} tets {}: {:.2} %", r.model, r.tets, r.solver, 100.0 * r.error),
+    };
+    let panels: Vec<plot::Panel> = problems
+        .iter()
+        .map(|problem| {
+            let sel: Vec<&AccuracyRow> = rows.iter().filter(|r| r.problem == *problem).collect();
+            let mut series: Vec<plot::Series> = colours
+                .iter()
+                .map(|(name, colour)| plot::Series {
+                    name: (*name).into(),
+                    colour,
+                    line: plot::Line::None,
+                    markers: true,
+                    points: sel.iter().filter(|r| r.model == *name).map(|r| point(r)).collect(),
+                })
+                .collect();
+            // Pareto front: sorted by time, keep the runs more accurate than every faster one
+            let mut by_time: Vec<&AccuracyRow> = sel.iter().copied().filter(|r| r.error > 0.0 && r.wall_ms > 0.0).collect();
+            by_time.sort_by(|a, b| a.wall_ms.total_cmp(&b.wall_ms));
+            let mut best = f64::INFINITY;
+            let mut front = Vec::new();
+            for r in by_time {
+                if r.error < best {
+                    best = r.error;
+                    front.push(point(r));
+                }
             }
-        }
-        s.push_str(&format!("<polyline points=\"{}\" fill=\"none\" stroke=\"#999\" stroke-dasharray=\"4 3\"/>\n", front.join(" ")));
-        for r in &sel {
-            let colour = colours.iter().find(|(n, _)| *n == r.model).map_or("#000", |(_, c)| c);
-            s.push_str(&format!(
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{colour}\"><title>{} {} tets {}: {:.2} %</title></circle>\n",
-                px(r.wall_ms),
-                py(r.error),
-                r.model,
-                r.tets,
-                r.solver,
-                100.0 * r.error
-            ));
-        }
-    }
-    s.push_str("</svg>\n");
-    s
+            series.insert(0, plot::Series { name: String::new(), colour: "#999", line: plot::Line::Dashed, markers: false, points: front });
+            plot::Panel {
+                title: format!("{problem}: error % (log) against wall ms, {} (log)", sel.first().map_or("", |r| r.wall_kind)),
+                y_unit: " %".into(),
+                series,
+                ..plot::Panel::default()
+            }
+        })
+        .collect();
+    plot::log_log(640.0, 220.0, &panels)
 }

@@ -6,7 +6,6 @@ use std::time::Instant;
 use anyhow::Context;
 use cutlab_sim::generate::GridCells;
 use cutlab_sim::stability::{self, Outcome, StabilityCase, StabilityResult};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 #[derive(Debug, Serialize)]
@@ -22,11 +21,7 @@ pub fn run(quick: bool, json: bool) -> anyhow::Result<()> {
     let cases = stability::sweep(quick);
     let cells = GridCells { nx: 6, ny: 6, nz: 2 };
     let duration_s = if quick { 0.05 } else { 0.2 };
-    let bar = ProgressBar::new(cases.len() as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:30} {pos}/{len} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar()));
-    if json {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
+    let bar = crate::progress::bar(cases.len() as u64, json);
     let mut rows = Vec::new();
     for case in cases {
         bar.set_message(format!(

@@ -4,11 +4,14 @@ mod assess_cli;
 mod bench;
 mod bench_accuracy;
 mod bench_dashboard;
+mod bench_perf;
 mod bench_recorder;
 mod bench_stability;
 mod demo;
 mod recording;
 mod motion_metrics;
+mod plot;
+mod progress;
 mod scene_info;
 mod serve;
 mod session;
@@ -219,6 +222,21 @@ enum BenchCommand {
         #[arg(long, default_value = "out/bench-accuracy")]
         out: PathBuf,
     },
+    /// Speed on large meshes: a scripted press-and-cut session on the chest wall at 10k,
+    /// 50k, 100k and 200k tetrahedra and on the CT body wall, full and localised; step time,
+    /// cut latency, awake particles, CG iterations, the localised error, memory; a CSV and a
+    /// log-log SVG of step time against tet count.
+    Perf {
+        /// A reduced set (10k and 50k, short runs; about a minute).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the CSV table and the SVG plot.
+        #[arg(long, default_value = "out/bench-perf")]
+        out: PathBuf,
+    },
     /// Recorder cost per servo tick (with and without), file size per minute, writer
     /// throughput and replay speed, on a scripted chest-wall session.
     Recorder {
@@ -356,6 +374,7 @@ fn run() -> anyhow::Result<()> {
         Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
         Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
+        Command::Bench { command: BenchCommand::Perf { quick, json, out } } => bench_perf::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Dashboard { bench_db, trainees, attempts, clients, duration, json } } => {
             bench_dashboard::run_bench(&bench_dashboard::Options { db: &bench_db, trainees, attempts, clients, duration_s: duration, json })
         }
