@@ -164,6 +164,7 @@ pub(crate) struct ActiveRegion {
 impl ActiveRegion {
     /// Particles awake after the last step.
     pub fn awake_count(&self) -> usize {
+        debug_assert_eq!(self.awake_count, self.awake.iter().filter(|a| **a).count());
         self.awake_count
     }
 
@@ -430,6 +431,8 @@ impl ActiveRegion {
         let awake = &self.awake;
         self.awake_list.retain(|&v| awake[v as usize]);
         self.awake_list.sort_unstable();
+        // a particle that fell asleep and woke again since the last rebuild is listed twice
+        self.awake_list.dedup();
         let springs_at = self.springs_at.as_ref().expect("built by ensure");
         let ends = &model.springs.ends;
         self.global_of.clear();
@@ -529,6 +532,48 @@ impl ActiveRegion {
             state.velocities[gi] = Vector3::zeros();
             self.awake_count -= 1;
             self.dirty = true;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{BuildOptions, Scene};
+    use crate::solver::StaticSettings;
+
+    #[test]
+    fn the_awake_count_and_the_sub_body_stay_consistent_while_particles_sleep_and_wake() {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(3_000) }).expect("built-in scene");
+        let mut sim = scene.simulation();
+        assert!(sim.settle(StaticSettings::default()).converged);
+        let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        let surface: Vec<u32> = sim.model.mesh.topology().boundary_vertices();
+        for scale in [1.0, 30.0] {
+            let mut sim = sim.clone();
+            sim.settings.localisation = Some(LocalisationSettings::default().scaled(scale));
+            for step in 0..800 {
+                // a tool tapping along a circle: particles enter and leave its focus, and the
+                // border wakes and falls asleep again
+                let a = step as f64 * 0.03;
+                let tip = Point3::new(0.02 * a.cos(), 0.02 * a.sin(), z);
+                sim.clear_external_forces();
+                sim.set_focus(&[tip]);
+                if step % 40 < 20 {
+                    let near = surface.iter().copied().filter(|&v| (sim.state.positions[v as usize] - tip).norm() < 0.005);
+                    for v in near.collect::<Vec<_>>() {
+                        sim.add_external_force(v, Vector3::new(0.0, 0.0, -0.05));
+                    }
+                }
+                sim.step().expect("step");
+                if step % 50 == 49 {
+                    // as a cut does: wakes particles, some of which just fell asleep
+                    sim.wake(0..sim.model.vertex_count() as u32);
+                }
+                let r = &sim.region;
+                assert_eq!(r.awake_count, r.awake.iter().filter(|a| **a).count(), "x{scale} step {step}: awake count");
+                assert!(r.global_of.windows(2).all(|w| w[0] < w[1]), "x{scale} step {step}: a particle twice in the sub-body");
+            }
         }
     }
 }
