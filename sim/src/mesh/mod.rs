@@ -36,6 +36,19 @@ pub struct TetMesh {
     topology: Topology,
 }
 
+/// Tet `t`'s vertex ids are in range and distinct.
+fn check_tet(t: usize, tet: &[VertexId; 4], vertex_count: usize) -> Result<(), MeshError> {
+    for (i, &v) in tet.iter().enumerate() {
+        if v as usize >= vertex_count {
+            return Err(MeshError::VertexOutOfRange { tet: t, vertex: v, vertex_count });
+        }
+        if tet[..i].contains(&v) {
+            return Err(MeshError::RepeatedVertex { tet: t, vertex: v });
+        }
+    }
+    Ok(())
+}
+
 impl TetMesh {
     /// Builds a mesh from vertex positions (metres), tetrahedra and one region id per
     /// tetrahedron. The vertex order of each tetrahedron is kept as given; call
@@ -55,18 +68,7 @@ impl TetMesh {
             return Err(MeshError::RegionCount { regions: regions.len(), tets: tets.len() });
         }
         for (t, tet) in tets.iter().enumerate() {
-            for (i, &v) in tet.iter().enumerate() {
-                if v as usize >= positions.len() {
-                    return Err(MeshError::VertexOutOfRange {
-                        tet: t,
-                        vertex: v,
-                        vertex_count: positions.len(),
-                    });
-                }
-                if tet[..i].contains(&v) {
-                    return Err(MeshError::RepeatedVertex { tet: t, vertex: v });
-                }
-            }
+            check_tet(t, tet, positions.len())?;
         }
         let topology = Topology::build(positions.len(), &tets);
         Ok(Self { positions, tets, regions, topology })
@@ -94,15 +96,7 @@ impl TetMesh {
             return Self::new(positions, tets, regions);
         }
         for t in changed.iter().copied().chain(old_count as u32..tets.len() as u32) {
-            let tet = &tets[t as usize];
-            for (i, &v) in tet.iter().enumerate() {
-                if v as usize >= positions.len() {
-                    return Err(MeshError::VertexOutOfRange { tet: t as usize, vertex: v, vertex_count: positions.len() });
-                }
-                if tet[..i].contains(&v) {
-                    return Err(MeshError::RepeatedVertex { tet: t as usize, vertex: v });
-                }
-            }
+            check_tet(t as usize, &tets[t as usize], positions.len())?;
         }
         let topology = previous
             .topology

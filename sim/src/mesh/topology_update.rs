@@ -62,17 +62,12 @@ fn merge_entities<'a, K: Ord + Copy, const L: usize>(
             old_to_new[i] = id;
             e += 1;
         }
-        let mut kept = old_row.iter().copied().filter(alive).peekable();
-        // merge the surviving old tets with the dirty ones of this key, both ascending
-        while let Some(&(_, t, l)) = dirty_pairs.get(j).filter(|p| p.0 == key) {
-            while let Some(o) = kept.next_if(|&o| o < t) {
-                out.items.push(o);
-            }
-            out.items.push(t);
-            dirty_ids.push((t, l, id));
-            j += 1;
-        }
-        out.items.extend(kept);
+        // the dirty tets of this key (ascending), merged with the surviving old ones
+        let count = dirty_pairs[j..].iter().take_while(|p| p.0 == key).count();
+        let run = &dirty_pairs[j..j + count];
+        j += count;
+        dirty_ids.extend(run.iter().map(|&(_, t, l)| (t, l, id)));
+        merge_ascending(&mut out.items, old_row.iter().copied().filter(alive), run.iter().map(|p| p.1));
         if out.items.len() == start {
             // an old entity no tet uses any more
             if let Some(i) = old_index {
@@ -90,6 +85,18 @@ fn merge_entities<'a, K: Ord + Copy, const L: usize>(
         out.tet_ids[t as usize][l as usize] = id;
     }
     out
+}
+
+/// Appends to `out` the merge of two ascending runs of tet ids.
+fn merge_ascending(out: &mut Vec<u32>, kept: impl Iterator<Item = u32>, new: impl Iterator<Item = u32>) {
+    let mut kept = kept.peekable();
+    for t in new {
+        while let Some(o) = kept.next_if(|&o| o < t) {
+            out.push(o);
+        }
+        out.push(t);
+    }
+    out.extend(kept);
 }
 
 fn sorted3(mut k: [u32; 3]) -> [u32; 3] {
@@ -181,15 +188,10 @@ impl Topology {
             if !touched[v] {
                 items.extend_from_slice(old_row);
             } else {
-                let mut kept = old_row.iter().copied().filter(|&t| !is_changed[t as usize]).peekable();
-                while let Some(&(_, t)) = vertex_pairs.get(j).filter(|p| p.0 as usize == v) {
-                    while let Some(o) = kept.next_if(|&o| o < t) {
-                        items.push(o);
-                    }
-                    items.push(t);
-                    j += 1;
-                }
-                items.extend(kept);
+                let count = vertex_pairs[j..].iter().take_while(|p| p.0 as usize == v).count();
+                let run = vertex_pairs[j..j + count].iter().map(|p| p.1);
+                j += count;
+                merge_ascending(&mut items, old_row.iter().copied().filter(|&t| !is_changed[t as usize]), run);
             }
             offsets.push(items.len() as u32);
         }

@@ -96,6 +96,15 @@ impl State {
         self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max)
     }
 
+    /// The particles whose position or velocity is not finite, ascending.
+    pub fn non_finite_particles(&self) -> Vec<u32> {
+        let finite = |c: &[f64]| c.iter().all(|c| c.is_finite());
+        (0..self.positions.len())
+            .filter(|&i| !(finite(self.positions[i].coords.as_slice()) && finite(self.velocities[i].as_slice())))
+            .map(|i| i as u32)
+            .collect()
+    }
+
     /// A hash of the exact bits of every position and velocity (FNV-1a, 64 bit): equal states
     /// give equal hashes on every platform.
     pub fn bit_hash(&self) -> u64 {
@@ -181,11 +190,7 @@ impl Model {
             return self.rebuild(mesh, held);
         }
         let old_mesh = &self.mesh;
-        let material = |t: usize| -> Result<Material, ModelError> {
-            let r = mesh.regions()[t];
-            let i = self.materials.binary_search_by_key(&r, |(id, _)| *id).map_err(|_| ModelError::MissingMaterial(r))?;
-            Ok(self.materials[i].1)
-        };
+        let material = |t: usize| material_of_region(&self.materials, mesh.regions()[t]);
         let topo = mesh.topology();
         let n = mesh.vertex_count();
 
@@ -199,7 +204,7 @@ impl Model {
         for &v in &touched {
             let mut m = 0.0;
             for &t in topo.vertex_tets.row(v as usize) {
-                m += 0.25 * material(t as usize)?.density_kg_per_m3 * mesh.tet_volume(t as usize).abs();
+                m += quarter_mass(&mesh, t as usize, &material(t as usize)?);
             }
             if !(m > 0.0) {
                 return Err(ModelError::ZeroMass { vertex: v });
@@ -269,17 +274,19 @@ impl Model {
     }
 }
 
+/// The material of `region` in `materials` (sorted by region id).
+fn material_of_region(materials: &[(u32, Material)], region: u32) -> Result<Material, ModelError> {
+    materials.binary_search_by_key(&region, |(id, _)| *id).map(|i| materials[i].1).map_err(|_| ModelError::MissingMaterial(region))
+}
+
 /// Material of each tetrahedron from `materials` (sorted by region id).
 fn material_of_tets(materials: &[(u32, Material)], mesh: &TetMesh) -> Result<Vec<Material>, ModelError> {
-    mesh.regions()
-        .iter()
-        .map(|&r| {
-            materials
-                .binary_search_by_key(&r, |(id, _)| *id)
-                .map(|i| materials[i].1)
-                .map_err(|_| ModelError::MissingMaterial(r))
-        })
-        .collect()
+    mesh.regions().iter().map(|&r| material_of_region(materials, r)).collect()
+}
+
+/// A quarter of tet `t`'s mass, `rho V / 4`: what it gives each of its vertices.
+fn quarter_mass(mesh: &TetMesh, t: usize, material: &Material) -> f64 {
+    0.25 * material.density_kg_per_m3 * mesh.tet_volume(t).abs()
 }
 
 /// What the model derives from mesh, materials and held flags: masses, inverse masses (zero
@@ -302,7 +309,7 @@ fn derive(
 pub fn lumped_masses(mesh: &TetMesh, material_of_tet: &[Material]) -> Vec<f64> {
     let mut mass = vec![0.0; mesh.vertex_count()];
     for (t, tet) in mesh.tets().iter().enumerate() {
-        let quarter = 0.25 * material_of_tet[t].density_kg_per_m3 * mesh.tet_volume(t).abs();
+        let quarter = quarter_mass(mesh, t, &material_of_tet[t]);
         for &v in tet {
             mass[v as usize] += quarter;
         }

@@ -17,22 +17,28 @@ pub fn total_forces(model: &Model, x: &[Point3], v: &[Vector3], external: &[Vect
     add_spring_forces(model, x, v, out);
 }
 
+/// The force of a spring and damper on its first particle `a` (minus it on `b`), with
+/// `d = x_b - x_a` and `u = v_b - v_a`: `n (k (l - l0) + c u . n)`, `n = d / l`. Zero for a
+/// zero-length spring (its direction is undefined).
+#[inline]
+pub fn spring_force(d: &Vector3, u: &Vector3, rest: f64, k: f64, c: f64) -> Vector3 {
+    let l2 = d.norm_squared();
+    if l2 == 0.0 {
+        return Vector3::zeros();
+    }
+    let l = l2.sqrt();
+    let inv_l = 1.0 / l;
+    let magnitude = k * (l - rest) + c * u.dot(d) * inv_l;
+    d * (magnitude * inv_l)
+}
+
 /// Adds the spring and damper forces to `out`.
 pub fn add_spring_forces(model: &Model, x: &[Point3], v: &[Vector3], out: &mut [Vector3]) {
     let s = &model.springs;
     let springs = s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping);
     for (((&[a, b], &rest), &k), &c) in springs {
         let (a, b) = (a as usize, b as usize);
-        let d = x[b] - x[a];
-        let l2 = d.norm_squared();
-        if l2 == 0.0 {
-            continue; // direction undefined; a zero-length spring exerts no force
-        }
-        let l = l2.sqrt();
-        let inv_l = 1.0 / l;
-        // f = n (k (l - l0) + c (v_b - v_a) . n) with n = d / l
-        let magnitude = k * (l - rest) + c * (v[b] - v[a]).dot(&d) * inv_l;
-        let f = d * (magnitude * inv_l);
+        let f = spring_force(&(x[b] - x[a]), &(v[b] - v[a]), rest, k, c);
         out[a] += f;
         out[b] -= f;
     }

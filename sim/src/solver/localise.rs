@@ -36,6 +36,7 @@ use crate::mesh::{Csr, PointGrid};
 use crate::model::{Model, Particles, SpringSet, State};
 use crate::{Point3, Vector3};
 
+use super::forces::spring_force;
 use super::implicit::{self, ImplicitScratch};
 use super::system::{CgReport, CgSettings};
 use super::StepError;
@@ -198,11 +199,7 @@ impl ActiveRegion {
         for h in &mut self.history {
             h.iter_mut().for_each(|d| *d = Vector3::zeros());
         }
-        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], history, .. } = &mut self.implicit;
-        for buf in [dv, p1, p2, p3] {
-            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
-        }
-        *history = 0;
+        self.implicit.reset_warm_start();
     }
 
     /// Wakes `vertices` at the next step.
@@ -311,12 +308,7 @@ impl ActiveRegion {
             self.reset_warm_start();
             return Err(StepError::SolverFailed { residual: report.relative_residual });
         }
-        let bad: Vec<u32> = (0..self.global_of.len())
-            .filter(|&l| {
-                !(self.state.positions[l].iter().all(|c| c.is_finite()) && self.state.velocities[l].iter().all(|c| c.is_finite()))
-            })
-            .map(|l| self.global_of[l])
-            .collect();
+        let bad: Vec<u32> = self.state.non_finite_particles().into_iter().map(|l| self.global_of[l as usize]).collect();
         if !bad.is_empty() {
             self.reset_warm_start();
             return Err(StepError::NonFinite { vertices: bad });
@@ -360,13 +352,7 @@ impl ActiveRegion {
                 let e = e as usize;
                 let [a, b] = s.ends[e].map(|v| v as usize);
                 let ((xa, va), (xb, vb)) = (position(a), position(b));
-                let d = xb - xa;
-                let l2 = d.norm_squared();
-                if l2 == 0.0 {
-                    continue;
-                }
-                let len = l2.sqrt();
-                let pull = d * ((s.stiffness[e] * (len - s.rest_length[e]) + s.damping[e] * (vb - va).dot(&d) / len) / len);
+                let pull = spring_force(&(xb - xa), &(vb - va), s.rest_length[e], s.stiffness[e], s.damping[e]);
                 f += if a == gi { pull } else { -pull };
             }
             if f.norm() > settings.wake_displacement_m * self.stiffness_at[gi] {

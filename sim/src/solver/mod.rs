@@ -296,12 +296,7 @@ impl Simulation {
 
     /// Forgets the implicit integrator's past velocity changes (after a jump of the state).
     fn reset_warm_start(&mut self) {
-        let implicit = &mut self.scratch.implicit;
-        let [p1, p2, p3] = &mut implicit.dv_previous;
-        for buf in [&mut implicit.dv, p1, p2, p3] {
-            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
-        }
-        implicit.history = 0;
+        self.scratch.implicit.reset_warm_start();
         self.scratch.fem.reset_warm_start();
         self.region.reset_warm_start();
         self.region.state_moved();
@@ -314,13 +309,7 @@ impl Simulation {
         {
             return self.step_localised(&localisation);
         }
-        let bad_input: Vec<u32> = (0..self.external_forces.len())
-            .filter(|&i| !self.external_forces[i].iter().all(|c| c.is_finite()))
-            .map(|i| i as u32)
-            .collect();
-        if !bad_input.is_empty() {
-            return Err(StepError::NonFiniteInput { vertices: bad_input });
-        }
+        self.check_external_forces(0..self.external_forces.len() as u32)?;
         let backup = self.scratch.backup.get_or_insert_with(|| self.state.clone());
         backup.positions.clone_from(&self.state.positions);
         backup.velocities.clone_from(&self.state.velocities);
@@ -359,11 +348,7 @@ impl Simulation {
                 explicit::step(&self.model, &mut self.state, &self.external_forces, dt, substeps, &mut self.scratch.forces);
             }
             (Integrator::ImplicitEuler, None) => {
-                let cg = CgSettings {
-                    relative_tolerance: self.settings.cg_relative_tolerance,
-                    absolute_tolerance: 0.0,
-                    max_iterations: self.settings.cg_max_iterations,
-                };
+                let cg = self.cg_settings();
                 let r = implicit::step(&self.model.particles(), &mut self.state, &self.external_forces, dt, cg, &mut self.scratch.implicit);
                 report.substeps = 1;
                 report.cg_iterations = r.iterations;
@@ -378,13 +363,7 @@ impl Simulation {
             self.reset_warm_start();
             return Err(StepError::SolverFailed { residual: report.cg_relative_residual });
         }
-        let bad: Vec<u32> = (0..self.state.positions.len())
-            .filter(|&i| {
-                !(self.state.positions[i].iter().all(|c| c.is_finite())
-                    && self.state.velocities[i].iter().all(|c| c.is_finite()))
-            })
-            .map(|i| i as u32)
-            .collect();
+        let bad = self.state.non_finite_particles();
         if !bad.is_empty() {
             if let Some(backup) = &self.scratch.backup {
                 self.state.positions.clone_from(&backup.positions);
@@ -400,6 +379,22 @@ impl Simulation {
         Ok(report)
     }
 
+    /// The implicit solve's CG settings (the relative tolerance; the absolute floor is the
+    /// integrator's).
+    fn cg_settings(&self) -> CgSettings {
+        CgSettings {
+            relative_tolerance: self.settings.cg_relative_tolerance,
+            absolute_tolerance: 0.0,
+            max_iterations: self.settings.cg_max_iterations,
+        }
+    }
+
+    /// Rejects the step when the external force on one of `vertices` is not finite.
+    fn check_external_forces(&self, vertices: impl Iterator<Item = u32>) -> Result<(), StepError> {
+        let bad: Vec<u32> = vertices.filter(|&v| !self.external_forces[v as usize].iter().all(|c| c.is_finite())).collect();
+        if bad.is_empty() { Ok(()) } else { Err(StepError::NonFiniteInput { vertices: bad }) }
+    }
+
     /// [`Self::step`] on the awake particles only (see [`localise`]).
     fn step_localised(&mut self, localisation: &LocalisationSettings) -> Result<StepReport, StepError> {
         if self.loaded_unknown {
@@ -410,17 +405,8 @@ impl Simulation {
         }
         self.loaded.sort_unstable();
         self.loaded.dedup();
-        let bad_input: Vec<u32> =
-            self.loaded.iter().copied().filter(|&v| !self.external_forces[v as usize].iter().all(|c| c.is_finite())).collect();
-        if !bad_input.is_empty() {
-            return Err(StepError::NonFiniteInput { vertices: bad_input });
-        }
-        let cg = CgSettings {
-            relative_tolerance: self.settings.cg_relative_tolerance,
-            absolute_tolerance: 0.0,
-            max_iterations: self.settings.cg_max_iterations,
-        };
-        let h = self.settings.time_step_s;
+        self.check_external_forces(self.loaded.iter().copied())?;
+        let (h, cg) = (self.settings.time_step_s, self.cg_settings());
         let (r, solves) = self.region.step(&self.model, &mut self.state, &self.external_forces, &self.loaded, localisation, h, cg)?;
         self.step_index += 1;
         Ok(StepReport {
