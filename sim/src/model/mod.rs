@@ -3,13 +3,16 @@
 //! and gravity; optionally ([`Model::with_fem`]) co-rotational finite elements instead of the
 //! springs (see [`crate::fem`]).
 
+mod mass;
 mod material;
 mod springs;
 
+pub use mass::{DONATED_SHARE, lumped_masses};
 pub use material::{Material, SpringStiffness};
 pub use springs::SpringSet;
 
 use crate::fem::{FemMaterial, FemModel};
+use mass::quarter_mass;
 use crate::{Point3, TetMesh, Vector3};
 
 /// A problem with the model's set-up.
@@ -36,8 +39,15 @@ pub struct Model {
     pub mesh: TetMesh,
     /// Materials by region id, sorted by id.
     pub materials: Vec<(u32, Material)>,
-    /// Lumped mass `m_i = sum over tets k around i of rho_k V_k / 4`, in kg.
+    /// The paper's lumped mass `l_i = sum over tets k around i of rho_k V_k / 4`, in kg.
+    pub lumped_mass: Vec<f64>,
+    /// The mass `m_i` the solvers use, in kg: `l_i`, except where a cut left particles below
+    /// [`Self::mass_floor_kg`], which receive mass from their neighbours (see
+    /// the `model::mass` module; the total is conserved).
     pub mass: Vec<f64>,
+    /// The lightest particle of the uncut mesh, in kg: what the regularisation lifts the
+    /// particles created by cuts towards.
+    pub mass_floor_kg: f64,
     /// `1 / m_i` for free vertices, 0 for held ones.
     pub inv_mass: Vec<f64>,
     /// Vertices held at their position.
@@ -137,8 +147,12 @@ impl Model {
         for &v in held_vertices {
             *held.get_mut(v as usize).ok_or(ModelError::HeldOutOfRange { vertex: v, vertex_count: n })? = true;
         }
-        let (mass, inv_mass, springs) = derive(&materials, &mesh, &held)?;
-        Ok(Self { mesh, materials, mass, inv_mass, held, springs, gravity, fem: None })
+        let material_of_tet = material_of_tets(&materials, &mesh)?;
+        let lumped = lumped_masses(&mesh, &material_of_tet);
+        let floor = lumped.iter().copied().fold(f64::INFINITY, f64::min);
+        let d = derive(&material_of_tet, &mesh, &held, lumped, floor)?;
+        let Derived { lumped, mass, inv_mass, springs } = d;
+        Ok(Self { mesh, materials, lumped_mass: lumped, mass, mass_floor_kg: floor, inv_mass, held, springs, gravity, fem: None })
     }
 
     /// Switches the model to co-rotational finite elements with the given materials per region
@@ -166,16 +180,19 @@ impl Model {
     }
 
     /// Replaces the mesh after a topology change (a cut): masses, springs and held flags are
-    /// rebuilt by the same rules as at the start (`m = sum rho V / 4`, `l = d (1 - s)` with `d`
-    /// from the reference positions).
+    /// rebuilt by the same rules as at the start (`l = sum rho V / 4` and its regularisation
+    /// with the floor of the uncut mesh, rest lengths `d (1 - s)` with `d` from the reference
+    /// positions).
     /// With finite elements, the elements are rebuilt too: new tetrahedra get their rest shapes
     /// by the same pre-strain rule (`D_m = (1 - s) D_ref`).
     pub fn rebuild(&mut self, mesh: TetMesh, held: Vec<bool>) -> Result<(), ModelError> {
-        let (mass, inv_mass, springs) = derive(&self.materials, &mesh, &held)?;
+        let material_of_tet = material_of_tets(&self.materials, &mesh)?;
+        let lumped = lumped_masses(&mesh, &material_of_tet);
+        let d = derive(&material_of_tet, &mesh, &held, lumped, self.mass_floor_kg)?;
         if let Some(fem) = &mut self.fem {
             *fem = FemModel::build(&mesh, &self.materials, &fem.materials)?;
         }
-        self.install(mesh, held, mass, inv_mass, springs);
+        self.install(mesh, held, d);
         Ok(())
     }
 
@@ -183,8 +200,9 @@ impl Model {
     /// bits, recomputing only what the change reached: `dirty` lists (ascending) the tets of
     /// `mesh` whose vertices or reference geometry changed or that are new (ids past the old
     /// tet count), and `changed` those of them that existed before with other vertices. The
-    /// masses of the vertices of those tets (before and after) and the springs on their edges
-    /// are derived again; everything else is carried over. Finite elements are rebuilt whole.
+    /// lumped masses of the vertices of those tets (before and after), the masses of these
+    /// vertices and their neighbours, and the springs on their edges are derived again;
+    /// everything else is carried over. Finite elements are rebuilt whole.
     pub fn rebuild_local(&mut self, mesh: TetMesh, held: Vec<bool>, dirty: &[u32], changed: &[u32]) -> Result<(), ModelError> {
         if self.fem.is_some() {
             return self.rebuild(mesh, held);
@@ -194,13 +212,14 @@ impl Model {
         let topo = mesh.topology();
         let n = mesh.vertex_count();
 
-        // masses: m_i summed over the tets around i in ascending order, as lumped_masses does
+        // lumped masses: l_i summed over the tets around i in ascending order, as
+        // lumped_masses does
         let mut touched: Vec<u32> = dirty.iter().flat_map(|&t| mesh.tets()[t as usize]).collect();
         touched.extend(changed.iter().filter_map(|&t| old_mesh.tets().get(t as usize)).flatten());
         touched.sort_unstable();
         touched.dedup();
-        let mut mass = self.mass.clone();
-        mass.resize(n, 0.0);
+        let mut lumped = self.lumped_mass.clone();
+        lumped.resize(n, 0.0);
         for &v in &touched {
             let mut m = 0.0;
             for &t in topo.vertex_tets.row(v as usize) {
@@ -209,12 +228,28 @@ impl Model {
             if !(m > 0.0) {
                 return Err(ModelError::ZeroMass { vertex: v });
             }
-            mass[v as usize] = m;
+            lumped[v as usize] = m;
+        }
+        // masses: a particle's depends on its neighbours' lumped masses and degrees, so those
+        // of the touched particles and their neighbours are derived again
+        let mut scratch = mass::MassScratch::default();
+        let mut reached = touched.clone();
+        let mut ring = Vec::new();
+        for &v in &touched {
+            mass::neighbours(&mesh, v, &mut ring);
+            reached.extend_from_slice(&ring);
+        }
+        reached.sort_unstable();
+        reached.dedup();
+        let mut mass = self.mass.clone();
+        mass.resize(n, 0.0);
+        for &v in &reached {
+            mass[v as usize] = mass::regularised_mass(&mesh, &lumped, self.mass_floor_kg, v, &mut scratch);
         }
         let mut inv_mass = self.inv_mass.clone();
         inv_mass.resize(n, 0.0);
         for (v, ((inv, &m), &h)) in inv_mass.iter_mut().zip(&mass).zip(&held).enumerate() {
-            if v >= self.held.len() || touched.binary_search(&(v as u32)).is_ok() || h != self.held[v] {
+            if v >= self.held.len() || reached.binary_search(&(v as u32)).is_ok() || h != self.held[v] {
                 *inv = if h { 0.0 } else { 1.0 / m };
             }
         }
@@ -251,21 +286,23 @@ impl Model {
                 }
             }
         }
-        self.install(mesh, held, mass, inv_mass, springs);
+        self.install(mesh, held, Derived { lumped, mass, inv_mass, springs });
         Ok(())
     }
 
-    fn install(&mut self, mesh: TetMesh, held: Vec<bool>, mass: Vec<f64>, inv_mass: Vec<f64>, springs: SpringSet) {
-        self.mass = mass;
-        self.inv_mass = inv_mass;
-        self.springs = springs;
+    fn install(&mut self, mesh: TetMesh, held: Vec<bool>, d: Derived) {
+        self.lumped_mass = d.lumped;
+        self.mass = d.mass;
+        self.inv_mass = d.inv_mass;
+        self.springs = d.springs;
         self.held = held;
         self.mesh = mesh;
     }
 
-    /// Total mass in kg.
+    /// The tissue's mass in kg, `sum l_i` (the lumped masses, `rho V` summed; the solvers'
+    /// masses add to this what chips cut free were lifted by).
     pub fn total_mass(&self) -> f64 {
-        self.mass.iter().sum()
+        self.lumped_mass.iter().sum()
     }
 
     /// Number of held vertices.
@@ -284,35 +321,21 @@ fn material_of_tets(materials: &[(u32, Material)], mesh: &TetMesh) -> Result<Vec
     mesh.regions().iter().map(|&r| material_of_region(materials, r)).collect()
 }
 
-/// A quarter of tet `t`'s mass, `rho V / 4`: what it gives each of its vertices.
-fn quarter_mass(mesh: &TetMesh, t: usize, material: &Material) -> f64 {
-    0.25 * material.density_kg_per_m3 * mesh.tet_volume(t).abs()
+/// What the model derives from mesh, materials and held flags.
+struct Derived {
+    lumped: Vec<f64>,
+    mass: Vec<f64>,
+    /// Zero where held.
+    inv_mass: Vec<f64>,
+    springs: SpringSet,
 }
 
-/// What the model derives from mesh, materials and held flags: masses, inverse masses (zero
-/// where held) and springs.
-fn derive(
-    materials: &[(u32, Material)],
-    mesh: &TetMesh,
-    held: &[bool],
-) -> Result<(Vec<f64>, Vec<f64>, SpringSet), ModelError> {
-    let material_of_tet = material_of_tets(materials, mesh)?;
-    let mass = lumped_masses(mesh, &material_of_tet);
-    if let Some(v) = mass.iter().position(|&m| !(m > 0.0)) {
+/// The masses (from the lumped masses `lumped` and the floor), inverse masses and springs.
+fn derive(material_of_tet: &[Material], mesh: &TetMesh, held: &[bool], lumped: Vec<f64>, floor_kg: f64) -> Result<Derived, ModelError> {
+    if let Some(v) = lumped.iter().position(|&m| !(m > 0.0)) {
         return Err(ModelError::ZeroMass { vertex: v as u32 });
     }
+    let mass = mass::regularised_masses(mesh, &lumped, floor_kg);
     let inv_mass = mass.iter().zip(held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
-    Ok((mass, inv_mass, SpringSet::from_mesh(mesh, &material_of_tet)))
-}
-
-/// `m_i = sum over tets k containing i of rho_k V_k / 4` (the paper's equation 2).
-pub fn lumped_masses(mesh: &TetMesh, material_of_tet: &[Material]) -> Vec<f64> {
-    let mut mass = vec![0.0; mesh.vertex_count()];
-    for (t, tet) in mesh.tets().iter().enumerate() {
-        let quarter = quarter_mass(mesh, t, &material_of_tet[t]);
-        for &v in tet {
-            mass[v as usize] += quarter;
-        }
-    }
-    mass
+    Ok(Derived { lumped, mass, inv_mass, springs: SpringSet::from_mesh(mesh, material_of_tet) })
 }
