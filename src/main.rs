@@ -8,6 +8,7 @@ mod bench_perf;
 mod bench_recorder;
 mod bench_stability;
 mod demo;
+mod demo_seed;
 mod recording;
 mod motion_metrics;
 mod plot;
@@ -48,7 +49,8 @@ enum Command {
         #[arg(long, default_value = "chest-wall")]
         scene: String,
         /// Then serve the web dashboard on this address (e.g. 127.0.0.1:8080) with the demo
-        /// accounts, cohort and attempts in the database (`--db`).
+        /// accounts, cohort, curriculum and simulated attempts (recordings in OUT/attempts)
+        /// in the database (`--db`).
         #[arg(long)]
         addr: Option<String>,
     },
@@ -58,7 +60,8 @@ enum Command {
         /// Address to listen on.
         #[arg(long, default_value = "127.0.0.1:8080")]
         addr: String,
-        /// First create the demo accounts, cohort and synthetic attempts (see the README).
+        /// First create the demo accounts, cohort, curriculum and attempts (simulated, about
+        /// a minute; recordings in demo-attempts/ beside the database; see the README).
         #[arg(long)]
         demo: bool,
     },
@@ -71,8 +74,8 @@ enum Command {
         /// Resolution of a generated mesh: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,
-        /// expert | intermediate | novice (synthetic trainee), csv:PATH (trajectory file) or
-        /// igtl:PORT (OpenIGTLink server).
+        /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
+        /// 0 novice to 1 expert), csv:PATH (trajectory file) or igtl:PORT (OpenIGTLink server).
         #[arg(long, default_value = "expert")]
         device: session::DeviceArg,
         /// live (real time) or virtual (as fast as possible, same ticks).
@@ -335,11 +338,15 @@ fn run() -> anyhow::Result<()> {
         Command::Demo { out, min_tets, scene, addr } => {
             demo::run(&out, min_tets, &scene)?;
             match addr {
-                Some(addr) => serve::run(&cutlab_assessor::default_db_path(cli.db.as_deref()), &addr, true),
+                Some(addr) => serve::run(&cutlab_assessor::default_db_path(cli.db.as_deref()), &addr, Some(&out.join("attempts"))),
                 None => Ok(()),
             }
         }
-        Command::Serve { addr, demo } => serve::run(&cutlab_assessor::default_db_path(cli.db.as_deref()), &addr, demo),
+        Command::Serve { addr, demo } => {
+            let db = cutlab_assessor::default_db_path(cli.db.as_deref());
+            let recordings = db.parent().unwrap_or(std::path::Path::new(".")).join("demo-attempts");
+            serve::run(&db, &addr, demo.then_some(recordings.as_path()))
+        }
         Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
             scene_info::run(&scene, min_tets, json)
         }
@@ -355,8 +362,9 @@ fn run() -> anyhow::Result<()> {
             keyframe_every_s: keyframe_every,
             surface_hz,
             rerun: recording::rerun_target(rrd.then_some(std::path::Path::new("session.rrd")), rerun.as_ref()),
-            attempt: trainee.map(|trainee| session::AttemptArgs { db: cutlab_assessor::default_db_path(cli.db.as_deref()), exercise, trainee }),
+            attempt: trainee.map(|trainee| session::AttemptArgs { db: cutlab_assessor::default_db_path(cli.db.as_deref()), exercise, trainee, expert: false }),
             localise,
+            quiet: false,
         }),
         Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
         Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),

@@ -5,18 +5,24 @@ use std::path::Path;
 
 use anyhow::Context;
 use cutlab_assessor::store::Store;
-use cutlab_dashboard::{AppState, Config, seed_demo};
+use cutlab_dashboard::{AppState, Config, DEMO_ACCOUNTS};
 
-/// Serves the dashboard on `addr` until Ctrl-C; with `demo`, first makes sure the demo
-/// accounts, cohort and attempts exist (and prints the accounts).
-pub fn run(db: &Path, addr: &str, demo: bool) -> anyhow::Result<()> {
+/// Serves the dashboard on `addr` until Ctrl-C; with `demo` (a directory for recordings),
+/// first makes sure the demo accounts, cohort, curriculum and simulated attempts exist (see
+/// [`crate::demo_seed`]) and prints the accounts.
+pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
+    if let Some(dir) = demo {
+        if !crate::demo_seed::run(db, dir)? {
+            println!("demo curriculum and attempts already in {}", db.display());
+        }
+    }
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
     rt.block_on(async {
         let store = Store::open(db).await.with_context(|| format!("opening the database {}", db.display()))?;
         store.ensure_builtins().await?;
-        if demo {
+        if demo.is_some() {
             println!("demo accounts (user / password / role):");
-            for a in seed_demo(&store).await? {
+            for a in DEMO_ACCOUNTS {
                 println!("  {:8} {:16} {}", a.name, a.password, a.role);
             }
         }

@@ -14,17 +14,28 @@ use cutlab_recorder::{RerunTarget, WriterOptions};
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
-use cutlab_sim::Vector3;
+use cutlab_assessor::ExpertPlan;
+use cutlab_sim::{Point3, Vector3};
 
 use cutlab_assessor::Store;
 use cutlab_recorder::Recording;
 
 use crate::stats::Summary;
 
+/// `println!` unless `quiet`.
+macro_rules! say {
+    ($quiet:expr, $($arg:tt)*) => {
+        if !$quiet {
+            println!($($arg)*);
+        }
+    };
+}
+
 /// What `--device` names.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DeviceArg {
-    Trainee(String),
+    /// A synthetic trainee: a preset's name or `level:L`, and its hand.
+    Trainee { name: String, skill: Skill },
     Csv(PathBuf),
     Igtl(u16),
 }
@@ -32,8 +43,12 @@ pub enum DeviceArg {
 impl std::str::FromStr for DeviceArg {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        if Skill::PRESETS.contains(&s) {
-            return Ok(DeviceArg::Trainee(s.to_owned()));
+        if let Some(skill) = Skill::preset(s) {
+            return Ok(DeviceArg::Trainee { name: s.to_owned(), skill });
+        }
+        if let Some(level) = s.strip_prefix("level:") {
+            let skill = level.parse::<f64>().ok().and_then(Skill::at_level).ok_or_else(|| format!("level: needs a skill level from 0 (novice) to 1 (expert), got {level:?}"))?;
+            return Ok(DeviceArg::Trainee { name: s.to_owned(), skill });
         }
         if let Some(path) = s.strip_prefix("csv:") {
             if path.is_empty() {
@@ -44,7 +59,7 @@ impl std::str::FromStr for DeviceArg {
         if let Some(port) = s.strip_prefix("igtl:") {
             return port.parse::<u16>().map(DeviceArg::Igtl).map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
         }
-        Err(format!("unknown device {s:?} (expected expert, intermediate, novice, csv:PATH or igtl:PORT)"))
+        Err(format!("unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH or igtl:PORT)"))
     }
 }
 
@@ -69,6 +84,8 @@ pub struct Options {
     pub attempt: Option<AttemptArgs>,
     /// Simulate only near the scalpel (the default localisation thresholds).
     pub localise: bool,
+    /// Print nothing (the demo's seeding runs many sessions).
+    pub quiet: bool,
 }
 
 /// The attempt a session is (`--trainee`, `--exercise`, `--db`).
@@ -77,6 +94,8 @@ pub struct AttemptArgs {
     pub db: PathBuf,
     pub exercise: String,
     pub trainee: String,
+    /// An expert's reference attempt (its metrics set the exercise's thresholds).
+    pub expert: bool,
 }
 
 /// The open attempt of a session, and the runtime its database needs.
@@ -84,29 +103,31 @@ struct OpenAttempt {
     rt: tokio::runtime::Runtime,
     store: Store,
     id: i64,
+    quiet: bool,
 }
 
 impl OpenAttempt {
-    fn start(a: &AttemptArgs, recording: &Path) -> anyhow::Result<Self> {
+    fn start(a: &AttemptArgs, recording: &Path, quiet: bool) -> anyhow::Result<Self> {
         let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
         let (store, id) = rt.block_on(async {
             let store = Store::open(&a.db).await.with_context(|| format!("opening the database {}", a.db.display()))?;
             store.ensure_builtins().await?;
-            let attempt = store.start_recorded_attempt(&a.exercise, &a.trainee, recording, false).await?;
+            let attempt = store.start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert).await?;
             anyhow::Ok((store, attempt.id))
         })?;
-        println!("attempt {id} of {} at {} (running; database {})", a.trainee, a.exercise, a.db.display());
-        Ok(Self { rt, store, id })
+        say!(quiet, "attempt {id} of {} at {} (running; database {})", a.trainee, a.exercise, a.db.display());
+        Ok(Self { rt, store, id, quiet })
     }
 
     /// Scores the attempt from its recording, or marks it incomplete when the session failed.
     fn finish(self, outcome: Result<&Path, String>) -> anyhow::Result<()> {
-        let Self { rt, store, id } = self;
+        let Self { rt, store, id, quiet } = self;
         rt.block_on(async {
             let result = match outcome {
                 Ok(path) => match Recording::open(path) {
                     Ok(rec) => match store.score_recording(id, &rec).await {
-                        Ok((o, values)) => crate::assess_cli::print_outcome(&o, &values, false),
+                        Ok((o, values)) if !quiet => crate::assess_cli::print_outcome(&o, &values, false),
+                        Ok(_) => Ok(()),
                         Err(e) => {
                             store.mark_failed(id, &e.to_string()).await?;
                             Err(anyhow::anyhow!("scoring attempt {id}: {e}"))
@@ -119,7 +140,7 @@ impl OpenAttempt {
                 },
                 Err(why) => {
                     store.mark_incomplete(id, Some(&why)).await?;
-                    println!("attempt {id} marked incomplete: {why}");
+                    say!(quiet, "attempt {id} marked incomplete: {why}");
                     Ok(())
                 }
             };
@@ -135,11 +156,11 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     }
     // Devices that need no scene first: a bad file or a busy port is reported at once.
     let mut device: Option<Box<dyn HapticDevice>> = match &o.device {
-        DeviceArg::Trainee(_) => None,
+        DeviceArg::Trainee { .. } => None,
         DeviceArg::Csv(path) => Some(Box::new(CsvDevice::open(path).context("reading the trajectory")?)),
         DeviceArg::Igtl(port) => {
             let d = IgtlDevice::listen(*port)?;
-            println!("OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)", d.address());
+            say!(o.quiet, "OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)", d.address());
             Some(Box::new(d))
         }
     };
@@ -148,13 +169,22 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     if o.localise {
         session.sim.settings.localisation = Some(LocalisationSettings::default());
     }
-    let (lo, hi) = scene.model.mesh.bounding_box();
-    let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
-    // The planned incision (what a synthetic trainee follows; recorded with every session).
-    let plan = session.plan_across_top(0.06, depth_m).context("planning the incision across the top of the tissue");
-    if let DeviceArg::Trainee(skill) = &o.device {
-        let preset = Skill::preset(skill).context("skill preset")?;
-        device = Some(Box::new(SyntheticTrainee::new(skill, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), preset, o.seed)?));
+    // The planned incision (what a synthetic trainee follows; recorded with every session):
+    // the exercise's expert plan when the session is an attempt, else 60 mm across the top.
+    let expert_plan = o.attempt.as_ref().map(|a| exercise_plan(a, &o.scene, &scene.spec.name)).transpose()?;
+    let plan = match &expert_plan {
+        Some(p) => {
+            let line: Vec<Point3> = p.incision_m.iter().map(|&c| Point3::from(c)).collect();
+            session.plan_along(&resample(&line, 33), &Vector3::from(p.normal), p.depth_m).context("projecting the exercise's plan onto the tissue")
+        }
+        None => {
+            let (lo, hi) = scene.model.mesh.bounding_box();
+            let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
+            session.plan_across_top(0.06, depth_m).context("planning the incision across the top of the tissue")
+        }
+    };
+    if let DeviceArg::Trainee { name, skill } = &o.device {
+        device = Some(Box::new(SyntheticTrainee::new(name, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), *skill, o.seed)?));
     }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
@@ -187,7 +217,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let attempt = o.attempt.as_ref().map(|a| OpenAttempt::start(a, &mcap_path)).transpose()?;
+    let attempt = o.attempt.as_ref().map(|a| OpenAttempt::start(a, &mcap_path, o.quiet)).transpose()?;
     let recorded = match record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, observer) {
         Ok(r) => r,
         Err(e) => {
@@ -211,28 +241,28 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     };
 
     let clock = if o.clock == Clock::Live { "live" } else { "virtual" };
-    println!("session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
+    say!(o.quiet, "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
     let max_lag = r.tick_of_step.iter().enumerate().map(|(n, &t)| t.saturating_sub(n as u64)).max().unwrap_or(0);
-    println!("  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
-    println!("  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count());
-    println!("  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
+    say!(o.quiet, "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
+    say!(o.quiet, "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count());
+    say!(o.quiet, "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
     let p = r.servo.period_stats(r.period_nanos);
     if o.clock == Clock::Live {
-        println!("  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline", p.mean_us, p.p50_us, p.p99_us, p.p99_deviation_us, p.max_deviation_us, p.missed_deadlines, p.max_lateness_us);
+        say!(o.quiet, "  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline", p.mean_us, p.p50_us, p.p99_us, p.p99_deviation_us, p.max_deviation_us, p.missed_deadlines, p.max_lateness_us);
         match &r.servo.realtime_priority {
-            Some(Ok(())) => println!("  servo thread at real-time priority (SCHED_FIFO)"),
-            Some(Err(e)) => println!("  real-time priority not permitted ({e}); normal priority"),
-            None => println!("  real-time priority not requested"),
+            Some(Ok(())) => say!(o.quiet, "  servo thread at real-time priority (SCHED_FIFO)"),
+            Some(Err(e)) => say!(o.quiet, "  real-time priority not permitted ({e}); normal priority"),
+            None => say!(o.quiet, "  real-time priority not requested"),
         }
     }
-    println!("  servo work per tick: mean {:.1} us, max {:.1} us", p.mean_work_us, p.max_work_us);
+    say!(o.quiet, "  servo work per tick: mean {:.1} us, max {:.1} us", p.mean_work_us, p.max_work_us);
     let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
     let s = Summary::of(&steps_us);
-    println!("  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64);
-    println!("  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
+    say!(o.quiet, "  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64);
+    say!(o.quiet, "  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
 
     let w = &recorded.write;
-    println!(
+    say!(o.quiet, 
         "  recording {}: {} messages, {:.1} MB of payload, writer busy {:.2} s; dropped tick records {}",
         mcap_path.display(), w.messages.values().sum::<u64>(), w.payload_bytes as f64 * 1e-6, w.busy_s, r.servo.dropped_records
     );
@@ -260,11 +290,71 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     }
     let steps_path = o.out.join("steps.csv");
     std::fs::write(&steps_path, steps).with_context(|| format!("writing {}", steps_path.display()))?;
-    println!("wrote {}, summary.json and steps.csv", path.display());
+    say!(o.quiet, "wrote {}, summary.json and steps.csv", path.display());
     if let Some(a) = attempt {
         a.finish(Ok(&mcap_path))?;
     }
     Ok(())
+}
+
+/// The expert plan of the attempt's exercise, whose scene must be the session's.
+fn exercise_plan(a: &AttemptArgs, scene_arg: &str, scene_name: &str) -> anyhow::Result<ExpertPlan> {
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
+    rt.block_on(async {
+        let store = Store::open(&a.db).await.with_context(|| format!("opening the database {}", a.db.display()))?;
+        store.ensure_builtins().await?;
+        let e = store.exercise_by_name(&a.exercise).await?;
+        let plan = store.exercise_plan(e.id).await?;
+        store.close().await;
+        if e.scene != scene_arg && e.scene != scene_name {
+            bail!("exercise {} is on the scene {}, not {scene_arg}: pass --scene {}", e.name, e.scene, e.scene);
+        }
+        Ok(plan)
+    })
+}
+
+/// `n >= 2` points evenly spaced by arc length along the polyline `line`, its ends included.
+fn resample(line: &[Point3], n: usize) -> Vec<Point3> {
+    let lengths: Vec<f64> = line.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+    let total: f64 = lengths.iter().sum();
+    let (mut seg, mut walked) = (0, 0.0);
+    (0..n)
+        .map(|i| {
+            let s = total * i as f64 / (n - 1) as f64;
+            while seg + 1 < lengths.len() && walked + lengths[seg] < s {
+                walked += lengths[seg];
+                seg += 1;
+            }
+            match lengths.get(seg) {
+                Some(&l) if l > 0.0 => line[seg] + (line[seg + 1] - line[seg]) * ((s - walked) / l).clamp(0.0, 1.0),
+                _ => line[seg],
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resampling_keeps_the_ends_and_spaces_evenly() {
+        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.01, 0.0, 0.0), Point3::new(0.01, 0.03, 0.0)];
+        let r = resample(&line, 5);
+        assert_eq!((r[0], r[4]), (line[0], line[2]));
+        for w in r.windows(2) {
+            assert!(((w[1] - w[0]).norm() - 0.01).abs() < 1e-12, "{r:?}");
+        }
+        assert!((r[1] - line[1]).norm() < 1e-12);
+    }
+
+    #[test]
+    fn skill_levels_parse_and_bad_ones_are_refused() {
+        assert!(matches!("level:0.25".parse::<DeviceArg>(), Ok(DeviceArg::Trainee { .. })));
+        for bad in ["level:", "level:1.5", "level:NaN", "level:x"] {
+            assert!(bad.parse::<DeviceArg>().is_err_and(|e| e.contains("level")), "{bad}");
+        }
+    }
 }
 
 fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {

@@ -53,7 +53,9 @@ fn motion_metrics_of_a_good_csv_at_two_rates() {
         assert!(ok, "{err}");
         let v: serde_json::Value = serde_json::from_str(&out).expect("json");
         assert_eq!(v["movements"], 2, "{out}");
-        assert!((v["time_s"].as_f64().expect("time") - 2.5).abs() < 0.02);
+        // the task time: the two reaches less their slow starts and ends, within the 2.5 s
+        let time = v["time_s"].as_f64().expect("time");
+        assert!(time > 2.1 && time < 2.5, "{time}");
         lengths.push(v["path_length_m"].as_f64().expect("length"));
         assert!(v["ldlj"].as_f64().is_some() && v["sparc"].as_f64().is_some());
         let (ok, table, err) = cutlab(&["motion-metrics", path.to_str().expect("utf8")], None);

@@ -161,7 +161,9 @@ fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line
     let a: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert!(a["score"].as_f64().is_some_and(|s| (-1.0..=1.0).contains(&s)), "{a}");
     let time = a["metrics"].as_array().expect("metrics").iter().find(|m| m["key"] == "time_s").expect("time_s")["value"].as_f64();
-    assert!(time.is_some_and(|t| (t - 3.0).abs() < 0.01), "{time:?}");
+    // the task time: the hand moves from its start until it holds still after the stroke,
+    // within the 3 s recorded
+    assert!(time.is_some_and(|t| t > 1.5 && t < 3.0), "{time:?}");
     assert_eq!(a["proficiency"]["attempts"], 1);
 
     // a recording cut short (a killed process): info says so, recover salvages it, the

@@ -48,7 +48,8 @@ pub struct Threshold {
     pub better: Better,
     /// The experts' mean (the reference value for the score).
     pub mean: f64,
-    /// The experts' sample SD after outlier removal (0 for hand-set thresholds).
+    /// The experts' sample SD after outlier removal, at least [`sd_floor`] (0 for hand-set
+    /// thresholds).
     pub sd: f64,
     /// Expert values used (0 for hand-set thresholds).
     pub n_experts: usize,
@@ -136,6 +137,28 @@ fn mean_sd(x: &[f64]) -> (f64, f64) {
     (mean, sd)
 }
 
+/// Relative floor of the SD a threshold is derived with: 5 % of the experts' mean.
+pub const SD_FLOOR_FRACTION: f64 = 0.05;
+
+/// The smallest SD a threshold is derived with: [`SD_FLOOR_FRACTION`] of `|mean|`, and at
+/// least what the metric resolves (0.2 mm, about a hand's tremor; 0.5 degrees; 0.1 s;
+/// 0.05 N; 0.02 of a fraction; 1 mm^2). Experts who repeat an exercise almost identically (a
+/// scripted hand, a scene with little to vary) give a near-zero SD, and thresholds that no
+/// other attempt, however good, could meet: the demo's six scripted experts all cut 1.41 mm
+/// deeper than planned, within 9 um of each other.
+pub fn sd_floor(unit: &str, mean: f64) -> f64 {
+    let resolution: f64 = match unit {
+        "m" => 2e-4,
+        "deg" => 0.5,
+        "s" => 0.1,
+        "N" => 0.05,
+        "1" => 0.02,
+        "m^2" => 1e-6,
+        _ => 0.0,
+    };
+    resolution.max(SD_FLOOR_FRACTION * mean.abs())
+}
+
 /// Expert values of one metric without the outliers (`|z| > 1.96`).
 pub fn without_outliers(x: &[f64]) -> Vec<f64> {
     let (mean, sd) = mean_sd(x);
@@ -159,6 +182,7 @@ impl Thresholds {
             }
             let kept = without_outliers(&x);
             let (mean, sd) = mean_sd(&kept);
+            let sd = sd.max(sd_floor(m.unit, mean));
             let (lower, upper) = match m.better {
                 Better::LowerIsBetter => (None, Some(mean + k * sd)),
                 Better::HigherIsBetter => (Some(mean - k * sd), None),
@@ -327,12 +351,22 @@ mod tests {
         assert_eq!(lat.lower, None);
         assert!((lat.upper.unwrap() - (5.0 + 2.0 * 7.5f64.sqrt())).abs() < 1e-12);
         let frac = t.metrics.iter().find(|m| m.key == "fraction_cut_in_tolerance").unwrap();
-        assert!((frac.lower.unwrap() - 0.9).abs() < 1e-12 && frac.upper.is_none(), "all equal: sd 0, nothing removed");
+        // all equal: sd 0, nothing removed; the limit is 2 floors of the SD below (5 % of 0.9)
+        assert!((frac.sd - 0.045).abs() < 1e-12 && (frac.lower.unwrap() - 0.81).abs() < 1e-12 && frac.upper.is_none(), "{frac:?}");
         assert_eq!(frac.n_experts, 10);
         let depth = t.metrics.iter().find(|m| m.key == "depth_error_m").unwrap();
         assert!(depth.lower.is_some() && depth.upper.is_some(), "two-sided");
         assert_eq!(t.metrics.len(), 3, "metrics without expert values get no threshold");
         assert!(Thresholds::from_experts(&experts, 0.0).is_err());
+    }
+
+    #[test]
+    fn the_sd_floor_is_relative_and_at_least_the_resolution() {
+        assert_eq!(sd_floor("m", 0.0), 2e-4);
+        assert!((sd_floor("m", 0.1) - 0.005).abs() < 1e-15);
+        assert_eq!(sd_floor("deg", -1.0), 0.5);
+        assert!((sd_floor("s", -10.0) - 0.5).abs() < 1e-15);
+        assert_eq!(sd_floor("rad", 0.0), 0.0);
     }
 
     #[test]

@@ -28,7 +28,7 @@ use crate::render::{ContactModel, ForceRenderer, RenderSettings, fault};
 use crate::servo::{self, Clock, ServoConfig, ServoEvent, ServoLinks, ServoReport, ServoSample};
 use crate::stepper::{SessionStepper, StepperStats};
 use crate::tap::{Keyframe, RecordTap, SimRecord, SurfaceSnapshot};
-use crate::{HapticsError, Point3};
+use crate::{HapticsError, Point3, Vector3};
 
 /// Settings of a session.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -146,14 +146,25 @@ impl Session {
         let centre = nalgebra::center(&lo, &hi);
         let length = length_m.min(0.6 * (hi.x - lo.x));
         let samples = 33;
-        let mut line_m = Vec::with_capacity(samples);
-        let mut normals = Vec::with_capacity(samples);
-        for i in 0..samples {
-            let u = i as f64 / (samples - 1) as f64 - 0.5;
-            let above = Point3::new(centre.x + u * length, centre.y, hi.z + 0.01);
-            let hit = self.collider.closest(&above).ok_or_else(|| HapticsError::Surface("no surface below the plan".into()))?;
-            if hit.normal.z < 0.5 {
-                return Err(HapticsError::Surface(format!("no upward-facing surface at x = {:.1} mm", above.x * 1e3)));
+        let above: Vec<Point3> = (0..samples)
+            .map(|i| {
+                let u = i as f64 / (samples - 1) as f64 - 0.5;
+                Point3::new(centre.x + u * length, centre.y, hi.z + 0.01)
+            })
+            .collect();
+        self.plan_along(&above, &Vector3::z(), depth_m)
+    }
+
+    /// An incision through the surface points closest to `points_m` (entry first), on a
+    /// surface facing `up` (within 60 degrees), cut `depth_m` deep: how a synthetic trainee
+    /// follows an exercise's expert plan.
+    pub fn plan_along(&self, points_m: &[Point3], up: &Vector3, depth_m: f64) -> Result<Plan, HapticsError> {
+        let mut line_m = Vec::with_capacity(points_m.len());
+        let mut normals = Vec::with_capacity(points_m.len());
+        for p in points_m {
+            let hit = self.collider.closest(p).ok_or_else(|| HapticsError::Surface("no surface near the plan".into()))?;
+            if hit.normal.dot(up) < 0.5 {
+                return Err(HapticsError::Surface(format!("no surface facing the plan's normal near ({:.1}, {:.1}, {:.1}) mm", p.x * 1e3, p.y * 1e3, p.z * 1e3)));
             }
             line_m.push(hit.point);
             normals.push(hit.normal);

@@ -35,7 +35,7 @@ use cutlab_assessor::store::Store;
 
 pub use cutlab_assessor as assessor;
 pub use error::AppError;
-pub use seed::{DEMO_ACCOUNTS, DemoAccount, seed_demo};
+pub use seed::{DEMO_ACCOUNTS, DEMO_COHORT, DemoAccount, seed_demo, seed_demo_accounts};
 
 /// Settings of a dashboard.
 #[derive(Debug, Clone)]

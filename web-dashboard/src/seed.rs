@@ -84,19 +84,30 @@ pub async fn synthetic_attempts(store: &Store, trainee: i64, exercise_id: i64, n
     Ok(())
 }
 
-/// Makes a fresh (or any) database usable: the built-in exercise, the [`DEMO_ACCOUNTS`], the
-/// cohort [`DEMO_COHORT`] and, for a demo trainee without attempts, synthetic scored
-/// attempts (ana improves to proficiency, ben is still learning). Safe to run again.
-pub async fn seed_demo(store: &Store) -> Result<Vec<DemoAccount>, AssessError> {
-    let exercise = store.ensure_builtins().await?;
+/// The built-in exercise, the [`DEMO_ACCOUNTS`] and the cohort [`DEMO_COHORT`] led by
+/// `dr-kim` with the demo trainees in it; returns the accounts' users in the order of
+/// [`DEMO_ACCOUNTS`]. Safe to run again.
+pub async fn seed_demo_accounts(store: &Store) -> Result<Vec<User>, AssessError> {
+    store.ensure_builtins().await?;
     let mut users = Vec::new();
     for a in &DEMO_ACCOUNTS {
         users.push(ensure_account(store, a).await?);
     }
     let cohort = ensure_cohort(store, DEMO_COHORT, users[1].id).await?;
+    for u in users.iter().filter(|u| u.role == Role::Trainee) {
+        store.join_cohort(cohort.id, u.id).await?;
+    }
+    Ok(users)
+}
+
+/// Makes a fresh (or any) database usable at once: [`seed_demo_accounts`] and, for a demo
+/// trainee without attempts, synthetic scored attempts (ana improves to proficiency, ben is
+/// still learning). `cutlab demo` simulates its attempts instead. Safe to run again.
+pub async fn seed_demo(store: &Store) -> Result<Vec<DemoAccount>, AssessError> {
+    let exercise = store.ensure_builtins().await?;
+    let users = seed_demo_accounts(store).await?;
     let mut rng = Rng::new(7);
     for (u, (n, s0, s1)) in users[2..].iter().zip([(8, 1.6, 0.3), (5, 1.8, 1.0)]) {
-        store.join_cohort(cohort.id, u.id).await?;
         if store.list_attempts(Some(u.id), None).await?.is_empty() {
             synthetic_attempts(store, u.id, exercise.id, n, s0, s1, &mut rng).await?;
         }

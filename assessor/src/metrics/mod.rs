@@ -104,7 +104,7 @@ pub const METRICS: &[Metric] = &[
     m("depth_rms_error_m", "m", Better::LowerIsBetter, false, "RMS of cut depth minus planned depth"),
     m("approach_error_deg", "deg", Better::LowerIsBetter, false, "angle between the tip's motion entering the tissue and the planned approach"),
     // path
-    m("time_s", "s", Better::LowerIsBetter, true, "duration of the attempt"),
+    m("time_s", "s", Better::LowerIsBetter, true, "task time: from the tip's first movement to its last"),
     m("path_length_m", "m", Better::LowerIsBetter, true, "distance travelled by the tip (filtered)"),
     m("economy_of_motion", "1", Better::HigherIsBetter, false, "straight distance start to end over path length"),
     m("idle_time_s", "s", Better::LowerIsBetter, false, "time with the tip (nearly) still"),

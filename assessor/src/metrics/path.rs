@@ -6,7 +6,8 @@
 //! (`cutoff_hz`, default 6 Hz: hand motion lies below it, tremor and sensor noise above), and
 //! only then differentiated (central differences) to the speed `v(t) = |dx/dt|`.
 //!
-//! - time: last minus first time stamp;
+//! - time: the task time, from the first to the last sample where `v` reaches
+//!   `idle_speed_m_s` (still time before or after the task does not count);
 //! - path length: `sum |x[k+1] - x[k]|` over the filtered samples;
 //! - economy of motion: `|x_last - x_first| / path length` (1 for a straight line);
 //! - idle time: total length of the intervals whose mean speed is below `idle_speed_m_s`;
@@ -110,7 +111,6 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     let fs = p.resample_hz;
     let dt = 1.0 / fs;
     let t: Vec<f64> = poses.iter().map(|s| s.t_s).collect();
-    let time_s = t[t.len() - 1] - t[0];
     let coords: Vec<Vec<f64>> = (0..3)
         .map(|c| {
             let x: Vec<f64> = poses.iter().map(|s| s.tip_m[c]).collect();
@@ -126,6 +126,13 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     let straight = geom::dist(pos(n - 1), pos(0));
     let economy_of_motion = (path_length_m > 1e-9).then(|| (straight / path_length_m).min(1.0));
     let idle_time_s = (1..n).filter(|&k| 0.5 * (speed[k] + speed[k - 1]) < p.idle_speed_m_s).count() as f64 * dt;
+    // the task time: from the first to the last moment the tip moves (a recording that runs
+    // on before or after the task does not count)
+    let moving = |k: &usize| speed[*k] >= p.idle_speed_m_s;
+    let time_s = match ((0..n).find(moving), (0..n).rev().find(moving)) {
+        (Some(first), Some(last)) => (last - first) as f64 * dt,
+        _ => 0.0,
+    };
 
     let peak = speed.iter().copied().fold(0.0, f64::max);
     let threshold = p.movement_floor_m_s.max(p.movement_fraction * peak);
@@ -283,6 +290,9 @@ mod tests {
         assert!(m.economy_of_motion.unwrap() < 0.01);
         // idle: the 3 rests plus the slow starts and ends of each reach (speed < 5 mm/s)
         assert!(m.idle_time_s > 3.0 && m.idle_time_s < 3.4, "{}", m.idle_time_s);
+        // the task time: from the start of the first reach to the end of the second (t = 1 to
+        // 4 s, less their slow starts and ends), not the 5 s recorded
+        assert!(m.time_s > 2.6 && m.time_s < 3.0, "{}", m.time_s);
         assert!(m.ldlj_per_movement.unwrap() > m.ldlj.unwrap(), "each reach is smoother than the whole");
         assert!(m.per_movement[0].start_s > 1.0 && m.per_movement[0].end_s < 2.0);
     }

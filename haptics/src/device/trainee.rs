@@ -5,6 +5,12 @@
 //! the blade is `depth_m` below the surface, strokes along the planned line (with tremor, slow
 //! lateral drift, speed variability and hesitations), overshoots the exit, lifts out and
 //! holds still. The blade button is held from the descent to the end of the stroke.
+//!
+//! The hand feels the force: when the tissue yields under the blade instead of letting it in
+//! (the push-back has not yet reached the force a blade needs, the renderer's default
+//! threshold, and then dropped from that peak by [`GIVE_FRACTION`], as it does once the blade
+//! enters), it presses on, slowly and at most [`MAX_PRESS_M`] deeper, until the blade gives;
+//! over the first part of the stroke it comes back up to the planned depth.
 
 use super::{DeviceFault, HapticDevice};
 use crate::pose::{BUTTON_BLADE, Rng};
@@ -118,6 +124,30 @@ impl Skill {
             _ => return None,
         })
     }
+
+    /// A hand between the presets: `level` 0 is the novice, 0.5 the intermediate and 1 the
+    /// expert, each parameter interpolated linearly between the two nearest (the number of
+    /// hesitations rounded); what the demo's trainees improve along. `None` outside [0, 1].
+    pub fn at_level(level: f64) -> Option<Self> {
+        if !(0.0..=1.0).contains(&level) {
+            return None;
+        }
+        let (a, b, t) = if level <= 0.5 { ("novice", "intermediate", 2.0 * level) } else { ("intermediate", "expert", 2.0 * level - 1.0) };
+        let (a, b) = (Self::preset(a)?, Self::preset(b)?);
+        let mix = |x: f64, y: f64| x * (1.0 - t) + y * t;
+        Some(Self {
+            tremor_amplitude_m: mix(a.tremor_amplitude_m, b.tremor_amplitude_m),
+            tremor_frequency_hz: mix(a.tremor_frequency_hz, b.tremor_frequency_hz),
+            drift_m: mix(a.drift_m, b.drift_m),
+            drift_time_constant_s: mix(a.drift_time_constant_s, b.drift_time_constant_s),
+            cut_speed_m_per_s: mix(a.cut_speed_m_per_s, b.cut_speed_m_per_s),
+            speed_variability: mix(a.speed_variability, b.speed_variability),
+            hesitations: mix(a.hesitations as f64, b.hesitations as f64).round() as usize,
+            hesitation_s: mix(a.hesitation_s, b.hesitation_s),
+            overshoot_m: mix(a.overshoot_m, b.overshoot_m),
+            approach_angle_error_rad: mix(a.approach_angle_error_rad, b.approach_angle_error_rad),
+        })
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -130,6 +160,15 @@ enum Phase {
 }
 
 const HOVER_S: f64 = 0.3;
+/// The blade has gone in when the push-back along the surface normal fell below this share
+/// of its peak during the descent.
+pub const GIVE_FRACTION: f64 = 0.7;
+/// How much deeper than planned the hand presses at most, m.
+pub const MAX_PRESS_M: f64 = 0.005;
+/// How fast it presses on, m/s.
+const PRESS_M_PER_S: f64 = 0.005;
+/// Time constant of the return to the planned depth during the stroke, s.
+const PRESS_RETURN_S: f64 = 0.2;
 const DESCEND_M_PER_S: f64 = 0.02;
 const RETRACT_M_PER_S: f64 = 0.03;
 
@@ -155,6 +194,14 @@ pub struct SyntheticTrainee {
     speed_noise: f64,
     time_s: f64,
     last: ToolPose,
+    /// The latest rendered force's push-back along the surface normal, and its peak in the
+    /// descent, N.
+    push_n: f64,
+    peak_push_n: f64,
+    /// How much deeper than planned the hand pressed for the blade to go in, m.
+    press_m: f64,
+    /// The force the hand expects a blade to need (the renderer's default threshold), N.
+    cutting_force_n: f64,
 }
 
 impl SyntheticTrainee {
@@ -192,6 +239,10 @@ impl SyntheticTrainee {
             speed_noise: 0.0,
             time_s: 0.0,
             last: ToolPose::default(),
+            push_n: 0.0,
+            peak_push_n: 0.0,
+            press_m: 0.0,
+            cutting_force_n: crate::render::RenderSettings::default().cut_threshold_newtons,
         };
         me.last = me.pose();
         Ok(me)
@@ -239,8 +290,8 @@ impl SyntheticTrainee {
         let (s, offset, buttons) = match self.phase {
             Phase::Hover => (0.0, h, 0),
             Phase::Descend => (0.0, h - self.progress, BUTTON_BLADE),
-            Phase::Stroke => (self.progress, -d, BUTTON_BLADE),
-            Phase::Retract => (self.stroke_end_m(), -d + self.progress, 0),
+            Phase::Stroke => (self.progress, -d - self.press_m, BUTTON_BLADE),
+            Phase::Retract => (self.stroke_end_m(), -d - self.press_m + self.progress, 0),
             Phase::Idle => (self.stroke_end_m(), h, 0),
         };
         let (p, normal, tangent) = self.along(s);
@@ -275,12 +326,22 @@ impl SyntheticTrainee {
                 }
             }
             Phase::Descend => {
-                self.progress += DESCEND_M_PER_S * speed_factor * dt;
-                if self.progress >= h + d {
-                    (self.phase, self.progress) = (Phase::Stroke, 0.0);
+                self.peak_push_n = self.peak_push_n.max(self.push_n);
+                if self.progress < h + d {
+                    self.progress += DESCEND_M_PER_S * speed_factor * dt;
+                } else {
+                    // at the planned depth: on once the blade has given way, else press on
+                    let given = self.peak_push_n >= self.cutting_force_n && self.push_n < GIVE_FRACTION * self.peak_push_n;
+                    if given || self.progress >= h + d + MAX_PRESS_M {
+                        self.press_m = self.progress - (h + d);
+                        (self.phase, self.progress) = (Phase::Stroke, 0.0);
+                    } else {
+                        self.progress += PRESS_M_PER_S * dt;
+                    }
                 }
             }
             Phase::Stroke => {
+                self.press_m -= self.press_m * (dt / PRESS_RETURN_S).min(1.0);
                 if self.pause_left_s > 0.0 {
                     self.pause_left_s -= dt;
                     return;
@@ -298,7 +359,7 @@ impl SyntheticTrainee {
             }
             Phase::Retract => {
                 self.progress += RETRACT_M_PER_S * dt;
-                if self.progress >= h + d {
+                if self.progress >= h + d + self.press_m {
                     (self.phase, self.progress) = (Phase::Idle, 0.0);
                 }
             }
@@ -327,8 +388,12 @@ impl HapticDevice for SyntheticTrainee {
         Ok(self.last)
     }
 
-    fn write_force(&mut self, _force_newtons: Vector3) -> Result<(), DeviceFault> {
-        // A scripted hand does not yield to the force (an ideal position source).
+    fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
+        // A scripted hand does not yield to the force (an ideal position source), but it feels
+        // whether the blade has gone in.
+        let (_, normal, _) = self.along(0.0);
+        let push = force_newtons.dot(&normal);
+        self.push_n = if push.is_finite() { push } else { 0.0 };
         Ok(())
     }
 
@@ -348,6 +413,17 @@ mod tests {
             depth_m: 0.005,
             approach_height_m: 0.015,
         }
+    }
+
+    #[test]
+    fn skill_levels_run_through_the_presets() {
+        for (level, name) in [(0.0, "novice"), (0.5, "intermediate"), (1.0, "expert")] {
+            assert_eq!(Skill::at_level(level), Skill::preset(name), "level {level}");
+        }
+        let (n, e, q) = (Skill::at_level(0.0).unwrap(), Skill::at_level(1.0).unwrap(), Skill::at_level(0.75).unwrap());
+        assert!(q.tremor_amplitude_m < Skill::preset("intermediate").unwrap().tremor_amplitude_m && q.tremor_amplitude_m > e.tremor_amplitude_m);
+        assert!(q.cut_speed_m_per_s > n.cut_speed_m_per_s && q.hesitations == 1);
+        assert!(Skill::at_level(1.5).is_none() && Skill::at_level(f64::NAN).is_none());
     }
 
     fn run(skill: &str, seed: u64, seconds: f64) -> Vec<ToolPose> {
