@@ -11,10 +11,10 @@ use cutlab_dashboard::{AppState, Config, DEMO_ACCOUNTS};
 /// first makes sure the demo accounts, cohort, curriculum and simulated attempts exist (see
 /// [`crate::demo_seed`]) and prints the accounts.
 pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
-    if let Some(dir) = demo {
-        if !crate::demo_seed::run(db, dir)? {
-            println!("demo curriculum and attempts already in {}", db.display());
-        }
+    if let Some(dir) = demo
+        && !crate::demo_seed::run(db, dir)?
+    {
+        println!("demo curriculum and attempts already in {}", db.display());
     }
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
     rt.block_on(async {

@@ -333,6 +333,10 @@ fn resample(line: &[Point3], n: usize) -> Vec<Point3> {
         .collect()
 }
 
+fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -355,8 +359,4 @@ mod tests {
             assert!(bad.parse::<DeviceArg>().is_err_and(|e| e.contains("level")), "{bad}");
         }
     }
-}
-
-fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", path.display()))
 }

@@ -31,8 +31,8 @@ fn free_port() -> u16 {
     TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
 }
 
-fn wait_for_port(port: u16, what: &str, child: &mut Child) {
-    let deadline = Instant::now() + Duration::from_secs(60);
+fn wait_for_port(port: u16, what: &str, child: &mut Child, timeout: Duration) {
+    let deadline = Instant::now() + timeout;
     let addr = SocketAddr::from(([127, 0, 0, 1], port));
     while TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
         if let Ok(Some(status)) = child.try_wait() {
@@ -70,9 +70,10 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
     let db = tmp.join("cutlab.db");
     let port = free_port();
     let mut server = cutlab(&db, &["serve", "--demo", "--addr", &format!("127.0.0.1:{port}")]).stdout(Stdio::null()).spawn().expect("cutlab serve");
-    wait_for_port(port, "cutlab serve", &mut server);
+    // (--demo first simulates the demo's attempts: about a minute)
+    wait_for_port(port, "cutlab serve", &mut server, Duration::from_secs(600));
     let _server = Proc(server);
-    // a real recorded attempt of ana's (after the demo's synthetic ones)
+    // a real recorded attempt of ana's (after the demo's)
     let out = tmp.join("session");
     let s = cutlab(&db, &["session", "--trainee", "ana", "--rrd", "--min-tets", "1500", "--duration", "3", "--clock", "virtual", "--out", out.to_str().expect("utf8")]).output().expect("cutlab session");
     assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
@@ -80,7 +81,7 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
 
     let driver_port = free_port();
     let mut driver = Command::new(CHROMEDRIVER).arg(format!("--port={driver_port}")).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("chromedriver");
-    wait_for_port(driver_port, "chromedriver", &mut driver);
+    wait_for_port(driver_port, "chromedriver", &mut driver, Duration::from_secs(60));
     let _driver = Proc(driver);
 
     let profile = tmp.join("chromium-profile");
