@@ -12,6 +12,7 @@ use cutlab_assessor::store::{BUILTIN_EXERCISE, BUILTIN_SCENE, NewExercise, Store
 use cutlab_assessor::{AssessError, ExpertPlan};
 use cutlab_dashboard::seed_demo_accounts;
 use cutlab_haptics::servo::Clock;
+use cutlab_recorder::RerunTarget;
 
 use crate::session::{self, AttemptArgs, DeviceArg};
 
@@ -182,7 +183,8 @@ fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
         realtime_priority: false,
         keyframe_every_s: 1.0,
         surface_hz: 10.0,
-        rerun: None,
+        // the dashboard's replay review opens the .rrd in the rerun viewer
+        rerun: Some(RerunTarget::File(PathBuf::from("session.rrd"))),
         attempt: Some(AttemptArgs { db: db.to_owned(), exercise: a.exercise.into(), trainee: a.trainee.into(), expert: a.expert }),
         localise: false,
         quiet: true,

@@ -78,6 +78,11 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
     let s = cutlab(&db, &["session", "--trainee", "ana", "--rrd", "--min-tets", "1500", "--duration", "3", "--clock", "virtual", "--out", out.to_str().expect("utf8")]).output().expect("cutlab session");
     assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
     assert!(out.join("session.rrd").is_file());
+    let stdout = String::from_utf8_lossy(&s.stdout);
+    let attempt: i64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("attempt ")?.split_once(" of ana")?.0.parse().ok())
+        .unwrap_or_else(|| panic!("the session names its attempt: {stdout}"));
 
     let driver_port = free_port();
     let mut driver = Command::new(CHROMEDRIVER).arg(format!("--port={driver_port}")).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("chromedriver");
@@ -86,11 +91,11 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
 
     let profile = tmp.join("chromium-profile");
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
-    rt.block_on(browse(port, driver_port, &profile, &artefacts()));
+    rt.block_on(browse(port, driver_port, attempt, &profile, &artefacts()));
     let _ = std::fs::remove_dir_all(&tmp);
 }
 
-async fn browse(port: u16, driver_port: u16, profile: &Path, shots: &Path) {
+async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots: &Path) {
     let args = [
         "--headless",
         "--no-sandbox",
@@ -125,9 +130,8 @@ async fn browse(port: u16, driver_port: u16, profile: &Path, shots: &Path) {
         let title = c.find(Locator::Css("h1")).await?.text().await?;
         assert_eq!(title, "Progress of ana");
         std::fs::write(shots.join("progress.png"), c.screenshot().await?).expect("screenshot");
-        // the newest attempt is the recorded one (the table lists newest first)
-        let first = c.find(Locator::Css("table tbody tr td a[href^='/attempts/']")).await?;
-        first.click().await?;
+        // the attempt just recorded
+        c.find(Locator::Css(&format!("table tbody tr td a[href='/attempts/{attempt}']"))).await?.click().await?;
         c.wait().for_element(Locator::Id("review-replay")).await?;
         std::fs::write(shots.join("attempt.png"), c.screenshot().await?).expect("screenshot");
         let svgs = c.find_all(Locator::Css(".charts svg.chart")).await?;
