@@ -17,6 +17,7 @@ use cutlab_recorder::record::{self, Provenance, RecordSettings};
 use cutlab_recorder::replay::{self, ReplayOptions};
 use cutlab_recorder::{Recording, WriterOptions};
 use cutlab_sim::scene::{BuildOptions, Scene};
+use cutlab_sim::solver::LocalisationSettings;
 use serde::Serialize;
 
 use crate::stats::Summary;
@@ -25,6 +26,7 @@ use crate::stats::Summary;
 struct Figures {
     scene: String,
     tets: usize,
+    localised: bool,
     session_s: f64,
     tick_work_us_unrecorded: Summary,
     tick_work_us_recorded: Summary,
@@ -41,14 +43,17 @@ struct Figures {
     keyframes_checked: u64,
 }
 
-pub fn run(min_tets: Option<usize>, duration_s: f64, json: bool, out: &Path) -> anyhow::Result<()> {
+pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     if !(duration_s > 0.0 && duration_s <= 3600.0) {
         anyhow::bail!("--duration must be in (0, 3600] s");
     }
     let scene = Scene::load("chest-wall", BuildOptions { min_tets }).context("loading the chest wall")?;
     let config = SessionConfig { duration_s, ..SessionConfig::default() };
     let make = || -> anyhow::Result<(Session, cutlab_haptics::device::Plan, Box<SyntheticTrainee>)> {
-        let session = Session::new(&scene)?;
+        let mut session = Session::new(&scene)?;
+        if localise {
+            session.sim.settings.localisation = Some(LocalisationSettings::default());
+        }
         let plan = session.plan_across_top(0.06, 0.008)?;
         let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), Skill::preset("expert").context("expert preset")?, 1)?);
         Ok((session, plan, device))
@@ -82,6 +87,7 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, json: bool, out: &Path) -> 
     let f = Figures {
         scene: "chest-wall".into(),
         tets: scene.model.mesh.tet_count(),
+        localised: localise,
         session_s: duration_s,
         tick_work_us_unrecorded: tick_us(&plain),
         tick_work_us_recorded: tick_us(&report),
@@ -101,7 +107,8 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, json: bool, out: &Path) -> 
         println!("{}", serde_json::to_string_pretty(&f)?);
         return Ok(());
     }
-    println!("recorder on a {:.0} s session, {} ({} tets), expert trainee, virtual clock", f.session_s, f.scene, f.tets);
+    let how = if f.localised { "localised" } else { "full" };
+    println!("recorder on a {:.0} s session, {} ({} tets, {how} simulation), expert trainee, virtual clock", f.session_s, f.scene, f.tets);
     let t = |s: &Summary| format!("p50 {:.2} us, p99 {:.2} us, max {:.1} us", s.median, s.p99, s.max);
     println!("  servo work per tick without the recorder: {}", t(&f.tick_work_us_unrecorded));
     println!("  servo work per tick with the recorder:    {}", t(&f.tick_work_us_recorded));

@@ -249,6 +249,9 @@ enum BenchCommand {
         /// Session length, s.
         #[arg(long, default_value_t = 30.0)]
         duration: f64,
+        /// Simulate only near the scalpel (recorded, so the replay is localised too).
+        #[arg(long)]
+        localise: bool,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -386,7 +389,7 @@ fn run() -> anyhow::Result<()> {
         Command::Bench { command: BenchCommand::Dashboard { bench_db, trainees, attempts, clients, duration, json } } => {
             bench_dashboard::run_bench(&bench_dashboard::Options { db: &bench_db, trainees, attempts, clients, duration_s: duration, json })
         }
-        Command::Bench { command: BenchCommand::Recorder { min_tets, duration, json, out } } => bench_recorder::run(min_tets, duration, json, &out),
+        Command::Bench { command: BenchCommand::Recorder { min_tets, duration, localise, json, out } } => bench_recorder::run(min_tets, duration, localise, json, &out),
         Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
     }
 }
