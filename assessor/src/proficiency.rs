@@ -5,8 +5,11 @@
 //! finite values `x_i` are taken; outliers with `|z_i| = |x_i - mean| / sd > 1.96` are removed
 //! (one pass, on the mean and sample SD of all values); of the rest the mean `mu` and sample
 //! SD `sigma` give the limits: `mu + k sigma` above for lower-is-better metrics, `mu - k sigma`
-//! below for higher-is-better ones, both for two-sided ones (`k` default 2). Metrics with fewer
-//! than 2 expert values get no threshold.
+//! below for higher-is-better ones (`k` default 2). Two-sided metrics are signed errors against
+//! the plan (cut length and depth minus planned), whose ideal is 0: their window is the
+//! *expert band* `[min(mu, 0), max(mu, 0)]` widened by `k sigma` on both sides, so a cut closer
+//! to the plan than the experts' never fails (experts who cut 2.3 mm deeper than planned do not
+//! make an exact depth a fail). Metrics with fewer than 2 expert values get no threshold.
 //!
 //! **Pass.** An attempt passes a metric when its value is within the limits (inclusive); a
 //! missing value fails. It passes overall when it passes every thresholded metric (and there
@@ -15,8 +18,10 @@
 //!
 //! **Score.** Per metric, the distance to the limit in units of the expert margin
 //! `|limit - mu|`: lower-is-better `s = (upper - x) / (upper - mu)`, higher-is-better
-//! `s = (x - lower) / (mu - lower)`, two-sided `s = 1 - |x - mu| / (upper - mu)`; so `s = 1` at
-//! the expert mean, `0` at the threshold, negative beyond; clamped to `[-1, 1]` (a missing
+//! `s = (x - lower) / (mu - lower)`, two-sided `s = 1 - d / m` with `d` the distance from `x` to
+//! the expert band `[a, b]` and `m` the margin on that side (`upper - b` or `a - lower`); so
+//! `s = 1` at the expert mean (and, two-sided, anywhere between it and the plan), `0` at the
+//! threshold, negative beyond; clamped to `[-1, 1]` (a missing
 //! value is `-1`). The overall score is the mean of `s` over the thresholded metrics: in
 //! `[-1, 1]`, higher is better, an attempt at the expert mean scores 1, one on every threshold
 //! 0, and `score >= 0` is necessary (not sufficient) for a pass. (A degenerate margin, all
@@ -59,14 +64,9 @@ pub struct Threshold {
 
 impl Threshold {
     /// A hand-set threshold: the reference (expert-like) value and the limit on the metric's
-    /// bad side (two-sided: symmetric about the reference).
+    /// bad side (two-sided: the margin on both sides of the expert band).
     pub fn fixed(key: &str, better: Better, reference: f64, limit: f64) -> Self {
-        let margin = (limit - reference).abs();
-        let (lower, upper) = match better {
-            Better::LowerIsBetter => (None, Some(reference + margin)),
-            Better::HigherIsBetter => (Some(reference - margin), None),
-            Better::TwoSided => (Some(reference - margin), Some(reference + margin)),
-        };
+        let (lower, upper) = limits(better, reference, (limit - reference).abs());
         Self { key: key.into(), better, mean: reference, sd: 0.0, n_experts: 0, lower, upper }
     }
 
@@ -83,12 +83,40 @@ impl Threshold {
         let raw = match (self.better, self.lower, self.upper) {
             (Better::LowerIsBetter, _, Some(u)) => ratio(u - value, u - self.mean),
             (Better::HigherIsBetter, Some(l), _) => ratio(value - l, self.mean - l),
-            (Better::TwoSided, _, Some(u)) => 1.0 - ratio(value - self.mean, u - self.mean).abs(),
-            (Better::TwoSided, Some(l), None) => 1.0 - ratio(self.mean - value, self.mean - l).abs(),
+            (Better::TwoSided, l, u) => {
+                let (a, b) = expert_band(self.mean);
+                // the margin on each side (a side without a limit borrows the other's)
+                let above = u.map(|u| u - b).or(l.map(|l| a - l));
+                let below = l.map(|l| a - l).or(above);
+                match (value > b, value < a) {
+                    (true, _) => above.map_or(1.0, |m| 1.0 - ratio(value - b, m)),
+                    (_, true) => below.map_or(1.0, |m| 1.0 - ratio(a - value, m)),
+                    _ => 1.0,
+                }
+            }
             _ => 1.0,
         };
         let raw = if raw.is_finite() { raw } else if self.passes(value) { 1.0 } else { -1.0 };
         raw.clamp(-1.0, 1.0)
+    }
+}
+
+/// The expert band of a two-sided metric (a signed error, ideal 0) with expert mean `mu`:
+/// `[min(mu, 0), max(mu, 0)]`.
+fn expert_band(mu: f64) -> (f64, f64) {
+    (mu.min(0.0), mu.max(0.0))
+}
+
+/// The limits `margin` beyond the reference `mu` on the metric's bad side (two-sided: beyond
+/// the expert band on both sides).
+fn limits(better: Better, mu: f64, margin: f64) -> (Option<f64>, Option<f64>) {
+    match better {
+        Better::LowerIsBetter => (None, Some(mu + margin)),
+        Better::HigherIsBetter => (Some(mu - margin), None),
+        Better::TwoSided => {
+            let (a, b) = expert_band(mu);
+            (Some(a - margin), Some(b + margin))
+        }
     }
 }
 
@@ -183,11 +211,7 @@ impl Thresholds {
             let kept = without_outliers(&x);
             let (mean, sd) = mean_sd(&kept);
             let sd = sd.max(sd_floor(m.unit, mean));
-            let (lower, upper) = match m.better {
-                Better::LowerIsBetter => (None, Some(mean + k * sd)),
-                Better::HigherIsBetter => (Some(mean - k * sd), None),
-                Better::TwoSided => (Some(mean - k * sd), Some(mean + k * sd)),
-            };
+            let (lower, upper) = limits(m.better, mean, k * sd);
             metrics.push(Threshold { key: m.key.into(), better: m.better, mean, sd, n_experts: kept.len(), lower, upper });
         }
         Ok(Self { k, metrics })
@@ -390,6 +414,26 @@ mod tests {
         let bad = t.verdict(&attempt(&[("lateral_mean_m", 100.0), ("fraction_cut_in_tolerance", 0.0)]));
         assert!(!bad.pass);
         assert!((bad.score + 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_cut_closer_to_the_plan_than_the_experts_passes_two_sided() {
+        // experts cut 2.2-2.4 mm deeper than planned: mean 2.3 mm, sd 0.1 mm (floor 0.2 mm)
+        let experts: Vec<Vec<MetricValue>> = [2.2e-3, 2.3e-3, 2.4e-3].iter().map(|&d| attempt(&[("depth_error_m", d)])).collect();
+        let t = Thresholds::from_experts(&experts, 2.0).unwrap();
+        let depth = &t.metrics[0];
+        assert!((depth.sd - 2e-4).abs() < 1e-15, "{depth:?}");
+        // the window reaches from 0.4 mm too shallow to 0.4 mm beyond the experts
+        assert!((depth.lower.unwrap() + 4e-4).abs() < 1e-15 && (depth.upper.unwrap() - 2.7e-3).abs() < 1e-15, "{depth:?}");
+        for (value, score) in [(0.0, 1.0), (1e-3, 1.0), (2.3e-3, 1.0), (2.5e-3, 0.5), (2.7e-3, 0.0), (-2e-4, 0.5), (-4e-4, 0.0)] {
+            assert!(depth.passes(value), "{value}");
+            assert!((depth.score(value) - score).abs() < 1e-9, "{value}: {} (expected {score})", depth.score(value));
+        }
+        assert!(!depth.passes(2.8e-3) && !depth.passes(-5e-4));
+        assert!(depth.score(2.8e-3) < 0.0 && depth.score(-5e-4) < 0.0);
+        // a band on the other side (experts too shallow) mirrors it
+        let shallow = Threshold { mean: -2.3e-3, lower: Some(-2.7e-3), upper: Some(4e-4), ..depth.clone() };
+        assert!((shallow.score(-1e-3) - 1.0).abs() < 1e-12 && (shallow.score(2e-4) - 0.5).abs() < 1e-9);
     }
 
     #[test]
