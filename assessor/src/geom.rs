@@ -1,54 +1,47 @@
-//! Small vector helpers on `[f64; 3]` and polylines, shared by the metrics.
+//! Geometry the metrics share that nalgebra does not provide: polylines (closest point,
+//! length, point at arc length), projection onto a plane, and a unit vector and angle that
+//! are `None` for degenerate input. Positions are [`Point3<f64>`], directions
+//! [`Vector3<f64>`]; the crate's public and serialized data stay `[f64; 3]` and are converted
+//! where the metrics read them (`Point3::from(a)`, `Vector3::from(a)`, `.into()`).
 
-pub(crate) type V3 = [f64; 3];
+use nalgebra::{Point3, Vector3};
 
-pub(crate) fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub(crate) fn add(a: V3, b: V3) -> V3 {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-pub(crate) fn scale(a: V3, s: f64) -> V3 {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-pub(crate) fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub(crate) fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-pub(crate) fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
-}
-pub(crate) fn dist(a: V3, b: V3) -> f64 {
-    norm(sub(a, b))
-}
 /// `a / |a|`, or `None` for a (nearly) zero or non-finite vector.
-pub(crate) fn unit(a: V3) -> Option<V3> {
-    let n = norm(a);
-    (n > 1e-12 && n.is_finite()).then(|| scale(a, 1.0 / n))
+///
+/// Unlike [`Vector3::try_normalize`], a vector with an infinite or NaN component gives `None`
+/// rather than a non-finite "unit" vector.
+pub(crate) fn unit(a: Vector3<f64>) -> Option<Vector3<f64>> {
+    let n = a.norm();
+    (n > 1e-12 && n.is_finite()).then(|| a * (1.0 / n))
 }
+
+/// Whether every number of `a` is finite.
 pub(crate) fn finite(a: &[f64]) -> bool {
     a.iter().all(|x| x.is_finite())
 }
-/// The angle between two vectors (rad); `None` if either is zero.
-pub(crate) fn angle(a: V3, b: V3) -> Option<f64> {
+
+/// The angle between two vectors (rad), `atan2(|a x b|, a . b)` of their unit vectors; `None`
+/// if either is (nearly) zero or not finite.
+///
+/// Not [`Vector3::angle`]: that takes the `acos` of the cosine, which loses precision near 0
+/// and pi (~1e-8 rad), and gives 0 for a zero vector.
+pub(crate) fn angle(a: Vector3<f64>, b: Vector3<f64>) -> Option<f64> {
     let (a, b) = (unit(a)?, unit(b)?);
-    Some(norm(cross(a, b)).atan2(dot(a, b)))
+    Some(a.cross(&b).norm().atan2(a.dot(&b)))
 }
 
 /// Projection onto the plane through the origin perpendicular to the unit normal `n`:
 /// `P(x) = x - (x . n) n`. Distances between projected points are distances "seen from above".
-pub(crate) fn project(x: V3, n: V3) -> V3 {
-    sub(x, scale(n, dot(x, n)))
+pub(crate) fn project(x: Point3<f64>, n: &Vector3<f64>) -> Point3<f64> {
+    x - n * x.coords.dot(n)
 }
 
 /// The closest point to `p` on segment `ab`: `(point, parameter in [0, 1])`.
-pub(crate) fn closest_on_segment(p: V3, a: V3, b: V3) -> (V3, f64) {
-    let ab = sub(b, a);
-    let l2 = dot(ab, ab);
-    let t = if l2 > 0.0 { (dot(sub(p, a), ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
-    (add(a, scale(ab, t)), t)
+pub(crate) fn closest_on_segment(p: Point3<f64>, a: Point3<f64>, b: Point3<f64>) -> (Point3<f64>, f64) {
+    let ab = b - a;
+    let l2 = ab.norm_squared();
+    let t = if l2 > 0.0 { ((p - a).dot(&ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    (a + ab * t, t)
 }
 
 /// Where `p` is closest to a polyline: the distance.
@@ -58,10 +51,10 @@ pub(crate) struct OnLine {
 }
 
 /// The closest point to `p` on the polyline `line` (at least 2 points).
-pub(crate) fn closest_on_polyline(p: V3, line: &[V3]) -> OnLine {
+pub(crate) fn closest_on_polyline(p: Point3<f64>, line: &[Point3<f64>]) -> OnLine {
     let mut best = OnLine { distance: f64::INFINITY };
     for w in line.windows(2) {
-        let d = dist(p, closest_on_segment(p, w[0], w[1]).0);
+        let d = nalgebra::distance(&p, &closest_on_segment(p, w[0], w[1]).0);
         if d < best.distance {
             best = OnLine { distance: d };
         }
@@ -70,25 +63,25 @@ pub(crate) fn closest_on_polyline(p: V3, line: &[V3]) -> OnLine {
 }
 
 /// The length of a polyline.
-pub(crate) fn polyline_length(line: &[V3]) -> f64 {
-    line.windows(2).map(|w| dist(w[0], w[1])).sum()
+pub(crate) fn polyline_length(line: &[Point3<f64>]) -> f64 {
+    line.windows(2).map(|w| nalgebra::distance(&w[0], &w[1])).sum()
 }
 
 /// The point at arc length `s` along the polyline (clamped to its ends) and the unit tangent
-/// of the segment it is on.
-pub(crate) fn point_at_arc(line: &[V3], s: f64) -> (V3, V3) {
+/// of the segment it is on (+x for a zero-length segment).
+pub(crate) fn point_at_arc(line: &[Point3<f64>], s: f64) -> (Point3<f64>, Vector3<f64>) {
     let mut acc = 0.0;
     let last = line.len().saturating_sub(2);
     for (i, w) in line.windows(2).enumerate() {
-        let len = dist(w[0], w[1]);
+        let len = nalgebra::distance(&w[0], &w[1]);
         if acc + len >= s || i == last {
             let t = if len > 0.0 { ((s - acc) / len).clamp(0.0, 1.0) } else { 0.0 };
-            let tangent = unit(sub(w[1], w[0])).unwrap_or([1.0, 0.0, 0.0]);
-            return (add(w[0], scale(sub(w[1], w[0]), t)), tangent);
+            let tangent = unit(w[1] - w[0]).unwrap_or_else(Vector3::x);
+            return (w[0] + (w[1] - w[0]) * t, tangent);
         }
         acc += len;
     }
-    (line[0], [1.0, 0.0, 0.0])
+    (line[0], Vector3::x())
 }
 
 /// Mean, RMS and max of a non-empty list.
@@ -106,14 +99,25 @@ mod tests {
 
     #[test]
     fn polyline_projection_and_arc() {
-        let line = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
-        let on = closest_on_polyline([1.5, 0.5, 0.0], &line);
+        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(1.0, 1.0, 0.0)];
+        let on = closest_on_polyline(Point3::new(1.5, 0.5, 0.0), &line);
         assert!((on.distance - 0.5).abs() < 1e-12);
         assert!((polyline_length(&line) - 2.0).abs() < 1e-12);
         let (p, t) = point_at_arc(&line, 1.25);
-        assert!(dist(p, [1.0, 0.25, 0.0]) < 1e-12);
-        assert!(dist(t, [0.0, 1.0, 0.0]) < 1e-12);
-        assert!((angle([1.0, 0.0, 0.0], [1.0, 1.0, 0.0]).unwrap() - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
-        assert_eq!(project([1.0, 2.0, 3.0], [0.0, 0.0, 1.0]), [1.0, 2.0, 0.0]);
+        assert!(nalgebra::distance(&p, &Point3::new(1.0, 0.25, 0.0)) < 1e-12);
+        assert!((t - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-12);
+        assert!((angle(Vector3::new(1.0, 0.0, 0.0), Vector3::new(1.0, 1.0, 0.0)).unwrap() - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
+        assert_eq!(project(Point3::new(1.0, 2.0, 3.0), &Vector3::new(0.0, 0.0, 1.0)), Point3::new(1.0, 2.0, 0.0));
+    }
+
+    #[test]
+    fn unit_and_angle_reject_zero_and_non_finite_vectors() {
+        assert!((unit(Vector3::new(0.0, 3.0, 4.0)).unwrap() - Vector3::new(0.0, 0.6, 0.8)).norm() < 1e-15);
+        assert_eq!(unit(Vector3::zeros()), None);
+        assert_eq!(unit(Vector3::new(1e-13, 0.0, 0.0)), None);
+        assert_eq!(unit(Vector3::new(f64::NAN, 0.0, 1.0)), None);
+        assert_eq!(unit(Vector3::new(f64::INFINITY, 0.0, 1.0)), None);
+        assert_eq!(angle(Vector3::zeros(), Vector3::x()), None);
+        assert!((angle(Vector3::x(), -Vector3::x()).unwrap() - std::f64::consts::PI).abs() < 1e-15);
     }
 }

@@ -2,10 +2,11 @@
 
 use std::path::Path;
 
+use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{AssessError, Result};
-use crate::geom::{self, V3};
+use crate::geom;
 
 /// The plan an attempt is measured against (SI units: metres).
 ///
@@ -22,27 +23,27 @@ pub struct ExpertPlan {
     #[serde(default)]
     pub scene: Option<String>,
     /// Where the incision starts, on the surface (m).
-    pub entry_m: V3,
+    pub entry_m: [f64; 3],
     /// Where it ends, on the surface (m).
-    pub exit_m: V3,
+    pub exit_m: [f64; 3],
     /// The planned line on the surface from entry to exit (m), at least 2 points. Empty means
     /// the straight segment `[entry_m, exit_m]`.
     #[serde(default)]
-    pub incision_m: Vec<V3>,
+    pub incision_m: Vec<[f64; 3]>,
     /// The planned depth below the surface (m), > 0.
     pub depth_m: f64,
     /// The surface's outward normal at the incision (unit after normalisation; default +z).
     #[serde(default = "default_normal")]
-    pub normal: V3,
+    pub normal: [f64; 3],
     /// The direction the blade moves as it enters the tissue (default `-normal`).
     #[serde(default)]
-    pub approach_dir: Option<V3>,
+    pub approach_dir: Option<[f64; 3]>,
     /// Points on the target that must become visible through the opening (m); may be empty
     /// (then the visibility metric is missing).
     #[serde(default)]
-    pub target_m: Vec<V3>,
+    pub target_m: Vec<[f64; 3]>,
     /// Where the target is seen from (m).
-    pub viewpoint_m: V3,
+    pub viewpoint_m: [f64; 3],
     /// How far from the planned line still counts as on it (m), default 2 mm.
     #[serde(default = "default_tolerance")]
     pub tolerance_m: f64,
@@ -54,7 +55,7 @@ pub struct ExpertPlan {
     pub force_limit_n: f64,
 }
 
-fn default_normal() -> V3 {
+fn default_normal() -> [f64; 3] {
     [0.0, 0.0, 1.0]
 }
 fn default_tolerance() -> f64 {
@@ -111,9 +112,10 @@ impl ExpertPlan {
             self.incision_m = vec![self.entry_m, self.exit_m];
         }
         self.check()?;
-        self.normal = geom::unit(self.normal).ok_or_else(|| AssessError::InvalidPlan("zero normal".into()))?;
-        let approach = self.approach_dir.unwrap_or(geom::scale(self.normal, -1.0));
-        self.approach_dir = Some(geom::unit(approach).ok_or_else(|| AssessError::InvalidPlan("zero approach direction".into()))?);
+        let normal = geom::unit(self.normal.into()).ok_or_else(|| AssessError::InvalidPlan("zero normal".into()))?;
+        self.normal = normal.into();
+        let approach = self.approach_dir.map_or(-normal, Vector3::from);
+        self.approach_dir = Some(geom::unit(approach).ok_or_else(|| AssessError::InvalidPlan("zero approach direction".into()))?.into());
         Ok(self)
     }
 
@@ -133,13 +135,13 @@ impl ExpertPlan {
         if self.incision_m.len() < 2 {
             return bad("the incision line needs at least 2 points");
         }
-        if geom::polyline_length(&self.incision_m) < 1e-3 {
+        if geom::polyline_length(&self.line()) < 1e-3 {
             return bad("the incision line is shorter than 1 mm");
         }
-        if geom::unit(self.normal).is_none() {
+        if geom::unit(self.normal.into()).is_none() {
             return bad("the normal is zero");
         }
-        if self.approach_dir.is_some_and(|a| geom::unit(a).is_none()) {
+        if self.approach_dir.is_some_and(|a| geom::unit(a.into()).is_none()) {
             return bad("the approach direction is zero");
         }
         if !(self.depth_m > 0.0) {
@@ -159,12 +161,17 @@ impl ExpertPlan {
 
     /// The planned incision's length along its polyline (m).
     pub fn length_m(&self) -> f64 {
-        geom::polyline_length(&self.incision_m)
+        geom::polyline_length(&self.line())
+    }
+
+    /// The planned line `incision_m` as points.
+    pub(crate) fn line(&self) -> Vec<Point3<f64>> {
+        self.incision_m.iter().map(|&p| Point3::from(p)).collect()
     }
 
     /// The approach direction (unit), `-normal` unless given.
-    pub fn approach(&self) -> V3 {
-        self.approach_dir.and_then(geom::unit).unwrap_or(geom::scale(self.normal, -1.0))
+    pub fn approach(&self) -> [f64; 3] {
+        self.approach_dir.and_then(|a| geom::unit(a.into())).unwrap_or(-Vector3::from(self.normal)).into()
     }
 }
 

@@ -18,12 +18,13 @@
 //!   the opening seen along `n`; approximate (the stations are ~1.5 mm apart on the 60 mm
 //!   plan, ends of the wound between stations are linearly interpolated).
 
+use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh;
 
 use crate::error::{AssessError, Result};
-use crate::geom::{self, V3};
+use crate::geom;
 use crate::input::SurfaceMesh;
 use crate::metrics::Values;
 use crate::plan::ExpertPlan;
@@ -37,8 +38,8 @@ pub const OPENING_STATIONS: usize = 41;
 /// Spacing of the rays across the line (m).
 pub const OPENING_STEP_M: f64 = 1e-4;
 
-fn to_parry(v: V3) -> PVec {
-    PVec::new(v[0], v[1], v[2])
+fn to_parry(v: Vector3<f64>) -> PVec {
+    PVec::new(v.x, v.y, v.z)
 }
 
 /// The surface as a parry triangle mesh; errors on an empty mesh, non-finite vertices or
@@ -54,7 +55,7 @@ pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
     if let Some(i) = surface.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= n)) {
         return Err(AssessError::InvalidInput(format!("surface triangle {i} refers to a missing vertex")));
     }
-    let vertices: Vec<PVec> = surface.vertices_m.iter().map(|&v| to_parry(v)).collect();
+    let vertices: Vec<PVec> = surface.vertices_m.iter().map(|&v| PVec::from_array(v)).collect();
     TriMesh::new(vertices, surface.triangles.clone()).map_err(|e| AssessError::InvalidInput(format!("surface: {e}")))
 }
 
@@ -64,28 +65,30 @@ pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
 /// mesh) can slip between two triangles. So each target is tested with three rays, to the
 /// point itself and to two points [`VISIBILITY_JITTER_M`] away from it across the ray, and is
 /// visible only when none of them hits: real openings are much wider than the jitter.
-pub fn visible_fraction(mesh: &TriMesh, eye: V3, targets: &[V3]) -> Option<f64> {
+pub fn visible_fraction(mesh: &TriMesh, eye: [f64; 3], targets: &[[f64; 3]]) -> Option<f64> {
     if targets.is_empty() {
         return None;
     }
-    let clear = |p: V3| {
-        let d = geom::sub(p, eye);
-        let len = geom::norm(d);
+    let eye = Point3::from(eye);
+    let clear = |p: Point3<f64>| {
+        let d = p - eye;
+        let len = d.norm();
         if len <= VISIBILITY_EPS_M {
             return true;
         }
-        let ray = Ray::new(to_parry(eye), to_parry(d));
+        let ray = Ray::new(to_parry(eye.coords), to_parry(d));
         mesh.cast_local_ray(&ray, 1.0 - VISIBILITY_EPS_M / len, false).is_none()
     };
     let visible = targets
         .iter()
-        .filter(|&&p| {
-            let d = geom::sub(p, eye);
-            let helper = if d[0].abs() < 0.9 * geom::norm(d) { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
-            let (Some(u), Some(v)) = (geom::unit(geom::cross(d, helper)), geom::unit(geom::cross(d, geom::cross(d, helper)))) else {
+        .map(|&p| Point3::from(p))
+        .filter(|&p| {
+            let d = p - eye;
+            let helper = if d.x.abs() < 0.9 * d.norm() { Vector3::x() } else { Vector3::y() };
+            let (Some(u), Some(v)) = (geom::unit(d.cross(&helper)), geom::unit(d.cross(&d.cross(&helper)))) else {
                 return clear(p);
             };
-            clear(p) && clear(geom::add(p, geom::scale(u, VISIBILITY_JITTER_M))) && clear(geom::add(p, geom::scale(v, VISIBILITY_JITTER_M)))
+            clear(p) && clear(p + u * VISIBILITY_JITTER_M) && clear(p + v * VISIBILITY_JITTER_M)
         })
         .count();
     Some(visible as f64 / targets.len() as f64)
@@ -94,8 +97,9 @@ pub fn visible_fraction(mesh: &TriMesh, eye: V3, targets: &[V3]) -> Option<f64> 
 /// The opening's width (widest station, m), area (m^2) and the per-station widths
 /// `(arc length along the plan, width)`.
 pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>) {
-    let n = plan.normal;
-    let length = geom::polyline_length(&plan.incision_m);
+    let n = Vector3::from(plan.normal);
+    let line = plan.line();
+    let length = geom::polyline_length(&line);
     let half_row = (3.0 * plan.corridor_half_width_m).max(0.01);
     let rays = (half_row / OPENING_STEP_M).round() as i64;
     let above = 0.05 + plan.depth_m;
@@ -103,15 +107,15 @@ pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>)
     let mut widths = Vec::with_capacity(OPENING_STATIONS);
     for k in 0..OPENING_STATIONS {
         let s = length * k as f64 / (OPENING_STATIONS - 1) as f64;
-        let (q, tangent) = geom::point_at_arc(&plan.incision_m, s);
-        let Some(lateral) = geom::unit(geom::cross(n, tangent)) else {
+        let (q, tangent) = geom::point_at_arc(&line, s);
+        let Some(lateral) = geom::unit(n.cross(&tangent)) else {
             widths.push((s, 0.0));
             continue;
         };
         let hits: Vec<Option<f64>> = (-rays..=rays)
             .map(|i| {
-                let origin = geom::add(geom::add(q, geom::scale(lateral, i as f64 * OPENING_STEP_M)), geom::scale(n, above));
-                let ray = Ray::new(to_parry(origin), to_parry(geom::scale(n, -1.0)));
+                let origin = q + lateral * (i as f64 * OPENING_STEP_M) + n * above;
+                let ray = Ray::new(to_parry(origin.coords), to_parry(-n));
                 mesh.cast_local_ray(&ray, max_toi, false).map(|toi| toi - above)
             })
             .collect();

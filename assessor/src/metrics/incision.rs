@@ -23,8 +23,10 @@
 //! - approach error: the angle between the tip's displacement over the last 5 mm of travel
 //!   before the first cut and the plan's approach direction (deg).
 
+use nalgebra::{Point3, Vector3};
+
 use crate::error::{AssessError, Result};
-use crate::geom::{self, V3};
+use crate::geom;
 use crate::input::{CutSample, PoseSample};
 use crate::metrics::Values;
 use crate::plan::ExpertPlan;
@@ -53,19 +55,19 @@ pub struct IncisionMetrics {
 
 /// Where the blade of `c` crossed the surface: `tip + depth_m * edge_dir` when the depth is
 /// finite and non-negative and `edge_dir` a finite non-zero vector, else the tip.
-pub fn trace_point(c: &CutSample) -> V3 {
-    match geom::unit(c.edge_dir) {
-        Some(e) if c.depth_m.is_finite() && c.depth_m >= 0.0 => geom::add(c.tip_m, geom::scale(e, c.depth_m)),
+pub fn trace_point(c: &CutSample) -> [f64; 3] {
+    match geom::unit(c.edge_dir.into()) {
+        Some(e) if c.depth_m.is_finite() && c.depth_m >= 0.0 => (Point3::from(c.tip_m) + e * c.depth_m).into(),
         _ => c.tip_m,
     }
 }
 
 /// The trace's strokes (projected trace points), split where samples are more than `gap` apart.
-fn strokes(tips: &[V3], gap: f64) -> Vec<Vec<V3>> {
-    let mut out: Vec<Vec<V3>> = Vec::new();
+fn strokes(tips: &[Point3<f64>], gap: f64) -> Vec<Vec<Point3<f64>>> {
+    let mut out: Vec<Vec<Point3<f64>>> = Vec::new();
     for &p in tips {
         match out.last_mut() {
-            Some(s) if s.last().is_some_and(|&q| geom::dist(p, q) <= gap) => s.push(p),
+            Some(s) if s.last().is_some_and(|q| nalgebra::distance(&p, q) <= gap) => s.push(p),
             _ => out.push(vec![p]),
         }
     }
@@ -73,14 +75,14 @@ fn strokes(tips: &[V3], gap: f64) -> Vec<Vec<V3>> {
 }
 
 /// Distance from `p` to the nearest point of any stroke.
-fn distance_to_strokes(p: V3, strokes: &[Vec<V3>]) -> f64 {
+fn distance_to_strokes(p: Point3<f64>, strokes: &[Vec<Point3<f64>>]) -> f64 {
     let mut best = f64::INFINITY;
     for s in strokes {
         if s.len() == 1 {
-            best = best.min(geom::dist(p, s[0]));
+            best = best.min(nalgebra::distance(&p, &s[0]));
         }
         for w in s.windows(2) {
-            best = best.min(geom::dist(p, geom::closest_on_segment(p, w[0], w[1]).0));
+            best = best.min(nalgebra::distance(&p, &geom::closest_on_segment(p, w[0], w[1]).0));
         }
     }
     best
@@ -90,19 +92,21 @@ fn distance_to_strokes(p: V3, strokes: &[Vec<V3>]) -> f64 {
 /// the planned line's point nearest to the tip seen from above: an approximation of
 /// [`CutSample::depth_m`] for recorders without the deformed surface (exact for a line on a
 /// flat surface).
-pub fn depth_below_plan(plan: &ExpertPlan, tip: V3) -> f64 {
-    let n = plan.normal;
-    let p = geom::project(tip, n);
-    let mut best = (f64::INFINITY, plan.incision_m[0]);
+pub fn depth_below_plan(plan: &ExpertPlan, tip: [f64; 3]) -> f64 {
+    let n = Vector3::from(plan.normal);
+    let tip = Point3::from(tip);
+    let p = geom::project(tip, &n);
+    let mut best = (f64::INFINITY, Point3::from(plan.incision_m[0]));
     for w in plan.incision_m.windows(2) {
+        let (a, b) = (Point3::from(w[0]), Point3::from(w[1]));
         // the nearest point seen from above, then the same parameter on the 3D segment
-        let (q, t) = geom::closest_on_segment(p, geom::project(w[0], n), geom::project(w[1], n));
-        let d = geom::dist(p, q);
+        let (q, t) = geom::closest_on_segment(p, geom::project(a, &n), geom::project(b, &n));
+        let d = nalgebra::distance(&p, &q);
         if d < best.0 {
-            best = (d, geom::add(w[0], geom::scale(geom::sub(w[1], w[0]), t)));
+            best = (d, a + (b - a) * t);
         }
     }
-    geom::dot(geom::sub(best.1, tip), n)
+    (best.1 - tip).dot(&n)
 }
 
 /// The incision metrics of `cuts` (at least 2, finite tips) against `plan`.
@@ -115,9 +119,10 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     }
     let mut cuts = cuts.to_vec();
     cuts.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    let n = plan.normal;
-    let tips: Vec<V3> = cuts.iter().map(|c| geom::project(trace_point(c), n)).collect();
-    let line: Vec<V3> = plan.incision_m.iter().map(|&p| geom::project(p, n)).collect();
+    let n = Vector3::from(plan.normal);
+    let tips: Vec<Point3<f64>> = cuts.iter().map(|c| geom::project(trace_point(c).into(), &n)).collect();
+    let line: Vec<Point3<f64>> = plan.incision_m.iter().map(|&p| geom::project(p.into(), &n)).collect();
+    let (entry, exit) = (geom::project(plan.entry_m.into(), &n), geom::project(plan.exit_m.into(), &n));
     let (first, last) = (tips[0], tips[tips.len() - 1]);
     let strokes = strokes(&tips, STROKE_GAP_M);
     let cut_length_m: f64 = strokes.iter().map(|s| geom::polyline_length(s)).sum();
@@ -136,8 +141,7 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
         .count();
     let fraction_cut_in_tolerance = covered as f64 / intervals as f64;
 
-    let planned_dir = geom::sub(geom::project(plan.exit_m, n), geom::project(plan.entry_m, n));
-    let direction_error_deg = geom::angle(geom::sub(last, first), planned_dir).map_or(180.0, f64::to_degrees);
+    let direction_error_deg = geom::angle(last - first, exit - entry).map_or(180.0, f64::to_degrees);
 
     let depths: Vec<f64> = cuts.iter().map(|c| c.depth_m - plan.depth_m).collect();
     let (depth_error_m, depth_rms_error_m) = if geom::finite(&depths) {
@@ -148,8 +152,8 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     };
 
     Ok(IncisionMetrics {
-        entry_error_m: geom::dist(first, geom::project(plan.entry_m, n)),
-        exit_error_m: geom::dist(last, geom::project(plan.exit_m, n)),
+        entry_error_m: nalgebra::distance(&first, &entry),
+        exit_error_m: nalgebra::distance(&last, &exit),
         cut_length_m,
         length_error_m: cut_length_m - plan_length,
         lateral_mean_m,
@@ -167,15 +171,16 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
 /// with non-finite ones, or if the tip barely moved.
 pub fn approach_error_deg(plan: &ExpertPlan, poses: &[PoseSample], t_first_cut: f64) -> Option<f64> {
     let before: Vec<&PoseSample> = poses.iter().filter(|p| p.t_s <= t_first_cut).collect();
-    let end = before.last()?.tip_m;
+    let end = Point3::from(before.last()?.tip_m);
     let mut travelled = 0.0;
     let mut start = end;
     for w in before.windows(2).rev() {
         if !geom::finite(&w[0].tip_m) || !geom::finite(&w[1].tip_m) {
             return None;
         }
-        travelled += geom::dist(w[0].tip_m, w[1].tip_m);
-        start = w[0].tip_m;
+        let (a, b) = (Point3::from(w[0].tip_m), Point3::from(w[1].tip_m));
+        travelled += nalgebra::distance(&a, &b);
+        start = a;
         if travelled >= APPROACH_LENGTH_M {
             break;
         }
@@ -183,7 +188,7 @@ pub fn approach_error_deg(plan: &ExpertPlan, poses: &[PoseSample], t_first_cut: 
     if travelled < 0.2 * APPROACH_LENGTH_M {
         return None;
     }
-    geom::angle(geom::sub(end, start), plan.approach()).map(f64::to_degrees)
+    geom::angle(end - start, plan.approach().into()).map(f64::to_degrees)
 }
 
 pub(crate) fn assess(plan: &ExpertPlan, cuts: &[CutSample], poses: &[PoseSample], values: &mut Values) {

@@ -17,8 +17,10 @@
 //! - smoothness: LDLJ and SPARC ([`smoothness`]) of the whole speed profile, and their mean
 //!   over the movements (each movement's own speed profile).
 
+use nalgebra::{Point3, Vector3};
+
 use crate::error::{AssessError, Result};
-use crate::geom::{self, V3};
+use crate::geom;
 use crate::input::PoseSample;
 use crate::metrics::Values;
 use crate::metrics::smoothness;
@@ -118,12 +120,12 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
         })
         .collect();
     let n = coords[0].len();
-    let pos = |k: usize| -> V3 { [coords[0][k], coords[1][k], coords[2][k]] };
+    let pos = |k: usize| Point3::new(coords[0][k], coords[1][k], coords[2][k]);
     let vel: Vec<Vec<f64>> = coords.iter().map(|x| smoothness::derivative(x, dt)).collect();
-    let speed: Vec<f64> = (0..n).map(|k| geom::norm([vel[0][k], vel[1][k], vel[2][k]])).collect();
+    let speed: Vec<f64> = (0..n).map(|k| Vector3::new(vel[0][k], vel[1][k], vel[2][k]).norm()).collect();
 
-    let path_length_m: f64 = (1..n).map(|k| geom::dist(pos(k), pos(k - 1))).sum();
-    let straight = geom::dist(pos(n - 1), pos(0));
+    let path_length_m: f64 = (1..n).map(|k| nalgebra::distance(&pos(k), &pos(k - 1))).sum();
+    let straight = nalgebra::distance(&pos(n - 1), &pos(0));
     let economy_of_motion = (path_length_m > 1e-9).then(|| (straight / path_length_m).min(1.0));
     let idle_time_s = (1..n).filter(|&k| 0.5 * (speed[k] + speed[k - 1]) < p.idle_speed_m_s).count() as f64 * dt;
     // the task time: from the first to the last moment the tip moves (a recording that runs
@@ -238,7 +240,7 @@ pub(crate) fn assess(poses: &[PoseSample], p: &PathParams, values: &mut Values) 
 mod tests {
     use super::*;
 
-    fn pose(t: f64, x: V3, angle_z: f64) -> PoseSample {
+    fn pose(t: f64, x: [f64; 3], angle_z: f64) -> PoseSample {
         let h = 0.5 * angle_z;
         PoseSample { t_s: t, tip_m: x, quat_wxyz: [h.cos(), 0.0, 0.0, h.sin()], blade_engaged: false }
     }

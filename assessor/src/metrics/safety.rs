@@ -13,8 +13,10 @@
 //!   the sum of each outside piece's length times the mean recorded depth of its segment's
 //!   two cut samples (the cut face's area).
 
+use nalgebra::{Point3, Vector3};
+
 use crate::error::{AssessError, Result};
-use crate::geom::{self, V3};
+use crate::geom;
 use crate::input::{CutSample, ForceSample};
 use crate::metrics::Values;
 use crate::metrics::incision::{STROKE_GAP_M, trace_point};
@@ -39,7 +41,7 @@ pub fn forces(forces: &[ForceSample], limit_n: f64) -> Result<ForceMetrics> {
     }
     let mut f = forces.to_vec();
     f.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    let mag: Vec<f64> = f.iter().map(|s| geom::norm(s.force_newtons)).collect();
+    let mag: Vec<f64> = f.iter().map(|s| Vector3::from(s.force_newtons).norm()).collect();
     let touching: Vec<f64> = f.iter().zip(&mag).filter(|(s, _)| s.touching).map(|(_, m)| *m).collect();
     let mean_force_n = if touching.is_empty() { 0.0 } else { touching.iter().sum::<f64>() / touching.len() as f64 };
     let time_above_limit_s = (0..f.len() - 1).filter(|&k| mag[k] > limit_n).map(|k| f[k + 1].t_s - f[k].t_s).sum();
@@ -55,12 +57,12 @@ pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, O
     }
     let mut cuts = cuts.to_vec();
     cuts.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    let n = plan.normal;
-    let line: Vec<V3> = plan.incision_m.iter().map(|&p| geom::project(p, n)).collect();
+    let n = Vector3::from(plan.normal);
+    let line: Vec<Point3<f64>> = plan.incision_m.iter().map(|&p| geom::project(p.into(), &n)).collect();
     let (mut length, mut area, mut area_ok) = (0.0, 0.0, true);
     for w in cuts.windows(2) {
-        let (a, b) = (geom::project(trace_point(&w[0]), n), geom::project(trace_point(&w[1]), n));
-        let len = geom::dist(a, b);
+        let (a, b) = (geom::project(trace_point(&w[0]).into(), &n), geom::project(trace_point(&w[1]).into(), &n));
+        let len = nalgebra::distance(&a, &b);
         if len > STROKE_GAP_M {
             continue;
         }
@@ -68,7 +70,7 @@ pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, O
         let piece = len / pieces as f64;
         let out = (0..pieces)
             .filter(|&k| {
-                let mid = geom::add(a, geom::scale(geom::sub(b, a), (k as f64 + 0.5) / pieces as f64));
+                let mid = a + (b - a) * ((k as f64 + 0.5) / pieces as f64);
                 geom::closest_on_polyline(mid, &line).distance > plan.corridor_half_width_m
             })
             .count() as f64
