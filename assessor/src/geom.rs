@@ -67,6 +67,49 @@ pub(crate) fn polyline_length(line: &[Point3<f64>]) -> f64 {
     line.windows(2).map(|w| nalgebra::distance(&w[0], &w[1])).sum()
 }
 
+/// The arc-length coordinate along the polyline `line` (at least 2 points) of the point closest
+/// to `p`, with the polyline extended straight beyond both ends: before the start it is
+/// `(p - line_0) . t_0 <= 0`, past the end `L + (p - line_n) . t_n >= L` (`t` the end
+/// segments' unit tangents, `L` the length).
+pub(crate) fn arc_coordinate(p: Point3<f64>, line: &[Point3<f64>]) -> f64 {
+    let (mut best, mut s_best, mut acc) = (f64::INFINITY, 0.0, 0.0);
+    let last = line.len().saturating_sub(2);
+    for (i, w) in line.windows(2).enumerate() {
+        let len = nalgebra::distance(&w[0], &w[1]);
+        let (q, t) = closest_on_segment(p, w[0], w[1]);
+        let d = nalgebra::distance(&p, &q);
+        if d < best {
+            let tangent = unit(w[1] - w[0]).unwrap_or_else(Vector3::zeros);
+            s_best = match (i, t) {
+                (0, t) if t <= 0.0 => (p - w[0]).dot(&tangent),
+                (i, t) if i == last && t >= 1.0 => acc + len + (p - w[1]).dot(&tangent),
+                _ => acc + t * len,
+            };
+            best = d;
+        }
+        acc += len;
+    }
+    s_best
+}
+
+/// The measure of the union of the intervals `spans` (each `(a, b)` with `a <= b`).
+pub(crate) fn union_length(mut spans: Vec<(f64, f64)>) -> f64 {
+    spans.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut total = 0.0;
+    let mut current: Option<(f64, f64)> = None;
+    for (a, b) in spans {
+        current = match current {
+            Some((c0, c1)) if a <= c1 => Some((c0, c1.max(b))),
+            Some((c0, c1)) => {
+                total += c1 - c0;
+                Some((a, b))
+            }
+            None => Some((a, b)),
+        };
+    }
+    total + current.map_or(0.0, |(a, b)| b - a)
+}
+
 /// The point at arc length `s` along the polyline (clamped to its ends) and the unit tangent
 /// of the segment it is on (+x for a zero-length segment).
 pub(crate) fn point_at_arc(line: &[Point3<f64>], s: f64) -> (Point3<f64>, Vector3<f64>) {
@@ -108,6 +151,17 @@ mod tests {
         assert!((t - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-12);
         assert!((angle(Vector3::new(1.0, 0.0, 0.0), Vector3::new(1.0, 1.0, 0.0)).unwrap() - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
         assert_eq!(project(Point3::new(1.0, 2.0, 3.0), &Vector3::new(0.0, 0.0, 1.0)), Point3::new(1.0, 2.0, 0.0));
+    }
+
+    #[test]
+    fn arc_coordinates_extend_beyond_the_ends_and_spans_unite() {
+        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(1.0, 1.0, 0.0)];
+        for (p, s) in [((0.5, 0.2), 0.5), ((-0.3, 0.1), -0.3), ((1.2, 0.5), 1.5), ((1.1, 1.4), 2.4), ((0.0, 0.0), 0.0)] {
+            let got = arc_coordinate(Point3::new(p.0, p.1, 0.0), &line);
+            assert!((got - s).abs() < 1e-12, "{p:?}: {got}, expected {s}");
+        }
+        assert!((union_length(vec![(2.0, 3.0), (0.0, 1.0), (0.5, 1.5), (1.5, 1.5)]) - 2.5).abs() < 1e-12);
+        assert_eq!(union_length(Vec::new()), 0.0);
     }
 
     #[test]

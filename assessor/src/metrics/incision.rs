@@ -11,7 +11,13 @@
 //! put back) start a new stroke; the trace's segments join samples within a stroke only.
 //!
 //! - entry / exit error: `|P(first trace point) - P(entry)|`, `|P(last) - P(exit)|`;
-//! - length error: projected length of the trace's strokes minus the plan's length (signed);
+//! - length error: the incision's length minus the plan's length (signed). The length is
+//!   measured along the projected planned line: each trace point gets the arc-length
+//!   coordinate of its nearest point on the line (extended straight beyond both ends), each
+//!   segment of a stroke spans the interval between its ends' coordinates, and the length is
+//!   the measure of the union of those spans. So going back over a stretch already cut, or a
+//!   tremor's zigzag across the line, does not lengthen the incision (the zigzag counts as
+//!   lateral deviation); a gap between strokes is not cut;
 //! - lateral deviation of sample `i`: the distance from `P(trace_i)` to the projected planned
 //!   polyline; its mean, RMS and max over the samples;
 //! - fraction cut within tolerance: the planned line is split into intervals of at most
@@ -125,7 +131,11 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     let (entry, exit) = (geom::project(plan.entry_m.into(), &n), geom::project(plan.exit_m.into(), &n));
     let (first, last) = (tips[0], tips[tips.len() - 1]);
     let strokes = strokes(&tips, STROKE_GAP_M);
-    let cut_length_m: f64 = strokes.iter().map(|s| geom::polyline_length(s)).sum();
+    let spans = strokes.iter().flat_map(|s| {
+        let arc: Vec<f64> = s.iter().map(|&p| geom::arc_coordinate(p, &line)).collect();
+        arc.windows(2).map(|w| (w[0].min(w[1]), w[0].max(w[1]))).collect::<Vec<_>>()
+    });
+    let cut_length_m = geom::union_length(spans.collect());
     let plan_length = geom::polyline_length(&line);
 
     let lateral: Vec<f64> = tips.iter().map(|&p| geom::closest_on_polyline(p, &line).distance).collect();
@@ -290,6 +300,30 @@ mod tests {
         assert!((m.cut_length_m - 0.040).abs() < 1e-12);
         // covered: [0, 22] and [38, 60] mm
         assert!((m.fraction_cut_in_tolerance - 44.0 / 60.0).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+    }
+
+    #[test]
+    fn going_back_over_the_cut_or_zigzagging_does_not_lengthen_the_incision() {
+        // 0 -> 40 -> 10 -> 40 mm in one stroke: 40 mm long (the blade travelled 100 mm)
+        let mut c = cuts(0, 40, 0.0, 0.008);
+        c.extend(cuts(10, 39, 0.0, 0.008).into_iter().rev());
+        c.extend(cuts(10, 40, 0.0, 0.008));
+        for (i, s) in c.iter_mut().enumerate() {
+            s.t_s = i as f64 * 0.01;
+        }
+        let m = incision(&straight_plan(), &c).unwrap();
+        assert!((m.cut_length_m - 0.040).abs() < 1e-12, "{}", m.cut_length_m);
+        // a tremor of +-1 mm across the line every 1 mm: 60 mm long, 1 mm lateral
+        let mut z = cuts(0, 60, 0.0, 0.008);
+        for (i, s) in z.iter_mut().enumerate() {
+            s.tip_m[1] = if i % 2 == 0 { 0.001 } else { -0.001 };
+        }
+        let m = incision(&straight_plan(), &z).unwrap();
+        assert!(m.length_error_m.abs() < 1e-12, "{}", m.length_error_m);
+        assert!((m.lateral_mean_m - 0.001).abs() < 1e-12);
+        // 5 mm past either end: 70 mm
+        let m = incision(&straight_plan(), &cuts(-5, 65, 0.0, 0.008)).unwrap();
+        assert!((m.length_error_m - 0.010).abs() < 1e-12, "{}", m.length_error_m);
     }
 
     #[test]
