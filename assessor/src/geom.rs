@@ -44,20 +44,34 @@ pub(crate) fn closest_on_segment(p: Point3<f64>, a: Point3<f64>, b: Point3<f64>)
     (a + ab * t, t)
 }
 
-/// Where `p` is closest to a polyline: the distance.
+/// Where `p` is closest to a polyline: the distance, and the arc-length coordinate of the
+/// closest point with the polyline extended straight beyond both ends: before the start it is
+/// `(p - line_0) . t_0 <= 0`, past the end `L + (p - line_n) . t_n >= L` (`t` the end
+/// segments' unit tangents, `L` the length).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct OnLine {
     pub distance: f64,
+    pub arc: f64,
 }
 
 /// The closest point to `p` on the polyline `line` (at least 2 points).
 pub(crate) fn closest_on_polyline(p: Point3<f64>, line: &[Point3<f64>]) -> OnLine {
-    let mut best = OnLine { distance: f64::INFINITY };
-    for w in line.windows(2) {
-        let d = nalgebra::distance(&p, &closest_on_segment(p, w[0], w[1]).0);
+    let mut best = OnLine { distance: f64::INFINITY, arc: 0.0 };
+    let (mut acc, last) = (0.0, line.len().saturating_sub(2));
+    for (i, w) in line.windows(2).enumerate() {
+        let len = nalgebra::distance(&w[0], &w[1]);
+        let (q, t) = closest_on_segment(p, w[0], w[1]);
+        let d = nalgebra::distance(&p, &q);
         if d < best.distance {
-            best = OnLine { distance: d };
+            let tangent = unit(w[1] - w[0]).unwrap_or_else(Vector3::zeros);
+            let arc = match (i, t) {
+                (0, t) if t <= 0.0 => (p - w[0]).dot(&tangent),
+                (i, t) if i == last && t >= 1.0 => acc + len + (p - w[1]).dot(&tangent),
+                _ => acc + t * len,
+            };
+            best = OnLine { distance: d, arc };
         }
+        acc += len;
     }
     best
 }
@@ -65,31 +79,6 @@ pub(crate) fn closest_on_polyline(p: Point3<f64>, line: &[Point3<f64>]) -> OnLin
 /// The length of a polyline.
 pub(crate) fn polyline_length(line: &[Point3<f64>]) -> f64 {
     line.windows(2).map(|w| nalgebra::distance(&w[0], &w[1])).sum()
-}
-
-/// The arc-length coordinate along the polyline `line` (at least 2 points) of the point closest
-/// to `p`, with the polyline extended straight beyond both ends: before the start it is
-/// `(p - line_0) . t_0 <= 0`, past the end `L + (p - line_n) . t_n >= L` (`t` the end
-/// segments' unit tangents, `L` the length).
-pub(crate) fn arc_coordinate(p: Point3<f64>, line: &[Point3<f64>]) -> f64 {
-    let (mut best, mut s_best, mut acc) = (f64::INFINITY, 0.0, 0.0);
-    let last = line.len().saturating_sub(2);
-    for (i, w) in line.windows(2).enumerate() {
-        let len = nalgebra::distance(&w[0], &w[1]);
-        let (q, t) = closest_on_segment(p, w[0], w[1]);
-        let d = nalgebra::distance(&p, &q);
-        if d < best {
-            let tangent = unit(w[1] - w[0]).unwrap_or_else(Vector3::zeros);
-            s_best = match (i, t) {
-                (0, t) if t <= 0.0 => (p - w[0]).dot(&tangent),
-                (i, t) if i == last && t >= 1.0 => acc + len + (p - w[1]).dot(&tangent),
-                _ => acc + t * len,
-            };
-            best = d;
-        }
-        acc += len;
-    }
-    s_best
 }
 
 /// The measure of the union of the intervals `spans` (each `(a, b)` with `a <= b`).
@@ -157,7 +146,7 @@ mod tests {
     fn arc_coordinates_extend_beyond_the_ends_and_spans_unite() {
         let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(1.0, 1.0, 0.0)];
         for (p, s) in [((0.5, 0.2), 0.5), ((-0.3, 0.1), -0.3), ((1.2, 0.5), 1.5), ((1.1, 1.4), 2.4), ((0.0, 0.0), 0.0)] {
-            let got = arc_coordinate(Point3::new(p.0, p.1, 0.0), &line);
+            let got = closest_on_polyline(Point3::new(p.0, p.1, 0.0), &line).arc;
             assert!((got - s).abs() < 1e-12, "{p:?}: {got}, expected {s}");
         }
         assert!((union_length(vec![(2.0, 3.0), (0.0, 1.0), (0.5, 1.5), (1.5, 1.5)]) - 2.5).abs() < 1e-12);

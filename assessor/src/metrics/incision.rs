@@ -29,6 +29,8 @@
 //! - approach error: the angle between the tip's displacement over the last 5 mm of travel
 //!   before the first cut and the plan's approach direction (deg).
 
+use std::ops::Range;
+
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{AssessError, Result};
@@ -68,22 +70,23 @@ pub fn trace_point(c: &CutSample) -> [f64; 3] {
     }
 }
 
-/// The trace's strokes (projected trace points), split where samples are more than `gap` apart.
-fn strokes(tips: &[Point3<f64>], gap: f64) -> Vec<Vec<Point3<f64>>> {
-    let mut out: Vec<Vec<Point3<f64>>> = Vec::new();
-    for &p in tips {
+/// The trace's strokes: ranges of the (projected) trace points, split where consecutive
+/// samples are more than `gap` apart.
+fn strokes(tips: &[Point3<f64>], gap: f64) -> Vec<Range<usize>> {
+    let mut out: Vec<Range<usize>> = Vec::new();
+    for (i, p) in tips.iter().enumerate() {
         match out.last_mut() {
-            Some(s) if s.last().is_some_and(|q| nalgebra::distance(&p, q) <= gap) => s.push(p),
-            _ => out.push(vec![p]),
+            Some(s) if nalgebra::distance(p, &tips[i - 1]) <= gap => s.end = i + 1,
+            _ => out.push(i..i + 1),
         }
     }
     out
 }
 
-/// Distance from `p` to the nearest point of any stroke.
-fn distance_to_strokes(p: Point3<f64>, strokes: &[Vec<Point3<f64>>]) -> f64 {
+/// Distance from `p` to the nearest point of any stroke of `tips`.
+fn distance_to_strokes(p: Point3<f64>, tips: &[Point3<f64>], strokes: &[Range<usize>]) -> f64 {
     let mut best = f64::INFINITY;
-    for s in strokes {
+    for s in strokes.iter().map(|r| &tips[r.clone()]) {
         if s.len() == 1 {
             best = best.min(nalgebra::distance(&p, &s[0]));
         }
@@ -131,14 +134,12 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     let (entry, exit) = (geom::project(plan.entry_m.into(), &n), geom::project(plan.exit_m.into(), &n));
     let (first, last) = (tips[0], tips[tips.len() - 1]);
     let strokes = strokes(&tips, STROKE_GAP_M);
-    let spans = strokes.iter().flat_map(|s| {
-        let arc: Vec<f64> = s.iter().map(|&p| geom::arc_coordinate(p, &line)).collect();
-        arc.windows(2).map(|w| (w[0].min(w[1]), w[0].max(w[1]))).collect::<Vec<_>>()
-    });
+    let on_line: Vec<geom::OnLine> = tips.iter().map(|&p| geom::closest_on_polyline(p, &line)).collect();
+    let spans = strokes.iter().flat_map(|r| on_line[r.clone()].windows(2).map(|w| (w[0].arc.min(w[1].arc), w[0].arc.max(w[1].arc))));
     let cut_length_m = geom::union_length(spans.collect());
     let plan_length = geom::polyline_length(&line);
 
-    let lateral: Vec<f64> = tips.iter().map(|&p| geom::closest_on_polyline(p, &line).distance).collect();
+    let lateral: Vec<f64> = on_line.iter().map(|o| o.distance).collect();
     let (lateral_mean_m, lateral_rms_m, lateral_max_m) = geom::mean_rms_max(&lateral);
 
     let intervals = ((plan_length / 1e-4).ceil() as usize).max(1);
@@ -146,7 +147,7 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     let covered = (0..intervals)
         .filter(|&k| {
             let (mid, _) = geom::point_at_arc(&line, (k as f64 + 0.5) * step);
-            distance_to_strokes(mid, &strokes) <= plan.tolerance_m
+            distance_to_strokes(mid, &tips, &strokes) <= plan.tolerance_m
         })
         .count();
     let fraction_cut_in_tolerance = covered as f64 / intervals as f64;
