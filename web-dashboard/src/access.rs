@@ -17,15 +17,17 @@ pub async fn can_see_user(state: &AppState, viewer: &CurrentUser, target_id: i64
             if viewer.id() == target_id {
                 return Ok(true);
             }
-            if let Some(ok) = state.caches().access.get(&(viewer.id(), target_id)) {
+            let cache = &state.caches().access;
+            if let Some(ok) = cache.get(&(viewer.id(), target_id)) {
                 return Ok(ok);
             }
+            let stamp = cache.stamp();
             let led: Option<i64> = sqlx::query_scalar("SELECT 1 FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = ? AND m.user_id = ? LIMIT 1")
                 .bind(viewer.id())
                 .bind(target_id)
                 .fetch_optional(state.store().pool())
                 .await?;
-            state.caches().access.put((viewer.id(), target_id), led.is_some());
+            cache.put((viewer.id(), target_id), led.is_some(), stamp);
             led.is_some()
         }
     })
@@ -36,7 +38,14 @@ pub async fn visible_user(state: &AppState, viewer: &CurrentUser, target_id: i64
     if !can_see_user(state, viewer, target_id).await? {
         return Err(AppError::NotFound);
     }
-    Ok(state.store().get_user(target_id).await?)
+    let cache = &state.caches().users;
+    if let Some(u) = cache.get(&target_id) {
+        return Ok(u);
+    }
+    let stamp = cache.stamp();
+    let user = state.store().get_user(target_id).await?;
+    cache.put(target_id, user.clone(), stamp);
+    Ok(user)
 }
 
 /// The attempt `id` if `viewer` may see its trainee; else not found.

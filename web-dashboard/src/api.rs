@@ -73,7 +73,7 @@ async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Id(i
         Some(j) => j.clone(),
         None => {
             let j = serde_json::to_vec(&c.data).map_err(|e| AppError::Internal(e.to_string()))?;
-            c.json.get_or_init(|| j).clone()
+            c.json.get_or_init(|| j.into()).clone()
         }
     };
     Ok(([(axum::http::header::CONTENT_TYPE, "application/json")], json).into_response())

@@ -1,68 +1,131 @@
-//! Short-lived in-memory caches that keep the hot paths off the database under load: the
-//! session of a cookie, who may see whom, and a trainee's progress (data, page body, JSON).
-//! Entries live a few seconds ([`SESSION_TTL`], [`ACCESS_TTL`], [`PROGRESS_TTL`]), so what
-//! other processes write (a scored `cutlab session`, a new cohort member) shows within that
-//! time; the dashboard's own writes that change them clear them at once (log-out, threshold
-//! and exercise edits).
+//! In-memory caches that keep the hot paths off the database under load: the session of a
+//! cookie, who may see whom, users by id, and a trainee's progress (data, page body, JSON).
+//!
+//! An entry is valid while the database has not changed since it was read: [`Changes`] keeps
+//! a generation that the watcher ([`crate::watch`]) bumps whenever any connection, in this
+//! process or another (a scored `cutlab session`, a new cohort member), commits to the
+//! database, and entries carry the generation ([`Stamp`]) taken before their queries ran. So a
+//! change shows within the watcher's poll ([`crate::watch::POLL`]), and a database that does
+//! not change is read once. Entries also expire after [`WATCHED_TTL`] (a safety net); while
+//! nothing watches (an in-memory database, the watcher's connection lost) they expire after the
+//! cache's own short time to live ([`SESSION_TTL`], [`ACCESS_TTL`], [`PROGRESS_TTL`]). The
+//! dashboard's own writes that change them clear them at once (log-out, threshold and exercise
+//! edits), so a redirect after a form never shows the old state.
 
 use std::collections::HashMap;
 use std::hash::Hash;
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 pub const SESSION_TTL: Duration = Duration::from_secs(5);
 pub const ACCESS_TTL: Duration = Duration::from_secs(5);
 pub const PROGRESS_TTL: Duration = Duration::from_secs(2);
+/// Time to live of every entry while the watcher runs.
+pub const WATCHED_TTL: Duration = Duration::from_secs(60);
 /// Entries kept per cache (beyond it, expired ones go, then everything).
 const CAPACITY: usize = 10_000;
 
-/// A map whose entries expire `ttl` after insertion.
+/// The database's generation as the caches know it, and whether a watcher keeps it current.
+#[derive(Debug, Default)]
+pub struct Changes {
+    generation: AtomicU64,
+    watching: AtomicBool,
+}
+
+/// The generation of the database at some moment: taken before reading what gets cached.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stamp(u64);
+
+impl Changes {
+    pub fn stamp(&self) -> Stamp {
+        Stamp(self.generation.load(Ordering::Acquire))
+    }
+
+    /// The database changed: every entry read before now is stale.
+    pub fn bump(&self) {
+        self.generation.fetch_add(1, Ordering::AcqRel);
+    }
+
+    pub fn set_watching(&self, watching: bool) {
+        self.watching.store(watching, Ordering::Release);
+    }
+
+    pub fn watching(&self) -> bool {
+        self.watching.load(Ordering::Acquire)
+    }
+}
+
+/// A map whose entries expire when the database changes or after a time to live.
 #[derive(Debug)]
 pub struct TtlCache<K, V> {
     ttl: Duration,
-    map: Mutex<HashMap<K, (Instant, V)>>,
+    changes: Arc<Changes>,
+    map: Mutex<HashMap<K, Entry<V>>>,
+}
+
+#[derive(Debug)]
+struct Entry<V> {
+    at: Instant,
+    stamp: Stamp,
+    value: V,
 }
 
 impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
-    pub fn new(ttl: Duration) -> Self {
-        Self { ttl, map: Mutex::new(HashMap::new()) }
+    /// A cache whose entries live `ttl` while nothing watches the database.
+    pub fn new(ttl: Duration, changes: Arc<Changes>) -> Self {
+        Self { ttl, changes, map: Mutex::new(HashMap::new()) }
     }
 
-    fn with<R>(&self, f: impl FnOnce(&mut HashMap<K, (Instant, V)>) -> R) -> R {
+    /// The generation to [`put`](Self::put) with what is read after this call.
+    pub fn stamp(&self) -> Stamp {
+        self.changes.stamp()
+    }
+
+    fn with<R>(&self, f: impl FnOnce(&mut HashMap<K, Entry<V>>) -> R) -> R {
         f(&mut self.map.lock().unwrap_or_else(std::sync::PoisonError::into_inner))
     }
 
-    pub fn get(&self, k: &K) -> Option<V> {
-        let now = Instant::now();
-        self.with(|m| m.get(k).filter(|(at, _)| now.duration_since(*at) < self.ttl).map(|(_, v)| v.clone()))
+    fn fresh(&self, e: &Entry<V>, now: Instant, current: Stamp) -> bool {
+        let ttl = if self.changes.watching() { WATCHED_TTL } else { self.ttl };
+        e.stamp == current && now.duration_since(e.at) < ttl
     }
 
-    /// The entry, fresh or not; when it has expired, the first caller gets `true` (refresh it)
+    pub fn get(&self, k: &K) -> Option<V> {
+        let (now, current) = (Instant::now(), self.stamp());
+        self.with(|m| m.get(k).filter(|e| self.fresh(e, now, current)).map(|e| e.value.clone()))
+    }
+
+    /// The entry, fresh or not; when it is stale, the first caller gets `true` (refresh it)
     /// and the entry counts as fresh again for everyone else meanwhile (stale while
     /// revalidating: one refresh at a time, nobody waits for it).
     pub fn get_or_claim(&self, k: &K) -> Option<(V, bool)> {
-        let now = Instant::now();
+        let (now, current) = (Instant::now(), self.stamp());
         self.with(|m| {
-            let (at, v) = m.get_mut(k)?;
-            if now.duration_since(*at) < self.ttl {
-                Some((v.clone(), false))
+            let e = m.get_mut(k)?;
+            if self.fresh(e, now, current) {
+                Some((e.value.clone(), false))
             } else {
-                *at = now;
-                Some((v.clone(), true))
+                e.at = now;
+                e.stamp = current;
+                Some((e.value.clone(), true))
             }
         })
     }
 
-    pub fn put(&self, k: K, v: V) {
+    /// Keeps `v`, read after `stamp` was taken: if the database changed meanwhile, the entry
+    /// is born stale.
+    pub fn put(&self, k: K, v: V, stamp: Stamp) {
         let now = Instant::now();
+        let current = self.stamp();
         self.with(|m| {
             if m.len() >= CAPACITY {
-                m.retain(|_, (at, _)| now.duration_since(*at) < self.ttl);
+                m.retain(|_, e| self.fresh(e, now, current));
                 if m.len() >= CAPACITY {
                     m.clear();
                 }
             }
-            m.insert(k, (now, v));
+            m.insert(k, Entry { at: now, stamp, value: v });
         })
     }
 
@@ -81,18 +144,41 @@ mod tests {
 
     #[test]
     fn entries_expire() {
-        let c = TtlCache::new(Duration::from_millis(50));
-        c.put(1, "a");
+        let c = TtlCache::new(Duration::from_millis(50), Arc::default());
+        c.put(1, "a", c.stamp());
         assert_eq!(c.get(&1), Some("a"));
         std::thread::sleep(Duration::from_millis(60));
         assert_eq!(c.get(&1), None);
-        c.put(3, "c");
+        c.put(3, "c", c.stamp());
         assert_eq!(c.get_or_claim(&3), Some(("c", false)));
         std::thread::sleep(Duration::from_millis(60));
         assert_eq!(c.get_or_claim(&3), Some(("c", true)), "the first caller refreshes");
         assert_eq!(c.get_or_claim(&3), Some(("c", false)), "the others take the old value");
-        c.put(2, "b");
+        c.put(2, "b", c.stamp());
         c.remove(&2);
         assert_eq!(c.get(&2), None);
+    }
+
+    #[test]
+    fn a_change_of_the_database_makes_entries_stale_and_a_watched_one_lives_long() {
+        let changes = Arc::new(Changes::default());
+        let c = TtlCache::new(Duration::from_millis(20), changes.clone());
+        changes.set_watching(true);
+        c.put(1, "a", c.stamp());
+        std::thread::sleep(Duration::from_millis(30));
+        assert_eq!(c.get(&1), Some("a"), "watched: lives past the short time to live");
+        changes.bump();
+        assert_eq!(c.get(&1), None, "stale after a change");
+        assert_eq!(c.get_or_claim(&1), Some(("a", true)), "served stale, one caller refreshes");
+        assert_eq!(c.get_or_claim(&1), Some(("a", false)));
+        // read before a change, kept after it: born stale
+        let before = c.stamp();
+        changes.bump();
+        c.put(2, "b", before);
+        assert_eq!(c.get(&2), None);
+        changes.set_watching(false);
+        c.put(3, "c", c.stamp());
+        std::thread::sleep(Duration::from_millis(30));
+        assert_eq!(c.get(&3), None, "unwatched: the short time to live");
     }
 }

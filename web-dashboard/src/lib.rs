@@ -26,6 +26,7 @@ pub mod extract;
 pub mod pages;
 pub mod recordings;
 pub mod seed;
+pub mod watch;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -68,25 +69,39 @@ struct Inner {
     caches: Caches,
 }
 
-/// The short-lived caches of the hot paths (see [`cache`]).
+/// The caches of the hot paths, valid until the database changes (see [`cache`]).
 #[derive(Debug)]
 pub(crate) struct Caches {
+    pub changes: Arc<cache::Changes>,
     pub sessions: cache::TtlCache<String, auth::AuthSession>,
     pub access: cache::TtlCache<(i64, i64), bool>,
+    pub users: cache::TtlCache<i64, cutlab_assessor::store::User>,
     pub progress: cache::TtlCache<i64, Arc<data::progress::Cached>>,
+}
+
+impl Caches {
+    fn new() -> Self {
+        let changes = Arc::new(cache::Changes::default());
+        Self {
+            sessions: cache::TtlCache::new(cache::SESSION_TTL, changes.clone()),
+            access: cache::TtlCache::new(cache::ACCESS_TTL, changes.clone()),
+            users: cache::TtlCache::new(cache::ACCESS_TTL, changes.clone()),
+            progress: cache::TtlCache::new(cache::PROGRESS_TTL, changes.clone()),
+            changes,
+        }
+    }
 }
 
 impl AppState {
     /// A state over an open store (its migrations, including the dashboard's tables, are
-    /// applied by [`Store::open`]).
+    /// applied by [`Store::open`]). Inside a Tokio runtime, it starts watching the database
+    /// for changes ([`watch`]); the watcher ends with the state.
     pub fn new(store: Store, config: Config) -> Result<Self, AppError> {
         let limiter = auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
         let grants = auth::grants::GrantKey::random()?;
-        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants, caches: Caches {
-            sessions: cache::TtlCache::new(cache::SESSION_TTL),
-            access: cache::TtlCache::new(cache::ACCESS_TTL),
-            progress: cache::TtlCache::new(cache::PROGRESS_TTL),
-        } })))
+        let caches = Caches::new();
+        watch::spawn(store.pool(), &caches.changes);
+        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants, caches })))
     }
     pub fn store(&self) -> &Store {
         &self.0.store

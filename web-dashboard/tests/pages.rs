@@ -5,6 +5,7 @@ mod common;
 
 use axum::http::{StatusCode, header};
 use common::*;
+use cutlab_dashboard::assessor::store::Store;
 
 #[tokio::test]
 async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
@@ -162,4 +163,29 @@ async fn the_replay_viewer_is_served_by_the_dashboard() {
     let page = body_text(send(&e.app, get(&format!("/attempts/{a}"), Some(&ana))).await).await;
     assert!(page.contains("Review replay") && page.contains("Download .mcap"));
     assert_eq!(body_text(send(&e.app, get(&format!("/attempts/{a}/recording.rrd"), Some(&ana))).await).await, "RRF2");
+}
+
+#[tokio::test]
+async fn an_attempt_written_by_another_process_shows_without_waiting_for_the_caches_to_expire() {
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let ana = common::user_id(&e.store, "ana").await;
+    let attempts = |p: serde_json::Value| p["exercises"][0]["attempts"].as_array().map_or(0, Vec::len);
+    let url = format!("/api/trainees/{ana}/progress");
+    let progress = || async { serde_json::from_str::<serde_json::Value>(&body_text(send(&e.app, get(&url, Some(&kim))).await).await).unwrap() };
+    assert_eq!(attempts(progress().await), 8);
+    // another process (its own connections) starts an attempt for ana and gives up on it
+    let other = Store::open(&e.dir.path().join("cutlab.db")).await.unwrap();
+    let exercise = other.exercise_by_name("chest-wall-incision").await.unwrap();
+    let a = other.start_attempt(ana, exercise.id, None, false).await.unwrap();
+    other.mark_incomplete(a.id, Some("interrupted")).await.unwrap();
+    let written = std::time::Instant::now();
+    let mut seen = attempts(progress().await);
+    while seen != 9 && written.elapsed() < std::time::Duration::from_secs(10) {
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        seen = attempts(progress().await);
+    }
+    assert_eq!(seen, 9);
+    // the watcher's poll (0.1 s) and a refresh, well before the unwatched caches would expire
+    assert!(written.elapsed() < cutlab_dashboard::cache::PROGRESS_TTL, "{:?}", written.elapsed());
 }

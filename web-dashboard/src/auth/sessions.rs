@@ -38,9 +38,11 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
         return Ok(None);
     }
     let hash = token_hash(token);
-    if let Some(s) = state.caches().sessions.get(&hash) {
+    let cache = &state.caches().sessions;
+    if let Some(s) = cache.get(&hash) {
         return Ok(Some(s));
     }
+    let stamp = cache.stamp();
     let row: Option<Row> = sqlx::query_as(
         "SELECT u.id, u.name, u.role, u.password_hash, u.created_ns, s.csrf_token FROM login_sessions s JOIN users u ON u.id = s.user_id WHERE s.token_sha256 = ? AND s.expires_ns > ?",
     )
@@ -52,7 +54,7 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
     let role: Role = role.parse().map_err(|e: cutlab_assessor::AssessError| AppError::Internal(e.to_string()))?;
     let user = User { id, name, role, has_password: password_hash.is_some(), created_ns };
     let s = AuthSession { user, csrf, token_hash: hash.clone() };
-    state.caches().sessions.put(hash, s.clone());
+    cache.put(hash, s.clone(), stamp);
     Ok(Some(s))
 }
 

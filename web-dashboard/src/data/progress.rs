@@ -114,26 +114,36 @@ pub struct ModuleProgress {
 #[derive(Debug)]
 pub struct Cached {
     pub data: Progress,
-    pub html: std::sync::OnceLock<String>,
-    pub json: std::sync::OnceLock<Vec<u8>>,
+    pub html: std::sync::OnceLock<axum::body::Bytes>,
+    pub json: std::sync::OnceLock<axum::body::Bytes>,
+}
+
+impl Cached {
+    pub fn new(data: Progress) -> Self {
+        Self { data, html: Default::default(), json: Default::default() }
+    }
 }
 
 /// [`progress`] through the cache.
 pub async fn cached_progress(state: &AppState, trainee: &User) -> Result<std::sync::Arc<Cached>, AppError> {
-    if let Some((c, refresh)) = state.caches().progress.get_or_claim(&trainee.id) {
+    let cache = &state.caches().progress;
+    if let Some((c, refresh)) = cache.get_or_claim(&trainee.id) {
         if refresh {
             let (state, trainee) = (state.clone(), trainee.clone());
             tokio::spawn(async move {
+                let cache = &state.caches().progress;
+                let stamp = cache.stamp();
                 match progress(&state, &trainee).await {
-                    Ok(data) => state.caches().progress.put(trainee.id, std::sync::Arc::new(Cached { data, html: Default::default(), json: Default::default() })),
+                    Ok(data) => cache.put(trainee.id, std::sync::Arc::new(Cached::new(data)), stamp),
                     Err(e) => tracing::warn!("refreshing the progress of {}: {e}", trainee.name),
                 }
             });
         }
         return Ok(c);
     }
-    let c = std::sync::Arc::new(Cached { data: progress(state, trainee).await?, html: Default::default(), json: Default::default() });
-    state.caches().progress.put(trainee.id, c.clone());
+    let stamp = cache.stamp();
+    let c = std::sync::Arc::new(Cached::new(progress(state, trainee).await?));
+    cache.put(trainee.id, c.clone(), stamp);
     Ok(c)
 }
 

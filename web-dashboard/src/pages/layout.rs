@@ -3,9 +3,24 @@
 
 use axum::http::StatusCode;
 use cutlab_assessor::store::iso8601;
-use maud::{DOCTYPE, Markup, html};
+use axum::body::Bytes;
+use axum::response::Html;
+use maud::{DOCTYPE, Markup, PreEscaped, html};
 
 use crate::auth::CurrentUser;
+
+/// [`page`] around a body rendered before (a cached one): one copy of it, not a render.
+pub fn page_around(title: &str, user: Option<&CurrentUser>, body: &[u8]) -> Html<Bytes> {
+    const SLOT: &str = "\u{1}body\u{1}";
+    let shell = page(title, user, PreEscaped(SLOT.to_owned())).into_string();
+    // the last one: the title and the user's name (user text) come before the body
+    let (head, tail) = shell.rsplit_once(SLOT).unwrap_or((shell.as_str(), ""));
+    let mut out = Vec::with_capacity(head.len() + body.len() + tail.len());
+    out.extend_from_slice(head.as_bytes());
+    out.extend_from_slice(body);
+    out.extend_from_slice(tail.as_bytes());
+    Html(Bytes::from(out))
+}
 
 /// A page: `title`, the navigation for `user` (if logged in), `body`.
 pub fn page(title: &str, user: Option<&CurrentUser>, body: Markup) -> Markup {

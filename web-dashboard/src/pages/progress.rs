@@ -4,9 +4,12 @@
 use axum::Router;
 use axum::extract::State;
 use axum::routing::get;
-use maud::{Markup, PreEscaped, html};
+use maud::{Markup, html};
 
-use super::layout::{num, page, verdict, when};
+use axum::body::Bytes;
+use axum::response::Html;
+
+use super::layout::{num, page_around, verdict, when};
 use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_user;
@@ -20,11 +23,11 @@ pub fn router() -> Router<AppState> {
     Router::new().route("/trainees/{id}", get(trainee))
 }
 
-async fn trainee(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
+async fn trainee(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Html<Bytes>> {
     let trainee = visible_user(&state, &user, id).await?;
     let c = cached_progress(&state, &trainee).await?;
-    let body = c.html.get_or_init(|| body(&c.data).into_string());
-    Ok(page(&format!("Progress of {}", c.data.trainee.name), Some(&user), PreEscaped(body.clone())))
+    let body = c.html.get_or_init(|| Bytes::from(body(&c.data).into_string()));
+    Ok(page_around(&format!("Progress of {}", c.data.trainee.name), Some(&user), body))
 }
 
 fn body(p: &Progress) -> Markup {
