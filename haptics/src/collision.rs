@@ -170,14 +170,28 @@ impl SurfaceCollider {
         k
     }
 
-    /// The contact model around the closest surface point to `proxy`: valid when the surface
-    /// is within `reach_m`.
-    pub fn contact_model(&self, sim: &Simulation, proxy: &Point3, reach_m: f64, source_tick: u64) -> (ContactModel, Option<SurfaceHit>) {
-        let hit = self.closest(proxy);
-        let model = match &hit {
+    /// The contact model around the surface point nearest the tool: of the closest surface
+    /// points to `probes` (the proxy, the blade's heel), the one the tool is deepest below or
+    /// nearest above (signed distance along the surface's normal, the first on a tie). Valid
+    /// when that surface point is within `reach_m`. Returns the model and the hit with the
+    /// index of its probe.
+    pub fn contact_model(&self, sim: &Simulation, probes: &[Point3], reach_m: f64, source_tick: u64) -> (ContactModel, Option<(usize, SurfaceHit)>) {
+        let signed = |p: &Point3, h: &SurfaceHit| (p - h.point).dot(&h.normal);
+        let mut best: Option<(f64, usize, SurfaceHit)> = None;
+        for (i, p) in probes.iter().enumerate() {
+            if let Some(h) = self.closest(p) {
+                let d = signed(p, &h);
+                if best.as_ref().is_none_or(|(b, _, _)| d < *b) {
+                    best = Some((d, i, h));
+                }
+            }
+        }
+        let hit = best.map(|(_, i, h)| (i, h));
+        let model = match hit.as_ref().map(|(_, h)| h) {
             Some(h) if h.distance_m <= reach_m => ContactModel {
                 published: true,
                 source_tick,
+                at_heel: false,
                 valid: true,
                 plane_point: h.point,
                 plane_normal: h.normal,
@@ -217,7 +231,17 @@ mod tests {
         let hit = c.closest(&Point3::new(0.05, 0.05, 0.01)).expect("hit");
         assert!((hit.point.z - 0.003).abs() < 1e-12, "{hit:?}");
         assert!(c.closest(&Point3::new(f64::NAN, 0.0, 0.0)).is_none());
-        let (far, _) = c.contact_model(&sim, &Point3::new(0.05, 0.05, 1.0), 0.05, 7);
+        let (far, _) = c.contact_model(&sim, &[Point3::new(0.05, 0.05, 1.0)], 0.05, 7);
         assert!(far.published && !far.valid && far.source_tick == 7);
+        // the tip 1 mm above the surface (z = 3 mm), the blade's heel 0.5 mm into it: the
+        // contact is under the heel; with the heel higher, under the tip
+        let tip = Point3::new(0.03, 0.05, 0.004);
+        let heel = Point3::new(0.05, 0.05, 0.0025);
+        let (m, hit) = c.contact_model(&sim, &[tip, heel], 0.005, 8);
+        let (probe, hit) = hit.expect("hit");
+        assert!(m.valid && probe == 1 && (hit.point - Point3::new(0.05, 0.05, 0.003)).norm() < 1e-12, "{hit:?}");
+        let (m, hit) = c.contact_model(&sim, &[tip, heel + Vector3::new(0.0, 0.0, 0.01)], 0.005, 8);
+        let (probe, hit) = hit.expect("hit");
+        assert!(m.valid && probe == 0 && (hit.point - Point3::new(0.03, 0.05, 0.003)).norm() < 1e-12);
     }
 }

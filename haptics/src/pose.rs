@@ -34,6 +34,12 @@ impl ToolPose {
         self.world_from_tool * Vector3::z()
     }
 
+    /// The heel of a blade `blade_length_m` long: the end of the cutting edge away from the
+    /// tip, in the world.
+    pub fn blade_heel(&self, blade_length_m: f64) -> Point3 {
+        self.tip_in_world + self.edge_direction() * blade_length_m
+    }
+
     pub fn blade_engaged(&self) -> bool {
         self.buttons & BUTTON_BLADE != 0
     }

@@ -5,8 +5,12 @@
 //! Between simulation updates the servo loop uses the latest [`ContactModel`] (a plane and a
 //! stiffness), so the force is smooth at 1 kHz even when the simulation runs slower.
 //!
-//! - Touching: the proxy is the tool's tip projected onto the contact plane; the force is
-//!   `k (proxy - tip) - b v_n` (never pulling into the surface).
+//! - Touching: the tool touches with its tip or, when the simulation found the surface under
+//!   the heel of the blade nearer than under the tip ([`ContactModel::at_heel`]; the blade is
+//!   a segment from the tip along the cutting edge, and the deepest point of a segment is one
+//!   of its ends), with its heel; the proxy is that point `p` projected onto the contact plane;
+//!   the force is `k (proxy - p) - b v_n` (never pulling into the surface). Only a contact at
+//!   the tip can start a cut: a blade laid on the tissue heel first presses, it does not cut.
 //! - A light touch does not cut: only when the blade is engaged and the contact force
 //!   exceeds `cut_threshold_newtons` does the blade enter the tissue (mode `Cutting`); the
 //!   proxy then follows the tip and the force is a cutting resistance opposing the blade's
@@ -27,6 +31,8 @@ pub struct ContactModel {
     pub published: bool,
     /// The servo tick whose sample the simulation step consumed to make this model.
     pub source_tick: u64,
+    /// The plane is under the blade's heel, not under the proxy: the tool touches with its heel.
+    pub at_heel: bool,
     /// A surface is near the proxy.
     pub valid: bool,
     /// Closest surface point to the proxy and the outward normal there.
@@ -41,6 +47,7 @@ impl Default for ContactModel {
         Self {
             published: false,
             source_tick: 0,
+            at_heel: false,
             valid: false,
             plane_point: Point3::origin(),
             plane_normal: Vector3::z(),
@@ -168,6 +175,8 @@ pub struct RenderOutput {
 #[derive(Debug, Clone)]
 pub struct ForceRenderer {
     pub settings: RenderSettings,
+    /// Length of the blade from the tip (0: the tip alone touches).
+    blade_length_m: f64,
     mode: Mode,
     proxy: Point3,
     last_pose: Option<ToolPose>,
@@ -185,6 +194,7 @@ impl ForceRenderer {
     pub fn new(settings: RenderSettings) -> Self {
         Self {
             settings,
+            blade_length_m: 0.0,
             mode: Mode::Free,
             proxy: Point3::origin(),
             last_pose: None,
@@ -194,6 +204,14 @@ impl ForceRenderer {
             gain: 1.0,
             non_finite_count: 0,
         }
+    }
+
+    /// The blade collides too, not only the tip: `blade_length_m` from the tip along the
+    /// cutting edge (negative or non-finite: the tip alone).
+    #[must_use]
+    pub fn with_blade_length(mut self, blade_length_m: f64) -> Self {
+        self.blade_length_m = if blade_length_m.is_finite() { blade_length_m.max(0.0) } else { 0.0 };
+        self
     }
 
     /// One servo tick: the device's pose (or its fault) and the latest contact model.
@@ -305,20 +323,21 @@ impl ForceRenderer {
                 -self.velocity / speed * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
             }
             Mode::Free | Mode::Touching => {
-                let depth = (tip - c.plane_point).dot(&n);
+                let point = if c.at_heel { pose.blade_heel(self.blade_length_m) } else { tip };
+                let depth = (point - c.plane_point).dot(&n);
                 if depth >= 0.0 {
                     self.mode = Mode::Free;
                     self.proxy = tip;
                     return Vector3::zeros();
                 }
                 self.mode = Mode::Touching;
-                self.proxy = tip - n * depth;
+                self.proxy = point - n * depth;
                 let k = c.stiffness_newtons_per_m.clamp(0.0, s.max_stiffness_newtons_per_m);
-                let mut f = (self.proxy - tip) * k - n * (s.damping_newton_seconds_per_m * self.velocity.dot(&n));
+                let mut f = (self.proxy - point) * k - n * (s.damping_newton_seconds_per_m * self.velocity.dot(&n));
                 if f.dot(&n) < 0.0 {
                     f = Vector3::zeros();
                 }
-                if pose.blade_engaged() && f.norm() >= s.cut_threshold_newtons {
+                if pose.blade_engaged() && !c.at_heel && f.norm() >= s.cut_threshold_newtons {
                     self.mode = Mode::Cutting;
                     self.cut_plane = (c.plane_point, n);
                     self.proxy = tip;
@@ -338,6 +357,7 @@ mod tests {
         ContactModel {
             published: true,
             source_tick: tick,
+            at_heel: false,
             valid: true,
             plane_point: Point3::origin(),
             plane_normal: Vector3::z(),
@@ -452,5 +472,27 @@ mod tests {
         // lifting out ends the cut
         let out = r.update(400, at(0.001, BUTTON_BLADE), &plane(400, 500.0));
         assert_eq!(out.mode, Mode::Free);
+    }
+
+    #[test]
+    fn the_blade_laid_on_the_tissue_presses_with_its_heel_and_does_not_cut() {
+        // the edge runs from the tip down into the plane: the heel, 20 mm away, is 1.9 mm deep
+        let edge = Vector3::new(1.0, 0.0, -0.2).normalize();
+        let world_from_tool = crate::Rotation::rotation_between(&Vector3::z(), &edge).expect("rotation");
+        let pose = Ok(ToolPose { tip_in_world: Point3::new(0.0, 0.0, 0.002), world_from_tool, buttons: BUTTON_BLADE });
+        let heel = Point3::new(0.0, 0.0, 0.002) + edge * 0.02;
+        let under_heel = |t: u64, k: f64| ContactModel { at_heel: true, ..plane(t, k) };
+        // the tip alone is above the plane: free
+        let mut r = ForceRenderer::new(RenderSettings::default()).with_blade_length(0.02);
+        assert_eq!(r.update(0, pose, &plane(0, 500.0)).mode, Mode::Free);
+        // the simulation says the surface is under the heel
+        let out = (1..100).map(|t| r.update(t, pose, &under_heel(t, 500.0))).last().expect("ticks");
+        assert_eq!(out.mode, Mode::Touching);
+        assert!((out.force_newtons - Vector3::new(0.0, 0.0, -500.0 * heel.z)).norm() < 1e-9, "{out:?}");
+        assert!((out.proxy - Point3::new(heel.x, heel.y, 0.0)).norm() < 1e-12, "the proxy is the heel on the plane: {out:?}");
+        // pressed hard (3.3 N, over the cut threshold), engaged: no cut
+        let hard = (100..200).map(|t| r.update(t, pose, &under_heel(t, 5000.0))).last().expect("ticks");
+        assert_eq!(hard.mode, Mode::Touching);
+        assert!(hard.force_newtons.z > 3.0);
     }
 }

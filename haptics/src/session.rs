@@ -263,7 +263,7 @@ impl Session {
                 worker.run(ticks)
             })
             .map_err(|source| HapticsError::Thread { name: "cutlab-sim", source })?;
-        let servo_thread = match servo::spawn(servo_config, device, ForceRenderer::new(render), links) {
+        let servo_thread = match servo::spawn(servo_config, device, ForceRenderer::new(render).with_blade_length(config.blade_length_m), links) {
             Ok(t) => t,
             Err(source) => {
                 abort.store(true, Ordering::Release);

@@ -156,8 +156,11 @@ impl SessionStepper {
             }
         };
         self.collider.refit(&self.sim.state.positions);
-        let (contact, hit) = self.collider.contact_model(&self.sim, &render.proxy, self.reach_m, sample.tick);
-        self.last_hit = hit;
+        // the proxy, and the blade's heel in case the blade rather than its tip meets the tissue
+        let probes = [render.proxy, sample.pose.blade_heel(self.blade_length_m)];
+        let (mut contact, hit) = self.collider.contact_model(&self.sim, &probes, self.reach_m, sample.tick);
+        contact.at_heel = contact.valid && hit.as_ref().is_some_and(|(probe, _)| *probe == 1);
+        self.last_hit = hit.map(|(_, h)| h);
         if sample.tick.is_multiple_of(100) {
             tracing::debug!(
                 "tick {} mode {:?} force {:.3} N stiffness {:.0} N/m tip z {:.2} mm plane z {:.2} mm",

@@ -38,6 +38,7 @@ fn a_servo_tick_does_not_allocate() {
             contact_in.write(ContactModel {
                 published: true,
                 source_tick: s.tick,
+                at_heel: false,
                 valid: true,
                 plane_point: Point3::origin(),
                 plane_normal: Vector3::z(),
