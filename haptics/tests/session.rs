@@ -153,3 +153,30 @@ fn a_live_session_survives_an_openigtlink_client_reconnecting() {
     assert!(r.servo.fault_ticks >= 200 && r.servo.fault_ticks <= 1500 - 300, "{} fault ticks", r.servo.fault_ticks);
     assert!(r.sim_steps > 0);
 }
+
+#[test]
+fn the_simulation_finds_the_surface_under_the_blades_heel() {
+    use cutlab_haptics::render::RenderOutput;
+    use cutlab_haptics::servo::ServoSample;
+    use cutlab_haptics::{Point3, Rotation, SessionStepper, ToolPose, Vector3};
+    let config = SessionConfig::default();
+    let mut stepper = SessionStepper::new(Session::new(&block()).expect("session"), &config);
+    let (lo, hi) = stepper.sim.model.mesh.bounding_box();
+    let (cx, cy, top) = (0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), hi.z);
+    let mut step = |tick: u64, tip: Point3, world_from_tool: Rotation| {
+        let pose = ToolPose { tip_in_world: tip, world_from_tool, buttons: 0 };
+        stepper.step(&ServoSample { tick, pose, render: RenderOutput { proxy: tip, ..RenderOutput::default() } }).contact
+    };
+    // the tool laid heel-first: the tip 2 mm above the top, the heel (20 mm along the edge)
+    // 1.9 mm into it
+    let edge = Vector3::new(1.0, 0.0, -0.2).normalize();
+    let tip = Point3::new(cx - 0.01, cy, top + 0.002);
+    let heel = tip + edge * config.blade_length_m;
+    let c = step(0, tip, Rotation::rotation_between(&Vector3::z(), &edge).expect("rotation"));
+    assert!(c.valid && c.at_heel, "{c:?}");
+    assert!((c.plane_point.x - heel.x).abs() < 1e-3 && (c.plane_point.z - top).abs() < 1e-3, "{c:?} heel {heel:?}");
+    // the usual pose, heel up: the contact is at the tip
+    let c = step(1, Point3::new(cx, cy, top - 0.0005), Rotation::identity());
+    assert!(c.valid && !c.at_heel, "{c:?}");
+    assert!((c.plane_point.x - cx).abs() < 1e-3, "{c:?}");
+}
