@@ -62,6 +62,8 @@ pub struct TtlCache<K, V> {
     ttl: Duration,
     changes: Arc<Changes>,
     map: Mutex<HashMap<K, Entry<V>>>,
+    /// One gate per key being loaded by [`load_once`](Self::load_once).
+    loading: Mutex<HashMap<K, Arc<tokio::sync::Mutex<()>>>>,
 }
 
 #[derive(Debug)]
@@ -74,7 +76,7 @@ struct Entry<V> {
 impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
     /// A cache whose entries live `ttl` while nothing watches the database.
     pub fn new(ttl: Duration, changes: Arc<Changes>) -> Self {
-        Self { ttl, changes, map: Mutex::new(HashMap::new()) }
+        Self { ttl, changes, map: Mutex::new(HashMap::new()), loading: Mutex::new(HashMap::new()) }
     }
 
     /// The generation to [`put`](Self::put) with what is read after this call.
@@ -129,6 +131,34 @@ impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
         })
     }
 
+    /// The fresh entry of `k`, or `load`'s value, kept: callers that miss the same key at
+    /// the same time wait for one load instead of each running it (a cold cache under load
+    /// would otherwise run it once per waiting request).
+    pub async fn load_once<E, F: Future<Output = Result<V, E>>>(&self, k: K, load: impl FnOnce() -> F) -> Result<V, E>
+    where
+        K: Clone,
+    {
+        let gate = self.loading.lock().unwrap_or_else(std::sync::PoisonError::into_inner).entry(k.clone()).or_default().clone();
+        let out = {
+            let _turn = gate.lock().await;
+            match self.get(&k) {
+                Some(v) => Ok(v),
+                None => {
+                    let stamp = self.stamp();
+                    let v = load().await?;
+                    self.put(k.clone(), v.clone(), stamp);
+                    Ok(v)
+                }
+            }
+        };
+        let mut loading = self.loading.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        // the map's and ours: nobody else waits
+        if Arc::strong_count(&gate) <= 2 {
+            loading.remove(&k);
+        }
+        out
+    }
+
     pub fn remove(&self, k: &K) {
         self.with(|m| m.remove(k));
     }
@@ -157,6 +187,33 @@ mod tests {
         c.put(2, "b", c.stamp());
         c.remove(&2);
         assert_eq!(c.get(&2), None);
+    }
+
+    #[tokio::test]
+    async fn concurrent_misses_of_a_key_load_it_once() {
+        let c = Arc::new(TtlCache::new(Duration::from_secs(5), Arc::default()));
+        let loads = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let tasks: Vec<_> = (0..8)
+            .map(|_| {
+                let (c, loads) = (c.clone(), loads.clone());
+                tokio::spawn(async move {
+                    c.load_once(7, || async {
+                        loads.fetch_add(1, Ordering::SeqCst);
+                        tokio::time::sleep(Duration::from_millis(20)).await;
+                        Ok::<_, ()>("v")
+                    })
+                    .await
+                })
+            })
+            .collect();
+        for t in tasks {
+            assert_eq!(t.await.expect("task"), Ok("v"));
+        }
+        assert_eq!(loads.load(Ordering::SeqCst), 1);
+        assert!(c.loading.lock().expect("lock").is_empty(), "the gates go with the load");
+        // an error is not kept: the next caller loads again
+        assert_eq!(c.load_once(8, || async { Err::<&str, _>("failed") }).await, Err("failed"));
+        assert_eq!(c.load_once(8, || async { Ok::<_, ()>("w") }).await, Ok("w"));
     }
 
     #[test]

@@ -141,10 +141,7 @@ pub async fn cached_progress(state: &AppState, trainee: &User) -> Result<std::sy
         }
         return Ok(c);
     }
-    let stamp = cache.stamp();
-    let c = std::sync::Arc::new(Cached::new(progress(state, trainee).await?));
-    cache.put(trainee.id, c.clone(), stamp);
-    Ok(c)
+    cache.load_once(trainee.id, || async { Ok(std::sync::Arc::new(Cached::new(progress(state, trainee).await?))) }).await
 }
 
 type MetricRow = (i64, String, Option<f64>, String, Option<bool>);
