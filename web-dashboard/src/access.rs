@@ -17,18 +17,18 @@ pub async fn can_see_user(state: &AppState, viewer: &CurrentUser, target_id: i64
             if viewer.id() == target_id {
                 return Ok(true);
             }
-            let cache = &state.caches().access;
-            if let Some(ok) = cache.get(&(viewer.id(), target_id)) {
-                return Ok(ok);
-            }
-            let stamp = cache.stamp();
-            let led: Option<i64> = sqlx::query_scalar("SELECT 1 FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = ? AND m.user_id = ? LIMIT 1")
-                .bind(viewer.id())
-                .bind(target_id)
-                .fetch_optional(state.store().pool())
-                .await?;
-            cache.put((viewer.id(), target_id), led.is_some(), stamp);
-            led.is_some()
+            state
+                .caches()
+                .access
+                .load_once((viewer.id(), target_id), || async {
+                    let led: Option<i64> = sqlx::query_scalar("SELECT 1 FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = ? AND m.user_id = ? LIMIT 1")
+                        .bind(viewer.id())
+                        .bind(target_id)
+                        .fetch_optional(state.store().pool())
+                        .await?;
+                    Ok::<_, AppError>(led.is_some())
+                })
+                .await?
         }
     })
 }
@@ -38,14 +38,7 @@ pub async fn visible_user(state: &AppState, viewer: &CurrentUser, target_id: i64
     if !can_see_user(state, viewer, target_id).await? {
         return Err(AppError::NotFound);
     }
-    let cache = &state.caches().users;
-    if let Some(u) = cache.get(&target_id) {
-        return Ok(u);
-    }
-    let stamp = cache.stamp();
-    let user = state.store().get_user(target_id).await?;
-    cache.put(target_id, user.clone(), stamp);
-    Ok(user)
+    state.caches().users.load_once(target_id, || async { Ok(state.store().get_user(target_id).await?) }).await
 }
 
 /// The attempt `id` if `viewer` may see its trainee; else not found.

@@ -1,10 +1,10 @@
 //! The frame of every page (navigation, log-out form with its CSRF token), the login form
 //! and error pages. maud escapes every interpolated string.
 
-use axum::http::StatusCode;
-use cutlab_assessor::store::iso8601;
 use axum::body::Bytes;
+use axum::http::StatusCode;
 use axum::response::Html;
+use cutlab_assessor::store::iso8601;
 use maud::{DOCTYPE, Markup, PreEscaped, html};
 
 use crate::auth::CurrentUser;

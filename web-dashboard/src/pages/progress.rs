@@ -2,12 +2,11 @@
 //! and the pass limits, the normalised score, the CUSUM chart, the curriculum modules.
 
 use axum::Router;
+use axum::body::Bytes;
 use axum::extract::State;
+use axum::response::Html;
 use axum::routing::get;
 use maud::{Markup, html};
-
-use axum::body::Bytes;
-use axum::response::Html;
 
 use super::layout::{num, page_around, verdict, when};
 use crate::extract::Id;
