@@ -170,7 +170,8 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         session.sim.settings.localisation = Some(LocalisationSettings::default());
     }
     // The planned incision (what a synthetic trainee follows; recorded with every session):
-    // the exercise's expert plan when the session is an attempt, else 60 mm across the top.
+    // the exercise's expert plan when the session is an attempt, else 60 mm across the
+    // tissue in the scene's `incision` directions.
     let expert_plan = o.attempt.as_ref().map(|a| exercise_plan(a, &o.scene, &scene.spec.name)).transpose()?;
     let plan = match &expert_plan {
         Some(p) => {
@@ -178,18 +179,22 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
             session.plan_along(&resample(&line, 33), &Vector3::from(p.normal), p.depth_m).context("projecting the exercise's plan onto the tissue")
         }
         None => {
+            // the scene's incision directions were checked when it was built
+            let (up, along) = scene.spec.incision.unit().map_err(anyhow::Error::msg)?;
             let (lo, hi) = scene.model.mesh.bounding_box();
-            let depth_m = (0.4 * (hi.z - lo.z)).min(0.008);
-            session.plan_across_top(0.06, depth_m).context("planning the incision across the top of the tissue")
+            let depth_m = (0.4 * (hi - lo).dot(&up.abs())).min(0.008);
+            session.plan_across(&up, &along, 0.06, depth_m).context("planning the incision across the tissue")
         }
     };
     if let DeviceArg::Trainee { name, skill } = &o.device {
-        device = Some(Box::new(SyntheticTrainee::new(name, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), *skill, o.seed)?));
+        let trainee = SyntheticTrainee::new(name, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), *skill, o.seed)?;
+        device = Some(Box::new(trainee.expecting_cut_force(scene.spec.cut_threshold_newtons)));
     }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
-    let config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
+    let mut config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
+    config.render.cut_threshold_newtons = scene.spec.cut_threshold_newtons;
     if !(o.keyframe_every_s > 0.0 && o.keyframe_every_s.is_finite() && o.surface_hz >= 0.0 && o.surface_hz.is_finite()) {
         bail!("--keyframe-every must be positive and --surface-hz non-negative");
     }
@@ -246,6 +251,9 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     say!(o.quiet, "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
     say!(o.quiet, "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count());
     say!(o.quiet, "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
+    if r.servo.blade_path_in_tissue_m == 0.0 && r.servo.max_force_newtons < config.render.cut_threshold_newtons {
+        say!(o.quiet, "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`)", r.servo.max_force_newtons, config.render.cut_threshold_newtons);
+    }
     let p = r.servo.period_stats(r.period_nanos);
     if o.clock == Clock::Live {
         say!(o.quiet, "  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline", p.mean_us, p.p50_us, p.p99_us, p.p99_deviation_us, p.max_deviation_us, p.missed_deadlines, p.max_lateness_us);

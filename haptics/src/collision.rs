@@ -6,7 +6,7 @@
 //! parry works on glam vectors (`DVec3`); the conversion happens here and nowhere else.
 
 use parry3d_f64::math::Vector as PVec;
-use parry3d_f64::query::PointQueryWithLocation;
+use parry3d_f64::query::{PointQueryWithLocation, Ray, RayCast};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags};
 
 use cutlab_sim::mesh::Csr;
@@ -145,6 +145,14 @@ impl SurfaceCollider {
             weights,
             distance_m: (point - p).norm(),
         })
+    }
+
+    /// Where the ray from `origin` along the unit `direction` first meets the surface, within
+    /// `max_m`.
+    pub fn cast(&self, origin: &Point3, direction: &Vector3, max_m: f64) -> Option<Point3> {
+        let ray = Ray::new(to_parry(origin), PVec::new(direction.x, direction.y, direction.z));
+        let toi = self.mesh.cast_local_ray(&ray, max_m, false)?;
+        Some(origin + direction * toi)
     }
 
     /// Local stiffness of the tissue along `normal` at a hit: the springs around the

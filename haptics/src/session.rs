@@ -137,6 +137,14 @@ impl Session {
     /// A straight incision of `length_m` across the top of the tissue (along x, through the
     /// middle of its bounding box), projected onto the surface, cut `depth_m` deep.
     pub fn plan_across_top(&self, length_m: f64, depth_m: f64) -> Result<Plan, HapticsError> {
+        self.plan_across(&Vector3::z(), &Vector3::x(), length_m, depth_m)
+    }
+
+    /// A straight incision of `length_m` (at most 60 % of the body's extent) along the unit
+    /// direction `along`, through the middle of the body, on the surface facing the unit
+    /// direction `up`: the line is drawn 10 mm beyond the body's outermost point along `up`,
+    /// and each of its points dropped along `-up` onto the surface, cut `depth_m` deep.
+    pub fn plan_across(&self, up: &Vector3, along: &Vector3, length_m: f64, depth_m: f64) -> Result<Plan, HapticsError> {
         let x = &self.sim.state.positions;
         let (mut lo, mut hi) = (x[0], x[0]);
         for p in x {
@@ -144,15 +152,25 @@ impl Session {
             hi = hi.sup(p);
         }
         let centre = nalgebra::center(&lo, &hi);
-        let length = length_m.min(0.6 * (hi.x - lo.x));
+        let (mut min_along, mut max_along, mut outermost, mut innermost) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+        for p in x {
+            let (s, h) = ((p - centre).dot(along), (p - centre).dot(up));
+            (min_along, max_along) = (min_along.min(s), max_along.max(s));
+            (innermost, outermost) = (innermost.min(h), outermost.max(h));
+        }
+        let length = length_m.min(0.6 * (max_along - min_along));
         let samples = 33;
-        let above: Vec<Point3> = (0..samples)
+        let drop_m = outermost - innermost + 0.02;
+        let on_surface = (0..samples)
             .map(|i| {
                 let u = i as f64 / (samples - 1) as f64 - 0.5;
-                Point3::new(centre.x + u * length, centre.y, hi.z + 0.01)
+                let above = centre + along * (u * length) + up * (outermost + 0.01);
+                self.collider.cast(&above, &-up, drop_m).ok_or_else(|| {
+                    HapticsError::Surface(format!("no surface under ({:.1}, {:.1}, {:.1}) mm", above.x * 1e3, above.y * 1e3, above.z * 1e3))
+                })
             })
-            .collect();
-        self.plan_along(&above, &Vector3::z(), depth_m)
+            .collect::<Result<Vec<_>, _>>()?;
+        self.plan_along(&on_surface, up, depth_m)
     }
 
     /// An incision through the surface points closest to `points_m` (entry first), on a

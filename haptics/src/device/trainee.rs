@@ -248,6 +248,14 @@ impl SyntheticTrainee {
         Ok(me)
     }
 
+    /// The same trainee expecting the blade to need `newtons` to enter the tissue (the
+    /// renderer's cut threshold; default 1 N): it presses on until the push has reached that
+    /// and given way, or it is [`MAX_PRESS_M`] deeper than planned.
+    pub fn expecting_cut_force(mut self, newtons: f64) -> Self {
+        self.cutting_force_n = newtons;
+        self
+    }
+
     /// Point, outward normal and unit tangent of the line at arc length `s` (extrapolated
     /// along the last segment past the exit).
     fn along(&self, s: f64) -> (Point3, Vector3, Vector3) {

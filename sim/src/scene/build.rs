@@ -40,6 +40,10 @@ impl Scene {
     pub fn build(spec: SceneSpec, origin: &SpecOrigin, options: BuildOptions) -> Result<Self, SceneError> {
         let invalid = |message: String| SceneError::Invalid { scene: spec.name.clone(), message };
         spec.solver.check().map_err(invalid)?;
+        spec.incision.unit().map_err(|m| invalid(m.into()))?;
+        if !(spec.cut_threshold_newtons > 0.0 && spec.cut_threshold_newtons.is_finite()) {
+            return Err(invalid(format!("cut_threshold_newtons must be positive, got {}", spec.cut_threshold_newtons)));
+        }
         let base_dir = match origin {
             SpecOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),
             // Built-in scenes refer to the repository's data relative to `sim/scenes/`.

@@ -6,7 +6,7 @@ mod build;
 mod spec;
 
 pub use build::{BuildOptions, Scene};
-pub use spec::{ForceModelSpec, HeldSelection, MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint};
+pub use spec::{ForceModelSpec, HeldSelection, IncisionDirections, MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint};
 
 use std::path::{Path, PathBuf};
 
@@ -89,6 +89,8 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
             held: Vec::new(),
             targets: Vec::new(),
             viewpoint: None,
+            incision: Default::default(),
+            cut_threshold_newtons: 1.0,
             solver: Default::default(),
             force_model: Default::default(),
         };
@@ -117,5 +119,28 @@ mod tests {
         let err = parse_spec(&bad, Path::new("x.toml")).unwrap_err().to_string();
         assert!(err.contains("x.toml") && err.contains("colour"), "{err}");
         assert!(matches!(find_spec("no-such-scene"), Err(SceneError::Unknown { .. })));
+    }
+
+    #[test]
+    fn incision_directions_and_cut_threshold_are_checked_when_a_scene_is_built() {
+        let spec = |extra: &str| {
+            let text = BUILTIN[0].1.replacen("[mesh]", &format!("{extra}\n[mesh]"), 1);
+            parse_spec(&text, Path::new("x.toml")).expect("parses")
+        };
+        let build = |extra: &str| Scene::build(spec(extra), &SpecOrigin::BuiltIn, BuildOptions { min_tets: Some(200) }).map(|s| s.spec);
+        let ok = build("cut_threshold_newtons = 0.1\n[incision]\nup = [0.0, 2.0, 0.0]\nalong = [0.0, 1.0, 3.0]").expect("valid");
+        let (up, along) = ok.incision.unit().expect("unit");
+        assert!((up - crate::Vector3::y()).norm() < 1e-15 && (along - crate::Vector3::z()).norm() < 1e-15, "{up:?} {along:?}");
+        assert_eq!(ok.cut_threshold_newtons, 0.1);
+        for bad in [
+            "[incision]\nup = [0.0, 0.0, 1.0]\nalong = [0.0, 0.0, -2.0]",
+            "[incision]\nup = [0.0, 0.0, 0.0]\nalong = [1.0, 0.0, 0.0]",
+            "[incision]\nup = [0.0, 0.0, 1.0]\nalong = [1e308, 1e308, 0.0]",
+            "cut_threshold_newtons = -1.0",
+            "cut_threshold_newtons = 0.0",
+        ] {
+            let err = build(bad).expect_err(bad).to_string();
+            assert!(err.contains("incision") || err.contains("cut_threshold_newtons"), "{bad}: {err}");
+        }
     }
 }

@@ -31,6 +31,13 @@ pub struct SceneSpec {
     pub targets: Vec<Target>,
     /// Where the surgeon looks from.
     pub viewpoint: Option<Viewpoint>,
+    /// The incision a session practises when no exercise gives a plan.
+    #[serde(default)]
+    pub incision: IncisionDirections,
+    /// The push along the surface normal at which a scalpel's blade enters this tissue, N
+    /// (the haptic renderer's cut threshold; default 1 N).
+    #[serde(default = "default_cut_threshold_newtons")]
+    pub cut_threshold_newtons: f64,
     #[serde(default)]
     pub solver: SolverSettings,
     /// The force model: the paper's `springs` (default) or `corotational-fem`.
@@ -144,6 +151,42 @@ pub struct Target {
     pub name: String,
     pub centre_mm: [f64; 3],
     pub radii_mm: [f64; 3],
+}
+
+fn default_cut_threshold_newtons() -> f64 {
+    1.0
+}
+
+/// How a default incision crosses the tissue: a straight line through the middle of the
+/// body along `along`, on the surface facing `up` (out of the tissue, where the tool comes
+/// from). Both are directions in the mesh's frame; they need not be unit vectors.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IncisionDirections {
+    pub up: [f64; 3],
+    pub along: [f64; 3],
+}
+
+impl Default for IncisionDirections {
+    /// Along x across the top (+z).
+    fn default() -> Self {
+        Self { up: [0.0, 0.0, 1.0], along: [1.0, 0.0, 0.0] }
+    }
+}
+
+impl IncisionDirections {
+    /// The unit directions `(up, along)`, `along` made perpendicular to `up`; an error when
+    /// either is not finite, zero, or they are parallel.
+    pub fn unit(&self) -> Result<(crate::Vector3, crate::Vector3), String> {
+        let up = crate::Vector3::from(self.up);
+        let along = crate::Vector3::from(self.along);
+        let up = up.try_normalize(1e-12).filter(|u| u.iter().all(|c| c.is_finite())).ok_or("incision.up must be a finite, non-zero direction")?;
+        let along = (along - up * along.dot(&up))
+            .try_normalize(1e-9 * along.norm().max(1e-300))
+            .filter(|a| a.iter().all(|c| c.is_finite()))
+            .ok_or("incision.along must be a finite direction not parallel to incision.up")?;
+        Ok((up, along))
+    }
 }
 
 /// The planned viewpoint: an eye position looking at a point.
