@@ -75,7 +75,8 @@ enum Command {
         #[arg(long)]
         min_tets: Option<usize>,
         /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
-        /// 0 novice to 1 expert), csv:PATH (trajectory file) or igtl:PORT (OpenIGTLink server).
+        /// 0 novice to 1 expert), csv:PATH (trajectory file), recording:PATH (the hand of a
+        /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
         #[arg(long, default_value = "expert")]
         device: session::DeviceArg,
         /// live (real time) or virtual (as fast as possible, same ticks).

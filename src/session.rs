@@ -10,7 +10,7 @@ use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
-use cutlab_recorder::{RerunTarget, WriterOptions};
+use cutlab_recorder::{RecordedHand, RerunTarget, WriterOptions};
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
@@ -38,6 +38,8 @@ pub enum DeviceArg {
     Trainee { name: String, skill: Skill },
     Csv(PathBuf),
     Igtl(u16),
+    /// A recorded session's hand, played back.
+    Recording(PathBuf),
 }
 
 impl std::str::FromStr for DeviceArg {
@@ -56,10 +58,16 @@ impl std::str::FromStr for DeviceArg {
             }
             return Ok(DeviceArg::Csv(PathBuf::from(path)));
         }
+        if let Some(path) = s.strip_prefix("recording:") {
+            if path.is_empty() {
+                return Err("recording: needs a session recording, e.g. recording:out/session/session.mcap".into());
+            }
+            return Ok(DeviceArg::Recording(PathBuf::from(path)));
+        }
         if let Some(port) = s.strip_prefix("igtl:") {
             return port.parse::<u16>().map(DeviceArg::Igtl).map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
         }
-        Err(format!("unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH or igtl:PORT)"))
+        Err(format!("unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH, recording:PATH or igtl:PORT)"))
     }
 }
 
@@ -158,6 +166,10 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let mut device: Option<Box<dyn HapticDevice>> = match &o.device {
         DeviceArg::Trainee { .. } => None,
         DeviceArg::Csv(path) => Some(Box::new(CsvDevice::open(path).context("reading the trajectory")?)),
+        DeviceArg::Recording(path) => {
+            let recording = Recording::open(path).with_context(|| format!("reading the recording {}", path.display()))?;
+            Some(Box::new(RecordedHand::new(&recording).with_context(|| format!("playing the hand of {}", path.display()))?))
+        }
         DeviceArg::Igtl(port) => {
             let d = IgtlDevice::listen(*port)?;
             say!(o.quiet, "OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)", d.address());

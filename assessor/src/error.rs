@@ -28,8 +28,8 @@ pub enum AssessError {
     #[error("database migration: {0}")]
     Migrate(#[from] sqlx::migrate::MigrateError),
     /// Reading a file.
-    #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     /// JSON (de)serialisation of stored values.
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),

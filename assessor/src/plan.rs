@@ -86,7 +86,7 @@ impl ExpertPlan {
 
     /// Reads a `.toml` or `.json` file (by extension; anything else is tried as TOML, then JSON).
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io { path: path.display().to_string(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io { path: path.display().to_string(), error: source })?;
         let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
         let at = |e: AssessError| match e {
             AssessError::Parse { what, message } => AssessError::Parse { what: format!("{} ({what})", path.display()), message },

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 /// Why a device, a session or a configuration could not be set up.
 #[derive(Debug, thiserror::Error)]
 pub enum HapticsError {
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("{path}:{line}: {message}")]
     Csv { path: PathBuf, line: usize, message: String },
     #[error("OpenIGTLink: cannot listen on port {port}: {source}")]

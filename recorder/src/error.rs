@@ -5,8 +5,8 @@ use std::path::PathBuf;
 /// Everything that can go wrong writing, reading, recovering or replaying a recording.
 #[derive(Debug, thiserror::Error)]
 pub enum RecorderError {
-    #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: {error}", path.display())]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("MCAP: {0}")]
     Mcap(#[from] mcap::McapError),
     #[error("encoding a message: {0}")]

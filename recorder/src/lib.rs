@@ -10,12 +10,14 @@
 //! - [`recover`]: salvages a recording cut short into a complete file.
 //! - [`rerun_log`]: [`RerunSink`] logs a session or a replay to a rerun `.rrd` file or a
 //!   live viewer (only when asked).
+//! - [`device`]: [`RecordedHand`] plays a recording's tool poses back as a haptic device.
 //! - [`replay`]: re-simulates a recording from its inputs and checks every keyframe's hash
 //!   bit for bit.
 //!
 //! May depend on `cutlab-haptics` and `cutlab-sim`; nothing below depends on it.
 
 pub mod channels;
+pub mod device;
 pub mod error;
 pub mod reader;
 pub mod record;
@@ -25,6 +27,7 @@ pub mod rerun_log;
 pub mod writer;
 
 pub use cutlab_haptics as haptics;
+pub use device::RecordedHand;
 pub use error::RecorderError;
 pub use reader::Recording;
 pub use rerun_log::{RerunLogError, RerunSink, RerunTarget};

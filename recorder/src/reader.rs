@@ -69,7 +69,7 @@ fn malformed(topic: &str, log_time: u64, e: impl std::fmt::Display) -> RecorderE
 
 impl Recording {
     pub fn open(path: &Path) -> Result<Self, RecorderError> {
-        let bytes = std::fs::read(path).map_err(|source| RecorderError::Io { path: path.to_owned(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| RecorderError::Io { path: path.to_owned(), error: source })?;
         Self::from_bytes(&bytes)
     }
 

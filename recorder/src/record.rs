@@ -58,7 +58,7 @@ pub fn run_recorded(
     }
     let sink = McapSink::create(path, &meta, &attachments, settings.writer)?;
     let (tap, feed) = tap::tap(settings.tap);
-    let writer = writer::spawn(sink, feed, observer).map_err(|source| RecorderError::Io { path: path.to_owned(), source })?;
+    let writer = writer::spawn(sink, feed, observer).map_err(|source| RecorderError::Io { path: path.to_owned(), error: source })?;
     let report = session.run_recorded(device, config, Some(tap));
     let (sink, observer) = writer.join().map_err(|_| RecorderError::Encode("the recorder thread panicked".into()))??;
     let mut end = BTreeMap::new();

@@ -33,10 +33,10 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
     if input == output {
         return Err(RecorderError::Malformed("recover writes a new file: the output must not be the input".into()));
     }
-    let bytes = std::fs::read(input).map_err(|source| RecorderError::Io { path: input.to_owned(), source })?;
+    let bytes = std::fs::read(input).map_err(|source| RecorderError::Io { path: input.to_owned(), error: source })?;
     // before the output is created: a file that is no recording leaves nothing behind
     check_magic(&bytes)?;
-    let file = File::create(output).map_err(|source| RecorderError::Io { path: output.to_owned(), source })?;
+    let file = File::create(output).map_err(|source| RecorderError::Io { path: output.to_owned(), error: source })?;
     let mut w = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
         .profile("cutlab")
@@ -99,6 +99,6 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
     }
     w.write_metadata(&Metadata { name: "cutlab.recovered".into(), metadata: note })?;
     w.finish()?;
-    w.into_inner().flush().map_err(|source| RecorderError::Io { path: output.to_owned(), source })?;
+    w.into_inner().flush().map_err(|source| RecorderError::Io { path: output.to_owned(), error: source })?;
     Ok(report)
 }

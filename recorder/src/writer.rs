@@ -82,7 +82,7 @@ impl McapSink<BufWriter<File>> {
     /// Creates `path` (replacing it) and writes the header, the channels, the session
     /// metadata and the attachments `(name, media type, bytes)`.
     pub fn create(path: &Path, meta: &SessionMeta, attachments: &[(&str, &str, Vec<u8>)], options: WriterOptions) -> Result<Self, RecorderError> {
-        let file = File::create(path).map_err(|source| RecorderError::Io { path: path.to_owned(), source })?;
+        let file = File::create(path).map_err(|source| RecorderError::Io { path: path.to_owned(), error: source })?;
         Self::new(BufWriter::with_capacity(1 << 16, file), meta, attachments, options)
     }
 }
@@ -213,7 +213,7 @@ impl<W: Write + Seek> McapSink<W> {
     pub fn finish(mut self, end: &BTreeMap<String, String>) -> Result<WriteStats, RecorderError> {
         self.writer.write_metadata(&Metadata { name: channels::SESSION_END_METADATA.into(), metadata: end.clone() })?;
         self.writer.finish()?;
-        self.writer.into_inner().flush().map_err(|source| RecorderError::Io { path: "recording".into(), source })?;
+        self.writer.into_inner().flush().map_err(|source| RecorderError::Io { path: "recording".into(), error: source })?;
         Ok(self.stats)
     }
 }

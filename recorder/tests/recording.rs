@@ -51,6 +51,7 @@ struct Recorded {
     ticks: u64,
     steps: u64,
     cut_steps: u64,
+    state_hash: u64,
 }
 
 /// One 30 s scripted session with cuts (the expert trainee on the chest wall), recorded once
@@ -73,8 +74,20 @@ fn recorded() -> &'static Recorded {
         let report = r.report.expect("session ran");
         drop(r.observer);
         let seen = Arc::try_unwrap(seen).ok().expect("observer dropped").into_inner().expect("lock");
-        Recorded { path, seen, ticks: report.servo.ticks, steps: report.sim_steps, cut_steps: report.stats.cut_steps }
+        Recorded { path, seen, ticks: report.servo.ticks, steps: report.sim_steps, cut_steps: report.stats.cut_steps, state_hash: report.state_hash }
     })
+}
+
+#[test]
+fn the_recorded_hand_played_back_drives_the_same_session_again() {
+    let r = recorded();
+    let hand = cutlab_recorder::RecordedHand::new(&Recording::open(&r.path).expect("readable")).expect("a hand to play");
+    assert!((hand.duration_s() - (DURATION_S - 0.001)).abs() < 1e-9, "{} s", hand.duration_s());
+    let scene = Scene::load(SCENE, BuildOptions { min_tets: Some(MIN_TETS) }).expect("scene");
+    let config = SessionConfig { duration_s: DURATION_S, ..SessionConfig::default() };
+    let again = Session::new(&scene).expect("session").run(Box::new(hand), &config).expect("session driven by the recording");
+    assert_eq!((again.servo.ticks, again.stats.cut_steps), (r.ticks, r.cut_steps));
+    assert_eq!(again.state_hash, r.state_hash, "the same hand on the same scene gives the same session, bit for bit");
 }
 
 #[test]

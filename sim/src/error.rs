@@ -19,8 +19,8 @@ pub enum MeshError {
 /// errors also name the 1-based line (text formats) and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
-    #[error("{path}: {source}")]
-    Io { path: std::path::PathBuf, source: std::io::Error },
+    #[error("{path}: {error}")]
+    Io { path: std::path::PathBuf, error: std::io::Error },
     #[error("{path}:{line}: {message}")]
     Parse { path: std::path::PathBuf, line: usize, message: String },
     #[error("{path}: {message}")]

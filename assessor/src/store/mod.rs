@@ -88,7 +88,7 @@ impl Store {
     /// Opens (creating if needed) the database at `path` and applies the migrations.
     pub async fn open(path: &Path) -> Result<Self> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|source| AssessError::Io { path: dir.display().to_string(), source })?;
+            std::fs::create_dir_all(dir).map_err(|source| AssessError::Io { path: dir.display().to_string(), error: source })?;
         }
         Self::open_with(SqliteConnectOptions::new().filename(path)).await
     }

@@ -41,7 +41,7 @@ pub struct CsvDevice {
 impl CsvDevice {
     /// Reads and checks the whole file.
     pub fn open(path: &Path) -> Result<Self, HapticsError> {
-        let io = |source| HapticsError::Io { path: path.to_path_buf(), source };
+        let io = |source| HapticsError::Io { path: path.to_path_buf(), error: source };
         let size = std::fs::metadata(path).map_err(io)?.len();
         if size > MAX_BYTES {
             return Err(HapticsError::Csv { path: path.to_path_buf(), line: 0, message: format!("file is {size} bytes; at most {MAX_BYTES} accepted") });

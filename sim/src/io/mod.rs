@@ -94,7 +94,7 @@ pub fn read_mesh_from_str(
 /// readers can still recognise headers (e.g. of binary files) and report a precise error.
 pub(crate) fn read_text(path: &Path) -> Result<String, ReadError> {
     let bytes =
-        std::fs::read(path).map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
+        std::fs::read(path).map_err(|source| ReadError::Io { path: path.to_path_buf(), error: source })?;
     Ok(match String::from_utf8(bytes) {
         Ok(s) => s,
         Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),

@@ -37,8 +37,8 @@ impl PointData<'_> {
 /// Why a `.vtu` file could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("point data `{name}` has {len} values for {vertices} vertices")]
     Length { name: String, len: usize, vertices: usize },
     #[error("point data `{name}` has a NaN or infinite value at vertex {vertex}")]
@@ -59,7 +59,7 @@ pub fn write_vtu(
     point_data: &[(&str, PointData<'_>)],
 ) -> Result<(), WriteError> {
     check(mesh, point_data)?;
-    let io_error = |source| WriteError::Io { path: path.to_path_buf(), source };
+    let io_error = |source| WriteError::Io { path: path.to_path_buf(), error: source };
     let file = std::fs::File::create(path).map_err(io_error)?;
     let mut out = std::io::BufWriter::new(file);
     write_body(&mut out, mesh, point_data).map_err(io_error)?;
@@ -74,7 +74,7 @@ pub fn vtu_string(
     check(mesh, point_data)?;
     let mut out = Vec::new();
     write_body(&mut out, mesh, point_data)
-        .map_err(|source| WriteError::Io { path: PathBuf::from("<memory>"), source })?;
+        .map_err(|source| WriteError::Io { path: PathBuf::from("<memory>"), error: source })?;
     Ok(String::from_utf8_lossy(&out).into_owned())
 }
 

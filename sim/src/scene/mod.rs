@@ -97,7 +97,7 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
         return Ok((spec, SpecOrigin::File(path.to_path_buf())));
     }
     let text = std::fs::read_to_string(path)
-        .map_err(|source| ReadError::Io { path: path.to_path_buf(), source })?;
+        .map_err(|source| ReadError::Io { path: path.to_path_buf(), error: source })?;
     Ok((parse_spec(&text, path)?, SpecOrigin::File(path.to_path_buf())))
 }
 

@@ -41,7 +41,7 @@ fn format_err(path: &Path, message: impl Into<String>) -> ReadError {
 fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
     let raw = std::fs::read(path).map_err(|source| ReadError::Io {
         path: path.to_path_buf(),
-        source,
+        error: source,
     })?;
     if !raw.starts_with(&[0x1f, 0x8b]) {
         return Ok(raw);
