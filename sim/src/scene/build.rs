@@ -40,7 +40,7 @@ impl Scene {
     pub fn build(spec: SceneSpec, origin: &SpecOrigin, options: BuildOptions) -> Result<Self, SceneError> {
         let invalid = |message: String| SceneError::Invalid { scene: spec.name.clone(), message };
         spec.solver.check().map_err(invalid)?;
-        spec.incision.unit().map_err(|m| invalid(m.into()))?;
+        spec.incision.unit().map_err(invalid)?;
         if !(spec.cut_threshold_newtons > 0.0 && spec.cut_threshold_newtons.is_finite()) {
             return Err(invalid(format!("cut_threshold_newtons must be positive, got {}", spec.cut_threshold_newtons)));
         }
