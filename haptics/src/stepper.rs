@@ -1,7 +1,6 @@
-//! The simulation side of a session, one step per servo sample: apply the tool's reaction
-//! (its push while touching, the cutting resistance's drag while cutting), cut while the
-//! blade is in the tissue, advance the simulation, refit the surface and build the contact
-//! model for the servo loop.
+//! The simulation side of a session, one step per servo sample: apply the tool's reaction,
+//! cut while the blade is in the tissue, advance the simulation, refit the surface and build
+//! the contact model for the servo loop.
 //!
 //! A live session drives a [`SessionStepper`] from its simulation thread; a replay drives
 //! the same stepper from the recorded samples, so a replay runs exactly the code of the
@@ -15,7 +14,7 @@ use crate::collision::{SurfaceCollider, SurfaceHit};
 use crate::render::{ContactModel, Mode};
 use crate::servo::ServoSample;
 use crate::session::{Session, SessionConfig};
-use crate::{Point3, Vector3};
+use crate::Point3;
 
 /// What the stepper counted.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -83,26 +82,30 @@ impl SessionStepper {
     pub fn step(&mut self, sample: &ServoSample) -> StepOutput {
         let render = sample.render;
 
-        // The tool's reaction on the tissue (the opposite of the force rendered to the hand):
-        // while touching, the push around the touched point; while cutting, the cutting
-        // resistance's drag along the blade's motion, around the blade.
+        // The tool's reaction on the tissue, spread over the contact patch around the
+        // touched point (weights (1 - r / R)^2 over the surface particles within R).
         self.sim.clear_external_forces();
         // the scalpel is where a localised simulation stays awake
         self.sim.set_focus(&[sample.pose.tip_in_world]);
-        let reaction = -render.force_newtons;
-        match render.mode {
-            Mode::Touching => {
-                if let Some(hit) = &self.last_hit {
-                    let at = hit.point;
-                    self.spread(reaction, |p| (p - at).norm());
+        if render.mode == Mode::Touching
+            && let Some(hit) = &self.last_hit
+        {
+            self.patch.clear();
+            let mut total = 0.0;
+            let x = &self.sim.state.positions;
+            for &v in self.collider.vertex_ids() {
+                let r = (x[v as usize] - hit.point).norm();
+                if r < self.patch_radius_m && !self.sim.model.held[v as usize] {
+                    let w = (1.0 - r / self.patch_radius_m).powi(2);
+                    self.patch.push((v, w));
+                    total += w;
                 }
             }
-            Mode::Cutting => {
-                let tip = sample.pose.tip_in_world;
-                let heel = sample.pose.blade_heel(self.blade_length_m);
-                self.spread(reaction, |p| distance_to_segment(p, &tip, &heel));
+            if total > 0.0 {
+                for &(v, w) in &self.patch {
+                    self.sim.add_external_force(v, -(render.force_newtons * (w / total)));
+                }
             }
-            Mode::Free => {}
         }
 
         // Cutting while the renderer says the blade is in the tissue.
@@ -168,40 +171,11 @@ impl SessionStepper {
         StepOutput { contact, cut: made, rejected }
     }
 
-    /// Applies `force` to the surface particles within the patch radius `R` of where the tool
-    /// meets the tissue (`distance` from there), in shares `w / sum w` with weights
-    /// `w = (1 - r / R)^2`; held particles take none.
-    fn spread(&mut self, force: Vector3, distance: impl Fn(&Point3) -> f64) {
-        self.patch.clear();
-        let mut total = 0.0;
-        let x = &self.sim.state.positions;
-        for &v in self.collider.vertex_ids() {
-            let r = distance(&x[v as usize]);
-            if r < self.patch_radius_m && !self.sim.model.held[v as usize] {
-                let w = (1.0 - r / self.patch_radius_m).powi(2);
-                self.patch.push((v, w));
-                total += w;
-            }
-        }
-        if total > 0.0 {
-            for &(v, w) in &self.patch {
-                self.sim.add_external_force(v, force * (w / total));
-            }
-        }
-    }
-
     /// Hash of the simulation state's bits (positions and velocities) and of its topology
     /// (the tetrahedra): what a recording's keyframes carry and a replay checks.
     pub fn state_hash(&self) -> StateHash {
         StateHash::of(&self.sim)
     }
-}
-
-/// Distance from `p` to the segment from `a` to `b`.
-fn distance_to_segment(p: &Point3, a: &Point3, b: &Point3) -> f64 {
-    let ab = b - a;
-    let t = if ab.norm_squared() > 0.0 { ((p - a).dot(&ab) / ab.norm_squared()).clamp(0.0, 1.0) } else { 0.0 };
-    (p - (a + ab * t)).norm()
 }
 
 /// The bits of a simulation at one step, hashed (FNV-1a, 64 bits).
