@@ -19,7 +19,7 @@ use cutlab_sim::cut::{Blade, CutError, CutEvent, Cutter};
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{LocalisationSettings, Simulation, StaticSettings};
 use cutlab_sim::model::Model;
-use cutlab_sim::{Point3, TetMesh, Vector3};
+use cutlab_sim::{Point3, TetMesh};
 use serde::Serialize;
 
 use crate::plot;
@@ -47,10 +47,6 @@ const COARSE: f64 = 10.0;
 struct Case {
     scene: &'static str,
     min_tets: Option<usize>,
-    /// Out of the tissue, where the tool comes from.
-    up: [f64; 3],
-    /// Along the incision.
-    along: [f64; 3],
     /// Also a localised run with thresholds `COARSE` times the defaults.
     coarse: bool,
 }
@@ -58,9 +54,10 @@ struct Case {
 /// Largest first: its peak memory is then its own (memory freed by an earlier case and kept by
 /// the allocator would count in the next case's peak).
 fn cases(quick: bool) -> Vec<Case> {
-    let chest = |n: usize, coarse: bool| Case { scene: "chest-wall", min_tets: Some(n), up: [0.0, 0.0, 1.0], along: [1.0, 0.0, 0.0], coarse };
-    // the body wall as scanned: z runs head to foot, +y is anterior; a midline incision
-    let body = Case { scene: "body-wall", min_tets: None, up: [0.0, 1.0, 0.0], along: [0.0, 0.0, 1.0], coarse: false };
+    // each scene's incision is its `[incision]`: across the chest wall's top along x; the body
+    // wall's midline (z runs head to foot, +y is anterior)
+    let chest = |n: usize, coarse: bool| Case { scene: "chest-wall", min_tets: Some(n), coarse };
+    let body = Case { scene: "body-wall", min_tets: None, coarse: false };
     if quick {
         vec![chest(50_000, true), chest(10_000, false)]
     } else {
@@ -530,9 +527,10 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
 
     // the incision: through the middle of the bounding box, on the surface facing `up`
     let x = &settled.state.positions;
-    let (lo, hi) = x.iter().fold((x[0], x[0]), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+    let (lo, hi) = cutlab_sim::mesh::bounding_box(x);
     let centre = lo + (hi - lo) / 2.0;
-    let (up, along) = (Vector3::from(case.up), Vector3::from(case.along));
+    // checked when the scene was built
+    let (up, along) = scene.spec.incision.unit().map_err(anyhow::Error::msg)?;
     let half = 0.5 * SPEED_M_PER_S * stroke_s;
     let stroke = Stroke::new(&settled, centre - along * half, centre + along * half, -up, stroke_s, PRESS_N);
     anyhow::ensure!(stroke.surface_count() > 0, "{}: no free surface facing {up:?} along the incision", case.scene);

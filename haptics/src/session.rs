@@ -146,11 +146,7 @@ impl Session {
     /// and each of its points dropped along `-up` onto the surface, cut `depth_m` deep.
     pub fn plan_across(&self, up: &Vector3, along: &Vector3, length_m: f64, depth_m: f64) -> Result<Plan, HapticsError> {
         let x = &self.sim.state.positions;
-        let (mut lo, mut hi) = (x[0], x[0]);
-        for p in x {
-            lo = lo.inf(p);
-            hi = hi.sup(p);
-        }
+        let (lo, hi) = cutlab_sim::mesh::bounding_box(x);
         let centre = nalgebra::center(&lo, &hi);
         let (mut min_along, mut max_along, mut outermost, mut innermost) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         for p in x {

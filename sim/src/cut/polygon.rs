@@ -101,13 +101,7 @@ impl CutPolygon {
 
     /// Axis-aligned bounds of the polygon.
     pub fn bounds(&self) -> (Point3, Point3) {
-        let mut lo = self.corners[0];
-        let mut hi = self.corners[0];
-        for p in &self.corners {
-            lo = lo.inf(p);
-            hi = hi.sup(p);
-        }
-        (lo, hi)
+        crate::mesh::bounding_box(&self.corners)
     }
 }
 

@@ -1,6 +1,17 @@
-//! Elementary geometry of tetrahedra and triangles.
+//! Elementary geometry of tetrahedra, triangles and point sets.
 
 use crate::{Point3, Vector3};
+
+/// Axis-aligned bounding box `(min, max)` of `points` (infinite and inverted when empty).
+pub fn bounding_box<'a>(points: impl IntoIterator<Item = &'a Point3>) -> (Point3, Point3) {
+    let mut lo = Point3::new(f64::INFINITY, f64::INFINITY, f64::INFINITY);
+    let mut hi = Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    (lo, hi)
+}
 
 /// Signed volume `det(b - a, c - a, d - a) / 6`; positive when `d` lies on the side of the
 /// triangle `(a, b, c)` towards which its right-hand normal points.

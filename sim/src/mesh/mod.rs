@@ -10,7 +10,7 @@ mod validate;
 
 pub use grid::PointGrid;
 pub use quality::tet_mu;
-pub use geometry::{dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal};
+pub use geometry::{bounding_box, dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal};
 pub use quality::QualityStats;
 pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};
 pub use validate::ValidationReport;
@@ -183,13 +183,7 @@ impl TetMesh {
 
     /// Axis-aligned bounding box `(min, max)` of the vertices.
     pub fn bounding_box(&self) -> (Point3, Point3) {
-        let mut lo = Point3::new(f64::INFINITY, f64::INFINITY, f64::INFINITY);
-        let mut hi = Point3::new(f64::NEG_INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
-        for p in &self.positions {
-            lo = lo.inf(p);
-            hi = hi.sup(p);
-        }
-        (lo, hi)
+        geometry::bounding_box(&self.positions)
     }
 
     /// Distinct region ids, ascending.
