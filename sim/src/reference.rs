@@ -15,6 +15,7 @@
 //!   `f_1 = sqrt(E / rho) / (4 L)`.
 
 use crate::fem::FemMaterial;
+use crate::fem::quadratic::{QuadraticMaterial, QuadraticMesh, QuadraticSolution, QuadraticStatics};
 use crate::generate::{GridCells, grid};
 use crate::model::{Material, Model, ModelError, SpringStiffness};
 use crate::solver::{Integrator, Simulation, SolverSettings, StaticSettings, StepError};
@@ -47,16 +48,26 @@ pub enum Elasticity {
     SpringsYoungs,
     /// Co-rotational linear tetrahedral finite elements.
     CorotationalFem,
+    /// Quadratic (10-node) tetrahedra on the same mesh ([`crate::fem::quadratic`]): linear
+    /// elasticity, static problems only (the patch test, the cantilever, the wound opening);
+    /// the converged reference beside the linear elements, not a model a session runs.
+    QuadraticFem,
 }
 
 impl Elasticity {
+    /// The models a simulation runs (statics and dynamics).
     pub const ALL: [Elasticity; 3] = [Elasticity::SpringsUniform, Elasticity::SpringsYoungs, Elasticity::CorotationalFem];
+
+    /// Every model of the static reference problems: [`Self::ALL`] and the quadratic elements.
+    pub const STATIC: [Elasticity; 4] =
+        [Elasticity::SpringsUniform, Elasticity::SpringsYoungs, Elasticity::CorotationalFem, Elasticity::QuadraticFem];
 
     pub fn name(self) -> &'static str {
         match self {
             Elasticity::SpringsUniform => "springs-uniform",
             Elasticity::SpringsYoungs => "springs-youngs",
             Elasticity::CorotationalFem => "corotational-fem",
+            Elasticity::QuadraticFem => "quadratic-fem",
         }
     }
 }
@@ -95,6 +106,9 @@ pub fn build_model(
     let regions = mesh.region_ids();
     let young = SpringStiffness::YoungsModulus { pascals: solid.youngs_modulus_pa };
     let materials: Vec<(u32, Material)> = regions.iter().map(|&r| (r, material(young))).collect();
+    if kind == Elasticity::QuadraticFem {
+        return Err(static_only());
+    }
     let model = Model::new(mesh, &materials, held, Vector3::zeros())?;
     Ok(match kind {
         Elasticity::SpringsYoungs => model,
@@ -116,7 +130,52 @@ pub fn build_model(
             let fems: Vec<(u32, FemMaterial)> = regions.iter().map(|&r| (r, fem)).collect();
             model.with_fem(&fems)?
         }
+        Elasticity::QuadraticFem => return Err(static_only()),
     })
+}
+
+/// The error of asking the static-only quadratic elements for a dynamic run.
+pub(crate) fn static_only() -> ReferenceError {
+    ReferenceError::Failed("the quadratic elements solve static problems only (no mass, no time steps)".into())
+}
+
+/// The quadratic elements' material for `solid` with the pre-tension `s` (pre-strain
+/// `s / (1 - s)`, as the linear elements' rest shape `(1 - s) D_ref` gives).
+fn quadratic_material(solid: Solid, pretension: f64) -> QuadraticMaterial {
+    let fem = FemMaterial { youngs_modulus_pa: solid.youngs_modulus_pa, poisson_ratio: solid.poisson_ratio, ..FemMaterial::default() };
+    let (mu_pa, lambda_pa) = fem.lame_pa();
+    QuadraticMaterial { mu_pa, lambda_pa, pre_strain: pretension / (1.0 - pretension) }
+}
+
+/// Linear statics on the quadratic elements: `held` nodes at their prescribed displacements,
+/// `external` nodal forces, CG to `relative_tolerance` of the right-hand side (1e-10 leaves
+/// the cantilever's deflection unchanged in its first five digits against 1e-12).
+fn solve_quadratic(
+    quadratic: &QuadraticMesh,
+    solid: Solid,
+    pretension: f64,
+    held: &[Option<Vector3>],
+    external: &[Vector3],
+    relative_tolerance: f64,
+) -> Result<QuadraticSolution, ReferenceError> {
+    let statics = QuadraticStatics::new(quadratic, |_| quadratic_material(solid, pretension));
+    let solution = statics.solve(held, external, relative_tolerance);
+    if !solution.report.converged {
+        return Err(ReferenceError::Failed(format!("quadratic elements: CG did not converge: {:?}", solution.report)));
+    }
+    Ok(solution)
+}
+
+/// The nodes of `quadratic` on the linear mesh's boundary: its boundary vertices and the
+/// middles of the boundary triangles' edges.
+fn quadratic_boundary(quadratic: &QuadraticMesh, mesh: &TetMesh) -> Vec<bool> {
+    let mut on = vec![false; quadratic.nodes.len()];
+    for tri in &mesh.topology().boundary {
+        for node in quadratic.triangle(*tri).into_iter().flatten() {
+            on[node as usize] = true;
+        }
+    }
+    on
 }
 
 /// Tight static settings for the reference solutions.
@@ -148,29 +207,39 @@ pub fn patch_test(kind: Elasticity, solid: Solid, cells: GridCells, strain: f64)
     let nu = solid.poisson_ratio;
     let field = |p: &Point3| Vector3::new(strain * p.x, -nu * strain * p.y, -nu * strain * p.z);
     let tets = mesh.tet_count();
-    let model = build_model(mesh, kind, solid, 0.0, &boundary)?;
-    let mut sim = Simulation::new(model, SolverSettings::default());
-    for &v in &boundary {
-        sim.state.positions[v as usize] = rest[v as usize] + field(&rest[v as usize]);
-    }
-    // (a uniform field: the forces are large and exact, so the solve can go to round-off)
-    let report = sim.settle(StaticSettings { relative_force_tolerance: 1e-11, max_newton_iterations: 60 });
-    if !report.converged {
-        return Err(ReferenceError::Failed(format!("patch test did not settle: {report:?}")));
-    }
+    // per node: rest position, held, displacement, elastic force
+    let (rest, held, u, f): (Vec<Point3>, Vec<bool>, Vec<Vector3>, Vec<Vector3>) = if kind == Elasticity::QuadraticFem {
+        let quadratic = QuadraticMesh::new(&mesh);
+        let held = quadratic_boundary(&quadratic, &mesh);
+        let prescribed: Vec<Option<Vector3>> = quadratic.nodes.iter().zip(&held).map(|(p, &h)| h.then(|| field(p))).collect();
+        let solution = solve_quadratic(&quadratic, solid, 0.0, &prescribed, &[], 1e-13)?;
+        (quadratic.nodes, held, solution.displacements, solution.internal_forces)
+    } else {
+        let model = build_model(mesh, kind, solid, 0.0, &boundary)?;
+        let mut sim = Simulation::new(model, SolverSettings::default());
+        for &v in &boundary {
+            sim.state.positions[v as usize] = rest[v as usize] + field(&rest[v as usize]);
+        }
+        // (a uniform field: the forces are large and exact, so the solve can go to round-off)
+        let report = sim.settle(StaticSettings { relative_force_tolerance: 1e-11, max_newton_iterations: 60 });
+        if !report.converged {
+            return Err(ReferenceError::Failed(format!("patch test did not settle: {report:?}")));
+        }
+        let n = sim.model.vertex_count();
+        let mut f = vec![Vector3::zeros(); n];
+        let zero = vec![Vector3::zeros(); n];
+        match &sim.model.fem {
+            Some(fem) => crate::fem::solve::total_forces(&sim.model, fem, &sim.state.positions, &zero, &zero, &mut f),
+            None => crate::solver::forces::total_forces(&sim.model, &sim.state.positions, &zero, &zero, &mut f),
+        }
+        let u = sim.state.positions.iter().zip(&rest).map(|(x, p)| x - p).collect();
+        (rest, sim.model.held.clone(), u, f)
+    };
     let mut displacement_error = 0.0f64;
     for (i, p) in rest.iter().enumerate() {
-        if !sim.model.held[i] {
-            let u = sim.state.positions[i] - p;
-            displacement_error = displacement_error.max((u - field(p)).norm() / (strain * size[0]));
+        if !held[i] {
+            displacement_error = displacement_error.max((u[i] - field(p)).norm() / (strain * size[0]));
         }
-    }
-    let n = sim.model.vertex_count();
-    let mut f = vec![Vector3::zeros(); n];
-    let zero = vec![Vector3::zeros(); n];
-    match &sim.model.fem {
-        Some(fem) => crate::fem::solve::total_forces(&sim.model, fem, &sim.state.positions, &zero, &zero, &mut f),
-        None => crate::solver::forces::total_forces(&sim.model, &sim.state.positions, &zero, &zero, &mut f),
     }
     let h = size[0] / cells.nx as f64;
     let e = solid.youngs_modulus_pa;
@@ -217,6 +286,11 @@ pub struct CantileverResult {
 /// A bar clamped at its `x = min` face (all vertices held) with the tip load `P` spread over
 /// the `x = max` face by area, along the bar's largest cross dimension. `P` is chosen small
 /// (`delta / L` = 1e-3), so that linear beam theory applies.
+///
+/// Linear elements get a third of each tip triangle's share on its corners and report the
+/// mean deflection of the tip vertices; quadratic elements get the consistent load of a
+/// uniform traction (a third of the triangle's share on each edge middle, none on the
+/// corners) and report the deflection averaged over the tip face's area (the same weights).
 pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<CantileverResult, ReferenceError> {
     let (lo, hi) = mesh.bounding_box();
     let ext = hi - lo;
@@ -245,17 +319,39 @@ pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<Canti
     let load = 1e-3 * length / unit;
     let analytic = load * unit;
     let tets = mesh.tet_count();
-    let model = build_model(mesh, kind, solid, 0.0, &clamped)?;
-    let mut sim = Simulation::new(model, SolverSettings::default());
-    let tip: Vec<usize> = (0..pos.len()).filter(|&i| tip_weight[i] > 0.0).collect();
-    for &i in &tip {
-        sim.external_forces_mut()[i][axis] = load * tip_weight[i] / area;
-    }
-    let report = sim.settle_loaded(tight());
-    if !report.converged {
-        return Err(ReferenceError::Failed(format!("cantilever did not settle: {report:?}")));
-    }
-    let deflection = tip.iter().map(|&i| sim.state.positions[i][axis] - pos[i][axis]).sum::<f64>() / tip.len() as f64;
+    let deflection = if kind == Elasticity::QuadraticFem {
+        let quadratic = QuadraticMesh::new(&mesh);
+        let mut weight = vec![0.0; quadratic.nodes.len()];
+        for tri in &mesh.topology().boundary {
+            if tri.iter().all(|&v| pos[v as usize].x > hi.x - tol) {
+                let [a, bb, c] = tri.map(|v| pos[v as usize]);
+                let share = 0.5 * (bb - a).cross(&(c - a)).norm() / 3.0;
+                let nodes = quadratic.triangle(*tri).ok_or_else(|| ReferenceError::Failed("a tip triangle's edge is missing".into()))?;
+                for &m in &nodes[3..] {
+                    weight[m as usize] += share;
+                }
+            }
+        }
+        let held: Vec<Option<Vector3>> = quadratic.nodes.iter().map(|p| (p.x < lo.x + tol).then(Vector3::zeros)).collect();
+        let mut external = vec![Vector3::zeros(); quadratic.nodes.len()];
+        for (f, w) in external.iter_mut().zip(&weight) {
+            f[axis] = load * w / area;
+        }
+        let solution = solve_quadratic(&quadratic, solid, 0.0, &held, &external, 1e-10)?;
+        solution.displacements.iter().zip(&weight).map(|(u, w)| u[axis] * w).sum::<f64>() / area
+    } else {
+        let model = build_model(mesh, kind, solid, 0.0, &clamped)?;
+        let mut sim = Simulation::new(model, SolverSettings::default());
+        let tip: Vec<usize> = (0..pos.len()).filter(|&i| tip_weight[i] > 0.0).collect();
+        for &i in &tip {
+            sim.external_forces_mut()[i][axis] = load * tip_weight[i] / area;
+        }
+        let report = sim.settle_loaded(tight());
+        if !report.converged {
+            return Err(ReferenceError::Failed(format!("cantilever did not settle: {report:?}")));
+        }
+        tip.iter().map(|&i| sim.state.positions[i][axis] - pos[i][axis]).sum::<f64>() / tip.len() as f64
+    };
     Ok(CantileverResult {
         tets,
         length_m: length,
@@ -353,12 +449,30 @@ pub fn wound_opening(
     let slit_mesh = TetMesh::new(positions, tets, regions)?;
     let rim: Vec<u32> = generated.rim.clone();
     let tet_count = slit_mesh.tet_count();
-    let model = build_model(slit_mesh, kind, solid, pretension, &rim)?;
-    let mut sim = Simulation::new(model, SolverSettings::default());
-    let report = sim.settle(tight());
-    if !report.converged {
-        return Err(ReferenceError::Failed(format!("wound opening did not settle: {report:?}")));
-    }
+    // the vertices' positions at rest
+    let deformed: Vec<Point3> = if kind == Elasticity::QuadraticFem {
+        // the rim's vertices and the middles of the edges between them are held
+        let quadratic = QuadraticMesh::new(&slit_mesh);
+        let mut held = vec![None; quadratic.nodes.len()];
+        for &v in &rim {
+            held[v as usize] = Some(Vector3::zeros());
+        }
+        for (e, &[a, b]) in quadratic.edges.iter().enumerate() {
+            if held[a as usize].is_some() && held[b as usize].is_some() {
+                held[quadratic.vertex_count + e] = Some(Vector3::zeros());
+            }
+        }
+        let solution = solve_quadratic(&quadratic, solid, pretension, &held, &[], 1e-10)?;
+        slit_mesh.positions().iter().zip(&solution.displacements).map(|(p, u)| p + u).collect()
+    } else {
+        let model = build_model(slit_mesh, kind, solid, pretension, &rim)?;
+        let mut sim = Simulation::new(model, SolverSettings::default());
+        let report = sim.settle(tight());
+        if !report.converged {
+            return Err(ReferenceError::Failed(format!("wound opening did not settle: {report:?}")));
+        }
+        sim.state.positions
+    };
     let e = pretension / (1.0 - pretension);
     let sigma = solid.youngs_modulus_pa * e / (1.0 - solid.poisson_ratio);
     let analytic = |x: f64| 4.0 * sigma / solid.youngs_modulus_pa * (a * a - x * x).max(0.0).sqrt();
@@ -369,7 +483,7 @@ pub fn wound_opening(
         if c == u32::MAX {
             continue;
         }
-        let gap = sim.state.positions[c as usize].y - sim.state.positions[i].y;
+        let gap = deformed[c as usize].y - deformed[i].y;
         match by_x.iter_mut().find(|(x, _, _)| (x - p.x).abs() < tol) {
             Some(entry) => {
                 entry.1 += gap;
@@ -418,6 +532,9 @@ pub fn vibration(
 ) -> Result<VibrationResult, ReferenceError> {
     if !(time_step_s > 0.0 && time_step_s.is_finite()) {
         return Err(ReferenceError::Failed(format!("time step must be positive, got {time_step_s} s")));
+    }
+    if kind == Elasticity::QuadraticFem {
+        return Err(static_only());
     }
     let (lo, hi) = mesh.bounding_box();
     let length = hi.x - lo.x;

@@ -102,6 +102,7 @@ pub fn build(case: &StabilityCase, cells: GridCells) -> Result<Simulation, Refer
             };
             model = model.with_fem(&[(0, fem), (1, fem)])?;
         }
+        Elasticity::QuadraticFem => return Err(crate::reference::static_only()),
     }
     let settings = SolverSettings { integrator: case.integrator, time_step_s: case.time_step_s, ..SolverSettings::default() };
     let mut sim = Simulation::new(model, settings);

@@ -33,6 +33,43 @@ fn patch_test_uniform_strain_and_lateral_contraction_to_round_off() {
     }
 }
 
+/// Quadratic elements contain the linear field too: the patch test holds to round-off, on the
+/// edge middles as on the corners.
+#[test]
+fn quadratic_elements_pass_the_patch_test() {
+    for cells in [GridCells { nx: 4, ny: 3, nz: 3 }, GridCells { nx: 5, ny: 2, nz: 4 }] {
+        let r = patch_test(Elasticity::QuadraticFem, SOLID, cells, 1e-3).expect("patch test");
+        println!("quadratic {cells:?}: {r:?}");
+        assert!(r.displacement_error < 1e-9, "{r:?}");
+        assert!(r.lateral_force < 1e-9, "{r:?}");
+        assert!(r.axial_force_error < 1e-9, "{r:?}");
+    }
+}
+
+/// The goal of the accuracy work: the finite elements within 5 % of Timoshenko at the finest
+/// IPC bar. Quadratic elements on the same meshes carry the bending the linear ones lock in.
+#[test]
+fn quadratic_elements_reach_the_cantilever_within_five_percent_on_the_finest_bar() {
+    let results: Vec<_> =
+        IPC_BARS.iter().map(|b| cantilever(bar(b), Elasticity::QuadraticFem, SOLID).expect("cantilever")).collect();
+    for r in &results {
+        println!("quadratic: {} tets, delta {:.4e} m vs Timoshenko {:.4e} m, error {:.2} %", r.tets, r.deflection_m, r.analytic_m, 100.0 * r.relative_error);
+    }
+    assert!(results[2].relative_error < 0.05, "{:?}", results[2]);
+    assert!(results[0].relative_error > results[2].relative_error, "{results:?}");
+    let linear = cantilever(bar(IPC_BARS[2]), Elasticity::CorotationalFem, SOLID).expect("cantilever");
+    assert!(results[2].relative_error < 0.5 * linear.relative_error, "{:?} vs linear {linear:?}", results[2]);
+}
+
+#[test]
+fn quadratic_elements_open_the_wound_as_fracture_mechanics_says() {
+    let r = wound_opening(Elasticity::QuadraticFem, SOLID, 0.01, 4).expect("wound");
+    println!("quadratic: {} tets, centre gap {:.4e} m vs {:.4e} m: {:.2} %, profile {:.1} %", r.tets, r.centre_gap_m, r.analytic_centre_gap_m, 100.0 * r.centre_error, 100.0 * r.profile_error);
+    assert!(r.centre_error < 0.05, "{r:?}");
+    assert!(r.profile_error < 0.15, "{r:?}");
+    assert!(vibration(bar(IPC_BARS[0]), Elasticity::QuadraticFem, SOLID, Integrator::ImplicitEuler, 1e-3).is_err(), "static only");
+}
+
 fn bar(name: &str) -> cutlab_sim::TetMesh {
     read_bar(&ipc_dir().join(name), IPC_UNIT_M).expect("IPC bar")
 }

@@ -43,6 +43,7 @@
 //! Tetrahedra of zero reference volume (possible slivers) get no stiffness.
 
 pub mod material;
+pub mod quadratic;
 pub mod solve;
 pub mod system;
 
