@@ -17,12 +17,15 @@ const SOLID: Solid = Solid::CHEST_WALL;
 
 #[test]
 fn patch_test_uniform_strain_and_lateral_contraction_to_round_off() {
-    for cells in [GridCells { nx: 4, ny: 3, nz: 3 }, GridCells { nx: 5, ny: 2, nz: 4 }] {
-        let r = patch_test(Elasticity::CorotationalFem, SOLID, cells, 1e-3).expect("patch test");
-        println!("fem {cells:?}: {r:?}");
-        assert!(r.displacement_error < 1e-10, "{r:?}");
-        assert!(r.lateral_force < 1e-10, "{r:?}");
-        assert!(r.axial_force_error < 1e-10, "{r:?}");
+    // (the quadratic elements contain the linear field too: on the edge middles as on the corners)
+    for kind in [Elasticity::CorotationalFem, Elasticity::QuadraticFem] {
+        for cells in [GridCells { nx: 4, ny: 3, nz: 3 }, GridCells { nx: 5, ny: 2, nz: 4 }] {
+            let r = patch_test(kind, SOLID, cells, 1e-3).expect("patch test");
+            println!("{} {cells:?}: {r:?}", kind.name());
+            assert!(r.displacement_error < 1e-10, "{r:?}");
+            assert!(r.lateral_force < 1e-10, "{r:?}");
+            assert!(r.axial_force_error < 1e-10, "{r:?}");
+        }
     }
     // The springs reproduce the uniform displacement (the lattice is uniform) but not the
     // stress: forces appear on the lateral faces, and the axial force is off.
@@ -33,28 +36,11 @@ fn patch_test_uniform_strain_and_lateral_contraction_to_round_off() {
     }
 }
 
-/// Quadratic elements contain the linear field too: the patch test holds to round-off, on the
-/// edge middles as on the corners.
-#[test]
-fn quadratic_elements_pass_the_patch_test() {
-    for cells in [GridCells { nx: 4, ny: 3, nz: 3 }, GridCells { nx: 5, ny: 2, nz: 4 }] {
-        let r = patch_test(Elasticity::QuadraticFem, SOLID, cells, 1e-3).expect("patch test");
-        println!("quadratic {cells:?}: {r:?}");
-        assert!(r.displacement_error < 1e-9, "{r:?}");
-        assert!(r.lateral_force < 1e-9, "{r:?}");
-        assert!(r.axial_force_error < 1e-9, "{r:?}");
-    }
-}
-
 /// The goal of the accuracy work: the finite elements within 5 % of Timoshenko at the finest
 /// IPC bar. Quadratic elements on the same meshes carry the bending the linear ones lock in.
 #[test]
 fn quadratic_elements_reach_the_cantilever_within_five_percent_on_the_finest_bar() {
-    let results: Vec<_> =
-        IPC_BARS.iter().map(|b| cantilever(bar(b), Elasticity::QuadraticFem, SOLID).expect("cantilever")).collect();
-    for r in &results {
-        println!("quadratic: {} tets, delta {:.4e} m vs Timoshenko {:.4e} m, error {:.2} %", r.tets, r.deflection_m, r.analytic_m, 100.0 * r.relative_error);
-    }
+    let results = cantilevers(Elasticity::QuadraticFem);
     assert!(results[2].relative_error < 0.05, "{:?}", results[2]);
     assert!(results[0].relative_error > results[2].relative_error, "{results:?}");
     let linear = cantilever(bar(IPC_BARS[2]), Elasticity::CorotationalFem, SOLID).expect("cantilever");
@@ -74,13 +60,18 @@ fn bar(name: &str) -> cutlab_sim::TetMesh {
     read_bar(&ipc_dir().join(name), IPC_UNIT_M).expect("IPC bar")
 }
 
+/// The cantilever of `kind` on every IPC bar, printed.
+fn cantilevers(kind: Elasticity) -> Vec<reference::CantileverResult> {
+    let results: Vec<_> = IPC_BARS.iter().map(|b| cantilever(bar(b), kind, SOLID).expect("cantilever")).collect();
+    for r in &results {
+        println!("{}: {} tets, delta {:.4e} m vs Timoshenko {:.4e} m, error {:.2} %", kind.name(), r.tets, r.deflection_m, r.analytic_m, 100.0 * r.relative_error);
+    }
+    results
+}
+
 #[test]
 fn cantilever_error_shrinks_with_refinement_on_the_ipc_bars() {
-    let results: Vec<_> =
-        IPC_BARS.iter().map(|b| cantilever(bar(b), Elasticity::CorotationalFem, SOLID).expect("cantilever")).collect();
-    for r in &results {
-        println!("fem: {} tets, delta {:.4e} m vs Timoshenko {:.4e} m, error {:.1} %", r.tets, r.deflection_m, r.analytic_m, 100.0 * r.relative_error);
-    }
+    let results = cantilevers(Elasticity::CorotationalFem);
     // linear tetrahedra are too stiff in bending (shear locking): the error falls like h^2
     assert!(results[0].relative_error > results[1].relative_error);
     assert!(results[1].relative_error > results[2].relative_error);
@@ -92,10 +83,7 @@ fn cantilever_error_shrinks_with_refinement_on_the_ipc_bars() {
     println!("fem extrapolated: {extrapolated:.4e} m, error {:.1} %", 100.0 * error);
     assert!(error < 0.05, "{error}");
     for kind in [Elasticity::SpringsUniform, Elasticity::SpringsYoungs] {
-        for b in IPC_BARS {
-            let r = cantilever(bar(b), kind, SOLID).expect("cantilever");
-            println!("{}: {} tets, error {:.1} %", kind.name(), r.tets, 100.0 * r.relative_error);
-        }
+        cantilevers(kind);
     }
 }
 
