@@ -106,9 +106,6 @@ pub fn build_model(
     let regions = mesh.region_ids();
     let young = SpringStiffness::YoungsModulus { pascals: solid.youngs_modulus_pa };
     let materials: Vec<(u32, Material)> = regions.iter().map(|&r| (r, material(young))).collect();
-    if kind == Elasticity::QuadraticFem {
-        return Err(static_only());
-    }
     let model = Model::new(mesh, &materials, held, Vector3::zeros())?;
     Ok(match kind {
         Elasticity::SpringsYoungs => model,
@@ -300,17 +297,18 @@ pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<Canti
     let tol = 1e-6 * length;
     let pos = mesh.positions().to_vec();
     let clamped: Vec<u32> = (0..pos.len() as u32).filter(|&i| pos[i as usize].x < lo.x + tol).collect();
-    let mut tip_weight = vec![0.0; pos.len()];
-    for tri in &mesh.topology().boundary {
-        if tri.iter().all(|&v| pos[v as usize].x > hi.x - tol) {
+    // the tip face's triangles, each with a third of its area
+    let tip_triangles: Vec<([u32; 3], f64)> = mesh
+        .topology()
+        .boundary
+        .iter()
+        .filter(|tri| tri.iter().all(|&v| pos[v as usize].x > hi.x - tol))
+        .map(|tri| {
             let [a, bb, c] = tri.map(|v| pos[v as usize]);
-            let area = 0.5 * (bb - a).cross(&(c - a)).norm();
-            for &v in tri {
-                tip_weight[v as usize] += area / 3.0;
-            }
-        }
-    }
-    let area: f64 = tip_weight.iter().sum();
+            (*tri, 0.5 * (bb - a).cross(&(c - a)).norm() / 3.0)
+        })
+        .collect();
+    let area: f64 = 3.0 * tip_triangles.iter().map(|(_, share)| share).sum::<f64>();
     let e = solid.youngs_modulus_pa;
     let g = e / (2.0 * (1.0 + solid.poisson_ratio));
     let inertia = b * h.powi(3) / 12.0;
@@ -322,14 +320,10 @@ pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<Canti
     let deflection = if kind == Elasticity::QuadraticFem {
         let quadratic = QuadraticMesh::new(&mesh);
         let mut weight = vec![0.0; quadratic.nodes.len()];
-        for tri in &mesh.topology().boundary {
-            if tri.iter().all(|&v| pos[v as usize].x > hi.x - tol) {
-                let [a, bb, c] = tri.map(|v| pos[v as usize]);
-                let share = 0.5 * (bb - a).cross(&(c - a)).norm() / 3.0;
-                let nodes = quadratic.triangle(*tri).ok_or_else(|| ReferenceError::Failed("a tip triangle's edge is missing".into()))?;
-                for &m in &nodes[3..] {
-                    weight[m as usize] += share;
-                }
+        for &(tri, share) in &tip_triangles {
+            let nodes = quadratic.triangle(tri).ok_or_else(|| ReferenceError::Failed("a tip triangle's edge is missing".into()))?;
+            for &m in &nodes[3..] {
+                weight[m as usize] += share;
             }
         }
         let held: Vec<Option<Vector3>> = quadratic.nodes.iter().map(|p| (p.x < lo.x + tol).then(Vector3::zeros)).collect();
@@ -340,6 +334,12 @@ pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<Canti
         let solution = solve_quadratic(&quadratic, solid, 0.0, &held, &external, 1e-10)?;
         solution.displacements.iter().zip(&weight).map(|(u, w)| u[axis] * w).sum::<f64>() / area
     } else {
+        let mut tip_weight = vec![0.0; pos.len()];
+        for &(tri, share) in &tip_triangles {
+            for v in tri {
+                tip_weight[v as usize] += share;
+            }
+        }
         let model = build_model(mesh, kind, solid, 0.0, &clamped)?;
         let mut sim = Simulation::new(model, SolverSettings::default());
         let tip: Vec<usize> = (0..pos.len()).filter(|&i| tip_weight[i] > 0.0).collect();

@@ -161,6 +161,14 @@ fn a_free_cut_off_piece_does_not_explode() {
     }
 }
 
+/// Tetrahedra inverted (or flat) in the current positions.
+fn inverted(sim: &Simulation) -> usize {
+    sim.model.mesh.tets().iter().filter(|t| {
+        let [a, b, c, d] = t.map(|i| sim.state.positions[i as usize]);
+        tet_signed_volume(&a, &b, &c, &d) <= 0.0
+    }).count()
+}
+
 #[test]
 fn inverted_elements_recover() {
     for integrator in Integrator::ALL {
@@ -179,12 +187,6 @@ fn inverted_elements_recover() {
             })
             .expect("a free top vertex");
         sim.state.positions[v].z -= 0.016;
-        let inverted = |sim: &Simulation| {
-            sim.model.mesh.tets().iter().filter(|t| {
-                let [a, b, c, d] = t.map(|i| sim.state.positions[i as usize]);
-                tet_signed_volume(&a, &b, &c, &d) <= 0.0
-            }).count()
-        };
         let at_start = inverted(&sim);
         assert!(at_start > 0, "nothing inverted");
         for _ in 0..1_000 {
@@ -228,10 +230,7 @@ fn a_tool_pushed_deep_into_the_tissue_stays_finite_and_the_tissue_springs_back()
             deepest = deepest.max(tool.iter().map(|&i| rest[i].z - sim.state.positions[i].z).fold(0.0, f64::max));
         }
         let left = sim.state.positions.iter().zip(&rest).map(|(p, r)| (p - r).norm()).fold(0.0, f64::max);
-        let inverted = sim.model.mesh.tets().iter().filter(|t| {
-            let [a, b, c, d] = t.map(|i| sim.state.positions[i as usize]);
-            tet_signed_volume(&a, &b, &c, &d) <= 0.0
-        }).count();
+        let inverted = inverted(&sim);
         println!("{} {}: pushed {:.1} mm deep, {:.3} mm left 1.5 s after, {inverted} inverted", model.name(), integrator.name(), deepest * 1e3, left * 1e3);
         assert!(deepest > 0.008, "{model:?} {integrator:?}: only {deepest} m deep");
         assert!(left < 0.1 * deepest, "{model:?} {integrator:?}: {left} m left of {deepest} m");

@@ -100,12 +100,6 @@ impl QuadraticMesh {
         let [a, b, c] = tri;
         Some([a, b, c, self.middle(a, b)?, self.middle(b, c)?, self.middle(c, a)?])
     }
-
-    /// Reference volume of element `t` (positive).
-    pub fn volume(&self, t: usize) -> f64 {
-        let [x0, x1, x2, x3] = [0, 1, 2, 3].map(|k| self.nodes[self.tets[t][k] as usize]);
-        Matrix3::from_columns(&[x1 - x0, x2 - x0, x3 - x0]).determinant().abs() / 6.0
-    }
 }
 
 /// The shape-function gradients at the barycentric point `l` of an element whose linear
@@ -180,8 +174,9 @@ pub struct QuadraticMaterial {
 /// A linear static problem on a [`QuadraticMesh`].
 #[derive(Debug, Clone)]
 pub struct QuadraticStatics {
-    /// Node pairs that share an element, `[a, b]` with `a < b`, sorted.
-    pairs: Vec<[u32; 2]>,
+    /// `K`, its off-diagonal blocks on the node pairs that share an element. Never prepared
+    /// (the preconditioner zeroes the held nodes' diagonal blocks): its `apply` is the whole
+    /// `K u`.
     system: BlockSystem,
     /// The pre-strain's nodal forces.
     pre_stress_forces: Vec<Vector3>,
@@ -233,22 +228,7 @@ impl QuadraticStatics {
                 }
             }
         }
-        Self { pairs, system, pre_stress_forces }
-    }
-
-    /// Node pairs coupled by the stiffness.
-    pub fn pair_count(&self) -> usize {
-        self.pairs.len()
-    }
-
-    /// `K u` for the assembled stiffness (all rows).
-    fn stiffness_times(system: &BlockSystem, u: &[Vector3], out: &mut [Vector3]) {
-        out.iter_mut().zip(u).enumerate().for_each(|(i, (o, u))| *o = system.diag[i] * u);
-        for (e, &[a, b]) in system.edges.iter().enumerate() {
-            let (a, b) = (a as usize, b as usize);
-            out[a] += system.off[e] * u[b];
-            out[b] += system.off[e].tr_mul(&u[a]);
-        }
+        Self { system, pre_stress_forces }
     }
 
     /// Solves `K u = f + f_0` for the free nodes, with `held[i] = Some(u_i)` prescribing node
@@ -257,7 +237,7 @@ impl QuadraticStatics {
         let n = self.system.diag.len();
         let prescribed: Vec<Vector3> = (0..n).map(|i| held.get(i).copied().flatten().unwrap_or_else(Vector3::zeros)).collect();
         let mut k_prescribed = vec![Vector3::zeros(); n];
-        Self::stiffness_times(&self.system, &prescribed, &mut k_prescribed);
+        self.system.apply(&prescribed, &mut k_prescribed);
         let rhs: Vec<Vector3> = (0..n)
             .map(|i| external.get(i).copied().unwrap_or_else(Vector3::zeros) + self.pre_stress_forces[i] - k_prescribed[i])
             .collect();
@@ -269,7 +249,7 @@ impl QuadraticStatics {
         let report = system.solve(&rhs, &mut free, relative_tolerance, 0.0, 20 * n.max(100), &mut BlockCgScratch::default());
         let displacements: Vec<Vector3> = free.iter().zip(&prescribed).map(|(x, p)| x + p).collect();
         let mut internal_forces = vec![Vector3::zeros(); n];
-        Self::stiffness_times(&self.system, &displacements, &mut internal_forces);
+        self.system.apply(&displacements, &mut internal_forces);
         for (f, f0) in internal_forces.iter_mut().zip(&self.pre_stress_forces) {
             *f = -*f + f0;
         }
