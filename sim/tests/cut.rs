@@ -356,3 +356,50 @@ fn the_topology_masses_and_springs_a_cut_carries_over_equal_those_built_from_scr
     }
     assert!(made >= 8, "only {made} cuts split tets");
 }
+
+/// The demo's incision (60 mm along the top of the chest wall, the blade 8 mm deep, cutting
+/// every 40 um of travel) on the coarsest wall, whose elements (8 mm) are as large as the blade
+/// is deep, along planes 0-2 mm beside a layer of vertices (at `y = 0`). The layer just below
+/// the blade's tip (1 mm below it) must join the cut: before, it lay outside C, its edges'
+/// crossings were never split nor its vertices moved, no face of the layer lay wholly on the
+/// plane, and the cut stalled at the entry with nothing separated. Returns the extent along x
+/// (m) of the split vertices' rest positions and the widest gap at rest (m).
+fn coarse_wall_incision(y_m: f64) -> (f64, f64, f64) {
+    use cutlab_sim::scene::{BuildOptions, Scene};
+    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_500) }).expect("chest wall");
+    assert!(scene.model.mesh.tet_count() < 2_000, "the coarsest wall: {} tets", scene.model.mesh.tet_count());
+    let mut sim = scene.simulation();
+    assert!(sim.settle(StaticSettings::default()).converged);
+    let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
+    let (radius, depth) = (0.15, 0.008);
+    let mut cutter = cut::Cutter::default();
+    for k in 0..=1500 {
+        let x = -0.03 + 0.06 * k as f64 / 1500.0;
+        let z_top = (radius * radius - x * x).sqrt() - radius;
+        let outward = Vector3::new(x, 0.0, z_top + radius).normalize();
+        let tip = Point3::new(x, y_m, z_top) - outward * depth;
+        cutter.advance(&mut sim, cut::blade(tip, outward, depth + 0.005)).expect("cut");
+        sim.step().expect("stable while cutting");
+    }
+    check_invariants(&sim, mass0, volume0);
+    assert!(sim.settle(StaticSettings::default()).converged);
+    let rest = sim.model.mesh.positions();
+    let (mut lo, mut hi, mut gap) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+    for [a, b] in sim.model.mesh.coincident_vertices(1e-12) {
+        lo = lo.min(rest[a as usize].x);
+        hi = hi.max(rest[a as usize].x);
+        gap = gap.max((sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm());
+    }
+    (lo, hi, gap)
+}
+
+#[test]
+fn a_coarse_wall_cut_beside_a_layer_of_vertices_opens_along_the_whole_path() {
+    for y_m in [0.0, 0.0003, 0.001, 0.002] {
+        let (lo, hi, gap) = coarse_wall_incision(y_m);
+        // the surface vertices split from one 8.5 mm column after the blade's entry to one
+        // before its exit (a vertex splits once the faces on both sides of it are cut)
+        assert!(lo < -0.016 && hi > 0.016, "y {y_m}: the cut spans {:.1} .. {:.1} mm", lo * 1e3, hi * 1e3);
+        assert!(gap > 1e-3, "y {y_m}: the wound opens by {:.2} mm", gap * 1e3);
+    }
+}

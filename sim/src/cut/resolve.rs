@@ -15,7 +15,8 @@
 //! 3. when neither end may move, the edge is split anyway.
 //!
 //! Vertices very close to the plane (crossing parameter below `snap`, or nearer than
-//! `snap_distance_m`) move onto it too, so that no sliver is created; one nearer than
+//! `snap_distance_m`, on an edge crossing inside C or within [`FORCE_REACH`] of it) move onto
+//! it too, so that no sliver is created and a layer of vertices just past B joins the cut; one nearer than
 //! `snap_distance_m` that may not move counts as on the plane where it stands. A vertex moves only if every tetrahedron around it keeps at
 //! least [`MIN_VOLUME_KEPT`] of its volume in both the current and the reference
 //! configuration; held vertices, and surface vertices on a crease or corner, do not move. A
@@ -364,7 +365,10 @@ impl Resolver<'_> {
             let c = self.classify(&on_plane, &forced);
             // Wanted moves, in order: slivers first, then incomplete intersections.
             let mut wanted: Vec<(u32, Option<[u32; 2]>)> = Vec::new();
-            for cr in c.crossings.values().filter(|cr| cr.split) {
+            // (a crossing just past B counts too: the vertex beside it joins the cut, as in 1.
+            // below, or a layer of vertices just beyond the blade's tip would stay off the
+            // plane, no face of that layer would lie on it, and the cut would never separate)
+            for cr in c.crossings.values().filter(|cr| cr.split || self.within_reach(cr)) {
                 if cr.t < self.snap || (cr.t <= 0.5 && self.near_plane(cr.edge[0])) {
                     wanted.push((cr.edge[0], None));
                 } else if cr.t > 1.0 - self.snap || self.near_plane(cr.edge[1]) {
