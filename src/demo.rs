@@ -8,7 +8,7 @@ use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
 use cutlab_sim::cut;
 use cutlab_sim::io::PointData;
-use cutlab_sim::{Point3, Vector3};
+use cutlab_sim::Vector3;
 
 use crate::stats::Summary;
 
@@ -33,14 +33,7 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
 
     // The incision: 60 mm across the top of the wall in 1.5 s, the blade 8 mm deep and normal
     // to the surface, cutting at every 1 ms step; then 0.5 s for the wound to open.
-    let radius = 0.15;
-    let depth = 0.008;
-    let blade_at = |x: f64| {
-        let z_top = (radius * radius - x * x).sqrt() - radius;
-        let outward = Vector3::new(x, 0.0, z_top + radius).normalize();
-        let tip = Point3::new(x, 0.0003, z_top) - outward * depth;
-        cut::blade(tip, outward, depth + 0.005)
-    };
+    let blade_at = |x: f64| cut::Blade::normal_to_curved_slab(x, 0.0003, 0.15, 0.008, 0.005);
     let dt = sim.settings.time_step_s;
     let stroke_steps = 1500;
     let mut cutter = cut::Cutter::default();

@@ -7,27 +7,22 @@ use cutlab_assessor::{AttemptData, CutSample, ExpertPlan, SurfaceMesh};
 use cutlab_sim::cut;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
-use cutlab_sim::{Point3, Vector3};
 
 #[test]
 fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
     let scene = Scene::load("chest-wall", BuildOptions { min_tets: None }).expect("scene");
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
-    let (radius, depth) = (0.15, 0.008);
-    let tip_at = |x: f64| {
-        let z_top = (radius * radius - x * x).sqrt() - radius;
-        let outward = Vector3::new(x, 0.0, z_top + radius).normalize();
-        (Point3::new(x, 0.0003, z_top) - outward * depth, outward)
-    };
+    let depth = 0.008;
     let steps = 1500;
     let mut cutter = cut::Cutter::default();
     let mut data = AttemptData::default();
     for k in 0..steps + 500 {
         if k <= steps {
             let x = -0.03 + 0.06 * k as f64 / steps as f64;
-            let (tip, outward) = tip_at(x);
-            if cutter.advance(&mut sim, cut::blade(tip, outward, depth + 0.005)).is_ok() && k % 12 == 0 {
+            let blade = cut::Blade::normal_to_curved_slab(x, 0.0003, 0.15, depth, 0.005);
+            let (tip, outward) = (blade.tip, blade.edge_direction);
+            if cutter.advance(&mut sim, blade).is_ok() && k % 12 == 0 {
                 data.cuts.push(CutSample { t_s: k as f64 * 1e-3, tip_m: [tip.x, tip.y, tip.z], edge_dir: [outward.x, outward.y, outward.z], depth_m: depth });
             }
         }

@@ -269,18 +269,23 @@ fn sheet_gap(pretension: f64) -> (f64, Vec<(f64, f64)>) {
     }
     let report = sim.settle(StaticSettings::default());
     assert!(report.converged, "{report:?}");
-    // pairs of coincident rest positions on the two sides
-    let mesh = &sim.model.mesh;
-    let mut profile = Vec::new();
-    let mut max_gap = 0.0f64;
-    let rest = mesh.positions();
-    for [a, b] in mesh.coincident_vertices(1e-12) {
-        let gap = (sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm();
-        max_gap = max_gap.max(gap);
-        profile.push((rest[a as usize].x, gap));
-    }
+    let profile = wound_profile(&sim);
+    (profile.iter().map(|p| p.1).fold(0.0, f64::max), profile)
+}
+
+/// The wound's opening: for each pair of coincident rest positions (the two copies of a split
+/// vertex), the rest position's x and the gap between the copies now, sorted by x.
+fn wound_profile(sim: &Simulation) -> Vec<(f64, f64)> {
+    let rest = sim.model.mesh.positions();
+    let mut profile: Vec<(f64, f64)> = sim
+        .model
+        .mesh
+        .coincident_vertices(1e-12)
+        .into_iter()
+        .map(|[a, b]| (rest[a as usize].x, (sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm()))
+        .collect();
     profile.sort_by(|p, q| p.0.total_cmp(&q.0));
-    (max_gap, profile)
+    profile
 }
 
 #[test]
@@ -371,26 +376,20 @@ fn coarse_wall_incision(y_m: f64) -> (f64, f64, f64) {
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
     let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
-    let (radius, depth) = (0.15, 0.008);
     let mut cutter = cut::Cutter::default();
     for k in 0..=1500 {
         let x = -0.03 + 0.06 * k as f64 / 1500.0;
-        let z_top = (radius * radius - x * x).sqrt() - radius;
-        let outward = Vector3::new(x, 0.0, z_top + radius).normalize();
-        let tip = Point3::new(x, y_m, z_top) - outward * depth;
-        cutter.advance(&mut sim, cut::blade(tip, outward, depth + 0.005)).expect("cut");
+        cutter.advance(&mut sim, cut::Blade::normal_to_curved_slab(x, y_m, 0.15, 0.008, 0.005)).expect("cut");
         sim.step().expect("stable while cutting");
     }
     check_invariants(&sim, mass0, volume0);
     assert!(sim.settle(StaticSettings::default()).converged);
-    let rest = sim.model.mesh.positions();
-    let (mut lo, mut hi, mut gap) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
-    for [a, b] in sim.model.mesh.coincident_vertices(1e-12) {
-        lo = lo.min(rest[a as usize].x);
-        hi = hi.max(rest[a as usize].x);
-        gap = gap.max((sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm());
+    let profile = wound_profile(&sim);
+    let gap = profile.iter().map(|p| p.1).fold(0.0, f64::max);
+    match (profile.first(), profile.last()) {
+        (Some(first), Some(last)) => (first.0, last.0, gap),
+        _ => (f64::INFINITY, f64::NEG_INFINITY, gap),
     }
-    (lo, hi, gap)
 }
 
 #[test]

@@ -13,6 +13,17 @@ pub struct Blade {
 }
 
 impl Blade {
+    /// A blade standing normal to the outer surface of a [`crate::generate::curved_slab`] of
+    /// radius `radius_m` (the surface `z = sqrt(r^2 - x^2) - r`), at `x_m` along the slab and
+    /// `y_m` across it, its tip `depth_m` below the surface and its edge reaching `above_m`
+    /// above it: the demo's incision across the chest wall.
+    pub fn normal_to_curved_slab(x_m: f64, y_m: f64, radius_m: f64, depth_m: f64, above_m: f64) -> Self {
+        let z_top = (radius_m * radius_m - x_m * x_m).sqrt() - radius_m;
+        let outward = Vector3::new(x_m, 0.0, z_top + radius_m).normalize();
+        let tip = Point3::new(x_m, y_m, z_top) - outward * depth_m;
+        super::blade(tip, outward, depth_m + above_m)
+    }
+
     /// The far end of the cutting edge.
     pub fn heel(&self) -> Point3 {
         self.tip + self.edge_direction * self.depth_m
