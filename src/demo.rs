@@ -76,14 +76,7 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
     // The wound at rest: gap between the two copies of each split vertex, along the cut.
     let settle = sim.settle(StaticSettings::default());
     anyhow::ensure!(settle.converged, "settling after the cut did not converge: {settle:?}");
-    let rest = sim.model.mesh.positions();
-    let gaps: Vec<(f64, f64)> = sim
-        .model
-        .mesh
-        .coincident_vertices(1e-12)
-        .into_iter()
-        .map(|[a, b]| (rest[a as usize].x, (sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm()))
-        .collect();
+    let gaps: Vec<(f64, f64)> = cut::wound_gaps(&sim).into_iter().map(|(p, gap)| (p.x, gap)).collect();
     println!("  wound opening under {pretension_percent:.0} % tension (gap across the cut at rest, by position along it):");
     let mut line = String::from("   ");
     for i in -6..=6 {

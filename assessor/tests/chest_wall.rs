@@ -30,7 +30,7 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
     }
     assert!(sim.settle(StaticSettings::default()).converged);
     let x = &sim.state.positions;
-    let widest_gap = sim.model.mesh.coincident_vertices(1e-12).into_iter().map(|[a, b]| (x[a as usize] - x[b as usize]).norm()).fold(0.0, f64::max);
+    let widest_gap = cut::wound_gaps(&sim).into_iter().map(|(_, gap)| gap).fold(0.0, f64::max);
     data.surface = Some(SurfaceMesh { vertices_m: x.iter().map(|p| [p.x, p.y, p.z]).collect(), triangles: sim.model.mesh.topology().boundary.clone() });
 
     let plan = ExpertPlan::chest_wall().expect("plan");

@@ -273,17 +273,9 @@ fn sheet_gap(pretension: f64) -> (f64, Vec<(f64, f64)>) {
     (profile.iter().map(|p| p.1).fold(0.0, f64::max), profile)
 }
 
-/// The wound's opening: for each pair of coincident rest positions (the two copies of a split
-/// vertex), the rest position's x and the gap between the copies now, sorted by x.
+/// The wound's opening ([`cut::wound_gaps`]) by the rest position's x: `(x, gap)`, sorted by x.
 fn wound_profile(sim: &Simulation) -> Vec<(f64, f64)> {
-    let rest = sim.model.mesh.positions();
-    let mut profile: Vec<(f64, f64)> = sim
-        .model
-        .mesh
-        .coincident_vertices(1e-12)
-        .into_iter()
-        .map(|[a, b]| (rest[a as usize].x, (sim.state.positions[a as usize] - sim.state.positions[b as usize]).norm()))
-        .collect();
+    let mut profile: Vec<(f64, f64)> = cut::wound_gaps(sim).into_iter().map(|(p, gap)| (p.x, gap)).collect();
     profile.sort_by(|p, q| p.0.total_cmp(&q.0));
     profile
 }

@@ -502,6 +502,18 @@ fn choose_fixed(splits: &[(u32, TetSplit)], x_ref: &[Point3]) -> Option<Vec<Chil
         .collect()
 }
 
+/// The wound's opening: for each split vertex (a pair of coincident rest positions, its two
+/// copies), the rest position and the distance between the copies now, m.
+pub fn wound_gaps(sim: &Simulation) -> Vec<(Point3, f64)> {
+    let (rest, x) = (sim.model.mesh.positions(), &sim.state.positions);
+    sim.model
+        .mesh
+        .coincident_vertices(1e-12)
+        .into_iter()
+        .map(|[a, b]| (rest[a as usize], (x[a as usize] - x[b as usize]).norm()))
+        .collect()
+}
+
 /// A vector helper for callers building blades.
 pub fn blade(tip: Point3, edge_direction: Vector3, depth_m: f64) -> Blade {
     Blade { tip, edge_direction: edge_direction.normalize(), depth_m }
