@@ -52,6 +52,12 @@ impl Csr {
         &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
     }
 
+    /// The row ends `offsets[a..=b]` and the entries of rows `a..b`.
+    pub(crate) fn rows_of(&self, range: std::ops::Range<usize>) -> (&[u32], &[u32]) {
+        let ends = &self.offsets[range.start..=range.end];
+        (ends, &self.items[ends[0] as usize..ends[ends.len() - 1] as usize])
+    }
+
     /// Number of rows.
     pub fn rows(&self) -> usize {
         self.offsets.len().saturating_sub(1)

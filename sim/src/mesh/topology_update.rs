@@ -3,6 +3,8 @@
 //! gives (tested field by field), at the cost of merging sorted lists (no sorting of the
 //! whole mesh): a few milliseconds instead of thirty at 100k tets.
 
+use std::ops::Range;
+
 use super::topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology};
 use super::VertexId;
 
@@ -15,13 +17,50 @@ struct Entities<K, const L: usize> {
     items: Vec<u32>,
 }
 
-/// Merges the entities of the tets that did not change (`old_*`, with `old_tets_of(e)` the
-/// ascending tets of old entity `e`) with those of the dirty tets (`dirty`: the changed ones,
-/// flagged in `changed`, and the new ones).
-fn merge_entities<'a, K: Ord + Copy, const L: usize>(
+/// The tets of each old entity (ascending).
+trait OldRows {
+    fn row(&self, e: usize) -> &[u32];
+    /// Appends the rows of `range` to `items`, and their ends (offset by what `items` held) to
+    /// `offsets`.
+    fn copy_rows(&self, range: Range<usize>, items: &mut Vec<u32>, offsets: &mut Vec<u32>);
+}
+
+impl OldRows for Csr {
+    fn row(&self, e: usize) -> &[u32] {
+        Csr::row(self, e)
+    }
+
+    fn copy_rows(&self, range: Range<usize>, items: &mut Vec<u32>, offsets: &mut Vec<u32>) {
+        let (ends, run) = self.rows_of(range);
+        let shift = items.len() as u32 - ends[0];
+        items.extend_from_slice(run);
+        offsets.extend(ends[1..].iter().map(|&o| o + shift));
+    }
+}
+
+/// Face rows: one or two tets, `NONE` for none.
+impl OldRows for [[u32; 2]] {
+    fn row(&self, e: usize) -> &[u32] {
+        let row = &self[e];
+        &row[..if row[0] == NONE { 0 } else if row[1] == NONE { 1 } else { 2 }]
+    }
+
+    fn copy_rows(&self, range: Range<usize>, items: &mut Vec<u32>, offsets: &mut Vec<u32>) {
+        for e in range {
+            items.extend_from_slice(OldRows::row(self, e));
+            offsets.push(items.len() as u32);
+        }
+    }
+}
+
+/// Merges the entities of the tets that did not change (`old_*`, with `old_rows` the
+/// ascending tets of each old entity) with those of the dirty tets (`dirty`: the changed ones,
+/// flagged in `changed`, and the new ones). Runs of old entities that no changed tet touches
+/// and no dirty entity falls between are copied whole.
+fn merge_entities<K: Ord + Copy, const L: usize>(
     old_keys: &[K],
     old_tet_ids: &[[u32; L]],
-    old_tets_of: impl Fn(usize) -> &'a [u32],
+    old_rows: &(impl OldRows + ?Sized),
     tets: &[[VertexId; 4]],
     dirty: &[u32],
     changed: &[bool],
@@ -35,6 +74,15 @@ fn merge_entities<'a, K: Ord + Copy, const L: usize>(
     }
     dirty_pairs.sort_unstable();
     let alive = |t: &u32| !changed.get(*t as usize).copied().unwrap_or(false);
+    // the old entities of the changed tets: only their rows lose tets; the others are copied
+    let mut touched: Vec<u32> = dirty
+        .iter()
+        .filter(|&&t| changed.get(t as usize).copied().unwrap_or(false))
+        .flat_map(|&t| old_tet_ids[t as usize])
+        .collect();
+    touched.sort_unstable();
+    touched.dedup();
+    let mut next_touched = 0;
 
     let mut out = Entities {
         keys: Vec::with_capacity(old_keys.len() + dirty_pairs.len() / 2),
@@ -47,6 +95,24 @@ fn merge_entities<'a, K: Ord + Copy, const L: usize>(
     let mut dirty_ids: Vec<(u32, u8, u32)> = Vec::with_capacity(dirty_pairs.len());
     let (mut e, mut j) = (0, 0);
     while e < old_keys.len() || j < dirty_pairs.len() {
+        // a run of untouched old entities before the next dirty key and touched entity
+        while touched.get(next_touched).is_some_and(|&i| (i as usize) < e) {
+            next_touched += 1;
+        }
+        let mut stop = touched.get(next_touched).map_or(old_keys.len(), |&i| i as usize);
+        if let Some(p) = dirty_pairs.get(j) {
+            stop = stop.min(e + old_keys[e..].partition_point(|k| *k < p.0));
+        }
+        if stop > e {
+            let first = out.keys.len() as u32;
+            out.keys.extend_from_slice(&old_keys[e..stop]);
+            for (i, new) in old_to_new[e..stop].iter_mut().enumerate() {
+                *new = first + i as u32;
+            }
+            old_rows.copy_rows(e..stop, &mut out.items, &mut out.offsets);
+            e = stop;
+            continue;
+        }
         let key = match (old_keys.get(e), dirty_pairs.get(j)) {
             (Some(a), Some(b)) => (*a).min(b.0),
             (Some(a), None) => *a,
@@ -58,7 +124,7 @@ fn merge_entities<'a, K: Ord + Copy, const L: usize>(
         let mut old_row: &[u32] = &[];
         let old_index = (old_keys.get(e) == Some(&key)).then_some(e);
         if let Some(i) = old_index {
-            old_row = old_tets_of(i);
+            old_row = old_rows.row(i);
             old_to_new[i] = id;
             e += 1;
         }
@@ -124,7 +190,7 @@ impl Topology {
         let edges = merge_entities(
             &self.edges,
             &self.tet_edges,
-            |e| self.edge_tets.row(e),
+            &self.edge_tets,
             tets,
             &dirty,
             &is_changed,
@@ -133,11 +199,7 @@ impl Topology {
         let faces = merge_entities(
             &self.faces,
             &self.tet_faces,
-            |f| {
-                let row = &self.face_tets[f];
-                let len = row.iter().take_while(|&&t| t != NONE).count();
-                &row[..len]
-            },
+            self.face_tets.as_slice(),
             tets,
             &dirty,
             &is_changed,
