@@ -75,11 +75,7 @@ fn merge_entities<K: Ord + Copy, const L: usize>(
     dirty_pairs.sort_unstable();
     let alive = |t: &u32| !changed.get(*t as usize).copied().unwrap_or(false);
     // the old entities of the changed tets: only their rows lose tets; the others are copied
-    let mut touched: Vec<u32> = dirty
-        .iter()
-        .filter(|&&t| changed.get(t as usize).copied().unwrap_or(false))
-        .flat_map(|&t| old_tet_ids[t as usize])
-        .collect();
+    let mut touched: Vec<u32> = dirty.iter().filter(|t| !alive(t)).flat_map(|&t| old_tet_ids[t as usize]).collect();
     touched.sort_unstable();
     touched.dedup();
     let mut next_touched = 0;
