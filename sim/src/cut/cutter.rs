@@ -21,6 +21,16 @@ pub struct Cutter {
     stroke: StrokeVertices,
 }
 
+/// A [`Cutter`]'s state between two steps (see [`Cutter::resume_state`]).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct CutterResume {
+    /// The blade's poses behind the tip, oldest first.
+    pub trail: Vec<Blade>,
+    /// The vertices the stroke has cut, ascending.
+    pub stroke: Vec<u32>,
+    pub snap_distance_m: Option<f64>,
+}
+
 /// The median length of the springs' rest lengths (the mesh's edges), m.
 fn median_edge_length(sim: &Simulation) -> f64 {
     let mut lengths = sim.model.springs.rest_length.clone();
@@ -46,6 +56,27 @@ impl Cutter {
     pub fn end_stroke(&mut self) {
         self.trail.clear();
         self.stroke.clear();
+    }
+
+    /// What the next [`Self::advance`] depends on: the trail of poses, the stroke's vertices
+    /// and the snapping distance derived from the first mesh cut.
+    pub fn resume_state(&self) -> CutterResume {
+        CutterResume { trail: self.trail.iter().copied().collect(), stroke: self.stroke.members(), snap_distance_m: self.options.snap_distance_m }
+    }
+
+    /// Continues a stroke captured by [`Self::resume_state`] (with this cutter's other options),
+    /// over a mesh of `vertex_count` vertices.
+    pub fn resume(&mut self, r: &CutterResume, vertex_count: usize) -> Result<(), String> {
+        if !r.trail.iter().all(Blade::is_finite) || !r.snap_distance_m.is_none_or(|d| d.is_finite() && d >= 0.0) {
+            return Err("the cutter's trail or snapping distance is not finite".into());
+        }
+        if let Some(v) = r.stroke.iter().find(|&&v| v as usize >= vertex_count) {
+            return Err(format!("the stroke's vertex {v} is not one of the {vertex_count}"));
+        }
+        self.trail = r.trail.iter().copied().collect();
+        self.stroke = StrokeVertices::from_members(&r.stroke);
+        self.options.snap_distance_m = r.snap_distance_m;
+        Ok(())
     }
 
     /// True while a stroke is in progress.

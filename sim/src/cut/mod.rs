@@ -16,7 +16,7 @@ mod separate;
 
 use std::collections::{BTreeMap, BTreeSet};
 
-pub use cutter::Cutter;
+pub use cutter::{Cutter, CutterResume};
 pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
@@ -135,6 +135,18 @@ impl StrokeVertices {
     /// Forgets every vertex (a new stroke).
     pub fn clear(&mut self) {
         self.member.clear();
+    }
+
+    /// The members, ascending.
+    pub fn members(&self) -> Vec<u32> {
+        self.member.iter().enumerate().filter(|(_, m)| **m).map(|(v, _)| v as u32).collect()
+    }
+
+    /// The stroke whose members are `vertices`.
+    pub fn from_members(vertices: &[u32]) -> Self {
+        let mut me = Self::default();
+        vertices.iter().for_each(|&v| me.insert(v));
+        me
     }
 }
 

@@ -4,7 +4,7 @@
 use crate::{Point3, Vector3};
 
 /// A scalpel blade: the cutting edge runs from the tip along `edge_direction` for `depth_m`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Blade {
     pub tip: Point3,
     /// Unit vector from the tip along the cutting edge (towards the handle).

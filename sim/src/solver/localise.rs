@@ -37,6 +37,7 @@ use crate::model::{Model, Particles, SpringSet, State};
 use crate::{Point3, Vector3};
 
 use super::forces::spring_force;
+use super::resume::{check_ids, RegionResume, ResumeError};
 use super::implicit::{self, ImplicitScratch};
 use super::system::{CgReport, CgSettings};
 use super::StepError;
@@ -202,6 +203,67 @@ impl ActiveRegion {
         self.implicit.reset_warm_start();
     }
 
+    /// What the next localised step needs of this region (None before the first one).
+    pub fn resume_state(&self) -> Option<RegionResume> {
+        if self.awake.is_empty() {
+            return None;
+        }
+        let awake = self.awake.iter().enumerate().filter(|(_, a)| **a).map(|(v, _)| v as u32).collect();
+        let quiet_steps = self.quiet_steps.iter().enumerate().filter(|(_, q)| **q > 0).map(|(v, &q)| (v as u32, q)).collect();
+        Some(RegionResume {
+            awake,
+            quiet_steps,
+            step_count: self.step_count,
+            to_wake: self.to_wake.clone(),
+            dirty: self.dirty,
+            sub_body: self.global_of.clone(),
+            warm_start: self.implicit.warm_start(),
+        })
+    }
+
+    /// The region a [`RegionResume`] describes, over `model` (see [`super::resume`]). The
+    /// warm start outside the sub-body is zero (a particle leaves the sub-body asleep, and a
+    /// sleeper's warm start is zero); a clean sub-body is gathered again from the awake set,
+    /// with the warm start kept as captured.
+    pub(crate) fn resume(model: &Model, r: &RegionResume) -> Result<Self, ResumeError> {
+        let n = model.vertex_count();
+        check_ids(&r.awake, n, "awake particles")?;
+        check_ids(&r.sub_body, n, "sub-body")?;
+        if let Some(v) = r.to_wake.iter().chain(r.quiet_steps.iter().map(|(v, _)| v)).find(|&&v| v as usize >= n) {
+            return Err(ResumeError::Invalid(format!("particle {v} of {n} queued to wake or quiet")));
+        }
+        r.warm_start.check(r.sub_body.len(), "localised step")?;
+        let mut me = Self {
+            awake: vec![false; n],
+            quiet_steps: vec![0; n],
+            pinned: vec![false; n],
+            local_of: vec![NONE; n],
+            history: std::array::from_fn(|_| vec![Vector3::zeros(); n]),
+            step_count: r.step_count,
+            to_wake: r.to_wake.clone(),
+            awake_list: r.awake.clone(),
+            awake_count: r.awake.len(),
+            ..Self::default()
+        };
+        r.awake.iter().for_each(|&v| me.awake[v as usize] = true);
+        r.quiet_steps.iter().for_each(|&(v, q)| me.quiet_steps[v as usize] = q);
+        if !r.dirty {
+            me.ensure_adjacency(model);
+            me.rebuild(model);
+            if me.global_of != r.sub_body {
+                return Err(ResumeError::Invalid("the sub-body differs from the one the awake particles make".into()));
+            }
+        }
+        me.global_of.clone_from(&r.sub_body);
+        for (l, &g) in me.global_of.iter().enumerate() {
+            me.local_of[g as usize] = l as u32;
+        }
+        let ImplicitScratch { dv, dv_previous, history, .. } = &mut me.implicit;
+        r.warm_start.install(dv, dv_previous, history);
+        me.dirty = r.dirty;
+        Ok(me)
+    }
+
     /// Wakes `vertices` at the next step.
     pub fn wake(&mut self, vertices: impl IntoIterator<Item = u32>) {
         if !self.awake.is_empty() {
@@ -223,15 +285,21 @@ impl ActiveRegion {
             self.to_wake.extend(0..n as u32);
             self.dirty = true;
         }
+        self.ensure_adjacency(model);
+        if self.grid.is_none() {
+            self.grid = Some(PointGrid::build(&state.positions, settings.focus_radius_m));
+            self.grid_slack_m = 0.0;
+        }
+    }
+
+    /// The springs at each particle and their summed constants, unless known.
+    fn ensure_adjacency(&mut self, model: &Model) {
         if self.springs_at.is_none() {
+            let n = model.vertex_count();
             let csr = model.springs.by_particle(n);
             let stiffness = &model.springs.stiffness;
             self.stiffness_at = (0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum()).collect();
             self.springs_at = Some(csr);
-        }
-        if self.grid.is_none() {
-            self.grid = Some(PointGrid::build(&state.positions, settings.focus_radius_m));
-            self.grid_slack_m = 0.0;
         }
     }
 

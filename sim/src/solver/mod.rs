@@ -10,12 +10,14 @@ pub mod explicit;
 pub mod forces;
 pub mod implicit;
 pub mod localise;
+pub mod resume;
 pub mod statics;
 pub mod system;
 
 use serde::{Deserialize, Serialize};
 
 pub use localise::LocalisationSettings;
+pub use resume::{RegionResume, ResumeError, ResumeState, WarmStart};
 pub use statics::{StaticReport, StaticSettings};
 pub use system::{CgReport, CgSettings};
 

@@ -1,0 +1,119 @@
+//! Resuming a simulation from a captured step continues bit for bit as the original run,
+//! whole-body and localised, in the middle of a cutting stroke.
+
+use cutlab_sim::cut::{Blade, Cutter, CutterResume};
+use cutlab_sim::scene::{BuildOptions, Scene};
+use cutlab_sim::solver::{LocalisationSettings, ResumeState, Simulation, StaticSettings};
+use cutlab_sim::{Point3, TetMesh, Vector3};
+
+fn settled_wall() -> Simulation {
+    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_500) }).expect("chest wall");
+    let mut sim = scene.simulation();
+    assert!(sim.settle(StaticSettings::default()).converged);
+    sim
+}
+
+/// Step `k` of the scripted stroke: the blade drawn along the wall, pressing the surface
+/// around the tip, cutting, then one step.
+fn stroke_step(sim: &mut Simulation, cutter: &mut Cutter, k: usize) {
+    let x = -0.02 + 0.04 * k as f64 / 800.0;
+    let blade = Blade::normal_to_curved_slab(x, 0.0, 0.15, 0.008, 0.005);
+    sim.clear_external_forces();
+    sim.set_focus(&[blade.tip]);
+    let near: Vec<u32> = sim.model.mesh.topology().boundary_vertices().into_iter().filter(|&v| (sim.state.positions[v as usize] - blade.tip).norm() < 0.012).collect();
+    for v in near {
+        sim.add_external_force(v, Vector3::new(0.0, 0.0, -0.02));
+    }
+    if k >= 100 {
+        cutter.advance(sim, blade).expect("cut");
+    }
+    sim.step().expect("step");
+}
+
+type Captured = (TetMesh, cutlab_sim::model::State, ResumeState, CutterResume);
+
+fn run_and_compare(localised: bool) {
+    let mut sim = settled_wall();
+    if localised {
+        sim.settings.localisation = Some(LocalisationSettings::default());
+    }
+    let mut cutter = Cutter::default();
+    let mut captured: Option<Captured> = None;
+    let mut original = Vec::new();
+    for k in 0..700 {
+        stroke_step(&mut sim, &mut cutter, k);
+        if k == 349 {
+            // through JSON, as a recording's keyframe carries it
+            let r: ResumeState = serde_json::from_str(&serde_json::to_string(&sim.resume_state()).expect("encode")).expect("decode");
+            let c: CutterResume = serde_json::from_str(&serde_json::to_string(&cutter.resume_state()).expect("encode")).expect("decode");
+            assert!(!c.trail.is_empty() && !c.stroke.is_empty(), "captured mid-stroke");
+            assert_eq!(r.region.is_some(), localised);
+            captured = Some((sim.model.mesh.clone(), sim.state.clone(), r, c));
+        }
+        if k >= 350 {
+            original.push((sim.state.bit_hash(), sim.model.mesh.tets().to_vec()));
+        }
+    }
+    assert!(sim.model.mesh.tet_count() > 1_600, "the stroke cut: {} tets", sim.model.mesh.tet_count());
+
+    let (mesh, state, r, c) = captured.expect("captured");
+    let mut resumed = settled_wall();
+    if localised {
+        resumed.settings.localisation = Some(LocalisationSettings::default());
+    }
+    // a resume state that does not fit is refused, and the simulation is left as it was
+    let before = resumed.state.bit_hash();
+    let mut short = state.clone();
+    short.positions.pop();
+    assert!(resumed.resume(mesh.clone(), short, &r).is_err());
+    let mut bad = r.clone();
+    bad.held.push(u32::MAX);
+    assert!(resumed.resume(mesh.clone(), state.clone(), &bad).is_err());
+    assert_eq!(resumed.state.bit_hash(), before);
+
+    resumed.resume(mesh, state, &r).expect("resume");
+    let mut cutter = Cutter::default();
+    cutter.resume(&c, resumed.model.vertex_count()).expect("cutter");
+    for (i, k) in (350..700).enumerate() {
+        stroke_step(&mut resumed, &mut cutter, k);
+        let (hash, tets) = &original[i];
+        assert!(resumed.state.bit_hash() == *hash && resumed.model.mesh.tets() == &tets[..], "localised {localised}: the resumed run differs at step {k}");
+    }
+}
+
+#[test]
+fn a_whole_body_run_resumed_mid_stroke_continues_bit_for_bit() {
+    run_and_compare(false);
+}
+
+#[test]
+fn a_localised_run_resumed_mid_stroke_continues_bit_for_bit() {
+    run_and_compare(true);
+}
+
+#[test]
+fn a_resume_state_is_checked_against_its_mesh() {
+    let mut sim = settled_wall();
+    sim.settings.localisation = Some(LocalisationSettings::default());
+    sim.set_focus(&[Point3::new(0.0, 0.0, 0.0)]);
+    sim.step().expect("step");
+    let r = sim.resume_state();
+    let region = r.region.clone().expect("localised");
+    let (mesh, state) = (sim.model.mesh.clone(), sim.state.clone());
+    let n = mesh.vertex_count() as u32;
+    let cases: Vec<(&str, ResumeState)> = vec![
+        ("awake out of range", ResumeState { region: Some(cutlab_sim::solver::RegionResume { awake: vec![n], ..region.clone() }), ..r.clone() }),
+        ("sub-body unsorted", ResumeState { region: Some(cutlab_sim::solver::RegionResume { sub_body: region.sub_body.iter().rev().copied().collect(), ..region.clone() }), ..r.clone() }),
+        ("warm start too long", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 1, rows: vec![[Vector3::zeros(); 4]; n as usize + 1] }, ..r.clone() }),
+        ("warm start count", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 5, rows: Vec::new() }, ..r.clone() }),
+    ];
+    for (what, bad) in cases {
+        let mut s = sim.clone();
+        let err = s.resume(mesh.clone(), state.clone(), &bad);
+        assert!(err.is_err(), "{what}: accepted");
+    }
+    let mut nan = state.clone();
+    nan.velocities[0].x = f64::NAN;
+    assert!(sim.clone().resume(mesh.clone(), nan, &r).is_err(), "a non-finite velocity");
+    sim.clone().resume(mesh, state, &r).expect("the captured state itself");
+}
