@@ -131,9 +131,15 @@ enum Command {
         /// max (as fast as possible), realtime, or a factor of real time (e.g. 4).
         #[arg(long, default_value = "max")]
         speed: cutlab_recorder::replay::Speed,
-        /// Play from this session time, s (earlier steps are re-simulated unpaced, still checked).
+        /// Play from this session time, s: the replay resumes at the last keyframe before it
+        /// (checked against the keyframe's hashes) and re-simulates from there, unpaced until
+        /// this time.
         #[arg(long)]
         from: Option<f64>,
+        /// With --from: re-simulate (and check) every step before it instead of resuming at
+        /// a keyframe.
+        #[arg(long, requires = "from")]
+        resimulate: bool,
         /// Stop after this session time, s.
         #[arg(long)]
         to: Option<f64>,
@@ -372,9 +378,9 @@ fn run() -> anyhow::Result<()> {
         }),
         Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
         Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),
-        Command::Replay { file, speed, from, to, keep_going, json, rrd, rerun } => {
+        Command::Replay { file, speed, from, resimulate, to, keep_going, json, rrd, rerun } => {
             let rerun = recording::rerun_target(rrd.as_deref(), rerun.as_ref());
-            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, to_s: to, keep_going, json, rerun })
+            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, resimulate, to_s: to, keep_going, json, rerun })
         }
         Command::Scene { command: SceneCommand::List } => {
             for (name, _) in cutlab_sim::scene::BUILTIN {

@@ -128,6 +128,7 @@ pub fn recover(file: &Path, out: Option<&Path>) -> anyhow::Result<()> {
 pub struct ReplayArgs {
     pub speed: Speed,
     pub from_s: Option<f64>,
+    pub resimulate: bool,
     pub to_s: Option<f64>,
     pub keep_going: bool,
     pub json: bool,
@@ -147,11 +148,14 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going };
+    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going, resimulate: a.resimulate };
+    let period_s = rec.meta()?.period_nanos as f64 * 1e-9;
     let r = replay::replay(&rec, options).context("replaying")?;
+    // the session time right after the keyframe the replay resumed at
+    let resumed_at_s = r.resumed_at.map(|(_, tick)| (tick + 1) as f64 * period_s);
     if a.json {
         let v = serde_json::json!({
-            "verified": r.verified(), "steps": r.steps, "keyframes_checked": r.keyframes_checked, "keyframes_matched": r.keyframes_matched,
+            "verified": r.verified(), "resumed_at_s": resumed_at_s, "steps": r.steps, "keyframes_checked": r.keyframes_checked, "keyframes_matched": r.keyframes_matched,
             "cuts_recorded": r.cuts_recorded, "cuts_replayed": r.cuts_replayed, "divergences": r.divergences,
             "first_divergence": r.first_divergence.as_ref().map(|d| d.to_string()),
             "simulated_s": r.simulated_s, "wall_s": r.wall_s, "speed": r.speed(),
@@ -159,6 +163,9 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
+        if let (Some((step, _)), Some(t)) = (r.resumed_at, resumed_at_s) {
+            println!("resumed at the keyframe of step {step} ({t:.3} s; its hashes equal)");
+        }
         println!(
             "replayed {} steps ({:.2} s of session) in {:.2} s wall: {:.1}x real time",
             r.steps,

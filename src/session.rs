@@ -211,9 +211,12 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         bail!("--keyframe-every must be positive and --surface-hz non-negative");
     }
     let step_s = scene.solver.time_step_s;
+    let keyframe_every_steps = ((o.keyframe_every_s / step_s).round() as u64).max(1);
+    // the surface BVH is built again at every keyframe, so that a replay can resume at each
+    config.collider_rebuild_every_steps = keyframe_every_steps;
     let settings = RecordSettings {
         tap: TapSettings {
-            keyframe_every_steps: ((o.keyframe_every_s / step_s).round() as u64).max(1),
+            keyframe_every_steps,
             surface_every_steps: if o.surface_hz > 0.0 { ((1.0 / (o.surface_hz * step_s)).round() as u64).max(1) } else { 0 },
             ..TapSettings::default()
         },

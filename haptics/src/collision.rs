@@ -24,7 +24,7 @@ fn from_parry(v: PVec) -> Vector3 {
 }
 
 /// The closest surface point to a query point.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SurfaceHit {
     pub point: Point3,
     /// Outward unit normal of the triangle hit.
@@ -45,7 +45,8 @@ pub struct SurfaceCollider {
     scratch: Vec<PVec>,
     /// Springs around each simulation vertex.
     springs_at: Csr,
-    /// Rebuilds so far (one at construction, one per surface-changing cut).
+    /// Rebuilds so far (one at construction, one per surface-changing cut, and the periodic
+    /// ones of a recorded session, [`crate::SessionConfig::collider_rebuild_every_steps`]).
     pub rebuilds: u64,
 }
 

@@ -52,6 +52,11 @@ pub struct SessionConfig {
     pub cut_step_m: f64,
     /// Capacity of the servo-to-simulation queue, samples.
     pub queue_capacity: usize,
+    /// The surface's BVH is built again every this many simulation steps instead of refitted
+    /// (0: only after cuts). A recording's keyframes at these steps can be resumed (see
+    /// [`crate::stepper::SessionStepper::resume_state`]); `cutlab session` sets it to the
+    /// keyframe interval.
+    pub collider_rebuild_every_steps: u64,
 }
 
 impl Default for SessionConfig {
@@ -68,6 +73,7 @@ impl Default for SessionConfig {
             contact_patch_radius_m: 0.005,
             cut_step_m: 0.0005,
             queue_capacity: 8192,
+            collider_rebuild_every_steps: 1000,
         }
     }
 }
@@ -403,7 +409,7 @@ impl SimWorker {
         {
             // ended early (the servo loop stopped): the state there is a keyframe too
             let n = out_ticks.len() as u64 - 1;
-            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper.sim, n, tick))));
+            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper, n, tick))));
         }
         self.log_events();
         SimOutcome { stepper: self.stepper, tick_of_step: out_ticks, step_nanos: out_nanos }
@@ -424,7 +430,7 @@ impl SimWorker {
             self.push(SimRecord::Surface(Box::new(s)));
         }
         if every(settings.keyframe_every_steps.max(1)) || last {
-            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper.sim, n, tick))));
+            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper, n, tick))));
         }
     }
 

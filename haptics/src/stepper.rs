@@ -6,18 +6,20 @@
 //! the same stepper from the recorded samples, so a replay runs exactly the code of the
 //! session it checks.
 
-use cutlab_sim::cut::{self, Blade, CutError, CutEvent, Cutter};
+use cutlab_sim::cut::{self, Blade, CutError, CutEvent, Cutter, CutterResume};
 use cutlab_sim::hash::Fnv1a;
-use cutlab_sim::solver::Simulation;
+use cutlab_sim::model::State;
+use cutlab_sim::solver::{ResumeState, Simulation};
+use cutlab_sim::TetMesh;
 
 use crate::collision::{SurfaceCollider, SurfaceHit};
 use crate::render::{ContactModel, Mode};
 use crate::servo::ServoSample;
 use crate::session::{Session, SessionConfig};
-use crate::Point3;
+use crate::{HapticsError, Point3};
 
 /// What the stepper counted.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct StepperStats {
     /// Steps whose cut changed the tissue, tetrahedra split, cuts skipped as unresolved and
     /// cuts that failed.
@@ -58,6 +60,32 @@ pub struct SessionStepper {
     last_hit: Option<SurfaceHit>,
     last_cut_tip: Option<Point3>,
     pub stats: StepperStats,
+    /// Steps taken.
+    steps: u64,
+    /// The surface's BVH is built again every this many steps (0: only after cuts): a
+    /// refitted tree depends on the whole past of the surface (which triangle a closest-point
+    /// query returns on a tie follows the tree), a freshly built one only on the surface now,
+    /// so the state at such a step determines the steps after it ([`Self::resume_state`]).
+    /// It also keeps the tree tight under large deformations.
+    rebuild_every_steps: u64,
+    /// The last step built the BVH again (rather than refitting it).
+    collider_fresh: bool,
+}
+
+/// What a [`SessionStepper`] carries from one step to the next beyond the simulation's state
+/// and mesh: with them, [`SessionStepper::resume`] continues bit for bit (see
+/// [`SessionStepper::resume_state`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepperResume {
+    /// Steps taken.
+    pub steps: u64,
+    pub sim: ResumeState,
+    pub cutter: CutterResume,
+    /// Where the tool touched after the last step (the next step presses there).
+    pub last_hit: Option<SurfaceHit>,
+    /// Where the blade's tip last cut in this stroke.
+    pub last_cut_tip: Option<Point3>,
+    pub stats: StepperStats,
 }
 
 impl SessionStepper {
@@ -75,7 +103,57 @@ impl SessionStepper {
             last_hit: None,
             last_cut_tip: None,
             stats: StepperStats::default(),
+            steps: 0,
+            rebuild_every_steps: config.collider_rebuild_every_steps,
+            collider_fresh: false,
         }
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// What [`Self::resume`] needs, with the simulation's state and mesh, to continue from
+    /// here; None unless the last step built the surface's BVH again (see
+    /// [`SessionConfig::collider_rebuild_every_steps`]), since a refitted tree cannot be rebuilt as it was.
+    pub fn resume_state(&self) -> Option<StepperResume> {
+        self.collider_fresh.then(|| StepperResume {
+            steps: self.steps,
+            sim: self.sim.resume_state(),
+            cutter: self.cutter.resume_state(),
+            last_hit: self.last_hit,
+            last_cut_tip: self.last_cut_tip,
+            stats: self.stats,
+        })
+    }
+
+    /// Continues from a step captured by [`Self::resume_state`], with the simulation's state
+    /// and mesh there. The stepper must have been made as the captured one was (scene and
+    /// settings). Input that does not fit is an error and leaves the stepper unchanged.
+    pub fn resume(&mut self, mesh: TetMesh, state: State, r: &StepperResume) -> Result<(), HapticsError> {
+        let invalid = |e: String| HapticsError::Simulation(format!("resuming at step {}: {e}", r.steps));
+        let n = mesh.vertex_count();
+        if let Some(h) = &r.last_hit
+            && (h.vertices.iter().any(|&v| v as usize >= n) || !h.point.iter().chain(h.normal.iter()).chain(&h.weights).all(|c| c.is_finite()))
+        {
+            return Err(invalid("the last contact is not on the mesh".into()));
+        }
+        if !r.last_cut_tip.is_none_or(|p| p.iter().all(|c| c.is_finite())) {
+            return Err(invalid("the last cut's tip is not finite".into()));
+        }
+        let mut cutter = self.cutter.clone();
+        cutter.resume(&r.cutter, n).map_err(invalid)?;
+        let mut sim = self.sim.clone();
+        sim.resume(mesh, state, &r.sim).map_err(|e| invalid(e.to_string()))?;
+        let collider = SurfaceCollider::build(&sim)?;
+        (self.sim, self.cutter, self.collider) = (sim, cutter, collider);
+        self.last_hit = r.last_hit;
+        self.last_cut_tip = r.last_cut_tip;
+        self.stats = r.stats;
+        self.steps = r.steps;
+        self.collider_fresh = true;
+        Ok(())
     }
 
     /// One simulation step driven by `sample`.
@@ -155,7 +233,17 @@ impl SessionStepper {
                 true
             }
         };
-        self.collider.refit(&self.sim.state.positions);
+        self.steps += 1;
+        self.collider_fresh = self.rebuild_every_steps > 0 && self.steps.is_multiple_of(self.rebuild_every_steps);
+        if self.collider_fresh {
+            if let Err(e) = self.collider.rebuild(&self.sim) {
+                tracing::error!("rebuilding the surface at step {} failed: {e}", self.steps);
+                self.collider_fresh = false;
+                self.collider.refit(&self.sim.state.positions);
+            }
+        } else {
+            self.collider.refit(&self.sim.state.positions);
+        }
         // the proxy, and the blade's heel in case the blade rather than its tip meets the tissue
         let probes = [render.proxy, sample.pose.blade_heel(self.blade_length_m)];
         let (mut contact, hit) = self.collider.contact_model(&self.sim, &probes, self.reach_m, sample.tick);

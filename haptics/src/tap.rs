@@ -11,18 +11,18 @@
 //! The consumer side ([`TapFeed`]) belongs to the recorder's writer thread.
 
 use cutlab_sim::cut::{Blade, CutEvent};
-use cutlab_sim::solver::Simulation;
 
 use crate::collision::SurfaceCollider;
 use crate::servo::{Backoff, ServoSample};
-use crate::stepper::StateHash;
+use crate::stepper::{SessionStepper, StateHash, StepperResume};
 use crate::Point3;
 
 /// How much a session records, and the queue sizes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TapSettings {
     /// A keyframe (the full state and its hash) every this many simulation steps (and after
-    /// the last step).
+    /// the last step); the session's surface BVH is built again at each (see
+    /// [`crate::SessionConfig::collider_rebuild_every_steps`]).
     pub keyframe_every_steps: u64,
     /// The tissue surface every this many simulation steps (0: never).
     pub surface_every_steps: u64,
@@ -51,12 +51,17 @@ pub struct Keyframe {
     pub rest_positions: Vec<Point3>,
     pub tets: Vec<[u32; 4]>,
     pub regions: Vec<u32>,
+    /// What else the steps after this one depend on, when the stepper can say
+    /// ([`SessionStepper::resume_state`]): with it a replay seeks here without re-simulating.
+    pub resume: Option<StepperResume>,
 }
 
 impl Keyframe {
-    pub fn of(sim: &Simulation, step: u64, tick: u64) -> Self {
+    pub fn of(stepper: &SessionStepper, step: u64, tick: u64) -> Self {
+        let sim = &stepper.sim;
         let mesh = &sim.model.mesh;
         Self {
+            resume: stepper.resume_state(),
             step,
             tick,
             hash: StateHash::of(sim),

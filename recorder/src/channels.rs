@@ -25,6 +25,7 @@ use serde::{Deserialize, Serialize};
 use cutlab_haptics::render::{Mode, RenderOutput};
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::stepper::StateHash;
+use cutlab_haptics::stepper::StepperResume;
 use cutlab_haptics::tap::Keyframe;
 use cutlab_haptics::{Point3, Rotation, ToolPose, Vector3};
 use cutlab_sim::cut::{Blade, CutEvent};
@@ -229,6 +230,11 @@ pub struct KeyframeMsg {
     pub rest_positions_m: Vec<[f64; 3]>,
     pub tets: Vec<[u32; 4]>,
     pub regions: Vec<u32>,
+    /// What else the steps after this one depend on (the solver's warm start, the localised
+    /// region, the cutter's stroke, the last contact): a replay seeks here without
+    /// re-simulating. Absent in older recordings and at the last step.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resume: Option<StepperResume>,
 }
 
 impl From<&Keyframe> for KeyframeMsg {
@@ -243,6 +249,7 @@ impl From<&Keyframe> for KeyframeMsg {
             rest_positions_m: k.rest_positions.iter().map(|p| p.coords.into()).collect(),
             tets: k.tets.clone(),
             regions: k.regions.clone(),
+            resume: k.resume.clone(),
         }
     }
 }
@@ -281,6 +288,10 @@ pub struct SessionMeta {
     pub contact_patch_radius_m: f64,
     pub cut_step_m: f64,
     pub keyframe_every_steps: u64,
+    /// The session built its surface BVH again every this many steps (0, in older
+    /// recordings: only after cuts); a replay does the same.
+    #[serde(default)]
+    pub collider_rebuild_every_steps: u64,
     pub surface_every_steps: u64,
     /// The simulation's localisation, when it ran localised (absent in older recordings:
     /// the scene's own solver settings).

@@ -98,6 +98,7 @@ fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, s
         contact_patch_radius_m: config.contact_patch_radius_m,
         cut_step_m: config.cut_step_m,
         keyframe_every_steps: settings.tap.keyframe_every_steps,
+        collider_rebuild_every_steps: config.collider_rebuild_every_steps,
         surface_every_steps: settings.tap.surface_every_steps,
         localisation: session.sim.settings.localisation,
         initial_state_hash: Hex(initial.state),

@@ -9,9 +9,13 @@
 //! the tick, what differed, and for a state difference the largest position difference
 //! against the keyframe and the vertex where it is.
 //!
-//! Seeking: a replay from `from_s` re-simulates the steps before it as fast as possible
-//! (still checking every hash on the way) and plays from there; there is no shortcut that
-//! would skip the checks.
+//! Seeking: a replay from `from_s` restores the last keyframe before it that carries what the
+//! steps after it depend on ([`KeyframeMsg::resume`]: the solver's warm start, the localised
+//! region, the cutter's stroke, the last contact; the session built its surface BVH again
+//! there), checks the restored state against the keyframe's hashes, and re-simulates from
+//! there; the steps before that keyframe are neither run nor checked. With
+//! [`ReplayOptions::resimulate`] (or without such a keyframe, as in older recordings) it
+//! re-simulates every step before `from_s` as fast as possible, checking every hash on the way.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -64,11 +68,13 @@ pub struct ReplayOptions {
     pub observer: Option<Box<dyn RecordObserver>>,
     /// Keep going after the first divergence (count them all).
     pub keep_going: bool,
+    /// Re-simulate (and check) the steps before `from_s` instead of restoring a keyframe.
+    pub resimulate: bool,
 }
 
 impl std::fmt::Debug for ReplayOptions {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ReplayOptions").field("speed", &self.speed).field("from_s", &self.from_s).field("to_s", &self.to_s).field("keep_going", &self.keep_going).finish_non_exhaustive()
+        f.debug_struct("ReplayOptions").field("speed", &self.speed).field("from_s", &self.from_s).field("to_s", &self.to_s).field("keep_going", &self.keep_going).field("resimulate", &self.resimulate).finish_non_exhaustive()
     }
 }
 
@@ -96,6 +102,9 @@ impl std::fmt::Display for Divergence {
 /// What a replay did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReplayReport {
+    /// The keyframe the replay resumed at (its step and tick), when it sought one.
+    pub resumed_at: Option<(u64, u64)>,
+    /// Steps re-simulated.
     pub steps: u64,
     pub keyframes_checked: u64,
     pub keyframes_matched: u64,
@@ -103,7 +112,7 @@ pub struct ReplayReport {
     pub cuts_replayed: u64,
     pub divergences: u64,
     pub first_divergence: Option<Divergence>,
-    /// Session time replayed, s.
+    /// Session time re-simulated, s.
     pub simulated_s: f64,
     pub wall_s: f64,
     /// The final state's hash.
@@ -134,9 +143,28 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
         contact_reach_m: meta.contact_reach_m,
         contact_patch_radius_m: meta.contact_patch_radius_m,
         cut_step_m: meta.cut_step_m,
+        collider_rebuild_every_steps: meta.collider_rebuild_every_steps,
         ..SessionConfig::default()
     };
     Ok(SessionStepper::new(session, &config))
+}
+
+/// Restores `stepper` to keyframe `k` (which must carry its resume state) and checks it
+/// against the keyframe's hashes.
+fn resume_at(stepper: &mut SessionStepper, k: &KeyframeMsg) -> Result<(), RecorderError> {
+    let resume = k.resume.as_ref().ok_or_else(|| RecorderError::Replay(format!("the keyframe at step {} cannot be resumed", k.step)))?;
+    let malformed = |e: String| RecorderError::Malformed(format!("keyframe at step {}: {e}", k.step));
+    let points = |v: &[[f64; 3]]| v.iter().map(|&p| cutlab_sim::Point3::from(p)).collect::<Vec<_>>();
+    let mesh = cutlab_sim::TetMesh::new(points(&k.rest_positions_m), k.tets.clone(), k.regions.clone()).map_err(|e| malformed(e.to_string()))?;
+    let state = cutlab_sim::model::State {
+        positions: points(&k.positions_m),
+        velocities: k.velocities_m_per_s.iter().map(|&v| cutlab_sim::Vector3::from(v)).collect(),
+    };
+    stepper.resume(mesh, state, resume).map_err(|e| malformed(e.to_string()))?;
+    if stepper.steps() != k.step + 1 {
+        return Err(malformed(format!("its resume state is of step {}", stepper.steps().wrapping_sub(1))));
+    }
+    Ok(())
 }
 
 /// The largest position difference between the stepper and a keyframe, and its vertex.
@@ -162,6 +190,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     let keyframes: BTreeMap<u64, &KeyframeMsg> = rec.keyframes.iter().map(|k| (k.step, k)).collect();
     let cuts: BTreeMap<u64, &TopologyMsg> = rec.topology.iter().map(|t| (t.step, t)).collect();
     let mut report = ReplayReport {
+        resumed_at: None,
         steps: 0,
         keyframes_checked: 0,
         keyframes_matched: 0,
@@ -198,7 +227,26 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     let to_tick = options.to_s.map_or(u64::MAX, |s| (s.max(0.0) * 1e9 / period as f64).ceil() as u64);
     let mut play_started: Option<(Instant, u64)> = None;
     let mut previous_tick: Option<u64> = None;
-    for (n, step) in rec.steps.iter().enumerate() {
+    let mut first_step = 0;
+    let seek_to = keyframes.values().rev().find(|k| k.resume.is_some() && k.tick < from_tick && (k.step as usize) < rec.steps.len());
+    if let (Some(k), false) = (seek_to, options.resimulate) {
+        resume_at(&mut stepper, k)?;
+        let now = stepper.state_hash();
+        if now != k.hash() {
+            let what = format!(
+                "the state restored from the keyframe has hashes {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}",
+                now.state, now.topology, k.state_hash.0, k.topology_hash.0
+            );
+            diverge(&mut report, Divergence { step: k.step, tick: k.tick, what, max_position_difference_m: None });
+            report.wall_s = started.elapsed().as_secs_f64();
+            return Ok(report);
+        }
+        report.resumed_at = Some((k.step, k.tick));
+        first_step = k.step as usize + 1;
+        previous_tick = Some(k.tick);
+    }
+    let start_tick = previous_tick.map_or(0, |t| t + 1);
+    for (n, step) in rec.steps.iter().enumerate().skip(first_step) {
         if step.step != n as u64 {
             return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
         }
@@ -275,10 +323,10 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
                 o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(&stepper.collider, &stepper.sim.state.positions, step.step, step.tick))))?;
             }
             if hashes.contains_key(&step.step) {
-                o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(&stepper.sim, step.step, step.tick))))?;
+                o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(&stepper, step.step, step.tick))))?;
             }
         }
-        report.simulated_s = (step.tick + 1) as f64 * period as f64 * 1e-9;
+        report.simulated_s = (step.tick + 1 - start_tick) as f64 * period as f64 * 1e-9;
         if report.first_divergence.is_some() && !options.keep_going {
             break;
         }

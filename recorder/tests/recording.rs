@@ -159,6 +159,51 @@ fn a_30_s_session_with_cuts_replays_with_every_hash_equal() {
 }
 
 #[test]
+fn a_replay_seeks_through_the_nearest_keyframe_and_stays_bit_exact() {
+    let r = recorded();
+    let rec = Recording::open(&r.path).expect("readable");
+    let period_s = 1e-3;
+    // every keyframe can be resumed (the surface BVH was built again at each); one of them
+    // in the middle of a stroke
+    let resumable: Vec<_> = rec.keyframes.iter().filter(|k| k.resume.is_some()).collect();
+    assert_eq!(resumable.len(), 30, "every keyframe carries its resume state");
+    let mid_stroke = resumable.iter().find(|k| k.resume.as_ref().is_some_and(|s| !s.cutter.trail.is_empty())).expect("a keyframe mid-stroke");
+    let mid_stroke_s = (mid_stroke.tick + 1) as f64 * period_s;
+    for from_s in [mid_stroke_s + 0.25, 20.2] {
+        let to_s = from_s + 2.0;
+        let options = ReplayOptions { from_s: Some(from_s), to_s: Some(to_s), ..ReplayOptions::default() };
+        let seek = replay::replay(&rec, options).expect("replay runs");
+        let (step, tick) = seek.resumed_at.expect("resumed at a keyframe");
+        let t = (tick + 1) as f64 * period_s;
+        assert!(t <= from_s && from_s - t < 1.0, "from {from_s} s: resumed at {t} s");
+        assert!(seek.verified() && seek.keyframes_checked >= 2, "from {from_s} s: {:?} ({} keyframes)", seek.first_divergence, seek.keyframes_checked);
+        assert!(seek.steps < 3100, "from {from_s} s: {} steps re-simulated", seek.steps);
+        // the same window re-simulated from the start ends in the same state
+        let options = ReplayOptions { from_s: Some(from_s), to_s: Some(to_s), resimulate: true, ..ReplayOptions::default() };
+        let full = replay::replay(&rec, options).expect("replay runs");
+        assert!(full.resumed_at.is_none() && full.verified());
+        assert_eq!(full.final_hash, seek.final_hash, "from {from_s} s (resumed at step {step})");
+    }
+
+    // a damaged resume state is an error, not a panic nor a silent re-simulation
+    let mut damaged = Recording::open(&r.path).expect("readable");
+    let k = damaged.keyframes.iter_mut().find(|k| k.step == mid_stroke.step).expect("keyframe");
+    if let Some(resume) = k.resume.as_mut() {
+        resume.cutter.stroke.push(u32::MAX);
+    }
+    let options = ReplayOptions { from_s: Some(mid_stroke_s + 0.25), ..ReplayOptions::default() };
+    let err = replay::replay(&damaged, options).expect_err("refused");
+    assert!(err.to_string().contains(&format!("keyframe at step {}", mid_stroke.step)), "{err}");
+    // a keyframe whose state was tampered with is caught by its hash
+    let mut tampered = Recording::open(&r.path).expect("readable");
+    let k = tampered.keyframes.iter_mut().find(|k| k.step == mid_stroke.step).expect("keyframe");
+    k.positions_m[0][0] += 1e-9;
+    let report = replay::replay(&tampered, ReplayOptions { from_s: Some(mid_stroke_s + 0.25), ..ReplayOptions::default() }).expect("replay runs");
+    let d = report.first_divergence.expect("found");
+    assert!(d.step == mid_stroke.step && d.what.contains("restored"), "{d}");
+}
+
+#[test]
 fn a_changed_input_is_reported_at_the_step_that_consumed_it() {
     let r = recorded();
     let mut rec = Recording::open(&r.path).expect("readable");
@@ -312,4 +357,9 @@ fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
     assert!(replayed.verified(), "{:?}", replayed.first_divergence);
     assert_eq!(replayed.cuts_replayed, report.stats.cut_steps);
     assert_eq!(replayed.keyframes_checked, 16);
+    // seeking restores the localised region too
+    let seek = replay::replay(&rec, ReplayOptions { from_s: Some(5.2), ..ReplayOptions::default() }).expect("replay runs");
+    assert_eq!(seek.resumed_at.map(|(step, _)| step), Some(4999));
+    assert!(seek.verified() && seek.keyframes_checked == 6, "{:?}", seek.first_divergence);
+    assert_eq!(seek.final_hash, replayed.final_hash);
 }
