@@ -5,7 +5,8 @@
 //! Figures: the servo loop's work per tick (p50/p99) without and with the recorder (its one
 //! extra cost on the servo thread is a push into a lock-free queue), the file size per minute
 //! of session, the writer's throughput (payload bytes per second of its busy time), and the
-//! replay speed against real time.
+//! replay speed against real time; and seeking to the middle of the session: resuming at the
+//! keyframe before it against re-simulating the steps up to it.
 
 use std::path::Path;
 
@@ -41,6 +42,14 @@ struct Figures {
     replay_speed: f64,
     replay_verified: bool,
     keyframes_checked: u64,
+    seek_to_s: f64,
+    /// Seeking by resuming at the keyframe before `seek_to_s` (its hashes checked): wall time,
+    /// and the keyframe's time.
+    seek_wall_s: f64,
+    seek_resumed_at_s: Option<f64>,
+    seek_restore_verified: bool,
+    /// Seeking by re-simulating every step up to `seek_to_s`: wall time.
+    seek_resimulate_wall_s: f64,
 }
 
 pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool, out: &Path) -> anyhow::Result<()> {
@@ -83,6 +92,13 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
     }
     let rec = Recording::open(&path)?;
     let rp = replay::replay(&rec, ReplayOptions::default())?;
+    if !json {
+        eprintln!("seeking...");
+    }
+    let seek_to_s = duration_s / 2.0 + 0.5;
+    let window = |resimulate| replay::replay(&rec, ReplayOptions { from_s: Some(seek_to_s), to_s: Some(seek_to_s), resimulate, ..ReplayOptions::default() });
+    let (seek, resimulated) = (window(false)?, window(true)?);
+    let period_s = rec.meta()?.period_nanos as f64 * 1e-9;
     let w = &recorded.write;
     let f = Figures {
         scene: "chest-wall".into(),
@@ -102,6 +118,11 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         replay_speed: rp.speed(),
         replay_verified: rp.verified(),
         keyframes_checked: rp.keyframes_checked,
+        seek_to_s,
+        seek_wall_s: seek.wall_s,
+        seek_resumed_at_s: seek.resumed_at.map(|(_, tick)| (tick + 1) as f64 * period_s),
+        seek_restore_verified: seek.resumed_at.is_some() && seek.first_divergence.is_none(),
+        seek_resimulate_wall_s: resimulated.wall_s,
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&f)?);
@@ -122,5 +143,15 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         if f.replay_verified { "bit-exact" } else { "DIVERGED" },
         f.keyframes_checked
     );
+    match f.seek_resumed_at_s {
+        Some(t) => println!(
+            "  seek to {:.1} s: {:.2} s wall resuming at the keyframe of {t:.1} s (hashes {}), {:.2} s re-simulating from the start",
+            f.seek_to_s,
+            f.seek_wall_s,
+            if f.seek_restore_verified { "equal" } else { "DIFFER" },
+            f.seek_resimulate_wall_s
+        ),
+        None => println!("  seek to {:.1} s: no keyframe to resume at; {:.2} s re-simulating from the start", f.seek_to_s, f.seek_resimulate_wall_s),
+    }
     Ok(())
 }
