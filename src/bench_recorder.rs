@@ -5,7 +5,8 @@
 //! Figures: the servo loop's work per tick (p50/p99) without and with the recorder (its one
 //! extra cost on the servo thread is a push into a lock-free queue), the file size per minute
 //! of session, the writer's throughput (payload bytes per second of its busy time), and the
-//! replay speed against real time; and seeking to the middle of the session: resuming at the
+//! replay speed against real time (on one thread, and on every core: the stretches between
+//! keyframes side by side); and seeking to the middle of the session: resuming at the
 //! keyframe before it against re-simulating the steps up to it.
 
 use std::path::Path;
@@ -42,6 +43,11 @@ struct Figures {
     replay_speed: f64,
     replay_verified: bool,
     keyframes_checked: u64,
+    /// The same replay with the stretches between keyframes on every core.
+    replay_parallel_threads: usize,
+    replay_parallel_wall_s: f64,
+    replay_parallel_speed: f64,
+    replay_parallel_verified: bool,
     seek_to_s: f64,
     /// Seeking by resuming at the keyframe before `seek_to_s` (its hashes checked): wall time,
     /// and the keyframe's time.
@@ -91,12 +97,13 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         eprintln!("replaying...");
     }
     let rec = Recording::open(&path)?;
-    let rp = replay::replay(&rec, ReplayOptions::default())?;
+    let rp = replay::replay(&rec, ReplayOptions { jobs: 1, ..ReplayOptions::default() })?;
+    let parallel = replay::replay(&rec, ReplayOptions { jobs: 0, ..ReplayOptions::default() })?;
     if !json {
         eprintln!("seeking...");
     }
     let seek_to_s = duration_s / 2.0 + 0.5;
-    let window = |resimulate| replay::replay(&rec, ReplayOptions { from_s: Some(seek_to_s), to_s: Some(seek_to_s), resimulate, ..ReplayOptions::default() });
+    let window = |resimulate| replay::replay(&rec, ReplayOptions { from_s: Some(seek_to_s), to_s: Some(seek_to_s), resimulate, jobs: 1, ..ReplayOptions::default() });
     let (seek, resimulated) = (window(false)?, window(true)?);
     let period_s = rec.meta()?.period_nanos as f64 * 1e-9;
     let w = &recorded.write;
@@ -118,6 +125,10 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         replay_speed: rp.speed(),
         replay_verified: rp.verified(),
         keyframes_checked: rp.keyframes_checked,
+        replay_parallel_threads: parallel.jobs,
+        replay_parallel_wall_s: parallel.wall_s,
+        replay_parallel_speed: parallel.speed(),
+        replay_parallel_verified: parallel.verified() && parallel.final_hash == rp.final_hash,
         seek_to_s,
         seek_wall_s: seek.wall_s,
         seek_resumed_at_s: seek.resumed_at.map(|(_, tick)| (tick + 1) as f64 * period_s),
@@ -142,6 +153,13 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         f.replay_speed,
         if f.replay_verified { "bit-exact" } else { "DIVERGED" },
         f.keyframes_checked
+    );
+    println!(
+        "  replay on {} threads (the stretches between keyframes side by side): {:.2} s wall, {:.2}x real time, {}",
+        f.replay_parallel_threads,
+        f.replay_parallel_wall_s,
+        f.replay_parallel_speed,
+        if f.replay_parallel_verified { "bit-exact, the same final state" } else { "DIVERGED" }
     );
     match f.seek_resumed_at_s {
         Some(t) => println!(

@@ -146,6 +146,10 @@ enum Command {
         /// Count every divergence instead of stopping at the first.
         #[arg(long)]
         keep_going: bool,
+        /// Threads replaying the stretches between keyframes side by side (0: one per core);
+        /// an unpaced replay without rerun output only.
+        #[arg(long, default_value_t = 0)]
+        jobs: usize,
         /// Export the played part to this `.rrd` file.
         #[arg(long, conflicts_with = "rerun")]
         rrd: Option<PathBuf>,
@@ -378,9 +382,9 @@ fn run() -> anyhow::Result<()> {
         }),
         Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
         Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),
-        Command::Replay { file, speed, from, resimulate, to, keep_going, json, rrd, rerun } => {
+        Command::Replay { file, speed, from, resimulate, to, keep_going, jobs, json, rrd, rerun } => {
             let rerun = recording::rerun_target(rrd.as_deref(), rerun.as_ref());
-            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, resimulate, to_s: to, keep_going, json, rerun })
+            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, resimulate, to_s: to, keep_going, jobs, json, rerun })
         }
         Command::Scene { command: SceneCommand::List } => {
             for (name, _) in cutlab_sim::scene::BUILTIN {

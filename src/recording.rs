@@ -131,6 +131,7 @@ pub struct ReplayArgs {
     pub resimulate: bool,
     pub to_s: Option<f64>,
     pub keep_going: bool,
+    pub jobs: usize,
     pub json: bool,
     pub rerun: Option<RerunTarget>,
 }
@@ -148,14 +149,14 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going, resimulate: a.resimulate };
+    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going, resimulate: a.resimulate, jobs: a.jobs };
     let period_s = rec.meta()?.period_nanos as f64 * 1e-9;
     let r = replay::replay(&rec, options).context("replaying")?;
     // the session time right after the keyframe the replay resumed at
     let resumed_at_s = r.resumed_at.map(|(_, tick)| (tick + 1) as f64 * period_s);
     if a.json {
         let v = serde_json::json!({
-            "verified": r.verified(), "resumed_at_s": resumed_at_s, "steps": r.steps, "keyframes_checked": r.keyframes_checked, "keyframes_matched": r.keyframes_matched,
+            "verified": r.verified(), "resumed_at_s": resumed_at_s, "steps": r.steps, "threads": r.jobs, "keyframes_checked": r.keyframes_checked, "keyframes_matched": r.keyframes_matched,
             "cuts_recorded": r.cuts_recorded, "cuts_replayed": r.cuts_replayed, "divergences": r.divergences,
             "first_divergence": r.first_divergence.as_ref().map(|d| d.to_string()),
             "simulated_s": r.simulated_s, "wall_s": r.wall_s, "speed": r.speed(),
@@ -167,9 +168,11 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
             println!("resumed at the keyframe of step {step} ({t:.3} s; its hashes equal)");
         }
         println!(
-            "replayed {} steps ({:.2} s of session) in {:.2} s wall: {:.1}x real time",
+            "replayed {} steps ({:.2} s of session) on {} thread{} in {:.2} s wall: {:.1}x real time",
             r.steps,
             r.simulated_s,
+            r.jobs,
+            if r.jobs == 1 { "" } else { "s" },
             r.wall_s,
             r.speed()
         );

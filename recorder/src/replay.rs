@@ -20,12 +20,13 @@
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
-use cutlab_haptics::stepper::{SessionStepper, StateHash};
+use cutlab_haptics::servo::ServoSample;
+use cutlab_haptics::stepper::{SessionStepper, StateHash, StepOutput};
 use cutlab_haptics::tap::{Keyframe, SimRecord, SurfaceSnapshot};
 use cutlab_haptics::{Session, SessionConfig};
 use cutlab_sim::scene::{BuildOptions, Scene};
 
-use crate::channels::{KeyframeMsg, SessionMeta, StateHashMsg, TopologyMsg};
+use crate::channels::{KeyframeMsg, SessionMeta, SimStepMsg, StateHashMsg, TopologyMsg};
 use crate::writer::RecordObserver;
 use crate::{RecorderError, Recording};
 
@@ -70,11 +71,14 @@ pub struct ReplayOptions {
     pub keep_going: bool,
     /// Re-simulate (and check) the steps before `from_s` instead of restoring a keyframe.
     pub resimulate: bool,
+    /// Threads that replay the stretches between resumable keyframes side by side (0: one
+    /// per core; 1: one after the other). Used only unpaced and without an observer.
+    pub jobs: usize,
 }
 
 impl std::fmt::Debug for ReplayOptions {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ReplayOptions").field("speed", &self.speed).field("from_s", &self.from_s).field("to_s", &self.to_s).field("keep_going", &self.keep_going).field("resimulate", &self.resimulate).finish_non_exhaustive()
+        f.debug_struct("ReplayOptions").field("speed", &self.speed).field("from_s", &self.from_s).field("to_s", &self.to_s).field("keep_going", &self.keep_going).field("resimulate", &self.resimulate).field("jobs", &self.jobs).finish_non_exhaustive()
     }
 }
 
@@ -106,6 +110,8 @@ pub struct ReplayReport {
     pub resumed_at: Option<(u64, u64)>,
     /// Steps re-simulated.
     pub steps: u64,
+    /// Threads the steps were re-simulated on.
+    pub jobs: usize,
     pub keyframes_checked: u64,
     pub keyframes_matched: u64,
     pub cuts_recorded: u64,
@@ -120,6 +126,24 @@ pub struct ReplayReport {
 }
 
 impl ReplayReport {
+    /// Nothing replayed yet, from a state with hashes `hash`.
+    fn empty(hash: StateHash) -> Self {
+        Self {
+            resumed_at: None,
+            steps: 0,
+            jobs: 1,
+            keyframes_checked: 0,
+            keyframes_matched: 0,
+            cuts_recorded: 0,
+            cuts_replayed: 0,
+            divergences: 0,
+            first_divergence: None,
+            simulated_s: 0.0,
+            wall_s: 0.0,
+            final_hash: hash,
+        }
+    }
+
     /// Every keyframe matched and every cut was the same.
     pub fn verified(&self) -> bool {
         self.first_divergence.is_none() && self.keyframes_checked > 0
@@ -176,6 +200,92 @@ fn position_difference(stepper: &SessionStepper, k: &KeyframeMsg) -> Option<(f64
     x.iter().zip(&k.positions_m).map(|(p, q)| (p - cutlab_sim::Point3::from(*q)).norm()).enumerate().map(|(i, d)| (d, i)).max_by(|a, b| a.0.total_cmp(&b.0))
 }
 
+/// What a replay compares each step with: the recorded cuts, keyframe hashes and keyframes.
+struct Checks<'a> {
+    hashes: BTreeMap<u64, &'a StateHashMsg>,
+    keyframes: BTreeMap<u64, &'a KeyframeMsg>,
+    cuts: BTreeMap<u64, &'a TopologyMsg>,
+}
+
+fn diverge(report: &mut ReplayReport, d: Divergence) {
+    report.divergences += 1;
+    if report.first_divergence.is_none() {
+        report.first_divergence = Some(d);
+    }
+}
+
+impl<'a> Checks<'a> {
+    fn of(rec: &'a Recording) -> Self {
+        Self {
+            hashes: rec.hashes.iter().map(|h| (h.step, h)).collect(),
+            keyframes: rec.keyframes.iter().map(|k| (k.step, k)).collect(),
+            cuts: rec.topology.iter().map(|t| (t.step, t)).collect(),
+        }
+    }
+
+    /// Runs recorded step `step` on `stepper` with its sample and compares what it did with
+    /// the recording, counting into `report`.
+    fn step(&self, stepper: &mut SessionStepper, step: &SimStepMsg, sample: &ServoSample, report: &mut ReplayReport) -> StepOutput {
+        let (cuts, hashes, keyframes) = (&self.cuts, &self.hashes, &self.keyframes);
+        let out = stepper.step(sample);
+        report.steps += 1;
+        let recorded_cut = cuts.get(&step.step);
+        report.cuts_recorded += recorded_cut.is_some() as u64;
+        report.cuts_replayed += out.cut.is_some() as u64;
+        let cut_differs = match (&out.cut, recorded_cut) {
+            (None, None) => None,
+            (Some(_), None) => Some("the replay cut, the recording did not".to_owned()),
+            (None, Some(_)) => Some("the recording cut, the replay did not".to_owned()),
+            (Some((blade, event)), Some(r)) => {
+                if crate::channels::BladeMsg::from(blade) != r.blade {
+                    Some("the blade of the cut differs".to_owned())
+                } else if *event != r.event {
+                    Some(format!(
+                        "the cut's topology differs ({} tets split, recorded {}; {} vertices created, recorded {})",
+                        event.tets_removed.len(), r.event.tets_removed.len(), event.vertices_created.len(), r.event.vertices_created.len()
+                    ))
+                } else {
+                    None
+                }
+            }
+        };
+        if out.rejected != step.rejected {
+            diverge(report, Divergence { step: step.step, tick: step.tick, what: format!("step rejected: {}, recorded {}", out.rejected, step.rejected), max_position_difference_m: None });
+        }
+        if let Some(what) = cut_differs {
+            diverge(report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m: None });
+        }
+        if let Some(h) = hashes.get(&step.step) {
+            report.keyframes_checked += 1;
+            let now = stepper.state_hash();
+            if now == h.hash() {
+                report.keyframes_matched += 1;
+            } else {
+                let what = format!("state hash {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}", now.state, now.topology, h.state.0, h.topology.0);
+                let max_position_difference_m = keyframes.get(&step.step).and_then(|k| position_difference(stepper, k));
+                diverge(report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m });
+            }
+        }
+        out
+    }
+
+    /// Restores `stepper` to keyframe `k` and checks the restored state against its hashes
+    /// (a difference is counted into `report`: false).
+    fn resume(&self, stepper: &mut SessionStepper, k: &KeyframeMsg, report: &mut ReplayReport) -> Result<bool, RecorderError> {
+        resume_at(stepper, k)?;
+        let now = stepper.state_hash();
+        if now != k.hash() {
+            let what = format!(
+                "the state restored from the keyframe has hashes {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}",
+                now.state, now.topology, k.state_hash.0, k.topology_hash.0
+            );
+            diverge(report, Divergence { step: k.step, tick: k.tick, what, max_position_difference_m: None });
+            return Ok(false);
+        }
+        Ok(true)
+    }
+}
+
 /// Replays `rec`; see the module documentation.
 pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayReport, RecorderError> {
     let meta = rec.meta()?;
@@ -186,28 +296,8 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     let mut stepper = stepper_for(meta)?;
     let period = meta.period_nanos.max(1);
     let samples = rec.samples();
-    let hashes: BTreeMap<u64, &StateHashMsg> = rec.hashes.iter().map(|h| (h.step, h)).collect();
-    let keyframes: BTreeMap<u64, &KeyframeMsg> = rec.keyframes.iter().map(|k| (k.step, k)).collect();
-    let cuts: BTreeMap<u64, &TopologyMsg> = rec.topology.iter().map(|t| (t.step, t)).collect();
-    let mut report = ReplayReport {
-        resumed_at: None,
-        steps: 0,
-        keyframes_checked: 0,
-        keyframes_matched: 0,
-        cuts_recorded: 0,
-        cuts_replayed: 0,
-        divergences: 0,
-        first_divergence: None,
-        simulated_s: 0.0,
-        wall_s: 0.0,
-        final_hash: stepper.state_hash(),
-    };
-    let diverge = |report: &mut ReplayReport, d: Divergence| {
-        report.divergences += 1;
-        if report.first_divergence.is_none() {
-            report.first_divergence = Some(d);
-        }
-    };
+    let checks = Checks::of(rec);
+    let mut report = ReplayReport::empty(stepper.state_hash());
     let initial = StateHash { state: meta.initial_state_hash.0, topology: meta.initial_topology_hash.0 };
     if stepper.state_hash() != initial {
         diverge(&mut report, Divergence {
@@ -228,16 +318,9 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     let mut play_started: Option<(Instant, u64)> = None;
     let mut previous_tick: Option<u64> = None;
     let mut first_step = 0;
-    let seek_to = keyframes.values().rev().find(|k| k.resume.is_some() && k.tick < from_tick && (k.step as usize) < rec.steps.len());
+    let seek_to = checks.keyframes.values().rev().find(|k| k.resume.is_some() && k.tick < from_tick && (k.step as usize) < rec.steps.len());
     if let (Some(k), false) = (seek_to, options.resimulate) {
-        resume_at(&mut stepper, k)?;
-        let now = stepper.state_hash();
-        if now != k.hash() {
-            let what = format!(
-                "the state restored from the keyframe has hashes {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}",
-                now.state, now.topology, k.state_hash.0, k.topology_hash.0
-            );
-            diverge(&mut report, Divergence { step: k.step, tick: k.tick, what, max_position_difference_m: None });
+        if !checks.resume(&mut stepper, k, &mut report)? {
             report.wall_s = started.elapsed().as_secs_f64();
             return Ok(report);
         }
@@ -246,6 +329,28 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         previous_tick = Some(k.tick);
     }
     let start_tick = previous_tick.map_or(0, |t| t + 1);
+    let jobs = match options.jobs {
+        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        j => j,
+    };
+    if jobs > 1 && options.observer.is_none() && matches!(options.speed, None | Some(Speed::Max)) {
+        let end_step = rec.steps.iter().position(|s| s.tick > to_tick).unwrap_or(rec.steps.len());
+        let parts = replay_in_parallel(rec, meta, &checks, &samples, stepper, first_step..end_step, jobs, options.keep_going)?;
+        report.jobs = jobs;
+        for part in parts {
+            report.steps += part.steps;
+            report.keyframes_checked += part.keyframes_checked;
+            report.keyframes_matched += part.keyframes_matched;
+            report.cuts_recorded += part.cuts_recorded;
+            report.cuts_replayed += part.cuts_replayed;
+            report.divergences += part.divergences;
+            report.first_divergence = report.first_divergence.or(part.first_divergence);
+            report.simulated_s += part.simulated_s;
+            report.final_hash = part.final_hash;
+        }
+        report.wall_s = started.elapsed().as_secs_f64();
+        return Ok(report);
+    }
     for (n, step) in rec.steps.iter().enumerate().skip(first_step) {
         if step.step != n as u64 {
             return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
@@ -274,45 +379,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         }
         previous_tick = Some(step.tick);
 
-        let out = stepper.step(sample);
-        report.steps += 1;
-        let recorded_cut = cuts.get(&step.step);
-        report.cuts_recorded += recorded_cut.is_some() as u64;
-        report.cuts_replayed += out.cut.is_some() as u64;
-        let cut_differs = match (&out.cut, recorded_cut) {
-            (None, None) => None,
-            (Some(_), None) => Some("the replay cut, the recording did not".to_owned()),
-            (None, Some(_)) => Some("the recording cut, the replay did not".to_owned()),
-            (Some((blade, event)), Some(r)) => {
-                if crate::channels::BladeMsg::from(blade) != r.blade {
-                    Some("the blade of the cut differs".to_owned())
-                } else if *event != r.event {
-                    Some(format!(
-                        "the cut's topology differs ({} tets split, recorded {}; {} vertices created, recorded {})",
-                        event.tets_removed.len(), r.event.tets_removed.len(), event.vertices_created.len(), r.event.vertices_created.len()
-                    ))
-                } else {
-                    None
-                }
-            }
-        };
-        if out.rejected != step.rejected {
-            diverge(&mut report, Divergence { step: step.step, tick: step.tick, what: format!("step rejected: {}, recorded {}", out.rejected, step.rejected), max_position_difference_m: None });
-        }
-        if let Some(what) = cut_differs {
-            diverge(&mut report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m: None });
-        }
-        if let Some(h) = hashes.get(&step.step) {
-            report.keyframes_checked += 1;
-            let now = stepper.state_hash();
-            if now == h.hash() {
-                report.keyframes_matched += 1;
-            } else {
-                let what = format!("state hash {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}", now.state, now.topology, h.state.0, h.topology.0);
-                let max_position_difference_m = keyframes.get(&step.step).and_then(|k| position_difference(&stepper, k));
-                diverge(&mut report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m });
-            }
-        }
+        let out = checks.step(&mut stepper, step, sample, &mut report);
         if playing && let Some(o) = options.observer.as_mut() {
             o.on_sim(&SimRecord::Step { step: step.step, tick: step.tick, rejected: out.rejected })?;
             if let Some((blade, event)) = out.cut {
@@ -322,7 +389,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
             if every > 0 && (step.step + 1).is_multiple_of(every) {
                 o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(&stepper.collider, &stepper.sim.state.positions, step.step, step.tick))))?;
             }
-            if hashes.contains_key(&step.step) {
+            if checks.hashes.contains_key(&step.step) {
                 o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(&stepper, step.step, step.tick))))?;
             }
         }
@@ -337,4 +404,108 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     report.final_hash = stepper.state_hash();
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
+}
+
+/// Replays the steps `range` in stretches that begin at the settled scene or `stepper`'s
+/// state (the first) and at every resumable keyframe inside it (the others, each restored and
+/// checked against its hashes), on `jobs` threads; each stretch is checked as a sequential
+/// replay checks it. Returns the stretches' reports in order, up to the first that diverged
+/// unless `keep_going`.
+#[allow(clippy::too_many_arguments)]
+fn replay_in_parallel(
+    rec: &Recording,
+    meta: &SessionMeta,
+    checks: &Checks<'_>,
+    samples: &BTreeMap<u64, ServoSample>,
+    stepper: SessionStepper,
+    range: std::ops::Range<usize>,
+    jobs: usize,
+    keep_going: bool,
+) -> Result<Vec<ReplayReport>, RecorderError> {
+    use std::sync::Mutex;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    for (n, step) in rec.steps.iter().enumerate().take(range.end).skip(range.start) {
+        if step.step != n as u64 {
+            return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
+        }
+    }
+    // (first step, the keyframe it resumes at; None: the given stepper's state)
+    let mut stretches: Vec<(usize, Option<&KeyframeMsg>)> = vec![(range.start, None)];
+    for k in checks.keyframes.values() {
+        let first = k.step as usize + 1;
+        if k.resume.is_some() && first > range.start && first < range.end {
+            stretches.push((first, Some(k)));
+        }
+    }
+    let first_stepper = Mutex::new(Some(stepper));
+    let next = AtomicUsize::new(0);
+    let stop_after = AtomicUsize::new(usize::MAX);
+    let run = || -> Result<Vec<(usize, ReplayReport)>, RecorderError> {
+        let mut done = Vec::new();
+        let mut own: Option<SessionStepper> = None;
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            if i >= stretches.len() || i > stop_after.load(Ordering::Relaxed) {
+                return Ok(done);
+            }
+            let (first, keyframe) = stretches[i];
+            let last = stretches.get(i + 1).map_or(range.end, |s| s.0);
+            let mut report = ReplayReport::empty(StateHash { state: 0, topology: 0 });
+            let mut taken = None;
+            let stepper = match keyframe {
+                None => {
+                    taken = first_stepper.lock().map_err(|_| RecorderError::Replay("a replay thread panicked".into()))?.take();
+                    taken.as_mut().ok_or_else(|| RecorderError::Replay("the first stretch was taken twice".into()))?
+                }
+                Some(k) => {
+                    let stepper = match own.as_mut() {
+                        Some(s) => s,
+                        None => own.insert(stepper_for(meta)?),
+                    };
+                    checks.resume(stepper, k, &mut report)?;
+                    stepper
+                }
+            };
+            if report.first_divergence.is_none() {
+                for step in &rec.steps[first..last] {
+                    let sample = samples.get(&step.tick).ok_or_else(|| {
+                        RecorderError::Replay(format!("the pose or tool state of tick {} (consumed by step {}) is missing from the recording", step.tick, step.step))
+                    })?;
+                    checks.step(stepper, step, sample, &mut report);
+                    if report.first_divergence.is_some() && !keep_going {
+                        break;
+                    }
+                }
+            }
+            let begun = first.checked_sub(1).map_or(0, |p| rec.steps[p].tick + 1);
+            let ticks = rec.steps[first..last].last().map_or(0, |s| (s.tick + 1).saturating_sub(begun));
+            report.simulated_s = ticks as f64 * meta.period_nanos as f64 * 1e-9;
+            report.final_hash = stepper.state_hash();
+            if report.first_divergence.is_some() && !keep_going {
+                stop_after.fetch_min(i, Ordering::Relaxed);
+            }
+            done.push((i, report));
+            // the first stretch's stepper is not reused: the others resume their own
+            drop(taken);
+        }
+    };
+    let results: Vec<Result<Vec<(usize, ReplayReport)>, RecorderError>> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..jobs.min(stretches.len())).map(|_| scope.spawn(run)).collect();
+        workers.into_iter().map(|w| w.join().unwrap_or_else(|_| Err(RecorderError::Replay("a replay thread panicked".into())))).collect()
+    });
+    let mut parts = Vec::new();
+    for r in results {
+        parts.extend(r?);
+    }
+    parts.sort_by_key(|(i, _)| *i);
+    let mut out = Vec::new();
+    for (_, part) in parts {
+        let diverged = part.first_divergence.is_some();
+        out.push(part);
+        if diverged && !keep_going {
+            break;
+        }
+    }
+    Ok(out)
 }

@@ -149,13 +149,21 @@ fn a_recording_reads_back_with_every_message_intact() {
 fn a_30_s_session_with_cuts_replays_with_every_hash_equal() {
     let r = recorded();
     let rec = Recording::open(&r.path).expect("readable");
-    let report = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
+    let report = replay::replay(&rec, ReplayOptions { jobs: 1, ..ReplayOptions::default() }).expect("replay runs");
     assert!(report.first_divergence.is_none(), "{:?}", report.first_divergence);
     assert_eq!(report.keyframes_checked, 30);
     assert_eq!(report.keyframes_matched, 30);
     assert_eq!(report.cuts_replayed, r.cut_steps);
     assert_eq!(report.steps, r.steps);
     assert!(report.verified());
+    assert_eq!(report.final_hash.state, r.state_hash);
+    // the stretches between keyframes side by side: the same checks, the same end
+    let parallel = replay::replay(&rec, ReplayOptions { jobs: 3, ..ReplayOptions::default() }).expect("replay runs");
+    assert_eq!(parallel.jobs, 3);
+    assert!(parallel.verified(), "{:?}", parallel.first_divergence);
+    let counts = |r: &replay::ReplayReport| (r.steps, r.keyframes_checked, r.keyframes_matched, r.cuts_recorded, r.cuts_replayed, r.final_hash);
+    assert_eq!(counts(&parallel), counts(&report));
+    assert!((parallel.simulated_s - report.simulated_s).abs() < 1e-9);
 }
 
 #[test]
@@ -211,11 +219,13 @@ fn a_changed_input_is_reported_at_the_step_that_consumed_it() {
     let cut = rec.topology[1].clone();
     let pose = rec.poses.iter_mut().find(|p| p.0 == cut.tick).expect("pose of the cut's tick");
     pose.1.x += 1e-7;
-    let report = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
-    let d = report.first_divergence.clone().expect("the change is found");
-    assert_eq!((d.step, d.tick), (cut.step, cut.tick), "{d}");
-    assert!(d.what.contains("blade"), "{d}");
-    assert!(!report.verified());
+    for jobs in [1, 2] {
+        let report = replay::replay(&rec, ReplayOptions { jobs, ..ReplayOptions::default() }).expect("replay runs");
+        let d = report.first_divergence.clone().expect("the change is found");
+        assert_eq!((d.step, d.tick), (cut.step, cut.tick), "{jobs} threads: {d}");
+        assert!(d.what.contains("blade"), "{d}");
+        assert!(!report.verified());
+    }
 }
 
 #[test]

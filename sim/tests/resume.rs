@@ -32,52 +32,56 @@ fn stroke_step(sim: &mut Simulation, cutter: &mut Cutter, k: usize) {
 
 type Captured = (TetMesh, cutlab_sim::model::State, ResumeState, CutterResume);
 
+/// The captures: before the stroke, early in it and later in it.
+const CAPTURES: [usize; 5] = [49, 149, 249, 349, 499];
+const STEPS: usize = 700;
+
 fn run_and_compare(localised: bool) {
     let mut sim = settled_wall();
     if localised {
         sim.settings.localisation = Some(LocalisationSettings::default());
     }
     let mut cutter = Cutter::default();
-    let mut captured: Option<Captured> = None;
+    let mut captured: Vec<(usize, Captured)> = Vec::new();
     let mut original = Vec::new();
-    for k in 0..700 {
+    for k in 0..STEPS {
         stroke_step(&mut sim, &mut cutter, k);
-        if k == 349 {
+        if CAPTURES.contains(&k) {
             // through JSON, as a recording's keyframe carries it
             let r: ResumeState = serde_json::from_str(&serde_json::to_string(&sim.resume_state()).expect("encode")).expect("decode");
             let c: CutterResume = serde_json::from_str(&serde_json::to_string(&cutter.resume_state()).expect("encode")).expect("decode");
-            assert!(!c.trail.is_empty() && !c.stroke.is_empty(), "captured mid-stroke");
+            assert!(k < 100 || (!c.trail.is_empty() && !c.stroke.is_empty()), "captured mid-stroke");
             assert_eq!(r.region.is_some(), localised);
-            captured = Some((sim.model.mesh.clone(), sim.state.clone(), r, c));
+            captured.push((k, (sim.model.mesh.clone(), sim.state.clone(), r, c)));
         }
-        if k >= 350 {
-            original.push((sim.state.bit_hash(), sim.model.mesh.tets().to_vec()));
-        }
+        original.push((sim.state.bit_hash(), sim.model.mesh.tets().to_vec()));
     }
     assert!(sim.model.mesh.tet_count() > 1_600, "the stroke cut: {} tets", sim.model.mesh.tet_count());
 
-    let (mesh, state, r, c) = captured.expect("captured");
-    let mut resumed = settled_wall();
-    if localised {
-        resumed.settings.localisation = Some(LocalisationSettings::default());
-    }
-    // a resume state that does not fit is refused, and the simulation is left as it was
-    let before = resumed.state.bit_hash();
-    let mut short = state.clone();
-    short.positions.pop();
-    assert!(resumed.resume(mesh.clone(), short, &r).is_err());
-    let mut bad = r.clone();
-    bad.held.push(u32::MAX);
-    assert!(resumed.resume(mesh.clone(), state.clone(), &bad).is_err());
-    assert_eq!(resumed.state.bit_hash(), before);
-
-    resumed.resume(mesh, state, &r).expect("resume");
-    let mut cutter = Cutter::default();
-    cutter.resume(&c, resumed.model.vertex_count()).expect("cutter");
-    for (i, k) in (350..700).enumerate() {
-        stroke_step(&mut resumed, &mut cutter, k);
-        let (hash, tets) = &original[i];
-        assert!(resumed.state.bit_hash() == *hash && resumed.model.mesh.tets() == &tets[..], "localised {localised}: the resumed run differs at step {k}");
+    for (at, (mesh, state, r, c)) in captured {
+        let mut resumed = settled_wall();
+        if localised {
+            resumed.settings.localisation = Some(LocalisationSettings::default());
+        }
+        if at == 349 {
+            // a resume state that does not fit is refused, and the simulation is left as it was
+            let before = resumed.state.bit_hash();
+            let mut short = state.clone();
+            short.positions.pop();
+            assert!(resumed.resume(mesh.clone(), short, &r).is_err());
+            let mut bad = r.clone();
+            bad.held.push(u32::MAX);
+            assert!(resumed.resume(mesh.clone(), state.clone(), &bad).is_err());
+            assert_eq!(resumed.state.bit_hash(), before);
+        }
+        resumed.resume(mesh, state, &r).expect("resume");
+        let mut cutter = Cutter::default();
+        cutter.resume(&c, resumed.model.vertex_count()).expect("cutter");
+        for k in at + 1..STEPS {
+            stroke_step(&mut resumed, &mut cutter, k);
+            let (hash, tets) = &original[k];
+            assert!(resumed.state.bit_hash() == *hash && resumed.model.mesh.tets() == &tets[..], "localised {localised}: resumed after step {at}, the run differs at step {k}");
+        }
     }
 }
 
@@ -104,8 +108,9 @@ fn a_resume_state_is_checked_against_its_mesh() {
     let cases: Vec<(&str, ResumeState)> = vec![
         ("awake out of range", ResumeState { region: Some(cutlab_sim::solver::RegionResume { awake: vec![n], ..region.clone() }), ..r.clone() }),
         ("sub-body unsorted", ResumeState { region: Some(cutlab_sim::solver::RegionResume { sub_body: region.sub_body.iter().rev().copied().collect(), ..region.clone() }), ..r.clone() }),
-        ("warm start too long", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 1, rows: vec![[Vector3::zeros(); 4]; n as usize + 1] }, ..r.clone() }),
-        ("warm start count", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 5, rows: Vec::new() }, ..r.clone() }),
+        ("warm start too long", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 1, rows: vec![[Vector3::zeros(); 4]; n as usize + 1], cg_residual_ratio: 0.0 }, ..r.clone() }),
+        ("warm start count", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 5, rows: Vec::new(), cg_residual_ratio: 0.0 }, ..r.clone() }),
+        ("CG residual ratio", ResumeState { warm_start: cutlab_sim::solver::WarmStart { cg_residual_ratio: f64::NAN, ..r.warm_start.clone() }, ..r.clone() }),
     ];
     for (what, bad) in cases {
         let mut s = sim.clone();

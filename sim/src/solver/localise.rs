@@ -258,8 +258,7 @@ impl ActiveRegion {
         for (l, &g) in me.global_of.iter().enumerate() {
             me.local_of[g as usize] = l as u32;
         }
-        let ImplicitScratch { dv, dv_previous, history, .. } = &mut me.implicit;
-        r.warm_start.install(dv, dv_previous, history);
+        me.implicit.install_warm_start(&r.warm_start);
         me.dirty = r.dirty;
         Ok(me)
     }

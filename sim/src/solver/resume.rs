@@ -26,12 +26,16 @@ use crate::Vector3;
 pub struct WarmStart {
     pub count: usize,
     pub rows: Vec<[Vector3; 4]>,
+    /// The last SSOR-preconditioned CG solve's ratio of true to preconditioned relative
+    /// residual, which the next solve's stopping test starts from (0: none yet).
+    #[serde(default)]
+    pub cg_residual_ratio: f64,
 }
 
 impl WarmStart {
     pub(crate) fn of(dv: &[Vector3], [p1, p2, p3]: &[Vec<Vector3>; 3], count: usize) -> Self {
         let rows = dv.iter().zip(p1).zip(p2).zip(p3).map(|(((&a, &b), &c), &d)| [a, b, c, d]).collect();
-        Self { count, rows }
+        Self { count, rows, cg_residual_ratio: 0.0 }
     }
 
     /// Writes the warm start into a solver's buffers.
@@ -50,6 +54,9 @@ impl WarmStart {
         if !self.rows.is_empty() && self.rows.len() != rows {
             return Err(ResumeError::Invalid(format!("{what}: {} warm-start rows for {rows} particles", self.rows.len())));
         }
+        if !(self.cg_residual_ratio >= 0.0 && self.cg_residual_ratio.is_finite()) {
+            return Err(ResumeError::Invalid(format!("{what}: CG residual ratio {}", self.cg_residual_ratio)));
+        }
         if !self.rows.iter().flatten().flat_map(|v| v.iter()).all(|c| c.is_finite()) {
             return Err(ResumeError::Invalid(format!("{what}: a non-finite warm start")));
         }
@@ -59,7 +66,12 @@ impl WarmStart {
 
 impl ImplicitScratch {
     pub(crate) fn warm_start(&self) -> WarmStart {
-        WarmStart::of(&self.dv, &self.dv_previous, self.history)
+        WarmStart { cg_residual_ratio: self.cg.residual_ratio, ..WarmStart::of(&self.dv, &self.dv_previous, self.history) }
+    }
+
+    pub(crate) fn install_warm_start(&mut self, w: &WarmStart) {
+        w.install(&mut self.dv, &mut self.dv_previous, &mut self.history);
+        self.cg.residual_ratio = w.cg_residual_ratio;
     }
 }
 
@@ -156,8 +168,7 @@ impl Simulation {
             None => ActiveRegion::default(),
         };
         let mut scratch = Scratch::default();
-        let ImplicitScratch { dv, dv_previous, history, .. } = &mut scratch.implicit;
-        resume.warm_start.install(dv, dv_previous, history);
+        scratch.implicit.install_warm_start(&resume.warm_start);
         let fem = &mut scratch.fem;
         resume.fem_warm_start.install(&mut fem.dv, &mut fem.dv_previous, &mut fem.history);
 

@@ -367,8 +367,9 @@ pub struct CgScratch {
     p: Vec<Vector3>,
     q: Vec<Vector3>,
     t: Vec<Vector3>,
-    /// Last seen `(|r| / |r_0|) / (|r^| / |r^_0|)` of the SSOR solve.
-    residual_ratio: f64,
+    /// Last seen `(|r| / |r_0|) / (|r^| / |r^_0|)` of the SSOR solve (carried to the next
+    /// solve's stopping test, so part of a [`super::resume::WarmStart`]).
+    pub(crate) residual_ratio: f64,
 }
 
 fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
