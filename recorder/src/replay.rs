@@ -335,8 +335,8 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     };
     if jobs > 1 && options.observer.is_none() && matches!(options.speed, None | Some(Speed::Max)) {
         let end_step = rec.steps.iter().position(|s| s.tick > to_tick).unwrap_or(rec.steps.len());
-        let parts = replay_in_parallel(rec, meta, &checks, &samples, stepper, first_step..end_step, jobs, options.keep_going)?;
-        report.jobs = jobs;
+        let (threads, parts) = replay_in_parallel(rec, meta, &checks, &samples, stepper, first_step..end_step, jobs, options.keep_going)?;
+        report.jobs = threads;
         for part in parts {
             report.steps += part.steps;
             report.keyframes_checked += part.keyframes_checked;
@@ -408,9 +408,9 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
 
 /// Replays the steps `range` in stretches that begin at the settled scene or `stepper`'s
 /// state (the first) and at every resumable keyframe inside it (the others, each restored and
-/// checked against its hashes), on `jobs` threads; each stretch is checked as a sequential
-/// replay checks it. Returns the stretches' reports in order, up to the first that diverged
-/// unless `keep_going`.
+/// checked against its hashes), on up to `jobs` threads; each stretch is checked as a
+/// sequential replay checks it. Returns the threads used and the stretches' reports in order,
+/// up to the first that diverged unless `keep_going`.
 #[allow(clippy::too_many_arguments)]
 fn replay_in_parallel(
     rec: &Recording,
@@ -421,7 +421,7 @@ fn replay_in_parallel(
     range: std::ops::Range<usize>,
     jobs: usize,
     keep_going: bool,
-) -> Result<Vec<ReplayReport>, RecorderError> {
+) -> Result<(usize, Vec<ReplayReport>), RecorderError> {
     use std::sync::Mutex;
     use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -490,8 +490,9 @@ fn replay_in_parallel(
             drop(taken);
         }
     };
+    let threads = jobs.min(stretches.len());
     let results: Vec<Result<Vec<(usize, ReplayReport)>, RecorderError>> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..jobs.min(stretches.len())).map(|_| scope.spawn(run)).collect();
+        let workers: Vec<_> = (0..threads).map(|_| scope.spawn(run)).collect();
         workers.into_iter().map(|w| w.join().unwrap_or_else(|_| Err(RecorderError::Replay("a replay thread panicked".into())))).collect()
     });
     let mut parts = Vec::new();
@@ -507,5 +508,5 @@ fn replay_in_parallel(
             break;
         }
     }
-    Ok(out)
+    Ok((threads, out))
 }

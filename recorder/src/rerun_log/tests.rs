@@ -136,6 +136,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
                 rest_positions: vec![Point3::origin(); 4],
                 tets: vec![[0, 1, 2, 3]],
                 regions: vec![0],
+                resume: None,
             };
             sink.on_sim(&SimRecord::Keyframe(Box::new(keyframe))).expect("keyframe");
             events += 1;
@@ -297,6 +298,7 @@ fn event_texts_carry_the_figures() {
         rest_positions: vec![],
         tets: vec![],
         regions: vec![],
+        resume: None,
     };
     let text = keyframe_text(&k);
     assert!(text.contains("state hash 0000000000000abc") && text.contains("topology hash 0000000000000001"), "{text}");
