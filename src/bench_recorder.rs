@@ -105,7 +105,6 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
     let seek_to_s = duration_s / 2.0 + 0.5;
     let window = |resimulate| replay::replay(&rec, ReplayOptions { from_s: Some(seek_to_s), to_s: Some(seek_to_s), resimulate, jobs: 1, ..ReplayOptions::default() });
     let (seek, resimulated) = (window(false)?, window(true)?);
-    let period_s = rec.meta()?.period_nanos as f64 * 1e-9;
     let w = &recorded.write;
     let f = Figures {
         scene: "chest-wall".into(),
@@ -131,7 +130,7 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         replay_parallel_verified: parallel.verified() && parallel.final_hash == rp.final_hash,
         seek_to_s,
         seek_wall_s: seek.wall_s,
-        seek_resumed_at_s: seek.resumed_at.map(|(_, tick)| (tick + 1) as f64 * period_s),
+        seek_resumed_at_s: seek.resumed_at.map(|k| k.session_s),
         seek_restore_verified: seek.resumed_at.is_some() && seek.first_divergence.is_none(),
         seek_resimulate_wall_s: resimulated.wall_s,
     };

@@ -150,10 +150,8 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         None => None,
     };
     let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going, resimulate: a.resimulate, jobs: a.jobs };
-    let period_s = rec.meta()?.period_nanos as f64 * 1e-9;
     let r = replay::replay(&rec, options).context("replaying")?;
-    // the session time right after the keyframe the replay resumed at
-    let resumed_at_s = r.resumed_at.map(|(_, tick)| (tick + 1) as f64 * period_s);
+    let resumed_at_s = r.resumed_at.map(|k| k.session_s);
     if a.json {
         let v = serde_json::json!({
             "verified": r.verified(), "resumed_at_s": resumed_at_s, "steps": r.steps, "threads": r.jobs, "keyframes_checked": r.keyframes_checked, "keyframes_matched": r.keyframes_matched,
@@ -164,8 +162,8 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        if let (Some((step, _)), Some(t)) = (r.resumed_at, resumed_at_s) {
-            println!("resumed at the keyframe of step {step} ({t:.3} s; its hashes equal)");
+        if let Some(k) = r.resumed_at {
+            println!("resumed at the keyframe of step {} ({:.3} s; its hashes equal)", k.step, k.session_s);
         }
         println!(
             "replayed {} steps ({:.2} s of session) on {} thread{} in {:.2} s wall: {:.1}x real time",

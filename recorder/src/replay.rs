@@ -103,11 +103,20 @@ impl std::fmt::Display for Divergence {
     }
 }
 
+/// The keyframe a replay resumed at.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResumedAt {
+    pub step: u64,
+    pub tick: u64,
+    /// Session time right after the keyframe's step, s.
+    pub session_s: f64,
+}
+
 /// What a replay did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ReplayReport {
-    /// The keyframe the replay resumed at (its step and tick), when it sought one.
-    pub resumed_at: Option<(u64, u64)>,
+    /// The keyframe the replay resumed at, when it sought one.
+    pub resumed_at: Option<ResumedAt>,
     /// Steps re-simulated.
     pub steps: u64,
     /// Threads the steps were re-simulated on.
@@ -286,6 +295,21 @@ impl<'a> Checks<'a> {
     }
 }
 
+/// Record `n` of the recording's steps must be step `n`.
+fn in_order(n: usize, step: &SimStepMsg) -> Result<(), RecorderError> {
+    if step.step != n as u64 {
+        return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
+    }
+    Ok(())
+}
+
+/// The recorded servo sample `step` consumed.
+fn sample_of<'s>(samples: &'s BTreeMap<u64, ServoSample>, step: &SimStepMsg) -> Result<&'s ServoSample, RecorderError> {
+    samples.get(&step.tick).ok_or_else(|| {
+        RecorderError::Replay(format!("the pose or tool state of tick {} (consumed by step {}) is missing from the recording", step.tick, step.step))
+    })
+}
+
 /// Replays `rec`; see the module documentation.
 pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayReport, RecorderError> {
     let meta = rec.meta()?;
@@ -324,7 +348,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
             report.wall_s = started.elapsed().as_secs_f64();
             return Ok(report);
         }
-        report.resumed_at = Some((k.step, k.tick));
+        report.resumed_at = Some(ResumedAt { step: k.step, tick: k.tick, session_s: (k.tick + 1) as f64 * period as f64 * 1e-9 });
         first_step = k.step as usize + 1;
         previous_tick = Some(k.tick);
     }
@@ -352,15 +376,11 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         return Ok(report);
     }
     for (n, step) in rec.steps.iter().enumerate().skip(first_step) {
-        if step.step != n as u64 {
-            return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
-        }
+        in_order(n, step)?;
         if step.tick > to_tick {
             break;
         }
-        let sample = samples.get(&step.tick).ok_or_else(|| {
-            RecorderError::Replay(format!("the pose or tool state of tick {} (consumed by step {n}) is missing from the recording", step.tick))
-        })?;
+        let sample = sample_of(&samples, step)?;
         let playing = step.tick >= from_tick;
         if playing {
             let (t0, tick0) = *play_started.get_or_insert((Instant::now(), step.tick));
@@ -426,9 +446,7 @@ fn replay_in_parallel(
     use std::sync::atomic::{AtomicUsize, Ordering};
 
     for (n, step) in rec.steps.iter().enumerate().take(range.end).skip(range.start) {
-        if step.step != n as u64 {
-            return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
-        }
+        in_order(n, step)?;
     }
     // (first step, the keyframe it resumes at; None: the given stepper's state)
     let mut stretches: Vec<(usize, Option<&KeyframeMsg>)> = vec![(range.start, None)];
@@ -469,10 +487,7 @@ fn replay_in_parallel(
             };
             if report.first_divergence.is_none() {
                 for step in &rec.steps[first..last] {
-                    let sample = samples.get(&step.tick).ok_or_else(|| {
-                        RecorderError::Replay(format!("the pose or tool state of tick {} (consumed by step {}) is missing from the recording", step.tick, step.step))
-                    })?;
-                    checks.step(stepper, step, sample, &mut report);
+                    checks.step(stepper, step, sample_of(samples, step)?, &mut report);
                     if report.first_divergence.is_some() && !keep_going {
                         break;
                     }

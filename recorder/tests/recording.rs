@@ -181,8 +181,9 @@ fn a_replay_seeks_through_the_nearest_keyframe_and_stays_bit_exact() {
         let to_s = from_s + 2.0;
         let options = ReplayOptions { from_s: Some(from_s), to_s: Some(to_s), ..ReplayOptions::default() };
         let seek = replay::replay(&rec, options).expect("replay runs");
-        let (step, tick) = seek.resumed_at.expect("resumed at a keyframe");
-        let t = (tick + 1) as f64 * period_s;
+        let resumed = seek.resumed_at.expect("resumed at a keyframe");
+        let (step, t) = (resumed.step, resumed.session_s);
+        assert!((t - (resumed.tick + 1) as f64 * period_s).abs() < 1e-12, "the keyframe's time is that of its tick");
         assert!(t <= from_s && from_s - t < 1.0, "from {from_s} s: resumed at {t} s");
         assert!(seek.verified() && seek.keyframes_checked >= 2, "from {from_s} s: {:?} ({} keyframes)", seek.first_divergence, seek.keyframes_checked);
         assert!(seek.steps < 3100, "from {from_s} s: {} steps re-simulated", seek.steps);
@@ -369,7 +370,7 @@ fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
     assert_eq!(replayed.keyframes_checked, 16);
     // seeking restores the localised region too
     let seek = replay::replay(&rec, ReplayOptions { from_s: Some(5.2), ..ReplayOptions::default() }).expect("replay runs");
-    assert_eq!(seek.resumed_at.map(|(step, _)| step), Some(4999));
+    assert_eq!(seek.resumed_at.map(|k| k.step), Some(4999));
     assert!(seek.verified() && seek.keyframes_checked == 6, "{:?}", seek.first_divergence);
     assert_eq!(seek.final_hash, replayed.final_hash);
 }

@@ -247,16 +247,18 @@ impl ActiveRegion {
         };
         r.awake.iter().for_each(|&v| me.awake[v as usize] = true);
         r.quiet_steps.iter().for_each(|&(v, q)| me.quiet_steps[v as usize] = q);
-        if !r.dirty {
+        if r.dirty {
+            // the next step gathers the sub-body again, starting from this one's warm start
+            me.global_of.clone_from(&r.sub_body);
+            for (l, &g) in me.global_of.iter().enumerate() {
+                me.local_of[g as usize] = l as u32;
+            }
+        } else {
             me.ensure_adjacency(model);
             me.rebuild(model);
             if me.global_of != r.sub_body {
                 return Err(ResumeError::Invalid("the sub-body differs from the one the awake particles make".into()));
             }
-        }
-        me.global_of.clone_from(&r.sub_body);
-        for (l, &g) in me.global_of.iter().enumerate() {
-            me.local_of[g as usize] = l as u32;
         }
         me.implicit.install_warm_start(&r.warm_start);
         me.dirty = r.dirty;
