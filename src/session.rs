@@ -264,7 +264,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     say!(o.quiet, "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
     let max_lag = r.tick_of_step.iter().enumerate().map(|(n, &t)| t.saturating_sub(n as u64)).max().unwrap_or(0);
     say!(o.quiet, "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
-    say!(o.quiet, "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count());
+    say!(o.quiet, "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now; the blade went in {} time(s)", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count(), r.servo.blade_entries);
     say!(o.quiet, "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
     if r.servo.blade_path_in_tissue_m == 0.0 && r.servo.max_force_newtons < config.render.cut_threshold_newtons {
         say!(o.quiet, "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`)", r.servo.max_force_newtons, config.render.cut_threshold_newtons);
@@ -297,7 +297,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let summary = serde_json::json!({
         "scene": scene.spec.name, "tets": tets, "device": device_name, "seed": o.seed, "clock": clock,
         "duration_s": o.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
-        "cut_length_mm": r.stats.cut_length_m * 1e3, "tets_split": r.stats.tets_split, "max_force_newtons": r.servo.max_force_newtons,
+        "cut_length_mm": r.stats.cut_length_m * 1e3, "blade_entries": r.servo.blade_entries, "tets_split": r.stats.tets_split, "max_force_newtons": r.servo.max_force_newtons,
         "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,
         "period_us": { "mean": p.mean_us, "p50": p.p50_us, "p99": p.p99_us, "p99_deviation": p.p99_deviation_us,
                        "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },

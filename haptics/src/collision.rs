@@ -35,6 +35,20 @@ pub struct SurfaceHit {
     pub distance_m: f64,
 }
 
+impl SurfaceHit {
+    /// The same material point of the surface at `positions`, which moves with the tissue:
+    /// the triangle's particles weighted as at the hit, and the outward normal of the
+    /// triangle as it is now (the hit's normal when the triangle has collapsed). None when a
+    /// particle is not in `positions` or a coordinate is not finite.
+    pub fn moved(&self, positions: &[Point3]) -> Option<(Point3, Vector3)> {
+        let [a, b, c] = self.vertices.map(|v| positions.get(v as usize).copied());
+        let (a, b, c) = (a?, b?, c?);
+        let point = Point3::from(a.coords * self.weights[0] + b.coords * self.weights[1] + c.coords * self.weights[2]);
+        let normal = (b - a).cross(&(c - a)).try_normalize(1e-18).unwrap_or(self.normal);
+        (point.iter().chain(normal.iter()).all(|x| x.is_finite())).then_some((point, normal))
+    }
+}
+
 /// The surface collider.
 #[derive(Debug)]
 pub struct SurfaceCollider {
@@ -184,11 +198,29 @@ impl SurfaceCollider {
     /// nearest above (signed distance along the surface's normal, the first on a tie). Valid
     /// when that surface point is within `reach_m`. Returns the model and the hit with the
     /// index of its probe.
-    pub fn contact_model(&self, sim: &Simulation, probes: &[Point3], reach_m: f64, source_tick: u64) -> (ContactModel, Option<(usize, SurfaceHit)>) {
+    ///
+    /// `pressed`: the contact the tool is pressing on, if it is. A contact follows the surface
+    /// the tool came through: a closest point on a surface facing away from it (the far side
+    /// of a thin wall dented by the press) is not taken; the pressed contact, moved with the
+    /// tissue ([`SurfaceHit::moved`]), stays instead.
+    pub fn contact_model(
+        &self,
+        sim: &Simulation,
+        probes: &[Point3],
+        reach_m: f64,
+        source_tick: u64,
+        pressed: Option<&SurfaceHit>,
+    ) -> (ContactModel, Option<(usize, SurfaceHit)>) {
         let signed = |p: &Point3, h: &SurfaceHit| (p - h.point).dot(&h.normal);
+        let kept = pressed.and_then(|h| Some((h, h.moved(&sim.state.positions)?)));
         let mut best: Option<(f64, usize, SurfaceHit)> = None;
         for (i, p) in probes.iter().enumerate() {
-            if let Some(h) = self.closest(p) {
+            if let Some(mut h) = self.closest(p) {
+                if let Some((was, (point, normal))) = kept
+                    && h.normal.dot(&normal) < 0.0
+                {
+                    h = SurfaceHit { point, normal, distance_m: (point - p).norm(), ..*was };
+                }
                 let d = signed(p, &h);
                 if best.as_ref().is_none_or(|(b, _, _)| d < *b) {
                     best = Some((d, i, h));
@@ -205,6 +237,7 @@ impl SurfaceCollider {
                 plane_point: h.point,
                 plane_normal: h.normal,
                 stiffness_newtons_per_m: self.stiffness_at(sim, h),
+                cut_entry: None,
             },
             _ => ContactModel { published: true, source_tick, ..ContactModel::default() },
         };
@@ -240,17 +273,31 @@ mod tests {
         let hit = c.closest(&Point3::new(0.05, 0.05, 0.01)).expect("hit");
         assert!((hit.point.z - 0.003).abs() < 1e-12, "{hit:?}");
         assert!(c.closest(&Point3::new(f64::NAN, 0.0, 0.0)).is_none());
-        let (far, _) = c.contact_model(&sim, &[Point3::new(0.05, 0.05, 1.0)], 0.05, 7);
+        let (far, _) = c.contact_model(&sim, &[Point3::new(0.05, 0.05, 1.0)], 0.05, 7, None);
         assert!(far.published && !far.valid && far.source_tick == 7);
         // the tip 1 mm above the surface (z = 3 mm), the blade's heel 0.5 mm into it: the
         // contact is under the heel; with the heel higher, under the tip
         let tip = Point3::new(0.03, 0.05, 0.004);
         let heel = Point3::new(0.05, 0.05, 0.0025);
-        let (m, hit) = c.contact_model(&sim, &[tip, heel], 0.005, 8);
+        let (m, hit) = c.contact_model(&sim, &[tip, heel], 0.005, 8, None);
         let (probe, hit) = hit.expect("hit");
         assert!(m.valid && probe == 1 && (hit.point - Point3::new(0.05, 0.05, 0.003)).norm() < 1e-12, "{hit:?}");
-        let (m, hit) = c.contact_model(&sim, &[tip, heel + Vector3::new(0.0, 0.0, 0.01)], 0.005, 8);
+        let (m, hit) = c.contact_model(&sim, &[tip, heel + Vector3::new(0.0, 0.0, 0.01)], 0.005, 8, None);
         let (probe, hit) = hit.expect("hit");
         assert!(m.valid && probe == 0 && (hit.point - Point3::new(0.03, 0.05, 0.003)).norm() < 1e-12);
+        // pressed deep into the sheet (now 1..3 mm), the tip is nearer the bottom face: the
+        // contact stays on the top, where the tool came in, and moves with the tissue
+        let (_, top) = c.contact_model(&sim, &[Point3::new(0.05, 0.05, 0.0035)], 0.005, 9, None);
+        let (_, top) = top.expect("hit");
+        assert!(top.normal.z > 0.99, "{top:?}");
+        let deep = Point3::new(0.05, 0.05, 0.0013);
+        let (m, hit) = c.contact_model(&sim, &[deep], 0.005, 10, None);
+        assert!(m.valid && m.plane_normal.z < -0.99, "unpressed, the nearest face is the bottom: {m:?} {hit:?}");
+        for p in sim.state.positions.iter_mut() {
+            p.z -= 0.0005;
+        }
+        let (m, hit) = c.contact_model(&sim, &[deep], 0.005, 11, Some(&top));
+        assert!(m.valid && m.plane_normal.z > 0.99 && (m.plane_point.z - 0.0025).abs() < 1e-12, "pressed, the top, moved: {m:?} {hit:?}");
+        assert_eq!(hit.expect("hit").1.vertices, top.vertices);
     }
 }

@@ -14,8 +14,9 @@
 //! - A light touch does not cut: only when the blade is engaged and the contact force
 //!   exceeds `cut_threshold_newtons` does the blade enter the tissue (mode `Cutting`); the
 //!   proxy then follows the tip and the force is a cutting resistance opposing the blade's
-//!   motion, `-R tanh(|v| / v0) v/|v|`. Lifting the tip above the plane where the cut
-//!   began, or releasing the blade, ends the cut.
+//!   motion, `-R tanh(|v| / v0) v/|v|`. Lifting the tip above the surface where the cut
+//!   began (as the simulation tracks it, [`ContactModel::cut_entry`]), or releasing the blade,
+//!   ends the cut.
 //! - Safety: the force is clamped to the device's limit and rate-limited; a non-finite pose or
 //!   model, a stalled simulation (no refresh for `stale_after_ticks`) or a lost device fades
 //!   the force to zero within `fade_ticks`; when the fault clears the force ramps back in.
@@ -40,6 +41,10 @@ pub struct ContactModel {
     pub plane_normal: Vector3,
     /// Local stiffness of the tissue along the normal, N/m.
     pub stiffness_newtons_per_m: f64,
+    /// While the blade cuts: the surface point where it went in and the outward normal
+    /// there, as they are now (they move with the tissue, which springs back from the press
+    /// once the blade is in). Lifting the tip above this plane ends the cut.
+    pub cut_entry: Option<(Point3, Vector3)>,
 }
 
 impl Default for ContactModel {
@@ -52,6 +57,7 @@ impl Default for ContactModel {
             plane_point: Point3::origin(),
             plane_normal: Vector3::z(),
             stiffness_newtons_per_m: 0.0,
+            cut_entry: None,
         }
     }
 }
@@ -60,6 +66,7 @@ impl ContactModel {
     fn is_finite(&self) -> bool {
         self.plane_point.iter().chain(self.plane_normal.iter()).all(|c| c.is_finite())
             && self.stiffness_newtons_per_m.is_finite()
+            && self.cut_entry.is_none_or(|(p, n)| p.iter().chain(n.iter()).all(|c| c.is_finite()))
     }
 }
 
@@ -181,7 +188,8 @@ pub struct ForceRenderer {
     proxy: Point3,
     last_pose: Option<ToolPose>,
     velocity: Vector3,
-    /// Plane where the current cut began.
+    /// Plane where the current cut began, as the contact model showed it then (until the
+    /// simulation publishes the entry it tracks).
     cut_plane: (Point3, Vector3),
     /// Desired (clamped, rate-limited, un-faded) force of the last tick.
     desired: Vector3,
@@ -309,7 +317,7 @@ impl ForceRenderer {
         let n = c.plane_normal;
         match self.mode {
             Mode::Cutting => {
-                let (p0, n0) = self.cut_plane;
+                let (p0, n0) = c.cut_entry.unwrap_or(self.cut_plane);
                 if !pose.blade_engaged() || (tip - p0).dot(&n0) > 0.0 {
                     self.mode = Mode::Free;
                     self.proxy = tip;
@@ -362,6 +370,7 @@ mod tests {
             plane_point: Point3::origin(),
             plane_normal: Vector3::z(),
             stiffness_newtons_per_m: k,
+            cut_entry: None,
         }
     }
 
@@ -472,6 +481,24 @@ mod tests {
         // lifting out ends the cut
         let out = r.update(400, at(0.001, BUTTON_BLADE), &plane(400, 500.0));
         assert_eq!(out.mode, Mode::Free);
+    }
+
+    #[test]
+    fn the_cut_ends_above_the_entry_as_the_tissue_moves_it_not_where_the_press_dented_it() {
+        // the press dented the surface 6 mm down; the blade went in there
+        let dented = ContactModel { plane_point: Point3::new(0.0, 0.0, -0.006), ..plane(0, 500.0) };
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let mode = (0..100).map(|t| r.update(t, at(-0.010, BUTTON_BLADE), &ContactModel { source_tick: t, ..dented }).mode).last();
+        assert_eq!(mode, Some(Mode::Cutting));
+        // once in, the tissue springs back up around the blade, which returns to its planned
+        // depth, 4 mm down: above the dented plane, below the entry as it is now
+        let entry = |t: u64, z: f64| ContactModel { source_tick: t, cut_entry: Some((Point3::new(0.0, 0.0, z), Vector3::z())), ..dented };
+        let mut fallback = r.clone();
+        assert_eq!(r.update(100, at(-0.004, BUTTON_BLADE), &entry(100, -0.001)).mode, Mode::Cutting);
+        // lifted above the entry: out
+        assert_eq!(r.update(101, at(0.0005, BUTTON_BLADE), &entry(101, 0.0)).mode, Mode::Free);
+        // with no entry published, the plane where the cut began decides
+        assert_eq!(fallback.update(100, at(-0.004, BUTTON_BLADE), &ContactModel { source_tick: 100, ..dented }).mode, Mode::Free);
     }
 
     #[test]

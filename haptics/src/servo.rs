@@ -112,6 +112,8 @@ pub struct ServoReport {
     pub dropped_records: u64,
     /// Path of the blade's tip while cutting, m.
     pub blade_path_in_tissue_m: f64,
+    /// Times the blade went into the tissue (one for an incision made in one stroke).
+    pub blade_entries: u64,
     /// FNV-1a hash of every tick's force bits (determinism checks).
     pub force_hash: u64,
 }
@@ -252,6 +254,7 @@ pub fn spawn<D: HapticDevice + 'static>(
             dropped_samples: 0,
             dropped_records: 0,
             blade_path_in_tissue_m: 0.0,
+            blade_entries: 0,
             force_hash: 0,
         };
         let spin = Duration::from_nanos(config.spin_nanos);
@@ -299,8 +302,9 @@ pub fn spawn<D: HapticDevice + 'static>(
             report.max_force_newtons = report.max_force_newtons.max(out.force_newtons.norm());
             out.force_newtons.iter().for_each(|&c| force_hash.f64(c));
             if out.mode == Mode::Cutting {
-                if let Some(t) = last_tip {
-                    report.blade_path_in_tissue_m += (last_pose.tip_in_world - t).norm();
+                match last_tip {
+                    Some(t) => report.blade_path_in_tissue_m += (last_pose.tip_in_world - t).norm(),
+                    None => report.blade_entries += 1,
                 }
                 last_tip = Some(last_pose.tip_in_world);
             } else {

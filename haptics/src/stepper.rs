@@ -58,6 +58,8 @@ pub struct SessionStepper {
     cut_step_m: f64,
     patch: Vec<(u32, f64)>,
     last_hit: Option<SurfaceHit>,
+    /// Where the blade went in, while it cuts (the contact the renderer started the cut on).
+    cut_entry: Option<SurfaceHit>,
     last_cut_tip: Option<Point3>,
     pub stats: StepperStats,
     /// Steps taken.
@@ -85,6 +87,9 @@ pub struct StepperResume {
     pub cutter: CutterResume,
     /// Where the tool touched after the last step (the next step presses there).
     pub last_hit: Option<SurfaceHit>,
+    /// Where the blade went in, while it cuts (absent in recordings made before it was kept).
+    #[serde(default)]
+    pub cut_entry: Option<SurfaceHit>,
     /// Where the blade's tip last cut in this stroke.
     pub last_cut_tip: Option<Point3>,
     pub stats: StepperStats,
@@ -103,6 +108,7 @@ impl SessionStepper {
             cut_step_m: config.cut_step_m,
             patch: Vec::new(),
             last_hit: None,
+            cut_entry: None,
             last_cut_tip: None,
             stats: StepperStats::default(),
             steps: 0,
@@ -125,6 +131,7 @@ impl SessionStepper {
             sim: self.sim.resume_state(),
             cutter: self.cutter.resume_state(),
             last_hit: self.last_hit,
+            cut_entry: self.cut_entry,
             last_cut_tip: self.last_cut_tip,
             stats: self.stats,
         })
@@ -136,10 +143,9 @@ impl SessionStepper {
     pub fn resume(&mut self, mesh: TetMesh, state: State, r: &StepperResume) -> Result<(), HapticsError> {
         let invalid = |e: String| HapticsError::Simulation(format!("resuming at step {}: {e}", r.steps));
         let n = mesh.vertex_count();
-        if let Some(h) = &r.last_hit
-            && (h.vertices.iter().any(|&v| v as usize >= n) || !h.point.iter().chain(h.normal.iter()).chain(&h.weights).all(|c| c.is_finite()))
-        {
-            return Err(invalid("the last contact is not on the mesh".into()));
+        let on_mesh = |h: &SurfaceHit| h.vertices.iter().all(|&v| (v as usize) < n) && h.point.iter().chain(h.normal.iter()).chain(&h.weights).all(|c| c.is_finite());
+        if !r.last_hit.as_ref().is_none_or(on_mesh) || !r.cut_entry.as_ref().is_none_or(on_mesh) {
+            return Err(invalid("the last contact or the cut's entry is not on the mesh".into()));
         }
         if !r.last_cut_tip.is_none_or(|p| p.iter().all(|c| c.is_finite())) {
             return Err(invalid("the last cut's tip is not finite".into()));
@@ -151,6 +157,7 @@ impl SessionStepper {
         let collider = SurfaceCollider::build(&sim)?;
         (self.sim, self.cutter, self.collider) = (sim, cutter, collider);
         self.last_hit = r.last_hit;
+        self.cut_entry = r.cut_entry;
         self.last_cut_tip = r.last_cut_tip;
         self.stats = r.stats;
         self.steps = r.steps;
@@ -188,7 +195,13 @@ impl SessionStepper {
             }
         }
 
-        // Cutting while the renderer says the blade is in the tissue.
+        // Cutting while the renderer says the blade is in the tissue; it went in where the
+        // contact model it rendered from was.
+        if render.mode == Mode::Cutting {
+            self.cut_entry = self.cut_entry.or(self.last_hit);
+        } else {
+            self.cut_entry = None;
+        }
         let mut made = None;
         let tip = sample.pose.tip_in_world;
         let moved_enough = self.last_cut_tip.is_none_or(|p| (tip - p).norm() >= self.cut_step_m);
@@ -248,8 +261,10 @@ impl SessionStepper {
         }
         // the proxy, and the blade's heel in case the blade rather than its tip meets the tissue
         let probes = [render.proxy, sample.pose.blade_heel(self.blade_length_m)];
-        let (mut contact, hit) = self.collider.contact_model(&self.sim, &probes, self.reach_m, sample.tick);
+        let pressed = self.last_hit.as_ref().filter(|_| render.mode == Mode::Touching);
+        let (mut contact, hit) = self.collider.contact_model(&self.sim, &probes, self.reach_m, sample.tick, pressed);
         contact.at_heel = contact.valid && hit.as_ref().is_some_and(|(probe, _)| *probe == 1);
+        contact.cut_entry = self.cut_entry.and_then(|h| h.moved(&self.sim.state.positions));
         self.last_hit = hit.map(|(_, h)| h);
         if sample.tick.is_multiple_of(100) {
             tracing::debug!(

@@ -43,6 +43,7 @@ fn a_servo_tick_does_not_allocate() {
                 plane_point: Point3::origin(),
                 plane_normal: Vector3::z(),
                 stiffness_newtons_per_m: 300.0,
+                cut_entry: None,
             });
         }
         out
