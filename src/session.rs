@@ -200,13 +200,14 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     };
     if let DeviceArg::Trainee { name, skill } = &o.device {
         let trainee = SyntheticTrainee::new(name, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), *skill, o.seed)?;
-        device = Some(Box::new(trainee.expecting_cut_force(scene.spec.cut_threshold_newtons)));
+        device = Some(Box::new(trainee.expecting_cut(scene.spec.cut_threshold_newtons, scene.spec.cut_depth_mm * 1e-3)));
     }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
     let mut config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
     config.render.cut_threshold_newtons = scene.spec.cut_threshold_newtons;
+    config.render.cut_depth_m = scene.spec.cut_depth_mm * 1e-3;
     if !(o.keyframe_every_s > 0.0 && o.keyframe_every_s.is_finite() && o.surface_hz >= 0.0 && o.surface_hz.is_finite()) {
         bail!("--keyframe-every must be positive and --surface-hz non-negative");
     }
@@ -266,8 +267,12 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     say!(o.quiet, "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
     say!(o.quiet, "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now; the blade went in {} time(s)", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count(), r.servo.blade_entries);
     say!(o.quiet, "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
-    if r.servo.blade_path_in_tissue_m == 0.0 && r.servo.max_force_newtons < config.render.cut_threshold_newtons {
-        say!(o.quiet, "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`)", r.servo.max_force_newtons, config.render.cut_threshold_newtons);
+    if r.servo.blade_entries == 0 {
+        say!(
+            o.quiet,
+            "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`), and the tip never pressed {:.1} mm in (`cut_depth_mm`), with the blade engaged",
+            r.servo.max_force_newtons, config.render.cut_threshold_newtons, scene.spec.cut_depth_mm
+        );
     }
     let p = r.servo.period_stats(r.period_nanos);
     if o.clock == Clock::Live {

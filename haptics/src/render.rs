@@ -12,7 +12,9 @@
 //!   the force is `k (proxy - p) - b v_n` (never pulling into the surface). Only a contact at
 //!   the tip can start a cut: a blade laid on the tissue heel first presses, it does not cut.
 //! - A light touch does not cut: only when the blade is engaged and the contact force
-//!   exceeds `cut_threshold_newtons` does the blade enter the tissue (mode `Cutting`); the
+//!   exceeds `cut_threshold_newtons`, or the tip has pressed `cut_depth_m` into the tissue
+//!   from where it first touched it (a soft or loosely held tissue yields rather than
+//!   pushing back), does the blade enter the tissue (mode `Cutting`); the
 //!   proxy then follows the tip and the force is a cutting resistance opposing the blade's
 //!   motion, `-R tanh(|v| / v0) v/|v|`. Lifting the tip above the surface where the cut
 //!   began (as the simulation tracks it, [`ContactModel::cut_entry`]), or releasing the blade,
@@ -82,6 +84,9 @@ pub struct RenderSettings {
     pub max_stiffness_newtons_per_m: f64,
     /// Contact force above which an engaged blade enters the tissue, N.
     pub cut_threshold_newtons: f64,
+    /// Depth below the surface where the tip first touched it (along the normal there) at
+    /// which an engaged blade enters the tissue whatever the force, m.
+    pub cut_depth_m: f64,
     /// Cutting resistance at speed (N) and the speed scale of its onset (m/s).
     pub cut_resistance_newtons: f64,
     pub cut_resistance_speed_m_per_s: f64,
@@ -100,6 +105,7 @@ impl Default for RenderSettings {
             damping_newton_seconds_per_m: 0.3,
             max_stiffness_newtons_per_m: 2000.0,
             cut_threshold_newtons: 1.0,
+            cut_depth_m: 0.006,
             cut_resistance_newtons: 0.8,
             cut_resistance_speed_m_per_s: 0.005,
             stale_after_ticks: 50,
@@ -118,6 +124,7 @@ impl RenderSettings {
             ("period", self.period_s),
             ("max stiffness", self.max_stiffness_newtons_per_m),
             ("cut threshold", self.cut_threshold_newtons),
+            ("cut depth", self.cut_depth_m),
             ("cut resistance speed", self.cut_resistance_speed_m_per_s),
         ];
         for (name, v) in positive {
@@ -188,6 +195,8 @@ pub struct ForceRenderer {
     proxy: Point3,
     last_pose: Option<ToolPose>,
     velocity: Vector3,
+    /// The surface where the tip first touched it in the current contact (point, normal).
+    touched: Option<(Point3, Vector3)>,
     /// Plane where the current cut began, as the contact model showed it then (until the
     /// simulation publishes the entry it tracks).
     cut_plane: (Point3, Vector3),
@@ -207,6 +216,7 @@ impl ForceRenderer {
             proxy: Point3::origin(),
             last_pose: None,
             velocity: Vector3::zeros(),
+            touched: None,
             cut_plane: (Point3::origin(), Vector3::z()),
             desired: Vector3::zeros(),
             gain: 1.0,
@@ -338,6 +348,9 @@ impl ForceRenderer {
                     self.proxy = tip;
                     return Vector3::zeros();
                 }
+                if self.mode == Mode::Free || c.at_heel {
+                    self.touched = None;
+                }
                 self.mode = Mode::Touching;
                 self.proxy = point - n * depth;
                 let k = c.stiffness_newtons_per_m.clamp(0.0, s.max_stiffness_newtons_per_m);
@@ -345,7 +358,14 @@ impl ForceRenderer {
                 if f.dot(&n) < 0.0 {
                     f = Vector3::zeros();
                 }
-                if pose.blade_engaged() && !c.at_heel && f.norm() >= s.cut_threshold_newtons {
+                // how far the tip has pressed in since it touched (along the normal there)
+                let pressed_in = if c.at_heel {
+                    0.0
+                } else {
+                    let (p0, n0) = *self.touched.get_or_insert((c.plane_point, n));
+                    (p0 - tip).dot(&n0)
+                };
+                if pose.blade_engaged() && !c.at_heel && (f.norm() >= s.cut_threshold_newtons || pressed_in >= s.cut_depth_m) {
                     self.mode = Mode::Cutting;
                     self.cut_plane = (c.plane_point, n);
                     self.proxy = tip;
@@ -481,6 +501,36 @@ mod tests {
         // lifting out ends the cut
         let out = r.update(400, at(0.001, BUTTON_BLADE), &plane(400, 500.0));
         assert_eq!(out.mode, Mode::Free);
+    }
+
+    #[test]
+    fn a_yielding_tissue_lets_the_blade_in_once_the_tip_has_pressed_the_cut_depth_in() {
+        // a soft tissue recedes under the tip: the surface stays 0.5 mm below it, the push
+        // stays at 0.01 N (20 N/m), far under the 1 N threshold
+        let receding = |t: u64, z: f64| ContactModel { plane_point: Point3::new(0.0, 0.0, z + 0.0005), ..plane(t, 20.0) };
+        let press = |r: &mut ForceRenderer, buttons: u32, to_m: f64| {
+            let mut out = RenderOutput::default();
+            for t in 0..=1000u64 {
+                let z = -to_m * t as f64 / 1000.0;
+                out = r.update(t, at(z, buttons), &receding(t, z));
+                if out.mode == Mode::Cutting {
+                    return (out, z);
+                }
+            }
+            (out, -to_m)
+        };
+        let d = RenderSettings::default().cut_depth_m;
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let (out, _) = press(&mut r, BUTTON_BLADE, 0.9 * d);
+        assert_eq!(out.mode, Mode::Touching, "not yet pressed the cut depth in: {out:?}");
+        assert!(out.force_newtons.norm() < 0.05);
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let (out, z) = press(&mut r, BUTTON_BLADE, 1.5 * d);
+        assert_eq!(out.mode, Mode::Cutting);
+        // the first touch was 0.5 mm above the start: in once the tip is d below it
+        assert!((z - (0.0005 - d)).abs() < 2e-5, "went in at {z}");
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        assert_eq!(press(&mut r, 0, 3.0 * d).0.mode, Mode::Touching, "the blade not engaged: a press, however deep, does not cut");
     }
 
     #[test]

@@ -215,7 +215,7 @@ fn an_expert_cuts_the_chest_wall_in_one_stroke_along_the_whole_line() {
         }
         let plan = session.plan_across(&Vector3::z(), &Vector3::x(), 0.06, 0.008).expect("plan");
         let hand = SyntheticTrainee::new("expert", plan, Skill::preset("expert").expect("preset"), seed).expect("trainee");
-        let device = Box::new(hand.expecting_cut_force(scene.spec.cut_threshold_newtons));
+        let device = Box::new(hand.expecting_cut(scene.spec.cut_threshold_newtons, scene.spec.cut_depth_mm * 1e-3));
         let config = SessionConfig { clock: Clock::Virtual, duration_s: 6.0, ..SessionConfig::default() };
         let r = session.run(device, &config).expect("run");
         let what = format!("seed {seed}, localised {localise}: {} entries, cut {:.1} mm", r.servo.blade_entries, r.stats.cut_length_m * 1e3);

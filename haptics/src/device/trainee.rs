@@ -9,8 +9,9 @@
 //! The hand feels the force: when the tissue yields under the blade instead of letting it in
 //! (the push-back has not yet reached the force a blade needs, the renderer's default
 //! threshold, and then dropped from that peak by [`GIVE_FRACTION`], as it does once the blade
-//! enters), it presses on, slowly and at most [`MAX_PRESS_M`] deeper, until the blade gives;
-//! over the first part of the stroke it comes back up to the planned depth.
+//! enters; nor has the hand pressed the depth a blade needs since it first felt the tissue),
+//! it presses on, slowly and at most [`MAX_PRESS_M`] deeper, until the blade gives; over the
+//! first part of the stroke it comes back up to the planned depth.
 
 use super::{DeviceFault, HapticDevice};
 use crate::pose::{BUTTON_BLADE, Rng};
@@ -202,6 +203,11 @@ pub struct SyntheticTrainee {
     press_m: f64,
     /// The force the hand expects a blade to need (the renderer's default threshold), N.
     cutting_force_n: f64,
+    /// How far the hand expects to press the tissue in before the blade goes in (the
+    /// renderer's default cut depth), m, and how far down it was when it first felt the
+    /// tissue push back (descent progress).
+    cutting_depth_m: f64,
+    touched_at_m: Option<f64>,
 }
 
 impl SyntheticTrainee {
@@ -243,16 +249,21 @@ impl SyntheticTrainee {
             peak_push_n: 0.0,
             press_m: 0.0,
             cutting_force_n: crate::render::RenderSettings::default().cut_threshold_newtons,
+            cutting_depth_m: crate::render::RenderSettings::default().cut_depth_m,
+            touched_at_m: None,
         };
         me.last = me.pose();
         Ok(me)
     }
 
-    /// The same trainee expecting the blade to need `newtons` to enter the tissue (the
-    /// renderer's cut threshold; default 1 N): it presses on until the push has reached that
-    /// and given way, or it is [`MAX_PRESS_M`] deeper than planned.
-    pub fn expecting_cut_force(mut self, newtons: f64) -> Self {
+    /// The same trainee expecting the blade to enter the tissue at a push of `newtons` or
+    /// once pressed `depth_m` in (the renderer's cut threshold and cut depth; default 1 N and
+    /// 6 mm): at its planned depth it presses on until the push has reached that force and
+    /// given way, or it has pressed that deep since it first felt the tissue, or it is
+    /// [`MAX_PRESS_M`] deeper than planned.
+    pub fn expecting_cut(mut self, newtons: f64, depth_m: f64) -> Self {
         self.cutting_force_n = newtons;
+        self.cutting_depth_m = depth_m;
         self
     }
 
@@ -335,11 +346,15 @@ impl SyntheticTrainee {
             }
             Phase::Descend => {
                 self.peak_push_n = self.peak_push_n.max(self.push_n);
+                if self.push_n > 0.0 && self.touched_at_m.is_none() {
+                    self.touched_at_m = Some(self.progress);
+                }
                 if self.progress < h + d {
                     self.progress += DESCEND_M_PER_S * speed_factor * dt;
                 } else {
                     // at the planned depth: on once the blade has given way, else press on
-                    let given = self.peak_push_n >= self.cutting_force_n && self.push_n < GIVE_FRACTION * self.peak_push_n;
+                    let given = (self.peak_push_n >= self.cutting_force_n && self.push_n < GIVE_FRACTION * self.peak_push_n)
+                        || self.touched_at_m.is_some_and(|at| self.progress - at >= self.cutting_depth_m);
                     if given || self.progress >= h + d + MAX_PRESS_M {
                         self.press_m = self.progress - (h + d);
                         (self.phase, self.progress) = (Phase::Stroke, 0.0);

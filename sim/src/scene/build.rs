@@ -44,6 +44,9 @@ impl Scene {
         if !(spec.cut_threshold_newtons > 0.0 && spec.cut_threshold_newtons.is_finite()) {
             return Err(invalid(format!("cut_threshold_newtons must be positive, got {}", spec.cut_threshold_newtons)));
         }
+        if !(spec.cut_depth_mm > 0.0 && spec.cut_depth_mm.is_finite()) {
+            return Err(invalid(format!("cut_depth_mm must be positive, got {}", spec.cut_depth_mm)));
+        }
         let base_dir = match origin {
             SpecOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),
             // Built-in scenes refer to the repository's data relative to `sim/scenes/`.

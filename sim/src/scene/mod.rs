@@ -91,6 +91,7 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
             viewpoint: None,
             incision: Default::default(),
             cut_threshold_newtons: 1.0,
+            cut_depth_mm: 6.0,
             solver: Default::default(),
             force_model: Default::default(),
         };
@@ -128,19 +129,22 @@ mod tests {
             parse_spec(&text, Path::new("x.toml")).expect("parses")
         };
         let build = |extra: &str| Scene::build(spec(extra), &SpecOrigin::BuiltIn, BuildOptions { min_tets: Some(200) }).map(|s| s.spec);
-        let ok = build("cut_threshold_newtons = 0.1\n[incision]\nup = [0.0, 2.0, 0.0]\nalong = [0.0, 1.0, 3.0]").expect("valid");
+        assert_eq!(build("").expect("valid").cut_depth_mm, 6.0, "the default");
+        let ok = build("cut_threshold_newtons = 0.1\ncut_depth_mm = 4.5\n[incision]\nup = [0.0, 2.0, 0.0]\nalong = [0.0, 1.0, 3.0]").expect("valid");
         let (up, along) = ok.incision.unit().expect("unit");
         assert!((up - crate::Vector3::y()).norm() < 1e-15 && (along - crate::Vector3::z()).norm() < 1e-15, "{up:?} {along:?}");
-        assert_eq!(ok.cut_threshold_newtons, 0.1);
+        assert_eq!((ok.cut_threshold_newtons, ok.cut_depth_mm), (0.1, 4.5));
         for bad in [
             "[incision]\nup = [0.0, 0.0, 1.0]\nalong = [0.0, 0.0, -2.0]",
             "[incision]\nup = [0.0, 0.0, 0.0]\nalong = [1.0, 0.0, 0.0]",
             "[incision]\nup = [0.0, 0.0, 1.0]\nalong = [1e308, 1e308, 0.0]",
             "cut_threshold_newtons = -1.0",
             "cut_threshold_newtons = 0.0",
+            "cut_depth_mm = 0.0",
+            "cut_depth_mm = -3.0",
         ] {
             let err = build(bad).expect_err(bad).to_string();
-            assert!(err.contains("incision") || err.contains("cut_threshold_newtons"), "{bad}: {err}");
+            assert!(err.contains("incision") || err.contains("cut_threshold_newtons") || err.contains("cut_depth_mm"), "{bad}: {err}");
         }
     }
 }

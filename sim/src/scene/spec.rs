@@ -38,6 +38,11 @@ pub struct SceneSpec {
     /// (the haptic renderer's cut threshold; default 1 N).
     #[serde(default = "default_cut_threshold_newtons")]
     pub cut_threshold_newtons: f64,
+    /// How far an engaged blade's tip must have pressed into this tissue, from where it first
+    /// touched it, to enter it when the push has stayed under `cut_threshold_newtons` (a soft
+    /// or loosely held tissue yields instead of pushing back), mm (default 6 mm).
+    #[serde(default = "default_cut_depth_mm")]
+    pub cut_depth_mm: f64,
     #[serde(default)]
     pub solver: SolverSettings,
     /// The force model: the paper's `springs` (default) or `corotational-fem`.
@@ -155,6 +160,10 @@ pub struct Target {
 
 fn default_cut_threshold_newtons() -> f64 {
     1.0
+}
+
+fn default_cut_depth_mm() -> f64 {
+    6.0
 }
 
 /// How a default incision crosses the tissue: a straight line through the middle of the
