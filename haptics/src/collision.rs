@@ -200,9 +200,11 @@ impl SurfaceCollider {
     /// index of its probe.
     ///
     /// `pressed`: the contact the tool is pressing on, if it is. A contact follows the surface
-    /// the tool came through: a closest point on a surface facing away from it (the far side
-    /// of a thin wall dented by the press) is not taken; the pressed contact, moved with the
-    /// tissue ([`SurfaceHit::moved`]), stays instead.
+    /// the tool came through: a closest point on a surface facing away from it with the probe
+    /// behind it, inside the tissue (the far side of a thin wall dented by the press), is not
+    /// taken; the pressed contact, moved with the tissue ([`SurfaceHit::moved`]), stays
+    /// instead. A probe in front of such a surface is outside the tissue (in a wound, between
+    /// its walls): that surface is taken.
     pub fn contact_model(
         &self,
         sim: &Simulation,
@@ -218,6 +220,7 @@ impl SurfaceCollider {
             if let Some(mut h) = self.closest(p) {
                 if let Some((was, (point, normal))) = kept
                     && h.normal.dot(&normal) < 0.0
+                    && signed(p, &h) < 0.0
                 {
                     h = SurfaceHit { point, normal, distance_m: (point - p).norm(), ..*was };
                 }

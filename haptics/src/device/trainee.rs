@@ -166,6 +166,10 @@ const HOVER_S: f64 = 0.3;
 pub const GIVE_FRACTION: f64 = 0.7;
 /// How much deeper than planned the hand presses at most, m.
 pub const MAX_PRESS_M: f64 = 0.005;
+/// How much further than the depth at which it expects the blade to go in the hand presses
+/// before it takes the blade to be in (it feels the tissue a little after the renderer
+/// does, and along its own approach rather than the surface's normal), m.
+pub const DEPTH_MARGIN_M: f64 = 0.001;
 /// How fast it presses on, m/s.
 const PRESS_M_PER_S: f64 = 0.005;
 /// Time constant of the return to the planned depth during the stroke, s.
@@ -258,8 +262,9 @@ impl SyntheticTrainee {
 
     /// The same trainee expecting the blade to enter the tissue at a push of `newtons` or
     /// once pressed `depth_m` in (the renderer's cut threshold and cut depth; default 1 N and
-    /// 6 mm): at its planned depth it presses on until the push has reached that force and
-    /// given way, or it has pressed that deep since it first felt the tissue, or it is
+    /// 4 mm): at its planned depth it presses on until the push has reached that force and
+    /// given way, or it has pressed that deep (and [`DEPTH_MARGIN_M`] more) since it first
+    /// felt the tissue, or it is
     /// [`MAX_PRESS_M`] deeper than planned.
     pub fn expecting_cut(mut self, newtons: f64, depth_m: f64) -> Self {
         self.cutting_force_n = newtons;
@@ -354,7 +359,7 @@ impl SyntheticTrainee {
                 } else {
                     // at the planned depth: on once the blade has given way, else press on
                     let given = (self.peak_push_n >= self.cutting_force_n && self.push_n < GIVE_FRACTION * self.peak_push_n)
-                        || self.touched_at_m.is_some_and(|at| self.progress - at >= self.cutting_depth_m);
+                        || self.touched_at_m.is_some_and(|at| self.progress - at >= self.cutting_depth_m + DEPTH_MARGIN_M);
                     if given || self.progress >= h + d + MAX_PRESS_M {
                         self.press_m = self.progress - (h + d);
                         (self.phase, self.progress) = (Phase::Stroke, 0.0);

@@ -91,7 +91,7 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
             viewpoint: None,
             incision: Default::default(),
             cut_threshold_newtons: 1.0,
-            cut_depth_mm: 6.0,
+            cut_depth_mm: 4.0,
             solver: Default::default(),
             force_model: Default::default(),
         };
@@ -129,7 +129,7 @@ mod tests {
             parse_spec(&text, Path::new("x.toml")).expect("parses")
         };
         let build = |extra: &str| Scene::build(spec(extra), &SpecOrigin::BuiltIn, BuildOptions { min_tets: Some(200) }).map(|s| s.spec);
-        assert_eq!(build("").expect("valid").cut_depth_mm, 6.0, "the default");
+        assert_eq!(build("").expect("valid").cut_depth_mm, 4.0, "the default");
         let ok = build("cut_threshold_newtons = 0.1\ncut_depth_mm = 4.5\n[incision]\nup = [0.0, 2.0, 0.0]\nalong = [0.0, 1.0, 3.0]").expect("valid");
         let (up, along) = ok.incision.unit().expect("unit");
         assert!((up - crate::Vector3::y()).norm() < 1e-15 && (along - crate::Vector3::z()).norm() < 1e-15, "{up:?} {along:?}");

@@ -40,7 +40,7 @@ pub struct SceneSpec {
     pub cut_threshold_newtons: f64,
     /// How far an engaged blade's tip must have pressed into this tissue, from where it first
     /// touched it, to enter it when the push has stayed under `cut_threshold_newtons` (a soft
-    /// or loosely held tissue yields instead of pushing back), mm (default 6 mm).
+    /// or loosely held tissue yields instead of pushing back), mm (default 4 mm).
     #[serde(default = "default_cut_depth_mm")]
     pub cut_depth_mm: f64,
     #[serde(default)]
@@ -163,7 +163,7 @@ fn default_cut_threshold_newtons() -> f64 {
 }
 
 fn default_cut_depth_mm() -> f64 {
-    6.0
+    4.0
 }
 
 /// How a default incision crosses the tissue: a straight line through the middle of the
