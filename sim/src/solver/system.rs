@@ -555,7 +555,11 @@ fn solve_ssor(
         iterations += 1;
         if rr.sqrt() <= target_hat {
             r_norm = residual(sys, model, b, x, acc, q);
-            *residual_ratio = (r_norm / r_norm0) / (rr.sqrt() / rr0.sqrt());
+            // an exact solve (rr = 0, as a few particles can reach) has no ratio: stored as 0,
+            // which the next solve reads as none (as it read the NaN this once stored, which a
+            // keyframe cannot carry); above 10 it is read as 10
+            let ratio = (r_norm / r_norm0) / (rr.sqrt() / rr0.sqrt());
+            *residual_ratio = if ratio.is_nan() { 0.0 } else { ratio.min(10.0) };
             if r_norm <= target {
                 break;
             }
