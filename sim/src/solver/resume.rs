@@ -27,9 +27,15 @@ pub struct WarmStart {
     pub count: usize,
     pub rows: Vec<[Vector3; 4]>,
     /// The last SSOR-preconditioned CG solve's ratio of true to preconditioned relative
-    /// residual, which the next solve's stopping test starts from (0: none yet).
-    #[serde(default)]
+    /// residual, which the next solve's stopping test starts from (0: none yet). Read as 0
+    /// when null: recordings made before the ratio was kept finite carry an exact solve's as
+    /// null, which the solver read as none.
+    #[serde(default, deserialize_with = "null_as_none")]
     pub cg_residual_ratio: f64,
+}
+
+fn null_as_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(0.0))
 }
 
 impl WarmStart {
@@ -183,5 +189,19 @@ impl Simulation {
         self.step_index = resume.step_index;
         self.scratch = scratch;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::WarmStart;
+
+    #[test]
+    fn a_null_cg_residual_ratio_reads_as_none() {
+        let read = |json: &str| serde_json::from_str::<WarmStart>(json).expect("reads").cg_residual_ratio;
+        assert_eq!(read(r#"{"count":4,"rows":[],"cg_residual_ratio":null}"#), 0.0);
+        assert_eq!(read(r#"{"count":4,"rows":[]}"#), 0.0);
+        assert_eq!(read(r#"{"count":4,"rows":[],"cg_residual_ratio":0.5}"#), 0.5);
+        assert!(serde_json::from_str::<WarmStart>(r#"{"count":4,"rows":[],"cg_residual_ratio":"x"}"#).is_err());
     }
 }
