@@ -31,15 +31,17 @@ struct StepRow {
 /// Step time per integrator on the chest wall (single thread), while a stroke presses on it:
 /// the paper's springs with both integrators, and the finite elements (`chest-wall-fem`) with
 /// implicit Euler (symplectic Euler would need thousands of sub-steps with their
-/// stiffness-proportional damping) up to 10k tets.
-pub fn step(quick: bool, json: bool) -> anyhow::Result<()> {
-    let sizes: &[usize] = if quick { &[1_000, 10_000] } else { &[1_000, 10_000, 100_000] };
+/// stiffness-proportional damping) up to 10k tets. `only_tets` (when not empty) and
+/// `only_integrator` narrow the set, e.g. to profile one size.
+pub fn step(quick: bool, json: bool, only_tets: &[usize], only_integrator: Option<Integrator>) -> anyhow::Result<()> {
+    let default_sizes: &[usize] = if quick { &[1_000, 10_000] } else { &[1_000, 10_000, 100_000] };
+    let sizes = if only_tets.is_empty() { default_sizes } else { only_tets };
     let mut runs: Vec<(&str, usize, Integrator)> = Vec::new();
     for &n in sizes {
-        for integrator in Integrator::ALL {
+        for integrator in Integrator::ALL.into_iter().filter(|i| only_integrator.is_none_or(|o| o == *i)) {
             runs.push(("chest-wall", n, integrator));
         }
-        if n <= 10_000 {
+        if n <= 10_000 && only_integrator.is_none_or(|o| o == Integrator::ImplicitEuler) {
             runs.push(("chest-wall-fem", n, Integrator::ImplicitEuler));
         }
     }

@@ -6,6 +6,7 @@ mod bench_accuracy;
 mod bench_dashboard;
 mod bench_perf;
 mod bench_recorder;
+mod bench_skip;
 mod bench_stability;
 mod demo;
 mod demo_seed;
@@ -221,6 +222,12 @@ enum BenchCommand {
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
+        /// Only these requested sizes (tets; repeatable), e.g. `--tets 100000` to profile one.
+        #[arg(long)]
+        tets: Vec<usize>,
+        /// Only this integrator (`symplectic-euler` or `implicit-euler`).
+        #[arg(long)]
+        integrator: Option<cutlab_sim::solver::Integrator>,
     },
     /// Run time against error per force model (springs, springs from E, co-rotational FEM),
     /// mesh and integrator on problems with known answers: patch test, cantilever on the IPC
@@ -249,6 +256,21 @@ enum BenchCommand {
         json: bool,
         /// Directory for the CSV table and the SVG plot.
         #[arg(long, default_value = "out/bench-perf")]
+        out: PathBuf,
+    },
+    /// What the work a session skips would cost if it were done, on the settled chest wall at
+    /// 10k and 100k tets: the surface BVH built again against refitted (or not, when the
+    /// surface is still), the surface extracted again, a resting step full against localised,
+    /// rerun logging of a surface snapshot.
+    Skip {
+        /// 10k tets only, fewer repeats.
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the `.rrd` files the rerun measurement writes.
+        #[arg(long, default_value = "out/bench-skip")]
         out: PathBuf,
     },
     /// Recorder cost per servo tick (with and without), file size per minute, writer
@@ -393,10 +415,11 @@ fn run() -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Bench { command: BenchCommand::Step { quick, json } } => bench::step(quick, json),
+        Command::Bench { command: BenchCommand::Step { quick, json, tets, integrator } } => bench::step(quick, json, &tets, integrator),
         Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
         Command::Bench { command: BenchCommand::Perf { quick, json, out } } => bench_perf::run(quick, json, &out),
+        Command::Bench { command: BenchCommand::Skip { quick, json, out } } => bench_skip::run(quick, json, &out),
         Command::Bench { command: BenchCommand::Dashboard { bench_db, trainees, attempts, clients, duration, json } } => {
             bench_dashboard::run_bench(&bench_dashboard::Options { db: &bench_db, trainees, attempts, clients, duration_s: duration, json })
         }
