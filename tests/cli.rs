@@ -210,3 +210,39 @@ fn output_into_a_closed_pipe_or_a_full_disk_ends_without_a_panic() {
         assert!(err.starts_with("error: failed printing to stdout") && !err.contains("panicked"), "{err}");
     }
 }
+
+#[test]
+fn bench_step_narrows_to_one_size_and_integrator() {
+    let (ok, out, err) = cutlab(&["bench", "step", "--quick", "--json", "--tets", "1000", "--integrator", "implicit-euler"]);
+    assert!(ok, "{err}");
+    let rows: Vec<serde_json::Value> = serde_json::from_str(&out).expect("json");
+    // the springs and the finite elements, both by implicit Euler, at the one size asked for
+    assert_eq!(rows.len(), 2, "{out}");
+    assert!(rows.iter().all(|r| r["requested_tets"] == 1000 && r["integrator"] == "implicit-euler"), "{out}");
+    let (ok, _, err) = cutlab(&["bench", "step", "--integrator", "leapfrog"]);
+    assert!(!ok && err.contains("unknown integrator"), "{err}");
+}
+
+#[test]
+fn bench_skip_measures_each_skipped_piece_of_work() {
+    let dir = std::env::temp_dir().join(format!("cutlab-bench-skip-{}", std::process::id()));
+    let dir_arg = dir.to_str().expect("utf-8 temp dir");
+    let (ok, out, err) = cutlab(&["bench", "skip", "--quick", "--json", "--out", dir_arg]);
+    assert!(ok, "{err}");
+    let rows: Vec<serde_json::Value> = serde_json::from_str(&out).expect("json");
+    assert_eq!(rows.len(), 1, "{out}");
+    let r = &rows[0];
+    let particles = r["particles"].as_f64().expect("particles");
+    assert!(r["surface_triangles"].as_u64().expect("triangles") > 0);
+    // the resting tool keeps only its neighbourhood awake
+    let awake = r["localised_awake"].as_f64().expect("awake");
+    assert!(awake > 0.0 && awake < particles / 4.0, "{awake} of {particles}");
+    for key in ["bvh_rebuild_ms", "bvh_refit_ms", "bvh_refit_still_ms", "surface_extract_ms", "step_full_ms", "step_localised_ms"] {
+        assert!(r[key]["count"].as_u64().expect("count") > 0, "{key}: {out}");
+    }
+    // the rerun measurement wrote a real .rrd file
+    let rrd = std::fs::read_dir(&dir).expect("out dir").filter_map(Result::ok).find(|e| e.path().extension().is_some_and(|x| x == "rrd"));
+    let rrd = rrd.expect("an .rrd file");
+    assert!(rrd.metadata().expect("metadata").len() > 1000);
+    std::fs::remove_dir_all(&dir).ok();
+}
