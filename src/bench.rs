@@ -96,7 +96,10 @@ pub fn step(quick: bool, json: bool, only_tets: &[usize], only_integrator: Optio
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
-    println!("chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall, single thread");
+    println!(
+        "chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall; {}",
+        crate::bench_perf::threads_text(cutlab_sim::solver::system::solver_threads())
+    );
     println!("| model | tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
     println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|");
     for r in &rows {

@@ -644,16 +644,17 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     let load = [load_before, load_average()];
+    let threads = cutlab_sim::solver::system::solver_threads();
 
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("perf.csv");
     std::fs::write(&csv_path, csv(&rows)).with_context(|| format!("writing {}", csv_path.display()))?;
     let svg_path = out.join("perf.svg");
-    std::fs::write(&svg_path, svg(&rows)).with_context(|| format!("writing {}", svg_path.display()))?;
+    std::fs::write(&svg_path, svg(&rows, threads)).with_context(|| format!("writing {}", svg_path.display()))?;
     let goals = goals(&rows);
     if json {
         let doc = serde_json::json!({
-            "threads": 1,
+            "solver_threads": threads,
             "session": session_text(stroke_s, after_s),
             "load_average_before_after": load,
             "rows": rows,
@@ -663,7 +664,7 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&doc)?);
         return Ok(());
     }
-    println!("{}; single thread (no parallelism yet)", session_text(stroke_s, after_s));
+    println!("{}; {}", session_text(stroke_s, after_s), threads_text(threads));
     if let [Some(a), Some(b)] = load {
         println!("load average before {:.2}, after {:.2} (other work on the machine inflates the p99s)", a[0], b[0]);
     }
@@ -743,6 +744,15 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// How many threads the solver used, for the headers.
+pub(crate) fn threads_text(threads: usize) -> String {
+    if threads > 1 {
+        format!("the solver's sweeps on {threads} threads from 4k particles on (RAYON_NUM_THREADS=1: one), the rest single thread")
+    } else {
+        "single thread".into()
+    }
+}
+
 fn session_text(stroke_s: f64, after_s: f64) -> String {
     format!(
         "1 ms steps, implicit Euler: after {:.0} ms without the tool (untimed), a {:.0} mm incision in {stroke_s} s ({PRESS_N} N press, tip {:.0} mm deep, a cut every {:.1} mm), then {after_s} s; the 1 ms step p99 includes its cut; times less the thread's waits for a CPU",
@@ -817,7 +827,7 @@ fn csv(rows: &[PerfRow]) -> String {
 
 /// Step time against tet count on the chest wall, median and p99, full and localised, and
 /// the localised whole step (with its cut) at p99; the 1 ms and 10 ms goals as guides.
-fn svg(rows: &[PerfRow]) -> String {
+fn svg(rows: &[PerfRow], threads: usize) -> String {
     let chest: Vec<&PerfRow> = rows.iter().filter(|r| r.scene == "chest-wall").collect();
     let series = |name: &str, colour: &'static str, line: plot::Line, mode: &str, value: fn(&PerfRow) -> f64| plot::Series {
         name: name.into(),
@@ -831,7 +841,7 @@ fn svg(rows: &[PerfRow]) -> String {
             .collect(),
     };
     let panel = plot::Panel {
-        title: "chest wall: step time, us (log), against tetrahedra (log); single thread".into(),
+        title: format!("chest wall: step time, us (log), against tetrahedra (log); {}", threads_text(threads)),
         x_unit: String::new(),
         y_unit: " us".into(),
         series: vec![

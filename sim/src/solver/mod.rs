@@ -13,6 +13,7 @@ pub mod localise;
 pub mod resume;
 pub mod statics;
 pub mod system;
+mod dissection;
 
 use serde::{Deserialize, Serialize};
 
