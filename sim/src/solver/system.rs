@@ -363,37 +363,57 @@ impl SpringSystem {
         let order = &self.layout.order[..n];
         let p_ranked: Vec<Vector3> = order.iter().map(|&i| p[i as usize]).collect();
         let mut y_ranked = vec![Vector3::zeros(); n];
-        self.apply_ranked(&p_ranked, &mut y_ranked);
+        self.apply_ranked(&p_ranked, &mut y_ranked, &mut Vec::new(), false);
         for (&i, y_k) in order.iter().zip(&y_ranked) {
             y[i as usize] = *y_k;
         }
     }
 
-    /// `y = A p` with held rows zeroed, both by rank.
-    fn apply_ranked(&self, p: &[Vector3], y: &mut [Vector3]) {
+    /// `y = A p` with held rows zeroed, both by rank: the halves side by side when `parallel`
+    /// (the second's products with the separator gathered in `spill` first), then the
+    /// separator; the same bits either way.
+    fn apply_ranked(&self, p: &[Vector3], y: &mut [Vector3], spill: &mut Vec<Vector3>, parallel: bool) {
         let n = self.mass.len();
         let (p, y) = (&p[..n], &mut y[..n]);
         for ((y, p), &m) in y.iter_mut().zip(p).zip(&self.mass) {
             *y = p * m;
         }
-        // The products on the first particle are summed in a register and stored once per
-        // particle; the summation order is fixed, so results stay deterministic.
-        let (start, other) = (&self.layout.start[..=n], &self.layout.other);
-        for k in 0..n {
-            let slots = start[k]..start[k + 1];
-            let pk = p[k];
-            let mut yk = Vector3::zeros();
-            for (&o, c) in other[slots.clone()].iter().zip(&self.coef[slots]) {
-                let w = block_mul(c, &(pk - p[o as usize]));
-                yk += w;
-                y[o as usize] -= w;
-            }
-            y[k] += yk;
-        }
+        let [h, s] = self.layout.halves;
+        spill.clear();
+        spill.resize(n - s, Vector3::zeros());
+        let (y1, y2, y_s) = split3(y, h, s);
+        join(parallel, || self.apply_part(p, 0, y1, y_s), || self.apply_part(p, h, y2, spill));
+        y_s.iter_mut().zip(spill.iter()).for_each(|(a, v)| *a += v);
+        self.apply_part(p, s, y_s, &mut []);
         for (y, &h) in y.iter_mut().zip(&self.held) {
             if h {
                 *y = Vector3::zeros();
             }
+        }
+    }
+
+    /// The springs of the part of ranks from `lo` whose entries of `y` are `own`: their products
+    /// added to `own` or, beyond it, to the separator's `spill`. The products on the first
+    /// particle are summed in a register and stored once per particle; the summation order is
+    /// fixed, so results stay deterministic.
+    fn apply_part(&self, p: &[Vector3], lo: usize, own: &mut [Vector3], spill: &mut [Vector3]) {
+        let (hi, s) = (lo + own.len(), self.layout.halves[1]);
+        let (start, other) = (&self.layout.start, &self.layout.other);
+        for k in lo..hi {
+            let slots = start[k]..start[k + 1];
+            let pk = p[k];
+            let mut yk = Vector3::zeros();
+            for (&o, c) in other[slots.clone()].iter().zip(&self.coef[slots]) {
+                let o = o as usize;
+                let w = block_mul(c, &(pk - p[o]));
+                yk += w;
+                if o < hi {
+                    own[o - lo] -= w;
+                } else {
+                    spill[o - s] -= w;
+                }
+            }
+            own[k - lo] += yk;
         }
     }
 }
@@ -522,8 +542,16 @@ fn solve_on(
 }
 
 /// `r = b - A x` (held entries zero), by rank; returns `|r|`.
-fn residual(sys: &SpringSystem, b: &[Vector3], x: &[Vector3], r: &mut [Vector3], ax: &mut [Vector3]) -> f64 {
-    sys.apply_ranked(x, ax);
+fn residual(
+    sys: &SpringSystem,
+    b: &[Vector3],
+    x: &[Vector3],
+    r: &mut [Vector3],
+    ax: &mut [Vector3],
+    spill: &mut Vec<Vector3>,
+    parallel: bool,
+) -> f64 {
+    sys.apply_ranked(x, ax, spill, parallel);
     let mut rr = 0.0;
     for k in 0..b.len() {
         r[k] = if sys.held[k] { Vector3::zeros() } else { b[k] - ax[k] };
@@ -535,8 +563,8 @@ fn residual(sys: &SpringSystem, b: &[Vector3], x: &[Vector3], r: &mut [Vector3],
 /// Block-Jacobi preconditioned CG, by rank.
 fn solve_jacobi(sys: &SpringSystem, b: &[Vector3], x: &mut [Vector3], b_norm: f64, settings: CgSettings, scratch: &mut CgScratch) -> CgReport {
     let n = b.len();
-    let CgScratch { r, z, p, q, .. } = scratch;
-    let mut r_norm = residual(sys, b, x, r, q);
+    let CgScratch { r, z, p, q, spill, .. } = scratch;
+    let mut r_norm = residual(sys, b, x, r, q, spill, false);
     for k in 0..n {
         z[k] = sys.inv_diag[k].mul(&r[k]);
         p[k] = z[k];
@@ -545,7 +573,7 @@ fn solve_jacobi(sys: &SpringSystem, b: &[Vector3], x: &mut [Vector3], b_norm: f6
     let target = (settings.relative_tolerance * b_norm).max(settings.absolute_tolerance);
     let mut iterations = 0;
     while r_norm > target && iterations < settings.max_iterations {
-        sys.apply_ranked(p, q);
+        sys.apply_ranked(p, q, spill, false);
         let pq = dot(p, q);
         if !(pq > 0.0) {
             break; // breakdown: the matrix is singular along p, or the numbers are bad
@@ -683,7 +711,7 @@ fn solve_ssor(
     spill.resize(n - s, Vector3::zeros());
     let target = (settings.relative_tolerance * b_norm).max(settings.absolute_tolerance);
 
-    let mut r_norm = residual(sys, b, x, acc, q);
+    let mut r_norm = residual(sys, b, x, acc, q, spill, parallel);
     if r_norm <= target {
         return CgReport { iterations: 0, relative_residual: r_norm / b_norm, converged: true };
     }
@@ -747,7 +775,7 @@ fn solve_ssor(
         rr = rr_next;
         iterations += 1;
         if rr.sqrt() <= target_hat {
-            r_norm = residual(sys, b, x, acc, q);
+            r_norm = residual(sys, b, x, acc, q, spill, parallel);
             // an exact solve (rr = 0, as a few particles can reach) has no ratio: stored as 0,
             // which the next solve reads as none (as it read the NaN this once stored, which a
             // keyframe cannot carry); above 10 it is read as 10
@@ -761,7 +789,7 @@ fn solve_ssor(
         }
     }
     if iterations == settings.max_iterations || !(r_norm <= target) {
-        r_norm = residual(sys, b, x, acc, q);
+        r_norm = residual(sys, b, x, acc, q, spill, parallel);
     }
     CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
 }
