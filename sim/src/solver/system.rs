@@ -314,13 +314,10 @@ impl SpringSystem {
         self.prepare(model);
     }
 
-    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones).
+    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones),
+    /// in the sweep order of the layout [`Self::begin`] built.
     pub fn prepare(&mut self, model: &Particles<'_>) {
         let n = model.vertex_count();
-        if self.layout.order.len() != n {
-            // (a system used without `begin`: the springs' layout for these particles)
-            self.layout.build(n, &model.springs.ends);
-        }
         for (d, &h) in self.diag[..n].iter_mut().zip(model.held) {
             if h {
                 *d = Sym3::default();
