@@ -161,6 +161,9 @@ fn merge_ascending(out: &mut Vec<u32>, kept: impl Iterator<Item = u32>, new: imp
     out.extend(kept);
 }
 
+/// From this many tets on, [`Topology::updated`] merges the edges and the faces side by side.
+const PARALLEL_MIN_TETS: usize = 20_000;
+
 fn sorted3(mut k: [u32; 3]) -> [u32; 3] {
     k.sort_unstable();
     k
@@ -183,42 +186,51 @@ impl Topology {
         }
         let dirty: Vec<u32> = changed.iter().copied().chain(old_count as u32..tets.len() as u32).collect();
 
-        let edges = merge_entities(
-            &self.edges,
-            &self.tet_edges,
-            &self.edge_tets,
-            tets,
-            &dirty,
-            &is_changed,
-            |tet| TET_EDGES.map(|[i, j]| [tet[i].min(tet[j]), tet[i].max(tet[j])]),
-        );
-        let faces = merge_entities(
-            &self.faces,
-            &self.tet_faces,
-            self.face_tets.as_slice(),
-            tets,
-            &dirty,
-            &is_changed,
-            |tet| TET_FACES.map(|f| sorted3([tet[f[0]], tet[f[1]], tet[f[2]]])),
-        );
-
-        let mut face_tets = Vec::with_capacity(faces.keys.len());
-        let (mut boundary, mut boundary_face_ids) = (Vec::new(), Vec::new());
-        for f in 0..faces.keys.len() {
-            let row = &faces.items[faces.offsets[f] as usize..faces.offsets[f + 1] as usize];
-            match *row {
-                [t] => {
-                    face_tets.push([t, NONE]);
-                    let tet = &tets[t as usize];
-                    let l = faces.tet_ids[t as usize].iter().position(|&id| id == f as u32)?;
-                    let lf = TET_FACES[l];
-                    boundary.push([tet[lf[0]], tet[lf[1]], tet[lf[2]]]);
-                    boundary_face_ids.push(f as u32);
+        let edges = || {
+            merge_entities(
+                &self.edges,
+                &self.tet_edges,
+                &self.edge_tets,
+                tets,
+                &dirty,
+                &is_changed,
+                |tet| TET_EDGES.map(|[i, j]| [tet[i].min(tet[j]), tet[i].max(tet[j])]),
+            )
+        };
+        let faces = || {
+            let faces = merge_entities(
+                &self.faces,
+                &self.tet_faces,
+                self.face_tets.as_slice(),
+                tets,
+                &dirty,
+                &is_changed,
+                |tet| TET_FACES.map(|f| sorted3([tet[f[0]], tet[f[1]], tet[f[2]]])),
+            );
+            let mut face_tets = Vec::with_capacity(faces.keys.len());
+            let (mut boundary, mut boundary_face_ids) = (Vec::new(), Vec::new());
+            for f in 0..faces.keys.len() {
+                let row = &faces.items[faces.offsets[f] as usize..faces.offsets[f + 1] as usize];
+                match *row {
+                    [t] => {
+                        face_tets.push([t, NONE]);
+                        let tet = &tets[t as usize];
+                        let l = faces.tet_ids[t as usize].iter().position(|&id| id == f as u32)?;
+                        let lf = TET_FACES[l];
+                        boundary.push([tet[lf[0]], tet[lf[1]], tet[lf[2]]]);
+                        boundary_face_ids.push(f as u32);
+                    }
+                    [a, b] => face_tets.push([a, b]),
+                    _ => return None, // shared by more than two tets: a full build reports it
                 }
-                [a, b] => face_tets.push([a, b]),
-                _ => return None, // shared by more than two tets: a full build reports it
             }
-        }
+            Some((faces, face_tets, boundary, boundary_face_ids))
+        };
+        // the edges and the faces are independent: side by side on a large mesh (the same
+        // result either way)
+        let (edges, faces) =
+            if tets.len() >= PARALLEL_MIN_TETS { rayon::join(edges, faces) } else { (edges(), faces()) };
+        let (faces, face_tets, boundary, boundary_face_ids) = faces?;
 
         // Vertex -> tets: the rows of the vertices the dirty tets touch (before or after)
         // are merged again, the others copied.

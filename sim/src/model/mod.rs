@@ -254,29 +254,42 @@ impl Model {
             }
         }
 
-        // springs: derived again on the edges of the dirty tets and on those that lost a
-        // changed tet; copied (matched by their ends) elsewhere
-        let mut dirty_edge = vec![false; topo.edges.len()];
-        for &t in dirty {
-            for &e in &topo.tet_edges[t as usize] {
-                dirty_edge[e as usize] = true;
-            }
-        }
-        let mut is_changed = vec![false; old_mesh.tet_count()];
-        changed.iter().for_each(|&t| is_changed[t as usize] = true);
+        // springs: derived again on the edges of the dirty tets and on the old edges that lost
+        // a changed tet; between them the old and new edges are the same run (an edge only
+        // appears with a dirty tet and only disappears with its last changed one), copied whole
+        let mut dirty_edges: Vec<u32> = dirty.iter().flat_map(|&t| topo.tet_edges[t as usize]).collect();
+        dirty_edges.sort_unstable();
+        dirty_edges.dedup();
         let (old, old_topo) = (&self.springs, old_mesh.topology());
-        let same_edges = old.ends == old_topo.edges;
-        let mut springs = SpringSet::default();
-        let mut j = 0;
-        for (e, &ends) in topo.edges.iter().enumerate() {
-            while j < old.ends.len() && old.ends[j] < ends {
+        let mut lost: Vec<u32> = if old.ends == old_topo.edges {
+            changed.iter().filter_map(|&t| old_topo.tet_edges.get(t as usize)).flatten().copied().collect()
+        } else {
+            (0..old.len() as u32).collect() // springs not of these edges: every one derived again
+        };
+        lost.sort_unstable();
+        lost.dedup();
+        let mut springs = SpringSet::with_capacity(topo.edges.len());
+        let (mut next_dirty, mut next_lost) = (dirty_edges.iter().peekable(), lost.iter().peekable());
+        let (mut e, mut j) = (0, 0);
+        while e < topo.edges.len() {
+            while next_dirty.next_if(|&&d| (d as usize) < e).is_some() {}
+            while next_lost.next_if(|&&l| (l as usize) < j).is_some() {}
+            let run = (next_dirty.peek().map_or(topo.edges.len(), |&&d| d as usize) - e)
+                .min(next_lost.peek().map_or(old.len(), |&&l| l as usize) - j);
+            if run > 0 && topo.edges[e..e + run] == old.ends[j..j + run] {
+                springs.extend_from(old, j..j + run);
+                (e, j) = (e + run, j + run);
+                continue;
+            }
+            let ends = topo.edges[e];
+            while j < old.len() && old.ends[j] < ends {
                 j += 1;
             }
-            let old_match = (j < old.ends.len() && old.ends[j] == ends).then_some(j);
-            let lost_a_tet = |j: usize| !same_edges || old_topo.edge_tets.row(j).iter().any(|&t| is_changed[t as usize]);
+            let old_match = (j < old.len() && old.ends[j] == ends).then_some(j);
+            let dirty_edge = dirty_edges.binary_search(&(e as u32)).is_ok();
             match old_match {
-                Some(j) if !dirty_edge[e] && !lost_a_tet(j) => {
-                    springs.push(ends, [old.rest_length[j], old.stiffness[j], old.damping[j]]);
+                Some(m) if !dirty_edge && lost.binary_search(&(m as u32)).is_err() => {
+                    springs.extend_from(old, m..m + 1);
                 }
                 _ => {
                     // (every tet's material was found above, with the masses: the default
@@ -285,6 +298,8 @@ impl Model {
                     springs.push(ends, params);
                 }
             }
+            j += usize::from(old_match.is_some());
+            e += 1;
         }
         self.install(mesh, held, Derived { lumped, mass, inv_mass, springs });
         Ok(())

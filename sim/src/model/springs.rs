@@ -32,6 +32,19 @@ impl SpringSet {
         crate::mesh::Csr::from_pairs(particle_count, &pairs)
     }
 
+    /// An empty set with room for `n` springs.
+    pub(crate) fn with_capacity(n: usize) -> Self {
+        Self { ends: Vec::with_capacity(n), rest_length: Vec::with_capacity(n), stiffness: Vec::with_capacity(n), damping: Vec::with_capacity(n) }
+    }
+
+    /// Appends the springs `range` of `other`.
+    pub(crate) fn extend_from(&mut self, other: &Self, range: std::ops::Range<usize>) {
+        self.ends.extend_from_slice(&other.ends[range.clone()]);
+        self.rest_length.extend_from_slice(&other.rest_length[range.clone()]);
+        self.stiffness.extend_from_slice(&other.stiffness[range.clone()]);
+        self.damping.extend_from_slice(&other.damping[range]);
+    }
+
     /// Appends a spring with `[rest length, stiffness, damping]`.
     pub(crate) fn push(&mut self, ends: [u32; 2], [rest, k, c]: [f64; 3]) {
         self.ends.push(ends);
