@@ -10,8 +10,8 @@
 //! and the diagonal blocks are assembled in one pass over the springs, chunk by chunk (gather,
 //! vectorised arithmetic, scatter).
 
-use crate::Vector3;
-use crate::model::{Particles, State};
+use crate::model::{Particles, SpringSet, State};
+use crate::{Point3, Vector3};
 
 use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 
@@ -37,6 +37,11 @@ pub struct ImplicitScratch {
     /// How many of `dv` and `dv_previous` hold solutions (0 after a reset).
     pub history: usize,
     pub cg: CgScratch,
+    /// The spring blocks in the springs' order, and the first part's contributions to the
+    /// second's particles, when the assembly is split (see [`step`]).
+    coef_by_spring: Vec<[f64; 4]>,
+    spill_rhs: Vec<Vector3>,
+    spill_diag: Vec<Sym3>,
 }
 
 impl ImplicitScratch {
@@ -59,22 +64,45 @@ pub fn step(
     cg: CgSettings,
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
+    step_on(model, state, external, h, cg, scratch, true)
+}
+
+/// [`step`], with the assembly split in two on large systems where `split` (see below).
+fn step_on(
+    model: &Particles<'_>,
+    state: &mut State,
+    external: &[Vector3],
+    h: f64,
+    cg: CgSettings,
+    scratch: &mut ImplicitScratch,
+    split: bool,
+) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, rhs, dv, dv_previous: [p1, p2, p3], history, cg: cg_scratch } = scratch;
+    let ImplicitScratch { system: sys, rhs, dv, dv_previous: [p1, p2, p3], history, cg: cg_scratch, coef_by_spring, spill_rhs, spill_diag } =
+        scratch;
     for buf in [&mut *rhs, &mut *dv, &mut *p1, &mut *p2, &mut *p3] {
         buf.resize(n, Vector3::zeros());
     }
 
-    // The springs go in chunks, each in three passes: the differences of positions and of
-    // velocities are gathered, everything per spring (forces, blocks `B_e`, the contributions
-    // to `rhs = h (f - h K v)` and to the diagonal blocks of `A`) is computed in loops that
-    // vectorise, and the results are scattered. The springs come sorted by their first
-    // particle: the sums on the current first particle are kept in registers and stored once
-    // per run (a fixed order, so results stay deterministic).
+    // Systems of `PARALLEL_MIN_PARTICLES` or more split the springs (sorted by their first
+    // particle) in two at a particle `A` near the middle: the first part's springs start below
+    // `A` and add to the particles from `A` on through `spill` only, the second part's touch
+    // only particles from `A` on. The parts run side by side on two threads, or one after the
+    // other on one, with the same arithmetic; then `spill` is added. Smaller systems keep one
+    // part (and the results they always had).
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
     sys.begin(model);
+    let split = split && n >= system::PARALLEL_MIN_PARTICLES && sys.springs_sorted_by_first();
+    let mid = if split {
+        let first = |e: usize| s.ends[e][0];
+        let half = m / 2;
+        (half..m).find(|&e| e == 0 || first(e) != first(e - 1)).unwrap_or(m)
+    } else {
+        m
+    };
+    let at = if mid < m { s.ends[mid][0] as usize } else { n };
     let (slots, coef, diag) = sys.parts_mut();
     diag.clear();
     for i in 0..n {
@@ -83,13 +111,82 @@ pub fn step(
     }
     let (x, v) = (&state.positions[..n], &state.velocities[..n]);
     let (rhs, diag) = (&mut rhs[..n], &mut diag[..n]);
+    if mid == m {
+        let store = |e: usize, c: [f64; 4]| coef[slots[e] as usize] = c;
+        assemble_springs(s, 0..m, x, v, h, Part { rhs, diag, lo: 0 }, Part { rhs: &mut [], diag: &mut [], lo: n }, store);
+    } else {
+        coef_by_spring.resize(m, [0.0; 4]);
+        spill_rhs.clear();
+        spill_rhs.resize(n - at, Vector3::zeros());
+        spill_diag.clear();
+        spill_diag.resize(n - at, Sym3::default());
+        let (rhs_lo, rhs_hi) = rhs.split_at_mut(at);
+        let (diag_lo, diag_hi) = diag.split_at_mut(at);
+        let (coef_lo, coef_hi) = coef_by_spring.split_at_mut(mid);
+        let parallel = system::solver_threads() > 1;
+        system::join(
+            parallel,
+            || {
+                let own = Part { rhs: rhs_lo, diag: diag_lo, lo: 0 };
+                let spill = Part { rhs: spill_rhs, diag: spill_diag, lo: at };
+                assemble_springs(s, 0..mid, x, v, h, own, spill, |e, c| coef_lo[e] = c);
+            },
+            || {
+                let own = Part { rhs: &mut *rhs_hi, diag: &mut *diag_hi, lo: at };
+                assemble_springs(s, mid..m, x, v, h, own, Part { rhs: &mut [], diag: &mut [], lo: n }, |e, c| coef_hi[e - mid] = c);
+            },
+        );
+        for ((r, d), (sr, sd)) in rhs_hi.iter_mut().zip(diag_hi.iter_mut()).zip(spill_rhs.iter().zip(spill_diag.iter())) {
+            *r += sr;
+            *d += *sd;
+        }
+        sys.set_blocks_by_spring(coef_by_spring, parallel);
+    }
+    sys.prepare(model);
+    extrapolate_warm_start(dv, [p1, p2, p3], history);
+    let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
+    let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
+    apply_velocity_change(model, state, dv, h);
+    report
+}
+
+/// Particles `lo..lo + rhs.len()`: their entries of the right-hand side and of the diagonal
+/// blocks.
+struct Part<'a> {
+    rhs: &'a mut [Vector3],
+    diag: &'a mut [Sym3],
+    lo: usize,
+}
+
+/// Assembles the springs `range` of `s` (whose first particles all lie in `own`, their second
+/// in `own` or `spill`): their blocks handed to `store(spring, [g_x, g_y, g_z, beta])`, their
+/// contributions to the right-hand side `h (f - h K v)` and to the diagonal blocks added to
+/// `own` and `spill`.
+///
+/// The springs go in chunks, each in three passes: the differences of positions and of
+/// velocities are gathered, everything per spring (forces, blocks `B_e`, the contributions to
+/// the right-hand side and to the diagonal blocks) is computed in loops that vectorise, and the
+/// results are scattered. The sums on the current first particle are kept in registers and
+/// stored once per run (a fixed order, so results stay deterministic).
+#[allow(clippy::too_many_arguments)]
+fn assemble_springs(
+    s: &SpringSet,
+    range: std::ops::Range<usize>,
+    x: &[Point3],
+    v: &[Vector3],
+    h: f64,
+    own: Part<'_>,
+    spill: Part<'_>,
+    mut store: impl FnMut(usize, [f64; 4]),
+) {
+    let own_hi = own.lo + own.rhs.len();
     let hh = h * h;
     let mut run = usize::MAX;
     let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
     let mut buf = [[0.0; CHUNK]; 19];
     let (mut inv_len, mut length, mut sqrt_gamma, mut ka_buf) = ([0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK]);
-    for start in (0..m).step_by(CHUNK) {
-        let end = (start + CHUNK).min(m);
+    for start in range.clone().step_by(CHUNK) {
+        let end = (start + CHUNK).min(range.end);
         let len = end - start;
         let ends = &s.ends[start..end];
         let [dx, dy, dz, ux, uy, uz, gx, gy, gz, beta, wx, wy, wz, bxx, byy, bzz, bxy, bxz, byz] = &mut buf;
@@ -145,36 +242,35 @@ pub fn step(
             (bxx[j], byy[j], bzz[j]) = (b + px * px, b + py * py, b + pz * pz);
             (bxy[j], bxz[j], byz[j]) = (px * py, px * pz, py * pz);
         }
-        for (j, (&[a, b], &slot)) in ends.iter().zip(&slots[start..end]).enumerate() {
+        for (j, &[a, b]) in ends.iter().enumerate() {
             let (a, b) = (a as usize, b as usize);
             if a != run {
                 if run != usize::MAX {
-                    rhs[run] += rhs_run;
-                    diag[run] += diag_run;
+                    own.rhs[run - own.lo] += rhs_run;
+                    own.diag[run - own.lo] += diag_run;
                 }
                 run = a;
                 rhs_run = Vector3::zeros();
                 diag_run = Sym3::default();
             }
-            coef[slot as usize] = [gx[j], gy[j], gz[j], beta[j]];
+            store(start + j, [gx[j], gy[j], gz[j], beta[j]]);
             let w = Vector3::new(wx[j], wy[j], wz[j]);
             rhs_run += w;
-            rhs[b] -= w;
             let block = Sym3 { xx: bxx[j], yy: byy[j], zz: bzz[j], xy: bxy[j], xz: bxz[j], yz: byz[j] };
             diag_run += block;
-            diag[b] += block;
+            if b < own_hi {
+                own.rhs[b - own.lo] -= w;
+                own.diag[b - own.lo] += block;
+            } else {
+                spill.rhs[b - spill.lo] -= w;
+                spill.diag[b - spill.lo] += block;
+            }
         }
     }
     if run != usize::MAX {
-        rhs[run] += rhs_run;
-        diag[run] += diag_run;
+        own.rhs[run - own.lo] += rhs_run;
+        own.diag[run - own.lo] += diag_run;
     }
-    sys.prepare(model);
-    extrapolate_warm_start(dv, [p1, p2, p3], history);
-    let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
-    let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
-    apply_velocity_change(model, state, dv, h);
-    report
 }
 
 /// Warm start of the velocity change `dv` (which holds the last one on entry): the cubic
@@ -217,5 +313,54 @@ pub(crate) fn apply_velocity_change(model: &Particles<'_>, state: &mut State, dv
         }
         state.velocities[i] += dv[i];
         state.positions[i] += state.velocities[i] * h;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{BuildOptions, Scene};
+    use crate::solver::SolverSettings;
+
+    /// Five steps of the chest wall at 20k tets (over `PARALLEL_MIN_PARTICLES`) pressed on its
+    /// top, from rest, on a pool of `threads`, with the assembly split or not: the positions.
+    fn pressed_steps(threads: usize, split: bool) -> Vec<crate::Point3> {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(20_000) }).expect("built-in scene");
+        let model = &scene.model;
+        let particles = model.particles();
+        assert!(particles.vertex_count() >= system::PARALLEL_MIN_PARTICLES);
+        let mut state = State::at_rest(&model.mesh);
+        let top = state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        let external: Vec<Vector3> = state
+            .positions
+            .iter()
+            .map(|p| if p.z > top - 1e-3 && p.x.abs() < 0.01 { Vector3::new(0.0, 0.0, -0.01) } else { Vector3::zeros() })
+            .collect();
+        let settings = SolverSettings::default();
+        let cg = CgSettings { relative_tolerance: settings.cg_relative_tolerance, absolute_tolerance: 0.0, max_iterations: settings.cg_max_iterations };
+        let mut scratch = ImplicitScratch::default();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
+        pool.install(|| {
+            for _ in 0..5 {
+                let report = step_on(&particles, &mut state, &external, settings.time_step_s, cg, &mut scratch, split);
+                assert!(report.converged, "{report:?}");
+            }
+        });
+        state.positions
+    }
+
+    #[test]
+    fn the_split_assembly_gives_the_same_bits_on_one_thread_or_two_and_the_same_motion_as_one_part() {
+        let (one, two) = (pressed_steps(1, true), pressed_steps(2, true));
+        assert!(one.iter().zip(&two).all(|(a, b)| a.coords.map(f64::to_bits) == b.coords.map(f64::to_bits)));
+        // the split only sums in another order: the motion agrees to round-off (relative to
+        // the largest displacement)
+        let whole = pressed_steps(2, false);
+        let start = Scene::load("chest-wall", BuildOptions { min_tets: Some(20_000) }).expect("built-in scene");
+        let rest = start.model.mesh.positions();
+        let moved = whole.iter().zip(rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let differ = whole.iter().zip(&one).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        assert!(moved > 1e-7, "the press moved the wall {moved} m");
+        assert!(differ > 0.0 && differ <= 1e-6 * moved, "split and whole differ by {differ} m of {moved} m");
     }
 }

@@ -167,6 +167,11 @@ struct BlockLayout {
     other: Vec<u32>,
     /// The slot of each spring.
     slot: Vec<u32>,
+    /// The spring of each slot.
+    spring: Vec<u32>,
+    /// Whether the springs come sorted by their first end, each `[a, b]` with `a < b` (as a
+    /// model's do): what the implicit assembly needs to split them in two.
+    sorted_by_first: bool,
     /// Whether some spring joins a particle to itself.
     has_loop: bool,
 }
@@ -176,6 +181,7 @@ impl BlockLayout {
         self.ends.clear();
         self.ends.extend_from_slice(ends);
         self.has_loop = ends.iter().any(|&[a, b]| a == b);
+        self.sorted_by_first = ends.iter().all(|&[a, b]| a < b) && ends.windows(2).all(|w| w[0][0] <= w[1][0]);
         (self.order, self.halves) = dissection_order(n, ends);
         let mut rank = vec![0u32; n];
         for (k, &i) in self.order.iter().enumerate() {
@@ -208,6 +214,8 @@ impl BlockLayout {
         for (s, &(_, e)) in by_slot.iter().enumerate() {
             self.slot[e as usize] = s as u32;
         }
+        self.spring.clear();
+        self.spring.extend(by_slot.iter().map(|&(_, e)| e));
     }
 }
 
@@ -291,6 +299,26 @@ impl SpringSystem {
         (&self.layout.slot, &mut self.coef, &mut self.diag)
     }
 
+    /// Whether the springs (of [`Self::begin`]) come sorted by their first end, each `[a, b]`
+    /// with `a < b`.
+    pub fn springs_sorted_by_first(&self) -> bool {
+        self.layout.sorted_by_first
+    }
+
+    /// Stores the blocks given in the springs' order (see [`block_coefficients`]), the two
+    /// halves of the storage side by side when `parallel`.
+    pub fn set_blocks_by_spring(&mut self, by_spring: &[[f64; 4]], parallel: bool) {
+        let half = self.coef.len() / 2;
+        let (lo, hi) = self.coef.split_at_mut(half);
+        let (spring_lo, spring_hi) = self.layout.spring.split_at(half);
+        let gather = |out: &mut [[f64; 4]], springs: &[u32]| {
+            for (c, &e) in out.iter_mut().zip(springs) {
+                *c = by_spring[e as usize];
+            }
+        };
+        join(parallel, || gather(lo, spring_lo), || gather(hi, spring_hi));
+    }
+
     /// Sets the block of spring `e` to `beta I + gamma n n^T` (`gamma >= 0`).
     pub fn set_block(&mut self, e: usize, beta: f64, gamma: f64, n: &Vector3) {
         self.coef[self.layout.slot[e] as usize] = block_coefficients(beta, gamma, n);
@@ -323,35 +351,51 @@ impl SpringSystem {
                 *d = Sym3::default();
             }
         }
-        self.inv_diag.clear();
-        self.chol.clear();
-        self.mass.clear();
-        self.held.clear();
-        let mut ssor = !self.layout.has_loop;
-        for &i in &self.layout.order[..n] {
-            let (i, h) = (i as usize, model.held[i as usize]);
-            self.mass.push(self.mass_weight * model.mass[i]);
-            self.held.push(h);
-            if h {
-                self.inv_diag.push(Sym3::default());
-                self.chol.push(Lower3::default());
-                continue;
+        self.inv_diag.resize(n, Sym3::default());
+        self.chol.resize(n, Lower3::default());
+        self.mass.resize(n, 0.0);
+        self.held.resize(n, false);
+        // each rank on its own: the two halves of the ranks side by side on a large system
+        let (diag, weight, order) = (&self.diag, self.mass_weight, &self.layout.order[..n]);
+        let fill = |order: &[u32], inv_diag: &mut [Sym3], chol: &mut [Lower3], mass: &mut [f64], held: &mut [bool]| {
+            let mut all_factored = true;
+            for (k, &i) in order.iter().enumerate() {
+                let (i, h) = (i as usize, model.held[i as usize]);
+                mass[k] = weight * model.mass[i];
+                held[k] = h;
+                if h {
+                    inv_diag[k] = Sym3::default();
+                    chol[k] = Lower3::default();
+                    continue;
+                }
+                let d = &diag[i];
+                let inv = d.inverse_or_zero();
+                inv_diag[k] = Sym3 {
+                    xx: SSOR_OMEGA * inv.xx,
+                    yy: SSOR_OMEGA * inv.yy,
+                    zz: SSOR_OMEGA * inv.zz,
+                    xy: SSOR_OMEGA * inv.xy,
+                    xz: SSOR_OMEGA * inv.xz,
+                    yz: SSOR_OMEGA * inv.yz,
+                };
+                let g = Lower3::cholesky(d);
+                all_factored &= g.is_some();
+                chol[k] = g.unwrap_or_default();
             }
-            let d = &self.diag[i];
-            let inv = d.inverse_or_zero();
-            self.inv_diag.push(Sym3 {
-                xx: SSOR_OMEGA * inv.xx,
-                yy: SSOR_OMEGA * inv.yy,
-                zz: SSOR_OMEGA * inv.zz,
-                xy: SSOR_OMEGA * inv.xy,
-                xz: SSOR_OMEGA * inv.xz,
-                yz: SSOR_OMEGA * inv.yz,
-            });
-            let g = Lower3::cholesky(d);
-            ssor &= g.is_some();
-            self.chol.push(g.unwrap_or_default());
-        }
-        self.ssor = ssor;
+            all_factored
+        };
+        let half = n / 2;
+        let (inv_lo, inv_hi) = self.inv_diag[..n].split_at_mut(half);
+        let (chol_lo, chol_hi) = self.chol[..n].split_at_mut(half);
+        let (mass_lo, mass_hi) = self.mass[..n].split_at_mut(half);
+        let (held_lo, held_hi) = self.held[..n].split_at_mut(half);
+        let parallel = n >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
+        let (lo, hi) = join(
+            parallel,
+            || fill(&order[..half], inv_lo, chol_lo, mass_lo, held_lo),
+            || fill(&order[half..], inv_hi, chol_hi, mass_hi, held_hi),
+        );
+        self.ssor = !self.layout.has_loop && lo && hi;
     }
 
     /// `y = A p` with held rows zeroed (after [`Self::prepare`]).
@@ -463,7 +507,7 @@ pub fn solver_threads() -> usize {
 }
 
 /// `a` and `b`, on two threads when `parallel` (the same results either way).
-fn join<RA: Send, RB: Send>(parallel: bool, a: impl FnOnce() -> RA + Send, b: impl FnOnce() -> RB + Send) -> (RA, RB) {
+pub(crate) fn join<RA: Send, RB: Send>(parallel: bool, a: impl FnOnce() -> RA + Send, b: impl FnOnce() -> RB + Send) -> (RA, RB) {
     if parallel { rayon::join(a, b) } else { (a(), b()) }
 }
 
