@@ -14,23 +14,68 @@
 //! the reverse. The two halves touch each other only through the separator, so a sweep over one
 //! half can run beside the sweep over the other.
 
-use crate::mesh::Csr;
+/// Buffers of [`dissection_order_into`], kept between calls (a cut changes the springs, and
+/// with them the order, every few steps).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct DissectionScratch {
+    /// The spring graph: the neighbours of particle `i` are `items[offsets[i]..offsets[i + 1]]`,
+    /// in the springs' order.
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+    level: Vec<u32>,
+    queue: Vec<u32>,
+}
 
 /// The sweep order of `n` particles joined by springs `ends`: `order[k]` is the `k`-th
 /// particle, and `parts = [h, s]` the ends of the first half (`order[..h]`) and of the second
 /// (`order[h..s]`); the separator is `order[s..]`.
+#[cfg(test)]
 pub(crate) fn dissection_order(n: usize, ends: &[[u32; 2]]) -> (Vec<u32>, [usize; 2]) {
+    let mut order = Vec::new();
+    let parts = dissection_order_into(n, ends, &mut DissectionScratch::default(), &mut order);
+    (order, parts)
+}
+
+/// [`dissection_order`] into `order`, with the buffers of `scratch`.
+pub(crate) fn dissection_order_into(n: usize, ends: &[[u32; 2]], scratch: &mut DissectionScratch, order: &mut Vec<u32>) -> [usize; 2] {
+    order.clear();
     if n == 0 {
-        return (Vec::new(), [0, 0]);
+        return [0, 0];
     }
-    let pairs: Vec<(u32, u32)> = ends.iter().flat_map(|&[a, b]| [(a, b), (b, a)]).filter(|(a, b)| a != b).collect();
-    let adjacency = Csr::from_pairs(n, &pairs);
-    let (mut level, mut queue) = (vec![u32::MAX; n], Vec::with_capacity(n));
+    let DissectionScratch { offsets, items, level, queue } = scratch;
+    // the graph: each spring's ends are each other's neighbours, rows in the springs' order
+    offsets.clear();
+    offsets.resize(n + 1, 0);
+    for &[a, b] in ends.iter().filter(|[a, b]| a != b) {
+        offsets[a as usize + 1] += 1;
+        offsets[b as usize + 1] += 1;
+    }
+    for i in 0..n {
+        offsets[i + 1] += offsets[i];
+    }
+    items.clear();
+    items.resize(offsets[n] as usize, 0);
+    // (offsets[i] serves as row i's cursor, ending at row i + 1's start; shifted back after)
+    for &[a, b] in ends.iter().filter(|[a, b]| a != b) {
+        items[offsets[a as usize] as usize] = b;
+        offsets[a as usize] += 1;
+        items[offsets[b as usize] as usize] = a;
+        offsets[b as usize] += 1;
+    }
+    for i in (1..=n).rev() {
+        offsets[i] = offsets[i - 1];
+    }
+    offsets[0] = 0;
+    let graph = Graph { offsets, items };
+    level.clear();
+    level.resize(n, u32::MAX);
+    queue.clear();
+    queue.reserve(n);
     // the particle with the most springs (the lowest such id) lies in the largest piece; the
     // particle reached last from it is a far end of that piece
-    let seed = (0..n).max_by_key(|&i| (adjacency.row(i).len(), std::cmp::Reverse(i))).unwrap_or(0);
-    let far = levels_from(&adjacency, seed, &mut level, &mut queue);
-    let far = levels_from(&adjacency, far, &mut level, &mut queue);
+    let seed = (0..n).max_by_key(|&i| (graph.row(i).len(), std::cmp::Reverse(i))).unwrap_or(0);
+    let far = levels_from(&graph, seed, level, queue);
+    let far = levels_from(&graph, far, level, queue);
     let depth = level[far] as usize;
     let mut count = vec![0usize; depth + 1];
     for &l in level.iter().filter(|&&l| l != u32::MAX) {
@@ -48,7 +93,7 @@ pub(crate) fn dissection_order(n: usize, ends: &[[u32; 2]]) -> (Vec<u32>, [usize
         l if l > separator => 1,
         _ => 2,
     };
-    let mut order = Vec::with_capacity(n);
+    order.reserve(n);
     let mut parts = [0; 2];
     for part in 0..3 {
         order.extend((0..n as u32).filter(|&i| part_of(level[i as usize]) == part));
@@ -56,12 +101,24 @@ pub(crate) fn dissection_order(n: usize, ends: &[[u32; 2]]) -> (Vec<u32>, [usize
             parts[part] = order.len();
         }
     }
-    (order, parts)
+    parts
+}
+
+/// A graph in compressed rows.
+struct Graph<'a> {
+    offsets: &'a [u32],
+    items: &'a [u32],
+}
+
+impl Graph<'_> {
+    fn row(&self, i: usize) -> &[u32] {
+        &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    }
 }
 
 /// Breadth-first levels from `from` (`u32::MAX` where not reached); returns the particle
 /// reached last.
-fn levels_from(adjacency: &Csr, from: usize, level: &mut [u32], queue: &mut Vec<u32>) -> usize {
+fn levels_from(graph: &Graph<'_>, from: usize, level: &mut [u32], queue: &mut Vec<u32>) -> usize {
     level.iter_mut().for_each(|l| *l = u32::MAX);
     queue.clear();
     level[from] = 0;
@@ -69,7 +126,7 @@ fn levels_from(adjacency: &Csr, from: usize, level: &mut [u32], queue: &mut Vec<
     let mut head = 0;
     while let Some(&u) = queue.get(head) {
         head += 1;
-        for &w in adjacency.row(u as usize) {
+        for &w in graph.row(u as usize) {
             if level[w as usize] == u32::MAX {
                 level[w as usize] = level[u as usize] + 1;
                 queue.push(w);

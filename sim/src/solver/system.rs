@@ -28,7 +28,7 @@
 use crate::Vector3;
 use crate::model::Particles;
 
-use super::dissection::dissection_order;
+use super::dissection::{DissectionScratch, dissection_order_into};
 
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
 /// on one, in the same order, with the same result). A half sweep of the 10k-tet chest wall
@@ -148,7 +148,7 @@ impl Lower3 {
 /// (1e-4, cubic warm start).
 pub const SSOR_OMEGA: f64 = 1.3;
 
-/// Where the spring blocks are stored: in the sweep order ([`dissection_order`]), by the
+/// Where the spring blocks are stored: in the sweep order ([`dissection_order_into`]), by the
 /// spring's end that comes first in it (its "first" particle), each particle's springs sorted
 /// by the other's place in the order. Particles are named by their place `k` in the order
 /// ("rank") inside the solver.
@@ -174,16 +174,20 @@ struct BlockLayout {
     sorted_by_first: bool,
     /// Whether some spring joins a particle to itself.
     has_loop: bool,
+    scratch: LayoutScratch,
 }
 
 impl BlockLayout {
     fn build(&mut self, n: usize, ends: &[[u32; 2]]) {
+        let m = ends.len();
         self.ends.clear();
         self.ends.extend_from_slice(ends);
         self.has_loop = ends.iter().any(|&[a, b]| a == b);
         self.sorted_by_first = ends.iter().all(|&[a, b]| a < b) && ends.windows(2).all(|w| w[0][0] <= w[1][0]);
-        (self.order, self.halves) = dissection_order(n, ends);
-        let mut rank = vec![0u32; n];
+        self.halves = dissection_order_into(n, ends, &mut self.scratch.dissection, &mut self.order);
+        let rank = &mut self.scratch.rank;
+        rank.clear();
+        rank.resize(n, 0);
         for (k, &i) in self.order.iter().enumerate() {
             rank[i as usize] = k as u32;
         }
@@ -196,27 +200,48 @@ impl BlockLayout {
             self.start[k + 1] += self.start[k];
         }
         // (other, spring) per slot, stably by first particle, then each run sorted by the other
-        let mut fill = self.start.clone();
-        let mut by_slot = vec![(0u32, 0u32); ends.len()];
+        let fill = &mut self.scratch.fill;
+        fill.clear();
+        fill.extend_from_slice(&self.start);
+        let (other, spring) = (&mut self.other, &mut self.spring);
+        other.clear();
+        other.resize(m, 0);
+        spring.clear();
+        spring.resize(m, 0);
         for (e, &[a, b]) in ends.iter().enumerate() {
             let (ra, rb) = (rank[a as usize], rank[b as usize]);
             let s = &mut fill[ra.min(rb) as usize];
-            by_slot[*s] = (ra.max(rb), e as u32);
+            (other[*s], spring[*s]) = (ra.max(rb), e as u32);
             *s += 1;
         }
+        let mut keys: Vec<u64> = Vec::new();
         for k in 0..n {
-            by_slot[self.start[k]..self.start[k + 1]].sort_unstable();
+            let run = self.start[k]..self.start[k + 1];
+            if run.len() > 1 {
+                keys.clear();
+                keys.extend(run.clone().map(|s| (u64::from(other[s]) << 32) | u64::from(spring[s])));
+                keys.sort_unstable();
+                for (s, &key) in run.zip(&keys) {
+                    (other[s], spring[s]) = ((key >> 32) as u32, key as u32);
+                }
+            }
         }
-        self.other.clear();
-        self.other.extend(by_slot.iter().map(|&(o, _)| o));
         self.slot.clear();
-        self.slot.resize(ends.len(), 0);
-        for (s, &(_, e)) in by_slot.iter().enumerate() {
+        self.slot.resize(m, 0);
+        for (s, &e) in spring.iter().enumerate() {
             self.slot[e as usize] = s as u32;
         }
-        self.spring.clear();
-        self.spring.extend(by_slot.iter().map(|&(_, e)| e));
     }
+}
+
+/// Buffers of [`BlockLayout::build`], kept between builds.
+#[derive(Debug, Clone, Default)]
+struct LayoutScratch {
+    dissection: DissectionScratch,
+    /// The rank of each particle.
+    rank: Vec<u32>,
+    /// The next free slot of each rank's run.
+    fill: Vec<usize>,
 }
 
 /// The system matrix: per-spring blocks, diagonal blocks and the preconditioner.
