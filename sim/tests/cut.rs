@@ -371,10 +371,17 @@ fn a_large_mesh_carries_its_topology_and_springs_over_as_built() {
     let mut changed = 0;
     for k in 0..=60 {
         let x = -0.015 + 0.03 * k as f64 / 60.0;
+        let before = sim.model.springs.ends.clone();
         let ev = cutter.advance(&mut sim, cut::Blade::normal_to_curved_slab(x, 0.0004, 0.15, 0.006, 0.005)).expect("cut");
         if !ev.is_empty() {
             changed += 1;
             assert_carried_over_as_built(&sim, &format!("cut {k}"));
+            // the springs the event reports lost and gained
+            let after = &sim.model.springs.ends;
+            let lost: Vec<[u32; 2]> = before.iter().filter(|e| after.binary_search(e).is_err()).copied().collect();
+            let gained: Vec<[u32; 2]> = after.iter().filter(|e| before.binary_search(e).is_err()).copied().collect();
+            assert!(!gained.is_empty(), "cut {k} gained no spring");
+            assert_eq!((&ev.springs_removed, &ev.springs_added), (&lost, &gained), "cut {k}");
         }
         sim.step().expect("stable while cutting");
     }

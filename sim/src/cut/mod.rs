@@ -14,6 +14,7 @@ mod polygon;
 mod resolve;
 mod separate;
 
+use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 
 pub use cutter::{Cutter, CutterResume};
@@ -21,7 +22,7 @@ pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
 
-use crate::mesh::{TET_EDGES, TetMesh, dihedral_angles, tet_signed_volume};
+use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, Topology, dihedral_angles, tet_signed_volume};
 use crate::model::ModelError;
 use crate::solver::Simulation;
 use crate::{MeshError, Point3, Vector3};
@@ -76,10 +77,26 @@ pub enum CutError {
 /// Tetrahedra whose bounds meet the polygon's (inflated by `margin`) and that touch or cross
 /// its plane, or come within `near` times their longest edge of it (where vertices of the
 /// stroke's cut that drifted off the plane still count as on it).
+/// The two halves of a large mesh are scanned side by side.
 fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
+    let count = mesh_tets.len();
+    if count < PARALLEL_MIN_TETS {
+        return candidates_in(mesh_tets, 0..count, x, polygon, margin, near);
+    }
+    let half = count / 2;
+    let (mut first, second) = rayon::join(
+        || candidates_in(mesh_tets, 0..half, x, polygon, margin, near),
+        || candidates_in(mesh_tets, half..count, x, polygon, margin, near),
+    );
+    first.extend(second);
+    first
+}
+
+/// [`candidates`] among the tets `range`.
+fn candidates_in(mesh_tets: &[[u32; 4]], range: std::ops::Range<usize>, x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
     let (lo, hi) = polygon.bounds();
     let mut out = Vec::new();
-    for (t, tet) in mesh_tets.iter().enumerate() {
+    for (t, tet) in mesh_tets.iter().enumerate().skip(range.start).take(range.len()) {
         let p = tet.map(|v| x[v as usize]);
         let (mut tlo, mut thi) = (p[0], p[0]);
         for q in &p[1..] {
@@ -272,8 +289,9 @@ pub fn cut_remembering(
         return Err(CutError::Unresolved(splits.first().map(|s| s.0).unwrap_or(0)));
     };
 
-    let mut tets = mesh.tets().to_vec();
-    let mut regions = mesh.regions().to_vec();
+    // (copied only when a tet is split: most steps of a stroke change no tet)
+    let mut tets = Cow::Borrowed(mesh.tets());
+    let mut regions = Cow::Borrowed(mesh.regions());
     for ((t, _), ch) in splits.iter().zip(&children) {
         let parent_volume = mesh.tet_volume(*t as usize);
         for (k, c) in ch.tets.iter().enumerate() {
@@ -281,11 +299,12 @@ pub fn cut_remembering(
             event.min_child_volume_fraction =
                 event.min_child_volume_fraction.min(tet_signed_volume(&a, &b, &cc, &d) / parent_volume);
             let id = if k == 0 {
-                tets[*t as usize] = *c;
+                tets.to_mut()[*t as usize] = *c;
                 *t
             } else {
-                tets.push(*c);
-                regions.push(regions[*t as usize]);
+                tets.to_mut().push(*c);
+                let region = regions[*t as usize];
+                regions.to_mut().push(region);
                 (tets.len() - 1) as u32
             };
             event.tets_added.push((id, *c));
@@ -323,7 +342,7 @@ pub fn cut_remembering(
         stars
     };
     let base_vertices = x.len();
-    let mut split_tets = tets.clone();
+    let mut split_tets = Cow::Borrowed(&tets[..]);
     let mut splits = Vec::new();
     let mut relinked = BTreeSet::new();
     let mut on_cut = BTreeSet::new();
@@ -337,7 +356,7 @@ pub fn cut_remembering(
             let copy = (base_vertices + k) as u32;
             original_of.push(*v);
             for &t in moved_tets {
-                for w in &mut split_tets[t as usize] {
+                for w in &mut split_tets.to_mut()[t as usize] {
                     if *w == *v {
                         *w = copy;
                     }
@@ -360,7 +379,7 @@ pub fn cut_remembering(
         }
         // undo this round's relabelling and try again without the pinching faces
         for &t in &local {
-            split_tets[t as usize] = tets[t as usize];
+            split_tets.to_mut()[t as usize] = tets[t as usize];
         }
         cut_faces = kept;
     }
@@ -377,7 +396,10 @@ pub fn cut_remembering(
         held.push(held[*v as usize]);
         event.vertices_split.push(SplitVertex { original: *v, copy });
     }
-    let tets = split_tets;
+    let tets = match split_tets {
+        Cow::Owned(relinked) => relinked,
+        Cow::Borrowed(_) => tets.into_owned(),
+    };
     event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
 
     // Commit: new mesh, rebuilt model, extended state.
@@ -386,7 +408,7 @@ pub fn cut_remembering(
     changed.retain(|&t| (t as usize) < old_tet_count);
     changed.sort_unstable();
     changed.dedup();
-    let new_mesh = TetMesh::with_changes(mesh, x_ref, tets, regions, &changed)?;
+    let new_mesh = TetMesh::with_changes(mesh, x_ref, tets, regions.into_owned(), &changed)?;
     // the masses and springs to derive again: those of the changed and new tets, and of the
     // tets around the vertices moved onto the plane (their reference geometry changed)
     let mut dirty: Vec<u32> = changed.iter().copied().chain(old_tet_count as u32..new_mesh.tet_count() as u32).collect();
@@ -395,11 +417,20 @@ pub fn cut_remembering(
     }
     dirty.sort_unstable();
     dirty.dedup();
-    let old_edges = sim.model.springs.ends.clone();
+    // the springs are the edges: those lost are among the changed tets' old edges, those
+    // gained among the dirty tets' new ones
+    let old_edges = (sim.model.springs.ends != mesh.topology().edges).then(|| sim.model.springs.ends.clone());
+    if old_edges.is_none() {
+        let (old, new) = (mesh.topology(), new_mesh.topology());
+        event.springs_removed = edges_not_in(old, &changed, new);
+        event.springs_added = edges_not_in(new, &dirty, old);
+    }
     sim.model.rebuild_local(new_mesh, held, &dirty, &changed)?;
-    let new_edges = &sim.model.mesh.topology().edges;
-    event.springs_removed = sorted_difference(&old_edges, new_edges);
-    event.springs_added = sorted_difference(new_edges, &old_edges);
+    if let Some(old_edges) = old_edges {
+        let new_edges = &sim.model.mesh.topology().edges;
+        event.springs_removed = sorted_difference(&old_edges, new_edges);
+        event.springs_added = sorted_difference(new_edges, &old_edges);
+    }
     sim.state.positions = x;
     sim.state.velocities = vel;
     sim.model_changed();
@@ -417,6 +448,20 @@ pub fn cut_remembering(
         stroke.insert(v);
     }
     Ok(event)
+}
+
+/// The edges of `tets` in `from` that `to` does not have, sorted.
+fn edges_not_in(from: &Topology, tets: &[u32], to: &Topology) -> Vec<[u32; 2]> {
+    let mut out: Vec<[u32; 2]> = tets
+        .iter()
+        .filter_map(|&t| from.tet_edges.get(t as usize))
+        .flatten()
+        .map(|&e| from.edges[e as usize])
+        .filter(|key| to.edges.binary_search(key).is_err())
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
 }
 
 /// The entries of `a` that are not in `b`, both sorted: one merge pass (a binary search per

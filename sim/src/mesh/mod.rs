@@ -12,6 +12,7 @@ pub use grid::PointGrid;
 pub use quality::tet_mu;
 pub use geometry::{bounding_box, dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal};
 pub use quality::QualityStats;
+pub(crate) use topology_update::PARALLEL_MIN_TETS;
 pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};
 pub use validate::ValidationReport;
 

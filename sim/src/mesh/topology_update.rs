@@ -161,8 +161,9 @@ fn merge_ascending(out: &mut Vec<u32>, kept: impl Iterator<Item = u32>, new: imp
     out.extend(kept);
 }
 
-/// From this many tets on, [`Topology::updated`] merges the edges and the faces side by side.
-const PARALLEL_MIN_TETS: usize = 20_000;
+/// From this many tets on, the passes of a cut over the whole mesh run on two threads
+/// ([`Topology::updated`] merges the edges and the faces side by side).
+pub(crate) const PARALLEL_MIN_TETS: usize = 20_000;
 
 fn sorted3(mut k: [u32; 3]) -> [u32; 3] {
     k.sort_unstable();
