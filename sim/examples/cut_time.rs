@@ -37,6 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cutter = Cutter::default();
     let (mut changed, mut idle) = (Vec::new(), Vec::new());
     let (mut step_after_cut, mut step_other) = (Vec::new(), Vec::new());
+    let (mut cg_after_cut, mut cg_other) = (0usize, 0usize);
     let mut split = 0;
     for k in 0..=80 {
         let tx = -0.02 + 0.0005 * k as f64;
@@ -53,9 +54,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         for j in 0..between {
             let t = Instant::now();
-            sim.step()?;
+            let report = sim.step()?;
             let us = t.elapsed().as_secs_f64() * 1e6;
-            if j == 0 && !event.is_empty() { step_after_cut.push(us) } else { step_other.push(us) }
+            if j == 0 && !event.is_empty() {
+                step_after_cut.push(us);
+                cg_after_cut += report.cg_iterations;
+            } else {
+                step_other.push(us);
+                cg_other += report.cg_iterations;
+            }
         }
     }
     let hash = sim.state.positions.iter().fold(0u64, |h, p| {
@@ -65,8 +72,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("{} tets before, {} after, {split} tets split", tets, sim.model.mesh.tet_count());
     println!("changing: {}", summary(changed));
     println!("idle:     {}", summary(idle));
-    println!("steps right after a changing cut: {}", summary(step_after_cut).replace("cuts", "steps"));
-    println!("other steps: {}", summary(step_other).replace("cuts", "steps"));
+    let mean = |sum: usize, of: &[f64]| sum as f64 / of.len().max(1) as f64;
+    let cg = (mean(cg_after_cut, &step_after_cut), mean(cg_other, &step_other));
+    println!("steps right after a changing cut: {}, {:.1} CG it.", summary(step_after_cut).replace("cuts", "steps"), cg.0);
+    println!("other steps: {}, {:.1} CG it.", summary(step_other).replace("cuts", "steps"), cg.1);
     println!("hash {hash:016x}");
     Ok(())
 }
