@@ -115,32 +115,39 @@ fn step_on(
         let store = |e: usize, c: [f64; 4]| coef[slots[e] as usize] = c;
         assemble_springs(s, 0..m, x, v, h, Part { rhs, diag, lo: 0 }, Part { rhs: &mut [], diag: &mut [], lo: n }, store);
     } else {
-        coef_by_spring.resize(m, [0.0; 4]);
         spill_rhs.clear();
         spill_rhs.resize(n - at, Vector3::zeros());
         spill_diag.clear();
         spill_diag.resize(n - at, Sym3::default());
         let (rhs_lo, rhs_hi) = rhs.split_at_mut(at);
         let (diag_lo, diag_hi) = diag.split_at_mut(at);
-        let (coef_lo, coef_hi) = coef_by_spring.split_at_mut(mid);
+        // on two threads the parts hand their blocks over in the springs' order, stored by
+        // slot after; on one, each stores its own (the same blocks either way)
         let parallel = system::solver_threads() > 1;
-        system::join(
-            parallel,
-            || {
-                let own = Part { rhs: rhs_lo, diag: diag_lo, lo: 0 };
-                let spill = Part { rhs: spill_rhs, diag: spill_diag, lo: at };
-                assemble_springs(s, 0..mid, x, v, h, own, spill, |e, c| coef_lo[e] = c);
-            },
-            || {
-                let own = Part { rhs: &mut *rhs_hi, diag: &mut *diag_hi, lo: at };
-                assemble_springs(s, mid..m, x, v, h, own, Part { rhs: &mut [], diag: &mut [], lo: n }, |e, c| coef_hi[e - mid] = c);
-            },
-        );
+        {
+            let own_first = Part { rhs: rhs_lo, diag: diag_lo, lo: 0 };
+            let spill = Part { rhs: &mut spill_rhs[..], diag: &mut spill_diag[..], lo: at };
+            let own_second = Part { rhs: &mut *rhs_hi, diag: &mut *diag_hi, lo: at };
+            let no_spill = Part { rhs: &mut [], diag: &mut [], lo: n };
+            if parallel {
+                coef_by_spring.resize(m, [0.0; 4]);
+                let (coef_lo, coef_hi) = coef_by_spring.split_at_mut(mid);
+                rayon::join(
+                    || assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| coef_lo[e] = c),
+                    || assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| coef_hi[e - mid] = c),
+                );
+            } else {
+                assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| coef[slots[e] as usize] = c);
+                assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| coef[slots[e] as usize] = c);
+            }
+        }
         for ((r, d), (sr, sd)) in rhs_hi.iter_mut().zip(diag_hi.iter_mut()).zip(spill_rhs.iter().zip(spill_diag.iter())) {
             *r += sr;
             *d += *sd;
         }
-        sys.set_blocks_by_spring(coef_by_spring, parallel);
+        if parallel {
+            sys.set_blocks_by_spring(coef_by_spring, true);
+        }
     }
     sys.prepare(model);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
