@@ -1,6 +1,7 @@
 //! Times the cutter alone on the chest wall at one size: a blade 3 mm deep slides along the
 //! top (x from -20 to +20 mm, a cut every 0.5 mm, `STEPS_BETWEEN` implicit steps between
-//! cuts): `cargo run --release -p cutlab-sim --example cut_time -- [TETS] [STEPS_BETWEEN]`.
+//! cuts): `cargo run --release -p cutlab-sim --example cut_time -- [TETS] [STEPS_BETWEEN]`
+//! (with `LOCALISED=1` in the environment, the localised step with its default thresholds).
 //! Prints the median, p99 and max time of the cuts that changed the tissue and of those that
 //! did not, of the steps right after a changing cut and of the others, the tets split, and a hash of the final mesh and positions (to see whether a
 //! change to the cutter changed its results).
@@ -34,6 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         x.iter().filter(|p| (p.x - tool_x).abs() < 0.002 && p.y.abs() < 0.002).map(|p| p.z).fold(f64::NEG_INFINITY, f64::max)
     };
     let (z0, z1) = (top(-0.02), top(0.02));
+    if std::env::var_os("LOCALISED").is_some() {
+        sim.settings.localisation = Some(cutlab_sim::solver::LocalisationSettings::default());
+    }
     let mut cutter = Cutter::default();
     let (mut changed, mut idle) = (Vec::new(), Vec::new());
     let (mut step_after_cut, mut step_other) = (Vec::new(), Vec::new());

@@ -28,8 +28,26 @@ impl SpringSet {
     /// The springs at each of `particle_count` particles (row `i`: the springs with an end at
     /// `i`, ascending).
     pub fn by_particle(&self, particle_count: usize) -> crate::mesh::Csr {
-        let pairs: Vec<(u32, u32)> = self.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]).collect();
-        crate::mesh::Csr::from_pairs(particle_count, &pairs)
+        // counted, then filled in the springs' order (as `Csr::from_pairs` of the pairs
+        // `(a, e), (b, e)` would, without the list of pairs)
+        let mut offsets = vec![0u32; particle_count + 1];
+        for &[a, b] in &self.ends {
+            offsets[a as usize + 1] += 1;
+            offsets[b as usize + 1] += 1;
+        }
+        for i in 0..particle_count {
+            offsets[i + 1] += offsets[i];
+        }
+        let mut fill = offsets.clone();
+        let mut items = vec![0u32; offsets[particle_count] as usize];
+        for (e, &[a, b]) in self.ends.iter().enumerate() {
+            for end in [a, b] {
+                let slot = &mut fill[end as usize];
+                items[*slot as usize] = e as u32;
+                *slot += 1;
+            }
+        }
+        crate::mesh::Csr::from_parts(offsets, items)
     }
 
     /// An empty set with room for `n` springs.
@@ -101,5 +119,26 @@ impl SpringSet {
             set.push(ends, Self::edge_parameters(mesh, e, &|t| material_of_tet[t]));
         }
         set
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Csr;
+
+    #[test]
+    fn by_particle_lists_each_particles_springs_in_order() {
+        let scene = crate::scene::Scene::load("chest-wall", crate::scene::BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let mut springs = scene.model.springs.clone();
+        // and a spring from a particle to itself, listed twice in its row
+        springs.push([3, 3], [0.0, 1.0, 0.0]);
+        let n = scene.model.vertex_count();
+        let pairs: Vec<(u32, u32)> = springs.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]).collect();
+        let csr = springs.by_particle(n);
+        assert_eq!(csr, Csr::from_pairs(n, &pairs));
+        let last = springs.len() as u32 - 1;
+        assert_eq!(csr.row(3).iter().filter(|&&e| e == last).count(), 2);
+        assert!((0..n).all(|i| csr.row(i).windows(2).all(|w| w[0] <= w[1])));
     }
 }
