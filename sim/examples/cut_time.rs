@@ -3,8 +3,9 @@
 //! cuts): `cargo run --release -p cutlab-sim --example cut_time -- [TETS] [STEPS_BETWEEN]`
 //! (with `LOCALISED=1` in the environment, the localised step with its default thresholds).
 //! Prints the median, p99 and max time of the cuts that changed the tissue and of those that
-//! did not, of the steps right after a changing cut and of the others, the tets split, and a hash of the final mesh and positions (to see whether a
-//! change to the cutter changed its results).
+//! did not, of the steps right after a changing cut and of the others, the tets split, and a
+//! hash of the final mesh and positions (to see whether a change to the cutter changed its
+//! results).
 
 use std::time::Instant;
 

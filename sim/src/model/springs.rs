@@ -124,7 +124,6 @@ impl SpringSet {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::mesh::Csr;
 
     #[test]
