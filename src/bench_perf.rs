@@ -747,7 +747,7 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
 /// How many threads the solver used, for the headers.
 pub(crate) fn threads_text(threads: usize) -> String {
     if threads > 1 {
-        format!("the solver's sweeps on {threads} threads from 4k particles on (RAYON_NUM_THREADS=1: one), the rest single thread")
+        format!("{threads} threads for the step from 4k particles and the cut from 20k tets on (RAYON_NUM_THREADS=1: one)")
     } else {
         "single thread".into()
     }
