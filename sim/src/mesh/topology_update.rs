@@ -9,47 +9,83 @@ use super::topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology};
 use super::VertexId;
 
 /// Edges or faces (`K`), `L` per tetrahedron, after the change: the sorted keys, each tet's
-/// entity ids and each entity's tets (ascending).
-struct Entities<K, const L: usize> {
+/// entity ids and each entity's tets (`R`, ascending).
+struct Entities<K, const L: usize, R> {
     keys: Vec<K>,
     tet_ids: Vec<[u32; L]>,
+    rows: R,
+}
+
+/// The tets of each entity (ascending), as the topology stores them: read from the old
+/// topology, and built (as `Out`) for the new one.
+trait Rows {
+    type Out;
+    fn row(&self, e: usize) -> &[u32];
+    /// Room for `entities` rows of `items` tets in all.
+    fn out_with_capacity(entities: usize, items: usize) -> Self::Out;
+    /// Appends the rows of `range`.
+    fn copy_rows(&self, range: Range<usize>, out: &mut Self::Out);
+    /// Appends a row; false when it does not fit (a face of more than two tets).
+    fn push_row(out: &mut Self::Out, row: &[u32]) -> bool;
+}
+
+/// Compressed rows being built: their ends and entries.
+struct CsrOut {
     offsets: Vec<u32>,
     items: Vec<u32>,
 }
 
-/// The tets of each old entity (ascending).
-trait OldRows {
-    fn row(&self, e: usize) -> &[u32];
-    /// Appends the rows of `range` to `items`, and their ends (offset by what `items` held) to
-    /// `offsets`.
-    fn copy_rows(&self, range: Range<usize>, items: &mut Vec<u32>, offsets: &mut Vec<u32>);
-}
+impl Rows for Csr {
+    type Out = CsrOut;
 
-impl OldRows for Csr {
     fn row(&self, e: usize) -> &[u32] {
         Csr::row(self, e)
     }
 
-    fn copy_rows(&self, range: Range<usize>, items: &mut Vec<u32>, offsets: &mut Vec<u32>) {
+    fn out_with_capacity(entities: usize, items: usize) -> CsrOut {
+        let mut offsets = Vec::with_capacity(entities + 1);
+        offsets.push(0);
+        CsrOut { offsets, items: Vec::with_capacity(items) }
+    }
+
+    fn copy_rows(&self, range: Range<usize>, out: &mut CsrOut) {
         let (ends, run) = self.rows_of(range);
-        let shift = items.len() as u32 - ends[0];
-        items.extend_from_slice(run);
-        offsets.extend(ends[1..].iter().map(|&o| o + shift));
+        let shift = out.items.len() as u32 - ends[0];
+        out.items.extend_from_slice(run);
+        out.offsets.extend(ends[1..].iter().map(|&o| o + shift));
+    }
+
+    fn push_row(out: &mut CsrOut, row: &[u32]) -> bool {
+        out.items.extend_from_slice(row);
+        out.offsets.push(out.items.len() as u32);
+        true
     }
 }
 
 /// Face rows: one or two tets, `NONE` for none.
-impl OldRows for [[u32; 2]] {
+impl Rows for [[u32; 2]] {
+    type Out = Vec<[u32; 2]>;
+
     fn row(&self, e: usize) -> &[u32] {
         let row = &self[e];
         &row[..if row[0] == NONE { 0 } else if row[1] == NONE { 1 } else { 2 }]
     }
 
-    fn copy_rows(&self, range: Range<usize>, items: &mut Vec<u32>, offsets: &mut Vec<u32>) {
-        for e in range {
-            items.extend_from_slice(OldRows::row(self, e));
-            offsets.push(items.len() as u32);
+    fn out_with_capacity(entities: usize, _: usize) -> Vec<[u32; 2]> {
+        Vec::with_capacity(entities)
+    }
+
+    fn copy_rows(&self, range: Range<usize>, out: &mut Vec<[u32; 2]>) {
+        out.extend_from_slice(&self[range]);
+    }
+
+    fn push_row(out: &mut Vec<[u32; 2]>, row: &[u32]) -> bool {
+        match *row {
+            [t] => out.push([t, NONE]),
+            [a, b] => out.push([a, b]),
+            _ => return false,
         }
+        true
     }
 }
 
@@ -57,15 +93,16 @@ impl OldRows for [[u32; 2]] {
 /// ascending tets of each old entity) with those of the dirty tets (`dirty`: the changed ones,
 /// flagged in `changed`, and the new ones). Runs of old entities that no changed tet touches
 /// and no dirty entity falls between are copied whole.
-fn merge_entities<K: Ord + Copy, const L: usize>(
+/// Returns `None` where a merged row does not fit its storage (a face of more than two tets).
+fn merge_entities<K: Ord + Copy, const L: usize, R: Rows + ?Sized>(
     old_keys: &[K],
     old_tet_ids: &[[u32; L]],
-    old_rows: &(impl OldRows + ?Sized),
+    old_rows: &R,
     tets: &[[VertexId; 4]],
     dirty: &[u32],
     changed: &[bool],
     keys_of: impl Fn(&[VertexId; 4]) -> [K; L],
-) -> Entities<K, L> {
+) -> Option<Entities<K, L, R::Out>> {
     let mut dirty_pairs: Vec<(K, u32, u8)> = Vec::with_capacity(dirty.len() * L);
     for &t in dirty {
         for (l, k) in keys_of(&tets[t as usize]).into_iter().enumerate() {
@@ -83,10 +120,9 @@ fn merge_entities<K: Ord + Copy, const L: usize>(
     let mut out = Entities {
         keys: Vec::with_capacity(old_keys.len() + dirty_pairs.len() / 2),
         tet_ids: Vec::with_capacity(tets.len()),
-        offsets: Vec::with_capacity(old_keys.len() + 1),
-        items: Vec::with_capacity(old_tet_ids.len() * L / 2 + dirty_pairs.len()),
+        rows: R::out_with_capacity(old_keys.len() + dirty_pairs.len() / 2, old_tet_ids.len() * L + dirty_pairs.len()),
     };
-    out.offsets.push(0);
+    let mut row = Vec::new();
     let mut old_to_new = vec![NONE; old_keys.len()];
     let mut dirty_ids: Vec<(u32, u8, u32)> = Vec::with_capacity(dirty_pairs.len());
     let (mut e, mut j) = (0, 0);
@@ -105,7 +141,7 @@ fn merge_entities<K: Ord + Copy, const L: usize>(
             for (i, new) in old_to_new[e..stop].iter_mut().enumerate() {
                 *new = first + i as u32;
             }
-            old_rows.copy_rows(e..stop, &mut out.items, &mut out.offsets);
+            old_rows.copy_rows(e..stop, &mut out.rows);
             e = stop;
             continue;
         }
@@ -116,7 +152,6 @@ fn merge_entities<K: Ord + Copy, const L: usize>(
             (None, None) => break,
         };
         let id = out.keys.len() as u32;
-        let start = out.items.len();
         let mut old_row: &[u32] = &[];
         let old_index = (old_keys.get(e) == Some(&key)).then_some(e);
         if let Some(i) = old_index {
@@ -129,16 +164,19 @@ fn merge_entities<K: Ord + Copy, const L: usize>(
         let run = &dirty_pairs[j..j + count];
         j += count;
         dirty_ids.extend(run.iter().map(|&(_, t, l)| (t, l, id)));
-        merge_ascending(&mut out.items, old_row.iter().copied().filter(alive), run.iter().map(|p| p.1));
-        if out.items.len() == start {
+        row.clear();
+        merge_ascending(&mut row, old_row.iter().copied().filter(alive), run.iter().map(|p| p.1));
+        if row.is_empty() {
             // an old entity no tet uses any more
             if let Some(i) = old_index {
                 old_to_new[i] = NONE;
             }
             continue;
         }
+        if !R::push_row(&mut out.rows, &row) {
+            return None;
+        }
         out.keys.push(key);
-        out.offsets.push(out.items.len() as u32);
     }
 
     out.tet_ids.extend(old_tet_ids.iter().map(|ids| ids.map(|i| old_to_new[i as usize])));
@@ -146,7 +184,7 @@ fn merge_entities<K: Ord + Copy, const L: usize>(
     for (t, l, id) in dirty_ids {
         out.tet_ids[t as usize][l as usize] = id;
     }
-    out
+    Some(out)
 }
 
 /// Appends to `out` the merge of two ascending runs of tet ids.
@@ -207,31 +245,24 @@ impl Topology {
                 &dirty,
                 &is_changed,
                 |tet| TET_FACES.map(|f| sorted3([tet[f[0]], tet[f[1]], tet[f[2]]])),
-            );
-            let mut face_tets = Vec::with_capacity(faces.keys.len());
+            )?;
             let (mut boundary, mut boundary_face_ids) = (Vec::new(), Vec::new());
-            for f in 0..faces.keys.len() {
-                let row = &faces.items[faces.offsets[f] as usize..faces.offsets[f + 1] as usize];
-                match *row {
-                    [t] => {
-                        face_tets.push([t, NONE]);
-                        let tet = &tets[t as usize];
-                        let l = faces.tet_ids[t as usize].iter().position(|&id| id == f as u32)?;
-                        let lf = TET_FACES[l];
-                        boundary.push([tet[lf[0]], tet[lf[1]], tet[lf[2]]]);
-                        boundary_face_ids.push(f as u32);
-                    }
-                    [a, b] => face_tets.push([a, b]),
-                    _ => return None, // shared by more than two tets: a full build reports it
+            for (f, &[t, other]) in faces.rows.iter().enumerate() {
+                if other == NONE {
+                    let tet = &tets[t as usize];
+                    let l = faces.tet_ids[t as usize].iter().position(|&id| id == f as u32)?;
+                    let lf = TET_FACES[l];
+                    boundary.push([tet[lf[0]], tet[lf[1]], tet[lf[2]]]);
+                    boundary_face_ids.push(f as u32);
                 }
             }
-            Some((faces, face_tets, boundary, boundary_face_ids))
+            Some((faces, boundary, boundary_face_ids))
         };
         // the edges and the faces are independent: side by side on a large mesh (the same
         // result either way)
         let (edges, faces) =
             if tets.len() >= PARALLEL_MIN_TETS { rayon::join(edges, faces) } else { (edges(), faces()) };
-        let (faces, face_tets, boundary, boundary_face_ids) = faces?;
+        let (edges, (faces, boundary, boundary_face_ids)) = (edges?, faces?);
 
         // Vertex -> tets: the rows of the vertices the dirty tets touch (before or after)
         // are merged again, the others copied.
@@ -271,13 +302,13 @@ impl Topology {
             edges: edges.keys,
             tet_edges: edges.tet_ids,
             faces: faces.keys,
-            face_tets,
+            face_tets: faces.rows,
             tet_faces: faces.tet_ids,
             boundary,
             boundary_face_ids,
             overshared_faces: Vec::new(),
             vertex_tets: Csr::from_parts(offsets, items),
-            edge_tets: Csr::from_parts(edges.offsets, edges.items),
+            edge_tets: Csr::from_parts(edges.rows.offsets, edges.rows.items),
         })
     }
 }
