@@ -84,7 +84,7 @@ fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin
         return candidates_in(mesh_tets, 0..count, x, polygon, margin, near);
     }
     let half = count / 2;
-    let (mut first, second) = rayon::join(
+    let (mut first, second) = crate::solver::system::side_by_side(
         || candidates_in(mesh_tets, 0..half, x, polygon, margin, near),
         || candidates_in(mesh_tets, half..count, x, polygon, margin, near),
     );

@@ -132,7 +132,7 @@ fn step_on(
             if parallel {
                 coef_by_spring.resize(m, [0.0; 4]);
                 let (coef_lo, coef_hi) = coef_by_spring.split_at_mut(mid);
-                rayon::join(
+                system::side_by_side(
                     || assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| coef_lo[e] = c),
                     || assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| coef_hi[e - mid] = c),
                 );
