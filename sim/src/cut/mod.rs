@@ -76,15 +76,12 @@ pub enum CutError {
 
 /// Tetrahedra whose bounds meet the polygon's (inflated by `margin`) and that touch or cross
 /// its plane, or come within `near` times their longest edge of it (where vertices of the
-/// stroke's cut that drifted off the plane still count as on it).
-/// The two halves of a large mesh are scanned side by side.
+/// stroke's cut that drifted off the plane still count as on it). The two halves of a large
+/// mesh are scanned side by side.
 fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
-    let count = mesh_tets.len();
-    if count < PARALLEL_MIN_TETS {
-        return candidates_in(mesh_tets, 0..count, x, polygon, margin, near);
-    }
-    let half = count / 2;
-    let (mut first, second) = crate::solver::system::side_by_side(
+    let (count, half) = (mesh_tets.len(), mesh_tets.len() / 2);
+    let (mut first, second) = crate::solver::system::join(
+        count >= PARALLEL_MIN_TETS,
         || candidates_in(mesh_tets, 0..half, x, polygon, margin, near),
         || candidates_in(mesh_tets, half..count, x, polygon, margin, near),
     );

@@ -24,21 +24,33 @@ impl Csr {
     /// Builds rows from `(row, item)` pairs; entries of a row keep the order of `pairs`
     /// after a stable sort by row.
     pub fn from_pairs(rows: usize, pairs: &[(u32, u32)]) -> Self {
-        let mut offsets = vec![0u32; rows + 1];
-        for &(r, _) in pairs {
-            offsets[r as usize + 1] += 1;
-        }
+        let mut csr = Self::default();
+        csr.refill(rows, || pairs.iter().copied());
+        csr
+    }
+
+    /// Rebuilds these rows from the `(row, item)` pairs `pairs()` yields (called twice: to
+    /// count the rows, then to fill them), the entries of a row in the order they come, in the
+    /// allocations this one holds (no list of pairs needed).
+    pub(crate) fn refill<I: Iterator<Item = (u32, u32)>>(&mut self, rows: usize, pairs: impl Fn() -> I) {
+        let Self { offsets, items } = self;
+        offsets.clear();
+        offsets.resize(rows + 1, 0);
+        // (internal iteration: a chain of adapters folds faster than it steps)
+        pairs().for_each(|(r, _)| offsets[r as usize + 1] += 1);
         for i in 0..rows {
             offsets[i + 1] += offsets[i];
         }
-        let mut fill = offsets.clone();
-        let mut items = vec![0u32; pairs.len()];
-        for &(r, it) in pairs {
-            let slot = &mut fill[r as usize];
+        items.clear();
+        items.resize(offsets[rows] as usize, 0);
+        // (offsets[r] serves as row r's cursor, ending at row r + 1's start; shifted back after)
+        pairs().for_each(|(r, it)| {
+            let slot = &mut offsets[r as usize];
             items[*slot as usize] = it;
             *slot += 1;
-        }
-        Self { offsets, items }
+        });
+        offsets.copy_within(0..rows, 1);
+        offsets[0] = 0;
     }
 
     /// From its parts (`offsets` ascending from 0 to `items.len()`).

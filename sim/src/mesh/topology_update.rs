@@ -260,8 +260,7 @@ impl Topology {
         };
         // the edges and the faces are independent: side by side on a large mesh (the same
         // result either way)
-        let (edges, faces) =
-            if tets.len() >= PARALLEL_MIN_TETS { crate::solver::system::side_by_side(edges, faces) } else { (edges(), faces()) };
+        let (edges, faces) = crate::solver::system::join(tets.len() >= PARALLEL_MIN_TETS, edges, faces);
         let (edges, (faces, boundary, boundary_face_ids)) = (edges?, faces?);
 
         // Vertex -> tets: the rows of the vertices the dirty tets touch (before or after)

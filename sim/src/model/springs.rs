@@ -28,26 +28,9 @@ impl SpringSet {
     /// The springs at each of `particle_count` particles (row `i`: the springs with an end at
     /// `i`, ascending).
     pub fn by_particle(&self, particle_count: usize) -> crate::mesh::Csr {
-        // counted, then filled in the springs' order (as `Csr::from_pairs` of the pairs
-        // `(a, e), (b, e)` would, without the list of pairs)
-        let mut offsets = vec![0u32; particle_count + 1];
-        for &[a, b] in &self.ends {
-            offsets[a as usize + 1] += 1;
-            offsets[b as usize + 1] += 1;
-        }
-        for i in 0..particle_count {
-            offsets[i + 1] += offsets[i];
-        }
-        let mut fill = offsets.clone();
-        let mut items = vec![0u32; offsets[particle_count] as usize];
-        for (e, &[a, b]) in self.ends.iter().enumerate() {
-            for end in [a, b] {
-                let slot = &mut fill[end as usize];
-                items[*slot as usize] = e as u32;
-                *slot += 1;
-            }
-        }
-        crate::mesh::Csr::from_parts(offsets, items)
+        let mut csr = crate::mesh::Csr::default();
+        csr.refill(particle_count, || self.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]));
+        csr
     }
 
     /// An empty set with room for `n` springs.
@@ -138,6 +121,12 @@ mod tests {
         assert_eq!(csr, Csr::from_pairs(n, &pairs));
         let last = springs.len() as u32 - 1;
         assert_eq!(csr.row(3).iter().filter(|&&e| e == last).count(), 2);
+        // row by row, the springs with an end there, in the springs' order
+        for i in 0..n as u32 {
+            let expected: Vec<u32> =
+                springs.ends.iter().enumerate().flat_map(|(e, ends)| ends.iter().filter(|&&v| v == i).map(move |_| e as u32)).collect();
+            assert_eq!(csr.row(i as usize), expected.as_slice(), "row {i}");
+        }
         assert!((0..n).all(|i| csr.row(i).windows(2).all(|w| w[0] <= w[1])));
     }
 }

@@ -14,14 +14,14 @@
 //! the reverse. The two halves touch each other only through the separator, so a sweep over one
 //! half can run beside the sweep over the other.
 
+use crate::mesh::Csr;
+
 /// Buffers of [`dissection_order_into`], kept between calls (a cut changes the springs, and
 /// with them the order, every few steps).
 #[derive(Debug, Clone, Default)]
 pub(crate) struct DissectionScratch {
-    /// The spring graph: the neighbours of particle `i` are `items[offsets[i]..offsets[i + 1]]`,
-    /// in the springs' order.
-    offsets: Vec<u32>,
-    items: Vec<u32>,
+    /// The spring graph: the neighbours of each particle, in the springs' order.
+    graph: Csr,
     level: Vec<u32>,
     queue: Vec<u32>,
 }
@@ -42,31 +42,10 @@ pub(crate) fn dissection_order_into(n: usize, ends: &[[u32; 2]], scratch: &mut D
     if n == 0 {
         return [0, 0];
     }
-    let DissectionScratch { offsets, items, level, queue } = scratch;
+    let DissectionScratch { graph, level, queue } = scratch;
     // the graph: each spring's ends are each other's neighbours, rows in the springs' order
-    offsets.clear();
-    offsets.resize(n + 1, 0);
-    for &[a, b] in ends.iter().filter(|[a, b]| a != b) {
-        offsets[a as usize + 1] += 1;
-        offsets[b as usize + 1] += 1;
-    }
-    for i in 0..n {
-        offsets[i + 1] += offsets[i];
-    }
-    items.clear();
-    items.resize(offsets[n] as usize, 0);
-    // (offsets[i] serves as row i's cursor, ending at row i + 1's start; shifted back after)
-    for &[a, b] in ends.iter().filter(|[a, b]| a != b) {
-        items[offsets[a as usize] as usize] = b;
-        offsets[a as usize] += 1;
-        items[offsets[b as usize] as usize] = a;
-        offsets[b as usize] += 1;
-    }
-    for i in (1..=n).rev() {
-        offsets[i] = offsets[i - 1];
-    }
-    offsets[0] = 0;
-    let graph = Graph { offsets, items };
+    graph.refill(n, || ends.iter().filter(|[a, b]| a != b).flat_map(|&[a, b]| [(a, b), (b, a)]));
+    let graph = &*graph;
     level.clear();
     level.resize(n, u32::MAX);
     queue.clear();
@@ -74,8 +53,8 @@ pub(crate) fn dissection_order_into(n: usize, ends: &[[u32; 2]], scratch: &mut D
     // the particle with the most springs (the lowest such id) lies in the largest piece; the
     // particle reached last from it is a far end of that piece
     let seed = (0..n).max_by_key(|&i| (graph.row(i).len(), std::cmp::Reverse(i))).unwrap_or(0);
-    let far = levels_from(&graph, seed, level, queue);
-    let far = levels_from(&graph, far, level, queue);
+    let far = levels_from(graph, seed, level, queue);
+    let far = levels_from(graph, far, level, queue);
     let depth = level[far] as usize;
     let mut count = vec![0usize; depth + 1];
     for &l in level.iter().filter(|&&l| l != u32::MAX) {
@@ -104,21 +83,9 @@ pub(crate) fn dissection_order_into(n: usize, ends: &[[u32; 2]], scratch: &mut D
     parts
 }
 
-/// A graph in compressed rows.
-struct Graph<'a> {
-    offsets: &'a [u32],
-    items: &'a [u32],
-}
-
-impl Graph<'_> {
-    fn row(&self, i: usize) -> &[u32] {
-        &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
-    }
-}
-
 /// Breadth-first levels from `from` (`u32::MAX` where not reached); returns the particle
 /// reached last.
-fn levels_from(graph: &Graph<'_>, from: usize, level: &mut [u32], queue: &mut Vec<u32>) -> usize {
+fn levels_from(graph: &Csr, from: usize, level: &mut [u32], queue: &mut Vec<u32>) -> usize {
     level.iter_mut().for_each(|l| *l = u32::MAX);
     queue.clear();
     level[from] = 0;
