@@ -465,15 +465,9 @@ fn memory(scene: &'static str, sim: &Simulation) -> SizeRow {
         + len(m.mesh.tets())
         + len(m.mesh.regions())
         + cap(&topo.edges)
-        + cap(&topo.tet_edges)
-        + cap(&topo.faces)
-        + cap(&topo.face_tets)
-        + cap(&topo.tet_faces)
         + cap(&topo.boundary)
-        + cap(&topo.boundary_face_ids)
         + cap(&topo.overshared_faces)
-        + csr(&topo.vertex_tets)
-        + csr(&topo.edge_tets);
+        + csr(&topo.vertex_tets);
     let tets = m.mesh.tet_count();
     SizeRow {
         scene,

@@ -32,10 +32,14 @@ fn pieces(mesh: &TetMesh) -> usize {
         }
         i
     }
-    for ft in &topo.face_tets {
-        if ft[1] != cutlab_sim::mesh::NONE {
-            let (a, b) = (find(&mut parent, ft[0] as usize), find(&mut parent, ft[1] as usize));
-            parent[a] = b;
+    for (t, tet) in mesh.tets().iter().enumerate() {
+        for f in cutlab_sim::mesh::TET_FACES {
+            let mut key = f.map(|i| tet[i]);
+            key.sort_unstable();
+            for other in topo.tets_of_face(key).filter(|&o| o as usize != t) {
+                let (a, b) = (find(&mut parent, t), find(&mut parent, other as usize));
+                parent[a] = b;
+            }
         }
     }
     (0..mesh.tet_count()).filter(|&i| find(&mut parent, i) == i).count()

@@ -22,7 +22,7 @@ pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
 
-use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, Topology, dihedral_angles, tet_signed_volume};
+use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, Topology, dihedral_angles, edge_key, tet_signed_volume};
 use crate::model::ModelError;
 use crate::solver::Simulation;
 use crate::{MeshError, Point3, Vector3};
@@ -216,9 +216,7 @@ pub fn cut_remembering(
         let topo = mesh.topology();
         let mut extra: BTreeSet<u32> = BTreeSet::new();
         for cr in class.crossings.values().filter(|c| c.split) {
-            if let Ok(e) = topo.edges.binary_search(&cr.edge) {
-                extra.extend(topo.edge_tets.row(e).iter().copied().filter(|t| cand.binary_search(t).is_err()));
-            }
+            extra.extend(topo.tets_of_edge(cr.edge).filter(|t| cand.binary_search(t).is_err()));
         }
         if extra.is_empty() {
             break class;
@@ -419,8 +417,8 @@ pub fn cut_remembering(
     let old_edges = (sim.model.springs.ends != mesh.topology().edges).then(|| sim.model.springs.ends.clone());
     if old_edges.is_none() {
         let (old, new) = (mesh.topology(), new_mesh.topology());
-        event.springs_removed = edges_not_in(old, &changed, new);
-        event.springs_added = edges_not_in(new, &dirty, old);
+        event.springs_removed = edges_not_in(mesh.tets(), &changed, new);
+        event.springs_added = edges_not_in(new_mesh.tets(), &dirty, old);
     }
     sim.model.rebuild_local(new_mesh, held, &dirty, &changed)?;
     if let Some(old_edges) = old_edges {
@@ -447,13 +445,12 @@ pub fn cut_remembering(
     Ok(event)
 }
 
-/// The edges of `tets` in `from` that `to` does not have, sorted.
-fn edges_not_in(from: &Topology, tets: &[u32], to: &Topology) -> Vec<[u32; 2]> {
-    let mut out: Vec<[u32; 2]> = tets
+/// The edges of the tets `ids` of `tets` that `to` does not have, sorted.
+fn edges_not_in(tets: &[[u32; 4]], ids: &[u32], to: &Topology) -> Vec<[u32; 2]> {
+    let mut out: Vec<[u32; 2]> = ids
         .iter()
-        .filter_map(|&t| from.tet_edges.get(t as usize))
-        .flatten()
-        .map(|&e| from.edges[e as usize])
+        .filter_map(|&t| tets.get(t as usize))
+        .flat_map(|tet| TET_EDGES.map(|l| edge_key(tet, l)))
         .filter(|key| to.edges.binary_search(key).is_err())
         .collect();
     out.sort_unstable();

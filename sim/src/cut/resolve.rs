@@ -31,7 +31,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::CutPolygon;
-use crate::mesh::{NONE, TET_EDGES, TET_FACES, TetMesh, tet_signed_volume, tet_volume_gradients, triangle_normal};
+use crate::mesh::{TET_EDGES, TET_FACES, TetMesh, face_key, tet_signed_volume, tet_volume_gradients, triangle_normal};
 use crate::{Point3, Vector3};
 
 /// A moved vertex keeps every tetrahedron around it at no less than this fraction of its
@@ -289,8 +289,7 @@ impl Resolver<'_> {
         for &t in topo.vertex_tets.row(v as usize) {
             let tet = self.mesh.tets()[t as usize];
             for (l, f) in TET_FACES.iter().enumerate() {
-                let fid = topo.tet_faces[t as usize][l] as usize;
-                if topo.face_tets[fid][1] != NONE || !f.iter().any(|&k| tet[k] == v) {
+                if !f.iter().any(|&k| tet[k] == v) || topo.tets_of_face(face_key(&tet, l)).nth(1).is_some() {
                     continue;
                 }
                 let p = f.map(|k| x[tet[k] as usize]);

@@ -111,7 +111,7 @@ impl FemModel {
             beta_s: Vec::with_capacity(nt),
             damping_mass: vec![0.0; mesh.vertex_count()],
             edges: topo.edges.clone(),
-            tet_edges: topo.tet_edges.clone(),
+            tet_edges: mesh.tets().iter().map(|tet| topo.tet_edge_ids(tet)).collect(),
             degenerate_tets: 0,
         };
         for (t, tet) in mesh.tets().iter().enumerate() {

@@ -75,8 +75,8 @@ impl QuadraticMesh {
         let tets = mesh
             .tets()
             .iter()
-            .zip(&topology.tet_edges)
-            .map(|(tet, edges)| {
+            .map(|tet| {
+                let edges = topology.tet_edge_ids(tet);
                 let mut nodes = [0u32; NODES];
                 nodes[..4].copy_from_slice(tet);
                 for (k, &e) in edges.iter().enumerate() {

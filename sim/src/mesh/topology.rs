@@ -64,42 +64,65 @@ impl Csr {
         &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
     }
 
-    /// The row ends `offsets[a..=b]` and the entries of rows `a..b`.
-    pub(crate) fn rows_of(&self, range: std::ops::Range<usize>) -> (&[u32], &[u32]) {
-        let ends = &self.offsets[range.start..=range.end];
-        (ends, &self.items[ends[0] as usize..ends[ends.len() - 1] as usize])
-    }
-
     /// Number of rows.
     pub fn rows(&self) -> usize {
         self.offsets.len().saturating_sub(1)
     }
+
+    /// Number of entries in all rows.
+    pub fn item_count(&self) -> usize {
+        self.items.len()
+    }
 }
 
-/// Edges, faces, surface and adjacency of a [`super::TetMesh`].
+/// Edges, surface and adjacency of a [`super::TetMesh`].
+///
+/// Only what a cut can carry over in runs is stored: the sorted edges, the boundary (sorted by
+/// its faces' vertex triples) and the tets around each vertex. The rest is derived on demand
+/// from those, locally: the tets around an edge or a face are the tets its vertices' rows have
+/// in common ([`Self::tets_of_edge`], [`Self::tets_of_face`]), and an edge's id is its place
+/// in the sorted edges ([`Self::edge_id`]). So a cut, which changes a few tets, changes a few
+/// entries and copies the rest whole, instead of renumbering the edge and face ids every tet
+/// would hold.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Topology {
     /// Unique edges `[a, b]` with `a < b`, sorted.
     pub edges: Vec<[VertexId; 2]>,
-    /// Edge ids of each tetrahedron, in the local order of [`TET_EDGES`].
-    pub tet_edges: Vec<[u32; 6]>,
-    /// Unique faces as sorted vertex triples, sorted.
-    pub faces: Vec<[VertexId; 3]>,
-    /// The (up to) two tetrahedra of each face; [`NONE`] where absent. Faces shared by more
-    /// than two tetrahedra are listed in `overshared_faces`.
-    pub face_tets: Vec<[u32; 2]>,
-    /// Face ids of each tetrahedron: the face opposite local vertex i (see [`TET_FACES`]).
-    pub tet_faces: Vec<[u32; 4]>,
-    /// Boundary triangles (faces with exactly one tetrahedron), oriented outward.
+    /// Boundary triangles (faces with exactly one tetrahedron), oriented outward, in the order
+    /// of their sorted vertex triples.
     pub boundary: Vec<[VertexId; 3]>,
-    /// Face id of each boundary triangle.
-    pub boundary_face_ids: Vec<u32>,
-    /// Faces used by more than two tetrahedra (a non-manifold, non-conforming mesh).
-    pub overshared_faces: Vec<u32>,
+    /// Faces (sorted vertex triples, sorted) used by more than two tetrahedra: a non-manifold,
+    /// non-conforming mesh.
+    pub overshared_faces: Vec<[VertexId; 3]>,
     /// Tetrahedra around each vertex, ascending.
     pub vertex_tets: Csr,
-    /// Tetrahedra around each edge, ascending.
-    pub edge_tets: Csr,
+}
+
+/// The entries two ascending rows have in common, ascending.
+fn common<'a>(a: &'a [u32], b: &'a [u32]) -> impl Iterator<Item = u32> + 'a {
+    let mut j = 0;
+    a.iter().copied().filter(move |&t| {
+        while b.get(j).is_some_and(|&o| o < t) {
+            j += 1;
+        }
+        b.get(j) == Some(&t)
+    })
+}
+
+/// The edge `[a, b]` with `a < b` of the local vertices `i`, `j` of `tet`.
+pub(crate) fn edge_key(tet: &[VertexId; 4], [i, j]: [usize; 2]) -> [VertexId; 2] {
+    [tet[i].min(tet[j]), tet[i].max(tet[j])]
+}
+
+/// The face opposite local vertex `l` of `tet` as a sorted vertex triple.
+pub(crate) fn face_key(tet: &[VertexId; 4], l: usize) -> [VertexId; 3] {
+    sorted_triple(TET_FACES[l].map(|i| tet[i]))
+}
+
+/// `k` sorted ascending: the key of a face whatever its orientation.
+pub(crate) fn sorted_triple(mut k: [VertexId; 3]) -> [VertexId; 3] {
+    k.sort_unstable();
+    k
 }
 
 /// Sorts `keys` (ascending, as `sort_unstable` would) by a counting sort on their first
@@ -127,97 +150,62 @@ fn sort_by_first_vertex<K: Ord + Copy>(keys: &mut Vec<K>, vertex_count: usize, f
     *keys = sorted;
 }
 
+/// The face opposite local vertex `l` of `tet`, oriented outward (see [`TET_FACES`]).
+pub(crate) fn oriented_face(tet: &[VertexId; 4], l: usize) -> [VertexId; 3] {
+    TET_FACES[l].map(|i| tet[i])
+}
+
 impl Topology {
     /// Derives the topology of `tets` over `vertex_count` vertices.
     pub fn build(vertex_count: usize, tets: &[[VertexId; 4]]) -> Self {
-        // Edges.
-        let mut edge_keys: Vec<([u32; 2], u32, u8)> = Vec::with_capacity(tets.len() * 6);
-        for (t, tet) in tets.iter().enumerate() {
-            for (l, &[i, j]) in TET_EDGES.iter().enumerate() {
-                let (a, b) = (tet[i], tet[j]);
-                edge_keys.push(([a.min(b), a.max(b)], t as u32, l as u8));
-            }
-        }
-        sort_by_first_vertex(&mut edge_keys, vertex_count, |k| k.0[0]);
-        let mut edges = Vec::with_capacity(tets.len() * 2);
-        let mut tet_edges = vec![[0u32; 6]; tets.len()];
-        let mut edge_tet_pairs = Vec::with_capacity(edge_keys.len());
-        for &(key, t, l) in &edge_keys {
-            if edges.last() != Some(&key) {
-                edges.push(key);
-            }
-            let e = (edges.len() - 1) as u32;
-            tet_edges[t as usize][l as usize] = e;
-            edge_tet_pairs.push((e, t));
-        }
-        let edge_tets = Csr::from_pairs(edges.len(), &edge_tet_pairs);
+        let mut edges: Vec<[VertexId; 2]> = tets.iter().flat_map(|tet| TET_EDGES.map(|l| edge_key(tet, l))).collect();
+        sort_by_first_vertex(&mut edges, vertex_count, |k| k[0]);
+        edges.dedup();
 
-        // Faces.
-        let mut face_keys: Vec<([u32; 3], u32, u8)> = Vec::with_capacity(tets.len() * 4);
+        let mut faces: Vec<([u32; 3], u32, u8)> = Vec::with_capacity(tets.len() * 4);
         for (t, tet) in tets.iter().enumerate() {
-            for (l, f) in TET_FACES.iter().enumerate() {
-                let mut key = [tet[f[0]], tet[f[1]], tet[f[2]]];
-                key.sort_unstable();
-                face_keys.push((key, t as u32, l as u8));
-            }
+            faces.extend((0..4).map(|l| (face_key(tet, l), t as u32, l as u8)));
         }
-        sort_by_first_vertex(&mut face_keys, vertex_count, |k| k.0[0]);
-        let mut faces = Vec::with_capacity(tets.len() * 2 + 16);
-        let mut face_tets: Vec<[u32; 2]> = Vec::with_capacity(faces.capacity());
-        let mut face_use: Vec<u32> = Vec::with_capacity(faces.capacity());
-        let mut first_local: Vec<(u32, u8)> = Vec::with_capacity(faces.capacity());
-        let mut tet_faces = vec![[0u32; 4]; tets.len()];
-        for &(key, t, l) in &face_keys {
-            if faces.last() != Some(&key) {
-                faces.push(key);
-                face_tets.push([NONE, NONE]);
-                face_use.push(0);
-                first_local.push((t, l));
-            }
-            let f = faces.len() - 1;
-            tet_faces[t as usize][l as usize] = f as u32;
-            let slot = face_use[f] as usize;
-            if slot < 2 {
-                face_tets[f][slot] = t;
-            }
-            face_use[f] += 1;
-        }
-        let mut boundary = Vec::new();
-        let mut boundary_face_ids = Vec::new();
-        let mut overshared_faces = Vec::new();
-        for (f, &uses) in face_use.iter().enumerate() {
-            if uses == 1 {
-                let (t, l) = first_local[f];
-                let tet = &tets[t as usize];
-                let lf = TET_FACES[l as usize];
-                boundary.push([tet[lf[0]], tet[lf[1]], tet[lf[2]]]);
-                boundary_face_ids.push(f as u32);
-            } else if uses > 2 {
-                overshared_faces.push(f as u32);
+        sort_by_first_vertex(&mut faces, vertex_count, |k| k.0[0]);
+        let (mut boundary, mut overshared_faces) = (Vec::new(), Vec::new());
+        for group in faces.chunk_by(|a, b| a.0 == b.0) {
+            match *group {
+                [(_, t, l)] => boundary.push(oriented_face(&tets[t as usize], l as usize)),
+                [_, _] => {}
+                _ => overshared_faces.push(group[0].0),
             }
         }
 
-        // Vertex -> tets.
-        let mut vt_pairs = Vec::with_capacity(tets.len() * 4);
-        for (t, tet) in tets.iter().enumerate() {
-            for &v in tet {
-                vt_pairs.push((v, t as u32));
-            }
-        }
-        let vertex_tets = Csr::from_pairs(vertex_count, &vt_pairs);
+        let mut vertex_tets = Csr::default();
+        vertex_tets.refill(vertex_count, || tets.iter().enumerate().flat_map(|(t, tet)| tet.map(|v| (v, t as u32))));
+        Self { edges, boundary, overshared_faces, vertex_tets }
+    }
 
-        Self {
-            edges,
-            tet_edges,
-            faces,
-            face_tets,
-            tet_faces,
-            boundary,
-            boundary_face_ids,
-            overshared_faces,
-            vertex_tets,
-            edge_tets,
-        }
+    /// The tets around vertex `v`, ascending (none for a vertex out of range).
+    pub fn tets_of_vertex(&self, v: VertexId) -> &[u32] {
+        if (v as usize) < self.vertex_tets.rows() { self.vertex_tets.row(v as usize) } else { &[] }
+    }
+
+    /// The tets around the edge `[a, b]`, ascending: those of both vertices.
+    pub fn tets_of_edge(&self, [a, b]: [VertexId; 2]) -> impl Iterator<Item = u32> + '_ {
+        common(self.tets_of_vertex(a), self.tets_of_vertex(b))
+    }
+
+    /// The tets around the face `[a, b, c]`, ascending: those of all three vertices.
+    pub fn tets_of_face(&self, [a, b, c]: [VertexId; 3]) -> impl Iterator<Item = u32> + '_ {
+        let third = self.tets_of_vertex(c);
+        common(self.tets_of_vertex(a), self.tets_of_vertex(b)).filter(move |t| third.binary_search(t).is_ok())
+    }
+
+    /// The id (place in [`Self::edges`]) of the edge between `a` and `b`, if there is one.
+    pub fn edge_id(&self, a: VertexId, b: VertexId) -> Option<u32> {
+        self.edges.binary_search(&[a.min(b), a.max(b)]).ok().map(|e| e as u32)
+    }
+
+    /// The edge ids of `tet`'s six edges, in the local order of [`TET_EDGES`] ([`NONE`] for an
+    /// edge this topology does not have: `tet` is not one of its tets).
+    pub fn tet_edge_ids(&self, tet: &[VertexId; 4]) -> [u32; 6] {
+        TET_EDGES.map(|[i, j]| self.edge_id(tet[i], tet[j]).unwrap_or(NONE))
     }
 
     /// Vertices that lie on the boundary surface, ascending.

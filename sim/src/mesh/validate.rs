@@ -100,7 +100,7 @@ pub(super) fn validate(mesh: &TetMesh) -> ValidationReport {
             r.inverted_tets.push(t as TetId);
         }
     }
-    r.overshared_faces = topo.overshared_faces.iter().map(|&f| topo.faces[f as usize]).collect();
+    r.overshared_faces = topo.overshared_faces.clone();
     r.hanging_faces = hanging_faces(mesh);
     r
 }

@@ -257,12 +257,12 @@ impl Model {
         // springs: derived again on the edges of the dirty tets and on the old edges that lost
         // a changed tet; between them the old and new edges are the same run (an edge only
         // appears with a dirty tet and only disappears with its last changed one), copied whole
-        let mut dirty_edges: Vec<u32> = dirty.iter().flat_map(|&t| topo.tet_edges[t as usize]).collect();
+        let mut dirty_edges: Vec<u32> = dirty.iter().flat_map(|&t| topo.tet_edge_ids(&mesh.tets()[t as usize])).collect();
         dirty_edges.sort_unstable();
         dirty_edges.dedup();
         let (old, old_topo) = (&self.springs, old_mesh.topology());
         let mut lost: Vec<u32> = if old.ends == old_topo.edges {
-            changed.iter().filter_map(|&t| old_topo.tet_edges.get(t as usize)).flatten().copied().collect()
+            changed.iter().filter_map(|&t| old_mesh.tets().get(t as usize)).flat_map(|tet| old_topo.tet_edge_ids(tet)).collect()
         } else {
             (0..old.len() as u32).collect() // springs not of these edges: every one derived again
         };

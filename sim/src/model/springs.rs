@@ -61,11 +61,10 @@ impl SpringSet {
         let pos = mesh.positions();
         let [a, b] = topo.edges[e];
         let d = (pos[b as usize] - pos[a as usize]).norm();
-        let tets = topo.edge_tets.row(e);
-        let count = tets.len() as f64;
         let (mut k, mut c, mut s) = (0.0, 0.0, 0.0);
-        let mut uniform_share = 0.0;
-        for &t in tets {
+        let (mut count, mut uniform_share) = (0.0, 0.0);
+        for t in topo.tets_of_edge([a, b]) {
+            count += 1.0;
             let m = material_of_tet(t as usize);
             k += match m.stiffness {
                 SpringStiffness::Uniform { newtons_per_metre } => {
