@@ -79,30 +79,42 @@ pub enum CutError {
 /// stroke's cut that drifted off the plane still count as on it). The two halves of a large
 /// mesh are scanned side by side.
 fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
+    // A tet's bounds miss the polygon's inflated bounds exactly when all four of its vertices
+    // lie beyond the same side of them (the tet's least coordinate above the box's greatest,
+    // or its greatest below the box's least): each vertex's sides, one bit each, are found
+    // once, and a tet is passed over when its vertices' bits share one.
+    let (lo, hi) = polygon.bounds();
+    let beyond: Vec<u8> = x
+        .iter()
+        .map(|q| (0..3).fold(0u8, |m, k| m | (u8::from(q[k] > hi[k] + margin) << k) | (u8::from(q[k] < lo[k] - margin) << (k + 3))))
+        .collect();
     let (count, half) = (mesh_tets.len(), mesh_tets.len() / 2);
     let (mut first, second) = crate::solver::system::join(
         count >= PARALLEL_MIN_TETS,
-        || candidates_in(mesh_tets, 0..half, x, polygon, margin, near),
-        || candidates_in(mesh_tets, half..count, x, polygon, margin, near),
+        || candidates_in(mesh_tets, 0..half, x, &beyond, polygon, margin, near),
+        || candidates_in(mesh_tets, half..count, x, &beyond, polygon, margin, near),
     );
     first.extend(second);
     first
 }
 
-/// [`candidates`] among the tets `range`.
-fn candidates_in(mesh_tets: &[[u32; 4]], range: std::ops::Range<usize>, x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
-    let (lo, hi) = polygon.bounds();
+/// [`candidates`] among the tets `range`, `beyond` the sides of the bounds each vertex lies
+/// beyond.
+fn candidates_in(
+    mesh_tets: &[[u32; 4]],
+    range: std::ops::Range<usize>,
+    x: &[Point3],
+    beyond: &[u8],
+    polygon: &CutPolygon,
+    margin: f64,
+    near: f64,
+) -> Vec<u32> {
     let mut out = Vec::new();
     for (t, tet) in mesh_tets.iter().enumerate().skip(range.start).take(range.len()) {
-        let p = tet.map(|v| x[v as usize]);
-        let (mut tlo, mut thi) = (p[0], p[0]);
-        for q in &p[1..] {
-            tlo = tlo.inf(q);
-            thi = thi.sup(q);
-        }
-        if (0..3).any(|k| tlo[k] > hi[k] + margin || thi[k] < lo[k] - margin) {
+        if tet.iter().fold(u8::MAX, |m, &v| m & beyond[v as usize]) != 0 {
             continue;
         }
+        let p = tet.map(|v| x[v as usize]);
         let s = p.map(|q| polygon.signed_distance(&q));
         let (smin, smax) = s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
         let reach = if near > 0.0 {

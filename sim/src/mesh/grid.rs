@@ -34,6 +34,29 @@ impl PointGrid {
         grid
     }
 
+    /// Bins the points of `points` from [`Self::len`] on (those added since), where they are
+    /// now; the others keep their binned positions.
+    pub fn extend(&mut self, points: &[Point3]) {
+        let from = self.binned.len();
+        if points.len() <= from {
+            return;
+        }
+        self.binned.extend_from_slice(&points[from..]);
+        let mut added: Vec<(u64, u32)> = (from..points.len()).map(|i| (key(self.cell_of(&points[i])), i as u32)).collect();
+        added.sort_unstable();
+        let old = std::mem::take(&mut self.entries);
+        let mut merged = Vec::with_capacity(old.len() + added.len());
+        let mut rest = old.as_slice();
+        for a in added {
+            let at = rest.partition_point(|e| *e < a);
+            merged.extend_from_slice(&rest[..at]);
+            merged.push(a);
+            rest = &rest[at..];
+        }
+        merged.extend_from_slice(rest);
+        self.entries = merged;
+    }
+
     /// Side of a cell, m.
     pub fn cell_m(&self) -> f64 {
         self.cell_m
@@ -112,5 +135,18 @@ mod tests {
         let mut none = 0;
         grid.for_each_within(&Point3::new(f64::NAN, 0.0, 0.0), 1.0, |_| none += 1);
         assert_eq!(none, 0);
+    }
+
+    #[test]
+    fn extending_a_grid_bins_the_new_points_as_building_it_anew_would() {
+        let points: Vec<Point3> =
+            (0..3000).map(|i| Point3::new((i as f64 * 0.618).sin() * 0.05, (i as f64 * 0.377).cos() * 0.04, (i as f64 * 0.131).sin() * 0.02)).collect();
+        let mut grid = PointGrid::build(&points[..2000], 0.006);
+        grid.extend(&points[..1500]); // nothing new: unchanged
+        assert_eq!(grid.len(), 2000);
+        grid.extend(&points);
+        let built = PointGrid::build(&points, 0.006);
+        assert_eq!(grid.entries, built.entries);
+        assert_eq!(grid.binned, built.binned);
     }
 }

@@ -170,11 +170,26 @@ impl ActiveRegion {
         self.awake_count
     }
 
-    /// Call after the model changed (a cut): new particles wake; the adjacency, the grid and
-    /// the sub-body are rebuilt at the next step.
-    pub fn model_changed(&mut self, n: usize) {
+    /// Call after the model changed (a cut), with the `positions` after it: new particles
+    /// wake; the adjacency and the sub-body are rebuilt at the next step. The grid bins the new
+    /// particles and widens its queries by how far any particle now lies from where it was
+    /// binned (a cut moves vertices onto its plane), so they find the same particles a grid
+    /// built anew would.
+    pub fn model_changed(&mut self, positions: &[Point3]) {
         if self.awake.is_empty() {
             return; // not started: everything wakes at the first localised step
+        }
+        let n = positions.len();
+        if let Some(grid) = &mut self.grid {
+            let old = grid.len().min(n);
+            let moved = (0..old).map(|i| (positions[i] - grid.binned_position(i)).norm()).fold(0.0, f64::max);
+            // (a NaN position: rebinned, as the step would)
+            if moved.is_nan() || old < grid.len() {
+                self.grid = None;
+            } else {
+                self.grid_slack_m = self.grid_slack_m.max(moved);
+                grid.extend(positions);
+            }
         }
         let old = self.awake.len().min(n);
         self.awake.resize(n, false);
@@ -186,7 +201,6 @@ impl ActiveRegion {
         }
         self.to_wake.extend(old as u32..n as u32);
         self.springs_at = None;
-        self.grid = None;
         self.dirty = true;
     }
 
@@ -287,7 +301,7 @@ impl ActiveRegion {
             self.dirty = true;
         }
         self.ensure_adjacency(model);
-        if self.grid.is_none() {
+        if self.grid.is_none() || self.grid_slack_m > 0.5 * settings.focus_radius_m {
             self.grid = Some(PointGrid::build(&state.positions, settings.focus_radius_m));
             self.grid_slack_m = 0.0;
         }

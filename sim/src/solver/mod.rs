@@ -219,7 +219,7 @@ impl Simulation {
         self.explicit_substeps = None;
         let n = self.model.vertex_count();
         self.external_forces.resize(n, Vector3::zeros());
-        self.region.model_changed(n);
+        self.region.model_changed(&self.state.positions);
     }
 
     /// External forces for the next steps (N per particle). Prefer
