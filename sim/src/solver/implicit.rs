@@ -42,6 +42,10 @@ pub struct ImplicitScratch {
     coef_by_spring: Vec<[f64; 4]>,
     spill_rhs: Vec<Vector3>,
     spill_diag: Vec<Sym3>,
+    /// For the next step only: where `guess_known[i]`, CG starts from `guess[i]` instead of
+    /// the extrapolation (the history still advances as usual).
+    pub(crate) guess: Vec<Vector3>,
+    pub(crate) guess_known: Vec<bool>,
 }
 
 impl ImplicitScratch {
@@ -78,8 +82,19 @@ fn step_on(
     split: bool,
 ) -> CgReport {
     let n = model.vertex_count();
-    let ImplicitScratch { system: sys, rhs, dv, dv_previous: [p1, p2, p3], history, cg: cg_scratch, coef_by_spring, spill_rhs, spill_diag } =
-        scratch;
+    let ImplicitScratch {
+        system: sys,
+        rhs,
+        dv,
+        dv_previous: [p1, p2, p3],
+        history,
+        cg: cg_scratch,
+        coef_by_spring,
+        spill_rhs,
+        spill_diag,
+        guess,
+        guess_known,
+    } = scratch;
     for buf in [&mut *rhs, &mut *dv, &mut *p1, &mut *p2, &mut *p3] {
         buf.resize(n, Vector3::zeros());
     }
@@ -151,6 +166,12 @@ fn step_on(
     }
     sys.prepare(model);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
+    if guess_known.len() == n && guess.len() == n {
+        for ((d, g), _) in dv.iter_mut().zip(guess.iter()).zip(guess_known.iter()).filter(|(_, k)| **k) {
+            *d = *g;
+        }
+    }
+    guess_known.clear();
     let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
     apply_velocity_change(model, state, dv, h);
@@ -369,5 +390,34 @@ mod tests {
         let differ = whole.iter().zip(&one).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
         assert!(moved > 1e-7, "the press moved the wall {moved} m");
         assert!(differ > 0.0 && differ <= 1e-6 * moved, "split and whole differ by {differ} m of {moved} m");
+    }
+
+    #[test]
+    fn a_guess_starts_the_solve_where_it_is_known_and_only_for_one_step() {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(2_000) }).expect("built-in scene");
+        let particles = scene.model.particles();
+        let n = particles.vertex_count();
+        let external = vec![Vector3::new(0.0, 0.0, -0.01); n];
+        let settings = SolverSettings::default();
+        let cg = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 500 };
+        let from_rest = State::at_rest(&scene.model.mesh);
+        let (mut state, mut scratch) = (from_rest.clone(), ImplicitScratch::default());
+        let plain = step(&particles, &mut state, &external, settings.time_step_s, cg, &mut scratch);
+        assert!(plain.converged && plain.iterations > 5, "{plain:?}");
+        let solution = scratch.dv.clone();
+        // the same step again, started from its solution: nothing left to solve
+        let (mut again, mut guessed) = (from_rest.clone(), ImplicitScratch::default());
+        guessed.guess = solution.clone();
+        guessed.guess_known = vec![true; n];
+        let report = step(&particles, &mut again, &external, settings.time_step_s, cg, &mut guessed);
+        assert!(report.converged && report.iterations <= 1, "{report:?}");
+        assert!(again.positions.iter().zip(&state.positions).all(|(a, b)| (a - b).norm() <= 1e-12));
+        assert!(guessed.guess_known.is_empty(), "one step only");
+        // known nowhere: the extrapolation (from rest: zero), as without a guess
+        let (mut third, mut unknown) = (from_rest, ImplicitScratch::default());
+        unknown.guess = solution;
+        unknown.guess_known = vec![false; n];
+        let report = step(&particles, &mut third, &external, settings.time_step_s, cg, &mut unknown);
+        assert_eq!(report.iterations, plain.iterations);
     }
 }

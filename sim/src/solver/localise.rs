@@ -160,6 +160,8 @@ pub(crate) struct ActiveRegion {
     history: [Vec<Vector3>; 4],
     /// The sub-body's warm start before this step's first solve (restored for a re-solve).
     saved_history: [Vec<Vector3>; 4],
+    /// A growth round's solution by global particle, to start the next round from.
+    round_dv: Vec<(u32, Vector3)>,
     saved_history_count: usize,
 }
 
@@ -350,10 +352,26 @@ impl ActiveRegion {
             if grew == 0 || round == settings.max_growth_rounds {
                 break;
             }
+            // the next round starts from this one's solution where it had one (the woken
+            // border from the extrapolation): it differs from it mostly near that border
+            self.round_dv.clear();
+            let solved = self.global_of.iter().zip(&self.held).zip(&self.implicit.dv);
+            self.round_dv.extend(solved.filter(|((_, held), _)| !**held).map(|((&g, _), &d)| (g, d)));
             self.restore_history();
             self.apply_wakes(model);
             self.rebuild(model);
             self.save_history();
+            let m = self.global_of.len();
+            let ImplicitScratch { guess, guess_known, .. } = &mut self.implicit;
+            guess.clear();
+            guess.resize(m, Vector3::zeros());
+            guess_known.clear();
+            guess_known.resize(m, false);
+            for &(g, d) in &self.round_dv {
+                if let Some(l) = self.local_of.get(g as usize).filter(|&&l| l != NONE) {
+                    (guess[*l as usize], guess_known[*l as usize]) = (d, true);
+                }
+            }
         }
 
         // Scatter the awake particles.
