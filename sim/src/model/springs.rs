@@ -29,8 +29,13 @@ impl SpringSet {
     /// `i`, ascending).
     pub fn by_particle(&self, particle_count: usize) -> crate::mesh::Csr {
         let mut csr = crate::mesh::Csr::default();
-        csr.refill(particle_count, || self.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]));
+        self.by_particle_into(particle_count, &mut csr);
         csr
+    }
+
+    /// [`Self::by_particle`] into `csr`, in the allocations it holds.
+    pub(crate) fn by_particle_into(&self, particle_count: usize, csr: &mut crate::mesh::Csr) {
+        csr.refill(particle_count, || self.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]));
     }
 
     /// An empty set with room for `n` springs.

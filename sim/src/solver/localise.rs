@@ -138,6 +138,8 @@ pub(crate) struct ActiveRegion {
     to_sleep: Vec<u32>,
     /// The springs at each particle (rebuilt when the model changes).
     springs_at: Option<Csr>,
+    /// Whether the springs changed since `springs_at` was built.
+    adjacency_stale: bool,
     /// `K_i`, the sum of the spring constants at each particle (with the adjacency).
     stiffness_at: Vec<f64>,
     /// Positions binned for the focus query, and how far an awake particle has moved since.
@@ -202,7 +204,7 @@ impl ActiveRegion {
             h.resize(n, Vector3::zeros());
         }
         self.to_wake.extend(old as u32..n as u32);
-        self.springs_at = None;
+        self.adjacency_stale = true;
         self.dirty = true;
     }
 
@@ -311,12 +313,15 @@ impl ActiveRegion {
 
     /// The springs at each particle and their summed constants, unless known.
     fn ensure_adjacency(&mut self, model: &Model) {
-        if self.springs_at.is_none() {
+        if self.springs_at.is_none() || self.adjacency_stale {
+            // (into the buffers of the last: a cut changes the springs every few steps)
             let n = model.vertex_count();
-            let csr = model.springs.by_particle(n);
+            let csr = self.springs_at.get_or_insert_with(Csr::default);
+            model.springs.by_particle_into(n, csr);
             let stiffness = &model.springs.stiffness;
-            self.stiffness_at = (0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum()).collect();
-            self.springs_at = Some(csr);
+            self.stiffness_at.clear();
+            self.stiffness_at.extend((0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum::<f64>()));
+            self.adjacency_stale = false;
         }
     }
 
