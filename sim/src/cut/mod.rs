@@ -325,7 +325,7 @@ pub fn cut_remembering(
     // both stay whole) is given up, and the split redone.
     let old_tet_count = mesh.tet_count();
     let topo = mesh.topology();
-    let star_of = |on_cut: &BTreeSet<u32>| -> separate::Stars {
+    let star_of = |tets: &[[u32; 4]], on_cut: &BTreeSet<u32>| -> separate::Stars {
         let mut stars: separate::Stars = BTreeMap::new();
         for &v in on_cut {
             let star = stars.entry(v).or_default();
@@ -349,31 +349,36 @@ pub fn cut_remembering(
         stars
     };
     let base_vertices = x.len();
-    let mut split_tets = Cow::Borrowed(&tets[..]);
     let mut splits = Vec::new();
     let mut relinked = BTreeSet::new();
+    // the relinked tets as they were, to undo a round
+    let mut undo: Vec<(u32, [u32; 4])> = Vec::new();
     let mut on_cut = BTreeSet::new();
     for _ in 0..64 {
         on_cut = cut_faces.iter().flatten().copied().collect();
-        let stars = star_of(&on_cut);
+        let stars = star_of(&tets, &on_cut);
         splits = separate::star_components(&tets, &stars, &cut_faces);
         relinked.clear();
+        undo.clear();
         let mut original_of: Vec<u32> = Vec::with_capacity(splits.len());
         for (k, (v, moved_tets)) in splits.iter().enumerate() {
             let copy = (base_vertices + k) as u32;
             original_of.push(*v);
             for &t in moved_tets {
-                for w in &mut split_tets.to_mut()[t as usize] {
+                let tet = &mut tets.to_mut()[t as usize];
+                if relinked.insert(t) {
+                    undo.push((t, *tet));
+                }
+                for w in tet {
                     if *w == *v {
                         *w = copy;
                     }
                 }
-                relinked.insert(t);
             }
         }
         let original = |v: u32| if (v as usize) < base_vertices { v } else { original_of[v as usize - base_vertices] };
         let local: BTreeSet<u32> = stars.values().flatten().copied().collect();
-        let pinched = separate::pinched_edges(&split_tets, &local, &|v| on_cut.contains(&original(v)));
+        let pinched = separate::pinched_edges(&tets, &local, &|v| on_cut.contains(&original(v)));
         if pinched.is_empty() {
             break;
         }
@@ -385,8 +390,8 @@ pub fn cut_remembering(
             break; // not ours to fix: the invariant checks will report it
         }
         // undo this round's relabelling and try again without the pinching faces
-        for &t in &local {
-            split_tets.to_mut()[t as usize] = tets[t as usize];
+        for &(t, tet) in &undo {
+            tets.to_mut()[t as usize] = tet;
         }
         cut_faces = kept;
     }
@@ -403,10 +408,7 @@ pub fn cut_remembering(
         held.push(held[*v as usize]);
         event.vertices_split.push(SplitVertex { original: *v, copy });
     }
-    let tets = match split_tets {
-        Cow::Owned(relinked) => relinked,
-        Cow::Borrowed(_) => tets.into_owned(),
-    };
+    let tets = tets.into_owned();
     event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
 
     // Commit: new mesh, rebuilt model, extended state.

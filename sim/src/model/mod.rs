@@ -204,7 +204,8 @@ impl Model {
     /// vertices and their neighbours, and the springs on their edges are derived again;
     /// everything else is carried over. Finite elements are rebuilt whole.
     pub fn rebuild_local(&mut self, mesh: TetMesh, held: Vec<bool>, dirty: &[u32], changed: &[u32]) -> Result<(), ModelError> {
-        if self.fem.is_some() {
+        // (finite elements, or held flags not one per vertex: the whole rebuild, which checks)
+        if self.fem.is_some() || held.len() != mesh.vertex_count() {
             return self.rebuild(mesh, held);
         }
         let old_mesh = &self.mesh;
@@ -248,10 +249,11 @@ impl Model {
         }
         let mut inv_mass = self.inv_mass.clone();
         inv_mass.resize(n, 0.0);
-        for (v, ((inv, &m), &h)) in inv_mass.iter_mut().zip(&mass).zip(&held).enumerate() {
-            if v >= self.held.len() || reached.binary_search(&(v as u32)).is_ok() || h != self.held[v] {
-                *inv = if h { 0.0 } else { 1.0 / m };
-            }
+        // derived again where the mass or the held flag may have changed, and for new particles
+        let old_n = self.held.len().min(n);
+        let held_changed = (0..old_n).filter(|&v| held[v] != self.held[v]);
+        for v in reached.iter().map(|&v| v as usize).chain(held_changed).chain(old_n..n) {
+            inv_mass[v] = if held[v] { 0.0 } else { 1.0 / mass[v] };
         }
 
         // springs: derived again on the edges of the dirty tets and on the old edges that lost
