@@ -22,7 +22,7 @@ pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
 
-use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, Topology, dihedral_angles, edge_key, tet_signed_volume};
+use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, dihedral_angles, edge_key, sorted_pair, sorted_triple, tet_signed_volume};
 use crate::model::ModelError;
 use crate::solver::Simulation;
 use crate::{MeshError, Point3, Vector3};
@@ -264,7 +264,7 @@ pub fn cut_remembering(
         let mut split = [crate::mesh::NONE; 6];
         let (mut crossing, mut split_count) = (0, 0);
         for (e, &[i, j]) in TET_EDGES.iter().enumerate() {
-            let key = [verts[i].min(verts[j]), verts[i].max(verts[j])];
+            let key = edge_key(&verts, [i, j]);
             if let Some(cr) = class.crossings.get(&key) {
                 crossing += 1;
                 if cr.split {
@@ -282,7 +282,7 @@ pub fn cut_remembering(
             let face: Vec<u32> = (0..4).filter(|&l| signs[l] == 0).map(|l| verts[l]).collect();
             let c = Point3::from((x[face[0] as usize].coords + x[face[1] as usize].coords + x[face[2] as usize].coords) / 3.0);
             if polygon.contains_projection(&c, 1e-9 * polygon.scale) {
-                cut_faces.insert(pattern::sorted3([face[0], face[1], face[2]]));
+                cut_faces.insert(sorted_triple([face[0], face[1], face[2]]));
             }
         }
     }
@@ -382,7 +382,7 @@ pub fn cut_remembering(
         if pinched.is_empty() {
             break;
         }
-        let pinched: BTreeSet<[u32; 2]> = pinched.iter().map(|e| pattern::sorted2(original(e[0]), original(e[1]))).collect();
+        let pinched: BTreeSet<[u32; 2]> = pinched.iter().map(|e| sorted_pair(original(e[0]), original(e[1]))).collect();
         let before = cut_faces.len();
         let kept: BTreeSet<[u32; 3]> =
             cut_faces.iter().filter(|f| !pinched.iter().any(|e| f.contains(&e[0]) && f.contains(&e[1]))).copied().collect();
@@ -431,8 +431,8 @@ pub fn cut_remembering(
     let old_edges = (sim.model.springs.ends != mesh.topology().edges).then(|| sim.model.springs.ends.clone());
     if old_edges.is_none() {
         let (old, new) = (mesh.topology(), new_mesh.topology());
-        event.springs_removed = edges_not_in(mesh.tets(), &changed, new);
-        event.springs_added = edges_not_in(new_mesh.tets(), &dirty, old);
+        event.springs_removed = new.lacking_edges(mesh.tets(), &changed);
+        event.springs_added = old.lacking_edges(new_mesh.tets(), &dirty);
     }
     sim.model.rebuild_local(new_mesh, held, &dirty, &changed)?;
     if let Some(old_edges) = old_edges {
@@ -459,18 +459,6 @@ pub fn cut_remembering(
     Ok(event)
 }
 
-/// The edges of the tets `ids` of `tets` that `to` does not have, sorted.
-fn edges_not_in(tets: &[[u32; 4]], ids: &[u32], to: &Topology) -> Vec<[u32; 2]> {
-    let mut out: Vec<[u32; 2]> = ids
-        .iter()
-        .filter_map(|&t| tets.get(t as usize))
-        .flat_map(|tet| TET_EDGES.map(|l| edge_key(tet, l)))
-        .filter(|key| to.edges.binary_search(key).is_err())
-        .collect();
-    out.sort_unstable();
-    out.dedup();
-    out
-}
 
 /// The entries of `a` that are not in `b`, both sorted: one merge pass (a binary search per
 /// entry cost 10 ms per cut at 100k tets).

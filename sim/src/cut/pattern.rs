@@ -16,7 +16,7 @@
 //! as an input and refuses cyclic prisms; the caller chooses them (by the paper's mu or by the
 //! fixed smallest-vertex rule, which never makes a cycle).
 
-use crate::mesh::TET_EDGES;
+use crate::mesh::{TET_EDGES, sorted_pair, sorted_triple};
 
 /// Identifies a quadrilateral whose diagonal must be chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -38,7 +38,7 @@ pub struct Quad {
 impl Quad {
     /// The two possible diagonals, as sorted vertex pairs.
     pub fn diagonals(&self) -> [[u32; 2]; 2] {
-        [sorted2(self.ring[0], self.ring[2]), sorted2(self.ring[1], self.ring[3])]
+        [sorted_pair(self.ring[0], self.ring[2]), sorted_pair(self.ring[1], self.ring[3])]
     }
 
     /// The diagonal through the smallest vertex id (the fixed rule).
@@ -47,17 +47,6 @@ impl Quad {
         let [d0, d1] = self.diagonals();
         if d0.contains(&m) { d0 } else { d1 }
     }
-}
-
-#[inline]
-pub fn sorted2(a: u32, b: u32) -> [u32; 2] {
-    if a < b { [a, b] } else { [b, a] }
-}
-
-#[inline]
-pub fn sorted3(mut f: [u32; 3]) -> [u32; 3] {
-    f.sort_unstable();
-    f
 }
 
 /// A tetrahedron to be split: its vertices, their sides and the new vertex on each crossing
@@ -83,7 +72,7 @@ impl TetSplit {
     }
 
     fn face(&self, locals: [usize; 3]) -> QuadKey {
-        QuadKey::Face(sorted3(locals.map(|l| self.verts[l])))
+        QuadKey::Face(sorted_triple(locals.map(|l| self.verts[l])))
     }
 
     /// Local vertex indices grouped by side: (positive, negative, on the plane).
@@ -172,7 +161,7 @@ impl TetSplit {
                 out.tets.extend(prism([v(c), xac, xbc], [v(d), xad, xbd], [diag(2), diag(5), diag(3)])?);
                 let [s, t] = diag(4);
                 for o in quads[4].ring.into_iter().filter(|&w| w != s && w != t) {
-                    out.section.push(sorted3([s, t, o]));
+                    out.section.push(sorted_triple([s, t, o]));
                 }
             }
             (1, 2, 1) => {
@@ -180,7 +169,7 @@ impl TetSplit {
                 let (xab, xac) = (self.x(a, b), self.x(a, c));
                 out.tets.push([v(a), xab, xac, v(d)]);
                 let [s, t] = diag(0);
-                if sorted2(xab, v(c)) == [s, t] {
+                if sorted_pair(xab, v(c)) == [s, t] {
                     out.tets.push([v(d), xab, v(b), v(c)]);
                     out.tets.push([v(d), xab, v(c), xac]);
                 } else {
@@ -199,7 +188,7 @@ impl TetSplit {
             _ => return None,
         }
         for s in &mut out.section {
-            *s = sorted3(*s);
+            *s = sorted_triple(*s);
         }
         Some(out)
     }
@@ -213,9 +202,9 @@ pub fn prism(p: [u32; 3], q: [u32; 3], diag: [[u32; 2]; 3]) -> Option<[[u32; 4];
     let mut rising = [false; 3];
     for i in 0..3 {
         let j = (i + 1) % 3;
-        if diag[i] == sorted2(p[i], q[j]) {
+        if diag[i] == sorted_pair(p[i], q[j]) {
             rising[i] = true;
-        } else if diag[i] != sorted2(p[j], q[i]) {
+        } else if diag[i] != sorted_pair(p[j], q[i]) {
             return None;
         }
     }
@@ -260,8 +249,8 @@ mod tests {
     #[test]
     fn prism_refuses_cycles_and_splits_the_rest_into_three() {
         let (p, q) = ([0, 1, 2], [3, 4, 5]);
-        let up = |i: usize| sorted2(p[i], q[(i + 1) % 3]);
-        let down = |i: usize| sorted2(p[(i + 1) % 3], q[i]);
+        let up = |i: usize| sorted_pair(p[i], q[(i + 1) % 3]);
+        let down = |i: usize| sorted_pair(p[(i + 1) % 3], q[i]);
         assert!(prism(p, q, [up(0), up(1), up(2)]).is_none());
         assert!(prism(p, q, [down(0), down(1), down(2)]).is_none());
         let mut count = 0;

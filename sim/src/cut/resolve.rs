@@ -31,7 +31,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::CutPolygon;
-use crate::mesh::{TET_EDGES, TET_FACES, TetMesh, face_key, tet_signed_volume, tet_volume_gradients, triangle_normal};
+use crate::mesh::{TET_EDGES, TET_FACES, TetMesh, edge_key, face_key, tet_signed_volume, tet_volume_gradients, triangle_normal};
 use crate::{Point3, Vector3};
 
 /// A moved vertex keeps every tetrahedron around it at no less than this fraction of its
@@ -120,7 +120,7 @@ impl Resolver<'_> {
         for &t in self.candidates {
             let tet = self.mesh.tets()[t as usize];
             for [i, j] in TET_EDGES {
-                let (a, b) = (tet[i].min(tet[j]), tet[i].max(tet[j]));
+                let [a, b] = edge_key(&tet, [i, j]);
                 if c.crossings.contains_key(&[a, b]) || c.sign[&a] * c.sign[&b] >= 0 {
                     continue;
                 }
@@ -378,7 +378,7 @@ impl Resolver<'_> {
                 let tet = self.mesh.tets()[t as usize];
                 let edges: Vec<&Crossing> = TET_EDGES
                     .iter()
-                    .filter_map(|&[i, j]| c.crossings.get(&[tet[i].min(tet[j]), tet[i].max(tet[j])]))
+                    .filter_map(|&l| c.crossings.get(&edge_key(&tet, l)))
                     .collect();
                 let splits = edges.iter().filter(|e| e.split).count();
                 if splits == 0 || splits == edges.len() {

@@ -9,9 +9,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::mesh::TET_FACES;
-use crate::mesh::non_manifold_edges;
+use crate::mesh::{non_manifold_edges, sorted_triple};
 
-use super::pattern::sorted3;
 
 /// Stars of the vertices of the cut: for each, the ids of the tetrahedra around it, ascending.
 pub type Stars = BTreeMap<u32, Vec<u32>>;
@@ -31,7 +30,7 @@ pub fn star_components(tets: &[[u32; 4]], stars: &Stars, cut_faces: &BTreeSet<[u
             let tet = tets[t as usize];
             for f in TET_FACES {
                 if f.iter().any(|&k| tet[k] == v) {
-                    faces.push((sorted3(f.map(|k| tet[k])), si));
+                    faces.push((sorted_triple(f.map(|k| tet[k])), si));
                 }
             }
         }
@@ -75,7 +74,7 @@ pub fn pinched_edges(tets: &[[u32; 4]], local: &BTreeSet<u32>, on_cut: &dyn Fn(u
         for f in TET_FACES {
             let oriented = f.map(|k| tet[k]);
             if oriented.iter().any(|&v| on_cut(v)) {
-                faces.push((sorted3(oriented), oriented));
+                faces.push((sorted_triple(oriented), oriented));
             }
         }
     }

@@ -14,7 +14,7 @@ pub use geometry::{bounding_box, dihedral_angles, tet_signed_volume, tet_volume_
 pub use quality::QualityStats;
 pub(crate) use topology_update::PARALLEL_MIN_TETS;
 pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};
-pub(crate) use topology::{edge_key, face_key};
+pub(crate) use topology::{edge_key, face_key, sorted_pair, sorted_triple};
 pub use validate::ValidationReport;
 
 use crate::{MeshError, Point3};

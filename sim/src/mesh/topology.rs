@@ -109,9 +109,22 @@ fn common<'a>(a: &'a [u32], b: &'a [u32]) -> impl Iterator<Item = u32> + 'a {
     })
 }
 
+/// `[a, b]` ascending: the key of an edge whatever its direction.
+#[inline]
+pub(crate) fn sorted_pair(a: VertexId, b: VertexId) -> [VertexId; 2] {
+    if a < b { [a, b] } else { [b, a] }
+}
+
+/// `k` sorted ascending: the key of a face whatever its orientation.
+#[inline]
+pub(crate) fn sorted_triple(mut k: [VertexId; 3]) -> [VertexId; 3] {
+    k.sort_unstable();
+    k
+}
+
 /// The edge `[a, b]` with `a < b` of the local vertices `i`, `j` of `tet`.
 pub(crate) fn edge_key(tet: &[VertexId; 4], [i, j]: [usize; 2]) -> [VertexId; 2] {
-    [tet[i].min(tet[j]), tet[i].max(tet[j])]
+    sorted_pair(tet[i], tet[j])
 }
 
 /// The face opposite local vertex `l` of `tet` as a sorted vertex triple.
@@ -119,10 +132,23 @@ pub(crate) fn face_key(tet: &[VertexId; 4], l: usize) -> [VertexId; 3] {
     sorted_triple(TET_FACES[l].map(|i| tet[i]))
 }
 
-/// `k` sorted ascending: the key of a face whatever its orientation.
-pub(crate) fn sorted_triple(mut k: [VertexId; 3]) -> [VertexId; 3] {
-    k.sort_unstable();
-    k
+/// The keys of `tet`'s six edges, in the local order of [`TET_EDGES`].
+pub(super) fn tet_edge_keys(tet: &[VertexId; 4]) -> [[VertexId; 2]; 6] {
+    TET_EDGES.map(|l| edge_key(tet, l))
+}
+
+/// The keys of `tet`'s four faces, in the local order of [`TET_FACES`].
+pub(super) fn tet_face_keys(tet: &[VertexId; 4]) -> [[VertexId; 3]; 4] {
+    std::array::from_fn(|l| face_key(tet, l))
+}
+
+/// The sorted, deduplicated keys `keys_of` gives for the tets `ids` of `tets` (ids out of range
+/// skipped).
+pub(super) fn keys_of_tets<K: Ord, const L: usize>(tets: &[[VertexId; 4]], ids: &[u32], keys_of: impl Fn(&[VertexId; 4]) -> [K; L]) -> Vec<K> {
+    let mut keys: Vec<K> = ids.iter().filter_map(|&t| tets.get(t as usize)).flat_map(keys_of).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    keys
 }
 
 /// Sorts `keys` (ascending, as `sort_unstable` would) by a counting sort on their first
@@ -158,13 +184,13 @@ pub(crate) fn oriented_face(tet: &[VertexId; 4], l: usize) -> [VertexId; 3] {
 impl Topology {
     /// Derives the topology of `tets` over `vertex_count` vertices.
     pub fn build(vertex_count: usize, tets: &[[VertexId; 4]]) -> Self {
-        let mut edges: Vec<[VertexId; 2]> = tets.iter().flat_map(|tet| TET_EDGES.map(|l| edge_key(tet, l))).collect();
+        let mut edges: Vec<[VertexId; 2]> = tets.iter().flat_map(tet_edge_keys).collect();
         sort_by_first_vertex(&mut edges, vertex_count, |k| k[0]);
         edges.dedup();
 
         let mut faces: Vec<([u32; 3], u32, u8)> = Vec::with_capacity(tets.len() * 4);
         for (t, tet) in tets.iter().enumerate() {
-            faces.extend((0..4).map(|l| (face_key(tet, l), t as u32, l as u8)));
+            faces.extend(tet_face_keys(tet).into_iter().zip(0..).map(|(key, l)| (key, t as u32, l)));
         }
         sort_by_first_vertex(&mut faces, vertex_count, |k| k.0[0]);
         let (mut boundary, mut overshared_faces) = (Vec::new(), Vec::new());
@@ -199,13 +225,21 @@ impl Topology {
 
     /// The id (place in [`Self::edges`]) of the edge between `a` and `b`, if there is one.
     pub fn edge_id(&self, a: VertexId, b: VertexId) -> Option<u32> {
-        self.edges.binary_search(&[a.min(b), a.max(b)]).ok().map(|e| e as u32)
+        self.edges.binary_search(&sorted_pair(a, b)).ok().map(|e| e as u32)
     }
 
     /// The edge ids of `tet`'s six edges, in the local order of [`TET_EDGES`] ([`NONE`] for an
     /// edge this topology does not have: `tet` is not one of its tets).
     pub fn tet_edge_ids(&self, tet: &[VertexId; 4]) -> [u32; 6] {
-        TET_EDGES.map(|[i, j]| self.edge_id(tet[i], tet[j]).unwrap_or(NONE))
+        tet_edge_keys(tet).map(|[a, b]| self.edge_id(a, b).unwrap_or(NONE))
+    }
+
+    /// The edges of the tets `ids` of `tets` (ids out of range skipped) that this topology
+    /// lacks, sorted.
+    pub(crate) fn lacking_edges(&self, tets: &[[VertexId; 4]], ids: &[u32]) -> Vec<[VertexId; 2]> {
+        let mut edges = keys_of_tets(tets, ids, tet_edge_keys);
+        edges.retain(|e| self.edges.binary_search(e).is_err());
+        edges
     }
 
     /// Vertices that lie on the boundary surface, ascending.

@@ -4,7 +4,7 @@
 //! vertices the changed tets touch are merged again, the edges and the boundary faces those
 //! tets had or have are looked up in the new rows, and everything between is copied whole.
 
-use super::topology::{Csr, TET_EDGES, Topology, edge_key, face_key, oriented_face, sorted_triple};
+use super::topology::{Csr, Topology, keys_of_tets, oriented_face, sorted_triple, tet_edge_keys, tet_face_keys};
 use super::VertexId;
 
 /// From this many tets on, the passes of a cut over the whole mesh run on two threads
@@ -50,15 +50,6 @@ fn merge_ascending(out: &mut Vec<u32>, kept: impl Iterator<Item = u32>, new: imp
     out.extend(kept);
 }
 
-/// The sorted, deduplicated keys `keys_of` gives for the tets `ids` of `tets` (ids out of range
-/// skipped).
-fn keys_of_tets<K: Ord, const L: usize>(tets: &[[VertexId; 4]], ids: &[u32], keys_of: impl Fn(&[VertexId; 4]) -> [K; L]) -> Vec<K> {
-    let mut keys: Vec<K> = ids.iter().filter_map(|&t| tets.get(t as usize)).flat_map(keys_of).collect();
-    keys.sort_unstable();
-    keys.dedup();
-    keys
-}
-
 impl Topology {
     /// The topology of `tets` over `vertex_count` vertices, given this topology of
     /// `old_tets` and the tets that differ: `changed` (ascending ids below `old_tets.len()`
@@ -85,18 +76,15 @@ impl Topology {
         // the edges the changed tets had and no tet has now, and those the dirty tets have and
         // no tet had
         let edges = || {
-            let edge_keys = |tet: &[VertexId; 4]| TET_EDGES.map(|l| edge_key(tet, l));
-            let mut removed = keys_of_tets(old_tets, changed, edge_keys);
+            let mut removed = keys_of_tets(old_tets, changed, tet_edge_keys);
             removed.retain(|&e| new.tets_of_edge(e).next().is_none());
-            let mut added = keys_of_tets(tets, &dirty, edge_keys);
-            added.retain(|e| self.edges.binary_search(e).is_err());
+            let added = self.lacking_edges(tets, &dirty);
             merge_runs(&self.edges, &removed, &added, |e| *e)
         };
         // the faces the changed tets had or the dirty tets have: boundary where one tet has it
         let boundary = || {
-            let face_keys = |tet: &[VertexId; 4]| [0, 1, 2, 3].map(|l| face_key(tet, l));
-            let mut faces = keys_of_tets(old_tets, changed, face_keys);
-            faces.extend(keys_of_tets(tets, &dirty, face_keys));
+            let mut faces = keys_of_tets(old_tets, changed, tet_face_keys);
+            faces.extend(keys_of_tets(tets, &dirty, tet_face_keys));
             faces.sort_unstable();
             faces.dedup();
             let mut added = Vec::new();

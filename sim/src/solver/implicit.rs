@@ -42,10 +42,9 @@ pub struct ImplicitScratch {
     coef_by_spring: Vec<[f64; 4]>,
     spill_rhs: Vec<Vector3>,
     spill_diag: Vec<Sym3>,
-    /// For the next step only: where `guess_known[i]`, CG starts from `guess[i]` instead of
-    /// the extrapolation (the history still advances as usual).
-    pub(crate) guess: Vec<Vector3>,
-    pub(crate) guess_known: Vec<bool>,
+    /// For the next step only: where `guess[i]` is known, CG starts from it instead of the
+    /// extrapolation (the history still advances as usual).
+    pub(crate) guess: Vec<Option<Vector3>>,
 }
 
 impl ImplicitScratch {
@@ -93,7 +92,6 @@ fn step_on(
         spill_rhs,
         spill_diag,
         guess,
-        guess_known,
     } = scratch;
     for buf in [&mut *rhs, &mut *dv, &mut *p1, &mut *p2, &mut *p3] {
         buf.resize(n, Vector3::zeros());
@@ -166,12 +164,14 @@ fn step_on(
     }
     sys.prepare(model);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
-    if guess_known.len() == n && guess.len() == n {
-        for ((d, g), _) in dv.iter_mut().zip(guess.iter()).zip(guess_known.iter()).filter(|(_, k)| **k) {
-            *d = *g;
+    if guess.len() == n {
+        for (d, g) in dv.iter_mut().zip(guess.iter()) {
+            if let Some(g) = g {
+                *d = *g;
+            }
         }
     }
-    guess_known.clear();
+    guess.clear();
     let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
     let report = system::solve(sys, model, rhs, dv, cg, cg_scratch);
     apply_velocity_change(model, state, dv, h);
@@ -407,16 +407,14 @@ mod tests {
         let solution = scratch.dv.clone();
         // the same step again, started from its solution: nothing left to solve
         let (mut again, mut guessed) = (from_rest.clone(), ImplicitScratch::default());
-        guessed.guess = solution.clone();
-        guessed.guess_known = vec![true; n];
+        guessed.guess = solution.iter().copied().map(Some).collect();
         let report = step(&particles, &mut again, &external, settings.time_step_s, cg, &mut guessed);
         assert!(report.converged && report.iterations <= 1, "{report:?}");
         assert!(again.positions.iter().zip(&state.positions).all(|(a, b)| (a - b).norm() <= 1e-12));
-        assert!(guessed.guess_known.is_empty(), "one step only");
+        assert!(guessed.guess.is_empty(), "one step only");
         // known nowhere: the extrapolation (from rest: zero), as without a guess
         let (mut third, mut unknown) = (from_rest, ImplicitScratch::default());
-        unknown.guess = solution;
-        unknown.guess_known = vec![false; n];
+        unknown.guess = vec![None; n];
         let report = step(&particles, &mut third, &external, settings.time_step_s, cg, &mut unknown);
         assert_eq!(report.iterations, plain.iterations);
     }

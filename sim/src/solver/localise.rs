@@ -367,14 +367,12 @@ impl ActiveRegion {
             self.rebuild(model);
             self.save_history();
             let m = self.global_of.len();
-            let ImplicitScratch { guess, guess_known, .. } = &mut self.implicit;
+            let guess = &mut self.implicit.guess;
             guess.clear();
-            guess.resize(m, Vector3::zeros());
-            guess_known.clear();
-            guess_known.resize(m, false);
+            guess.resize(m, None);
             for &(g, d) in &self.round_dv {
-                if let Some(l) = self.local_of.get(g as usize).filter(|&&l| l != NONE) {
-                    (guess[*l as usize], guess_known[*l as usize]) = (d, true);
+                if let Some(&l) = self.local_of.get(g as usize).filter(|&&l| l != NONE) {
+                    guess[l as usize] = Some(d);
                 }
             }
         }
