@@ -29,6 +29,7 @@ use crate::Vector3;
 use crate::model::Particles;
 
 use super::dissection::{DissectionScratch, dissection_order_into};
+use super::span::SPAN;
 
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
 /// on one, in the same order, with the same result). A half sweep of the 10k-tet chest wall
@@ -308,14 +309,16 @@ pub fn block_matrix(c: &[f64; 4]) -> Sym3 {
 
 impl SpringSystem {
     /// Sizes the block storage for the springs of `model` (the layout is rebuilt only when the
-    /// springs changed).
-    pub fn begin(&mut self, model: &Particles<'_>) {
+    /// springs changed). Returns whether they changed.
+    pub fn begin(&mut self, model: &Particles<'_>) -> bool {
         let n = model.vertex_count();
         let ends = &model.springs.ends;
-        if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
+        let changed = self.layout.ends != *ends || self.layout.start.len() != n + 1;
+        if changed {
             self.layout.build(n, ends);
         }
         self.coef.resize(ends.len(), [0.0; 4]);
+        changed
     }
 
     /// For assembling in one pass: the slot of each spring (after [`Self::begin`]), the block
@@ -437,23 +440,23 @@ impl SpringSystem {
 
     /// `y = A p` with held rows zeroed, both by rank: the halves side by side when `parallel`
     /// (the second's products with the separator gathered in `spill` first), then the
-    /// separator; the same bits either way.
-    fn apply_ranked(&self, p: &[Vector3], y: &mut [Vector3], spill: &mut Vec<Vector3>, parallel: bool) {
+    /// separator; the same bits either way. `p` may hold one vector or several ([`Lanes`]).
+    fn apply_ranked<T: Lanes>(&self, p: &[T], y: &mut [T], spill: &mut Vec<T>, parallel: bool) {
         let n = self.mass.len();
         let (p, y) = (&p[..n], &mut y[..n]);
         for ((y, p), &m) in y.iter_mut().zip(p).zip(&self.mass) {
-            *y = p * m;
+            *y = p.scaled(m);
         }
         let [h, s] = self.layout.halves;
         spill.clear();
-        spill.resize(n - s, Vector3::zeros());
+        spill.resize(n - s, T::ZERO);
         let (y1, y2, y_s) = split3(y, h, s);
         join(parallel, || self.apply_part(p, 0, y1, y_s), || self.apply_part(p, h, y2, spill));
-        y_s.iter_mut().zip(spill.iter()).for_each(|(a, v)| *a += v);
+        y_s.iter_mut().zip(spill.iter()).for_each(|(a, v)| a.add(*v));
         self.apply_part(p, s, y_s, &mut []);
         for (y, &h) in y.iter_mut().zip(&self.held) {
             if h {
-                *y = Vector3::zeros();
+                *y = T::ZERO;
             }
         }
     }
@@ -462,24 +465,159 @@ impl SpringSystem {
     /// added to `own` or, beyond it, to the separator's `spill`. The products on the first
     /// particle are summed in a register and stored once per particle; the summation order is
     /// fixed, so results stay deterministic.
-    fn apply_part(&self, p: &[Vector3], lo: usize, own: &mut [Vector3], spill: &mut [Vector3]) {
+    fn apply_part<T: Lanes>(&self, p: &[T], lo: usize, own: &mut [T], spill: &mut [T]) {
         let (hi, s) = (lo + own.len(), self.layout.halves[1]);
         let (start, other) = (&self.layout.start, &self.layout.other);
         for k in lo..hi {
             let slots = start[k]..start[k + 1];
             let pk = p[k];
-            let mut yk = Vector3::zeros();
+            let mut yk = T::ZERO;
             for (&o, c) in other[slots.clone()].iter().zip(&self.coef[slots]) {
                 let o = o as usize;
-                let w = block_mul(c, &(pk - p[o]));
-                yk += w;
+                let w = pk.block_mul_difference(c, p[o]);
+                yk.add(w);
                 if o < hi {
-                    own[o - lo] -= w;
+                    own[o - lo].sub(w);
                 } else {
-                    spill[o - s] -= w;
+                    spill[o - s].sub(w);
                 }
             }
-            own[k - lo] += yk;
+            own[k - lo].add(yk);
+        }
+    }
+
+    /// The start of a solve projected onto the span of `span` (by rank, held entries zero;
+    /// see [`super::span`]): `x = U c` and its residual `r = b - A x = b - (A U) c` (held
+    /// entries zero), whose norm this returns. The Gram matrix and `U^T b` are summed over the
+    /// two halves of the ranks, side by side when `parallel` (the same bits either way).
+    fn project_start(&self, span: &[SpanEntries], b: &[Vector3], x: &mut [Vector3], r: &mut [Vector3], scratch: &mut SpanScratch, parallel: bool) -> f64 {
+        let n = b.len();
+        let SpanScratch { y, spill } = scratch;
+        y.resize(n, SpanEntries::ZERO);
+        self.apply_ranked(span, y, spill, parallel);
+        let sums = |k0: usize, k1: usize| {
+            let (mut g, mut f) = ([[0.0; SPAN]; SPAN], [0.0; SPAN]);
+            for k in k0..k1 {
+                let (u, y) = (&span[k], &y[k]);
+                for i in 0..SPAN {
+                    f[i] += u.get(i).dot(&b[k]);
+                    for j in i..SPAN {
+                        g[i][j] += u.get(i).dot(&y.get(j));
+                    }
+                }
+            }
+            (g, f)
+        };
+        let m = n / 2;
+        let ((g1, f1), (g2, f2)) = join(parallel, || sums(0, m), || sums(m, n));
+        let g = std::array::from_fn(|i| {
+            std::array::from_fn(|j| {
+                let (i, j) = (i.min(j), i.max(j));
+                g1[i][j] + g2[i][j]
+            })
+        });
+        let f = std::array::from_fn(|i| f1[i] + f2[i]);
+        let c = super::span::coefficients(&g, &f);
+        let mut rr = 0.0;
+        for k in 0..n {
+            x[k] = span[k].combine(&c);
+            r[k] = if self.held[k] { Vector3::zeros() } else { b[k] - y[k].combine(&c) };
+            rr += r[k].norm_squared();
+        }
+        rr.sqrt()
+    }
+}
+
+/// A particle's entries of one vector or of several multiplied by the matrix together (the
+/// springs' blocks read once for all).
+trait Lanes: Copy + Send + Sync {
+    const ZERO: Self;
+    fn scaled(self, m: f64) -> Self;
+    /// `B (self - other)` for the stored block `c`.
+    fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self;
+    fn add(&mut self, v: Self);
+    fn sub(&mut self, v: Self);
+}
+
+impl Lanes for Vector3 {
+    const ZERO: Self = Vector3::new(0.0, 0.0, 0.0);
+    #[inline(always)]
+    fn scaled(self, m: f64) -> Self {
+        self * m
+    }
+    #[inline(always)]
+    fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self {
+        block_mul(c, &(self - other))
+    }
+    #[inline(always)]
+    fn add(&mut self, v: Self) {
+        *self += v;
+    }
+    #[inline(always)]
+    fn sub(&mut self, v: Self) {
+        *self -= v;
+    }
+}
+
+/// The entries of [`SPAN`] vectors at one particle, by coordinate (`x[j]` of vector `j`), so
+/// that the products of the four run in the same vector instructions.
+#[derive(Debug, Clone, Copy, Default)]
+struct SpanEntries {
+    x: [f64; SPAN],
+    y: [f64; SPAN],
+    z: [f64; SPAN],
+}
+
+impl SpanEntries {
+    fn of(v: [Vector3; SPAN]) -> Self {
+        Self { x: v.map(|v| v.x), y: v.map(|v| v.y), z: v.map(|v| v.z) }
+    }
+
+    fn get(&self, j: usize) -> Vector3 {
+        Vector3::new(self.x[j], self.y[j], self.z[j])
+    }
+
+    /// `sum_j c_j v_j`.
+    fn combine(&self, c: &[f64; SPAN]) -> Vector3 {
+        let dot = |a: &[f64; SPAN]| a.iter().zip(c).map(|(a, c)| a * c).sum::<f64>();
+        Vector3::new(dot(&self.x), dot(&self.y), dot(&self.z))
+    }
+}
+
+impl Lanes for SpanEntries {
+    const ZERO: Self = Self { x: [0.0; SPAN], y: [0.0; SPAN], z: [0.0; SPAN] };
+    #[inline(always)]
+    fn scaled(self, m: f64) -> Self {
+        Self { x: self.x.map(|v| v * m), y: self.y.map(|v| v * m), z: self.z.map(|v| v * m) }
+    }
+    #[inline(always)]
+    fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self {
+        // B d = beta d + g (g . d), lane by lane
+        let [gx, gy, gz, beta] = *c;
+        let mut out = Self::ZERO;
+        for j in 0..SPAN {
+            let (dx, dy, dz) = (self.x[j] - other.x[j], self.y[j] - other.y[j], self.z[j] - other.z[j]);
+            let gd = gx * dx + gy * dy + gz * dz;
+            out.x[j] = beta * dx + gx * gd;
+            out.y[j] = beta * dy + gy * gd;
+            out.z[j] = beta * dz + gz * gd;
+        }
+        out
+    }
+    #[inline(always)]
+    fn add(&mut self, v: Self) {
+        for j in 0..SPAN {
+            self.x[j] += v.x[j];
+            self.y[j] += v.y[j];
+            self.z[j] += v.z[j];
+        }
+    }
+    #[inline(always)]
+    fn sub(&mut self, v: Self) {
+        for j in 0..SPAN {
+            self.x[j] -= v.x[j];
+            self.y[j] -= v.y[j];
+            self.z[j] -= v.z[j];
         }
     }
 }
@@ -516,9 +654,19 @@ pub struct CgScratch {
     /// The second half's products with the separator in a forward sweep (the first half adds
     /// its own to the separator's entries directly).
     spill: Vec<Vector3>,
+    /// The vectors a start is projected onto, by rank, and their products with the matrix.
+    span: Vec<SpanEntries>,
+    span_products: SpanScratch,
     /// Last seen `(|r| / |r_0|) / (|r^| / |r^_0|)` of the SSOR solve (carried to the next
     /// solve's stopping test, so part of a [`super::resume::WarmStart`]).
     pub(crate) residual_ratio: f64,
+}
+
+/// Buffers of [`SpringSystem::project_start`].
+#[derive(Debug, Clone, Default)]
+struct SpanScratch {
+    y: Vec<SpanEntries>,
+    spill: Vec<SpanEntries>,
 }
 
 fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
@@ -571,15 +719,35 @@ pub fn solve(
     scratch: &mut CgScratch,
 ) -> CgReport {
     let parallel = b.len() >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
-    solve_on(sys, model, b, x, settings, scratch, parallel)
+    solve_on(sys, model, b, x, None, settings, scratch, parallel)
 }
 
-/// [`solve`], with the halves' sweeps on two threads or not (the same bits either way).
+/// [`solve`], starting from the projection onto the span of `x` (as given) and `more` (see
+/// [`super::span`]): the start closest to the solution in the `A`-norm among their
+/// combinations. Its residual comes with the products, so the projection costs one pass over
+/// the springs that multiplies by all four vectors, in place of the first residual's.
+pub fn solve_from_span(
+    sys: &SpringSystem,
+    model: &Particles<'_>,
+    b: &[Vector3],
+    x: &mut [Vector3],
+    more: [&[Vector3]; SPAN - 1],
+    settings: CgSettings,
+    scratch: &mut CgScratch,
+) -> CgReport {
+    let parallel = b.len() >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
+    solve_on(sys, model, b, x, Some(more), settings, scratch, parallel)
+}
+
+/// [`solve`] or [`solve_from_span`] (with `more`), with the halves' sweeps on two threads or
+/// not (the same bits either way).
+#[allow(clippy::too_many_arguments)]
 fn solve_on(
     sys: &SpringSystem,
     model: &Particles<'_>,
     b: &[Vector3],
     x: &mut [Vector3],
+    more: Option<[&[Vector3]; SPAN - 1]>,
     settings: CgSettings,
     scratch: &mut CgScratch,
     parallel: bool,
@@ -604,16 +772,41 @@ fn solve_on(
     b_ranked.clear();
     b_ranked.extend(order.iter().map(|&i| b[i as usize]));
     x_ranked.clear();
-    x_ranked.extend(order.iter().map(|&i| x[i as usize]));
-    let report = if sys.ssor && sys.chol.len() == n && sys.layout.start.len() == n + 1 {
+    x_ranked.resize(n, Vector3::zeros());
+    let ssor = sys.ssor && sys.chol.len() == n && sys.layout.start.len() == n + 1;
+    // with a span: its projection, and the residual in `z` (where the SSOR solve wants it)
+    let known = match more {
+        Some(more) => {
+            let span = &mut scratch.span;
+            span.clear();
+            span.extend(order.iter().map(|&i| {
+                let i = i as usize;
+                if model.held[i] { SpanEntries::ZERO } else { SpanEntries::of([x[i], more[0][i], more[1][i], more[2][i]]) }
+            }));
+            let run = |scratch: &mut CgScratch, x: &mut [Vector3]| {
+                let CgScratch { span, span_products, z, .. } = scratch;
+                sys.project_start(span, &b_ranked, x, z, span_products, parallel)
+            };
+            Some(if parallel { rayon::scope(|_| run(scratch, &mut x_ranked)) } else { run(scratch, &mut x_ranked) })
+        }
+        None => {
+            x_ranked.iter_mut().zip(order).for_each(|(x_k, &i)| *x_k = x[i as usize]);
+            None
+        }
+    };
+    let report = if ssor {
         if parallel {
             // on one of rayon's threads, so that handing the other half of a sweep over is cheap
-            rayon::scope(|_| solve_ssor(sys, &b_ranked, &mut x_ranked, b_norm, settings, scratch, true))
+            rayon::scope(|_| solve_ssor(sys, &b_ranked, &mut x_ranked, b_norm, known, settings, scratch, true))
         } else {
-            solve_ssor(sys, &b_ranked, &mut x_ranked, b_norm, settings, scratch, false)
+            solve_ssor(sys, &b_ranked, &mut x_ranked, b_norm, known, settings, scratch, false)
         }
     } else {
-        solve_jacobi(sys, &b_ranked, &mut x_ranked, b_norm, settings, scratch)
+        if known.is_some() {
+            let CgScratch { r, z, .. } = &mut *scratch;
+            r.copy_from_slice(z);
+        }
+        solve_jacobi(sys, &b_ranked, &mut x_ranked, b_norm, known, settings, scratch)
     };
     for (&i, x_k) in order.iter().zip(&x_ranked) {
         x[i as usize] = *x_k;
@@ -642,10 +835,14 @@ fn residual(
 }
 
 /// Block-Jacobi preconditioned CG, by rank.
-fn solve_jacobi(sys: &SpringSystem, b: &[Vector3], x: &mut [Vector3], b_norm: f64, settings: CgSettings, scratch: &mut CgScratch) -> CgReport {
+/// `known`: the norm of the residual of `x`, already in `r`.
+fn solve_jacobi(sys: &SpringSystem, b: &[Vector3], x: &mut [Vector3], b_norm: f64, known: Option<f64>, settings: CgSettings, scratch: &mut CgScratch) -> CgReport {
     let n = b.len();
     let CgScratch { r, z, p, q, spill, .. } = scratch;
-    let mut r_norm = residual(sys, b, x, r, q, spill, false);
+    let mut r_norm = match known {
+        Some(r_norm) => r_norm,
+        None => residual(sys, b, x, r, q, spill, false),
+    };
     for k in 0..n {
         z[k] = sys.inv_diag[k].mul(&r[k]);
         p[k] = z[k];
@@ -768,11 +965,14 @@ impl Sweeps<'_> {
 /// tolerance asks of `|b - A x|`, corrected by the ratio of the two reductions seen at the last
 /// check (`|r|` falls about half as fast as `|r^|` on the chest wall). The true residual is then
 /// checked, and the iteration continued with a tighter target if it is not yet small enough.
+/// `known`: the norm of the residual of `x`, already in the scratch's `z`.
+#[allow(clippy::too_many_arguments)]
 fn solve_ssor(
     sys: &SpringSystem,
     b: &[Vector3],
     x: &mut [Vector3],
     b_norm: f64,
+    known: Option<f64>,
     settings: CgSettings,
     scratch: &mut CgScratch,
     parallel: bool,
@@ -792,7 +992,10 @@ fn solve_ssor(
     spill.resize(n - s, Vector3::zeros());
     let target = (settings.relative_tolerance * b_norm).max(settings.absolute_tolerance);
 
-    let mut r_norm = residual(sys, b, x, acc, q, spill, parallel);
+    let mut r_norm = match known {
+        Some(r_norm) => r_norm,
+        None => residual(sys, b, x, acc, q, spill, parallel),
+    };
     if r_norm <= target {
         return CgReport { iterations: 0, relative_residual: r_norm / b_norm, converged: true };
     }
@@ -960,12 +1163,59 @@ mod tests {
         let settings = CgSettings { relative_tolerance: 1e-8, absolute_tolerance: 0.0, max_iterations: 1000 };
         let n = b.len();
         let (mut one, mut two) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
-        let a = solve_on(&sys, model, &b, &mut one, settings, &mut CgScratch::default(), false);
-        let c = solve_on(&sys, model, &b, &mut two, settings, &mut CgScratch::default(), true);
+        let a = solve_on(&sys, model, &b, &mut one, None, settings, &mut CgScratch::default(), false);
+        let c = solve_on(&sys, model, &b, &mut two, None, settings, &mut CgScratch::default(), true);
         assert!(a.converged && a.iterations > 5, "{a:?}");
         assert_eq!(a, c);
         assert!(one.iter().zip(&two).all(|(u, v)| u.map(f64::to_bits) == v.map(f64::to_bits)));
         assert!(true_residual(&sys, model, &b, &one) <= 1e-8);
+        // started from a span
+        let more: Vec<Vec<Vector3>> = (1..SPAN).map(|j| one.iter().enumerate().map(|(i, v)| v * (1.0 + 0.1 * ((i * j) as f64).sin())).collect()).collect();
+        let more = [&more[0][..], &more[1][..], &more[2][..]];
+        let (mut one, mut two) = (b.clone(), b.clone());
+        let a = solve_on(&sys, model, &b, &mut one, Some(more), settings, &mut CgScratch::default(), false);
+        let c = solve_on(&sys, model, &b, &mut two, Some(more), settings, &mut CgScratch::default(), true);
+        assert!(a.converged, "{a:?}");
+        assert_eq!(a, c);
+        assert!(one.iter().zip(&two).all(|(u, v)| u.map(f64::to_bits) == v.map(f64::to_bits)));
+    }
+
+    /// `|x - y|_A`.
+    fn a_norm_of_difference(sys: &SpringSystem, model: &Particles<'_>, x: &[Vector3], y: &[Vector3]) -> f64 {
+        let d: Vec<Vector3> = x.iter().zip(y).map(|(x, y)| x - y).collect();
+        let mut ad = vec![Vector3::zeros(); d.len()];
+        sys.apply(model, &d, &mut ad);
+        d.iter().zip(&ad).zip(model.held).filter(|(_, h)| !**h).map(|((d, ad), _)| d.dot(ad)).sum::<f64>().sqrt()
+    }
+
+    #[test]
+    fn a_start_from_a_span_is_the_best_of_its_combinations() {
+        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let positions = scene.model.mesh.positions();
+        let model = &scene.model.particles();
+        let (sys, b) = system(model, positions);
+        let n = b.len();
+        let tight = CgSettings { relative_tolerance: 1e-12, absolute_tolerance: 0.0, max_iterations: 1000 };
+        let mut exact = vec![Vector3::zeros(); n];
+        assert!(solve(&sys, model, &b, &mut exact, tight, &mut CgScratch::default()).converged);
+        // the solution disturbed in two ways, a vector with no part along it, and a repeat
+        let wave = |k: f64| -> Vec<Vector3> { exact.iter().enumerate().map(|(i, v)| v * (1.0 + 0.3 * (k * i as f64).sin())).collect() };
+        let (u0, u1) = (wave(0.37), wave(1.9));
+        let u2: Vec<Vector3> = (0..n).map(|i| Vector3::new((0.5 * i as f64).cos(), 0.0, 1.0) * 1e-7).collect();
+        let no_iterations = CgSettings { max_iterations: 0, ..tight };
+        let mut start = u0.clone();
+        solve_from_span(&sys, model, &b, &mut start, [&u1, &u2, &u1], no_iterations, &mut CgScratch::default());
+        let error = a_norm_of_difference(&sys, model, &start, &exact);
+        let zero = vec![Vector3::zeros(); n];
+        for (name, other) in [("u0", &u0), ("u1", &u1), ("the mean", &u0.iter().zip(&u1).map(|(a, b)| (a + b) / 2.0).collect()), ("zero", &zero)] {
+            let e = a_norm_of_difference(&sys, model, other, &exact);
+            assert!(error <= e, "{error} from the span, {e} from {name}");
+        }
+        // with the solution in the span, the start is the solution: no iteration needed
+        let mut start = u0.clone();
+        let report = solve_from_span(&sys, model, &b, &mut start, [&u1, &exact, &u2], CgSettings { relative_tolerance: 1e-8, ..tight }, &mut CgScratch::default());
+        assert_eq!(report.iterations, 0, "{report:?}");
+        assert!(true_residual(&sys, model, &b, &start) <= 1e-8);
     }
 
     #[test]
