@@ -109,7 +109,7 @@ fn step_on(
     let s = &model.springs;
     let m = s.len();
     sys.mass_weight = 1.0;
-    let springs_changed = sys.begin(model);
+    sys.begin(model);
     let split = split && n >= system::PARALLEL_MIN_PARTICLES && sys.springs_sorted_by_first();
     let mid = if split {
         let first = |e: usize| s.ends[e][0];
@@ -177,9 +177,7 @@ fn step_on(
     }
     guess.clear();
     let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
-    // (a cut's new springs: the velocity changes before it say little about the one after;
-    // on the 100k-tet wall the step after a cut takes 11.7 CG iterations from either start)
-    let report = if guessed || springs_changed {
+    let report = if guessed {
         system::solve(sys, model, rhs, dv, cg, cg_scratch)
     } else {
         system::solve_from_span(sys, model, rhs, dv, [p1, p2, p3], cg, cg_scratch)

@@ -309,16 +309,14 @@ pub fn block_matrix(c: &[f64; 4]) -> Sym3 {
 
 impl SpringSystem {
     /// Sizes the block storage for the springs of `model` (the layout is rebuilt only when the
-    /// springs changed). Returns whether they changed.
-    pub fn begin(&mut self, model: &Particles<'_>) -> bool {
+    /// springs changed).
+    pub fn begin(&mut self, model: &Particles<'_>) {
         let n = model.vertex_count();
         let ends = &model.springs.ends;
-        let changed = self.layout.ends != *ends || self.layout.start.len() != n + 1;
-        if changed {
+        if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
             self.layout.build(n, ends);
         }
         self.coef.resize(ends.len(), [0.0; 4]);
-        changed
     }
 
     /// For assembling in one pass: the slot of each spring (after [`Self::begin`]), the block
