@@ -3,6 +3,7 @@
 
 use cutlab_sim::cut::{Blade, Cutter, CutterResume};
 use cutlab_sim::scene::{BuildOptions, Scene};
+use cutlab_sim::solver::system::SweepOrder;
 use cutlab_sim::solver::{LocalisationSettings, ResumeState, Simulation, StaticSettings};
 use cutlab_sim::{Point3, TetMesh, Vector3};
 
@@ -111,6 +112,8 @@ fn a_resume_state_is_checked_against_its_mesh() {
         ("warm start too long", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 1, rows: vec![[Vector3::zeros(); 4]; n as usize + 1], cg_residual_ratio: 0.0 }, ..r.clone() }),
         ("warm start count", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 5, rows: Vec::new(), cg_residual_ratio: 0.0 }, ..r.clone() }),
         ("CG residual ratio", ResumeState { warm_start: cutlab_sim::solver::WarmStart { cg_residual_ratio: f64::NAN, ..r.warm_start.clone() }, ..r.clone() }),
+        ("sweep order too short", ResumeState { sweep_order: Some(SweepOrder { parts: vec![0; n as usize - 1], separator_when_dissected: 0 }), ..r.clone() }),
+        ("sweep order part", ResumeState { sweep_order: Some(SweepOrder { parts: vec![3; n as usize], separator_when_dissected: 0 }), ..r.clone() }),
     ];
     for (what, bad) in cases {
         let mut s = sim.clone();

@@ -13,6 +13,11 @@
 //! A forward sweep then visits the first half, the second half, the separator; a backward sweep
 //! the reverse. The two halves touch each other only through the separator, so a sweep over one
 //! half can run beside the sweep over the other.
+//!
+//! A cut keeps its particles and adds new ones after them, with springs among the particles
+//! around it. The whole-body step carries the parts over ([`extend_parts`]: a new particle
+//! joins the half its springs reach, or the separator) instead of dissecting again, as long as
+//! no spring joins the halves and the separator stays small.
 
 use crate::mesh::Csr;
 
@@ -26,21 +31,28 @@ pub(crate) struct DissectionScratch {
     queue: Vec<u32>,
 }
 
+/// The part of a particle: the first half, the second, the separator.
+pub(crate) const FIRST: u8 = 0;
+pub(crate) const SECOND: u8 = 1;
+pub(crate) const SEPARATOR: u8 = 2;
+
 /// The sweep order of `n` particles joined by springs `ends`: `order[k]` is the `k`-th
 /// particle, and `parts = [h, s]` the ends of the first half (`order[..h]`) and of the second
 /// (`order[h..s]`); the separator is `order[s..]`.
 #[cfg(test)]
 pub(crate) fn dissection_order(n: usize, ends: &[[u32; 2]]) -> (Vec<u32>, [usize; 2]) {
-    let mut order = Vec::new();
-    let parts = dissection_order_into(n, ends, &mut DissectionScratch::default(), &mut order);
+    let (mut order, mut part) = (Vec::new(), Vec::new());
+    dissection_parts_into(n, ends, &mut DissectionScratch::default(), &mut part);
+    let parts = order_of_parts(&part, &mut order);
     (order, parts)
 }
 
-/// [`dissection_order`] into `order`, with the buffers of `scratch`.
-pub(crate) fn dissection_order_into(n: usize, ends: &[[u32; 2]], scratch: &mut DissectionScratch, order: &mut Vec<u32>) -> [usize; 2] {
-    order.clear();
+/// The part ([`FIRST`], [`SECOND`], [`SEPARATOR`]) of each of `n` particles joined by springs
+/// `ends` (see the module documentation), into `part`, with the buffers of `scratch`.
+pub(crate) fn dissection_parts_into(n: usize, ends: &[[u32; 2]], scratch: &mut DissectionScratch, part: &mut Vec<u8>) {
+    part.clear();
     if n == 0 {
-        return [0, 0];
+        return;
     }
     let DissectionScratch { graph, level, queue } = scratch;
     // the graph: each spring's ends are each other's neighbours, rows in the springs' order
@@ -66,21 +78,59 @@ pub(crate) fn dissection_order_into(n: usize, ends: &[[u32; 2]], scratch: &mut D
         separator += 1;
     }
     let separator = separator as u32;
-    let part_of = |l: u32| match l {
-        u32::MAX => 1,
-        l if l < separator => 0,
-        l if l > separator => 1,
-        _ => 2,
-    };
-    order.reserve(n);
-    let mut parts = [0; 2];
-    for part in 0..3 {
-        order.extend((0..n as u32).filter(|&i| part_of(level[i as usize]) == part));
-        if part < 2 {
-            parts[part] = order.len();
+    part.extend(level.iter().map(|&l| match l {
+        u32::MAX => SECOND,
+        l if l < separator => FIRST,
+        l if l > separator => SECOND,
+        _ => SEPARATOR,
+    }));
+}
+
+/// The sweep order of particles in parts `part`: the first half, the second, the separator,
+/// each in the particles' order. Returns the ends `[h, s]` of the halves.
+pub(crate) fn order_of_parts(part: &[u8], order: &mut Vec<u32>) -> [usize; 2] {
+    order.clear();
+    order.reserve(part.len());
+    let mut ends = [0; 2];
+    for p in [FIRST, SECOND, SEPARATOR] {
+        order.extend((0..part.len() as u32).filter(|&i| part[i as usize] == p));
+        if p != SEPARATOR {
+            ends[p as usize] = order.len();
         }
     }
-    parts
+    ends
+}
+
+/// Carries the parts over to springs `ends` on `n` particles, the particles from `part.len()`
+/// on new (a cut's): a new particle goes to the half its springs reach, unless they reach both
+/// halves or another new particle (then to the separator). Returns whether no spring joins the
+/// halves (otherwise the parts must be found anew); `part` is extended either way.
+pub(crate) fn extend_parts(part: &mut Vec<u8>, n: usize, ends: &[[u32; 2]]) -> bool {
+    let old = part.len();
+    if old > n {
+        return false;
+    }
+    // per new particle: bit p set when a spring reaches part p, bit 3 when it reaches a new one
+    let mut reach = vec![0u8; n - old];
+    for &[a, b] in ends {
+        let (a, b) = (a as usize, b as usize);
+        for (me, other) in [(a, b), (b, a)] {
+            if me >= old {
+                reach[me - old] |= if other >= old { 8 } else { 1 << part[other] };
+            }
+        }
+    }
+    part.extend(reach.iter().map(|&r| match r {
+        1 | 5 => FIRST,
+        2 | 6 => SECOND,
+        _ => SEPARATOR,
+    }));
+    ends.iter().all(|&[a, b]| part[a as usize] + part[b as usize] != FIRST + SECOND)
+}
+
+/// Particles in the separator.
+pub(crate) fn separator_count(part: &[u8]) -> usize {
+    part.iter().filter(|&&p| p == SEPARATOR).count()
 }
 
 /// Breadth-first levels from `from` (`u32::MAX` where not reached); returns the particle
@@ -131,5 +181,26 @@ mod tests {
         }
         // a graph without springs: every particle in the second half
         assert_eq!(dissection_order(3, &[]), (vec![1, 2, 0], [0, 2]));
+    }
+
+    #[test]
+    fn new_particles_join_the_half_their_springs_reach() {
+        // 0 and 1 in the first half, 2 the separator, 3 and 4 the second half
+        let mut part = vec![FIRST, FIRST, SEPARATOR, SECOND, SECOND];
+        // 5 reaches 0 and 2, 6 reaches 4, 7 reaches 2 alone, 8 reaches 0 and 3, 9 reaches 5
+        let ends = [[0, 1], [1, 2], [2, 3], [3, 4], [0, 5], [2, 5], [4, 6], [2, 7], [0, 8], [3, 8], [5, 9]];
+        assert!(extend_parts(&mut part, 10, &ends));
+        assert_eq!(part[5..], [SEPARATOR, SECOND, SEPARATOR, SEPARATOR, SEPARATOR], "5 reaches the new 9");
+        let mut part = vec![FIRST, FIRST, SEPARATOR, SECOND, SECOND];
+        assert!(extend_parts(&mut part, 9, &ends[..10]));
+        assert_eq!(part[5..], [FIRST, SECOND, SEPARATOR, SEPARATOR]);
+        let mut order = Vec::new();
+        assert_eq!(order_of_parts(&part, &mut order), [3, 6]);
+        assert_eq!(order, [0, 1, 5, 3, 4, 6, 2, 7, 8]);
+        // a new spring across the halves: the parts must be found anew
+        let mut part = vec![FIRST, FIRST, SEPARATOR, SECOND, SECOND];
+        assert!(!extend_parts(&mut part, 5, &[[1, 3]]));
+        // fewer particles than before: likewise
+        assert!(!extend_parts(&mut vec![FIRST; 4], 3, &[]));
     }
 }

@@ -154,6 +154,16 @@ struct Scratch {
     fem: crate::fem::solve::FemScratch,
 }
 
+impl Scratch {
+    /// The whole-body step's scratch: its sweep order carried across cuts (see
+    /// [`system::SpringSystem::carry_sweep_order`]).
+    fn new() -> Self {
+        let mut scratch = Self::default();
+        scratch.implicit.system.carry_sweep_order();
+        scratch
+    }
+}
+
 /// The particle simulation: model, state, inputs and scratch.
 #[derive(Debug, Clone)]
 pub struct Simulation {
@@ -193,7 +203,7 @@ impl Simulation {
             region: localise::ActiveRegion::default(),
             explicit_substeps,
             step_index: 0,
-            scratch: Scratch::default(),
+            scratch: Scratch::new(),
         }
     }
 

@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::implicit::ImplicitScratch;
+use super::system::SweepOrder;
 use super::localise::ActiveRegion;
 use super::{Scratch, Simulation};
 use crate::mesh::TetMesh;
@@ -114,6 +115,11 @@ pub struct ResumeState {
     /// The localised step's region, once it has stepped.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub region: Option<RegionResume>,
+    /// The whole-body step's sweep order, once it has stepped (carried across cuts, see
+    /// [`super::system::SpringSystem::carry_sweep_order`]). Without it (older recordings) the order is found
+    /// anew, which after cuts can differ from the captured run's in the last bits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sweep_order: Option<SweepOrder>,
 }
 
 /// A resume state that does not fit the mesh it comes with.
@@ -146,6 +152,7 @@ impl Simulation {
             warm_start: self.scratch.implicit.warm_start(),
             fem_warm_start: WarmStart::of(&fem.dv, &fem.dv_previous, fem.history),
             region: self.region.resume_state(),
+            sweep_order: self.scratch.implicit.system.sweep_order(),
         }
     }
 
@@ -165,6 +172,9 @@ impl Simulation {
         check_ids(&resume.held, n, "held particles")?;
         resume.warm_start.check(n, "whole-body step")?;
         resume.fem_warm_start.check(n, "finite elements")?;
+        if let Some(order) = &resume.sweep_order {
+            order.check(n).map_err(ResumeError::Invalid)?;
+        }
         let mut held = vec![false; n];
         resume.held.iter().for_each(|&v| held[v as usize] = true);
         let mut model = self.model.clone();
@@ -173,8 +183,11 @@ impl Simulation {
             Some(r) => ActiveRegion::resume(&model, r)?,
             None => ActiveRegion::default(),
         };
-        let mut scratch = Scratch::default();
+        let mut scratch = Scratch::new();
         scratch.implicit.install_warm_start(&resume.warm_start);
+        if let Some(order) = &resume.sweep_order {
+            scratch.implicit.system.install_sweep_order(order);
+        }
         let fem = &mut scratch.fem;
         resume.fem_warm_start.install(&mut fem.dv, &mut fem.dv_previous, &mut fem.history);
 

@@ -28,7 +28,7 @@
 use crate::Vector3;
 use crate::model::Particles;
 
-use super::dissection::{DissectionScratch, dissection_order_into};
+use super::dissection::{self, DissectionScratch};
 use super::span::SPAN;
 
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
@@ -149,7 +149,7 @@ impl Lower3 {
 /// (1e-4, cubic warm start).
 pub const SSOR_OMEGA: f64 = 1.3;
 
-/// Where the spring blocks are stored: in the sweep order ([`dissection_order_into`]), by the
+/// Where the spring blocks are stored: in the sweep order ([`super::dissection`]), by the
 /// spring's end that comes first in it (its "first" particle), each particle's springs sorted
 /// by the other's place in the order. Particles are named by their place `k` in the order
 /// ("rank") inside the solver.
@@ -175,6 +175,12 @@ struct BlockLayout {
     sorted_by_first: bool,
     /// Whether some spring joins a particle to itself.
     has_loop: bool,
+    /// The part of each particle (see [`super::dissection`]), and whether a rebuild carries it
+    /// over (see [`SpringSystem::carry_sweep_order`]).
+    part: Vec<u8>,
+    carry: bool,
+    /// Particles in the separator when the parts were last found by dissection.
+    separator_when_dissected: usize,
     scratch: LayoutScratch,
 }
 
@@ -185,7 +191,17 @@ impl BlockLayout {
         self.ends.extend_from_slice(ends);
         self.has_loop = ends.iter().any(|&[a, b]| a == b);
         self.sorted_by_first = ends.iter().all(|&[a, b]| a < b) && ends.windows(2).all(|w| w[0][0] <= w[1][0]);
-        self.halves = dissection_order_into(n, ends, &mut self.scratch.dissection, &mut self.order);
+        // carried over while no spring joins the halves and the separator has not grown past
+        // twice its dissected size (and 64 particles): it is swept on one thread
+        let carried = self.carry
+            && !self.part.is_empty()
+            && dissection::extend_parts(&mut self.part, n, ends)
+            && dissection::separator_count(&self.part) <= 2 * self.separator_when_dissected + 64;
+        if !carried {
+            dissection::dissection_parts_into(n, ends, &mut self.scratch.dissection, &mut self.part);
+            self.separator_when_dissected = dissection::separator_count(&self.part);
+        }
+        self.halves = dissection::order_of_parts(&self.part, &mut self.order);
         let rank = &mut self.scratch.rank;
         rank.clear();
         rank.resize(n, 0);
@@ -232,6 +248,27 @@ impl BlockLayout {
         for (s, &e) in spring.iter().enumerate() {
             self.slot[e as usize] = s as u32;
         }
+    }
+}
+
+/// The parts of a carried sweep order (see [`SpringSystem::carry_sweep_order`]): per particle
+/// 0 (the first half), 1 (the second) or 2 (the separator).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SweepOrder {
+    pub parts: Vec<u8>,
+    pub separator_when_dissected: usize,
+}
+
+impl SweepOrder {
+    /// Whether this fits `n` particles (the springs are checked when it is used).
+    pub fn check(&self, n: usize) -> Result<(), String> {
+        if self.parts.len() != n {
+            return Err(format!("sweep order of {} particles for {n}", self.parts.len()));
+        }
+        if let Some(p) = self.parts.iter().find(|&&p| p > dissection::SEPARATOR) {
+            return Err(format!("sweep order: part {p} (0, 1 or 2)"));
+        }
+        Ok(())
     }
 }
 
@@ -308,6 +345,33 @@ pub fn block_matrix(c: &[f64; 4]) -> Sym3 {
 }
 
 impl SpringSystem {
+    /// From now on, a change of the springs on the same particles and new ones after them (a
+    /// cut's) keeps each particle in the part of the sweep order it had (new ones in the half
+    /// their springs reach, or the separator) instead of dissecting the spring graph again:
+    /// 1.2 ms of the 2.3 ms the layout takes on the 100k-tet chest wall. The order then depends
+    /// on the cuts before, so it is part of a resume state ([`Self::sweep_order`]).
+    pub fn carry_sweep_order(&mut self) {
+        self.layout.carry = true;
+    }
+
+    /// The sweep order's parts, where carried over (see [`Self::carry_sweep_order`]).
+    pub fn sweep_order(&self) -> Option<SweepOrder> {
+        (self.layout.carry && !self.layout.part.is_empty()).then(|| SweepOrder {
+            parts: self.layout.part.clone(),
+            separator_when_dissected: self.layout.separator_when_dissected,
+        })
+    }
+
+    /// Continues from a [`SweepOrder`]: the next [`Self::begin`] lays the springs out in it
+    /// (or dissects anew if some spring joins its halves).
+    pub fn install_sweep_order(&mut self, order: &SweepOrder) {
+        self.layout.carry = true;
+        self.layout.part.clone_from(&order.parts);
+        self.layout.separator_when_dissected = order.separator_when_dissected;
+        self.layout.ends.clear();
+        self.layout.start.clear();
+    }
+
     /// Sizes the block storage for the springs of `model` (the layout is rebuilt only when the
     /// springs changed).
     pub fn begin(&mut self, model: &Particles<'_>) {
