@@ -64,7 +64,10 @@ impl Config {
 
     pub fn label(self) -> String {
         match self {
-            Config::CutlabFem => "co-rotational FEM, implicit Euler (1 linear solve, PCG to 1e-4)".into(),
+            Config::CutlabFem => {
+                let tolerance = cutlab_sim::solver::SolverSettings::default().cg_relative_tolerance;
+                format!("co-rotational FEM, implicit Euler (1 linear solve, PCG to {tolerance:e})")
+            }
             Config::CutlabSprings => "paper's springs (chest wall 100 N/m, bar van Gelder's k from E), implicit Euler".into(),
             Config::Rapier { solver: RapierSolver::Constraints, substeps } => {
                 format!("co-rotational cells, constraints solver ({}, 4 sweeps each)", substeps_text(substeps))
