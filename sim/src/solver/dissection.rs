@@ -112,20 +112,27 @@ pub(crate) fn extend_parts(part: &mut Vec<u8>, n: usize, ends: &[[u32; 2]]) -> b
     }
     // per new particle: bit p set when a spring reaches part p, bit 3 when it reaches a new one
     let mut reach = vec![0u8; n - old];
+    let mut joined = false;
     for &[a, b] in ends {
         let (a, b) = (a as usize, b as usize);
+        if a < old && b < old {
+            joined |= part[a] + part[b] == FIRST + SECOND;
+            continue;
+        }
         for (me, other) in [(a, b), (b, a)] {
             if me >= old {
                 reach[me - old] |= if other >= old { 8 } else { 1 << part[other] };
             }
         }
     }
+    // (a new particle joins a half only when its springs reach that half and the separator
+    // alone: no spring of a new particle joins the halves)
     part.extend(reach.iter().map(|&r| match r {
         1 | 5 => FIRST,
         2 | 6 => SECOND,
         _ => SEPARATOR,
     }));
-    ends.iter().all(|&[a, b]| part[a as usize] + part[b as usize] != FIRST + SECOND)
+    !joined
 }
 
 /// Particles in the separator.
