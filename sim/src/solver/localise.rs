@@ -250,7 +250,7 @@ impl ActiveRegion {
         if let Some(v) = r.to_wake.iter().chain(r.quiet_steps.iter().map(|(v, _)| v)).find(|&&v| v as usize >= n) {
             return Err(ResumeError::Invalid(format!("particle {v} of {n} queued to wake or quiet")));
         }
-        r.warm_start.check(r.sub_body.len(), "localised step")?;
+        r.warm_start.check(r.sub_body.len(), "localised step", false)?;
         let mut me = Self {
             awake: vec![false; n],
             quiet_steps: vec![0; n],

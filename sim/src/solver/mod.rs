@@ -73,7 +73,8 @@ pub struct SolverSettings {
     /// 5e-7 of the largest displacement over 0.5 s of the benchmark stroke at 12.8k tets, and
     /// by 2e-5 (0.03 um) after the 100k-tet wall's 40 cuts in 0.49 s (`cut_time 100000 6`:
     /// 1e-4 gave 4e-6 there, 1e-2 1e-4), with 22.8 CG iterations per step at 1e-4, 17.3 at
-    /// 1e-3 and 12.6 at 1e-2.
+    /// 1e-3 and 12.6 at 1e-2 from the extrapolated start (12.2 at 1e-3 from the projected
+    /// start now used, see [`implicit`]).
     pub cg_relative_tolerance: f64,
     pub cg_max_iterations: usize,
     /// Simulate only near the scalpel and the disturbance it causes (see [`localise`]);

@@ -4,10 +4,11 @@
 //! A step reads the model (masses, springs, held particles: derived again from the mesh by
 //! [`crate::model::Model::rebuild`], with the same bits as the cuts that led there carried
 //! over), the state, and what the solver keeps from step to step: the implicit integrator's
-//! last four velocity changes (the warm start, [`super::implicit::extrapolate_warm_start`]) and,
-//! localised, which particles are awake, how long each has been quiet, the wakes queued for the
-//! next step and the sub-body the warm start is laid out on. [`ResumeState`] holds exactly
-//! that, so that [`Simulation::resume`] from a state captured by
+//! last four velocity changes (the warm start: their span, [`super::span`], and their
+//! extrapolation, [`super::implicit::extrapolate_warm_start`]), the whole-body step's sweep
+//! order (carried across cuts, [`super::dissection`]) and, localised, which particles are
+//! awake, how long each has been quiet, the wakes queued for the next step and the sub-body the
+//! warm start is laid out on. [`ResumeState`] holds exactly that, so that [`Simulation::resume`] from a state captured by
 //! [`Simulation::resume_state`] continues bit for bit as the original run did (a recording's
 //! keyframes carry one; a replay seeks through them). Scratch buffers are not part of it.
 
@@ -54,11 +55,14 @@ impl WarmStart {
         *count = self.count;
     }
 
-    pub(crate) fn check(&self, rows: usize, what: &str) -> Result<(), ResumeError> {
+    /// Whether this fits `rows` particles: as many rows, none, or (`fewer_allowed`, the
+    /// whole-body steps) fewer, for a state captured after a cut added particles and before the
+    /// next step gave them their zero rows.
+    pub(crate) fn check(&self, rows: usize, what: &str, fewer_allowed: bool) -> Result<(), ResumeError> {
         if self.count > 4 {
             return Err(ResumeError::Invalid(format!("{what}: warm-start count {} (at most 4)", self.count)));
         }
-        if !self.rows.is_empty() && self.rows.len() != rows {
+        if !self.rows.is_empty() && self.rows.len() != rows && !(fewer_allowed && self.rows.len() < rows) {
             return Err(ResumeError::Invalid(format!("{what}: {} warm-start rows for {rows} particles", self.rows.len())));
         }
         if !(self.cg_residual_ratio >= 0.0 && self.cg_residual_ratio.is_finite()) {
@@ -170,8 +174,8 @@ impl Simulation {
             return Err(ResumeError::Invalid("a non-finite position or velocity".into()));
         }
         check_ids(&resume.held, n, "held particles")?;
-        resume.warm_start.check(n, "whole-body step")?;
-        resume.fem_warm_start.check(n, "finite elements")?;
+        resume.warm_start.check(n, "whole-body step", true)?;
+        resume.fem_warm_start.check(n, "finite elements", true)?;
         if let Some(order) = &resume.sweep_order {
             order.check(n).map_err(ResumeError::Invalid)?;
         }

@@ -7,8 +7,8 @@
 /// How many vectors a start may be projected onto.
 pub const SPAN: usize = 4;
 
-/// A vector whose `A`-norm, relative to that of the vectors before it, is below the square root
-/// of this once its part along them is removed counts as dependent on them and gets no
+/// A vector whose `A`-norm, once its part along the vectors before it is removed, is below the
+/// square root of this times its own `A`-norm counts as dependent on them and gets no
 /// coefficient.
 const DEPENDENT: f64 = 1e-10;
 

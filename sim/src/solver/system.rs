@@ -196,7 +196,7 @@ impl BlockLayout {
         let carried = self.carry
             && !self.part.is_empty()
             && dissection::extend_parts(&mut self.part, n, ends)
-            && dissection::separator_count(&self.part) <= 2 * self.separator_when_dissected + 64;
+            && dissection::separator_count(&self.part) <= self.separator_when_dissected.saturating_mul(2).saturating_add(64);
         if !carried {
             dissection::dissection_parts_into(n, ends, &mut self.scratch.dissection, &mut self.part);
             self.separator_when_dissected = dissection::separator_count(&self.part);
@@ -260,13 +260,18 @@ pub struct SweepOrder {
 }
 
 impl SweepOrder {
-    /// Whether this fits `n` particles (the springs are checked when it is used).
+    /// Whether this fits `n` particles: at most `n` parts (particles a cut added since the
+    /// order was last laid out get theirs at the next step, as in the captured run), each 0, 1
+    /// or 2, and a dissected separator of at most `n` (the springs are checked when it is used).
     pub fn check(&self, n: usize) -> Result<(), String> {
-        if self.parts.len() != n {
+        if self.parts.len() > n {
             return Err(format!("sweep order of {} particles for {n}", self.parts.len()));
         }
         if let Some(p) = self.parts.iter().find(|&&p| p > dissection::SEPARATOR) {
             return Err(format!("sweep order: part {p} (0, 1 or 2)"));
+        }
+        if self.separator_when_dissected > n {
+            return Err(format!("sweep order: a separator of {} particles for {n}", self.separator_when_dissected));
         }
         Ok(())
     }
@@ -362,9 +367,10 @@ impl SpringSystem {
         })
     }
 
-    /// Continues from a [`SweepOrder`]: the next [`Self::begin`] lays the springs out in it
-    /// (or dissects anew if some spring joins its halves).
-    pub fn install_sweep_order(&mut self, order: &SweepOrder) {
+    /// Continues from a [`SweepOrder`] (checked by [`SweepOrder::check`]): the next
+    /// [`Self::begin`] lays the springs out in it, or dissects anew where a carried order would
+    /// (a spring joining its halves, a separator grown past twice its dissected size and 64).
+    pub(crate) fn install_sweep_order(&mut self, order: &SweepOrder) {
         self.layout.carry = true;
         self.layout.part.clone_from(&order.parts);
         self.layout.separator_when_dissected = order.separator_when_dissected;
@@ -787,7 +793,8 @@ pub fn solve(
 /// [`solve`], starting from the projection onto the span of `x` (as given) and `more` (see
 /// [`super::span`]): the start closest to the solution in the `A`-norm among their
 /// combinations. Its residual comes with the products, so the projection costs one pass over
-/// the springs that multiplies by all four vectors, in place of the first residual's.
+/// the springs that multiplies by all four vectors, in place of the first residual's. Vectors
+/// of `more` that do not have one entry per particle are left out of the span.
 pub fn solve_from_span(
     sys: &SpringSystem,
     model: &Particles<'_>,
@@ -798,6 +805,8 @@ pub fn solve_from_span(
     scratch: &mut CgScratch,
 ) -> CgReport {
     let parallel = b.len() >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
+    let n = b.len();
+    let more = more.map(|v| if v.len() == n { v } else { &[] as &[Vector3] });
     solve_on(sys, model, b, x, Some(more), settings, scratch, parallel)
 }
 
@@ -843,7 +852,8 @@ fn solve_on(
             span.clear();
             span.extend(order.iter().map(|&i| {
                 let i = i as usize;
-                if model.held[i] { SpanEntries::ZERO } else { SpanEntries::of([x[i], more[0][i], more[1][i], more[2][i]]) }
+                let at = |v: &[Vector3]| v.get(i).copied().unwrap_or_else(Vector3::zeros);
+                if model.held[i] { SpanEntries::ZERO } else { SpanEntries::of([x[i], at(more[0]), at(more[1]), at(more[2])]) }
             }));
             let run = |scratch: &mut CgScratch, x: &mut [Vector3]| {
                 let CgScratch { span, span_products, z, .. } = scratch;
