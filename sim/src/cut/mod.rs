@@ -459,7 +459,6 @@ pub fn cut_remembering(
     Ok(event)
 }
 
-
 /// The entries of `a` that are not in `b`, both sorted: one merge pass (a binary search per
 /// entry cost 10 ms per cut at 100k tets).
 fn sorted_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {

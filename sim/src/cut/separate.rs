@@ -11,7 +11,6 @@ use std::collections::{BTreeMap, BTreeSet};
 use crate::mesh::TET_FACES;
 use crate::mesh::{non_manifold_edges, sorted_triple};
 
-
 /// Stars of the vertices of the cut: for each, the ids of the tetrahedra around it, ascending.
 pub type Stars = BTreeMap<u32, Vec<u32>>;
 

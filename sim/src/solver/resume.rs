@@ -8,9 +8,10 @@
 //! extrapolation, [`super::implicit::extrapolate_warm_start`]), the whole-body step's sweep
 //! order (carried across cuts, [`super::dissection`]) and, localised, which particles are
 //! awake, how long each has been quiet, the wakes queued for the next step and the sub-body the
-//! warm start is laid out on. [`ResumeState`] holds exactly that, so that [`Simulation::resume`] from a state captured by
-//! [`Simulation::resume_state`] continues bit for bit as the original run did (a recording's
-//! keyframes carry one; a replay seeks through them). Scratch buffers are not part of it.
+//! warm start is laid out on. [`ResumeState`] holds exactly that, so that
+//! [`Simulation::resume`] from a state captured by [`Simulation::resume_state`] continues bit
+//! for bit as the original run did (a recording's keyframes carry one; a replay seeks through
+//! them). Scratch buffers are not part of it.
 
 use serde::{Deserialize, Serialize};
 
@@ -120,8 +121,9 @@ pub struct ResumeState {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub region: Option<RegionResume>,
     /// The whole-body step's sweep order, once it has stepped (carried across cuts, see
-    /// [`super::system::SpringSystem::carry_sweep_order`]). Without it (older recordings) the order is found
-    /// anew, which after cuts can differ from the captured run's in the last bits.
+    /// [`super::system::SpringSystem::carry_sweep_order`]). Without it (older recordings) the
+    /// order is found anew, which after cuts can differ from the captured run's in the last
+    /// bits.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sweep_order: Option<SweepOrder>,
 }

@@ -843,7 +843,6 @@ fn solve_on(
     b_ranked.clear();
     b_ranked.extend(order.iter().map(|&i| b[i as usize]));
     x_ranked.clear();
-    x_ranked.resize(n, Vector3::zeros());
     let ssor = sys.ssor && sys.chol.len() == n && sys.layout.start.len() == n + 1;
     // with a span: its projection, and the residual in `z` (where the SSOR solve wants it)
     let known = match more {
@@ -855,6 +854,7 @@ fn solve_on(
                 let at = |v: &[Vector3]| v.get(i).copied().unwrap_or_else(Vector3::zeros);
                 if model.held[i] { SpanEntries::ZERO } else { SpanEntries::of([x[i], at(more[0]), at(more[1]), at(more[2])]) }
             }));
+            x_ranked.resize(n, Vector3::zeros());
             let run = |scratch: &mut CgScratch, x: &mut [Vector3]| {
                 let CgScratch { span, span_products, z, .. } = scratch;
                 sys.project_start(span, &b_ranked, x, z, span_products, parallel)
@@ -862,7 +862,7 @@ fn solve_on(
             Some(if parallel { rayon::scope(|_| run(scratch, &mut x_ranked)) } else { run(scratch, &mut x_ranked) })
         }
         None => {
-            x_ranked.iter_mut().zip(order).for_each(|(x_k, &i)| *x_k = x[i as usize]);
+            x_ranked.extend(order.iter().map(|&i| x[i as usize]));
             None
         }
     };
