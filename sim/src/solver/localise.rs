@@ -140,6 +140,8 @@ pub(crate) struct ActiveRegion {
     springs_at: Option<Csr>,
     /// Whether the springs changed since `springs_at` was built.
     adjacency_stale: bool,
+    /// Whether the model's springs come sorted by their first end (with `springs_at`).
+    springs_sorted_by_first: bool,
     /// `K_i`, the sum of the spring constants at each particle (with the adjacency).
     stiffness_at: Vec<f64>,
     /// Positions binned for the focus query, and how far an awake particle has moved since.
@@ -321,6 +323,7 @@ impl ActiveRegion {
             let stiffness = &model.springs.stiffness;
             self.stiffness_at.clear();
             self.stiffness_at.extend((0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum::<f64>()));
+            self.springs_sorted_by_first = model.springs.ends.windows(2).all(|w| w[0][0] <= w[1][0]);
             self.adjacency_stale = false;
         }
     }
@@ -535,14 +538,9 @@ impl ActiveRegion {
             for &e in springs_at.row(g as usize) {
                 let [a, b] = ends[e as usize];
                 let other = if a == g { b } else { a };
-                if !self.awake[other as usize] {
-                    if self.local_of[other as usize] == NONE {
-                        self.local_of[other as usize] = 0;
-                        self.global_of.push(other);
-                    }
-                    self.local_spring_ids.push(e);
-                } else if g == a.min(b) {
-                    self.local_spring_ids.push(e);
+                if !self.awake[other as usize] && self.local_of[other as usize] == NONE {
+                    self.local_of[other as usize] = 0;
+                    self.global_of.push(other);
                 }
             }
         }
@@ -550,7 +548,21 @@ impl ActiveRegion {
         for (l, &g) in self.global_of.iter().enumerate() {
             self.local_of[g as usize] = l as u32;
         }
-        self.local_spring_ids.sort_unstable();
+        // the springs with an awake end, each from its first end (which is in the sub-body):
+        // the rows list them in the model's order, so they come sorted where the model's
+        // springs are sorted by their first end (as a model's are), and need no sort
+        let awake = &self.awake;
+        for &g in &self.global_of {
+            for &e in springs_at.row(g as usize) {
+                let [a, b] = ends[e as usize];
+                if a == g && (awake[a as usize] || awake[b as usize]) {
+                    self.local_spring_ids.push(e);
+                }
+            }
+        }
+        if !self.springs_sorted_by_first {
+            self.local_spring_ids.sort_unstable();
+        }
         let s = &model.springs;
         let local = &mut self.springs;
         local.ends.clear();
@@ -639,8 +651,16 @@ mod tests {
         assert!(sim.settle(StaticSettings::default()).converged);
         let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
         let surface: Vec<u32> = sim.model.mesh.topology().boundary_vertices();
-        for scale in [1.0, 30.0] {
+        // (the springs reversed as well: no longer sorted by their first end)
+        for (scale, reversed) in [(1.0, false), (30.0, false), (1.0, true)] {
             let mut sim = sim.clone();
+            if reversed {
+                let s = &mut sim.model.springs;
+                for v in [&mut s.rest_length, &mut s.stiffness, &mut s.damping] {
+                    v.reverse();
+                }
+                s.ends.reverse();
+            }
             sim.settings.localisation = Some(LocalisationSettings::default().scaled(scale));
             for step in 0..800 {
                 // a tool tapping along a circle: particles enter and leave its focus, and the
@@ -663,6 +683,11 @@ mod tests {
                 let r = &sim.region;
                 assert_eq!(r.awake_count, r.awake.iter().filter(|a| **a).count(), "x{scale} step {step}: awake count");
                 assert!(r.global_of.windows(2).all(|w| w[0] < w[1]), "x{scale} step {step}: a particle twice in the sub-body");
+                if !r.dirty {
+                    let ends = &sim.model.springs.ends;
+                    let with_awake_end = (0..ends.len() as u32).filter(|&e| ends[e as usize].iter().any(|&v| r.awake[v as usize]));
+                    assert!(r.local_spring_ids.iter().copied().eq(with_awake_end), "x{scale} {reversed} step {step}: the sub-body's springs");
+                }
             }
         }
     }
