@@ -117,6 +117,35 @@ impl LocalisationSettings {
 
 const NONE: u32 = u32::MAX;
 
+/// The springs around each particle, as the localised step reads them.
+#[derive(Debug, Clone, Default)]
+struct Adjacency {
+    /// The springs at each particle, in the model's order.
+    springs_at: Csr,
+    /// `K_i`, the sum of the spring constants at each particle.
+    stiffness_at: Vec<f64>,
+    /// Whether the model's springs come sorted by their first end.
+    sorted_by_first: bool,
+    /// Whether this describes the model's springs (false until built, and after a cut).
+    fresh: bool,
+}
+
+impl Adjacency {
+    /// Built again for `springs` on `n` particles, unless fresh (into the buffers of the last:
+    /// a cut changes the springs every few steps).
+    fn refresh(&mut self, springs: &SpringSet, n: usize) {
+        if self.fresh {
+            return;
+        }
+        springs.by_particle_into(n, &mut self.springs_at);
+        let csr = &self.springs_at;
+        self.stiffness_at.clear();
+        self.stiffness_at.extend((0..n).map(|i| csr.row(i).iter().map(|&e| springs.stiffness[e as usize]).sum::<f64>()));
+        self.sorted_by_first = springs.ends.windows(2).all(|w| w[0][0] <= w[1][0]);
+        self.fresh = true;
+    }
+}
+
 /// Steps between the moments quiet particles fall asleep (see [`ActiveRegion::decide`]).
 pub const SLEEP_BATCH_STEPS: u64 = 10;
 
@@ -136,14 +165,8 @@ pub(crate) struct ActiveRegion {
     /// Particles to wake at the next step (cuts, neighbours, the border).
     to_wake: Vec<u32>,
     to_sleep: Vec<u32>,
-    /// The springs at each particle (rebuilt when the model changes).
-    springs_at: Option<Csr>,
-    /// Whether the springs changed since `springs_at` was built.
-    adjacency_stale: bool,
-    /// Whether the model's springs come sorted by their first end (with `springs_at`).
-    springs_sorted_by_first: bool,
-    /// `K_i`, the sum of the spring constants at each particle (with the adjacency).
-    stiffness_at: Vec<f64>,
+    /// The springs around each particle (rebuilt when the model changes).
+    adjacency: Adjacency,
     /// Positions binned for the focus query, and how far an awake particle has moved since.
     grid: Option<PointGrid>,
     grid_slack_m: f64,
@@ -206,7 +229,7 @@ impl ActiveRegion {
             h.resize(n, Vector3::zeros());
         }
         self.to_wake.extend(old as u32..n as u32);
-        self.adjacency_stale = true;
+        self.adjacency.fresh = false;
         self.dirty = true;
     }
 
@@ -274,7 +297,7 @@ impl ActiveRegion {
                 me.local_of[g as usize] = l as u32;
             }
         } else {
-            me.ensure_adjacency(model);
+            me.adjacency.refresh(&model.springs, n);
             me.rebuild(model);
             if me.global_of != r.sub_body {
                 return Err(ResumeError::Invalid("the sub-body differs from the one the awake particles make".into()));
@@ -306,25 +329,10 @@ impl ActiveRegion {
             self.to_wake.extend(0..n as u32);
             self.dirty = true;
         }
-        self.ensure_adjacency(model);
+        self.adjacency.refresh(&model.springs, n);
         if self.grid.is_none() || self.grid_slack_m > 0.5 * settings.focus_radius_m {
             self.grid = Some(PointGrid::build(&state.positions, settings.focus_radius_m));
             self.grid_slack_m = 0.0;
-        }
-    }
-
-    /// The springs at each particle and their summed constants, unless known.
-    fn ensure_adjacency(&mut self, model: &Model) {
-        if self.springs_at.is_none() || self.adjacency_stale {
-            // (into the buffers of the last: a cut changes the springs every few steps)
-            let n = model.vertex_count();
-            let csr = self.springs_at.get_or_insert_with(Csr::default);
-            model.springs.by_particle_into(n, csr);
-            let stiffness = &model.springs.stiffness;
-            self.stiffness_at.clear();
-            self.stiffness_at.extend((0..n).map(|i| csr.row(i).iter().map(|&e| stiffness[e as usize]).sum::<f64>()));
-            self.springs_sorted_by_first = model.springs.ends.windows(2).all(|w| w[0][0] <= w[1][0]);
-            self.adjacency_stale = false;
         }
     }
 
@@ -442,7 +450,7 @@ impl ActiveRegion {
     /// Queues the border particles whose residual displacement (with the sub-body's solved
     /// positions) exceeds the wake threshold; returns how many.
     fn wake_border(&mut self, model: &Model, state: &State, external: &[Vector3], settings: &LocalisationSettings) -> usize {
-        let springs_at = self.springs_at.as_ref().expect("built by ensure");
+        let springs_at = &self.adjacency.springs_at;
         let s = &model.springs;
         let before = self.to_wake.len();
         let position = |g: usize| match self.local_of[g] {
@@ -462,7 +470,7 @@ impl ActiveRegion {
                 let pull = spring_force(&(xb - xa), &(vb - va), s.rest_length[e], s.stiffness[e], s.damping[e]);
                 f += if a == gi { pull } else { -pull };
             }
-            if f.norm() > settings.wake_displacement_m * self.stiffness_at[gi] {
+            if f.norm() > settings.wake_displacement_m * self.adjacency.stiffness_at[gi] {
                 self.to_wake.push(g);
             }
         }
@@ -526,7 +534,7 @@ impl ActiveRegion {
         self.awake_list.sort_unstable();
         // a particle that fell asleep and woke again since the last rebuild is listed twice
         self.awake_list.dedup();
-        let springs_at = self.springs_at.as_ref().expect("built by ensure");
+        let springs_at = &self.adjacency.springs_at;
         let ends = &model.springs.ends;
         self.global_of.clear();
         self.local_spring_ids.clear();
@@ -560,7 +568,7 @@ impl ActiveRegion {
                 }
             }
         }
-        if !self.springs_sorted_by_first {
+        if !self.adjacency.sorted_by_first {
             self.local_spring_ids.sort_unstable();
         }
         let s = &model.springs;
@@ -596,7 +604,7 @@ impl ActiveRegion {
 
     /// Who wakes at the next step (the neighbours of fast particles) and who falls asleep now.
     fn decide(&mut self, model: &Model, state: &mut State, settings: &LocalisationSettings, h: f64) {
-        let springs_at = self.springs_at.as_ref().expect("built by ensure");
+        let springs_at = &self.adjacency.springs_at;
         let s = &model.springs;
         self.to_sleep.clear();
         for (l, &g) in self.global_of.iter().enumerate() {
@@ -615,7 +623,7 @@ impl ActiveRegion {
                 }
             }
             // residual displacement m |dv| / (h K)
-            let residual_m = model.mass[gi] * self.implicit.dv[l].norm() / (h * self.stiffness_at[gi]);
+            let residual_m = model.mass[gi] * self.implicit.dv[l].norm() / (h * self.adjacency.stiffness_at[gi]);
             let quiet = !self.pinned[gi] && speed < settings.sleep_speed_m_per_s && residual_m < settings.sleep_displacement_m;
             self.quiet_steps[gi] = if quiet { self.quiet_steps[gi] + 1 } else { 0 };
             if self.quiet_steps[gi] >= settings.sleep_after_steps {
