@@ -10,6 +10,7 @@ mod springs;
 pub use mass::{DONATED_SHARE, lumped_masses};
 pub use material::{Material, SpringStiffness};
 pub use springs::SpringSet;
+pub(crate) use springs::sorted_by_first_end;
 
 use crate::fem::{FemMaterial, FemModel};
 use mass::quarter_mass;

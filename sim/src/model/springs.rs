@@ -3,6 +3,11 @@
 use super::{Material, SpringStiffness};
 use crate::TetMesh;
 
+/// Whether springs `ends` come sorted by their first end (as a model's do: by edge).
+pub(crate) fn sorted_by_first_end(ends: &[[u32; 2]]) -> bool {
+    ends.windows(2).all(|w| w[0][0] <= w[1][0])
+}
+
 /// One spring + damper per mesh edge, stored as a structure of arrays.
 #[derive(Debug, Clone, Default)]
 pub struct SpringSet {

@@ -9,9 +9,9 @@
 //! the system's matrix (a Galerkin projection onto their span, see [`super::span`]; before,
 //! their cubic extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4`, which that span holds). On the
 //! 100k-tet chest wall while it is cut (`cut_time 100000 6`, tolerance 1e-3) the steps need 12.2
-//! CG iterations from the projection against 17.3 from the extrapolation. The forces, the blocks, the right-hand side
-//! and the diagonal blocks are assembled in one pass over the springs, chunk by chunk (gather,
-//! vectorised arithmetic, scatter).
+//! CG iterations from the projection against 17.3 from the extrapolation. The forces, the
+//! blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
+//! springs, chunk by chunk (gather, vectorised arithmetic, scatter).
 
 use crate::model::{Particles, SpringSet, State};
 use crate::{Point3, Vector3};

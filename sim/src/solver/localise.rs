@@ -141,7 +141,7 @@ impl Adjacency {
         let csr = &self.springs_at;
         self.stiffness_at.clear();
         self.stiffness_at.extend((0..n).map(|i| csr.row(i).iter().map(|&e| springs.stiffness[e as usize]).sum::<f64>()));
-        self.sorted_by_first = springs.ends.windows(2).all(|w| w[0][0] <= w[1][0]);
+        self.sorted_by_first = crate::model::sorted_by_first_end(&springs.ends);
         self.fresh = true;
     }
 }
