@@ -149,9 +149,14 @@ pub fn run(db: Option<&Path>, command: AssessCommand) -> anyhow::Result<()> {
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json),
         command => {
             let path = default_db_path(db);
-            let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .context("starting the async runtime")?;
             rt.block_on(async {
-                let store = Store::open(&path).await.with_context(|| format!("opening the database {}", path.display()))?;
+                let store = Store::open(&path)
+                    .await
+                    .with_context(|| format!("opening the database {}", path.display()))?;
                 store.ensure_builtins().await?;
                 let result = with_store(&store, command).await;
                 store.close().await;
@@ -163,18 +168,41 @@ pub fn run(db: Option<&Path>, command: AssessCommand) -> anyhow::Result<()> {
 
 async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()> {
     match command {
-        AssessCommand::Assess { file, exercise, trainee, expert, json } => {
-            let rec = cutlab_recorder::Recording::open(&file).with_context(|| format!("reading {}", file.display()))?;
-            let attempt = store.start_recorded_attempt(&exercise, &trainee, &file, expert).await?;
-            let (outcome, values) = store.score_recording(attempt.id, &rec).await.context("scoring the recording")?;
+        AssessCommand::Assess {
+            file,
+            exercise,
+            trainee,
+            expert,
+            json,
+        } => {
+            let rec = cutlab_recorder::Recording::open(&file)
+                .with_context(|| format!("reading {}", file.display()))?;
+            let attempt = store
+                .start_recorded_attempt(&exercise, &trainee, &file, expert)
+                .await?;
+            let (outcome, values) = store
+                .score_recording(attempt.id, &rec)
+                .await
+                .context("scoring the recording")?;
             print_outcome(&outcome, &values, json)?;
         }
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
-        AssessCommand::User { command: UserCommand::Add { name, role, password_stdin, password } } => {
+        AssessCommand::User {
+            command:
+                UserCommand::Add {
+                    name,
+                    role,
+                    password_stdin,
+                    password,
+                },
+        } => {
             let role: Role = role.parse()?;
             let password = if password_stdin {
                 let mut line = String::new();
-                std::io::stdin().lock().read_line(&mut line).context("reading the password from standard input")?;
+                std::io::stdin()
+                    .lock()
+                    .read_line(&mut line)
+                    .context("reading the password from standard input")?;
                 let line = line.trim_end_matches(['\r', '\n']).to_owned();
                 anyhow::ensure!(!line.is_empty(), "empty password on standard input");
                 Some(line)
@@ -182,14 +210,24 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                 password
             };
             let u = store.create_user(&name, role, password.as_deref()).await?;
-            println!("added {} {} (id {}){}", u.role, u.name, u.id, if u.has_password { "" } else { ", no password" });
+            println!(
+                "added {} {} (id {}){}",
+                u.role,
+                u.name,
+                u.id,
+                if u.has_password { "" } else { ", no password" }
+            );
         }
-        AssessCommand::User { command: UserCommand::List } => {
+        AssessCommand::User {
+            command: UserCommand::List,
+        } => {
             for u in store.list_users(None).await? {
                 println!("{:>4}  {:<11} {}", u.id, u.role.as_str(), u.name);
             }
         }
-        AssessCommand::Cohort { command: CohortCommand::Add { name, instructor } } => {
+        AssessCommand::Cohort {
+            command: CohortCommand::Add { name, instructor },
+        } => {
             let instructor = match instructor {
                 Some(n) => Some(store.user_by_name(&n).await?.id),
                 None => None,
@@ -197,44 +235,105 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             let c = store.create_cohort(&name, instructor).await?;
             println!("added cohort {} (id {})", c.name, c.id);
         }
-        AssessCommand::Cohort { command: CohortCommand::Join { cohort, user } } => {
+        AssessCommand::Cohort {
+            command: CohortCommand::Join { cohort, user },
+        } => {
             let c = store.cohort_by_name(&cohort).await?;
             let u = store.user_by_name(&user).await?;
             store.join_cohort(c.id, u.id).await?;
             println!("{} is in cohort {}", u.name, c.name);
         }
-        AssessCommand::Cohort { command: CohortCommand::List } => {
+        AssessCommand::Cohort {
+            command: CohortCommand::List,
+        } => {
             for c in store.list_cohorts().await? {
-                let members: Vec<String> = store.cohort_members(c.id).await?.into_iter().map(|u| u.name).collect();
+                let members: Vec<String> = store
+                    .cohort_members(c.id)
+                    .await?
+                    .into_iter()
+                    .map(|u| u.name)
+                    .collect();
                 println!("{}: {}", c.name, members.join(", "));
             }
         }
-        AssessCommand::Exercise { command: ExerciseCommand::Add { name, scene, plan, description, k } } => {
+        AssessCommand::Exercise {
+            command:
+                ExerciseCommand::Add {
+                    name,
+                    scene,
+                    plan,
+                    description,
+                    k,
+                },
+        } => {
             let plan = ExpertPlan::load(&plan)?;
-            let e = store.create_exercise(&NewExercise { name: &name, scene: &scene, description: &description, plan: &plan, thresholds: &[], threshold_k: k }).await?;
-            println!("added exercise {} (id {}, scene {}, plan {:.1} mm long, {:.1} mm deep); thresholds come from expert attempts", e.name, e.id, e.scene, plan.length_m() * 1e3, plan.depth_m * 1e3);
+            let e = store
+                .create_exercise(&NewExercise {
+                    name: &name,
+                    scene: &scene,
+                    description: &description,
+                    plan: &plan,
+                    thresholds: &[],
+                    threshold_k: k,
+                })
+                .await?;
+            println!(
+                "added exercise {} (id {}, scene {}, plan {:.1} mm long, {:.1} mm deep); thresholds come from expert attempts",
+                e.name,
+                e.id,
+                e.scene,
+                plan.length_m() * 1e3,
+                plan.depth_m * 1e3
+            );
         }
-        AssessCommand::Exercise { command: ExerciseCommand::List } => {
+        AssessCommand::Exercise {
+            command: ExerciseCommand::List,
+        } => {
             for e in store.list_exercises().await? {
                 let t = store.thresholds(e.id).await?;
-                println!("{:>4}  {:<24} scene {:<12} {} thresholds", e.id, e.name, e.scene, t.metrics.len());
+                println!(
+                    "{:>4}  {:<24} scene {:<12} {} thresholds",
+                    e.id,
+                    e.name,
+                    e.scene,
+                    t.metrics.len()
+                );
             }
         }
-        AssessCommand::Exercise { command: ExerciseCommand::Thresholds { name, json } } => {
+        AssessCommand::Exercise {
+            command: ExerciseCommand::Thresholds { name, json },
+        } => {
             let e = store.exercise_by_name(&name).await?;
             let t = store.thresholds_from_experts(e.id).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&t)?);
             } else {
-                println!("{}: thresholds from expert attempts, mean +/- {} SD", e.name, e.threshold_k);
-                println!("{:<28} {:>12} {:>12} {:>4} {:>12} {:>12}", "metric", "mean", "sd", "n", "lower", "upper");
-                let limit = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.4}"));
+                println!(
+                    "{}: thresholds from expert attempts, mean +/- {} SD",
+                    e.name, e.threshold_k
+                );
+                println!(
+                    "{:<28} {:>12} {:>12} {:>4} {:>12} {:>12}",
+                    "metric", "mean", "sd", "n", "lower", "upper"
+                );
+                let limit =
+                    |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.4}"));
                 for m in &t.metrics {
-                    println!("{:<28} {:>12.4} {:>12.4} {:>4} {:>12} {:>12}", m.key, m.mean, m.sd, m.n_experts, limit(m.lower), limit(m.upper));
+                    println!(
+                        "{:<28} {:>12.4} {:>12.4} {:>4} {:>12} {:>12}",
+                        m.key,
+                        m.mean,
+                        m.sd,
+                        m.n_experts,
+                        limit(m.lower),
+                        limit(m.upper)
+                    );
                 }
             }
         }
-        AssessCommand::Export { command: ExportCommand::Xapi { trainee } } => {
+        AssessCommand::Export {
+            command: ExportCommand::Xapi { trainee },
+        } => {
             let statements = store.xapi_statements(&trainee).await?;
             println!("{}", serde_json::to_string_pretty(&statements)?);
         }
@@ -244,7 +343,11 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
 
 /// The report of a scored attempt: every metric with its verdict, the score, pass/fail and
 /// proficiency (JSON: the same, with the overall normalised `score`).
-pub fn print_outcome(o: &cutlab_assessor::store::Outcome, values: &[cutlab_assessor::MetricValue], json: bool) -> anyhow::Result<()> {
+pub fn print_outcome(
+    o: &cutlab_assessor::store::Outcome,
+    values: &[cutlab_assessor::MetricValue],
+    json: bool,
+) -> anyhow::Result<()> {
     let verdict = |key: &str| o.verdict.metrics.iter().find(|m| m.key == key);
     if json {
         let metrics: Vec<_> = values
@@ -263,13 +366,27 @@ pub fn print_outcome(o: &cutlab_assessor::store::Outcome, values: &[cutlab_asses
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
-    println!("attempt {}: score {:+.2}, {}", o.attempt.id, o.verdict.score, if o.verdict.pass { "PASS" } else { "FAIL" });
+    println!(
+        "attempt {}: score {:+.2}, {}",
+        o.attempt.id,
+        o.verdict.score,
+        if o.verdict.pass { "PASS" } else { "FAIL" }
+    );
     println!("  {:<28} {:>12} {:<8} verdict", "metric", "value", "unit");
     for v in values {
-        let value = v.value.map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
+        let value = v
+            .value
+            .map_or_else(|| "-".to_owned(), |x| format!("{x:.4}"));
         let judged = match verdict(&v.key) {
-            Some(m) => format!("{} (score {:+.2})", if m.pass { "pass" } else { "FAIL" }, m.score),
-            None => v.missing.clone().map_or_else(String::new, |r| format!("missing: {r}")),
+            Some(m) => format!(
+                "{} (score {:+.2})",
+                if m.pass { "pass" } else { "FAIL" },
+                m.score
+            ),
+            None => v
+                .missing
+                .clone()
+                .map_or_else(String::new, |r| format!("missing: {r}")),
         };
         println!("  {:<28} {:>12} {:<8} {}", v.key, value, v.unit, judged);
     }
@@ -279,7 +396,11 @@ pub fn print_outcome(o: &cutlab_assessor::store::Outcome, values: &[cutlab_asses
         p.attempts,
         p.passes,
         p.consecutive_passes,
-        if p.proficient { "proficient" } else { "not yet proficient" },
+        if p.proficient {
+            "proficient"
+        } else {
+            "not yet proficient"
+        },
         o.proficiency.cusum
     );
     Ok(())

@@ -33,34 +33,73 @@ struct StepRow {
 /// implicit Euler (symplectic Euler would need thousands of sub-steps with their
 /// stiffness-proportional damping) up to 10k tets. `only_tets` (when not empty) and
 /// `only_integrator` narrow the set, e.g. to profile one size.
-pub fn step(quick: bool, json: bool, only_tets: &[usize], only_integrator: Option<Integrator>) -> anyhow::Result<()> {
-    let default_sizes: &[usize] = if quick { &[1_000, 10_000] } else { &[1_000, 10_000, 100_000] };
-    let sizes = if only_tets.is_empty() { default_sizes } else { only_tets };
+pub fn step(
+    quick: bool,
+    json: bool,
+    only_tets: &[usize],
+    only_integrator: Option<Integrator>,
+) -> anyhow::Result<()> {
+    let default_sizes: &[usize] = if quick {
+        &[1_000, 10_000]
+    } else {
+        &[1_000, 10_000, 100_000]
+    };
+    let sizes = if only_tets.is_empty() {
+        default_sizes
+    } else {
+        only_tets
+    };
     let mut runs: Vec<(&str, usize, Integrator)> = Vec::new();
     for &n in sizes {
-        for integrator in Integrator::ALL.into_iter().filter(|i| only_integrator.is_none_or(|o| o == *i)) {
+        for integrator in Integrator::ALL
+            .into_iter()
+            .filter(|i| only_integrator.is_none_or(|o| o == *i))
+        {
             runs.push(("chest-wall", n, integrator));
         }
         if n <= 10_000 && only_integrator.is_none_or(|o| o == Integrator::ImplicitEuler) {
             runs.push(("chest-wall-fem", n, Integrator::ImplicitEuler));
         }
     }
-    let budget = if quick { Duration::from_secs(2) } else { Duration::from_secs(10) };
+    let budget = if quick {
+        Duration::from_secs(2)
+    } else {
+        Duration::from_secs(10)
+    };
     let max_steps = if quick { 500 } else { 2_000 };
     let bar = crate::progress::bar(runs.len() as u64, json);
     let mut rows = Vec::new();
     for &(name, n, integrator) in &runs {
         let scene = Scene::load(name, BuildOptions { min_tets: Some(n) }).context(name)?;
-        bar.set_message(format!("{} tets, {}", scene.model.mesh.tet_count(), integrator.name()));
+        bar.set_message(format!(
+            "{} tets, {}",
+            scene.model.mesh.tet_count(),
+            integrator.name()
+        ));
         let mut sim = scene.simulation();
         sim.settings.integrator = integrator;
         sim.model_changed();
         let t = Instant::now();
         let settle = sim.settle(StaticSettings::default());
         let settle_ms = t.elapsed().as_secs_f64() * 1e3;
-        anyhow::ensure!(settle.converged, "settling {n} tets did not converge: {settle:?}");
-        let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
-        let mut stroke = Stroke::new(&sim, Point3::new(-0.03, 0.0, z), Point3::new(0.03, 0.0, z), -Vector3::z(), 1.5, 0.3);
+        anyhow::ensure!(
+            settle.converged,
+            "settling {n} tets did not converge: {settle:?}"
+        );
+        let z = sim
+            .state
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let mut stroke = Stroke::new(
+            &sim,
+            Point3::new(-0.03, 0.0, z),
+            Point3::new(0.03, 0.0, z),
+            -Vector3::z(),
+            1.5,
+            0.3,
+        );
         let dt = sim.settings.time_step_s;
         let mut times = Vec::new();
         let mut cg = 0;
@@ -74,7 +113,11 @@ pub fn step(quick: bool, json: bool, only_tets: &[usize], only_integrator: Optio
         }
         let s = Summary::of(&times);
         rows.push(StepRow {
-            model: if scene.model.fem.is_some() { "corotational-fem" } else { "springs" },
+            model: if scene.model.fem.is_some() {
+                "corotational-fem"
+            } else {
+                "springs"
+            },
             requested_tets: n,
             tets: scene.model.mesh.tet_count(),
             particles: scene.model.vertex_count(),
@@ -100,12 +143,24 @@ pub fn step(quick: bool, json: bool, only_tets: &[usize], only_integrator: Optio
         "chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall; {}",
         crate::bench_perf::threads_text(cutlab_sim::solver::system::solver_threads())
     );
-    println!("| model | tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |");
+    println!(
+        "| model | tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |"
+    );
     println!("|---|---:|---:|---|---:|---:|---:|---:|---:|---:|");
     for r in &rows {
-        println!("| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
-            r.model, r.tets, r.particles, r.integrator, r.substeps, r.cg_iterations_mean, r.step_us.median, r.step_us.p99,
-            r.realtime_factor, r.settle_ms);
+        println!(
+            "| {} | {} | {} | {} | {} | {:.1} | {:.0} | {:.0} | {:.2} | {:.0} |",
+            r.model,
+            r.tets,
+            r.particles,
+            r.integrator,
+            r.substeps,
+            r.cg_iterations_mean,
+            r.step_us.median,
+            r.step_us.p99,
+            r.realtime_factor,
+            r.settle_ms
+        );
     }
     Ok(())
 }

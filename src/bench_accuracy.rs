@@ -64,9 +64,16 @@ fn jobs(quick: bool) -> Vec<Job> {
     }
     let bars: &[&'static str] = if quick { &IPC_BARS[..2] } else { &IPC_BARS };
     let steppers: &[(Integrator, f64)] = if quick {
-        &[(Integrator::ImplicitEuler, 1e-4), (Integrator::ImplicitEuler, 1e-3)]
+        &[
+            (Integrator::ImplicitEuler, 1e-4),
+            (Integrator::ImplicitEuler, 1e-3),
+        ]
     } else {
-        &[(Integrator::ImplicitEuler, 1e-4), (Integrator::ImplicitEuler, 1e-3), (Integrator::SymplecticEuler, 1e-4)]
+        &[
+            (Integrator::ImplicitEuler, 1e-4),
+            (Integrator::ImplicitEuler, 1e-3),
+            (Integrator::SymplecticEuler, 1e-4),
+        ]
     };
     for kind in Elasticity::ALL {
         for &bar in bars {
@@ -79,10 +86,16 @@ fn jobs(quick: bool) -> Vec<Job> {
 }
 
 fn run_job(job: &Job, solid: Solid) -> anyhow::Result<AccuracyRow> {
-    let bar = |name: &str| read_bar(&ipc_dir().join(name), IPC_UNIT_M).with_context(|| format!("reading {name}"));
+    let bar = |name: &str| {
+        read_bar(&ipc_dir().join(name), IPC_UNIT_M).with_context(|| format!("reading {name}"))
+    };
     Ok(match *job {
         Job::Patch(kind) => {
-            let cells = GridCells { nx: 4, ny: 3, nz: 3 };
+            let cells = GridCells {
+                nx: 4,
+                ny: 3,
+                nz: 3,
+            };
             let t = Instant::now();
             let r = reference::patch_test(kind, solid, cells, 1e-3)?;
             let wall_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -163,7 +176,9 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
             Job::Patch(k) => format!("patch test, {}", k.name()),
             Job::Cantilever(k, b) => format!("cantilever {b}, {}", k.name()),
             Job::Wound(k, m) => format!("wound opening, {m} cells per half length, {}", k.name()),
-            Job::Vibration(k, b, i, dt) => format!("vibration {b}, {} {} ms, {}", i.name(), dt * 1e3, k.name()),
+            Job::Vibration(k, b, i, dt) => {
+                format!("vibration {b}, {} {} ms, {}", i.name(), dt * 1e3, k.name())
+            }
         });
         rows.push(run_job(job, solid)?);
         bar.inc(1);
@@ -172,16 +187,24 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     // Richardson extrapolation of the finite elements' cantilever on the two finest bars.
     let fem_bars: Vec<CantileverResult> = IPC_BARS[1..]
         .iter()
-        .map(|b| reference::cantilever(read_bar(&ipc_dir().join(b), IPC_UNIT_M)?, Elasticity::CorotationalFem, solid))
+        .map(|b| {
+            reference::cantilever(
+                read_bar(&ipc_dir().join(b), IPC_UNIT_M)?,
+                Elasticity::CorotationalFem,
+                solid,
+            )
+        })
         .collect::<Result<_, _>>()?;
     let extrapolated = reference::richardson(&fem_bars[0], &fem_bars[1]);
     let extrapolated_error = (extrapolated - fem_bars[1].analytic_m).abs() / fem_bars[1].analytic_m;
 
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("accuracy.csv");
-    std::fs::write(&csv_path, csv(&rows)).with_context(|| format!("writing {}", csv_path.display()))?;
+    std::fs::write(&csv_path, csv(&rows))
+        .with_context(|| format!("writing {}", csv_path.display()))?;
     let svg_path = out.join("accuracy.svg");
-    std::fs::write(&svg_path, svg(&rows)).with_context(|| format!("writing {}", svg_path.display()))?;
+    std::fs::write(&svg_path, svg(&rows))
+        .with_context(|| format!("writing {}", svg_path.display()))?;
     if json {
         let doc = serde_json::json!({
             "solid": solid,
@@ -200,31 +223,75 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     println!("| problem | model | tets | solver | wall ms | error % |");
     println!("|---|---|---:|---|---:|---:|");
     for r in &rows {
-        let wall = if r.wall_kind == "solve" { format!("{:.1}", r.wall_ms) } else { format!("{:.0} / sim s", r.wall_ms) };
-        println!("| {} | {} | {} | {} | {} | {:.2} |", r.problem, r.model, r.tets, r.solver, wall, 100.0 * r.error);
+        let wall = if r.wall_kind == "solve" {
+            format!("{:.1}", r.wall_ms)
+        } else {
+            format!("{:.0} / sim s", r.wall_ms)
+        };
+        println!(
+            "| {} | {} | {} | {} | {} | {:.2} |",
+            r.problem,
+            r.model,
+            r.tets,
+            r.solver,
+            wall,
+            100.0 * r.error
+        );
     }
     let finest_wound = rows
         .iter()
         .filter(|r| r.problem.starts_with("wound") && r.model == Elasticity::CorotationalFem.name())
         .max_by_key(|r| r.tets);
     let finest = |model: Elasticity| {
-        rows.iter().filter(|r| r.problem.starts_with("cantilever") && r.model == model.name()).max_by_key(|r| r.tets)
+        rows.iter()
+            .filter(|r| r.problem.starts_with("cantilever") && r.model == model.name())
+            .max_by_key(|r| r.tets)
     };
-    let (finest_bar, finest_quadratic_bar) = (finest(Elasticity::CorotationalFem), finest(Elasticity::QuadraticFem));
+    let (finest_bar, finest_quadratic_bar) = (
+        finest(Elasticity::CorotationalFem),
+        finest(Elasticity::QuadraticFem),
+    );
     println!();
     if let Some(w) = finest_wound {
-        let verdict = if w.error < 0.05 { "reached" } else { "NOT reached" };
-        println!("goal, FEM within 5 % of the wound opening ({} tets): {:.1} %, {verdict}", w.tets, 100.0 * w.error);
+        let verdict = if w.error < 0.05 {
+            "reached"
+        } else {
+            "NOT reached"
+        };
+        println!(
+            "goal, FEM within 5 % of the wound opening ({} tets): {:.1} %, {verdict}",
+            w.tets,
+            100.0 * w.error
+        );
     }
     if let Some(c) = finest_bar {
-        let verdict = if c.error < 0.05 { "reached" } else { "NOT reached (linear tetrahedra lock in bending)" };
-        println!("goal, linear FEM within 5 % of the cantilever at the finest IPC bar ({} tets): {:.1} %, {verdict}", c.tets, 100.0 * c.error);
+        let verdict = if c.error < 0.05 {
+            "reached"
+        } else {
+            "NOT reached (linear tetrahedra lock in bending)"
+        };
+        println!(
+            "goal, linear FEM within 5 % of the cantilever at the finest IPC bar ({} tets): {:.1} %, {verdict}",
+            c.tets,
+            100.0 * c.error
+        );
     }
     if let Some(c) = finest_quadratic_bar {
-        let verdict = if c.error < 0.05 { "reached" } else { "NOT reached" };
-        println!("goal, quadratic FEM within 5 % of the cantilever at the finest IPC bar ({} tets): {:.1} %, {verdict}", c.tets, 100.0 * c.error);
+        let verdict = if c.error < 0.05 {
+            "reached"
+        } else {
+            "NOT reached"
+        };
+        println!(
+            "goal, quadratic FEM within 5 % of the cantilever at the finest IPC bar ({} tets): {:.1} %, {verdict}",
+            c.tets,
+            100.0 * c.error
+        );
     }
-    println!("FEM cantilever, Richardson extrapolation of the two finest bars: {:.1} % (error ~ h^2)", 100.0 * extrapolated_error);
+    println!(
+        "FEM cantilever, Richardson extrapolation of the two finest bars: {:.1} % (error ~ h^2)",
+        100.0 * extrapolated_error
+    );
     println!("wrote {} and {}", csv_path.display(), svg_path.display());
     Ok(())
 }
@@ -234,7 +301,15 @@ fn csv(rows: &[AccuracyRow]) -> String {
     for r in rows {
         s.push_str(&format!(
             "{},{},{},{},{},{},{},{},{}\n",
-            r.problem, r.model, r.tets, r.solver, r.wall_ms, r.wall_kind, r.error, r.value, r.analytic
+            r.problem,
+            r.model,
+            r.tets,
+            r.solver,
+            r.wall_ms,
+            r.wall_kind,
+            r.error,
+            r.value,
+            r.analytic
         ));
     }
     s
@@ -244,16 +319,30 @@ fn csv(rows: &[AccuracyRow]) -> String {
 /// with each problem's Pareto front (no other run is both faster and more accurate).
 fn svg(rows: &[AccuracyRow]) -> String {
     let problems: Vec<&str> = {
-        let mut p: Vec<&str> = rows.iter().map(|r| r.problem).filter(|p| !p.starts_with("patch")).collect();
+        let mut p: Vec<&str> = rows
+            .iter()
+            .map(|r| r.problem)
+            .filter(|p| !p.starts_with("patch"))
+            .collect();
         p.dedup();
         p
     };
-    let colours =
-        [("springs-uniform", "#d62728"), ("springs-youngs", "#ff7f0e"), ("corotational-fem", "#1f77b4"), ("quadratic-fem", "#2ca02c")];
+    let colours = [
+        ("springs-uniform", "#d62728"),
+        ("springs-youngs", "#ff7f0e"),
+        ("corotational-fem", "#1f77b4"),
+        ("quadratic-fem", "#2ca02c"),
+    ];
     let point = |r: &AccuracyRow| plot::Point {
         x: r.wall_ms,
         y: 100.0 * r.error,
-        title: format!("{} {} tets {}: {:.2} %", r.model, r.tets, r.solver, 100.0 * r.error),
+        title: format!(
+            "{} {} tets {}: {:.2} %",
+            r.model,
+            r.tets,
+            r.solver,
+            100.0 * r.error
+        ),
     };
     let panels: Vec<plot::Panel> = problems
         .iter()
@@ -266,11 +355,19 @@ fn svg(rows: &[AccuracyRow]) -> String {
                     colour,
                     line: plot::Line::None,
                     markers: true,
-                    points: sel.iter().filter(|r| r.model == *name).map(|r| point(r)).collect(),
+                    points: sel
+                        .iter()
+                        .filter(|r| r.model == *name)
+                        .map(|r| point(r))
+                        .collect(),
                 })
                 .collect();
             // Pareto front: sorted by time, keep the runs more accurate than every faster one
-            let mut by_time: Vec<&AccuracyRow> = sel.iter().copied().filter(|r| r.error > 0.0 && r.wall_ms > 0.0).collect();
+            let mut by_time: Vec<&AccuracyRow> = sel
+                .iter()
+                .copied()
+                .filter(|r| r.error > 0.0 && r.wall_ms > 0.0)
+                .collect();
             by_time.sort_by(|a, b| a.wall_ms.total_cmp(&b.wall_ms));
             let mut best = f64::INFINITY;
             let mut front = Vec::new();
@@ -280,9 +377,21 @@ fn svg(rows: &[AccuracyRow]) -> String {
                     front.push(point(r));
                 }
             }
-            series.insert(0, plot::Series { name: String::new(), colour: "#999", line: plot::Line::Dashed, markers: false, points: front });
+            series.insert(
+                0,
+                plot::Series {
+                    name: String::new(),
+                    colour: "#999",
+                    line: plot::Line::Dashed,
+                    markers: false,
+                    points: front,
+                },
+            );
             plot::Panel {
-                title: format!("{problem}: error % (log) against wall ms, {} (log)", sel.first().map_or("", |r| r.wall_kind)),
+                title: format!(
+                    "{problem}: error % (log) against wall ms, {} (log)",
+                    sel.first().map_or("", |r| r.wall_kind)
+                ),
                 y_unit: " %".into(),
                 series,
                 ..plot::Panel::default()

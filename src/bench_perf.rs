@@ -16,9 +16,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use cutlab_sim::cut::{Blade, CutError, CutEvent, Cutter};
+use cutlab_sim::model::Model;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{LocalisationSettings, Simulation, StaticSettings};
-use cutlab_sim::model::Model;
 use cutlab_sim::{Point3, TetMesh};
 use serde::Serialize;
 
@@ -56,12 +56,26 @@ struct Case {
 fn cases(quick: bool) -> Vec<Case> {
     // each scene's incision is its `[incision]`: across the chest wall's top along x; the body
     // wall's midline (z runs head to foot, +y is anterior)
-    let chest = |n: usize, coarse: bool| Case { scene: "chest-wall", min_tets: Some(n), coarse };
-    let body = Case { scene: "body-wall", min_tets: None, coarse: false };
+    let chest = |n: usize, coarse: bool| Case {
+        scene: "chest-wall",
+        min_tets: Some(n),
+        coarse,
+    };
+    let body = Case {
+        scene: "body-wall",
+        min_tets: None,
+        coarse: false,
+    };
     if quick {
         vec![chest(50_000, true), chest(10_000, false)]
     } else {
-        vec![chest(200_000, false), chest(100_000, true), chest(50_000, false), chest(10_000, false), body]
+        vec![
+            chest(200_000, false),
+            chest(100_000, true),
+            chest(50_000, false),
+            chest(10_000, false),
+            body,
+        ]
     }
 }
 
@@ -208,28 +222,43 @@ struct Took {
 
 impl Stopwatch {
     fn new() -> Self {
-        Self { schedstat: File::open("/proc/thread-self/schedstat").ok(), buf: Vec::with_capacity(64) }
+        Self {
+            schedstat: File::open("/proc/thread-self/schedstat").ok(),
+            buf: Vec::with_capacity(64),
+        }
     }
 
     /// Nanoseconds this thread has waited for a CPU so far.
     fn waited_ns(&mut self) -> u64 {
-        let Some(file) = self.schedstat.as_mut() else { return 0 };
+        let Some(file) = self.schedstat.as_mut() else {
+            return 0;
+        };
         self.buf.clear();
         if file.seek(SeekFrom::Start(0)).is_err() || file.read_to_end(&mut self.buf).is_err() {
             return 0;
         }
-        std::str::from_utf8(&self.buf).ok().and_then(|s| s.split_whitespace().nth(1)).and_then(|w| w.parse().ok()).unwrap_or(0)
+        std::str::from_utf8(&self.buf)
+            .ok()
+            .and_then(|s| s.split_whitespace().nth(1))
+            .and_then(|w| w.parse().ok())
+            .unwrap_or(0)
     }
 
     fn start(&mut self) -> Mark {
         let waited_ns = self.waited_ns();
-        Mark { at: Instant::now(), waited_ns }
+        Mark {
+            at: Instant::now(),
+            waited_ns,
+        }
     }
 
     fn stop(&mut self, mark: Mark) -> Took {
         let wall_us = mark.at.elapsed().as_secs_f64() * 1e6;
         let waited_us = self.waited_ns().saturating_sub(mark.waited_ns) as f64 / 1e3;
-        Took { wall_us, busy_us: (wall_us - waited_us).max(0.0) }
+        Took {
+            wall_us,
+            busy_us: (wall_us - waited_us).max(0.0),
+        }
     }
 }
 
@@ -306,10 +335,16 @@ impl Run {
     /// the surface as pressed, or at `tool` (the hand is the session's input: every run of a
     /// session follows the full run's tool), the tool the focus; then the tool lifts. Returns
     /// the cut that changed the tissue and where the blade's tip was.
-    fn step(&mut self, k: usize, tool: Option<Point3>) -> anyhow::Result<(Option<CutEvent>, Option<Point3>)> {
+    fn step(
+        &mut self,
+        k: usize,
+        tool: Option<Point3>,
+    ) -> anyhow::Result<(Option<CutEvent>, Option<Point3>)> {
         let t = k as f64 * self.sim.settings.time_step_s - LEAD_IN_S;
         if t < 0.0 {
-            self.sim.step().with_context(|| format!("{} step {k}", self.mode.name()))?;
+            self.sim
+                .step()
+                .with_context(|| format!("{} step {k}", self.mode.name()))?;
             return Ok((None, None));
         }
         let whole = self.clock.start();
@@ -318,9 +353,16 @@ impl Run {
         let down = self.stroke.direction();
         let tip = (t <= self.stroke.duration_s).then(|| tool.unwrap_or(surface + down * DEPTH_M));
         if let Some(tip) = tip {
-            if self.last_cut_tip.is_none_or(|p| (tip - p).norm() >= CUT_STEP_M) {
+            if self
+                .last_cut_tip
+                .is_none_or(|p| (tip - p).norm() >= CUT_STEP_M)
+            {
                 self.last_cut_tip = Some(tip);
-                let blade = Blade { tip, edge_direction: -down, depth_m: BLADE_M };
+                let blade = Blade {
+                    tip,
+                    edge_direction: -down,
+                    depth_m: BLADE_M,
+                };
                 let tc = self.clock.start();
                 let cut = self.cutter.advance(&mut self.sim, blade);
                 let took = self.clock.stop(tc);
@@ -370,12 +412,21 @@ fn same_topology(a: &CutEvent, b: &CutEvent) -> bool {
         && a.vertices_split == b.vertices_split
         && a.springs_removed == b.springs_removed
         && a.springs_added == b.springs_added
-        && a.vertices_created.iter().map(|v| (v.id, v.edge)).eq(b.vertices_created.iter().map(|v| (v.id, v.edge)))
-        && a.vertices_moved.iter().map(|v| v.id).eq(b.vertices_moved.iter().map(|v| v.id))
+        && a.vertices_created
+            .iter()
+            .map(|v| (v.id, v.edge))
+            .eq(b.vertices_created.iter().map(|v| (v.id, v.edge)))
+        && a.vertices_moved
+            .iter()
+            .map(|v| v.id)
+            .eq(b.vertices_moved.iter().map(|v| v.id))
 }
 
 fn max_distance(a: &[Point3], b: &[Point3]) -> f64 {
-    a.iter().zip(b).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max)
 }
 
 /// How a localised run compares with the full one, step by step.
@@ -391,7 +442,13 @@ struct Comparison {
 
 impl Comparison {
     /// The step `at_ms` after the stroke began, the blade's tip at `tool`.
-    fn step(&mut self, at_ms: f64, tool: Option<Point3>, full: (&Run, &Option<CutEvent>), local: (&Run, &Option<CutEvent>)) {
+    fn step(
+        &mut self,
+        at_ms: f64,
+        tool: Option<Point3>,
+        full: (&Run, &Option<CutEvent>),
+        local: (&Run, &Option<CutEvent>),
+    ) {
         if self.diverged_at.is_some() {
             return;
         }
@@ -409,7 +466,13 @@ impl Comparison {
             return;
         }
         self.compared += 1;
-        let Some((vertex, d)) = a.iter().zip(b).map(|(p, q)| (p - q).norm()).enumerate().max_by(|x, y| x.1.total_cmp(&y.1)) else {
+        let Some((vertex, d)) = a
+            .iter()
+            .zip(b)
+            .map(|(p, q)| (p - q).norm())
+            .enumerate()
+            .max_by(|x, y| x.1.total_cmp(&y.1))
+        else {
             return;
         };
         if d > self.worst_m {
@@ -452,8 +515,11 @@ fn memory(scene: &'static str, sim: &Simulation) -> SizeRow {
     }
     let m = &sim.model;
     let topo = m.mesh.topology();
-    let csr = |c: &cutlab_sim::mesh::Csr| 4 * (c.rows() + 1 + (0..c.rows()).map(|i| c.row(i).len()).sum::<usize>());
-    let state_bytes = cap(&sim.state.positions) + cap(&sim.state.velocities) + len(sim.external_forces());
+    let csr = |c: &cutlab_sim::mesh::Csr| {
+        4 * (c.rows() + 1 + (0..c.rows()).map(|i| c.row(i).len()).sum::<usize>())
+    };
+    let state_bytes =
+        cap(&sim.state.positions) + cap(&sim.state.velocities) + len(sim.external_forces());
     let model_bytes = cap(&m.mass)
         + cap(&m.inv_mass)
         + cap(&m.held)
@@ -494,7 +560,11 @@ fn rebuild_ms(model: &Model) -> anyhow::Result<f64> {
     let mut times = Vec::new();
     for _ in 0..5 {
         let t = clock.start();
-        let rebuilt = TetMesh::new(mesh.positions().to_vec(), mesh.tets().to_vec(), mesh.regions().to_vec())?;
+        let rebuilt = TetMesh::new(
+            mesh.positions().to_vec(),
+            mesh.tets().to_vec(),
+            mesh.regions().to_vec(),
+        )?;
         copy.rebuild(rebuilt, model.held.clone())?;
         times.push(clock.stop(t).busy_us / 1e3);
     }
@@ -503,16 +573,31 @@ fn rebuild_ms(model: &Model) -> anyhow::Result<f64> {
 
 /// With `first`, the peak memory of the process too (a later case's would include what the
 /// allocator kept of an earlier one).
-fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) -> anyhow::Result<(Vec<PerfRow>, SizeRow)> {
+fn run_case(
+    case: Case,
+    quick: bool,
+    first: bool,
+    bar: &indicatif::ProgressBar,
+) -> anyhow::Result<(Vec<PerfRow>, SizeRow)> {
     let (stroke_s, after_s) = timing(quick);
     let label = |tets: usize| format!("{} {}k tets", case.scene, tets / 1000);
     bar.set_message(format!("{}: building and settling", case.scene));
-    let scene = Scene::load(case.scene, BuildOptions { min_tets: case.min_tets }).with_context(|| format!("building {}", case.scene))?;
+    let scene = Scene::load(
+        case.scene,
+        BuildOptions {
+            min_tets: case.min_tets,
+        },
+    )
+    .with_context(|| format!("building {}", case.scene))?;
     let mut settled = scene.simulation();
     let t = Instant::now();
     let report = settled.settle(StaticSettings::default());
     let settle_ms = t.elapsed().as_secs_f64() * 1e3;
-    anyhow::ensure!(report.converged, "settling {} did not converge: {report:?}", case.scene);
+    anyhow::ensure!(
+        report.converged,
+        "settling {} did not converge: {report:?}",
+        case.scene
+    );
     let tets = settled.model.mesh.tet_count();
     let mut size = memory(case.scene, &settled);
     size.peak_settled_bytes = vm_hwm_bytes().filter(|_| first);
@@ -526,21 +611,43 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
     // checked when the scene was built
     let (up, along) = scene.spec.incision.unit().map_err(anyhow::Error::msg)?;
     let half = 0.5 * SPEED_M_PER_S * stroke_s;
-    let stroke = Stroke::new(&settled, centre - along * half, centre + along * half, -up, stroke_s, PRESS_N);
-    anyhow::ensure!(stroke.surface_count() > 0, "{}: no free surface facing {up:?} along the incision", case.scene);
+    let stroke = Stroke::new(
+        &settled,
+        centre - along * half,
+        centre + along * half,
+        -up,
+        stroke_s,
+        PRESS_N,
+    );
+    anyhow::ensure!(
+        stroke.surface_count() > 0,
+        "{}: no free surface facing {up:?} along the incision",
+        case.scene
+    );
 
     let mut modes = vec![Mode::Full, Mode::Localised(1.0)];
     if case.coarse {
         modes.push(Mode::Localised(COARSE));
     }
-    let mut runs: Vec<Run> = modes.iter().map(|&m| Run::new(&settled, &stroke, m)).collect();
+    let mut runs: Vec<Run> = modes
+        .iter()
+        .map(|&m| Run::new(&settled, &stroke, m))
+        .collect();
     let start = settled.state.positions.clone();
     drop(settled);
     let mut comparisons: Vec<Comparison> = (1..runs.len()).map(|_| Comparison::default()).collect();
     let dt = runs[0].sim.settings.time_step_s;
     let mut peak_m = 0.0f64;
     let mut tool = None;
-    bar.set_message(format!("{}: {}", label(tets), modes.iter().map(|m| m.name()).collect::<Vec<_>>().join(", ")));
+    bar.set_message(format!(
+        "{}: {}",
+        label(tets),
+        modes
+            .iter()
+            .map(|m| m.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    ));
     for k in 0..((LEAD_IN_S + stroke_s + after_s) / dt).round() as usize {
         let (first, tip) = runs[0].step(k, None)?;
         tool = tip.or(tool);
@@ -552,7 +659,12 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
         peak_m = peak_m.max(max_distance(&full[..start.len()], &start));
         let at_ms = (k as f64 * dt - LEAD_IN_S) * 1e3;
         for (j, c) in comparisons.iter_mut().enumerate() {
-            c.step(at_ms, tool, (&runs[0], &events[0]), (&runs[j + 1], &events[j + 1]));
+            c.step(
+                at_ms,
+                tool,
+                (&runs[0], &events[0]),
+                (&runs[j + 1], &events[j + 1]),
+            );
         }
         bar.inc(1);
     }
@@ -572,7 +684,13 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
                 mode: r.mode.name(),
                 steps: r.step_us.busy.len(),
                 step_us: Summary::of(&r.step_us.busy),
-                step_after_cut_us: Summary::of(&r.records.iter().filter(|s| s.since_cut == Some(0)).map(|s| s.busy_us).collect::<Vec<_>>()),
+                step_after_cut_us: Summary::of(
+                    &r.records
+                        .iter()
+                        .filter(|s| s.since_cut == Some(0))
+                        .map(|s| s.busy_us)
+                        .collect::<Vec<_>>(),
+                ),
                 cut_us: Summary::of(&r.cut_us.busy),
                 cut_idle_us: Summary::of(&r.cut_idle_us),
                 whole_step_us: Summary::of(&r.whole_us.busy),
@@ -582,10 +700,21 @@ fn run_case(case: Case, quick: bool, first: bool, bar: &indicatif::ProgressBar) 
                 unresolved_cuts: r.unresolved,
                 tets_split: r.tets_split,
                 cg_iterations_mean: mean(r.records.iter().map(|s| s.cg as f64)),
-                cg_iterations_after_cut_mean: mean(r.records.iter().filter(|s| after_cut(s)).map(|s| s.cg as f64)),
+                cg_iterations_after_cut_mean: mean(
+                    r.records
+                        .iter()
+                        .filter(|s| after_cut(s))
+                        .map(|s| s.cg as f64),
+                ),
                 awake_mean: mean(r.records.iter().map(|s| s.awake as f64)),
                 slowest: slowest(&r.records),
-                error: comparison.map(|c| if peak_m > 0.0 { c.worst_m / peak_m } else { 0.0 }),
+                error: comparison.map(|c| {
+                    if peak_m > 0.0 {
+                        c.worst_m / peak_m
+                    } else {
+                        0.0
+                    }
+                }),
                 compared_steps: comparison.map(|c| c.compared),
                 worst: comparison.and_then(|c| c.worst),
                 cut_events: comparison.map(Comparison::verdict),
@@ -642,9 +771,11 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
 
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("perf.csv");
-    std::fs::write(&csv_path, csv(&rows)).with_context(|| format!("writing {}", csv_path.display()))?;
+    std::fs::write(&csv_path, csv(&rows))
+        .with_context(|| format!("writing {}", csv_path.display()))?;
     let svg_path = out.join("perf.svg");
-    std::fs::write(&svg_path, svg(&rows, threads)).with_context(|| format!("writing {}", svg_path.display()))?;
+    std::fs::write(&svg_path, svg(&rows, threads))
+        .with_context(|| format!("writing {}", svg_path.display()))?;
     let goals = goals(&rows);
     if json {
         let doc = serde_json::json!({
@@ -658,15 +789,24 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&doc)?);
         return Ok(());
     }
-    println!("{}; {}", session_text(stroke_s, after_s), threads_text(threads));
+    println!(
+        "{}; {}",
+        session_text(stroke_s, after_s),
+        threads_text(threads)
+    );
     if let [Some(a), Some(b)] = load {
-        println!("load average before {:.2}, after {:.2} (other work on the machine inflates the p99s)", a[0], b[0]);
+        println!(
+            "load average before {:.2}, after {:.2} (other work on the machine inflates the p99s)",
+            a[0], b[0]
+        );
     }
     println!();
     println!(
         "| scene | tets | mode | step median us | step p99 us | step after a cut, median us | cuts | cut median us | cut p99 us | cut call without change, median us | 1 ms step with its cut, p99 us | max us | the same p99 in wall time us | awake | CG it. | CG it. after a cut | error % | cut events |"
     );
-    println!("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    println!(
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+    );
     for r in &rows {
         println!(
             "| {} | {} | {} | {:.0} | {:.0} | {:.0} | {} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {} | {} |",
@@ -713,7 +853,9 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
         );
     }
     println!();
-    println!("| scene | tets | particles | settle ms | rebuild per cut ms | largest displacement mm | state bytes per tet | peak memory, settled MB | peak memory with the runs MB |");
+    println!(
+        "| scene | tets | particles | settle ms | rebuild per cut ms | largest displacement mm | state bytes per tet | peak memory, settled MB | peak memory with the runs MB |"
+    );
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
     let mb = |b: Option<u64>| b.map_or(String::new(), |b| format!("{:.0}", b as f64 / 1e6));
     for m in &sizes {
@@ -732,7 +874,12 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     }
     println!();
     for g in &goals {
-        println!("goal, {}: {:.0} us, {}", g.goal, g.measured_us, if g.met { "met" } else { "NOT met" });
+        println!(
+            "goal, {}: {:.0} us, {}",
+            g.goal,
+            g.measured_us,
+            if g.met { "met" } else { "NOT met" }
+        );
     }
     println!("wrote {} and {}", csv_path.display(), svg_path.display());
     Ok(())
@@ -741,7 +888,9 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
 /// How many threads the solver used, for the headers.
 pub(crate) fn threads_text(threads: usize) -> String {
     if threads > 1 {
-        format!("{threads} threads for the step from 4k particles and the cut from 20k tets on (RAYON_NUM_THREADS=1: one)")
+        format!(
+            "{threads} threads for the step from 4k particles and the cut from 20k tets on (RAYON_NUM_THREADS=1: one)"
+        )
     } else {
         "single thread".into()
     }
@@ -766,15 +915,27 @@ struct Goal {
 }
 
 fn goals(rows: &[PerfRow]) -> Vec<Goal> {
-    let at_100k = |mode: &str| rows.iter().find(|r| r.scene == "chest-wall" && r.requested_tets == Some(100_000) && r.mode == mode);
+    let at_100k = |mode: &str| {
+        rows.iter().find(|r| {
+            r.scene == "chest-wall" && r.requested_tets == Some(100_000) && r.mode == mode
+        })
+    };
     let mut goals = Vec::new();
     if let Some(r) = at_100k("localised") {
         let us = r.whole_step_us.p99;
-        goals.push(Goal { goal: "localised 100k, p99 of the 1 ms step with its cut < 1 ms", measured_us: us, met: us < 1e3 });
+        goals.push(Goal {
+            goal: "localised 100k, p99 of the 1 ms step with its cut < 1 ms",
+            measured_us: us,
+            met: us < 1e3,
+        });
     }
     if let Some(r) = at_100k("full") {
         let us = r.step_us.p99;
-        goals.push(Goal { goal: "full 100k, p99 of the step < 10 ms", measured_us: us, met: us < 1e4 });
+        goals.push(Goal {
+            goal: "full 100k, p99 of the step < 10 ms",
+            measured_us: us,
+            met: us < 1e4,
+        });
     }
     goals
 }
@@ -823,7 +984,11 @@ fn csv(rows: &[PerfRow]) -> String {
 /// the localised whole step (with its cut) at p99; the 1 ms and 10 ms goals as guides.
 fn svg(rows: &[PerfRow], threads: usize) -> String {
     let chest: Vec<&PerfRow> = rows.iter().filter(|r| r.scene == "chest-wall").collect();
-    let series = |name: &str, colour: &'static str, line: plot::Line, mode: &str, value: fn(&PerfRow) -> f64| plot::Series {
+    let series = |name: &str,
+                  colour: &'static str,
+                  line: plot::Line,
+                  mode: &str,
+                  value: fn(&PerfRow) -> f64| plot::Series {
         name: name.into(),
         colour,
         line,
@@ -831,19 +996,48 @@ fn svg(rows: &[PerfRow], threads: usize) -> String {
         points: chest
             .iter()
             .filter(|r| r.mode == mode)
-            .map(|r| plot::Point { x: r.tets as f64, y: value(r), title: format!("{name}, {} tets: {:.0} us", r.tets, value(r)) })
+            .map(|r| plot::Point {
+                x: r.tets as f64,
+                y: value(r),
+                title: format!("{name}, {} tets: {:.0} us", r.tets, value(r)),
+            })
             .collect(),
     };
     let panel = plot::Panel {
-        title: format!("chest wall: step time, us (log), against tetrahedra (log); {}", threads_text(threads)),
+        title: format!(
+            "chest wall: step time, us (log), against tetrahedra (log); {}",
+            threads_text(threads)
+        ),
         x_unit: String::new(),
         y_unit: " us".into(),
         series: vec![
-            series("full, median", "#1f77b4", plot::Line::Solid, "full", |r| r.step_us.median),
-            series("full, p99", "#1f77b4", plot::Line::Dashed, "full", |r| r.step_us.p99),
-            series("localised, median", "#d62728", plot::Line::Solid, "localised", |r| r.step_us.median),
-            series("localised, p99", "#d62728", plot::Line::Dashed, "localised", |r| r.step_us.p99),
-            series("localised, p99 of the step with its cut", "#ff7f0e", plot::Line::Dashed, "localised", |r| r.whole_step_us.p99),
+            series("full, median", "#1f77b4", plot::Line::Solid, "full", |r| {
+                r.step_us.median
+            }),
+            series("full, p99", "#1f77b4", plot::Line::Dashed, "full", |r| {
+                r.step_us.p99
+            }),
+            series(
+                "localised, median",
+                "#d62728",
+                plot::Line::Solid,
+                "localised",
+                |r| r.step_us.median,
+            ),
+            series(
+                "localised, p99",
+                "#d62728",
+                plot::Line::Dashed,
+                "localised",
+                |r| r.step_us.p99,
+            ),
+            series(
+                "localised, p99 of the step with its cut",
+                "#ff7f0e",
+                plot::Line::Dashed,
+                "localised",
+                |r| r.whole_step_us.p99,
+            ),
         ],
         guides: vec![(1e3, "1 ms: 1 kHz".into()), (1e4, "10 ms".into())],
     };

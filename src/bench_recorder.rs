@@ -58,25 +58,52 @@ struct Figures {
     seek_resimulate_wall_s: f64,
 }
 
-pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool, out: &Path) -> anyhow::Result<()> {
+pub fn run(
+    min_tets: Option<usize>,
+    duration_s: f64,
+    localise: bool,
+    json: bool,
+    out: &Path,
+) -> anyhow::Result<()> {
     if !(duration_s > 0.0 && duration_s <= 3600.0) {
         anyhow::bail!("--duration must be in (0, 3600] s");
     }
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets }).context("loading the chest wall")?;
-    let config = SessionConfig { duration_s, ..SessionConfig::default() };
-    let make = || -> anyhow::Result<(Session, cutlab_haptics::device::Plan, Box<SyntheticTrainee>)> {
-        let mut session = Session::new(&scene)?;
-        if localise {
-            session.sim.settings.localisation = Some(LocalisationSettings::default());
-        }
-        let plan = session.plan_across_top(0.06, 0.008)?;
-        let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), Skill::preset("expert").context("expert preset")?, 1)?);
-        Ok((session, plan, device))
+    let scene =
+        Scene::load("chest-wall", BuildOptions { min_tets }).context("loading the chest wall")?;
+    let config = SessionConfig {
+        duration_s,
+        ..SessionConfig::default()
     };
-    let tick_us = |r: &cutlab_haptics::SessionReport| Summary::of(&r.servo.tick_work_nanos.iter().map(|&n| n as f64 * 1e-3).collect::<Vec<_>>());
+    let make =
+        || -> anyhow::Result<(Session, cutlab_haptics::device::Plan, Box<SyntheticTrainee>)> {
+            let mut session = Session::new(&scene)?;
+            if localise {
+                session.sim.settings.localisation = Some(LocalisationSettings::default());
+            }
+            let plan = session.plan_across_top(0.06, 0.008)?;
+            let device = Box::new(SyntheticTrainee::new(
+                "expert",
+                plan.clone(),
+                Skill::preset("expert").context("expert preset")?,
+                1,
+            )?);
+            Ok((session, plan, device))
+        };
+    let tick_us = |r: &cutlab_haptics::SessionReport| {
+        Summary::of(
+            &r.servo
+                .tick_work_nanos
+                .iter()
+                .map(|&n| n as f64 * 1e-3)
+                .collect::<Vec<_>>(),
+        )
+    };
 
     if !json {
-        eprintln!("session without the recorder ({duration_s} s, {} tets)...", scene.model.mesh.tet_count());
+        eprintln!(
+            "session without the recorder ({duration_s} s, {} tets)...",
+            scene.model.mesh.tet_count()
+        );
     }
     let (session, _, device) = make()?;
     let plain = session.run(device, &config)?;
@@ -87,9 +114,28 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("session.mcap");
     let (session, plan, device) = make()?;
-    let provenance = Provenance { scene: "chest-wall".into(), min_tets, seed: 1, device: "expert".into(), ..Provenance::default() };
-    let settings = RecordSettings { tap: TapSettings::default(), writer: WriterOptions::default() };
-    let recorded = record::run_recorded(session, device, &config, &provenance, Some(&plan), &scene.spec, &path, settings, None)?;
+    let provenance = Provenance {
+        scene: "chest-wall".into(),
+        min_tets,
+        seed: 1,
+        device: "expert".into(),
+        ..Provenance::default()
+    };
+    let settings = RecordSettings {
+        tap: TapSettings::default(),
+        writer: WriterOptions::default(),
+    };
+    let recorded = record::run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        Some(&plan),
+        &scene.spec,
+        &path,
+        settings,
+        None,
+    )?;
     let report = recorded.report?;
     let file_bytes = std::fs::metadata(&path)?.len();
 
@@ -97,13 +143,36 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         eprintln!("replaying...");
     }
     let rec = Recording::open(&path)?;
-    let rp = replay::replay(&rec, ReplayOptions { jobs: 1, ..ReplayOptions::default() })?;
-    let parallel = replay::replay(&rec, ReplayOptions { jobs: 0, ..ReplayOptions::default() })?;
+    let rp = replay::replay(
+        &rec,
+        ReplayOptions {
+            jobs: 1,
+            ..ReplayOptions::default()
+        },
+    )?;
+    let parallel = replay::replay(
+        &rec,
+        ReplayOptions {
+            jobs: 0,
+            ..ReplayOptions::default()
+        },
+    )?;
     if !json {
         eprintln!("seeking...");
     }
     let seek_to_s = duration_s / 2.0 + 0.5;
-    let window = |resimulate| replay::replay(&rec, ReplayOptions { from_s: Some(seek_to_s), to_s: Some(seek_to_s), resimulate, jobs: 1, ..ReplayOptions::default() });
+    let window = |resimulate| {
+        replay::replay(
+            &rec,
+            ReplayOptions {
+                from_s: Some(seek_to_s),
+                to_s: Some(seek_to_s),
+                resimulate,
+                jobs: 1,
+                ..ReplayOptions::default()
+            },
+        )
+    };
     let (seek, resimulated) = (window(false)?, window(true)?);
     let w = &recorded.write;
     let f = Figures {
@@ -139,18 +208,45 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         return Ok(());
     }
     let how = if f.localised { "localised" } else { "full" };
-    println!("recorder on a {:.0} s session, {} ({} tets, {how} simulation), expert trainee, virtual clock", f.session_s, f.scene, f.tets);
-    let t = |s: &Summary| format!("p50 {:.2} us, p99 {:.2} us, max {:.1} us", s.median, s.p99, s.max);
-    println!("  servo work per tick without the recorder: {}", t(&f.tick_work_us_unrecorded));
-    println!("  servo work per tick with the recorder:    {}", t(&f.tick_work_us_recorded));
+    println!(
+        "recorder on a {:.0} s session, {} ({} tets, {how} simulation), expert trainee, virtual clock",
+        f.session_s, f.scene, f.tets
+    );
+    let t = |s: &Summary| {
+        format!(
+            "p50 {:.2} us, p99 {:.2} us, max {:.1} us",
+            s.median, s.p99, s.max
+        )
+    };
+    println!(
+        "  servo work per tick without the recorder: {}",
+        t(&f.tick_work_us_unrecorded)
+    );
+    println!(
+        "  servo work per tick with the recorder:    {}",
+        t(&f.tick_work_us_recorded)
+    );
     println!("  dropped tick records: {}", f.dropped_tick_records);
-    println!("  file: {:.2} MB ({:.1} MB per minute of session); {} messages, {:.1} MB of payload before compression", f.file_bytes as f64 * 1e-6, f.file_mb_per_minute, f.messages, f.payload_mb);
-    println!("  writer thread: busy {:.2} s, {:.0} MB/s of payload", f.writer_busy_s, f.writer_mb_per_s);
+    println!(
+        "  file: {:.2} MB ({:.1} MB per minute of session); {} messages, {:.1} MB of payload before compression",
+        f.file_bytes as f64 * 1e-6,
+        f.file_mb_per_minute,
+        f.messages,
+        f.payload_mb
+    );
+    println!(
+        "  writer thread: busy {:.2} s, {:.0} MB/s of payload",
+        f.writer_busy_s, f.writer_mb_per_s
+    );
     println!(
         "  replay: {:.2} s wall, {:.2}x real time, {} ({} keyframes)",
         f.replay_wall_s,
         f.replay_speed,
-        if f.replay_verified { "bit-exact" } else { "DIVERGED" },
+        if f.replay_verified {
+            "bit-exact"
+        } else {
+            "DIVERGED"
+        },
         f.keyframes_checked
     );
     println!(
@@ -158,17 +254,28 @@ pub fn run(min_tets: Option<usize>, duration_s: f64, localise: bool, json: bool,
         f.replay_parallel_threads,
         f.replay_parallel_wall_s,
         f.replay_parallel_speed,
-        if f.replay_parallel_verified { "bit-exact, the same final state" } else { "DIVERGED" }
+        if f.replay_parallel_verified {
+            "bit-exact, the same final state"
+        } else {
+            "DIVERGED"
+        }
     );
     match f.seek_resumed_at_s {
         Some(t) => println!(
             "  seek to {:.1} s: {:.2} s wall resuming at the keyframe of {t:.1} s (hashes {}), {:.2} s re-simulating from the start",
             f.seek_to_s,
             f.seek_wall_s,
-            if f.seek_restore_verified { "equal" } else { "DIFFER" },
+            if f.seek_restore_verified {
+                "equal"
+            } else {
+                "DIFFER"
+            },
             f.seek_resimulate_wall_s
         ),
-        None => println!("  seek to {:.1} s: no keyframe to resume at; {:.2} s re-simulating from the start", f.seek_to_s, f.seek_resimulate_wall_s),
+        None => println!(
+            "  seek to {:.1} s: no keyframe to resume at; {:.2} s re-simulating from the start",
+            f.seek_to_s, f.seek_resimulate_wall_s
+        ),
     }
     Ok(())
 }

@@ -16,9 +16,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
+use cutlab_haptics::SimRecord;
 use cutlab_haptics::collision::SurfaceCollider;
 use cutlab_haptics::tap::SurfaceSnapshot;
-use cutlab_haptics::SimRecord;
 use cutlab_recorder::{RerunSink, RerunTarget};
 use cutlab_sim::mesh::Topology;
 use cutlab_sim::scene::{BuildOptions, Scene};
@@ -65,7 +65,11 @@ fn time_ms(count: usize, mut f: impl FnMut()) -> Summary {
 }
 
 /// Steps `sim` `count` times with the tool resting on the surface at `tip` (the focus, no force).
-fn resting_steps(sim: &mut Simulation, tip: Point3, count: usize) -> anyhow::Result<(Summary, f64)> {
+fn resting_steps(
+    sim: &mut Simulation,
+    tip: Point3,
+    count: usize,
+) -> anyhow::Result<(Summary, f64)> {
     sim.set_focus(&[tip]);
     let (mut samples, mut awake) = (Vec::with_capacity(count), 0usize);
     for _ in 0..count {
@@ -78,10 +82,19 @@ fn resting_steps(sim: &mut Simulation, tip: Point3, count: usize) -> anyhow::Res
 }
 
 fn measure(min_tets: usize, quick: bool, out: &Path) -> anyhow::Result<SkipRow> {
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(min_tets) }).context("chest-wall")?;
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(min_tets),
+        },
+    )
+    .context("chest-wall")?;
     let mut sim = scene.simulation();
     let settle = sim.settle(StaticSettings::default());
-    anyhow::ensure!(settle.converged, "settling {min_tets} tets did not converge: {settle:?}");
+    anyhow::ensure!(
+        settle.converged,
+        "settling {min_tets} tets did not converge: {settle:?}"
+    );
     let repeats = if quick { 5 } else { 20 };
 
     let mut collider = SurfaceCollider::build(&sim)?;
@@ -109,7 +122,13 @@ fn measure(min_tets: usize, quick: bool, out: &Path) -> anyhow::Result<SkipRow> 
     });
 
     // the tool resting on the top of the wall, at its middle
-    let tip = sim.state.positions.iter().copied().max_by(|a, b| a.z.total_cmp(&b.z)).context("no particles")?;
+    let tip = sim
+        .state
+        .positions
+        .iter()
+        .copied()
+        .max_by(|a, b| a.z.total_cmp(&b.z))
+        .context("no particles")?;
     let steps = if quick { 100 } else { 300 };
     let mut full = sim.clone();
     let (step_full_ms, _) = resting_steps(&mut full, tip, steps)?;
@@ -121,8 +140,13 @@ fn measure(min_tets: usize, quick: bool, out: &Path) -> anyhow::Result<SkipRow> 
 
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let rrd = out.join(format!("surface-{}.rrd", mesh.tet_count()));
-    let mut sink = RerunSink::new(&RerunTarget::File(rrd.clone()), "cutlab-bench-skip", 1_000_000, 0.01)
-        .with_context(|| format!("opening {}", rrd.display()))?;
+    let mut sink = RerunSink::new(
+        &RerunTarget::File(rrd.clone()),
+        "cutlab-bench-skip",
+        1_000_000,
+        0.01,
+    )
+    .with_context(|| format!("opening {}", rrd.display()))?;
     let snapshots = if quick { 20 } else { 100 };
     let started = Instant::now();
     let mut step = 0u64;
@@ -131,7 +155,8 @@ fn measure(min_tets: usize, quick: bool, out: &Path) -> anyhow::Result<SkipRow> 
         for p in &mut moved {
             *p += Vector3::z() * 1e-6;
         }
-        let record = SimRecord::Surface(Box::new(SurfaceSnapshot::of(&collider, &moved, step, step)));
+        let record =
+            SimRecord::Surface(Box::new(SurfaceSnapshot::of(&collider, &moved, step, step)));
         if let Err(e) = sink.on_sim(&record) {
             tracing::error!("logging a surface to rerun: {e}");
         }
@@ -169,7 +194,9 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
-    println!("What the work a session skips would cost, chest wall settled, single thread, medians in ms");
+    println!(
+        "What the work a session skips would cost, chest wall settled, single thread, medians in ms"
+    );
     println!(
         "| tets | particles | surface triangles | BVH built again | BVH refitted | refit skipped (surface still) | surface extracted again | step, tool resting: full | localised (awake) | rerun: surface snapshot, call / with the file written |"
     );

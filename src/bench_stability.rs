@@ -19,7 +19,11 @@ struct Row {
 /// stable.
 pub fn run(quick: bool, json: bool) -> anyhow::Result<()> {
     let cases = stability::sweep(quick);
-    let cells = GridCells { nx: 6, ny: 6, nz: 2 };
+    let cells = GridCells {
+        nx: 6,
+        ny: 6,
+        nz: 2,
+    };
     let duration_s = if quick { 0.05 } else { 0.2 };
     let bar = crate::progress::bar(cases.len() as u64, json);
     let mut rows = Vec::new();
@@ -32,8 +36,13 @@ pub fn run(quick: bool, json: bool) -> anyhow::Result<()> {
             case.youngs_modulus_pa / 1e3
         ));
         let t = Instant::now();
-        let result = stability::run(&case, cells, duration_s, stability::MAX_SUBSTEPS).with_context(|| format!("{case:?}"))?;
-        rows.push(Row { case, result, wall_ms: t.elapsed().as_secs_f64() * 1e3 });
+        let result = stability::run(&case, cells, duration_s, stability::MAX_SUBSTEPS)
+            .with_context(|| format!("{case:?}"))?;
+        rows.push(Row {
+            case,
+            result,
+            wall_ms: t.elapsed().as_secs_f64() * 1e3,
+        });
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -47,12 +56,20 @@ pub fn run(quick: bool, json: bool) -> anyhow::Result<()> {
         duration_s
     );
     println!("dt 0.1/1/10 ms, E 1 kPa..1 MPa, damping levels 0/1/2, mass ratio 1/100");
-    println!("| model | integrator | cases | stable | rejected safely | unbounded | too many substeps | NaN leaked | max energy ratio (stable) |");
+    println!(
+        "| model | integrator | cases | stable | rejected safely | unbounded | too many substeps | NaN leaked | max energy ratio (stable) |"
+    );
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
-    let mut groups: Vec<(&str, &str)> = rows.iter().map(|r| (r.case.model.name(), r.case.integrator.name())).collect();
+    let mut groups: Vec<(&str, &str)> = rows
+        .iter()
+        .map(|r| (r.case.model.name(), r.case.integrator.name()))
+        .collect();
     groups.dedup();
     for (model, integrator) in groups {
-        let sel: Vec<&Row> = rows.iter().filter(|r| r.case.model.name() == model && r.case.integrator.name() == integrator).collect();
+        let sel: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.case.model.name() == model && r.case.integrator.name() == integrator)
+            .collect();
         let count = |o: Outcome| sel.iter().filter(|r| r.result.outcome == o).count();
         let worst = sel
             .iter()
@@ -71,7 +88,9 @@ pub fn run(quick: bool, json: bool) -> anyhow::Result<()> {
     }
     println!();
     println!("cases that were not stable:");
-    println!("| model | integrator | dt ms | E kPa | damping | mass ratio | outcome | substeps | energy ratio |");
+    println!(
+        "| model | integrator | dt ms | E kPa | damping | mass ratio | outcome | substeps | energy ratio |"
+    );
     println!("|---|---|---:|---:|---:|---:|---|---:|---:|");
     for r in rows.iter().filter(|r| r.result.outcome != Outcome::Stable) {
         let c = &r.case;
@@ -88,7 +107,13 @@ pub fn run(quick: bool, json: bool) -> anyhow::Result<()> {
             r.result.energy_ratio
         );
     }
-    let leaks = rows.iter().filter(|r| r.result.outcome == Outcome::NonFiniteLeak).count();
-    anyhow::ensure!(leaks == 0, "{leaks} runs leaked non-finite values into the state");
+    let leaks = rows
+        .iter()
+        .filter(|r| r.result.outcome == Outcome::NonFiniteLeak)
+        .count();
+    anyhow::ensure!(
+        leaks == 0,
+        "{leaks} runs leaked non-finite values into the state"
+    );
     Ok(())
 }

@@ -8,7 +8,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use cutlab_assessor::proficiency::DEFAULT_K;
-use cutlab_assessor::store::{BUILTIN_EXERCISE, BUILTIN_SCENE, NewExercise, Store, default_thresholds};
+use cutlab_assessor::store::{
+    BUILTIN_EXERCISE, BUILTIN_SCENE, NewExercise, Store, default_thresholds,
+};
 use cutlab_assessor::{AssessError, ExpertPlan};
 use cutlab_dashboard::seed_demo_accounts;
 use cutlab_haptics::servo::Clock;
@@ -51,15 +53,30 @@ pub fn axial_plan() -> Result<ExpertPlan, AssessError> {
     let (x, r) = (0.005f64, 0.15f64);
     let z = (r * r - x * x).sqrt() - r;
     let (entry_m, exit_m) = ([x, -0.02, z], [x, 0.02, z]);
-    ExpertPlan { name: "chest-wall axial incision".into(), entry_m, exit_m, incision_m: vec![entry_m, exit_m], depth_m: 0.005, ..base }.normalised()
+    ExpertPlan {
+        name: "chest-wall axial incision".into(),
+        entry_m,
+        exit_m,
+        incision_m: vec![entry_m, exit_m],
+        depth_m: 0.005,
+        ..base
+    }
+    .normalised()
 }
 
 /// Seeds the demo's history into the database `db` (recordings under `dir`) unless
 /// [`DEMO_CURRICULUM`] exists already; returns whether it seeded. The accounts and cohort are
 /// made sure of either way.
 pub fn run(db: &Path, dir: &Path) -> anyhow::Result<bool> {
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
-    let open = || async { Store::open(db).await.with_context(|| format!("opening the database {}", db.display())) };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let open = || async {
+        Store::open(db)
+            .await
+            .with_context(|| format!("opening the database {}", db.display()))
+    };
     let done = rt.block_on(async {
         let store = open().await?;
         seed_demo_accounts(&store).await?;
@@ -74,18 +91,43 @@ pub fn run(db: &Path, dir: &Path) -> anyhow::Result<bool> {
         return Ok(false);
     }
     let exercises = [BUILTIN_EXERCISE, AXIAL_EXERCISE];
-    println!("simulating the demo's attempts ({MIN_TETS} tets, virtual clock; recordings in {}):", dir.display());
+    println!(
+        "simulating the demo's attempts ({MIN_TETS} tets, virtual clock; recordings in {}):",
+        dir.display()
+    );
     let experts: Vec<Attempt> = exercises
         .iter()
-        .flat_map(|&exercise| (1..=EXPERTS).map(move |k| Attempt { exercise, trainee: "dr-kim", level: 1.0, seed: 100 + k, expert: true }))
+        .flat_map(|&exercise| {
+            (1..=EXPERTS).map(move |k| Attempt {
+                exercise,
+                trainee: "dr-kim",
+                level: 1.0,
+                seed: 100 + k,
+                expert: true,
+            })
+        })
         .collect();
-    run_lanes(db, dir, "expert reference attempts", &[experts.iter().step_by(2).cloned().collect(), experts.iter().skip(1).step_by(2).cloned().collect()])?;
+    run_lanes(
+        db,
+        dir,
+        "expert reference attempts",
+        &[
+            experts.iter().step_by(2).cloned().collect(),
+            experts.iter().skip(1).step_by(2).cloned().collect(),
+        ],
+    )?;
     rt.block_on(async {
         let store = open().await?;
         for name in exercises {
             let e = store.exercise_by_name(name).await?;
-            let t = store.thresholds_from_experts(e.id).await.with_context(|| format!("thresholds of {name} from its expert attempts"))?;
-            println!("  {name}: thresholds of {} metrics from {EXPERTS} expert attempts", t.metrics.len());
+            let t = store
+                .thresholds_from_experts(e.id)
+                .await
+                .with_context(|| format!("thresholds of {name} from its expert attempts"))?;
+            println!(
+                "  {name}: thresholds of {} metrics from {EXPERTS} expert attempts",
+                t.metrics.len()
+            );
         }
         store.close().await;
         anyhow::Ok(())
@@ -93,14 +135,44 @@ pub fn run(db: &Path, dir: &Path) -> anyhow::Result<bool> {
     // ana improves from novice to expert level (her best attempts pass; two passes in a row,
     // proficiency, are still ahead of her) and becomes proficient at the second exercise; ben
     // is still learning
-    let ana = [0.1, 0.35, 0.6, 0.8, 0.95, 1.0, 1.0].iter().map(|&level| (BUILTIN_EXERCISE, level)).chain([0.8, 1.0, 1.0].map(|l| (AXIAL_EXERCISE, l)));
-    let ana: Vec<Attempt> = ana.enumerate().map(|(k, (exercise, level))| Attempt { exercise, trainee: "ana", level, seed: 200 + k as u64, expert: false }).collect();
-    let ben: Vec<Attempt> = [0.0, 0.15, 0.3, 0.45].iter().enumerate().map(|(k, &level)| Attempt { exercise: BUILTIN_EXERCISE, trainee: "ben", level, seed: 300 + k as u64, expert: false }).collect();
+    let ana = [0.1, 0.35, 0.6, 0.8, 0.95, 1.0, 1.0]
+        .iter()
+        .map(|&level| (BUILTIN_EXERCISE, level))
+        .chain([0.8, 1.0, 1.0].map(|l| (AXIAL_EXERCISE, l)));
+    let ana: Vec<Attempt> = ana
+        .enumerate()
+        .map(|(k, (exercise, level))| Attempt {
+            exercise,
+            trainee: "ana",
+            level,
+            seed: 200 + k as u64,
+            expert: false,
+        })
+        .collect();
+    let ben: Vec<Attempt> = [0.0, 0.15, 0.3, 0.45]
+        .iter()
+        .enumerate()
+        .map(|(k, &level)| Attempt {
+            exercise: BUILTIN_EXERCISE,
+            trainee: "ben",
+            level,
+            seed: 300 + k as u64,
+            expert: false,
+        })
+        .collect();
     run_lanes(db, dir, "trainee attempts", &[ana, ben])?;
     rt.block_on(async {
         let store = open().await?;
-        let c = store.create_curriculum(DEMO_CURRICULUM, "Open incisions on the chest wall: a transverse incision, then a shorter axial one").await?;
-        for (name, exercise) in [("Transverse incision", BUILTIN_EXERCISE), ("Axial incision", AXIAL_EXERCISE)] {
+        let c = store
+            .create_curriculum(
+                DEMO_CURRICULUM,
+                "Open incisions on the chest wall: a transverse incision, then a shorter axial one",
+            )
+            .await?;
+        for (name, exercise) in [
+            ("Transverse incision", BUILTIN_EXERCISE),
+            ("Axial incision", AXIAL_EXERCISE),
+        ] {
             let e = store.exercise_by_name(exercise).await?;
             store.add_module(c.id, name, &[e.id]).await?;
         }
@@ -108,10 +180,24 @@ pub fn run(db: &Path, dir: &Path) -> anyhow::Result<bool> {
             let u = store.user_by_name(trainee).await?;
             for name in exercises {
                 let e = store.exercise_by_name(name).await?;
-                let scores: Vec<String> = store.list_attempts(Some(u.id), Some(e.id)).await?.iter().filter_map(|a| a.score).map(|s| format!("{s:+.2}")).collect();
+                let scores: Vec<String> = store
+                    .list_attempts(Some(u.id), Some(e.id))
+                    .await?
+                    .iter()
+                    .filter_map(|a| a.score)
+                    .map(|s| format!("{s:+.2}"))
+                    .collect();
                 if !scores.is_empty() {
                     let p = store.proficiency(u.id, e.id).await?;
-                    println!("  {trainee} at {name}: scores {}; {}", scores.join(" "), if p.proficient_attempt_id.is_some() { "proficient" } else { "not yet proficient" });
+                    println!(
+                        "  {trainee} at {name}: scores {}; {}",
+                        scores.join(" "),
+                        if p.proficient_attempt_id.is_some() {
+                            "proficient"
+                        } else {
+                            "not yet proficient"
+                        }
+                    );
                 }
             }
         }
@@ -156,14 +242,22 @@ fn run_lanes(db: &Path, dir: &Path, what: &str, lanes: &[Vec<Attempt>]) -> anyho
                 let bar = bar.clone();
                 scope.spawn(move || {
                     for a in lane {
-                        simulate(db, dir, a).with_context(|| format!("{}'s attempt at {} (seed {})", a.trainee, a.exercise, a.seed))?;
+                        simulate(db, dir, a).with_context(|| {
+                            format!(
+                                "{}'s attempt at {} (seed {})",
+                                a.trainee, a.exercise, a.seed
+                            )
+                        })?;
                         bar.inc(1);
                     }
                     anyhow::Ok(())
                 })
             })
             .collect();
-        handles.into_iter().try_for_each(|h| h.join().map_err(|_| anyhow::anyhow!("a session thread panicked"))?)
+        handles.into_iter().try_for_each(|h| {
+            h.join()
+                .map_err(|_| anyhow::anyhow!("a session thread panicked"))?
+        })
     })?;
     bar.finish_and_clear();
     println!("  {total} {what} simulated, scored and stored");
@@ -172,12 +266,17 @@ fn run_lanes(db: &Path, dir: &Path, what: &str, lanes: &[Vec<Attempt>]) -> anyho
 
 /// One attempt: a recorded session of a synthetic trainee at the attempt's level, scored.
 fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
-    let out: PathBuf = dir.join(a.exercise).join(format!("{}-{}", a.trainee, a.seed));
+    let out: PathBuf = dir
+        .join(a.exercise)
+        .join(format!("{}-{}", a.trainee, a.seed));
     let skill = cutlab_haptics::device::Skill::at_level(a.level).context("skill level")?;
     session::run(&session::Options {
         scene: BUILTIN_SCENE.into(),
         min_tets: Some(MIN_TETS),
-        device: DeviceArg::Trainee { name: format!("level:{}", a.level), skill },
+        device: DeviceArg::Trainee {
+            name: format!("level:{}", a.level),
+            skill,
+        },
         clock: Clock::Virtual,
         duration_s: a.duration_s(),
         seed: a.seed,
@@ -187,7 +286,12 @@ fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
         surface_hz: 10.0,
         // the dashboard's replay review opens the .rrd in the rerun viewer
         rerun: Some(RerunTarget::File(PathBuf::from("session.rrd"))),
-        attempt: Some(AttemptArgs { db: db.to_owned(), exercise: a.exercise.into(), trainee: a.trainee.into(), expert: a.expert }),
+        attempt: Some(AttemptArgs {
+            db: db.to_owned(),
+            exercise: a.exercise.into(),
+            trainee: a.trainee.into(),
+            expert: a.expert,
+        }),
         localise: false,
         quiet: true,
     })
@@ -199,8 +303,16 @@ mod tests {
 
     #[test]
     fn the_axial_plan_is_valid_and_shorter_than_the_transverse_one() {
-        let (axial, transverse) = (axial_plan().expect("axial plan"), ExpertPlan::chest_wall().expect("built-in plan"));
-        assert!((axial.length_m() - 0.04).abs() < 1e-12 && axial.length_m() < transverse.length_m());
-        assert_eq!((axial.viewpoint_m, &axial.target_m), (transverse.viewpoint_m, &transverse.target_m));
+        let (axial, transverse) = (
+            axial_plan().expect("axial plan"),
+            ExpertPlan::chest_wall().expect("built-in plan"),
+        );
+        assert!(
+            (axial.length_m() - 0.04).abs() < 1e-12 && axial.length_m() < transverse.length_m()
+        );
+        assert_eq!(
+            (axial.viewpoint_m, &axial.target_m),
+            (transverse.viewpoint_m, &transverse.target_m)
+        );
     }
 }

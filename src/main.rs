@@ -10,10 +10,10 @@ mod bench_skip;
 mod bench_stability;
 mod demo;
 mod demo_seed;
-mod recording;
 mod motion_metrics;
 mod plot;
 mod progress;
+mod recording;
 mod scene_info;
 mod serve;
 mod session;
@@ -348,7 +348,10 @@ fn stdout_errors_end_quietly() {
     let default = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         let payload = info.payload();
-        let message = payload.downcast_ref::<String>().map(String::as_str).or_else(|| payload.downcast_ref::<&str>().copied());
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied());
         match message {
             Some(m) if m.starts_with("failed printing to stdout") => {
                 if m.contains("Broken pipe") {
@@ -371,22 +374,55 @@ fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     match cli.command {
-        Command::Demo { out, min_tets, scene, addr } => {
+        Command::Demo {
+            out,
+            min_tets,
+            scene,
+            addr,
+        } => {
             demo::run(&out, min_tets, &scene)?;
             match addr {
-                Some(addr) => serve::run(&cutlab_assessor::default_db_path(cli.db.as_deref()), &addr, Some(&out.join("attempts"))),
+                Some(addr) => serve::run(
+                    &cutlab_assessor::default_db_path(cli.db.as_deref()),
+                    &addr,
+                    Some(&out.join("attempts")),
+                ),
                 None => Ok(()),
             }
         }
         Command::Serve { addr, demo } => {
             let db = cutlab_assessor::default_db_path(cli.db.as_deref());
-            let recordings = db.parent().unwrap_or(std::path::Path::new(".")).join("demo-attempts");
+            let recordings = db
+                .parent()
+                .unwrap_or(std::path::Path::new("."))
+                .join("demo-attempts");
             serve::run(&db, &addr, demo.then_some(recordings.as_path()))
         }
-        Command::Scene { command: SceneCommand::Info { scene, min_tets, json } } => {
-            scene_info::run(&scene, min_tets, json)
-        }
-        Command::Session { scene, min_tets, device, clock, duration, seed, out, no_realtime, keyframe_every, surface_hz, rrd, rerun, trainee, exercise, localise } => session::run(&session::Options {
+        Command::Scene {
+            command:
+                SceneCommand::Info {
+                    scene,
+                    min_tets,
+                    json,
+                },
+        } => scene_info::run(&scene, min_tets, json),
+        Command::Session {
+            scene,
+            min_tets,
+            device,
+            clock,
+            duration,
+            seed,
+            out,
+            no_realtime,
+            keyframe_every,
+            surface_hz,
+            rrd,
+            rerun,
+            trainee,
+            exercise,
+            localise,
+        } => session::run(&session::Options {
             scene,
             min_tets,
             device,
@@ -397,33 +433,113 @@ fn run() -> anyhow::Result<()> {
             realtime_priority: !no_realtime,
             keyframe_every_s: keyframe_every,
             surface_hz,
-            rerun: recording::rerun_target(rrd.then_some(std::path::Path::new("session.rrd")), rerun.as_ref()),
-            attempt: trainee.map(|trainee| session::AttemptArgs { db: cutlab_assessor::default_db_path(cli.db.as_deref()), exercise, trainee, expert: false }),
+            rerun: recording::rerun_target(
+                rrd.then_some(std::path::Path::new("session.rrd")),
+                rerun.as_ref(),
+            ),
+            attempt: trainee.map(|trainee| session::AttemptArgs {
+                db: cutlab_assessor::default_db_path(cli.db.as_deref()),
+                exercise,
+                trainee,
+                expert: false,
+            }),
             localise,
             quiet: false,
         }),
-        Command::Recording { command: RecordingCommand::Info { file, json } } => recording::info(&file, json),
-        Command::Recording { command: RecordingCommand::Recover { file, out } } => recording::recover(&file, out.as_deref()),
-        Command::Replay { file, speed, from, resimulate, to, keep_going, jobs, json, rrd, rerun } => {
+        Command::Recording {
+            command: RecordingCommand::Info { file, json },
+        } => recording::info(&file, json),
+        Command::Recording {
+            command: RecordingCommand::Recover { file, out },
+        } => recording::recover(&file, out.as_deref()),
+        Command::Replay {
+            file,
+            speed,
+            from,
+            resimulate,
+            to,
+            keep_going,
+            jobs,
+            json,
+            rrd,
+            rerun,
+        } => {
             let rerun = recording::rerun_target(rrd.as_deref(), rerun.as_ref());
-            recording::replay(&file, recording::ReplayArgs { speed, from_s: from, resimulate, to_s: to, keep_going, jobs, json, rerun })
+            recording::replay(
+                &file,
+                recording::ReplayArgs {
+                    speed,
+                    from_s: from,
+                    resimulate,
+                    to_s: to,
+                    keep_going,
+                    jobs,
+                    json,
+                    rerun,
+                },
+            )
         }
-        Command::Scene { command: SceneCommand::List } => {
+        Command::Scene {
+            command: SceneCommand::List,
+        } => {
             for (name, _) in cutlab_sim::scene::BUILTIN {
                 let spec = cutlab_sim::scene::builtin_spec(name);
-                println!("{name:12} {}", spec.map(|s| s.description).unwrap_or_default());
+                println!(
+                    "{name:12} {}",
+                    spec.map(|s| s.description).unwrap_or_default()
+                );
             }
             Ok(())
         }
-        Command::Bench { command: BenchCommand::Step { quick, json, tets, integrator } } => bench::step(quick, json, &tets, integrator),
-        Command::Bench { command: BenchCommand::Accuracy { quick, json, out } } => bench_accuracy::run(quick, json, &out),
-        Command::Bench { command: BenchCommand::Stability { quick, json } } => bench_stability::run(quick, json),
-        Command::Bench { command: BenchCommand::Perf { quick, json, out } } => bench_perf::run(quick, json, &out),
-        Command::Bench { command: BenchCommand::Skip { quick, json, out } } => bench_skip::run(quick, json, &out),
-        Command::Bench { command: BenchCommand::Dashboard { bench_db, trainees, attempts, clients, duration, json } } => {
-            bench_dashboard::run_bench(&bench_dashboard::Options { db: &bench_db, trainees, attempts, clients, duration_s: duration, json })
-        }
-        Command::Bench { command: BenchCommand::Recorder { min_tets, duration, localise, json, out } } => bench_recorder::run(min_tets, duration, localise, json, &out),
+        Command::Bench {
+            command:
+                BenchCommand::Step {
+                    quick,
+                    json,
+                    tets,
+                    integrator,
+                },
+        } => bench::step(quick, json, &tets, integrator),
+        Command::Bench {
+            command: BenchCommand::Accuracy { quick, json, out },
+        } => bench_accuracy::run(quick, json, &out),
+        Command::Bench {
+            command: BenchCommand::Stability { quick, json },
+        } => bench_stability::run(quick, json),
+        Command::Bench {
+            command: BenchCommand::Perf { quick, json, out },
+        } => bench_perf::run(quick, json, &out),
+        Command::Bench {
+            command: BenchCommand::Skip { quick, json, out },
+        } => bench_skip::run(quick, json, &out),
+        Command::Bench {
+            command:
+                BenchCommand::Dashboard {
+                    bench_db,
+                    trainees,
+                    attempts,
+                    clients,
+                    duration,
+                    json,
+                },
+        } => bench_dashboard::run_bench(&bench_dashboard::Options {
+            db: &bench_db,
+            trainees,
+            attempts,
+            clients,
+            duration_s: duration,
+            json,
+        }),
+        Command::Bench {
+            command:
+                BenchCommand::Recorder {
+                    min_tets,
+                    duration,
+                    localise,
+                    json,
+                    out,
+                },
+        } => bench_recorder::run(min_tets, duration, localise, json, &out),
         Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
     }
 }

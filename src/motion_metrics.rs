@@ -31,11 +31,18 @@ pub fn parse_poses(text: &str, name: &str) -> anyhow::Result<Vec<PoseSample>> {
             }
         }
         if fields.len() != COLUMNS.len() {
-            bail!("{name}:{line_no}: expected {} fields ({}), found {}", COLUMNS.len(), COLUMNS.join(", "), fields.len());
+            bail!(
+                "{name}:{line_no}: expected {} fields ({}), found {}",
+                COLUMNS.len(),
+                COLUMNS.join(", "),
+                fields.len()
+            );
         }
         let mut v = [0.0f64; 8];
         for (k, f) in fields.iter().enumerate() {
-            v[k] = f.parse().map_err(|_| anyhow::anyhow!("{name}:{line_no}: {} {f:?} is not a number", COLUMNS[k]))?;
+            v[k] = f.parse().map_err(|_| {
+                anyhow::anyhow!("{name}:{line_no}: {} {f:?} is not a number", COLUMNS[k])
+            })?;
             if !v[k].is_finite() {
                 bail!("{name}:{line_no}: {} is not finite", COLUMNS[k]);
             }
@@ -43,12 +50,20 @@ pub fn parse_poses(text: &str, name: &str) -> anyhow::Result<Vec<PoseSample>> {
         if let Some(prev) = poses.last().map(|p: &PoseSample| p.t_s)
             && v[0] < prev
         {
-            bail!("{name}:{line_no}: time {} s goes back (previous row {prev} s)", v[0]);
+            bail!(
+                "{name}:{line_no}: time {} s goes back (previous row {prev} s)",
+                v[0]
+            );
         }
         if v[4..].iter().map(|q| q * q).sum::<f64>() < 1e-12 {
             bail!("{name}:{line_no}: the quaternion is zero");
         }
-        poses.push(PoseSample { t_s: v[0], tip_m: [v[1], v[2], v[3]], quat_wxyz: [v[4], v[5], v[6], v[7]], blade_engaged: false });
+        poses.push(PoseSample {
+            t_s: v[0],
+            tip_m: [v[1], v[2], v[3]],
+            quat_wxyz: [v[4], v[5], v[6], v[7]],
+            blade_engaged: false,
+        });
     }
     Ok(poses)
 }
@@ -58,7 +73,8 @@ fn opt(v: Option<f64>, scale: f64, digits: usize) -> String {
 }
 
 pub fn run(file: &Path, json: bool) -> anyhow::Result<()> {
-    let text = std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
+    let text =
+        std::fs::read_to_string(file).with_context(|| format!("reading {}", file.display()))?;
     let poses = parse_poses(&text, &file.display().to_string())?;
     let m = path(&poses, &PathParams::default()).with_context(|| format!("{}", file.display()))?;
     if json {
@@ -76,7 +92,11 @@ pub fn run(file: &Path, json: bool) -> anyhow::Result<()> {
         ("economy of motion", opt(m.economy_of_motion, 1.0, 3), ""),
         ("idle time", format!("{:.3}", m.idle_time_s), "s"),
         ("movements", m.movements.to_string(), ""),
-        ("peak speed", format!("{:.1}", m.peak_speed_m_s * 1e3), "mm/s"),
+        (
+            "peak speed",
+            format!("{:.1}", m.peak_speed_m_s * 1e3),
+            "mm/s",
+        ),
         ("angular path", format!("{:.3}", m.angular_path_rad), "rad"),
         ("LDLJ", opt(m.ldlj, 1.0, 3), ""),
         ("SPARC", opt(m.sparc, 1.0, 3), ""),
@@ -109,12 +129,32 @@ mod tests {
         let ok = "t_s,x_m,y_m,z_m,qw,qx,qy,qz\n# comment\n0,0,0,0,1,0,0,0\n\n0.1, 0.001, 0, 0, 1, 0, 0, 0\n";
         assert_eq!(parse_poses(ok, "p.csv").unwrap().len(), 2);
         let short = "0,0,0,0,1,0,0,0\n0.1,0,0,0,1,0,0\n";
-        assert!(parse_poses(short, "p.csv").unwrap_err().to_string().contains("p.csv:2: expected 8 fields"));
+        assert!(
+            parse_poses(short, "p.csv")
+                .unwrap_err()
+                .to_string()
+                .contains("p.csv:2: expected 8 fields")
+        );
         let word = "0,0,0,0,1,0,0,0\n0.1,0,zero,0,1,0,0,0\n";
-        assert!(parse_poses(word, "p.csv").unwrap_err().to_string().contains("p.csv:2: y_m \"zero\" is not a number"));
+        assert!(
+            parse_poses(word, "p.csv")
+                .unwrap_err()
+                .to_string()
+                .contains("p.csv:2: y_m \"zero\" is not a number")
+        );
         let back = "0.2,0,0,0,1,0,0,0\n0.1,0,0,0,1,0,0,0\n";
-        assert!(parse_poses(back, "p.csv").unwrap_err().to_string().contains("p.csv:2: time"));
+        assert!(
+            parse_poses(back, "p.csv")
+                .unwrap_err()
+                .to_string()
+                .contains("p.csv:2: time")
+        );
         let nan = "0,0,0,NaN,1,0,0,0\n";
-        assert!(parse_poses(nan, "p.csv").unwrap_err().to_string().contains("p.csv:1: z_m is not finite"));
+        assert!(
+            parse_poses(nan, "p.csv")
+                .unwrap_err()
+                .to_string()
+                .contains("p.csv:1: z_m is not finite")
+        );
     }
 }

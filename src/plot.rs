@@ -63,23 +63,50 @@ pub fn log_log(width: f64, panel_height: f64, panels: &[Panel]) -> String {
         let x = LEFT + LEGEND_ENTRY_WIDTH * (k % per_row) as f64;
         let y = 14.0 + 18.0 * (k / per_row) as f64;
         if entry.line != Line::None {
-            let _ = writeln!(s, "<line x1=\"{}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"{}\"{}/>", x - 8.0, x + 8.0, entry.colour, dash(entry.line));
+            let _ = writeln!(
+                s,
+                "<line x1=\"{}\" y1=\"{y}\" x2=\"{}\" y2=\"{y}\" stroke=\"{}\"{}/>",
+                x - 8.0,
+                x + 8.0,
+                entry.colour,
+                dash(entry.line)
+            );
         }
         if entry.markers || entry.line == Line::None {
-            let _ = write!(s, "<circle cx=\"{x}\" cy=\"{y}\" r=\"4\" fill=\"{}\"/>", entry.colour);
+            let _ = write!(
+                s,
+                "<circle cx=\"{x}\" cy=\"{y}\" r=\"4\" fill=\"{}\"/>",
+                entry.colour
+            );
         }
-        let _ = writeln!(s, "<text x=\"{}\" y=\"{}\">{}</text>", x + 12.0, y + 4.0, entry.name);
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\">{}</text>",
+            x + 12.0,
+            y + 4.0,
+            entry.name
+        );
     }
     let plot_w = width - LEFT - 20.0;
     for (pi, panel) in panels.iter().enumerate() {
         let y0 = top + panel_height * pi as f64;
         let ph = panel_height - 50.0;
         let shown = |p: &&Point| p.x > 0.0 && p.y > 0.0;
-        let points = || panel.series.iter().flat_map(|s| s.points.iter().filter(shown));
+        let points = || {
+            panel
+                .series
+                .iter()
+                .flat_map(|s| s.points.iter().filter(shown))
+        };
         if points().next().is_none() {
             continue;
         }
-        let (mut xmin, mut xmax, mut ymin, mut ymax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let (mut xmin, mut xmax, mut ymin, mut ymax) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         for p in points() {
             xmin = xmin.min(p.x.log10().floor());
             xmax = xmax.max(p.x.log10().ceil());
@@ -107,11 +134,22 @@ pub fn log_log(width: f64, panel_height: f64, panels: &[Panel]) -> String {
         );
         for d in (xmin as i32)..=(xmax as i32) {
             let x = LEFT + (d as f64 - xmin) / (xmax - xmin) * plot_w;
-            let _ = writeln!(s, "<text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{d}{}</text>", y0 + 20.0 + ph + 14.0, panel.x_unit);
+            let _ = writeln!(
+                s,
+                "<text x=\"{x}\" y=\"{}\" text-anchor=\"middle\">1e{d}{}</text>",
+                y0 + 20.0 + ph + 14.0,
+                panel.x_unit
+            );
         }
         for d in (ymin as i32)..=(ymax as i32) {
             let y = y0 + 20.0 + (ymax - d as f64) / (ymax - ymin) * ph;
-            let _ = writeln!(s, "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{d}{}</text>", LEFT - 4.0, y + 4.0, panel.y_unit);
+            let _ = writeln!(
+                s,
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{d}{}</text>",
+                LEFT - 4.0,
+                y + 4.0,
+                panel.y_unit
+            );
         }
         for (g, label) in panel.guides.iter().filter(|(g, _)| *g > 0.0) {
             let y = py(*g);
@@ -126,7 +164,10 @@ pub fn log_log(width: f64, panel_height: f64, panels: &[Panel]) -> String {
         for series in &panel.series {
             let points: Vec<&Point> = series.points.iter().filter(shown).collect();
             if series.line != Line::None && points.len() > 1 {
-                let xy: Vec<String> = points.iter().map(|p| format!("{:.1},{:.1}", px(p.x), py(p.y))).collect();
+                let xy: Vec<String> = points
+                    .iter()
+                    .map(|p| format!("{:.1},{:.1}", px(p.x), py(p.y)))
+                    .collect();
                 let _ = writeln!(
                     s,
                     "<polyline points=\"{}\" fill=\"none\" stroke=\"{}\"{}/>",
@@ -154,7 +195,11 @@ pub fn log_log(width: f64, panel_height: f64, panels: &[Panel]) -> String {
 }
 
 fn dash(line: Line) -> &'static str {
-    if line == Line::Dashed { " stroke-dasharray=\"4 3\"" } else { "" }
+    if line == Line::Dashed {
+        " stroke-dasharray=\"4 3\""
+    } else {
+        ""
+    }
 }
 
 #[cfg(test)]
@@ -171,9 +216,21 @@ mod tests {
                 line: Line::Solid,
                 markers: true,
                 points: vec![
-                    Point { x: 10.0, y: 1.0, title: "low".into() },
-                    Point { x: 100.0, y: 10.0, title: "high".into() },
-                    Point { x: 0.0, y: 5.0, title: "gone".into() },
+                    Point {
+                        x: 10.0,
+                        y: 1.0,
+                        title: "low".into(),
+                    },
+                    Point {
+                        x: 100.0,
+                        y: 10.0,
+                        title: "high".into(),
+                    },
+                    Point {
+                        x: 0.0,
+                        y: 5.0,
+                        title: "gone".into(),
+                    },
                 ],
             }],
             ..Panel::default()

@@ -22,7 +22,9 @@ impl std::str::FromStr for RerunArg {
             "connect" => Ok(RerunArg::Connect(None)),
             _ => match s.strip_prefix("connect=") {
                 Some(url) if !url.is_empty() => Ok(RerunArg::Connect(Some(url.to_owned()))),
-                _ => Err(format!("--rerun takes spawn, connect or connect=URL, got {s:?}")),
+                _ => Err(format!(
+                    "--rerun takes spawn, connect or connect=URL, got {s:?}"
+                )),
             },
         }
     }
@@ -41,8 +43,14 @@ pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<Reru
 }
 
 /// A rerun sink for a recording's session, with its planned incision logged.
-pub fn rerun_sink(target: &RerunTarget, period_nanos: u64, blade_length_m: f64, plan: Option<&[cutlab_sim::Point3]>) -> anyhow::Result<Box<dyn RecordObserver>> {
-    let mut sink = RerunSink::new(target, "cutlab", period_nanos, blade_length_m).context("starting the rerun logger")?;
+pub fn rerun_sink(
+    target: &RerunTarget,
+    period_nanos: u64,
+    blade_length_m: f64,
+    plan: Option<&[cutlab_sim::Point3]>,
+) -> anyhow::Result<Box<dyn RecordObserver>> {
+    let mut sink = RerunSink::new(target, "cutlab", period_nanos, blade_length_m)
+        .context("starting the rerun logger")?;
     if let Some(line) = plan {
         sink.log_plan(line).context("logging the plan to rerun")?;
     }
@@ -66,10 +74,25 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
-    println!("{}: {:.1} MB, {}", file.display(), rec.file_bytes as f64 * 1e-6, if rec.complete { "complete" } else { "INCOMPLETE" });
+    println!(
+        "{}: {:.1} MB, {}",
+        file.display(),
+        rec.file_bytes as f64 * 1e-6,
+        if rec.complete {
+            "complete"
+        } else {
+            "INCOMPLETE"
+        }
+    );
     if let Some(d) = &rec.damage {
-        println!("  reading stopped after {} records: {}", d.records_read, d.reason);
-        println!("  (`cutlab recording recover {}` writes a complete copy of what is readable)", file.display());
+        println!(
+            "  reading stopped after {} records: {}",
+            d.records_read, d.reason
+        );
+        println!(
+            "  (`cutlab recording recover {}` writes a complete copy of what is readable)",
+            file.display()
+        );
     } else if !rec.complete {
         println!("  the file ends without its footer: the session did not finish writing it");
     }
@@ -79,7 +102,10 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
             "  cutlab {}, scene {}{}, device {}, seed {}, trainee {:?}, exercise {:?}, {} clock, servo period {} us, sim step {} us",
             m.cutlab_version,
             m.provenance.scene,
-            m.provenance.min_tets.map(|n| format!(" (min {n} tets)")).unwrap_or_default(),
+            m.provenance
+                .min_tets
+                .map(|n| format!(" (min {n} tets)"))
+                .unwrap_or_default(),
             m.provenance.device,
             m.provenance.seed,
             m.provenance.trainee,
@@ -89,25 +115,45 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
             m.time_step_nanos / 1000
         );
     }
-    println!("  {:<18} {:<26} {:<10} {:>10}", "channel", "schema", "encoding", "messages");
+    println!(
+        "  {:<18} {:<26} {:<10} {:>10}",
+        "channel", "schema", "encoding", "messages"
+    );
     for c in rec.channels.values() {
-        println!("  {:<18} {:<26} {:<10} {:>10}", c.topic, c.schema, c.message_encoding, c.messages);
+        println!(
+            "  {:<18} {:<26} {:<10} {:>10}",
+            c.topic, c.schema, c.message_encoding, c.messages
+        );
     }
     for (name, media, bytes) in &rec.attachments {
         println!("  attachment {name} ({media}, {} bytes)", bytes.len());
     }
     match &rec.end {
-        Some(end) => println!("  session end: {}", end.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(", ")),
+        Some(end) => println!(
+            "  session end: {}",
+            end.iter()
+                .map(|(k, v)| format!("{k}={v}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
         None => println!("  no session-end record (the session was interrupted)"),
     }
     Ok(())
 }
 
 pub fn recover(file: &Path, out: Option<&Path>) -> anyhow::Result<()> {
-    let out: PathBuf = out.map(Path::to_path_buf).unwrap_or_else(|| file.with_extension("recovered.mcap"));
-    let r = salvage::recover(file, &out).with_context(|| format!("recovering {}", file.display()))?;
+    let out: PathBuf = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| file.with_extension("recovered.mcap"));
+    let r =
+        salvage::recover(file, &out).with_context(|| format!("recovering {}", file.display()))?;
     if r.input_complete {
-        println!("{} was complete; copied {} messages to {}", file.display(), r.messages, out.display());
+        println!(
+            "{} was complete; copied {} messages to {}",
+            file.display(),
+            r.messages,
+            out.display()
+        );
     } else {
         println!(
             "salvaged {} messages ({} metadata, {} attachments) up to {:.3} s into {}",
@@ -139,17 +185,33 @@ pub struct ReplayArgs {
 pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
     let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
     if !rec.complete {
-        eprintln!("warning: {} is incomplete; replaying what is readable", file.display());
+        eprintln!(
+            "warning: {} is incomplete; replaying what is readable",
+            file.display()
+        );
     }
     let observer = match &a.rerun {
         Some(target) => {
             let plan = rec.plan()?.map(|p| p.to_plan().line_m);
             let meta = rec.meta()?;
-            Some(rerun_sink(target, meta.period_nanos, meta.blade_length_m, plan.as_deref())?)
+            Some(rerun_sink(
+                target,
+                meta.period_nanos,
+                meta.blade_length_m,
+                plan.as_deref(),
+            )?)
         }
         None => None,
     };
-    let options = ReplayOptions { speed: Some(a.speed), from_s: a.from_s, to_s: a.to_s, observer, keep_going: a.keep_going, resimulate: a.resimulate, jobs: a.jobs };
+    let options = ReplayOptions {
+        speed: Some(a.speed),
+        from_s: a.from_s,
+        to_s: a.to_s,
+        observer,
+        keep_going: a.keep_going,
+        resimulate: a.resimulate,
+        jobs: a.jobs,
+    };
     let r = replay::replay(&rec, options).context("replaying")?;
     let resumed_at_s = r.resumed_at.map(|k| k.session_s);
     if a.json {
@@ -163,7 +225,10 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         if let Some(k) = r.resumed_at {
-            println!("resumed at the keyframe of step {} ({:.3} s; its hashes equal)", k.step, k.session_s);
+            println!(
+                "resumed at the keyframe of step {} ({:.3} s; its hashes equal)",
+                k.step, k.session_s
+            );
         }
         println!(
             "replayed {} steps ({:.2} s of session) on {} thread{} in {:.2} s wall: {:.1}x real time",
@@ -174,7 +239,10 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
             r.wall_s,
             r.speed()
         );
-        println!("  keyframes: {} of {} hashes equal; cuts: {} replayed, {} recorded", r.keyframes_matched, r.keyframes_checked, r.cuts_replayed, r.cuts_recorded);
+        println!(
+            "  keyframes: {} of {} hashes equal; cuts: {} replayed, {} recorded",
+            r.keyframes_matched, r.keyframes_checked, r.cuts_replayed, r.cuts_recorded
+        );
     }
     match &r.first_divergence {
         None if r.keyframes_checked > 0 => {
@@ -191,6 +259,9 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
             Ok(())
         }
         None => bail!("no keyframe in the recording: nothing was verified"),
-        Some(d) => bail!("the replay diverged ({} divergences); first at {d}", r.divergences),
+        Some(d) => bail!(
+            "the replay diverged ({} divergences); first at {d}",
+            r.divergences
+        ),
     }
 }

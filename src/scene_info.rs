@@ -26,7 +26,8 @@ struct Info {
 }
 
 pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<()> {
-    let built = Scene::load(scene, BuildOptions { min_tets }).with_context(|| format!("loading {scene}"))?;
+    let built = Scene::load(scene, BuildOptions { min_tets })
+        .with_context(|| format!("loading {scene}"))?;
     let m = &built.model;
     let mesh = &m.mesh;
     let (lo, hi) = mesh.bounding_box();
@@ -49,7 +50,11 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
         bounding_box_max_mm: [hi.x, hi.y, hi.z].map(|v| v * 1e3),
         quality: mesh.quality(),
         valid: report.is_ok(),
-        problems: if report.is_ok() { String::new() } else { report.to_string() },
+        problems: if report.is_ok() {
+            String::new()
+        } else {
+            report.to_string()
+        },
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&info)?);
@@ -58,7 +63,11 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
     println!("scene      {}", info.name);
     println!("model      {}", info.force_model);
     println!("tets       {}", info.tets);
-    println!("vertices   {} ({} held)", info.vertices, info.held_vertices.unwrap_or(0));
+    println!(
+        "vertices   {} ({} held)",
+        info.vertices,
+        info.held_vertices.unwrap_or(0)
+    );
     println!("edges      {}", info.edges);
     println!("surface    {} triangles", info.boundary_triangles);
     println!("regions    {:?}", info.regions);
@@ -69,8 +78,20 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
     let [a, b, c] = info.bounding_box_min_mm;
     let [d, e, f] = info.bounding_box_max_mm;
     println!("bbox       [{a:.2}, {b:.2}, {c:.2}] .. [{d:.2}, {e:.2}, {f:.2}] mm");
-    println!("dihedral   min {:.2} deg, max {:.2} deg (mu mean {:.3}, max {:.3})",
-        info.quality.min_dihedral_deg, info.quality.max_dihedral_deg, info.quality.mean_mu, info.quality.max_mu);
-    println!("validation {}", if info.valid { "ok".to_string() } else { info.problems.clone() });
+    println!(
+        "dihedral   min {:.2} deg, max {:.2} deg (mu mean {:.3}, max {:.3})",
+        info.quality.min_dihedral_deg,
+        info.quality.max_dihedral_deg,
+        info.quality.mean_mu,
+        info.quality.max_mu
+    );
+    println!(
+        "validation {}",
+        if info.valid {
+            "ok".to_string()
+        } else {
+            info.problems.clone()
+        }
+    );
     Ok(())
 }

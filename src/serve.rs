@@ -16,9 +16,14 @@ pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
     {
         println!("demo curriculum and attempts already in {}", db.display());
     }
-    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")?;
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     rt.block_on(async {
-        let store = Store::open(db).await.with_context(|| format!("opening the database {}", db.display()))?;
+        let store = Store::open(db)
+            .await
+            .with_context(|| format!("opening the database {}", db.display()))?;
         store.ensure_builtins().await?;
         if demo.is_some() {
             println!("demo accounts (user / password / role):");
@@ -26,15 +31,23 @@ pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
                 println!("  {:8} {:16} {}", a.name, a.password, a.role);
             }
         }
-        let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("listening on {addr}"))?;
-        println!("dashboard: http://{} (database {}); Ctrl-C stops it", listener.local_addr()?, db.display());
+        let listener = tokio::net::TcpListener::bind(addr)
+            .await
+            .with_context(|| format!("listening on {addr}"))?;
+        println!(
+            "dashboard: http://{} (database {}); Ctrl-C stops it",
+            listener.local_addr()?,
+            db.display()
+        );
         let shutdown = async {
             // no signal handler: run until killed
             if tokio::signal::ctrl_c().await.is_err() {
                 std::future::pending::<()>().await;
             }
         };
-        cutlab_dashboard::serve(listener, AppState::new(store, Config::default())?, shutdown).await.context("serving")?;
+        cutlab_dashboard::serve(listener, AppState::new(store, Config::default())?, shutdown)
+            .await
+            .context("serving")?;
         anyhow::Ok(())
     })
 }

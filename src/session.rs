@@ -5,6 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use cutlab_assessor::ExpertPlan;
 use cutlab_haptics::device::{CsvDevice, HapticDevice, IgtlDevice, Skill, SyntheticTrainee};
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
@@ -14,7 +15,6 @@ use cutlab_recorder::{RecordedHand, RerunTarget, WriterOptions};
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
-use cutlab_assessor::ExpertPlan;
 use cutlab_sim::{Point3, Vector3};
 
 use cutlab_assessor::Store;
@@ -35,7 +35,10 @@ macro_rules! say {
 #[derive(Debug, Clone, PartialEq)]
 pub enum DeviceArg {
     /// A synthetic trainee: a preset's name or `level:L`, and its hand.
-    Trainee { name: String, skill: Skill },
+    Trainee {
+        name: String,
+        skill: Skill,
+    },
     Csv(PathBuf),
     Igtl(u16),
     /// A recorded session's hand, played back.
@@ -46,11 +49,25 @@ impl std::str::FromStr for DeviceArg {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         if let Some(skill) = Skill::preset(s) {
-            return Ok(DeviceArg::Trainee { name: s.to_owned(), skill });
+            return Ok(DeviceArg::Trainee {
+                name: s.to_owned(),
+                skill,
+            });
         }
         if let Some(level) = s.strip_prefix("level:") {
-            let skill = level.parse::<f64>().ok().and_then(Skill::at_level).ok_or_else(|| format!("level: needs a skill level from 0 (novice) to 1 (expert), got {level:?}"))?;
-            return Ok(DeviceArg::Trainee { name: s.to_owned(), skill });
+            let skill = level
+                .parse::<f64>()
+                .ok()
+                .and_then(Skill::at_level)
+                .ok_or_else(|| {
+                    format!(
+                        "level: needs a skill level from 0 (novice) to 1 (expert), got {level:?}"
+                    )
+                })?;
+            return Ok(DeviceArg::Trainee {
+                name: s.to_owned(),
+                skill,
+            });
         }
         if let Some(path) = s.strip_prefix("csv:") {
             if path.is_empty() {
@@ -60,14 +77,22 @@ impl std::str::FromStr for DeviceArg {
         }
         if let Some(path) = s.strip_prefix("recording:") {
             if path.is_empty() {
-                return Err("recording: needs a session recording, e.g. recording:out/session/session.mcap".into());
+                return Err(
+                    "recording: needs a session recording, e.g. recording:out/session/session.mcap"
+                        .into(),
+                );
             }
             return Ok(DeviceArg::Recording(PathBuf::from(path)));
         }
         if let Some(port) = s.strip_prefix("igtl:") {
-            return port.parse::<u16>().map(DeviceArg::Igtl).map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
+            return port
+                .parse::<u16>()
+                .map(DeviceArg::Igtl)
+                .map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
         }
-        Err(format!("unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH, recording:PATH or igtl:PORT)"))
+        Err(format!(
+            "unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH, recording:PATH or igtl:PORT)"
+        ))
     }
 }
 
@@ -116,25 +141,50 @@ struct OpenAttempt {
 
 impl OpenAttempt {
     fn start(a: &AttemptArgs, recording: &Path, quiet: bool) -> anyhow::Result<Self> {
-        let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .context("starting the async runtime")?;
         let (store, id) = rt.block_on(async {
-            let store = Store::open(&a.db).await.with_context(|| format!("opening the database {}", a.db.display()))?;
+            let store = Store::open(&a.db)
+                .await
+                .with_context(|| format!("opening the database {}", a.db.display()))?;
             store.ensure_builtins().await?;
-            let attempt = store.start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert).await?;
+            let attempt = store
+                .start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert)
+                .await?;
             anyhow::Ok((store, attempt.id))
         })?;
-        say!(quiet, "attempt {id} of {} at {} (running; database {})", a.trainee, a.exercise, a.db.display());
-        Ok(Self { rt, store, id, quiet })
+        say!(
+            quiet,
+            "attempt {id} of {} at {} (running; database {})",
+            a.trainee,
+            a.exercise,
+            a.db.display()
+        );
+        Ok(Self {
+            rt,
+            store,
+            id,
+            quiet,
+        })
     }
 
     /// Scores the attempt from its recording, or marks it incomplete when the session failed.
     fn finish(self, outcome: Result<&Path, String>) -> anyhow::Result<()> {
-        let Self { rt, store, id, quiet } = self;
+        let Self {
+            rt,
+            store,
+            id,
+            quiet,
+        } = self;
         rt.block_on(async {
             let result = match outcome {
                 Ok(path) => match Recording::open(path) {
                     Ok(rec) => match store.score_recording(id, &rec).await {
-                        Ok((o, values)) if !quiet => crate::assess_cli::print_outcome(&o, &values, false),
+                        Ok((o, values)) if !quiet => {
+                            crate::assess_cli::print_outcome(&o, &values, false)
+                        }
                         Ok(_) => Ok(()),
                         Err(e) => {
                             store.mark_failed(id, &e.to_string()).await?;
@@ -143,7 +193,9 @@ impl OpenAttempt {
                     },
                     Err(e) => {
                         store.mark_incomplete(id, Some(&e.to_string())).await?;
-                        Err(anyhow::anyhow!("reading the recording of attempt {id}: {e}"))
+                        Err(anyhow::anyhow!(
+                            "reading the recording of attempt {id}: {e}"
+                        ))
                     }
                 },
                 Err(why) => {
@@ -160,23 +212,41 @@ impl OpenAttempt {
 
 pub fn run(o: &Options) -> anyhow::Result<()> {
     if !(o.duration_s > 0.0 && o.duration_s <= 86_400.0) {
-        bail!("--duration must be between 0 and 86400 seconds, got {}", o.duration_s);
+        bail!(
+            "--duration must be between 0 and 86400 seconds, got {}",
+            o.duration_s
+        );
     }
     // Devices that need no scene first: a bad file or a busy port is reported at once.
     let mut device: Option<Box<dyn HapticDevice>> = match &o.device {
         DeviceArg::Trainee { .. } => None,
-        DeviceArg::Csv(path) => Some(Box::new(CsvDevice::open(path).context("reading the trajectory")?)),
+        DeviceArg::Csv(path) => Some(Box::new(
+            CsvDevice::open(path).context("reading the trajectory")?,
+        )),
         DeviceArg::Recording(path) => {
-            let recording = Recording::open(path).with_context(|| format!("reading the recording {}", path.display()))?;
-            Some(Box::new(RecordedHand::new(&recording).with_context(|| format!("playing the hand of {}", path.display()))?))
+            let recording = Recording::open(path)
+                .with_context(|| format!("reading the recording {}", path.display()))?;
+            Some(Box::new(RecordedHand::new(&recording).with_context(
+                || format!("playing the hand of {}", path.display()),
+            )?))
         }
         DeviceArg::Igtl(port) => {
             let d = IgtlDevice::listen(*port)?;
-            say!(o.quiet, "OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)", d.address());
+            say!(
+                o.quiet,
+                "OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)",
+                d.address()
+            );
             Some(Box::new(d))
         }
     };
-    let scene = Scene::load(&o.scene, BuildOptions { min_tets: o.min_tets }).with_context(|| format!("loading scene {:?}", o.scene))?;
+    let scene = Scene::load(
+        &o.scene,
+        BuildOptions {
+            min_tets: o.min_tets,
+        },
+    )
+    .with_context(|| format!("loading scene {:?}", o.scene))?;
     let mut session = Session::new(&scene).context("preparing the session")?;
     if o.localise {
         session.sim.settings.localisation = Some(LocalisationSettings::default());
@@ -184,31 +254,56 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     // The planned incision (what a synthetic trainee follows; recorded with every session):
     // the exercise's expert plan when the session is an attempt, else 60 mm across the
     // tissue in the scene's `incision` directions.
-    let expert_plan = o.attempt.as_ref().map(|a| exercise_plan(a, &o.scene, &scene.spec.name)).transpose()?;
+    let expert_plan = o
+        .attempt
+        .as_ref()
+        .map(|a| exercise_plan(a, &o.scene, &scene.spec.name))
+        .transpose()?;
     let plan = match &expert_plan {
         Some(p) => {
             let line: Vec<Point3> = p.incision_m.iter().map(|&c| Point3::from(c)).collect();
-            session.plan_along(&resample(&line, 33), &Vector3::from(p.normal), p.depth_m).context("projecting the exercise's plan onto the tissue")
+            session
+                .plan_along(&resample(&line, 33), &Vector3::from(p.normal), p.depth_m)
+                .context("projecting the exercise's plan onto the tissue")
         }
         None => {
             // the scene's incision directions were checked when it was built
             let (up, along) = scene.spec.incision.unit().map_err(anyhow::Error::msg)?;
             let (lo, hi) = scene.model.mesh.bounding_box();
             let depth_m = (0.4 * (hi - lo).dot(&up.abs())).min(0.008);
-            session.plan_across(&up, &along, 0.06, depth_m).context("planning the incision across the tissue")
+            session
+                .plan_across(&up, &along, 0.06, depth_m)
+                .context("planning the incision across the tissue")
         }
     };
     if let DeviceArg::Trainee { name, skill } = &o.device {
-        let trainee = SyntheticTrainee::new(name, plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(), *skill, o.seed)?;
-        device = Some(Box::new(trainee.expecting_cut(scene.spec.cut_threshold_newtons, scene.spec.cut_depth_mm * 1e-3)));
+        let trainee = SyntheticTrainee::new(
+            name,
+            plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(),
+            *skill,
+            o.seed,
+        )?;
+        device = Some(Box::new(trainee.expecting_cut(
+            scene.spec.cut_threshold_newtons,
+            scene.spec.cut_depth_mm * 1e-3,
+        )));
     }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
-    let mut config = SessionConfig { clock: o.clock, duration_s: o.duration_s, realtime_priority: o.realtime_priority, ..SessionConfig::default() };
+    let mut config = SessionConfig {
+        clock: o.clock,
+        duration_s: o.duration_s,
+        realtime_priority: o.realtime_priority,
+        ..SessionConfig::default()
+    };
     config.render.cut_threshold_newtons = scene.spec.cut_threshold_newtons;
     config.render.cut_depth_m = scene.spec.cut_depth_mm * 1e-3;
-    if !(o.keyframe_every_s > 0.0 && o.keyframe_every_s.is_finite() && o.surface_hz >= 0.0 && o.surface_hz.is_finite()) {
+    if !(o.keyframe_every_s > 0.0
+        && o.keyframe_every_s.is_finite()
+        && o.surface_hz >= 0.0
+        && o.surface_hz.is_finite())
+    {
         bail!("--keyframe-every must be positive and --surface-hz non-negative");
     }
     let step_s = scene.solver.time_step_s;
@@ -218,15 +313,31 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let settings = RecordSettings {
         tap: TapSettings {
             keyframe_every_steps,
-            surface_every_steps: if o.surface_hz > 0.0 { ((1.0 / (o.surface_hz * step_s)).round() as u64).max(1) } else { 0 },
+            surface_every_steps: if o.surface_hz > 0.0 {
+                ((1.0 / (o.surface_hz * step_s)).round() as u64).max(1)
+            } else {
+                0
+            },
             ..TapSettings::default()
         },
         writer: WriterOptions::default(),
     };
     std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
     let mcap_path = o.out.join("session.mcap");
-    let (trainee, exercise) = o.attempt.as_ref().map_or((String::new(), String::new()), |a| (a.trainee.clone(), a.exercise.clone()));
-    let provenance = Provenance { scene: o.scene.clone(), min_tets: o.min_tets, seed: o.seed, trainee, exercise, device: device_name.clone() };
+    let (trainee, exercise) = o
+        .attempt
+        .as_ref()
+        .map_or((String::new(), String::new()), |a| {
+            (a.trainee.clone(), a.exercise.clone())
+        });
+    let provenance = Provenance {
+        scene: o.scene.clone(),
+        min_tets: o.min_tets,
+        seed: o.seed,
+        trainee,
+        exercise,
+        device: device_name.clone(),
+    };
     let observer = match &o.rerun {
         Some(target) => {
             let target = match target {
@@ -234,12 +345,31 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
                 other => other.clone(),
             };
             let plan_line = plan.as_ref().ok().map(|p| p.line_m.as_slice());
-            Some(crate::recording::rerun_sink(&target, config.period_nanos, config.blade_length_m, plan_line)?)
+            Some(crate::recording::rerun_sink(
+                &target,
+                config.period_nanos,
+                config.blade_length_m,
+                plan_line,
+            )?)
         }
         None => None,
     };
-    let attempt = o.attempt.as_ref().map(|a| OpenAttempt::start(a, &mcap_path, o.quiet)).transpose()?;
-    let recorded = match record::run_recorded(session, device, &config, &provenance, plan.as_ref().ok(), &scene.spec, &mcap_path, settings, observer) {
+    let attempt = o
+        .attempt
+        .as_ref()
+        .map(|a| OpenAttempt::start(a, &mcap_path, o.quiet))
+        .transpose()?;
+    let recorded = match record::run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        plan.as_ref().ok(),
+        &scene.spec,
+        &mcap_path,
+        settings,
+        observer,
+    ) {
         Ok(r) => r,
         Err(e) => {
             if let Some(a) = attempt {
@@ -261,44 +391,136 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         }
     };
 
-    let clock = if o.clock == Clock::Live { "live" } else { "virtual" };
-    say!(o.quiet, "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s", scene.spec.name, o.seed, o.duration_s);
-    let max_lag = r.tick_of_step.iter().enumerate().map(|(n, &t)| t.saturating_sub(n as u64)).max().unwrap_or(0);
-    say!(o.quiet, "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)", r.servo.ticks, r.sim_steps);
-    say!(o.quiet, "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now; the blade went in {} time(s)", r.stats.cut_length_m * 1e3, r.stats.cut_steps, r.stats.tets_split, r.stats.unresolved_cuts, r.stats.failed_cuts, r.simulation.model.mesh.tet_count(), r.servo.blade_entries);
-    say!(o.quiet, "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}", r.servo.max_force_newtons, r.servo.non_finite_count, r.servo.fault_ticks, r.servo.faded_ticks, r.servo.dropped_samples, r.stats.rejected_steps);
+    let clock = if o.clock == Clock::Live {
+        "live"
+    } else {
+        "virtual"
+    };
+    say!(
+        o.quiet,
+        "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s",
+        scene.spec.name,
+        o.seed,
+        o.duration_s
+    );
+    let max_lag = r
+        .tick_of_step
+        .iter()
+        .enumerate()
+        .map(|(n, &t)| t.saturating_sub(n as u64))
+        .max()
+        .unwrap_or(0);
+    say!(
+        o.quiet,
+        "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)",
+        r.servo.ticks,
+        r.sim_steps
+    );
+    say!(
+        o.quiet,
+        "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now; the blade went in {} time(s)",
+        r.stats.cut_length_m * 1e3,
+        r.stats.cut_steps,
+        r.stats.tets_split,
+        r.stats.unresolved_cuts,
+        r.stats.failed_cuts,
+        r.simulation.model.mesh.tet_count(),
+        r.servo.blade_entries
+    );
+    say!(
+        o.quiet,
+        "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}",
+        r.servo.max_force_newtons,
+        r.servo.non_finite_count,
+        r.servo.fault_ticks,
+        r.servo.faded_ticks,
+        r.servo.dropped_samples,
+        r.stats.rejected_steps
+    );
     if r.servo.blade_entries == 0 {
         say!(
             o.quiet,
             "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`), and the tip never pressed {:.1} mm in (`cut_depth_mm`), with the blade engaged",
-            r.servo.max_force_newtons, config.render.cut_threshold_newtons, scene.spec.cut_depth_mm
+            r.servo.max_force_newtons,
+            config.render.cut_threshold_newtons,
+            scene.spec.cut_depth_mm
         );
     }
     let p = r.servo.period_stats(r.period_nanos);
     if o.clock == Clock::Live {
-        say!(o.quiet, "  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline", p.mean_us, p.p50_us, p.p99_us, p.p99_deviation_us, p.max_deviation_us, p.missed_deadlines, p.max_lateness_us);
+        say!(
+            o.quiet,
+            "  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline",
+            p.mean_us,
+            p.p50_us,
+            p.p99_us,
+            p.p99_deviation_us,
+            p.max_deviation_us,
+            p.missed_deadlines,
+            p.max_lateness_us
+        );
         match &r.servo.realtime_priority {
             Some(Ok(())) => say!(o.quiet, "  servo thread at real-time priority (SCHED_FIFO)"),
-            Some(Err(e)) => say!(o.quiet, "  real-time priority not permitted ({e}); normal priority"),
+            Some(Err(e)) => say!(
+                o.quiet,
+                "  real-time priority not permitted ({e}); normal priority"
+            ),
             None => say!(o.quiet, "  real-time priority not requested"),
         }
     }
-    say!(o.quiet, "  servo work per tick: mean {:.1} us, max {:.1} us", p.mean_work_us, p.max_work_us);
+    say!(
+        o.quiet,
+        "  servo work per tick: mean {:.1} us, max {:.1} us",
+        p.mean_work_us,
+        p.max_work_us
+    );
     let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
     let s = Summary::of(&steps_us);
-    say!(o.quiet, "  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}", s.median, s.p99, s.max, r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64);
-    say!(o.quiet, "  speed: {:.2} simulated s per wall s ({:.2} s wall)", r.speed(), r.wall_s);
+    say!(
+        o.quiet,
+        "  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}",
+        s.median,
+        s.p99,
+        s.max,
+        r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64
+    );
+    say!(
+        o.quiet,
+        "  speed: {:.2} simulated s per wall s ({:.2} s wall)",
+        r.speed(),
+        r.wall_s
+    );
 
     let w = &recorded.write;
-    say!(o.quiet, 
+    say!(
+        o.quiet,
         "  recording {}: {} messages, {:.1} MB of payload, writer busy {:.2} s; dropped tick records {}",
-        mcap_path.display(), w.messages.values().sum::<u64>(), w.payload_bytes as f64 * 1e-6, w.busy_s, r.servo.dropped_records
+        mcap_path.display(),
+        w.messages.values().sum::<u64>(),
+        w.payload_bytes as f64 * 1e-6,
+        w.busy_s,
+        r.servo.dropped_records
     );
     let sim = &r.simulation;
-    let deformed = cutlab_sim::TetMesh::new(sim.state.positions.clone(), sim.model.mesh.tets().to_vec(), sim.model.mesh.regions().to_vec())?;
-    let displacement: Vec<Vector3> = sim.state.positions.iter().zip(sim.model.mesh.positions()).map(|(p, q)| p - q).collect();
+    let deformed = cutlab_sim::TetMesh::new(
+        sim.state.positions.clone(),
+        sim.model.mesh.tets().to_vec(),
+        sim.model.mesh.regions().to_vec(),
+    )?;
+    let displacement: Vec<Vector3> = sim
+        .state
+        .positions
+        .iter()
+        .zip(sim.model.mesh.positions())
+        .map(|(p, q)| p - q)
+        .collect();
     let path = o.out.join("final.vtu");
-    cutlab_sim::io::write_vtu(&path, &deformed, &[("displacement", PointData::Vector(&displacement))]).with_context(|| format!("writing {}", path.display()))?;
+    cutlab_sim::io::write_vtu(
+        &path,
+        &deformed,
+        &[("displacement", PointData::Vector(&displacement))],
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
     let summary = serde_json::json!({
         "scene": scene.spec.name, "tets": tets, "device": device_name, "seed": o.seed, "clock": clock,
         "duration_s": o.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
@@ -317,8 +539,13 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         steps.push_str(&format!("{n},{t}\n"));
     }
     let steps_path = o.out.join("steps.csv");
-    std::fs::write(&steps_path, steps).with_context(|| format!("writing {}", steps_path.display()))?;
-    say!(o.quiet, "wrote {}, summary.json and steps.csv", path.display());
+    std::fs::write(&steps_path, steps)
+        .with_context(|| format!("writing {}", steps_path.display()))?;
+    say!(
+        o.quiet,
+        "wrote {}, summary.json and steps.csv",
+        path.display()
+    );
     if let Some(a) = attempt {
         a.finish(Ok(&mcap_path))?;
     }
@@ -327,15 +554,25 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
 
 /// The expert plan of the attempt's exercise, whose scene must be the session's.
 fn exercise_plan(a: &AttemptArgs, scene_arg: &str, scene_name: &str) -> anyhow::Result<ExpertPlan> {
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().context("starting the async runtime")?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     rt.block_on(async {
-        let store = Store::open(&a.db).await.with_context(|| format!("opening the database {}", a.db.display()))?;
+        let store = Store::open(&a.db)
+            .await
+            .with_context(|| format!("opening the database {}", a.db.display()))?;
         store.ensure_builtins().await?;
         let e = store.exercise_by_name(&a.exercise).await?;
         let plan = store.exercise_plan(e.id).await?;
         store.close().await;
         if e.scene != scene_arg && e.scene != scene_name {
-            bail!("exercise {} is on the scene {}, not {scene_arg}: pass --scene {}", e.name, e.scene, e.scene);
+            bail!(
+                "exercise {} is on the scene {}, not {scene_arg}: pass --scene {}",
+                e.name,
+                e.scene,
+                e.scene
+            );
         }
         Ok(plan)
     })
@@ -354,7 +591,9 @@ fn resample(line: &[Point3], n: usize) -> Vec<Point3> {
                 seg += 1;
             }
             match lengths.get(seg) {
-                Some(&l) if l > 0.0 => line[seg] + (line[seg + 1] - line[seg]) * ((s - walked) / l).clamp(0.0, 1.0),
+                Some(&l) if l > 0.0 => {
+                    line[seg] + (line[seg + 1] - line[seg]) * ((s - walked) / l).clamp(0.0, 1.0)
+                }
                 _ => line[seg],
             }
         })
@@ -362,7 +601,8 @@ fn resample(line: &[Point3], n: usize) -> Vec<Point3> {
 }
 
 fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
-    std::fs::write(path, serde_json::to_string_pretty(v)?).with_context(|| format!("writing {}", path.display()))
+    std::fs::write(path, serde_json::to_string_pretty(v)?)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 #[cfg(test)]
@@ -371,7 +611,11 @@ mod tests {
 
     #[test]
     fn resampling_keeps_the_ends_and_spaces_evenly() {
-        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(0.01, 0.0, 0.0), Point3::new(0.01, 0.03, 0.0)];
+        let line = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.01, 0.0, 0.0),
+            Point3::new(0.01, 0.03, 0.0),
+        ];
         let r = resample(&line, 5);
         assert_eq!((r[0], r[4]), (line[0], line[2]));
         for w in r.windows(2) {
@@ -382,9 +626,15 @@ mod tests {
 
     #[test]
     fn skill_levels_parse_and_bad_ones_are_refused() {
-        assert!(matches!("level:0.25".parse::<DeviceArg>(), Ok(DeviceArg::Trainee { .. })));
+        assert!(matches!(
+            "level:0.25".parse::<DeviceArg>(),
+            Ok(DeviceArg::Trainee { .. })
+        ));
         for bad in ["level:", "level:1.5", "level:NaN", "level:x"] {
-            assert!(bad.parse::<DeviceArg>().is_err_and(|e| e.contains("level")), "{bad}");
+            assert!(
+                bad.parse::<DeviceArg>().is_err_and(|e| e.contains("level")),
+                "{bad}"
+            );
         }
     }
 }

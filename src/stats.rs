@@ -16,7 +16,13 @@ impl Summary {
     /// Summarises `samples` (order irrelevant); an empty sample gives zeros.
     pub fn of(samples: &[f64]) -> Self {
         if samples.is_empty() {
-            return Self { count: 0, median: 0.0, p99: 0.0, mean: 0.0, max: 0.0 };
+            return Self {
+                count: 0,
+                median: 0.0,
+                p99: 0.0,
+                mean: 0.0,
+                max: 0.0,
+            };
         }
         let mut s = samples.to_vec();
         s.sort_by(f64::total_cmp);

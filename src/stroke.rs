@@ -34,12 +34,23 @@ pub struct Stroke {
 
 impl Stroke {
     /// A stroke over the free surface of `sim`'s mesh as it is now (e.g. settled).
-    pub fn new(sim: &Simulation, start: Point3, end: Point3, direction: Vector3, duration_s: f64, force_newtons: f64) -> Self {
+    pub fn new(
+        sim: &Simulation,
+        start: Point3,
+        end: Point3,
+        direction: Vector3,
+        duration_s: f64,
+        force_newtons: f64,
+    ) -> Self {
         let direction = direction.normalize();
         // 4 mm, or more on a coarse mesh, so that the tool always has particles under it
         let mut edges = sim.model.springs.rest_length.clone();
         let mid = edges.len() / 2;
-        let median_edge = if edges.is_empty() { 0.0 } else { *edges.select_nth_unstable_by(mid, f64::total_cmp).1 };
+        let median_edge = if edges.is_empty() {
+            0.0
+        } else {
+            *edges.select_nth_unstable_by(mid, f64::total_cmp).1
+        };
         let radius_m = (0.75 * median_edge).max(0.004);
         let across = |d: Vector3| d - direction * d.dot(&direction);
         let x = &sim.state.positions;
@@ -55,7 +66,11 @@ impl Stroke {
         let line = across(end - start);
         // where along the line a point lies (0 to 1), and how far across from it
         let along = |p: &Point3| {
-            if line.norm_squared() > 0.0 { (across(p - start).dot(&line) / line.norm_squared()).clamp(0.0, 1.0) } else { 0.0 }
+            if line.norm_squared() > 0.0 {
+                (across(p - start).dot(&line) / line.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
         };
         let near_line = |p: &Point3| (across(p - start) - line * along(p)).norm();
         let reach = radius_m + TRACK_SPACING_M;
@@ -91,7 +106,15 @@ impl Stroke {
                 p + direction * if total > 0.0 { sum / total } else { 0.0 }
             })
             .collect();
-        let mut stroke = Self { duration_s, force_newtons, direction, radius_m, track, surface: Vec::new(), weights: Vec::new() };
+        let mut stroke = Self {
+            duration_s,
+            force_newtons,
+            direction,
+            radius_m,
+            track,
+            surface: Vec::new(),
+            weights: Vec::new(),
+        };
         // the particles pressed: the facing ones near the surface under the line
         stroke.surface = facing
             .into_iter()
@@ -157,8 +180,12 @@ impl Stroke {
 
     /// Follows a cut: the copies of split surface particles are pressed like their originals.
     pub fn cut(&mut self, event: &CutEvent) {
-        let copies: Vec<u32> =
-            event.vertices_split.iter().filter(|s| self.surface.binary_search(&s.original).is_ok()).map(|s| s.copy).collect();
+        let copies: Vec<u32> = event
+            .vertices_split
+            .iter()
+            .filter(|s| self.surface.binary_search(&s.original).is_ok())
+            .map(|s| s.copy)
+            .collect();
         if !copies.is_empty() {
             self.surface.extend(copies);
             self.surface.sort_unstable();

@@ -14,11 +14,20 @@ fn cutlab(args: &[&str], stdin: Option<&str>) -> (bool, String, String) {
         .spawn()
         .expect("cutlab runs");
     if let Some(text) = stdin {
-        child.stdin.take().expect("stdin").write_all(text.as_bytes()).expect("write stdin");
+        child
+            .stdin
+            .take()
+            .expect("stdin")
+            .write_all(text.as_bytes())
+            .expect("write stdin");
     }
     drop(child.stdin.take());
     let out = child.wait_with_output().expect("cutlab ends");
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 fn temp(name: &str) -> PathBuf {
@@ -49,7 +58,10 @@ fn motion_metrics_of_a_good_csv_at_two_rates() {
     for hz in [60.0, 1000.0] {
         let path = temp(&format!("reach-{hz}.csv"));
         std::fs::write(&path, reach_csv(hz)).expect("write csv");
-        let (ok, out, err) = cutlab(&["motion-metrics", path.to_str().expect("utf8"), "--json"], None);
+        let (ok, out, err) = cutlab(
+            &["motion-metrics", path.to_str().expect("utf8"), "--json"],
+            None,
+        );
         assert!(ok, "{err}");
         let v: serde_json::Value = serde_json::from_str(&out).expect("json");
         assert_eq!(v["movements"], 2, "{out}");
@@ -60,20 +72,33 @@ fn motion_metrics_of_a_good_csv_at_two_rates() {
         assert!(v["ldlj"].as_f64().is_some() && v["sparc"].as_f64().is_some());
         let (ok, table, err) = cutlab(&["motion-metrics", path.to_str().expect("utf8")], None);
         assert!(ok, "{err}");
-        assert!(table.contains("path length") && table.contains("SPARC"), "{table}");
+        assert!(
+            table.contains("path length") && table.contains("SPARC"),
+            "{table}"
+        );
     }
     for l in &lengths {
-        assert!((l - 0.2).abs() < 0.002, "about 200 mm at any rate: {lengths:?}");
+        assert!(
+            (l - 0.2).abs() < 0.002,
+            "about 200 mm at any rate: {lengths:?}"
+        );
     }
 }
 
 #[test]
 fn motion_metrics_names_the_line_of_a_malformed_row() {
     let path = temp("bad.csv");
-    std::fs::write(&path, "t_s,x_m,y_m,z_m,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n0.01,0,0,0,1,0,0,0\n0.02,0,oops,0,1,0,0,0\n").expect("write");
+    std::fs::write(
+        &path,
+        "t_s,x_m,y_m,z_m,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n0.01,0,0,0,1,0,0,0\n0.02,0,oops,0,1,0,0,0\n",
+    )
+    .expect("write");
     let (ok, _, err) = cutlab(&["motion-metrics", path.to_str().expect("utf8")], None);
     assert!(!ok);
-    assert!(err.contains("bad.csv:4: y_m \"oops\" is not a number"), "{err}");
+    assert!(
+        err.contains("bad.csv:4: y_m \"oops\" is not a number"),
+        "{err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
     std::fs::write(&path, "0,0,0,0,1,0,0,0\n0.01,0,0,0,1,0\n").expect("write");
     let (ok, _, err) = cutlab(&["motion-metrics", path.to_str().expect("utf8")], None);
@@ -86,30 +111,119 @@ fn users_cohorts_exercises_and_xapi_on_a_fresh_database() {
     let db = temp("cli.db");
     std::fs::remove_file(&db).ok();
     let db = db.to_str().expect("utf8");
-    let (ok, out, err) = cutlab(&["user", "add", "--name", "alice", "--role", "trainee", "--password-stdin", "--db", db], Some("pa55word\n"));
+    let (ok, out, err) = cutlab(
+        &[
+            "user",
+            "add",
+            "--name",
+            "alice",
+            "--role",
+            "trainee",
+            "--password-stdin",
+            "--db",
+            db,
+        ],
+        Some("pa55word\n"),
+    );
     assert!(ok, "{err}");
     assert!(out.contains("added trainee alice"), "{out}");
-    let (ok, _, err) = cutlab(&["--db", db, "user", "add", "--name", "alice", "--role", "trainee"], None);
+    let (ok, _, err) = cutlab(
+        &[
+            "--db", db, "user", "add", "--name", "alice", "--role", "trainee",
+        ],
+        None,
+    );
     assert!(!ok && err.contains("exists"), "{err}");
-    let (ok, _, err) = cutlab(&["--db", db, "user", "add", "--name", "bob", "--role", "surgeon"], None);
+    let (ok, _, err) = cutlab(
+        &[
+            "--db", db, "user", "add", "--name", "bob", "--role", "surgeon",
+        ],
+        None,
+    );
     assert!(!ok && err.contains("unknown role"), "{err}");
-    let (ok, _, err) = cutlab(&["--db", db, "user", "add", "--name", "dr-k", "--role", "instructor", "--password", "x"], None);
+    let (ok, _, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "user",
+            "add",
+            "--name",
+            "dr-k",
+            "--role",
+            "instructor",
+            "--password",
+            "x",
+        ],
+        None,
+    );
     assert!(ok, "{err}");
-    let (ok, _, err) = cutlab(&["--db", db, "cohort", "add", "--name", "spring", "--instructor", "dr-k"], None);
+    let (ok, _, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "cohort",
+            "add",
+            "--name",
+            "spring",
+            "--instructor",
+            "dr-k",
+        ],
+        None,
+    );
     assert!(ok, "{err}");
-    let (ok, _, err) = cutlab(&["--db", db, "cohort", "join", "--cohort", "spring", "--user", "alice"], None);
+    let (ok, _, err) = cutlab(
+        &[
+            "--db", db, "cohort", "join", "--cohort", "spring", "--user", "alice",
+        ],
+        None,
+    );
     assert!(ok, "{err}");
     let (ok, out, _) = cutlab(&["--db", db, "cohort", "list"], None);
     assert!(ok && out.contains("spring: alice"), "{out}");
     let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/assessor/examples/plan.toml");
-    let (ok, out, err) = cutlab(&["--db", db, "exercise", "add", "--name", "copy", "--scene", "chest-wall", "--plan", plan], None);
+    let (ok, out, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "exercise",
+            "add",
+            "--name",
+            "copy",
+            "--scene",
+            "chest-wall",
+            "--plan",
+            plan,
+        ],
+        None,
+    );
     assert!(ok, "{err}");
     assert!(out.contains("added exercise copy"), "{out}");
     let (ok, out, _) = cutlab(&["--db", db, "exercise", "list"], None);
-    assert!(ok && out.contains("chest-wall-incision") && out.contains("copy"), "the built-in is always there: {out}");
+    assert!(
+        ok && out.contains("chest-wall-incision") && out.contains("copy"),
+        "the built-in is always there: {out}"
+    );
     let bad_plan = temp("bad-plan.toml");
-    std::fs::write(&bad_plan, "entry_m = [0, 0, 0]\nexit_m = [0, 0, 0]\ndepth_m = 0.008\nviewpoint_m = [0, 0, 1]\n").expect("write");
-    let (ok, _, err) = cutlab(&["--db", db, "exercise", "add", "--name", "bad", "--scene", "x", "--plan", bad_plan.to_str().expect("utf8")], None);
+    std::fs::write(
+        &bad_plan,
+        "entry_m = [0, 0, 0]\nexit_m = [0, 0, 0]\ndepth_m = 0.008\nviewpoint_m = [0, 0, 1]\n",
+    )
+    .expect("write");
+    let (ok, _, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "exercise",
+            "add",
+            "--name",
+            "bad",
+            "--scene",
+            "x",
+            "--plan",
+            bad_plan.to_str().expect("utf8"),
+        ],
+        None,
+    );
     assert!(!ok && err.contains("shorter than 1 mm"), "{err}");
     let (ok, out, err) = cutlab(&["--db", db, "export", "xapi", "--trainee", "alice"], None);
     assert!(ok, "{err}");

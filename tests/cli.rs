@@ -3,8 +3,15 @@
 use std::process::Command;
 
 fn cutlab(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_cutlab")).args(args).output().expect("cutlab runs");
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+        .args(args)
+        .output()
+        .expect("cutlab runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 #[test]
@@ -38,7 +45,13 @@ fn bad_scene_arguments_give_a_clear_error() {
 #[test]
 fn demo_cuts_the_chest_wall_and_writes_the_result() {
     let dir = std::env::temp_dir().join(format!("cutlab-demo-{}", std::process::id()));
-    let (ok, out, err) = cutlab(&["demo", "--min-tets", "3000", "--out", dir.to_str().expect("utf8")]);
+    let (ok, out, err) = cutlab(&[
+        "demo",
+        "--min-tets",
+        "3000",
+        "--out",
+        dir.to_str().expect("utf8"),
+    ]);
     assert!(ok, "{err}");
     assert!(out.contains("widest gap"), "{out}");
     let gap_mm: f64 = out
@@ -55,23 +68,47 @@ fn demo_cuts_the_chest_wall_and_writes_the_result() {
 #[test]
 fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result() {
     let dir = std::env::temp_dir().join(format!("cutlab-session-{}", std::process::id()));
-    let args = ["session", "--scene", "chest-wall", "--min-tets", "1500", "--device", "expert", "--clock", "virtual", "--duration", "2.5", "--seed", "3", "--out", dir.to_str().expect("utf8")];
+    let args = [
+        "session",
+        "--scene",
+        "chest-wall",
+        "--min-tets",
+        "1500",
+        "--device",
+        "expert",
+        "--clock",
+        "virtual",
+        "--duration",
+        "2.5",
+        "--seed",
+        "3",
+        "--out",
+        dir.to_str().expect("utf8"),
+    ];
     let (ok, out, err) = cutlab(&args);
     assert!(ok, "{err}");
     assert!(out.contains("ticks 2500, sim steps 2500"), "{out}");
     assert!(out.contains("non-finite values 0"), "{out}");
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary")).expect("json");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary"))
+            .expect("json");
     let max_force = summary["max_force_newtons"].as_f64().expect("max force");
     assert!(max_force > 0.1 && max_force <= 3.3, "{max_force}");
     let mesh = cutlab_sim::io::read_mesh(&dir.join("final.vtu")).expect("final.vtu reads back");
     assert!(mesh.tet_count() >= 1500);
     let steps = std::fs::read_to_string(dir.join("steps.csv")).expect("steps.csv");
     assert_eq!(steps.lines().count(), 2501);
-    assert_eq!(steps.lines().nth(2500), Some("2499,2499"), "virtual clock: step n consumed tick n");
+    assert_eq!(
+        steps.lines().nth(2500),
+        Some("2499,2499"),
+        "virtual clock: step n consumed tick n"
+    );
     // the same seed gives the same session, bit for bit
     let (ok, _, err) = cutlab(&args);
     assert!(ok, "{err}");
-    let again: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary")).expect("json");
+    let again: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary"))
+            .expect("json");
     assert_eq!(summary["state_hash"], again["state_hash"]);
     assert_eq!(summary["force_hash"], again["force_hash"]);
     std::fs::remove_dir_all(&dir).ok();
@@ -80,9 +117,26 @@ fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result()
 #[test]
 fn bad_session_arguments_give_a_clear_error() {
     let cases: [(&[&str], &str); 6] = [
-        (&["session", "--scene", "no-such-scene", "--duration", "1"], "unknown scene \"no-such-scene\""),
-        (&["session", "--device", "surgeon"], "unknown device \"surgeon\""),
-        (&["session", "--device", "csv:/no/such/file.csv", "--min-tets", "500", "--duration", "0.1"], "/no/such/file.csv"),
+        (
+            &["session", "--scene", "no-such-scene", "--duration", "1"],
+            "unknown scene \"no-such-scene\"",
+        ),
+        (
+            &["session", "--device", "surgeon"],
+            "unknown device \"surgeon\"",
+        ),
+        (
+            &[
+                "session",
+                "--device",
+                "csv:/no/such/file.csv",
+                "--min-tets",
+                "500",
+                "--duration",
+                "0.1",
+            ],
+            "/no/such/file.csv",
+        ),
         (&["session", "--device", "igtl:99999"], "port number"),
         (&["session", "--clock", "sundial"], "unknown clock"),
         (&["session", "--duration=-1"], "--duration must be"),
@@ -100,9 +154,22 @@ fn session_reports_a_port_in_use() {
     let listener = std::net::TcpListener::bind("0.0.0.0:0").expect("bind");
     let port = listener.local_addr().expect("addr").port().to_string();
     let device = format!("igtl:{port}");
-    let (ok, _, err) = cutlab(&["session", "--scene", "no-such-scene", "--device", &device, "--duration", "0.1", "--out", "/tmp/cutlab-port-test"]);
+    let (ok, _, err) = cutlab(&[
+        "session",
+        "--scene",
+        "no-such-scene",
+        "--device",
+        &device,
+        "--duration",
+        "0.1",
+        "--out",
+        "/tmp/cutlab-port-test",
+    ]);
     assert!(!ok);
-    assert!(err.contains(&format!("cannot listen on port {port}")), "{err}");
+    assert!(
+        err.contains(&format!("cannot listen on port {port}")),
+        "{err}"
+    );
 }
 
 #[test]
@@ -118,16 +185,40 @@ fn session_plays_a_csv_trajectory() {
     .expect("csv");
     let device = format!("csv:{}", csv.display());
     let out = dir.join("out");
-    let (ok, stdout, err) = cutlab(&["session", "--scene", "chest-wall", "--min-tets", "1500", "--device", &device, "--duration", "1.2", "--out", out.to_str().expect("utf8")]);
+    let (ok, stdout, err) = cutlab(&[
+        "session",
+        "--scene",
+        "chest-wall",
+        "--min-tets",
+        "1500",
+        "--device",
+        &device,
+        "--duration",
+        "1.2",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
     assert!(ok, "{err}");
     assert!(stdout.contains("ticks 1200, sim steps 1200"), "{stdout}");
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary")).expect("json");
-    assert!(summary["max_force_newtons"].as_f64().expect("force") > 0.05, "the stroke pressed on the wall: {summary}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    assert!(
+        summary["max_force_newtons"].as_f64().expect("force") > 0.05,
+        "the stroke pressed on the wall: {summary}"
+    );
     // a malformed trajectory is a clear error
-    std::fs::write(&csv, "t_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n0.0, 0, 0, oops, 1, 0, 0, 0, 0\n").expect("csv");
+    std::fs::write(
+        &csv,
+        "t_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n0.0, 0, 0, oops, 1, 0, 0, 0, 0\n",
+    )
+    .expect("csv");
     let (ok, _, err) = cutlab(&["session", "--device", &device, "--duration", "1"]);
     assert!(!ok);
-    assert!(err.contains("stroke.csv:2: column 4 (z_m): `oops` is not a number"), "{err}");
+    assert!(
+        err.contains("stroke.csv:2: column 4 (z_m): `oops` is not a number"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -135,32 +226,84 @@ fn session_plays_a_csv_trajectory() {
 fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line() {
     let dir = std::env::temp_dir().join(format!("cutlab-recording-{}", std::process::id()));
     let d = dir.to_str().expect("utf8");
-    let (ok, _, err) = cutlab(&["session", "--min-tets", "3000", "--duration", "3", "--seed", "5", "--out", d, "--rrd"]);
+    let (ok, _, err) = cutlab(&[
+        "session",
+        "--min-tets",
+        "3000",
+        "--duration",
+        "3",
+        "--seed",
+        "5",
+        "--out",
+        d,
+        "--rrd",
+    ]);
     assert!(ok, "{err}");
     let mcap = dir.join("session.mcap");
     let m = mcap.to_str().expect("utf8");
-    assert!(dir.join("session.rrd").metadata().expect("session.rrd").len() > 1000);
+    assert!(
+        dir.join("session.rrd")
+            .metadata()
+            .expect("session.rrd")
+            .len()
+            > 1000
+    );
 
     let (ok, out, err) = cutlab(&["recording", "info", m, "--json"]);
     assert!(ok, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["complete"], true);
-    let pose = v["channels"].as_array().expect("channels").iter().find(|c| c["topic"] == "/tool/pose").expect("pose channel").clone();
-    assert_eq!((pose["messages"].as_u64(), pose["schema"].as_str()), (Some(3000), Some("foxglove.PoseInFrame")));
+    let pose = v["channels"]
+        .as_array()
+        .expect("channels")
+        .iter()
+        .find(|c| c["topic"] == "/tool/pose")
+        .expect("pose channel")
+        .clone();
+    assert_eq!(
+        (pose["messages"].as_u64(), pose["schema"].as_str()),
+        (Some(3000), Some("foxglove.PoseInFrame"))
+    );
     assert_eq!(v["session"]["seed"], 5);
 
     let (ok, out, err) = cutlab(&["replay", m, "--json"]);
     assert!(ok, "{err}");
     let r: serde_json::Value = serde_json::from_str(&out).expect("json");
-    assert_eq!((r["verified"].as_bool(), r["keyframes_checked"].as_u64(), r["steps"].as_u64()), (Some(true), Some(3), Some(3000)));
+    assert_eq!(
+        (
+            r["verified"].as_bool(),
+            r["keyframes_checked"].as_u64(),
+            r["steps"].as_u64()
+        ),
+        (Some(true), Some(3), Some(3000))
+    );
 
     // scored against the built-in exercise on a fresh database
     let db = dir.join("cutlab.db");
-    let (ok, out, err) = cutlab(&["--db", db.to_str().expect("utf8"), "assess", m, "--trainee", "tess", "--json"]);
+    let (ok, out, err) = cutlab(&[
+        "--db",
+        db.to_str().expect("utf8"),
+        "assess",
+        m,
+        "--trainee",
+        "tess",
+        "--json",
+    ]);
     assert!(ok, "{err}");
     let a: serde_json::Value = serde_json::from_str(&out).expect("json");
-    assert!(a["score"].as_f64().is_some_and(|s| (-1.0..=1.0).contains(&s)), "{a}");
-    let time = a["metrics"].as_array().expect("metrics").iter().find(|m| m["key"] == "time_s").expect("time_s")["value"].as_f64();
+    assert!(
+        a["score"]
+            .as_f64()
+            .is_some_and(|s| (-1.0..=1.0).contains(&s)),
+        "{a}"
+    );
+    let time = a["metrics"]
+        .as_array()
+        .expect("metrics")
+        .iter()
+        .find(|m| m["key"] == "time_s")
+        .expect("time_s")["value"]
+        .as_f64();
     // the task time: the hand moves from its start until it holds still after the stroke,
     // within the 3 s recorded
     assert!(time.is_some_and(|t| t > 1.5 && t < 3.0), "{time:?}");
@@ -174,14 +317,26 @@ fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line
     let s = short.to_str().expect("utf8");
     let (ok, out, err) = cutlab(&["recording", "info", s]);
     assert!(ok, "{err}");
-    assert!(out.contains("INCOMPLETE") && out.contains("recording recover"), "{out}");
+    assert!(
+        out.contains("INCOMPLETE") && out.contains("recording recover"),
+        "{out}"
+    );
     let fixed = dir.join("fixed.mcap");
-    let (ok, out, err) = cutlab(&["recording", "recover", s, "--out", fixed.to_str().expect("utf8")]);
+    let (ok, out, err) = cutlab(&[
+        "recording",
+        "recover",
+        s,
+        "--out",
+        fixed.to_str().expect("utf8"),
+    ]);
     assert!(ok, "{err}");
     assert!(out.contains("salvaged"), "{out}");
     let (ok, out, err) = cutlab(&["recording", "info", fixed.to_str().expect("utf8"), "--json"]);
     assert!(ok, "{err}");
-    assert_eq!(serde_json::from_str::<serde_json::Value>(&out).expect("json")["complete"], true);
+    assert_eq!(
+        serde_json::from_str::<serde_json::Value>(&out).expect("json")["complete"],
+        true
+    );
     let (ok, out, err) = cutlab(&["replay", fixed.to_str().expect("utf8")]);
     assert!(ok, "{err}");
     assert!(out.contains("bit-exact"), "{out}");
@@ -190,7 +345,10 @@ fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line
     let junk = dir.join("junk.mcap");
     std::fs::write(&junk, "hello").expect("write");
     let (ok, _, err) = cutlab(&["recording", "info", junk.to_str().expect("utf8")]);
-    assert!(!ok && err.contains("not an MCAP file") && !err.contains("panicked"), "{err}");
+    assert!(
+        !ok && err.contains("not an MCAP file") && !err.contains("panicked"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -199,26 +357,50 @@ fn output_into_a_closed_pipe_or_a_full_disk_ends_without_a_panic() {
     // a pipe whose reader is gone: the first write fails with EPIPE
     let (reader, writer) = std::io::pipe().expect("pipe");
     drop(reader);
-    let out = Command::new(env!("CARGO_BIN_EXE_cutlab")).args(["scene", "list"]).stdout(writer).output().expect("cutlab runs");
+    let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+        .args(["scene", "list"])
+        .stdout(writer)
+        .output()
+        .expect("cutlab runs");
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(141), "{err}");
     assert!(!err.contains("panicked"), "{err}");
     if let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") {
-        let out = Command::new(env!("CARGO_BIN_EXE_cutlab")).args(["scene", "list"]).stdout(full).output().expect("cutlab runs");
+        let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+            .args(["scene", "list"])
+            .stdout(full)
+            .output()
+            .expect("cutlab runs");
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(1), "{err}");
-        assert!(err.starts_with("error: failed printing to stdout") && !err.contains("panicked"), "{err}");
+        assert!(
+            err.starts_with("error: failed printing to stdout") && !err.contains("panicked"),
+            "{err}"
+        );
     }
 }
 
 #[test]
 fn bench_step_narrows_to_one_size_and_integrator() {
-    let (ok, out, err) = cutlab(&["bench", "step", "--quick", "--json", "--tets", "1000", "--integrator", "implicit-euler"]);
+    let (ok, out, err) = cutlab(&[
+        "bench",
+        "step",
+        "--quick",
+        "--json",
+        "--tets",
+        "1000",
+        "--integrator",
+        "implicit-euler",
+    ]);
     assert!(ok, "{err}");
     let rows: Vec<serde_json::Value> = serde_json::from_str(&out).expect("json");
     // the springs and the finite elements, both by implicit Euler, at the one size asked for
     assert_eq!(rows.len(), 2, "{out}");
-    assert!(rows.iter().all(|r| r["requested_tets"] == 1000 && r["integrator"] == "implicit-euler"), "{out}");
+    assert!(
+        rows.iter()
+            .all(|r| r["requested_tets"] == 1000 && r["integrator"] == "implicit-euler"),
+        "{out}"
+    );
     let (ok, _, err) = cutlab(&["bench", "step", "--integrator", "leapfrog"]);
     assert!(!ok && err.contains("unknown integrator"), "{err}");
 }
@@ -236,12 +418,25 @@ fn bench_skip_measures_each_skipped_piece_of_work() {
     assert!(r["surface_triangles"].as_u64().expect("triangles") > 0);
     // the resting tool keeps only its neighbourhood awake
     let awake = r["localised_awake"].as_f64().expect("awake");
-    assert!(awake > 0.0 && awake < particles / 4.0, "{awake} of {particles}");
-    for key in ["bvh_rebuild_ms", "bvh_refit_ms", "bvh_refit_still_ms", "surface_extract_ms", "step_full_ms", "step_localised_ms"] {
+    assert!(
+        awake > 0.0 && awake < particles / 4.0,
+        "{awake} of {particles}"
+    );
+    for key in [
+        "bvh_rebuild_ms",
+        "bvh_refit_ms",
+        "bvh_refit_still_ms",
+        "surface_extract_ms",
+        "step_full_ms",
+        "step_localised_ms",
+    ] {
         assert!(r[key]["count"].as_u64().expect("count") > 0, "{key}: {out}");
     }
     // the rerun measurement wrote a real .rrd file
-    let rrd = std::fs::read_dir(&dir).expect("out dir").filter_map(Result::ok).find(|e| e.path().extension().is_some_and(|x| x == "rrd"));
+    let rrd = std::fs::read_dir(&dir)
+        .expect("out dir")
+        .filter_map(Result::ok)
+        .find(|e| e.path().extension().is_some_and(|x| x == "rrd"));
     let rrd = rrd.expect("an .rrd file");
     assert!(rrd.metadata().expect("metadata").len() > 1000);
     std::fs::remove_dir_all(&dir).ok();

@@ -28,7 +28,10 @@ impl Drop for Proc {
 }
 
 fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).map(|a| a.port()).expect("a free port")
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
 }
 
 fn wait_for_port(port: u16, what: &str, child: &mut Child, timeout: Duration) {
@@ -38,7 +41,10 @@ fn wait_for_port(port: u16, what: &str, child: &mut Child, timeout: Duration) {
         if let Ok(Some(status)) = child.try_wait() {
             panic!("{what} exited: {status}");
         }
-        assert!(Instant::now() < deadline, "{what} does not listen on {port}");
+        assert!(
+            Instant::now() < deadline,
+            "{what} does not listen on {port}"
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
 }
@@ -50,7 +56,10 @@ fn cutlab(db: &Path, args: &[&str]) -> Command {
 }
 
 fn artefacts() -> PathBuf {
-    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("target"), PathBuf::from);
+    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("target"),
+        PathBuf::from,
+    );
     let dir = target.join("e2e");
     std::fs::create_dir_all(&dir).expect("target/e2e");
     dir
@@ -58,10 +67,18 @@ fn artefacts() -> PathBuf {
 
 #[test]
 fn instructor_reviews_progress_and_replay_in_headless_chromium() {
-    let missing: Vec<&str> = [CHROMIUM, CHROMEDRIVER].into_iter().filter(|p| !Path::new(p).exists()).collect();
+    let missing: Vec<&str> = [CHROMIUM, CHROMEDRIVER]
+        .into_iter()
+        .filter(|p| !Path::new(p).exists())
+        .collect();
     if !missing.is_empty() {
-        assert!(std::env::var_os("CUTLAB_E2E").is_none(), "CUTLAB_E2E is set but {missing:?} are missing (apt-get install chromium chromium-driver)");
-        eprintln!("skipped: {missing:?} missing (apt-get install chromium chromium-driver; CUTLAB_E2E=1 makes this a failure)");
+        assert!(
+            std::env::var_os("CUTLAB_E2E").is_none(),
+            "CUTLAB_E2E is set but {missing:?} are missing (apt-get install chromium chromium-driver)"
+        );
+        eprintln!(
+            "skipped: {missing:?} missing (apt-get install chromium chromium-driver; CUTLAB_E2E=1 makes this a failure)"
+        );
         return;
     }
     let tmp = std::env::temp_dir().join(format!("cutlab-e2e-{}", std::process::id()));
@@ -69,28 +86,72 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
     std::fs::create_dir_all(&tmp).expect("temp dir");
     let db = tmp.join("cutlab.db");
     let port = free_port();
-    let mut server = cutlab(&db, &["serve", "--demo", "--addr", &format!("127.0.0.1:{port}")]).stdout(Stdio::null()).spawn().expect("cutlab serve");
+    let mut server = cutlab(
+        &db,
+        &["serve", "--demo", "--addr", &format!("127.0.0.1:{port}")],
+    )
+    .stdout(Stdio::null())
+    .spawn()
+    .expect("cutlab serve");
     // (--demo first simulates the demo's attempts: about a minute)
     wait_for_port(port, "cutlab serve", &mut server, Duration::from_secs(600));
     let _server = Proc(server);
     // a real recorded attempt of ana's (after the demo's)
     let out = tmp.join("session");
-    let s = cutlab(&db, &["session", "--trainee", "ana", "--rrd", "--min-tets", "1500", "--duration", "3", "--clock", "virtual", "--out", out.to_str().expect("utf8")]).output().expect("cutlab session");
+    let s = cutlab(
+        &db,
+        &[
+            "session",
+            "--trainee",
+            "ana",
+            "--rrd",
+            "--min-tets",
+            "1500",
+            "--duration",
+            "3",
+            "--clock",
+            "virtual",
+            "--out",
+            out.to_str().expect("utf8"),
+        ],
+    )
+    .output()
+    .expect("cutlab session");
     assert!(s.status.success(), "{}", String::from_utf8_lossy(&s.stderr));
     assert!(out.join("session.rrd").is_file());
     let stdout = String::from_utf8_lossy(&s.stdout);
     let attempt: i64 = stdout
         .lines()
-        .find_map(|l| l.strip_prefix("attempt ")?.split_once(" of ana")?.0.parse().ok())
+        .find_map(|l| {
+            l.strip_prefix("attempt ")?
+                .split_once(" of ana")?
+                .0
+                .parse()
+                .ok()
+        })
         .unwrap_or_else(|| panic!("the session names its attempt: {stdout}"));
 
     let driver_port = free_port();
-    let mut driver = Command::new(CHROMEDRIVER).arg(format!("--port={driver_port}")).stdout(Stdio::null()).stderr(Stdio::null()).spawn().expect("chromedriver");
-    wait_for_port(driver_port, "chromedriver", &mut driver, Duration::from_secs(60));
+    let mut driver = Command::new(CHROMEDRIVER)
+        .arg(format!("--port={driver_port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver");
+    wait_for_port(
+        driver_port,
+        "chromedriver",
+        &mut driver,
+        Duration::from_secs(60),
+    );
     let _driver = Proc(driver);
 
     let profile = tmp.join("chromium-profile");
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
     rt.block_on(browse(port, driver_port, attempt, &profile, &artefacts()));
     let _ = std::fs::remove_dir_all(&tmp);
 }
@@ -109,7 +170,10 @@ async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots
         &format!("--user-data-dir={}", profile.display()),
     ];
     let mut caps = serde_json::Map::new();
-    caps.insert("goog:chromeOptions".into(), serde_json::json!({ "binary": CHROMIUM, "args": args }));
+    caps.insert(
+        "goog:chromeOptions".into(),
+        serde_json::json!({ "binary": CHROMIUM, "args": args }),
+    );
     let c = ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
         .capabilities(caps)
         .connect(&format!("http://127.0.0.1:{driver_port}"))

@@ -26,11 +26,18 @@ fn metadata() -> (BTreeMap<String, Vec<String>>, BTreeMap<String, String>) {
         .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml"))
         .output()
         .expect("cargo metadata runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: Value = serde_json::from_slice(&out.stdout).expect("metadata is JSON");
     let mut names = BTreeMap::new();
     for p in v["packages"].as_array().expect("packages") {
-        names.insert(p["id"].as_str().expect("id").to_owned(), p["name"].as_str().expect("name").to_owned());
+        names.insert(
+            p["id"].as_str().expect("id").to_owned(),
+            p["name"].as_str().expect("name").to_owned(),
+        );
     }
     let mut resolve = BTreeMap::new();
     for node in v["resolve"]["nodes"].as_array().expect("nodes") {
@@ -40,7 +47,9 @@ fn metadata() -> (BTreeMap<String, Vec<String>>, BTreeMap<String, String>) {
             .expect("deps")
             .iter()
             .filter(|d| {
-                d["dep_kinds"].as_array().is_some_and(|k| k.iter().any(|k| k["kind"].is_null()))
+                d["dep_kinds"]
+                    .as_array()
+                    .is_some_and(|k| k.iter().any(|k| k["kind"].is_null()))
             })
             .map(|d| d["pkg"].as_str().expect("pkg").to_owned())
             .collect();
@@ -51,24 +60,46 @@ fn metadata() -> (BTreeMap<String, Vec<String>>, BTreeMap<String, String>) {
 
 fn reachable_names(crate_name: &str) -> BTreeSet<String> {
     let (resolve, names) = metadata();
-    let root = names.iter().find(|(_, n)| *n == crate_name).map(|(id, _)| id.clone()).expect("crate in workspace");
-    closure(&resolve, &root).into_iter().map(|id| names[&id].clone()).collect()
+    let root = names
+        .iter()
+        .find(|(_, n)| *n == crate_name)
+        .map(|(id, _)| id.clone())
+        .expect("crate in workspace");
+    closure(&resolve, &root)
+        .into_iter()
+        .map(|id| names[&id].clone())
+        .collect()
 }
 
-const FORBIDDEN_BELOW_RECORDER: [&str; 7] = ["tokio", "sqlx", "axum", "mcap", "rerun", "re_sdk", "hyper"];
+const FORBIDDEN_BELOW_RECORDER: [&str; 7] =
+    ["tokio", "sqlx", "axum", "mcap", "rerun", "re_sdk", "hyper"];
 
 #[test]
 fn sim_and_haptics_are_free_of_runtime_database_web_and_recording_crates() {
     for krate in ["cutlab-sim", "cutlab-haptics"] {
         let deps = reachable_names(krate);
-        let bad: Vec<&str> = FORBIDDEN_BELOW_RECORDER.iter().copied().filter(|f| deps.contains(*f)).collect();
-        assert!(bad.is_empty(), "{krate} depends (maybe indirectly) on {bad:?}");
+        let bad: Vec<&str> = FORBIDDEN_BELOW_RECORDER
+            .iter()
+            .copied()
+            .filter(|f| deps.contains(*f))
+            .collect();
+        assert!(
+            bad.is_empty(),
+            "{krate} depends (maybe indirectly) on {bad:?}"
+        );
     }
 }
 
 #[test]
 fn no_crate_depends_on_a_crate_above_it() {
-    let layers = ["cutlab-sim", "cutlab-haptics", "cutlab-recorder", "cutlab-assessor", "cutlab-dashboard", "cutlab"];
+    let layers = [
+        "cutlab-sim",
+        "cutlab-haptics",
+        "cutlab-recorder",
+        "cutlab-assessor",
+        "cutlab-dashboard",
+        "cutlab",
+    ];
     for (i, krate) in layers.iter().enumerate() {
         let deps = reachable_names(krate);
         for above in &layers[i + 1..] {
@@ -89,9 +120,22 @@ fn the_peer_engine_is_a_bench_only_dependency() {
     // no crate, the command line included, may depend on it. (It is in the metadata, as a
     // dev-dependency: the check below is not vacuous.)
     let (_, names) = metadata();
-    assert!(names.values().any(|n| n == "rapier3d-f64"), "rapier3d-f64 is in the workspace's metadata");
-    for krate in ["cutlab-sim", "cutlab-haptics", "cutlab-recorder", "cutlab-assessor", "cutlab-dashboard", "cutlab"] {
-        let rapier: Vec<String> = reachable_names(krate).into_iter().filter(|d| d.starts_with("rapier")).collect();
+    assert!(
+        names.values().any(|n| n == "rapier3d-f64"),
+        "rapier3d-f64 is in the workspace's metadata"
+    );
+    for krate in [
+        "cutlab-sim",
+        "cutlab-haptics",
+        "cutlab-recorder",
+        "cutlab-assessor",
+        "cutlab-dashboard",
+        "cutlab",
+    ] {
+        let rapier: Vec<String> = reachable_names(krate)
+            .into_iter()
+            .filter(|d| d.starts_with("rapier"))
+            .collect();
         assert!(rapier.is_empty(), "{krate} depends on {rapier:?}");
     }
 }

@@ -21,7 +21,11 @@ fn cutlab(db: &Path, args: &[&str]) -> String {
         .env("RUST_LOG", "error")
         .output()
         .expect("cutlab runs");
-    assert!(out.status.success(), "cutlab {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "cutlab {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
@@ -33,7 +37,24 @@ fn record(db: &Path, dir: &Path, skill: &str, seed: u64) -> PathBuf {
     let duration = if skill == "expert" { "6" } else { "15" };
     let seed = seed.to_string();
     let out_arg = out.to_str().expect("utf-8 path");
-    cutlab(db, &["session", "--device", skill, "--seed", &seed, "--min-tets", MIN_TETS, "--duration", duration, "--surface-hz", "0", "--out", out_arg]);
+    cutlab(
+        db,
+        &[
+            "session",
+            "--device",
+            skill,
+            "--seed",
+            &seed,
+            "--min-tets",
+            MIN_TETS,
+            "--duration",
+            duration,
+            "--surface-hz",
+            "0",
+            "--out",
+            out_arg,
+        ],
+    );
     out.join("session.mcap")
 }
 
@@ -49,19 +70,32 @@ fn record_all(db: &Path, dir: &Path, skill: &str) -> Vec<PathBuf> {
                 std::thread::spawn(move || record(&db, &dir, &skill, seed))
             })
             .collect();
-        files.extend(handles.into_iter().map(|h| h.join().expect("session thread")));
+        files.extend(
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("session thread")),
+        );
     }
     files
 }
 
 /// Scores `file` for `trainee`; returns (score, passed).
 fn assess(db: &Path, file: &Path, trainee: &str, expert: bool) -> (f64, bool) {
-    let mut args = vec!["assess", file.to_str().expect("utf-8 path"), "--trainee", trainee, "--json"];
+    let mut args = vec![
+        "assess",
+        file.to_str().expect("utf-8 path"),
+        "--trainee",
+        trainee,
+        "--json",
+    ];
     if expert {
         args.push("--expert");
     }
     let v: serde_json::Value = serde_json::from_str(&cutlab(db, &args)).expect("assess --json");
-    (v["score"].as_f64().expect("score"), v["pass"].as_bool().expect("pass"))
+    (
+        v["score"].as_f64().expect("score"),
+        v["pass"].as_bool().expect("pass"),
+    )
 }
 
 #[test]
@@ -78,19 +112,44 @@ fn every_novice_scores_below_every_expert_and_fails_the_expert_thresholds() {
     let thresholds = cutlab(&db, &["exercise", "thresholds", "--json"]);
     let t: serde_json::Value = serde_json::from_str(&thresholds).expect("thresholds json");
     let metrics = t["metrics"].as_array().expect("metrics");
-    assert!(metrics.len() >= 5, "thresholds for the metrics: {thresholds}");
-    assert!(metrics.iter().all(|m| m["n_experts"].as_u64().is_some_and(|n| n >= 8)), "from the experts: {thresholds}");
+    assert!(
+        metrics.len() >= 5,
+        "thresholds for the metrics: {thresholds}"
+    );
+    assert!(
+        metrics
+            .iter()
+            .all(|m| m["n_experts"].as_u64().is_some_and(|n| n >= 8)),
+        "from the experts: {thresholds}"
+    );
 
     // the experts' attempts scored against their own thresholds, as a trainee's would be
-    let expert_scores: Vec<f64> = experts.iter().enumerate().map(|(k, f)| assess(&db, f, &format!("expert-check-{k}"), false).0).collect();
+    let expert_scores: Vec<f64> = experts
+        .iter()
+        .enumerate()
+        .map(|(k, f)| assess(&db, f, &format!("expert-check-{k}"), false).0)
+        .collect();
     let novices = record_all(&db, &dir, "novice");
-    let novice: Vec<(f64, bool)> = novices.iter().enumerate().map(|(k, f)| assess(&db, f, &format!("novice-{k}"), false)).collect();
+    let novice: Vec<(f64, bool)> = novices
+        .iter()
+        .enumerate()
+        .map(|(k, f)| assess(&db, f, &format!("novice-{k}"), false))
+        .collect();
     eprintln!("expert scores {expert_scores:.3?}");
-    eprintln!("novice scores {:.3?}", novice.iter().map(|n| n.0).collect::<Vec<_>>());
+    eprintln!(
+        "novice scores {:.3?}",
+        novice.iter().map(|n| n.0).collect::<Vec<_>>()
+    );
 
     let lowest_expert = expert_scores.iter().copied().fold(f64::INFINITY, f64::min);
     let highest_novice = novice.iter().map(|n| n.0).fold(f64::NEG_INFINITY, f64::max);
-    assert!(highest_novice < lowest_expert, "the best novice ({highest_novice:.3}) scores below the worst expert ({lowest_expert:.3})");
-    assert!(novice.iter().all(|n| !n.1), "every novice fails the expert-derived thresholds");
+    assert!(
+        highest_novice < lowest_expert,
+        "the best novice ({highest_novice:.3}) scores below the worst expert ({lowest_expert:.3})"
+    );
+    assert!(
+        novice.iter().all(|n| !n.1),
+        "every novice fails the expert-derived thresholds"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

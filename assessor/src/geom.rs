@@ -37,10 +37,18 @@ pub(crate) fn project(x: Point3<f64>, n: &Vector3<f64>) -> Point3<f64> {
 }
 
 /// The closest point to `p` on segment `ab`: `(point, parameter in [0, 1])`.
-pub(crate) fn closest_on_segment(p: Point3<f64>, a: Point3<f64>, b: Point3<f64>) -> (Point3<f64>, f64) {
+pub(crate) fn closest_on_segment(
+    p: Point3<f64>,
+    a: Point3<f64>,
+    b: Point3<f64>,
+) -> (Point3<f64>, f64) {
     let ab = b - a;
     let l2 = ab.norm_squared();
-    let t = if l2 > 0.0 { ((p - a).dot(&ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if l2 > 0.0 {
+        ((p - a).dot(&ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     (a + ab * t, t)
 }
 
@@ -56,7 +64,10 @@ pub(crate) struct OnLine {
 
 /// The closest point to `p` on the polyline `line` (at least 2 points).
 pub(crate) fn closest_on_polyline(p: Point3<f64>, line: &[Point3<f64>]) -> OnLine {
-    let mut best = OnLine { distance: f64::INFINITY, arc: 0.0 };
+    let mut best = OnLine {
+        distance: f64::INFINITY,
+        arc: 0.0,
+    };
     let (mut acc, last) = (0.0, line.len().saturating_sub(2));
     for (i, w) in line.windows(2).enumerate() {
         let len = nalgebra::distance(&w[0], &w[1]);
@@ -78,7 +89,9 @@ pub(crate) fn closest_on_polyline(p: Point3<f64>, line: &[Point3<f64>]) -> OnLin
 
 /// The length of a polyline.
 pub(crate) fn polyline_length(line: &[Point3<f64>]) -> f64 {
-    line.windows(2).map(|w| nalgebra::distance(&w[0], &w[1])).sum()
+    line.windows(2)
+        .map(|w| nalgebra::distance(&w[0], &w[1]))
+        .sum()
 }
 
 /// The measure of the union of the intervals `spans` (each `(a, b)` with `a <= b`).
@@ -107,7 +120,11 @@ pub(crate) fn point_at_arc(line: &[Point3<f64>], s: f64) -> (Point3<f64>, Vector
     for (i, w) in line.windows(2).enumerate() {
         let len = nalgebra::distance(&w[0], &w[1]);
         if acc + len >= s || i == last {
-            let t = if len > 0.0 { ((s - acc) / len).clamp(0.0, 1.0) } else { 0.0 };
+            let t = if len > 0.0 {
+                ((s - acc) / len).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let tangent = unit(w[1] - w[0]).unwrap_or_else(Vector3::x);
             return (w[0] + (w[1] - w[0]) * t, tangent);
         }
@@ -131,31 +148,59 @@ mod tests {
 
     #[test]
     fn polyline_projection_and_arc() {
-        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(1.0, 1.0, 0.0)];
+        let line = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(1.0, 1.0, 0.0),
+        ];
         let on = closest_on_polyline(Point3::new(1.5, 0.5, 0.0), &line);
         assert!((on.distance - 0.5).abs() < 1e-12);
         assert!((polyline_length(&line) - 2.0).abs() < 1e-12);
         let (p, t) = point_at_arc(&line, 1.25);
         assert!(nalgebra::distance(&p, &Point3::new(1.0, 0.25, 0.0)) < 1e-12);
         assert!((t - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-12);
-        assert!((angle(Vector3::new(1.0, 0.0, 0.0), Vector3::new(1.0, 1.0, 0.0)).unwrap() - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
-        assert_eq!(project(Point3::new(1.0, 2.0, 3.0), &Vector3::new(0.0, 0.0, 1.0)), Point3::new(1.0, 2.0, 0.0));
+        assert!(
+            (angle(Vector3::new(1.0, 0.0, 0.0), Vector3::new(1.0, 1.0, 0.0)).unwrap()
+                - std::f64::consts::FRAC_PI_4)
+                .abs()
+                < 1e-12
+        );
+        assert_eq!(
+            project(Point3::new(1.0, 2.0, 3.0), &Vector3::new(0.0, 0.0, 1.0)),
+            Point3::new(1.0, 2.0, 0.0)
+        );
     }
 
     #[test]
     fn arc_coordinates_extend_beyond_the_ends_and_spans_unite() {
-        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(1.0, 1.0, 0.0)];
-        for (p, s) in [((0.5, 0.2), 0.5), ((-0.3, 0.1), -0.3), ((1.2, 0.5), 1.5), ((1.1, 1.4), 2.4), ((0.0, 0.0), 0.0)] {
+        let line = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(1.0, 1.0, 0.0),
+        ];
+        for (p, s) in [
+            ((0.5, 0.2), 0.5),
+            ((-0.3, 0.1), -0.3),
+            ((1.2, 0.5), 1.5),
+            ((1.1, 1.4), 2.4),
+            ((0.0, 0.0), 0.0),
+        ] {
             let got = closest_on_polyline(Point3::new(p.0, p.1, 0.0), &line).arc;
             assert!((got - s).abs() < 1e-12, "{p:?}: {got}, expected {s}");
         }
-        assert!((union_length(vec![(2.0, 3.0), (0.0, 1.0), (0.5, 1.5), (1.5, 1.5)]) - 2.5).abs() < 1e-12);
+        assert!(
+            (union_length(vec![(2.0, 3.0), (0.0, 1.0), (0.5, 1.5), (1.5, 1.5)]) - 2.5).abs()
+                < 1e-12
+        );
         assert_eq!(union_length(Vec::new()), 0.0);
     }
 
     #[test]
     fn unit_and_angle_reject_zero_and_non_finite_vectors() {
-        assert!((unit(Vector3::new(0.0, 3.0, 4.0)).unwrap() - Vector3::new(0.0, 0.6, 0.8)).norm() < 1e-15);
+        assert!(
+            (unit(Vector3::new(0.0, 3.0, 4.0)).unwrap() - Vector3::new(0.0, 0.6, 0.8)).norm()
+                < 1e-15
+        );
         assert_eq!(unit(Vector3::zeros()), None);
         assert_eq!(unit(Vector3::new(1e-13, 0.0, 0.0)), None);
         assert_eq!(unit(Vector3::new(f64::NAN, 0.0, 1.0)), None);

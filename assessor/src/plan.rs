@@ -74,29 +74,49 @@ pub const CHEST_WALL_PLAN_TOML: &str = include_str!("../examples/plan.toml");
 impl ExpertPlan {
     /// Parses TOML.
     pub fn from_toml(text: &str) -> Result<Self> {
-        let plan: Self = toml::from_str(text).map_err(|e| AssessError::Parse { what: "expert plan (TOML)".into(), message: e.to_string() })?;
+        let plan: Self = toml::from_str(text).map_err(|e| AssessError::Parse {
+            what: "expert plan (TOML)".into(),
+            message: e.to_string(),
+        })?;
         plan.normalised()
     }
 
     /// Parses JSON.
     pub fn from_json(text: &str) -> Result<Self> {
-        let plan: Self = serde_json::from_str(text).map_err(|e| AssessError::Parse { what: "expert plan (JSON)".into(), message: e.to_string() })?;
+        let plan: Self = serde_json::from_str(text).map_err(|e| AssessError::Parse {
+            what: "expert plan (JSON)".into(),
+            message: e.to_string(),
+        })?;
         plan.normalised()
     }
 
     /// Reads a `.toml` or `.json` file (by extension; anything else is tried as TOML, then JSON).
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io { path: path.display().to_string(), error: source })?;
-        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
+            path: path.display().to_string(),
+            error: source,
+        })?;
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
         let at = |e: AssessError| match e {
-            AssessError::Parse { what, message } => AssessError::Parse { what: format!("{} ({what})", path.display()), message },
-            AssessError::InvalidPlan(m) => AssessError::InvalidPlan(format!("{}: {m}", path.display())),
+            AssessError::Parse { what, message } => AssessError::Parse {
+                what: format!("{} ({what})", path.display()),
+                message,
+            },
+            AssessError::InvalidPlan(m) => {
+                AssessError::InvalidPlan(format!("{}: {m}", path.display()))
+            }
             e => e,
         };
         match ext.as_str() {
             "json" => Self::from_json(&text).map_err(at),
             "toml" => Self::from_toml(&text).map_err(at),
-            _ => Self::from_toml(&text).or_else(|_| Self::from_json(&text)).map_err(at),
+            _ => Self::from_toml(&text)
+                .or_else(|_| Self::from_json(&text))
+                .map_err(at),
         }
     }
 
@@ -112,10 +132,15 @@ impl ExpertPlan {
             self.incision_m = vec![self.entry_m, self.exit_m];
         }
         self.check()?;
-        let normal = geom::unit(self.normal.into()).ok_or_else(|| AssessError::InvalidPlan("zero normal".into()))?;
+        let normal = geom::unit(self.normal.into())
+            .ok_or_else(|| AssessError::InvalidPlan("zero normal".into()))?;
         self.normal = normal.into();
         let approach = self.approach_dir.map_or(-normal, Vector3::from);
-        self.approach_dir = Some(geom::unit(approach).ok_or_else(|| AssessError::InvalidPlan("zero approach direction".into()))?.into());
+        self.approach_dir = Some(
+            geom::unit(approach)
+                .ok_or_else(|| AssessError::InvalidPlan("zero approach direction".into()))?
+                .into(),
+        );
         Ok(self)
     }
 
@@ -125,10 +150,20 @@ impl ExpertPlan {
     pub fn check(&self) -> Result<()> {
         let bad = |m: &str| Err(AssessError::InvalidPlan(m.into()));
         let mut numbers: Vec<f64> = Vec::new();
-        for v in [self.entry_m, self.exit_m, self.normal, self.viewpoint_m].iter().chain(self.approach_dir.iter()).chain(&self.incision_m).chain(&self.target_m) {
+        for v in [self.entry_m, self.exit_m, self.normal, self.viewpoint_m]
+            .iter()
+            .chain(self.approach_dir.iter())
+            .chain(&self.incision_m)
+            .chain(&self.target_m)
+        {
             numbers.extend_from_slice(v);
         }
-        numbers.extend([self.depth_m, self.tolerance_m, self.corridor_half_width_m, self.force_limit_n]);
+        numbers.extend([
+            self.depth_m,
+            self.tolerance_m,
+            self.corridor_half_width_m,
+            self.force_limit_n,
+        ]);
         if !geom::finite(&numbers) {
             return bad("a number is not finite (NaN or infinite)");
         }
@@ -141,7 +176,10 @@ impl ExpertPlan {
         if geom::unit(self.normal.into()).is_none() {
             return bad("the normal is zero");
         }
-        if self.approach_dir.is_some_and(|a| geom::unit(a.into()).is_none()) {
+        if self
+            .approach_dir
+            .is_some_and(|a| geom::unit(a.into()).is_none())
+        {
             return bad("the approach direction is zero");
         }
         if !(self.depth_m > 0.0) {
@@ -171,7 +209,10 @@ impl ExpertPlan {
 
     /// The approach direction (unit), `-normal` unless given.
     pub fn approach(&self) -> [f64; 3] {
-        self.approach_dir.and_then(|a| geom::unit(a.into())).unwrap_or(-Vector3::from(self.normal)).into()
+        self.approach_dir
+            .and_then(|a| geom::unit(a.into()))
+            .unwrap_or(-Vector3::from(self.normal))
+            .into()
     }
 }
 
@@ -182,7 +223,11 @@ mod tests {
     #[test]
     fn the_builtin_plan_parses_and_is_60_mm_long() {
         let plan = ExpertPlan::chest_wall().unwrap();
-        assert!((plan.length_m() - 0.060).abs() < 1e-3, "{}", plan.length_m());
+        assert!(
+            (plan.length_m() - 0.060).abs() < 1e-3,
+            "{}",
+            plan.length_m()
+        );
         assert!((plan.depth_m - 0.008).abs() < 1e-12);
         assert!((plan.tolerance_m - 0.002).abs() < 1e-12);
         assert!(!plan.target_m.is_empty());
@@ -191,7 +236,8 @@ mod tests {
 
     #[test]
     fn json_round_trip_and_defaults() {
-        let text = r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
+        let text =
+            r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
         let plan = ExpertPlan::from_json(text).unwrap();
         assert_eq!(plan.incision_m.len(), 2);
         assert!((plan.tolerance_m - 0.002).abs() < 1e-15);
@@ -201,16 +247,30 @@ mod tests {
 
     #[test]
     fn degenerate_and_nan_plans_are_rejected_with_a_reason() {
-        let ok = r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
+        let ok =
+            r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
         assert!(ExpertPlan::from_json(ok).is_ok());
         let short = ok.replace("0.05,0,0", "0.0001,0,0");
-        assert!(ExpertPlan::from_json(&short).unwrap_err().to_string().contains("shorter than 1 mm"));
+        assert!(
+            ExpertPlan::from_json(&short)
+                .unwrap_err()
+                .to_string()
+                .contains("shorter than 1 mm")
+        );
         let no_depth = ok.replace("\"depth_m\":0.005", "\"depth_m\":0");
-        assert!(ExpertPlan::from_json(&no_depth).unwrap_err().to_string().contains("depth_m"));
+        assert!(
+            ExpertPlan::from_json(&no_depth)
+                .unwrap_err()
+                .to_string()
+                .contains("depth_m")
+        );
         let mut plan = ExpertPlan::from_json(ok).unwrap();
         plan.exit_m[1] = f64::NAN;
         assert!(plan.check().unwrap_err().to_string().contains("not finite"));
         let typo = ok.replace("depth_m", "depht_m");
-        assert!(matches!(ExpertPlan::from_json(&typo), Err(AssessError::Parse { .. })));
+        assert!(matches!(
+            ExpertPlan::from_json(&typo),
+            Err(AssessError::Parse { .. })
+        ));
     }
 }

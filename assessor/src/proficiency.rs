@@ -67,12 +67,22 @@ impl Threshold {
     /// bad side (two-sided: the margin on both sides of the expert band).
     pub fn fixed(key: &str, better: Better, reference: f64, limit: f64) -> Self {
         let (lower, upper) = limits(better, reference, (limit - reference).abs());
-        Self { key: key.into(), better, mean: reference, sd: 0.0, n_experts: 0, lower, upper }
+        Self {
+            key: key.into(),
+            better,
+            mean: reference,
+            sd: 0.0,
+            n_experts: 0,
+            lower,
+            upper,
+        }
     }
 
     /// Whether `value` is within the limits.
     pub fn passes(&self, value: f64) -> bool {
-        value.is_finite() && self.lower.is_none_or(|l| value >= l) && self.upper.is_none_or(|u| value <= u)
+        value.is_finite()
+            && self.lower.is_none_or(|l| value >= l)
+            && self.upper.is_none_or(|u| value <= u)
     }
 
     /// The per-metric score in `[-1, 1]` (see the module documentation).
@@ -96,7 +106,13 @@ impl Threshold {
             }
             _ => 1.0,
         };
-        let raw = if raw.is_finite() { raw } else if self.passes(value) { 1.0 } else { -1.0 };
+        let raw = if raw.is_finite() {
+            raw
+        } else if self.passes(value) {
+            1.0
+        } else {
+            -1.0
+        };
         raw.clamp(-1.0, 1.0)
     }
 }
@@ -161,7 +177,11 @@ pub struct Verdict {
 fn mean_sd(x: &[f64]) -> (f64, f64) {
     let n = x.len() as f64;
     let mean = x.iter().sum::<f64>() / n;
-    let sd = if x.len() > 1 { (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt() } else { 0.0 };
+    let sd = if x.len() > 1 {
+        (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    } else {
+        0.0
+    };
     (mean, sd)
 }
 
@@ -193,7 +213,10 @@ pub fn without_outliers(x: &[f64]) -> Vec<f64> {
     if !(sd > 0.0) {
         return x.to_vec();
     }
-    x.iter().copied().filter(|v| ((v - mean) / sd).abs() <= OUTLIER_Z).collect()
+    x.iter()
+        .copied()
+        .filter(|v| ((v - mean) / sd).abs() <= OUTLIER_Z)
+        .collect()
 }
 
 impl Thresholds {
@@ -204,7 +227,10 @@ impl Thresholds {
         }
         let mut metrics = Vec::new();
         for m in METRICS.iter().filter(|m| m.scored) {
-            let x: Vec<f64> = attempts.iter().filter_map(|a| crate::metrics::value_of(a, m.key)).collect();
+            let x: Vec<f64> = attempts
+                .iter()
+                .filter_map(|a| crate::metrics::value_of(a, m.key))
+                .collect();
             if x.len() < 2 {
                 continue;
             }
@@ -212,7 +238,15 @@ impl Thresholds {
             let (mean, sd) = mean_sd(&kept);
             let sd = sd.max(sd_floor(m.unit, mean));
             let (lower, upper) = limits(m.better, mean, k * sd);
-            metrics.push(Threshold { key: m.key.into(), better: m.better, mean, sd, n_experts: kept.len(), lower, upper });
+            metrics.push(Threshold {
+                key: m.key.into(),
+                better: m.better,
+                mean,
+                sd,
+                n_experts: kept.len(),
+                lower,
+                upper,
+            });
         }
         Ok(Self { k, metrics })
     }
@@ -224,12 +258,25 @@ impl Thresholds {
             .iter()
             .map(|t| {
                 let value = crate::metrics::value_of(attempt, &t.key);
-                MetricVerdict { key: t.key.clone(), value, pass: value.is_some_and(|v| t.passes(v)), score: value.map_or(-1.0, |v| t.score(v)) }
+                MetricVerdict {
+                    key: t.key.clone(),
+                    value,
+                    pass: value.is_some_and(|v| t.passes(v)),
+                    score: value.map_or(-1.0, |v| t.score(v)),
+                }
             })
             .collect();
         let pass = !metrics.is_empty() && metrics.iter().all(|m| m.pass);
-        let score = if metrics.is_empty() { 0.0 } else { metrics.iter().map(|m| m.score).sum::<f64>() / metrics.len() as f64 };
-        Verdict { metrics, pass, score }
+        let score = if metrics.is_empty() {
+            0.0
+        } else {
+            metrics.iter().map(|m| m.score).sum::<f64>() / metrics.len() as f64
+        };
+        Verdict {
+            metrics,
+            pass,
+            score,
+        }
     }
 }
 
@@ -281,15 +328,32 @@ pub struct CusumParams {
 
 impl Default for CusumParams {
     fn default() -> Self {
-        Self { p0: 0.10, p1: 0.20, alpha: 0.10, beta: 0.10 }
+        Self {
+            p0: 0.10,
+            p1: 0.20,
+            alpha: 0.10,
+            beta: 0.10,
+        }
     }
 }
 
 impl CusumParams {
     /// Checks `0 < p0 < p1 < 1` and `0 < alpha, beta < 1`.
     pub fn check(&self) -> Result<()> {
-        let ok = 0.0 < self.p0 && self.p0 < self.p1 && self.p1 < 1.0 && 0.0 < self.alpha && self.alpha < 1.0 && 0.0 < self.beta && self.beta < 1.0;
-        if ok { Ok(()) } else { Err(AssessError::InvalidInput(format!("CUSUM parameters {self:?}: need 0 < p0 < p1 < 1, 0 < alpha, beta < 1"))) }
+        let ok = 0.0 < self.p0
+            && self.p0 < self.p1
+            && self.p1 < 1.0
+            && 0.0 < self.alpha
+            && self.alpha < 1.0
+            && 0.0 < self.beta
+            && self.beta < 1.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(AssessError::InvalidInput(format!(
+                "CUSUM parameters {self:?}: need 0 < p0 < p1 < 1, 0 < alpha, beta < 1"
+            )))
+        }
     }
     fn p_plus_q(&self) -> f64 {
         (self.p1 / self.p0).ln() + ((1.0 - self.p0) / (1.0 - self.p1)).ln()
@@ -356,7 +420,14 @@ mod tests {
             .iter()
             .map(|(k, v)| {
                 let m = crate::metrics::metric(k).unwrap();
-                MetricValue { key: (*k).into(), value: Some(*v), unit: m.unit.into(), better: m.better, scored: m.scored, missing: None }
+                MetricValue {
+                    key: (*k).into(),
+                    value: Some(*v),
+                    unit: m.unit.into(),
+                    better: m.better,
+                    scored: m.scored,
+                    missing: None,
+                }
             })
             .collect()
     }
@@ -364,23 +435,52 @@ mod tests {
     #[test]
     fn thresholds_by_hand_with_an_outlier_removed() {
         // lateral_mean_m: 1..=9 mm and an outlier at 40 mm
-        let mut experts: Vec<Vec<MetricValue>> = (1..=9).map(|i| attempt(&[("lateral_mean_m", i as f64), ("fraction_cut_in_tolerance", 0.9), ("depth_error_m", if i % 2 == 0 { 1.0 } else { -1.0 })])).collect();
-        experts.push(attempt(&[("lateral_mean_m", 40.0), ("fraction_cut_in_tolerance", 0.9), ("depth_error_m", 0.0)]));
+        let mut experts: Vec<Vec<MetricValue>> = (1..=9)
+            .map(|i| {
+                attempt(&[
+                    ("lateral_mean_m", i as f64),
+                    ("fraction_cut_in_tolerance", 0.9),
+                    ("depth_error_m", if i % 2 == 0 { 1.0 } else { -1.0 }),
+                ])
+            })
+            .collect();
+        experts.push(attempt(&[
+            ("lateral_mean_m", 40.0),
+            ("fraction_cut_in_tolerance", 0.9),
+            ("depth_error_m", 0.0),
+        ]));
         let t = Thresholds::from_experts(&experts, 2.0).unwrap();
-        let lat = t.metrics.iter().find(|m| m.key == "lateral_mean_m").unwrap();
+        let lat = t
+            .metrics
+            .iter()
+            .find(|m| m.key == "lateral_mean_m")
+            .unwrap();
         // all 10: mean 8.5, sd 11.72; z(40) = 2.69 > 1.96 removed; 1..9: mean 5, sd sqrt(7.5)
         assert_eq!(lat.n_experts, 9);
         assert!((lat.mean - 5.0).abs() < 1e-12);
         assert!((lat.sd - 7.5f64.sqrt()).abs() < 1e-12);
         assert_eq!(lat.lower, None);
         assert!((lat.upper.unwrap() - (5.0 + 2.0 * 7.5f64.sqrt())).abs() < 1e-12);
-        let frac = t.metrics.iter().find(|m| m.key == "fraction_cut_in_tolerance").unwrap();
+        let frac = t
+            .metrics
+            .iter()
+            .find(|m| m.key == "fraction_cut_in_tolerance")
+            .unwrap();
         // all equal: sd 0, nothing removed; the limit is 2 floors of the SD below (5 % of 0.9)
-        assert!((frac.sd - 0.045).abs() < 1e-12 && (frac.lower.unwrap() - 0.81).abs() < 1e-12 && frac.upper.is_none(), "{frac:?}");
+        assert!(
+            (frac.sd - 0.045).abs() < 1e-12
+                && (frac.lower.unwrap() - 0.81).abs() < 1e-12
+                && frac.upper.is_none(),
+            "{frac:?}"
+        );
         assert_eq!(frac.n_experts, 10);
         let depth = t.metrics.iter().find(|m| m.key == "depth_error_m").unwrap();
         assert!(depth.lower.is_some() && depth.upper.is_some(), "two-sided");
-        assert_eq!(t.metrics.len(), 3, "metrics without expert values get no threshold");
+        assert_eq!(
+            t.metrics.len(),
+            3,
+            "metrics without expert values get no threshold"
+        );
         assert!(Thresholds::from_experts(&experts, 0.0).is_err());
     }
 
@@ -397,21 +497,48 @@ mod tests {
     fn pass_and_score_by_hand() {
         let t = Thresholds {
             k: 2.0,
-            metrics: vec![Threshold::fixed("lateral_mean_m", Better::LowerIsBetter, 1.0, 3.0), Threshold::fixed("fraction_cut_in_tolerance", Better::HigherIsBetter, 0.9, 0.7), Threshold::fixed("depth_error_m", Better::TwoSided, 0.0, 2.0)],
+            metrics: vec![
+                Threshold::fixed("lateral_mean_m", Better::LowerIsBetter, 1.0, 3.0),
+                Threshold::fixed(
+                    "fraction_cut_in_tolerance",
+                    Better::HigherIsBetter,
+                    0.9,
+                    0.7,
+                ),
+                Threshold::fixed("depth_error_m", Better::TwoSided, 0.0, 2.0),
+            ],
         };
-        let at_mean = t.verdict(&attempt(&[("lateral_mean_m", 1.0), ("fraction_cut_in_tolerance", 0.9), ("depth_error_m", 0.0)]));
+        let at_mean = t.verdict(&attempt(&[
+            ("lateral_mean_m", 1.0),
+            ("fraction_cut_in_tolerance", 0.9),
+            ("depth_error_m", 0.0),
+        ]));
         assert!(at_mean.pass);
         assert!((at_mean.score - 1.0).abs() < 1e-12);
-        let on_limits = t.verdict(&attempt(&[("lateral_mean_m", 3.0), ("fraction_cut_in_tolerance", 0.7), ("depth_error_m", -2.0)]));
+        let on_limits = t.verdict(&attempt(&[
+            ("lateral_mean_m", 3.0),
+            ("fraction_cut_in_tolerance", 0.7),
+            ("depth_error_m", -2.0),
+        ]));
         assert!(on_limits.pass);
         assert!(on_limits.score.abs() < 1e-12);
         // lateral 2 -> 0.5; fraction 0.6 -> -0.5 (fails); depth 1 -> 0.5: mean 1/6
-        let mixed = t.verdict(&attempt(&[("lateral_mean_m", 2.0), ("fraction_cut_in_tolerance", 0.6), ("depth_error_m", 1.0)]));
+        let mixed = t.verdict(&attempt(&[
+            ("lateral_mean_m", 2.0),
+            ("fraction_cut_in_tolerance", 0.6),
+            ("depth_error_m", 1.0),
+        ]));
         assert!(!mixed.pass);
         assert!((mixed.score - 1.0 / 6.0).abs() < 1e-12, "{}", mixed.score);
-        assert_eq!(mixed.metrics.iter().map(|m| m.pass).collect::<Vec<_>>(), [true, false, true]);
+        assert_eq!(
+            mixed.metrics.iter().map(|m| m.pass).collect::<Vec<_>>(),
+            [true, false, true]
+        );
         // far beyond: clamped to -1; missing: -1 and a fail
-        let bad = t.verdict(&attempt(&[("lateral_mean_m", 100.0), ("fraction_cut_in_tolerance", 0.0)]));
+        let bad = t.verdict(&attempt(&[
+            ("lateral_mean_m", 100.0),
+            ("fraction_cut_in_tolerance", 0.0),
+        ]));
         assert!(!bad.pass);
         assert!((bad.score + 1.0).abs() < 1e-12);
     }
@@ -419,21 +546,47 @@ mod tests {
     #[test]
     fn a_cut_closer_to_the_plan_than_the_experts_passes_two_sided() {
         // experts cut 2.2-2.4 mm deeper than planned: mean 2.3 mm, sd 0.1 mm (floor 0.2 mm)
-        let experts: Vec<Vec<MetricValue>> = [2.2e-3, 2.3e-3, 2.4e-3].iter().map(|&d| attempt(&[("depth_error_m", d)])).collect();
+        let experts: Vec<Vec<MetricValue>> = [2.2e-3, 2.3e-3, 2.4e-3]
+            .iter()
+            .map(|&d| attempt(&[("depth_error_m", d)]))
+            .collect();
         let t = Thresholds::from_experts(&experts, 2.0).unwrap();
         let depth = &t.metrics[0];
         assert!((depth.sd - 2e-4).abs() < 1e-15, "{depth:?}");
         // the window reaches from 0.4 mm too shallow to 0.4 mm beyond the experts
-        assert!((depth.lower.unwrap() + 4e-4).abs() < 1e-15 && (depth.upper.unwrap() - 2.7e-3).abs() < 1e-15, "{depth:?}");
-        for (value, score) in [(0.0, 1.0), (1e-3, 1.0), (2.3e-3, 1.0), (2.5e-3, 0.5), (2.7e-3, 0.0), (-2e-4, 0.5), (-4e-4, 0.0)] {
+        assert!(
+            (depth.lower.unwrap() + 4e-4).abs() < 1e-15
+                && (depth.upper.unwrap() - 2.7e-3).abs() < 1e-15,
+            "{depth:?}"
+        );
+        for (value, score) in [
+            (0.0, 1.0),
+            (1e-3, 1.0),
+            (2.3e-3, 1.0),
+            (2.5e-3, 0.5),
+            (2.7e-3, 0.0),
+            (-2e-4, 0.5),
+            (-4e-4, 0.0),
+        ] {
             assert!(depth.passes(value), "{value}");
-            assert!((depth.score(value) - score).abs() < 1e-9, "{value}: {} (expected {score})", depth.score(value));
+            assert!(
+                (depth.score(value) - score).abs() < 1e-9,
+                "{value}: {} (expected {score})",
+                depth.score(value)
+            );
         }
         assert!(!depth.passes(2.8e-3) && !depth.passes(-5e-4));
         assert!(depth.score(2.8e-3) < 0.0 && depth.score(-5e-4) < 0.0);
         // a band on the other side (experts too shallow) mirrors it
-        let shallow = Threshold { mean: -2.3e-3, lower: Some(-2.7e-3), upper: Some(4e-4), ..depth.clone() };
-        assert!((shallow.score(-1e-3) - 1.0).abs() < 1e-12 && (shallow.score(2e-4) - 0.5).abs() < 1e-9);
+        let shallow = Threshold {
+            mean: -2.3e-3,
+            lower: Some(-2.7e-3),
+            upper: Some(4e-4),
+            ..depth.clone()
+        };
+        assert!(
+            (shallow.score(-1e-3) - 1.0).abs() < 1e-12 && (shallow.score(2e-4) - 0.5).abs() < 1e-9
+        );
     }
 
     #[test]
@@ -466,6 +619,16 @@ mod tests {
         let fails = cusum(&[false; 4], &p).unwrap();
         assert_eq!(fails[2].signal, CusumSignal::None);
         assert_eq!(fails[3].signal, CusumSignal::Unacceptable);
-        assert!(cusum(&[true], &CusumParams { p0: 0.3, p1: 0.2, ..p }).is_err());
+        assert!(
+            cusum(
+                &[true],
+                &CusumParams {
+                    p0: 0.3,
+                    p1: 0.2,
+                    ..p
+                }
+            )
+            .is_err()
+        );
     }
 }

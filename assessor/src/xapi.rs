@@ -49,7 +49,11 @@ fn verb(id: &str) -> Value {
 /// The statements of one trainee's attempts (oldest first). `exercise_name` names each
 /// attempt's exercise; `metrics` are its stored results; `mastered_attempts` are the attempts
 /// that made the trainee proficient.
-pub fn statements(trainee: &User, attempts: &[(Attempt, String, Vec<StoredMetric>)], mastered_attempts: &[i64]) -> Vec<Value> {
+pub fn statements(
+    trainee: &User,
+    attempts: &[(Attempt, String, Vec<StoredMetric>)],
+    mastered_attempts: &[i64],
+) -> Vec<Value> {
     let actor = json!({ "objectType": "Agent", "name": trainee.name, "account": { "homePage": XAPI_BASE, "name": trainee.name } });
     let mut out = Vec::new();
     for (a, exercise, metrics) in attempts {
@@ -66,8 +70,16 @@ pub fn statements(trainee: &User, attempts: &[(Attempt, String, Vec<StoredMetric
             attempted_result["duration"] = json!(d);
         }
         out.push(json!({ "actor": actor, "verb": verb(VERB_ATTEMPTED), "object": object, "result": attempted_result, "context": context, "timestamp": iso8601(a.started_ns) }));
-        let (Some(score), Some(pass), true) = (a.score, a.passed, a.scored) else { continue };
-        let extensions: serde_json::Map<String, Value> = metrics.iter().filter_map(|m| m.value.map(|v| (format!("{XAPI_BASE}/metric/{}", m.metric), json!(v)))).collect();
+        let (Some(score), Some(pass), true) = (a.score, a.passed, a.scored) else {
+            continue;
+        };
+        let extensions: serde_json::Map<String, Value> = metrics
+            .iter()
+            .filter_map(|m| {
+                m.value
+                    .map(|v| (format!("{XAPI_BASE}/metric/{}", m.metric), json!(v)))
+            })
+            .collect();
         let mut result = json!({
             "score": { "scaled": score.clamp(-1.0, 1.0) },
             "success": pass,
@@ -119,7 +131,13 @@ mod tests {
 
     #[test]
     fn attempted_passed_failed_mastered() {
-        let user = User { id: 7, name: "alice".into(), role: Role::Trainee, has_password: false, created_ns: 0 };
+        let user = User {
+            id: 7,
+            name: "alice".into(),
+            role: Role::Trainee,
+            has_password: false,
+            created_ns: 0,
+        };
         let a = |id: i64, passed: Option<bool>, status: AttemptStatus| Attempt {
             id,
             trainee_id: 7,
@@ -134,20 +152,63 @@ mod tests {
             passed,
             note: None,
         };
-        let m = vec![StoredMetric { metric: "lateral_mean_m".into(), value: Some(0.001), unit: "m".into(), passed: Some(true), missing: None }];
+        let m = vec![StoredMetric {
+            metric: "lateral_mean_m".into(),
+            value: Some(0.001),
+            unit: "m".into(),
+            passed: Some(true),
+            missing: None,
+        }];
         let rows = vec![
-            (a(1, Some(false), AttemptStatus::Complete), "chest-wall-incision".to_owned(), m.clone()),
-            (a(2, None, AttemptStatus::Incomplete), "chest-wall-incision".to_owned(), vec![]),
-            (a(3, Some(true), AttemptStatus::Complete), "chest-wall-incision".to_owned(), m.clone()),
-            (a(4, Some(true), AttemptStatus::Complete), "chest-wall-incision".to_owned(), m),
+            (
+                a(1, Some(false), AttemptStatus::Complete),
+                "chest-wall-incision".to_owned(),
+                m.clone(),
+            ),
+            (
+                a(2, None, AttemptStatus::Incomplete),
+                "chest-wall-incision".to_owned(),
+                vec![],
+            ),
+            (
+                a(3, Some(true), AttemptStatus::Complete),
+                "chest-wall-incision".to_owned(),
+                m.clone(),
+            ),
+            (
+                a(4, Some(true), AttemptStatus::Complete),
+                "chest-wall-incision".to_owned(),
+                m,
+            ),
         ];
         let s = statements(&user, &rows, &[4]);
-        let verbs: Vec<&str> = s.iter().map(|v| v["verb"]["display"]["en-US"].as_str().unwrap()).collect();
-        assert_eq!(verbs, ["attempted", "failed", "attempted", "attempted", "passed", "attempted", "passed", "mastered"]);
+        let verbs: Vec<&str> = s
+            .iter()
+            .map(|v| v["verb"]["display"]["en-US"].as_str().unwrap())
+            .collect();
+        assert_eq!(
+            verbs,
+            [
+                "attempted",
+                "failed",
+                "attempted",
+                "attempted",
+                "passed",
+                "attempted",
+                "passed",
+                "mastered"
+            ]
+        );
         assert_eq!(s[1]["verb"]["id"], VERB_FAILED);
-        assert_eq!(s[1]["result"]["score"]["scaled"], -1.0, "clamped to [-1, 1]");
+        assert_eq!(
+            s[1]["result"]["score"]["scaled"], -1.0,
+            "clamped to [-1, 1]"
+        );
         assert_eq!(s[1]["result"]["duration"], "PT10.5S");
-        assert_eq!(s[1]["result"]["extensions"][format!("{XAPI_BASE}/metric/lateral_mean_m")], 0.001);
+        assert_eq!(
+            s[1]["result"]["extensions"][format!("{XAPI_BASE}/metric/lateral_mean_m")],
+            0.001
+        );
         assert_eq!(s[2]["result"]["completion"], false);
         assert_eq!(s[4]["result"]["score"]["scaled"], 0.7);
         assert_eq!(s[0]["actor"]["account"]["name"], "alice");

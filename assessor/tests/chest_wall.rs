@@ -23,26 +23,52 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
             let blade = cut::Blade::normal_to_curved_slab(x, 0.0003, 0.15, depth, 0.005);
             let (tip, outward) = (blade.tip, blade.edge_direction);
             if cutter.advance(&mut sim, blade).is_ok() && k % 12 == 0 {
-                data.cuts.push(CutSample { t_s: k as f64 * 1e-3, tip_m: [tip.x, tip.y, tip.z], edge_dir: [outward.x, outward.y, outward.z], depth_m: depth });
+                data.cuts.push(CutSample {
+                    t_s: k as f64 * 1e-3,
+                    tip_m: [tip.x, tip.y, tip.z],
+                    edge_dir: [outward.x, outward.y, outward.z],
+                    depth_m: depth,
+                });
             }
         }
         sim.step().expect("step");
     }
     assert!(sim.settle(StaticSettings::default()).converged);
     let x = &sim.state.positions;
-    let widest_gap = cut::wound_gaps(&sim).into_iter().map(|(_, gap)| gap).fold(0.0, f64::max);
-    data.surface = Some(SurfaceMesh { vertices_m: x.iter().map(|p| [p.x, p.y, p.z]).collect(), triangles: sim.model.mesh.topology().boundary.clone() });
+    let widest_gap = cut::wound_gaps(&sim)
+        .into_iter()
+        .map(|(_, gap)| gap)
+        .fold(0.0, f64::max);
+    data.surface = Some(SurfaceMesh {
+        vertices_m: x.iter().map(|p| [p.x, p.y, p.z]).collect(),
+        triangles: sim.model.mesh.topology().boundary.clone(),
+    });
 
     let plan = ExpertPlan::chest_wall().expect("plan");
     let m = assess(&plan, &data).expect("assess");
     let get = |k: &str| value_of(&m, k).unwrap_or_else(|| panic!("{k} missing: {m:?}"));
     let width = get("opening_width_m");
-    println!("opening width {:.2} mm, area {:.1} mm^2, widest vertex gap {:.2} mm", width * 1e3, get("opening_area_m2") * 1e6, widest_gap * 1e3);
+    println!(
+        "opening width {:.2} mm, area {:.1} mm^2, widest vertex gap {:.2} mm",
+        width * 1e3,
+        get("opening_area_m2") * 1e6,
+        widest_gap * 1e3
+    );
     assert!(widest_gap > 5e-4, "the wound opens: {widest_gap}");
     // the ray-cast width is measured at half the planned depth, the vertex gap anywhere
-    assert!(width > 0.4 * widest_gap && width < 1.5 * widest_gap + 3e-4, "width {width} vs gap {widest_gap}");
-    assert!(get("opening_area_m2") > 0.3 * width * 0.06, "open along most of the line");
-    assert_eq!(get("target_visible_fraction"), 0.0, "an 8 mm cut in a 15 mm wall does not show the heart");
+    assert!(
+        width > 0.4 * widest_gap && width < 1.5 * widest_gap + 3e-4,
+        "width {width} vs gap {widest_gap}"
+    );
+    assert!(
+        get("opening_area_m2") > 0.3 * width * 0.06,
+        "open along most of the line"
+    );
+    assert_eq!(
+        get("target_visible_fraction"),
+        0.0,
+        "an 8 mm cut in a 15 mm wall does not show the heart"
+    );
     assert!(get("lateral_max_m") < 5e-4);
     assert!(get("fraction_cut_in_tolerance") > 0.98);
     assert!(get("entry_error_m") < 1e-3 && get("exit_error_m") < 1e-3);

@@ -13,61 +13,174 @@ fn values(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
         .iter()
         .map(|m| {
             let v = pairs.iter().find(|(k, _)| *k == m.key).map(|p| p.1);
-            MetricValue { key: m.key.into(), value: v, unit: m.unit.into(), better: m.better, scored: m.scored, missing: v.is_none().then(|| "test".into()) }
+            MetricValue {
+                key: m.key.into(),
+                value: v,
+                unit: m.unit.into(),
+                better: m.better,
+                scored: m.scored,
+                missing: v.is_none().then(|| "test".into()),
+            }
         })
         .collect()
 }
 
 async fn exercise_with_one_threshold(store: &Store) -> i64 {
     let plan = ExpertPlan::chest_wall().expect("plan");
-    let t = [Threshold::fixed("lateral_mean_m", Better::LowerIsBetter, 0.0005, 0.002)];
-    let new = NewExercise { name: "one-metric", scene: "chest-wall", description: "", plan: &plan, thresholds: &t, threshold_k: 2.0 };
+    let t = [Threshold::fixed(
+        "lateral_mean_m",
+        Better::LowerIsBetter,
+        0.0005,
+        0.002,
+    )];
+    let new = NewExercise {
+        name: "one-metric",
+        scene: "chest-wall",
+        description: "",
+        plan: &plan,
+        thresholds: &t,
+        threshold_k: 2.0,
+    };
     store.create_exercise(&new).await.expect("exercise").id
 }
 
 #[sqlx::test(migrations = "../migrations")]
 async fn users_and_passwords(pool: SqlitePool) {
     let store = Store::from_pool(pool.clone()).await.expect("store");
-    let alice = store.create_user("alice", Role::Trainee, Some("s3cret")).await.expect("alice");
+    let alice = store
+        .create_user("alice", Role::Trainee, Some("s3cret"))
+        .await
+        .expect("alice");
     assert_eq!(alice.role, Role::Trainee);
     assert!(alice.has_password);
-    store.create_user("bob", Role::Instructor, None).await.expect("bob");
-    assert!(matches!(store.create_user("alice", Role::Admin, None).await, Err(AssessError::Conflict(_))));
-    assert_eq!(store.verify_password("alice", "s3cret").await.expect("verify").map(|u| u.id), Some(alice.id));
-    assert!(store.verify_password("alice", "wrong").await.expect("verify").is_none());
-    assert!(store.verify_password("bob", "").await.expect("verify").is_none(), "no password: cannot log in");
-    assert!(store.verify_password("nobody", "x").await.expect("verify").is_none());
+    store
+        .create_user("bob", Role::Instructor, None)
+        .await
+        .expect("bob");
+    assert!(matches!(
+        store.create_user("alice", Role::Admin, None).await,
+        Err(AssessError::Conflict(_))
+    ));
+    assert_eq!(
+        store
+            .verify_password("alice", "s3cret")
+            .await
+            .expect("verify")
+            .map(|u| u.id),
+        Some(alice.id)
+    );
+    assert!(
+        store
+            .verify_password("alice", "wrong")
+            .await
+            .expect("verify")
+            .is_none()
+    );
+    assert!(
+        store
+            .verify_password("bob", "")
+            .await
+            .expect("verify")
+            .is_none(),
+        "no password: cannot log in"
+    );
+    assert!(
+        store
+            .verify_password("nobody", "x")
+            .await
+            .expect("verify")
+            .is_none()
+    );
     // never the plain text
-    let hash: String = sqlx::query_scalar("SELECT password_hash FROM users WHERE name = 'alice'").fetch_one(&pool).await.expect("hash");
-    assert!(hash.starts_with("$argon2id$") && !hash.contains("s3cret"), "{hash}");
-    assert_eq!(store.list_users(Some(Role::Instructor)).await.expect("list").len(), 1);
+    let hash: String = sqlx::query_scalar("SELECT password_hash FROM users WHERE name = 'alice'")
+        .fetch_one(&pool)
+        .await
+        .expect("hash");
+    assert!(
+        hash.starts_with("$argon2id$") && !hash.contains("s3cret"),
+        "{hash}"
+    );
+    assert_eq!(
+        store
+            .list_users(Some(Role::Instructor))
+            .await
+            .expect("list")
+            .len(),
+        1
+    );
     assert_eq!(store.list_users(None).await.expect("list").len(), 2);
-    assert!(matches!(store.user_by_name("carol").await, Err(AssessError::NotFound(_))));
+    assert!(matches!(
+        store.user_by_name("carol").await,
+        Err(AssessError::NotFound(_))
+    ));
 }
 
 #[sqlx::test(migrations = "../migrations")]
 async fn cohorts_and_curricula(pool: SqlitePool) {
     let store = Store::from_pool(pool).await.expect("store");
-    let teacher = store.create_user("dr-who", Role::Instructor, None).await.expect("user");
-    let t1 = store.create_user("t1", Role::Trainee, None).await.expect("user");
-    let t2 = store.create_user("t2", Role::Trainee, None).await.expect("user");
-    let c = store.create_cohort("2026-spring", Some(teacher.id)).await.expect("cohort");
+    let teacher = store
+        .create_user("dr-who", Role::Instructor, None)
+        .await
+        .expect("user");
+    let t1 = store
+        .create_user("t1", Role::Trainee, None)
+        .await
+        .expect("user");
+    let t2 = store
+        .create_user("t2", Role::Trainee, None)
+        .await
+        .expect("user");
+    let c = store
+        .create_cohort("2026-spring", Some(teacher.id))
+        .await
+        .expect("cohort");
     store.join_cohort(c.id, t2.id).await.expect("join");
     store.join_cohort(c.id, t1.id).await.expect("join");
-    store.join_cohort(c.id, t1.id).await.expect("joining twice is fine");
-    let members: Vec<String> = store.cohort_members(c.id).await.expect("members").into_iter().map(|u| u.name).collect();
+    store
+        .join_cohort(c.id, t1.id)
+        .await
+        .expect("joining twice is fine");
+    let members: Vec<String> = store
+        .cohort_members(c.id)
+        .await
+        .expect("members")
+        .into_iter()
+        .map(|u| u.name)
+        .collect();
     assert_eq!(members, ["t1", "t2"]);
-    assert_eq!(store.cohort_by_name("2026-spring").await.expect("by name").id, c.id);
+    assert_eq!(
+        store
+            .cohort_by_name("2026-spring")
+            .await
+            .expect("by name")
+            .id,
+        c.id
+    );
 
     let builtin = store.ensure_builtins().await.expect("builtins");
     let other = exercise_with_one_threshold(&store).await;
-    let cur = store.create_curriculum("basic incisions", "first steps").await.expect("curriculum");
-    store.add_module(cur.id, "straight lines", &[builtin.id, other]).await.expect("module");
-    store.add_module(cur.id, "again", &[other]).await.expect("module");
+    let cur = store
+        .create_curriculum("basic incisions", "first steps")
+        .await
+        .expect("curriculum");
+    store
+        .add_module(cur.id, "straight lines", &[builtin.id, other])
+        .await
+        .expect("module");
+    store
+        .add_module(cur.id, "again", &[other])
+        .await
+        .expect("module");
     let modules = store.curriculum_modules(cur.id).await.expect("modules");
-    assert_eq!(modules.iter().map(|m| m.position).collect::<Vec<_>>(), [1, 2]);
+    assert_eq!(
+        modules.iter().map(|m| m.position).collect::<Vec<_>>(),
+        [1, 2]
+    );
     assert_eq!(modules[0].exercise_ids, [builtin.id, other]);
-    assert_eq!(store.get_curriculum(cur.id).await.expect("get").name, "basic incisions");
+    assert_eq!(
+        store.get_curriculum(cur.id).await.expect("get").name,
+        "basic incisions"
+    );
     assert_eq!(store.list_plans().await.expect("plans").len(), 2);
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
 }
@@ -82,7 +195,14 @@ async fn the_builtin_exercise_is_there_once(pool: SqlitePool) {
     assert_eq!(a.scene, "chest-wall");
     let plan = store.exercise_plan(a.id).await.expect("plan");
     assert_eq!(plan, ExpertPlan::chest_wall().expect("plan"));
-    assert!(!store.thresholds(a.id).await.expect("thresholds").metrics.is_empty());
+    assert!(
+        !store
+            .thresholds(a.id)
+            .await
+            .expect("thresholds")
+            .metrics
+            .is_empty()
+    );
     assert_eq!(store.list_exercises().await.expect("list").len(), 1);
 }
 
@@ -90,116 +210,262 @@ async fn the_builtin_exercise_is_there_once(pool: SqlitePool) {
 async fn attempts_scores_and_proficiency(pool: SqlitePool) {
     let store = Store::from_pool(pool).await.expect("store");
     let ex = exercise_with_one_threshold(&store).await;
-    let t = store.create_user("trainee", Role::Trainee, None).await.expect("user");
+    let t = store
+        .create_user("trainee", Role::Trainee, None)
+        .await
+        .expect("user");
     // fail, pass, pass: proficient at the third
     let mut ids = Vec::new();
     for lateral in [0.005, 0.001, 0.0005] {
-        let a = store.start_attempt(t.id, ex, Some("rec/a.mcap"), false).await.expect("start");
+        let a = store
+            .start_attempt(t.id, ex, Some("rec/a.mcap"), false)
+            .await
+            .expect("start");
         assert_eq!(a.status, AttemptStatus::Running);
-        let out = store.finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)])).await.expect("finish");
+        let out = store
+            .finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)]))
+            .await
+            .expect("finish");
         assert_eq!(out.attempt.status, AttemptStatus::Complete);
         assert!(out.attempt.ended_ns.is_some() && out.attempt.scored);
         ids.push(a.id);
     }
-    let attempts = store.list_attempts(Some(t.id), Some(ex)).await.expect("list");
-    assert_eq!(attempts.iter().map(|a| a.passed).collect::<Vec<_>>(), [Some(false), Some(true), Some(true)]);
+    let attempts = store
+        .list_attempts(Some(t.id), Some(ex))
+        .await
+        .expect("list");
+    assert_eq!(
+        attempts.iter().map(|a| a.passed).collect::<Vec<_>>(),
+        [Some(false), Some(true), Some(true)]
+    );
     // 0.001 on a (0.0005, 0.002) threshold: (0.002 - 0.001) / 0.0015 = 2/3
     assert!((attempts[1].score.expect("score") - 2.0 / 3.0).abs() < 1e-12);
     let p = store.proficiency(t.id, ex).await.expect("proficiency");
     assert!(p.state.proficient);
     assert_eq!(p.proficient_attempt_id, Some(ids[2]));
-    assert_eq!((p.state.attempts, p.state.passes, p.state.consecutive_passes), (3, 2, 2));
-    let chart = store.cusum_chart(t.id, ex, &CusumParams::default()).await.expect("cusum");
+    assert_eq!(
+        (p.state.attempts, p.state.passes, p.state.consecutive_passes),
+        (3, 2, 2)
+    );
+    let chart = store
+        .cusum_chart(t.id, ex, &CusumParams::default())
+        .await
+        .expect("cusum");
     assert_eq!(chart.len(), 3);
     assert!((chart[2].1.value - p.cusum).abs() < 1e-12);
     let metrics = store.attempt_metrics(ids[0]).await.expect("metrics");
-    let lat = metrics.iter().find(|m| m.metric == "lateral_mean_m").expect("stored");
+    let lat = metrics
+        .iter()
+        .find(|m| m.metric == "lateral_mean_m")
+        .expect("stored");
     assert_eq!((lat.value, lat.passed), (Some(0.005), Some(false)));
-    assert!(metrics.iter().find(|m| m.metric == "time_s").expect("stored").value.is_none(), "missing stays missing");
-    assert!(matches!(store.finish_attempt(ids[0], &values(&[])).await, Err(AssessError::Conflict(_))), "scored once");
+    assert!(
+        metrics
+            .iter()
+            .find(|m| m.metric == "time_s")
+            .expect("stored")
+            .value
+            .is_none(),
+        "missing stays missing"
+    );
+    assert!(
+        matches!(
+            store.finish_attempt(ids[0], &values(&[])).await,
+            Err(AssessError::Conflict(_))
+        ),
+        "scored once"
+    );
 
     // an interrupted session: incomplete, recording kept, not scored
-    let a = store.start_attempt(t.id, ex, Some("rec/cut-short.mcap"), false).await.expect("start");
-    let a = store.mark_incomplete(a.id, Some("interrupted")).await.expect("incomplete");
+    let a = store
+        .start_attempt(t.id, ex, Some("rec/cut-short.mcap"), false)
+        .await
+        .expect("start");
+    let a = store
+        .mark_incomplete(a.id, Some("interrupted"))
+        .await
+        .expect("incomplete");
     assert_eq!(a.status, AttemptStatus::Incomplete);
     assert_eq!(a.recording_path.as_deref(), Some("rec/cut-short.mcap"));
     assert!(!a.scored && a.score.is_none());
-    assert!(store.mark_incomplete(a.id, None).await.is_err(), "only running attempts");
-    assert_eq!(store.proficiency(t.id, ex).await.expect("p").state.attempts, 3);
+    assert!(
+        store.mark_incomplete(a.id, None).await.is_err(),
+        "only running attempts"
+    );
+    assert_eq!(
+        store.proficiency(t.id, ex).await.expect("p").state.attempts,
+        3
+    );
 }
 
 #[sqlx::test(migrations = "../migrations")]
 async fn thresholds_from_expert_attempts(pool: SqlitePool) {
     let store = Store::from_pool(pool).await.expect("store");
     let ex = exercise_with_one_threshold(&store).await;
-    let expert = store.create_user("expert", Role::Instructor, None).await.expect("user");
-    assert!(store.thresholds_from_experts(ex).await.is_err(), "no experts yet");
+    let expert = store
+        .create_user("expert", Role::Instructor, None)
+        .await
+        .expect("user");
+    assert!(
+        store.thresholds_from_experts(ex).await.is_err(),
+        "no experts yet"
+    );
     for lateral in [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 40.0] {
-        let a = store.start_attempt(expert.id, ex, None, true).await.expect("start");
-        store.finish_attempt(a.id, &values(&[("lateral_mean_m", lateral * 1e-3), ("time_s", 10.0)])).await.expect("finish");
+        let a = store
+            .start_attempt(expert.id, ex, None, true)
+            .await
+            .expect("start");
+        store
+            .finish_attempt(
+                a.id,
+                &values(&[("lateral_mean_m", lateral * 1e-3), ("time_s", 10.0)]),
+            )
+            .await
+            .expect("finish");
     }
     let t: Thresholds = store.thresholds_from_experts(ex).await.expect("thresholds");
-    let lat = t.metrics.iter().find(|m| m.key == "lateral_mean_m").expect("lateral");
+    let lat = t
+        .metrics
+        .iter()
+        .find(|m| m.key == "lateral_mean_m")
+        .expect("lateral");
     assert_eq!(lat.n_experts, 9, "the 40 mm outlier is out");
     assert!((lat.upper.expect("upper") - (5.0 + 2.0 * 7.5f64.sqrt()) * 1e-3).abs() < 1e-12);
-    assert_eq!(t.metrics.iter().map(|m| m.key.as_str()).collect::<Vec<_>>(), ["lateral_mean_m", "time_s"]);
+    assert_eq!(
+        t.metrics.iter().map(|m| m.key.as_str()).collect::<Vec<_>>(),
+        ["lateral_mean_m", "time_s"]
+    );
     let stored = store.thresholds(ex).await.expect("stored");
     assert_eq!(stored.metrics.len(), 2);
-    let src: String = sqlx::query_scalar("SELECT DISTINCT source FROM metric_thresholds WHERE exercise_id = ?").bind(ex).fetch_one(store.pool()).await.expect("source");
+    let src: String =
+        sqlx::query_scalar("SELECT DISTINCT source FROM metric_thresholds WHERE exercise_id = ?")
+            .bind(ex)
+            .fetch_one(store.pool())
+            .await
+            .expect("source");
     assert_eq!(src, "experts");
-    store.set_thresholds(ex, &Thresholds { k: 2.0, metrics: vec![] }, ThresholdSource::Default).await.expect("clear");
-    assert!(store.thresholds(ex).await.expect("stored").metrics.is_empty());
+    store
+        .set_thresholds(
+            ex,
+            &Thresholds {
+                k: 2.0,
+                metrics: vec![],
+            },
+            ThresholdSource::Default,
+        )
+        .await
+        .expect("clear");
+    assert!(
+        store
+            .thresholds(ex)
+            .await
+            .expect("stored")
+            .metrics
+            .is_empty()
+    );
 }
 
 #[sqlx::test(migrations = "../migrations")]
 async fn xapi_of_a_trainee(pool: SqlitePool) {
     let store = Store::from_pool(pool).await.expect("store");
     let ex = exercise_with_one_threshold(&store).await;
-    let t = store.create_user("trainee", Role::Trainee, None).await.expect("user");
+    let t = store
+        .create_user("trainee", Role::Trainee, None)
+        .await
+        .expect("user");
     for lateral in [0.001, 0.001] {
-        let a = store.start_attempt(t.id, ex, None, false).await.expect("start");
-        store.finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)])).await.expect("finish");
+        let a = store
+            .start_attempt(t.id, ex, None, false)
+            .await
+            .expect("start");
+        store
+            .finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)]))
+            .await
+            .expect("finish");
     }
     let s = store.xapi_statements("trainee").await.expect("xapi");
-    let verbs: Vec<&str> = s.iter().map(|v| v["verb"]["display"]["en-US"].as_str().expect("verb")).collect();
-    assert_eq!(verbs, ["attempted", "passed", "attempted", "passed", "mastered"]);
-    assert!(s[1]["result"]["duration"].as_str().expect("duration").starts_with("PT"));
-    assert!(matches!(store.xapi_statements("nobody").await, Err(AssessError::NotFound(_))));
+    let verbs: Vec<&str> = s
+        .iter()
+        .map(|v| v["verb"]["display"]["en-US"].as_str().expect("verb"))
+        .collect();
+    assert_eq!(
+        verbs,
+        ["attempted", "passed", "attempted", "passed", "mastered"]
+    );
+    assert!(
+        s[1]["result"]["duration"]
+            .as_str()
+            .expect("duration")
+            .starts_with("PT")
+    );
+    assert!(matches!(
+        store.xapi_statements("nobody").await,
+        Err(AssessError::NotFound(_))
+    ));
 }
 
 /// Two pools (two stations) on one file write attempts at the same time: nothing is lost.
 #[sqlx::test(migrations = "../migrations")]
-async fn concurrent_writers_on_one_file(_pool_options: SqlitePoolOptions, options: SqliteConnectOptions) {
+async fn concurrent_writers_on_one_file(
+    _pool_options: SqlitePoolOptions,
+    options: SqliteConnectOptions,
+) {
     let a = Store::open_with(options.clone()).await.expect("store a");
     let b = Store::open_with(options).await.expect("store b");
     let ex = a.ensure_builtins().await.expect("builtins").id;
     assert_eq!(b.ensure_builtins().await.expect("builtins").id, ex);
-    let ua = a.create_user("station-a", Role::Trainee, None).await.expect("user").id;
-    let ub = b.create_user("station-b", Role::Trainee, None).await.expect("user").id;
+    let ua = a
+        .create_user("station-a", Role::Trainee, None)
+        .await
+        .expect("user")
+        .id;
+    let ub = b
+        .create_user("station-b", Role::Trainee, None)
+        .await
+        .expect("user")
+        .id;
     let run = |store: Store, user: i64| async move {
         let mut tasks = Vec::new();
         for i in 0..10 {
             let store = store.clone();
             tasks.push(tokio::spawn(async move {
-                let at = store.start_attempt(user, ex, Some(&format!("rec/{user}-{i}.mcap")), false).await.expect("start");
-                store.finish_attempt(at.id, &values(&[("lateral_mean_m", 0.001), ("time_s", 9.0)])).await.expect("finish");
+                let at = store
+                    .start_attempt(user, ex, Some(&format!("rec/{user}-{i}.mcap")), false)
+                    .await
+                    .expect("start");
+                store
+                    .finish_attempt(
+                        at.id,
+                        &values(&[("lateral_mean_m", 0.001), ("time_s", 9.0)]),
+                    )
+                    .await
+                    .expect("finish");
             }));
         }
         for t in tasks {
             t.await.expect("task");
         }
     };
-    let (ra, rb) = tokio::join!(tokio::spawn(run(a.clone(), ua)), tokio::spawn(run(b.clone(), ub)));
+    let (ra, rb) = tokio::join!(
+        tokio::spawn(run(a.clone(), ua)),
+        tokio::spawn(run(b.clone(), ub))
+    );
     ra.expect("a");
     rb.expect("b");
     let all = a.list_attempts(None, None).await.expect("list");
     assert_eq!(all.len(), 20);
     assert!(all.iter().all(|x| x.status == AttemptStatus::Complete));
-    let results: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM metric_results").fetch_one(b.pool()).await.expect("count");
+    let results: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM metric_results")
+        .fetch_one(b.pool())
+        .await
+        .expect("count");
     assert_eq!(results, 20 * METRICS.len() as i64);
     assert_eq!(a.proficiency(ua, ex).await.expect("p").state.attempts, 10);
     assert_eq!(b.proficiency(ub, ex).await.expect("p").state.attempts, 10);
-    let mode: String = sqlx::query_scalar("PRAGMA journal_mode").fetch_one(a.pool()).await.expect("pragma");
+    let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
+        .fetch_one(a.pool())
+        .await
+        .expect("pragma");
     assert_eq!(mode, "wal");
 }
 
@@ -229,22 +495,49 @@ fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData
             10.0 * u.powi(3) - 15.0 * u.powi(4) + 6.0 * u.powi(5)
         };
         if t < 1.0 {
-            [-0.03, offset, surface(-0.03) + 0.02 - (0.02 + depth) * ease(t)]
+            [
+                -0.03,
+                offset,
+                surface(-0.03) + 0.02 - (0.02 + depth) * ease(t),
+            ]
         } else if t < 7.0 {
             let x = -0.03 + 0.06 * ease((t - 1.0) / 6.0);
             [x, offset, surface(x) - depth]
         } else {
-            [0.03, offset, surface(0.03) - depth + (0.02 + depth) * ease(t - 7.0)]
+            [
+                0.03,
+                offset,
+                surface(0.03) - depth + (0.02 + depth) * ease(t - 7.0),
+            ]
         }
     };
     for i in 0..=(8.0 * hz) as usize {
         let t = i as f64 / hz;
         let p = tip(t);
         let cutting = (1.0..7.0).contains(&t);
-        d.poses.push(PoseSample { t_s: t, tip_m: p, quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: cutting });
-        d.forces.push(ForceSample { t_s: t, force_newtons: [0.0, 0.0, if cutting { force } else { 0.0 }], touching: cutting, cutting });
-        if cutting && d.cuts.last().is_none_or(|c: &CutSample| (p[0] - c.tip_m[0]).abs() >= 0.0005) {
-            d.cuts.push(CutSample { t_s: t, tip_m: p, edge_dir: [0.0, 0.0, 1.0], depth_m: depth });
+        d.poses.push(PoseSample {
+            t_s: t,
+            tip_m: p,
+            quat_wxyz: [1.0, 0.0, 0.0, 0.0],
+            blade_engaged: cutting,
+        });
+        d.forces.push(ForceSample {
+            t_s: t,
+            force_newtons: [0.0, 0.0, if cutting { force } else { 0.0 }],
+            touching: cutting,
+            cutting,
+        });
+        if cutting
+            && d.cuts
+                .last()
+                .is_none_or(|c: &CutSample| (p[0] - c.tip_m[0]).abs() >= 0.0005)
+        {
+            d.cuts.push(CutSample {
+                t_s: t,
+                tip_m: p,
+                edge_dir: [0.0, 0.0, 1.0],
+                depth_m: depth,
+            });
         }
     }
     d
@@ -254,17 +547,50 @@ fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData
 async fn score_attempts_on_the_builtin_exercise(pool: SqlitePool) {
     let store = Store::from_pool(pool).await.expect("store");
     let ex = store.ensure_builtins().await.expect("builtins").id;
-    let t = store.create_user("t", Role::Trainee, None).await.expect("user");
-    let good = store.start_attempt(t.id, ex, None, false).await.expect("start");
-    let good = store.score_attempt(good.id, &scripted(0.0002, 0.008, 1.0)).await.expect("score");
+    let t = store
+        .create_user("t", Role::Trainee, None)
+        .await
+        .expect("user");
+    let good = store
+        .start_attempt(t.id, ex, None, false)
+        .await
+        .expect("start");
+    let good = store
+        .score_attempt(good.id, &scripted(0.0002, 0.008, 1.0))
+        .await
+        .expect("score");
     let failed: Vec<_> = good.verdict.metrics.iter().filter(|m| !m.pass).collect();
     assert!(good.verdict.pass, "{failed:?}");
-    assert!(good.verdict.score > 0.5, "{} {:?}", good.verdict.score, good.verdict.metrics);
-    let bad = store.start_attempt(t.id, ex, None, false).await.expect("start");
-    let bad = store.score_attempt(bad.id, &scripted(0.004, 0.003, 3.2)).await.expect("score");
+    assert!(
+        good.verdict.score > 0.5,
+        "{} {:?}",
+        good.verdict.score,
+        good.verdict.metrics
+    );
+    let bad = store
+        .start_attempt(t.id, ex, None, false)
+        .await
+        .expect("start");
+    let bad = store
+        .score_attempt(bad.id, &scripted(0.004, 0.003, 3.2))
+        .await
+        .expect("score");
     assert!(!bad.verdict.pass);
-    assert!(bad.verdict.score < good.verdict.score - 0.4, "{} vs {}", bad.verdict.score, good.verdict.score);
+    assert!(
+        bad.verdict.score < good.verdict.score - 0.4,
+        "{} vs {}",
+        bad.verdict.score,
+        good.verdict.score
+    );
     for key in ["lateral_mean_m", "depth_error_m", "peak_force_n"] {
-        assert!(!bad.verdict.metrics.iter().find(|m| m.key == key).expect(key).pass, "{key}");
+        assert!(
+            !bad.verdict
+                .metrics
+                .iter()
+                .find(|m| m.key == key)
+                .expect(key)
+                .pass,
+            "{key}"
+        );
     }
 }

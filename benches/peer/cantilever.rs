@@ -3,8 +3,8 @@
 //! `x = max` face by area along the larger cross dimension, `P` such that Timoshenko's
 //! deflection `P L^3 / (3 E I) + P L / (kappa G A)` (`kappa = 5/6`) is 1e-3 of the length.
 
-use cutlab_sim::{Point3, TetMesh};
 use cutlab_sim::reference::Solid;
+use cutlab_sim::{Point3, TetMesh};
 
 use crate::cases::end_face;
 
@@ -25,7 +25,11 @@ impl CantileverLoad {
         let (lo, hi) = mesh.bounding_box();
         let ext = hi - lo;
         let length = ext.x;
-        let (axis, h, b) = if ext.z >= ext.y { (2, ext.z, ext.y) } else { (1, ext.y, ext.z) };
+        let (axis, h, b) = if ext.z >= ext.y {
+            (2, ext.z, ext.y)
+        } else {
+            (1, ext.y, ext.z)
+        };
         let tol = 1e-6 * length;
         let pos = mesh.positions();
         let mut weight = vec![0.0; pos.len()];
@@ -46,7 +50,8 @@ impl CantileverLoad {
             .filter(|&i| weight[i as usize] > 0.0)
             .map(|i| (i, load * weight[i as usize] / area))
             .collect();
-        let first_mode = 1.875f64.powi(2) * (e * inertia / (solid.density_kg_per_m3 * b * h * length.powi(4))).sqrt();
+        let first_mode = 1.875f64.powi(2)
+            * (e * inertia / (solid.density_kg_per_m3 * b * h * length.powi(4))).sqrt();
         Self {
             clamped: end_face(mesh, lo.x),
             tip,
@@ -58,7 +63,11 @@ impl CantileverLoad {
 
     /// Mean displacement of the tip face along the load, m, from the current positions.
     pub fn deflection_m(&self, rest: &TetMesh, current: impl Fn(u32) -> Point3) -> f64 {
-        let sum: f64 = self.tip.iter().map(|&(v, _)| current(v)[self.axis] - rest.positions()[v as usize][self.axis]).sum();
+        let sum: f64 = self
+            .tip
+            .iter()
+            .map(|&(v, _)| current(v)[self.axis] - rest.positions()[v as usize][self.axis])
+            .sum();
         sum / self.tip.len().max(1) as f64
     }
 

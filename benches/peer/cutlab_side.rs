@@ -4,11 +4,11 @@
 use std::time::Instant;
 
 use anyhow::Context;
+use cutlab_sim::Vector3;
 use cutlab_sim::cut::{self, CutOptions, CutPolygon};
 use cutlab_sim::model::Model;
 use cutlab_sim::reference::{self, Elasticity, Solid};
 use cutlab_sim::solver::{Simulation, SolverSettings, StaticSettings};
-use cutlab_sim::Vector3;
 
 use crate::cases::{Case, bar_mesh};
 use crate::stats::Summary;
@@ -39,7 +39,11 @@ pub fn steps(case: &Case, model: &Model, steps: usize) -> anyhow::Result<StepRun
     let mut times_us = Vec::with_capacity(steps);
     let mut cg = 0;
     for i in 0..steps {
-        case.press.forces(i as f64 * dt, |v| sim.state.positions[v as usize], &mut forces);
+        case.press.forces(
+            i as f64 * dt,
+            |v| sim.state.positions[v as usize],
+            &mut forces,
+        );
         sim.clear_external_forces();
         let external = sim.external_forces_mut();
         forces.iter().for_each(|&(v, f)| external[v as usize] = f);
@@ -48,7 +52,10 @@ pub fn steps(case: &Case, model: &Model, steps: usize) -> anyhow::Result<StepRun
         times_us.push(t.elapsed().as_secs_f64() * 1e6);
         cg += report.cg_iterations;
     }
-    Ok(StepRun { step_us: Summary::of(&times_us), cg_iterations_mean: cg as f64 / steps.max(1) as f64 })
+    Ok(StepRun {
+        step_us: Summary::of(&times_us),
+        cg_iterations_mean: cg as f64 / steps.max(1) as f64,
+    })
 }
 
 /// Times of one cut along the case's quad.
@@ -85,7 +92,10 @@ pub fn cut(case: &Case, model: &Model, repeats: usize) -> anyhow::Result<CutRun>
 }
 
 /// The cantilever on bar-2523 by `reference::cantilever`: relative error and solve time.
-pub fn cantilever(kind: Elasticity, solid: Solid) -> anyhow::Result<(reference::CantileverResult, f64)> {
+pub fn cantilever(
+    kind: Elasticity,
+    solid: Solid,
+) -> anyhow::Result<(reference::CantileverResult, f64)> {
     let mesh = bar_mesh()?;
     let t = Instant::now();
     let result = reference::cantilever(mesh, kind, solid).context("cutlab cantilever")?;

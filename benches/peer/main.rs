@@ -51,7 +51,10 @@ impl Plan {
                 steps: 60,
                 cut_repeats: 2,
                 single_substep: false,
-                cantilever: Settle { relative_change: 1e-3, max_steps: 2_000 },
+                cantilever: Settle {
+                    relative_change: 1e-3,
+                    max_steps: 2_000,
+                },
                 mapped_cantilever: None,
             }
         } else {
@@ -61,37 +64,62 @@ impl Plan {
                 steps: 300,
                 cut_repeats: 5,
                 single_substep: true,
-                cantilever: Settle { relative_change: 1e-4, max_steps: 5_000 },
-                mapped_cantilever: Some(Settle { relative_change: 1e-4, max_steps: 3_000 }),
+                cantilever: Settle {
+                    relative_change: 1e-4,
+                    max_steps: 5_000,
+                },
+                mapped_cantilever: Some(Settle {
+                    relative_change: 1e-4,
+                    max_steps: 3_000,
+                }),
             }
         }
     }
 
     /// The configurations measured.
     fn configs(&self) -> Vec<Config> {
-        Config::ALL.into_iter().filter(|c| self.single_substep || !matches!(c, Config::Rapier { substeps: 1, .. })).collect()
+        Config::ALL
+            .into_iter()
+            .filter(|c| self.single_substep || !matches!(c, Config::Rapier { substeps: 1, .. }))
+            .collect()
     }
 
     /// The configurations cut: cutlab's and Rapier's at its default substeps (a cut does not
     /// depend on them).
     fn cut_configs(&self) -> Vec<Config> {
-        self.configs().into_iter().filter(|c| c.engine() == "cutlab" || c.is_rapier_default()).collect()
+        self.configs()
+            .into_iter()
+            .filter(|c| c.engine() == "cutlab" || c.is_rapier_default())
+            .collect()
     }
 
     /// Rapier's cantilever runs: every Rapier configuration with its default damping, those
     /// at the default substeps with the mapped damping too (full run).
     fn rapier_cantilevers(&self) -> Vec<(Config, CellDamping, Settle)> {
-        let rapier: Vec<Config> = self.configs().into_iter().filter(|c| c.engine() == "Rapier").collect();
-        let mut runs: Vec<(Config, CellDamping, Settle)> =
-            rapier.iter().map(|&c| (c, CellDamping::Default, self.cantilever)).collect();
+        let rapier: Vec<Config> = self
+            .configs()
+            .into_iter()
+            .filter(|c| c.engine() == "Rapier")
+            .collect();
+        let mut runs: Vec<(Config, CellDamping, Settle)> = rapier
+            .iter()
+            .map(|&c| (c, CellDamping::Default, self.cantilever))
+            .collect();
         if let Some(settle) = self.mapped_cantilever {
-            runs.extend(rapier.iter().filter(|c| c.is_rapier_default()).map(|&c| (c, CellDamping::Mapped, settle)));
+            runs.extend(
+                rapier
+                    .iter()
+                    .filter(|c| c.is_rapier_default())
+                    .map(|&c| (c, CellDamping::Mapped, settle)),
+            );
         }
         runs
     }
 
     fn job_count(&self) -> u64 {
-        (2 * (self.configs().len() + self.cut_configs().len()) + 2 + self.rapier_cantilevers().len()) as u64
+        (2 * (self.configs().len() + self.cut_configs().len())
+            + 2
+            + self.rapier_cantilevers().len()) as u64
     }
 }
 
@@ -101,14 +129,19 @@ struct Progress(ProgressBar);
 impl Progress {
     fn new(plan: &Plan) -> Self {
         let bar = ProgressBar::new(plan.job_count());
-        let style = ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}").unwrap_or_else(|_| ProgressStyle::default_bar());
+        let style = ProgressStyle::with_template("{bar:30} {pos}/{len} {elapsed} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar());
         bar.set_style(style);
         Self(bar)
     }
 
     fn start(&self, message: String) {
         if self.0.is_hidden() {
-            eprintln!("[{}/{}] {message}", self.0.position() + 1, self.0.length().unwrap_or(0));
+            eprintln!(
+                "[{}/{}] {message}",
+                self.0.position() + 1,
+                self.0.length().unwrap_or(0)
+            );
         }
         self.0.set_message(message);
     }
@@ -121,7 +154,11 @@ impl Progress {
 /// Rapier's setup for `config` (`None` for cutlab's).
 fn rapier_setup(config: Config, cell_damping: CellDamping) -> Option<Setup> {
     match config {
-        Config::Rapier { solver, substeps } => Some(Setup { solver: solver.soft_body_solver(), substeps, cell_damping }),
+        Config::Rapier { solver, substeps } => Some(Setup {
+            solver: solver.soft_body_solver(),
+            substeps,
+            cell_damping,
+        }),
         Config::CutlabFem | Config::CutlabSprings => None,
     }
 }
@@ -139,7 +176,13 @@ fn step_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<StepRow>
             (run.step_us, Some(run.cg_iterations_mean))
         }
     };
-    Ok(StepRow { config, mesh: case.name, tets: case.tets(), step_us, cg_iterations_mean: cg })
+    Ok(StepRow {
+        config,
+        mesh: case.name,
+        tets: case.tets(),
+        step_us,
+        cg_iterations_mean: cg,
+    })
 }
 
 /// Cut times of `config` on `case`.
@@ -158,7 +201,11 @@ fn cut_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<CutRow> {
             }
         }
         (_, None) => {
-            let model = if config == Config::CutlabSprings { &case.springs } else { &case.fem };
+            let model = if config == Config::CutlabSprings {
+                &case.springs
+            } else {
+                &case.fem
+            };
             let run = cutlab_side::cut(case, model, plan.cut_repeats)?;
             CutRow {
                 config,
@@ -175,27 +222,56 @@ fn cut_row(case: &Case, config: Config, plan: &Plan) -> anyhow::Result<CutRow> {
 
 /// The cantilever rows: cutlab's two models (Newton statics), Rapier's two solvers run to rest
 /// with its default cell damping and (full run) the mapped one.
-fn cantilever_rows(bar: &Case, plan: &Plan, progress: &Progress) -> anyhow::Result<Vec<CantileverRow>> {
+fn cantilever_rows(
+    bar: &Case,
+    plan: &Plan,
+    progress: &Progress,
+) -> anyhow::Result<Vec<CantileverRow>> {
     let solid = Solid::CHEST_WALL;
     let load = CantileverLoad::new(&bar.fem.mesh, solid);
-    let held: Vec<u32> = (0..bar.fem.vertex_count() as u32).filter(|&v| bar.fem.held[v as usize]).collect();
-    anyhow::ensure!(held == load.clamped, "the bar's held vertices are not the cantilever's clamped face");
+    let held: Vec<u32> = (0..bar.fem.vertex_count() as u32)
+        .filter(|&v| bar.fem.held[v as usize])
+        .collect();
+    anyhow::ensure!(
+        held == load.clamped,
+        "the bar's held vertices are not the cantilever's clamped face"
+    );
     let mut rows = Vec::new();
-    for (config, kind) in [(Config::CutlabFem, Elasticity::CorotationalFem), (Config::CutlabSprings, Elasticity::SpringsYoungs)] {
+    for (config, kind) in [
+        (Config::CutlabFem, Elasticity::CorotationalFem),
+        (Config::CutlabSprings, Elasticity::SpringsYoungs),
+    ] {
         progress.start(format!("cantilever, {}", config.label()));
         let (result, wall_ms) = cutlab_side::cantilever(kind, solid)?;
         anyhow::ensure!(
             (result.analytic_m - load.analytic_m).abs() <= 1e-12 * load.analytic_m,
             "the bench's cantilever load differs from cutlab_sim::reference's"
         );
-        rows.push(CantileverRow::cutlab(config, result.deflection_m, load.analytic_m, wall_ms));
+        rows.push(CantileverRow::cutlab(
+            config,
+            result.deflection_m,
+            load.analytic_m,
+            wall_ms,
+        ));
         progress.done();
     }
     for (config, damping, settle) in plan.rapier_cantilevers() {
-        let Some(setup) = rapier_setup(config, damping) else { continue };
-        progress.start(format!("cantilever, {}, {damping:?} cell damping", config.label()));
+        let Some(setup) = rapier_setup(config, damping) else {
+            continue;
+        };
+        progress.start(format!(
+            "cantilever, {}, {damping:?} cell damping",
+            config.label()
+        ));
         let run = rapier_side::cantilever(&bar.fem, &bar.material, &load, setup, settle)?;
-        rows.push(CantileverRow::rapier(config, damping, &run, settle, load.analytic_m, rapier_side::TIME_STEP_S));
+        rows.push(CantileverRow::rapier(
+            config,
+            damping,
+            &run,
+            settle,
+            load.analytic_m,
+            rapier_side::TIME_STEP_S,
+        ));
         progress.done();
     }
     Ok(rows)

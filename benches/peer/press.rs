@@ -28,7 +28,15 @@ impl Press {
             .into_iter()
             .filter(|&v| !model.held[v as usize])
             .collect();
-        Self { start, end, duration_s, force_n, direction: -Vector3::z(), radius_m: 0.004, surface }
+        Self {
+            start,
+            end,
+            duration_s,
+            force_n,
+            direction: -Vector3::z(),
+            radius_m: 0.004,
+            surface,
+        }
     }
 
     pub fn with_radius(mut self, radius_m: f64) -> Self {
@@ -43,7 +51,12 @@ impl Press {
 
     /// The force on each pressed vertex at time `t_s`, given the current positions
     /// (`position(v)` of vertex `v`); appended to `out` after clearing it.
-    pub fn forces(&self, t_s: f64, position: impl Fn(u32) -> Point3, out: &mut Vec<(u32, Vector3)>) {
+    pub fn forces(
+        &self,
+        t_s: f64,
+        position: impl Fn(u32) -> Point3,
+        out: &mut Vec<(u32, Vector3)>,
+    ) {
         out.clear();
         let tip = self.tip_at(t_s);
         let mut total = 0.0;

@@ -9,7 +9,8 @@ use cutlab_sim::fem::FemMaterial;
 use cutlab_sim::model::Model;
 use cutlab_sim::{Point3, TetMesh, Vector3};
 use rapier3d_f64::prelude::{
-    PhysicsWorld, SoftBodyBuilder, SoftBodyCellModel, SoftBodyHandle, SoftBodyMaterial, SoftBodySolver, Vector,
+    PhysicsWorld, SoftBodyBuilder, SoftBodyCellModel, SoftBodyHandle, SoftBodyMaterial,
+    SoftBodySolver, Vector,
 };
 
 use crate::cantilever::CantileverLoad;
@@ -53,7 +54,12 @@ pub enum CellDamping {
 
 /// Rapier's material for cutlab's: Young's modulus and Poisson's ratio as they are, the
 /// stiffness-proportional Rayleigh damping as the cells' damping ratio (`damping`).
-pub fn material(mesh: &TetMesh, inv_mass: &[f64], fem: &FemMaterial, damping: CellDamping) -> SoftBodyMaterial {
+pub fn material(
+    mesh: &TetMesh,
+    inv_mass: &[f64],
+    fem: &FemMaterial,
+    damping: CellDamping,
+) -> SoftBodyMaterial {
     let default = SoftBodyMaterial::default();
     SoftBodyMaterial {
         young_modulus: fem.youngs_modulus_pa,
@@ -81,11 +87,22 @@ pub fn damping_ratio_for(mesh: &TetMesh, inv_mass: &[f64], fem: &FemMaterial) ->
             volume += v;
         }
     }
-    if volume > 0.0 && weighted > 0.0 { fem.rayleigh_stiffness_s / (weighted / volume) } else { 1.0 }
+    if volume > 0.0 && weighted > 0.0 {
+        fem.rayleigh_stiffness_s / (weighted / volume)
+    } else {
+        1.0
+    }
 }
 
 /// Rapier's `beta` of one cell at damping ratio 1.
-fn unit_beta(mesh: &TetMesh, tet: &[u32; 4], inv_mass: &[f64], mu: f64, lambda: f64, volume: f64) -> Option<f64> {
+fn unit_beta(
+    mesh: &TetMesh,
+    tet: &[u32; 4],
+    inv_mass: &[f64],
+    mu: f64,
+    lambda: f64,
+    volume: f64,
+) -> Option<f64> {
     let x = tet.map(|i| mesh.positions()[i as usize]);
     let (e1, e2, e3) = (x[1] - x[0], x[2] - x[0], x[3] - x[0]);
     let det = e1.dot(&e2.cross(&e3));
@@ -93,7 +110,12 @@ fn unit_beta(mesh: &TetMesh, tet: &[u32; 4], inv_mass: &[f64], mu: f64, lambda: 
         return None;
     }
     // shape-function gradients: the rows of Dm^-1 for vertices 1..3, minus their sum for 0
-    let mut g = [Vector3::zeros(), e2.cross(&e3) / det, e3.cross(&e1) / det, e1.cross(&e2) / det];
+    let mut g = [
+        Vector3::zeros(),
+        e2.cross(&e3) / det,
+        e3.cross(&e1) / det,
+        e1.cross(&e2) / det,
+    ];
     g[0] = -(g[1] + g[2] + g[3]);
     // the diagonal of the inverse-mass-weighted Gram matrix sum_p w_p g_p g_p^T
     let mut gram = [0.0; 3];
@@ -101,7 +123,8 @@ fn unit_beta(mesh: &TetMesh, tet: &[u32; 4], inv_mass: &[f64], mu: f64, lambda: 
         (0..3).for_each(|a| gram[a] += inv_mass[vertex as usize] * g[p][a] * g[p][a]);
     }
     let normal = (0..3).map(|a| ((2.0 * mu + lambda) * volume * gram[a]).sqrt());
-    let shear = [(0, 1), (0, 2), (1, 2)].map(|(a, b)| (4.0 * mu * volume * 0.25 * (gram[a] + gram[b])).sqrt());
+    let shear = [(0, 1), (0, 2), (1, 2)]
+        .map(|(a, b)| (4.0 * mu * volume * 0.25 * (gram[a] + gram[b])).sqrt());
     let omegas: Vec<f64> = normal.chain(shear).filter(|w| *w > 0.0).collect();
     let sum: f64 = omegas.iter().sum();
     (sum > 0.0).then(|| 2.0 * omegas.len() as f64 / sum)
@@ -121,7 +144,9 @@ fn particle_radius_m(model: &Model) -> f64 {
 /// (1/s, Rapier's particle damping, mass-proportional) plays cutlab's Rayleigh `alpha`.
 pub fn world(model: &Model, fem: &FemMaterial, setup: Setup, linear_damping_per_s: f64) -> World {
     let mesh = &model.mesh;
-    let held: Vec<u32> = (0..model.vertex_count() as u32).filter(|&v| model.held[v as usize]).collect();
+    let held: Vec<u32> = (0..model.vertex_count() as u32)
+        .filter(|&v| model.held[v as usize])
+        .collect();
     let builder = SoftBodyBuilder::new(mesh.positions().iter().map(point).collect())
         .cells(mesh.tets().to_vec())
         .masses(model.mass.clone())
@@ -143,13 +168,22 @@ pub fn world(model: &Model, fem: &FemMaterial, setup: Setup, linear_damping_per_
 
 impl World {
     fn position(&self, v: u32) -> Point3 {
-        let p = self.world.soft_bodies.get(self.body).map(|b| b.particle_position(v as usize)).unwrap_or(Vector::ZERO);
+        let p = self
+            .world
+            .soft_bodies
+            .get(self.body)
+            .map(|b| b.particle_position(v as usize))
+            .unwrap_or(Vector::ZERO);
         Point3::new(p.x, p.y, p.z)
     }
 
     /// Replaces the user forces (N per particle).
     fn set_forces(&mut self, forces: &[(u32, Vector3)]) -> anyhow::Result<()> {
-        let body = self.world.soft_bodies.get_mut(self.body).context("soft body gone")?;
+        let body = self
+            .world
+            .soft_bodies
+            .get_mut(self.body)
+            .context("soft body gone")?;
         body.reset_forces(false);
         for (v, f) in forces {
             body.add_particle_force(*v as usize, vector(f), false);
@@ -160,16 +194,25 @@ impl World {
 
 /// `steps` timed steps while the case's press slides along the body.
 pub fn steps(case: &Case, setup: Setup, steps: usize) -> anyhow::Result<Summary> {
-    let mut w = world(&case.fem, &case.material, setup, case.material.rayleigh_mass_per_s);
+    let mut w = world(
+        &case.fem,
+        &case.material,
+        setup,
+        case.material.rayleigh_mass_per_s,
+    );
     let mut forces = Vec::new();
     let mut times_us = Vec::with_capacity(steps);
     for i in 0..steps {
-        case.press.forces(i as f64 * TIME_STEP_S, |v| w.position(v), &mut forces);
+        case.press
+            .forces(i as f64 * TIME_STEP_S, |v| w.position(v), &mut forces);
         w.set_forces(&forces)?;
         let t = Instant::now();
         w.world.step();
         times_us.push(t.elapsed().as_secs_f64() * 1e6);
-        anyhow::ensure!(w.world.quarantine().is_empty(), "Rapier quarantined the soft body at step {i} (non-finite state)");
+        anyhow::ensure!(
+            w.world.quarantine().is_empty(),
+            "Rapier quarantined the soft body at step {i} (non-finite state)"
+        );
     }
     Ok(Summary::of(&times_us))
 }
@@ -190,23 +233,39 @@ pub fn cut(case: &Case, setup: Setup, repeats: usize) -> anyhow::Result<CutRun> 
     let mut times_ms = Vec::with_capacity(repeats);
     let mut counts = (0, 0, 0);
     for _ in 0..repeats {
-        let mut w = world(&case.fem, &case.material, setup, case.material.rayleigh_mass_per_s);
+        let mut w = world(
+            &case.fem,
+            &case.material,
+            setup,
+            case.material.rayleigh_mass_per_s,
+        );
         w.world.step();
         let before = particles(&w);
         let t = Instant::now();
         let first = w.world.cut_soft_body(w.body, &[a, b, c]);
         let second = w.world.cut_soft_body(w.body, &[a, c, d]);
         times_ms.push(t.elapsed().as_secs_f64() * 1e3);
-        anyhow::ensure!(first.is_some() || second.is_some(), "Rapier's cut changed nothing");
+        anyhow::ensure!(
+            first.is_some() || second.is_some(),
+            "Rapier's cut changed nothing"
+        );
         let cells = w.world.soft_bodies().map(|(_, sb)| sb.cells().len()).sum();
         counts = (before, particles(&w), cells);
     }
-    Ok(CutRun { cut_ms: Summary::of(&times_ms), particles_before: counts.0, particles_after: counts.1, cells: counts.2 })
+    Ok(CutRun {
+        cut_ms: Summary::of(&times_ms),
+        particles_before: counts.0,
+        particles_after: counts.1,
+        cells: counts.2,
+    })
 }
 
 /// All particles of all soft bodies (a cut may split the body).
 fn particles(w: &World) -> usize {
-    w.world.soft_bodies().map(|(_, sb)| sb.num_particles()).sum()
+    w.world
+        .soft_bodies()
+        .map(|(_, sb)| sb.num_particles())
+        .sum()
 }
 
 /// A cantilever run to rest.
@@ -257,7 +316,10 @@ pub fn cantilever(
     while steps < settle.max_steps {
         w.world.step();
         steps += 1;
-        anyhow::ensure!(w.world.quarantine().is_empty(), "Rapier quarantined the bar at step {steps} (non-finite state)");
+        anyhow::ensure!(
+            w.world.quarantine().is_empty(),
+            "Rapier quarantined the bar at step {steps} (non-finite state)"
+        );
         if steps % 100 == 0 {
             let d = deflection(&w);
             if (d - previous).abs() < settle.relative_change * d.abs() {

@@ -36,17 +36,32 @@ pub enum Config {
     CutlabSprings,
     /// Rapier's co-rotational cells; `substeps` per 1 ms step (Rapier's
     /// `num_solver_iterations`, default 4).
-    Rapier { solver: RapierSolver, substeps: usize },
+    Rapier {
+        solver: RapierSolver,
+        substeps: usize,
+    },
 }
 
 impl Config {
     pub const ALL: [Config; 6] = [
         Config::CutlabFem,
         Config::CutlabSprings,
-        Config::Rapier { solver: RapierSolver::Constraints, substeps: 4 },
-        Config::Rapier { solver: RapierSolver::Fem, substeps: 4 },
-        Config::Rapier { solver: RapierSolver::Constraints, substeps: 1 },
-        Config::Rapier { solver: RapierSolver::Fem, substeps: 1 },
+        Config::Rapier {
+            solver: RapierSolver::Constraints,
+            substeps: 4,
+        },
+        Config::Rapier {
+            solver: RapierSolver::Fem,
+            substeps: 4,
+        },
+        Config::Rapier {
+            solver: RapierSolver::Constraints,
+            substeps: 1,
+        },
+        Config::Rapier {
+            solver: RapierSolver::Fem,
+            substeps: 1,
+        },
     ];
 
     /// Rapier at its default substeps: the configurations the cut and the mapped damping
@@ -68,12 +83,27 @@ impl Config {
                 let tolerance = cutlab_sim::solver::SolverSettings::default().cg_relative_tolerance;
                 format!("co-rotational FEM, implicit Euler (1 linear solve, PCG to {tolerance:e})")
             }
-            Config::CutlabSprings => "paper's springs (chest wall 100 N/m, bar van Gelder's k from E), implicit Euler".into(),
-            Config::Rapier { solver: RapierSolver::Constraints, substeps } => {
-                format!("co-rotational cells, constraints solver ({}, 4 sweeps each)", substeps_text(substeps))
+            Config::CutlabSprings => {
+                "paper's springs (chest wall 100 N/m, bar van Gelder's k from E), implicit Euler"
+                    .into()
             }
-            Config::Rapier { solver: RapierSolver::Fem, substeps } => {
-                format!("co-rotational cells, FEM solver ({}, CG to 1e-5, at most 20 it.)", substeps_text(substeps))
+            Config::Rapier {
+                solver: RapierSolver::Constraints,
+                substeps,
+            } => {
+                format!(
+                    "co-rotational cells, constraints solver ({}, 4 sweeps each)",
+                    substeps_text(substeps)
+                )
+            }
+            Config::Rapier {
+                solver: RapierSolver::Fem,
+                substeps,
+            } => {
+                format!(
+                    "co-rotational cells, FEM solver ({}, CG to 1e-5, at most 20 it.)",
+                    substeps_text(substeps)
+                )
             }
         }
     }
@@ -82,14 +112,24 @@ impl Config {
         match self {
             Config::CutlabFem => "FEM".into(),
             Config::CutlabSprings => "springs".into(),
-            Config::Rapier { solver: RapierSolver::Constraints, substeps } => format!("constraints, {}", substeps_text(substeps)),
-            Config::Rapier { solver: RapierSolver::Fem, substeps } => format!("FEM solver, {}", substeps_text(substeps)),
+            Config::Rapier {
+                solver: RapierSolver::Constraints,
+                substeps,
+            } => format!("constraints, {}", substeps_text(substeps)),
+            Config::Rapier {
+                solver: RapierSolver::Fem,
+                substeps,
+            } => format!("FEM solver, {}", substeps_text(substeps)),
         }
     }
 }
 
 fn substeps_text(substeps: usize) -> String {
-    if substeps == 1 { "1 substep".into() } else { format!("{substeps} substeps") }
+    if substeps == 1 {
+        "1 substep".into()
+    } else {
+        format!("{substeps} substeps")
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -152,7 +192,14 @@ impl CantileverRow {
         }
     }
 
-    pub fn rapier(config: Config, damping: CellDamping, run: &CantileverRun, settle: Settle, analytic_m: f64, time_step_s: f64) -> Self {
+    pub fn rapier(
+        config: Config,
+        damping: CellDamping,
+        run: &CantileverRun,
+        settle: Settle,
+        analytic_m: f64,
+        time_step_s: f64,
+    ) -> Self {
         Self {
             config,
             cell_damping: Some(damping),
@@ -224,15 +271,22 @@ impl Results {
 
     /// The configurations measured, in [`Config::ALL`]'s order.
     fn configs(&self) -> Vec<Config> {
-        Config::ALL.into_iter().filter(|c| self.steps.iter().any(|r| r.config == *c)).collect()
+        Config::ALL
+            .into_iter()
+            .filter(|c| self.steps.iter().any(|r| r.config == *c))
+            .collect()
     }
 
     fn step(&self, config: Config, mesh: &str) -> Option<&StepRow> {
-        self.steps.iter().find(|r| r.config == config && r.mesh == mesh)
+        self.steps
+            .iter()
+            .find(|r| r.config == config && r.mesh == mesh)
     }
 
     fn cut(&self, config: Config, mesh: &str) -> Option<&CutRow> {
-        self.cuts.iter().find(|r| r.config == config && r.mesh == mesh)
+        self.cuts
+            .iter()
+            .find(|r| r.config == config && r.mesh == mesh)
     }
 }
 
@@ -261,7 +315,11 @@ fn header(out: &mut String, r: &Results) {
         let _ = writeln!(
             out,
             "Damping on {}: Rayleigh alpha {} /s -> Rapier particle damping {} /s; beta {} s -> cell damping ratio {:.2}.",
-            d.mesh, d.rayleigh_alpha_per_s, d.rayleigh_alpha_per_s, d.rayleigh_beta_s, d.cell_damping_ratio
+            d.mesh,
+            d.rayleigh_alpha_per_s,
+            d.rayleigh_alpha_per_s,
+            d.rayleigh_beta_s,
+            d.cell_damping_ratio
         );
     }
     let _ = writeln!(out);
@@ -269,7 +327,10 @@ fn header(out: &mut String, r: &Results) {
 
 fn step_table(out: &mut String, r: &Results) {
     let meshes = r.meshes();
-    let _ = writeln!(out, "Time per step, median / p99 us, while a press slides along the surface:\n");
+    let _ = writeln!(
+        out,
+        "Time per step, median / p99 us, while a press slides along the surface:\n"
+    );
     let _ = write!(out, "| engine | model, solver |");
     meshes.iter().for_each(|(m, t)| {
         let _ = write!(out, " {m} ({t} tets) |");
@@ -278,10 +339,15 @@ fn step_table(out: &mut String, r: &Results) {
     for config in r.configs() {
         let _ = write!(out, "| {} | {} |", config.engine(), config.label());
         for (mesh, _) in &meshes {
-            let cell = r.step(config, mesh).map_or_else(|| "-".to_owned(), |s| {
-                let cg = s.cg_iterations_mean.map_or_else(String::new, |c| format!(" ({c:.1} CG it.)"));
-                format!("{:.0} / {:.0}{cg}", s.step_us.median, s.step_us.p99)
-            });
+            let cell = r.step(config, mesh).map_or_else(
+                || "-".to_owned(),
+                |s| {
+                    let cg = s
+                        .cg_iterations_mean
+                        .map_or_else(String::new, |c| format!(" ({c:.1} CG it.)"));
+                    format!("{:.0} / {:.0}{cg}", s.step_us.median, s.step_us.p99)
+                },
+            );
             let _ = write!(out, " {cell} |");
         }
         let _ = writeln!(out);
@@ -291,21 +357,35 @@ fn step_table(out: &mut String, r: &Results) {
 
 fn cut_table(out: &mut String, r: &Results) {
     let meshes = r.meshes();
-    let _ = writeln!(out, "Time per cut through the middle (median ms; tets or cells and vertices or particles before -> after):\n");
+    let _ = writeln!(
+        out,
+        "Time per cut through the middle (median ms; tets or cells and vertices or particles before -> after):\n"
+    );
     let _ = write!(out, "| engine | model |");
     meshes.iter().for_each(|(m, _)| {
         let _ = write!(out, " {m} |");
     });
     let _ = writeln!(out, "\n|---|---|{}", "---:|".repeat(meshes.len()));
-    for config in r.configs().into_iter().filter(|c| r.cuts.iter().any(|row| row.config == *c)) {
+    for config in r
+        .configs()
+        .into_iter()
+        .filter(|c| r.cuts.iter().any(|row| row.config == *c))
+    {
         let _ = write!(out, "| {} | {} |", config.engine(), config.label());
         for (mesh, _) in &meshes {
-            let cell = r.cut(config, mesh).map_or_else(|| "-".to_owned(), |c| {
-                format!(
-                    "{:.2} ({} -> {} tets, {} -> {} vertices)",
-                    c.cut_ms.median, c.tets_before, c.tets_after, c.vertices_before, c.vertices_after
-                )
-            });
+            let cell = r.cut(config, mesh).map_or_else(
+                || "-".to_owned(),
+                |c| {
+                    format!(
+                        "{:.2} ({} -> {} tets, {} -> {} vertices)",
+                        c.cut_ms.median,
+                        c.tets_before,
+                        c.tets_after,
+                        c.vertices_before,
+                        c.vertices_after
+                    )
+                },
+            );
             let _ = write!(out, " {cell} |");
         }
         let _ = writeln!(out);
@@ -314,13 +394,20 @@ fn cut_table(out: &mut String, r: &Results) {
 }
 
 fn cantilever_table(out: &mut String, r: &Results) {
-    let fe = r.cantilevers.iter().find(|c| c.config == Config::CutlabFem).map(|c| c.deflection_m);
+    let fe = r
+        .cantilevers
+        .iter()
+        .find(|c| c.config == Config::CutlabFem)
+        .map(|c| c.deflection_m);
     let _ = writeln!(
         out,
         "Cantilever on bar-2523 (tip load, deflection 1e-3 of the length by Timoshenko); `/ FE` is the deflection over \
          cutlab's static finite-element solution of the same mesh:\n"
     );
-    let _ = writeln!(out, "| engine | model, solver | cell damping | deflection / Timoshenko | error % | / FE | solved by |");
+    let _ = writeln!(
+        out,
+        "| engine | model, solver | cell damping | deflection / Timoshenko | error % | / FE | solved by |"
+    );
     let _ = writeln!(out, "|---|---|---|---:|---:|---:|---|");
     for c in &r.cantilevers {
         let damping = match c.cell_damping {
@@ -336,7 +423,10 @@ fn cantilever_table(out: &mut String, r: &Results) {
                 "dynamics to rest (tip moving < {tolerance:.0e} of itself per 100 steps) after {t:.1} s simulated ({:.1} s wall)",
                 c.wall_ms / 1e3
             ),
-            Some(t) => format!("dynamics, NOT at rest after {t:.1} s simulated ({:.1} s wall)", c.wall_ms / 1e3),
+            Some(t) => format!(
+                "dynamics, NOT at rest after {t:.1} s simulated ({:.1} s wall)",
+                c.wall_ms / 1e3
+            ),
         };
         let _ = writeln!(
             out,
@@ -352,7 +442,10 @@ fn cantilever_table(out: &mut String, r: &Results) {
 
 fn ratio_table(out: &mut String, r: &Results) {
     let meshes = r.meshes();
-    let _ = writeln!(out, "Ratios cutlab / Rapier (below 1: cutlab takes less time), step median and p99, cut median:\n");
+    let _ = writeln!(
+        out,
+        "Ratios cutlab / Rapier (below 1: cutlab takes less time), step median and p99, cut median:\n"
+    );
     let _ = write!(out, "| cutlab | Rapier |");
     for (m, _) in &meshes {
         let _ = write!(out, " step {m} | step p99 {m} | cut {m} |");

@@ -43,8 +43,13 @@ impl SurfaceHit {
     pub fn moved(&self, positions: &[Point3]) -> Option<(Point3, Vector3)> {
         let [a, b, c] = self.vertices.map(|v| positions.get(v as usize).copied());
         let (a, b, c) = (a?, b?, c?);
-        let point = Point3::from(a.coords * self.weights[0] + b.coords * self.weights[1] + c.coords * self.weights[2]);
-        let normal = (b - a).cross(&(c - a)).try_normalize(1e-18).unwrap_or(self.normal);
+        let point = Point3::from(
+            a.coords * self.weights[0] + b.coords * self.weights[1] + c.coords * self.weights[2],
+        );
+        let normal = (b - a)
+            .cross(&(c - a))
+            .try_normalize(1e-18)
+            .unwrap_or(self.normal);
         (point.iter().chain(normal.iter()).all(|x| x.is_finite())).then_some((point, normal))
     }
 }
@@ -69,7 +74,8 @@ impl SurfaceCollider {
     pub fn build(sim: &Simulation) -> Result<Self, HapticsError> {
         let mut me = Self {
             vertex_ids: Vec::new(),
-            mesh: TriMesh::new(vec![PVec::ZERO; 3], vec![[0, 1, 2]]).map_err(|e| HapticsError::Surface(e.to_string()))?,
+            mesh: TriMesh::new(vec![PVec::ZERO; 3], vec![[0, 1, 2]])
+                .map_err(|e| HapticsError::Surface(e.to_string()))?,
             scratch: Vec::new(),
             springs_at: Csr::default(),
             rebuilds: 0,
@@ -83,7 +89,9 @@ impl SurfaceCollider {
         let mesh = &sim.model.mesh;
         let boundary = &mesh.topology().boundary;
         if boundary.is_empty() {
-            return Err(HapticsError::Surface("the mesh has no boundary triangles".into()));
+            return Err(HapticsError::Surface(
+                "the mesh has no boundary triangles".into(),
+            ));
         }
         let n = mesh.vertex_count();
         let mut local = vec![u32::MAX; n];
@@ -101,9 +109,14 @@ impl SurfaceCollider {
             triangles.push(t);
         }
         let x = &sim.state.positions;
-        let vertices: Vec<PVec> = self.vertex_ids.iter().map(|&v| to_parry(&x[v as usize])).collect();
+        let vertices: Vec<PVec> = self
+            .vertex_ids
+            .iter()
+            .map(|&v| to_parry(&x[v as usize]))
+            .collect();
         self.scratch.clone_from(&vertices);
-        self.mesh = TriMesh::with_flags(vertices, triangles, TriMeshFlags::DEFORMABLE).map_err(|e| HapticsError::Surface(e.to_string()))?;
+        self.mesh = TriMesh::with_flags(vertices, triangles, TriMeshFlags::DEFORMABLE)
+            .map_err(|e| HapticsError::Surface(e.to_string()))?;
 
         // springs around each vertex, for the local stiffness
         self.springs_at = sim.model.springs.by_particle(n);
@@ -147,7 +160,9 @@ impl SurfaceCollider {
         if !p.iter().all(|c| c.is_finite()) {
             return None;
         }
-        let (proj, (tri, location)) = self.mesh.project_local_point_and_get_location(to_parry(p), false);
+        let (proj, (tri, location)) = self
+            .mesh
+            .project_local_point_and_get_location(to_parry(p), false);
         let idx = *self.mesh.indices().get(tri as usize)?;
         let triangle = self.mesh.triangle(tri);
         let normal = from_parry(triangle.normal()?);
@@ -165,7 +180,10 @@ impl SurfaceCollider {
     /// Where the ray from `origin` along the unit `direction` first meets the surface, within
     /// `max_m`.
     pub fn cast(&self, origin: &Point3, direction: &Vector3, max_m: f64) -> Option<Point3> {
-        let ray = Ray::new(to_parry(origin), PVec::new(direction.x, direction.y, direction.z));
+        let ray = Ray::new(
+            to_parry(origin),
+            PVec::new(direction.x, direction.y, direction.z),
+        );
         let toi = self.mesh.cast_local_ray(&ray, max_m, false)?;
         Some(origin + direction * toi)
     }
@@ -185,7 +203,9 @@ impl SurfaceCollider {
             let mut kv = 0.0;
             for &s in self.springs_at.row(v) {
                 let [a, b] = springs.ends[s as usize];
-                let Some(e) = (x[b as usize] - x[a as usize]).try_normalize(1e-15) else { continue };
+                let Some(e) = (x[b as usize] - x[a as usize]).try_normalize(1e-15) else {
+                    continue;
+                };
                 kv += springs.stiffness[s as usize] * e.dot(&hit.normal).powi(2);
             }
             k += w * kv;
@@ -222,7 +242,12 @@ impl SurfaceCollider {
                     && h.normal.dot(&normal) < 0.0
                     && signed(p, &h) < 0.0
                 {
-                    h = SurfaceHit { point, normal, distance_m: (point - p).norm(), ..*was };
+                    h = SurfaceHit {
+                        point,
+                        normal,
+                        distance_m: (point - p).norm(),
+                        ..*was
+                    };
                 }
                 let d = signed(p, &h);
                 if best.as_ref().is_none_or(|(b, _, _)| d < *b) {
@@ -242,7 +267,11 @@ impl SurfaceCollider {
                 stiffness_newtons_per_m: self.stiffness_at(sim, h),
                 cut_entry: None,
             },
-            _ => ContactModel { published: true, source_tick, ..ContactModel::default() },
+            _ => ContactModel {
+                published: true,
+                source_tick,
+                ..ContactModel::default()
+            },
         };
         (model, hit)
     }
@@ -255,7 +284,13 @@ mod tests {
 
     #[test]
     fn closest_point_normal_and_refit_on_the_sheet() {
-        let scene = Scene::load("sheet", BuildOptions { min_tets: Some(600) }).expect("sheet");
+        let scene = Scene::load(
+            "sheet",
+            BuildOptions {
+                min_tets: Some(600),
+            },
+        )
+        .expect("sheet");
         let mut sim = scene.simulation();
         let mut c = SurfaceCollider::build(&sim).expect("collider");
         assert!(c.triangle_count() > 100);
@@ -284,10 +319,21 @@ mod tests {
         let heel = Point3::new(0.05, 0.05, 0.0025);
         let (m, hit) = c.contact_model(&sim, &[tip, heel], 0.005, 8, None);
         let (probe, hit) = hit.expect("hit");
-        assert!(m.valid && probe == 1 && (hit.point - Point3::new(0.05, 0.05, 0.003)).norm() < 1e-12, "{hit:?}");
-        let (m, hit) = c.contact_model(&sim, &[tip, heel + Vector3::new(0.0, 0.0, 0.01)], 0.005, 8, None);
+        assert!(
+            m.valid && probe == 1 && (hit.point - Point3::new(0.05, 0.05, 0.003)).norm() < 1e-12,
+            "{hit:?}"
+        );
+        let (m, hit) = c.contact_model(
+            &sim,
+            &[tip, heel + Vector3::new(0.0, 0.0, 0.01)],
+            0.005,
+            8,
+            None,
+        );
         let (probe, hit) = hit.expect("hit");
-        assert!(m.valid && probe == 0 && (hit.point - Point3::new(0.03, 0.05, 0.003)).norm() < 1e-12);
+        assert!(
+            m.valid && probe == 0 && (hit.point - Point3::new(0.03, 0.05, 0.003)).norm() < 1e-12
+        );
         // pressed deep into the sheet (now 1..3 mm), the tip is nearer the bottom face: the
         // contact stays on the top, where the tool came in, and moves with the tissue
         let (_, top) = c.contact_model(&sim, &[Point3::new(0.05, 0.05, 0.0035)], 0.005, 9, None);
@@ -295,12 +341,18 @@ mod tests {
         assert!(top.normal.z > 0.99, "{top:?}");
         let deep = Point3::new(0.05, 0.05, 0.0013);
         let (m, hit) = c.contact_model(&sim, &[deep], 0.005, 10, None);
-        assert!(m.valid && m.plane_normal.z < -0.99, "unpressed, the nearest face is the bottom: {m:?} {hit:?}");
+        assert!(
+            m.valid && m.plane_normal.z < -0.99,
+            "unpressed, the nearest face is the bottom: {m:?} {hit:?}"
+        );
         for p in sim.state.positions.iter_mut() {
             p.z -= 0.0005;
         }
         let (m, hit) = c.contact_model(&sim, &[deep], 0.005, 11, Some(&top));
-        assert!(m.valid && m.plane_normal.z > 0.99 && (m.plane_point.z - 0.0025).abs() < 1e-12, "pressed, the top, moved: {m:?} {hit:?}");
+        assert!(
+            m.valid && m.plane_normal.z > 0.99 && (m.plane_point.z - 0.0025).abs() < 1e-12,
+            "pressed, the top, moved: {m:?} {hit:?}"
+        );
         assert_eq!(hit.expect("hit").1.vertices, top.vertices);
     }
 }

@@ -6,9 +6,16 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum HapticsError {
     #[error("{path}: {error}")]
-    Io { path: PathBuf, error: std::io::Error },
+    Io {
+        path: PathBuf,
+        error: std::io::Error,
+    },
     #[error("{path}:{line}: {message}")]
-    Csv { path: PathBuf, line: usize, message: String },
+    Csv {
+        path: PathBuf,
+        line: usize,
+        message: String,
+    },
     #[error("OpenIGTLink: cannot listen on port {port}: {source}")]
     Listen { port: u16, source: std::io::Error },
     #[error("invalid configuration: {0}")]
@@ -18,7 +25,10 @@ pub enum HapticsError {
     #[error("the scene's tissue has no surface to touch: {0}")]
     Surface(String),
     #[error("cannot start the {name} thread: {source}")]
-    Thread { name: &'static str, source: std::io::Error },
+    Thread {
+        name: &'static str,
+        source: std::io::Error,
+    },
     #[error("the {0} thread panicked")]
     Panicked(&'static str),
     #[error("simulation: {0}")]

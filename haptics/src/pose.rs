@@ -18,7 +18,11 @@ pub struct ToolPose {
 
 impl Default for ToolPose {
     fn default() -> Self {
-        Self { tip_in_world: Point3::origin(), world_from_tool: Rotation::identity(), buttons: 0 }
+        Self {
+            tip_in_world: Point3::origin(),
+            world_from_tool: Rotation::identity(),
+            buttons: 0,
+        }
     }
 }
 
@@ -88,6 +92,9 @@ mod tests {
         let xs: Vec<f64> = (0..n).map(|_| a.normal()).collect();
         let mean = xs.iter().sum::<f64>() / n as f64;
         let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
-        assert!(mean.abs() < 0.03 && (var - 1.0).abs() < 0.05, "{mean} {var}");
+        assert!(
+            mean.abs() < 0.03 && (var - 1.0).abs() < 0.05,
+            "{mean} {var}"
+        );
     }
 }

@@ -66,9 +66,14 @@ impl Default for ContactModel {
 
 impl ContactModel {
     fn is_finite(&self) -> bool {
-        self.plane_point.iter().chain(self.plane_normal.iter()).all(|c| c.is_finite())
+        self.plane_point
+            .iter()
+            .chain(self.plane_normal.iter())
+            .all(|c| c.is_finite())
             && self.stiffness_newtons_per_m.is_finite()
-            && self.cut_entry.is_none_or(|(p, n)| p.iter().chain(n.iter()).all(|c| c.is_finite()))
+            && self
+                .cut_entry
+                .is_none_or(|(p, n)| p.iter().chain(n.iter()).all(|c| c.is_finite()))
     }
 }
 
@@ -228,12 +233,21 @@ impl ForceRenderer {
     /// cutting edge (negative or non-finite: the tip alone).
     #[must_use]
     pub fn with_blade_length(mut self, blade_length_m: f64) -> Self {
-        self.blade_length_m = if blade_length_m.is_finite() { blade_length_m.max(0.0) } else { 0.0 };
+        self.blade_length_m = if blade_length_m.is_finite() {
+            blade_length_m.max(0.0)
+        } else {
+            0.0
+        };
         self
     }
 
     /// One servo tick: the device's pose (or its fault) and the latest contact model.
-    pub fn update(&mut self, tick: u64, pose: Result<ToolPose, DeviceFault>, contact: &ContactModel) -> RenderOutput {
+    pub fn update(
+        &mut self,
+        tick: u64,
+        pose: Result<ToolPose, DeviceFault>,
+        contact: &ContactModel,
+    ) -> RenderOutput {
         let s = self.settings;
         let mut faults = 0u8;
         let pose = match pose {
@@ -251,7 +265,11 @@ impl ForceRenderer {
                 None
             }
         };
-        let stale = if contact.published { tick.saturating_sub(contact.source_tick) > s.stale_after_ticks } else { tick > s.stale_after_ticks };
+        let stale = if contact.published {
+            tick.saturating_sub(contact.source_tick) > s.stale_after_ticks
+        } else {
+            tick > s.stale_after_ticks
+        };
         if stale {
             faults |= fault::SIM_STALLED;
         }
@@ -313,7 +331,13 @@ impl ForceRenderer {
             self.desired = Vector3::zeros();
             self.mode = Mode::Free;
         }
-        RenderOutput { force_newtons: force, proxy: self.proxy, mode: self.mode, faults, gain: self.gain }
+        RenderOutput {
+            force_newtons: force,
+            proxy: self.proxy,
+            mode: self.mode,
+            faults,
+            gain: self.gain,
+        }
     }
 
     fn desired_force(&mut self, pose: &ToolPose, c: &ContactModel) -> Vector3 {
@@ -338,10 +362,15 @@ impl ForceRenderer {
                 if speed < 1e-9 {
                     return Vector3::zeros();
                 }
-                -self.velocity / speed * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
+                -self.velocity / speed
+                    * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
             }
             Mode::Free | Mode::Touching => {
-                let point = if c.at_heel { pose.blade_heel(self.blade_length_m) } else { tip };
+                let point = if c.at_heel {
+                    pose.blade_heel(self.blade_length_m)
+                } else {
+                    tip
+                };
                 let depth = (point - c.plane_point).dot(&n);
                 if depth >= 0.0 {
                     self.mode = Mode::Free;
@@ -353,8 +382,11 @@ impl ForceRenderer {
                 }
                 self.mode = Mode::Touching;
                 self.proxy = point - n * depth;
-                let k = c.stiffness_newtons_per_m.clamp(0.0, s.max_stiffness_newtons_per_m);
-                let mut f = (self.proxy - point) * k - n * (s.damping_newton_seconds_per_m * self.velocity.dot(&n));
+                let k = c
+                    .stiffness_newtons_per_m
+                    .clamp(0.0, s.max_stiffness_newtons_per_m);
+                let mut f = (self.proxy - point) * k
+                    - n * (s.damping_newton_seconds_per_m * self.velocity.dot(&n));
                 if f.dot(&n) < 0.0 {
                     f = Vector3::zeros();
                 }
@@ -365,7 +397,10 @@ impl ForceRenderer {
                     let (p0, n0) = *self.touched.get_or_insert((c.plane_point, n));
                     (p0 - tip).dot(&n0)
                 };
-                if pose.blade_engaged() && !c.at_heel && (f.norm() >= s.cut_threshold_newtons || pressed_in >= s.cut_depth_m) {
+                if pose.blade_engaged()
+                    && !c.at_heel
+                    && (f.norm() >= s.cut_threshold_newtons || pressed_in >= s.cut_depth_m)
+                {
                     self.mode = Mode::Cutting;
                     self.cut_plane = (c.plane_point, n);
                     self.proxy = tip;
@@ -395,7 +430,11 @@ mod tests {
     }
 
     fn at(z: f64, buttons: u32) -> Result<ToolPose, DeviceFault> {
-        Ok(ToolPose { tip_in_world: Point3::new(0.0, 0.0, z), buttons, ..ToolPose::default() })
+        Ok(ToolPose {
+            tip_in_world: Point3::new(0.0, 0.0, z),
+            buttons,
+            ..ToolPose::default()
+        })
     }
 
     /// Presses `depth` into a plane of stiffness `k` for `ticks` ticks.
@@ -411,9 +450,15 @@ mod tests {
     fn pressing_gives_spring_force_along_the_normal_rate_limited() {
         let mut r = ForceRenderer::new(RenderSettings::default());
         let first = r.update(0, at(-0.002, 0), &plane(0, 500.0));
-        assert!((first.force_newtons.norm() - 0.2).abs() < 1e-12, "rate limit 0.2 N per tick: {first:?}");
+        assert!(
+            (first.force_newtons.norm() - 0.2).abs() < 1e-12,
+            "rate limit 0.2 N per tick: {first:?}"
+        );
         let out = press(&mut r, 0.002, 500.0, 50);
-        assert!((out.force_newtons - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-9, "{out:?}");
+        assert!(
+            (out.force_newtons - Vector3::new(0.0, 0.0, 1.0)).norm() < 1e-9,
+            "{out:?}"
+        );
         assert_eq!(out.mode, Mode::Touching);
         assert!((out.proxy - Point3::origin()).norm() < 1e-12);
     }
@@ -423,7 +468,13 @@ mod tests {
         let mut r = ForceRenderer::new(RenderSettings::default());
         let out = press(&mut r, 0.05, 2000.0, 200);
         assert!((out.force_newtons.norm() - 3.3).abs() < 1e-9, "{out:?}");
-        let mut r = ForceRenderer::new(RenderSettings { limits: DeviceLimits { max_force_newtons: 1.5, ..DeviceLimits::default() }, ..RenderSettings::default() });
+        let mut r = ForceRenderer::new(RenderSettings {
+            limits: DeviceLimits {
+                max_force_newtons: 1.5,
+                ..DeviceLimits::default()
+            },
+            ..RenderSettings::default()
+        });
         assert!((press(&mut r, 0.05, 2000.0, 200).force_newtons.norm() - 1.5).abs() < 1e-9);
     }
 
@@ -447,7 +498,10 @@ mod tests {
         press(&mut r, 0.004, 500.0, 100);
         let mut bad = plane(100, f64::NAN);
         bad.plane_point.x = f64::NAN;
-        let out = (100..105).map(|t| r.update(t, at(-0.004, 0), &bad)).last().expect("ticks");
+        let out = (100..105)
+            .map(|t| r.update(t, at(-0.004, 0), &bad))
+            .last()
+            .expect("ticks");
         assert_eq!(out.force_newtons, Vector3::zeros());
         // recovery ramps back in
         let back = press(&mut r, 0.004, 500.0, 200);
@@ -468,18 +522,31 @@ mod tests {
                 assert_eq!(out.faults, fault::SIM_STALLED);
             }
         }
-        assert_eq!(first_zero, Some(99 + 50 + 5), "stale after 50 ticks, faded in 5");
+        assert_eq!(
+            first_zero,
+            Some(99 + 50 + 5),
+            "stale after 50 ticks, faded in 5"
+        );
 
         let mut r = ForceRenderer::new(RenderSettings::default());
         press(&mut r, 0.004, 500.0, 100);
-        let out = (100..105).map(|t| r.update(t, Err(DeviceFault::Disconnected), &plane(t, 500.0))).last().expect("ticks");
-        assert_eq!((out.force_newtons.norm(), out.faults), (0.0, fault::DEVICE_LOST));
+        let out = (100..105)
+            .map(|t| r.update(t, Err(DeviceFault::Disconnected), &plane(t, 500.0)))
+            .last()
+            .expect("ticks");
+        assert_eq!(
+            (out.force_newtons.norm(), out.faults),
+            (0.0, fault::DEVICE_LOST)
+        );
     }
 
     #[test]
     fn a_light_touch_does_not_cut_a_firm_press_with_the_blade_does() {
         let mut r = ForceRenderer::new(RenderSettings::default());
-        let light = (0..100).map(|t| r.update(t, at(-0.001, BUTTON_BLADE), &plane(t, 500.0))).last().expect("ticks");
+        let light = (0..100)
+            .map(|t| r.update(t, at(-0.001, BUTTON_BLADE), &plane(t, 500.0)))
+            .last()
+            .expect("ticks");
         assert_eq!(light.mode, Mode::Touching, "0.5 N < 1 N threshold");
         let mut r = ForceRenderer::new(RenderSettings::default());
         let firm_no_blade = press(&mut r, 0.004, 500.0, 100);
@@ -494,10 +561,21 @@ mod tests {
         let mut out = RenderOutput::default();
         for t in 100..400 {
             let x = (t - 100) as f64 * 2e-5; // 20 mm/s
-            out = r.update(t, Ok(ToolPose { tip_in_world: Point3::new(x, 0.0, -0.004), buttons: BUTTON_BLADE, ..ToolPose::default() }), &plane(t, 500.0));
+            out = r.update(
+                t,
+                Ok(ToolPose {
+                    tip_in_world: Point3::new(x, 0.0, -0.004),
+                    buttons: BUTTON_BLADE,
+                    ..ToolPose::default()
+                }),
+                &plane(t, 500.0),
+            );
         }
         assert_eq!(out.mode, Mode::Cutting);
-        assert!(out.force_newtons.x < -0.7 && out.force_newtons.x > -0.81, "{out:?}");
+        assert!(
+            out.force_newtons.x < -0.7 && out.force_newtons.x > -0.81,
+            "{out:?}"
+        );
         // lifting out ends the cut
         let out = r.update(400, at(0.001, BUTTON_BLADE), &plane(400, 500.0));
         assert_eq!(out.mode, Mode::Free);
@@ -507,7 +585,10 @@ mod tests {
     fn a_yielding_tissue_lets_the_blade_in_once_the_tip_has_pressed_the_cut_depth_in() {
         // a soft tissue recedes under the tip: the surface stays 0.5 mm below it, the push
         // stays at 0.01 N (20 N/m), far under the 1 N threshold
-        let receding = |t: u64, z: f64| ContactModel { plane_point: Point3::new(0.0, 0.0, z + 0.0005), ..plane(t, 20.0) };
+        let receding = |t: u64, z: f64| ContactModel {
+            plane_point: Point3::new(0.0, 0.0, z + 0.0005),
+            ..plane(t, 20.0)
+        };
         let press = |r: &mut ForceRenderer, buttons: u32, to_m: f64| {
             let mut out = RenderOutput::default();
             for t in 0..=1000u64 {
@@ -522,7 +603,11 @@ mod tests {
         let d = RenderSettings::default().cut_depth_m;
         let mut r = ForceRenderer::new(RenderSettings::default());
         let (out, _) = press(&mut r, BUTTON_BLADE, 0.9 * d - 0.0005);
-        assert_eq!(out.mode, Mode::Touching, "not yet pressed the cut depth in: {out:?}");
+        assert_eq!(
+            out.mode,
+            Mode::Touching,
+            "not yet pressed the cut depth in: {out:?}"
+        );
         assert!(out.force_newtons.norm() < 0.05);
         let mut r = ForceRenderer::new(RenderSettings::default());
         let (out, z) = press(&mut r, BUTTON_BLADE, 1.5 * d);
@@ -530,45 +615,108 @@ mod tests {
         // the first touch was 0.5 mm above the start: in once the tip is d below it
         assert!((z - (0.0005 - d)).abs() < 2e-5, "went in at {z}");
         let mut r = ForceRenderer::new(RenderSettings::default());
-        assert_eq!(press(&mut r, 0, 3.0 * d).0.mode, Mode::Touching, "the blade not engaged: a press, however deep, does not cut");
+        assert_eq!(
+            press(&mut r, 0, 3.0 * d).0.mode,
+            Mode::Touching,
+            "the blade not engaged: a press, however deep, does not cut"
+        );
     }
 
     #[test]
     fn the_cut_ends_above_the_entry_as_the_tissue_moves_it_not_where_the_press_dented_it() {
         // the press dented the surface 6 mm down; the blade went in there
-        let dented = ContactModel { plane_point: Point3::new(0.0, 0.0, -0.006), ..plane(0, 500.0) };
+        let dented = ContactModel {
+            plane_point: Point3::new(0.0, 0.0, -0.006),
+            ..plane(0, 500.0)
+        };
         let mut r = ForceRenderer::new(RenderSettings::default());
-        let mode = (0..100).map(|t| r.update(t, at(-0.010, BUTTON_BLADE), &ContactModel { source_tick: t, ..dented }).mode).last();
+        let mode = (0..100)
+            .map(|t| {
+                r.update(
+                    t,
+                    at(-0.010, BUTTON_BLADE),
+                    &ContactModel {
+                        source_tick: t,
+                        ..dented
+                    },
+                )
+                .mode
+            })
+            .last();
         assert_eq!(mode, Some(Mode::Cutting));
         // once in, the tissue springs back up around the blade, which returns to its planned
         // depth, 4 mm down: above the dented plane, below the entry as it is now
-        let entry = |t: u64, z: f64| ContactModel { source_tick: t, cut_entry: Some((Point3::new(0.0, 0.0, z), Vector3::z())), ..dented };
+        let entry = |t: u64, z: f64| ContactModel {
+            source_tick: t,
+            cut_entry: Some((Point3::new(0.0, 0.0, z), Vector3::z())),
+            ..dented
+        };
         let mut fallback = r.clone();
-        assert_eq!(r.update(100, at(-0.004, BUTTON_BLADE), &entry(100, -0.001)).mode, Mode::Cutting);
+        assert_eq!(
+            r.update(100, at(-0.004, BUTTON_BLADE), &entry(100, -0.001))
+                .mode,
+            Mode::Cutting
+        );
         // lifted above the entry: out
-        assert_eq!(r.update(101, at(0.0005, BUTTON_BLADE), &entry(101, 0.0)).mode, Mode::Free);
+        assert_eq!(
+            r.update(101, at(0.0005, BUTTON_BLADE), &entry(101, 0.0))
+                .mode,
+            Mode::Free
+        );
         // with no entry published, the plane where the cut began decides
-        assert_eq!(fallback.update(100, at(-0.004, BUTTON_BLADE), &ContactModel { source_tick: 100, ..dented }).mode, Mode::Free);
+        assert_eq!(
+            fallback
+                .update(
+                    100,
+                    at(-0.004, BUTTON_BLADE),
+                    &ContactModel {
+                        source_tick: 100,
+                        ..dented
+                    }
+                )
+                .mode,
+            Mode::Free
+        );
     }
 
     #[test]
     fn the_blade_laid_on_the_tissue_presses_with_its_heel_and_does_not_cut() {
         // the edge runs from the tip down into the plane: the heel, 20 mm away, is 1.9 mm deep
         let edge = Vector3::new(1.0, 0.0, -0.2).normalize();
-        let world_from_tool = crate::Rotation::rotation_between(&Vector3::z(), &edge).expect("rotation");
-        let pose = Ok(ToolPose { tip_in_world: Point3::new(0.0, 0.0, 0.002), world_from_tool, buttons: BUTTON_BLADE });
+        let world_from_tool =
+            crate::Rotation::rotation_between(&Vector3::z(), &edge).expect("rotation");
+        let pose = Ok(ToolPose {
+            tip_in_world: Point3::new(0.0, 0.0, 0.002),
+            world_from_tool,
+            buttons: BUTTON_BLADE,
+        });
         let heel = Point3::new(0.0, 0.0, 0.002) + edge * 0.02;
-        let under_heel = |t: u64, k: f64| ContactModel { at_heel: true, ..plane(t, k) };
+        let under_heel = |t: u64, k: f64| ContactModel {
+            at_heel: true,
+            ..plane(t, k)
+        };
         // the tip alone is above the plane: free
         let mut r = ForceRenderer::new(RenderSettings::default()).with_blade_length(0.02);
         assert_eq!(r.update(0, pose, &plane(0, 500.0)).mode, Mode::Free);
         // the simulation says the surface is under the heel
-        let out = (1..100).map(|t| r.update(t, pose, &under_heel(t, 500.0))).last().expect("ticks");
+        let out = (1..100)
+            .map(|t| r.update(t, pose, &under_heel(t, 500.0)))
+            .last()
+            .expect("ticks");
         assert_eq!(out.mode, Mode::Touching);
-        assert!((out.force_newtons - Vector3::new(0.0, 0.0, -500.0 * heel.z)).norm() < 1e-9, "{out:?}");
-        assert!((out.proxy - Point3::new(heel.x, heel.y, 0.0)).norm() < 1e-12, "the proxy is the heel on the plane: {out:?}");
+        assert!(
+            (out.force_newtons - Vector3::new(0.0, 0.0, -500.0 * heel.z)).norm() < 1e-9,
+            "{out:?}"
+        );
+        assert!(
+            (out.proxy - Point3::new(heel.x, heel.y, 0.0)).norm() < 1e-12,
+            "the proxy is the heel on the plane: {out:?}"
+        );
         // pressed hard (3.3 N, over the cut threshold), engaged: no cut
-        let hard = (100..200).map(|t| r.update(t, pose, &under_heel(t, 5000.0))).last().expect("ticks");
+        let hard = (100..200)
+            .map(|t| r.update(t, pose, &under_heel(t, 5000.0)))
+            .last()
+            .expect("ticks");
         assert_eq!(hard.mode, Mode::Touching);
         assert!(hard.force_newtons.z > 3.0);
     }

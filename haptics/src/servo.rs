@@ -143,14 +143,20 @@ impl ServoReport {
         if starts.len() < 2 {
             return PeriodStats::default();
         }
-        let mut periods: Vec<f64> = starts.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-3).collect();
+        let mut periods: Vec<f64> = starts
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as f64 * 1e-3)
+            .collect();
         let nominal = period_nanos as f64 * 1e-3;
         let mut deviations: Vec<f64> = periods.iter().map(|p| (p - nominal).abs()).collect();
         periods.sort_by(f64::total_cmp);
         deviations.sort_by(f64::total_cmp);
-        let q = |s: &[f64], p: f64| s[((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)];
+        let q =
+            |s: &[f64], p: f64| s[((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)];
         let lateness = |k: usize| starts[k].saturating_sub(k as u64 * period_nanos);
-        let missed = (0..starts.len()).filter(|&k| lateness(k) >= period_nanos).count() as u64;
+        let missed = (0..starts.len())
+            .filter(|&k| lateness(k) >= period_nanos)
+            .count() as u64;
         let max_lateness = (0..starts.len()).map(lateness).max().unwrap_or(0);
         let work = &self.tick_work_nanos;
         PeriodStats {
@@ -161,7 +167,8 @@ impl ServoReport {
             p99_deviation_us: q(&deviations, 0.99),
             missed_deadlines: missed,
             max_lateness_us: max_lateness as f64 * 1e-3,
-            mean_work_us: work.iter().map(|&w| w as f64).sum::<f64>() / work.len().max(1) as f64 * 1e-3,
+            mean_work_us: work.iter().map(|&w| w as f64).sum::<f64>() / work.len().max(1) as f64
+                * 1e-3,
             max_work_us: work.iter().copied().max().unwrap_or(0) as f64 * 1e-3,
         }
     }

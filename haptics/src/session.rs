@@ -119,12 +119,16 @@ impl Session {
         let mut sim = scene.simulation();
         let report = sim.settle(StaticSettings::default());
         if !report.residual_newtons.is_finite() {
-            return Err(HapticsError::Simulation(format!("settling the scene failed: {report:?}")));
+            return Err(HapticsError::Simulation(format!(
+                "settling the scene failed: {report:?}"
+            )));
         }
         if !report.converged {
             tracing::warn!(
                 "settling stopped after {} Newton iterations at a residual of {:.1e} N (tolerance {:.1e} N); starting from there",
-                report.newton_iterations, report.residual_newtons, report.tolerance_newtons
+                report.newton_iterations,
+                report.residual_newtons,
+                report.tolerance_newtons
             );
         }
         let collider = SurfaceCollider::build(&sim)?;
@@ -150,11 +154,18 @@ impl Session {
     /// direction `along`, through the middle of the body, on the surface facing the unit
     /// direction `up`: the line is drawn 10 mm beyond the body's outermost point along `up`,
     /// and each of its points dropped along `-up` onto the surface, cut `depth_m` deep.
-    pub fn plan_across(&self, up: &Vector3, along: &Vector3, length_m: f64, depth_m: f64) -> Result<Plan, HapticsError> {
+    pub fn plan_across(
+        &self,
+        up: &Vector3,
+        along: &Vector3,
+        length_m: f64,
+        depth_m: f64,
+    ) -> Result<Plan, HapticsError> {
         let x = &self.sim.state.positions;
         let (lo, hi) = cutlab_sim::mesh::bounding_box(x);
         let centre = nalgebra::center(&lo, &hi);
-        let (mut min_along, mut max_along, mut outermost, mut innermost) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+        let (mut min_along, mut max_along, mut outermost, mut innermost) =
+            (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         for p in x {
             let (s, h) = ((p - centre).dot(along), (p - centre).dot(up));
             (min_along, max_along) = (min_along.min(s), max_along.max(s));
@@ -168,7 +179,12 @@ impl Session {
                 let u = i as f64 / (samples - 1) as f64 - 0.5;
                 let above = centre + along * (u * length) + up * (outermost + 0.01);
                 self.collider.cast(&above, &-up, drop_m).ok_or_else(|| {
-                    HapticsError::Surface(format!("no surface under ({:.1}, {:.1}, {:.1}) mm", above.x * 1e3, above.y * 1e3, above.z * 1e3))
+                    HapticsError::Surface(format!(
+                        "no surface under ({:.1}, {:.1}, {:.1}) mm",
+                        above.x * 1e3,
+                        above.y * 1e3,
+                        above.z * 1e3
+                    ))
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -178,43 +194,89 @@ impl Session {
     /// An incision through the surface points closest to `points_m` (entry first), on a
     /// surface facing `up` (within 60 degrees), cut `depth_m` deep: how a synthetic trainee
     /// follows an exercise's expert plan.
-    pub fn plan_along(&self, points_m: &[Point3], up: &Vector3, depth_m: f64) -> Result<Plan, HapticsError> {
+    pub fn plan_along(
+        &self,
+        points_m: &[Point3],
+        up: &Vector3,
+        depth_m: f64,
+    ) -> Result<Plan, HapticsError> {
         let mut line_m = Vec::with_capacity(points_m.len());
         let mut normals = Vec::with_capacity(points_m.len());
         for p in points_m {
-            let hit = self.collider.closest(p).ok_or_else(|| HapticsError::Surface("no surface near the plan".into()))?;
+            let hit = self
+                .collider
+                .closest(p)
+                .ok_or_else(|| HapticsError::Surface("no surface near the plan".into()))?;
             if hit.normal.dot(up) < 0.5 {
-                return Err(HapticsError::Surface(format!("no surface facing the plan's normal near ({:.1}, {:.1}, {:.1}) mm", p.x * 1e3, p.y * 1e3, p.z * 1e3)));
+                return Err(HapticsError::Surface(format!(
+                    "no surface facing the plan's normal near ({:.1}, {:.1}, {:.1}) mm",
+                    p.x * 1e3,
+                    p.y * 1e3,
+                    p.z * 1e3
+                )));
             }
             line_m.push(hit.point);
             normals.push(hit.normal);
         }
-        let plan = Plan { line_m, normals, depth_m, approach_height_m: 0.015 };
+        let plan = Plan {
+            line_m,
+            normals,
+            depth_m,
+            approach_height_m: 0.015,
+        };
         plan.check()?;
         Ok(plan)
     }
 
     /// Runs the session with `device` until `config.duration_s` has passed on the clock.
-    pub fn run(self, device: Box<dyn HapticDevice>, config: &SessionConfig) -> Result<SessionReport, HapticsError> {
+    pub fn run(
+        self,
+        device: Box<dyn HapticDevice>,
+        config: &SessionConfig,
+    ) -> Result<SessionReport, HapticsError> {
         self.run_recorded(device, config, None)
     }
 
     /// [`Self::run`], handing every tick and every simulation record to `tap` (a recorder).
-    pub fn run_recorded(self, device: Box<dyn HapticDevice>, config: &SessionConfig, tap: Option<RecordTap>) -> Result<SessionReport, HapticsError> {
+    pub fn run_recorded(
+        self,
+        device: Box<dyn HapticDevice>,
+        config: &SessionConfig,
+        tap: Option<RecordTap>,
+    ) -> Result<SessionReport, HapticsError> {
         let mut render = config.render;
         let limits = device.limits();
-        render.limits.max_force_newtons = render.limits.max_force_newtons.min(limits.max_force_newtons);
-        render.limits.max_force_rate_newtons_per_s = render.limits.max_force_rate_newtons_per_s.min(limits.max_force_rate_newtons_per_s);
+        render.limits.max_force_newtons = render
+            .limits
+            .max_force_newtons
+            .min(limits.max_force_newtons);
+        render.limits.max_force_rate_newtons_per_s = render
+            .limits
+            .max_force_rate_newtons_per_s
+            .min(limits.max_force_rate_newtons_per_s);
         render.period_s = config.period_nanos as f64 * 1e-9;
         render.check().map_err(HapticsError::Config)?;
         if !(config.duration_s > 0.0 && config.duration_s <= 86_400.0) {
-            return Err(HapticsError::Config(format!("duration must be in (0, 86400] s, got {}", config.duration_s)));
+            return Err(HapticsError::Config(format!(
+                "duration must be in (0, 86400] s, got {}",
+                config.duration_s
+            )));
         }
         if !(100_000..=100_000_000).contains(&config.period_nanos) {
-            return Err(HapticsError::Config(format!("servo period must be 0.1 to 100 ms, got {} ns", config.period_nanos)));
+            return Err(HapticsError::Config(format!(
+                "servo period must be 0.1 to 100 ms, got {} ns",
+                config.period_nanos
+            )));
         }
-        if !(config.blade_length_m > 0.0 && config.contact_reach_m > 0.0 && config.contact_patch_radius_m > 0.0) || config.queue_capacity < 2 {
-            return Err(HapticsError::Config("blade length, contact reach, patch radius and queue capacity must be positive".into()));
+        if !(config.blade_length_m > 0.0
+            && config.contact_reach_m > 0.0
+            && config.contact_patch_radius_m > 0.0)
+            || config.queue_capacity < 2
+        {
+            return Err(HapticsError::Config(
+                "blade length, contact reach, patch radius and queue capacity must be positive"
+                    .into(),
+            ));
         }
         let dt_nanos = (self.sim.settings.time_step_s * 1e9).round() as u64;
         let ticks_per_step = (dt_nanos / config.period_nanos).max(1);
@@ -257,7 +319,11 @@ impl Session {
         tracing::info!(
             "session: {} on the {} clock, {ticks} ticks of {} us, simulation step {} ticks, {} surface triangles",
             device.name(),
-            if config.clock == Clock::Live { "live" } else { "virtual" },
+            if config.clock == Clock::Live {
+                "live"
+            } else {
+                "virtual"
+            },
             config.period_nanos / 1000,
             ticks_per_step,
             self.collider.triangle_count()
@@ -282,13 +348,24 @@ impl Session {
                 let _guard = AbortOnExit(sim_abort);
                 worker.run(ticks)
             })
-            .map_err(|source| HapticsError::Thread { name: "cutlab-sim", source })?;
-        let servo_thread = match servo::spawn(servo_config, device, ForceRenderer::new(render).with_blade_length(config.blade_length_m), links) {
+            .map_err(|source| HapticsError::Thread {
+                name: "cutlab-sim",
+                source,
+            })?;
+        let servo_thread = match servo::spawn(
+            servo_config,
+            device,
+            ForceRenderer::new(render).with_blade_length(config.blade_length_m),
+            links,
+        ) {
             Ok(t) => t,
             Err(source) => {
                 abort.store(true, Ordering::Release);
                 let _ = sim_thread.join();
-                return Err(HapticsError::Thread { name: "cutlab-servo", source });
+                return Err(HapticsError::Thread {
+                    name: "cutlab-servo",
+                    source,
+                });
             }
         };
         let servo_result = servo_thread.join();
@@ -348,16 +425,29 @@ impl SimWorker {
             let ms = |tick: u64| tick as f64 * self.period_nanos as f64 * 1e-6;
             match e {
                 ServoEvent::FaultBegan { tick, faults } => {
-                    tracing::warn!("servo: {} at tick {tick} ({:.0} ms); fading the force out", fault::describe(faults), ms(tick))
+                    tracing::warn!(
+                        "servo: {} at tick {tick} ({:.0} ms); fading the force out",
+                        fault::describe(faults),
+                        ms(tick)
+                    )
                 }
-                ServoEvent::FaultCleared { tick } => tracing::info!("servo: fault cleared at tick {tick} ({:.0} ms); force ramps back in", ms(tick)),
-                ServoEvent::FadedOut { tick } => tracing::warn!("servo: force faded to zero at tick {tick}"),
+                ServoEvent::FaultCleared { tick } => tracing::info!(
+                    "servo: fault cleared at tick {tick} ({:.0} ms); force ramps back in",
+                    ms(tick)
+                ),
+                ServoEvent::FadedOut { tick } => {
+                    tracing::warn!("servo: force faded to zero at tick {tick}")
+                }
             }
         }
     }
 
     /// The sample for a step whose last tick is `target` (None: the servo loop has ended).
-    fn next_sample(&mut self, target: u64, latest: &mut Option<ServoSample>) -> Option<ServoSample> {
+    fn next_sample(
+        &mut self,
+        target: u64,
+        latest: &mut Option<ServoSample>,
+    ) -> Option<ServoSample> {
         let mut backoff = servo::Backoff::default();
         loop {
             while let Ok(s) = self.samples.pop() {
@@ -392,11 +482,14 @@ impl SimWorker {
                 Some(&last) => own.max(last + self.ticks_per_step),
                 None => own,
             };
-            let Some(sample) = self.next_sample(target, &mut latest) else { break };
+            let Some(sample) = self.next_sample(target, &mut latest) else {
+                break;
+            };
             let began = Instant::now();
             let out = self.stepper.step(&sample);
             self.contact.write(out.contact);
-            self.sim_ticks_done.store(sample.tick + 1, Ordering::Release);
+            self.sim_ticks_done
+                .store(sample.tick + 1, Ordering::Release);
             out_ticks.push(sample.tick);
             out_nanos.push(began.elapsed().as_nanos() as u64);
             let last = n + 1 == steps as u64;
@@ -409,28 +502,63 @@ impl SimWorker {
         {
             // ended early (the servo loop stopped): the state there is a keyframe too
             let n = out_ticks.len() as u64 - 1;
-            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper, n, tick))));
+            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(
+                &self.stepper,
+                n,
+                tick,
+            ))));
         }
         self.log_events();
-        SimOutcome { stepper: self.stepper, tick_of_step: out_ticks, step_nanos: out_nanos }
+        SimOutcome {
+            stepper: self.stepper,
+            tick_of_step: out_ticks,
+            step_nanos: out_nanos,
+        }
     }
 
     /// Hands step `n`'s records to the recorder, if one listens.
-    fn record(&mut self, n: u64, sample: &ServoSample, cut: Option<(cutlab_sim::cut::Blade, cutlab_sim::cut::CutEvent)>, rejected: bool, last: bool) {
-        let Some((_, settings)) = &self.record else { return };
+    fn record(
+        &mut self,
+        n: u64,
+        sample: &ServoSample,
+        cut: Option<(cutlab_sim::cut::Blade, cutlab_sim::cut::CutEvent)>,
+        rejected: bool,
+        last: bool,
+    ) {
+        let Some((_, settings)) = &self.record else {
+            return;
+        };
         let settings = *settings;
         let tick = sample.tick;
-        self.push(SimRecord::Step { step: n, tick, rejected });
+        self.push(SimRecord::Step {
+            step: n,
+            tick,
+            rejected,
+        });
         if let Some((blade, event)) = cut {
-            self.push(SimRecord::Cut { step: n, tick, blade, event: Box::new(event) });
+            self.push(SimRecord::Cut {
+                step: n,
+                tick,
+                blade,
+                event: Box::new(event),
+            });
         }
         let every = |k: u64| k > 0 && (n + 1).is_multiple_of(k);
         if every(settings.surface_every_steps) {
-            let s = SurfaceSnapshot::of(&self.stepper.collider, &self.stepper.sim.state.positions, n, tick);
+            let s = SurfaceSnapshot::of(
+                &self.stepper.collider,
+                &self.stepper.sim.state.positions,
+                n,
+                tick,
+            );
             self.push(SimRecord::Surface(Box::new(s)));
         }
         if every(settings.keyframe_every_steps.max(1)) || last {
-            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(&self.stepper, n, tick))));
+            self.push(SimRecord::Keyframe(Box::new(Keyframe::of(
+                &self.stepper,
+                n,
+                tick,
+            ))));
         }
     }
 

@@ -6,11 +6,11 @@
 //! the same stepper from the recorded samples, so a replay runs exactly the code of the
 //! session it checks.
 
+use cutlab_sim::TetMesh;
 use cutlab_sim::cut::{self, Blade, CutError, CutEvent, Cutter, CutterResume};
 use cutlab_sim::hash::Fnv1a;
 use cutlab_sim::model::State;
 use cutlab_sim::solver::{ResumeState, Simulation};
-use cutlab_sim::TetMesh;
 
 use crate::collision::{SurfaceCollider, SurfaceHit};
 use crate::render::{ContactModel, Mode};
@@ -140,20 +140,39 @@ impl SessionStepper {
     /// Continues from a step captured by [`Self::resume_state`], with the simulation's state
     /// and mesh there. The stepper must have been made as the captured one was (scene and
     /// settings). Input that does not fit is an error and leaves the stepper unchanged.
-    pub fn resume(&mut self, mesh: TetMesh, state: State, r: &StepperResume) -> Result<(), HapticsError> {
-        let invalid = |e: String| HapticsError::Simulation(format!("resuming at step {}: {e}", r.steps));
+    pub fn resume(
+        &mut self,
+        mesh: TetMesh,
+        state: State,
+        r: &StepperResume,
+    ) -> Result<(), HapticsError> {
+        let invalid =
+            |e: String| HapticsError::Simulation(format!("resuming at step {}: {e}", r.steps));
         let n = mesh.vertex_count();
-        let on_mesh = |h: &SurfaceHit| h.vertices.iter().all(|&v| (v as usize) < n) && h.point.iter().chain(h.normal.iter()).chain(&h.weights).all(|c| c.is_finite());
+        let on_mesh = |h: &SurfaceHit| {
+            h.vertices.iter().all(|&v| (v as usize) < n)
+                && h.point
+                    .iter()
+                    .chain(h.normal.iter())
+                    .chain(&h.weights)
+                    .all(|c| c.is_finite())
+        };
         if !r.last_hit.as_ref().is_none_or(on_mesh) || !r.cut_entry.as_ref().is_none_or(on_mesh) {
-            return Err(invalid("the last contact or the cut's entry is not on the mesh".into()));
+            return Err(invalid(
+                "the last contact or the cut's entry is not on the mesh".into(),
+            ));
         }
-        if !r.last_cut_tip.is_none_or(|p| p.iter().all(|c| c.is_finite())) {
+        if !r
+            .last_cut_tip
+            .is_none_or(|p| p.iter().all(|c| c.is_finite()))
+        {
             return Err(invalid("the last cut's tip is not finite".into()));
         }
         let mut cutter = self.cutter.clone();
         cutter.resume(&r.cutter, n).map_err(invalid)?;
         let mut sim = self.sim.clone();
-        sim.resume(mesh, state, &r.sim).map_err(|e| invalid(e.to_string()))?;
+        sim.resume(mesh, state, &r.sim)
+            .map_err(|e| invalid(e.to_string()))?;
         let collider = SurfaceCollider::build(&sim)?;
         (self.sim, self.cutter, self.collider) = (sim, cutter, collider);
         self.last_hit = r.last_hit;
@@ -190,7 +209,8 @@ impl SessionStepper {
             }
             if total > 0.0 {
                 for &(v, w) in &self.patch {
-                    self.sim.add_external_force(v, -(render.force_newtons * (w / total)));
+                    self.sim
+                        .add_external_force(v, -(render.force_newtons * (w / total)));
                 }
             }
         }
@@ -204,13 +224,19 @@ impl SessionStepper {
         }
         let mut made = None;
         let tip = sample.pose.tip_in_world;
-        let moved_enough = self.last_cut_tip.is_none_or(|p| (tip - p).norm() >= self.cut_step_m);
+        let moved_enough = self
+            .last_cut_tip
+            .is_none_or(|p| (tip - p).norm() >= self.cut_step_m);
         if render.mode == Mode::Cutting && moved_enough {
             if let Some(p) = self.last_cut_tip {
                 self.stats.cut_length_m += (tip - p).norm();
             }
             self.last_cut_tip = Some(tip);
-            let blade = cut::Blade { tip, edge_direction: sample.pose.edge_direction(), depth_m: self.blade_length_m };
+            let blade = cut::Blade {
+                tip,
+                edge_direction: sample.pose.edge_direction(),
+                depth_m: self.blade_length_m,
+            };
             match self.cutter.advance(&mut self.sim, blade) {
                 Ok(ev) if !ev.is_empty() => {
                     self.stats.cut_steps += 1;
@@ -243,13 +269,18 @@ impl SessionStepper {
                 self.stats.rejected_steps += 1;
                 // the first, then every hundredth: a diverging model would flood the log
                 if self.stats.rejected_steps % 100 == 1 {
-                    tracing::warn!("simulation step at tick {} rejected ({} so far): {e}", sample.tick, self.stats.rejected_steps);
+                    tracing::warn!(
+                        "simulation step at tick {} rejected ({} so far): {e}",
+                        sample.tick,
+                        self.stats.rejected_steps
+                    );
                 }
                 true
             }
         };
         self.steps += 1;
-        self.collider_fresh = self.rebuild_every_steps > 0 && self.steps.is_multiple_of(self.rebuild_every_steps);
+        self.collider_fresh =
+            self.rebuild_every_steps > 0 && self.steps.is_multiple_of(self.rebuild_every_steps);
         if self.collider_fresh {
             if let Err(e) = self.collider.rebuild(&self.sim) {
                 tracing::error!("rebuilding the surface at step {} failed: {e}", self.steps);
@@ -261,19 +292,34 @@ impl SessionStepper {
         }
         // the proxy, and the blade's heel in case the blade rather than its tip meets the tissue
         let probes = [render.proxy, sample.pose.blade_heel(self.blade_length_m)];
-        let pressed = self.last_hit.as_ref().filter(|_| render.mode == Mode::Touching);
-        let (mut contact, hit) = self.collider.contact_model(&self.sim, &probes, self.reach_m, sample.tick, pressed);
+        let pressed = self
+            .last_hit
+            .as_ref()
+            .filter(|_| render.mode == Mode::Touching);
+        let (mut contact, hit) =
+            self.collider
+                .contact_model(&self.sim, &probes, self.reach_m, sample.tick, pressed);
         contact.at_heel = contact.valid && hit.as_ref().is_some_and(|(probe, _)| *probe == 1);
-        contact.cut_entry = self.cut_entry.and_then(|h| h.moved(&self.sim.state.positions));
+        contact.cut_entry = self
+            .cut_entry
+            .and_then(|h| h.moved(&self.sim.state.positions));
         self.last_hit = hit.map(|(_, h)| h);
         if sample.tick.is_multiple_of(100) {
             tracing::debug!(
                 "tick {} mode {:?} force {:.3} N stiffness {:.0} N/m tip z {:.2} mm plane z {:.2} mm",
-                sample.tick, render.mode, render.force_newtons.norm(), contact.stiffness_newtons_per_m,
-                tip.z * 1e3, contact.plane_point.z * 1e3
+                sample.tick,
+                render.mode,
+                render.force_newtons.norm(),
+                contact.stiffness_newtons_per_m,
+                tip.z * 1e3,
+                contact.plane_point.z * 1e3
             );
         }
-        StepOutput { contact, cut: made, rejected }
+        StepOutput {
+            contact,
+            cut: made,
+            rejected,
+        }
     }
 
     /// Hash of the simulation state's bits (positions and velocities) and of its topology
@@ -302,6 +348,9 @@ impl StateHash {
         for p in mesh.positions() {
             p.iter().for_each(|&c| h.f64(c));
         }
-        Self { state: sim.state.bit_hash(), topology: h.finish() }
+        Self {
+            state: sim.state.bit_hash(),
+            topology: h.finish(),
+        }
     }
 }

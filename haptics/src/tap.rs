@@ -12,10 +12,10 @@
 
 use cutlab_sim::cut::{Blade, CutEvent};
 
+use crate::Point3;
 use crate::collision::SurfaceCollider;
 use crate::servo::{Backoff, ServoSample};
 use crate::stepper::{SessionStepper, StateHash, StepperResume};
-use crate::Point3;
 
 /// How much a session records, and the queue sizes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,7 +34,12 @@ pub struct TapSettings {
 
 impl Default for TapSettings {
     fn default() -> Self {
-        Self { keyframe_every_steps: 1000, surface_every_steps: 33, tick_capacity: 1 << 16, sim_capacity: 1 << 14 }
+        Self {
+            keyframe_every_steps: 1000,
+            surface_every_steps: 33,
+            tick_capacity: 1 << 16,
+            sim_capacity: 1 << 14,
+        }
     }
 }
 
@@ -88,7 +93,11 @@ impl SurfaceSnapshot {
         Self {
             step,
             tick,
-            vertices: collider.vertex_ids().iter().map(|&v| positions[v as usize]).collect(),
+            vertices: collider
+                .vertex_ids()
+                .iter()
+                .map(|&v| positions[v as usize])
+                .collect(),
             triangles: collider.triangles().to_vec(),
         }
     }
@@ -98,9 +107,18 @@ impl SurfaceSnapshot {
 #[derive(Debug, Clone, PartialEq)]
 pub enum SimRecord {
     /// Step `step` consumed the sample of servo tick `tick`.
-    Step { step: u64, tick: u64, rejected: bool },
+    Step {
+        step: u64,
+        tick: u64,
+        rejected: bool,
+    },
     /// The cut step `step` made.
-    Cut { step: u64, tick: u64, blade: Blade, event: Box<CutEvent> },
+    Cut {
+        step: u64,
+        tick: u64,
+        blade: Blade,
+        event: Box<CutEvent>,
+    },
     Keyframe(Box<Keyframe>),
     Surface(Box<SurfaceSnapshot>),
 }
@@ -124,7 +142,10 @@ pub struct TapFeed {
 impl TapFeed {
     /// Both producers are gone and both queues are empty: nothing more will come.
     pub fn ended(&self) -> bool {
-        self.ticks.is_abandoned() && self.ticks.is_empty() && self.sim.is_abandoned() && self.sim.is_empty()
+        self.ticks.is_abandoned()
+            && self.ticks.is_empty()
+            && self.sim.is_abandoned()
+            && self.sim.is_empty()
     }
 }
 
@@ -135,7 +156,17 @@ pub fn tap(settings: TapSettings) -> (RecordTap, TapFeed) {
     while ticks_in.push(ServoSample::default()).is_ok() {}
     while ticks_out.pop().is_ok() {}
     let (sim_in, sim_out) = rtrb::RingBuffer::new(settings.sim_capacity.max(2));
-    (RecordTap { settings, ticks: ticks_in, sim: sim_in }, TapFeed { ticks: ticks_out, sim: sim_out })
+    (
+        RecordTap {
+            settings,
+            ticks: ticks_in,
+            sim: sim_in,
+        },
+        TapFeed {
+            ticks: ticks_out,
+            sim: sim_out,
+        },
+    )
 }
 
 impl RecordTap {

@@ -16,7 +16,13 @@ fn local_device() -> IgtlDevice {
 /// A TRANSFORM packet: identity rotation, translation in mm.
 fn transform_packet(t_mm: [f64; 3]) -> Vec<u8> {
     let mut out = Vec::new();
-    encode_transform("Tool", &(Point3::from(t_mm) * 1e-3), &Rotation::identity(), 0, &mut out);
+    encode_transform(
+        "Tool",
+        &(Point3::from(t_mm) * 1e-3),
+        &Rotation::identity(),
+        0,
+        &mut out,
+    );
     out
 }
 
@@ -49,7 +55,8 @@ fn hostile_packets_are_rejected_and_the_device_survives_reconnects() {
     assert_eq!(device.read(0, 0.0), Err(DeviceFault::Disconnected));
     device.write_force(Vector3::new(0.25, 0.0, -0.5)).ok();
     let mut s = TcpStream::connect(device.address()).expect("connect");
-    s.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
+    s.set_read_timeout(Some(Duration::from_secs(5)))
+        .expect("timeout");
 
     // a bad CRC is dropped, the connection stays framed
     let mut bad = transform_packet([1.0, 2.0, 3.0]);
@@ -67,14 +74,27 @@ fn hostile_packets_are_rejected_and_the_device_survives_reconnects() {
     status.extend_from_slice(&[0u8; 30]);
     s.write_all(&status).expect("send");
     // then a good one gets through and is answered with the force
-    s.write_all(&transform_packet([10.0, -20.0, 30.0])).expect("send");
+    s.write_all(&transform_packet([10.0, -20.0, 30.0]))
+        .expect("send");
     let f = read_force(&mut s);
     assert!((f - Vector3::new(0.25, 0.0, -0.5)).norm() < 1e-6, "{f:?}");
     let pose = device.read(1, 0.001).expect("pose");
     assert!((pose.tip_in_world - Point3::new(0.01, -0.02, 0.03)).norm() < 1e-9);
     assert!(pose.blade_engaged());
-    assert_eq!(device.counters().rejected.load(std::sync::atomic::Ordering::Relaxed), 2);
-    assert_eq!(device.counters().ignored.load(std::sync::atomic::Ordering::Relaxed), 1);
+    assert_eq!(
+        device
+            .counters()
+            .rejected
+            .load(std::sync::atomic::Ordering::Relaxed),
+        2
+    );
+    assert_eq!(
+        device
+            .counters()
+            .ignored
+            .load(std::sync::atomic::Ordering::Relaxed),
+        1
+    );
 
     // a header announcing a huge body closes the connection (the stream cannot be framed)
     let mut huge = transform_packet([0.0; 3]);
@@ -93,20 +113,32 @@ fn hostile_packets_are_rejected_and_the_device_survives_reconnects() {
 
     // a client that stops mid-message does not hang the device; the next one is served
     let mut slow = TcpStream::connect(device.address()).expect("connect");
-    slow.write_all(&transform_packet([1.0, 1.0, 1.0])[..30]).expect("send");
+    slow.write_all(&transform_packet([1.0, 1.0, 1.0])[..30])
+        .expect("send");
     drop(slow);
 
     let mut s2 = TcpStream::connect(device.address()).expect("reconnect");
-    s2.set_read_timeout(Some(Duration::from_secs(5))).expect("timeout");
-    s2.write_all(&transform_packet([5.0, 5.0, 5.0])).expect("send");
+    s2.set_read_timeout(Some(Duration::from_secs(5)))
+        .expect("timeout");
+    s2.write_all(&transform_packet([5.0, 5.0, 5.0]))
+        .expect("send");
     read_force(&mut s2);
     let pose = device.read(3, 0.003).expect("pose after reconnect");
     assert!((pose.tip_in_world - Point3::new(0.005, 0.005, 0.005)).norm() < 1e-9);
-    assert!(device.counters().connections.load(std::sync::atomic::Ordering::Relaxed) >= 4);
+    assert!(
+        device
+            .counters()
+            .connections
+            .load(std::sync::atomic::Ordering::Relaxed)
+            >= 4
+    );
 
     // the pose goes stale when the client stops sending
     device.stale_after_nanos = 20_000_000;
-    assert!(wait_for(|| matches!(device.read(4, 0.004), Err(DeviceFault::Stale { .. }))));
+    assert!(wait_for(|| matches!(
+        device.read(4, 0.004),
+        Err(DeviceFault::Stale { .. })
+    )));
 }
 
 const PYIGTL_CLIENT: &str = r#"
@@ -135,7 +167,9 @@ client.stop()
 fn pyigtl_client_sends_poses_and_reads_forces() {
     // .ci/run always sets this (it installs pyigtl from PyPI into a venv).
     let Some(python) = std::env::var_os("CUTLAB_PYIGTL_PYTHON") else {
-        println!("SKIPPED pyigtl interop: CUTLAB_PYIGTL_PYTHON is not set (run .ci/run, or point it at a python with pyigtl)");
+        println!(
+            "SKIPPED pyigtl interop: CUTLAB_PYIGTL_PYTHON is not set (run .ci/run, or point it at a python with pyigtl)"
+        );
         return;
     };
     let mut device = local_device();
@@ -149,19 +183,46 @@ fn pyigtl_client_sends_poses_and_reads_forces() {
         .spawn()
         .expect("python runs");
     let mut line = String::new();
-    BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("a line from the client");
+    BufReader::new(child.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("a line from the client");
     // the client is still connected (it sleeps 1 s): the device has its last pose
     let pose = device.read(0, 0.0).expect("pose from pyigtl");
-    assert!((pose.tip_in_world - Point3::new(0.029, 0.02, 0.03)).norm() < 1e-6, "{pose:?}");
+    assert!(
+        (pose.tip_in_world - Point3::new(0.029, 0.02, 0.03)).norm() < 1e-6,
+        "{pose:?}"
+    );
     let x_axis = pose.world_from_tool * Vector3::x();
-    assert!((x_axis - Vector3::y()).norm() < 1e-6, "90 degrees about z: {x_axis:?}");
+    assert!(
+        (x_axis - Vector3::y()).norm() < 1e-6,
+        "90 degrees about z: {x_axis:?}"
+    );
     let status = child.wait().expect("python exits");
     assert!(status.success(), "pyigtl client failed: {line}");
-    let v: serde_json::Value = serde_json::from_str(line.trim()).unwrap_or_else(|e| panic!("{e}: {line}"));
+    let v: serde_json::Value =
+        serde_json::from_str(line.trim()).unwrap_or_else(|e| panic!("{e}: {line}"));
     assert_eq!(v["type"], "POINT");
     assert_eq!(v["name"], "force");
-    let f: Vec<f64> = v["force"].as_array().expect("force").iter().map(|x| x.as_f64().expect("number")).collect();
+    let f: Vec<f64> = v["force"]
+        .as_array()
+        .expect("force")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect();
     assert_eq!(f, vec![0.5, -1.25, 2.0]);
-    assert!(device.counters().transforms.load(std::sync::atomic::Ordering::Relaxed) >= 20);
-    assert_eq!(device.counters().rejected.load(std::sync::atomic::Ordering::Relaxed), 0, "pyigtl's CRC and framing are accepted");
+    assert!(
+        device
+            .counters()
+            .transforms
+            .load(std::sync::atomic::Ordering::Relaxed)
+            >= 20
+    );
+    assert_eq!(
+        device
+            .counters()
+            .rejected
+            .load(std::sync::atomic::Ordering::Relaxed),
+        0,
+        "pyigtl's CRC and framing are accepted"
+    );
 }

@@ -19,8 +19,11 @@ fn a_servo_tick_does_not_allocate() {
         depth_m: 0.005,
         approach_height_m: 0.015,
     };
-    let mut trainee = SyntheticTrainee::new("novice", plan, Skill::preset("novice").expect("preset"), 1).expect("trainee");
-    let mut network = IgtlDevice::listen_on("127.0.0.1:0".parse().expect("address")).expect("listen");
+    let mut trainee =
+        SyntheticTrainee::new("novice", plan, Skill::preset("novice").expect("preset"), 1)
+            .expect("trainee");
+    let mut network =
+        IgtlDevice::listen_on("127.0.0.1:0".parse().expect("address")).expect("listen");
     let mut renderer = ForceRenderer::new(RenderSettings::default());
     let (mut contact_in, mut contact_out) = triple_buffer::triple_buffer(&ContactModel::default());
     let (mut samples_in, mut samples_out) = rtrb::RingBuffer::<ServoSample>::new(64);
@@ -32,7 +35,11 @@ fn a_servo_tick_does_not_allocate() {
         let out = renderer.update(tick, read, &contact);
         let _ = trainee.write_force(out.force_newtons);
         let _ = network.write_force(out.force_newtons);
-        let _ = samples_in.push(ServoSample { tick, pose: read.unwrap_or_default(), render: out });
+        let _ = samples_in.push(ServoSample {
+            tick,
+            pose: read.unwrap_or_default(),
+            render: out,
+        });
         // the simulation side, here in the same thread: take the sample, publish a model
         if let Ok(s) = samples_out.pop() {
             contact_in.write(ContactModel {
@@ -59,5 +66,8 @@ fn a_servo_tick_does_not_allocate() {
         }
     });
     assert_eq!(violation_count(), 0, "allocations during servo ticks");
-    assert!(max_force > 0.5, "the trainee pressed on the plane: {max_force}");
+    assert!(
+        max_force > 0.5,
+        "the trainee pressed on the plane: {max_force}"
+    );
 }

@@ -6,18 +6,29 @@ use cutlab_haptics::servo::Clock;
 use cutlab_haptics::{Session, SessionConfig};
 
 fn block() -> Scene {
-    Scene::load(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/block.toml"), BuildOptions::default()).expect("block scene")
+    Scene::load(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/tests/block.toml"),
+        BuildOptions::default(),
+    )
+    .expect("block scene")
 }
 
 fn trainee(session: &Session, skill: &str, seed: u64) -> Box<dyn HapticDevice> {
     let plan = session.plan_across_top(0.03, 0.006).expect("plan");
-    Box::new(SyntheticTrainee::new(skill, plan, Skill::preset(skill).expect("preset"), seed).expect("trainee"))
+    Box::new(
+        SyntheticTrainee::new(skill, plan, Skill::preset(skill).expect("preset"), seed)
+            .expect("trainee"),
+    )
 }
 
 #[test]
 fn virtual_clock_session_cuts_and_is_reproducible_bit_for_bit() {
     let scene = block();
-    let config = SessionConfig { clock: Clock::Virtual, duration_s: 3.5, ..SessionConfig::default() };
+    let config = SessionConfig {
+        clock: Clock::Virtual,
+        duration_s: 3.5,
+        ..SessionConfig::default()
+    };
     let run = |seed| {
         let session = Session::new(&scene).expect("session");
         let device = trainee(&session, "intermediate", seed);
@@ -26,25 +37,54 @@ fn virtual_clock_session_cuts_and_is_reproducible_bit_for_bit() {
     let a = run(1);
     println!(
         "ticks {} steps {} cut steps {} tets split {} blade path {:.1} mm max force {:.2} N faults {} wall {:.2} s speed {:.2}x",
-        a.servo.ticks, a.sim_steps, a.stats.cut_steps, a.stats.tets_split, a.servo.blade_path_in_tissue_m * 1e3,
-        a.servo.max_force_newtons, a.servo.fault_ticks, a.wall_s, a.speed()
+        a.servo.ticks,
+        a.sim_steps,
+        a.stats.cut_steps,
+        a.stats.tets_split,
+        a.servo.blade_path_in_tissue_m * 1e3,
+        a.servo.max_force_newtons,
+        a.servo.fault_ticks,
+        a.wall_s,
+        a.speed()
     );
     assert_eq!(a.servo.ticks, 3500);
     assert_eq!(a.sim_steps, 3500);
-    assert!(a.tick_of_step.iter().enumerate().all(|(n, &t)| t == n as u64), "lock-step: step n consumed tick n");
+    assert!(
+        a.tick_of_step
+            .iter()
+            .enumerate()
+            .all(|(n, &t)| t == n as u64),
+        "lock-step: step n consumed tick n"
+    );
     assert_eq!(a.servo.non_finite_count, 0);
     assert!(a.servo.max_force_newtons > 0.5 && a.servo.max_force_newtons <= 3.3 + 1e-12);
     // the cut opened the block: vertices split (the tets along it may be split too, or
     // their vertices moved onto the blade's plane and the cut run along their faces)
-    let vertices_before = Session::new(&scene).expect("session").sim.model.vertex_count();
+    let vertices_before = Session::new(&scene)
+        .expect("session")
+        .sim
+        .model
+        .vertex_count();
     assert!(a.stats.cut_steps > 0, "the trainee cut the block");
-    assert!(a.simulation.model.vertex_count() > vertices_before, "the cut split vertices: {} before, {} after", vertices_before, a.simulation.model.vertex_count());
+    assert!(
+        a.simulation.model.vertex_count() > vertices_before,
+        "the cut split vertices: {} before, {} after",
+        vertices_before,
+        a.simulation.model.vertex_count()
+    );
     assert!(a.servo.blade_path_in_tissue_m > 0.005);
     let b = run(1);
-    assert_eq!((a.state_hash, a.servo.force_hash), (b.state_hash, b.servo.force_hash), "same seed, same bits");
+    assert_eq!(
+        (a.state_hash, a.servo.force_hash),
+        (b.state_hash, b.servo.force_hash),
+        "same seed, same bits"
+    );
     assert_eq!(a.stats.tets_split, b.stats.tets_split);
     let c = run(2);
-    assert_ne!(a.servo.force_hash, c.servo.force_hash, "another seed, another hand");
+    assert_ne!(
+        a.servo.force_hash, c.servo.force_hash,
+        "another seed, another hand"
+    );
 }
 
 /// A trainee whose device fails for a while: NaN poses, then a lost connection.
@@ -59,7 +99,11 @@ impl HapticDevice for Faulty {
     fn name(&self) -> &str {
         "faulty"
     }
-    fn read(&mut self, tick: u64, time_s: f64) -> Result<cutlab_haptics::ToolPose, cutlab_haptics::DeviceFault> {
+    fn read(
+        &mut self,
+        tick: u64,
+        time_s: f64,
+    ) -> Result<cutlab_haptics::ToolPose, cutlab_haptics::DeviceFault> {
         let mut pose = self.inner.read(tick, time_s)?;
         if self.lost.contains(&tick) {
             return Err(cutlab_haptics::DeviceFault::Disconnected);
@@ -69,7 +113,10 @@ impl HapticDevice for Faulty {
         }
         Ok(pose)
     }
-    fn write_force(&mut self, f: cutlab_haptics::Vector3) -> Result<(), cutlab_haptics::DeviceFault> {
+    fn write_force(
+        &mut self,
+        f: cutlab_haptics::Vector3,
+    ) -> Result<(), cutlab_haptics::DeviceFault> {
         self.inner.write_force(f)
     }
 }
@@ -79,8 +126,16 @@ fn nan_poses_and_a_lost_device_fade_the_force_and_the_session_survives() {
     let scene = block();
     let session = Session::new(&scene).expect("session");
     // the expert presses on the surface from about tick 1000 and cuts from about 1600
-    let device = Box::new(Faulty { inner: trainee(&session, "expert", 1), nan: 1200..1300, lost: 1400..1450 });
-    let config = SessionConfig { clock: Clock::Virtual, duration_s: 1.55, ..SessionConfig::default() };
+    let device = Box::new(Faulty {
+        inner: trainee(&session, "expert", 1),
+        nan: 1200..1300,
+        lost: 1400..1450,
+    });
+    let config = SessionConfig {
+        clock: Clock::Virtual,
+        duration_s: 1.55,
+        ..SessionConfig::default()
+    };
     let r = session.run(device, &config).expect("run");
     assert_eq!(r.servo.ticks, 1550);
     assert_eq!(r.sim_steps, 1550);
@@ -97,27 +152,40 @@ fn live_clock_ticks_at_one_kilohertz() {
     let scene = block();
     let session = Session::new(&scene).expect("session");
     let device = trainee(&session, "expert", 1);
-    let config = SessionConfig { clock: Clock::Live, duration_s: 0.5, realtime_priority: false, ..SessionConfig::default() };
+    let config = SessionConfig {
+        clock: Clock::Live,
+        duration_s: 0.5,
+        realtime_priority: false,
+        ..SessionConfig::default()
+    };
     let r = session.run(device, &config).expect("run");
     let p = r.servo.period_stats(r.period_nanos);
     println!("live 0.5 s: {p:?}; {} sim steps", r.sim_steps);
     assert_eq!(r.servo.ticks, 500);
     assert!(r.wall_s >= 0.499, "real time: {} s", r.wall_s);
     assert!((p.mean_us - 1000.0).abs() < 20.0, "{p:?}");
-    assert!(r.sim_steps > 0 && r.tick_of_step.windows(2).all(|w| w[1] > w[0]), "each step a newer tick");
+    assert!(
+        r.sim_steps > 0 && r.tick_of_step.windows(2).all(|w| w[1] > w[0]),
+        "each step a newer tick"
+    );
 }
 
 #[test]
 fn a_live_session_survives_an_openigtlink_client_reconnecting() {
-    use std::io::{Read, Write};
     use cutlab_haptics::device::IgtlDevice;
     use cutlab_haptics::device::igtl::{HEADER_BYTES, Header, POINT_ELEMENT_BYTES};
+    use std::io::{Read, Write};
 
     let scene = block();
     let session = Session::new(&scene).expect("session");
     let device = IgtlDevice::listen_on("127.0.0.1:0".parse().expect("address")).expect("listen");
     let address = device.address();
-    let config = SessionConfig { clock: Clock::Live, duration_s: 1.5, realtime_priority: false, ..SessionConfig::default() };
+    let config = SessionConfig {
+        clock: Clock::Live,
+        duration_s: 1.5,
+        realtime_priority: false,
+        ..SessionConfig::default()
+    };
     let run = std::thread::spawn(move || session.run(Box::new(device), &config));
 
     // a tracker above the block: 300 ms of poses, gone for 250 ms, back for 300 ms
@@ -127,7 +195,9 @@ fn a_live_session_survives_an_openigtlink_client_reconnecting() {
         let mut replies = 0;
         while t.elapsed() < std::time::Duration::from_millis(ms) {
             let mut body = Vec::new();
-            for v in [1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 30.0, 20.0, 60.0] {
+            for v in [
+                1.0f32, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 30.0, 20.0, 60.0,
+            ] {
                 body.extend_from_slice(&v.to_be_bytes());
             }
             let mut packet = Vec::new();
@@ -150,7 +220,11 @@ fn a_live_session_survives_an_openigtlink_client_reconnecting() {
     assert_eq!(r.servo.ticks, 1500);
     assert_eq!(r.servo.non_finite_count, 0);
     // faults: before the first connection, during the gap and after the end; not while connected
-    assert!(r.servo.fault_ticks >= 200 && r.servo.fault_ticks <= 1500 - 300, "{} fault ticks", r.servo.fault_ticks);
+    assert!(
+        r.servo.fault_ticks >= 200 && r.servo.fault_ticks <= 1500 - 300,
+        "{} fault ticks",
+        r.servo.fault_ticks
+    );
     assert!(r.sim_steps > 0);
 }
 
@@ -164,17 +238,37 @@ fn the_simulation_finds_the_surface_under_the_blades_heel() {
     let (lo, hi) = stepper.sim.model.mesh.bounding_box();
     let (cx, cy, top) = (0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), hi.z);
     let mut step = |tick: u64, tip: Point3, world_from_tool: Rotation| {
-        let pose = ToolPose { tip_in_world: tip, world_from_tool, buttons: 0 };
-        stepper.step(&ServoSample { tick, pose, render: RenderOutput { proxy: tip, ..RenderOutput::default() } }).contact
+        let pose = ToolPose {
+            tip_in_world: tip,
+            world_from_tool,
+            buttons: 0,
+        };
+        stepper
+            .step(&ServoSample {
+                tick,
+                pose,
+                render: RenderOutput {
+                    proxy: tip,
+                    ..RenderOutput::default()
+                },
+            })
+            .contact
     };
     // the tool laid heel-first: the tip 2 mm above the top, the heel (20 mm along the edge)
     // 1.9 mm into it
     let edge = Vector3::new(1.0, 0.0, -0.2).normalize();
     let tip = Point3::new(cx - 0.01, cy, top + 0.002);
     let heel = tip + edge * config.blade_length_m;
-    let c = step(0, tip, Rotation::rotation_between(&Vector3::z(), &edge).expect("rotation"));
+    let c = step(
+        0,
+        tip,
+        Rotation::rotation_between(&Vector3::z(), &edge).expect("rotation"),
+    );
     assert!(c.valid && c.at_heel, "{c:?}");
-    assert!((c.plane_point.x - heel.x).abs() < 1e-3 && (c.plane_point.z - top).abs() < 1e-3, "{c:?} heel {heel:?}");
+    assert!(
+        (c.plane_point.x - heel.x).abs() < 1e-3 && (c.plane_point.z - top).abs() < 1e-3,
+        "{c:?} heel {heel:?}"
+    );
     // the usual pose, heel up: the contact is at the tip
     let c = step(1, Point3::new(cx, cy, top - 0.0005), Rotation::identity());
     assert!(c.valid && !c.at_heel, "{c:?}");
@@ -187,15 +281,31 @@ fn an_incision_can_be_planned_on_any_side_of_the_tissue() {
     let session = Session::new(&block()).expect("session");
     let (lo, hi) = session.sim.model.mesh.bounding_box();
     // on the block's +x side, along y: 60 % of the 40 mm side at most, centred
-    let plan = session.plan_across(&Vector3::x(), &Vector3::y(), 0.03, 0.004).expect("plan on the side");
+    let plan = session
+        .plan_across(&Vector3::x(), &Vector3::y(), 0.03, 0.004)
+        .expect("plan on the side");
     let (first, last) = (plan.line_m[0], plan.line_m[plan.line_m.len() - 1]);
-    assert!(plan.line_m.iter().all(|p| (p.x - hi.x).abs() < 1e-3), "on the +x face: {first:?}");
-    assert!(plan.normals.iter().all(|n| n.dot(&Vector3::x()) > 0.99), "facing +x");
-    assert!(((last.y - first.y) - 0.024).abs() < 1e-3 && ((first.y + last.y) - (lo.y + hi.y)).abs() < 1e-3, "{first:?} {last:?}");
+    assert!(
+        plan.line_m.iter().all(|p| (p.x - hi.x).abs() < 1e-3),
+        "on the +x face: {first:?}"
+    );
+    assert!(
+        plan.normals.iter().all(|n| n.dot(&Vector3::x()) > 0.99),
+        "facing +x"
+    );
+    assert!(
+        ((last.y - first.y) - 0.024).abs() < 1e-3
+            && ((first.y + last.y) - (lo.y + hi.y)).abs() < 1e-3,
+        "{first:?} {last:?}"
+    );
     // across the top, the default
     let top = session.plan_across_top(0.03, 0.006).expect("plan on top");
     let (first, last) = (top.line_m[0], top.line_m[top.line_m.len() - 1]);
-    assert!(top.line_m.iter().all(|p| (p.z - hi.z).abs() < 1e-3) && ((last.x - first.x) - 0.03).abs() < 1e-3, "{first:?} {last:?}");
+    assert!(
+        top.line_m.iter().all(|p| (p.z - hi.z).abs() < 1e-3)
+            && ((last.x - first.x) - 0.03).abs() < 1e-3,
+        "{first:?} {last:?}"
+    );
 }
 
 /// The expert's incision across the default chest wall (12.8k tets; the command line's plan,
@@ -215,18 +325,43 @@ fn an_expert_cuts_the_chest_wall_in_one_stroke_along_the_whole_line() {
         if localise {
             session.sim.settings.localisation = Some(LocalisationSettings::default());
         }
-        let plan = session.plan_across(&Vector3::z(), &Vector3::x(), 0.06, 0.008).expect("plan");
-        let hand = SyntheticTrainee::new("expert", plan, Skill::preset("expert").expect("preset"), seed).expect("trainee");
-        let device = Box::new(hand.expecting_cut(scene.spec.cut_threshold_newtons, scene.spec.cut_depth_mm * 1e-3));
-        let config = SessionConfig { clock: Clock::Virtual, duration_s: 6.0, ..SessionConfig::default() };
+        let plan = session
+            .plan_across(&Vector3::z(), &Vector3::x(), 0.06, 0.008)
+            .expect("plan");
+        let hand = SyntheticTrainee::new(
+            "expert",
+            plan,
+            Skill::preset("expert").expect("preset"),
+            seed,
+        )
+        .expect("trainee");
+        let device = Box::new(hand.expecting_cut(
+            scene.spec.cut_threshold_newtons,
+            scene.spec.cut_depth_mm * 1e-3,
+        ));
+        let config = SessionConfig {
+            clock: Clock::Virtual,
+            duration_s: 6.0,
+            ..SessionConfig::default()
+        };
         let r = session.run(device, &config).expect("run");
         let what = format!(
             "seed {seed}, localised {localise}: {} entries, cut {:.1} mm, max force {:.2} N",
-            r.servo.blade_entries, r.stats.cut_length_m * 1e3, r.servo.max_force_newtons
+            r.servo.blade_entries,
+            r.stats.cut_length_m * 1e3,
+            r.servo.max_force_newtons
         );
         assert_eq!(r.servo.blade_entries, 1, "{what}");
         assert!(r.stats.cut_length_m >= 0.06, "{what}");
         assert!(r.servo.max_force_newtons < 1.5, "{what}");
-        assert_eq!((r.stats.failed_cuts, r.stats.rejected_steps, r.servo.non_finite_count), (0, 0, 0), "{what}");
+        assert_eq!(
+            (
+                r.stats.failed_cuts,
+                r.stats.rejected_steps,
+                r.servo.non_finite_count
+            ),
+            (0, 0, 0),
+            "{what}"
+        );
     }
 }

@@ -137,7 +137,11 @@ impl ToolStateMsg {
     pub fn sample(&self, tip_in_world: Point3, world_from_tool: Rotation) -> ServoSample {
         ServoSample {
             tick: self.tick,
-            pose: ToolPose { tip_in_world, world_from_tool, buttons: self.buttons },
+            pose: ToolPose {
+                tip_in_world,
+                world_from_tool,
+                buttons: self.buttons,
+            },
             render: RenderOutput {
                 force_newtons: Vector3::from(self.force_newtons),
                 proxy: Point3::from(self.proxy_m),
@@ -167,13 +171,21 @@ pub struct BladeMsg {
 
 impl From<&Blade> for BladeMsg {
     fn from(b: &Blade) -> Self {
-        Self { tip_m: b.tip.coords.into(), edge_direction: b.edge_direction.into(), depth_m: b.depth_m }
+        Self {
+            tip_m: b.tip.coords.into(),
+            edge_direction: b.edge_direction.into(),
+            depth_m: b.depth_m,
+        }
     }
 }
 
 impl From<&BladeMsg> for Blade {
     fn from(b: &BladeMsg) -> Self {
-        Self { tip: Point3::from(b.tip_m), edge_direction: Vector3::from(b.edge_direction), depth_m: b.depth_m }
+        Self {
+            tip: Point3::from(b.tip_m),
+            edge_direction: Vector3::from(b.edge_direction),
+            depth_m: b.depth_m,
+        }
     }
 }
 
@@ -199,7 +211,9 @@ impl Serialize for Hex {
 impl<'de> Deserialize<'de> for Hex {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let s = String::deserialize(d)?;
-        u64::from_str_radix(&s, 16).map(Hex).map_err(serde::de::Error::custom)
+        u64::from_str_radix(&s, 16)
+            .map(Hex)
+            .map_err(serde::de::Error::custom)
     }
 }
 
@@ -214,7 +228,10 @@ pub struct StateHashMsg {
 
 impl StateHashMsg {
     pub fn hash(&self) -> StateHash {
-        StateHash { state: self.state.0, topology: self.topology.0 }
+        StateHash {
+            state: self.state.0,
+            topology: self.topology.0,
+        }
     }
 }
 
@@ -256,7 +273,10 @@ impl From<&Keyframe> for KeyframeMsg {
 
 impl KeyframeMsg {
     pub fn hash(&self) -> StateHash {
-        StateHash { state: self.state_hash.0, topology: self.topology_hash.0 }
+        StateHash {
+            state: self.state_hash.0,
+            topology: self.topology_hash.0,
+        }
     }
 }
 
@@ -323,21 +343,33 @@ impl SessionMeta {
     }
 
     /// From an MCAP metadata map (numbers parsed back from their strings).
-    pub fn from_map(map: &std::collections::BTreeMap<String, String>) -> Result<Self, RecorderError> {
+    pub fn from_map(
+        map: &std::collections::BTreeMap<String, String>,
+    ) -> Result<Self, RecorderError> {
         let mut fields = serde_json::Map::new();
         for (k, v) in map {
             let numeric = !matches!(
                 k.as_str(),
-                "cutlab_version" | "scene" | "trainee" | "exercise" | "device" | "clock" | "initial_state_hash" | "initial_topology_hash"
+                "cutlab_version"
+                    | "scene"
+                    | "trainee"
+                    | "exercise"
+                    | "device"
+                    | "clock"
+                    | "initial_state_hash"
+                    | "initial_topology_hash"
             );
             let value = if numeric {
-                serde_json::from_str(v).map_err(|e| RecorderError::Malformed(format!("session metadata {k}={v:?}: {e}")))?
+                serde_json::from_str(v).map_err(|e| {
+                    RecorderError::Malformed(format!("session metadata {k}={v:?}: {e}"))
+                })?
             } else {
                 serde_json::Value::String(v.clone())
             };
             fields.insert(k.clone(), value);
         }
-        serde_json::from_value(serde_json::Value::Object(fields)).map_err(|e| RecorderError::Malformed(format!("session metadata: {e}")))
+        serde_json::from_value(serde_json::Value::Object(fields))
+            .map_err(|e| RecorderError::Malformed(format!("session metadata: {e}")))
     }
 }
 
@@ -380,8 +412,17 @@ pub fn pose_message(pose: &ToolPose, log_time_nanos: u64) -> foxglove::messages:
         timestamp: Some(timestamp(log_time_nanos)),
         frame_id: WORLD_FRAME.to_owned(),
         pose: Some(Pose {
-            position: Some(FVector3 { x: pose.tip_in_world.x, y: pose.tip_in_world.y, z: pose.tip_in_world.z }),
-            orientation: Some(Quaternion { x: q.i, y: q.j, z: q.k, w: q.w }),
+            position: Some(FVector3 {
+                x: pose.tip_in_world.x,
+                y: pose.tip_in_world.y,
+                z: pose.tip_in_world.z,
+            }),
+            orientation: Some(Quaternion {
+                x: q.i,
+                y: q.j,
+                z: q.k,
+                w: q.w,
+            }),
         }),
     }
 }
@@ -394,18 +435,40 @@ pub fn timestamp(nanos: u64) -> foxglove::messages::Timestamp {
 
 /// The tip and orientation of a decoded pose.
 pub fn pose_of(msg: &foxglove::messages::PoseInFrame) -> Result<(Point3, Rotation), RecorderError> {
-    let pose = msg.pose.as_ref().ok_or_else(|| RecorderError::Malformed("pose without a pose".into()))?;
-    let p = pose.position.as_ref().ok_or_else(|| RecorderError::Malformed("pose without a position".into()))?;
-    let q = pose.orientation.as_ref().ok_or_else(|| RecorderError::Malformed("pose without an orientation".into()))?;
+    let pose = msg
+        .pose
+        .as_ref()
+        .ok_or_else(|| RecorderError::Malformed("pose without a pose".into()))?;
+    let p = pose
+        .position
+        .as_ref()
+        .ok_or_else(|| RecorderError::Malformed("pose without a position".into()))?;
+    let q = pose
+        .orientation
+        .as_ref()
+        .ok_or_else(|| RecorderError::Malformed("pose without an orientation".into()))?;
     // Exactly the recorded components: no renormalisation (replay needs the same bits).
     let rotation = Rotation::new_unchecked(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
     Ok((Point3::new(p.x, p.y, p.z), rotation))
 }
 
 /// The tissue surface as a Foxglove scene entity (a triangle list).
-pub fn surface_message(vertices: &[Point3], triangles: &[[u32; 3]], log_time_nanos: u64) -> foxglove::messages::SceneUpdate {
-    use foxglove::messages::{Color, Point3 as FPoint3, SceneEntity, SceneUpdate, TriangleListPrimitive};
-    let points = vertices.iter().map(|p| FPoint3 { x: p.x, y: p.y, z: p.z }).collect();
+pub fn surface_message(
+    vertices: &[Point3],
+    triangles: &[[u32; 3]],
+    log_time_nanos: u64,
+) -> foxglove::messages::SceneUpdate {
+    use foxglove::messages::{
+        Color, Point3 as FPoint3, SceneEntity, SceneUpdate, TriangleListPrimitive,
+    };
+    let points = vertices
+        .iter()
+        .map(|p| FPoint3 {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        })
+        .collect();
     let indices = triangles.iter().flatten().copied().collect();
     SceneUpdate {
         deletions: Vec::new(),
@@ -417,7 +480,12 @@ pub fn surface_message(vertices: &[Point3], triangles: &[[u32; 3]], log_time_nan
             triangles: vec![TriangleListPrimitive {
                 points,
                 indices,
-                color: Some(Color { r: 0.85, g: 0.45, b: 0.42, a: 1.0 }),
+                color: Some(Color {
+                    r: 0.85,
+                    g: 0.45,
+                    b: 0.42,
+                    a: 1.0,
+                }),
                 ..Default::default()
             }],
             ..Default::default()

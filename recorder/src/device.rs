@@ -39,18 +39,28 @@ impl RecordedHand {
     /// The hand of `recording`; an error when it has no session metadata or no tool poses.
     pub fn new(recording: &Recording) -> Result<Self, RecorderError> {
         let meta = recording.meta()?;
-        Self::from_samples(format!("recording of {}", meta.provenance.device), &recording.samples(), meta.period_nanos)
+        Self::from_samples(
+            format!("recording of {}", meta.provenance.device),
+            &recording.samples(),
+            meta.period_nanos,
+        )
     }
 
     /// The hand of recorded servo samples (by tick) at a servo period of `period_nanos`.
-    pub fn from_samples(name: String, samples: &BTreeMap<u64, ServoSample>, period_nanos: u64) -> Result<Self, RecorderError> {
+    pub fn from_samples(
+        name: String,
+        samples: &BTreeMap<u64, ServoSample>,
+        period_nanos: u64,
+    ) -> Result<Self, RecorderError> {
         let ticks: Vec<(u64, Recorded)> = samples
             .iter()
             .map(|(&tick, s)| {
                 let recorded = if s.render.faults & fault::DEVICE_LOST != 0 {
                     Recorded::Failed(DeviceFault::Disconnected)
                 } else if s.render.faults & fault::DEVICE_STALE != 0 {
-                    Recorded::Failed(DeviceFault::Stale { age_nanos: period_nanos })
+                    Recorded::Failed(DeviceFault::Stale {
+                        age_nanos: period_nanos,
+                    })
                 } else {
                     Recorded::Pose(s.pose)
                 };
@@ -58,9 +68,16 @@ impl RecordedHand {
             })
             .collect();
         if ticks.is_empty() || period_nanos == 0 {
-            return Err(RecorderError::Malformed("the recording has no tool poses to play".into()));
+            return Err(RecorderError::Malformed(
+                "the recording has no tool poses to play".into(),
+            ));
         }
-        Ok(Self { name, ticks, period_s: period_nanos as f64 * 1e-9, cursor: 0 })
+        Ok(Self {
+            name,
+            ticks,
+            period_s: period_nanos as f64 * 1e-9,
+            cursor: 0,
+        })
     }
 
     /// Seconds from the session's start to the last recorded tick.
@@ -103,20 +120,51 @@ mod tests {
     use cutlab_haptics::render::RenderOutput;
 
     fn sample(tick: u64, faults: u8) -> (u64, ServoSample) {
-        let pose = ToolPose { tip_in_world: Point3::new(tick as f64, 0.0, 0.0), ..ToolPose::default() };
-        (tick, ServoSample { tick, pose, render: RenderOutput { faults, ..RenderOutput::default() } })
+        let pose = ToolPose {
+            tip_in_world: Point3::new(tick as f64, 0.0, 0.0),
+            ..ToolPose::default()
+        };
+        (
+            tick,
+            ServoSample {
+                tick,
+                pose,
+                render: RenderOutput {
+                    faults,
+                    ..RenderOutput::default()
+                },
+            },
+        )
     }
 
     #[test]
     fn plays_each_recorded_tick_at_its_time_with_its_faults() {
         // ticks 2..=6 recorded at 1 ms, tick 4 missing, the device lost at 5
-        let samples: BTreeMap<u64, ServoSample> = [sample(2, 0), sample(3, fault::SIM_STALLED), sample(5, fault::DEVICE_LOST), sample(6, 0)].into();
+        let samples: BTreeMap<u64, ServoSample> = [
+            sample(2, 0),
+            sample(3, fault::SIM_STALLED),
+            sample(5, fault::DEVICE_LOST),
+            sample(6, 0),
+        ]
+        .into();
         let mut hand = RecordedHand::from_samples("r".into(), &samples, 1_000_000).expect("hand");
         let x = |r: Result<ToolPose, DeviceFault>| r.map(|p| p.tip_in_world.x);
-        assert_eq!(x(hand.read(0, 0.0)), Err(DeviceFault::Disconnected), "before the first recorded tick");
+        assert_eq!(
+            x(hand.read(0, 0.0)),
+            Err(DeviceFault::Disconnected),
+            "before the first recorded tick"
+        );
         assert_eq!(x(hand.read(2, 0.002)), Ok(2.0));
-        assert_eq!(x(hand.read(3, 0.003)), Ok(3.0), "a fault that is not the device's plays the pose");
-        assert_eq!(x(hand.read(4, 0.004)), Ok(3.0), "a missing tick holds the last pose");
+        assert_eq!(
+            x(hand.read(3, 0.003)),
+            Ok(3.0),
+            "a fault that is not the device's plays the pose"
+        );
+        assert_eq!(
+            x(hand.read(4, 0.004)),
+            Ok(3.0),
+            "a missing tick holds the last pose"
+        );
         assert_eq!(x(hand.read(5, 0.005)), Err(DeviceFault::Disconnected));
         assert!(!hand.finished(0.006));
         assert_eq!(x(hand.read(6, 0.006)), Ok(6.0));

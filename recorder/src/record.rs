@@ -9,10 +9,10 @@ use cutlab_haptics::device::{HapticDevice, Plan};
 use cutlab_haptics::tap::{self, TapSettings};
 use cutlab_haptics::{HapticsError, Session, SessionConfig, SessionReport, StateHash};
 
+use crate::RecorderError;
 pub use crate::channels::Provenance;
 use crate::channels::{self, Hex, PlanMsg, SessionMeta};
 use crate::writer::{self, McapSink, RecordObserver, WriteStats, WriterOptions};
-use crate::RecorderError;
 
 /// How much to record.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -33,7 +33,11 @@ pub struct RecordedSession {
 
 impl std::fmt::Debug for RecordedSession {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("RecordedSession").field("report", &self.report).field("write", &self.write).field("path", &self.path).finish_non_exhaustive()
+        f.debug_struct("RecordedSession")
+            .field("report", &self.report)
+            .field("write", &self.write)
+            .field("path", &self.path)
+            .finish_non_exhaustive()
     }
 }
 
@@ -52,26 +56,48 @@ pub fn run_recorded(
     observer: Option<Box<dyn RecordObserver>>,
 ) -> Result<RecordedSession, RecorderError> {
     let meta = meta_of(&session, config, provenance, settings);
-    let mut attachments = vec![(channels::SCENE_ATTACHMENT, "application/json", json(scene_spec)?)];
+    let mut attachments = vec![(
+        channels::SCENE_ATTACHMENT,
+        "application/json",
+        json(scene_spec)?,
+    )];
     if let Some(plan) = plan {
-        attachments.push((channels::PLAN_ATTACHMENT, "application/json", json(&PlanMsg::from(plan))?));
+        attachments.push((
+            channels::PLAN_ATTACHMENT,
+            "application/json",
+            json(&PlanMsg::from(plan))?,
+        ));
     }
     let sink = McapSink::create(path, &meta, &attachments, settings.writer)?;
     let (tap, feed) = tap::tap(settings.tap);
-    let writer = writer::spawn(sink, feed, observer).map_err(|source| RecorderError::Io { path: path.to_owned(), error: source })?;
+    let writer = writer::spawn(sink, feed, observer).map_err(|source| RecorderError::Io {
+        path: path.to_owned(),
+        error: source,
+    })?;
     let report = session.run_recorded(device, config, Some(tap));
-    let (sink, observer) = writer.join().map_err(|_| RecorderError::Encode("the recorder thread panicked".into()))??;
+    let (sink, observer) = writer
+        .join()
+        .map_err(|_| RecorderError::Encode("the recorder thread panicked".into()))??;
     let mut end = BTreeMap::new();
     match &report {
         Ok(r) => {
             end.insert("status".to_owned(), "complete".to_owned());
             end.insert("ticks".to_owned(), r.servo.ticks.to_string());
             end.insert("sim_steps".to_owned(), r.sim_steps.to_string());
-            end.insert("dropped_tick_records".to_owned(), r.servo.dropped_records.to_string());
-            end.insert("dropped_samples".to_owned(), r.servo.dropped_samples.to_string());
+            end.insert(
+                "dropped_tick_records".to_owned(),
+                r.servo.dropped_records.to_string(),
+            );
+            end.insert(
+                "dropped_samples".to_owned(),
+                r.servo.dropped_samples.to_string(),
+            );
             end.insert("tets_split".to_owned(), r.stats.tets_split.to_string());
             end.insert("cut_length_m".to_owned(), r.stats.cut_length_m.to_string());
-            end.insert("final_state_hash".to_owned(), format!("{:016x}", r.state_hash));
+            end.insert(
+                "final_state_hash".to_owned(),
+                format!("{:016x}", r.state_hash),
+            );
             end.insert("wall_s".to_owned(), r.wall_s.to_string());
         }
         Err(e) => {
@@ -80,11 +106,21 @@ pub fn run_recorded(
         }
     }
     let write = sink.finish(&end)?;
-    Ok(RecordedSession { report, write, path: path.to_owned(), observer })
+    Ok(RecordedSession {
+        report,
+        write,
+        path: path.to_owned(),
+        observer,
+    })
 }
 
 /// The session metadata a recording of `session` carries.
-fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, settings: RecordSettings) -> SessionMeta {
+fn meta_of(
+    session: &Session,
+    config: &SessionConfig,
+    provenance: &Provenance,
+    settings: RecordSettings,
+) -> SessionMeta {
     let initial = StateHash::of(&session.sim);
     SessionMeta {
         cutlab_version: env!("CARGO_PKG_VERSION").to_owned(),
@@ -103,7 +139,9 @@ fn meta_of(session: &Session, config: &SessionConfig, provenance: &Provenance, s
         localisation: session.sim.settings.localisation,
         initial_state_hash: Hex(initial.state),
         initial_topology_hash: Hex(initial.topology),
-        started_unix_s: std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64()),
+        started_unix_s: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64()),
     }
 }
 

@@ -10,8 +10,8 @@ use std::path::Path;
 
 use mcap::records::{MessageHeader, Metadata, Record};
 
-use crate::reader::{check_magic, for_each_record};
 use crate::RecorderError;
+use crate::reader::{check_magic, for_each_record};
 
 /// What a recovery kept.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -31,12 +31,20 @@ pub struct RecoverReport {
 /// Copies the readable part of `input` into a complete recording at `output`.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderError> {
     if input == output {
-        return Err(RecorderError::Malformed("recover writes a new file: the output must not be the input".into()));
+        return Err(RecorderError::Malformed(
+            "recover writes a new file: the output must not be the input".into(),
+        ));
     }
-    let bytes = std::fs::read(input).map_err(|source| RecorderError::Io { path: input.to_owned(), error: source })?;
+    let bytes = std::fs::read(input).map_err(|source| RecorderError::Io {
+        path: input.to_owned(),
+        error: source,
+    })?;
     // before the output is created: a file that is no recording leaves nothing behind
     check_magic(&bytes)?;
-    let file = File::create(output).map_err(|source| RecorderError::Io { path: output.to_owned(), error: source })?;
+    let file = File::create(output).map_err(|source| RecorderError::Io {
+        path: output.to_owned(),
+        error: source,
+    })?;
     let mut w = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
         .profile("cutlab")
@@ -64,23 +72,49 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
                 let schema = if c.schema_id == 0 {
                     0
                 } else {
-                    *schemas.get(&c.schema_id).ok_or_else(|| RecorderError::Malformed(format!("channel {} names unknown schema {}", c.topic, c.schema_id)))?
+                    *schemas.get(&c.schema_id).ok_or_else(|| {
+                        RecorderError::Malformed(format!(
+                            "channel {} names unknown schema {}",
+                            c.topic, c.schema_id
+                        ))
+                    })?
                 };
                 let id = w.add_channel(schema, &c.topic, &c.message_encoding, &c.metadata)?;
                 channels.insert(c.id, id);
             }
             Record::Message { header, data } => {
-                let channel_id = *channels.get(&header.channel_id).ok_or_else(|| RecorderError::Malformed(format!("message on unknown channel {}", header.channel_id)))?;
-                w.write_to_known_channel(&MessageHeader { channel_id, ..header }, &data)?;
+                let channel_id = *channels.get(&header.channel_id).ok_or_else(|| {
+                    RecorderError::Malformed(format!(
+                        "message on unknown channel {}",
+                        header.channel_id
+                    ))
+                })?;
+                w.write_to_known_channel(
+                    &MessageHeader {
+                        channel_id,
+                        ..header
+                    },
+                    &data,
+                )?;
                 report.messages += 1;
-                report.last_log_time = Some(report.last_log_time.map_or(header.log_time, |t| t.max(header.log_time)));
+                report.last_log_time = Some(
+                    report
+                        .last_log_time
+                        .map_or(header.log_time, |t| t.max(header.log_time)),
+                );
             }
             Record::Metadata(m) => {
                 w.write_metadata(&m)?;
                 report.metadata += 1;
             }
             Record::Attachment { header, data, .. } => {
-                w.attach(&mcap::Attachment { log_time: header.log_time, create_time: header.create_time, name: header.name, media_type: header.media_type, data: Cow::Borrowed(&data) })?;
+                w.attach(&mcap::Attachment {
+                    log_time: header.log_time,
+                    create_time: header.create_time,
+                    name: header.name,
+                    media_type: header.media_type,
+                    data: Cow::Borrowed(&data),
+                })?;
                 report.attachments += 1;
             }
             _ => {}
@@ -92,13 +126,22 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
     let mut note = BTreeMap::new();
     note.insert("source".to_owned(), input.display().to_string());
     note.insert("source_bytes".to_owned(), report.input_bytes.to_string());
-    note.insert("source_complete".to_owned(), report.input_complete.to_string());
+    note.insert(
+        "source_complete".to_owned(),
+        report.input_complete.to_string(),
+    );
     note.insert("messages_kept".to_owned(), report.messages.to_string());
     if let Some(d) = &report.damage {
         note.insert("damage".to_owned(), d.clone());
     }
-    w.write_metadata(&Metadata { name: "cutlab.recovered".into(), metadata: note })?;
+    w.write_metadata(&Metadata {
+        name: "cutlab.recovered".into(),
+        metadata: note,
+    })?;
     w.finish()?;
-    w.into_inner().flush().map_err(|source| RecorderError::Io { path: output.to_owned(), error: source })?;
+    w.into_inner().flush().map_err(|source| RecorderError::Io {
+        path: output.to_owned(),
+        error: source,
+    })?;
     Ok(report)
 }

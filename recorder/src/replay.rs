@@ -46,7 +46,9 @@ impl std::str::FromStr for Speed {
             "max" => Ok(Speed::Max),
             "realtime" | "real-time" => Ok(Speed::Factor(1.0)),
             _ => {
-                let f: f64 = s.trim_start_matches('x').parse().map_err(|_| format!("speed must be max, realtime or a factor such as 4 or x4, got {s:?}"))?;
+                let f: f64 = s.trim_start_matches('x').parse().map_err(|_| {
+                    format!("speed must be max, realtime or a factor such as 4 or x4, got {s:?}")
+                })?;
                 if f > 0.0 && f.is_finite() {
                     Ok(Speed::Factor(f))
                 } else {
@@ -78,7 +80,14 @@ pub struct ReplayOptions {
 
 impl std::fmt::Debug for ReplayOptions {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ReplayOptions").field("speed", &self.speed).field("from_s", &self.from_s).field("to_s", &self.to_s).field("keep_going", &self.keep_going).field("resimulate", &self.resimulate).field("jobs", &self.jobs).finish_non_exhaustive()
+        f.debug_struct("ReplayOptions")
+            .field("speed", &self.speed)
+            .field("from_s", &self.from_s)
+            .field("to_s", &self.to_s)
+            .field("keep_going", &self.keep_going)
+            .field("resimulate", &self.resimulate)
+            .field("jobs", &self.jobs)
+            .finish_non_exhaustive()
     }
 }
 
@@ -166,7 +175,13 @@ impl ReplayReport {
 
 /// The stepper a recording's session started from: its scene, settled, with its settings.
 pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> {
-    let scene = Scene::load(&meta.provenance.scene, BuildOptions { min_tets: meta.provenance.min_tets }).map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?;
+    let scene = Scene::load(
+        &meta.provenance.scene,
+        BuildOptions {
+            min_tets: meta.provenance.min_tets,
+        },
+    )
+    .map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?;
     let mut session = Session::new(&scene)?;
     if meta.localisation.is_some() {
         session.sim.settings.localisation = meta.localisation;
@@ -185,17 +200,38 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
 /// Restores `stepper` to keyframe `k` (which must carry its resume state) and checks it
 /// against the keyframe's hashes.
 fn resume_at(stepper: &mut SessionStepper, k: &KeyframeMsg) -> Result<(), RecorderError> {
-    let resume = k.resume.as_ref().ok_or_else(|| RecorderError::Replay(format!("the keyframe at step {} cannot be resumed", k.step)))?;
-    let malformed = |e: String| RecorderError::Malformed(format!("keyframe at step {}: {e}", k.step));
-    let points = |v: &[[f64; 3]]| v.iter().map(|&p| cutlab_sim::Point3::from(p)).collect::<Vec<_>>();
-    let mesh = cutlab_sim::TetMesh::new(points(&k.rest_positions_m), k.tets.clone(), k.regions.clone()).map_err(|e| malformed(e.to_string()))?;
+    let resume = k.resume.as_ref().ok_or_else(|| {
+        RecorderError::Replay(format!("the keyframe at step {} cannot be resumed", k.step))
+    })?;
+    let malformed =
+        |e: String| RecorderError::Malformed(format!("keyframe at step {}: {e}", k.step));
+    let points = |v: &[[f64; 3]]| {
+        v.iter()
+            .map(|&p| cutlab_sim::Point3::from(p))
+            .collect::<Vec<_>>()
+    };
+    let mesh = cutlab_sim::TetMesh::new(
+        points(&k.rest_positions_m),
+        k.tets.clone(),
+        k.regions.clone(),
+    )
+    .map_err(|e| malformed(e.to_string()))?;
     let state = cutlab_sim::model::State {
         positions: points(&k.positions_m),
-        velocities: k.velocities_m_per_s.iter().map(|&v| cutlab_sim::Vector3::from(v)).collect(),
+        velocities: k
+            .velocities_m_per_s
+            .iter()
+            .map(|&v| cutlab_sim::Vector3::from(v))
+            .collect(),
     };
-    stepper.resume(mesh, state, resume).map_err(|e| malformed(e.to_string()))?;
+    stepper
+        .resume(mesh, state, resume)
+        .map_err(|e| malformed(e.to_string()))?;
     if stepper.steps() != k.step + 1 {
-        return Err(malformed(format!("its resume state is of step {}", stepper.steps().wrapping_sub(1))));
+        return Err(malformed(format!(
+            "its resume state is of step {}",
+            stepper.steps().wrapping_sub(1)
+        )));
     }
     Ok(())
 }
@@ -206,7 +242,12 @@ fn position_difference(stepper: &SessionStepper, k: &KeyframeMsg) -> Option<(f64
     if x.len() != k.positions_m.len() {
         return None;
     }
-    x.iter().zip(&k.positions_m).map(|(p, q)| (p - cutlab_sim::Point3::from(*q)).norm()).enumerate().map(|(i, d)| (d, i)).max_by(|a, b| a.0.total_cmp(&b.0))
+    x.iter()
+        .zip(&k.positions_m)
+        .map(|(p, q)| (p - cutlab_sim::Point3::from(*q)).norm())
+        .enumerate()
+        .map(|(i, d)| (d, i))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
 }
 
 /// What a replay compares each step with: the recorded cuts, keyframe hashes and keyframes.
@@ -234,7 +275,13 @@ impl<'a> Checks<'a> {
 
     /// Runs recorded step `step` on `stepper` with its sample and compares what it did with
     /// the recording, counting into `report`.
-    fn step(&self, stepper: &mut SessionStepper, step: &SimStepMsg, sample: &ServoSample, report: &mut ReplayReport) -> StepOutput {
+    fn step(
+        &self,
+        stepper: &mut SessionStepper,
+        step: &SimStepMsg,
+        sample: &ServoSample,
+        report: &mut ReplayReport,
+    ) -> StepOutput {
         let (cuts, hashes, keyframes) = (&self.cuts, &self.hashes, &self.keyframes);
         let out = stepper.step(sample);
         report.steps += 1;
@@ -251,7 +298,10 @@ impl<'a> Checks<'a> {
                 } else if *event != r.event {
                     Some(format!(
                         "the cut's topology differs ({} tets split, recorded {}; {} vertices created, recorded {})",
-                        event.tets_removed.len(), r.event.tets_removed.len(), event.vertices_created.len(), r.event.vertices_created.len()
+                        event.tets_removed.len(),
+                        r.event.tets_removed.len(),
+                        event.vertices_created.len(),
+                        r.event.vertices_created.len()
                     ))
                 } else {
                     None
@@ -259,10 +309,29 @@ impl<'a> Checks<'a> {
             }
         };
         if out.rejected != step.rejected {
-            diverge(report, Divergence { step: step.step, tick: step.tick, what: format!("step rejected: {}, recorded {}", out.rejected, step.rejected), max_position_difference_m: None });
+            diverge(
+                report,
+                Divergence {
+                    step: step.step,
+                    tick: step.tick,
+                    what: format!(
+                        "step rejected: {}, recorded {}",
+                        out.rejected, step.rejected
+                    ),
+                    max_position_difference_m: None,
+                },
+            );
         }
         if let Some(what) = cut_differs {
-            diverge(report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m: None });
+            diverge(
+                report,
+                Divergence {
+                    step: step.step,
+                    tick: step.tick,
+                    what,
+                    max_position_difference_m: None,
+                },
+            );
         }
         if let Some(h) = hashes.get(&step.step) {
             report.keyframes_checked += 1;
@@ -270,9 +339,22 @@ impl<'a> Checks<'a> {
             if now == h.hash() {
                 report.keyframes_matched += 1;
             } else {
-                let what = format!("state hash {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}", now.state, now.topology, h.state.0, h.topology.0);
-                let max_position_difference_m = keyframes.get(&step.step).and_then(|k| position_difference(stepper, k));
-                diverge(report, Divergence { step: step.step, tick: step.tick, what, max_position_difference_m });
+                let what = format!(
+                    "state hash {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}",
+                    now.state, now.topology, h.state.0, h.topology.0
+                );
+                let max_position_difference_m = keyframes
+                    .get(&step.step)
+                    .and_then(|k| position_difference(stepper, k));
+                diverge(
+                    report,
+                    Divergence {
+                        step: step.step,
+                        tick: step.tick,
+                        what,
+                        max_position_difference_m,
+                    },
+                );
             }
         }
         out
@@ -280,7 +362,12 @@ impl<'a> Checks<'a> {
 
     /// Restores `stepper` to keyframe `k` and checks the restored state against its hashes
     /// (a difference is counted into `report`: false).
-    fn resume(&self, stepper: &mut SessionStepper, k: &KeyframeMsg, report: &mut ReplayReport) -> Result<bool, RecorderError> {
+    fn resume(
+        &self,
+        stepper: &mut SessionStepper,
+        k: &KeyframeMsg,
+        report: &mut ReplayReport,
+    ) -> Result<bool, RecorderError> {
         resume_at(stepper, k)?;
         let now = stepper.state_hash();
         if now != k.hash() {
@@ -288,7 +375,15 @@ impl<'a> Checks<'a> {
                 "the state restored from the keyframe has hashes {:016x}/{:016x} (state/topology), recorded {:016x}/{:016x}",
                 now.state, now.topology, k.state_hash.0, k.topology_hash.0
             );
-            diverge(report, Divergence { step: k.step, tick: k.tick, what, max_position_difference_m: None });
+            diverge(
+                report,
+                Divergence {
+                    step: k.step,
+                    tick: k.tick,
+                    what,
+                    max_position_difference_m: None,
+                },
+            );
             return Ok(false);
         }
         Ok(true)
@@ -298,15 +393,24 @@ impl<'a> Checks<'a> {
 /// Record `n` of the recording's steps must be step `n`.
 fn in_order(n: usize, step: &SimStepMsg) -> Result<(), RecorderError> {
     if step.step != n as u64 {
-        return Err(RecorderError::Replay(format!("step records out of order: record {n} is step {}", step.step)));
+        return Err(RecorderError::Replay(format!(
+            "step records out of order: record {n} is step {}",
+            step.step
+        )));
     }
     Ok(())
 }
 
 /// The recorded servo sample `step` consumed.
-fn sample_of<'s>(samples: &'s BTreeMap<u64, ServoSample>, step: &SimStepMsg) -> Result<&'s ServoSample, RecorderError> {
+fn sample_of<'s>(
+    samples: &'s BTreeMap<u64, ServoSample>,
+    step: &SimStepMsg,
+) -> Result<&'s ServoSample, RecorderError> {
     samples.get(&step.tick).ok_or_else(|| {
-        RecorderError::Replay(format!("the pose or tool state of tick {} (consumed by step {}) is missing from the recording", step.tick, step.step))
+        RecorderError::Replay(format!(
+            "the pose or tool state of tick {} (consumed by step {}) is missing from the recording",
+            step.tick, step.step
+        ))
     })
 }
 
@@ -314,7 +418,9 @@ fn sample_of<'s>(samples: &'s BTreeMap<u64, ServoSample>, step: &SimStepMsg) -> 
 pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayReport, RecorderError> {
     let meta = rec.meta()?;
     if rec.steps.is_empty() {
-        return Err(RecorderError::Replay("the recording has no simulation steps".into()));
+        return Err(RecorderError::Replay(
+            "the recording has no simulation steps".into(),
+        ));
     }
     let started = Instant::now();
     let mut stepper = stepper_for(meta)?;
@@ -322,33 +428,54 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     let samples = rec.samples();
     let checks = Checks::of(rec);
     let mut report = ReplayReport::empty(stepper.state_hash());
-    let initial = StateHash { state: meta.initial_state_hash.0, topology: meta.initial_topology_hash.0 };
+    let initial = StateHash {
+        state: meta.initial_state_hash.0,
+        topology: meta.initial_topology_hash.0,
+    };
     if stepper.state_hash() != initial {
-        diverge(&mut report, Divergence {
-            step: 0,
-            tick: 0,
-            what: format!(
-                "the settled scene {:?} differs from the recorded one before the first step (hashes {:016x}/{:016x}, recorded {:016x}/{:016x}): a different scene file or cutlab build",
-                meta.provenance.scene, stepper.state_hash().state, stepper.state_hash().topology, initial.state, initial.topology
-            ),
-            max_position_difference_m: None,
-        });
+        diverge(
+            &mut report,
+            Divergence {
+                step: 0,
+                tick: 0,
+                what: format!(
+                    "the settled scene {:?} differs from the recorded one before the first step (hashes {:016x}/{:016x}, recorded {:016x}/{:016x}): a different scene file or cutlab build",
+                    meta.provenance.scene,
+                    stepper.state_hash().state,
+                    stepper.state_hash().topology,
+                    initial.state,
+                    initial.topology
+                ),
+                max_position_difference_m: None,
+            },
+        );
         report.wall_s = started.elapsed().as_secs_f64();
         return Ok(report);
     }
 
-    let from_tick = options.from_s.map_or(0, |s| (s.max(0.0) * 1e9 / period as f64) as u64);
-    let to_tick = options.to_s.map_or(u64::MAX, |s| (s.max(0.0) * 1e9 / period as f64).ceil() as u64);
+    let from_tick = options
+        .from_s
+        .map_or(0, |s| (s.max(0.0) * 1e9 / period as f64) as u64);
+    let to_tick = options.to_s.map_or(u64::MAX, |s| {
+        (s.max(0.0) * 1e9 / period as f64).ceil() as u64
+    });
     let mut play_started: Option<(Instant, u64)> = None;
     let mut previous_tick: Option<u64> = None;
     let mut first_step = 0;
-    let seek_to = checks.keyframes.values().rev().find(|k| k.resume.is_some() && k.tick < from_tick && (k.step as usize) < rec.steps.len());
+    let seek_to =
+        checks.keyframes.values().rev().find(|k| {
+            k.resume.is_some() && k.tick < from_tick && (k.step as usize) < rec.steps.len()
+        });
     if let (Some(k), false) = (seek_to, options.resimulate) {
         if !checks.resume(&mut stepper, k, &mut report)? {
             report.wall_s = started.elapsed().as_secs_f64();
             return Ok(report);
         }
-        report.resumed_at = Some(ResumedAt { step: k.step, tick: k.tick, session_s: (k.tick + 1) as f64 * period as f64 * 1e-9 });
+        report.resumed_at = Some(ResumedAt {
+            step: k.step,
+            tick: k.tick,
+            session_s: (k.tick + 1) as f64 * period as f64 * 1e-9,
+        });
         first_step = k.step as usize + 1;
         previous_tick = Some(k.tick);
     }
@@ -358,8 +485,21 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         j => j,
     };
     if jobs > 1 && options.observer.is_none() && matches!(options.speed, None | Some(Speed::Max)) {
-        let end_step = rec.steps.iter().position(|s| s.tick > to_tick).unwrap_or(rec.steps.len());
-        let (threads, parts) = replay_in_parallel(rec, meta, &checks, &samples, stepper, first_step..end_step, jobs, options.keep_going)?;
+        let end_step = rec
+            .steps
+            .iter()
+            .position(|s| s.tick > to_tick)
+            .unwrap_or(rec.steps.len());
+        let (threads, parts) = replay_in_parallel(
+            rec,
+            meta,
+            &checks,
+            &samples,
+            stepper,
+            first_step..end_step,
+            jobs,
+            options.keep_going,
+        )?;
         report.jobs = threads;
         for part in parts {
             report.steps += part.steps;
@@ -385,7 +525,8 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         if playing {
             let (t0, tick0) = *play_started.get_or_insert((Instant::now(), step.tick));
             if let Some(Speed::Factor(f)) = options.speed {
-                let due = Duration::from_secs_f64((step.tick - tick0) as f64 * period as f64 * 1e-9 / f);
+                let due =
+                    Duration::from_secs_f64((step.tick - tick0) as f64 * period as f64 * 1e-9 / f);
                 if let Some(wait) = (t0 + due).checked_duration_since(Instant::now()) {
                     std::thread::sleep(wait);
                 }
@@ -401,16 +542,32 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
 
         let out = checks.step(&mut stepper, step, sample, &mut report);
         if playing && let Some(o) = options.observer.as_mut() {
-            o.on_sim(&SimRecord::Step { step: step.step, tick: step.tick, rejected: out.rejected })?;
+            o.on_sim(&SimRecord::Step {
+                step: step.step,
+                tick: step.tick,
+                rejected: out.rejected,
+            })?;
             if let Some((blade, event)) = out.cut {
-                o.on_sim(&SimRecord::Cut { step: step.step, tick: step.tick, blade, event: Box::new(event) })?;
+                o.on_sim(&SimRecord::Cut {
+                    step: step.step,
+                    tick: step.tick,
+                    blade,
+                    event: Box::new(event),
+                })?;
             }
             let every = meta.surface_every_steps;
             if every > 0 && (step.step + 1).is_multiple_of(every) {
-                o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(&stepper.collider, &stepper.sim.state.positions, step.step, step.tick))))?;
+                o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(
+                    &stepper.collider,
+                    &stepper.sim.state.positions,
+                    step.step,
+                    step.tick,
+                ))))?;
             }
             if checks.hashes.contains_key(&step.step) {
-                o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(&stepper, step.step, step.tick))))?;
+                o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(
+                    &stepper, step.step, step.tick,
+                ))))?;
             }
         }
         report.simulated_s = (step.tick + 1 - start_tick) as f64 * period as f64 * 1e-9;
@@ -445,7 +602,13 @@ fn replay_in_parallel(
     use std::sync::Mutex;
     use std::sync::atomic::{AtomicUsize, Ordering};
 
-    for (n, step) in rec.steps.iter().enumerate().take(range.end).skip(range.start) {
+    for (n, step) in rec
+        .steps
+        .iter()
+        .enumerate()
+        .take(range.end)
+        .skip(range.start)
+    {
         in_order(n, step)?;
     }
     // (first step, the keyframe it resumes at; None: the given stepper's state)
@@ -469,12 +632,20 @@ fn replay_in_parallel(
             }
             let (first, keyframe) = stretches[i];
             let last = stretches.get(i + 1).map_or(range.end, |s| s.0);
-            let mut report = ReplayReport::empty(StateHash { state: 0, topology: 0 });
+            let mut report = ReplayReport::empty(StateHash {
+                state: 0,
+                topology: 0,
+            });
             let mut taken = None;
             let stepper = match keyframe {
                 None => {
-                    taken = first_stepper.lock().map_err(|_| RecorderError::Replay("a replay thread panicked".into()))?.take();
-                    taken.as_mut().ok_or_else(|| RecorderError::Replay("the first stretch was taken twice".into()))?
+                    taken = first_stepper
+                        .lock()
+                        .map_err(|_| RecorderError::Replay("a replay thread panicked".into()))?
+                        .take();
+                    taken.as_mut().ok_or_else(|| {
+                        RecorderError::Replay("the first stretch was taken twice".into())
+                    })?
                 }
                 Some(k) => {
                     let stepper = match own.as_mut() {
@@ -494,7 +665,9 @@ fn replay_in_parallel(
                 }
             }
             let begun = first.checked_sub(1).map_or(0, |p| rec.steps[p].tick + 1);
-            let ticks = rec.steps[first..last].last().map_or(0, |s| (s.tick + 1).saturating_sub(begun));
+            let ticks = rec.steps[first..last]
+                .last()
+                .map_or(0, |s| (s.tick + 1).saturating_sub(begun));
             report.simulated_s = ticks as f64 * meta.period_nanos as f64 * 1e-9;
             report.final_hash = stepper.state_hash();
             if report.first_divergence.is_some() && !keep_going {
@@ -506,10 +679,18 @@ fn replay_in_parallel(
         }
     };
     let threads = jobs.min(stretches.len());
-    let results: Vec<Result<Vec<(usize, ReplayReport)>, RecorderError>> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..threads).map(|_| scope.spawn(run)).collect();
-        workers.into_iter().map(|w| w.join().unwrap_or_else(|_| Err(RecorderError::Replay("a replay thread panicked".into())))).collect()
-    });
+    let results: Vec<Result<Vec<(usize, ReplayReport)>, RecorderError>> =
+        std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..threads).map(|_| scope.spawn(run)).collect();
+            workers
+                .into_iter()
+                .map(|w| {
+                    w.join().unwrap_or_else(|_| {
+                        Err(RecorderError::Replay("a replay thread panicked".into()))
+                    })
+                })
+                .collect()
+        });
     let mut parts = Vec::new();
     for r in results {
         parts.extend(r?);

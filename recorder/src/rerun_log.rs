@@ -177,12 +177,21 @@ impl RerunSink {
     /// Opens the log: `application` names the rerun application (e.g. `"cutlab"`),
     /// `period_nanos` is the servo period (the `sim_time` of a tick is `tick * period`),
     /// `blade_length_m` the length of the blade drawn from the tip.
-    pub fn new(target: &RerunTarget, application: &str, period_nanos: u64, blade_length_m: f64) -> Result<Self, RerunLogError> {
+    pub fn new(
+        target: &RerunTarget,
+        application: &str,
+        period_nanos: u64,
+        blade_length_m: f64,
+    ) -> Result<Self, RerunLogError> {
         if period_nanos == 0 {
-            return Err(RerunLogError::Settings("the servo period must be positive".into()));
+            return Err(RerunLogError::Settings(
+                "the servo period must be positive".into(),
+            ));
         }
         if !(blade_length_m > 0.0 && blade_length_m.is_finite()) {
-            return Err(RerunLogError::Settings(format!("the blade length must be positive and finite, got {blade_length_m} m")));
+            return Err(RerunLogError::Settings(format!(
+                "the blade length must be positive and finite, got {blade_length_m} m"
+            )));
         }
         // `enabled(true)`: asked for explicitly, so the `RERUN` environment variable does not
         // silently turn it off.
@@ -191,19 +200,31 @@ impl RerunSink {
         let builder = RecordingStreamBuilder::new(application).enabled(true);
         let rec = match target {
             RerunTarget::File(path) => builder.save(path)?,
-            RerunTarget::Spawn => {
-                builder.spawn_opts(&rerun::SpawnOptions { hide_welcome_screen: true, ..Default::default() })?
-            }
+            RerunTarget::Spawn => builder.spawn_opts(&rerun::SpawnOptions {
+                hide_welcome_screen: true,
+                ..Default::default()
+            })?,
             RerunTarget::Connect(url) => builder.connect_grpc_opts(url.clone())?,
         };
         Self::with_stream(rec, target.is_live(), period_nanos, blade_length_m)
     }
 
-    fn with_stream(rec: RecordingStream, live: bool, period_nanos: u64, blade_length_m: f64) -> Result<Self, RerunLogError> {
+    fn with_stream(
+        rec: RecordingStream,
+        live: bool,
+        period_nanos: u64,
+        blade_length_m: f64,
+    ) -> Result<Self, RerunLogError> {
         // Wall-clock time means nothing in a replay: the timelines are the session's own.
         rec.set_log_time_enabled(false);
-        let batch_ticks = if live { LIVE_BATCH_TICKS } else { FILE_BATCH_TICKS };
-        let visual_every_ticks = ((1e9 / VISUAL_RATE_HZ) / period_nanos as f64).round().max(1.0) as u64;
+        let batch_ticks = if live {
+            LIVE_BATCH_TICKS
+        } else {
+            FILE_BATCH_TICKS
+        };
+        let visual_every_ticks = ((1e9 / VISUAL_RATE_HZ) / period_nanos as f64)
+            .round()
+            .max(1.0) as u64;
         let sink = Self {
             rec,
             live,
@@ -229,10 +250,17 @@ impl RerunSink {
             (paths::FORCE_Y, "Fy (N)", Color::from_rgb(60, 170, 60)),
             (paths::FORCE_Z, "Fz (N)", Color::from_rgb(60, 90, 220)),
             (paths::FORCE_NORM, "|F| (N)", Color::from_rgb(30, 30, 30)),
-            (paths::CONTACT_PENETRATION, "penetration (m)", Color::from_rgb(150, 80, 200)),
+            (
+                paths::CONTACT_PENETRATION,
+                "penetration (m)",
+                Color::from_rgb(150, 80, 200),
+            ),
         ];
         for (path, name, color) in series {
-            rec.log_static(path, &SeriesLines::new().with_names([name]).with_colors([color]))?;
+            rec.log_static(
+                path,
+                &SeriesLines::new().with_names([name]).with_colors([color]),
+            )?;
         }
         rec.log_static(
             paths::CONTACT_MODE,
@@ -269,27 +297,42 @@ impl RerunSink {
         let f = &sample.render.force_newtons;
         let c = &mut self.columns;
         c.ticks.push(to_i64(sample.tick));
-        c.sim_time_nanos.push(to_i64(sample.tick.saturating_mul(self.period_nanos)));
+        c.sim_time_nanos
+            .push(to_i64(sample.tick.saturating_mul(self.period_nanos)));
         c.force[0].push(f.x);
         c.force[1].push(f.y);
         c.force[2].push(f.z);
         c.force[3].push(f.norm());
         c.mode.push(mode_value(sample.render.mode));
-        c.penetration.push((sample.pose.tip_in_world - sample.render.proxy).norm());
+        c.penetration
+            .push((sample.pose.tip_in_world - sample.render.proxy).norm());
         self.ticks_logged += 1;
 
         let faults = sample.render.faults;
         if faults != self.last_faults {
             let (text, level) = if faults == 0 {
-                (format!("tick {}: faults cleared", sample.tick), rerun::TextLogLevel::INFO)
+                (
+                    format!("tick {}: faults cleared", sample.tick),
+                    rerun::TextLogLevel::INFO,
+                )
             } else {
-                (format!("tick {}: fault: {} (bits {faults:#04b})", sample.tick, fault::describe(faults)), rerun::TextLogLevel::WARN)
+                (
+                    format!(
+                        "tick {}: fault: {} (bits {faults:#04b})",
+                        sample.tick,
+                        fault::describe(faults)
+                    ),
+                    rerun::TextLogLevel::WARN,
+                )
             };
             self.last_faults = faults;
             self.set_time(sample.tick, None);
-            self.rec.log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
+            self.rec
+                .log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
         }
-        let due = self.last_visual_tick.is_none_or(|last| sample.tick.abs_diff(last) >= self.visual_every_ticks);
+        let due = self
+            .last_visual_tick
+            .is_none_or(|last| sample.tick.abs_diff(last) >= self.visual_every_ticks);
         if due {
             self.last_visual_tick = Some(sample.tick);
             self.log_tool(sample)?;
@@ -303,19 +346,35 @@ impl RerunSink {
     /// One record of the simulation thread.
     pub fn on_sim(&mut self, record: &SimRecord) -> Result<(), RerunLogError> {
         match record {
-            SimRecord::Step { step, tick, rejected } => {
+            SimRecord::Step {
+                step,
+                tick,
+                rejected,
+            } => {
                 if *rejected {
                     self.rejected_steps += 1;
                     // The first one, then one line per hundred: a diverging simulation must
                     // not flood the log.
                     if self.rejected_steps % 100 == 1 {
-                        let text = format!("step {step}: the simulation rejected the step (non-finite state; {} rejected so far)", self.rejected_steps);
+                        let text = format!(
+                            "step {step}: the simulation rejected the step (non-finite state; {} rejected so far)",
+                            self.rejected_steps
+                        );
                         self.log_event(*tick, *step, text, rerun::TextLogLevel::WARN)?;
                     }
                 }
             }
-            SimRecord::Cut { step, tick, blade, event } => {
-                let level = if event.forced_splits > 0 { rerun::TextLogLevel::WARN } else { rerun::TextLogLevel::INFO };
+            SimRecord::Cut {
+                step,
+                tick,
+                blade,
+                event,
+            } => {
+                let level = if event.forced_splits > 0 {
+                    rerun::TextLogLevel::WARN
+                } else {
+                    rerun::TextLogLevel::INFO
+                };
                 self.log_event(*tick, *step, cut_text(*step, blade, event), level)?;
             }
             SimRecord::Keyframe(k) => {
@@ -359,7 +418,10 @@ impl RerunSink {
     fn set_time(&self, tick: u64, step: Option<u64>) {
         self.rec.reset_time();
         self.rec.set_time_sequence(TIMELINE_TICK, to_i64(tick));
-        self.rec.set_time(TIMELINE_SIM_TIME, Duration::from_nanos(tick.saturating_mul(self.period_nanos)));
+        self.rec.set_time(
+            TIMELINE_SIM_TIME,
+            Duration::from_nanos(tick.saturating_mul(self.period_nanos)),
+        );
         if let Some(step) = step {
             self.rec.set_time_sequence(TIMELINE_STEP, to_i64(step));
         }
@@ -368,10 +430,12 @@ impl RerunSink {
     fn log_tool(&self, sample: &ServoSample) -> Result<(), RerunLogError> {
         self.set_time(sample.tick, None);
         let q = sample.pose.world_from_tool.quaternion();
-        let rotation = rerun::Quaternion::from_xyzw([q.i as f32, q.j as f32, q.k as f32, q.w as f32]);
+        let rotation =
+            rerun::Quaternion::from_xyzw([q.i as f32, q.j as f32, q.k as f32, q.w as f32]);
         self.rec.log(
             paths::SCALPEL,
-            &rerun::Transform3D::from_translation(f32x3(&sample.pose.tip_in_world)).with_quaternion(rotation),
+            &rerun::Transform3D::from_translation(f32x3(&sample.pose.tip_in_world))
+                .with_quaternion(rotation),
         )?;
         let color = match sample.render.mode {
             Mode::Free => rerun::Color::from_rgb(150, 150, 150),
@@ -403,7 +467,10 @@ impl RerunSink {
         for (path, values) in series {
             let indexes = [
                 rerun::TimeColumn::new_sequence(TIMELINE_TICK, c.ticks.iter().copied()),
-                rerun::TimeColumn::new_duration_nanos(TIMELINE_SIM_TIME, c.sim_time_nanos.iter().copied()),
+                rerun::TimeColumn::new_duration_nanos(
+                    TIMELINE_SIM_TIME,
+                    c.sim_time_nanos.iter().copied(),
+                ),
             ];
             let columns = rerun::Scalars::new(values.iter().copied()).columns_of_unit_batches()?;
             self.rec.send_columns(path, indexes, columns)?;
@@ -418,7 +485,9 @@ impl RerunSink {
         let normals = vertex_normals(&s.vertices, &s.triangles);
         let mesh = if !self.last_triangles.is_empty() && self.last_triangles == s.triangles {
             // Same topology: the triangles logged before still hold (latest-at).
-            rerun::Mesh3D::update_fields().with_vertex_positions(positions).with_vertex_normals(normals)
+            rerun::Mesh3D::update_fields()
+                .with_vertex_positions(positions)
+                .with_vertex_normals(normals)
         } else {
             self.last_triangles.clone_from(&s.triangles);
             rerun::Mesh3D::new(positions)
@@ -430,9 +499,16 @@ impl RerunSink {
         Ok(())
     }
 
-    fn log_event(&self, tick: u64, step: u64, text: String, level: &str) -> Result<(), RerunLogError> {
+    fn log_event(
+        &self,
+        tick: u64,
+        step: u64,
+        text: String,
+        level: &str,
+    ) -> Result<(), RerunLogError> {
         self.set_time(tick, Some(step));
-        self.rec.log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
+        self.rec
+            .log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
         Ok(())
     }
 }
@@ -442,7 +518,10 @@ impl Drop for RerunSink {
     /// as a boxed observer); the stream itself flushes (and a file gets its footer) when it drops.
     fn drop(&mut self) {
         if let Err(e) = self.send_series() {
-            tracing::warn!("rerun: the last {} ticks could not be sent: {e}", self.columns.len());
+            tracing::warn!(
+                "rerun: the last {} ticks could not be sent: {e}",
+                self.columns.len()
+            );
         }
     }
 }
@@ -469,7 +548,8 @@ fn vertex_normals(vertices: &[Point3], triangles: &[[u32; 3]]) -> Vec<[f32; 3]> 
     let mut sums = vec![nalgebra::Vector3::<f64>::zeros(); vertices.len()];
     for t in triangles {
         let [a, b, c] = t.map(|i| i as usize);
-        let (Some(pa), Some(pb), Some(pc)) = (vertices.get(a), vertices.get(b), vertices.get(c)) else {
+        let (Some(pa), Some(pb), Some(pc)) = (vertices.get(a), vertices.get(b), vertices.get(c))
+        else {
             continue;
         };
         // Twice the area times the unit normal: larger triangles weigh more.
@@ -511,7 +591,10 @@ fn cut_text(step: u64, blade: &Blade, e: &CutEvent) -> String {
         blade.depth_m,
     );
     if e.forced_splits > 0 {
-        text.push_str(&format!("; {} edges split beyond the blade (forced)", e.forced_splits));
+        text.push_str(&format!(
+            "; {} edges split beyond the blade (forced)",
+            e.forced_splits
+        ));
     }
     text
 }

@@ -18,8 +18,10 @@ use cutlab_haptics::tap::{SimRecord, TapFeed};
 use foxglove::Encode;
 use mcap::records::{MessageHeader, Metadata};
 
-use crate::channels::{self, KeyframeMsg, SessionMeta, SimStepMsg, StateHashMsg, ToolStateMsg, TopologyMsg};
 use crate::RecorderError;
+use crate::channels::{
+    self, KeyframeMsg, SessionMeta, SimStepMsg, StateHashMsg, ToolStateMsg, TopologyMsg,
+};
 
 /// Settings of the writer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,7 +34,10 @@ pub struct WriterOptions {
 
 impl Default for WriterOptions {
     fn default() -> Self {
-        Self { flush_interval: Duration::from_secs(1), chunk_size: 1 << 20 }
+        Self {
+            flush_interval: Duration::from_secs(1),
+            chunk_size: 1 << 20,
+        }
     }
 }
 
@@ -74,25 +79,47 @@ pub struct McapSink<W: Write + Seek> {
 
 impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("McapSink").field("period_nanos", &self.period_nanos).field("stats", &self.stats).finish_non_exhaustive()
+        f.debug_struct("McapSink")
+            .field("period_nanos", &self.period_nanos)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
     }
 }
 
 impl McapSink<BufWriter<File>> {
     /// Creates `path` (replacing it) and writes the header, the channels, the session
     /// metadata and the attachments `(name, media type, bytes)`.
-    pub fn create(path: &Path, meta: &SessionMeta, attachments: &[(&str, &str, Vec<u8>)], options: WriterOptions) -> Result<Self, RecorderError> {
-        let file = File::create(path).map_err(|source| RecorderError::Io { path: path.to_owned(), error: source })?;
-        Self::new(BufWriter::with_capacity(1 << 16, file), meta, attachments, options)
+    pub fn create(
+        path: &Path,
+        meta: &SessionMeta,
+        attachments: &[(&str, &str, Vec<u8>)],
+        options: WriterOptions,
+    ) -> Result<Self, RecorderError> {
+        let file = File::create(path).map_err(|source| RecorderError::Io {
+            path: path.to_owned(),
+            error: source,
+        })?;
+        Self::new(
+            BufWriter::with_capacity(1 << 16, file),
+            meta,
+            attachments,
+            options,
+        )
     }
 }
 
 fn protobuf_schema<T: Encode>() -> Result<foxglove::Schema, RecorderError> {
-    T::get_schema().ok_or_else(|| RecorderError::Encode("a Foxglove message without a schema".into()))
+    T::get_schema()
+        .ok_or_else(|| RecorderError::Encode("a Foxglove message without a schema".into()))
 }
 
 impl<W: Write + Seek> McapSink<W> {
-    pub fn new(out: W, meta: &SessionMeta, attachments: &[(&str, &str, Vec<u8>)], options: WriterOptions) -> Result<Self, RecorderError> {
+    pub fn new(
+        out: W,
+        meta: &SessionMeta,
+        attachments: &[(&str, &str, Vec<u8>)],
+        options: WriterOptions,
+    ) -> Result<Self, RecorderError> {
         let mut writer = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(options.chunk_size))
@@ -100,19 +127,33 @@ impl<W: Write + Seek> McapSink<W> {
             .library(format!("cutlab {}", env!("CARGO_PKG_VERSION")))
             .create(out)?;
         let no_meta = BTreeMap::new();
-        let protobuf = |w: &mut mcap::Writer<W>, schema: foxglove::Schema, topic: &str| -> Result<u16, RecorderError> {
+        let protobuf = |w: &mut mcap::Writer<W>,
+                        schema: foxglove::Schema,
+                        topic: &str|
+         -> Result<u16, RecorderError> {
             let id = w.add_schema(&schema.name, &schema.encoding, &schema.data)?;
             Ok(w.add_channel(id, topic, "protobuf", &no_meta)?)
         };
-        let pose = protobuf(&mut writer, protobuf_schema::<foxglove::messages::PoseInFrame>()?, channels::POSE)?;
-        let surface = protobuf(&mut writer, protobuf_schema::<foxglove::messages::SceneUpdate>()?, channels::SURFACE)?;
+        let pose = protobuf(
+            &mut writer,
+            protobuf_schema::<foxglove::messages::PoseInFrame>()?,
+            channels::POSE,
+        )?;
+        let surface = protobuf(
+            &mut writer,
+            protobuf_schema::<foxglove::messages::SceneUpdate>()?,
+            channels::SURFACE,
+        )?;
         let mut json = [0u16; 5];
         for (slot, (topic, name, schema)) in json.iter_mut().zip(channels::JSON_CHANNELS) {
             let id = writer.add_schema(name, "jsonschema", schema.as_bytes())?;
             *slot = writer.add_channel(id, topic, "json", &no_meta)?;
         }
         let [tool_state, step, topology, state_hash, keyframe] = json;
-        writer.write_metadata(&Metadata { name: channels::SESSION_METADATA.into(), metadata: meta.to_map()? })?;
+        writer.write_metadata(&Metadata {
+            name: channels::SESSION_METADATA.into(),
+            metadata: meta.to_map()?,
+        })?;
         for (name, media_type, data) in attachments {
             writer.attach(&mcap::Attachment {
                 log_time: 0,
@@ -125,7 +166,15 @@ impl<W: Write + Seek> McapSink<W> {
         writer.flush()?;
         Ok(Self {
             writer,
-            ids: Ids { pose, tool_state, step, topology, state_hash, keyframe, surface },
+            ids: Ids {
+                pose,
+                tool_state,
+                step,
+                topology,
+                state_hash,
+                keyframe,
+                surface,
+            },
             period_nanos: meta.period_nanos,
             sequence: 0,
             buf: Vec::with_capacity(1 << 12),
@@ -138,22 +187,41 @@ impl<W: Write + Seek> McapSink<W> {
     fn write(&mut self, channel_id: u16, topic: &str, tick: u64) -> Result<(), RecorderError> {
         let time = tick.saturating_mul(self.period_nanos);
         self.sequence = self.sequence.wrapping_add(1);
-        let header = MessageHeader { channel_id, sequence: self.sequence, log_time: time, publish_time: time };
+        let header = MessageHeader {
+            channel_id,
+            sequence: self.sequence,
+            log_time: time,
+            publish_time: time,
+        };
         self.writer.write_to_known_channel(&header, &self.buf)?;
         self.stats.payload_bytes += self.buf.len() as u64;
         *self.stats.messages.entry(topic.to_owned()).or_default() += 1;
         Ok(())
     }
 
-    fn write_json<T: serde::Serialize>(&mut self, channel_id: u16, topic: &str, tick: u64, msg: &T) -> Result<(), RecorderError> {
+    fn write_json<T: serde::Serialize>(
+        &mut self,
+        channel_id: u16,
+        topic: &str,
+        tick: u64,
+        msg: &T,
+    ) -> Result<(), RecorderError> {
         self.buf.clear();
-        serde_json::to_writer(&mut self.buf, msg).map_err(|e| RecorderError::Encode(e.to_string()))?;
+        serde_json::to_writer(&mut self.buf, msg)
+            .map_err(|e| RecorderError::Encode(e.to_string()))?;
         self.write(channel_id, topic, tick)
     }
 
-    fn write_protobuf<T: Encode>(&mut self, channel_id: u16, topic: &str, tick: u64, msg: &T) -> Result<(), RecorderError> {
+    fn write_protobuf<T: Encode>(
+        &mut self,
+        channel_id: u16,
+        topic: &str,
+        tick: u64,
+        msg: &T,
+    ) -> Result<(), RecorderError> {
         self.buf.clear();
-        msg.encode(&mut self.buf).map_err(|e| RecorderError::Encode(e.to_string()))?;
+        msg.encode(&mut self.buf)
+            .map_err(|e| RecorderError::Encode(e.to_string()))?;
         self.write(channel_id, topic, tick)
     }
 
@@ -161,8 +229,18 @@ impl<W: Write + Seek> McapSink<W> {
     pub fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
         let began = Instant::now();
         let time = sample.tick.saturating_mul(self.period_nanos);
-        self.write_protobuf(self.ids.pose, channels::POSE, sample.tick, &channels::pose_message(&sample.pose, time))?;
-        self.write_json(self.ids.tool_state, channels::TOOL_STATE, sample.tick, &ToolStateMsg::of(sample))?;
+        self.write_protobuf(
+            self.ids.pose,
+            channels::POSE,
+            sample.tick,
+            &channels::pose_message(&sample.pose, time),
+        )?;
+        self.write_json(
+            self.ids.tool_state,
+            channels::TOOL_STATE,
+            sample.tick,
+            &ToolStateMsg::of(sample),
+        )?;
         self.stats.busy_s += began.elapsed().as_secs_f64();
         self.flush_if_due()
     }
@@ -171,18 +249,55 @@ impl<W: Write + Seek> McapSink<W> {
     pub fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
         let began = Instant::now();
         match record {
-            &SimRecord::Step { step, tick, rejected } => self.write_json(self.ids.step, channels::SIM_STEP, tick, &SimStepMsg { step, tick, rejected })?,
-            SimRecord::Cut { step, tick, blade, event } => {
-                let msg = TopologyMsg { step: *step, tick: *tick, blade: blade.into(), event: (**event).clone() };
+            &SimRecord::Step {
+                step,
+                tick,
+                rejected,
+            } => self.write_json(
+                self.ids.step,
+                channels::SIM_STEP,
+                tick,
+                &SimStepMsg {
+                    step,
+                    tick,
+                    rejected,
+                },
+            )?,
+            SimRecord::Cut {
+                step,
+                tick,
+                blade,
+                event,
+            } => {
+                let msg = TopologyMsg {
+                    step: *step,
+                    tick: *tick,
+                    blade: blade.into(),
+                    event: (**event).clone(),
+                };
                 self.write_json(self.ids.topology, channels::TOPOLOGY, *tick, &msg)?;
             }
             SimRecord::Keyframe(k) => {
-                let hash = StateHashMsg { step: k.step, tick: k.tick, state: channels::Hex(k.hash.state), topology: channels::Hex(k.hash.topology) };
+                let hash = StateHashMsg {
+                    step: k.step,
+                    tick: k.tick,
+                    state: channels::Hex(k.hash.state),
+                    topology: channels::Hex(k.hash.topology),
+                };
                 self.write_json(self.ids.state_hash, channels::STATE_HASH, k.tick, &hash)?;
-                self.write_json(self.ids.keyframe, channels::KEYFRAME, k.tick, &KeyframeMsg::from(&**k))?;
+                self.write_json(
+                    self.ids.keyframe,
+                    channels::KEYFRAME,
+                    k.tick,
+                    &KeyframeMsg::from(&**k),
+                )?;
             }
             SimRecord::Surface(s) => {
-                let msg = channels::surface_message(&s.vertices, &s.triangles, s.tick.saturating_mul(self.period_nanos));
+                let msg = channels::surface_message(
+                    &s.vertices,
+                    &s.triangles,
+                    s.tick.saturating_mul(self.period_nanos),
+                );
                 self.write_protobuf(self.ids.surface, channels::SURFACE, s.tick, &msg)?;
             }
         }
@@ -211,9 +326,18 @@ impl<W: Write + Seek> McapSink<W> {
 
     /// Writes `end` as the `cutlab.session_end` metadata, then the summary and footer.
     pub fn finish(mut self, end: &BTreeMap<String, String>) -> Result<WriteStats, RecorderError> {
-        self.writer.write_metadata(&Metadata { name: channels::SESSION_END_METADATA.into(), metadata: end.clone() })?;
+        self.writer.write_metadata(&Metadata {
+            name: channels::SESSION_END_METADATA.into(),
+            metadata: end.clone(),
+        })?;
         self.writer.finish()?;
-        self.writer.into_inner().flush().map_err(|source| RecorderError::Io { path: "recording".into(), error: source })?;
+        self.writer
+            .into_inner()
+            .flush()
+            .map_err(|source| RecorderError::Io {
+                path: "recording".into(),
+                error: source,
+            })?;
         Ok(self.stats)
     }
 }
@@ -252,33 +376,35 @@ pub fn spawn<W: Write + Seek + Send + 'static>(
     mut feed: TapFeed,
     mut observer: Option<Box<dyn RecordObserver>>,
 ) -> std::io::Result<std::thread::JoinHandle<Result<WriterOutcome<W>, RecorderError>>> {
-    std::thread::Builder::new().name("cutlab-recorder".into()).spawn(move || {
-        loop {
-            let mut idle = true;
-            // ticks first: their queue is the one that drops when full
-            while let Ok(sample) = feed.ticks.pop() {
-                idle = false;
-                sink.on_tick(&sample)?;
-                if let Some(o) = observer.as_mut() {
-                    o.on_tick(&sample)?;
+    std::thread::Builder::new()
+        .name("cutlab-recorder".into())
+        .spawn(move || {
+            loop {
+                let mut idle = true;
+                // ticks first: their queue is the one that drops when full
+                while let Ok(sample) = feed.ticks.pop() {
+                    idle = false;
+                    sink.on_tick(&sample)?;
+                    if let Some(o) = observer.as_mut() {
+                        o.on_tick(&sample)?;
+                    }
+                }
+                if let Ok(record) = feed.sim.pop() {
+                    idle = false;
+                    sink.on_sim(&record)?;
+                    if let Some(o) = observer.as_mut() {
+                        o.on_sim(&record)?;
+                    }
+                }
+                if feed.ended() {
+                    break;
+                }
+                if idle {
+                    sink.flush_if_due()?;
+                    std::thread::sleep(Duration::from_micros(500));
                 }
             }
-            if let Ok(record) = feed.sim.pop() {
-                idle = false;
-                sink.on_sim(&record)?;
-                if let Some(o) = observer.as_mut() {
-                    o.on_sim(&record)?;
-                }
-            }
-            if feed.ended() {
-                break;
-            }
-            if idle {
-                sink.flush_if_due()?;
-                std::thread::sleep(Duration::from_micros(500));
-            }
-        }
-        sink.flush()?;
-        Ok((sink, observer))
-    })
+            sink.flush()?;
+            Ok((sink, observer))
+        })
 }

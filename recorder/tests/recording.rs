@@ -59,42 +59,113 @@ struct Recorded {
 fn recorded() -> &'static Recorded {
     static ONCE: OnceLock<Recorded> = OnceLock::new();
     ONCE.get_or_init(|| {
-        let scene = Scene::load(SCENE, BuildOptions { min_tets: Some(MIN_TETS) }).expect("scene");
+        let scene = Scene::load(
+            SCENE,
+            BuildOptions {
+                min_tets: Some(MIN_TETS),
+            },
+        )
+        .expect("scene");
         let session = Session::new(&scene).expect("session");
         let plan = session.plan_across_top(0.06, 0.008).expect("plan");
         let preset = Skill::preset("expert").expect("preset");
-        let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
-        let config = SessionConfig { duration_s: DURATION_S, ..SessionConfig::default() };
+        let device =
+            Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
+        let config = SessionConfig {
+            duration_s: DURATION_S,
+            ..SessionConfig::default()
+        };
         let path = temp_dir("shared").join("session.mcap");
         let seen = Arc::new(Mutex::new(Seen::default()));
-        let provenance = Provenance { scene: SCENE.into(), min_tets: Some(MIN_TETS), seed: 7, trainee: "t".into(), exercise: "e".into(), device: "expert".into() };
-        let settings = RecordSettings { tap: TapSettings { keyframe_every_steps: 1000, surface_every_steps: 100, ..TapSettings::default() }, writer: WriterOptions::default() };
-        let r = record::run_recorded(session, device, &config, &provenance, Some(&plan), &scene.spec, &path, settings, Some(Box::new(Collect(seen.clone()))))
-            .expect("recorded session");
+        let provenance = Provenance {
+            scene: SCENE.into(),
+            min_tets: Some(MIN_TETS),
+            seed: 7,
+            trainee: "t".into(),
+            exercise: "e".into(),
+            device: "expert".into(),
+        };
+        let settings = RecordSettings {
+            tap: TapSettings {
+                keyframe_every_steps: 1000,
+                surface_every_steps: 100,
+                ..TapSettings::default()
+            },
+            writer: WriterOptions::default(),
+        };
+        let r = record::run_recorded(
+            session,
+            device,
+            &config,
+            &provenance,
+            Some(&plan),
+            &scene.spec,
+            &path,
+            settings,
+            Some(Box::new(Collect(seen.clone()))),
+        )
+        .expect("recorded session");
         let report = r.report.expect("session ran");
         drop(r.observer);
-        let seen = Arc::try_unwrap(seen).ok().expect("observer dropped").into_inner().expect("lock");
-        Recorded { path, seen, ticks: report.servo.ticks, steps: report.sim_steps, cut_steps: report.stats.cut_steps, state_hash: report.state_hash }
+        let seen = Arc::try_unwrap(seen)
+            .ok()
+            .expect("observer dropped")
+            .into_inner()
+            .expect("lock");
+        Recorded {
+            path,
+            seen,
+            ticks: report.servo.ticks,
+            steps: report.sim_steps,
+            cut_steps: report.stats.cut_steps,
+            state_hash: report.state_hash,
+        }
     })
 }
 
 #[test]
 fn the_recorded_hand_played_back_drives_the_same_session_again() {
     let r = recorded();
-    let hand = cutlab_recorder::RecordedHand::new(&Recording::open(&r.path).expect("readable")).expect("a hand to play");
-    assert!((hand.duration_s() - (DURATION_S - 0.001)).abs() < 1e-9, "{} s", hand.duration_s());
-    let scene = Scene::load(SCENE, BuildOptions { min_tets: Some(MIN_TETS) }).expect("scene");
-    let config = SessionConfig { duration_s: DURATION_S, ..SessionConfig::default() };
-    let again = Session::new(&scene).expect("session").run(Box::new(hand), &config).expect("session driven by the recording");
-    assert_eq!((again.servo.ticks, again.stats.cut_steps), (r.ticks, r.cut_steps));
-    assert_eq!(again.state_hash, r.state_hash, "the same hand on the same scene gives the same session, bit for bit");
+    let hand = cutlab_recorder::RecordedHand::new(&Recording::open(&r.path).expect("readable"))
+        .expect("a hand to play");
+    assert!(
+        (hand.duration_s() - (DURATION_S - 0.001)).abs() < 1e-9,
+        "{} s",
+        hand.duration_s()
+    );
+    let scene = Scene::load(
+        SCENE,
+        BuildOptions {
+            min_tets: Some(MIN_TETS),
+        },
+    )
+    .expect("scene");
+    let config = SessionConfig {
+        duration_s: DURATION_S,
+        ..SessionConfig::default()
+    };
+    let again = Session::new(&scene)
+        .expect("session")
+        .run(Box::new(hand), &config)
+        .expect("session driven by the recording");
+    assert_eq!(
+        (again.servo.ticks, again.stats.cut_steps),
+        (r.ticks, r.cut_steps)
+    );
+    assert_eq!(
+        again.state_hash, r.state_hash,
+        "the same hand on the same scene gives the same session, bit for bit"
+    );
 }
 
 #[test]
 fn a_recording_reads_back_with_every_message_intact() {
     let r = recorded();
     let rec = Recording::open(&r.path).expect("readable");
-    assert!(rec.complete && rec.damage.is_none(), "a finished recording is complete");
+    assert!(
+        rec.complete && rec.damage.is_none(),
+        "a finished recording is complete"
+    );
     assert_eq!(r.ticks, 30_000);
     assert!(r.cut_steps > 0, "the session cut");
 
@@ -109,16 +180,28 @@ fn a_recording_reads_back_with_every_message_intact() {
     let (mut steps, mut cuts, mut keyframes, mut surfaces) = (0, 0, 0, 0);
     for record in &r.seen.sim {
         match record {
-            SimRecord::Step { step, tick, rejected } => {
+            SimRecord::Step {
+                step,
+                tick,
+                rejected,
+            } => {
                 let m = rec.steps[*step as usize];
                 assert_eq!((m.step, m.tick, m.rejected), (*step, *tick, *rejected));
                 steps += 1;
             }
-            SimRecord::Cut { step, tick, blade, event } => {
+            SimRecord::Cut {
+                step,
+                tick,
+                blade,
+                event,
+            } => {
                 let m = &rec.topology[cuts];
                 assert_eq!((m.step, m.tick), (*step, *tick));
                 assert_eq!(m.blade, BladeMsg::from(blade));
-                assert_eq!(&m.event, &**event, "the topology event of step {step} reads back bit for bit");
+                assert_eq!(
+                    &m.event, &**event,
+                    "the topology event of step {step} reads back bit for bit"
+                );
                 cuts += 1;
             }
             SimRecord::Keyframe(k) => {
@@ -126,7 +209,12 @@ fn a_recording_reads_back_with_every_message_intact() {
                 assert_eq!(m.hash(), k.hash);
                 assert_eq!(rec.hashes[keyframes].hash(), k.hash);
                 assert_eq!(m.positions_m.len(), k.positions.len());
-                assert!(m.positions_m.iter().zip(&k.positions).all(|(a, b)| a == &<[f64; 3]>::from(b.coords)));
+                assert!(
+                    m.positions_m
+                        .iter()
+                        .zip(&k.positions)
+                        .all(|(a, b)| a == &<[f64; 3]>::from(b.coords))
+                );
                 assert_eq!(m.tets, k.tets);
                 keyframes += 1;
             }
@@ -139,18 +227,43 @@ fn a_recording_reads_back_with_every_message_intact() {
     assert_eq!(keyframes, 30, "one keyframe a second");
     assert_eq!(surfaces, rec.surfaces);
     let meta = rec.meta().expect("metadata");
-    assert_eq!((meta.provenance.scene.as_str(), meta.provenance.min_tets, meta.provenance.seed, meta.provenance.trainee.as_str()), (SCENE, Some(MIN_TETS), 7, "t"));
+    assert_eq!(
+        (
+            meta.provenance.scene.as_str(),
+            meta.provenance.min_tets,
+            meta.provenance.seed,
+            meta.provenance.trainee.as_str()
+        ),
+        (SCENE, Some(MIN_TETS), 7, "t")
+    );
     assert!(rec.plan().expect("plan attachment").is_some());
     assert!(rec.attachment(channels::SCENE_ATTACHMENT).is_some());
-    assert_eq!(rec.end.as_ref().and_then(|e| e.get("status")).map(String::as_str), Some("complete"));
+    assert_eq!(
+        rec.end
+            .as_ref()
+            .and_then(|e| e.get("status"))
+            .map(String::as_str),
+        Some("complete")
+    );
 }
 
 #[test]
 fn a_30_s_session_with_cuts_replays_with_every_hash_equal() {
     let r = recorded();
     let rec = Recording::open(&r.path).expect("readable");
-    let report = replay::replay(&rec, ReplayOptions { jobs: 1, ..ReplayOptions::default() }).expect("replay runs");
-    assert!(report.first_divergence.is_none(), "{:?}", report.first_divergence);
+    let report = replay::replay(
+        &rec,
+        ReplayOptions {
+            jobs: 1,
+            ..ReplayOptions::default()
+        },
+    )
+    .expect("replay runs");
+    assert!(
+        report.first_divergence.is_none(),
+        "{:?}",
+        report.first_divergence
+    );
     assert_eq!(report.keyframes_checked, 30);
     assert_eq!(report.keyframes_matched, 30);
     assert_eq!(report.cuts_replayed, r.cut_steps);
@@ -158,10 +271,26 @@ fn a_30_s_session_with_cuts_replays_with_every_hash_equal() {
     assert!(report.verified());
     assert_eq!(report.final_hash.state, r.state_hash);
     // the stretches between keyframes side by side: the same checks, the same end
-    let parallel = replay::replay(&rec, ReplayOptions { jobs: 3, ..ReplayOptions::default() }).expect("replay runs");
+    let parallel = replay::replay(
+        &rec,
+        ReplayOptions {
+            jobs: 3,
+            ..ReplayOptions::default()
+        },
+    )
+    .expect("replay runs");
     assert_eq!(parallel.jobs, 3);
     assert!(parallel.verified(), "{:?}", parallel.first_divergence);
-    let counts = |r: &replay::ReplayReport| (r.steps, r.keyframes_checked, r.keyframes_matched, r.cuts_recorded, r.cuts_replayed, r.final_hash);
+    let counts = |r: &replay::ReplayReport| {
+        (
+            r.steps,
+            r.keyframes_checked,
+            r.keyframes_matched,
+            r.cuts_recorded,
+            r.cuts_replayed,
+            r.final_hash,
+        )
+    };
     assert_eq!(counts(&parallel), counts(&report));
     assert!((parallel.simulated_s - report.simulated_s).abs() < 1e-9);
 }
@@ -173,43 +302,110 @@ fn a_replay_seeks_through_the_nearest_keyframe_and_stays_bit_exact() {
     let period_s = 1e-3;
     // every keyframe can be resumed (the surface BVH was built again at each); one of them
     // in the middle of a stroke
-    let resumable: Vec<_> = rec.keyframes.iter().filter(|k| k.resume.is_some()).collect();
-    assert_eq!(resumable.len(), 30, "every keyframe carries its resume state");
-    let mid_stroke = resumable.iter().find(|k| k.resume.as_ref().is_some_and(|s| !s.cutter.trail.is_empty())).expect("a keyframe mid-stroke");
+    let resumable: Vec<_> = rec
+        .keyframes
+        .iter()
+        .filter(|k| k.resume.is_some())
+        .collect();
+    assert_eq!(
+        resumable.len(),
+        30,
+        "every keyframe carries its resume state"
+    );
+    let mid_stroke = resumable
+        .iter()
+        .find(|k| {
+            k.resume
+                .as_ref()
+                .is_some_and(|s| !s.cutter.trail.is_empty())
+        })
+        .expect("a keyframe mid-stroke");
     let mid_stroke_s = (mid_stroke.tick + 1) as f64 * period_s;
     for from_s in [mid_stroke_s + 0.25, 20.2] {
         let to_s = from_s + 2.0;
-        let options = ReplayOptions { from_s: Some(from_s), to_s: Some(to_s), ..ReplayOptions::default() };
+        let options = ReplayOptions {
+            from_s: Some(from_s),
+            to_s: Some(to_s),
+            ..ReplayOptions::default()
+        };
         let seek = replay::replay(&rec, options).expect("replay runs");
         let resumed = seek.resumed_at.expect("resumed at a keyframe");
         let (step, t) = (resumed.step, resumed.session_s);
-        assert!((t - (resumed.tick + 1) as f64 * period_s).abs() < 1e-12, "the keyframe's time is that of its tick");
-        assert!(t <= from_s && from_s - t < 1.0, "from {from_s} s: resumed at {t} s");
-        assert!(seek.verified() && seek.keyframes_checked >= 2, "from {from_s} s: {:?} ({} keyframes)", seek.first_divergence, seek.keyframes_checked);
-        assert!(seek.steps < 3100, "from {from_s} s: {} steps re-simulated", seek.steps);
+        assert!(
+            (t - (resumed.tick + 1) as f64 * period_s).abs() < 1e-12,
+            "the keyframe's time is that of its tick"
+        );
+        assert!(
+            t <= from_s && from_s - t < 1.0,
+            "from {from_s} s: resumed at {t} s"
+        );
+        assert!(
+            seek.verified() && seek.keyframes_checked >= 2,
+            "from {from_s} s: {:?} ({} keyframes)",
+            seek.first_divergence,
+            seek.keyframes_checked
+        );
+        assert!(
+            seek.steps < 3100,
+            "from {from_s} s: {} steps re-simulated",
+            seek.steps
+        );
         // the same window re-simulated from the start ends in the same state
-        let options = ReplayOptions { from_s: Some(from_s), to_s: Some(to_s), resimulate: true, ..ReplayOptions::default() };
+        let options = ReplayOptions {
+            from_s: Some(from_s),
+            to_s: Some(to_s),
+            resimulate: true,
+            ..ReplayOptions::default()
+        };
         let full = replay::replay(&rec, options).expect("replay runs");
         assert!(full.resumed_at.is_none() && full.verified());
-        assert_eq!(full.final_hash, seek.final_hash, "from {from_s} s (resumed at step {step})");
+        assert_eq!(
+            full.final_hash, seek.final_hash,
+            "from {from_s} s (resumed at step {step})"
+        );
     }
 
     // a damaged resume state is an error, not a panic nor a silent re-simulation
     let mut damaged = Recording::open(&r.path).expect("readable");
-    let k = damaged.keyframes.iter_mut().find(|k| k.step == mid_stroke.step).expect("keyframe");
+    let k = damaged
+        .keyframes
+        .iter_mut()
+        .find(|k| k.step == mid_stroke.step)
+        .expect("keyframe");
     if let Some(resume) = k.resume.as_mut() {
         resume.cutter.stroke.push(u32::MAX);
     }
-    let options = ReplayOptions { from_s: Some(mid_stroke_s + 0.25), ..ReplayOptions::default() };
+    let options = ReplayOptions {
+        from_s: Some(mid_stroke_s + 0.25),
+        ..ReplayOptions::default()
+    };
     let err = replay::replay(&damaged, options).expect_err("refused");
-    assert!(err.to_string().contains(&format!("keyframe at step {}", mid_stroke.step)), "{err}");
+    assert!(
+        err.to_string()
+            .contains(&format!("keyframe at step {}", mid_stroke.step)),
+        "{err}"
+    );
     // a keyframe whose state was tampered with is caught by its hash
     let mut tampered = Recording::open(&r.path).expect("readable");
-    let k = tampered.keyframes.iter_mut().find(|k| k.step == mid_stroke.step).expect("keyframe");
+    let k = tampered
+        .keyframes
+        .iter_mut()
+        .find(|k| k.step == mid_stroke.step)
+        .expect("keyframe");
     k.positions_m[0][0] += 1e-9;
-    let report = replay::replay(&tampered, ReplayOptions { from_s: Some(mid_stroke_s + 0.25), ..ReplayOptions::default() }).expect("replay runs");
+    let report = replay::replay(
+        &tampered,
+        ReplayOptions {
+            from_s: Some(mid_stroke_s + 0.25),
+            ..ReplayOptions::default()
+        },
+    )
+    .expect("replay runs");
     let d = report.first_divergence.expect("found");
-    assert!(d.step == mid_stroke.step && d.what.contains("restored"), "{d}");
+    assert!(
+        d.step == mid_stroke.step && d.what.contains("restored"),
+        "{d}"
+    );
 }
 
 #[test]
@@ -218,12 +414,30 @@ fn a_changed_input_is_reported_at_the_step_that_consumed_it() {
     let mut rec = Recording::open(&r.path).expect("readable");
     // nudge the scalpel by 0.1 um at the tick of the second cut: that cut's blade differs
     let cut = rec.topology[1].clone();
-    let pose = rec.poses.iter_mut().find(|p| p.0 == cut.tick).expect("pose of the cut's tick");
+    let pose = rec
+        .poses
+        .iter_mut()
+        .find(|p| p.0 == cut.tick)
+        .expect("pose of the cut's tick");
     pose.1.x += 1e-7;
     for jobs in [1, 2] {
-        let report = replay::replay(&rec, ReplayOptions { jobs, ..ReplayOptions::default() }).expect("replay runs");
-        let d = report.first_divergence.clone().expect("the change is found");
-        assert_eq!((d.step, d.tick), (cut.step, cut.tick), "{jobs} threads: {d}");
+        let report = replay::replay(
+            &rec,
+            ReplayOptions {
+                jobs,
+                ..ReplayOptions::default()
+            },
+        )
+        .expect("replay runs");
+        let d = report
+            .first_divergence
+            .clone()
+            .expect("the change is found");
+        assert_eq!(
+            (d.step, d.tick),
+            (cut.step, cut.tick),
+            "{jobs} threads: {d}"
+        );
         assert!(d.what.contains("blade"), "{d}");
         assert!(!report.verified());
     }
@@ -256,7 +470,15 @@ fn truncation_at_random_offsets_is_read_and_recovered_without_panics() {
     let full_messages: u64 = full.counts().values().sum();
     let dir = temp_dir("truncated");
     let mut cuts = offsets(bytes.len() as u64, 24, 11);
-    cuts.extend([0, 3, 8, 9, 64, bytes.len() as u64 / 2, bytes.len() as u64 - 1]);
+    cuts.extend([
+        0,
+        3,
+        8,
+        9,
+        64,
+        bytes.len() as u64 / 2,
+        bytes.len() as u64 - 1,
+    ]);
     let mut replayed_partial = false;
     for (k, &at) in cuts.iter().enumerate() {
         let cut = &bytes[..at as usize];
@@ -271,17 +493,25 @@ fn truncation_at_random_offsets_is_read_and_recovered_without_panics() {
             assert!(recovered.is_err());
             continue;
         };
-        assert!(!rec.complete, "a file cut at {at} of {} bytes is not complete", bytes.len());
+        assert!(
+            !rec.complete,
+            "a file cut at {at} of {} bytes is not complete",
+            bytes.len()
+        );
         let kept: u64 = rec.counts().values().sum();
         assert!(kept <= full_messages);
         let report = recovered.expect("recovered");
-        assert_eq!(report.messages, kept, "recover keeps what the reader reads (cut at {at})");
+        assert_eq!(
+            report.messages, kept,
+            "recover keeps what the reader reads (cut at {at})"
+        );
         let again = Recording::open(&fixed).expect("the recovered file opens");
         assert!(again.complete, "the recovered file is complete");
         assert_eq!(again.counts().values().sum::<u64>(), kept);
         // a recovered file with a keyframe replays bit for bit up to where it ends
         if !again.hashes.is_empty() && again.meta.is_some() && !replayed_partial {
-            let rp = replay::replay(&again, ReplayOptions::default()).expect("replay of the recovered part");
+            let rp = replay::replay(&again, ReplayOptions::default())
+                .expect("replay of the recovered part");
             assert!(rp.first_divergence.is_none(), "{:?}", rp.first_divergence);
             assert_eq!(rp.keyframes_matched, rp.keyframes_checked);
             replayed_partial = true;
@@ -307,7 +537,8 @@ fn a_flushed_recording_is_readable_while_still_open() {
     let rec = Recording::open(&r.path).expect("readable");
     let meta = rec.meta().expect("meta").clone();
     let path = temp_dir("open").join("open.mcap");
-    let mut sink = cutlab_recorder::McapSink::create(&path, &meta, &[], WriterOptions::default()).expect("sink");
+    let mut sink = cutlab_recorder::McapSink::create(&path, &meta, &[], WriterOptions::default())
+        .expect("sink");
     for s in r.seen.ticks.iter().take(1500) {
         sink.on_tick(s).expect("tick");
     }
@@ -324,13 +555,23 @@ fn a_flushed_recording_is_readable_while_still_open() {
 #[test]
 fn the_external_mcap_reader_reads_it_with_crc_checks() {
     let Ok(python) = std::env::var("CUTLAB_MCAP_PYTHON") else {
-        eprintln!("skipped: CUTLAB_MCAP_PYTHON is not set (.ci/run sets it to a venv with mcap and mcap-protobuf-support)");
+        eprintln!(
+            "skipped: CUTLAB_MCAP_PYTHON is not set (.ci/run sets it to a venv with mcap and mcap-protobuf-support)"
+        );
         return;
     };
     let r = recorded();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/read_mcap.py");
-    let out = std::process::Command::new(python).arg(&script).arg(&r.path).output().expect("python runs");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = std::process::Command::new(python)
+        .arg(&script)
+        .arg(&r.path)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
     let rec = Recording::open(&r.path).expect("readable");
     for (topic, n) in rec.counts() {
@@ -340,37 +581,102 @@ fn the_external_mcap_reader_reads_it_with_crc_checks() {
     let x = v["first_pose_xyz"][0].as_f64().expect("x");
     assert_eq!(x.to_bits(), first.pose.tip_in_world.x.to_bits());
     assert_eq!(v["first_tool_state"]["tick"].as_u64(), Some(0));
-    let meta_names: Vec<&str> = v["metadata"].as_array().expect("metadata").iter().filter_map(|m| m.as_str()).collect();
-    assert!(meta_names.contains(&channels::SESSION_METADATA) && meta_names.contains(&channels::SESSION_END_METADATA));
-    let attachments: Vec<&str> = v["attachments"].as_array().expect("attachments").iter().filter_map(|m| m.as_str()).collect();
-    assert!(attachments.contains(&channels::PLAN_ATTACHMENT) && attachments.contains(&channels::SCENE_ATTACHMENT));
+    let meta_names: Vec<&str> = v["metadata"]
+        .as_array()
+        .expect("metadata")
+        .iter()
+        .filter_map(|m| m.as_str())
+        .collect();
+    assert!(
+        meta_names.contains(&channels::SESSION_METADATA)
+            && meta_names.contains(&channels::SESSION_END_METADATA)
+    );
+    let attachments: Vec<&str> = v["attachments"]
+        .as_array()
+        .expect("attachments")
+        .iter()
+        .filter_map(|m| m.as_str())
+        .collect();
+    assert!(
+        attachments.contains(&channels::PLAN_ATTACHMENT)
+            && attachments.contains(&channels::SCENE_ATTACHMENT)
+    );
 }
 
 #[test]
 fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
-    let scene = Scene::load(SCENE, BuildOptions { min_tets: Some(MIN_TETS) }).expect("scene");
+    let scene = Scene::load(
+        SCENE,
+        BuildOptions {
+            min_tets: Some(MIN_TETS),
+        },
+    )
+    .expect("scene");
     let mut session = Session::new(&scene).expect("session");
     session.sim.settings.localisation = Some(cutlab_sim::solver::LocalisationSettings::default());
     let plan = session.plan_across_top(0.06, 0.008).expect("plan");
     let preset = Skill::preset("expert").expect("preset");
-    let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
-    let config = SessionConfig { duration_s: 8.0, ..SessionConfig::default() };
+    let device =
+        Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
+    let config = SessionConfig {
+        duration_s: 8.0,
+        ..SessionConfig::default()
+    };
     let path = temp_dir("localised").join("session.mcap");
-    let provenance = Provenance { scene: SCENE.into(), min_tets: Some(MIN_TETS), seed: 7, trainee: "t".into(), exercise: "e".into(), device: "expert".into() };
-    let settings = RecordSettings { tap: TapSettings { keyframe_every_steps: 500, surface_every_steps: 0, ..TapSettings::default() }, writer: WriterOptions::default() };
-    let r = record::run_recorded(session, device, &config, &provenance, Some(&plan), &scene.spec, &path, settings, None).expect("recorded session");
+    let provenance = Provenance {
+        scene: SCENE.into(),
+        min_tets: Some(MIN_TETS),
+        seed: 7,
+        trainee: "t".into(),
+        exercise: "e".into(),
+        device: "expert".into(),
+    };
+    let settings = RecordSettings {
+        tap: TapSettings {
+            keyframe_every_steps: 500,
+            surface_every_steps: 0,
+            ..TapSettings::default()
+        },
+        writer: WriterOptions::default(),
+    };
+    let r = record::run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        Some(&plan),
+        &scene.spec,
+        &path,
+        settings,
+        None,
+    )
+    .expect("recorded session");
     let report = r.report.expect("session ran");
     assert!(report.stats.cut_steps > 0, "{:?}", report.stats);
 
     let rec = Recording::open(&path).expect("readable");
-    assert_eq!(rec.meta().expect("meta").localisation, Some(cutlab_sim::solver::LocalisationSettings::default()));
+    assert_eq!(
+        rec.meta().expect("meta").localisation,
+        Some(cutlab_sim::solver::LocalisationSettings::default())
+    );
     let replayed = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
     assert!(replayed.verified(), "{:?}", replayed.first_divergence);
     assert_eq!(replayed.cuts_replayed, report.stats.cut_steps);
     assert_eq!(replayed.keyframes_checked, 16);
     // seeking restores the localised region too
-    let seek = replay::replay(&rec, ReplayOptions { from_s: Some(5.2), ..ReplayOptions::default() }).expect("replay runs");
+    let seek = replay::replay(
+        &rec,
+        ReplayOptions {
+            from_s: Some(5.2),
+            ..ReplayOptions::default()
+        },
+    )
+    .expect("replay runs");
     assert_eq!(seek.resumed_at.map(|k| k.step), Some(4999));
-    assert!(seek.verified() && seek.keyframes_checked == 6, "{:?}", seek.first_divergence);
+    assert!(
+        seek.verified() && seek.keyframes_checked == 6,
+        "{:?}",
+        seek.first_divergence
+    );
     assert_eq!(seek.final_hash, replayed.final_hash);
 }

@@ -20,20 +20,38 @@ fn summary(mut v: Vec<f64>) -> String {
     }
     v.sort_by(f64::total_cmp);
     let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    format!("{} cuts, median {:.0} us, p99 {:.0} us, max {:.0} us", v.len(), at(0.5), at(0.99), v[v.len() - 1])
+    format!(
+        "{} cuts, median {:.0} us, p99 {:.0} us, max {:.0} us",
+        v.len(),
+        at(0.5),
+        at(0.99),
+        v[v.len() - 1]
+    )
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let tets: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(100_000);
+    let tets: usize = args
+        .next()
+        .map(|a| a.parse())
+        .transpose()?
+        .unwrap_or(100_000);
     let between: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(3);
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(tets) })?;
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(tets),
+        },
+    )?;
     let mut sim = scene.simulation();
     let settle = sim.settle(StaticSettings::default());
     assert!(settle.converged, "{settle:?}");
     let x = &sim.state.positions;
     let top = |tool_x: f64| {
-        x.iter().filter(|p| (p.x - tool_x).abs() < 0.002 && p.y.abs() < 0.002).map(|p| p.z).fold(f64::NEG_INFINITY, f64::max)
+        x.iter()
+            .filter(|p| (p.x - tool_x).abs() < 0.002 && p.y.abs() < 0.002)
+            .map(|p| p.z)
+            .fold(f64::NEG_INFINITY, f64::max)
     };
     let (z0, z1) = (top(-0.02), top(0.02));
     if std::env::var_os("LOCALISED").is_some() {
@@ -47,7 +65,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for k in 0..=80 {
         let tx = -0.02 + 0.0005 * k as f64;
         let z = z0 + (z1 - z0) * (k as f64 / 80.0) - 0.003;
-        let blade = Blade { tip: Point3::new(tx, 0.0, z), edge_direction: Vector3::z(), depth_m: 0.008 };
+        let blade = Blade {
+            tip: Point3::new(tx, 0.0, z),
+            edge_direction: Vector3::z(),
+            depth_m: 0.008,
+        };
         let t = Instant::now();
         let event = cutter.advance(&mut sim, blade)?;
         let us = t.elapsed().as_secs_f64() * 1e6;
@@ -71,16 +93,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let hash = sim.state.positions.iter().fold(0u64, |h, p| {
-        [p.x, p.y, p.z].iter().fold(h, |h, c| (h ^ c.to_bits()).wrapping_mul(0x100000001b3))
+        [p.x, p.y, p.z]
+            .iter()
+            .fold(h, |h, c| (h ^ c.to_bits()).wrapping_mul(0x100000001b3))
     });
-    let hash = sim.model.mesh.tets().iter().flatten().fold(hash, |h, &v| (h ^ v as u64).wrapping_mul(0x100000001b3));
-    println!("{} tets before, {} after, {split} tets split", tets, sim.model.mesh.tet_count());
+    let hash = sim
+        .model
+        .mesh
+        .tets()
+        .iter()
+        .flatten()
+        .fold(hash, |h, &v| (h ^ v as u64).wrapping_mul(0x100000001b3));
+    println!(
+        "{} tets before, {} after, {split} tets split",
+        tets,
+        sim.model.mesh.tet_count()
+    );
     println!("changing: {}", summary(changed));
     println!("idle:     {}", summary(idle));
     let mean = |sum: usize, of: &[f64]| sum as f64 / of.len().max(1) as f64;
-    let cg = (mean(cg_after_cut, &step_after_cut), mean(cg_other, &step_other));
-    println!("steps right after a changing cut: {}, {:.1} CG it.", summary(step_after_cut).replace("cuts", "steps"), cg.0);
-    println!("other steps: {}, {:.1} CG it.", summary(step_other).replace("cuts", "steps"), cg.1);
+    let cg = (
+        mean(cg_after_cut, &step_after_cut),
+        mean(cg_other, &step_other),
+    );
+    println!(
+        "steps right after a changing cut: {}, {:.1} CG it.",
+        summary(step_after_cut).replace("cuts", "steps"),
+        cg.0
+    );
+    println!(
+        "other steps: {}, {:.1} CG it.",
+        summary(step_other).replace("cuts", "steps"),
+        cg.1
+    );
     println!("hash {hash:016x}");
     Ok(())
 }

@@ -6,15 +6,24 @@
 
 use std::time::Instant;
 
+use cutlab_sim::Vector3;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
-use cutlab_sim::Vector3;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let tets: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(100_000);
+    let tets: usize = args
+        .next()
+        .map(|a| a.parse())
+        .transpose()?
+        .unwrap_or(100_000);
     let steps: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(400);
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(tets) })?;
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(tets),
+        },
+    )?;
     let mut sim = scene.simulation();
     let settle = sim.settle(StaticSettings::default());
     assert!(settle.converged, "{settle:?}");
@@ -30,7 +39,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     surface.sort_unstable();
     surface.dedup();
     let dt = sim.settings.time_step_s;
-    let force: f64 = std::env::var("FORCE_N").ok().and_then(|f| f.parse().ok()).unwrap_or(0.3);
+    let force: f64 = std::env::var("FORCE_N")
+        .ok()
+        .and_then(|f| f.parse().ok())
+        .unwrap_or(0.3);
     let (mut times, mut cg) = (Vec::with_capacity(steps), 0usize);
     for k in 0..steps {
         // the press slides from x = -30 mm to +30 mm over 1.5 s
@@ -55,7 +67,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cg += report.cg_iterations;
     }
     let hash = sim.state.positions.iter().fold(0u64, |h, p| {
-        [p.x, p.y, p.z].iter().fold(h, |h, c| (h ^ c.to_bits()).wrapping_mul(0x100000001b3))
+        [p.x, p.y, p.z]
+            .iter()
+            .fold(h, |h, c| (h ^ c.to_bits()).wrapping_mul(0x100000001b3))
     });
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);

@@ -5,8 +5,14 @@
 pub enum MeshError {
     #[error("mesh has no tetrahedra")]
     Empty,
-    #[error("tetrahedron {tet} refers to vertex {vertex}, but the mesh has {vertex_count} vertices")]
-    VertexOutOfRange { tet: usize, vertex: u32, vertex_count: usize },
+    #[error(
+        "tetrahedron {tet} refers to vertex {vertex}, but the mesh has {vertex_count} vertices"
+    )]
+    VertexOutOfRange {
+        tet: usize,
+        vertex: u32,
+        vertex_count: usize,
+    },
     #[error("tetrahedron {tet} repeats vertex {vertex}")]
     RepeatedVertex { tet: usize, vertex: u32 },
     #[error("{regions} region ids given for {tets} tetrahedra")]
@@ -20,13 +26,26 @@ pub enum MeshError {
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     #[error("{path}: {error}")]
-    Io { path: std::path::PathBuf, error: std::io::Error },
+    Io {
+        path: std::path::PathBuf,
+        error: std::io::Error,
+    },
     #[error("{path}:{line}: {message}")]
-    Parse { path: std::path::PathBuf, line: usize, message: String },
+    Parse {
+        path: std::path::PathBuf,
+        line: usize,
+        message: String,
+    },
     #[error("{path}: {message}")]
-    Format { path: std::path::PathBuf, message: String },
+    Format {
+        path: std::path::PathBuf,
+        message: String,
+    },
     #[error("{path}: {source}")]
-    Mesh { path: std::path::PathBuf, source: MeshError },
+    Mesh {
+        path: std::path::PathBuf,
+        source: MeshError,
+    },
 }
 
 /// A label volume that could not be turned into a mesh (see [`crate::segmentation`]).

@@ -37,7 +37,11 @@ impl GridCells {
         let mut h = (volume * 6.0 / min_tets.max(6) as f64).cbrt();
         loop {
             let n = size.map(|s| ((s / h).round() as usize).max(1));
-            let cells = Self { nx: n[0], ny: n[1], nz: n[2] };
+            let cells = Self {
+                nx: n[0],
+                ny: n[1],
+                nz: n[2],
+            };
             if cells.tet_count() >= min_tets {
                 return cells;
             }
@@ -59,7 +63,10 @@ const KUHN: [[usize; 4]; 6] = [
 
 /// Builds the grid over the unit parameter cube `[0, 1]^3`, mapped to space by `map`, which
 /// must be smooth and one-to-one. All tetrahedra come out positively oriented.
-pub fn grid(cells: GridCells, map: impl Fn(f64, f64, f64) -> Point3) -> Result<GeneratedMesh, MeshError> {
+pub fn grid(
+    cells: GridCells,
+    map: impl Fn(f64, f64, f64) -> Point3,
+) -> Result<GeneratedMesh, MeshError> {
     let GridCells { nx, ny, nz } = cells;
     let id = |i: usize, j: usize, k: usize| ((k * (ny + 1) + j) * (nx + 1) + i) as u32;
     let mut positions = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
@@ -68,7 +75,11 @@ pub fn grid(cells: GridCells, map: impl Fn(f64, f64, f64) -> Point3) -> Result<G
     for k in 0..=nz {
         for j in 0..=ny {
             for i in 0..=nx {
-                positions.push(map(i as f64 / nx as f64, j as f64 / ny as f64, k as f64 / nz as f64));
+                positions.push(map(
+                    i as f64 / nx as f64,
+                    j as f64 / ny as f64,
+                    k as f64 / nz as f64,
+                ));
                 if i == 0 || i == nx || j == 0 || j == ny {
                     rim.push(id(i, j, k));
                 }
@@ -96,19 +107,29 @@ pub fn grid(cells: GridCells, map: impl Fn(f64, f64, f64) -> Point3) -> Result<G
 
 /// An axis-aligned box `[0, size]` (metres) with its minimum corner at `origin`.
 pub fn boxed(origin: Point3, size: [f64; 3], cells: GridCells) -> Result<GeneratedMesh, MeshError> {
-    grid(cells, |u, v, w| origin + nalgebra::Vector3::new(u * size[0], v * size[1], w * size[2]))
+    grid(cells, |u, v, w| {
+        origin + nalgebra::Vector3::new(u * size[0], v * size[1], w * size[2])
+    })
 }
 
 /// A slab curved about an axis parallel to y: arc length `size[0]` across, `size[1]` along the
 /// axis, thickness `size[2]`; the outer surface has radius `radius` and its apex at z = 0,
 /// centred on x = 0, y = 0; the tissue lies below (z <= 0), like a chest wall seen from outside.
-pub fn curved_slab(size: [f64; 3], radius: f64, cells: GridCells) -> Result<GeneratedMesh, MeshError> {
+pub fn curved_slab(
+    size: [f64; 3],
+    radius: f64,
+    cells: GridCells,
+) -> Result<GeneratedMesh, MeshError> {
     grid(cells, |u, v, w| {
         let theta = (u - 0.5) * size[0] / radius;
         // w = 0 is the inner surface, w = 1 the outer one, so the parameter frame is
         // right-handed in space.
         let r = radius - (1.0 - w) * size[2];
-        Point3::new(r * theta.sin(), (v - 0.5) * size[1], r * theta.cos() - radius)
+        Point3::new(
+            r * theta.sin(),
+            (v - 0.5) * size[1],
+            r * theta.cos() - radius,
+        )
     })
 }
 
@@ -118,7 +139,16 @@ mod tests {
 
     #[test]
     fn box_grid_is_valid_and_closed() {
-        let g = boxed(Point3::origin(), [3.0, 2.0, 1.0], GridCells { nx: 3, ny: 2, nz: 1 }).unwrap();
+        let g = boxed(
+            Point3::origin(),
+            [3.0, 2.0, 1.0],
+            GridCells {
+                nx: 3,
+                ny: 2,
+                nz: 1,
+            },
+        )
+        .unwrap();
         assert_eq!(g.mesh.tet_count(), 36);
         assert_eq!(g.mesh.vertex_count(), 4 * 3 * 2);
         assert!(g.mesh.validate().is_ok(), "{}", g.mesh.validate());
@@ -131,12 +161,25 @@ mod tests {
     #[test]
     fn curved_slab_volume_matches_annulus_sector() {
         let (size, radius) = ([0.12, 0.08, 0.015], 0.15);
-        let g = curved_slab(size, radius, GridCells { nx: 60, ny: 4, nz: 3 }).unwrap();
+        let g = curved_slab(
+            size,
+            radius,
+            GridCells {
+                nx: 60,
+                ny: 4,
+                nz: 3,
+            },
+        )
+        .unwrap();
         assert!(g.mesh.validate().is_ok());
         let angle = size[0] / radius;
         let exact = 0.5 * angle * (radius * radius - (radius - size[2]).powi(2)) * size[1];
         // chords instead of arcs: relative error ~ (angle / nx)^2 / 12 per cell
-        assert!((g.mesh.volume() - exact).abs() / exact < 1e-4, "{} vs {exact}", g.mesh.volume());
+        assert!(
+            (g.mesh.volume() - exact).abs() / exact < 1e-4,
+            "{} vs {exact}",
+            g.mesh.volume()
+        );
     }
 
     #[test]

@@ -15,7 +15,9 @@
 //!   `f_1 = sqrt(E / rho) / (4 L)`.
 
 use crate::fem::FemMaterial;
-use crate::fem::quadratic::{QuadraticMaterial, QuadraticMesh, QuadraticSolution, QuadraticStatics};
+use crate::fem::quadratic::{
+    QuadraticMaterial, QuadraticMesh, QuadraticSolution, QuadraticStatics,
+};
 use crate::generate::{GridCells, grid};
 use crate::model::{Material, Model, ModelError, SpringStiffness};
 use crate::solver::{Integrator, Simulation, SolverSettings, StaticSettings, StepError};
@@ -56,11 +58,19 @@ pub enum Elasticity {
 
 impl Elasticity {
     /// The models a simulation runs (statics and dynamics).
-    pub const ALL: [Elasticity; 3] = [Elasticity::SpringsUniform, Elasticity::SpringsYoungs, Elasticity::CorotationalFem];
+    pub const ALL: [Elasticity; 3] = [
+        Elasticity::SpringsUniform,
+        Elasticity::SpringsYoungs,
+        Elasticity::CorotationalFem,
+    ];
 
     /// Every model of the static reference problems: [`Self::ALL`] and the quadratic elements.
-    pub const STATIC: [Elasticity; 4] =
-        [Elasticity::SpringsUniform, Elasticity::SpringsYoungs, Elasticity::CorotationalFem, Elasticity::QuadraticFem];
+    pub const STATIC: [Elasticity; 4] = [
+        Elasticity::SpringsUniform,
+        Elasticity::SpringsYoungs,
+        Elasticity::CorotationalFem,
+        Elasticity::QuadraticFem,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -104,7 +114,9 @@ pub fn build_model(
         pretension,
     };
     let regions = mesh.region_ids();
-    let young = SpringStiffness::YoungsModulus { pascals: solid.youngs_modulus_pa };
+    let young = SpringStiffness::YoungsModulus {
+        pascals: solid.youngs_modulus_pa,
+    };
     let materials: Vec<(u32, Material)> = regions.iter().map(|&r| (r, material(young))).collect();
     let model = Model::new(mesh, &materials, held, Vector3::zeros())?;
     Ok(match kind {
@@ -112,8 +124,11 @@ pub fn build_model(
         Elasticity::SpringsUniform => {
             let k = &model.springs.stiffness;
             let mean = k.iter().sum::<f64>() / k.len().max(1) as f64;
-            let uniform = SpringStiffness::Uniform { newtons_per_metre: mean };
-            let materials: Vec<(u32, Material)> = regions.iter().map(|&r| (r, material(uniform))).collect();
+            let uniform = SpringStiffness::Uniform {
+                newtons_per_metre: mean,
+            };
+            let materials: Vec<(u32, Material)> =
+                regions.iter().map(|&r| (r, material(uniform))).collect();
             let mesh = model.mesh;
             Model::new(mesh, &materials, held, Vector3::zeros())?
         }
@@ -133,15 +148,25 @@ pub fn build_model(
 
 /// The error of asking the static-only quadratic elements for a dynamic run.
 pub(crate) fn static_only() -> ReferenceError {
-    ReferenceError::Failed("the quadratic elements solve static problems only (no mass, no time steps)".into())
+    ReferenceError::Failed(
+        "the quadratic elements solve static problems only (no mass, no time steps)".into(),
+    )
 }
 
 /// The quadratic elements' material for `solid` with the pre-tension `s` (pre-strain
 /// `s / (1 - s)`, as the linear elements' rest shape `(1 - s) D_ref` gives).
 fn quadratic_material(solid: Solid, pretension: f64) -> QuadraticMaterial {
-    let fem = FemMaterial { youngs_modulus_pa: solid.youngs_modulus_pa, poisson_ratio: solid.poisson_ratio, ..FemMaterial::default() };
+    let fem = FemMaterial {
+        youngs_modulus_pa: solid.youngs_modulus_pa,
+        poisson_ratio: solid.poisson_ratio,
+        ..FemMaterial::default()
+    };
     let (mu_pa, lambda_pa) = fem.lame_pa();
-    QuadraticMaterial { mu_pa, lambda_pa, pre_strain: pretension / (1.0 - pretension) }
+    QuadraticMaterial {
+        mu_pa,
+        lambda_pa,
+        pre_strain: pretension / (1.0 - pretension),
+    }
 }
 
 /// Linear statics on the quadratic elements: `held` nodes at their prescribed displacements,
@@ -158,7 +183,10 @@ fn solve_quadratic(
     let statics = QuadraticStatics::new(quadratic, |_| quadratic_material(solid, pretension));
     let solution = statics.solve(held, external, relative_tolerance);
     if !solution.report.converged {
-        return Err(ReferenceError::Failed(format!("quadratic elements: CG did not converge: {:?}", solution.report)));
+        return Err(ReferenceError::Failed(format!(
+            "quadratic elements: CG did not converge: {:?}",
+            solution.report
+        )));
     }
     Ok(solution)
 }
@@ -179,7 +207,10 @@ fn quadratic_boundary(quadratic: &QuadraticMesh, mesh: &TetMesh) -> Vec<bool> {
 /// (Relative to the largest element or external force: 1e-6 leaves the solution error far
 /// below the discretisation error while staying above the round-off of the positions.)
 fn tight() -> StaticSettings {
-    StaticSettings { relative_force_tolerance: 1e-6, max_newton_iterations: 60 }
+    StaticSettings {
+        relative_force_tolerance: 1e-6,
+        max_newton_iterations: 60,
+    }
 }
 
 /// Result of the displacement patch test.
@@ -196,7 +227,12 @@ pub struct PatchResult {
 
 /// The displacement patch test on a box of `cells` (uniaxial stress `E eps` along x, lateral
 /// contraction `-nu eps`): the boundary vertices are held on the field, the interior settles.
-pub fn patch_test(kind: Elasticity, solid: Solid, cells: GridCells, strain: f64) -> Result<PatchResult, ReferenceError> {
+pub fn patch_test(
+    kind: Elasticity,
+    solid: Solid,
+    cells: GridCells,
+    strain: f64,
+) -> Result<PatchResult, ReferenceError> {
     let size = [0.04, 0.02, 0.02];
     let mesh = crate::generate::boxed(Point3::origin(), size, cells)?.mesh;
     let boundary = mesh.topology().boundary_vertices();
@@ -205,37 +241,73 @@ pub fn patch_test(kind: Elasticity, solid: Solid, cells: GridCells, strain: f64)
     let field = |p: &Point3| Vector3::new(strain * p.x, -nu * strain * p.y, -nu * strain * p.z);
     let tets = mesh.tet_count();
     // per node: rest position, held, displacement, elastic force
-    let (rest, held, u, f): (Vec<Point3>, Vec<bool>, Vec<Vector3>, Vec<Vector3>) = if kind == Elasticity::QuadraticFem {
-        let quadratic = QuadraticMesh::new(&mesh);
-        let held = quadratic_boundary(&quadratic, &mesh);
-        let prescribed: Vec<Option<Vector3>> = quadratic.nodes.iter().zip(&held).map(|(p, &h)| h.then(|| field(p))).collect();
-        let solution = solve_quadratic(&quadratic, solid, 0.0, &prescribed, &[], 1e-13)?;
-        (quadratic.nodes, held, solution.displacements, solution.internal_forces)
-    } else {
-        let model = build_model(mesh, kind, solid, 0.0, &boundary)?;
-        let mut sim = Simulation::new(model, SolverSettings::default());
-        for &v in &boundary {
-            sim.state.positions[v as usize] = rest[v as usize] + field(&rest[v as usize]);
-        }
-        // (a uniform field: the forces are large and exact, so the solve can go to round-off)
-        let report = sim.settle(StaticSettings { relative_force_tolerance: 1e-11, max_newton_iterations: 60 });
-        if !report.converged {
-            return Err(ReferenceError::Failed(format!("patch test did not settle: {report:?}")));
-        }
-        let n = sim.model.vertex_count();
-        let mut f = vec![Vector3::zeros(); n];
-        let zero = vec![Vector3::zeros(); n];
-        match &sim.model.fem {
-            Some(fem) => crate::fem::solve::total_forces(&sim.model, fem, &sim.state.positions, &zero, &zero, &mut f),
-            None => crate::solver::forces::total_forces(&sim.model, &sim.state.positions, &zero, &zero, &mut f),
-        }
-        let u = sim.state.positions.iter().zip(&rest).map(|(x, p)| x - p).collect();
-        (rest, sim.model.held.clone(), u, f)
-    };
+    let (rest, held, u, f): (Vec<Point3>, Vec<bool>, Vec<Vector3>, Vec<Vector3>) =
+        if kind == Elasticity::QuadraticFem {
+            let quadratic = QuadraticMesh::new(&mesh);
+            let held = quadratic_boundary(&quadratic, &mesh);
+            let prescribed: Vec<Option<Vector3>> = quadratic
+                .nodes
+                .iter()
+                .zip(&held)
+                .map(|(p, &h)| h.then(|| field(p)))
+                .collect();
+            let solution = solve_quadratic(&quadratic, solid, 0.0, &prescribed, &[], 1e-13)?;
+            (
+                quadratic.nodes,
+                held,
+                solution.displacements,
+                solution.internal_forces,
+            )
+        } else {
+            let model = build_model(mesh, kind, solid, 0.0, &boundary)?;
+            let mut sim = Simulation::new(model, SolverSettings::default());
+            for &v in &boundary {
+                sim.state.positions[v as usize] = rest[v as usize] + field(&rest[v as usize]);
+            }
+            // (a uniform field: the forces are large and exact, so the solve can go to round-off)
+            let report = sim.settle(StaticSettings {
+                relative_force_tolerance: 1e-11,
+                max_newton_iterations: 60,
+            });
+            if !report.converged {
+                return Err(ReferenceError::Failed(format!(
+                    "patch test did not settle: {report:?}"
+                )));
+            }
+            let n = sim.model.vertex_count();
+            let mut f = vec![Vector3::zeros(); n];
+            let zero = vec![Vector3::zeros(); n];
+            match &sim.model.fem {
+                Some(fem) => crate::fem::solve::total_forces(
+                    &sim.model,
+                    fem,
+                    &sim.state.positions,
+                    &zero,
+                    &zero,
+                    &mut f,
+                ),
+                None => crate::solver::forces::total_forces(
+                    &sim.model,
+                    &sim.state.positions,
+                    &zero,
+                    &zero,
+                    &mut f,
+                ),
+            }
+            let u = sim
+                .state
+                .positions
+                .iter()
+                .zip(&rest)
+                .map(|(x, p)| x - p)
+                .collect();
+            (rest, sim.model.held.clone(), u, f)
+        };
     let mut displacement_error = 0.0f64;
     for (i, p) in rest.iter().enumerate() {
         if !held[i] {
-            displacement_error = displacement_error.max((u[i] - field(p)).norm() / (strain * size[0]));
+            displacement_error =
+                displacement_error.max((u[i] - field(p)).norm() / (strain * size[0]));
         }
     }
     let h = size[0] / cells.nx as f64;
@@ -256,7 +328,12 @@ pub fn patch_test(kind: Elasticity, solid: Solid, cells: GridCells, strain: f64)
     }
     // the internal force on the end face pulls back: -sigma A
     let expected = -e * strain * size[1] * size[2];
-    Ok(PatchResult { tets, displacement_error, lateral_force, axial_force_error: ((axial - expected) / expected).abs() })
+    Ok(PatchResult {
+        tets,
+        displacement_error,
+        lateral_force,
+        axial_force_error: ((axial - expected) / expected).abs(),
+    })
 }
 
 /// Reads an IPC bar (`unit_m` metres per file unit).
@@ -288,15 +365,25 @@ pub struct CantileverResult {
 /// mean deflection of the tip vertices; quadratic elements get the consistent load of a
 /// uniform traction (a third of the triangle's share on each edge middle, none on the
 /// corners) and report the deflection averaged over the tip face's area (the same weights).
-pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<CantileverResult, ReferenceError> {
+pub fn cantilever(
+    mesh: TetMesh,
+    kind: Elasticity,
+    solid: Solid,
+) -> Result<CantileverResult, ReferenceError> {
     let (lo, hi) = mesh.bounding_box();
     let ext = hi - lo;
     let length = ext.x;
     // the load along the larger cross dimension (height h), width b the other
-    let (axis, h, b) = if ext.z >= ext.y { (2, ext.z, ext.y) } else { (1, ext.y, ext.z) };
+    let (axis, h, b) = if ext.z >= ext.y {
+        (2, ext.z, ext.y)
+    } else {
+        (1, ext.y, ext.z)
+    };
     let tol = 1e-6 * length;
     let pos = mesh.positions().to_vec();
-    let clamped: Vec<u32> = (0..pos.len() as u32).filter(|&i| pos[i as usize].x < lo.x + tol).collect();
+    let clamped: Vec<u32> = (0..pos.len() as u32)
+        .filter(|&i| pos[i as usize].x < lo.x + tol)
+        .collect();
     // the tip face's triangles, each with a third of its area
     let tip_triangles: Vec<([u32; 3], f64)> = mesh
         .topology()
@@ -321,18 +408,30 @@ pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<Canti
         let quadratic = QuadraticMesh::new(&mesh);
         let mut weight = vec![0.0; quadratic.nodes.len()];
         for &(tri, share) in &tip_triangles {
-            let nodes = quadratic.triangle(tri).ok_or_else(|| ReferenceError::Failed("a tip triangle's edge is missing".into()))?;
+            let nodes = quadratic
+                .triangle(tri)
+                .ok_or_else(|| ReferenceError::Failed("a tip triangle's edge is missing".into()))?;
             for &m in &nodes[3..] {
                 weight[m as usize] += share;
             }
         }
-        let held: Vec<Option<Vector3>> = quadratic.nodes.iter().map(|p| (p.x < lo.x + tol).then(Vector3::zeros)).collect();
+        let held: Vec<Option<Vector3>> = quadratic
+            .nodes
+            .iter()
+            .map(|p| (p.x < lo.x + tol).then(Vector3::zeros))
+            .collect();
         let mut external = vec![Vector3::zeros(); quadratic.nodes.len()];
         for (f, w) in external.iter_mut().zip(&weight) {
             f[axis] = load * w / area;
         }
         let solution = solve_quadratic(&quadratic, solid, 0.0, &held, &external, 1e-10)?;
-        solution.displacements.iter().zip(&weight).map(|(u, w)| u[axis] * w).sum::<f64>() / area
+        solution
+            .displacements
+            .iter()
+            .zip(&weight)
+            .map(|(u, w)| u[axis] * w)
+            .sum::<f64>()
+            / area
     } else {
         let mut tip_weight = vec![0.0; pos.len()];
         for &(tri, share) in &tip_triangles {
@@ -348,9 +447,14 @@ pub fn cantilever(mesh: TetMesh, kind: Elasticity, solid: Solid) -> Result<Canti
         }
         let report = sim.settle_loaded(tight());
         if !report.converged {
-            return Err(ReferenceError::Failed(format!("cantilever did not settle: {report:?}")));
+            return Err(ReferenceError::Failed(format!(
+                "cantilever did not settle: {report:?}"
+            )));
         }
-        tip.iter().map(|&i| sim.state.positions[i][axis] - pos[i][axis]).sum::<f64>() / tip.len() as f64
+        tip.iter()
+            .map(|&i| sim.state.positions[i][axis] - pos[i][axis])
+            .sum::<f64>()
+            / tip.len() as f64
     };
     Ok(CantileverResult {
         tets,
@@ -418,9 +522,15 @@ pub fn wound_opening(
     let xs = graded(1.5 * a, b, h, 1.15);
     let ys = graded(0.5 * a, b, h, 1.15);
     let zs = [0.0, h];
-    let cells = GridCells { nx: xs.len() - 1, ny: ys.len() - 1, nz: 1 };
+    let cells = GridCells {
+        nx: xs.len() - 1,
+        ny: ys.len() - 1,
+        nz: 1,
+    };
     let idx = |u: f64, n: usize| ((u * n as f64).round() as usize).min(n);
-    let generated = grid(cells, |u, v, w| Point3::new(xs[idx(u, cells.nx)], ys[idx(v, cells.ny)], zs[idx(w, 1)]))?;
+    let generated = grid(cells, |u, v, w| {
+        Point3::new(xs[idx(u, cells.nx)], ys[idx(v, cells.ny)], zs[idx(w, 1)])
+    })?;
     let mesh = generated.mesh;
     let pos = mesh.positions().to_vec();
     let tol = 1e-9 * a;
@@ -463,13 +573,20 @@ pub fn wound_opening(
             }
         }
         let solution = solve_quadratic(&quadratic, solid, pretension, &held, &[], 1e-10)?;
-        slit_mesh.positions().iter().zip(&solution.displacements).map(|(p, u)| p + u).collect()
+        slit_mesh
+            .positions()
+            .iter()
+            .zip(&solution.displacements)
+            .map(|(p, u)| p + u)
+            .collect()
     } else {
         let model = build_model(slit_mesh, kind, solid, pretension, &rim)?;
         let mut sim = Simulation::new(model, SolverSettings::default());
         let report = sim.settle(tight());
         if !report.converged {
-            return Err(ReferenceError::Failed(format!("wound opening did not settle: {report:?}")));
+            return Err(ReferenceError::Failed(format!(
+                "wound opening did not settle: {report:?}"
+            )));
         }
         sim.state.positions
     };
@@ -493,10 +610,20 @@ pub fn wound_opening(
         }
     }
     by_x.sort_by(|l, r| l.0.total_cmp(&r.0));
-    let profile: Vec<(f64, f64, f64)> = by_x.iter().map(|&(x, g, k)| (x, g / k as f64, analytic(x))).collect();
-    let centre = profile.iter().min_by(|l, r| l.0.abs().total_cmp(&r.0.abs())).copied().unwrap_or((0.0, 0.0, 0.0));
+    let profile: Vec<(f64, f64, f64)> = by_x
+        .iter()
+        .map(|&(x, g, k)| (x, g / k as f64, analytic(x)))
+        .collect();
+    let centre = profile
+        .iter()
+        .min_by(|l, r| l.0.abs().total_cmp(&r.0.abs()))
+        .copied()
+        .unwrap_or((0.0, 0.0, 0.0));
     let scale = analytic(0.0);
-    let profile_error = profile.iter().map(|&(_, g, an)| (g - an).abs() / scale).fold(0.0, f64::max);
+    let profile_error = profile
+        .iter()
+        .map(|&(_, g, an)| (g - an).abs() / scale)
+        .fold(0.0, f64::max);
     Ok(WoundResult {
         tets: tet_count,
         half_length_m: a,
@@ -531,7 +658,9 @@ pub fn vibration(
     time_step_s: f64,
 ) -> Result<VibrationResult, ReferenceError> {
     if !(time_step_s > 0.0 && time_step_s.is_finite()) {
-        return Err(ReferenceError::Failed(format!("time step must be positive, got {time_step_s} s")));
+        return Err(ReferenceError::Failed(format!(
+            "time step must be positive, got {time_step_s} s"
+        )));
     }
     if kind == Elasticity::QuadraticFem {
         return Err(static_only());
@@ -540,18 +669,30 @@ pub fn vibration(
     let length = hi.x - lo.x;
     let tol = 1e-6 * length;
     let pos = mesh.positions().to_vec();
-    let clamped: Vec<u32> = (0..pos.len() as u32).filter(|&i| pos[i as usize].x < lo.x + tol).collect();
+    let clamped: Vec<u32> = (0..pos.len() as u32)
+        .filter(|&i| pos[i as usize].x < lo.x + tol)
+        .collect();
     let tip: Vec<usize> = (0..pos.len()).filter(|&i| pos[i].x > hi.x - tol).collect();
     let tets = mesh.tet_count();
     let model = build_model(mesh, kind, solid, 0.0, &clamped)?;
-    let settings = SolverSettings { integrator, time_step_s, cg_relative_tolerance: 1e-8, ..SolverSettings::default() };
+    let settings = SolverSettings {
+        integrator,
+        time_step_s,
+        cg_relative_tolerance: 1e-8,
+        ..SolverSettings::default()
+    };
     let mut sim = Simulation::new(model, settings);
     let stretch = 1e-4;
     for (p, x) in sim.state.positions.iter_mut().zip(&pos) {
         p.x = x.x + stretch * (x.x - lo.x);
     }
     let analytic = (solid.youngs_modulus_pa / solid.density_kg_per_m3).sqrt() / (4.0 * length);
-    let tip_u = |sim: &Simulation| tip.iter().map(|&i| sim.state.positions[i].x - pos[i].x).sum::<f64>() / tip.len() as f64;
+    let tip_u = |sim: &Simulation| {
+        tip.iter()
+            .map(|&i| sim.state.positions[i].x - pos[i].x)
+            .sum::<f64>()
+            / tip.len() as f64
+    };
     let max_steps = (3.0 / analytic / time_step_s).ceil() as u64;
     let mut crossings: Vec<f64> = Vec::new();
     let mut previous = tip_u(&sim);
@@ -566,7 +707,10 @@ pub fn vibration(
         previous = u;
     }
     if crossings.len() < 3 {
-        return Err(ReferenceError::Failed(format!("vibration: {} zero crossings in {max_steps} steps", crossings.len())));
+        return Err(ReferenceError::Failed(format!(
+            "vibration: {} zero crossings in {max_steps} steps",
+            crossings.len()
+        )));
     }
     let frequency = 1.0 / (crossings[2] - crossings[0]);
     Ok(VibrationResult {

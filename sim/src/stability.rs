@@ -67,7 +67,13 @@ pub fn slab(cells: GridCells) -> Result<(TetMesh, Vec<u32>), ReferenceError> {
         .mesh
         .tets()
         .iter()
-        .map(|t| if t.iter().map(|&v| pos[v as usize].x).sum::<f64>() / 4.0 > 0.02 { 1 } else { 0 })
+        .map(|t| {
+            if t.iter().map(|&v| pos[v as usize].x).sum::<f64>() / 4.0 > 0.02 {
+                1
+            } else {
+                0
+            }
+        })
         .collect();
     let mesh = TetMesh::new(pos, g.mesh.tets().to_vec(), regions)?;
     Ok((mesh, g.rim))
@@ -83,15 +89,29 @@ pub fn build(case: &StabilityCase, cells: GridCells) -> Result<Simulation, Refer
         damping_newton_seconds_per_metre: 0.05 * damping,
         pretension: 0.04,
     };
-    let young = SpringStiffness::YoungsModulus { pascals: case.youngs_modulus_pa };
-    let mats = |stiffness| [(0, material(900.0, stiffness)), (1, material(900.0 * case.mass_ratio, stiffness))];
+    let young = SpringStiffness::YoungsModulus {
+        pascals: case.youngs_modulus_pa,
+    };
+    let mats = |stiffness| {
+        [
+            (0, material(900.0, stiffness)),
+            (1, material(900.0 * case.mass_ratio, stiffness)),
+        ]
+    };
     let mut model = Model::new(mesh.clone(), &mats(young), &rim, Vector3::zeros())?;
     match case.model {
         Elasticity::SpringsYoungs => {}
         Elasticity::SpringsUniform => {
             let k = &model.springs.stiffness;
             let mean = k.iter().sum::<f64>() / k.len().max(1) as f64;
-            model = Model::new(mesh, &mats(SpringStiffness::Uniform { newtons_per_metre: mean }), &rim, Vector3::zeros())?;
+            model = Model::new(
+                mesh,
+                &mats(SpringStiffness::Uniform {
+                    newtons_per_metre: mean,
+                }),
+                &rim,
+                Vector3::zeros(),
+            )?;
         }
         Elasticity::CorotationalFem => {
             let fem = FemMaterial {
@@ -104,11 +124,17 @@ pub fn build(case: &StabilityCase, cells: GridCells) -> Result<Simulation, Refer
         }
         Elasticity::QuadraticFem => return Err(crate::reference::static_only()),
     }
-    let settings = SolverSettings { integrator: case.integrator, time_step_s: case.time_step_s, ..SolverSettings::default() };
+    let settings = SolverSettings {
+        integrator: case.integrator,
+        time_step_s: case.time_step_s,
+        ..SolverSettings::default()
+    };
     let mut sim = Simulation::new(model, settings);
     let report = sim.settle(StaticSettings::default());
     if !report.converged {
-        return Err(ReferenceError::Failed(format!("the slab did not settle: {report:?}")));
+        return Err(ReferenceError::Failed(format!(
+            "the slab did not settle: {report:?}"
+        )));
     }
     Ok(sim)
 }
@@ -127,13 +153,31 @@ pub fn energy(sim: &Simulation) -> f64 {
 /// Kicks the settled slab (0.1 m/s along z, in a sine over the free vertices) and runs it for
 /// `duration_s` of simulated time; explicit runs needing more than `max_substeps` per step are
 /// not run.
-pub fn run(case: &StabilityCase, cells: GridCells, duration_s: f64, max_substeps: u32) -> Result<StabilityResult, ReferenceError> {
+pub fn run(
+    case: &StabilityCase,
+    cells: GridCells,
+    duration_s: f64,
+    max_substeps: u32,
+) -> Result<StabilityResult, ReferenceError> {
     if !(case.time_step_s > 0.0 && case.time_step_s.is_finite() && duration_s.is_finite()) {
-        return Err(ReferenceError::Failed(format!("bad time step {} s or duration {duration_s} s", case.time_step_s)));
+        return Err(ReferenceError::Failed(format!(
+            "bad time step {} s or duration {duration_s} s",
+            case.time_step_s
+        )));
     }
     let mut sim = build(case, cells)?;
-    let substeps = if case.integrator == Integrator::SymplecticEuler { sim.explicit_substeps() } else { 1 };
-    let mut result = StabilityResult { outcome: Outcome::Stable, steps: 0, substeps, energy_ratio: 1.0, max_speed_m_per_s: 0.0 };
+    let substeps = if case.integrator == Integrator::SymplecticEuler {
+        sim.explicit_substeps()
+    } else {
+        1
+    };
+    let mut result = StabilityResult {
+        outcome: Outcome::Stable,
+        steps: 0,
+        substeps,
+        energy_ratio: 1.0,
+        max_speed_m_per_s: 0.0,
+    };
     if substeps > max_substeps {
         result.outcome = Outcome::TooManySubsteps;
         return Ok(result);
@@ -143,7 +187,10 @@ pub fn run(case: &StabilityCase, cells: GridCells, duration_s: f64, max_substeps
     for (i, v) in sim.state.velocities.iter_mut().enumerate() {
         if !sim.model.held[i] {
             let p = x0[i];
-            *v = Vector3::z() * 0.1 * (p.x * std::f64::consts::PI / 0.04).sin() * (p.y * std::f64::consts::PI / 0.04).sin();
+            *v = Vector3::z()
+                * 0.1
+                * (p.x * std::f64::consts::PI / 0.04).sin()
+                * (p.y * std::f64::consts::PI / 0.04).sin();
         }
     }
     let initial = (energy(&sim) - rest_energy).max(f64::MIN_POSITIVE);
@@ -154,8 +201,16 @@ pub fn run(case: &StabilityCase, cells: GridCells, duration_s: f64, max_substeps
             Ok(_) => {}
             Err(_) => rejected += 1,
         }
-        let finite = sim.state.positions.iter().all(|p| p.iter().all(|c| c.is_finite()))
-            && sim.state.velocities.iter().all(|v| v.iter().all(|c| c.is_finite()));
+        let finite = sim
+            .state
+            .positions
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite()))
+            && sim
+                .state
+                .velocities
+                .iter()
+                .all(|v| v.iter().all(|c| c.is_finite()));
         if !finite {
             result.outcome = Outcome::NonFiniteLeak;
             return Ok(result);
@@ -192,7 +247,14 @@ pub fn sweep(quick: bool) -> Vec<StabilityCase> {
                 for &youngs_modulus_pa in es {
                     for &damping_level in dampings {
                         for &mass_ratio in ratios {
-                            cases.push(StabilityCase { model, integrator, time_step_s, youngs_modulus_pa, damping_level, mass_ratio });
+                            cases.push(StabilityCase {
+                                model,
+                                integrator,
+                                time_step_s,
+                                youngs_modulus_pa,
+                                damping_level,
+                                mass_ratio,
+                            });
                         }
                     }
                 }

@@ -7,18 +7,30 @@ use cutlab_sim::solver::{Simulation, SolverSettings, StaticSettings};
 use cutlab_sim::{Point3, TetMesh, Vector3};
 
 fn sim_of(mesh: TetMesh, held: &[u32], pretension: f64) -> Simulation {
-    let material = Material { pretension, ..Material::PAPER_CHEST_WALL };
+    let material = Material {
+        pretension,
+        ..Material::PAPER_CHEST_WALL
+    };
     let model = Model::new(mesh, &[(0, material)], held, Vector3::zeros()).expect("model");
     Simulation::new(model, SolverSettings::default())
 }
 
 fn square(centre: Point3, normal: Vector3, half: f64) -> CutPolygon {
     let n = normal.normalize();
-    let u = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let u = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
     let u = (u - n * n.dot(&u)).normalize();
     let v = n.cross(&u);
-    CutPolygon::new(&[centre + (u + v) * half, centre + (u - v) * half, centre + (-u - v) * half, centre + (-u + v) * half])
-        .expect("polygon")
+    CutPolygon::new(&[
+        centre + (u + v) * half,
+        centre + (u - v) * half,
+        centre + (-u - v) * half,
+        centre + (-u + v) * half,
+    ])
+    .expect("polygon")
 }
 
 /// Number of pieces: tetrahedra connected through shared faces.
@@ -42,12 +54,19 @@ fn pieces(mesh: &TetMesh) -> usize {
             }
         }
     }
-    (0..mesh.tet_count()).filter(|&i| find(&mut parent, i) == i).count()
+    (0..mesh.tet_count())
+        .filter(|&i| find(&mut parent, i) == i)
+        .count()
 }
 
 fn single_tet() -> TetMesh {
     TetMesh::with_single_region(
-        vec![Point3::origin(), Point3::new(1.0, 0.0, 0.0), Point3::new(0.0, 1.0, 0.0), Point3::new(0.0, 0.0, 1.0)],
+        vec![
+            Point3::origin(),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(0.0, 1.0, 0.0),
+            Point3::new(0.0, 0.0, 1.0),
+        ],
         vec![[0, 1, 2, 3]],
     )
     .expect("tet")
@@ -59,7 +78,16 @@ fn single_tet_one_three_gives_four_tets_in_two_pieces() {
         // separates vertex 0 (origin) from the other three
         let mut sim = sim_of(single_tet(), &[], 0.0);
         let c = square(Point3::new(0.2, 0.2, 0.2), Vector3::new(1.0, 1.0, 1.0), 5.0);
-        let ev = cut::cut(&mut sim, &c, &CutOptions { pattern, snap: 0.0, snap_distance_m: None }).expect("cut");
+        let ev = cut::cut(
+            &mut sim,
+            &c,
+            &CutOptions {
+                pattern,
+                snap: 0.0,
+                snap_distance_m: None,
+            },
+        )
+        .expect("cut");
         let mesh = &sim.model.mesh;
         assert_eq!(mesh.tet_count(), 4, "{pattern:?}");
         assert_eq!(ev.vertices_created.len(), 3);
@@ -77,8 +105,21 @@ fn single_tet_two_two_gives_six_tets_in_two_pieces() {
     for pattern in [PatternChoice::MinMu, PatternChoice::MinVertexId] {
         // x + y = 0.5 separates {0, 3} from {1, 2}
         let mut sim = sim_of(single_tet(), &[], 0.0);
-        let c = square(Point3::new(0.25, 0.25, 0.3), Vector3::new(1.0, 1.0, 0.0), 5.0);
-        let ev = cut::cut(&mut sim, &c, &CutOptions { pattern, snap: 0.0, snap_distance_m: None }).expect("cut");
+        let c = square(
+            Point3::new(0.25, 0.25, 0.3),
+            Vector3::new(1.0, 1.0, 0.0),
+            5.0,
+        );
+        let ev = cut::cut(
+            &mut sim,
+            &c,
+            &CutOptions {
+                pattern,
+                snap: 0.0,
+                snap_distance_m: None,
+            },
+        )
+        .expect("cut");
         let mesh = &sim.model.mesh;
         assert_eq!(mesh.tet_count(), 6, "{pattern:?}");
         assert_eq!(ev.vertices_created.len(), 4);
@@ -91,7 +132,16 @@ fn single_tet_two_two_gives_six_tets_in_two_pieces() {
 }
 
 fn slab() -> (TetMesh, Vec<u32>) {
-    let g = boxed(Point3::origin(), [0.04, 0.04, 0.01], GridCells { nx: 8, ny: 8, nz: 2 }).expect("slab");
+    let g = boxed(
+        Point3::origin(),
+        [0.04, 0.04, 0.01],
+        GridCells {
+            nx: 8,
+            ny: 8,
+            nz: 2,
+        },
+    )
+    .expect("slab");
     (g.mesh, g.rim)
 }
 
@@ -100,18 +150,36 @@ fn check_invariants(sim: &Simulation, mass0: f64, volume0: f64) {
     let report = mesh.validate();
     // Shape-degenerate tets (normalised volume < 1e-8) can appear after many crossing cuts of
     // the same region; every tet must still have positive volume in the rest configuration.
-    let structural = cutlab_sim::mesh::ValidationReport { degenerate_tets: Vec::new(), ..report.clone() };
+    let structural = cutlab_sim::mesh::ValidationReport {
+        degenerate_tets: Vec::new(),
+        ..report.clone()
+    };
     assert!(structural.is_ok(), "{report}");
     for t in 0..mesh.tet_count() {
-        assert!(mesh.tet_volume(t) > 0.0, "tet {t} has volume {}", mesh.tet_volume(t));
+        assert!(
+            mesh.tet_volume(t) > 0.0,
+            "tet {t} has volume {}",
+            mesh.tet_volume(t)
+        );
     }
     let bad = mesh.topology().boundary_non_manifold_edges();
     assert!(bad.is_empty(), "non-manifold surface edges {bad:?}");
     let mass = sim.model.total_mass();
-    assert!((mass - mass0).abs() <= 1e-12 * mass0, "mass {mass} vs {mass0}");
+    assert!(
+        (mass - mass0).abs() <= 1e-12 * mass0,
+        "mass {mass} vs {mass0}"
+    );
     let volume = mesh.volume();
-    assert!((volume - volume0).abs() <= 1e-9 * volume0, "volume {volume} vs {volume0}");
-    assert!(sim.state.positions.iter().all(|p| p.iter().all(|c| c.is_finite())));
+    assert!(
+        (volume - volume0).abs() <= 1e-9 * volume0,
+        "volume {volume} vs {volume0}"
+    );
+    assert!(
+        sim.state
+            .positions
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite()))
+    );
 }
 
 #[test]
@@ -124,7 +192,11 @@ fn a_stroke_through_a_slab_cuts_and_keeps_the_invariants() {
     // blade vertical, depth 15 mm, moving along x at y = 0.0223 from 8 mm to 32 mm in 12 steps
     let mut cutter = cut::Cutter::default();
     for k in 0..=12 {
-        let next = cut::blade(Point3::new(0.008 + 0.002 * k as f64, 0.0223, -0.003), Vector3::z(), 0.015);
+        let next = cut::blade(
+            Point3::new(0.008 + 0.002 * k as f64, 0.0223, -0.003),
+            Vector3::z(),
+            0.015,
+        );
         let ev = cutter.advance(&mut sim, next).expect("cut");
         assert!(ev.min_child_volume_fraction > 0.0);
         check_invariants(&sim, mass0, volume0);
@@ -154,17 +226,24 @@ fn trembling_strokes(options: CutOptions) -> (usize, usize, f64, Result<f64, Str
             for k in 0..600 {
                 let t = (pass * 600 + k) as f64 * dt;
                 let x = 0.008 + 0.024 * k as f64 / 600.0;
-                let y = 0.0203 + 0.0004 * (std::f64::consts::TAU * 8.0 * t).sin() + 0.0003 * pass as f64;
+                let y = 0.0203
+                    + 0.0004 * (std::f64::consts::TAU * 8.0 * t).sin()
+                    + 0.0003 * pass as f64;
                 let depth = 0.006 + 0.001 * (std::f64::consts::TAU * 1.3 * t).sin();
-                let edge = Vector3::new(0.0, 0.05 * (std::f64::consts::TAU * 2.0 * t).sin(), 1.0).normalize();
+                let edge = Vector3::new(0.0, 0.05 * (std::f64::consts::TAU * 2.0 * t).sin(), 1.0)
+                    .normalize();
                 let blade = cut::blade(Point3::new(x, y, 0.01 - depth), edge, depth + 0.003);
                 match cutter.advance(&mut sim, blade) {
                     Ok(_) | Err(cut::CutError::Unresolved(_)) => {}
                     Err(e) => return Err(format!("pass {pass} step {k}: {e}")),
                 }
-                sim.step().map_err(|e| format!("pass {pass} step {k}: {e}"))?;
+                sim.step()
+                    .map_err(|e| format!("pass {pass} step {k}: {e}"))?;
                 if sim.model.mesh.tet_count() > 3 * tets0 {
-                    return Err(format!("pass {pass} step {k}: {tets0} tets grew to {}", sim.model.mesh.tet_count()));
+                    return Err(format!(
+                        "pass {pass} step {k}: {tets0} tets grew to {}",
+                        sim.model.mesh.tet_count()
+                    ));
                 }
             }
             cutter.end_stroke();
@@ -175,7 +254,9 @@ fn trembling_strokes(options: CutOptions) -> (usize, usize, f64, Result<f64, Str
         Ok(sim.state.max_speed())
     })();
     let mesh = &sim.model.mesh;
-    let min_volume = (0..mesh.tet_count()).map(|t| mesh.tet_volume(t)).fold(f64::INFINITY, f64::min);
+    let min_volume = (0..mesh.tet_count())
+        .map(|t| mesh.tet_volume(t))
+        .fold(f64::INFINITY, f64::min);
     (tets0, mesh.tet_count(), min_volume / mean_volume, run)
 }
 
@@ -183,9 +264,15 @@ fn trembling_strokes(options: CutOptions) -> (usize, usize, f64, Result<f64, Str
 fn a_trembling_hand_recutting_the_same_line_keeps_the_elements_and_the_motion_sane() {
     let (tets0, tets, min_volume_fraction, run) = trembling_strokes(CutOptions::default());
     let speed = run.expect("every step of the simulation succeeds");
-    assert!(speed < 0.05, "the tissue settles after the cut: max speed {speed} m/s");
+    assert!(
+        speed < 0.05,
+        "the tissue settles after the cut: max speed {speed} m/s"
+    );
     assert!(tets < 3 * tets0, "{tets0} tets grew to {tets}");
-    assert!(min_volume_fraction > 1e-4, "a sliver of {min_volume_fraction:e} of the mean tet volume");
+    assert!(
+        min_volume_fraction > 1e-4,
+        "a sliver of {min_volume_fraction:e} of the mean tet volume"
+    );
 }
 
 mod random_strokes {
@@ -204,8 +291,23 @@ mod random_strokes {
     }
 
     fn stroke() -> impl Strategy<Value = StrokeSpec> {
-        (0.004..0.036f64, 0.004..0.036f64, 0.0..std::f64::consts::TAU, 0.003..0.025f64, 0.002..0.016f64, -0.3..0.3f64, 2..8usize)
-            .prop_map(|(x, y, heading, length, depth, tilt, steps)| StrokeSpec { start: (x, y), heading, length, depth, tilt, steps })
+        (
+            0.004..0.036f64,
+            0.004..0.036f64,
+            0.0..std::f64::consts::TAU,
+            0.003..0.025f64,
+            0.002..0.016f64,
+            -0.3..0.3f64,
+            2..8usize,
+        )
+            .prop_map(|(x, y, heading, length, depth, tilt, steps)| StrokeSpec {
+                start: (x, y),
+                heading,
+                length,
+                depth,
+                tilt,
+                steps,
+            })
     }
 
     fn run_stroke(sim: &mut Simulation, s: &StrokeSpec) -> f64 {
@@ -225,7 +327,8 @@ mod random_strokes {
             min_fraction = min_fraction.min(ev.min_child_volume_fraction);
         }
         for _ in 0..3 {
-            sim.step().expect("the simulation keeps running after the cut");
+            sim.step()
+                .expect("the simulation keeps running after the cut");
         }
         min_fraction
     }
@@ -260,16 +363,34 @@ mod random_strokes {
 fn sheet_gap(pretension: f64) -> (f64, Vec<(f64, f64)>) {
     use cutlab_sim::scene::{BuildOptions, Scene};
     let mut scene = Scene::load("sheet", BuildOptions::default()).expect("sheet");
-    let materials: Vec<_> = scene.model.materials.iter().map(|(r, m)| (*r, Material { pretension, ..*m })).collect();
-    let held: Vec<u32> = (0..scene.model.vertex_count() as u32).filter(|&v| scene.model.held[v as usize]).collect();
-    scene.model = Model::new(scene.model.mesh.clone(), &materials, &held, Vector3::zeros()).expect("model");
+    let materials: Vec<_> = scene
+        .model
+        .materials
+        .iter()
+        .map(|(r, m)| (*r, Material { pretension, ..*m }))
+        .collect();
+    let held: Vec<u32> = (0..scene.model.vertex_count() as u32)
+        .filter(|&v| scene.model.held[v as usize])
+        .collect();
+    scene.model = Model::new(
+        scene.model.mesh.clone(),
+        &materials,
+        &held,
+        Vector3::zeros(),
+    )
+    .expect("model");
     let mut sim = scene.simulation();
     sim.settle(StaticSettings::default());
     let mut cutter = cut::Cutter::default();
     let y = 0.0503; // a little off the grid lines
     for k in 0..=15 {
         let x = 0.035 + 0.002 * k as f64;
-        cutter.advance(&mut sim, cut::blade(Point3::new(x, y, -0.002), Vector3::z(), 0.006)).expect("cut");
+        cutter
+            .advance(
+                &mut sim,
+                cut::blade(Point3::new(x, y, -0.002), Vector3::z(), 0.006),
+            )
+            .expect("cut");
     }
     let report = sim.settle(StaticSettings::default());
     assert!(report.converged, "{report:?}");
@@ -279,7 +400,10 @@ fn sheet_gap(pretension: f64) -> (f64, Vec<(f64, f64)>) {
 
 /// The wound's opening ([`cut::wound_gaps`]) by the rest position's x: `(x, gap)`, sorted by x.
 fn wound_profile(sim: &Simulation) -> Vec<(f64, f64)> {
-    let mut profile: Vec<(f64, f64)> = cut::wound_gaps(sim).into_iter().map(|(p, gap)| (p.x, gap)).collect();
+    let mut profile: Vec<(f64, f64)> = cut::wound_gaps(sim)
+        .into_iter()
+        .map(|(p, gap)| (p.x, gap))
+        .collect();
     profile.sort_by(|p, q| p.0.total_cmp(&q.0));
     profile
 }
@@ -291,10 +415,21 @@ fn an_incision_in_a_pretensioned_sheet_opens_and_without_tension_it_does_not() {
     assert!(gap > 1e-3, "the wound gapes by {gap} m");
     // widest in the middle of the slit, closing towards its tips (the outermost split
     // vertices, within half a millimetre), as the elliptical opening of a crack does
-    let mid = profile.iter().filter(|(x, _)| (x - 0.05).abs() < 0.005).map(|p| p.1).fold(0.0, f64::max);
+    let mid = profile
+        .iter()
+        .filter(|(x, _)| (x - 0.05).abs() < 0.005)
+        .map(|p| p.1)
+        .fold(0.0, f64::max);
     let (first, last) = (profile[0].0, profile[profile.len() - 1].0);
-    assert!(first > 0.032 && last < 0.068, "the slit stays within a millimetre or two of the blade's path: {first} .. {last}");
-    let tips = profile.iter().filter(|(x, _)| *x < first + 0.0005 || *x > last - 0.0005).map(|p| p.1).fold(0.0, f64::max);
+    assert!(
+        first > 0.032 && last < 0.068,
+        "the slit stays within a millimetre or two of the blade's path: {first} .. {last}"
+    );
+    let tips = profile
+        .iter()
+        .filter(|(x, _)| *x < first + 0.0005 || *x > last - 0.0005)
+        .map(|p| p.1)
+        .fold(0.0, f64::max);
     assert!(mid > 2.0 * tips, "mid {mid} vs tips {tips}");
     let (gap0, _) = sheet_gap(0.0);
     assert!(gap0 < 1e-9, "no tension, no opening: {gap0} m");
@@ -306,7 +441,10 @@ fn mu_chosen_patterns_are_better_than_a_fixed_pattern() {
     for pattern in [PatternChoice::MinMu, PatternChoice::MinVertexId] {
         let (mesh, rim) = slab();
         let mut sim = sim_of(mesh, &rim, 0.04);
-        let mut cutter = cut::Cutter::new(CutOptions { pattern, ..CutOptions::default() });
+        let mut cutter = cut::Cutter::new(CutOptions {
+            pattern,
+            ..CutOptions::default()
+        });
         let mut mus = Vec::new();
         let mut min_angle = f64::INFINITY;
         for (i, y) in [0.0113, 0.0187, 0.0262, 0.0338].into_iter().enumerate() {
@@ -315,16 +453,23 @@ fn mu_chosen_patterns_are_better_than_a_fixed_pattern() {
                 let x = 0.004 + 0.0032 * k as f64;
                 let tilt = 0.2 * i as f64;
                 let edge = Vector3::new(0.0, tilt, 1.0).normalize();
-                let ev = cutter.advance(&mut sim, cut::blade(Point3::new(x, y, -0.002), edge, 0.016)).expect("cut");
+                let ev = cutter
+                    .advance(&mut sim, cut::blade(Point3::new(x, y, -0.002), edge, 0.016))
+                    .expect("cut");
                 for (t, _) in &ev.tets_added {
-                    let a = cutlab_sim::mesh::dihedral_angles(&sim.model.mesh.tet_corners(*t as usize));
+                    let a =
+                        cutlab_sim::mesh::dihedral_angles(&sim.model.mesh.tet_corners(*t as usize));
                     mus.push(cutlab_sim::mesh::tet_mu(&a));
                     min_angle = a.iter().copied().fold(min_angle, f64::min);
                 }
             }
         }
         let mean = mus.iter().sum::<f64>() / mus.len() as f64;
-        eprintln!("{pattern:?}: {} new tets, mean mu {mean:.3}, min dihedral {:.2} deg", mus.len(), min_angle.to_degrees());
+        eprintln!(
+            "{pattern:?}: {} new tets, mean mu {mean:.3}, min dihedral {:.2} deg",
+            mus.len(),
+            min_angle.to_degrees()
+        );
         results.push((mean, min_angle));
     }
     assert!(results[0].0 < results[1].0, "mean mu {:?}", results);
@@ -332,17 +477,36 @@ fn mu_chosen_patterns_are_better_than_a_fixed_pattern() {
 
 #[test]
 fn the_topology_masses_and_springs_a_cut_carries_over_equal_those_built_from_scratch() {
-    let g = boxed(Point3::origin(), [0.04, 0.04, 0.01], GridCells { nx: 8, ny: 8, nz: 3 }).expect("slab");
+    let g = boxed(
+        Point3::origin(),
+        [0.04, 0.04, 0.01],
+        GridCells {
+            nx: 8,
+            ny: 8,
+            nz: 3,
+        },
+    )
+    .expect("slab");
     let mut sim = sim_of(g.mesh, &[], 0.04);
     // planes of every orientation through the slab, some crossing earlier cuts, the last one
     // right through (a separated piece)
     let mut made = 0;
     for k in 0..14 {
         let a = k as f64 * 0.7;
-        let centre = Point3::new(0.02 + 0.01 * (1.3 * a).sin(), 0.02 + 0.01 * (0.9 * a).cos(), 0.005);
+        let centre = Point3::new(
+            0.02 + 0.01 * (1.3 * a).sin(),
+            0.02 + 0.01 * (0.9 * a).cos(),
+            0.005,
+        );
         let normal = Vector3::new(a.cos(), a.sin(), 0.3 * (2.1 * a).sin());
         let half = if k == 13 { 0.05 } else { 0.006 };
-        let Ok(ev) = cut::cut(&mut sim, &square(centre, normal, half), &CutOptions::default()) else { continue };
+        let Ok(ev) = cut::cut(
+            &mut sim,
+            &square(centre, normal, half),
+            &CutOptions::default(),
+        ) else {
+            continue;
+        };
         made += usize::from(!ev.tets_removed.is_empty());
         assert_carried_over_as_built(&sim, &format!("cut {k}"));
     }
@@ -353,14 +517,27 @@ fn the_topology_masses_and_springs_a_cut_carries_over_equal_those_built_from_scr
 fn assert_carried_over_as_built(sim: &Simulation, what: &str) {
     let mesh = &sim.model.mesh;
     let built = cutlab_sim::mesh::Topology::build(mesh.vertex_count(), mesh.tets());
-    assert!(*mesh.topology() == built, "{what}: the carried-over topology differs from a fresh build");
+    assert!(
+        *mesh.topology() == built,
+        "{what}: the carried-over topology differs from a fresh build"
+    );
     // and the masses and springs derived again locally equal those of a full rebuild
     let mut full = sim.model.clone();
-    full.rebuild(mesh.clone(), sim.model.held.clone()).expect("rebuild");
+    full.rebuild(mesh.clone(), sim.model.held.clone())
+        .expect("rebuild");
     let (m, f) = (&sim.model, &full);
-    assert!(m.mass == f.mass && m.inv_mass == f.inv_mass, "{what}: masses");
+    assert!(
+        m.mass == f.mass && m.inv_mass == f.inv_mass,
+        "{what}: masses"
+    );
     let (s, t) = (&m.springs, &f.springs);
-    assert!(s.ends == t.ends && s.rest_length == t.rest_length && s.stiffness == t.stiffness && s.damping == t.damping, "{what}: springs");
+    assert!(
+        s.ends == t.ends
+            && s.rest_length == t.rest_length
+            && s.stiffness == t.stiffness
+            && s.damping == t.damping,
+        "{what}: springs"
+    );
 }
 
 /// The same on a mesh large enough that the edges and faces are merged side by side, along a
@@ -369,23 +546,46 @@ fn assert_carried_over_as_built(sim: &Simulation, what: &str) {
 #[test]
 fn a_large_mesh_carries_its_topology_and_springs_over_as_built() {
     use cutlab_sim::scene::{BuildOptions, Scene};
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(25_000) }).expect("chest wall");
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(25_000),
+        },
+    )
+    .expect("chest wall");
     let mut sim = scene.simulation();
     let mut cutter = cut::Cutter::default();
     let mut changed = 0;
     for k in 0..=60 {
         let x = -0.015 + 0.03 * k as f64 / 60.0;
         let before = sim.model.springs.ends.clone();
-        let ev = cutter.advance(&mut sim, cut::Blade::normal_to_curved_slab(x, 0.0004, 0.15, 0.006, 0.005)).expect("cut");
+        let ev = cutter
+            .advance(
+                &mut sim,
+                cut::Blade::normal_to_curved_slab(x, 0.0004, 0.15, 0.006, 0.005),
+            )
+            .expect("cut");
         if !ev.is_empty() {
             changed += 1;
             assert_carried_over_as_built(&sim, &format!("cut {k}"));
             // the springs the event reports lost and gained
             let after = &sim.model.springs.ends;
-            let lost: Vec<[u32; 2]> = before.iter().filter(|e| after.binary_search(e).is_err()).copied().collect();
-            let gained: Vec<[u32; 2]> = after.iter().filter(|e| before.binary_search(e).is_err()).copied().collect();
+            let lost: Vec<[u32; 2]> = before
+                .iter()
+                .filter(|e| after.binary_search(e).is_err())
+                .copied()
+                .collect();
+            let gained: Vec<[u32; 2]> = after
+                .iter()
+                .filter(|e| before.binary_search(e).is_err())
+                .copied()
+                .collect();
             assert!(!gained.is_empty(), "cut {k} gained no spring");
-            assert_eq!((&ev.springs_removed, &ev.springs_added), (&lost, &gained), "cut {k}");
+            assert_eq!(
+                (&ev.springs_removed, &ev.springs_added),
+                (&lost, &gained),
+                "cut {k}"
+            );
         }
         sim.step().expect("stable while cutting");
     }
@@ -401,15 +601,30 @@ fn a_large_mesh_carries_its_topology_and_springs_over_as_built() {
 /// (m) of the split vertices' rest positions and the widest gap at rest (m).
 fn coarse_wall_incision(y_m: f64) -> (f64, f64, f64) {
     use cutlab_sim::scene::{BuildOptions, Scene};
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_500) }).expect("chest wall");
-    assert!(scene.model.mesh.tet_count() < 2_000, "the coarsest wall: {} tets", scene.model.mesh.tet_count());
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(1_500),
+        },
+    )
+    .expect("chest wall");
+    assert!(
+        scene.model.mesh.tet_count() < 2_000,
+        "the coarsest wall: {} tets",
+        scene.model.mesh.tet_count()
+    );
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
     let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
     let mut cutter = cut::Cutter::default();
     for k in 0..=1500 {
         let x = -0.03 + 0.06 * k as f64 / 1500.0;
-        cutter.advance(&mut sim, cut::Blade::normal_to_curved_slab(x, y_m, 0.15, 0.008, 0.005)).expect("cut");
+        cutter
+            .advance(
+                &mut sim,
+                cut::Blade::normal_to_curved_slab(x, y_m, 0.15, 0.008, 0.005),
+            )
+            .expect("cut");
         sim.step().expect("stable while cutting");
     }
     check_invariants(&sim, mass0, volume0);
@@ -428,7 +643,16 @@ fn a_coarse_wall_cut_beside_a_layer_of_vertices_opens_along_the_whole_path() {
         let (lo, hi, gap) = coarse_wall_incision(y_m);
         // the surface vertices split from one 8.5 mm column after the blade's entry to one
         // before its exit (a vertex splits once the faces on both sides of it are cut)
-        assert!(lo < -0.016 && hi > 0.016, "y {y_m}: the cut spans {:.1} .. {:.1} mm", lo * 1e3, hi * 1e3);
-        assert!(gap > 1e-3, "y {y_m}: the wound opens by {:.2} mm", gap * 1e3);
+        assert!(
+            lo < -0.016 && hi > 0.016,
+            "y {y_m}: the cut spans {:.1} .. {:.1} mm",
+            lo * 1e3,
+            hi * 1e3
+        );
+        assert!(
+            gap > 1e-3,
+            "y {y_m}: the wound opens by {:.2} mm",
+            gap * 1e3
+        );
     }
 }

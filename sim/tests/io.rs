@@ -41,7 +41,11 @@ fn assert_parse_error(result: Result<TetMesh, ReadError>, file: &str, line: usiz
     };
     let shown = err.to_string();
     match &err {
-        ReadError::Parse { path, line: l, message } => {
+        ReadError::Parse {
+            path,
+            line: l,
+            message,
+        } => {
             assert_eq!(path, Path::new(file), "{shown}");
             assert_eq!(*l, line, "wrong line in: {shown}");
             assert!(
@@ -60,7 +64,10 @@ fn assert_format_error(result: Result<TetMesh, ReadError>, file: &str, needle: &
     match result {
         Err(ReadError::Format { path, message }) => {
             assert_eq!(path, Path::new(file));
-            assert!(message.to_lowercase().contains(&needle.to_lowercase()), "{message}");
+            assert!(
+                message.to_lowercase().contains(&needle.to_lowercase()),
+                "{message}"
+            );
         }
         Err(other) => panic!("expected a format error, got {other}"),
         Ok(m) => panic!("expected an error, read {} tets", m.tet_count()),
@@ -98,10 +105,17 @@ fn tetgen(node: &str, ele: &str) -> Result<TetMesh, ReadError> {
 /// The unit cube split into six tetrahedra around the diagonal 0-7 (Kuhn); half of them are
 /// negatively oriented as listed. Vertex `i` is at `(i & 1, i >> 1 & 1, i >> 2 & 1)`.
 fn cube() -> (Vec<[f64; 3]>, Vec<[usize; 4]>) {
-    let points =
-        (0..8).map(|i| [(i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64]).collect();
-    let tets =
-        vec![[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]];
+    let points = (0..8)
+        .map(|i| [(i & 1) as f64, (i >> 1 & 1) as f64, (i >> 2 & 1) as f64])
+        .collect();
+    let tets = vec![
+        [0, 1, 3, 7],
+        [0, 1, 5, 7],
+        [0, 2, 3, 7],
+        [0, 2, 6, 7],
+        [0, 4, 5, 7],
+        [0, 4, 6, 7],
+    ];
     (points, tets)
 }
 
@@ -151,7 +165,11 @@ fn check_bar(rel: &str, nodes: usize, tets: usize) {
     let (lo, hi) = mesh.bounding_box();
     assert_eq!([lo.x, lo.y, lo.z], [0.0, 0.0, 0.0]);
     assert_eq!([hi.x, hi.y, hi.z], [10.0, 0.5, 1.0]);
-    assert!((mesh.volume() - 5.0).abs() < 1e-9, "volume {}", mesh.volume());
+    assert!(
+        (mesh.volume() - 5.0).abs() < 1e-9,
+        "volume {}",
+        mesh.volume()
+    );
     // No $Entities section and entity tag 0: region 0 throughout.
     assert_eq!(mesh.region_ids(), vec![0]);
     assert!(mesh.validate().is_ok(), "{}", mesh.validate());
@@ -236,10 +254,14 @@ fn generated_gmsh22() {
 
 #[test]
 fn gmsh22_elementary_tag_when_no_physical() {
-    let text = cube_msh22().replace(" 4 2 1 5 ", " 4 2 0 5 ").replace(" 4 2 2 5 ", " 4 2 0 6 ");
+    let text = cube_msh22()
+        .replace(" 4 2 1 5 ", " 4 2 0 5 ")
+        .replace(" 4 2 2 5 ", " 4 2 0 6 ");
     let mesh = gmsh(&text).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(mesh.regions(), [5, 5, 5, 6, 6, 6]);
-    let text = cube_msh22().replace(" 4 2 1 5 ", " 4 0 ").replace(" 4 2 2 5 ", " 4 0 ");
+    let text = cube_msh22()
+        .replace(" 4 2 1 5 ", " 4 0 ")
+        .replace(" 4 2 2 5 ", " 4 0 ");
     let mesh = gmsh(&text).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(mesh.regions(), [0; 6]);
 }
@@ -385,15 +407,30 @@ fn gmsh22_wrong_counts() {
 #[test]
 fn gmsh22_unknown_node_tag() {
     let text = with_line(&cube_msh22(), 26, "5 4 2 1 5 10 20 60 99");
-    assert_parse_error(gmsh(&text), "small.msh", 26, "element 5 refers to unknown node tag 99");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        26,
+        "element 5 refers to unknown node tag 99",
+    );
 }
 
 #[test]
 fn gmsh22_nan_and_inf_coordinates() {
     let text = with_line(&cube_msh22(), 13, "30 0 nan 0");
-    assert_parse_error(gmsh(&text), "small.msh", 13, "y coordinate is not finite: `nan`");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        13,
+        "y coordinate is not finite: `nan`",
+    );
     let text = with_line(&cube_msh22(), 18, "80 1 1 -inf");
-    assert_parse_error(gmsh(&text), "small.msh", 18, "z coordinate is not finite: `-inf`");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        18,
+        "z coordinate is not finite: `-inf`",
+    );
 }
 
 #[test]
@@ -418,7 +455,12 @@ fn gmsh22_wrong_element_types() {
         "type 5 (a hexahedron)",
     );
     let tet10 = "5 11 2 1 5 10 20 30 40 50 60 70 80 10 20";
-    assert_parse_error(gmsh(&with_line(&cube_msh22(), 26, tet10)), "small.msh", 26, "second-order");
+    assert_parse_error(
+        gmsh(&with_line(&cube_msh22(), 26, tet10)),
+        "small.msh",
+        26,
+        "second-order",
+    );
     assert_parse_error(
         gmsh(&with_line(&cube_msh22(), 26, "5 999 0 1 2")),
         "small.msh",
@@ -437,7 +479,12 @@ fn gmsh22_no_tetrahedra() {
 #[test]
 fn gmsh22_missing_sections() {
     let text = first_lines(&cube_msh22(), 19);
-    assert_parse_error(gmsh(&text), "small.msh", 20, "without an `$Elements` section");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        20,
+        "without an `$Elements` section",
+    );
     let text = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Elements\n0\n$EndElements\n";
     assert_parse_error(gmsh(text), "small.msh", 4, "before the `$Nodes` section");
     let text = "$MeshFormat\n2.2 0 8\n";
@@ -462,11 +509,26 @@ fn gmsh22_duplicate_and_repeated_tags() {
 #[test]
 fn gmsh_binary_and_unsupported_versions() {
     let text = cube_msh22().replace("2.2 0 8", "2.2 1 8");
-    assert_parse_error(gmsh(&text), "small.msh", 2, "binary Gmsh files are not supported");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        2,
+        "binary Gmsh files are not supported",
+    );
     let text = MSH41.replace("4.1 0 8", "4 0 8");
-    assert_parse_error(gmsh(&text), "small.msh", 2, "unsupported Gmsh format version 4");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        2,
+        "unsupported Gmsh format version 4",
+    );
     let text = MSH41.replace("4.1 0 8", "3.0 0 8");
-    assert_parse_error(gmsh(&text), "small.msh", 2, "unsupported Gmsh format version 3.0");
+    assert_parse_error(
+        gmsh(&text),
+        "small.msh",
+        2,
+        "unsupported Gmsh format version 3.0",
+    );
 }
 
 #[test]
@@ -536,8 +598,18 @@ fn gmsh41_nan() {
 
 #[test]
 fn gmsh41_wrong_element_type() {
-    assert_parse_error(gmsh(&with_line(MSH41, 27, "3 7 11 2")), "small.msh", 27, "second-order");
-    assert_parse_error(gmsh(&with_line(MSH41, 27, "3 7 6 2")), "small.msh", 27, "a prism");
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 27, "3 7 11 2")),
+        "small.msh",
+        27,
+        "second-order",
+    );
+    assert_parse_error(
+        gmsh(&with_line(MSH41, 27, "3 7 6 2")),
+        "small.msh",
+        27,
+        "a prism",
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -582,7 +654,10 @@ fn generated_tetgen_cube_base_zero_files() {
     }
     let mut ele = format!("{} 4 1\n", tets.len());
     for (t, tet) in tets.iter().enumerate() {
-        ele += &format!("{t} {} {} {} {} {}\n", tet[0], tet[1], tet[2], tet[3], CUBE_REGIONS[t]);
+        ele += &format!(
+            "{t} {} {} {} {} {}\n",
+            tet[0], tet[1], tet[2], tet[3], CUBE_REGIONS[t]
+        );
     }
     let dir = scratch_dir("tetgen");
     std::fs::write(dir.join("cube.1.node"), node).expect("write");
@@ -606,7 +681,12 @@ fn generated_tetgen_cube_base_zero_files() {
 #[test]
 fn tetgen_empty() {
     assert_parse_error(tetgen("", ELE), "small.node", 1, "the file is empty");
-    assert_parse_error(tetgen("# only a comment\n", ELE), "small.node", 2, "the file is empty");
+    assert_parse_error(
+        tetgen("# only a comment\n", ELE),
+        "small.node",
+        2,
+        "the file is empty",
+    );
     assert_parse_error(tetgen(NODE, ""), "small.ele", 1, "the file is empty");
 }
 
@@ -708,14 +788,24 @@ fn tetgen_nan() {
 
 #[test]
 fn tetgen_wrong_element_type() {
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "2 10 1")), "small.ele", 1, "second-order");
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 1, "2 10 1")),
+        "small.ele",
+        1,
+        "second-order",
+    );
     assert_parse_error(
         tetgen(NODE, &with_line(ELE, 1, "2 3 1")),
         "small.ele",
         1,
         "3 nodes per tetrahedron",
     );
-    assert_parse_error(tetgen(&with_line(NODE, 2, "5 2 0 1"), ELE), "small.node", 2, "dimension 2");
+    assert_parse_error(
+        tetgen(&with_line(NODE, 2, "5 2 0 1"), ELE),
+        "small.node",
+        2,
+        "dimension 2",
+    );
 }
 
 #[test]
@@ -744,7 +834,12 @@ fn tetgen_numbering_and_garbage() {
         2,
         "region attribute 2.5",
     );
-    assert_parse_error(tetgen(NODE, &with_line(ELE, 1, "0 4 1")), "small.ele", 1, "no tetrahedra");
+    assert_parse_error(
+        tetgen(NODE, &with_line(ELE, 1, "0 4 1")),
+        "small.ele",
+        1,
+        "no tetrahedra",
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -767,8 +862,10 @@ fn cube_vtk() -> String {
     }
     s += &format!("CELL_TYPES {}\n5\n", tets.len() + 1);
     s += &"10\n".repeat(tets.len());
-    s +=
-        &format!("CELL_DATA {}\nSCALARS material int 1\nLOOKUP_TABLE default\n0\n", tets.len() + 1);
+    s += &format!(
+        "CELL_DATA {}\nSCALARS material int 1\nLOOKUP_TABLE default\n0\n",
+        tets.len() + 1
+    );
     s += &CUBE_REGIONS.map(|r| r.to_string()).join(" ");
     s += "\nPOINT_DATA 8\nVECTORS velocity double\n";
     s += &"0 0 0\n".repeat(8);
@@ -781,7 +878,10 @@ fn cube_vtk() -> String {
 
 #[test]
 fn generated_legacy_vtk() {
-    assert_cube(&vtk(&cube_vtk()).unwrap_or_else(|e| panic!("{e}")), &CUBE_REGIONS);
+    assert_cube(
+        &vtk(&cube_vtk()).unwrap_or_else(|e| panic!("{e}")),
+        &CUBE_REGIONS,
+    );
 }
 
 #[test]
@@ -805,8 +905,15 @@ fn legacy_vtk_51_offsets_connectivity() {
         s += &format!("{} {} {}\n", p[0], p[1], p[2]);
     }
     s += "METADATA\nINFORMATION 0\n\n";
-    s += &format!("CELLS {} {}\nOFFSETS vtktypeint64\n", tets.len() + 1, 4 * tets.len());
-    s += &(0..=tets.len()).map(|i| (4 * i).to_string()).collect::<Vec<_>>().join(" ");
+    s += &format!(
+        "CELLS {} {}\nOFFSETS vtktypeint64\n",
+        tets.len() + 1,
+        4 * tets.len()
+    );
+    s += &(0..=tets.len())
+        .map(|i| (4 * i).to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
     s += "\nCONNECTIVITY vtktypeint64\n";
     for tet in &tets {
         s += &format!("{} {} {} {}\n", tet[0], tet[1], tet[2], tet[3]);
@@ -825,16 +932,36 @@ fn legacy_vtk_empty_and_not_vtk() {
 #[test]
 fn legacy_vtk_truncated() {
     let text = cube_vtk();
-    assert_parse_error(vtk(&first_lines(&text, 8)), "small.vtk", 9, "expected point coordinate");
+    assert_parse_error(
+        vtk(&first_lines(&text, 8)),
+        "small.vtk",
+        9,
+        "expected point coordinate",
+    );
     assert_parse_error(
         vtk(&first_lines(&text, 17)),
         "small.vtk",
         18,
         "without a CELL_TYPES section",
     );
-    assert_parse_error(vtk(&first_lines(&text, 4)), "small.vtk", 5, "without a POINTS section");
-    assert_parse_error(vtk(&first_lines(&text, 2)), "small.vtk", 3, "expected `ASCII` or `BINARY`");
-    assert_parse_error(vtk(&first_lines(&text, 29)), "small.vtk", 30, "expected a region value");
+    assert_parse_error(
+        vtk(&first_lines(&text, 4)),
+        "small.vtk",
+        5,
+        "without a POINTS section",
+    );
+    assert_parse_error(
+        vtk(&first_lines(&text, 2)),
+        "small.vtk",
+        3,
+        "expected `ASCII` or `BINARY`",
+    );
+    assert_parse_error(
+        vtk(&first_lines(&text, 29)),
+        "small.vtk",
+        30,
+        "expected a region value",
+    );
 }
 
 #[test]
@@ -898,7 +1025,12 @@ fn legacy_vtk_out_of_range_point() {
 #[test]
 fn legacy_vtk_nan() {
     let text = with_line(&cube_vtk(), 7, "0 1 0 NaN 1 0");
-    assert_parse_error(vtk(&text), "small.vtk", 7, "point coordinate is not finite: `NaN`");
+    assert_parse_error(
+        vtk(&text),
+        "small.vtk",
+        7,
+        "point coordinate is not finite: `NaN`",
+    );
     let text = with_line(&cube_vtk(), 9, "0 1 1 1 inf 1");
     assert_parse_error(vtk(&text), "small.vtk", 9, "not finite: `inf`");
 }
@@ -965,7 +1097,10 @@ fn legacy_vtk_no_tetrahedra() {
 
 fn cube_mesh() -> TetMesh {
     let (points, tets) = cube();
-    let positions = points.iter().map(|p| Point3::new(p[0], p[1], p[2])).collect();
+    let positions = points
+        .iter()
+        .map(|p| Point3::new(p[0], p[1], p[2]))
+        .collect();
     let tets = tets.iter().map(|t| t.map(|v| v as u32)).collect();
     let mut mesh = TetMesh::new(positions, tets, CUBE_REGIONS.to_vec()).expect("cube");
     mesh.orient_positively();
@@ -1026,11 +1161,18 @@ fn handwritten_vtu() {
 #[test]
 fn vtu_writer_output_reads_back() {
     let mesh = cube_mesh();
-    let v: Vec<Vector3> = (0..8).map(|i| Vector3::new(i as f64, 0.5, -1e-300)).collect();
+    let v: Vec<Vector3> = (0..8)
+        .map(|i| Vector3::new(i as f64, 0.5, -1e-300))
+        .collect();
     let s: Vec<f64> = (0..8).map(|i| 0.1 * i as f64).collect();
-    let text =
-        vtu_string(&mesh, &[("velocity", PointData::Vector(&v)), ("p<&>", PointData::Scalar(&s))])
-            .unwrap_or_else(|e| panic!("{e}"));
+    let text = vtu_string(
+        &mesh,
+        &[
+            ("velocity", PointData::Vector(&v)),
+            ("p<&>", PointData::Scalar(&s)),
+        ],
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     assert!(text.contains(r#"Name="velocity" NumberOfComponents="3""#));
     assert!(text.contains(r#"Name="p&lt;&amp;&gt;""#));
     assert!(text.contains(r#"Name="region""#));
@@ -1042,14 +1184,30 @@ fn vtu_writer_refuses_bad_point_data() {
     let mesh = cube_mesh();
     let short = [0.0; 7];
     let e = vtu_string(&mesh, &[("p", PointData::Scalar(&short))]).err();
-    assert!(matches!(e, Some(WriteError::Length { len: 7, vertices: 8, .. })), "{e:?}");
+    assert!(
+        matches!(
+            e,
+            Some(WriteError::Length {
+                len: 7,
+                vertices: 8,
+                ..
+            })
+        ),
+        "{e:?}"
+    );
     let mut nan = [0.0; 8];
     nan[3] = f64::NAN;
     let e = vtu_string(&mesh, &[("p", PointData::Scalar(&nan))]).err();
-    assert!(matches!(e, Some(WriteError::NonFinite { vertex: 3, .. })), "{e:?}");
+    assert!(
+        matches!(e, Some(WriteError::NonFinite { vertex: 3, .. })),
+        "{e:?}"
+    );
     let ok = [0.0; 8];
-    let e =
-        vtu_string(&mesh, &[("p", PointData::Scalar(&ok)), ("p", PointData::Scalar(&ok))]).err();
+    let e = vtu_string(
+        &mesh,
+        &[("p", PointData::Scalar(&ok)), ("p", PointData::Scalar(&ok))],
+    )
+    .err();
     assert!(matches!(e, Some(WriteError::Name { .. })), "{e:?}");
     let e = write_vtu(Path::new("/nonexistent/cutlab/out.vtu"), &mesh, &[]).expect_err("error");
     assert!(e.to_string().contains("/nonexistent/cutlab/out.vtu"), "{e}");
@@ -1064,8 +1222,16 @@ fn vtu_empty_and_not_vtk() {
         2,
         "root element is <html>",
     );
-    let text = VTU.replace(r#"type="UnstructuredGrid" version"#, r#"type="PolyData" version"#);
-    assert_parse_error(vtu(&text), "small.vtu", 2, "only VTKFile type=\"UnstructuredGrid\"");
+    let text = VTU.replace(
+        r#"type="UnstructuredGrid" version"#,
+        r#"type="PolyData" version"#,
+    );
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        2,
+        "only VTKFile type=\"UnstructuredGrid\"",
+    );
 }
 
 #[test]
@@ -1130,7 +1296,12 @@ fn vtu_out_of_range_point() {
 #[test]
 fn vtu_nan() {
     let text = VTU.replace("0 0 1\n", "0 nan 1\n");
-    assert_parse_error(vtu(&text), "small.vtu", 19, "point coordinate is not finite: `nan`");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        19,
+        "point coordinate is not finite: `nan`",
+    );
 }
 
 #[test]
@@ -1138,12 +1309,20 @@ fn vtu_wrong_cell_type() {
     let mut lines: Vec<&str> = VTU.lines().collect();
     lines[32] = "          12";
     let text = lines.join("\n") + "\n";
-    assert_parse_error(vtu(&text), "small.vtu", 33, "cell 2 has VTK cell type 12 (a hexahedron)");
+    assert_parse_error(
+        vtu(&text),
+        "small.vtu",
+        33,
+        "cell 2 has VTK cell type 12 (a hexahedron)",
+    );
 }
 
 #[test]
 fn vtu_binary_and_appended_unsupported() {
-    let text = VTU.replace(r#"Name="offsets" format="ascii""#, r#"Name="offsets" format="binary""#);
+    let text = VTU.replace(
+        r#"Name="offsets" format="ascii""#,
+        r#"Name="offsets" format="binary""#,
+    );
     assert_parse_error(
         vtu(&text),
         "small.vtu",
@@ -1169,15 +1348,21 @@ fn vtu_malformed_xml() {
 #[test]
 fn bar_651_round_trip_through_vtu() {
     let mesh = read_data("ipc/bar-651.msh");
-    let displacement: Vec<Vector3> =
-        mesh.positions().iter().map(|p| Vector3::new(0.0, 0.0, -1e-3 * p.x * p.x / 3.0)).collect();
+    let displacement: Vec<Vector3> = mesh
+        .positions()
+        .iter()
+        .map(|p| Vector3::new(0.0, 0.0, -1e-3 * p.x * p.x / 3.0))
+        .collect();
     let speed: Vec<f64> = mesh.positions().iter().map(|p| p.x.sqrt() / 7.0).collect();
     let dir = scratch_dir("roundtrip");
     let path = dir.join("bar-651.vtu");
     write_vtu(
         &path,
         &mesh,
-        &[("displacement", PointData::Vector(&displacement)), ("speed", PointData::Scalar(&speed))],
+        &[
+            ("displacement", PointData::Vector(&displacement)),
+            ("speed", PointData::Scalar(&speed)),
+        ],
     )
     .unwrap_or_else(|e| panic!("{e}"));
     let back = read_mesh(&path).unwrap_or_else(|e| panic!("{e}"));
@@ -1242,8 +1427,9 @@ fn random_corruption_never_panics() {
     // A fixed linear congruential generator: deterministic, no extra dependency.
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut next = move |n: usize| {
-        state =
-            state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
         ((state >> 33) as usize) % n.max(1)
     };
     const REPLACEMENTS: [&str; 14] = [
@@ -1290,8 +1476,16 @@ fn huge_counts_do_not_allocate_or_panic() {
     let text = with_line(MSH41, 9, "18446744073709551615 18446744073709551615 10 50");
     assert_parse_error(gmsh(&text), "small.msh", 22, "section ends early");
     let text = with_line(&cube_vtk(), 5, "POINTS 18446744073709551615 double");
-    assert_parse_error(vtk(&text), "small.vtk", 10, "invalid point coordinate `CELLS`");
-    let text = VTU.replace(r#"NumberOfCells="3""#, r#"NumberOfCells="18446744073709551615""#);
+    assert_parse_error(
+        vtk(&text),
+        "small.vtk",
+        10,
+        "invalid point coordinate `CELLS`",
+    );
+    let text = VTU.replace(
+        r#"NumberOfCells="3""#,
+        r#"NumberOfCells="18446744073709551615""#,
+    );
     assert_parse_error(
         vtu(&text),
         "small.vtu",

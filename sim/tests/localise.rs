@@ -8,7 +8,13 @@ use cutlab_sim::{Point3, Vector3};
 
 /// The settled chest wall, localised or not.
 fn settled(min_tets: usize, localised: bool) -> Simulation {
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(min_tets) }).expect("built-in scene");
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(min_tets),
+        },
+    )
+    .expect("built-in scene");
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
     sim.settings.localisation = localised.then(LocalisationSettings::default);
@@ -16,7 +22,11 @@ fn settled(min_tets: usize, localised: bool) -> Simulation {
 }
 
 fn top_z(sim: &Simulation) -> f64 {
-    sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max)
+    sim.state
+        .positions
+        .iter()
+        .map(|p| p.z)
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// A tool pressing 0.5 N down on the surface particles within 4 mm of a point sliding from
@@ -46,7 +56,10 @@ fn press(sim: &mut Simulation, step: usize, press_steps: usize, z: f64, surface:
 
 fn surface_top(sim: &Simulation, z: f64) -> Vec<u32> {
     let boundary = sim.model.mesh.topology().boundary_vertices();
-    boundary.into_iter().filter(|&v| sim.state.positions[v as usize].z > z - 0.005).collect()
+    boundary
+        .into_iter()
+        .filter(|&v| sim.state.positions[v as usize].z > z - 0.005)
+        .collect()
 }
 
 /// Runs the press; returns the largest displacement from the start at each of the checked
@@ -100,23 +113,59 @@ fn press_error(min_tets: usize, scale: f64) -> (f64, f64, usize) {
         let awake = local.step().expect("localised step").awake_particles;
         // (a particle that fell asleep and woke before the sub-body was rebuilt was once
         // counted twice, and the count wrapped below zero)
-        assert!(awake <= full.model.vertex_count(), "step {step}: {awake} awake");
+        assert!(
+            awake <= full.model.vertex_count(),
+            "step {step}: {awake} awake"
+        );
         awake_sum += awake;
-        peak = peak.max(full.state.positions.iter().zip(&start).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max));
-        worst = worst.max(full.state.positions.iter().zip(&local.state.positions).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max));
+        peak = peak.max(
+            full.state
+                .positions
+                .iter()
+                .zip(&start)
+                .map(|(p, q)| (p - q).norm())
+                .fold(0.0, f64::max),
+        );
+        worst = worst.max(
+            full.state
+                .positions
+                .iter()
+                .zip(&local.state.positions)
+                .map(|(p, q)| (p - q).norm())
+                .fold(0.0, f64::max),
+        );
     }
-    (worst / peak, awake_sum as f64 / steps as f64, full.model.vertex_count())
+    (
+        worst / peak,
+        awake_sum as f64 / steps as f64,
+        full.model.vertex_count(),
+    )
 }
 
 #[test]
-fn the_localised_error_shrinks_with_the_thresholds_and_coarse_thresholds_put_most_particles_to_sleep() {
+fn the_localised_error_shrinks_with_the_thresholds_and_coarse_thresholds_put_most_particles_to_sleep()
+ {
     let (fine, fine_awake, n) = press_error(12_000, 0.1);
     let (default, _, _) = press_error(12_000, 1.0);
     let (coarse, coarse_awake, _) = press_error(12_000, 30.0);
-    assert!(fine < 1e-3, "thresholds x0.1: {:.3} % of the peak displacement", fine * 100.0);
-    assert!(default < 0.02, "default thresholds: {:.3} %", default * 100.0);
-    assert!(fine < default && default < coarse, "{fine} {default} {coarse}");
-    assert!(coarse_awake < 0.3 * n as f64 && coarse_awake < 0.5 * fine_awake, "{coarse_awake:.0} vs {fine_awake:.0} of {n} awake");
+    assert!(
+        fine < 1e-3,
+        "thresholds x0.1: {:.3} % of the peak displacement",
+        fine * 100.0
+    );
+    assert!(
+        default < 0.02,
+        "default thresholds: {:.3} %",
+        default * 100.0
+    );
+    assert!(
+        fine < default && default < coarse,
+        "{fine} {default} {coarse}"
+    );
+    assert!(
+        coarse_awake < 0.3 * n as f64 && coarse_awake < 0.5 * fine_awake,
+        "{coarse_awake:.0} vs {fine_awake:.0} of {n} awake"
+    );
 }
 
 #[test]
@@ -127,7 +176,13 @@ fn without_a_tool_everything_falls_asleep_and_stays_at_rest() {
         sim.step().expect("step");
     }
     assert_eq!(sim.awake_particles(), 0);
-    let drift = sim.state.positions.iter().zip(&start).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max);
+    let drift = sim
+        .state
+        .positions
+        .iter()
+        .zip(&start)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max);
     assert!(drift < 1e-9, "drift {drift} m");
     // a sleeping body costs no solver iterations
     assert_eq!(sim.step().expect("step").cg_iterations, 0);
@@ -154,16 +209,43 @@ fn a_cut_wakes_the_tissue_it_touched_and_the_wound_opens_as_in_the_full_simulati
     let ef = cut::cut(&mut full, &c, &options).expect("full cut");
     let el = cut::cut(&mut local, &c, &options).expect("localised cut");
     assert_eq!(ef.tets_removed, el.tets_removed);
-    assert!(!el.tets_removed.is_empty() && !el.vertices_split.is_empty(), "{el:?}");
+    assert!(
+        !el.tets_removed.is_empty() && !el.vertices_split.is_empty(),
+        "{el:?}"
+    );
     let start = full.state.positions.clone();
     let (mut peak, mut worst) = (0.0f64, 0.0f64);
     for _ in 0..300 {
         full.step().expect("full step");
         local.step().expect("localised step");
-        peak = peak.max(full.state.positions.iter().zip(&start).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max));
-        worst = worst.max(full.state.positions.iter().zip(&local.state.positions).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max));
+        peak = peak.max(
+            full.state
+                .positions
+                .iter()
+                .zip(&start)
+                .map(|(p, q)| (p - q).norm())
+                .fold(0.0, f64::max),
+        );
+        worst = worst.max(
+            full.state
+                .positions
+                .iter()
+                .zip(&local.state.positions)
+                .map(|(p, q)| (p - q).norm())
+                .fold(0.0, f64::max),
+        );
     }
     let worst = worst / peak;
-    assert!(worst < 0.05, "largest difference {:.2} % of the largest displacement", worst * 100.0);
-    assert!(local.state.positions.iter().all(|p| p.iter().all(|c| c.is_finite())));
+    assert!(
+        worst < 0.05,
+        "largest difference {:.2} % of the largest displacement",
+        worst * 100.0
+    );
+    assert!(
+        local
+            .state
+            .positions
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite()))
+    );
 }

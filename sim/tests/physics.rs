@@ -6,7 +6,13 @@ use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{Integrator, StaticSettings, StepError};
 
 fn chest_wall(min_tets: usize) -> Scene {
-    Scene::load("chest-wall", BuildOptions { min_tets: Some(min_tets) }).expect("built-in scene")
+    Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(min_tets),
+        },
+    )
+    .expect("built-in scene")
 }
 
 #[test]
@@ -14,7 +20,11 @@ fn lumped_masses_sum_to_density_times_volume() {
     let scene = chest_wall(2_000);
     let m = &scene.model;
     let expected = 900.0 * m.mesh.volume();
-    assert!((m.total_mass() - expected).abs() <= 1e-12 * expected, "{} vs {expected}", m.total_mass());
+    assert!(
+        (m.total_mass() - expected).abs() <= 1e-12 * expected,
+        "{} vs {expected}",
+        m.total_mass()
+    );
 }
 
 #[test]
@@ -40,14 +50,23 @@ fn settled_scene_stays_at_rest_for_ten_seconds() {
         let report = sim.settle(StaticSettings::default());
         assert!(report.converged, "{report:?}");
         // the pre-tension really moved the tissue
-        let moved = sim.state.positions.iter().zip(scene.model.mesh.positions()).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let moved = sim
+            .state
+            .positions
+            .iter()
+            .zip(scene.model.mesh.positions())
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
         assert!(moved > 1e-4, "settling moved at most {moved} m");
         let mut max_speed = 0.0f64;
         for _ in 0..10_000 {
             sim.step().expect("step");
             max_speed = max_speed.max(sim.state.max_speed());
         }
-        assert!(max_speed < 1e-9, "{integrator:?}: max speed {max_speed} m/s");
+        assert!(
+            max_speed < 1e-9,
+            "{integrator:?}: max speed {max_speed} m/s"
+        );
     }
 }
 
@@ -80,7 +99,11 @@ fn same_inputs_give_bit_identical_states() {
         let a = run_pressed(integrator, 200);
         let b = run_pressed(integrator, 200);
         assert_eq!(a, b, "{integrator:?}");
-        assert_ne!(a, run_pressed(integrator, 199), "the hash must see the state");
+        assert_ne!(
+            a,
+            run_pressed(integrator, 199),
+            "the hash must see the state"
+        );
     }
 }
 
@@ -105,7 +128,8 @@ fn non_finite_force_is_rejected_and_state_kept() {
     assert!(matches!(sim.step(), Err(StepError::NonFinite { .. })));
     assert_eq!(sim.state.bit_hash(), before);
     sim.clear_external_forces();
-    sim.step().expect("the simulation keeps running after a rejected step");
+    sim.step()
+        .expect("the simulation keeps running after a rejected step");
 }
 
 #[test]

@@ -8,7 +8,13 @@ use cutlab_sim::solver::{LocalisationSettings, ResumeState, Simulation, StaticSe
 use cutlab_sim::{Point3, TetMesh, Vector3};
 
 fn settled_wall() -> Simulation {
-    let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_500) }).expect("chest wall");
+    let scene = Scene::load(
+        "chest-wall",
+        BuildOptions {
+            min_tets: Some(1_500),
+        },
+    )
+    .expect("chest wall");
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
     sim
@@ -27,7 +33,14 @@ fn press_and_cut(sim: &mut Simulation, cutter: &mut Cutter, k: usize) {
     let blade = Blade::normal_to_curved_slab(x, 0.0, 0.15, 0.008, 0.005);
     sim.clear_external_forces();
     sim.set_focus(&[blade.tip]);
-    let near: Vec<u32> = sim.model.mesh.topology().boundary_vertices().into_iter().filter(|&v| (sim.state.positions[v as usize] - blade.tip).norm() < 0.012).collect();
+    let near: Vec<u32> = sim
+        .model
+        .mesh
+        .topology()
+        .boundary_vertices()
+        .into_iter()
+        .filter(|&v| (sim.state.positions[v as usize] - blade.tip).norm() < 0.012)
+        .collect();
     for v in near {
         sim.add_external_force(v, Vector3::new(0.0, 0.0, -0.02));
     }
@@ -54,15 +67,27 @@ fn run_and_compare(localised: bool) {
         stroke_step(&mut sim, &mut cutter, k);
         if CAPTURES.contains(&k) {
             // through JSON, as a recording's keyframe carries it
-            let r: ResumeState = serde_json::from_str(&serde_json::to_string(&sim.resume_state()).expect("encode")).expect("decode");
-            let c: CutterResume = serde_json::from_str(&serde_json::to_string(&cutter.resume_state()).expect("encode")).expect("decode");
-            assert!(k < 100 || (!c.trail.is_empty() && !c.stroke.is_empty()), "captured mid-stroke");
+            let r: ResumeState =
+                serde_json::from_str(&serde_json::to_string(&sim.resume_state()).expect("encode"))
+                    .expect("decode");
+            let c: CutterResume = serde_json::from_str(
+                &serde_json::to_string(&cutter.resume_state()).expect("encode"),
+            )
+            .expect("decode");
+            assert!(
+                k < 100 || (!c.trail.is_empty() && !c.stroke.is_empty()),
+                "captured mid-stroke"
+            );
             assert_eq!(r.region.is_some(), localised);
             captured.push((k, (sim.model.mesh.clone(), sim.state.clone(), r, c)));
         }
         original.push((sim.state.bit_hash(), sim.model.mesh.tets().to_vec()));
     }
-    assert!(sim.model.mesh.tet_count() > 1_600, "the stroke cut: {} tets", sim.model.mesh.tet_count());
+    assert!(
+        sim.model.mesh.tet_count() > 1_600,
+        "the stroke cut: {} tets",
+        sim.model.mesh.tet_count()
+    );
 
     for (at, (mesh, state, r, c)) in captured {
         let mut resumed = settled_wall();
@@ -82,11 +107,16 @@ fn run_and_compare(localised: bool) {
         }
         resumed.resume(mesh, state, &r).expect("resume");
         let mut cutter = Cutter::default();
-        cutter.resume(&c, resumed.model.vertex_count()).expect("cutter");
+        cutter
+            .resume(&c, resumed.model.vertex_count())
+            .expect("cutter");
         for k in at + 1..STEPS {
             stroke_step(&mut resumed, &mut cutter, k);
             let (hash, tets) = &original[k];
-            assert!(resumed.state.bit_hash() == *hash && resumed.model.mesh.tets() == &tets[..], "localised {localised}: resumed after step {at}, the run differs at step {k}");
+            assert!(
+                resumed.state.bit_hash() == *hash && resumed.model.mesh.tets() == &tets[..],
+                "localised {localised}: resumed after step {at}, the run differs at step {k}"
+            );
         }
     }
 }
@@ -117,23 +147,45 @@ fn a_whole_body_run_captured_between_a_cut_and_its_step_resumes_bit_for_bit() {
         k += 1;
         press_and_cut(&mut sim, &mut cutter, k);
     }
-    let r: ResumeState = serde_json::from_str(&serde_json::to_string(&sim.resume_state()).expect("encode")).expect("decode");
-    let parts = r.sweep_order.as_ref().expect("a whole-body step laid the sweep order out").parts.len();
-    assert!(parts < sim.model.vertex_count(), "{parts} parts for {} particles", sim.model.vertex_count());
+    let r: ResumeState =
+        serde_json::from_str(&serde_json::to_string(&sim.resume_state()).expect("encode"))
+            .expect("decode");
+    let parts = r
+        .sweep_order
+        .as_ref()
+        .expect("a whole-body step laid the sweep order out")
+        .parts
+        .len();
+    assert!(
+        parts < sim.model.vertex_count(),
+        "{parts} parts for {} particles",
+        sim.model.vertex_count()
+    );
     let c = cutter.resume_state();
     let mut resumed = settled_wall();
-    resumed.resume(sim.model.mesh.clone(), sim.state.clone(), &r).expect("resume");
+    resumed
+        .resume(sim.model.mesh.clone(), sim.state.clone(), &r)
+        .expect("resume");
     let mut resumed_cutter = Cutter::default();
-    resumed_cutter.resume(&c, resumed.model.vertex_count()).expect("cutter");
+    resumed_cutter
+        .resume(&c, resumed.model.vertex_count())
+        .expect("cutter");
     // (the press is the session's input, not state: both step without it once)
     sim.clear_external_forces();
     sim.step().expect("step");
     resumed.step().expect("step");
-    assert!(resumed.state.bit_hash() == sim.state.bit_hash(), "differs at the step after the cut");
+    assert!(
+        resumed.state.bit_hash() == sim.state.bit_hash(),
+        "differs at the step after the cut"
+    );
     for j in k + 1..k + 60 {
         stroke_step(&mut sim, &mut cutter, j);
         stroke_step(&mut resumed, &mut resumed_cutter, j);
-        assert!(resumed.state.bit_hash() == sim.state.bit_hash() && resumed.model.mesh.tets() == sim.model.mesh.tets(), "differs at step {j}");
+        assert!(
+            resumed.state.bit_hash() == sim.state.bit_hash()
+                && resumed.model.mesh.tets() == sim.model.mesh.tets(),
+            "differs at step {j}"
+        );
     }
 }
 
@@ -148,14 +200,88 @@ fn a_resume_state_is_checked_against_its_mesh() {
     let (mesh, state) = (sim.model.mesh.clone(), sim.state.clone());
     let n = mesh.vertex_count() as u32;
     let cases: Vec<(&str, ResumeState)> = vec![
-        ("awake out of range", ResumeState { region: Some(cutlab_sim::solver::RegionResume { awake: vec![n], ..region.clone() }), ..r.clone() }),
-        ("sub-body unsorted", ResumeState { region: Some(cutlab_sim::solver::RegionResume { sub_body: region.sub_body.iter().rev().copied().collect(), ..region.clone() }), ..r.clone() }),
-        ("warm start too long", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 1, rows: vec![[Vector3::zeros(); 4]; n as usize + 1], cg_residual_ratio: 0.0 }, ..r.clone() }),
-        ("warm start count", ResumeState { warm_start: cutlab_sim::solver::WarmStart { count: 5, rows: Vec::new(), cg_residual_ratio: 0.0 }, ..r.clone() }),
-        ("CG residual ratio", ResumeState { warm_start: cutlab_sim::solver::WarmStart { cg_residual_ratio: f64::NAN, ..r.warm_start.clone() }, ..r.clone() }),
-        ("sweep order too long", ResumeState { sweep_order: Some(SweepOrder { parts: vec![0; n as usize + 1], separator_when_dissected: 0 }), ..r.clone() }),
-        ("sweep order part", ResumeState { sweep_order: Some(SweepOrder { parts: vec![3; n as usize], separator_when_dissected: 0 }), ..r.clone() }),
-        ("sweep order separator", ResumeState { sweep_order: Some(SweepOrder { parts: vec![0; n as usize], separator_when_dissected: usize::MAX }), ..r.clone() }),
+        (
+            "awake out of range",
+            ResumeState {
+                region: Some(cutlab_sim::solver::RegionResume {
+                    awake: vec![n],
+                    ..region.clone()
+                }),
+                ..r.clone()
+            },
+        ),
+        (
+            "sub-body unsorted",
+            ResumeState {
+                region: Some(cutlab_sim::solver::RegionResume {
+                    sub_body: region.sub_body.iter().rev().copied().collect(),
+                    ..region.clone()
+                }),
+                ..r.clone()
+            },
+        ),
+        (
+            "warm start too long",
+            ResumeState {
+                warm_start: cutlab_sim::solver::WarmStart {
+                    count: 1,
+                    rows: vec![[Vector3::zeros(); 4]; n as usize + 1],
+                    cg_residual_ratio: 0.0,
+                },
+                ..r.clone()
+            },
+        ),
+        (
+            "warm start count",
+            ResumeState {
+                warm_start: cutlab_sim::solver::WarmStart {
+                    count: 5,
+                    rows: Vec::new(),
+                    cg_residual_ratio: 0.0,
+                },
+                ..r.clone()
+            },
+        ),
+        (
+            "CG residual ratio",
+            ResumeState {
+                warm_start: cutlab_sim::solver::WarmStart {
+                    cg_residual_ratio: f64::NAN,
+                    ..r.warm_start.clone()
+                },
+                ..r.clone()
+            },
+        ),
+        (
+            "sweep order too long",
+            ResumeState {
+                sweep_order: Some(SweepOrder {
+                    parts: vec![0; n as usize + 1],
+                    separator_when_dissected: 0,
+                }),
+                ..r.clone()
+            },
+        ),
+        (
+            "sweep order part",
+            ResumeState {
+                sweep_order: Some(SweepOrder {
+                    parts: vec![3; n as usize],
+                    separator_when_dissected: 0,
+                }),
+                ..r.clone()
+            },
+        ),
+        (
+            "sweep order separator",
+            ResumeState {
+                sweep_order: Some(SweepOrder {
+                    parts: vec![0; n as usize],
+                    separator_when_dissected: usize::MAX,
+                }),
+                ..r.clone()
+            },
+        ),
     ];
     for (what, bad) in cases {
         let mut s = sim.clone();
@@ -164,6 +290,11 @@ fn a_resume_state_is_checked_against_its_mesh() {
     }
     let mut nan = state.clone();
     nan.velocities[0].x = f64::NAN;
-    assert!(sim.clone().resume(mesh.clone(), nan, &r).is_err(), "a non-finite velocity");
-    sim.clone().resume(mesh, state, &r).expect("the captured state itself");
+    assert!(
+        sim.clone().resume(mesh.clone(), nan, &r).is_err(),
+        "a non-finite velocity"
+    );
+    sim.clone()
+        .resume(mesh, state, &r)
+        .expect("the captured state itself");
 }

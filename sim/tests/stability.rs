@@ -13,19 +13,30 @@ use cutlab_sim::{Point3, Vector3};
 
 #[test]
 fn sweep_of_step_stiffness_damping_and_mass_ratio_never_leaks_or_blows_up() {
-    let cells = GridCells { nx: 4, ny: 4, nz: 1 };
+    let cells = GridCells {
+        nx: 4,
+        ny: 4,
+        nz: 1,
+    };
     for case in stability::sweep(true) {
         let r = stability::run(&case, cells, 0.01, 300).expect("builds and settles");
         match (case.integrator, r.outcome) {
             (_, Outcome::NonFiniteLeak | Outcome::Unbounded) => panic!("{case:?}: {r:?}"),
             (Integrator::ImplicitEuler, o) => assert_eq!(o, Outcome::Stable, "{case:?}: {r:?}"),
             (Integrator::SymplecticEuler, o) => {
-                assert!(matches!(o, Outcome::Stable | Outcome::TooManySubsteps), "{case:?}: {r:?}")
+                assert!(
+                    matches!(o, Outcome::Stable | Outcome::TooManySubsteps),
+                    "{case:?}: {r:?}"
+                )
             }
         }
         if r.outcome == Outcome::Stable {
             // implicit Euler dissipates; symplectic Euler's energy oscillates a little
-            let bound = if case.integrator == Integrator::ImplicitEuler { 1.0 + 1e-6 } else { 1.5 };
+            let bound = if case.integrator == Integrator::ImplicitEuler {
+                1.0 + 1e-6
+            } else {
+                1.5
+            };
             assert!(r.energy_ratio <= bound, "{case:?}: {r:?}");
         }
     }
@@ -44,21 +55,47 @@ fn kinds() -> [(Elasticity, Integrator); 6] {
 }
 
 fn case(model: Elasticity, integrator: Integrator, damping_level: u8) -> StabilityCase {
-    StabilityCase { model, integrator, time_step_s: 1e-3, youngs_modulus_pa: 3e4, damping_level, mass_ratio: 1.0 }
+    StabilityCase {
+        model,
+        integrator,
+        time_step_s: 1e-3,
+        youngs_modulus_pa: 3e4,
+        damping_level,
+        mass_ratio: 1.0,
+    }
 }
 
 #[test]
 fn non_finite_and_overflowing_forces_are_rejected_with_the_state_kept() {
     for (model, integrator) in kinds() {
-        let mut sim = stability::build(&case(model, integrator, 1), GridCells { nx: 4, ny: 4, nz: 1 }).expect("slab");
-        let free = (0..sim.model.vertex_count()).find(|&i| !sim.model.held[i]).expect("a free vertex");
+        let mut sim = stability::build(
+            &case(model, integrator, 1),
+            GridCells {
+                nx: 4,
+                ny: 4,
+                nz: 1,
+            },
+        )
+        .expect("slab");
+        let free = (0..sim.model.vertex_count())
+            .find(|&i| !sim.model.held[i])
+            .expect("a free vertex");
         let before = sim.state.clone();
         sim.external_forces_mut()[free] = Vector3::new(f64::NAN, 0.0, 0.0);
-        assert!(matches!(sim.step(), Err(StepError::NonFiniteInput { .. })), "{model:?} {integrator:?}");
+        assert!(
+            matches!(sim.step(), Err(StepError::NonFiniteInput { .. })),
+            "{model:?} {integrator:?}"
+        );
         assert_eq!(sim.state, before);
         sim.external_forces_mut()[free] = Vector3::new(0.0, 0.0, 1e308);
         let err = sim.step();
-        assert!(matches!(err, Err(StepError::NonFinite { .. } | StepError::SolverFailed { .. })), "{model:?} {integrator:?}: {err:?}");
+        assert!(
+            matches!(
+                err,
+                Err(StepError::NonFinite { .. } | StepError::SolverFailed { .. })
+            ),
+            "{model:?} {integrator:?}: {err:?}"
+        );
         assert_eq!(sim.state, before, "{model:?} {integrator:?}: state kept");
         // and it goes on once the input is sane again
         sim.clear_external_forces();
@@ -70,7 +107,15 @@ fn non_finite_and_overflowing_forces_are_rejected_with_the_state_kept() {
 fn energy_drift_over_sixty_seconds_without_input() {
     for (model, integrator) in kinds() {
         let c = case(model, integrator, 0);
-        let mut sim = stability::build(&c, GridCells { nx: 3, ny: 3, nz: 1 }).expect("slab");
+        let mut sim = stability::build(
+            &c,
+            GridCells {
+                nx: 3,
+                ny: 3,
+                nz: 1,
+            },
+        )
+        .expect("slab");
         let rest = stability::energy(&sim);
         for (i, v) in sim.state.velocities.iter_mut().enumerate() {
             if !sim.model.held[i] {
@@ -86,12 +131,24 @@ fn energy_drift_over_sixty_seconds_without_input() {
             lo = lo.min(last);
             hi = hi.max(last);
         }
-        println!("{} {}: energy over 60 s in [{:.4}, {:.4}] of the initial, last {:.4}", model.name(), integrator.name(), lo / e0, hi / e0, last / e0);
+        println!(
+            "{} {}: energy over 60 s in [{:.4}, {:.4}] of the initial, last {:.4}",
+            model.name(),
+            integrator.name(),
+            lo / e0,
+            hi / e0,
+            last / e0
+        );
         match integrator {
             // no damping: symplectic Euler keeps the energy within a band, with no trend
-            Integrator::SymplecticEuler => assert!(lo > 0.8 * e0 && hi < 1.2 * e0, "{model:?}: [{lo}, {hi}] of {e0}"),
+            Integrator::SymplecticEuler => assert!(
+                lo > 0.8 * e0 && hi < 1.2 * e0,
+                "{model:?}: [{lo}, {hi}] of {e0}"
+            ),
             // implicit Euler only ever dissipates
-            Integrator::ImplicitEuler => assert!(hi <= e0 * (1.0 + 1e-9), "{model:?}: {hi} of {e0}"),
+            Integrator::ImplicitEuler => {
+                assert!(hi <= e0 * (1.0 + 1e-9), "{model:?}: {hi} of {e0}")
+            }
         }
     }
 }
@@ -102,19 +159,47 @@ fn energy_drift_over_sixty_seconds_without_input() {
 #[test]
 fn a_free_cut_off_piece_does_not_explode() {
     for (model, integrator) in kinds() {
-        let g = boxed(Point3::origin(), [0.04, 0.04, 0.01], GridCells { nx: 8, ny: 8, nz: 2 }).expect("slab");
-        let mut material = Material { pretension: 0.04, ..Material::PAPER_CHEST_WALL };
+        let g = boxed(
+            Point3::origin(),
+            [0.04, 0.04, 0.01],
+            GridCells {
+                nx: 8,
+                ny: 8,
+                nz: 2,
+            },
+        )
+        .expect("slab");
+        let mut material = Material {
+            pretension: 0.04,
+            ..Material::PAPER_CHEST_WALL
+        };
         if model == Elasticity::SpringsYoungs {
             material.stiffness = SpringStiffness::YoungsModulus { pascals: 3e4 };
         }
-        let mut m = Model::new(g.mesh, &[(0, material)], &g.end_i0, Vector3::zeros()).expect("model");
+        let mut m =
+            Model::new(g.mesh, &[(0, material)], &g.end_i0, Vector3::zeros()).expect("model");
         if model == Elasticity::CorotationalFem {
             // (no stiffness-proportional damping with the explicit integrator: it would need
             // hundreds of sub-steps per step)
-            let beta = if integrator == Integrator::SymplecticEuler { 0.0 } else { FemMaterial::CHEST_WALL.rayleigh_stiffness_s };
-            m = m.with_fem(&[(0, FemMaterial { rayleigh_stiffness_s: beta, ..FemMaterial::CHEST_WALL })]).expect("fem");
+            let beta = if integrator == Integrator::SymplecticEuler {
+                0.0
+            } else {
+                FemMaterial::CHEST_WALL.rayleigh_stiffness_s
+            };
+            m = m
+                .with_fem(&[(
+                    0,
+                    FemMaterial {
+                        rayleigh_stiffness_s: beta,
+                        ..FemMaterial::CHEST_WALL
+                    },
+                )])
+                .expect("fem");
         }
-        let settings = SolverSettings { integrator, ..SolverSettings::default() };
+        let settings = SolverSettings {
+            integrator,
+            ..SolverSettings::default()
+        };
         let mut sim = Simulation::new(m, settings);
         assert!(sim.settle(StaticSettings::default()).converged);
         // separate along x = 20 mm
@@ -154,19 +239,35 @@ fn a_free_cut_off_piece_does_not_explode() {
             sim.step().expect("stable");
             max_speed = max_speed.max(sim.state.max_speed());
         }
-        let centre: Vector3 = free_piece.iter().map(|&i| sim.state.positions[i].coords).sum::<Vector3>() / free_piece.len() as f64;
-        println!("{} {}: max speed {max_speed:.3e} m/s, free piece centre {centre:?}", model.name(), integrator.name());
+        let centre: Vector3 = free_piece
+            .iter()
+            .map(|&i| sim.state.positions[i].coords)
+            .sum::<Vector3>()
+            / free_piece.len() as f64;
+        println!(
+            "{} {}: max speed {max_speed:.3e} m/s, free piece centre {centre:?}",
+            model.name(),
+            integrator.name()
+        );
         assert!(max_speed < 1.0, "{model:?} {integrator:?}: {max_speed} m/s");
-        assert!(centre.iter().all(|c| c.is_finite()) && (centre.x - 0.03).abs() < 0.005, "{centre:?}");
+        assert!(
+            centre.iter().all(|c| c.is_finite()) && (centre.x - 0.03).abs() < 0.005,
+            "{centre:?}"
+        );
     }
 }
 
 /// Tetrahedra inverted (or flat) in the current positions.
 fn inverted(sim: &Simulation) -> usize {
-    sim.model.mesh.tets().iter().filter(|t| {
-        let [a, b, c, d] = t.map(|i| sim.state.positions[i as usize]);
-        tet_signed_volume(&a, &b, &c, &d) <= 0.0
-    }).count()
+    sim.model
+        .mesh
+        .tets()
+        .iter()
+        .filter(|t| {
+            let [a, b, c, d] = t.map(|i| sim.state.positions[i as usize]);
+            tet_signed_volume(&a, &b, &c, &d) <= 0.0
+        })
+        .count()
 }
 
 #[test]
@@ -176,7 +277,15 @@ fn inverted_elements_recover() {
         if integrator == Integrator::SymplecticEuler {
             c.damping_level = 0;
         }
-        let mut sim = stability::build(&c, GridCells { nx: 6, ny: 6, nz: 2 }).expect("slab");
+        let mut sim = stability::build(
+            &c,
+            GridCells {
+                nx: 6,
+                ny: 6,
+                nz: 2,
+            },
+        )
+        .expect("slab");
         // push a free top vertex near the middle through the bottom of the slab
         let pos = sim.state.positions.clone();
         let v = (0..pos.len())
@@ -193,7 +302,10 @@ fn inverted_elements_recover() {
             sim.step().expect("step");
         }
         let at_end = inverted(&sim);
-        println!("{}: {at_start} inverted tets -> {at_end} after 1 s", integrator.name());
+        println!(
+            "{}: {at_start} inverted tets -> {at_end} after 1 s",
+            integrator.name()
+        );
         assert_eq!(at_end, 0, "{integrator:?}");
     }
 }
@@ -212,28 +324,72 @@ fn a_tool_pushed_deep_into_the_tissue_stays_finite_and_the_tissue_springs_back()
         if (model, integrator) == (Elasticity::CorotationalFem, Integrator::SymplecticEuler) {
             continue;
         }
-        let mut sim = stability::build(&case(model, integrator, 1), GridCells { nx: 8, ny: 8, nz: 2 }).expect("slab");
+        let mut sim = stability::build(
+            &case(model, integrator, 1),
+            GridCells {
+                nx: 8,
+                ny: 8,
+                nz: 2,
+            },
+        )
+        .expect("slab");
         let rest = sim.state.positions.clone();
         let reference = sim.model.mesh.positions().to_vec();
         let tool: Vec<usize> = (0..rest.len())
-            .filter(|&i| reference[i].z > 0.01 - 1e-6 && (reference[i].x - 0.02).hypot(reference[i].y - 0.02) < 0.003 && !sim.model.held[i])
+            .filter(|&i| {
+                reference[i].z > 0.01 - 1e-6
+                    && (reference[i].x - 0.02).hypot(reference[i].y - 0.02) < 0.003
+                    && !sim.model.held[i]
+            })
             .collect();
         assert!(!tool.is_empty());
         let mut deepest = 0.0f64;
         for step in 0..2_000 {
             for &i in &tool {
-                let push = if step < 500 { 1.5 * (step as f64 / 300.0).min(1.0) / tool.len() as f64 } else { 0.0 };
+                let push = if step < 500 {
+                    1.5 * (step as f64 / 300.0).min(1.0) / tool.len() as f64
+                } else {
+                    0.0
+                };
                 sim.external_forces_mut()[i] = Vector3::new(0.0, 0.0, -push);
             }
-            sim.step().unwrap_or_else(|e| panic!("{model:?} {integrator:?} step {step}: {e}"));
-            assert!(sim.state.positions.iter().all(|p| p.iter().all(|c| c.is_finite())));
-            deepest = deepest.max(tool.iter().map(|&i| rest[i].z - sim.state.positions[i].z).fold(0.0, f64::max));
+            sim.step()
+                .unwrap_or_else(|e| panic!("{model:?} {integrator:?} step {step}: {e}"));
+            assert!(
+                sim.state
+                    .positions
+                    .iter()
+                    .all(|p| p.iter().all(|c| c.is_finite()))
+            );
+            deepest = deepest.max(
+                tool.iter()
+                    .map(|&i| rest[i].z - sim.state.positions[i].z)
+                    .fold(0.0, f64::max),
+            );
         }
-        let left = sim.state.positions.iter().zip(&rest).map(|(p, r)| (p - r).norm()).fold(0.0, f64::max);
+        let left = sim
+            .state
+            .positions
+            .iter()
+            .zip(&rest)
+            .map(|(p, r)| (p - r).norm())
+            .fold(0.0, f64::max);
         let inverted = inverted(&sim);
-        println!("{} {}: pushed {:.1} mm deep, {:.3} mm left 1.5 s after, {inverted} inverted", model.name(), integrator.name(), deepest * 1e3, left * 1e3);
-        assert!(deepest > 0.008, "{model:?} {integrator:?}: only {deepest} m deep");
-        assert!(left < 0.1 * deepest, "{model:?} {integrator:?}: {left} m left of {deepest} m");
+        println!(
+            "{} {}: pushed {:.1} mm deep, {:.3} mm left 1.5 s after, {inverted} inverted",
+            model.name(),
+            integrator.name(),
+            deepest * 1e3,
+            left * 1e3
+        );
+        assert!(
+            deepest > 0.008,
+            "{model:?} {integrator:?}: only {deepest} m deep"
+        );
+        assert!(
+            left < 0.1 * deepest,
+            "{model:?} {integrator:?}: {left} m left of {deepest} m"
+        );
         if model == Elasticity::CorotationalFem {
             assert_eq!(inverted, 0);
         }
@@ -248,7 +404,15 @@ fn fem_steps_are_deterministic() {
             if integrator == Integrator::SymplecticEuler {
                 c.damping_level = 0;
             }
-            let mut sim = stability::build(&c, GridCells { nx: 4, ny: 4, nz: 1 }).expect("slab");
+            let mut sim = stability::build(
+                &c,
+                GridCells {
+                    nx: 4,
+                    ny: 4,
+                    nz: 1,
+                },
+            )
+            .expect("slab");
             for (i, v) in sim.state.velocities.iter_mut().enumerate() {
                 if !sim.model.held[i] {
                     *v = Vector3::new(0.01, -0.02, 0.05);

@@ -9,7 +9,11 @@ use crate::auth::CurrentUser;
 use crate::error::AppError;
 
 /// Whether `viewer` may see the data of user `target_id`.
-pub async fn can_see_user(state: &AppState, viewer: &CurrentUser, target_id: i64) -> Result<bool, AppError> {
+pub async fn can_see_user(
+    state: &AppState,
+    viewer: &CurrentUser,
+    target_id: i64,
+) -> Result<bool, AppError> {
     Ok(match viewer.role() {
         Role::Admin => true,
         Role::Trainee => viewer.id() == target_id,
@@ -34,15 +38,29 @@ pub async fn can_see_user(state: &AppState, viewer: &CurrentUser, target_id: i64
 }
 
 /// The user `target_id` if `viewer` may see them; else not found.
-pub async fn visible_user(state: &AppState, viewer: &CurrentUser, target_id: i64) -> Result<User, AppError> {
+pub async fn visible_user(
+    state: &AppState,
+    viewer: &CurrentUser,
+    target_id: i64,
+) -> Result<User, AppError> {
     if !can_see_user(state, viewer, target_id).await? {
         return Err(AppError::NotFound);
     }
-    state.caches().users.load_once(target_id, || async { Ok(state.store().get_user(target_id).await?) }).await
+    state
+        .caches()
+        .users
+        .load_once(target_id, || async {
+            Ok(state.store().get_user(target_id).await?)
+        })
+        .await
 }
 
 /// The attempt `id` if `viewer` may see its trainee; else not found.
-pub async fn visible_attempt(state: &AppState, viewer: &CurrentUser, id: i64) -> Result<Attempt, AppError> {
+pub async fn visible_attempt(
+    state: &AppState,
+    viewer: &CurrentUser,
+    id: i64,
+) -> Result<Attempt, AppError> {
     let a = state.store().get_attempt(id).await?;
     if !can_see_user(state, viewer, a.trainee_id).await? {
         return Err(AppError::NotFound);
@@ -52,7 +70,10 @@ pub async fn visible_attempt(state: &AppState, viewer: &CurrentUser, id: i64) ->
 
 /// The trainees `viewer` may see, by name: all (admin), their cohorts' members (instructor),
 /// themselves (trainee).
-pub async fn visible_trainees(state: &AppState, viewer: &CurrentUser) -> Result<Vec<User>, AppError> {
+pub async fn visible_trainees(
+    state: &AppState,
+    viewer: &CurrentUser,
+) -> Result<Vec<User>, AppError> {
     let store = state.store();
     Ok(match viewer.role() {
         Role::Admin => store.list_users(Some(Role::Trainee)).await?,

@@ -21,12 +21,11 @@
 use axum::extract::State;
 use axum::routing::get;
 use axum::{Json, Router};
+use cutlab_assessor::ExpertPlan;
 use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Curriculum, Exercise, Module, User};
-use cutlab_assessor::ExpertPlan;
 use serde::Serialize;
 
-use crate::extract::Id;
 use crate::AppState;
 use crate::access::{visible_attempt, visible_trainees, visible_user};
 use crate::auth::CurrentUser;
@@ -36,6 +35,7 @@ use crate::data::progress::cached_progress;
 use crate::data::running::{RunningAttempt, running};
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::{ApiError, ApiResult, AppError};
+use crate::extract::Id;
 
 pub fn router() -> Router<AppState> {
     Router::new()
@@ -56,7 +56,10 @@ async fn me(user: CurrentUser) -> Json<User> {
     Json(user.user().clone())
 }
 
-async fn cohorts(State(state): State<AppState>, user: CurrentUser) -> ApiResult<Vec<CohortOverview>> {
+async fn cohorts(
+    State(state): State<AppState>,
+    user: CurrentUser,
+) -> ApiResult<Vec<CohortOverview>> {
     user.require_staff()?;
     Ok(Json(overview(&state, &user).await?))
 }
@@ -65,7 +68,11 @@ async fn trainees(State(state): State<AppState>, user: CurrentUser) -> ApiResult
     Ok(Json(visible_trainees(&state, &user).await?))
 }
 
-async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<axum::response::Response, ApiError> {
+async fn trainee_progress(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> Result<axum::response::Response, ApiError> {
     use axum::response::IntoResponse;
     let t = visible_user(&state, &user, id).await?;
     let c = cached_progress(&state, &t).await?;
@@ -76,20 +83,35 @@ async fn trainee_progress(State(state): State<AppState>, user: CurrentUser, Id(i
             c.json.get_or_init(|| j.into()).clone()
         }
     };
-    Ok(([(axum::http::header::CONTENT_TYPE, "application/json")], json).into_response())
+    Ok((
+        [(axum::http::header::CONTENT_TYPE, "application/json")],
+        json,
+    )
+        .into_response())
 }
 
-async fn attempt(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> ApiResult<AttemptDetail> {
+async fn attempt(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> ApiResult<AttemptDetail> {
     let a = visible_attempt(&state, &user, id).await?;
     Ok(Json(detail(&state, a).await?))
 }
 
-async fn attempt_trace(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Json<std::sync::Arc<AttemptTrace>>, ApiError> {
+async fn attempt_trace(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> Result<Json<std::sync::Arc<AttemptTrace>>, ApiError> {
     let a = visible_attempt(&state, &user, id).await?;
     Ok(Json(trace(&state, &a).await?.ok_or(AppError::NotFound)?))
 }
 
-async fn running_attempts(State(state): State<AppState>, user: CurrentUser) -> ApiResult<Vec<RunningAttempt>> {
+async fn running_attempts(
+    State(state): State<AppState>,
+    user: CurrentUser,
+) -> ApiResult<Vec<RunningAttempt>> {
     Ok(Json(running(&state, &user).await?))
 }
 
@@ -102,20 +124,35 @@ struct ExerciseView {
     plan: Option<ExpertPlan>,
 }
 
-async fn exercises(State(state): State<AppState>, _user: CurrentUser) -> ApiResult<Vec<ExerciseView>> {
+async fn exercises(
+    State(state): State<AppState>,
+    _user: CurrentUser,
+) -> ApiResult<Vec<ExerciseView>> {
     let mut out = Vec::new();
     for e in state.store().list_exercises().await? {
         let thresholds = state.store().thresholds(e.id).await?;
-        out.push(ExerciseView { exercise: e, thresholds, plan: None });
+        out.push(ExerciseView {
+            exercise: e,
+            thresholds,
+            plan: None,
+        });
     }
     Ok(Json(out))
 }
 
-async fn exercise(State(state): State<AppState>, _user: CurrentUser, Id(id): Id) -> ApiResult<ExerciseView> {
+async fn exercise(
+    State(state): State<AppState>,
+    _user: CurrentUser,
+    Id(id): Id,
+) -> ApiResult<ExerciseView> {
     let e = state.store().get_exercise(id).await?;
     let plan = state.store().get_plan(e.plan_id).await?;
     let thresholds = state.store().thresholds(id).await?;
-    Ok(Json(ExerciseView { exercise: e, thresholds, plan: Some(plan) }))
+    Ok(Json(ExerciseView {
+        exercise: e,
+        thresholds,
+        plan: Some(plan),
+    }))
 }
 
 #[derive(Debug, Serialize)]
@@ -125,11 +162,17 @@ struct CurriculumView {
     modules: Vec<Module>,
 }
 
-async fn curricula(State(state): State<AppState>, _user: CurrentUser) -> ApiResult<Vec<CurriculumView>> {
+async fn curricula(
+    State(state): State<AppState>,
+    _user: CurrentUser,
+) -> ApiResult<Vec<CurriculumView>> {
     let mut out = Vec::new();
     for c in state.store().list_curricula().await? {
         let modules = state.store().curriculum_modules(c.id).await?;
-        out.push(CurriculumView { curriculum: c, modules });
+        out.push(CurriculumView {
+            curriculum: c,
+            modules,
+        });
     }
     Ok(Json(out))
 }

@@ -36,35 +36,72 @@ type HttpClient = Client<HttpConnector, Full<Bytes>>;
 fn client(max_idle: usize) -> HttpClient {
     let mut c = HttpConnector::new();
     c.set_nodelay(true);
-    Client::builder(TokioExecutor::new()).pool_max_idle_per_host(max_idle).build(c)
+    Client::builder(TokioExecutor::new())
+        .pool_max_idle_per_host(max_idle)
+        .build(c)
 }
 
 /// Logs in at `addr` as `user` and returns the `Cookie` header value of the session.
 pub async fn login(addr: SocketAddr, user: &str, password: &str) -> Result<String, String> {
     let c = client(1);
-    let get = Request::get(format!("http://{addr}/login")).body(Full::new(Bytes::new())).map_err(|e| e.to_string())?;
-    let r = c.request(get).await.map_err(|e| format!("GET /login: {e}"))?;
-    let csrf = set_cookie(r.headers(), crate::auth::LOGIN_CSRF_COOKIE).ok_or("no login CSRF cookie")?;
-    let form: String = form_urlencoded::Serializer::new(String::new()).append_pair("username", user).append_pair("password", password).append_pair("csrf", &csrf).finish();
+    let get = Request::get(format!("http://{addr}/login"))
+        .body(Full::new(Bytes::new()))
+        .map_err(|e| e.to_string())?;
+    let r = c
+        .request(get)
+        .await
+        .map_err(|e| format!("GET /login: {e}"))?;
+    let csrf =
+        set_cookie(r.headers(), crate::auth::LOGIN_CSRF_COOKIE).ok_or("no login CSRF cookie")?;
+    let form: String = form_urlencoded::Serializer::new(String::new())
+        .append_pair("username", user)
+        .append_pair("password", password)
+        .append_pair("csrf", &csrf)
+        .finish();
     let post = Request::builder()
         .method(Method::POST)
         .uri(format!("http://{addr}/login"))
         .header("content-type", "application/x-www-form-urlencoded")
-        .header("cookie", format!("{}={csrf}", crate::auth::LOGIN_CSRF_COOKIE))
+        .header(
+            "cookie",
+            format!("{}={csrf}", crate::auth::LOGIN_CSRF_COOKIE),
+        )
         .body(Full::new(Bytes::from(form)))
         .map_err(|e| e.to_string())?;
-    let r = c.request(post).await.map_err(|e| format!("POST /login: {e}"))?;
-    let token = set_cookie(r.headers(), crate::auth::SESSION_COOKIE).filter(|t| !t.is_empty()).ok_or_else(|| format!("login refused ({})", r.status()))?;
+    let r = c
+        .request(post)
+        .await
+        .map_err(|e| format!("POST /login: {e}"))?;
+    let token = set_cookie(r.headers(), crate::auth::SESSION_COOKIE)
+        .filter(|t| !t.is_empty())
+        .ok_or_else(|| format!("login refused ({})", r.status()))?;
     Ok(format!("{}={token}", crate::auth::SESSION_COOKIE))
 }
 
 fn set_cookie(h: &hyper::HeaderMap, name: &str) -> Option<String> {
-    h.get_all(hyper::header::SET_COOKIE).iter().filter_map(|v| v.to_str().ok()).find_map(|v| v.split(';').next()?.trim().strip_prefix(name)?.strip_prefix('=').map(str::to_owned))
+    h.get_all(hyper::header::SET_COOKIE)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .find_map(|v| {
+            v.split(';')
+                .next()?
+                .trim()
+                .strip_prefix(name)?
+                .strip_prefix('=')
+                .map(str::to_owned)
+        })
 }
 
 /// `clients` concurrent clients GET `paths` (each client walks them from its own offset)
 /// for `duration`, with `cookie`; `target` names the run.
-pub async fn run(addr: SocketAddr, target: &str, paths: &[String], cookie: &str, clients: usize, duration: Duration) -> LoadReport {
+pub async fn run(
+    addr: SocketAddr,
+    target: &str,
+    paths: &[String],
+    cookie: &str,
+    clients: usize,
+    duration: Duration,
+) -> LoadReport {
     let http = client(clients);
     let deadline = Instant::now() + duration;
     let started = Instant::now();
@@ -78,7 +115,13 @@ pub async fn run(addr: SocketAddr, target: &str, paths: &[String], cookie: &str,
             while Instant::now() < deadline && !paths.is_empty() {
                 let path = &paths[i % paths.len()];
                 i += 1;
-                let Ok(req) = Request::get(format!("http://{addr}{path}")).header("cookie", &cookie).body(Full::new(Bytes::new())) else { errors += 1; continue };
+                let Ok(req) = Request::get(format!("http://{addr}{path}"))
+                    .header("cookie", &cookie)
+                    .body(Full::new(Bytes::new()))
+                else {
+                    errors += 1;
+                    continue;
+                };
                 let t0 = Instant::now();
                 match http.request(req).await {
                     Ok(r) => {
@@ -107,7 +150,14 @@ pub async fn run(addr: SocketAddr, target: &str, paths: &[String], cookie: &str,
     }
     let elapsed = started.elapsed().as_secs_f64();
     lat.sort();
-    let pct = |p: f64| lat.get(((lat.len() as f64 * p).ceil() as usize).saturating_sub(1).min(lat.len().saturating_sub(1))).map_or(f64::NAN, |d| d.as_secs_f64() * 1e3);
+    let pct = |p: f64| {
+        lat.get(
+            ((lat.len() as f64 * p).ceil() as usize)
+                .saturating_sub(1)
+                .min(lat.len().saturating_sub(1)),
+        )
+        .map_or(f64::NAN, |d| d.as_secs_f64() * 1e3)
+    };
     let requests = lat.len() as u64;
     LoadReport {
         target: target.to_owned(),
@@ -120,6 +170,10 @@ pub async fn run(addr: SocketAddr, target: &str, paths: &[String], cookie: &str,
         p90_ms: pct(0.90),
         p99_ms: pct(0.99),
         max_ms: lat.last().map_or(f64::NAN, |d| d.as_secs_f64() * 1e3),
-        mean_bytes: if requests > 0 { bytes as f64 / requests as f64 } else { 0.0 },
+        mean_bytes: if requests > 0 {
+            bytes as f64 / requests as f64
+        } else {
+            0.0
+        },
     }
 }

@@ -76,7 +76,12 @@ struct Entry<V> {
 impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
     /// A cache whose entries live `ttl` while nothing watches the database.
     pub fn new(ttl: Duration, changes: Arc<Changes>) -> Self {
-        Self { ttl, changes, map: Mutex::new(HashMap::new()), loading: Mutex::new(HashMap::new()) }
+        Self {
+            ttl,
+            changes,
+            map: Mutex::new(HashMap::new()),
+            loading: Mutex::new(HashMap::new()),
+        }
     }
 
     /// The generation to [`put`](Self::put) with what is read after this call.
@@ -85,17 +90,28 @@ impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
     }
 
     fn with<R>(&self, f: impl FnOnce(&mut HashMap<K, Entry<V>>) -> R) -> R {
-        f(&mut self.map.lock().unwrap_or_else(std::sync::PoisonError::into_inner))
+        f(&mut self
+            .map
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner))
     }
 
     fn fresh(&self, e: &Entry<V>, now: Instant, current: Stamp) -> bool {
-        let ttl = if self.changes.watching() { WATCHED_TTL } else { self.ttl };
+        let ttl = if self.changes.watching() {
+            WATCHED_TTL
+        } else {
+            self.ttl
+        };
         e.stamp == current && now.duration_since(e.at) < ttl
     }
 
     pub fn get(&self, k: &K) -> Option<V> {
         let (now, current) = (Instant::now(), self.stamp());
-        self.with(|m| m.get(k).filter(|e| self.fresh(e, now, current)).map(|e| e.value.clone()))
+        self.with(|m| {
+            m.get(k)
+                .filter(|e| self.fresh(e, now, current))
+                .map(|e| e.value.clone())
+        })
     }
 
     /// The entry, fresh or not; when it is stale, the first caller gets `true` (refresh it)
@@ -127,18 +143,35 @@ impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
                     m.clear();
                 }
             }
-            m.insert(k, Entry { at: now, stamp, value: v });
+            m.insert(
+                k,
+                Entry {
+                    at: now,
+                    stamp,
+                    value: v,
+                },
+            );
         })
     }
 
     /// The fresh entry of `k`, or `load`'s value, kept: callers that miss the same key at
     /// the same time wait for one load instead of each running it (a cold cache under load
     /// would otherwise run it once per waiting request).
-    pub async fn load_once<E, F: Future<Output = Result<V, E>>>(&self, k: K, load: impl FnOnce() -> F) -> Result<V, E>
+    pub async fn load_once<E, F: Future<Output = Result<V, E>>>(
+        &self,
+        k: K,
+        load: impl FnOnce() -> F,
+    ) -> Result<V, E>
     where
         K: Clone,
     {
-        let gate = self.loading.lock().unwrap_or_else(std::sync::PoisonError::into_inner).entry(k.clone()).or_default().clone();
+        let gate = self
+            .loading
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .entry(k.clone())
+            .or_default()
+            .clone();
         let out = {
             let _turn = gate.lock().await;
             match self.get(&k) {
@@ -151,7 +184,10 @@ impl<K: Eq + Hash, V: Clone> TtlCache<K, V> {
                 }
             }
         };
-        let mut loading = self.loading.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut loading = self
+            .loading
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         // the map's and ours: nobody else waits
         if Arc::strong_count(&gate) <= 2 {
             loading.remove(&k);
@@ -182,8 +218,16 @@ mod tests {
         c.put(3, "c", c.stamp());
         assert_eq!(c.get_or_claim(&3), Some(("c", false)));
         std::thread::sleep(Duration::from_millis(60));
-        assert_eq!(c.get_or_claim(&3), Some(("c", true)), "the first caller refreshes");
-        assert_eq!(c.get_or_claim(&3), Some(("c", false)), "the others take the old value");
+        assert_eq!(
+            c.get_or_claim(&3),
+            Some(("c", true)),
+            "the first caller refreshes"
+        );
+        assert_eq!(
+            c.get_or_claim(&3),
+            Some(("c", false)),
+            "the others take the old value"
+        );
         c.put(2, "b", c.stamp());
         c.remove(&2);
         assert_eq!(c.get(&2), None);
@@ -210,9 +254,15 @@ mod tests {
             assert_eq!(t.await.expect("task"), Ok("v"));
         }
         assert_eq!(loads.load(Ordering::SeqCst), 1);
-        assert!(c.loading.lock().expect("lock").is_empty(), "the gates go with the load");
+        assert!(
+            c.loading.lock().expect("lock").is_empty(),
+            "the gates go with the load"
+        );
         // an error is not kept: the next caller loads again
-        assert_eq!(c.load_once(8, || async { Err::<&str, _>("failed") }).await, Err("failed"));
+        assert_eq!(
+            c.load_once(8, || async { Err::<&str, _>("failed") }).await,
+            Err("failed")
+        );
         assert_eq!(c.load_once(8, || async { Ok::<_, ()>("w") }).await, Ok("w"));
     }
 
@@ -223,10 +273,18 @@ mod tests {
         changes.set_watching(true);
         c.put(1, "a", c.stamp());
         std::thread::sleep(Duration::from_millis(30));
-        assert_eq!(c.get(&1), Some("a"), "watched: lives past the short time to live");
+        assert_eq!(
+            c.get(&1),
+            Some("a"),
+            "watched: lives past the short time to live"
+        );
         changes.bump();
         assert_eq!(c.get(&1), None, "stale after a change");
-        assert_eq!(c.get_or_claim(&1), Some(("a", true)), "served stale, one caller refreshes");
+        assert_eq!(
+            c.get_or_claim(&1),
+            Some(("a", true)),
+            "served stale, one caller refreshes"
+        );
         assert_eq!(c.get_or_claim(&1), Some(("a", false)));
         // read before a change, kept after it: born stale
         let before = c.stamp();

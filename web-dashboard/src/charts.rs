@@ -8,13 +8,26 @@ use maud::{Markup, html};
 #[derive(Debug, Clone)]
 pub enum Layer {
     /// A polyline; `None` values break it.
-    Line { points: Vec<(f64, Option<f64>)>, class: &'static str },
+    Line {
+        points: Vec<(f64, Option<f64>)>,
+        class: &'static str,
+    },
     /// Markers, each with its own class (e.g. pass / fail).
-    Points { points: Vec<(f64, f64, &'static str)> },
+    Points {
+        points: Vec<(f64, f64, &'static str)>,
+    },
     /// A horizontal band between two values.
-    HBand { low: f64, high: f64, class: &'static str },
+    HBand {
+        low: f64,
+        high: f64,
+        class: &'static str,
+    },
     /// A horizontal line with a label at its right end.
-    HLine { y: f64, class: &'static str, label: String },
+    HLine {
+        y: f64,
+        class: &'static str,
+        label: String,
+    },
 }
 
 /// A chart: title, axis labels and layers; ranges from the data unless given.
@@ -38,8 +51,21 @@ const MARGIN_T: f64 = 26.0;
 const MARGIN_B: f64 = 40.0;
 
 impl Chart {
-    pub fn new(title: impl Into<String>, x_label: impl Into<String>, y_label: impl Into<String>) -> Self {
-        Self { title: title.into(), x_label: x_label.into(), y_label: y_label.into(), layers: Vec::new(), width: 460.0, height: 240.0, y_include: Vec::new(), equal_aspect: false }
+    pub fn new(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+    ) -> Self {
+        Self {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            layers: Vec::new(),
+            width: 460.0,
+            height: 240.0,
+            y_include: Vec::new(),
+            equal_aspect: false,
+        }
     }
 
     pub fn layer(mut self, l: Layer) -> Self {
@@ -73,7 +99,10 @@ impl Chart {
     /// The SVG element.
     pub fn render(&self) -> Markup {
         let ((mut x0, mut x1), (mut y0, mut y1)) = self.ranges();
-        let (pw, ph) = (self.width - MARGIN_L - MARGIN_R, self.height - MARGIN_T - MARGIN_B);
+        let (pw, ph) = (
+            self.width - MARGIN_L - MARGIN_R,
+            self.height - MARGIN_T - MARGIN_B,
+        );
         if self.equal_aspect {
             // widen the narrower range so one unit is as long on both axes
             let (sx, sy) = ((x1 - x0) / pw, (y1 - y0) / ph);
@@ -147,7 +176,12 @@ fn runs(points: &[(f64, Option<f64>)]) -> Vec<Vec<(f64, f64)>> {
 
 /// `(min, max)` of the finite values, padded; `(0, 1)` when there are none.
 fn span(v: &[f64]) -> (f64, f64) {
-    let (lo, hi) = v.iter().filter(|x| x.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(*x), b.max(*x)));
+    let (lo, hi) = v
+        .iter()
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(*x), b.max(*x))
+        });
     if !lo.is_finite() {
         return (0.0, 1.0);
     }
@@ -167,7 +201,11 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
     }
     let raw = range / 5.0;
     let mag = 10f64.powf(raw.log10().floor());
-    let step = [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * mag).find(|s| range / s <= 6.0).unwrap_or(10.0 * mag);
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| range / s <= 6.0)
+        .unwrap_or(10.0 * mag);
     let first = (lo / step).ceil() as i64;
     let last = (hi / step).floor() as i64;
     (first..=last).map(|i| i as f64 * step).collect()
@@ -189,7 +227,11 @@ fn tick_label(v: f64) -> String {
 
 /// A coordinate with two decimals (SVG attribute text).
 fn fmt(v: f64) -> String {
-    if v.is_finite() { format!("{v:.2}") } else { "0".into() }
+    if v.is_finite() {
+        format!("{v:.2}")
+    } else {
+        "0".into()
+    }
 }
 
 #[cfg(test)]
@@ -200,7 +242,10 @@ mod tests {
     fn ticks_are_round_and_inside() {
         assert_eq!(ticks(0.0, 10.0), vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]);
         let t = ticks(-0.37, 1.21);
-        assert!(t.iter().all(|v| (-0.37..=1.21).contains(v)) && t.len() >= 3, "{t:?}");
+        assert!(
+            t.iter().all(|v| (-0.37..=1.21).contains(v)) && t.len() >= 3,
+            "{t:?}"
+        );
         assert!(ticks(1.0, 1.0).is_empty());
         assert!(ticks(f64::NAN, 1.0).is_empty());
     }
@@ -208,7 +253,15 @@ mod tests {
     #[test]
     fn text_is_escaped_and_gaps_break_lines() {
         let svg = Chart::new("<script>x</script>", "n", "v")
-            .layer(Layer::Line { points: vec![(1.0, Some(1.0)), (2.0, None), (3.0, Some(2.0)), (4.0, Some(3.0))], class: "series" })
+            .layer(Layer::Line {
+                points: vec![
+                    (1.0, Some(1.0)),
+                    (2.0, None),
+                    (3.0, Some(2.0)),
+                    (4.0, Some(3.0)),
+                ],
+                class: "series",
+            })
             .render()
             .into_string();
         assert!(!svg.contains("<script>"));

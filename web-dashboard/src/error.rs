@@ -63,7 +63,9 @@ impl From<AssessError> for AppError {
         match e {
             AssessError::NotFound(_) => AppError::NotFound,
             AssessError::Conflict(m) => AppError::Conflict(m),
-            AssessError::InvalidPlan(_) | AssessError::Parse { .. } | AssessError::InvalidInput(_) => AppError::BadRequest(e.to_string()),
+            AssessError::InvalidPlan(_)
+            | AssessError::Parse { .. }
+            | AssessError::InvalidInput(_) => AppError::BadRequest(e.to_string()),
             other => AppError::Internal(other.to_string()),
         }
     }
@@ -96,7 +98,13 @@ impl<E: Into<AppError>> From<E> for ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.0.status();
-        (status, Json(serde_json::json!({ "error": self.0.public_message(), "status": status.as_u16() }))).into_response()
+        (
+            status,
+            Json(
+                serde_json::json!({ "error": self.0.public_message(), "status": status.as_u16() }),
+            ),
+        )
+            .into_response()
     }
 }
 

@@ -20,7 +20,11 @@ pub struct IdRejection {
 impl IntoResponse for IdRejection {
     fn into_response(self) -> Response {
         let e = AppError::BadRequest("the id in the address is not a number".into());
-        if self.api { ApiError(e).into_response() } else { e.into_response() }
+        if self.api {
+            ApiError(e).into_response()
+        } else {
+            e.into_response()
+        }
     }
 }
 
@@ -30,7 +34,9 @@ impl<S: Send + Sync> FromRequestParts<S> for Id {
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
         match Path::<i64>::from_request_parts(parts, state).await {
             Ok(Path(id)) => Ok(Id(id)),
-            Err(_) => Err(IdRejection { api: crate::auth::original_path(parts).starts_with("/api/") }),
+            Err(_) => Err(IdRejection {
+                api: crate::auth::original_path(parts).starts_with("/api/"),
+            }),
         }
     }
 }

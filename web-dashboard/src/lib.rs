@@ -50,7 +50,11 @@ pub struct Config {
 
 impl Default for Config {
     fn default() -> Self {
-        Self { secure_cookies: false, login_failures: 5, login_window: Duration::from_secs(60) }
+        Self {
+            secure_cookies: false,
+            login_failures: 5,
+            login_window: Duration::from_secs(60),
+        }
     }
 }
 
@@ -97,11 +101,20 @@ impl AppState {
     /// applied by [`Store::open`]). Inside a Tokio runtime, it starts watching the database
     /// for changes ([`watch`]); the watcher ends with the state.
     pub fn new(store: Store, config: Config) -> Result<Self, AppError> {
-        let limiter = auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
+        let limiter =
+            auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
         let grants = auth::grants::GrantKey::random()?;
         let caches = Caches::new();
         watch::spawn(store.pool(), &caches.changes);
-        Ok(Self(Arc::new(Inner { store, limiter, config, traces: Default::default(), viewer: recordings::Viewer::load(), grants, caches })))
+        Ok(Self(Arc::new(Inner {
+            store,
+            limiter,
+            config,
+            traces: Default::default(),
+            viewer: recordings::Viewer::load(),
+            grants,
+            caches,
+        })))
     }
     pub fn store(&self) -> &Store {
         &self.0.store
@@ -134,12 +147,21 @@ pub fn app(state: AppState) -> Router {
         .merge(recordings::router())
         .nest("/api", api::router())
         .fallback(|| async { AppError::NotFound })
-        .layer(axum::middleware::from_fn_with_state(state.clone(), auth::session_layer))
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            auth::session_layer,
+        ))
         .with_state(state)
 }
 
 /// Serves the dashboard on `listener` until the future `shutdown` completes.
-pub async fn serve(listener: tokio::net::TcpListener, state: AppState, shutdown: impl Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    state: AppState,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
     let service = app(state).into_make_service_with_connect_info::<std::net::SocketAddr>();
-    axum::serve(listener, service).with_graceful_shutdown(shutdown).await
+    axum::serve(listener, service)
+        .with_graceful_shutdown(shutdown)
+        .await
 }

@@ -15,12 +15,12 @@ use axum::routing::get;
 use maud::html;
 use re_web_viewer_server::WebViewerData;
 
-use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
 use crate::data::attempt::recording_paths;
 use crate::error::AppError;
+use crate::extract::Id;
 use crate::pages::layout;
 
 /// rerun's web viewer files, read once.
@@ -72,7 +72,9 @@ fn offline_index(html: &[u8]) -> Vec<u8> {
     let mut out = String::with_capacity(text.len());
     let mut rest: &str = &text;
     while let Some(start) = rest.find("<link") {
-        let Some(len) = rest[start..].find('>') else { break };
+        let Some(len) = rest[start..].find('>') else {
+            break;
+        };
         let tag = &rest[start..start + len + 1];
         out.push_str(&rest[..start]);
         if !(tag.contains("fonts.googleapis.com") || tag.contains("fonts.gstatic.com")) {
@@ -89,18 +91,29 @@ pub fn router() -> Router<AppState> {
         .route("/attempts/{id}/recording.mcap", get(mcap))
         .route("/attempts/{id}/recording.rrd", get(rrd))
         .route("/attempts/{id}/replay", get(replay_page))
-        .route("/attempts/{id}/grant/{grant}/recording.rrd", get(granted_rrd))
+        .route(
+            "/attempts/{id}/grant/{grant}/recording.rrd",
+            get(granted_rrd),
+        )
         .route("/viewer/", get(viewer_index))
         .route("/viewer/{file}", get(viewer_file))
 }
 
-async fn mcap(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
+async fn mcap(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
     let (path, _) = recording_paths(&a).ok_or(AppError::NotFound)?;
     send_file(&path, &format!("attempt-{id}.mcap")).await
 }
 
-async fn rrd(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Result<Response, AppError> {
+async fn rrd(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
     let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
     send_file(&path, &format!("attempt-{id}.rrd")).await
@@ -108,7 +121,10 @@ async fn rrd(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> Re
 
 /// The `.rrd` for rerun's web viewer, which fetches without cookies: the path carries a
 /// grant issued by the replay page (see [`crate::auth::grants`]).
-async fn granted_rrd(State(state): State<AppState>, axum::extract::Path((id, grant)): axum::extract::Path<(i64, String)>) -> Result<Response, AppError> {
+async fn granted_rrd(
+    State(state): State<AppState>,
+    axum::extract::Path((id, grant)): axum::extract::Path<(i64, String)>,
+) -> Result<Response, AppError> {
     if !state.grants().check(id, &grant) {
         return Err(AppError::NotFound);
     }
@@ -130,7 +146,10 @@ async fn send_file(path: &std::path::Path, download_name: &str) -> Result<Respon
     let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
     let mut r = body.into_response();
     let h = r.headers_mut();
-    h.insert(header::CONTENT_TYPE, HeaderValue::from_static("application/octet-stream"));
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/octet-stream"),
+    );
     h.insert(header::CONTENT_LENGTH, HeaderValue::from(meta.len()));
     // the name is ours (attempt-N.ext), never the stored path
     if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{download_name}\"")) {
@@ -142,20 +161,32 @@ async fn send_file(path: &std::path::Path, download_name: &str) -> Result<Respon
 /// The host the browser used, if it is a plain host[:port] (for the viewer's absolute URL).
 fn request_origin(headers: &HeaderMap, https: bool) -> Option<String> {
     let host = headers.get(header::HOST)?.to_str().ok()?;
-    let ok = !host.is_empty() && host.len() <= 255 && host.bytes().all(|c| c.is_ascii_alphanumeric() || b".-:[]".contains(&c));
+    let ok = !host.is_empty()
+        && host.len() <= 255
+        && host
+            .bytes()
+            .all(|c| c.is_ascii_alphanumeric() || b".-:[]".contains(&c));
     ok.then(|| format!("{}://{host}", if https { "https" } else { "http" }))
 }
 
 /// The viewer's URL opening attempt `id`'s `.rrd` through `grant`.
 pub fn viewer_url(origin: &str, id: i64, grant: &str) -> String {
     let rrd = format!("{origin}/attempts/{id}/grant/{grant}/recording.rrd");
-    let q: String = form_urlencoded::Serializer::new(String::new()).append_pair("url", &rrd).finish();
+    let q: String = form_urlencoded::Serializer::new(String::new())
+        .append_pair("url", &rrd)
+        .finish();
     format!("/viewer/?{q}&hide_welcome_screen")
 }
 
-async fn replay_page(State(state): State<AppState>, user: CurrentUser, headers: HeaderMap, Id(id): Id) -> Result<Response, AppError> {
+async fn replay_page(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    headers: HeaderMap,
+    Id(id): Id,
+) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
-    let has_rrd = recording_paths(&a).is_some_and(|(_, rrd)| std::fs::metadata(rrd).is_ok_and(|m| m.is_file()));
+    let has_rrd = recording_paths(&a)
+        .is_some_and(|(_, rrd)| std::fs::metadata(rrd).is_ok_and(|m| m.is_file()));
     let origin = request_origin(&headers, state.config().secure_cookies);
     let body = html! {
         p { a href=(format!("/attempts/{id}")) { "Back to attempt " (id) } " · " a href=(format!("/attempts/{id}/recording.rrd")) { "Download .rrd" } }
@@ -172,11 +203,18 @@ async fn replay_page(State(state): State<AppState>, user: CurrentUser, headers: 
     Ok(layout::page(&format!("Replay of attempt {id}"), Some(&user), body).into_response())
 }
 
-async fn viewer_index(State(state): State<AppState>, _user: CurrentUser) -> Result<Response, AppError> {
+async fn viewer_index(
+    State(state): State<AppState>,
+    _user: CurrentUser,
+) -> Result<Response, AppError> {
     serve_viewer_file(&state, "index.html")
 }
 
-async fn viewer_file(State(state): State<AppState>, _user: CurrentUser, Path(file): Path<String>) -> Result<Response, AppError> {
+async fn viewer_file(
+    State(state): State<AppState>,
+    _user: CurrentUser,
+    Path(file): Path<String>,
+) -> Result<Response, AppError> {
     serve_viewer_file(&state, &file)
 }
 
@@ -191,7 +229,14 @@ fn serve_viewer_file(state: &AppState, name: &str) -> Result<Response, AppError>
         "sw.js" => ("text/javascript", &files.sw_js),
         _ => return Err(AppError::NotFound),
     };
-    Ok(([(header::CONTENT_TYPE, mime), (header::CACHE_CONTROL, "private, max-age=3600")], bytes.clone()).into_response())
+    Ok((
+        [
+            (header::CONTENT_TYPE, mime),
+            (header::CACHE_CONTROL, "private, max-age=3600"),
+        ],
+        bytes.clone(),
+    )
+        .into_response())
 }
 
 #[cfg(test)]
@@ -202,7 +247,10 @@ mod tests {
     fn the_viewer_index_loses_only_the_font_links() {
         let html = b"<head><link rel=\"icon\" href=\"favicon.ico\" /><link rel=\"preconnect\" href=\"https://fonts.googleapis.com\" /><link\n href=\"https://fonts.googleapis.com/css2\"\n rel=\"stylesheet\"\n /></head>";
         let out = String::from_utf8(offline_index(html)).unwrap();
-        assert_eq!(out, "<head><link rel=\"icon\" href=\"favicon.ico\" /></head>");
+        assert_eq!(
+            out,
+            "<head><link rel=\"icon\" href=\"favicon.ico\" /></head>"
+        );
     }
 
     #[test]
@@ -216,6 +264,9 @@ mod tests {
 
     #[test]
     fn viewer_url_encodes_the_rrd_url() {
-        assert_eq!(viewer_url("http://127.0.0.1:8080", 7, "1-2-ab"), "/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F7%2Fgrant%2F1-2-ab%2Frecording.rrd&hide_welcome_screen");
+        assert_eq!(
+            viewer_url("http://127.0.0.1:8080", 7, "1-2-ab"),
+            "/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F7%2Fgrant%2F1-2-ab%2Frecording.rrd&hide_welcome_screen"
+        );
     }
 }

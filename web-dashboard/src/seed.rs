@@ -4,10 +4,10 @@
 //! around the exercise's thresholds by a seeded generator; they have no recording.
 
 use cutlab_assessor::metrics::{self, MetricValue};
-use cutlab_haptics::pose::Rng;
 use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Cohort, Role, Store, User};
 use cutlab_assessor::{AssessError, Better};
+use cutlab_haptics::pose::Rng;
 use serde::Serialize;
 
 /// A demo login.
@@ -20,10 +20,26 @@ pub struct DemoAccount {
 
 /// The demo accounts (also in the README).
 pub const DEMO_ACCOUNTS: [DemoAccount; 4] = [
-    DemoAccount { name: "admin", password: "admin-demo", role: Role::Admin },
-    DemoAccount { name: "dr-kim", password: "instructor-demo", role: Role::Instructor },
-    DemoAccount { name: "ana", password: "trainee-demo", role: Role::Trainee },
-    DemoAccount { name: "ben", password: "trainee-demo", role: Role::Trainee },
+    DemoAccount {
+        name: "admin",
+        password: "admin-demo",
+        role: Role::Admin,
+    },
+    DemoAccount {
+        name: "dr-kim",
+        password: "instructor-demo",
+        role: Role::Instructor,
+    },
+    DemoAccount {
+        name: "ana",
+        password: "trainee-demo",
+        role: Role::Trainee,
+    },
+    DemoAccount {
+        name: "ben",
+        password: "trainee-demo",
+        role: Role::Trainee,
+    },
 ];
 
 /// The demo cohort, led by `dr-kim`, with `ana` and `ben`.
@@ -63,23 +79,56 @@ pub fn synthetic_metrics(t: &Thresholds, skill: f64, rng: &mut Rng) -> Vec<Metri
             let value = match (th.better, th.lower, th.upper) {
                 (Better::LowerIsBetter, _, Some(u)) => th.mean + q * (u - th.mean),
                 (Better::HigherIsBetter, Some(l), _) => th.mean - q * (th.mean - l),
-                (Better::TwoSided, _, Some(u)) => th.mean + if rng.uniform() < 0.5 { -1.0 } else { 1.0 } * q * (u - th.mean),
+                (Better::TwoSided, _, Some(u)) => {
+                    th.mean + if rng.uniform() < 0.5 { -1.0 } else { 1.0 } * q * (u - th.mean)
+                }
                 _ => th.mean,
             };
-            let value = if th.better == Better::HigherIsBetter && def.unit == "1" { value.clamp(0.0, 1.0) } else { value.max(if th.better == Better::TwoSided { f64::NEG_INFINITY } else { 0.0 }) };
-            Some(MetricValue { key: th.key.clone(), value: Some(value), unit: def.unit.into(), better: th.better, scored: def.scored, missing: None })
+            let value = if th.better == Better::HigherIsBetter && def.unit == "1" {
+                value.clamp(0.0, 1.0)
+            } else {
+                value.max(if th.better == Better::TwoSided {
+                    f64::NEG_INFINITY
+                } else {
+                    0.0
+                })
+            };
+            Some(MetricValue {
+                key: th.key.clone(),
+                value: Some(value),
+                unit: def.unit.into(),
+                better: th.better,
+                scored: def.scored,
+                missing: None,
+            })
         })
         .collect()
 }
 
 /// `n` scored synthetic attempts of `trainee` at `exercise_id`, skill improving from
 /// `skill0` to `skill1`.
-pub async fn synthetic_attempts(store: &Store, trainee: i64, exercise_id: i64, n: usize, skill0: f64, skill1: f64, rng: &mut Rng) -> Result<(), AssessError> {
+pub async fn synthetic_attempts(
+    store: &Store,
+    trainee: i64,
+    exercise_id: i64,
+    n: usize,
+    skill0: f64,
+    skill1: f64,
+    rng: &mut Rng,
+) -> Result<(), AssessError> {
     let t = store.thresholds(exercise_id).await?;
     for i in 0..n {
-        let s = if n > 1 { skill0 + (skill1 - skill0) * i as f64 / (n - 1) as f64 } else { skill1 };
-        let a = store.start_attempt(trainee, exercise_id, None, false).await?;
-        store.finish_attempt(a.id, &synthetic_metrics(&t, s, rng)).await?;
+        let s = if n > 1 {
+            skill0 + (skill1 - skill0) * i as f64 / (n - 1) as f64
+        } else {
+            skill1
+        };
+        let a = store
+            .start_attempt(trainee, exercise_id, None, false)
+            .await?;
+        store
+            .finish_attempt(a.id, &synthetic_metrics(&t, s, rng))
+            .await?;
     }
     Ok(())
 }
@@ -116,12 +165,20 @@ pub async fn seed_demo(store: &Store) -> Result<Vec<DemoAccount>, AssessError> {
 }
 
 /// The load-test instructor and password.
-pub const LOAD_INSTRUCTOR: DemoAccount = DemoAccount { name: "load-instructor", password: "load-demo", role: Role::Instructor };
+pub const LOAD_INSTRUCTOR: DemoAccount = DemoAccount {
+    name: "load-instructor",
+    password: "load-demo",
+    role: Role::Instructor,
+};
 
 /// `trainees` trainees (`load-0000`...) in cohort `load-cohort` led by [`LOAD_INSTRUCTOR`],
 /// each with `attempts` scored synthetic attempts; returns the trainees' ids. Trainees that
 /// already have attempts are kept as they are.
-pub async fn seed_load(store: &Store, trainees: usize, attempts: usize) -> Result<Vec<i64>, AssessError> {
+pub async fn seed_load(
+    store: &Store,
+    trainees: usize,
+    attempts: usize,
+) -> Result<Vec<i64>, AssessError> {
     let exercise = store.ensure_builtins().await?;
     let instructor = ensure_account(store, &LOAD_INSTRUCTOR).await?;
     let cohort = ensure_cohort(store, "load-cohort", instructor.id).await?;
@@ -137,7 +194,16 @@ pub async fn seed_load(store: &Store, trainees: usize, attempts: usize) -> Resul
         store.join_cohort(cohort.id, u.id).await?;
         if store.list_attempts(Some(u.id), None).await?.is_empty() {
             let start = 1.2 + 0.8 * rng.uniform();
-            synthetic_attempts(store, u.id, exercise.id, attempts, start, 0.3 + 0.5 * rng.uniform(), &mut rng).await?;
+            synthetic_attempts(
+                store,
+                u.id,
+                exercise.id,
+                attempts,
+                start,
+                0.3 + 0.5 * rng.uniform(),
+                &mut rng,
+            )
+            .await?;
         }
         ids.push(u.id);
     }

@@ -46,18 +46,30 @@ pub(crate) fn spawn(pool: &SqlitePool, changes: &Arc<Changes>) {
 
 /// Polls until the dashboard is gone (`Ok`), or the database is in memory (`Ok` at once), or
 /// the connection fails.
-async fn watch(options: &sqlx::sqlite::SqliteConnectOptions, changes: &Weak<Changes>) -> Result<(), sqlx::Error> {
+async fn watch(
+    options: &sqlx::sqlite::SqliteConnectOptions,
+    changes: &Weak<Changes>,
+) -> Result<(), sqlx::Error> {
     let mut conn = sqlx::sqlite::SqliteConnection::connect_with(options).await?;
     // `file` is empty for an in-memory or temporary database
-    let files: Vec<(i64, String, String)> = sqlx::query_as("PRAGMA database_list").fetch_all(&mut conn).await?;
-    if !files.iter().any(|(_, name, file)| name == "main" && !file.is_empty()) {
+    let files: Vec<(i64, String, String)> = sqlx::query_as("PRAGMA database_list")
+        .fetch_all(&mut conn)
+        .await?;
+    if !files
+        .iter()
+        .any(|(_, name, file)| name == "main" && !file.is_empty())
+    {
         tracing::debug!("an in-memory database: not watched; caches use short times to live");
         return Ok(());
     }
     let mut last: Option<i64> = None;
     loop {
-        let version: i64 = sqlx::query_scalar("PRAGMA data_version").fetch_one(&mut conn).await?;
-        let Some(c) = changes.upgrade() else { return Ok(()) };
+        let version: i64 = sqlx::query_scalar("PRAGMA data_version")
+            .fetch_one(&mut conn)
+            .await?;
+        let Some(c) = changes.upgrade() else {
+            return Ok(());
+        };
         if last.is_some_and(|l| l != version) {
             c.bump();
         }

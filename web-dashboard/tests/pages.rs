@@ -12,32 +12,82 @@ async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let grid = body_text(send(&e.app, get("/cohorts", Some(&kim))).await).await;
-    assert!(grid.contains("demo-cohort") && grid.contains("ana") && grid.contains("ben"), "{grid}");
-    assert!(grid.contains("proficient after"), "ana's trials to proficiency: {grid}");
+    assert!(
+        grid.contains("demo-cohort") && grid.contains("ana") && grid.contains("ben"),
+        "{grid}"
+    );
+    assert!(
+        grid.contains("proficient after"),
+        "ana's trials to proficiency: {grid}"
+    );
     let ana = user_id(&e.store, "ana").await;
     let r = send(&e.app, get(&format!("/trainees/{ana}"), Some(&kim))).await;
     assert_eq!(r.status(), StatusCode::OK);
     let page = body_text(r).await;
     let curves = &page[page.find("learning-curves").unwrap()..];
-    assert!(curves.matches("<svg").count() >= 10, "a chart per thresholded metric");
+    assert!(
+        curves.matches("<svg").count() >= 10,
+        "a chart per thresholded metric"
+    );
     assert!(page.contains("CUSUM of failures") && page.contains("Normalised score"));
-    assert!(page.contains("class=\"limit\"") && page.contains("class=\"mean\""), "pass lines and the expert reference");
+    assert!(
+        page.contains("class=\"limit\"") && page.contains("class=\"mean\""),
+        "pass lines and the expert reference"
+    );
     let a = first_attempt(&e.store, "ana").await;
     let page = body_text(send(&e.app, get(&format!("/attempts/{a}"), Some(&kim))).await).await;
     assert!(page.contains("entry_error_m") && page.contains("Pass limits"));
-    assert!(page.contains("no .mcap"), "synthetic attempts have no recording");
+    assert!(
+        page.contains("no .mcap"),
+        "synthetic attempts have no recording"
+    );
     // debriefing: comment, sign off, the trainee reads it
-    let r = send(&e.app, post_form(&format!("/attempts/{a}/comments"), Some(&kim.cookie), &[("body", "Keep the blade perpendicular."), ("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/attempts/{a}/comments"),
+            Some(&kim.cookie),
+            &[
+                ("body", "Keep the blade perpendicular."),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
-    let r = send(&e.app, post_form(&format!("/attempts/{a}/signoff"), Some(&kim.cookie), &[("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/attempts/{a}/signoff"),
+            Some(&kim.cookie),
+            &[("csrf", &kim.csrf)],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
-    let r = send(&e.app, post_form(&format!("/attempts/{a}/signoff"), Some(&kim.cookie), &[("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/attempts/{a}/signoff"),
+            Some(&kim.cookie),
+            &[("csrf", &kim.csrf)],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::CONFLICT, "signed off once");
     let trainee = login(&e.app, "ana", "trainee-demo").await;
     let page = body_text(send(&e.app, get(&format!("/attempts/{a}"), Some(&trainee))).await).await;
-    assert!(page.contains("Keep the blade perpendicular.") && page.contains("Signed off by dr-kim"));
-    assert!(!page.contains("Add comment"), "trainees read, they do not comment");
-    let json: serde_json::Value = serde_json::from_str(&body_text(send(&e.app, get(&format!("/api/attempts/{a}"), Some(&trainee))).await).await).unwrap();
+    assert!(
+        page.contains("Keep the blade perpendicular.") && page.contains("Signed off by dr-kim")
+    );
+    assert!(
+        !page.contains("Add comment"),
+        "trainees read, they do not comment"
+    );
+    let json: serde_json::Value = serde_json::from_str(
+        &body_text(send(&e.app, get(&format!("/api/attempts/{a}"), Some(&trainee))).await).await,
+    )
+    .unwrap();
     assert_eq!(json["comments"][0]["body"], "Keep the blade perpendicular.");
     assert_eq!(json["signoff"]["instructor"]["name"], "dr-kim");
 }
@@ -46,22 +96,40 @@ async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
 async fn the_api_carries_the_same_data() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
-    let grid: serde_json::Value = serde_json::from_str(&body_text(send(&e.app, get("/api/cohorts", Some(&kim))).await).await).unwrap();
+    let grid: serde_json::Value =
+        serde_json::from_str(&body_text(send(&e.app, get("/api/cohorts", Some(&kim))).await).await)
+            .unwrap();
     let rows = grid[0]["trainees"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
     let ana = rows.iter().find(|r| r["trainee"]["name"] == "ana").unwrap();
     assert_eq!(ana["cells"][0]["attempts"], 8);
     assert_eq!(ana["cells"][0]["proficiency"]["standing"], "proficient");
     let id = ana["trainee"]["id"].as_i64().unwrap();
-    let p: serde_json::Value = serde_json::from_str(&body_text(send(&e.app, get(&format!("/api/trainees/{id}/progress"), Some(&kim))).await).await).unwrap();
+    let p: serde_json::Value = serde_json::from_str(
+        &body_text(
+            send(
+                &e.app,
+                get(&format!("/api/trainees/{id}/progress"), Some(&kim)),
+            )
+            .await,
+        )
+        .await,
+    )
+    .unwrap();
     let ex = &p["exercises"][0];
     assert_eq!(ex["attempts"].as_array().unwrap().len(), 8);
     assert_eq!(ex["cusum"]["points"].as_array().unwrap().len(), 8);
     assert!(ex["cusum"]["h1"].as_f64().unwrap() > 0.0);
     let m = &ex["metrics"][0];
-    assert!(m["band"]["upper_limit"].is_number() || m["band"]["lower_limit"].is_number(), "{m}");
+    assert!(
+        m["band"]["upper_limit"].is_number() || m["band"]["lower_limit"].is_number(),
+        "{m}"
+    );
     assert_eq!(m["points"].as_array().unwrap().len(), 8);
-    let ex: serde_json::Value = serde_json::from_str(&body_text(send(&e.app, get("/api/exercises", Some(&kim))).await).await).unwrap();
+    let ex: serde_json::Value = serde_json::from_str(
+        &body_text(send(&e.app, get("/api/exercises", Some(&kim))).await).await,
+    )
+    .unwrap();
     assert_eq!(ex[0]["name"], "chest-wall-incision");
     assert!(ex[0]["thresholds"]["metrics"].as_array().unwrap().len() >= 10);
     let r = send(&e.app, get("/api/running", Some(&kim))).await;
@@ -77,21 +145,46 @@ async fn supervision_shows_running_attempts_live() {
     let ex = e.store.list_exercises().await.unwrap()[0].id;
     let running = e.store.start_attempt(ana, ex, None, false).await.unwrap();
     let page = body_text(send(&e.app, get("/supervision", Some(&kim))).await).await;
-    assert!(page.contains(&format!("attempt {}", running.id)) && page.contains("/static/supervision.js"));
-    let list: serde_json::Value = serde_json::from_str(&body_text(send(&e.app, get("/api/running", Some(&kim))).await).await).unwrap();
+    assert!(
+        page.contains(&format!("attempt {}", running.id))
+            && page.contains("/static/supervision.js")
+    );
+    let list: serde_json::Value =
+        serde_json::from_str(&body_text(send(&e.app, get("/api/running", Some(&kim))).await).await)
+            .unwrap();
     assert_eq!(list[0]["id"], running.id);
     assert!(list[0]["elapsed_s"].as_f64().unwrap() >= 0.0);
     // the event stream's first event carries the list
     let r = send(&e.app, get("/supervision/events", Some(&kim))).await;
     assert_eq!(r.headers()[header::CONTENT_TYPE], "text/event-stream");
     let mut body = r.into_body();
-    let frame = tokio::time::timeout(std::time::Duration::from_secs(5), http_body_util::BodyExt::frame(&mut body)).await.unwrap().unwrap().unwrap();
+    let frame = tokio::time::timeout(
+        std::time::Duration::from_secs(5),
+        http_body_util::BodyExt::frame(&mut body),
+    )
+    .await
+    .unwrap()
+    .unwrap()
+    .unwrap();
     let text = String::from_utf8_lossy(frame.data_ref().unwrap()).into_owned();
-    assert!(text.starts_with("event: running") && text.contains(&format!("\"id\":{}", running.id)), "{text}");
+    assert!(
+        text.starts_with("event: running") && text.contains(&format!("\"id\":{}", running.id)),
+        "{text}"
+    );
     // another instructor's supervision does not list it
-    e.store.create_user("dr-other", cutlab_dashboard::assessor::store::Role::Instructor, Some("pw")).await.unwrap();
+    e.store
+        .create_user(
+            "dr-other",
+            cutlab_dashboard::assessor::store::Role::Instructor,
+            Some("pw"),
+        )
+        .await
+        .unwrap();
     let other = login(&e.app, "dr-other", "pw").await;
-    assert_eq!(body_text(send(&e.app, get("/api/running", Some(&other))).await).await, "[]");
+    assert_eq!(
+        body_text(send(&e.app, get("/api/running", Some(&other))).await).await,
+        "[]"
+    );
 }
 
 #[tokio::test]
@@ -99,33 +192,107 @@ async fn instructors_create_and_edit_exercises_and_curricula() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let plan = cutlab_dashboard::assessor::plan::CHEST_WALL_PLAN_TOML;
-    let r = send(&e.app, post_form("/exercises", Some(&kim.cookie), &[("name", "deep-cut"), ("scene", "chest-wall"), ("threshold_k", "2.5"), ("description", "deeper"), ("plan", plan), ("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/exercises",
+            Some(&kim.cookie),
+            &[
+                ("name", "deep-cut"),
+                ("scene", "chest-wall"),
+                ("threshold_k", "2.5"),
+                ("description", "deeper"),
+                ("plan", plan),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let e2 = e.store.exercise_by_name("deep-cut").await.unwrap();
     assert!((e2.threshold_k - 2.5).abs() < 1e-12);
-    let r = send(&e.app, post_form(&format!("/exercises/{}", e2.id), Some(&kim.cookie), &[("scene", "body-wall"), ("threshold_k", "3"), ("description", "edited"), ("plan", ""), ("csrf", &kim.csrf)])).await;
-    assert_eq!(r.status(), StatusCode::SEE_OTHER);
-    let e3 = e.store.get_exercise(e2.id).await.unwrap();
-    assert_eq!((e3.scene.as_str(), e3.description.as_str(), e3.plan_id), ("body-wall", "edited", e2.plan_id));
     let r = send(
         &e.app,
-        post_form(&format!("/exercises/{}/thresholds", e2.id), Some(&kim.cookie), &[("key_0", "time_s"), ("better_0", "lower-is-better"), ("mean_0", "8"), ("sd_0", "1"), ("upper_0", "10"), ("key_1", ""), ("csrf", &kim.csrf)]),
+        post_form(
+            &format!("/exercises/{}", e2.id),
+            Some(&kim.cookie),
+            &[
+                ("scene", "body-wall"),
+                ("threshold_k", "3"),
+                ("description", "edited"),
+                ("plan", ""),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    let e3 = e.store.get_exercise(e2.id).await.unwrap();
+    assert_eq!(
+        (e3.scene.as_str(), e3.description.as_str(), e3.plan_id),
+        ("body-wall", "edited", e2.plan_id)
+    );
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/exercises/{}/thresholds", e2.id),
+            Some(&kim.cookie),
+            &[
+                ("key_0", "time_s"),
+                ("better_0", "lower-is-better"),
+                ("mean_0", "8"),
+                ("sd_0", "1"),
+                ("upper_0", "10"),
+                ("key_1", ""),
+                ("csrf", &kim.csrf),
+            ],
+        ),
     )
     .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let t = e.store.thresholds(e2.id).await.unwrap();
     assert_eq!(t.metrics.len(), 1);
     assert_eq!(t.metrics[0].upper, Some(10.0));
-    let r = send(&e.app, post_form("/curricula", Some(&kim.cookie), &[("name", "basics"), ("description", "first steps"), ("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/curricula",
+            Some(&kim.cookie),
+            &[
+                ("name", "basics"),
+                ("description", "first steps"),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let c = e.store.curriculum_by_name("basics").await.unwrap();
     let id = e2.id.to_string();
-    let r = send(&e.app, post_form(&format!("/curricula/{}/modules", c.id), Some(&kim.cookie), &[("name", "module one"), ("exercise_id", &id), ("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/curricula/{}/modules", c.id),
+            Some(&kim.cookie),
+            &[
+                ("name", "module one"),
+                ("exercise_id", &id),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
-    assert_eq!(e.store.curriculum_modules(c.id).await.unwrap()[0].exercise_ids, vec![e2.id]);
+    assert_eq!(
+        e.store.curriculum_modules(c.id).await.unwrap()[0].exercise_ids,
+        vec![e2.id]
+    );
     let ana = user_id(&e.store, "ana").await;
     let page = body_text(send(&e.app, get(&format!("/trainees/{ana}"), Some(&kim))).await).await;
-    assert!(page.contains("module one") && page.contains("deep-cut (not started)"), "module state on the progress page");
+    assert!(
+        page.contains("module one") && page.contains("deep-cut (not started)"),
+        "module state on the progress page"
+    );
 }
 
 #[tokio::test]
@@ -143,26 +310,78 @@ async fn the_replay_viewer_is_served_by_the_dashboard() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("session.mcap"), b"x").unwrap();
     std::fs::write(dir.join("session.rrd"), b"RRF2").unwrap();
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?").bind(dir.join("session.mcap").display().to_string()).bind(a).execute(e.store.pool()).await.unwrap();
+    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+        .bind(dir.join("session.mcap").display().to_string())
+        .bind(a)
+        .execute(e.store.pool())
+        .await
+        .unwrap();
     let mut req = get(&format!("/attempts/{a}/replay"), Some(&ana));
-    req.headers_mut().insert(header::HOST, "127.0.0.1:8080".parse().unwrap());
+    req.headers_mut()
+        .insert(header::HOST, "127.0.0.1:8080".parse().unwrap());
     let page = body_text(send(&e.app, req).await).await;
     let prefix = format!("/viewer/?url=http%3A%2F%2F127.0.0.1%3A8080%2Fattempts%2F{a}%2Fgrant%2F");
     let at = page.find(&prefix).unwrap() + prefix.len();
     let grant = &page[at..at + page[at..].find("%2F").unwrap()];
     // the viewer fetches without cookies, through the grant; a wrong or foreign grant is 404
     let no_cookie = |path: String| get(&path, None);
-    assert_eq!(body_text(send(&e.app, no_cookie(format!("/attempts/{a}/grant/{grant}/recording.rrd"))).await).await, "RRF2");
+    assert_eq!(
+        body_text(
+            send(
+                &e.app,
+                no_cookie(format!("/attempts/{a}/grant/{grant}/recording.rrd"))
+            )
+            .await
+        )
+        .await,
+        "RRF2"
+    );
     let ben = first_attempt(&e.store, "ben").await;
-    assert_eq!(send(&e.app, no_cookie(format!("/attempts/{ben}/grant/{grant}/recording.rrd"))).await.status(), StatusCode::NOT_FOUND);
+    assert_eq!(
+        send(
+            &e.app,
+            no_cookie(format!("/attempts/{ben}/grant/{grant}/recording.rrd"))
+        )
+        .await
+        .status(),
+        StatusCode::NOT_FOUND
+    );
     // the grant with its last digit changed (to another digit: a random grant may end in 0)
     let last = if grant.ends_with('0') { '1' } else { '0' };
     let forged = format!("{}{last}", &grant[..grant.len() - 1]);
-    assert_eq!(send(&e.app, no_cookie(format!("/attempts/{a}/grant/{forged}/recording.rrd"))).await.status(), StatusCode::NOT_FOUND);
-    assert_eq!(send(&e.app, no_cookie(format!("/attempts/{a}/grant/1-99999999999-00/recording.rrd"))).await.status(), StatusCode::NOT_FOUND);
+    assert_eq!(
+        send(
+            &e.app,
+            no_cookie(format!("/attempts/{a}/grant/{forged}/recording.rrd"))
+        )
+        .await
+        .status(),
+        StatusCode::NOT_FOUND
+    );
+    assert_eq!(
+        send(
+            &e.app,
+            no_cookie(format!(
+                "/attempts/{a}/grant/1-99999999999-00/recording.rrd"
+            ))
+        )
+        .await
+        .status(),
+        StatusCode::NOT_FOUND
+    );
     let page = body_text(send(&e.app, get(&format!("/attempts/{a}"), Some(&ana))).await).await;
     assert!(page.contains("Review replay") && page.contains("Download .mcap"));
-    assert_eq!(body_text(send(&e.app, get(&format!("/attempts/{a}/recording.rrd"), Some(&ana))).await).await, "RRF2");
+    assert_eq!(
+        body_text(
+            send(
+                &e.app,
+                get(&format!("/attempts/{a}/recording.rrd"), Some(&ana))
+            )
+            .await
+        )
+        .await,
+        "RRF2"
+    );
 }
 
 #[tokio::test]
@@ -170,15 +389,27 @@ async fn an_attempt_written_by_another_process_shows_without_waiting_for_the_cac
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let ana = common::user_id(&e.store, "ana").await;
-    let attempts = |p: serde_json::Value| p["exercises"][0]["attempts"].as_array().map_or(0, Vec::len);
+    let attempts =
+        |p: serde_json::Value| p["exercises"][0]["attempts"].as_array().map_or(0, Vec::len);
     let url = format!("/api/trainees/{ana}/progress");
-    let progress = || async { serde_json::from_str::<serde_json::Value>(&body_text(send(&e.app, get(&url, Some(&kim))).await).await).unwrap() };
+    let progress = || async {
+        serde_json::from_str::<serde_json::Value>(
+            &body_text(send(&e.app, get(&url, Some(&kim))).await).await,
+        )
+        .unwrap()
+    };
     assert_eq!(attempts(progress().await), 8);
     // another process (its own connections) starts an attempt for ana and gives up on it
     let other = Store::open(&e.dir.path().join("cutlab.db")).await.unwrap();
     let exercise = other.exercise_by_name("chest-wall-incision").await.unwrap();
-    let a = other.start_attempt(ana, exercise.id, None, false).await.unwrap();
-    other.mark_incomplete(a.id, Some("interrupted")).await.unwrap();
+    let a = other
+        .start_attempt(ana, exercise.id, None, false)
+        .await
+        .unwrap();
+    other
+        .mark_incomplete(a.id, Some("interrupted"))
+        .await
+        .unwrap();
     let written = std::time::Instant::now();
     let mut seen = attempts(progress().await);
     while seen != 9 && written.elapsed() < std::time::Duration::from_secs(10) {
@@ -187,5 +418,9 @@ async fn an_attempt_written_by_another_process_shows_without_waiting_for_the_cac
     }
     assert_eq!(seen, 9);
     // the watcher's poll (0.1 s) and a refresh, well before the unwatched caches would expire
-    assert!(written.elapsed() < cutlab_dashboard::cache::PROGRESS_TTL, "{:?}", written.elapsed());
+    assert!(
+        written.elapsed() < cutlab_dashboard::cache::PROGRESS_TTL,
+        "{:?}",
+        written.elapsed()
+    );
 }

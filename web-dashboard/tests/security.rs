@@ -11,21 +11,51 @@ use common::*;
 async fn unauthenticated_pages_redirect_and_api_calls_get_401() {
     let e = env().await;
     let a = first_attempt(&e.store, "ana").await;
-    for path in ["/", "/cohorts", "/trainees/1", &format!("/attempts/{a}"), &format!("/attempts/{a}/recording.mcap"), &format!("/attempts/{a}/replay"), "/supervision", "/curriculum", "/viewer/re_viewer_bg.wasm"] {
+    for path in [
+        "/",
+        "/cohorts",
+        "/trainees/1",
+        &format!("/attempts/{a}"),
+        &format!("/attempts/{a}/recording.mcap"),
+        &format!("/attempts/{a}/replay"),
+        "/supervision",
+        "/curriculum",
+        "/viewer/re_viewer_bg.wasm",
+    ] {
         let r = send(&e.app, get(path, None)).await;
         assert_eq!(r.status(), StatusCode::SEE_OTHER, "{path}");
         assert_eq!(r.headers()[header::LOCATION], "/login", "{path}");
     }
-    for path in ["/api/me", "/api/cohorts", &format!("/api/attempts/{a}"), "/api/trainees/1/progress", "/api/running", "/api/nothing-here"] {
+    for path in [
+        "/api/me",
+        "/api/cohorts",
+        &format!("/api/attempts/{a}"),
+        "/api/trainees/1/progress",
+        "/api/running",
+        "/api/nothing-here",
+    ] {
         let r = send(&e.app, get(path, None)).await;
         let status = r.status();
         let body = body_text(r).await;
-        assert!(status == StatusCode::UNAUTHORIZED || (path == "/api/nothing-here" && status == StatusCode::NOT_FOUND), "{path}: {status}");
-        assert!(body.starts_with('{') && body.contains("\"error\""), "{path}: {body}");
+        assert!(
+            status == StatusCode::UNAUTHORIZED
+                || (path == "/api/nothing-here" && status == StatusCode::NOT_FOUND),
+            "{path}: {status}"
+        );
+        assert!(
+            body.starts_with('{') && body.contains("\"error\""),
+            "{path}: {body}"
+        );
     }
     // a made-up session cookie is no session
-    let fake = Session { cookie: format!("cutlab_session={}", "a".repeat(64)), csrf: String::new() };
-    assert_eq!(send(&e.app, get("/api/me", Some(&fake))).await.status(), StatusCode::UNAUTHORIZED);
+    let fake = Session {
+        cookie: format!("cutlab_session={}", "a".repeat(64)),
+        csrf: String::new(),
+    };
+    assert_eq!(
+        send(&e.app, get("/api/me", Some(&fake))).await.status(),
+        StatusCode::UNAUTHORIZED
+    );
 }
 
 #[tokio::test]
@@ -34,21 +64,43 @@ async fn login_logout_happy_path() {
     let r = try_login(&e.app, "dr-kim", "instructor-demo").await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let set = r.headers()[header::SET_COOKIE].to_str().unwrap().to_owned();
-    assert!(set.contains("HttpOnly") && set.contains("SameSite=Strict"), "{set}");
+    assert!(
+        set.contains("HttpOnly") && set.contains("SameSite=Strict"),
+        "{set}"
+    );
     // the database keeps a hash of the token, never the token
     let token = set_cookie(&r, "cutlab_session").unwrap();
-    let stored: String = sqlx::query_scalar("SELECT token_sha256 FROM login_sessions").fetch_one(e.store.pool()).await.unwrap();
+    let stored: String = sqlx::query_scalar("SELECT token_sha256 FROM login_sessions")
+        .fetch_one(e.store.pool())
+        .await
+        .unwrap();
     assert_ne!(stored, token);
     let s = login(&e.app, "dr-kim", "instructor-demo").await;
     let me = body_text(send(&e.app, get("/api/me", Some(&s))).await).await;
-    assert!(me.contains("\"name\":\"dr-kim\"") && me.contains("\"role\":\"instructor\""), "{me}");
+    assert!(
+        me.contains("\"name\":\"dr-kim\"") && me.contains("\"role\":\"instructor\""),
+        "{me}"
+    );
     assert!(!me.contains("argon2"), "no hash in the API");
     let r = send(&e.app, get("/", Some(&s))).await;
     assert_eq!(r.headers()[header::LOCATION], "/cohorts");
-    let r = send(&e.app, post_form("/logout", Some(&s.cookie), &[("csrf", &s.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form("/logout", Some(&s.cookie), &[("csrf", &s.csrf)]),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
-    assert!(r.headers()[header::SET_COOKIE].to_str().unwrap().contains("Max-Age=0"));
-    assert_eq!(send(&e.app, get("/api/me", Some(&s))).await.status(), StatusCode::UNAUTHORIZED, "the session is gone");
+    assert!(
+        r.headers()[header::SET_COOKIE]
+            .to_str()
+            .unwrap()
+            .contains("Max-Age=0")
+    );
+    assert_eq!(
+        send(&e.app, get("/api/me", Some(&s))).await.status(),
+        StatusCode::UNAUTHORIZED,
+        "the session is gone"
+    );
 }
 
 #[tokio::test]
@@ -57,15 +109,31 @@ async fn wrong_passwords_are_refused_then_rate_limited() {
     let r = try_login(&e.app, "ana", "wrong").await;
     assert_eq!(r.status(), StatusCode::UNAUTHORIZED);
     assert!(set_cookie(&r, "cutlab_session").is_none());
-    assert_eq!(try_login(&e.app, "nobody", "x").await.status(), StatusCode::UNAUTHORIZED);
-    assert_eq!(try_login(&e.app, "", "").await.status(), StatusCode::UNAUTHORIZED);
-    assert_eq!(try_login(&e.app, &"x".repeat(10_000), "y").await.status(), StatusCode::UNAUTHORIZED);
-    assert_eq!(try_login(&e.app, "ana", "wrong again").await.status(), StatusCode::UNAUTHORIZED);
+    assert_eq!(
+        try_login(&e.app, "nobody", "x").await.status(),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        try_login(&e.app, "", "").await.status(),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        try_login(&e.app, &"x".repeat(10_000), "y").await.status(),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        try_login(&e.app, "ana", "wrong again").await.status(),
+        StatusCode::UNAUTHORIZED
+    );
     // 5 failures from this address within the minute: even the right password waits
     let r = try_login(&e.app, "ana", "trainee-demo").await;
     assert_eq!(r.status(), StatusCode::TOO_MANY_REQUESTS);
     assert!(set_cookie(&r, "cutlab_session").is_none());
-    assert_eq!(try_login(&e.app, "ben", "trainee-demo").await.status(), StatusCode::TOO_MANY_REQUESTS, "per address too");
+    assert_eq!(
+        try_login(&e.app, "ben", "trainee-demo").await.status(),
+        StatusCode::TOO_MANY_REQUESTS,
+        "per address too"
+    );
 }
 
 #[tokio::test]
@@ -73,14 +141,34 @@ async fn per_user_limit_counts_failures_from_any_address() {
     let e = env().await;
     // a fresh app per "address" is not possible with oneshot; instead a limiter of 3 per key
     // shows the user key alone blocks: 3 failures for ben, then ana still logs in
-    let state = cutlab_dashboard::AppState::new(e.store.clone(), cutlab_dashboard::Config { login_failures: 3, ..Default::default() }).unwrap();
+    let state = cutlab_dashboard::AppState::new(
+        e.store.clone(),
+        cutlab_dashboard::Config {
+            login_failures: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let app = cutlab_dashboard::app(state);
     for _ in 0..2 {
-        assert_eq!(try_login(&app, "ben", "nope").await.status(), StatusCode::UNAUTHORIZED);
+        assert_eq!(
+            try_login(&app, "ben", "nope").await.status(),
+            StatusCode::UNAUTHORIZED
+        );
     }
-    assert_eq!(try_login(&app, "ana", "trainee-demo").await.status(), StatusCode::SEE_OTHER, "2 failures: not yet limited");
-    assert_eq!(try_login(&app, "ben", "nope").await.status(), StatusCode::UNAUTHORIZED);
-    assert_eq!(try_login(&app, "ben", "trainee-demo").await.status(), StatusCode::TOO_MANY_REQUESTS);
+    assert_eq!(
+        try_login(&app, "ana", "trainee-demo").await.status(),
+        StatusCode::SEE_OTHER,
+        "2 failures: not yet limited"
+    );
+    assert_eq!(
+        try_login(&app, "ben", "nope").await.status(),
+        StatusCode::UNAUTHORIZED
+    );
+    assert_eq!(
+        try_login(&app, "ben", "trainee-demo").await.status(),
+        StatusCode::TOO_MANY_REQUESTS
+    );
 }
 
 #[tokio::test]
@@ -90,30 +178,78 @@ async fn forms_without_the_csrf_token_are_refused() {
     let a = first_attempt(&e.store, "ana").await;
     let path = format!("/attempts/{a}/comments");
     let before = count(&e.store, "attempt_comments").await;
-    for form in [vec![("body", "hi")], vec![("body", "hi"), ("csrf", "0000")], vec![("body", "hi"), ("csrf", &"f".repeat(64))]] {
+    for form in [
+        vec![("body", "hi")],
+        vec![("body", "hi"), ("csrf", "0000")],
+        vec![("body", "hi"), ("csrf", &"f".repeat(64))],
+    ] {
         let r = send(&e.app, post_form(&path, Some(&s.cookie), &form)).await;
         assert_eq!(r.status(), StatusCode::FORBIDDEN, "{form:?}");
     }
-    let r = send(&e.app, post_form(&format!("/attempts/{a}/signoff"), Some(&s.cookie), &[])).await;
+    let r = send(
+        &e.app,
+        post_form(&format!("/attempts/{a}/signoff"), Some(&s.cookie), &[]),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
     let r = send(&e.app, post_form("/logout", Some(&s.cookie), &[])).await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
-    assert_eq!(send(&e.app, get("/api/me", Some(&s))).await.status(), StatusCode::OK, "still logged in");
+    assert_eq!(
+        send(&e.app, get("/api/me", Some(&s))).await.status(),
+        StatusCode::OK,
+        "still logged in"
+    );
     assert_eq!(count(&e.store, "attempt_comments").await, before);
     assert_eq!(count(&e.store, "attempt_signoffs").await, 0);
     // another session's token is not this session's
     let other = login(&e.app, "admin", "admin-demo").await;
-    let r = send(&e.app, post_form(&path, Some(&s.cookie), &[("body", "hi"), ("csrf", &other.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &path,
+            Some(&s.cookie),
+            &[("body", "hi"), ("csrf", &other.csrf)],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
     // the right token works
-    let r = send(&e.app, post_form(&path, Some(&s.cookie), &[("body", "hi"), ("csrf", &s.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(&path, Some(&s.cookie), &[("body", "hi"), ("csrf", &s.csrf)]),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     assert_eq!(count(&e.store, "attempt_comments").await, before + 1);
     // the login form: no cookie, or a field that does not match it
     let csrf = login_csrf(&e.app).await;
-    let r = send(&e.app, post_form("/login", None, &[("username", "ana"), ("password", "trainee-demo"), ("csrf", &csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/login",
+            None,
+            &[
+                ("username", "ana"),
+                ("password", "trainee-demo"),
+                ("csrf", &csrf),
+            ],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
-    let r = send(&e.app, post_form("/login", Some(&format!("cutlab_login_csrf={csrf}")), &[("username", "ana"), ("password", "trainee-demo"), ("csrf", &"0".repeat(64))])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/login",
+            Some(&format!("cutlab_login_csrf={csrf}")),
+            &[
+                ("username", "ana"),
+                ("password", "trainee-demo"),
+                ("csrf", &"0".repeat(64)),
+            ],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
 }
 
@@ -121,13 +257,24 @@ async fn forms_without_the_csrf_token_are_refused() {
 async fn a_trainee_sees_only_their_own_data() {
     let e = env().await;
     let ana = login(&e.app, "ana", "trainee-demo").await;
-    let (ana_id, ben_id) = (user_id(&e.store, "ana").await, user_id(&e.store, "ben").await);
-    let (mine, bens) = (first_attempt(&e.store, "ana").await, first_attempt(&e.store, "ben").await);
+    let (ana_id, ben_id) = (
+        user_id(&e.store, "ana").await,
+        user_id(&e.store, "ben").await,
+    );
+    let (mine, bens) = (
+        first_attempt(&e.store, "ana").await,
+        first_attempt(&e.store, "ben").await,
+    );
     let dir = e.dir.path().join("ben");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("session.mcap"), b"ben's recording").unwrap();
     std::fs::write(dir.join("session.rrd"), b"ben's rrd").unwrap();
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?").bind(dir.join("session.mcap").display().to_string()).bind(bens).execute(e.store.pool()).await.unwrap();
+    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+        .bind(dir.join("session.mcap").display().to_string())
+        .bind(bens)
+        .execute(e.store.pool())
+        .await
+        .unwrap();
     for path in [
         format!("/attempts/{bens}"),
         format!("/api/attempts/{bens}"),
@@ -145,17 +292,51 @@ async fn a_trainee_sees_only_their_own_data() {
     }
     let r = send(&e.app, get("/api/cohorts", Some(&ana))).await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
-    assert_eq!(send(&e.app, get("/cohorts", Some(&ana))).await.status(), StatusCode::FORBIDDEN);
+    assert_eq!(
+        send(&e.app, get("/cohorts", Some(&ana))).await.status(),
+        StatusCode::FORBIDDEN
+    );
     let list = body_text(send(&e.app, get("/api/trainees", Some(&ana))).await).await;
-    assert!(list.contains("\"ana\"") && !list.contains("\"ben\""), "{list}");
+    assert!(
+        list.contains("\"ana\"") && !list.contains("\"ben\""),
+        "{list}"
+    );
     // her own data is there
-    assert_eq!(send(&e.app, get(&format!("/attempts/{mine}"), Some(&ana))).await.status(), StatusCode::OK);
-    let p = body_text(send(&e.app, get(&format!("/api/trainees/{ana_id}/progress"), Some(&ana))).await).await;
+    assert_eq!(
+        send(&e.app, get(&format!("/attempts/{mine}"), Some(&ana)))
+            .await
+            .status(),
+        StatusCode::OK
+    );
+    let p = body_text(
+        send(
+            &e.app,
+            get(&format!("/api/trainees/{ana_id}/progress"), Some(&ana)),
+        )
+        .await,
+    )
+    .await;
     assert!(p.contains("\"trials_to_proficiency\""), "{p}");
     // a trainee cannot comment, sign off or edit exercises
-    let r = send(&e.app, post_form(&format!("/attempts/{mine}/comments"), Some(&ana.cookie), &[("body", "self praise"), ("csrf", &ana.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/attempts/{mine}/comments"),
+            Some(&ana.cookie),
+            &[("body", "self praise"), ("csrf", &ana.csrf)],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
-    let r = send(&e.app, post_form("/curricula", Some(&ana.cookie), &[("name", "mine"), ("csrf", &ana.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/curricula",
+            Some(&ana.cookie),
+            &[("name", "mine"), ("csrf", &ana.csrf)],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
     assert_eq!(count(&e.store, "curricula").await, 0);
 }
@@ -163,18 +344,45 @@ async fn a_trainee_sees_only_their_own_data() {
 #[tokio::test]
 async fn an_instructor_sees_only_their_cohorts() {
     let e = env().await;
-    e.store.create_user("dr-other", cutlab_dashboard::assessor::store::Role::Instructor, Some("pw-other")).await.unwrap();
+    e.store
+        .create_user(
+            "dr-other",
+            cutlab_dashboard::assessor::store::Role::Instructor,
+            Some("pw-other"),
+        )
+        .await
+        .unwrap();
     let other = login(&e.app, "dr-other", "pw-other").await;
     let ana_id = user_id(&e.store, "ana").await;
     let a = first_attempt(&e.store, "ana").await;
-    assert_eq!(send(&e.app, get(&format!("/trainees/{ana_id}"), Some(&other))).await.status(), StatusCode::NOT_FOUND);
-    assert_eq!(send(&e.app, get(&format!("/api/attempts/{a}"), Some(&other))).await.status(), StatusCode::NOT_FOUND);
+    assert_eq!(
+        send(&e.app, get(&format!("/trainees/{ana_id}"), Some(&other)))
+            .await
+            .status(),
+        StatusCode::NOT_FOUND
+    );
+    assert_eq!(
+        send(&e.app, get(&format!("/api/attempts/{a}"), Some(&other)))
+            .await
+            .status(),
+        StatusCode::NOT_FOUND
+    );
     let grid = body_text(send(&e.app, get("/api/cohorts", Some(&other))).await).await;
     assert_eq!(grid, "[]");
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
-    assert_eq!(send(&e.app, get(&format!("/trainees/{ana_id}"), Some(&kim))).await.status(), StatusCode::OK);
+    assert_eq!(
+        send(&e.app, get(&format!("/trainees/{ana_id}"), Some(&kim)))
+            .await
+            .status(),
+        StatusCode::OK
+    );
     let admin = login(&e.app, "admin", "admin-demo").await;
-    assert_eq!(send(&e.app, get(&format!("/api/attempts/{a}"), Some(&admin))).await.status(), StatusCode::OK);
+    assert_eq!(
+        send(&e.app, get(&format!("/api/attempts/{a}"), Some(&admin)))
+            .await
+            .status(),
+        StatusCode::OK
+    );
 }
 
 #[tokio::test]
@@ -186,12 +394,38 @@ async fn downloads_serve_only_the_stored_recording() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("session.mcap"), b"MCAP bytes").unwrap();
     std::fs::write(e.dir.path().join("secret.txt"), b"secret").unwrap();
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?").bind(dir.join("session.mcap").display().to_string()).bind(a).execute(e.store.pool()).await.unwrap();
-    let r = send(&e.app, get(&format!("/attempts/{a}/recording.mcap?path=../secret.txt&file=/etc/passwd"), Some(&ana))).await;
+    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+        .bind(dir.join("session.mcap").display().to_string())
+        .bind(a)
+        .execute(e.store.pool())
+        .await
+        .unwrap();
+    let r = send(
+        &e.app,
+        get(
+            &format!("/attempts/{a}/recording.mcap?path=../secret.txt&file=/etc/passwd"),
+            Some(&ana),
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::OK);
-    assert!(r.headers()[header::CONTENT_DISPOSITION].to_str().unwrap().contains(&format!("attempt-{a}.mcap")));
+    assert!(
+        r.headers()[header::CONTENT_DISPOSITION]
+            .to_str()
+            .unwrap()
+            .contains(&format!("attempt-{a}.mcap"))
+    );
     assert_eq!(body_text(r).await, "MCAP bytes");
-    assert_eq!(send(&e.app, get(&format!("/attempts/{a}/recording.rrd"), Some(&ana))).await.status(), StatusCode::NOT_FOUND, "no .rrd beside it");
+    assert_eq!(
+        send(
+            &e.app,
+            get(&format!("/attempts/{a}/recording.rrd"), Some(&ana))
+        )
+        .await
+        .status(),
+        StatusCode::NOT_FOUND,
+        "no .rrd beside it"
+    );
     for path in [
         format!("/attempts/{a}/../../secret.txt"),
         format!("/attempts/{a}/recording.mcap/../../secret.txt"),
@@ -205,25 +439,69 @@ async fn downloads_serve_only_the_stored_recording() {
         let r = send(&e.app, get(&path, Some(&ana))).await;
         assert!(r.status().is_client_error(), "{path}: {}", r.status());
         let body = body_text(r).await;
-        assert!(!body.contains("secret") && !body.contains("[workspace]"), "{path}");
+        assert!(
+            !body.contains("secret") && !body.contains("[workspace]"),
+            "{path}"
+        );
     }
     // a stored path that is a directory is not served
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?").bind(dir.display().to_string()).bind(a).execute(e.store.pool()).await.unwrap();
-    assert_eq!(send(&e.app, get(&format!("/attempts/{a}/recording.mcap"), Some(&ana))).await.status(), StatusCode::NOT_FOUND);
+    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+        .bind(dir.display().to_string())
+        .bind(a)
+        .execute(e.store.pool())
+        .await
+        .unwrap();
+    assert_eq!(
+        send(
+            &e.app,
+            get(&format!("/attempts/{a}/recording.mcap"), Some(&ana))
+        )
+        .await
+        .status(),
+        StatusCode::NOT_FOUND
+    );
 }
 
 #[tokio::test]
 async fn hostile_parameters_get_4xx_and_change_nothing() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
-    let tables = ["users", "attempts", "metric_results", "attempt_comments", "exercises", "metric_thresholds", "curricula", "modules"];
+    let tables = [
+        "users",
+        "attempts",
+        "metric_results",
+        "attempt_comments",
+        "exercises",
+        "metric_thresholds",
+        "curricula",
+        "modules",
+    ];
     let mut before = Vec::new();
     for t in tables {
         before.push(count(&e.store, t).await);
     }
     let long = "9".repeat(5000);
-    for id in ["abc", "1'%20OR%20'1'='1", "1;DROP%20TABLE%20users", "99999999999999999999999", "-1", "0", "1.5", "%00", long.as_str(), "9223372036854775807"] {
-        for path in [format!("/attempts/{id}"), format!("/api/attempts/{id}"), format!("/trainees/{id}"), format!("/api/trainees/{id}/progress"), format!("/attempts/{id}/recording.mcap"), format!("/exercises/{id}"), format!("/api/exercises/{id}")] {
+    for id in [
+        "abc",
+        "1'%20OR%20'1'='1",
+        "1;DROP%20TABLE%20users",
+        "99999999999999999999999",
+        "-1",
+        "0",
+        "1.5",
+        "%00",
+        long.as_str(),
+        "9223372036854775807",
+    ] {
+        for path in [
+            format!("/attempts/{id}"),
+            format!("/api/attempts/{id}"),
+            format!("/trainees/{id}"),
+            format!("/api/trainees/{id}/progress"),
+            format!("/attempts/{id}/recording.mcap"),
+            format!("/exercises/{id}"),
+            format!("/api/exercises/{id}"),
+        ] {
             let r = send(&e.app, get(&path, Some(&kim))).await;
             assert!(r.status().is_client_error(), "{path}: {}", r.status());
         }
@@ -233,27 +511,119 @@ async fn hostile_parameters_get_4xx_and_change_nothing() {
     let c = &kim.csrf;
     let huge = "x".repeat(5000);
     let posts: Vec<(String, Vec<(&str, &str)>)> = vec![
-        (format!("/attempts/{a}/comments"), vec![("body", huge.as_str()), ("csrf", c)]),
-        (format!("/attempts/{a}/comments"), vec![("body", "   "), ("csrf", c)]),
+        (
+            format!("/attempts/{a}/comments"),
+            vec![("body", huge.as_str()), ("csrf", c)],
+        ),
+        (
+            format!("/attempts/{a}/comments"),
+            vec![("body", "   "), ("csrf", c)],
+        ),
         (format!("/attempts/{a}/comments"), vec![("csrf", c)]),
-        ("/attempts/abc/comments".into(), vec![("body", "x"), ("csrf", c)]),
-        ("/attempts/99999999999/comments".into(), vec![("body", "x"), ("csrf", c)]),
-        ("/exercises".into(), vec![("name", "x'); DROP TABLE exercises;--"), ("scene", "chest-wall"), ("threshold_k", "NaN"), ("plan", "entry_m = [0,0,0]"), ("csrf", c)]),
-        ("/exercises".into(), vec![("name", "ok-name"), ("scene", "chest-wall"), ("threshold_k", "2"), ("plan", "not = [valid"), ("csrf", c)]),
-        ("/exercises".into(), vec![("name", huge.as_str()), ("scene", "chest-wall"), ("threshold_k", "2"), ("plan", ""), ("csrf", c)]),
-        (format!("/exercises/{ex}"), vec![("scene", ""), ("threshold_k", "2"), ("csrf", c)]),
-        (format!("/exercises/{ex}"), vec![("scene", "chest-wall"), ("threshold_k", "-1"), ("csrf", c)]),
-        (format!("/exercises/{ex}/thresholds"), vec![("key_0", "time_s"), ("better_0", "lower-is-better"), ("mean_0", "1e999"), ("upper_0", "3"), ("csrf", c)]),
-        (format!("/exercises/{ex}/thresholds"), vec![("key_0", "'; DELETE FROM users;--"), ("better_0", "lower-is-better"), ("mean_0", "1"), ("upper_0", "3"), ("csrf", c)]),
-        (format!("/exercises/{ex}/thresholds"), vec![("key_0", "time_s"), ("better_0", "sideways"), ("mean_0", "1"), ("upper_0", "3"), ("csrf", c)]),
-        (format!("/exercises/{ex}/thresholds"), vec![("key_0", "time_s"), ("better_0", "two-sided"), ("mean_0", "1"), ("lower_0", "5"), ("upper_0", "3"), ("csrf", c)]),
+        (
+            "/attempts/abc/comments".into(),
+            vec![("body", "x"), ("csrf", c)],
+        ),
+        (
+            "/attempts/99999999999/comments".into(),
+            vec![("body", "x"), ("csrf", c)],
+        ),
+        (
+            "/exercises".into(),
+            vec![
+                ("name", "x'); DROP TABLE exercises;--"),
+                ("scene", "chest-wall"),
+                ("threshold_k", "NaN"),
+                ("plan", "entry_m = [0,0,0]"),
+                ("csrf", c),
+            ],
+        ),
+        (
+            "/exercises".into(),
+            vec![
+                ("name", "ok-name"),
+                ("scene", "chest-wall"),
+                ("threshold_k", "2"),
+                ("plan", "not = [valid"),
+                ("csrf", c),
+            ],
+        ),
+        (
+            "/exercises".into(),
+            vec![
+                ("name", huge.as_str()),
+                ("scene", "chest-wall"),
+                ("threshold_k", "2"),
+                ("plan", ""),
+                ("csrf", c),
+            ],
+        ),
+        (
+            format!("/exercises/{ex}"),
+            vec![("scene", ""), ("threshold_k", "2"), ("csrf", c)],
+        ),
+        (
+            format!("/exercises/{ex}"),
+            vec![("scene", "chest-wall"), ("threshold_k", "-1"), ("csrf", c)],
+        ),
+        (
+            format!("/exercises/{ex}/thresholds"),
+            vec![
+                ("key_0", "time_s"),
+                ("better_0", "lower-is-better"),
+                ("mean_0", "1e999"),
+                ("upper_0", "3"),
+                ("csrf", c),
+            ],
+        ),
+        (
+            format!("/exercises/{ex}/thresholds"),
+            vec![
+                ("key_0", "'; DELETE FROM users;--"),
+                ("better_0", "lower-is-better"),
+                ("mean_0", "1"),
+                ("upper_0", "3"),
+                ("csrf", c),
+            ],
+        ),
+        (
+            format!("/exercises/{ex}/thresholds"),
+            vec![
+                ("key_0", "time_s"),
+                ("better_0", "sideways"),
+                ("mean_0", "1"),
+                ("upper_0", "3"),
+                ("csrf", c),
+            ],
+        ),
+        (
+            format!("/exercises/{ex}/thresholds"),
+            vec![
+                ("key_0", "time_s"),
+                ("better_0", "two-sided"),
+                ("mean_0", "1"),
+                ("lower_0", "5"),
+                ("upper_0", "3"),
+                ("csrf", c),
+            ],
+        ),
         ("/curricula".into(), vec![("name", ""), ("csrf", c)]),
-        ("/curricula/1/modules".into(), vec![("name", "m"), ("exercise_id", "1 OR 1=1"), ("csrf", c)]),
-        ("/curricula/424242/modules".into(), vec![("name", "m"), ("exercise_id", "1"), ("csrf", c)]),
+        (
+            "/curricula/1/modules".into(),
+            vec![("name", "m"), ("exercise_id", "1 OR 1=1"), ("csrf", c)],
+        ),
+        (
+            "/curricula/424242/modules".into(),
+            vec![("name", "m"), ("exercise_id", "1"), ("csrf", c)],
+        ),
     ];
     for (path, form) in &posts {
         let r = send(&e.app, post_form(path, Some(&kim.cookie), form)).await;
-        assert!(r.status().is_client_error(), "{path} {form:?}: {}", r.status());
+        assert!(
+            r.status().is_client_error(),
+            "{path} {form:?}: {}",
+            r.status()
+        );
     }
     for (t, n) in tables.iter().zip(before) {
         assert_eq!(count(&e.store, t).await, n, "{t} changed");
@@ -266,12 +636,31 @@ async fn user_text_is_escaped() {
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let a = first_attempt(&e.store, "ana").await;
     let evil = "<script>alert('x')</script>\"><img src=x onerror=alert(1)>";
-    let r = send(&e.app, post_form(&format!("/attempts/{a}/comments"), Some(&kim.cookie), &[("body", evil), ("csrf", &kim.csrf)])).await;
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/attempts/{a}/comments"),
+            Some(&kim.cookie),
+            &[("body", evil), ("csrf", &kim.csrf)],
+        ),
+    )
+    .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let ana = login(&e.app, "ana", "trainee-demo").await;
     let r = send(&e.app, get(&format!("/attempts/{a}"), Some(&ana))).await;
-    assert!(r.headers()[header::CONTENT_SECURITY_POLICY].to_str().unwrap().contains("script-src 'self'"));
+    assert!(
+        r.headers()[header::CONTENT_SECURITY_POLICY]
+            .to_str()
+            .unwrap()
+            .contains("script-src 'self'")
+    );
     let page = body_text(r).await;
-    assert!(!page.contains("<script>alert") && !page.contains("<img src=x"), "unescaped");
-    assert!(page.contains("&lt;script&gt;alert("), "the trainee sees the comment");
+    assert!(
+        !page.contains("<script>alert") && !page.contains("<img src=x"),
+        "unescaped"
+    );
+    assert!(
+        page.contains("&lt;script&gt;alert("),
+        "the trainee sees the comment"
+    );
 }

@@ -46,17 +46,32 @@ fn to_parry(v: Vector3<f64>) -> PVec {
 /// indices out of range.
 pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
     if surface.triangles.is_empty() {
-        return Err(AssessError::InvalidInput("the surface has no triangles".into()));
+        return Err(AssessError::InvalidInput(
+            "the surface has no triangles".into(),
+        ));
     }
     if let Some(i) = surface.vertices_m.iter().position(|v| !geom::finite(v)) {
-        return Err(AssessError::InvalidInput(format!("surface vertex {i} is not finite")));
+        return Err(AssessError::InvalidInput(format!(
+            "surface vertex {i} is not finite"
+        )));
     }
     let n = surface.vertices_m.len();
-    if let Some(i) = surface.triangles.iter().position(|t| t.iter().any(|&v| v as usize >= n)) {
-        return Err(AssessError::InvalidInput(format!("surface triangle {i} refers to a missing vertex")));
+    if let Some(i) = surface
+        .triangles
+        .iter()
+        .position(|t| t.iter().any(|&v| v as usize >= n))
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "surface triangle {i} refers to a missing vertex"
+        )));
     }
-    let vertices: Vec<PVec> = surface.vertices_m.iter().map(|&v| PVec::from_array(v)).collect();
-    TriMesh::new(vertices, surface.triangles.clone()).map_err(|e| AssessError::InvalidInput(format!("surface: {e}")))
+    let vertices: Vec<PVec> = surface
+        .vertices_m
+        .iter()
+        .map(|&v| PVec::from_array(v))
+        .collect();
+    TriMesh::new(vertices, surface.triangles.clone())
+        .map_err(|e| AssessError::InvalidInput(format!("surface: {e}")))
 }
 
 /// The fraction of `targets` visible from `eye` past `mesh`; `None` without targets.
@@ -77,15 +92,23 @@ pub fn visible_fraction(mesh: &TriMesh, eye: [f64; 3], targets: &[[f64; 3]]) -> 
             return true;
         }
         let ray = Ray::new(to_parry(eye.coords), to_parry(d));
-        mesh.cast_local_ray(&ray, 1.0 - VISIBILITY_EPS_M / len, false).is_none()
+        mesh.cast_local_ray(&ray, 1.0 - VISIBILITY_EPS_M / len, false)
+            .is_none()
     };
     let visible = targets
         .iter()
         .map(|&p| Point3::from(p))
         .filter(|&p| {
             let d = p - eye;
-            let helper = if d.x.abs() < 0.9 * d.norm() { Vector3::x() } else { Vector3::y() };
-            let (Some(u), Some(v)) = (geom::unit(d.cross(&helper)), geom::unit(d.cross(&d.cross(&helper)))) else {
+            let helper = if d.x.abs() < 0.9 * d.norm() {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            };
+            let (Some(u), Some(v)) = (
+                geom::unit(d.cross(&helper)),
+                geom::unit(d.cross(&d.cross(&helper))),
+            ) else {
                 return clear(p);
             };
             clear(p) && clear(p + u * VISIBILITY_JITTER_M) && clear(p + v * VISIBILITY_JITTER_M)
@@ -116,7 +139,8 @@ pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>)
             .map(|i| {
                 let origin = q + lateral * (i as f64 * OPENING_STEP_M) + n * above;
                 let ray = Ray::new(to_parry(origin.coords), to_parry(-n));
-                mesh.cast_local_ray(&ray, max_toi, false).map(|toi| toi - above)
+                mesh.cast_local_ray(&ray, max_toi, false)
+                    .map(|toi| toi - above)
             })
             .collect();
         let mut depths: Vec<f64> = hits.iter().flatten().copied().collect();
@@ -126,7 +150,10 @@ pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>)
         }
         depths.sort_by(f64::total_cmp);
         let reference = depths[depths.len() / 2];
-        let open: Vec<bool> = hits.iter().map(|h| h.is_none_or(|d| d > reference + 0.5 * plan.depth_m)).collect();
+        let open: Vec<bool> = hits
+            .iter()
+            .map(|h| h.is_none_or(|d| d > reference + 0.5 * plan.depth_m))
+            .collect();
         let (mut best, mut run) = (0usize, 0usize);
         for (i, &o) in open.iter().enumerate() {
             if o {
@@ -142,12 +169,19 @@ pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>)
         widths.push((s, best as f64 * OPENING_STEP_M));
     }
     let width = widths.iter().map(|w| w.1).fold(0.0, f64::max);
-    let area = widths.windows(2).map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0)).sum();
+    let area = widths
+        .windows(2)
+        .map(|w| 0.5 * (w[0].1 + w[1].1) * (w[1].0 - w[0].0))
+        .sum();
     (width, area, widths)
 }
 
 pub(crate) fn assess(plan: &ExpertPlan, surface: Option<&SurfaceMesh>, values: &mut Values) {
-    const KEYS: [&str; 3] = ["target_visible_fraction", "opening_width_m", "opening_area_m2"];
+    const KEYS: [&str; 3] = [
+        "target_visible_fraction",
+        "opening_width_m",
+        "opening_area_m2",
+    ];
     let Some(surface) = surface else {
         values.missing(&KEYS, "no surface recorded");
         return;
@@ -156,7 +190,10 @@ pub(crate) fn assess(plan: &ExpertPlan, surface: Option<&SurfaceMesh>, values: &
         Ok(mesh) => {
             match visible_fraction(&mesh, plan.viewpoint_m, &plan.target_m) {
                 Some(f) => values.set("target_visible_fraction", f),
-                None => values.missing(&["target_visible_fraction"], "the plan has no target points"),
+                None => values.missing(
+                    &["target_visible_fraction"],
+                    "the plan has no target points",
+                ),
             }
             let (width, area, _) = opening(plan, &mesh);
             values.set("opening_width_m", width);
@@ -204,11 +241,17 @@ mod tests {
     fn targets_under_the_slot_are_visible_the_others_hidden() {
         let mesh = trimesh(&slotted(false)).unwrap();
         let p = plan();
-        assert_eq!(visible_fraction(&mesh, p.viewpoint_m, &p.target_m), Some(0.5));
+        assert_eq!(
+            visible_fraction(&mesh, p.viewpoint_m, &p.target_m),
+            Some(0.5)
+        );
         assert_eq!(visible_fraction(&mesh, p.viewpoint_m, &[]), None);
         // through the floor nothing is visible
         let closed = trimesh(&slotted(true)).unwrap();
-        assert_eq!(visible_fraction(&closed, p.viewpoint_m, &p.target_m), Some(0.0));
+        assert_eq!(
+            visible_fraction(&closed, p.viewpoint_m, &p.target_m),
+            Some(0.0)
+        );
     }
 
     #[test]
@@ -226,8 +269,15 @@ mod tests {
     fn a_closed_surface_has_no_opening_and_bad_meshes_are_errors() {
         let mut closed = slotted(false);
         let b = closed.vertices_m.len() as u32;
-        closed.vertices_m.extend([[0.0, -0.003, 0.0], [0.07, -0.003, 0.0], [0.07, 0.003, 0.0], [0.0, 0.003, 0.0]]);
-        closed.triangles.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        closed.vertices_m.extend([
+            [0.0, -0.003, 0.0],
+            [0.07, -0.003, 0.0],
+            [0.07, 0.003, 0.0],
+            [0.0, 0.003, 0.0],
+        ]);
+        closed
+            .triangles
+            .extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
         let (width, area, _) = opening(&plan(), &trimesh(&closed).unwrap());
         assert_eq!((width, area), (0.0, 0.0));
         assert!(trimesh(&SurfaceMesh::default()).is_err());

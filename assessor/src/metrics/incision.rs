@@ -65,7 +65,9 @@ pub struct IncisionMetrics {
 /// finite and non-negative and `edge_dir` a finite non-zero vector, else the tip.
 pub fn trace_point(c: &CutSample) -> [f64; 3] {
     match geom::unit(c.edge_dir.into()) {
-        Some(e) if c.depth_m.is_finite() && c.depth_m >= 0.0 => (Point3::from(c.tip_m) + e * c.depth_m).into(),
+        Some(e) if c.depth_m.is_finite() && c.depth_m >= 0.0 => {
+            (Point3::from(c.tip_m) + e * c.depth_m).into()
+        }
         _ => c.tip_m,
     }
 }
@@ -91,7 +93,10 @@ fn distance_to_strokes(p: Point3<f64>, tips: &[Point3<f64>], strokes: &[Range<us
             best = best.min(nalgebra::distance(&p, &s[0]));
         }
         for w in s.windows(2) {
-            best = best.min(nalgebra::distance(&p, &geom::closest_on_segment(p, w[0], w[1]).0));
+            best = best.min(nalgebra::distance(
+                &p,
+                &geom::closest_on_segment(p, w[0], w[1]).0,
+            ));
         }
     }
     best
@@ -121,21 +126,46 @@ pub fn depth_below_plan(plan: &ExpertPlan, tip: [f64; 3]) -> f64 {
 /// The incision metrics of `cuts` (at least 2, finite tips) against `plan`.
 pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics> {
     if cuts.len() < 2 {
-        return Err(AssessError::InvalidInput(format!("{} cut samples: no incision to measure", cuts.len())));
+        return Err(AssessError::InvalidInput(format!(
+            "{} cut samples: no incision to measure",
+            cuts.len()
+        )));
     }
-    if let Some(i) = cuts.iter().position(|c| !geom::finite(&c.tip_m) || !c.t_s.is_finite()) {
-        return Err(AssessError::InvalidInput(format!("cut sample {i}: time or tip not finite")));
+    if let Some(i) = cuts
+        .iter()
+        .position(|c| !geom::finite(&c.tip_m) || !c.t_s.is_finite())
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "cut sample {i}: time or tip not finite"
+        )));
     }
     let mut cuts = cuts.to_vec();
     cuts.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     let n = Vector3::from(plan.normal);
-    let tips: Vec<Point3<f64>> = cuts.iter().map(|c| geom::project(trace_point(c).into(), &n)).collect();
-    let line: Vec<Point3<f64>> = plan.incision_m.iter().map(|&p| geom::project(p.into(), &n)).collect();
-    let (entry, exit) = (geom::project(plan.entry_m.into(), &n), geom::project(plan.exit_m.into(), &n));
+    let tips: Vec<Point3<f64>> = cuts
+        .iter()
+        .map(|c| geom::project(trace_point(c).into(), &n))
+        .collect();
+    let line: Vec<Point3<f64>> = plan
+        .incision_m
+        .iter()
+        .map(|&p| geom::project(p.into(), &n))
+        .collect();
+    let (entry, exit) = (
+        geom::project(plan.entry_m.into(), &n),
+        geom::project(plan.exit_m.into(), &n),
+    );
     let (first, last) = (tips[0], tips[tips.len() - 1]);
     let strokes = strokes(&tips, STROKE_GAP_M);
-    let on_line: Vec<geom::OnLine> = tips.iter().map(|&p| geom::closest_on_polyline(p, &line)).collect();
-    let spans = strokes.iter().flat_map(|r| on_line[r.clone()].windows(2).map(|w| (w[0].arc.min(w[1].arc), w[0].arc.max(w[1].arc))));
+    let on_line: Vec<geom::OnLine> = tips
+        .iter()
+        .map(|&p| geom::closest_on_polyline(p, &line))
+        .collect();
+    let spans = strokes.iter().flat_map(|r| {
+        on_line[r.clone()]
+            .windows(2)
+            .map(|w| (w[0].arc.min(w[1].arc), w[0].arc.max(w[1].arc)))
+    });
     let cut_length_m = geom::union_length(spans.collect());
     let plan_length = geom::polyline_length(&line);
 
@@ -152,7 +182,8 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
         .count();
     let fraction_cut_in_tolerance = covered as f64 / intervals as f64;
 
-    let direction_error_deg = geom::angle(last - first, exit - entry).map_or(180.0, f64::to_degrees);
+    let direction_error_deg =
+        geom::angle(last - first, exit - entry).map_or(180.0, f64::to_degrees);
 
     let depths: Vec<f64> = cuts.iter().map(|c| c.depth_m - plan.depth_m).collect();
     let (depth_error_m, depth_rms_error_m) = if geom::finite(&depths) {
@@ -180,7 +211,11 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
 /// The angle (deg) between the tip's displacement over the last [`APPROACH_LENGTH_M`] of
 /// travel up to time `t_first_cut` and the plan's approach direction; `None` without poses,
 /// with non-finite ones, or if the tip barely moved.
-pub fn approach_error_deg(plan: &ExpertPlan, poses: &[PoseSample], t_first_cut: f64) -> Option<f64> {
+pub fn approach_error_deg(
+    plan: &ExpertPlan,
+    poses: &[PoseSample],
+    t_first_cut: f64,
+) -> Option<f64> {
     let before: Vec<&PoseSample> = poses.iter().filter(|p| p.t_s <= t_first_cut).collect();
     let end = Point3::from(before.last()?.tip_m);
     let mut travelled = 0.0;
@@ -202,7 +237,12 @@ pub fn approach_error_deg(plan: &ExpertPlan, poses: &[PoseSample], t_first_cut: 
     geom::angle(end - start, plan.approach().into()).map(f64::to_degrees)
 }
 
-pub(crate) fn assess(plan: &ExpertPlan, cuts: &[CutSample], poses: &[PoseSample], values: &mut Values) {
+pub(crate) fn assess(
+    plan: &ExpertPlan,
+    cuts: &[CutSample],
+    poses: &[PoseSample],
+    values: &mut Values,
+) {
     const KEYS: [&str; 10] = [
         "entry_error_m",
         "exit_error_m",
@@ -230,12 +270,19 @@ pub(crate) fn assess(plan: &ExpertPlan, cuts: &[CutSample], poses: &[PoseSample]
                     values.set("depth_error_m", d);
                     values.set("depth_rms_error_m", r);
                 }
-                _ => values.missing(&["depth_error_m", "depth_rms_error_m"], "a cut depth is not finite"),
+                _ => values.missing(
+                    &["depth_error_m", "depth_rms_error_m"],
+                    "a cut depth is not finite",
+                ),
             }
         }
         Err(e) => values.missing(&KEYS, &e.to_string()),
     }
-    let first_cut = cuts.iter().map(|c| c.t_s).filter(|t| t.is_finite()).fold(f64::INFINITY, f64::min);
+    let first_cut = cuts
+        .iter()
+        .map(|c| c.t_s)
+        .filter(|t| t.is_finite())
+        .fold(f64::INFINITY, f64::min);
     match approach_error_deg(plan, poses, first_cut).filter(|_| first_cut.is_finite()) {
         Some(a) => values.set("approach_error_deg", a),
         None => values.missing(&["approach_error_deg"], "no approach before a first cut"),
@@ -247,13 +294,21 @@ mod tests {
     use super::*;
 
     fn straight_plan() -> ExpertPlan {
-        ExpertPlan::from_json(r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#).unwrap()
+        ExpertPlan::from_json(
+            r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#,
+        )
+        .unwrap()
     }
 
     /// Cuts every 1 mm along y = `y` from x = `x0` to `x1` (mm), 8 mm deep.
     fn cuts(x0: i32, x1: i32, y: f64, depth: f64) -> Vec<CutSample> {
         (x0..=x1)
-            .map(|x| CutSample { t_s: x as f64 * 0.01, tip_m: [x as f64 * 1e-3, y, -depth], edge_dir: [0.0, 0.0, 1.0], depth_m: depth })
+            .map(|x| CutSample {
+                t_s: x as f64 * 0.01,
+                tip_m: [x as f64 * 1e-3, y, -depth],
+                edge_dir: [0.0, 0.0, 1.0],
+                depth_m: depth,
+            })
             .collect()
     }
 
@@ -270,7 +325,11 @@ mod tests {
         assert!((m.lateral_max_m - 0.001).abs() < 1e-12);
         // covered: x in [5 - sqrt(3), 55 + sqrt(3)] mm of 60 mm
         let expected = (50.0 + 2.0 * 3f64.sqrt()) / 60.0;
-        assert!((m.fraction_cut_in_tolerance - expected).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+        assert!(
+            (m.fraction_cut_in_tolerance - expected).abs() < 2e-3,
+            "{}",
+            m.fraction_cut_in_tolerance
+        );
         assert!(m.direction_error_deg.abs() < 1e-9);
         assert!(m.depth_error_m.unwrap().abs() < 1e-15);
     }
@@ -282,7 +341,12 @@ mod tests {
         let c: Vec<CutSample> = (0..=50)
             .map(|i| {
                 let x = i as f64 * 1e-3;
-                CutSample { t_s: i as f64, tip_m: [x, x * tan, -0.006], edge_dir: [0.0, 0.0, 1.0], depth_m: 0.006 }
+                CutSample {
+                    t_s: i as f64,
+                    tip_m: [x, x * tan, -0.006],
+                    edge_dir: [0.0, 0.0, 1.0],
+                    depth_m: 0.006,
+                }
             })
             .collect();
         let m = incision(&straight_plan(), &c).unwrap();
@@ -300,7 +364,11 @@ mod tests {
         let m = incision(&straight_plan(), &c).unwrap();
         assert!((m.cut_length_m - 0.040).abs() < 1e-12);
         // covered: [0, 22] and [38, 60] mm
-        assert!((m.fraction_cut_in_tolerance - 44.0 / 60.0).abs() < 2e-3, "{}", m.fraction_cut_in_tolerance);
+        assert!(
+            (m.fraction_cut_in_tolerance - 44.0 / 60.0).abs() < 2e-3,
+            "{}",
+            m.fraction_cut_in_tolerance
+        );
     }
 
     #[test]
@@ -324,14 +392,29 @@ mod tests {
         assert!((m.lateral_mean_m - 0.001).abs() < 1e-12);
         // 5 mm past either end: 70 mm
         let m = incision(&straight_plan(), &cuts(-5, 65, 0.0, 0.008)).unwrap();
-        assert!((m.length_error_m - 0.010).abs() < 1e-12, "{}", m.length_error_m);
+        assert!(
+            (m.length_error_m - 0.010).abs() < 1e-12,
+            "{}",
+            m.length_error_m
+        );
     }
 
     #[test]
     fn the_trace_is_where_a_tilted_blade_crosses_the_surface() {
         // tip 8 mm deep, blade tilted 45 degrees in y: it crosses the surface 8 mm beside the tip
-        let e = [0.0, std::f64::consts::FRAC_1_SQRT_2, std::f64::consts::FRAC_1_SQRT_2];
-        let c: Vec<CutSample> = (0..=60).map(|i| CutSample { t_s: i as f64, tip_m: [i as f64 * 1e-3, -0.008 * e[1], -0.008 * e[2]], edge_dir: e, depth_m: 0.008 }).collect();
+        let e = [
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ];
+        let c: Vec<CutSample> = (0..=60)
+            .map(|i| CutSample {
+                t_s: i as f64,
+                tip_m: [i as f64 * 1e-3, -0.008 * e[1], -0.008 * e[2]],
+                edge_dir: e,
+                depth_m: 0.008,
+            })
+            .collect();
         let m = incision(&straight_plan(), &c).unwrap();
         assert!(m.lateral_max_m < 1e-12, "{}", m.lateral_max_m);
         let mut unusable = c.clone();
@@ -339,7 +422,10 @@ mod tests {
             s.edge_dir = [0.0; 3];
         }
         let m = incision(&straight_plan(), &unusable).unwrap();
-        assert!((m.lateral_mean_m - 0.008 * e[1]).abs() < 1e-12, "falls back to the tip");
+        assert!(
+            (m.lateral_mean_m - 0.008 * e[1]).abs() < 1e-12,
+            "falls back to the tip"
+        );
     }
 
     #[test]
@@ -357,21 +443,41 @@ mod tests {
         assert!(incision(&straight_plan(), &cuts(0, 0, 0.0, 0.008)).is_err());
         let mut c = cuts(0, 10, 0.0, 0.008);
         c[3].tip_m[1] = f64::NAN;
-        assert!(incision(&straight_plan(), &c).unwrap_err().to_string().contains("cut sample 3"));
+        assert!(
+            incision(&straight_plan(), &c)
+                .unwrap_err()
+                .to_string()
+                .contains("cut sample 3")
+        );
         let mut c = cuts(0, 10, 0.0, 0.008);
         c[3].depth_m = f64::NAN;
-        assert!(incision(&straight_plan(), &c).unwrap().depth_error_m.is_none());
+        assert!(
+            incision(&straight_plan(), &c)
+                .unwrap()
+                .depth_error_m
+                .is_none()
+        );
     }
 
     #[test]
     fn approach_straight_down_and_at_45_degrees() {
         let plan = straight_plan();
         let down: Vec<PoseSample> = (0..=20)
-            .map(|i| PoseSample { t_s: i as f64, tip_m: [0.0, 0.0, 0.01 - i as f64 * 1e-3], quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: false })
+            .map(|i| PoseSample {
+                t_s: i as f64,
+                tip_m: [0.0, 0.0, 0.01 - i as f64 * 1e-3],
+                quat_wxyz: [1.0, 0.0, 0.0, 0.0],
+                blade_engaged: false,
+            })
             .collect();
         assert!(approach_error_deg(&plan, &down, 20.0).unwrap() < 1e-9);
         let slanted: Vec<PoseSample> = (0..=20)
-            .map(|i| PoseSample { t_s: i as f64, tip_m: [i as f64 * 1e-3, 0.0, -(i as f64) * 1e-3], quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: false })
+            .map(|i| PoseSample {
+                t_s: i as f64,
+                tip_m: [i as f64 * 1e-3, 0.0, -(i as f64) * 1e-3],
+                quat_wxyz: [1.0, 0.0, 0.0, 0.0],
+                blade_engaged: false,
+            })
             .collect();
         assert!((approach_error_deg(&plan, &slanted, 20.0).unwrap() - 45.0).abs() < 1e-9);
         assert!(approach_error_deg(&plan, &[], 1.0).is_none());

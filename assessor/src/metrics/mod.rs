@@ -81,8 +81,19 @@ pub struct MetricValue {
 impl MetricValue {
     fn of(metric: &Metric, value: Option<f64>, missing: Option<String>) -> Self {
         let value = value.filter(|v| v.is_finite());
-        let missing = if value.is_none() { Some(missing.unwrap_or_else(|| "not finite".into())) } else { None };
-        Self { key: metric.key.into(), value, unit: metric.unit.into(), better: metric.better, scored: metric.scored, missing }
+        let missing = if value.is_none() {
+            Some(missing.unwrap_or_else(|| "not finite".into()))
+        } else {
+            None
+        };
+        Self {
+            key: metric.key.into(),
+            value,
+            unit: metric.unit.into(),
+            better: metric.better,
+            scored: metric.scored,
+            missing,
+        }
     }
 }
 
@@ -92,43 +103,235 @@ pub type MetricSet = Vec<MetricValue>;
 /// The metric catalogue, in report order.
 pub const METRICS: &[Metric] = &[
     // incision
-    m("entry_error_m", "m", Better::LowerIsBetter, true, "distance of the cut's start from the planned entry (seen along the normal)"),
-    m("exit_error_m", "m", Better::LowerIsBetter, true, "distance of the cut's end from the planned exit"),
-    m("length_error_m", "m", Better::TwoSided, true, "cut length minus planned length (signed)"),
-    m("lateral_mean_m", "m", Better::LowerIsBetter, true, "mean distance of the cut from the planned line"),
-    m("lateral_rms_m", "m", Better::LowerIsBetter, false, "RMS distance of the cut from the planned line"),
-    m("lateral_max_m", "m", Better::LowerIsBetter, true, "largest distance of the cut from the planned line"),
-    m("fraction_cut_in_tolerance", "1", Better::HigherIsBetter, true, "fraction of the planned line cut within the tolerance"),
-    m("direction_error_deg", "deg", Better::LowerIsBetter, true, "angle between the cut's overall direction and the plan's"),
-    m("depth_error_m", "m", Better::TwoSided, true, "mean cut depth minus planned depth (signed)"),
-    m("depth_rms_error_m", "m", Better::LowerIsBetter, false, "RMS of cut depth minus planned depth"),
-    m("approach_error_deg", "deg", Better::LowerIsBetter, false, "angle between the tip's motion entering the tissue and the planned approach"),
+    m(
+        "entry_error_m",
+        "m",
+        Better::LowerIsBetter,
+        true,
+        "distance of the cut's start from the planned entry (seen along the normal)",
+    ),
+    m(
+        "exit_error_m",
+        "m",
+        Better::LowerIsBetter,
+        true,
+        "distance of the cut's end from the planned exit",
+    ),
+    m(
+        "length_error_m",
+        "m",
+        Better::TwoSided,
+        true,
+        "cut length minus planned length (signed)",
+    ),
+    m(
+        "lateral_mean_m",
+        "m",
+        Better::LowerIsBetter,
+        true,
+        "mean distance of the cut from the planned line",
+    ),
+    m(
+        "lateral_rms_m",
+        "m",
+        Better::LowerIsBetter,
+        false,
+        "RMS distance of the cut from the planned line",
+    ),
+    m(
+        "lateral_max_m",
+        "m",
+        Better::LowerIsBetter,
+        true,
+        "largest distance of the cut from the planned line",
+    ),
+    m(
+        "fraction_cut_in_tolerance",
+        "1",
+        Better::HigherIsBetter,
+        true,
+        "fraction of the planned line cut within the tolerance",
+    ),
+    m(
+        "direction_error_deg",
+        "deg",
+        Better::LowerIsBetter,
+        true,
+        "angle between the cut's overall direction and the plan's",
+    ),
+    m(
+        "depth_error_m",
+        "m",
+        Better::TwoSided,
+        true,
+        "mean cut depth minus planned depth (signed)",
+    ),
+    m(
+        "depth_rms_error_m",
+        "m",
+        Better::LowerIsBetter,
+        false,
+        "RMS of cut depth minus planned depth",
+    ),
+    m(
+        "approach_error_deg",
+        "deg",
+        Better::LowerIsBetter,
+        false,
+        "angle between the tip's motion entering the tissue and the planned approach",
+    ),
     // path
-    m("time_s", "s", Better::LowerIsBetter, true, "task time: from the tip's first movement to its last"),
-    m("path_length_m", "m", Better::LowerIsBetter, true, "distance travelled by the tip (filtered)"),
-    m("economy_of_motion", "1", Better::HigherIsBetter, false, "straight distance start to end over path length"),
-    m("idle_time_s", "s", Better::LowerIsBetter, false, "time with the tip (nearly) still"),
-    m("movements", "1", Better::LowerIsBetter, true, "number of movements (speed threshold crossings)"),
-    m("angular_path_rad", "rad", Better::LowerIsBetter, false, "total rotation of the tool"),
-    m("ldlj", "1", Better::HigherIsBetter, true, "log dimensionless jerk of the whole speed profile"),
-    m("sparc", "1", Better::HigherIsBetter, false, "spectral arc length of the whole speed profile"),
-    m("ldlj_per_movement", "1", Better::HigherIsBetter, false, "mean log dimensionless jerk per movement"),
-    m("sparc_per_movement", "1", Better::HigherIsBetter, false, "mean spectral arc length per movement"),
+    m(
+        "time_s",
+        "s",
+        Better::LowerIsBetter,
+        true,
+        "task time: from the tip's first movement to its last",
+    ),
+    m(
+        "path_length_m",
+        "m",
+        Better::LowerIsBetter,
+        true,
+        "distance travelled by the tip (filtered)",
+    ),
+    m(
+        "economy_of_motion",
+        "1",
+        Better::HigherIsBetter,
+        false,
+        "straight distance start to end over path length",
+    ),
+    m(
+        "idle_time_s",
+        "s",
+        Better::LowerIsBetter,
+        false,
+        "time with the tip (nearly) still",
+    ),
+    m(
+        "movements",
+        "1",
+        Better::LowerIsBetter,
+        true,
+        "number of movements (speed threshold crossings)",
+    ),
+    m(
+        "angular_path_rad",
+        "rad",
+        Better::LowerIsBetter,
+        false,
+        "total rotation of the tool",
+    ),
+    m(
+        "ldlj",
+        "1",
+        Better::HigherIsBetter,
+        true,
+        "log dimensionless jerk of the whole speed profile",
+    ),
+    m(
+        "sparc",
+        "1",
+        Better::HigherIsBetter,
+        false,
+        "spectral arc length of the whole speed profile",
+    ),
+    m(
+        "ldlj_per_movement",
+        "1",
+        Better::HigherIsBetter,
+        false,
+        "mean log dimensionless jerk per movement",
+    ),
+    m(
+        "sparc_per_movement",
+        "1",
+        Better::HigherIsBetter,
+        false,
+        "mean spectral arc length per movement",
+    ),
     // safety
-    m("peak_force_n", "N", Better::LowerIsBetter, true, "largest force"),
-    m("mean_force_n", "N", Better::LowerIsBetter, false, "mean force while touching"),
-    m("time_above_force_limit_s", "s", Better::LowerIsBetter, false, "time above the plan's force limit"),
-    m("excessive_force_events", "1", Better::LowerIsBetter, false, "times the force rose above the limit"),
-    m("cut_outside_corridor_m", "m", Better::LowerIsBetter, true, "length of cut beyond the corridor"),
-    m("cut_area_outside_corridor_m2", "m^2", Better::LowerIsBetter, false, "cut area (length x depth) beyond the corridor"),
+    m(
+        "peak_force_n",
+        "N",
+        Better::LowerIsBetter,
+        true,
+        "largest force",
+    ),
+    m(
+        "mean_force_n",
+        "N",
+        Better::LowerIsBetter,
+        false,
+        "mean force while touching",
+    ),
+    m(
+        "time_above_force_limit_s",
+        "s",
+        Better::LowerIsBetter,
+        false,
+        "time above the plan's force limit",
+    ),
+    m(
+        "excessive_force_events",
+        "1",
+        Better::LowerIsBetter,
+        false,
+        "times the force rose above the limit",
+    ),
+    m(
+        "cut_outside_corridor_m",
+        "m",
+        Better::LowerIsBetter,
+        true,
+        "length of cut beyond the corridor",
+    ),
+    m(
+        "cut_area_outside_corridor_m2",
+        "m^2",
+        Better::LowerIsBetter,
+        false,
+        "cut area (length x depth) beyond the corridor",
+    ),
     // field
-    m("target_visible_fraction", "1", Better::HigherIsBetter, false, "fraction of the target seen from the viewpoint"),
-    m("opening_width_m", "m", Better::HigherIsBetter, false, "widest gap between the wound's lips"),
-    m("opening_area_m2", "m^2", Better::HigherIsBetter, false, "area of the wound's opening seen along the normal"),
+    m(
+        "target_visible_fraction",
+        "1",
+        Better::HigherIsBetter,
+        false,
+        "fraction of the target seen from the viewpoint",
+    ),
+    m(
+        "opening_width_m",
+        "m",
+        Better::HigherIsBetter,
+        false,
+        "widest gap between the wound's lips",
+    ),
+    m(
+        "opening_area_m2",
+        "m^2",
+        Better::HigherIsBetter,
+        false,
+        "area of the wound's opening seen along the normal",
+    ),
 ];
 
-const fn m(key: &'static str, unit: &'static str, better: Better, scored: bool, description: &'static str) -> Metric {
-    Metric { key, unit, better, scored, description }
+const fn m(
+    key: &'static str,
+    unit: &'static str,
+    better: Better,
+    scored: bool,
+    description: &'static str,
+) -> Metric {
+    Metric {
+        key,
+        unit,
+        better,
+        scored,
+        description,
+    }
 }
 
 /// The definition of a metric key.
@@ -138,7 +341,10 @@ pub fn metric(key: &str) -> Option<&'static Metric> {
 
 /// Where a metric key stands in [`METRICS`] (unknown keys last): the order reports list them.
 pub fn catalogue_rank(key: &str) -> usize {
-    METRICS.iter().position(|m| m.key == key).unwrap_or(usize::MAX)
+    METRICS
+        .iter()
+        .position(|m| m.key == key)
+        .unwrap_or(usize::MAX)
 }
 
 /// Values keyed as in [`METRICS`], built by the groups.
@@ -211,12 +417,20 @@ mod tests {
         let mut data = AttemptData::default();
         for i in 0..200 {
             let t = i as f64 * 0.01;
-            data.poses.push(crate::input::PoseSample { t_s: t, tip_m: [t * 0.01, 0.0, 0.01], quat_wxyz: [1.0, 0.0, 0.0, 0.0], blade_engaged: false });
+            data.poses.push(crate::input::PoseSample {
+                t_s: t,
+                tip_m: [t * 0.01, 0.0, 0.01],
+                quat_wxyz: [1.0, 0.0, 0.0, 0.0],
+                blade_engaged: false,
+            });
         }
         data.poses[50].tip_m[0] = f64::NAN;
         let out = assess(&plan, &data).unwrap();
         let time = out.iter().find(|v| v.key == "time_s").unwrap();
         assert!(time.value.is_none());
-        assert!(time.missing.as_deref().unwrap().contains("not finite"), "{time:?}");
+        assert!(
+            time.missing.as_deref().unwrap().contains("not finite"),
+            "{time:?}"
+        );
     }
 }

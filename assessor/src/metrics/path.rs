@@ -98,17 +98,30 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 /// The path metrics of `poses` (at least 3 with distinct times, all finite, non-zero
 /// quaternions; sorted by time here).
 pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
-    if let Some(i) = poses.iter().position(|s| !s.t_s.is_finite() || !geom::finite(&s.tip_m) || !geom::finite(&s.quat_wxyz)) {
-        return Err(AssessError::InvalidInput(format!("pose {i}: a value is not finite")));
+    if let Some(i) = poses
+        .iter()
+        .position(|s| !s.t_s.is_finite() || !geom::finite(&s.tip_m) || !geom::finite(&s.quat_wxyz))
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "pose {i}: a value is not finite"
+        )));
     }
-    if let Some(i) = poses.iter().position(|s| s.quat_wxyz.iter().map(|c| c * c).sum::<f64>() < 1e-12) {
-        return Err(AssessError::InvalidInput(format!("pose {i}: zero quaternion")));
+    if let Some(i) = poses
+        .iter()
+        .position(|s| s.quat_wxyz.iter().map(|c| c * c).sum::<f64>() < 1e-12)
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "pose {i}: zero quaternion"
+        )));
     }
     let mut poses = poses.to_vec();
     poses.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     poses.dedup_by(|b, a| b.t_s <= a.t_s);
     if poses.len() < 3 {
-        return Err(AssessError::InvalidInput(format!("{} poses with distinct times: need at least 3", poses.len())));
+        return Err(AssessError::InvalidInput(format!(
+            "{} poses with distinct times: need at least 3",
+            poses.len()
+        )));
     }
     let fs = p.resample_hz;
     let dt = 1.0 / fs;
@@ -121,13 +134,23 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
         .collect();
     let n = coords[0].len();
     let pos = |k: usize| Point3::new(coords[0][k], coords[1][k], coords[2][k]);
-    let vel: Vec<Vec<f64>> = coords.iter().map(|x| smoothness::derivative(x, dt)).collect();
-    let speed: Vec<f64> = (0..n).map(|k| Vector3::new(vel[0][k], vel[1][k], vel[2][k]).norm()).collect();
+    let vel: Vec<Vec<f64>> = coords
+        .iter()
+        .map(|x| smoothness::derivative(x, dt))
+        .collect();
+    let speed: Vec<f64> = (0..n)
+        .map(|k| Vector3::new(vel[0][k], vel[1][k], vel[2][k]).norm())
+        .collect();
 
-    let path_length_m: f64 = (1..n).map(|k| nalgebra::distance(&pos(k), &pos(k - 1))).sum();
+    let path_length_m: f64 = (1..n)
+        .map(|k| nalgebra::distance(&pos(k), &pos(k - 1)))
+        .sum();
     let straight = nalgebra::distance(&pos(n - 1), &pos(0));
     let economy_of_motion = (path_length_m > 1e-9).then(|| (straight / path_length_m).min(1.0));
-    let idle_time_s = (1..n).filter(|&k| 0.5 * (speed[k] + speed[k - 1]) < p.idle_speed_m_s).count() as f64 * dt;
+    let idle_time_s = (1..n)
+        .filter(|&k| 0.5 * (speed[k] + speed[k - 1]) < p.idle_speed_m_s)
+        .count() as f64
+        * dt;
     // the task time: from the first to the last moment the tip moves (a recording that runs
     // on before or after the task does not count)
     let moving = |k: &usize| speed[*k] >= p.idle_speed_m_s;
@@ -178,7 +201,11 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     let angular_path_rad = quats
         .windows(2)
         .map(|w| {
-            let d: f64 = (0..4).map(|i| w[0][i] * w[1][i]).sum::<f64>().abs().min(1.0);
+            let d: f64 = (0..4)
+                .map(|i| w[0][i] * w[1][i])
+                .sum::<f64>()
+                .abs()
+                .min(1.0);
             2.0 * d.acos()
         })
         .sum();
@@ -242,7 +269,12 @@ mod tests {
 
     fn pose(t: f64, x: [f64; 3], angle_z: f64) -> PoseSample {
         let h = 0.5 * angle_z;
-        PoseSample { t_s: t, tip_m: x, quat_wxyz: [h.cos(), 0.0, 0.0, h.sin()], blade_engaged: false }
+        PoseSample {
+            t_s: t,
+            tip_m: x,
+            quat_wxyz: [h.cos(), 0.0, 0.0, h.sin()],
+            blade_engaged: false,
+        }
     }
 
     /// Minimum-jerk displacement from 0 to `d` over [0, 1].
@@ -253,24 +285,42 @@ mod tests {
 
     #[test]
     fn a_straight_constant_speed_line_with_a_quarter_turn() {
-        let poses: Vec<PoseSample> = (0..=1000).map(|i| i as f64 * 1e-3).map(|t| pose(t, [0.1 * t, 0.0, 0.0], t * std::f64::consts::FRAC_PI_2)).collect();
+        let poses: Vec<PoseSample> = (0..=1000)
+            .map(|i| i as f64 * 1e-3)
+            .map(|t| pose(t, [0.1 * t, 0.0, 0.0], t * std::f64::consts::FRAC_PI_2))
+            .collect();
         let m = path(&poses, &PathParams::default()).unwrap();
         assert!((m.time_s - 1.0).abs() < 1e-12);
         assert!((m.path_length_m - 0.1).abs() < 1e-6, "{}", m.path_length_m);
         assert!((m.economy_of_motion.unwrap() - 1.0).abs() < 1e-6);
         assert!(m.idle_time_s < 1e-12);
         assert_eq!(m.movements, 1);
-        assert!((m.angular_path_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-6, "{}", m.angular_path_rad);
+        assert!(
+            (m.angular_path_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-6,
+            "{}",
+            m.angular_path_rad
+        );
     }
 
     #[test]
     fn minimum_jerk_reach_has_the_analytic_ldlj() {
         // DJ of a minimum-jerk speed profile: -720 / 1.875^2 = -204.8, LDLJ = -ln 204.8
-        let poses: Vec<PoseSample> = (0..=1000).map(|i| i as f64 * 1e-3).map(|t| pose(t, [min_jerk(t, 0.1), 0.0, 0.0], 0.0)).collect();
+        let poses: Vec<PoseSample> = (0..=1000)
+            .map(|i| i as f64 * 1e-3)
+            .map(|t| pose(t, [min_jerk(t, 0.1), 0.0, 0.0], 0.0))
+            .collect();
         let m = path(&poses, &PathParams::default()).unwrap();
         let expected = -(204.8f64).ln();
-        assert!((m.ldlj.unwrap() - expected).abs() < 0.03 * expected.abs(), "{:?} vs {expected}", m.ldlj);
-        assert!(m.sparc.unwrap() > -1.8 && m.sparc.unwrap() < -1.3, "{:?}", m.sparc);
+        assert!(
+            (m.ldlj.unwrap() - expected).abs() < 0.03 * expected.abs(),
+            "{:?} vs {expected}",
+            m.ldlj
+        );
+        assert!(
+            m.sparc.unwrap() > -1.8 && m.sparc.unwrap() < -1.3,
+            "{:?}",
+            m.sparc
+        );
         assert!((m.path_length_m - 0.1).abs() < 1e-4);
     }
 
@@ -291,22 +341,36 @@ mod tests {
         assert!((m.path_length_m - 0.2).abs() < 0.002, "{}", m.path_length_m);
         assert!(m.economy_of_motion.unwrap() < 0.01);
         // idle: the 3 rests plus the slow starts and ends of each reach (speed < 5 mm/s)
-        assert!(m.idle_time_s > 3.0 && m.idle_time_s < 3.4, "{}", m.idle_time_s);
+        assert!(
+            m.idle_time_s > 3.0 && m.idle_time_s < 3.4,
+            "{}",
+            m.idle_time_s
+        );
         // the task time: from the start of the first reach to the end of the second (t = 1 to
         // 4 s, less their slow starts and ends), not the 5 s recorded
         assert!(m.time_s > 2.6 && m.time_s < 3.0, "{}", m.time_s);
-        assert!(m.ldlj_per_movement.unwrap() > m.ldlj.unwrap(), "each reach is smoother than the whole");
+        assert!(
+            m.ldlj_per_movement.unwrap() > m.ldlj.unwrap(),
+            "each reach is smoother than the whole"
+        );
         assert!(m.per_movement[0].start_s > 1.0 && m.per_movement[0].end_s < 2.0);
     }
 
     #[test]
     fn bad_poses_are_errors_not_panics() {
-        let good: Vec<PoseSample> = (0..10).map(|i| pose(i as f64 * 0.01, [0.0; 3], 0.0)).collect();
+        let good: Vec<PoseSample> = (0..10)
+            .map(|i| pose(i as f64 * 0.01, [0.0; 3], 0.0))
+            .collect();
         assert!(path(&good, &PathParams::default()).is_ok());
         assert!(path(&good[..2], &PathParams::default()).is_err());
         let mut bad = good.clone();
         bad[4].tip_m[2] = f64::INFINITY;
-        assert!(path(&bad, &PathParams::default()).unwrap_err().to_string().contains("pose 4"));
+        assert!(
+            path(&bad, &PathParams::default())
+                .unwrap_err()
+                .to_string()
+                .contains("pose 4")
+        );
         let mut zero = good.clone();
         zero[1].quat_wxyz = [0.0; 4];
         assert!(path(&zero, &PathParams::default()).is_err());

@@ -36,32 +36,71 @@ pub fn forces(forces: &[ForceSample], limit_n: f64) -> Result<ForceMetrics> {
     if forces.is_empty() {
         return Err(AssessError::InvalidInput("no force samples".into()));
     }
-    if let Some(i) = forces.iter().position(|f| !f.t_s.is_finite() || !geom::finite(&f.force_newtons)) {
-        return Err(AssessError::InvalidInput(format!("force sample {i}: a value is not finite")));
+    if let Some(i) = forces
+        .iter()
+        .position(|f| !f.t_s.is_finite() || !geom::finite(&f.force_newtons))
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "force sample {i}: a value is not finite"
+        )));
     }
     let mut f = forces.to_vec();
     f.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-    let mag: Vec<f64> = f.iter().map(|s| Vector3::from(s.force_newtons).norm()).collect();
-    let touching: Vec<f64> = f.iter().zip(&mag).filter(|(s, _)| s.touching).map(|(_, m)| *m).collect();
-    let mean_force_n = if touching.is_empty() { 0.0 } else { touching.iter().sum::<f64>() / touching.len() as f64 };
-    let time_above_limit_s = (0..f.len() - 1).filter(|&k| mag[k] > limit_n).map(|k| f[k + 1].t_s - f[k].t_s).sum();
-    let excessive_force_events = (0..f.len()).filter(|&k| mag[k] > limit_n && (k == 0 || mag[k - 1] <= limit_n)).count();
-    Ok(ForceMetrics { peak_force_n: mag.iter().copied().fold(0.0, f64::max), mean_force_n, time_above_limit_s, excessive_force_events })
+    let mag: Vec<f64> = f
+        .iter()
+        .map(|s| Vector3::from(s.force_newtons).norm())
+        .collect();
+    let touching: Vec<f64> = f
+        .iter()
+        .zip(&mag)
+        .filter(|(s, _)| s.touching)
+        .map(|(_, m)| *m)
+        .collect();
+    let mean_force_n = if touching.is_empty() {
+        0.0
+    } else {
+        touching.iter().sum::<f64>() / touching.len() as f64
+    };
+    let time_above_limit_s = (0..f.len() - 1)
+        .filter(|&k| mag[k] > limit_n)
+        .map(|k| f[k + 1].t_s - f[k].t_s)
+        .sum();
+    let excessive_force_events = (0..f.len())
+        .filter(|&k| mag[k] > limit_n && (k == 0 || mag[k - 1] <= limit_n))
+        .count();
+    Ok(ForceMetrics {
+        peak_force_n: mag.iter().copied().fold(0.0, f64::max),
+        mean_force_n,
+        time_above_limit_s,
+        excessive_force_events,
+    })
 }
 
 /// The cut outside the plan's corridor: `(length m, area m^2)`; the area is `None` when a
 /// depth is not finite. No cuts: nothing outside.
 pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, Option<f64>)> {
-    if let Some(i) = cuts.iter().position(|c| !c.t_s.is_finite() || !geom::finite(&c.tip_m)) {
-        return Err(AssessError::InvalidInput(format!("cut sample {i}: time or tip not finite")));
+    if let Some(i) = cuts
+        .iter()
+        .position(|c| !c.t_s.is_finite() || !geom::finite(&c.tip_m))
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "cut sample {i}: time or tip not finite"
+        )));
     }
     let mut cuts = cuts.to_vec();
     cuts.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     let n = Vector3::from(plan.normal);
-    let line: Vec<Point3<f64>> = plan.incision_m.iter().map(|&p| geom::project(p.into(), &n)).collect();
+    let line: Vec<Point3<f64>> = plan
+        .incision_m
+        .iter()
+        .map(|&p| geom::project(p.into(), &n))
+        .collect();
     let (mut length, mut area, mut area_ok) = (0.0, 0.0, true);
     for w in cuts.windows(2) {
-        let (a, b) = (geom::project(trace_point(&w[0]).into(), &n), geom::project(trace_point(&w[1]).into(), &n));
+        let (a, b) = (
+            geom::project(trace_point(&w[0]).into(), &n),
+            geom::project(trace_point(&w[1]).into(), &n),
+        );
         let len = nalgebra::distance(&a, &b);
         if len > STROKE_GAP_M {
             continue;
@@ -88,7 +127,12 @@ pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, O
     Ok((length, area_ok.then_some(area)))
 }
 
-pub(crate) fn assess(plan: &ExpertPlan, f: &[ForceSample], cuts: &[CutSample], values: &mut Values) {
+pub(crate) fn assess(
+    plan: &ExpertPlan,
+    f: &[ForceSample],
+    cuts: &[CutSample],
+    values: &mut Values,
+) {
     match forces(f, plan.force_limit_n) {
         Ok(m) => {
             values.set("peak_force_n", m.peak_force_n);
@@ -96,17 +140,31 @@ pub(crate) fn assess(plan: &ExpertPlan, f: &[ForceSample], cuts: &[CutSample], v
             values.set("time_above_force_limit_s", m.time_above_limit_s);
             values.set("excessive_force_events", m.excessive_force_events as f64);
         }
-        Err(e) => values.missing(&["peak_force_n", "mean_force_n", "time_above_force_limit_s", "excessive_force_events"], &e.to_string()),
+        Err(e) => values.missing(
+            &[
+                "peak_force_n",
+                "mean_force_n",
+                "time_above_force_limit_s",
+                "excessive_force_events",
+            ],
+            &e.to_string(),
+        ),
     }
     match outside_corridor(plan, cuts) {
         Ok((length, area)) => {
             values.set("cut_outside_corridor_m", length);
             match area {
                 Some(a) => values.set("cut_area_outside_corridor_m2", a),
-                None => values.missing(&["cut_area_outside_corridor_m2"], "a cut depth is not finite"),
+                None => values.missing(
+                    &["cut_area_outside_corridor_m2"],
+                    "a cut depth is not finite",
+                ),
             }
         }
-        Err(e) => values.missing(&["cut_outside_corridor_m", "cut_area_outside_corridor_m2"], &e.to_string()),
+        Err(e) => values.missing(
+            &["cut_outside_corridor_m", "cut_area_outside_corridor_m2"],
+            &e.to_string(),
+        ),
     }
 }
 
@@ -129,7 +187,10 @@ mod tests {
             .collect();
         let m = forces(&samples, 2.5).unwrap();
         assert!((m.peak_force_n - 3.0).abs() < 1e-12);
-        assert!((m.mean_force_n - 12.0 / 6.0).abs() < 1e-12, "mean over the 6 touching samples");
+        assert!(
+            (m.mean_force_n - 12.0 / 6.0).abs() < 1e-12,
+            "mean over the 6 touching samples"
+        );
         assert!((m.time_above_limit_s - 0.3).abs() < 1e-12);
         assert_eq!(m.excessive_force_events, 2);
         assert!(forces(&[], 2.5).is_err());
@@ -137,7 +198,12 @@ mod tests {
 
     #[test]
     fn cut_outside_the_corridor_by_hand() {
-        let at = |x_mm: i32, y_mm: f64, t: f64| CutSample { t_s: t, tip_m: [x_mm as f64 * 1e-3, y_mm * 1e-3, -0.008], edge_dir: [0.0, 0.0, 1.0], depth_m: 0.008 };
+        let at = |x_mm: i32, y_mm: f64, t: f64| CutSample {
+            t_s: t,
+            tip_m: [x_mm as f64 * 1e-3, y_mm * 1e-3, -0.008],
+            edge_dir: [0.0, 0.0, 1.0],
+            depth_m: 0.008,
+        };
         // 10 mm at y = 7 mm (outside the 5 mm corridor), then 20 mm on the line
         let mut cuts: Vec<CutSample> = (10..=20).map(|x| at(x, 7.0, x as f64)).collect();
         cuts.extend((30..=50).map(|x| at(x, 0.0, x as f64)));

@@ -103,13 +103,18 @@ pub fn dimensionless_jerk(v: &[f64], fs: f64) -> Option<f64> {
     }
     let dt = 1.0 / fs;
     let duration = v.len() as f64 * dt;
-    let sum: f64 = v.windows(3).map(|w| ((w[2] - 2.0 * w[1] + w[0]) / (dt * dt)).powi(2)).sum();
+    let sum: f64 = v
+        .windows(3)
+        .map(|w| ((w[2] - 2.0 * w[1] + w[0]) / (dt * dt)).powi(2))
+        .sum();
     Some(-duration.powi(3) / (peak * peak) * sum * dt)
 }
 
 /// Log dimensionless jerk: `LDLJ = -ln |DJ|` (higher, i.e. closer to zero, is smoother).
 pub fn ldlj(v: &[f64], fs: f64) -> Option<f64> {
-    dimensionless_jerk(v, fs).filter(|dj| *dj != 0.0).map(|dj| -dj.abs().ln())
+    dimensionless_jerk(v, fs)
+        .filter(|dj| *dj != 0.0)
+        .map(|dj| -dj.abs().ln())
 }
 
 /// Spectral arc length (SPARC) of a speed profile `v` sampled at `fs`:
@@ -132,7 +137,10 @@ pub fn sparc(v: &[f64], fs: f64, padlevel: u32, fc: f64, amp_th: f64) -> Option<
         return None;
     }
     let df = fs / nfft as f64;
-    let band: Vec<(f64, f64)> = (0..nfft).map(|k| (k as f64 * df, mag[k] / max)).take_while(|(f, _)| *f <= fc).collect();
+    let band: Vec<(f64, f64)> = (0..nfft)
+        .map(|k| (k as f64 * df, mag[k] / max))
+        .take_while(|(f, _)| *f <= fc)
+        .collect();
     let first = band.iter().position(|(_, m)| *m >= amp_th)?;
     let last = band.iter().rposition(|(_, m)| *m >= amp_th)?;
     let band = &band[first..=last];
@@ -140,7 +148,12 @@ pub fn sparc(v: &[f64], fs: f64, padlevel: u32, fc: f64, amp_th: f64) -> Option<
         return None;
     }
     let span = band[band.len() - 1].0 - band[0].0;
-    Some(-band.windows(2).map(|w| (((w[1].0 - w[0].0) / span).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt()).sum::<f64>())
+    Some(
+        -band
+            .windows(2)
+            .map(|w| (((w[1].0 - w[0].0) / span).powi(2) + (w[1].1 - w[0].1).powi(2)).sqrt())
+            .sum::<f64>(),
+    )
 }
 
 fn geomfinite(v: &[f64]) -> bool {
@@ -153,7 +166,10 @@ mod tests {
 
     /// The paper's example: v(t) = exp(-5 t^2), t = -1 .. 0.99 s at 100 Hz.
     fn gaussian() -> Vec<f64> {
-        (0..200).map(|i| -1.0 + i as f64 * 0.01).map(|t: f64| (-5.0 * t * t).exp()).collect()
+        (0..200)
+            .map(|i| -1.0 + i as f64 * 0.01)
+            .map(|t: f64| (-5.0 * t * t).exp())
+            .collect()
     }
 
     fn rel(a: f64, b: f64) -> f64 {
@@ -174,9 +190,14 @@ mod tests {
     #[test]
     fn a_two_peaked_profile_is_less_smooth() {
         let one = gaussian();
-        let two: Vec<f64> = (0..200).map(|i| -1.0 + i as f64 * 0.01).map(|t: f64| (-40.0 * (t + 0.4).powi(2)).exp() + (-40.0 * (t - 0.4).powi(2)).exp()).collect();
+        let two: Vec<f64> = (0..200)
+            .map(|i| -1.0 + i as f64 * 0.01)
+            .map(|t: f64| (-40.0 * (t + 0.4).powi(2)).exp() + (-40.0 * (t - 0.4).powi(2)).exp())
+            .collect();
         assert!(ldlj(&two, 100.0).unwrap() < ldlj(&one, 100.0).unwrap());
-        assert!(sparc(&two, 100.0, 4, 10.0, 0.05).unwrap() < sparc(&one, 100.0, 4, 10.0, 0.05).unwrap());
+        assert!(
+            sparc(&two, 100.0, 4, 10.0, 0.05).unwrap() < sparc(&one, 100.0, 4, 10.0, 0.05).unwrap()
+        );
         assert!(ldlj(&[0.0; 10], 100.0).is_none());
     }
 
@@ -196,8 +217,13 @@ mod tests {
         let fs = 100.0;
         let ramp: Vec<f64> = (0..300).map(|i| 0.01 * i as f64).collect();
         let f = lowpass_zero_phase(&ramp, fs, 6.0);
-        assert!(ramp.iter().zip(&f).all(|(a, b)| (a - b).abs() < 1e-6), "a ramp passes unchanged");
-        let noisy: Vec<f64> = (0..300).map(|i| (2.0 * PI * 30.0 * i as f64 / fs).sin()).collect();
+        assert!(
+            ramp.iter().zip(&f).all(|(a, b)| (a - b).abs() < 1e-6),
+            "a ramp passes unchanged"
+        );
+        let noisy: Vec<f64> = (0..300)
+            .map(|i| (2.0 * PI * 30.0 * i as f64 / fs).sin())
+            .collect();
         let g = lowpass_zero_phase(&noisy, fs, 6.0);
         let amp = g[100..200].iter().fold(0.0f64, |m, x| m.max(x.abs()));
         // |H(30 Hz)|^2 of the 6 Hz 2nd-order Butterworth is about 0.0015

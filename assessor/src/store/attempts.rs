@@ -5,7 +5,9 @@ use serde::{Deserialize, Serialize};
 use super::{Store, now_ns};
 use crate::error::{AssessError, Result};
 use crate::metrics::{self, Better, MetricValue};
-use crate::proficiency::{CusumParams, CusumPoint, ProficiencyState, REQUIRED_CONSECUTIVE_PASSES, Verdict, cusum};
+use crate::proficiency::{
+    CusumParams, CusumPoint, ProficiencyState, REQUIRED_CONSECUTIVE_PASSES, Verdict, cusum,
+};
 
 /// Where an attempt stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -36,7 +38,9 @@ impl AttemptStatus {
             "complete" => Ok(AttemptStatus::Complete),
             "incomplete" => Ok(AttemptStatus::Incomplete),
             "failed" => Ok(AttemptStatus::Failed),
-            _ => Err(AssessError::InvalidInput(format!("stored attempt status {s:?}"))),
+            _ => Err(AssessError::InvalidInput(format!(
+                "stored attempt status {s:?}"
+            ))),
         }
     }
 }
@@ -61,7 +65,20 @@ pub struct Attempt {
 
 type MetricRow = (String, Option<f64>, String, Option<bool>, Option<String>);
 type ProficiencyRow = (i64, i64, i64, bool, Option<i64>, f64);
-type AttemptRow = (i64, i64, i64, Option<String>, i64, Option<i64>, String, bool, bool, Option<f64>, Option<bool>, Option<String>);
+type AttemptRow = (
+    i64,
+    i64,
+    i64,
+    Option<String>,
+    i64,
+    Option<i64>,
+    String,
+    bool,
+    bool,
+    Option<f64>,
+    Option<bool>,
+    Option<String>,
+);
 const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note FROM attempts";
 
 fn attempt(r: AttemptRow) -> Result<Attempt> {
@@ -114,7 +131,13 @@ pub struct Outcome {
 
 impl Store {
     /// Records the start of an attempt (status `running`).
-    pub async fn start_attempt(&self, trainee_id: i64, exercise_id: i64, recording_path: Option<&str>, expert: bool) -> Result<Attempt> {
+    pub async fn start_attempt(
+        &self,
+        trainee_id: i64,
+        exercise_id: i64,
+        recording_path: Option<&str>,
+        expert: bool,
+    ) -> Result<Attempt> {
         self.get_user(trainee_id).await?;
         self.get_exercise(exercise_id).await?;
         let id: i64 = sqlx::query_scalar("INSERT INTO attempts (trainee_id, exercise_id, recording_path, started_ns, status, expert) VALUES (?, ?, ?, ?, 'running', ?) RETURNING id")
@@ -129,12 +152,21 @@ impl Store {
     }
 
     pub async fn get_attempt(&self, id: i64) -> Result<Attempt> {
-        let row: Option<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE id = ?"))).bind(id).fetch_optional(&self.pool).await?;
+        let row: Option<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{ATTEMPT_COLUMNS} WHERE id = ?"
+        )))
+        .bind(id)
+        .fetch_optional(&self.pool)
+        .await?;
         attempt(row.ok_or_else(|| AssessError::NotFound(format!("attempt {id}")))?)
     }
 
     /// Attempts, optionally of one trainee and/or exercise, oldest first.
-    pub async fn list_attempts(&self, trainee_id: Option<i64>, exercise_id: Option<i64>) -> Result<Vec<Attempt>> {
+    pub async fn list_attempts(
+        &self,
+        trainee_id: Option<i64>,
+        exercise_id: Option<i64>,
+    ) -> Result<Vec<Attempt>> {
         let rows: Vec<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE (? IS NULL OR trainee_id = ?) AND (? IS NULL OR exercise_id = ?) ORDER BY started_ns, id")))
             .bind(trainee_id)
             .bind(trainee_id)
@@ -146,7 +178,12 @@ impl Store {
     }
 
     /// Sets the end time (if not set) of a running attempt, `status` and a note.
-    async fn end_unscored(&self, attempt_id: i64, status: AttemptStatus, note: Option<&str>) -> Result<Attempt> {
+    async fn end_unscored(
+        &self,
+        attempt_id: i64,
+        status: AttemptStatus,
+        note: Option<&str>,
+    ) -> Result<Attempt> {
         let done = sqlx::query("UPDATE attempts SET status = ?, ended_ns = COALESCE(ended_ns, ?), note = COALESCE(?, note) WHERE id = ? AND status = 'running'")
             .bind(status.as_str())
             .bind(now_ns())
@@ -156,25 +193,34 @@ impl Store {
             .await?;
         if done.rows_affected() == 0 {
             let a = self.get_attempt(attempt_id).await?;
-            return Err(AssessError::Conflict(format!("attempt {attempt_id} is {}, not running", a.status.as_str())));
+            return Err(AssessError::Conflict(format!(
+                "attempt {attempt_id} is {}, not running",
+                a.status.as_str()
+            )));
         }
         self.get_attempt(attempt_id).await
     }
 
     /// An interrupted attempt: `incomplete`, the recording path kept, nothing scored.
     pub async fn mark_incomplete(&self, attempt_id: i64, note: Option<&str>) -> Result<Attempt> {
-        self.end_unscored(attempt_id, AttemptStatus::Incomplete, note).await
+        self.end_unscored(attempt_id, AttemptStatus::Incomplete, note)
+            .await
     }
 
     /// An attempt whose assessment failed (`failed`, with the reason).
     pub async fn mark_failed(&self, attempt_id: i64, reason: &str) -> Result<Attempt> {
-        self.end_unscored(attempt_id, AttemptStatus::Failed, Some(reason)).await
+        self.end_unscored(attempt_id, AttemptStatus::Failed, Some(reason))
+            .await
     }
 
     /// Scores an attempt (running, incomplete or failed; not already complete) against its
     /// exercise's current thresholds, stores its metrics, marks it complete and updates the
     /// trainee's proficiency, in one transaction.
-    pub async fn finish_attempt(&self, attempt_id: i64, metrics: &[MetricValue]) -> Result<Outcome> {
+    pub async fn finish_attempt(
+        &self,
+        attempt_id: i64,
+        metrics: &[MetricValue],
+    ) -> Result<Outcome> {
         let a = self.get_attempt(attempt_id).await?;
         let thresholds = self.thresholds(a.exercise_id).await?;
         let verdict = thresholds.verdict(metrics);
@@ -187,11 +233,20 @@ impl Store {
             .execute(&mut *tx)
             .await?;
         if done.rows_affected() == 0 {
-            return Err(AssessError::Conflict(format!("attempt {attempt_id} is already scored")));
+            return Err(AssessError::Conflict(format!(
+                "attempt {attempt_id} is already scored"
+            )));
         }
-        sqlx::query("DELETE FROM metric_results WHERE attempt_id = ?").bind(attempt_id).execute(&mut *tx).await?;
+        sqlx::query("DELETE FROM metric_results WHERE attempt_id = ?")
+            .bind(attempt_id)
+            .execute(&mut *tx)
+            .await?;
         for m in metrics {
-            let passed = verdict.metrics.iter().find(|v| v.key == m.key).map(|v| v.pass);
+            let passed = verdict
+                .metrics
+                .iter()
+                .find(|v| v.key == m.key)
+                .map(|v| v.pass);
             sqlx::query("INSERT INTO metric_results (attempt_id, metric, value, unit, passed, missing) VALUES (?, ?, ?, ?, ?, ?)")
                 .bind(attempt_id)
                 .bind(&m.key)
@@ -228,12 +283,20 @@ impl Store {
         .execute(&mut *tx)
         .await?;
         tx.commit().await?;
-        Ok(Outcome { attempt: self.get_attempt(attempt_id).await?, verdict, proficiency: record })
+        Ok(Outcome {
+            attempt: self.get_attempt(attempt_id).await?,
+            verdict,
+            proficiency: record,
+        })
     }
 
     /// Computes the attempt's metrics from `data` against its exercise's plan
     /// ([`metrics::assess`]) and scores it ([`Store::finish_attempt`]).
-    pub async fn score_attempt(&self, attempt_id: i64, data: &crate::input::AttemptData) -> Result<Outcome> {
+    pub async fn score_attempt(
+        &self,
+        attempt_id: i64,
+        data: &crate::input::AttemptData,
+    ) -> Result<Outcome> {
         let a = self.get_attempt(attempt_id).await?;
         let plan = self.exercise_plan(a.exercise_id).await?;
         let values = metrics::assess(&plan, data)?;
@@ -243,7 +306,16 @@ impl Store {
     /// The stored metric results of an attempt, by metric.
     pub async fn attempt_metrics(&self, attempt_id: i64) -> Result<Vec<StoredMetric>> {
         let rows: Vec<MetricRow> = sqlx::query_as("SELECT metric, value, unit, passed, missing FROM metric_results WHERE attempt_id = ? ORDER BY metric").bind(attempt_id).fetch_all(&self.pool).await?;
-        Ok(rows.into_iter().map(|(metric, value, unit, passed, missing)| StoredMetric { metric, value, unit, passed, missing }).collect())
+        Ok(rows
+            .into_iter()
+            .map(|(metric, value, unit, passed, missing)| StoredMetric {
+                metric,
+                value,
+                unit,
+                passed,
+                missing,
+            })
+            .collect())
     }
 
     /// The stored metric results of an attempt as [`MetricValue`]s (direction and scoring
@@ -255,13 +327,24 @@ impl Store {
             .into_iter()
             .map(|m| {
                 let def = metrics::metric(&m.metric);
-                MetricValue { better: def.map_or(Better::TwoSided, |d| d.better), scored: def.is_some_and(|d| d.scored), key: m.metric, value: m.value, unit: m.unit, missing: m.missing }
+                MetricValue {
+                    better: def.map_or(Better::TwoSided, |d| d.better),
+                    scored: def.is_some_and(|d| d.scored),
+                    key: m.metric,
+                    value: m.value,
+                    unit: m.unit,
+                    missing: m.missing,
+                }
             })
             .collect())
     }
 
     /// A trainee's proficiency in an exercise (all zero before the first scored attempt).
-    pub async fn proficiency(&self, trainee_id: i64, exercise_id: i64) -> Result<ProficiencyRecord> {
+    pub async fn proficiency(
+        &self,
+        trainee_id: i64,
+        exercise_id: i64,
+    ) -> Result<ProficiencyRecord> {
         let row: Option<ProficiencyRow> = sqlx::query_as("SELECT attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum FROM proficiency WHERE trainee_id = ? AND exercise_id = ?")
                 .bind(trainee_id)
                 .bind(exercise_id)
@@ -272,37 +355,71 @@ impl Store {
             Some((attempts, passes, consecutive, proficient, at, cusum)) => ProficiencyRecord {
                 trainee_id,
                 exercise_id,
-                state: ProficiencyState { attempts: u(attempts), passes: u(passes), consecutive_passes: u(consecutive), proficient },
+                state: ProficiencyState {
+                    attempts: u(attempts),
+                    passes: u(passes),
+                    consecutive_passes: u(consecutive),
+                    proficient,
+                },
                 proficient_attempt_id: at,
                 cusum,
             },
-            None => ProficiencyRecord { trainee_id, exercise_id, state: ProficiencyState::default(), proficient_attempt_id: None, cusum: 0.0 },
+            None => ProficiencyRecord {
+                trainee_id,
+                exercise_id,
+                state: ProficiencyState::default(),
+                proficient_attempt_id: None,
+                cusum: 0.0,
+            },
         })
     }
 
     /// The CUSUM chart of a trainee's scored attempts at an exercise, oldest first, with
     /// the attempt ids.
-    pub async fn cusum_chart(&self, trainee_id: i64, exercise_id: i64, params: &CusumParams) -> Result<Vec<(i64, CusumPoint)>> {
+    pub async fn cusum_chart(
+        &self,
+        trainee_id: i64,
+        exercise_id: i64,
+        params: &CusumParams,
+    ) -> Result<Vec<(i64, CusumPoint)>> {
         let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = ? AND exercise_id = ? AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
             .bind(trainee_id)
             .bind(exercise_id)
             .fetch_all(&self.pool)
             .await?;
         let passes: Vec<bool> = history.iter().map(|h| h.1).collect();
-        Ok(history.iter().map(|h| h.0).zip(cusum(&passes, params)?).collect())
+        Ok(history
+            .iter()
+            .map(|h| h.0)
+            .zip(cusum(&passes, params)?)
+            .collect())
     }
 }
 
-fn proficiency_of(trainee_id: i64, exercise_id: i64, history: &[(i64, bool)]) -> Result<ProficiencyRecord> {
+fn proficiency_of(
+    trainee_id: i64,
+    exercise_id: i64,
+    history: &[(i64, bool)],
+) -> Result<ProficiencyRecord> {
     let mut state = ProficiencyState::default();
     let mut proficient_attempt_id = None;
     for &(id, pass) in history {
         state.update(pass);
-        if proficient_attempt_id.is_none() && state.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES {
+        if proficient_attempt_id.is_none()
+            && state.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES
+        {
             proficient_attempt_id = Some(id);
         }
     }
     let passes: Vec<bool> = history.iter().map(|h| h.1).collect();
-    let cusum = cusum(&passes, &CusumParams::default())?.last().map_or(0.0, |p| p.value);
-    Ok(ProficiencyRecord { trainee_id, exercise_id, state, proficient_attempt_id, cusum })
+    let cusum = cusum(&passes, &CusumParams::default())?
+        .last()
+        .map_or(0.0, |p| p.value);
+    Ok(ProficiencyRecord {
+        trainee_id,
+        exercise_id,
+        state,
+        proficient_attempt_id,
+        cusum,
+    })
 }

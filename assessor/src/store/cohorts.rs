@@ -17,7 +17,12 @@ pub struct Cohort {
 type CohortRow = (i64, String, Option<i64>, i64);
 
 fn cohort((id, name, instructor_id, created_ns): CohortRow) -> Cohort {
-    Cohort { id, name, instructor_id, created_ns }
+    Cohort {
+        id,
+        name,
+        instructor_id,
+        created_ns,
+    }
 }
 
 impl Store {
@@ -26,28 +31,44 @@ impl Store {
         if let Some(i) = instructor_id {
             self.get_user(i).await?;
         }
-        let id: i64 = sqlx::query_scalar("INSERT INTO cohorts (name, instructor_id, created_ns) VALUES (?, ?, ?) RETURNING id")
-            .bind(name)
-            .bind(instructor_id)
-            .bind(now_ns())
-            .fetch_one(&self.pool)
-            .await
-            .map_err(conflict(|| format!("a cohort named {name:?} exists")))?;
+        let id: i64 = sqlx::query_scalar(
+            "INSERT INTO cohorts (name, instructor_id, created_ns) VALUES (?, ?, ?) RETURNING id",
+        )
+        .bind(name)
+        .bind(instructor_id)
+        .bind(now_ns())
+        .fetch_one(&self.pool)
+        .await
+        .map_err(conflict(|| format!("a cohort named {name:?} exists")))?;
         self.get_cohort(id).await
     }
 
     pub async fn get_cohort(&self, id: i64) -> Result<Cohort> {
-        let row: Option<CohortRow> = sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
-        row.map(cohort).ok_or_else(|| AssessError::NotFound(format!("cohort {id}")))
+        let row: Option<CohortRow> =
+            sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts WHERE id = ?")
+                .bind(id)
+                .fetch_optional(&self.pool)
+                .await?;
+        row.map(cohort)
+            .ok_or_else(|| AssessError::NotFound(format!("cohort {id}")))
     }
 
     pub async fn cohort_by_name(&self, name: &str) -> Result<Cohort> {
-        let row: Option<CohortRow> = sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
-        row.map(cohort).ok_or_else(|| AssessError::NotFound(format!("cohort {name:?}")))
+        let row: Option<CohortRow> = sqlx::query_as(
+            "SELECT id, name, instructor_id, created_ns FROM cohorts WHERE name = ?",
+        )
+        .bind(name)
+        .fetch_optional(&self.pool)
+        .await?;
+        row.map(cohort)
+            .ok_or_else(|| AssessError::NotFound(format!("cohort {name:?}")))
     }
 
     pub async fn list_cohorts(&self) -> Result<Vec<Cohort>> {
-        let rows: Vec<CohortRow> = sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts ORDER BY name").fetch_all(&self.pool).await?;
+        let rows: Vec<CohortRow> =
+            sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts ORDER BY name")
+                .fetch_all(&self.pool)
+                .await?;
         Ok(rows.into_iter().map(cohort).collect())
     }
 

@@ -26,57 +26,140 @@ pub struct Module {
 
 impl Store {
     pub async fn create_curriculum(&self, name: &str, description: &str) -> Result<Curriculum> {
-        let id: i64 = sqlx::query_scalar("INSERT INTO curricula (name, description, created_ns) VALUES (?, ?, ?) RETURNING id")
-            .bind(name)
-            .bind(description)
-            .bind(now_ns())
-            .fetch_one(&self.pool)
-            .await
-            .map_err(conflict(|| format!("a curriculum named {name:?} exists")))?;
-        Ok(Curriculum { id, name: name.into(), description: description.into() })
+        let id: i64 = sqlx::query_scalar(
+            "INSERT INTO curricula (name, description, created_ns) VALUES (?, ?, ?) RETURNING id",
+        )
+        .bind(name)
+        .bind(description)
+        .bind(now_ns())
+        .fetch_one(&self.pool)
+        .await
+        .map_err(conflict(|| format!("a curriculum named {name:?} exists")))?;
+        Ok(Curriculum {
+            id,
+            name: name.into(),
+            description: description.into(),
+        })
     }
 
     pub async fn get_curriculum(&self, id: i64) -> Result<Curriculum> {
-        let row: Option<(i64, String, String)> = sqlx::query_as("SELECT id, name, description FROM curricula WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
-        row.map(|(id, name, description)| Curriculum { id, name, description }).ok_or_else(|| AssessError::NotFound(format!("curriculum {id}")))
+        let row: Option<(i64, String, String)> =
+            sqlx::query_as("SELECT id, name, description FROM curricula WHERE id = ?")
+                .bind(id)
+                .fetch_optional(&self.pool)
+                .await?;
+        row.map(|(id, name, description)| Curriculum {
+            id,
+            name,
+            description,
+        })
+        .ok_or_else(|| AssessError::NotFound(format!("curriculum {id}")))
     }
 
     pub async fn curriculum_by_name(&self, name: &str) -> Result<Curriculum> {
-        let row: Option<(i64, String, String)> = sqlx::query_as("SELECT id, name, description FROM curricula WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
-        row.map(|(id, name, description)| Curriculum { id, name, description }).ok_or_else(|| AssessError::NotFound(format!("curriculum {name:?}")))
+        let row: Option<(i64, String, String)> =
+            sqlx::query_as("SELECT id, name, description FROM curricula WHERE name = ?")
+                .bind(name)
+                .fetch_optional(&self.pool)
+                .await?;
+        row.map(|(id, name, description)| Curriculum {
+            id,
+            name,
+            description,
+        })
+        .ok_or_else(|| AssessError::NotFound(format!("curriculum {name:?}")))
     }
 
     pub async fn list_curricula(&self) -> Result<Vec<Curriculum>> {
-        let rows: Vec<(i64, String, String)> = sqlx::query_as("SELECT id, name, description FROM curricula ORDER BY name").fetch_all(&self.pool).await?;
-        Ok(rows.into_iter().map(|(id, name, description)| Curriculum { id, name, description }).collect())
+        let rows: Vec<(i64, String, String)> =
+            sqlx::query_as("SELECT id, name, description FROM curricula ORDER BY name")
+                .fetch_all(&self.pool)
+                .await?;
+        Ok(rows
+            .into_iter()
+            .map(|(id, name, description)| Curriculum {
+                id,
+                name,
+                description,
+            })
+            .collect())
     }
 
     /// Appends a module with `exercise_ids` (in that order) to a curriculum.
-    pub async fn add_module(&self, curriculum_id: i64, name: &str, exercise_ids: &[i64]) -> Result<Module> {
+    pub async fn add_module(
+        &self,
+        curriculum_id: i64,
+        name: &str,
+        exercise_ids: &[i64],
+    ) -> Result<Module> {
         for &e in exercise_ids {
             self.get_exercise(e).await?;
         }
         let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let exists: Option<i64> = sqlx::query_scalar("SELECT id FROM curricula WHERE id = ?").bind(curriculum_id).fetch_optional(&mut *tx).await?;
+        let exists: Option<i64> = sqlx::query_scalar("SELECT id FROM curricula WHERE id = ?")
+            .bind(curriculum_id)
+            .fetch_optional(&mut *tx)
+            .await?;
         if exists.is_none() {
             return Err(AssessError::NotFound(format!("curriculum {curriculum_id}")));
         }
-        let position: i64 = sqlx::query_scalar("SELECT COALESCE(MAX(position), 0) + 1 FROM modules WHERE curriculum_id = ?").bind(curriculum_id).fetch_one(&mut *tx).await?;
-        let id: i64 = sqlx::query_scalar("INSERT INTO modules (curriculum_id, position, name) VALUES (?, ?, ?) RETURNING id").bind(curriculum_id).bind(position).bind(name).fetch_one(&mut *tx).await?;
+        let position: i64 = sqlx::query_scalar(
+            "SELECT COALESCE(MAX(position), 0) + 1 FROM modules WHERE curriculum_id = ?",
+        )
+        .bind(curriculum_id)
+        .fetch_one(&mut *tx)
+        .await?;
+        let id: i64 = sqlx::query_scalar(
+            "INSERT INTO modules (curriculum_id, position, name) VALUES (?, ?, ?) RETURNING id",
+        )
+        .bind(curriculum_id)
+        .bind(position)
+        .bind(name)
+        .fetch_one(&mut *tx)
+        .await?;
         for (i, &e) in exercise_ids.iter().enumerate() {
-            sqlx::query("INSERT INTO module_exercises (module_id, position, exercise_id) VALUES (?, ?, ?)").bind(id).bind(i as i64 + 1).bind(e).execute(&mut *tx).await?;
+            sqlx::query(
+                "INSERT INTO module_exercises (module_id, position, exercise_id) VALUES (?, ?, ?)",
+            )
+            .bind(id)
+            .bind(i as i64 + 1)
+            .bind(e)
+            .execute(&mut *tx)
+            .await?;
         }
         tx.commit().await?;
-        Ok(Module { id, curriculum_id, position, name: name.into(), exercise_ids: exercise_ids.to_vec() })
+        Ok(Module {
+            id,
+            curriculum_id,
+            position,
+            name: name.into(),
+            exercise_ids: exercise_ids.to_vec(),
+        })
     }
 
     /// A curriculum's modules in order, each with its exercises in order.
     pub async fn curriculum_modules(&self, curriculum_id: i64) -> Result<Vec<Module>> {
-        let rows: Vec<(i64, i64, String)> = sqlx::query_as("SELECT id, position, name FROM modules WHERE curriculum_id = ? ORDER BY position").bind(curriculum_id).fetch_all(&self.pool).await?;
+        let rows: Vec<(i64, i64, String)> = sqlx::query_as(
+            "SELECT id, position, name FROM modules WHERE curriculum_id = ? ORDER BY position",
+        )
+        .bind(curriculum_id)
+        .fetch_all(&self.pool)
+        .await?;
         let mut out = Vec::with_capacity(rows.len());
         for (id, position, name) in rows {
-            let exercise_ids: Vec<i64> = sqlx::query_scalar("SELECT exercise_id FROM module_exercises WHERE module_id = ? ORDER BY position").bind(id).fetch_all(&self.pool).await?;
-            out.push(Module { id, curriculum_id, position, name, exercise_ids });
+            let exercise_ids: Vec<i64> = sqlx::query_scalar(
+                "SELECT exercise_id FROM module_exercises WHERE module_id = ? ORDER BY position",
+            )
+            .bind(id)
+            .fetch_all(&self.pool)
+            .await?;
+            out.push(Module {
+                id,
+                curriculum_id,
+                position,
+                name,
+                exercise_ids,
+            });
         }
         Ok(out)
     }

@@ -54,10 +54,21 @@ impl ThresholdSource {
 
 type ThresholdRow = (String, String, f64, f64, i64, Option<f64>, Option<f64>);
 type ExerciseRow = (i64, String, String, String, i64, f64, i64);
-const EXERCISE_SELECT: &str = "SELECT id, name, scene, description, plan_id, threshold_k, created_ns FROM exercises";
+const EXERCISE_SELECT: &str =
+    "SELECT id, name, scene, description, plan_id, threshold_k, created_ns FROM exercises";
 
-fn exercise((id, name, scene, description, plan_id, threshold_k, created_ns): ExerciseRow) -> Exercise {
-    Exercise { id, name, scene, description, plan_id, threshold_k, created_ns }
+fn exercise(
+    (id, name, scene, description, plan_id, threshold_k, created_ns): ExerciseRow,
+) -> Exercise {
+    Exercise {
+        id,
+        name,
+        scene,
+        description,
+        plan_id,
+        threshold_k,
+        created_ns,
+    }
 }
 
 impl Store {
@@ -78,24 +89,40 @@ impl Store {
 
     /// The plan with `id`.
     pub async fn get_plan(&self, id: i64) -> Result<ExpertPlan> {
-        let json: Option<String> = sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
-        ExpertPlan::from_json(&json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?)
+        let json: Option<String> =
+            sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = ?")
+                .bind(id)
+                .fetch_optional(&self.pool)
+                .await?;
+        ExpertPlan::from_json(
+            &json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?,
+        )
     }
 
     /// All stored plans `(id, plan)`, oldest first.
     pub async fn list_plans(&self) -> Result<Vec<(i64, ExpertPlan)>> {
-        let rows: Vec<(i64, String)> = sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id").fetch_all(&self.pool).await?;
-        rows.into_iter().map(|(id, json)| Ok((id, ExpertPlan::from_json(&json)?))).collect()
+        let rows: Vec<(i64, String)> =
+            sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id")
+                .fetch_all(&self.pool)
+                .await?;
+        rows.into_iter()
+            .map(|(id, json)| Ok((id, ExpertPlan::from_json(&json)?)))
+            .collect()
     }
 
     /// Adds an exercise with its plan and hand-set thresholds (one transaction).
     pub async fn create_exercise(&self, new: &NewExercise<'_>) -> Result<Exercise> {
         new.plan.check()?;
         if new.name.trim().is_empty() || new.scene.trim().is_empty() {
-            return Err(AssessError::InvalidInput("an exercise needs a name and a scene".into()));
+            return Err(AssessError::InvalidInput(
+                "an exercise needs a name and a scene".into(),
+            ));
         }
         if !(new.threshold_k > 0.0) {
-            return Err(AssessError::InvalidInput(format!("threshold k = {}: must be > 0", new.threshold_k)));
+            return Err(AssessError::InvalidInput(format!(
+                "threshold k = {}: must be > 0",
+                new.threshold_k
+            )));
         }
         let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
         let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
@@ -124,34 +151,69 @@ impl Store {
     }
 
     pub async fn get_exercise(&self, id: i64) -> Result<Exercise> {
-        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{EXERCISE_SELECT} WHERE id = ?"))).bind(id).fetch_optional(&self.pool).await?;
-        row.map(exercise).ok_or_else(|| AssessError::NotFound(format!("exercise {id}")))
+        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{EXERCISE_SELECT} WHERE id = ?"
+        )))
+        .bind(id)
+        .fetch_optional(&self.pool)
+        .await?;
+        row.map(exercise)
+            .ok_or_else(|| AssessError::NotFound(format!("exercise {id}")))
     }
 
     pub async fn exercise_by_name(&self, name: &str) -> Result<Exercise> {
-        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{EXERCISE_SELECT} WHERE name = ?"))).bind(name).fetch_optional(&self.pool).await?;
-        row.map(exercise).ok_or_else(|| AssessError::NotFound(format!("exercise {name:?}")))
+        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{EXERCISE_SELECT} WHERE name = ?"
+        )))
+        .bind(name)
+        .fetch_optional(&self.pool)
+        .await?;
+        row.map(exercise)
+            .ok_or_else(|| AssessError::NotFound(format!("exercise {name:?}")))
     }
 
     pub async fn list_exercises(&self) -> Result<Vec<Exercise>> {
-        let rows: Vec<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{EXERCISE_SELECT} ORDER BY name"))).fetch_all(&self.pool).await?;
+        let rows: Vec<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{EXERCISE_SELECT} ORDER BY name"
+        )))
+        .fetch_all(&self.pool)
+        .await?;
         Ok(rows.into_iter().map(exercise).collect())
     }
 
     /// Edits an exercise: its scene, description and `k`, and (if given) a new expert plan
     /// (stored as a new plan; attempts already scored keep their results). One transaction.
-    pub async fn update_exercise(&self, id: i64, scene: &str, description: &str, threshold_k: f64, plan: Option<&ExpertPlan>) -> Result<Exercise> {
+    pub async fn update_exercise(
+        &self,
+        id: i64,
+        scene: &str,
+        description: &str,
+        threshold_k: f64,
+        plan: Option<&ExpertPlan>,
+    ) -> Result<Exercise> {
         if scene.trim().is_empty() {
-            return Err(AssessError::InvalidInput("an exercise needs a scene".into()));
+            return Err(AssessError::InvalidInput(
+                "an exercise needs a scene".into(),
+            ));
         }
         if !(threshold_k > 0.0) || !threshold_k.is_finite() {
-            return Err(AssessError::InvalidInput(format!("threshold k = {threshold_k}: must be > 0")));
+            return Err(AssessError::InvalidInput(format!(
+                "threshold k = {threshold_k}: must be > 0"
+            )));
         }
         if let Some(p) = plan {
             p.check()?;
         }
         let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let done = sqlx::query("UPDATE exercises SET scene = ?, description = ?, threshold_k = ? WHERE id = ?").bind(scene.trim()).bind(description).bind(threshold_k).bind(id).execute(&mut *tx).await?;
+        let done = sqlx::query(
+            "UPDATE exercises SET scene = ?, description = ?, threshold_k = ? WHERE id = ?",
+        )
+        .bind(scene.trim())
+        .bind(description)
+        .bind(threshold_k)
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
         if done.rows_affected() == 0 {
             return Err(AssessError::NotFound(format!("exercise {id}")));
         }
@@ -165,7 +227,11 @@ impl Store {
                 .bind(now_ns())
                 .fetch_one(&mut *tx)
                 .await?;
-            sqlx::query("UPDATE exercises SET plan_id = ? WHERE id = ?").bind(plan_id).bind(id).execute(&mut *tx).await?;
+            sqlx::query("UPDATE exercises SET plan_id = ? WHERE id = ?")
+                .bind(plan_id)
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
         }
         tx.commit().await?;
         self.get_exercise(id).await
@@ -183,17 +249,40 @@ impl Store {
         let rows: Vec<ThresholdRow> = sqlx::query_as("SELECT metric, better, mean, sd, n_experts, lower_limit, upper_limit FROM metric_thresholds WHERE exercise_id = ? ORDER BY metric").bind(exercise_id).fetch_all(&self.pool).await?;
         let mut metrics = Vec::with_capacity(rows.len());
         for (key, better, mean, sd, n, lower, upper) in rows {
-            let better = Better::parse(&better).ok_or_else(|| AssessError::InvalidInput(format!("stored threshold of {key}: unknown direction {better:?}")))?;
-            metrics.push(Threshold { key, better, mean, sd, n_experts: usize::try_from(n).unwrap_or(0), lower, upper });
+            let better = Better::parse(&better).ok_or_else(|| {
+                AssessError::InvalidInput(format!(
+                    "stored threshold of {key}: unknown direction {better:?}"
+                ))
+            })?;
+            metrics.push(Threshold {
+                key,
+                better,
+                mean,
+                sd,
+                n_experts: usize::try_from(n).unwrap_or(0),
+                lower,
+                upper,
+            });
         }
-        Ok(Thresholds { k: e.threshold_k, metrics })
+        Ok(Thresholds {
+            k: e.threshold_k,
+            metrics,
+        })
     }
 
     /// Replaces the exercise's thresholds.
-    pub async fn set_thresholds(&self, exercise_id: i64, thresholds: &Thresholds, source: ThresholdSource) -> Result<()> {
+    pub async fn set_thresholds(
+        &self,
+        exercise_id: i64,
+        thresholds: &Thresholds,
+        source: ThresholdSource,
+    ) -> Result<()> {
         self.get_exercise(exercise_id).await?;
         let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        sqlx::query("DELETE FROM metric_thresholds WHERE exercise_id = ?").bind(exercise_id).execute(&mut *tx).await?;
+        sqlx::query("DELETE FROM metric_thresholds WHERE exercise_id = ?")
+            .bind(exercise_id)
+            .execute(&mut *tx)
+            .await?;
         write_thresholds(&mut tx, exercise_id, &thresholds.metrics, source).await?;
         tx.commit().await?;
         Ok(())
@@ -211,14 +300,24 @@ impl Store {
         }
         let t = Thresholds::from_experts(&attempts, e.threshold_k)?;
         if t.metrics.is_empty() {
-            return Err(AssessError::InvalidInput(format!("exercise {:?}: {} complete expert attempts, need at least 2 with metric values", e.name, attempts.len())));
+            return Err(AssessError::InvalidInput(format!(
+                "exercise {:?}: {} complete expert attempts, need at least 2 with metric values",
+                e.name,
+                attempts.len()
+            )));
         }
-        self.set_thresholds(exercise_id, &t, ThresholdSource::Experts).await?;
+        self.set_thresholds(exercise_id, &t, ThresholdSource::Experts)
+            .await?;
         Ok(t)
     }
 }
 
-async fn write_thresholds(tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>, exercise_id: i64, thresholds: &[Threshold], source: ThresholdSource) -> Result<()> {
+async fn write_thresholds(
+    tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>,
+    exercise_id: i64,
+    thresholds: &[Threshold],
+    source: ThresholdSource,
+) -> Result<()> {
     for t in thresholds {
         sqlx::query("INSERT INTO metric_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
             .bind(exercise_id)

@@ -49,7 +49,9 @@ pub fn default_db_path(cli: Option<&Path>) -> PathBuf {
 
 /// Now, in nanoseconds since the Unix epoch.
 pub fn now_ns() -> i64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
 }
 
 /// `ns` since the epoch as ISO 8601 UTC with milliseconds, e.g. `2026-05-01T08:00:00.000Z`.
@@ -67,7 +69,12 @@ pub fn iso8601(ns: i64) -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{milli:03}Z", sod / 3600, sod % 3600 / 60, sod % 60)
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{milli:03}Z",
+        sod / 3600,
+        sod % 3600 / 60,
+        sod % 60
+    )
 }
 
 /// The assessor's database.
@@ -88,7 +95,10 @@ impl Store {
     /// Opens (creating if needed) the database at `path` and applies the migrations.
     pub async fn open(path: &Path) -> Result<Self> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|source| AssessError::Io { path: dir.display().to_string(), error: source })?;
+            std::fs::create_dir_all(dir).map_err(|source| AssessError::Io {
+                path: dir.display().to_string(),
+                error: source,
+            })?;
         }
         Self::open_with(SqliteConnectOptions::new().filename(path)).await
     }
@@ -102,7 +112,10 @@ impl Store {
             .synchronous(SqliteSynchronous::Normal)
             .busy_timeout(Duration::from_secs(30))
             .foreign_keys(true);
-        let pool = SqlitePoolOptions::new().max_connections(4).connect_with(options).await?;
+        let pool = SqlitePoolOptions::new()
+            .max_connections(4)
+            .connect_with(options)
+            .await?;
         Self::from_pool(pool).await
     }
 
@@ -149,9 +162,14 @@ mod tests {
 
     #[test]
     fn db_path_resolution() {
-        assert_eq!(default_db_path(Some(Path::new("x.db"))), PathBuf::from("x.db"));
+        assert_eq!(
+            default_db_path(Some(Path::new("x.db"))),
+            PathBuf::from("x.db")
+        );
         // the environment is shared by the test threads: only read it here
-        let expected = std::env::var_os(DB_ENV).filter(|p| !p.is_empty()).map_or(PathBuf::from("cutlab.db"), PathBuf::from);
+        let expected = std::env::var_os(DB_ENV)
+            .filter(|p| !p.is_empty())
+            .map_or(PathBuf::from("cutlab.db"), PathBuf::from);
         assert_eq!(default_db_path(None), expected);
     }
 }

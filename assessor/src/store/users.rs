@@ -34,7 +34,9 @@ impl std::str::FromStr for Role {
             "instructor" => Ok(Role::Instructor),
             "trainee" => Ok(Role::Trainee),
             "admin" => Ok(Role::Admin),
-            _ => Err(AssessError::InvalidInput(format!("unknown role {s:?} (instructor, trainee or admin)"))),
+            _ => Err(AssessError::InvalidInput(format!(
+                "unknown role {s:?} (instructor, trainee or admin)"
+            ))),
         }
     }
 }
@@ -58,19 +60,32 @@ pub struct User {
 type UserRow = (i64, String, String, Option<String>, i64);
 
 fn user(row: UserRow) -> Result<User> {
-    Ok(User { id: row.0, name: row.1, role: row.2.parse()?, has_password: row.3.is_some(), created_ns: row.4 })
+    Ok(User {
+        id: row.0,
+        name: row.1,
+        role: row.2.parse()?,
+        has_password: row.3.is_some(),
+        created_ns: row.4,
+    })
 }
-
 
 /// An argon2id PHC string for `password` with a random salt.
 pub fn hash_password(password: &str) -> Result<String> {
     let salt = SaltString::generate(&mut OsRng);
-    Argon2::default().hash_password(password.as_bytes(), &salt).map(|h| h.to_string()).map_err(|e| AssessError::Password(e.to_string()))
+    Argon2::default()
+        .hash_password(password.as_bytes(), &salt)
+        .map(|h| h.to_string())
+        .map_err(|e| AssessError::Password(e.to_string()))
 }
 
 impl Store {
     /// Adds a user; `password` is hashed (argon2id). Names are unique.
-    pub async fn create_user(&self, name: &str, role: Role, password: Option<&str>) -> Result<User> {
+    pub async fn create_user(
+        &self,
+        name: &str,
+        role: Role,
+        password: Option<&str>,
+    ) -> Result<User> {
         let name = name.trim();
         if name.is_empty() {
             return Err(AssessError::InvalidInput("empty user name".into()));
@@ -89,13 +104,23 @@ impl Store {
 
     /// The user with `id`.
     pub async fn get_user(&self, id: i64) -> Result<User> {
-        let row: Option<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE id = ?").bind(id).fetch_optional(&self.pool).await?;
+        let row: Option<UserRow> = sqlx::query_as(
+            "SELECT id, name, role, password_hash, created_ns FROM users WHERE id = ?",
+        )
+        .bind(id)
+        .fetch_optional(&self.pool)
+        .await?;
         user(row.ok_or_else(|| AssessError::NotFound(format!("user {id}")))?)
     }
 
     /// The user named `name`.
     pub async fn user_by_name(&self, name: &str) -> Result<User> {
-        let row: Option<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
+        let row: Option<UserRow> = sqlx::query_as(
+            "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?",
+        )
+        .bind(name)
+        .fetch_optional(&self.pool)
+        .await?;
         user(row.ok_or_else(|| AssessError::NotFound(format!("user {name:?}")))?)
     }
 
@@ -112,7 +137,11 @@ impl Store {
     /// Sets (or replaces) a user's password.
     pub async fn set_password(&self, user_id: i64, password: &str) -> Result<()> {
         let hash = hash_password(password)?;
-        let done = sqlx::query("UPDATE users SET password_hash = ? WHERE id = ?").bind(hash).bind(user_id).execute(&self.pool).await?;
+        let done = sqlx::query("UPDATE users SET password_hash = ? WHERE id = ?")
+            .bind(hash)
+            .bind(user_id)
+            .execute(&self.pool)
+            .await?;
         if done.rows_affected() == 0 {
             return Err(AssessError::NotFound(format!("user {user_id}")));
         }
@@ -122,10 +151,25 @@ impl Store {
     /// The user if `name` exists, has a password and `password` matches it; `None` otherwise
     /// (unknown user, no password or a wrong one alike).
     pub async fn verify_password(&self, name: &str, password: &str) -> Result<Option<User>> {
-        let row: Option<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?").bind(name).fetch_optional(&self.pool).await?;
+        let row: Option<UserRow> = sqlx::query_as(
+            "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?",
+        )
+        .bind(name)
+        .fetch_optional(&self.pool)
+        .await?;
         let Some(row) = row else { return Ok(None) };
-        let Some(hash) = row.3.clone() else { return Ok(None) };
-        let parsed = PasswordHash::new(&hash).map_err(|e| AssessError::Password(format!("stored hash of {name:?}: {e}")))?;
-        if Argon2::default().verify_password(password.as_bytes(), &parsed).is_ok() { Ok(Some(user(row)?)) } else { Ok(None) }
+        let Some(hash) = row.3.clone() else {
+            return Ok(None);
+        };
+        let parsed = PasswordHash::new(&hash)
+            .map_err(|e| AssessError::Password(format!("stored hash of {name:?}: {e}")))?;
+        if Argon2::default()
+            .verify_password(password.as_bytes(), &parsed)
+            .is_ok()
+        {
+            Ok(Some(user(row)?))
+        } else {
+            Ok(None)
+        }
     }
 }

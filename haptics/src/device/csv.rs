@@ -41,10 +41,17 @@ pub struct CsvDevice {
 impl CsvDevice {
     /// Reads and checks the whole file.
     pub fn open(path: &Path) -> Result<Self, HapticsError> {
-        let io = |source| HapticsError::Io { path: path.to_path_buf(), error: source };
+        let io = |source| HapticsError::Io {
+            path: path.to_path_buf(),
+            error: source,
+        };
         let size = std::fs::metadata(path).map_err(io)?.len();
         if size > MAX_BYTES {
-            return Err(HapticsError::Csv { path: path.to_path_buf(), line: 0, message: format!("file is {size} bytes; at most {MAX_BYTES} accepted") });
+            return Err(HapticsError::Csv {
+                path: path.to_path_buf(),
+                line: 0,
+                message: format!("file is {size} bytes; at most {MAX_BYTES} accepted"),
+            });
         }
         let text = std::fs::read_to_string(path).map_err(io)?;
         Self::parse(&text, path)
@@ -52,7 +59,11 @@ impl CsvDevice {
 
     /// Parses CSV text; `path` names the source in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self, HapticsError> {
-        let err = |line: usize, message: String| HapticsError::Csv { path: path.to_path_buf(), line, message };
+        let err = |line: usize, message: String| HapticsError::Csv {
+            path: path.to_path_buf(),
+            line,
+            message,
+        };
         let mut header_seen = false;
         let mut times_s = Vec::new();
         let mut poses = Vec::new();
@@ -65,19 +76,44 @@ impl CsvDevice {
             let fields: Vec<&str> = content.split(',').map(str::trim).collect();
             if !header_seen {
                 if fields != CSV_HEADER {
-                    return Err(err(line, format!("expected the header `{}`, found `{content}`", CSV_HEADER.join(", "))));
+                    return Err(err(
+                        line,
+                        format!(
+                            "expected the header `{}`, found `{content}`",
+                            CSV_HEADER.join(", ")
+                        ),
+                    ));
                 }
                 header_seen = true;
                 continue;
             }
             if fields.len() != CSV_HEADER.len() {
-                return Err(err(line, format!("expected {} fields, found {}", CSV_HEADER.len(), fields.len())));
+                return Err(err(
+                    line,
+                    format!(
+                        "expected {} fields, found {}",
+                        CSV_HEADER.len(),
+                        fields.len()
+                    ),
+                ));
             }
             let mut v = [0.0; 9];
             for (k, f) in fields.iter().enumerate() {
-                v[k] = f.parse::<f64>().map_err(|_| err(line, format!("column {} ({}): `{f}` is not a number", k + 1, CSV_HEADER[k])))?;
+                v[k] = f.parse::<f64>().map_err(|_| {
+                    err(
+                        line,
+                        format!(
+                            "column {} ({}): `{f}` is not a number",
+                            k + 1,
+                            CSV_HEADER[k]
+                        ),
+                    )
+                })?;
                 if !v[k].is_finite() {
-                    return Err(err(line, format!("column {} ({}): `{f}` is not finite", k + 1, CSV_HEADER[k])));
+                    return Err(err(
+                        line,
+                        format!("column {} ({}): `{f}` is not finite", k + 1, CSV_HEADER[k]),
+                    ));
                 }
             }
             let t = v[0];
@@ -87,28 +123,54 @@ impl CsvDevice {
             if let Some(&previous) = times_s.last()
                 && t <= previous
             {
-                return Err(err(line, format!("t_s must increase strictly: {t} after {previous}")));
+                return Err(err(
+                    line,
+                    format!("t_s must increase strictly: {t} after {previous}"),
+                ));
             }
             let q = nalgebra::Quaternion::new(v[4], v[5], v[6], v[7]);
             if q.norm() < 1e-9 {
-                return Err(err(line, "the quaternion qw qx qy qz has zero length".into()));
+                return Err(err(
+                    line,
+                    "the quaternion qw qx qy qz has zero length".into(),
+                ));
             }
             let buttons = match fields[8] {
                 "0" => 0,
                 "1" => BUTTON_BLADE,
-                other => return Err(err(line, format!("column 9 (button): expected 0 or 1, got `{other}`"))),
+                other => {
+                    return Err(err(
+                        line,
+                        format!("column 9 (button): expected 0 or 1, got `{other}`"),
+                    ));
+                }
             };
             times_s.push(t);
-            poses.push(ToolPose { tip_in_world: Point3::new(v[1], v[2], v[3]), world_from_tool: Rotation::from_quaternion(q), buttons });
+            poses.push(ToolPose {
+                tip_in_world: Point3::new(v[1], v[2], v[3]),
+                world_from_tool: Rotation::from_quaternion(q),
+                buttons,
+            });
         }
         if !header_seen {
-            return Err(err(0, format!("empty file: expected the header `{}`", CSV_HEADER.join(", "))));
+            return Err(err(
+                0,
+                format!(
+                    "empty file: expected the header `{}`",
+                    CSV_HEADER.join(", ")
+                ),
+            ));
         }
         if poses.is_empty() {
             return Err(err(0, "no samples after the header".into()));
         }
         let name = format!("csv:{}", path.display());
-        Ok(Self { name, times_s, poses, cursor: 0 })
+        Ok(Self {
+            name,
+            times_s,
+            poses,
+            cursor: 0,
+        })
     }
 
     /// Number of samples.
@@ -142,10 +204,18 @@ impl CsvDevice {
             self.cursor += 1;
         }
         let (a, b) = (self.poses[self.cursor], self.poses[self.cursor + 1]);
-        let u = (time_s - self.times_s[self.cursor]) / (self.times_s[self.cursor + 1] - self.times_s[self.cursor]);
+        let u = (time_s - self.times_s[self.cursor])
+            / (self.times_s[self.cursor + 1] - self.times_s[self.cursor]);
         let tip = a.tip_in_world + (b.tip_in_world - a.tip_in_world) * u;
-        let rotation = a.world_from_tool.try_slerp(&b.world_from_tool, u, 1e-9).unwrap_or(a.world_from_tool);
-        ToolPose { tip_in_world: tip, world_from_tool: rotation, buttons: a.buttons }
+        let rotation = a
+            .world_from_tool
+            .try_slerp(&b.world_from_tool, u, 1e-9)
+            .unwrap_or(a.world_from_tool);
+        ToolPose {
+            tip_in_world: tip,
+            world_from_tool: rotation,
+            buttons: a.buttons,
+        }
     }
 }
 
@@ -194,19 +264,42 @@ mod tests {
             ("", "empty file"),
             ("t, x, y\n", "t.csv:1: expected the header"),
             ("t_s, x_m, y_m, z_m, qw, qx, qy, qz, button\n", "no samples"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 1, 0, 0\n", "t.csv:2: expected 9 fields, found 7"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, abc, 0, 1, 0, 0, 0, 0\n", "t.csv:2: column 3 (y_m): `abc` is not a number"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, NaN, 0, 1, 0, 0, 0, 0\n", "not finite"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n1, 0, 0, 0, 1, 0, 0, 0, 0\n1, 0, 0, 0, 1, 0, 0, 0, 0\n", "t.csv:3: t_s must increase strictly"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 0, 0, 0, 0, 0\n", "zero length"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 1, 0, 0, 0, 2\n", "expected 0 or 1"),
-            ("t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n-1, 0, 0, 0, 1, 0, 0, 0, 0\n", "must not be negative"),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 1, 0, 0\n",
+                "t.csv:2: expected 9 fields, found 7",
+            ),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, abc, 0, 1, 0, 0, 0, 0\n",
+                "t.csv:2: column 3 (y_m): `abc` is not a number",
+            ),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, NaN, 0, 1, 0, 0, 0, 0\n",
+                "not finite",
+            ),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n1, 0, 0, 0, 1, 0, 0, 0, 0\n1, 0, 0, 0, 1, 0, 0, 0, 0\n",
+                "t.csv:3: t_s must increase strictly",
+            ),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 0, 0, 0, 0, 0\n",
+                "zero length",
+            ),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 1, 0, 0, 0, 2\n",
+                "expected 0 or 1",
+            ),
+            (
+                "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n-1, 0, 0, 0, 1, 0, 0, 0, 0\n",
+                "must not be negative",
+            ),
         ];
         for (text, expected) in cases {
             let e = parse(text).expect_err(text);
             assert!(e.contains(expected), "{text:?}: {e}");
         }
-        let e = CsvDevice::open(Path::new("/no/such/file.csv")).expect_err("missing").to_string();
+        let e = CsvDevice::open(Path::new("/no/such/file.csv"))
+            .expect_err("missing")
+            .to_string();
         assert!(e.contains("/no/such/file.csv"), "{e}");
     }
 }

@@ -52,7 +52,11 @@ pub fn crc64_ecma(bytes: &[u8]) -> u64 {
             let mut c = (i as u64) << 56;
             let mut k = 0;
             while k < 8 {
-                c = if c & (1 << 63) != 0 { (c << 1) ^ POLY } else { c << 1 };
+                c = if c & (1 << 63) != 0 {
+                    (c << 1) ^ POLY
+                } else {
+                    c << 1
+                };
                 k += 1;
             }
             table[i] = c;
@@ -60,7 +64,9 @@ pub fn crc64_ecma(bytes: &[u8]) -> u64 {
         }
         table
     };
-    bytes.iter().fold(0u64, |crc, &b| TABLE[((crc >> 56) as u8 ^ b) as usize] ^ (crc << 8))
+    bytes.iter().fold(0u64, |crc, &b| {
+        TABLE[((crc >> 56) as u8 ^ b) as usize] ^ (crc << 8)
+    })
 }
 
 /// A parsed OpenIGTLink header.
@@ -112,7 +118,10 @@ impl Header {
         let mut message_type = [0u8; 12];
         message_type.copy_from_slice(&bytes[2..14]);
         let t = trimmed(&message_type);
-        if t.is_empty() || !t.iter().all(|b| b.is_ascii_graphic()) || message_type[t.len()..].iter().any(|&b| b != 0) {
+        if t.is_empty()
+            || !t.iter().all(|b| b.is_ascii_graphic())
+            || message_type[t.len()..].iter().any(|&b| b != 0)
+        {
             return Err(PacketError::MessageType);
         }
         let mut device_name = [0u8; 20];
@@ -121,7 +130,14 @@ impl Header {
         if body_bytes > MAX_BODY_BYTES {
             return Err(PacketError::TooLarge(body_bytes));
         }
-        Ok(Self { version, message_type, device_name, timestamp: be64(34), body_bytes, crc: be64(50) })
+        Ok(Self {
+            version,
+            message_type,
+            device_name,
+            timestamp: be64(34),
+            body_bytes,
+            crc: be64(50),
+        })
     }
 
     pub fn message_type(&self) -> &[u8] {
@@ -133,7 +149,13 @@ impl Header {
     }
 
     /// Writes a version-1 header for `body` into `out`.
-    pub fn write(message_type: &str, device_name: &str, timestamp: u64, body: &[u8], out: &mut Vec<u8>) {
+    pub fn write(
+        message_type: &str,
+        device_name: &str,
+        timestamp: u64,
+        body: &[u8],
+        out: &mut Vec<u8>,
+    ) {
         out.extend_from_slice(&1u16.to_be_bytes());
         let mut field = [0u8; 12];
         let n = message_type.len().min(12);
@@ -163,7 +185,10 @@ pub fn content<'a>(header: &Header, body: &'a [u8]) -> Result<&'a [u8], PacketEr
     let ext = u16::from_be_bytes([body[0], body[1]]) as usize;
     let meta_header = u16::from_be_bytes([body[2], body[3]]) as usize;
     let meta_body = u32::from_be_bytes([body[4], body[5], body[6], body[7]]) as usize;
-    let end = body.len().checked_sub(meta_header.saturating_add(meta_body)).ok_or(PacketError::Size(body.len()))?;
+    let end = body
+        .len()
+        .checked_sub(meta_header.saturating_add(meta_body))
+        .ok_or(PacketError::Size(body.len()))?;
     if ext < 12 || ext > end {
         return Err(PacketError::Size(body.len()));
     }
@@ -177,7 +202,12 @@ pub fn decode_transform(content: &[u8]) -> Result<(Point3, Rotation), PacketErro
     }
     let mut v = [0.0f64; 12];
     for (k, x) in v.iter_mut().enumerate() {
-        let b = [content[4 * k], content[4 * k + 1], content[4 * k + 2], content[4 * k + 3]];
+        let b = [
+            content[4 * k],
+            content[4 * k + 1],
+            content[4 * k + 2],
+            content[4 * k + 3],
+        ];
         *x = f32::from_be_bytes(b) as f64;
     }
     if !v.iter().all(|x| x.is_finite()) {
@@ -185,7 +215,10 @@ pub fn decode_transform(content: &[u8]) -> Result<(Point3, Rotation), PacketErro
     }
     // R11 R21 R31 R12 R22 R32 R13 R23 R33 TX TY TZ: the rotation's columns, then translation.
     let m = nalgebra::Matrix3::new(v[0], v[3], v[6], v[1], v[4], v[7], v[2], v[5], v[8]);
-    let orthonormal = (m.transpose() * m - nalgebra::Matrix3::identity()).abs().max() < 1e-3;
+    let orthonormal = (m.transpose() * m - nalgebra::Matrix3::identity())
+        .abs()
+        .max()
+        < 1e-3;
     if !orthonormal || m.determinant() < 0.0 {
         return Err(PacketError::Transform);
     }
@@ -198,11 +231,21 @@ pub fn decode_transform(content: &[u8]) -> Result<(Point3, Rotation), PacketErro
 /// Encodes a TRANSFORM message (header + body) into `out`: the inverse of
 /// [`decode_transform`] (`world_from_tool`, the tip in metres; millimetres on the wire), as a
 /// tracker or a bridge sends it.
-pub fn encode_transform(device_name: &str, tip_in_world: &Point3, world_from_tool: &Rotation, timestamp: u64, out: &mut Vec<u8>) {
+pub fn encode_transform(
+    device_name: &str,
+    tip_in_world: &Point3,
+    world_from_tool: &Rotation,
+    timestamp: u64,
+    out: &mut Vec<u8>,
+) {
     let m = world_from_tool.to_rotation_matrix().into_inner();
     let mut body = Vec::with_capacity(TRANSFORM_BODY_BYTES);
     // R11 R21 R31 R12 R22 R32 R13 R23 R33 (the rotation's columns), then TX TY TZ in mm
-    for v in m.iter().copied().chain(tip_in_world.coords.iter().map(|c| c * 1e3)) {
+    for v in m
+        .iter()
+        .copied()
+        .chain(tip_in_world.coords.iter().map(|c| c * 1e3))
+    {
         body.extend_from_slice(&(v as f32).to_be_bytes());
     }
     out.clear();
@@ -227,7 +270,9 @@ pub fn encode_force(force_newtons: &Vector3, timestamp: u64, out: &mut Vec<u8>) 
 
 /// OpenIGTLink timestamp of now: seconds since 1970 in the high 32 bits, fraction in the low.
 fn timestamp_now() -> u64 {
-    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
     let frac = ((now.subsec_nanos() as u64) << 32) / 1_000_000_000;
     ((now.as_secs() & 0xffff_ffff) << 32) | frac
 }
@@ -274,7 +319,10 @@ impl IgtlDevice {
 
     /// Listens on `address`.
     pub fn listen_on(address: SocketAddr) -> Result<Self, HapticsError> {
-        let listen_err = |source| HapticsError::Listen { port: address.port(), source };
+        let listen_err = |source| HapticsError::Listen {
+            port: address.port(),
+            source,
+        };
         let listener = TcpListener::bind(address).map_err(listen_err)?;
         listener.set_nonblocking(true).map_err(listen_err)?;
         let address = listener.local_addr().map_err(listen_err)?;
@@ -297,7 +345,10 @@ impl IgtlDevice {
         let thread = std::thread::Builder::new()
             .name("cutlab-igtl".into())
             .spawn(move || server.run())
-            .map_err(|source| HapticsError::Thread { name: "cutlab-igtl", source })?;
+            .map_err(|source| HapticsError::Thread {
+                name: "cutlab-igtl",
+                source,
+            })?;
         Ok(Self {
             name: format!("igtl:{}", address.port()),
             address,
@@ -356,7 +407,11 @@ impl HapticDevice for IgtlDevice {
 
     fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
         self.forces.write(force_newtons);
-        if self.connected.load(Ordering::Acquire) { Ok(()) } else { Err(DeviceFault::Disconnected) }
+        if self.connected.load(Ordering::Acquire) {
+            Ok(())
+        } else {
+            Err(DeviceFault::Disconnected)
+        }
     }
 }
 
@@ -393,7 +448,9 @@ impl Server {
                     self.connected.store(false, Ordering::Release);
                     tracing::warn!("OpenIGTLink client {peer} disconnected");
                 }
-                Err(e) if e.kind() == ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(5)),
+                Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                    std::thread::sleep(Duration::from_millis(5))
+                }
                 Err(e) => {
                     tracing::warn!("OpenIGTLink accept failed: {e}");
                     std::thread::sleep(Duration::from_millis(50));
@@ -413,7 +470,12 @@ impl Server {
             match stream.read(&mut buf[filled..]) {
                 Ok(0) => return Fill::Closed,
                 Ok(n) => filled += n,
-                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted) => {
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                    ) =>
+                {
                     if boundary && filled == 0 {
                         return Fill::Idle;
                     }
@@ -429,8 +491,12 @@ impl Server {
 
     fn serve(&mut self, mut stream: TcpStream) {
         if stream.set_nonblocking(false).is_err()
-            || stream.set_read_timeout(Some(Duration::from_millis(20))).is_err()
-            || stream.set_write_timeout(Some(Duration::from_millis(100))).is_err()
+            || stream
+                .set_read_timeout(Some(Duration::from_millis(20)))
+                .is_err()
+            || stream
+                .set_write_timeout(Some(Duration::from_millis(100)))
+                .is_err()
         {
             return;
         }
@@ -449,7 +515,9 @@ impl Server {
                 Ok(h) => h,
                 Err(e) => {
                     self.counters.rejected.fetch_add(1, Ordering::Relaxed);
-                    tracing::warn!("OpenIGTLink: rejected a packet ({e}); closing the connection (the stream cannot be framed)");
+                    tracing::warn!(
+                        "OpenIGTLink: rejected a packet ({e}); closing the connection (the stream cannot be framed)"
+                    );
                     return;
                 }
             };
@@ -469,7 +537,10 @@ impl Server {
                 Ok(false) => {}
                 Err(e) => {
                     self.counters.rejected.fetch_add(1, Ordering::Relaxed);
-                    tracing::warn!("OpenIGTLink: rejected a {} message ({e})", String::from_utf8_lossy(h.message_type()));
+                    tracing::warn!(
+                        "OpenIGTLink: rejected a {} message ({e})",
+                        String::from_utf8_lossy(h.message_type())
+                    );
                 }
             }
         }
@@ -482,7 +553,14 @@ impl Server {
             b"TRANSFORM" => {
                 let (tip, rotation) = decode_transform(content)?;
                 let at_nanos = (self.epoch.elapsed().as_nanos() as u64).max(1);
-                self.poses.write(Received { pose: ToolPose { tip_in_world: tip, world_from_tool: rotation, buttons: self.button }, at_nanos });
+                self.poses.write(Received {
+                    pose: ToolPose {
+                        tip_in_world: tip,
+                        world_from_tool: rotation,
+                        buttons: self.button,
+                    },
+                    at_nanos,
+                });
                 self.counters.transforms.fetch_add(1, Ordering::Relaxed);
                 Ok(true)
             }
@@ -513,7 +591,13 @@ mod tests {
     /// A TRANSFORM packet: identity rotation, translation in mm.
     fn transform_packet(t_mm: [f64; 3]) -> Vec<u8> {
         let mut out = Vec::new();
-        encode_transform("Tool", &(Point3::from(t_mm) * 1e-3), &Rotation::identity(), 0, &mut out);
+        encode_transform(
+            "Tool",
+            &(Point3::from(t_mm) * 1e-3),
+            &Rotation::identity(),
+            0,
+            &mut out,
+        );
         out
     }
 
@@ -530,7 +614,8 @@ mod tests {
         hb.copy_from_slice(&p[..HEADER_BYTES]);
         let h = Header::parse(&hb).expect("header");
         assert_eq!(h.message_type(), b"TRANSFORM");
-        let (tip, q) = decode_transform(content(&h, &p[HEADER_BYTES..]).expect("content")).expect("transform");
+        let (tip, q) =
+            decode_transform(content(&h, &p[HEADER_BYTES..]).expect("content")).expect("transform");
         assert!((tip - Point3::new(0.01, -0.02, 0.005)).norm() < 1e-9);
         assert!(q.angle() < 1e-6);
 
@@ -596,7 +681,10 @@ mod tests {
         let mut hb = [0u8; HEADER_BYTES];
         hb.copy_from_slice(&out[..HEADER_BYTES]);
         let h = Header::parse(&hb).expect("header");
-        assert_eq!((h.message_type(), h.device_name()), (&b"POINT"[..], &b"Force"[..]));
+        assert_eq!(
+            (h.message_type(), h.device_name()),
+            (&b"POINT"[..], &b"Force"[..])
+        );
         let c = content(&h, &out[HEADER_BYTES..]).expect("crc");
         let y = f32::from_be_bytes([c[104], c[105], c[106], c[107]]);
         assert_eq!(y, -1.0);

@@ -22,7 +22,10 @@ pub struct DeviceLimits {
 impl Default for DeviceLimits {
     /// A typical desktop haptic device: 3.3 N peak, 0.2 N per millisecond.
     fn default() -> Self {
-        Self { max_force_newtons: 3.3, max_force_rate_newtons_per_s: 200.0 }
+        Self {
+            max_force_newtons: 3.3,
+            max_force_rate_newtons_per_s: 200.0,
+        }
     }
 }
 
@@ -39,7 +42,11 @@ impl std::fmt::Display for DeviceFault {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             DeviceFault::Disconnected => write!(f, "device disconnected"),
-            DeviceFault::Stale { age_nanos } => write!(f, "device data stale ({:.1} ms old)", *age_nanos as f64 * 1e-6),
+            DeviceFault::Stale { age_nanos } => write!(
+                f,
+                "device data stale ({:.1} ms old)",
+                *age_nanos as f64 * 1e-6
+            ),
         }
     }
 }

@@ -38,11 +38,18 @@ impl Plan {
             return bad("needs at least two line points, each with a normal");
         }
         if !self.line_m.iter().all(|p| p.iter().all(|c| c.is_finite()))
-            || !self.normals.iter().all(|n| n.iter().all(|c| c.is_finite()) && (n.norm() - 1.0).abs() < 1e-6)
+            || !self
+                .normals
+                .iter()
+                .all(|n| n.iter().all(|c| c.is_finite()) && (n.norm() - 1.0).abs() < 1e-6)
         {
             return bad("line points must be finite and normals unit vectors");
         }
-        if !(self.depth_m >= 0.0 && self.depth_m < 0.1 && self.approach_height_m > 0.0 && self.approach_height_m < 1.0) {
+        if !(self.depth_m >= 0.0
+            && self.depth_m < 0.1
+            && self.approach_height_m > 0.0
+            && self.approach_height_m < 1.0)
+        {
             return bad("depth must be in [0, 0.1) m and approach height in (0, 1) m");
         }
         if self.length_m() < 1e-4 {
@@ -133,7 +140,11 @@ impl Skill {
         if !(0.0..=1.0).contains(&level) {
             return None;
         }
-        let (a, b, t) = if level <= 0.5 { ("novice", "intermediate", 2.0 * level) } else { ("intermediate", "expert", 2.0 * level - 1.0) };
+        let (a, b, t) = if level <= 0.5 {
+            ("novice", "intermediate", 2.0 * level)
+        } else {
+            ("intermediate", "expert", 2.0 * level - 1.0)
+        };
         let (a, b) = (Self::preset(a)?, Self::preset(b)?);
         let mix = |x: f64, y: f64| x * (1.0 - t) + y * t;
         Some(Self {
@@ -226,12 +237,21 @@ impl SyntheticTrainee {
         let length = arc_m[arc_m.len() - 1];
         let mut rng = Rng::new(seed);
         let mut pauses: Vec<(f64, f64)> = (0..skill.hesitations)
-            .map(|_| (length * (0.1 + 0.8 * rng.uniform()), skill.hesitation_s * (0.5 + rng.uniform())))
+            .map(|_| {
+                (
+                    length * (0.1 + 0.8 * rng.uniform()),
+                    skill.hesitation_s * (0.5 + rng.uniform()),
+                )
+            })
             .collect();
         pauses.sort_by(|a, b| a.0.total_cmp(&b.0));
         let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
         let tilt_rad = sign * skill.approach_angle_error_rad * (0.5 + rng.uniform());
-        let phases = [rng.uniform() * std::f64::consts::TAU, rng.uniform() * std::f64::consts::TAU, rng.uniform() * std::f64::consts::TAU];
+        let phases = [
+            rng.uniform() * std::f64::consts::TAU,
+            rng.uniform() * std::f64::consts::TAU,
+            rng.uniform() * std::f64::consts::TAU,
+        ];
         let mut me = Self {
             name: name.to_owned(),
             plan,
@@ -283,8 +303,14 @@ impl SyntheticTrainee {
         };
         i = i.min(n - 2);
         let seg = self.arc_m[i + 1] - self.arc_m[i];
-        let u = if seg > 0.0 { (s - self.arc_m[i]) / seg } else { 0.0 };
-        let tangent = (line[i + 1] - line[i]).try_normalize(1e-15).unwrap_or_else(Vector3::x);
+        let u = if seg > 0.0 {
+            (s - self.arc_m[i]) / seg
+        } else {
+            0.0
+        };
+        let tangent = (line[i + 1] - line[i])
+            .try_normalize(1e-15)
+            .unwrap_or_else(Vector3::x);
         let uc = u.clamp(0.0, 1.0);
         let normal = (self.plan.normals[i] * (1.0 - uc) + self.plan.normals[i + 1] * uc)
             .try_normalize(1e-15)
@@ -299,9 +325,12 @@ impl SyntheticTrainee {
     /// The blade's orientation for the surface normal and cutting direction: +z along the
     /// normal tilted by the approach error about the cutting direction, +x along the cut.
     fn orientation(&self, normal: Vector3, tangent: Vector3) -> Rotation {
-        let tilt = Rotation::from_axis_angle(&nalgebra::Unit::new_normalize(tangent), self.tilt_rad);
+        let tilt =
+            Rotation::from_axis_angle(&nalgebra::Unit::new_normalize(tangent), self.tilt_rad);
         let z = tilt * normal;
-        let x = (tangent - z * tangent.dot(&z)).try_normalize(1e-12).unwrap_or_else(|| z.cross(&Vector3::y()).normalize());
+        let x = (tangent - z * tangent.dot(&z))
+            .try_normalize(1e-12)
+            .unwrap_or_else(|| z.cross(&Vector3::y()).normalize());
         let y = z.cross(&x);
         let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
         Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m))
@@ -321,23 +350,37 @@ impl SyntheticTrainee {
         let (p, normal, tangent) = self.along(s);
         let rotation = self.orientation(normal, tangent);
         let axis = rotation * Vector3::z();
-        let lateral = normal.cross(&tangent).try_normalize(1e-12).unwrap_or_else(Vector3::y);
+        let lateral = normal
+            .cross(&tangent)
+            .try_normalize(1e-12)
+            .unwrap_or_else(Vector3::y);
         let w = std::f64::consts::TAU * self.skill.tremor_frequency_hz * self.time_s;
         let a = self.skill.tremor_amplitude_m;
         let tremor = lateral * (a * (w + self.phases[0]).sin())
             + tangent * (0.7 * a * (1.13 * w + self.phases[1]).sin())
             + normal * (0.5 * a * (0.87 * w + self.phases[2]).sin());
         let tip = p + axis * offset + lateral * self.drift_m + tremor;
-        ToolPose { tip_in_world: tip, world_from_tool: rotation, buttons }
+        ToolPose {
+            tip_in_world: tip,
+            world_from_tool: rotation,
+            buttons,
+        }
     }
 
     /// Advances the hand by `dt` seconds.
     fn advance(&mut self, dt: f64) {
         // Ornstein-Uhlenbeck processes: stationary standard deviation `sigma`.
-        let ou = |x: f64, tau: f64, sigma: f64, n: f64| x - x / tau * dt + sigma * (2.0 * dt / tau).sqrt() * n;
+        let ou = |x: f64, tau: f64, sigma: f64, n: f64| {
+            x - x / tau * dt + sigma * (2.0 * dt / tau).sqrt() * n
+        };
         let n1 = self.rng.normal();
         let n2 = self.rng.normal();
-        self.drift_m = ou(self.drift_m, self.skill.drift_time_constant_s.max(1e-3), self.skill.drift_m, n1);
+        self.drift_m = ou(
+            self.drift_m,
+            self.skill.drift_time_constant_s.max(1e-3),
+            self.skill.drift_m,
+            n1,
+        );
         self.speed_noise = ou(self.speed_noise, 0.3, 1.0, n2);
         let speed_factor = (1.0 + self.skill.speed_variability * self.speed_noise).clamp(0.2, 3.0);
         let h = self.plan.approach_height_m;
@@ -358,8 +401,11 @@ impl SyntheticTrainee {
                     self.progress += DESCEND_M_PER_S * speed_factor * dt;
                 } else {
                     // at the planned depth: on once the blade has given way, else press on
-                    let given = (self.peak_push_n >= self.cutting_force_n && self.push_n < GIVE_FRACTION * self.peak_push_n)
-                        || self.touched_at_m.is_some_and(|at| self.progress - at >= self.cutting_depth_m + DEPTH_MARGIN_M);
+                    let given = (self.peak_push_n >= self.cutting_force_n
+                        && self.push_n < GIVE_FRACTION * self.peak_push_n)
+                        || self.touched_at_m.is_some_and(|at| {
+                            self.progress - at >= self.cutting_depth_m + DEPTH_MARGIN_M
+                        });
                     if given || self.progress >= h + d + MAX_PRESS_M {
                         self.press_m = self.progress - (h + d);
                         (self.phase, self.progress) = (Phase::Stroke, 0.0);
@@ -448,15 +494,30 @@ mod tests {
         for (level, name) in [(0.0, "novice"), (0.5, "intermediate"), (1.0, "expert")] {
             assert_eq!(Skill::at_level(level), Skill::preset(name), "level {level}");
         }
-        let (n, e, q) = (Skill::at_level(0.0).unwrap(), Skill::at_level(1.0).unwrap(), Skill::at_level(0.75).unwrap());
-        assert!(q.tremor_amplitude_m < Skill::preset("intermediate").unwrap().tremor_amplitude_m && q.tremor_amplitude_m > e.tremor_amplitude_m);
+        let (n, e, q) = (
+            Skill::at_level(0.0).unwrap(),
+            Skill::at_level(1.0).unwrap(),
+            Skill::at_level(0.75).unwrap(),
+        );
+        assert!(
+            q.tremor_amplitude_m < Skill::preset("intermediate").unwrap().tremor_amplitude_m
+                && q.tremor_amplitude_m > e.tremor_amplitude_m
+        );
         assert!(q.cut_speed_m_per_s > n.cut_speed_m_per_s && q.hesitations == 1);
         assert!(Skill::at_level(1.5).is_none() && Skill::at_level(f64::NAN).is_none());
     }
 
     fn run(skill: &str, seed: u64, seconds: f64) -> Vec<ToolPose> {
-        let mut t = SyntheticTrainee::new(skill, flat_plan(), Skill::preset(skill).expect("preset"), seed).expect("plan");
-        (0..(seconds * 1000.0) as u64).map(|k| t.read(k, k as f64 * 1e-3).expect("pose")).collect()
+        let mut t = SyntheticTrainee::new(
+            skill,
+            flat_plan(),
+            Skill::preset(skill).expect("preset"),
+            seed,
+        )
+        .expect("plan");
+        (0..(seconds * 1000.0) as u64)
+            .map(|k| t.read(k, k as f64 * 1e-3).expect("pose"))
+            .collect()
     }
 
     #[test]
@@ -470,24 +531,47 @@ mod tests {
     fn an_expert_cuts_along_the_line_and_a_novice_wanders() {
         let lateral = |skill: &str| {
             let poses = run(skill, 11, 16.0);
-            let cutting: Vec<&ToolPose> = poses.iter().filter(|p| p.blade_engaged() && p.tip_in_world.z < -0.004).collect();
-            assert!(cutting.len() > 1000, "{skill}: {} cutting ticks", cutting.len());
-            let xmax = cutting.iter().map(|p| p.tip_in_world.x).fold(f64::MIN, f64::max);
-            let ymax = cutting.iter().map(|p| p.tip_in_world.y.abs()).fold(0.0, f64::max);
+            let cutting: Vec<&ToolPose> = poses
+                .iter()
+                .filter(|p| p.blade_engaged() && p.tip_in_world.z < -0.004)
+                .collect();
+            assert!(
+                cutting.len() > 1000,
+                "{skill}: {} cutting ticks",
+                cutting.len()
+            );
+            let xmax = cutting
+                .iter()
+                .map(|p| p.tip_in_world.x)
+                .fold(f64::MIN, f64::max);
+            let ymax = cutting
+                .iter()
+                .map(|p| p.tip_in_world.y.abs())
+                .fold(0.0, f64::max);
             (xmax, ymax)
         };
         let (x_expert, y_expert) = lateral("expert");
         let (x_novice, y_novice) = lateral("novice");
-        assert!(x_expert > 0.03 && x_expert < 0.0312, "expert overshoot: {x_expert}");
+        assert!(
+            x_expert > 0.03 && x_expert < 0.0312,
+            "expert overshoot: {x_expert}"
+        );
         assert!(x_novice > 0.033, "novice overshoot: {x_novice}");
-        assert!(y_expert < 1e-3 && y_novice > y_expert, "{y_expert} {y_novice}");
+        assert!(
+            y_expert < 1e-3 && y_novice > y_expert,
+            "{y_expert} {y_novice}"
+        );
     }
 
     #[test]
     fn the_blade_points_out_of_the_surface_within_the_angle_error() {
         let poses = run("intermediate", 5, 3.0);
         for p in &poses {
-            let angle = p.edge_direction().dot(&Vector3::z()).clamp(-1.0, 1.0).acos();
+            let angle = p
+                .edge_direction()
+                .dot(&Vector3::z())
+                .clamp(-1.0, 1.0)
+                .acos();
             assert!(angle <= 1.5 * 6.0f64.to_radians() + 1e-9, "{angle}");
             assert!(p.is_finite());
         }
@@ -497,10 +581,14 @@ mod tests {
     fn bad_plans_are_errors() {
         let mut p = flat_plan();
         p.line_m.pop();
-        assert!(SyntheticTrainee::new("x", p, Skill::preset("expert").expect("preset"), 0).is_err());
+        assert!(
+            SyntheticTrainee::new("x", p, Skill::preset("expert").expect("preset"), 0).is_err()
+        );
         let mut p = flat_plan();
         p.depth_m = f64::NAN;
-        assert!(SyntheticTrainee::new("x", p, Skill::preset("expert").expect("preset"), 0).is_err());
+        assert!(
+            SyntheticTrainee::new("x", p, Skill::preset("expert").expect("preset"), 0).is_err()
+        );
         assert!(Skill::preset("surgeon").is_none());
     }
 }

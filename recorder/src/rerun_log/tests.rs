@@ -18,8 +18,14 @@ struct TempFile(PathBuf);
 
 impl TempFile {
     fn new(name: &str) -> Self {
-        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos()).unwrap_or(0);
-        Self(std::env::temp_dir().join(format!("cutlab-rerun-{}-{nanos}-{name}", std::process::id())))
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos())
+            .unwrap_or(0);
+        Self(std::env::temp_dir().join(format!(
+            "cutlab-rerun-{}-{nanos}-{name}",
+            std::process::id()
+        )))
     }
 }
 
@@ -39,13 +45,21 @@ fn sample(tick: u64) -> ServoSample {
     let tip = Point3::new(0.01 * t, 0.0, 0.02 - 0.001 * t);
     ServoSample {
         tick,
-        pose: ToolPose { tip_in_world: tip, world_from_tool: Rotation::from_euler_angles(0.1 * t, 0.2, 0.0), buttons: 1 },
+        pose: ToolPose {
+            tip_in_world: tip,
+            world_from_tool: Rotation::from_euler_angles(0.1 * t, 0.2, 0.0),
+            buttons: 1,
+        },
         render: RenderOutput {
             force_newtons: Vector3::new((3.0 * t).sin(), 0.5, 2.0 + t),
             proxy: tip + Vector3::new(0.0, 0.0, 0.001),
             mode,
             // The device is lost for ten ticks: two events (the fault, then its clearing).
-            faults: if (1000..1010).contains(&tick) { cutlab_haptics::render::fault::DEVICE_LOST } else { 0 },
+            faults: if (1000..1010).contains(&tick) {
+                cutlab_haptics::render::fault::DEVICE_LOST
+            } else {
+                0
+            },
             gain: 1.0,
         },
     }
@@ -53,13 +67,23 @@ fn sample(tick: u64) -> ServoSample {
 
 /// A unit square in the z = 0 plane, lifted by `h` at one corner.
 fn surface(step: u64, h: f64, split: bool) -> SurfaceSnapshot {
-    let mut vertices = vec![Point3::new(0.0, 0.0, 0.0), Point3::new(0.1, 0.0, 0.0), Point3::new(0.1, 0.1, h), Point3::new(0.0, 0.1, 0.0)];
+    let mut vertices = vec![
+        Point3::new(0.0, 0.0, 0.0),
+        Point3::new(0.1, 0.0, 0.0),
+        Point3::new(0.1, 0.1, h),
+        Point3::new(0.0, 0.1, 0.0),
+    ];
     let mut triangles = vec![[0, 1, 2], [0, 2, 3]];
     if split {
         vertices.push(Point3::new(0.05, 0.05, 0.0));
         triangles = vec![[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]];
     }
-    SurfaceSnapshot { step, tick: step, vertices, triangles }
+    SurfaceSnapshot {
+        step,
+        tick: step,
+        vertices,
+        triangles,
+    }
 }
 
 /// Rows per entity path (without the leading `/`), and the timelines seen on each.
@@ -78,9 +102,15 @@ fn decode(path: &Path) -> Decoded {
     let mut out = Decoded::default();
     for msg in decoder {
         let msg = msg.expect("a message decodes");
-        let LogMsg::ArrowMsg(_, arrow) = msg else { continue };
+        let LogMsg::ArrowMsg(_, arrow) = msg else {
+            continue;
+        };
         let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk decodes");
-        let path = chunk.entity_path().to_string().trim_start_matches('/').to_owned();
+        let path = chunk
+            .entity_path()
+            .to_string()
+            .trim_start_matches('/')
+            .to_owned();
         out.chunks += 1;
         *out.rows.entry(path.clone()).or_default() += chunk.num_rows();
         let names = out.timelines.entry(path.clone()).or_default();
@@ -92,7 +122,11 @@ fn decode(path: &Path) -> Decoded {
         }
         if path == paths::FORCE_NORM {
             let last = |name: &str| {
-                chunk.timelines().iter().find(|(n, _)| n.as_str() == name).and_then(|(_, c)| c.times_raw().last().copied())
+                chunk
+                    .timelines()
+                    .iter()
+                    .find(|(n, _)| n.as_str() == name)
+                    .and_then(|(_, c)| c.times_raw().last().copied())
             };
             if let (Some(tick), Some(nanos)) = (last(TIMELINE_TICK), last(TIMELINE_SIM_TIME))
                 && out.last_force_row.is_none_or(|(t, _)| tick > t)
@@ -107,30 +141,64 @@ fn decode(path: &Path) -> Decoded {
 #[test]
 fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
     let file = TempFile::new("session.rrd");
-    let mut sink = RerunSink::new(&RerunTarget::File(file.0.clone()), "cutlab-test", PERIOD_NANOS, 0.015).expect("sink");
-    sink.log_plan(&[Point3::new(0.0, 0.05, 0.0), Point3::new(0.1, 0.05, 0.0)]).expect("plan");
+    let mut sink = RerunSink::new(
+        &RerunTarget::File(file.0.clone()),
+        "cutlab-test",
+        PERIOD_NANOS,
+        0.015,
+    )
+    .expect("sink");
+    sink.log_plan(&[Point3::new(0.0, 0.05, 0.0), Point3::new(0.1, 0.05, 0.0)])
+        .expect("plan");
 
     let mut surfaces = 0;
     let mut events = 0;
     for tick in 0..TICKS {
         sink.on_tick(&sample(tick)).expect("tick");
         let step = tick; // lock-step: one simulation step per tick
-        sink.on_sim(&SimRecord::Step { step, tick, rejected: tick == 1500 }).expect("step");
+        sink.on_sim(&SimRecord::Step {
+            step,
+            tick,
+            rejected: tick == 1500,
+        })
+        .expect("step");
         if tick % 33 == 0 {
-            sink.on_sim(&SimRecord::Surface(Box::new(surface(step, 1e-6 * tick as f64, tick >= 2000)))).expect("surface");
+            sink.on_sim(&SimRecord::Surface(Box::new(surface(
+                step,
+                1e-6 * tick as f64,
+                tick >= 2000,
+            ))))
+            .expect("surface");
             surfaces += 1;
         }
         if tick == 2000 {
-            let blade = Blade { tip: Point3::new(0.05, 0.05, 0.0), edge_direction: Vector3::z(), depth_m: 0.01 };
-            let event = CutEvent { tets_removed: vec![1, 2], forced_splits: 1, ..CutEvent::default() };
-            sink.on_sim(&SimRecord::Cut { step, tick, blade, event: Box::new(event) }).expect("cut");
+            let blade = Blade {
+                tip: Point3::new(0.05, 0.05, 0.0),
+                edge_direction: Vector3::z(),
+                depth_m: 0.01,
+            };
+            let event = CutEvent {
+                tets_removed: vec![1, 2],
+                forced_splits: 1,
+                ..CutEvent::default()
+            };
+            sink.on_sim(&SimRecord::Cut {
+                step,
+                tick,
+                blade,
+                event: Box::new(event),
+            })
+            .expect("cut");
             events += 1;
         }
         if tick % 1000 == 999 {
             let keyframe = Keyframe {
                 step,
                 tick,
-                hash: StateHash { state: 0xdead_beef, topology: 42 },
+                hash: StateHash {
+                    state: 0xdead_beef,
+                    topology: 42,
+                },
                 positions: vec![Point3::origin(); 4],
                 velocities: vec![Vector3::zeros(); 4],
                 rest_positions: vec![Point3::origin(); 4],
@@ -138,7 +206,8 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
                 regions: vec![0],
                 resume: None,
             };
-            sink.on_sim(&SimRecord::Keyframe(Box::new(keyframe))).expect("keyframe");
+            sink.on_sim(&SimRecord::Keyframe(Box::new(keyframe)))
+                .expect("keyframe");
             events += 1;
         }
     }
@@ -149,23 +218,51 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
 
     let size = std::fs::metadata(&file.0).expect("the rrd exists").len();
     let decoded = decode(&file.0);
-    eprintln!("{TICKS} ticks, {surfaces} surfaces: {size} bytes, {} chunks, rows {:?}", decoded.chunks, decoded.rows);
+    eprintln!(
+        "{TICKS} ticks, {surfaces} surfaces: {size} bytes, {} chunks, rows {:?}",
+        decoded.chunks, decoded.rows
+    );
 
     assert!(decoded.chunks > 0);
-    for path in [paths::FORCE_X, paths::FORCE_Y, paths::FORCE_Z, paths::FORCE_NORM, paths::CONTACT_MODE, paths::CONTACT_PENETRATION] {
+    for path in [
+        paths::FORCE_X,
+        paths::FORCE_Y,
+        paths::FORCE_Z,
+        paths::FORCE_NORM,
+        paths::CONTACT_MODE,
+        paths::CONTACT_PENETRATION,
+    ] {
         // One static row of series styling, then one row per tick.
-        assert_eq!(decoded.rows.get(path).copied(), Some(TICKS as usize + 1), "rows of {path}");
+        assert_eq!(
+            decoded.rows.get(path).copied(),
+            Some(TICKS as usize + 1),
+            "rows of {path}"
+        );
         let timelines = &decoded.timelines[path];
-        assert!(timelines.iter().any(|t| t == TIMELINE_TICK) && timelines.iter().any(|t| t == TIMELINE_SIM_TIME), "{path}: {timelines:?}");
+        assert!(
+            timelines.iter().any(|t| t == TIMELINE_TICK)
+                && timelines.iter().any(|t| t == TIMELINE_SIM_TIME),
+            "{path}: {timelines:?}"
+        );
     }
     let last = TICKS as i64 - 1;
-    assert_eq!(decoded.last_force_row, Some((last, last * PERIOD_NANOS as i64)));
+    assert_eq!(
+        decoded.last_force_row,
+        Some((last, last * PERIOD_NANOS as i64))
+    );
     assert_eq!(decoded.rows.get(paths::TISSUE).copied(), Some(surfaces));
-    assert!(decoded.timelines[paths::TISSUE].iter().any(|t| t == TIMELINE_STEP));
+    assert!(
+        decoded.timelines[paths::TISSUE]
+            .iter()
+            .any(|t| t == TIMELINE_STEP)
+    );
     assert_eq!(decoded.rows.get(paths::EVENTS).copied(), Some(events));
     // The static axes, then ~30 Hz of transforms (every 33rd tick).
     let transforms = TICKS.div_ceil(33) as usize;
-    assert_eq!(decoded.rows.get(paths::SCALPEL).copied(), Some(1 + transforms));
+    assert_eq!(
+        decoded.rows.get(paths::SCALPEL).copied(),
+        Some(1 + transforms)
+    );
     assert_eq!(decoded.rows.get(paths::PROXY).copied(), Some(transforms));
     assert_eq!(decoded.rows.get(paths::BLADE).copied(), Some(1));
     assert_eq!(decoded.rows.get(paths::PLAN).copied(), Some(1));
@@ -174,7 +271,13 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
 #[test]
 fn a_short_session_is_sent_at_finish() {
     let file = TempFile::new("short.rrd");
-    let mut sink = RerunSink::new(&RerunTarget::File(file.0.clone()), "cutlab-test", PERIOD_NANOS, 0.015).expect("sink");
+    let mut sink = RerunSink::new(
+        &RerunTarget::File(file.0.clone()),
+        "cutlab-test",
+        PERIOD_NANOS,
+        0.015,
+    )
+    .expect("sink");
     for tick in 0..10 {
         sink.on_tick(&sample(tick)).expect("tick");
     }
@@ -187,7 +290,13 @@ fn a_short_session_is_sent_at_finish() {
 #[test]
 fn a_dropped_sink_still_sends_its_buffer_and_completes_the_file() {
     let file = TempFile::new("dropped.rrd");
-    let mut sink = RerunSink::new(&RerunTarget::File(file.0.clone()), "cutlab-test", PERIOD_NANOS, 0.015).expect("sink");
+    let mut sink = RerunSink::new(
+        &RerunTarget::File(file.0.clone()),
+        "cutlab-test",
+        PERIOD_NANOS,
+        0.015,
+    )
+    .expect("sink");
     for tick in 0..1500 {
         sink.on_tick(&sample(tick)).expect("tick");
     }
@@ -201,33 +310,63 @@ fn a_dropped_sink_still_sends_its_buffer_and_completes_the_file() {
 #[test]
 fn a_viewer_that_is_not_there_is_an_error_not_a_hang() {
     // A port nobody listens on.
-    let port = std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port").port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
     let target = RerunTarget::Connect(format!("rerun+http://127.0.0.1:{port}/proxy"));
     let started = std::time::Instant::now();
-    let mut sink = RerunSink::new(&target, "cutlab-test", PERIOD_NANOS, 0.015).expect("connecting is lazy");
+    let mut sink =
+        RerunSink::new(&target, "cutlab-test", PERIOD_NANOS, 0.015).expect("connecting is lazy");
     for tick in 0..200 {
-        sink.on_tick(&sample(tick)).expect("ticks are buffered or queued");
+        sink.on_tick(&sample(tick))
+            .expect("ticks are buffered or queued");
     }
     let result = sink.finish();
-    eprintln!("finish against no viewer: {result:?} after {:?}", started.elapsed());
+    eprintln!(
+        "finish against no viewer: {result:?} after {:?}",
+        started.elapsed()
+    );
     assert!(result.is_err(), "no viewer took the data");
     assert!(started.elapsed() < LIVE_FLUSH_TIMEOUT + Duration::from_secs(5));
 
-    let bad = RerunSink::new(&RerunTarget::Connect("not a url".into()), "cutlab-test", PERIOD_NANOS, 0.015);
+    let bad = RerunSink::new(
+        &RerunTarget::Connect("not a url".into()),
+        "cutlab-test",
+        PERIOD_NANOS,
+        0.015,
+    );
     assert!(matches!(bad, Err(RerunLogError::Stream(_))), "{bad:?}");
-    assert_eq!(RerunTarget::connect_default(), RerunTarget::Connect("rerun+http://127.0.0.1:9876/proxy".into()));
+    assert_eq!(
+        RerunTarget::connect_default(),
+        RerunTarget::Connect("rerun+http://127.0.0.1:9876/proxy".into())
+    );
 }
 
 #[test]
 fn settings_and_paths_are_checked() {
     let file = TempFile::new("never.rrd");
     let target = RerunTarget::File(file.0.clone());
-    assert!(matches!(RerunSink::new(&target, "cutlab-test", 0, 0.015), Err(RerunLogError::Settings(_))));
-    assert!(matches!(RerunSink::new(&target, "cutlab-test", PERIOD_NANOS, f64::NAN), Err(RerunLogError::Settings(_))));
+    assert!(matches!(
+        RerunSink::new(&target, "cutlab-test", 0, 0.015),
+        Err(RerunLogError::Settings(_))
+    ));
+    assert!(matches!(
+        RerunSink::new(&target, "cutlab-test", PERIOD_NANOS, f64::NAN),
+        Err(RerunLogError::Settings(_))
+    ));
     assert!(!file.0.exists(), "nothing is created for bad settings");
 
-    let missing = std::env::temp_dir().join("cutlab-no-such-directory").join("x.rrd");
-    let err = RerunSink::new(&RerunTarget::File(missing), "cutlab-test", PERIOD_NANOS, 0.015).expect_err("no directory");
+    let missing = std::env::temp_dir()
+        .join("cutlab-no-such-directory")
+        .join("x.rrd");
+    let err = RerunSink::new(
+        &RerunTarget::File(missing),
+        "cutlab-test",
+        PERIOD_NANOS,
+        0.015,
+    )
+    .expect_err("no directory");
     assert!(matches!(err, RerunLogError::Stream(_)), "{err}");
 }
 
@@ -244,7 +383,8 @@ fn spawning_without_a_viewer_on_path_is_an_error() {
     }
     if std::env::var_os(SPAWN_CHILD).is_some() {
         // PATH has no `rerun` here.
-        let err = RerunSink::new(&RerunTarget::Spawn, "cutlab-test", PERIOD_NANOS, 0.015).expect_err("no viewer on PATH");
+        let err = RerunSink::new(&RerunTarget::Spawn, "cutlab-test", PERIOD_NANOS, 0.015)
+            .expect_err("no viewer on PATH");
         let text = err.to_string();
         assert!(matches!(err, RerunLogError::Spawn(_)), "{text}");
         assert!(text.contains("PATH") && text.contains("install"), "{text}");
@@ -255,15 +395,26 @@ fn spawning_without_a_viewer_on_path_is_an_error() {
     let empty = TempFile::new("empty-path");
     std::fs::create_dir_all(&empty.0).expect("an empty directory");
     let out = std::process::Command::new(std::env::current_exe().expect("this test binary"))
-        .args(["--exact", "rerun_log::tests::spawning_without_a_viewer_on_path_is_an_error", "--nocapture"])
+        .args([
+            "--exact",
+            "rerun_log::tests::spawning_without_a_viewer_on_path_is_an_error",
+            "--nocapture",
+        ])
         .env("PATH", &empty.0)
         .env(SPAWN_CHILD, "1")
         .output()
         .expect("the child runs");
     let _ = std::fs::remove_dir(&empty.0);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "child failed:\n{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    assert!(stdout.contains("1 passed"), "the child did not run the test:\n{stdout}");
+    assert!(
+        out.status.success(),
+        "child failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("1 passed"),
+        "the child did not run the test:\n{stdout}"
+    );
 }
 
 #[test]
@@ -272,7 +423,10 @@ fn vertex_normals_are_unit_and_area_weighted() {
     let n = vertex_normals(&s.vertices, &s.triangles);
     assert_eq!(n.len(), 4);
     for v in &n {
-        assert!((v[2] - 1.0).abs() < 1e-6 && v[0].abs() < 1e-6 && v[1].abs() < 1e-6, "{v:?}");
+        assert!(
+            (v[2] - 1.0).abs() < 1e-6 && v[0].abs() < 1e-6 && v[1].abs() < 1e-6,
+            "{v:?}"
+        );
     }
     // A triangle with an index out of range is skipped, a vertex on no triangle gets zero.
     let mut vertices = s.vertices.clone();
@@ -284,15 +438,29 @@ fn vertex_normals_are_unit_and_area_weighted() {
 
 #[test]
 fn event_texts_carry_the_figures() {
-    let blade = Blade { tip: Point3::new(0.01, 0.02, 0.03), edge_direction: Vector3::z(), depth_m: 0.005 };
-    let e = CutEvent { tets_removed: vec![1; 12], tets_added: vec![(0, [0; 4]); 37], ..CutEvent::default() };
+    let blade = Blade {
+        tip: Point3::new(0.01, 0.02, 0.03),
+        edge_direction: Vector3::z(),
+        depth_m: 0.005,
+    };
+    let e = CutEvent {
+        tets_removed: vec![1; 12],
+        tets_added: vec![(0, [0; 4]); 37],
+        ..CutEvent::default()
+    };
     let text = cut_text(1234, &blade, &e);
-    assert!(text.starts_with("step 1234: cut: 12 tets split into 37,"), "{text}");
+    assert!(
+        text.starts_with("step 1234: cut: 12 tets split into 37,"),
+        "{text}"
+    );
     assert!(!text.contains("forced"));
     let k = Keyframe {
         step: 7,
         tick: 9,
-        hash: StateHash { state: 0xabc, topology: 0x1 },
+        hash: StateHash {
+            state: 0xabc,
+            topology: 0x1,
+        },
         positions: vec![],
         velocities: vec![],
         rest_positions: vec![],
@@ -301,5 +469,9 @@ fn event_texts_carry_the_figures() {
         resume: None,
     };
     let text = keyframe_text(&k);
-    assert!(text.contains("state hash 0000000000000abc") && text.contains("topology hash 0000000000000001"), "{text}");
+    assert!(
+        text.contains("state hash 0000000000000abc")
+            && text.contains("topology hash 0000000000000001"),
+        "{text}"
+    );
 }

@@ -49,7 +49,12 @@ impl Default for Cutter {
 
 impl Cutter {
     pub fn new(options: CutOptions) -> Self {
-        Self { options, window_m: 0.01, trail: VecDeque::new(), stroke: StrokeVertices::default() }
+        Self {
+            options,
+            window_m: 0.01,
+            trail: VecDeque::new(),
+            stroke: StrokeVertices::default(),
+        }
     }
 
     /// Ends the current stroke: the next pose starts a new one.
@@ -61,17 +66,25 @@ impl Cutter {
     /// What the next [`Self::advance`] depends on: the trail of poses, the stroke's vertices
     /// and the snapping distance derived from the first mesh cut.
     pub fn resume_state(&self) -> CutterResume {
-        CutterResume { trail: self.trail.iter().copied().collect(), stroke: self.stroke.members(), snap_distance_m: self.options.snap_distance_m }
+        CutterResume {
+            trail: self.trail.iter().copied().collect(),
+            stroke: self.stroke.members(),
+            snap_distance_m: self.options.snap_distance_m,
+        }
     }
 
     /// Continues a stroke captured by [`Self::resume_state`] (with this cutter's other options),
     /// over a mesh of `vertex_count` vertices.
     pub fn resume(&mut self, r: &CutterResume, vertex_count: usize) -> Result<(), String> {
-        if !r.trail.iter().all(Blade::is_finite) || !r.snap_distance_m.is_none_or(|d| d.is_finite() && d >= 0.0) {
+        if !r.trail.iter().all(Blade::is_finite)
+            || !r.snap_distance_m.is_none_or(|d| d.is_finite() && d >= 0.0)
+        {
             return Err("the cutter's trail or snapping distance is not finite".into());
         }
         if let Some(v) = r.stroke.iter().find(|&&v| v as usize >= vertex_count) {
-            return Err(format!("the stroke's vertex {v} is not one of the {vertex_count}"));
+            return Err(format!(
+                "the stroke's vertex {v} is not one of the {vertex_count}"
+            ));
         }
         self.trail = r.trail.iter().copied().collect();
         self.stroke = StrokeVertices::from_members(&r.stroke);
@@ -94,7 +107,9 @@ impl Cutter {
         // corners
         let min_spacing = self.window_m / 32.0;
         match self.trail.len() {
-            n if n >= 2 && (blade.tip - self.trail[n - 2].tip).norm() < min_spacing => self.trail[n - 1] = blade,
+            n if n >= 2 && (blade.tip - self.trail[n - 2].tip).norm() < min_spacing => {
+                self.trail[n - 1] = blade
+            }
             _ => self.trail.push_back(blade),
         }
         // keep the poses within the window behind the tip (at least the previous one)

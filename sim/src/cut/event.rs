@@ -72,6 +72,8 @@ impl Default for CutEvent {
 impl CutEvent {
     /// True when the cut changed nothing.
     pub fn is_empty(&self) -> bool {
-        self.tets_removed.is_empty() && self.vertices_moved.is_empty() && self.vertices_split.is_empty()
+        self.tets_removed.is_empty()
+            && self.vertices_moved.is_empty()
+            && self.vertices_split.is_empty()
     }
 }

@@ -22,7 +22,10 @@ pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
 
-use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, dihedral_angles, edge_key, sorted_pair, sorted_triple, tet_signed_volume};
+use crate::mesh::{
+    PARALLEL_MIN_TETS, TET_EDGES, TetMesh, dihedral_angles, edge_key, sorted_pair, sorted_triple,
+    tet_signed_volume,
+};
 use crate::model::ModelError;
 use crate::solver::Simulation;
 use crate::{MeshError, Point3, Vector3};
@@ -55,7 +58,11 @@ pub struct CutOptions {
 
 impl Default for CutOptions {
     fn default() -> Self {
-        Self { pattern: PatternChoice::MinMu, snap: 0.15, snap_distance_m: None }
+        Self {
+            pattern: PatternChoice::MinMu,
+            snap: 0.15,
+            snap_distance_m: None,
+        }
     }
 }
 
@@ -78,7 +85,13 @@ pub enum CutError {
 /// its plane, or come within `near` times their longest edge of it (where vertices of the
 /// stroke's cut that drifted off the plane still count as on it). The two halves of a large
 /// mesh are scanned side by side.
-fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin: f64, near: f64) -> Vec<u32> {
+fn candidates(
+    mesh_tets: &[[u32; 4]],
+    x: &[Point3],
+    polygon: &CutPolygon,
+    margin: f64,
+    near: f64,
+) -> Vec<u32> {
     // A tet's bounds miss the polygon's inflated bounds exactly when all four of its vertices
     // lie beyond the same side of them (the tet's least coordinate above the box's greatest,
     // or its greatest below the box's least): each vertex's sides, one bit each, are found
@@ -86,7 +99,12 @@ fn candidates(mesh_tets: &[[u32; 4]], x: &[Point3], polygon: &CutPolygon, margin
     let (lo, hi) = polygon.bounds();
     let beyond: Vec<u8> = x
         .iter()
-        .map(|q| (0..3).fold(0u8, |m, k| m | (u8::from(q[k] > hi[k] + margin) << k) | (u8::from(q[k] < lo[k] - margin) << (k + 3))))
+        .map(|q| {
+            (0..3).fold(0u8, |m, k| {
+                m | (u8::from(q[k] > hi[k] + margin) << k)
+                    | (u8::from(q[k] < lo[k] - margin) << (k + 3))
+            })
+        })
         .collect();
     let (count, half) = (mesh_tets.len(), mesh_tets.len() / 2);
     let (mut first, second) = crate::solver::system::join(
@@ -110,15 +128,28 @@ fn candidates_in(
     near: f64,
 ) -> Vec<u32> {
     let mut out = Vec::new();
-    for (t, tet) in mesh_tets.iter().enumerate().skip(range.start).take(range.len()) {
+    for (t, tet) in mesh_tets
+        .iter()
+        .enumerate()
+        .skip(range.start)
+        .take(range.len())
+    {
         if tet.iter().fold(u8::MAX, |m, &v| m & beyond[v as usize]) != 0 {
             continue;
         }
         let p = tet.map(|v| x[v as usize]);
         let s = p.map(|q| polygon.signed_distance(&q));
-        let (smin, smax) = s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let (smin, smax) = s
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
         let reach = if near > 0.0 {
-            let longest = TET_EDGES.iter().map(|&[i, j]| (p[i] - p[j]).norm_squared()).fold(0.0, f64::max).sqrt();
+            let longest = TET_EDGES
+                .iter()
+                .map(|&[i, j]| (p[i] - p[j]).norm_squared())
+                .fold(0.0, f64::max)
+                .sqrt();
             margin.max(near * longest)
         } else {
             margin
@@ -165,7 +196,12 @@ impl StrokeVertices {
 
     /// The members, ascending.
     pub fn members(&self) -> Vec<u32> {
-        self.member.iter().enumerate().filter(|(_, m)| **m).map(|(v, _)| v as u32).collect()
+        self.member
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| **m)
+            .map(|(v, _)| v as u32)
+            .collect()
     }
 
     /// The stroke whose members are `vertices`.
@@ -177,7 +213,11 @@ impl StrokeVertices {
 }
 
 /// Cuts the simulation's tissue along a planar polygon C.
-pub fn cut(sim: &mut Simulation, polygon: &CutPolygon, options: &CutOptions) -> Result<CutEvent, CutError> {
+pub fn cut(
+    sim: &mut Simulation,
+    polygon: &CutPolygon,
+    options: &CutOptions,
+) -> Result<CutEvent, CutError> {
     cut_remembering(sim, polygon, options, &mut StrokeVertices::default())
 }
 
@@ -192,7 +232,11 @@ pub fn cut_remembering(
     let mesh = &sim.model.mesh;
     let n = mesh.vertex_count();
     let margin = 1e-9 * polygon.scale;
-    let near = if stroke.is_empty() { 0.0 } else { resolve::near_fraction(options.snap) };
+    let near = if stroke.is_empty() {
+        0.0
+    } else {
+        resolve::near_fraction(options.snap)
+    };
     let cand = candidates(mesh.tets(), &sim.state.positions, polygon, margin, near);
     let mut event = CutEvent::default();
     if cand.is_empty() {
@@ -228,7 +272,10 @@ pub fn cut_remembering(
         let topo = mesh.topology();
         let mut extra: BTreeSet<u32> = BTreeSet::new();
         for cr in class.crossings.values().filter(|c| c.split) {
-            extra.extend(topo.tets_of_edge(cr.edge).filter(|t| cand.binary_search(t).is_err()));
+            extra.extend(
+                topo.tets_of_edge(cr.edge)
+                    .filter(|t| cand.binary_search(t).is_err()),
+            );
         }
         if extra.is_empty() {
             break class;
@@ -236,10 +283,18 @@ pub fn cut_remembering(
         cand.extend(extra);
         cand.sort_unstable();
     };
-    let class = resolve::Classification { moved: moved_all, forced: forced_all, ..class };
+    let class = resolve::Classification {
+        moved: moved_all,
+        forced: forced_all,
+        ..class
+    };
     event.forced_splits = class.forced;
     for &(id, from, to) in &class.moved {
-        event.vertices_moved.push(MovedVertex { id, from: from.coords.into(), to: to.coords.into() });
+        event.vertices_moved.push(MovedVertex {
+            id,
+            from: from.coords.into(),
+            to: to.coords.into(),
+        });
     }
 
     // New vertices on split edges.
@@ -252,7 +307,11 @@ pub fn cut_remembering(
         vel.push(vel[a] + (vel[b] - vel[a]) * cr.t);
         held.push(false);
         split_id.insert(cr.edge, id);
-        event.vertices_created.push(CreatedVertex { id, edge: cr.edge, t: cr.t });
+        event.vertices_created.push(CreatedVertex {
+            id,
+            edge: cr.edge,
+            t: cr.t,
+        });
     }
 
     // Tetrahedra to split, and faces lying in the plane inside C.
@@ -277,10 +336,25 @@ pub fn cut_remembering(
             if split_count != crossing {
                 return Err(CutError::Unresolved(t));
             }
-            splits.push((t, TetSplit { verts, signs, split }));
+            splits.push((
+                t,
+                TetSplit {
+                    verts,
+                    signs,
+                    split,
+                },
+            ));
         } else if signs.iter().filter(|&&s| s == 0).count() == 3 {
-            let face: Vec<u32> = (0..4).filter(|&l| signs[l] == 0).map(|l| verts[l]).collect();
-            let c = Point3::from((x[face[0] as usize].coords + x[face[1] as usize].coords + x[face[2] as usize].coords) / 3.0);
+            let face: Vec<u32> = (0..4)
+                .filter(|&l| signs[l] == 0)
+                .map(|l| verts[l])
+                .collect();
+            let c = Point3::from(
+                (x[face[0] as usize].coords
+                    + x[face[1] as usize].coords
+                    + x[face[2] as usize].coords)
+                    / 3.0,
+            );
             if polygon.contains_projection(&c, 1e-9 * polygon.scale) {
                 cut_faces.insert(sorted_triple([face[0], face[1], face[2]]));
             }
@@ -289,11 +363,15 @@ pub fn cut_remembering(
 
     // Children with conforming diagonals.
     let children = match options.pattern {
-        PatternChoice::MinMu => choose_min_mu(&splits, &x, &x_ref).or_else(|| choose_fixed(&splits, &x_ref)),
+        PatternChoice::MinMu => {
+            choose_min_mu(&splits, &x, &x_ref).or_else(|| choose_fixed(&splits, &x_ref))
+        }
         PatternChoice::MinVertexId => choose_fixed(&splits, &x_ref),
     };
     let Some(children) = children else {
-        return Err(CutError::Unresolved(splits.first().map(|s| s.0).unwrap_or(0)));
+        return Err(CutError::Unresolved(
+            splits.first().map(|s| s.0).unwrap_or(0),
+        ));
     };
 
     // (copied only when a tet is split: most steps of a stroke change no tet)
@@ -303,8 +381,9 @@ pub fn cut_remembering(
         let parent_volume = mesh.tet_volume(*t as usize);
         for (k, c) in ch.tets.iter().enumerate() {
             let [a, b, cc, d] = c.map(|v| x_ref[v as usize]);
-            event.min_child_volume_fraction =
-                event.min_child_volume_fraction.min(tet_signed_volume(&a, &b, &cc, &d) / parent_volume);
+            event.min_child_volume_fraction = event
+                .min_child_volume_fraction
+                .min(tet_signed_volume(&a, &b, &cc, &d) / parent_volume);
             let id = if k == 0 {
                 tets.to_mut()[*t as usize] = *c;
                 *t
@@ -330,7 +409,12 @@ pub fn cut_remembering(
         for &v in on_cut {
             let star = stars.entry(v).or_default();
             if (v as usize) < n {
-                star.extend(topo.vertex_tets.row(v as usize).iter().filter(|&&t| tets[t as usize].contains(&v)));
+                star.extend(
+                    topo.vertex_tets
+                        .row(v as usize)
+                        .iter()
+                        .filter(|&&t| tets[t as usize].contains(&v)),
+                );
             }
         }
         for (id, c) in &event.tets_added {
@@ -376,16 +460,32 @@ pub fn cut_remembering(
                 }
             }
         }
-        let original = |v: u32| if (v as usize) < base_vertices { v } else { original_of[v as usize - base_vertices] };
+        let original = |v: u32| {
+            if (v as usize) < base_vertices {
+                v
+            } else {
+                original_of[v as usize - base_vertices]
+            }
+        };
         let local: BTreeSet<u32> = stars.values().flatten().copied().collect();
         let pinched = separate::pinched_edges(&tets, &local, &|v| on_cut.contains(&original(v)));
         if pinched.is_empty() {
             break;
         }
-        let pinched: BTreeSet<[u32; 2]> = pinched.iter().map(|e| sorted_pair(original(e[0]), original(e[1]))).collect();
+        let pinched: BTreeSet<[u32; 2]> = pinched
+            .iter()
+            .map(|e| sorted_pair(original(e[0]), original(e[1])))
+            .collect();
         let before = cut_faces.len();
-        let kept: BTreeSet<[u32; 3]> =
-            cut_faces.iter().filter(|f| !pinched.iter().any(|e| f.contains(&e[0]) && f.contains(&e[1]))).copied().collect();
+        let kept: BTreeSet<[u32; 3]> = cut_faces
+            .iter()
+            .filter(|f| {
+                !pinched
+                    .iter()
+                    .any(|e| f.contains(&e[0]) && f.contains(&e[1]))
+            })
+            .copied()
+            .collect();
         if kept.len() == before {
             break; // not ours to fix: the invariant checks will report it
         }
@@ -406,21 +506,35 @@ pub fn cut_remembering(
         x_ref.push(x_ref[*v as usize]);
         vel.push(vel[*v as usize]);
         held.push(held[*v as usize]);
-        event.vertices_split.push(SplitVertex { original: *v, copy });
+        event
+            .vertices_split
+            .push(SplitVertex { original: *v, copy });
     }
     let tets = tets.into_owned();
-    event.tets_relinked = relinked.into_iter().map(|t| (t, tets[t as usize])).collect();
+    event.tets_relinked = relinked
+        .into_iter()
+        .map(|t| (t, tets[t as usize]))
+        .collect();
 
     // Commit: new mesh, rebuilt model, extended state.
     // only the split parents (replaced in place by a child) and the relinked tets changed
-    let mut changed: Vec<u32> = event.tets_removed.iter().copied().chain(event.tets_relinked.iter().map(|(t, _)| *t)).collect();
+    let mut changed: Vec<u32> = event
+        .tets_removed
+        .iter()
+        .copied()
+        .chain(event.tets_relinked.iter().map(|(t, _)| *t))
+        .collect();
     changed.retain(|&t| (t as usize) < old_tet_count);
     changed.sort_unstable();
     changed.dedup();
     let new_mesh = TetMesh::with_changes(mesh, x_ref, tets, regions.into_owned(), &changed)?;
     // the masses and springs to derive again: those of the changed and new tets, and of the
     // tets around the vertices moved onto the plane (their reference geometry changed)
-    let mut dirty: Vec<u32> = changed.iter().copied().chain(old_tet_count as u32..new_mesh.tet_count() as u32).collect();
+    let mut dirty: Vec<u32> = changed
+        .iter()
+        .copied()
+        .chain(old_tet_count as u32..new_mesh.tet_count() as u32)
+        .collect();
     for &(v, _, _) in &class.moved {
         dirty.extend_from_slice(new_mesh.topology().vertex_tets.row(v as usize));
     }
@@ -428,7 +542,8 @@ pub fn cut_remembering(
     dirty.dedup();
     // the springs are the edges: those lost are among the changed tets' old edges, those
     // gained among the dirty tets' new ones
-    let old_edges = (sim.model.springs.ends != mesh.topology().edges).then(|| sim.model.springs.ends.clone());
+    let old_edges =
+        (sim.model.springs.ends != mesh.topology().edges).then(|| sim.model.springs.ends.clone());
     if old_edges.is_none() {
         let (old, new) = (mesh.topology(), new_mesh.topology());
         event.springs_removed = new.lacking_edges(mesh.tets(), &changed);
@@ -504,12 +619,20 @@ fn mu(ch: &Children, x: &[Point3]) -> f64 {
     if lo > 0.0 { hi / lo } else { f64::INFINITY }
 }
 
-fn choose_min_mu(splits: &[(u32, TetSplit)], x: &[Point3], x_ref: &[Point3]) -> Option<Vec<Children>> {
+fn choose_min_mu(
+    splits: &[(u32, TetSplit)],
+    x: &[Point3],
+    x_ref: &[Point3],
+) -> Option<Vec<Children>> {
     let mut fixed: BTreeMap<QuadKey, [u32; 2]> = BTreeMap::new();
     let mut out = Vec::with_capacity(splits.len());
     for (_, s) in splits {
         let quads = s.quads();
-        let mut free: Vec<QuadKey> = quads.iter().filter(|q| !fixed.contains_key(&q.key)).map(|q| q.key).collect();
+        let mut free: Vec<QuadKey> = quads
+            .iter()
+            .filter(|q| !fixed.contains_key(&q.key))
+            .map(|q| q.key)
+            .collect();
         free.sort_unstable();
         free.dedup();
         let mut best: Option<(f64, Children, u32)> = None;
@@ -521,7 +644,9 @@ fn choose_min_mu(splits: &[(u32, TetSplit)], x: &[Point3], x_ref: &[Point3]) -> 
                 let bit = free.iter().position(|k| *k == q.key).unwrap_or(0);
                 q.diagonals()[((mask >> bit) & 1) as usize]
             };
-            let Some(mut ch) = s.children(&choice) else { continue };
+            let Some(mut ch) = s.children(&choice) else {
+                continue;
+            };
             if !orient(&mut ch, x, x_ref) {
                 continue;
             }
@@ -568,7 +693,11 @@ pub fn wound_gaps(sim: &Simulation) -> Vec<(Point3, f64)> {
 
 /// A vector helper for callers building blades.
 pub fn blade(tip: Point3, edge_direction: Vector3, depth_m: f64) -> Blade {
-    Blade { tip, edge_direction: edge_direction.normalize(), depth_m }
+    Blade {
+        tip,
+        edge_direction: edge_direction.normalize(),
+        depth_m,
+    }
 }
 
 #[cfg(test)]
@@ -577,9 +706,18 @@ mod tests {
 
     #[test]
     fn sorted_difference_is_the_set_difference() {
-        let a: Vec<[u32; 2]> = (0..200u32).filter(|i| i % 3 != 0).map(|i| [i / 7, i]).collect();
-        let b: Vec<[u32; 2]> = (0..200u32).filter(|i| i % 2 == 0).map(|i| [i / 7, i]).chain([[99, 999]]).collect();
-        let naive = |a: &[[u32; 2]], b: &[[u32; 2]]| -> Vec<[u32; 2]> { a.iter().filter(|e| !b.contains(e)).copied().collect() };
+        let a: Vec<[u32; 2]> = (0..200u32)
+            .filter(|i| i % 3 != 0)
+            .map(|i| [i / 7, i])
+            .collect();
+        let b: Vec<[u32; 2]> = (0..200u32)
+            .filter(|i| i % 2 == 0)
+            .map(|i| [i / 7, i])
+            .chain([[99, 999]])
+            .collect();
+        let naive = |a: &[[u32; 2]], b: &[[u32; 2]]| -> Vec<[u32; 2]> {
+            a.iter().filter(|e| !b.contains(e)).copied().collect()
+        };
         assert_eq!(sorted_difference(&a, &b), naive(&a, &b));
         assert_eq!(sorted_difference(&b, &a), naive(&b, &a));
         assert_eq!(sorted_difference(&a, &[]), a);

@@ -38,7 +38,10 @@ pub struct Quad {
 impl Quad {
     /// The two possible diagonals, as sorted vertex pairs.
     pub fn diagonals(&self) -> [[u32; 2]; 2] {
-        [sorted_pair(self.ring[0], self.ring[2]), sorted_pair(self.ring[1], self.ring[3])]
+        [
+            sorted_pair(self.ring[0], self.ring[2]),
+            sorted_pair(self.ring[1], self.ring[3]),
+        ]
     }
 
     /// The diagonal through the smallest vertex id (the fixed rule).
@@ -67,7 +70,10 @@ pub struct Children {
 
 impl TetSplit {
     fn x(&self, i: usize, j: usize) -> u32 {
-        let e = TET_EDGES.iter().position(|&[a, b]| (a, b) == (i.min(j), i.max(j))).unwrap_or(0);
+        let e = TET_EDGES
+            .iter()
+            .position(|&[a, b]| (a, b) == (i.min(j), i.max(j)))
+            .unwrap_or(0);
         self.split[e]
     }
 
@@ -108,7 +114,10 @@ impl TetSplit {
                 (0..3)
                     .map(|i| {
                         let (qi, qj) = (q[i], q[(i + 1) % 3]);
-                        Quad { key: self.face([a, qi, qj]), ring: [self.x(a, qi), self.x(a, qj), v(qj), v(qi)] }
+                        Quad {
+                            key: self.face([a, qi, qj]),
+                            ring: [self.x(a, qi), self.x(a, qj), v(qj), v(qi)],
+                        }
                     })
                     .collect()
             }
@@ -116,17 +125,38 @@ impl TetSplit {
                 let (a, b, c, d) = (p[0], p[1], n[0], n[1]);
                 let (xac, xad, xbc, xbd) = (self.x(a, c), self.x(a, d), self.x(b, c), self.x(b, d));
                 vec![
-                    Quad { key: self.face([a, b, c]), ring: [v(a), xac, xbc, v(b)] },
-                    Quad { key: self.face([a, b, d]), ring: [xad, v(a), v(b), xbd] },
-                    Quad { key: self.face([a, c, d]), ring: [v(c), xac, xad, v(d)] },
-                    Quad { key: self.face([b, c, d]), ring: [xbc, v(c), v(d), xbd] },
-                    Quad { key: QuadKey::Section, ring: [xac, xad, xbd, xbc] },
-                    Quad { key: QuadKey::Section, ring: [xac, xbc, xbd, xad] },
+                    Quad {
+                        key: self.face([a, b, c]),
+                        ring: [v(a), xac, xbc, v(b)],
+                    },
+                    Quad {
+                        key: self.face([a, b, d]),
+                        ring: [xad, v(a), v(b), xbd],
+                    },
+                    Quad {
+                        key: self.face([a, c, d]),
+                        ring: [v(c), xac, xad, v(d)],
+                    },
+                    Quad {
+                        key: self.face([b, c, d]),
+                        ring: [xbc, v(c), v(d), xbd],
+                    },
+                    Quad {
+                        key: QuadKey::Section,
+                        ring: [xac, xad, xbd, xbc],
+                    },
+                    Quad {
+                        key: QuadKey::Section,
+                        ring: [xac, xbc, xbd, xad],
+                    },
                 ]
             }
             (1, 2, 1) => {
                 let (a, b, c) = (p[0], n[0], n[1]);
-                vec![Quad { key: self.face([a, b, c]), ring: [self.x(a, b), v(b), v(c), self.x(a, c)] }]
+                vec![Quad {
+                    key: self.face([a, b, c]),
+                    ring: [self.x(a, b), v(b), v(c), self.x(a, c)],
+                }]
             }
             _ => Vec::new(),
         }
@@ -149,16 +179,28 @@ impl TetSplit {
                 let a = p[0];
                 let xs = [self.x(a, n[0]), self.x(a, n[1]), self.x(a, n[2])];
                 out.tets.push([v(a), xs[0], xs[1], xs[2]]);
-                out.tets.extend(prism(xs, [v(n[0]), v(n[1]), v(n[2])], [diag(0), diag(1), diag(2)])?);
+                out.tets.extend(prism(
+                    xs,
+                    [v(n[0]), v(n[1]), v(n[2])],
+                    [diag(0), diag(1), diag(2)],
+                )?);
                 out.section.push(xs);
             }
             (2, 2, 0) => {
                 let (a, b, c, d) = (p[0], p[1], n[0], n[1]);
                 let (xac, xad, xbc, xbd) = (self.x(a, c), self.x(a, d), self.x(b, c), self.x(b, d));
                 // positive prism (a, xac, xad) - (b, xbc, xbd): quads [a b c], section, [a b d]
-                out.tets.extend(prism([v(a), xac, xad], [v(b), xbc, xbd], [diag(0), diag(4), diag(1)])?);
+                out.tets.extend(prism(
+                    [v(a), xac, xad],
+                    [v(b), xbc, xbd],
+                    [diag(0), diag(4), diag(1)],
+                )?);
                 // negative prism (c, xac, xbc) - (d, xad, xbd): quads [a c d], section, [b c d]
-                out.tets.extend(prism([v(c), xac, xbc], [v(d), xad, xbd], [diag(2), diag(5), diag(3)])?);
+                out.tets.extend(prism(
+                    [v(c), xac, xbc],
+                    [v(d), xad, xbd],
+                    [diag(2), diag(5), diag(3)],
+                )?);
                 let [s, t] = diag(4);
                 for o in quads[4].ring.into_iter().filter(|&w| w != s && w != t) {
                     out.section.push(sorted_triple([s, t, o]));
@@ -265,7 +307,11 @@ mod tests {
                 assert!(s.windows(2).all(|w| w[0] != w[1]), "{tet:?}");
             }
             for dd in d {
-                assert!(t.iter().any(|tet| tet.contains(&dd[0]) && tet.contains(&dd[1])), "{d:?} {t:?}");
+                assert!(
+                    t.iter()
+                        .any(|tet| tet.contains(&dd[0]) && tet.contains(&dd[1])),
+                    "{d:?} {t:?}"
+                );
             }
         }
         assert_eq!(count, 6);

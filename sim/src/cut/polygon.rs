@@ -17,7 +17,13 @@ impl Blade {
     /// radius `radius_m` (the surface `z = sqrt(r^2 - x^2) - r`), at `x_m` along the slab and
     /// `y_m` across it, its tip `depth_m` below the surface and its edge reaching `above_m`
     /// above it: the demo's incision across the chest wall.
-    pub fn normal_to_curved_slab(x_m: f64, y_m: f64, radius_m: f64, depth_m: f64, above_m: f64) -> Self {
+    pub fn normal_to_curved_slab(
+        x_m: f64,
+        y_m: f64,
+        radius_m: f64,
+        depth_m: f64,
+        above_m: f64,
+    ) -> Self {
         let z_top = (radius_m * radius_m - x_m * x_m).sqrt() - radius_m;
         let outward = Vector3::new(x_m, 0.0, z_top + radius_m).normalize();
         let tip = Point3::new(x_m, y_m, z_top) - outward * depth_m;
@@ -31,7 +37,10 @@ impl Blade {
 
     /// True when every number is finite and the depth positive.
     pub fn is_finite(&self) -> bool {
-        self.tip.iter().chain(self.edge_direction.iter()).all(|c| c.is_finite())
+        self.tip
+            .iter()
+            .chain(self.edge_direction.iter())
+            .all(|c| c.is_finite())
             && self.depth_m.is_finite()
             && self.depth_m > 0.0
             && self.edge_direction.norm() > 0.0
@@ -78,11 +87,25 @@ impl CutPolygon {
         }
         let normal = normal / area2;
         let offset = normal.dot(&centroid);
-        let projected: Vec<Point3> = corners.iter().map(|p| p - normal * (normal.dot(&p.coords) - offset)).collect();
+        let projected: Vec<Point3> = corners
+            .iter()
+            .map(|p| p - normal * (normal.dot(&p.coords) - offset))
+            .collect();
         let u = (projected[1] - projected[0]).normalize();
         let v = normal.cross(&u);
-        let corners_2d = projected.iter().map(|p| [u.dot(&p.coords), v.dot(&p.coords)]).collect();
-        Some(Self { corners: projected, normal, offset, u, v, corners_2d, scale })
+        let corners_2d = projected
+            .iter()
+            .map(|p| [u.dot(&p.coords), v.dot(&p.coords)])
+            .collect();
+        Some(Self {
+            corners: projected,
+            normal,
+            offset,
+            u,
+            v,
+            corners_2d,
+            scale,
+        })
     }
 
     /// Signed distance of `p` from the plane.
@@ -107,7 +130,10 @@ impl CutPolygon {
                 }
             }
         }
-        inside || (0..n).any(|i| segment_distance_2d(q, self.corners_2d[i], self.corners_2d[(i + 1) % n]) <= tol)
+        inside
+            || (0..n).any(|i| {
+                segment_distance_2d(q, self.corners_2d[i], self.corners_2d[(i + 1) % n]) <= tol
+            })
     }
 
     /// Axis-aligned bounds of the polygon.
@@ -120,7 +146,11 @@ fn segment_distance_2d(q: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
     let ab = [b[0] - a[0], b[1] - a[1]];
     let aq = [q[0] - a[0], q[1] - a[1]];
     let len2 = ab[0] * ab[0] + ab[1] * ab[1];
-    let t = if len2 > 0.0 { ((aq[0] * ab[0] + aq[1] * ab[1]) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        ((aq[0] * ab[0] + aq[1] * ab[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let d = [aq[0] - t * ab[0], aq[1] - t * ab[1]];
     (d[0] * d[0] + d[1] * d[1]).sqrt()
 }
@@ -143,6 +173,13 @@ mod tests {
         assert!(!c.contains_projection(&Point3::new(1.5, 0.5, 1.0), 0.0));
         assert!(c.contains_projection(&Point3::new(1.05, 0.5, 1.0), 0.1));
         assert!((c.signed_distance(&Point3::new(0.3, 0.3, 3.0)).abs() - 2.0).abs() < 1e-15);
-        assert!(CutPolygon::new(&[Point3::origin(), Point3::new(1.0, 0.0, 0.0), Point3::new(2.0, 0.0, 0.0)]).is_none());
+        assert!(
+            CutPolygon::new(&[
+                Point3::origin(),
+                Point3::new(1.0, 0.0, 0.0),
+                Point3::new(2.0, 0.0, 0.0)
+            ])
+            .is_none()
+        );
     }
 }

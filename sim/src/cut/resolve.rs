@@ -31,7 +31,10 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use super::CutPolygon;
-use crate::mesh::{TET_EDGES, TET_FACES, TetMesh, edge_key, face_key, tet_signed_volume, tet_volume_gradients, triangle_normal};
+use crate::mesh::{
+    TET_EDGES, TET_FACES, TetMesh, edge_key, face_key, tet_signed_volume, tet_volume_gradients,
+    triangle_normal,
+};
 use crate::{Point3, Vector3};
 
 /// A moved vertex keeps every tetrahedron around it at no less than this fraction of its
@@ -110,7 +113,11 @@ impl Resolver<'_> {
         for &t in self.candidates {
             for &v in &self.mesh.tets()[t as usize] {
                 dist.entry(v).or_insert_with(|| {
-                    if on_plane.contains(&v) { 0.0 } else { self.plane.signed_distance(&self.x[v as usize]) }
+                    if on_plane.contains(&v) {
+                        0.0
+                    } else {
+                        self.plane.signed_distance(&self.x[v as usize])
+                    }
                 });
             }
         }
@@ -131,8 +138,16 @@ impl Resolver<'_> {
                 // plane, so that no child is a sliver.
                 let tt = (sa / (sa - sb)).clamp(MIN_EDGE_FRACTION, 1.0 - MIN_EDGE_FRACTION);
                 let p = self.x[a as usize] + (self.x[b as usize] - self.x[a as usize]) * tt;
-                let split = forced.contains(&[a, b]) || self.plane.contains_projection(&p, self.inside_tolerance);
-                c.crossings.insert([a, b], Crossing { edge: [a, b], t: tt, split });
+                let split = forced.contains(&[a, b])
+                    || self.plane.contains_projection(&p, self.inside_tolerance);
+                c.crossings.insert(
+                    [a, b],
+                    Crossing {
+                        edge: [a, b],
+                        t: tt,
+                        split,
+                    },
+                );
             }
         }
         c
@@ -143,7 +158,8 @@ impl Resolver<'_> {
     fn within_reach(&self, cr: &Crossing) -> bool {
         let [a, b] = cr.edge.map(|v| self.x[v as usize]);
         let p = a + (b - a) * cr.t;
-        self.plane.contains_projection(&p, FORCE_REACH * (b - a).norm())
+        self.plane
+            .contains_projection(&p, FORCE_REACH * (b - a).norm())
     }
 
     /// True when `v` lies nearer the plane than the snapping distance.
@@ -258,7 +274,9 @@ impl Resolver<'_> {
         let mut gradients: Vec<(u32, Vector3, f64)> = Vec::new();
         for &t in topo.vertex_tets.row(v as usize) {
             let tet = self.mesh.tets()[t as usize];
-            let Some(l) = tet.iter().position(|&w| w == v) else { continue };
+            let Some(l) = tet.iter().position(|&w| w == v) else {
+                continue;
+            };
             let g = tet_volume_gradients(&tet.map(|w| self.x_ref[w as usize]))[l];
             let r = regions[t as usize];
             match gradients.iter_mut().find(|e| e.0 == r) {
@@ -289,7 +307,9 @@ impl Resolver<'_> {
         for &t in topo.vertex_tets.row(v as usize) {
             let tet = self.mesh.tets()[t as usize];
             for (l, f) in TET_FACES.iter().enumerate() {
-                if !f.iter().any(|&k| tet[k] == v) || topo.tets_of_face(face_key(&tet, l)).nth(1).is_some() {
+                if !f.iter().any(|&k| tet[k] == v)
+                    || topo.tets_of_face(face_key(&tet, l)).nth(1).is_some()
+                {
                     continue;
                 }
                 let p = f.map(|k| x[tet[k] as usize]);
@@ -304,7 +324,11 @@ impl Resolver<'_> {
         }
         let mean = normals.iter().sum::<Vector3>().normalize();
         // nearly flat: a crease or corner keeps its shape
-        if normals.iter().all(|n| n.dot(&mean) > 0.98) { Some(Some(mean)) } else { None }
+        if normals.iter().all(|n| n.dot(&mean) > 0.98) {
+            Some(Some(mean))
+        } else {
+            None
+        }
     }
 
     /// True when moving `v` by (dx, dref) keeps every tetrahedron around it healthy.
@@ -314,7 +338,13 @@ impl Resolver<'_> {
             let tet = self.mesh.tets()[t as usize];
             for (pos, d) in [(&*self.x, dx), (&*self.x_ref, dref)] {
                 let before = tet.map(|w| pos[w as usize]);
-                let after = tet.map(|w| if w == v { pos[w as usize] + d } else { pos[w as usize] });
+                let after = tet.map(|w| {
+                    if w == v {
+                        pos[w as usize] + d
+                    } else {
+                        pos[w as usize]
+                    }
+                });
                 let v0 = tet_signed_volume(&before[0], &before[1], &before[2], &before[3]);
                 let v1 = tet_signed_volume(&after[0], &after[1], &after[2], &after[3]);
                 if !(v1 >= MIN_VOLUME_KEPT * v0.abs()) || v0 <= 0.0 {
@@ -326,7 +356,12 @@ impl Resolver<'_> {
     }
 
     /// Moves `v` by `delta` if that keeps its tetrahedra healthy; records the move.
-    fn apply(&mut self, v: u32, delta: Option<(Vector3, Vector3)>, moved: &mut Vec<(u32, Point3, Point3)>) -> bool {
+    fn apply(
+        &mut self,
+        v: u32,
+        delta: Option<(Vector3, Vector3)>,
+        moved: &mut Vec<(u32, Point3, Point3)>,
+    ) -> bool {
         match delta {
             Some((dx, dref)) if self.movement_ok(v, &dx, &dref) => {
                 let from = self.x[v as usize];
@@ -350,7 +385,8 @@ impl Resolver<'_> {
                 if self.stroke.contains(v)
                     && !on_plane.contains(&v)
                     && self.plane.signed_distance(&self.x[v as usize]).abs()
-                        <= (near_fraction(self.snap) * self.shortest_edge(v)).max(self.snap_distance_m)
+                        <= (near_fraction(self.snap) * self.shortest_edge(v))
+                            .max(self.snap_distance_m)
                 {
                     on_plane.insert(v);
                 }
@@ -367,7 +403,11 @@ impl Resolver<'_> {
             // (a crossing just past B counts too: the vertex beside it joins the cut, as in 1.
             // below, or a layer of vertices just beyond the blade's tip would stay off the
             // plane, no face of that layer would lie on it, and the cut would never separate)
-            for cr in c.crossings.values().filter(|cr| cr.split || self.within_reach(cr)) {
+            for cr in c
+                .crossings
+                .values()
+                .filter(|cr| cr.split || self.within_reach(cr))
+            {
                 if cr.t < self.snap || (cr.t <= 0.5 && self.near_plane(cr.edge[0])) {
                     wanted.push((cr.edge[0], None));
                 } else if cr.t > 1.0 - self.snap || self.near_plane(cr.edge[1]) {
@@ -387,7 +427,9 @@ impl Resolver<'_> {
                 for e in edges.iter().filter(|e| !e.split) {
                     // the paper moves the vertex outside C; when both (or neither) project
                     // outside, the one nearer the plane
-                    let out = e.edge.map(|v| !self.plane.contains_projection(&self.x[v as usize], 0.0));
+                    let out = e
+                        .edge
+                        .map(|v| !self.plane.contains_projection(&self.x[v as usize], 0.0));
                     let near = match out {
                         [true, false] => e.edge[0],
                         [false, true] => e.edge[1],
@@ -398,7 +440,11 @@ impl Resolver<'_> {
                 }
             }
             if wanted.is_empty() {
-                return Classification { moved, forced: forced.len(), ..c };
+                return Classification {
+                    moved,
+                    forced: forced.len(),
+                    ..c
+                };
             }
             // Apply every wanted move whose tetrahedra no other move of this round touched
             // (so the moves are independent), then classify again.
@@ -410,8 +456,15 @@ impl Resolver<'_> {
                 if on_plane.contains(&v) || !done.insert((v, edge)) {
                     continue;
                 }
-                let free = |w: u32, touched: &BTreeSet<u32>| topo.vertex_tets.row(w as usize).iter().all(|t| !touched.contains(t));
-                if edge.is_some_and(|e| !free(e[0], &touched) || !free(e[1], &touched)) || !free(v, &touched) {
+                let free = |w: u32, touched: &BTreeSet<u32>| {
+                    topo.vertex_tets
+                        .row(w as usize)
+                        .iter()
+                        .all(|t| !touched.contains(t))
+                };
+                if edge.is_some_and(|e| !free(e[0], &touched) || !free(e[1], &touched))
+                    || !free(v, &touched)
+                {
                     continue;
                 }
                 if let Some(e) = edge.filter(|e| self.within_reach(&c.crossings[e])) {
@@ -439,7 +492,10 @@ impl Resolver<'_> {
                     changed = true;
                     continue;
                 }
-                if edge.is_none() && !pushed.contains(&v) && self.apply(v, self.push_away(v, &c), &mut moved) {
+                if edge.is_none()
+                    && !pushed.contains(&v)
+                    && self.apply(v, self.push_away(v, &c), &mut moved)
+                {
                     // a sliver whose vertex cannot move onto the plane: pushed off instead
                     pushed.insert(v);
                     touched.extend(topo.vertex_tets.row(v as usize));
@@ -465,10 +521,18 @@ impl Resolver<'_> {
                 }
             }
             if !changed {
-                return Classification { moved, forced: forced.len(), ..c };
+                return Classification {
+                    moved,
+                    forced: forced.len(),
+                    ..c
+                };
             }
         }
         let c = self.classify(&on_plane, &forced);
-        Classification { moved, forced: forced.len(), ..c }
+        Classification {
+            moved,
+            forced: forced.len(),
+            ..c
+        }
     }
 }

@@ -16,7 +16,11 @@ pub type Stars = BTreeMap<u32, Vec<u32>>;
 
 /// For each split, the original vertex and the tetrahedra (of its star) that move to a new
 /// copy. The piece holding the smallest tetrahedron id keeps the vertex.
-pub fn star_components(tets: &[[u32; 4]], stars: &Stars, cut_faces: &BTreeSet<[u32; 3]>) -> Vec<(u32, Vec<u32>)> {
+pub fn star_components(
+    tets: &[[u32; 4]],
+    stars: &Stars,
+    cut_faces: &BTreeSet<[u32; 3]>,
+) -> Vec<(u32, Vec<u32>)> {
     let mut out = Vec::new();
     let mut faces: Vec<([u32; 3], usize)> = Vec::new();
     for (&v, star) in stars {
@@ -55,7 +59,12 @@ pub fn star_components(tets: &[[u32; 4]], stars: &Stars, cut_faces: &BTreeSet<[u
         distinct.sort_unstable();
         distinct.dedup();
         for &r in distinct.iter().skip(1) {
-            let moved = star.iter().zip(&roots).filter(|(_, rr)| **rr == r).map(|(t, _)| *t).collect();
+            let moved = star
+                .iter()
+                .zip(&roots)
+                .filter(|(_, rr)| **rr == r)
+                .map(|(t, _)| *t)
+                .collect();
             out.push((v, moved));
         }
     }
@@ -66,7 +75,11 @@ pub fn star_components(tets: &[[u32; 4]], stars: &Stars, cut_faces: &BTreeSet<[u
 /// exactly two boundary triangles in opposite directions), among the tetrahedra `local` (the
 /// union of the stars, after splitting). `on_cut(v)` tells whether a vertex (or a copy) lies on
 /// the cut; only edges with such an end are judged, since all faces around them are local.
-pub fn pinched_edges(tets: &[[u32; 4]], local: &BTreeSet<u32>, on_cut: &dyn Fn(u32) -> bool) -> Vec<[u32; 2]> {
+pub fn pinched_edges(
+    tets: &[[u32; 4]],
+    local: &BTreeSet<u32>,
+    on_cut: &dyn Fn(u32) -> bool,
+) -> Vec<[u32; 2]> {
     let mut faces: Vec<([u32; 3], [u32; 3])> = Vec::new();
     for &t in local {
         let tet = tets[t as usize];

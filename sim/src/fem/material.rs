@@ -39,28 +39,41 @@ impl FemMaterial {
     ///   measured viscoelastic time constant of muscle is about 6 s, Bosboom et al. 2001, a
     ///   relaxation this linear model does not represent); chosen to damp the lowest modes
     ///   of the chest wall (a few Hz) within about a second, as the paper's dampers do.
-    pub const CHEST_WALL: Self =
-        Self { youngs_modulus_pa: 30e3, poisson_ratio: 0.45, rayleigh_mass_per_s: 1.0, rayleigh_stiffness_s: 0.01 };
+    pub const CHEST_WALL: Self = Self {
+        youngs_modulus_pa: 30e3,
+        poisson_ratio: 0.45,
+        rayleigh_mass_per_s: 1.0,
+        rayleigh_stiffness_s: 0.01,
+    };
 
     /// The Lame parameters `(mu, lambda)` in Pa: `mu = E / (2 (1 + nu))`,
     /// `lambda = E nu / ((1 + nu) (1 - 2 nu))`.
     pub fn lame_pa(&self) -> (f64, f64) {
         let (e, nu) = (self.youngs_modulus_pa, self.poisson_ratio);
-        (e / (2.0 * (1.0 + nu)), e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)))
+        (
+            e / (2.0 * (1.0 + nu)),
+            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+        )
     }
 
     /// Checks the ranges; returns a description of the first problem.
     pub fn check(&self) -> Result<(), String> {
         let e = self.youngs_modulus_pa;
         if !(e > 0.0 && e.is_finite()) {
-            return Err(format!("Young's modulus must be positive and finite, got {e} Pa"));
+            return Err(format!(
+                "Young's modulus must be positive and finite, got {e} Pa"
+            ));
         }
         let nu = self.poisson_ratio;
         if !(nu > -1.0 && nu < 0.5) {
-            return Err(format!("Poisson's ratio must satisfy -1 < nu < 0.5, got {nu}"));
+            return Err(format!(
+                "Poisson's ratio must satisfy -1 < nu < 0.5, got {nu}"
+            ));
         }
-        for (name, v) in [("rayleigh_mass_per_s", self.rayleigh_mass_per_s), ("rayleigh_stiffness_s", self.rayleigh_stiffness_s)]
-        {
+        for (name, v) in [
+            ("rayleigh_mass_per_s", self.rayleigh_mass_per_s),
+            ("rayleigh_stiffness_s", self.rayleigh_stiffness_s),
+        ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(format!("{name} must be non-negative and finite, got {v}"));
             }

@@ -89,10 +89,15 @@ impl FemModel {
         fem_materials: &[(u32, FemMaterial)],
     ) -> Result<Self, ModelError> {
         for (region, m) in fem_materials {
-            m.check().map_err(|message| ModelError::Material { region: *region, message })?;
+            m.check().map_err(|message| ModelError::Material {
+                region: *region,
+                message,
+            })?;
         }
         let find = |r: u32| -> Result<(Material, FemMaterial), ModelError> {
-            let m = materials.binary_search_by_key(&r, |(id, _)| *id).map_err(|_| ModelError::MissingMaterial(r))?;
+            let m = materials
+                .binary_search_by_key(&r, |(id, _)| *id)
+                .map_err(|_| ModelError::MissingMaterial(r))?;
             let f = fem_materials
                 .binary_search_by_key(&r, |(id, _)| *id)
                 .map_err(|_| ModelError::MissingFemMaterial(r))?;
@@ -111,15 +116,22 @@ impl FemModel {
             beta_s: Vec::with_capacity(nt),
             damping_mass: vec![0.0; mesh.vertex_count()],
             edges: topo.edges.clone(),
-            tet_edges: mesh.tets().iter().map(|tet| topo.tet_edge_ids(tet)).collect(),
+            tet_edges: mesh
+                .tets()
+                .iter()
+                .map(|tet| topo.tet_edge_ids(tet))
+                .collect(),
             degenerate_tets: 0,
         };
         for (t, tet) in mesh.tets().iter().enumerate() {
             let (material, fem) = find(mesh.regions()[t])?;
             let [x0, x1, x2, x3] = tet.map(|v| pos[v as usize]);
-            let d_m = Matrix3::from_columns(&[x1 - x0, x2 - x0, x3 - x0]) * (1.0 - material.pretension);
+            let d_m =
+                Matrix3::from_columns(&[x1 - x0, x2 - x0, x3 - x0]) * (1.0 - material.pretension);
             let det = d_m.determinant();
-            let inverse = d_m.try_inverse().filter(|inv| det > 0.0 && inv.iter().all(|c| c.is_finite()));
+            let inverse = d_m
+                .try_inverse()
+                .filter(|inv| det > 0.0 && inv.iter().all(|c| c.is_finite()));
             let (mu, lambda) = fem.lame_pa();
             match inverse {
                 Some(inv) => {
@@ -137,7 +149,10 @@ impl FemModel {
                 }
             }
             model.beta_s.push(fem.rayleigh_stiffness_s);
-            let quarter = 0.25 * fem.rayleigh_mass_per_s * material.density_kg_per_m3 * mesh.tet_volume(t).abs();
+            let quarter = 0.25
+                * fem.rayleigh_mass_per_s
+                * material.density_kg_per_m3
+                * mesh.tet_volume(t).abs();
             for &v in tet {
                 model.damping_mass[v as usize] += quarter;
             }
@@ -172,7 +187,8 @@ impl FemModel {
             let r = rotation(&f);
             let eps = strain(&r, &f);
             let tr = eps.trace();
-            energy += self.rest_volume_m3[t] * (self.mu_pa[t] * eps.norm_squared() + 0.5 * self.lambda_pa[t] * tr * tr);
+            energy += self.rest_volume_m3[t]
+                * (self.mu_pa[t] * eps.norm_squared() + 0.5 * self.lambda_pa[t] * tr * tr);
         }
         energy
     }
@@ -188,7 +204,8 @@ impl FemModel {
         let mut k = [[Matrix3::zeros(); 4]; 4];
         for i in 0..4 {
             for j in 0..4 {
-                k[i][j] = (Matrix3::identity() * (mu * b[i].dot(&b[j])) + c[j] * c[i].transpose() * mu
+                k[i][j] = (Matrix3::identity() * (mu * b[i].dot(&b[j]))
+                    + c[j] * c[i].transpose() * mu
                     + c[i] * c[j].transpose() * lambda)
                     * w;
             }
@@ -219,7 +236,10 @@ impl FemModel {
         let trace = s.trace();
         let m = Matrix3::identity() * trace - s;
         // eigenvalues of m are the pairwise sums of those of S: all near 2 at rest
-        let m_inv = m.cholesky().filter(|c| c.l().diagonal().iter().all(|&d| d * d > 0.2))?.inverse();
+        let m_inv = m
+            .cholesky()
+            .filter(|c| c.l().diagonal().iter().all(|&d| d * d > 0.2))?
+            .inverse();
         let coefficient = lambda * (trace - 3.0) - 2.0 * mu;
         let mut dp = [[Matrix3::zeros(); 3]; 3];
         for bb in 0..3 {
@@ -227,9 +247,14 @@ impl FemModel {
                 let mut df = Matrix3::zeros();
                 df[(bb, d)] = 1.0;
                 let y = r.transpose() * df;
-                let axial = Vector3::new(y[(2, 1)] - y[(1, 2)], y[(0, 2)] - y[(2, 0)], y[(1, 0)] - y[(0, 1)]);
+                let axial = Vector3::new(
+                    y[(2, 1)] - y[(1, 2)],
+                    y[(0, 2)] - y[(2, 0)],
+                    y[(1, 0)] - y[(0, 1)],
+                );
                 let w = m_inv * axial;
-                dp[bb][d] = df * (2.0 * mu) + r * (lambda * y.trace()) + r * w.cross_matrix() * coefficient;
+                dp[bb][d] =
+                    df * (2.0 * mu) + r * (lambda * y.trace()) + r * w.cross_matrix() * coefficient;
             }
         }
         let b = gradients(&self.rest_inverse[t]);

@@ -70,7 +70,9 @@ impl QuadraticMesh {
         let topology = mesh.topology();
         let vertex_count = mesh.vertex_count();
         let corners = mesh.positions();
-        let middles = topology.edges.iter().map(|&[a, b]| Point3::from((corners[a as usize].coords + corners[b as usize].coords) * 0.5));
+        let middles = topology.edges.iter().map(|&[a, b]| {
+            Point3::from((corners[a as usize].coords + corners[b as usize].coords) * 0.5)
+        });
         let nodes: Vec<Point3> = corners.iter().copied().chain(middles).collect();
         let tets = mesh
             .tets()
@@ -85,20 +87,36 @@ impl QuadraticMesh {
                 nodes
             })
             .collect();
-        Self { nodes, tets, regions: mesh.regions().to_vec(), vertex_count, edges: topology.edges.clone() }
+        Self {
+            nodes,
+            tets,
+            regions: mesh.regions().to_vec(),
+            vertex_count,
+            edges: topology.edges.clone(),
+        }
     }
 
     /// The node at the middle of the edge `a`-`b`, if it is an edge of the mesh.
     pub fn middle(&self, a: u32, b: u32) -> Option<u32> {
         let key = [a.min(b), a.max(b)];
-        self.edges.binary_search(&key).ok().map(|e| (self.vertex_count + e) as u32)
+        self.edges
+            .binary_search(&key)
+            .ok()
+            .map(|e| (self.vertex_count + e) as u32)
     }
 
     /// The node ids of a boundary triangle of the linear mesh: corners `a, b, c`, then the
     /// middles of `ab`, `bc`, `ca`.
     pub fn triangle(&self, tri: [u32; 3]) -> Option<[u32; 6]> {
         let [a, b, c] = tri;
-        Some([a, b, c, self.middle(a, b)?, self.middle(b, c)?, self.middle(c, a)?])
+        Some([
+            a,
+            b,
+            c,
+            self.middle(a, b)?,
+            self.middle(b, c)?,
+            self.middle(c, a)?,
+        ])
     }
 }
 
@@ -135,15 +153,25 @@ fn linear_gradients(mesh: &QuadraticMesh, t: usize) -> Option<(f64, [Vector3; 4]
 
 /// The element stiffness blocks `K_ac` (`a <= c` filled; `K_ca = K_ac^T`) for the Lame
 /// parameters `mu`, `lambda`; zero for a degenerate element.
-pub fn element_stiffness(mesh: &QuadraticMesh, t: usize, mu: f64, lambda: f64) -> [[Matrix3<f64>; NODES]; NODES] {
+pub fn element_stiffness(
+    mesh: &QuadraticMesh,
+    t: usize,
+    mu: f64,
+    lambda: f64,
+) -> [[Matrix3<f64>; NODES]; NODES] {
     let mut k = [[Matrix3::zeros(); NODES]; NODES];
-    let Some((volume, b)) = linear_gradients(mesh, t) else { return k };
+    let Some((volume, b)) = linear_gradients(mesh, t) else {
+        return k;
+    };
     let w = volume / 4.0;
     for l in quadrature() {
         let g = shape_gradients(&l, &b);
         for a in 0..NODES {
             for c in a..NODES {
-                k[a][c] += (g[a] * g[c].transpose() * lambda + g[c] * g[a].transpose() * mu + Matrix3::identity() * (mu * g[a].dot(&g[c]))) * w;
+                k[a][c] += (g[a] * g[c].transpose() * lambda
+                    + g[c] * g[a].transpose() * mu
+                    + Matrix3::identity() * (mu * g[a].dot(&g[c])))
+                    * w;
             }
         }
     }
@@ -154,7 +182,9 @@ pub fn element_stiffness(mesh: &QuadraticMesh, t: usize, mu: f64, lambda: f64) -
 /// `-int g_a dV`).
 pub fn gradient_integrals(mesh: &QuadraticMesh, t: usize) -> [Vector3; NODES] {
     let mut out = [Vector3::zeros(); NODES];
-    let Some((volume, b)) = linear_gradients(mesh, t) else { return out };
+    let Some((volume, b)) = linear_gradients(mesh, t) else {
+        return out;
+    };
     for l in quadrature() {
         for (o, g) in out.iter_mut().zip(shape_gradients(&l, &b)) {
             *o += g * (volume / 4.0);
@@ -217,7 +247,9 @@ impl QuadraticStatics {
                 system.diag[tet[a] as usize] += k[a][a];
                 for c in a + 1..NODES {
                     let (ga, gc) = (tet[a], tet[c]);
-                    let Ok(e) = pairs.binary_search(&[ga.min(gc), ga.max(gc)]) else { continue };
+                    let Ok(e) = pairs.binary_search(&[ga.min(gc), ga.max(gc)]) else {
+                        continue;
+                    };
                     system.add_off(e, ga, gc, &k[a][c]);
                 }
             }
@@ -228,32 +260,64 @@ impl QuadraticStatics {
                 }
             }
         }
-        Self { system, pre_stress_forces }
+        Self {
+            system,
+            pre_stress_forces,
+        }
     }
 
     /// Solves `K u = f + f_0` for the free nodes, with `held[i] = Some(u_i)` prescribing node
     /// `i`'s displacement; CG to `relative_tolerance` of the right-hand side.
-    pub fn solve(&self, held: &[Option<Vector3>], external: &[Vector3], relative_tolerance: f64) -> QuadraticSolution {
+    pub fn solve(
+        &self,
+        held: &[Option<Vector3>],
+        external: &[Vector3],
+        relative_tolerance: f64,
+    ) -> QuadraticSolution {
         let n = self.system.diag.len();
-        let prescribed: Vec<Vector3> = (0..n).map(|i| held.get(i).copied().flatten().unwrap_or_else(Vector3::zeros)).collect();
+        let prescribed: Vec<Vector3> = (0..n)
+            .map(|i| {
+                held.get(i)
+                    .copied()
+                    .flatten()
+                    .unwrap_or_else(Vector3::zeros)
+            })
+            .collect();
         let mut k_prescribed = vec![Vector3::zeros(); n];
         self.system.apply(&prescribed, &mut k_prescribed);
         let rhs: Vec<Vector3> = (0..n)
-            .map(|i| external.get(i).copied().unwrap_or_else(Vector3::zeros) + self.pre_stress_forces[i] - k_prescribed[i])
+            .map(|i| {
+                external.get(i).copied().unwrap_or_else(Vector3::zeros) + self.pre_stress_forces[i]
+                    - k_prescribed[i]
+            })
             .collect();
-        let is_held: Vec<bool> = (0..n).map(|i| held.get(i).is_some_and(Option::is_some)).collect();
+        let is_held: Vec<bool> = (0..n)
+            .map(|i| held.get(i).is_some_and(Option::is_some))
+            .collect();
         // the preconditioner zeroes the held diagonal blocks: prepare a copy, keep K whole
         let mut system = self.system.clone();
         system.prepare(&is_held);
         let mut free = vec![Vector3::zeros(); n];
-        let report = system.solve(&rhs, &mut free, relative_tolerance, 0.0, 20 * n.max(100), &mut BlockCgScratch::default());
-        let displacements: Vec<Vector3> = free.iter().zip(&prescribed).map(|(x, p)| x + p).collect();
+        let report = system.solve(
+            &rhs,
+            &mut free,
+            relative_tolerance,
+            0.0,
+            20 * n.max(100),
+            &mut BlockCgScratch::default(),
+        );
+        let displacements: Vec<Vector3> =
+            free.iter().zip(&prescribed).map(|(x, p)| x + p).collect();
         let mut internal_forces = vec![Vector3::zeros(); n];
         self.system.apply(&displacements, &mut internal_forces);
         for (f, f0) in internal_forces.iter_mut().zip(&self.pre_stress_forces) {
             *f = -*f + f0;
         }
-        QuadraticSolution { displacements, internal_forces, report }
+        QuadraticSolution {
+            displacements,
+            internal_forces,
+            report,
+        }
     }
 }
 
@@ -267,33 +331,53 @@ mod tests {
     /// the 6 rigid-body modes in its null space.
     #[test]
     fn element_stiffness_has_exactly_the_rigid_modes_in_its_kernel() {
-        let mesh = boxed(Point3::origin(), [0.01, 0.008, 0.012], GridCells { nx: 1, ny: 1, nz: 1 }).expect("box").mesh;
+        let mesh = boxed(
+            Point3::origin(),
+            [0.01, 0.008, 0.012],
+            GridCells {
+                nx: 1,
+                ny: 1,
+                nz: 1,
+            },
+        )
+        .expect("box")
+        .mesh;
         let q = QuadraticMesh::new(&mesh);
         let k = element_stiffness(&q, 0, 1e4, 3e4);
         let mut full = nalgebra::DMatrix::<f64>::zeros(3 * NODES, 3 * NODES);
         for a in 0..NODES {
             for c in a..NODES {
-                full.fixed_view_mut::<3, 3>(3 * a, 3 * c).copy_from(&k[a][c]);
-                full.fixed_view_mut::<3, 3>(3 * c, 3 * a).copy_from(&k[a][c].transpose());
+                full.fixed_view_mut::<3, 3>(3 * a, 3 * c)
+                    .copy_from(&k[a][c]);
+                full.fixed_view_mut::<3, 3>(3 * c, 3 * a)
+                    .copy_from(&k[a][c].transpose());
             }
         }
         let b = linear_gradients(&q, 0).expect("element").1;
         let sum: Vector3 = shape_gradients(&[0.1, 0.2, 0.3, 0.4], &b).iter().sum();
         assert!(sum.norm() < 1e-9 * b[0].norm(), "{sum}");
         let x: Vec<Point3> = q.tets[0].iter().map(|&i| q.nodes[i as usize]).collect();
-        let rigid = |f: &dyn Fn(&Point3) -> Vector3| nalgebra::DVector::from_iterator(3 * NODES, x.iter().flat_map(|p| f(p).data.0[0]));
+        let rigid = |f: &dyn Fn(&Point3) -> Vector3| {
+            nalgebra::DVector::from_iterator(3 * NODES, x.iter().flat_map(|p| f(p).data.0[0]))
+        };
         let scale = full.norm();
         for mode in [
             rigid(&|_| Vector3::x()),
             rigid(&|p| Vector3::z().cross(&p.coords)),
             rigid(&|p| Vector3::new(1.0, 2.0, -1.0).cross(&p.coords)),
         ] {
-            assert!((&full * mode).norm() < 1e-12 * scale, "a rigid motion is resisted");
+            assert!(
+                (&full * mode).norm() < 1e-12 * scale,
+                "a rigid motion is resisted"
+            );
         }
         let eigen = full.symmetric_eigen();
         let mut values: Vec<f64> = eigen.eigenvalues.iter().copied().collect();
         values.sort_by(f64::total_cmp);
-        let zero = values.iter().filter(|v| v.abs() < 1e-10 * values[values.len() - 1]).count();
+        let zero = values
+            .iter()
+            .filter(|v| v.abs() < 1e-10 * values[values.len() - 1])
+            .count();
         assert_eq!(zero, 6, "{values:?}");
         assert!(values[0] > -1e-10 * values[values.len() - 1]);
     }

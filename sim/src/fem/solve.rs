@@ -53,7 +53,12 @@ impl FemScratch {
 /// forces on local vertices 1..3 (`-W R sigma(epsilon) D_m^-T`, the elastic force) and
 /// `W R sigma(sym(R^T G)) D_m^-T` (the product `K v`); vertex 0 gets minus their sum.
 #[inline]
-fn element(fem: &FemModel, t: usize, x: &[Point3], v: &[Vector3]) -> (Matrix3<f64>, Matrix3<f64>, Matrix3<f64>) {
+fn element(
+    fem: &FemModel,
+    t: usize,
+    x: &[Point3],
+    v: &[Vector3],
+) -> (Matrix3<f64>, Matrix3<f64>, Matrix3<f64>) {
     let w = fem.rest_volume_m3[t];
     if w == 0.0 {
         return (Matrix3::identity(), Matrix3::zeros(), Matrix3::zeros());
@@ -77,7 +82,11 @@ fn element(fem: &FemModel, t: usize, x: &[Point3], v: &[Vector3]) -> (Matrix3<f6
 /// Adds `columns` of `h` (vertices 1..3) and minus their sum (vertex 0) times `weight`.
 #[inline]
 fn scatter(tet: &[u32; 4], h: &Matrix3<f64>, weight: f64, out: &mut [Vector3]) {
-    let (c1, c2, c3) = (h.column(0).into_owned(), h.column(1).into_owned(), h.column(2).into_owned());
+    let (c1, c2, c3) = (
+        h.column(0).into_owned(),
+        h.column(1).into_owned(),
+        h.column(2).into_owned(),
+    );
     out[tet[0] as usize] -= (c1 + c2 + c3) * weight;
     out[tet[1] as usize] += c1 * weight;
     out[tet[2] as usize] += c2 * weight;
@@ -86,7 +95,14 @@ fn scatter(tet: &[u32; 4], h: &Matrix3<f64>, weight: f64, out: &mut [Vector3]) {
 
 /// Writes into `out` the total force on every particle:
 /// `f_el(x) - beta K v - alpha M v + m g + f_ext`.
-pub fn total_forces(model: &Model, fem: &FemModel, x: &[Point3], v: &[Vector3], external: &[Vector3], out: &mut [Vector3]) {
+pub fn total_forces(
+    model: &Model,
+    fem: &FemModel,
+    x: &[Point3],
+    v: &[Vector3],
+    external: &[Vector3],
+    out: &mut [Vector3],
+) {
     for i in 0..out.len() {
         out[i] = model.gravity * model.mass[i] + external[i] - v[i] * fem.damping_mass[i];
     }
@@ -99,7 +115,11 @@ pub fn total_forces(model: &Model, fem: &FemModel, x: &[Point3], v: &[Vector3], 
 
 /// Potential energy in joules: elastic energy minus `sum m_i g . x_i`.
 pub fn potential_energy(model: &Model, fem: &FemModel, x: &[Point3]) -> f64 {
-    let gravity: f64 = x.iter().zip(&model.mass).map(|(p, &m)| m * model.gravity.dot(&p.coords)).sum();
+    let gravity: f64 = x
+        .iter()
+        .zip(&model.mass)
+        .map(|(p, &m)| m * model.gravity.dot(&p.coords))
+        .sum();
     fem.elastic_energy(x) - gravity
 }
 
@@ -112,7 +132,13 @@ fn add_stiffness(fem: &FemModel, t: usize, r: &Matrix3<f64>, weight: f64, sys: &
 }
 
 /// Adds `weight k` (element blocks of tetrahedron `t`) to the blocks of `sys`.
-fn add_blocks(fem: &FemModel, t: usize, k: &[[Matrix3<f64>; 4]; 4], weight: f64, sys: &mut BlockSystem) {
+fn add_blocks(
+    fem: &FemModel,
+    t: usize,
+    k: &[[Matrix3<f64>; 4]; 4],
+    weight: f64,
+    sys: &mut BlockSystem,
+) {
     let tet = fem.tets[t];
     for i in 0..4 {
         sys.diag[tet[i] as usize] += k[i][i] * weight;
@@ -135,7 +161,15 @@ pub fn implicit_step(
     scratch: &mut FemScratch,
 ) -> super::system::BlockCgReport {
     let n = model.vertex_count();
-    let FemScratch { system: sys, cg, rhs, dv, dv_previous: [p1, p2, p3], history, .. } = scratch;
+    let FemScratch {
+        system: sys,
+        cg,
+        rhs,
+        dv,
+        dv_previous: [p1, p2, p3],
+        history,
+        ..
+    } = scratch;
     for buf in [&mut *rhs, &mut *dv, &mut *p1, &mut *p2, &mut *p3] {
         buf.resize(n, Vector3::zeros());
     }
@@ -154,7 +188,14 @@ pub fn implicit_step(
     }
     sys.prepare(&model.held);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
-    let report = sys.solve(rhs, dv, relative_tolerance, velocity_floor(&model.particles()), max_iterations, cg);
+    let report = sys.solve(
+        rhs,
+        dv,
+        relative_tolerance,
+        velocity_floor(&model.particles()),
+        max_iterations,
+        cg,
+    );
     apply_velocity_change(&model.particles(), state, dv, h);
     report
 }
@@ -212,7 +253,14 @@ pub fn explicit_step(
     let n = model.vertex_count();
     forces.resize(n, Vector3::zeros());
     for _ in 0..substeps {
-        total_forces(model, fem, &state.positions, &state.velocities, external, forces);
+        total_forces(
+            model,
+            fem,
+            &state.positions,
+            &state.velocities,
+            external,
+            forces,
+        );
         for i in 0..n {
             let v = &mut state.velocities[i];
             *v += forces[i] * (h * model.inv_mass[i]);
@@ -223,9 +271,18 @@ pub fn explicit_step(
 
 /// Moves the free particles to static equilibrium under gravity and `external` forces;
 /// velocities are zeroed.
-pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vector3], settings: StaticSettings) -> StaticReport {
+pub fn statics(
+    model: &Model,
+    fem: &FemModel,
+    state: &mut State,
+    external: &[Vector3],
+    settings: StaticSettings,
+) -> StaticReport {
     let n = model.vertex_count();
-    state.velocities.iter_mut().for_each(|v| *v = Vector3::zeros());
+    state
+        .velocities
+        .iter_mut()
+        .for_each(|v| *v = Vector3::zeros());
     let zero_v = vec![Vector3::zeros(); n];
     let mut f = vec![Vector3::zeros(); n];
     let mut f_trial = f.clone();
@@ -242,7 +299,9 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
         scale = scale.max(h_el.column_iter().map(|c| c.norm()).fold(0.0, f64::max));
     }
     for i in 0..n {
-        scale = scale.max(model.mass[i] * model.gravity.norm()).max(external[i].norm());
+        scale = scale
+            .max(model.mass[i] * model.gravity.norm())
+            .max(external[i].norm());
     }
     let tolerance = settings.relative_force_tolerance * scale;
     total_forces(model, fem, &state.positions, &zero_v, external, &mut f);
@@ -256,9 +315,18 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
         for attempt in [exact, false] {
             sys.begin(n, &fem.edges);
             for t in 0..fem.len() {
-                match attempt.then(|| fem.exact_stiffness_blocks(t, &state.positions)).flatten() {
+                match attempt
+                    .then(|| fem.exact_stiffness_blocks(t, &state.positions))
+                    .flatten()
+                {
                     Some(k) => add_blocks(fem, t, &k, 1.0, &mut sys),
-                    None => add_stiffness(fem, t, &rotation(&fem.deformation_gradient(t, &state.positions)), 1.0, &mut sys),
+                    None => add_stiffness(
+                        fem,
+                        t,
+                        &rotation(&fem.deformation_gradient(t, &state.positions)),
+                        1.0,
+                        &mut sys,
+                    ),
                 }
             }
             sys.prepare(&model.held);
@@ -270,9 +338,17 @@ pub fn statics(model: &Model, fem: &FemModel, state: &mut State, external: &[Vec
             }
             exact = false; // the exact tangent was not positive definite here: stay warped
         }
-        match line_search(model, &mut state.positions, &mut f, &dx, residual, scale, &mut trial, &mut f_trial, |x, out| {
-            total_forces(model, fem, x, &zero_v, external, out)
-        }) {
+        match line_search(
+            model,
+            &mut state.positions,
+            &mut f,
+            &dx,
+            residual,
+            scale,
+            &mut trial,
+            &mut f_trial,
+            |x, out| total_forces(model, fem, x, &zero_v, external, out),
+        ) {
             Some(r) => residual = r,
             None => stalls += 1,
         }
@@ -294,10 +370,28 @@ mod tests {
     use crate::model::Material;
 
     fn model(pretension: f64) -> (Model, FemModel) {
-        let mesh = boxed(Point3::origin(), [0.02, 0.01, 0.01], GridCells { nx: 2, ny: 1, nz: 1 }).expect("box").mesh;
-        let material = Material { pretension, ..Material::default() };
+        let mesh = boxed(
+            Point3::origin(),
+            [0.02, 0.01, 0.01],
+            GridCells {
+                nx: 2,
+                ny: 1,
+                nz: 1,
+            },
+        )
+        .expect("box")
+        .mesh;
+        let material = Material {
+            pretension,
+            ..Material::default()
+        };
         let model = Model::new(mesh, &[(0, material)], &[], Vector3::zeros()).expect("model");
-        let fem = FemModel::build(&model.mesh, &model.materials, &[(0, FemMaterial::CHEST_WALL)]).expect("fem");
+        let fem = FemModel::build(
+            &model.mesh,
+            &model.materials,
+            &[(0, FemMaterial::CHEST_WALL)],
+        )
+        .expect("fem");
         (model, fem)
     }
 
@@ -310,7 +404,10 @@ mod tests {
         assert!((r.transpose() * r - Matrix3::identity()).norm() < 1e-12);
         let s = r.transpose() * f;
         assert!((s - s.transpose()).norm() < 1e-12, "R^T F symmetric");
-        assert_eq!(rotation(&Matrix3::from_element(f64::NAN)), Matrix3::identity());
+        assert_eq!(
+            rotation(&Matrix3::from_element(f64::NAN)),
+            Matrix3::identity()
+        );
     }
 
     /// The Newton polar factor agrees with the SVD's, from mild to strong deformations.
@@ -319,7 +416,17 @@ mod tests {
         for k in 0..200 {
             let a = k as f64;
             let rot = nalgebra::Rotation3::from_euler_angles(0.1 * a, -0.07 * a, 0.03 * a);
-            let stretch = Matrix3::new(1.0 + 0.3 * (0.9 * a).sin(), 0.2 * (1.1 * a).cos(), 0.1, 0.0, 1.0 + 0.5 * (0.4 * a).cos().powi(2), -0.3 * (0.3 * a).sin(), 0.0, 0.0, 0.2 + (0.7 * a).sin().abs());
+            let stretch = Matrix3::new(
+                1.0 + 0.3 * (0.9 * a).sin(),
+                0.2 * (1.1 * a).cos(),
+                0.1,
+                0.0,
+                1.0 + 0.5 * (0.4 * a).cos().powi(2),
+                -0.3 * (0.3 * a).sin(),
+                0.0,
+                0.0,
+                0.2 + (0.7 * a).sin().abs(),
+            );
             let f = rot.matrix() * stretch * (1.0 + 0.01 * a);
             assert!(f.determinant() > 0.0);
             let (r, r_svd) = (rotation(&f), crate::fem::rotation_by_svd(&f));
@@ -334,7 +441,12 @@ mod tests {
         let (model, fem) = model(0.0);
         let n = model.vertex_count();
         let rot = nalgebra::Rotation3::from_euler_angles(0.3, -0.5, 0.9);
-        let x: Vec<Point3> = model.mesh.positions().iter().map(|p| rot * p + Vector3::new(0.1, 0.2, 0.3)).collect();
+        let x: Vec<Point3> = model
+            .mesh
+            .positions()
+            .iter()
+            .map(|p| rot * p + Vector3::new(0.1, 0.2, 0.3))
+            .collect();
         let v = vec![Vector3::zeros(); n];
         let zero = vec![Vector3::zeros(); n];
         let mut f = vec![Vector3::zeros(); n];
@@ -348,13 +460,21 @@ mod tests {
             add_stiffness(&fem, t, &r, 1.0, &mut sys);
         }
         sys.prepare(&model.held);
-        let dir: Vec<Vector3> = (0..n).map(|i| Vector3::new((i as f64).sin(), (1.3 * i as f64).cos(), 0.2)).collect();
+        let dir: Vec<Vector3> = (0..n)
+            .map(|i| Vector3::new((i as f64).sin(), (1.3 * i as f64).cos(), 0.2))
+            .collect();
         assert_is_force_derivative(&model, &fem, &x, &sys, &dir);
     }
 
     /// Asserts that the stiffness `sys` applied to `dir` is minus the derivative of the forces
     /// at rest velocity along `dir` (central differences).
-    fn assert_is_force_derivative(model: &Model, fem: &FemModel, x: &[Point3], sys: &BlockSystem, dir: &[Vector3]) {
+    fn assert_is_force_derivative(
+        model: &Model,
+        fem: &FemModel,
+        x: &[Point3],
+        sys: &BlockSystem,
+        dir: &[Vector3],
+    ) {
         let n = x.len();
         let v = vec![Vector3::zeros(); n];
         let mut kd = vec![Vector3::zeros(); n];
@@ -368,7 +488,11 @@ mod tests {
         let k_scale = kd.iter().map(|k| k.norm()).fold(0.0, f64::max);
         for i in 0..n {
             let fd = -(fp[i] - fm[i]) / (2.0 * eps);
-            assert!((fd - kd[i]).norm() < 1e-5 * k_scale, "{i}: {fd} vs {}", kd[i]);
+            assert!(
+                (fd - kd[i]).norm() < 1e-5 * k_scale,
+                "{i}: {fd} vs {}",
+                kd[i]
+            );
         }
     }
 
@@ -384,16 +508,22 @@ mod tests {
             .positions()
             .iter()
             .enumerate()
-            .map(|(i, p)| rot * p + Vector3::new((i as f64).sin(), (2.0 * i as f64).cos(), 0.5) * 1e-3)
+            .map(|(i, p)| {
+                rot * p + Vector3::new((i as f64).sin(), (2.0 * i as f64).cos(), 0.5) * 1e-3
+            })
             .collect();
         let mut sys = BlockSystem::default();
         sys.begin(n, &fem.edges);
         for t in 0..fem.len() {
-            let k = fem.exact_stiffness_blocks(t, &x).expect("not near inversion");
+            let k = fem
+                .exact_stiffness_blocks(t, &x)
+                .expect("not near inversion");
             add_blocks(&fem, t, &k, 1.0, &mut sys);
         }
         sys.prepare(&model.held);
-        let dir: Vec<Vector3> = (0..n).map(|i| Vector3::new((0.7 * i as f64).cos(), (1.1 * i as f64).sin(), -0.4)).collect();
+        let dir: Vec<Vector3> = (0..n)
+            .map(|i| Vector3::new((0.7 * i as f64).cos(), (1.1 * i as f64).sin(), -0.4))
+            .collect();
         assert_is_force_derivative(&model, &fem, &x, &sys, &dir);
     }
 
@@ -404,7 +534,10 @@ mod tests {
         for t in 0..fem.len() {
             let f = fem.deformation_gradient(t, x);
             assert!((f - Matrix3::identity() / 0.96).norm() < 1e-12);
-            assert!((fem.rest_volume_m3[t] - 0.96f64.powi(3) * model.mesh.tet_volume(t)).abs() < 1e-12 * fem.rest_volume_m3[t]);
+            assert!(
+                (fem.rest_volume_m3[t] - 0.96f64.powi(3) * model.mesh.tet_volume(t)).abs()
+                    < 1e-12 * fem.rest_volume_m3[t]
+            );
         }
     }
 }

@@ -93,7 +93,10 @@ impl BlockSystem {
             let sym = (*d + d.transpose()) * 0.5;
             let pd = sym.cholesky().is_some();
             sgs &= pd;
-            let inv = d.try_inverse().filter(|m| pd && m.iter().all(|c| c.is_finite())).unwrap_or_else(Matrix3::zeros);
+            let inv = d
+                .try_inverse()
+                .filter(|m| pd && m.iter().all(|c| c.is_finite()))
+                .unwrap_or_else(Matrix3::zeros);
             self.inv_diag.push(inv);
         }
         self.sgs = sgs;
@@ -130,7 +133,11 @@ impl BlockSystem {
         // Forward: (D + L) y = r, with L_ba = A_ab^T for a < b. z accumulates r - L y.
         z[..n].copy_from_slice(&r[..n]);
         for i in 0..n {
-            let yi = if self.held[i] { Vector3::zeros() } else { self.inv_diag[i] * z[i] };
+            let yi = if self.held[i] {
+                Vector3::zeros()
+            } else {
+                self.inv_diag[i] * z[i]
+            };
             z[i] = yi;
             for e in self.start[i]..self.start[i + 1] {
                 let o = self.edges[e][1] as usize;
@@ -173,15 +180,27 @@ impl BlockSystem {
             }
         }
         let free = |i: usize| !self.held[i];
-        let b_norm = (0..n).filter(|&i| free(i)).map(|i| b[i].norm_squared()).sum::<f64>().sqrt();
+        let b_norm = (0..n)
+            .filter(|&i| free(i))
+            .map(|i| b[i].norm_squared())
+            .sum::<f64>()
+            .sqrt();
         if b_norm == 0.0 {
             x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
-            return BlockCgReport { iterations: 0, relative_residual: 0.0, converged: true };
+            return BlockCgReport {
+                iterations: 0,
+                relative_residual: 0.0,
+                converged: true,
+            };
         }
         self.apply(x, q);
         let mut rr = 0.0;
         for i in 0..n {
-            r[i] = if free(i) { b[i] - q[i] } else { Vector3::zeros() };
+            r[i] = if free(i) {
+                b[i] - q[i]
+            } else {
+                Vector3::zeros()
+            };
             rr += r[i].norm_squared();
         }
         let target = (relative_tolerance * b_norm).max(absolute_tolerance);
@@ -212,7 +231,11 @@ impl BlockSystem {
             iterations += 1;
         }
         let r_norm = rr.sqrt();
-        BlockCgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
+        BlockCgReport {
+            iterations,
+            relative_residual: r_norm / b_norm,
+            converged: r_norm <= target,
+        }
     }
 }
 
@@ -231,11 +254,14 @@ mod tests {
             *d = Matrix3::new(4.0, 0.5, 0.1, 0.5, 3.0, 0.2, 0.1, 0.2, 5.0);
         }
         for (e, k) in sys.off.iter_mut().enumerate() {
-            *k = Matrix3::new(-1.0, 0.3, 0.0, 0.1, -0.5, 0.2, 0.0, -0.1, -0.7) * (1.0 + 0.1 * e as f64);
+            *k = Matrix3::new(-1.0, 0.3, 0.0, 0.1, -0.5, 0.2, 0.0, -0.1, -0.7)
+                * (1.0 + 0.1 * e as f64);
         }
         let held = vec![false; 4];
         sys.prepare(&held);
-        let b: Vec<Vector3> = (0..4).map(|i| Vector3::new(1.0, -(i as f64), 0.5)).collect();
+        let b: Vec<Vector3> = (0..4)
+            .map(|i| Vector3::new(1.0, -(i as f64), 0.5))
+            .collect();
         for sgs in [true, false] {
             sys.sgs = sgs;
             let mut x = vec![Vector3::zeros(); 4];

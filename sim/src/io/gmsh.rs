@@ -47,7 +47,9 @@ enum Version {
 
 /// Reads the contents of `$MeshFormat` up to `$EndMeshFormat`.
 fn read_mesh_format(cur: &mut Cursor<'_>) -> Result<Version, ReadError> {
-    let mut line = data_line(cur, || "the format line `version file-type data-size`".into())?;
+    let mut line = data_line(cur, || {
+        "the format line `version file-type data-size`".into()
+    })?;
     let version_text = line.token("the format version")?;
     let version: f64 = version_text
         .parse()
@@ -87,7 +89,10 @@ struct Nodes {
 
 impl Nodes {
     fn with_capacity(n: usize) -> Self {
-        Self { positions: Vec::with_capacity(capped(n)), index: HashMap::with_capacity(capped(n)) }
+        Self {
+            positions: Vec::with_capacity(capped(n)),
+            index: HashMap::with_capacity(capped(n)),
+        }
     }
 
     /// Adds node `tag` at `p`; `line` is the line to blame for a duplicate tag.
@@ -107,7 +112,9 @@ impl Nodes {
     /// The vertex index of node `tag`, referred to by element `element` on `line`.
     fn lookup(&self, tag: u64, element: u64, line: &Line<'_>) -> Result<u32, ReadError> {
         self.index.get(&tag).copied().ok_or_else(|| {
-            line.error(format!("element {element} refers to unknown node tag {tag}"))
+            line.error(format!(
+                "element {element} refers to unknown node tag {tag}"
+            ))
         })
     }
 }
@@ -186,14 +193,19 @@ fn region_of(
         (_, Some(e)) => e,
         _ => 0,
     };
-    u32::try_from(tag)
-        .map_err(|_| line.error(format!("region tag {tag} is not a non-negative 32-bit integer")))
+    u32::try_from(tag).map_err(|_| {
+        line.error(format!(
+            "region tag {tag} is not a non-negative 32-bit integer"
+        ))
+    })
 }
 
 /// Reads the nodes of a version 1 `$NOD` or version 2 `$Nodes` section (whose header line
 /// is `header`) up to `end`: a count, then `tag x y z` lines.
 fn read_nodes_v12(cur: &mut Cursor<'_>, header: &Line<'_>, end: &str) -> Result<Nodes, ReadError> {
-    let mut line = data_line(cur, || format!("the number of nodes after `{}`", header.text))?;
+    let mut line = data_line(cur, || {
+        format!("the number of nodes after `{}`", header.text)
+    })?;
     let n: usize = line.parse("number of nodes")?;
     line.finish("the number of nodes")?;
     let mut nodes = Nodes::with_capacity(n);
@@ -285,9 +297,9 @@ impl Reader {
                 }
                 self.elements_seen = true;
                 let Some(nodes) = self.nodes.take() else {
-                    return Err(
-                        line.error(format!("`{name}` section before the `{nodes_name}` section"))
-                    );
+                    return Err(line.error(format!(
+                        "`{name}` section before the `{nodes_name}` section"
+                    )));
                 };
                 let result = match self.version {
                     Version::V1 | Version::V2 => self.read_elements_v12(cur, &nodes, &line),
@@ -304,9 +316,10 @@ impl Reader {
             }
         }
         let Some(nodes) = self.nodes else {
-            return Err(
-                cur.error(cur.eof_line(), format!("end of file without a `{nodes_name}` section"))
-            );
+            return Err(cur.error(
+                cur.eof_line(),
+                format!("end of file without a `{nodes_name}` section"),
+            ));
         };
         if !self.elements_seen {
             return Err(cur.error(
@@ -332,8 +345,9 @@ impl Reader {
         header: &Line<'_>,
     ) -> Result<(), ReadError> {
         let v1 = self.version == Version::V1;
-        let mut line =
-            data_line(cur, || format!("the number of elements after `{}`", header.text))?;
+        let mut line = data_line(cur, || {
+            format!("the number of elements after `{}`", header.text)
+        })?;
         let n: usize = line.parse("number of elements")?;
         line.finish("the number of elements")?;
         self.tets.reserve(capped(n));
@@ -384,17 +398,23 @@ impl Reader {
 
     /// Version 4.1 `$Entities`: records the first physical tag of each volume.
     fn read_entities(&mut self, cur: &mut Cursor<'_>) -> Result<(), ReadError> {
-        let mut line =
-            data_line(cur, || "the entity counts `points curves surfaces volumes`".into())?;
+        let mut line = data_line(cur, || {
+            "the entity counts `points curves surfaces volumes`".into()
+        })?;
         let mut counts = [0usize; 4];
-        for (c, what) in counts.iter_mut().zip(["points", "curves", "surfaces", "volumes"]) {
+        for (c, what) in counts
+            .iter_mut()
+            .zip(["points", "curves", "surfaces", "volumes"])
+        {
             *c = line.parse(&format!("number of {what}"))?;
         }
         line.finish("the number of volumes")?;
         let [points, curves, surfaces, volumes] = counts;
         let lower = points.saturating_add(curves).saturating_add(surfaces);
         for i in 0..lower {
-            data_line(cur, || format!("point, curve or surface entity {} of {lower}", i + 1))?;
+            data_line(cur, || {
+                format!("point, curve or surface entity {} of {lower}", i + 1)
+            })?;
         }
         for i in 0..volumes {
             let mut line = data_line(cur, || format!("volume entity {} of {volumes}", i + 1))?;
@@ -403,11 +423,18 @@ impl Reader {
                 line.token("bounding box coordinate")?;
             }
             let physical_count: usize = line.parse("number of physical tags")?;
-            let physical =
-                if physical_count > 0 { Some(line.parse::<i64>("physical tag")?) } else { None };
+            let physical = if physical_count > 0 {
+                Some(line.parse::<i64>("physical tag")?)
+            } else {
+                None
+            };
             self.volume_physical.insert(tag, physical);
         }
-        expect_end(cur, "$EndEntities", &format!("{} entities", lower.saturating_add(volumes)))
+        expect_end(
+            cur,
+            "$EndEntities",
+            &format!("{} entities", lower.saturating_add(volumes)),
+        )
     }
 
     /// Version 4.1 `$Elements`: blocks of `dim entity-tag type count` followed by `count`
@@ -425,8 +452,9 @@ impl Reader {
         self.regions.reserve(capped(total));
         let mut seen = 0usize;
         for b in 0..blocks {
-            let mut block =
-                data_line(cur, || format!("element block header {} of {blocks}", b + 1))?;
+            let mut block = data_line(cur, || {
+                format!("element block header {} of {blocks}", b + 1)
+            })?;
             let _dim: u32 = block.parse("entity dimension")?;
             let entity: i64 = block.parse("entity tag")?;
             let element_type: u32 = block.parse("element type")?;
@@ -452,8 +480,9 @@ impl Reader {
                 }
             };
             for i in 0..count {
-                let mut line =
-                    data_line(cur, || format!("element {} of {count} in block {}", i + 1, b + 1))?;
+                let mut line = data_line(cur, || {
+                    format!("element {} of {count} in block {}", i + 1, b + 1)
+                })?;
                 let tag: u64 = line.parse("element tag")?;
                 let tet = read_tet(nodes, tag, &mut line)?;
                 self.tets.push(tet);
@@ -472,8 +501,9 @@ impl Reader {
 /// Version 4.1 `$Nodes`: blocks of `dim entity-tag parametric count`, then `count` tag
 /// lines, then `count` coordinate lines.
 fn read_nodes_v41(cur: &mut Cursor<'_>) -> Result<Nodes, ReadError> {
-    let mut header =
-        data_line(cur, || "the node section header `blocks nodes min-tag max-tag`".into())?;
+    let mut header = data_line(cur, || {
+        "the node section header `blocks nodes min-tag max-tag`".into()
+    })?;
     let blocks: usize = header.parse("number of node blocks")?;
     let total: usize = header.parse("number of nodes")?;
     header.parse::<u64>("minimum node tag")?;
@@ -495,23 +525,28 @@ fn read_nodes_v41(cur: &mut Cursor<'_>) -> Result<Nodes, ReadError> {
             0 => 0,
             1 => dim,
             _ => {
-                return Err(
-                    block.error(format!("invalid parametric flag {parametric}: expected 0 or 1"))
-                );
+                return Err(block.error(format!(
+                    "invalid parametric flag {parametric}: expected 0 or 1"
+                )));
             }
         };
         tags.clear();
         tags.reserve(capped(count));
         for i in 0..count {
-            let mut line =
-                data_line(cur, || format!("node tag {} of {count} in block {}", i + 1, b + 1))?;
+            let mut line = data_line(cur, || {
+                format!("node tag {} of {count} in block {}", i + 1, b + 1)
+            })?;
             let tag: u64 = line.parse("node tag")?;
             line.finish("the node tag")?;
             tags.push((tag, line));
         }
         for (i, (tag, tag_line)) in tags.iter().enumerate() {
             let mut line = data_line(cur, || {
-                format!("coordinates of node {} of {count} in block {}", i + 1, b + 1)
+                format!(
+                    "coordinates of node {} of {count} in block {}",
+                    i + 1,
+                    b + 1
+                )
             })?;
             let p = read_xyz(&mut line)?;
             for _ in 0..parameters {

@@ -22,7 +22,11 @@ pub(crate) fn capped(n: usize) -> usize {
 
 /// A parse error at `line` of `path`.
 pub(crate) fn parse_error(path: &Path, line: usize, message: impl Into<String>) -> ReadError {
-    ReadError::Parse { path: path.to_path_buf(), line, message: message.into() }
+    ReadError::Parse {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
 }
 
 /// Shortens a token for quoting in an error message.
@@ -41,7 +45,9 @@ pub(crate) fn parse_token<T: FromStr>(
     token: &str,
     what: &str,
 ) -> Result<T, ReadError> {
-    token.parse().map_err(|_| parse_error(path, line, format!("invalid {what} {}", quoted(token))))
+    token
+        .parse()
+        .map_err(|_| parse_error(path, line, format!("invalid {what} {}", quoted(token))))
 }
 
 /// Parses `token` as a finite `f64` (NaN and infinities are errors).
@@ -55,7 +61,11 @@ pub(crate) fn parse_finite(
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(parse_error(path, line, format!("{what} is not finite: {}", quoted(token))))
+        Err(parse_error(
+            path,
+            line,
+            format!("{what} is not finite: {}", quoted(token)),
+        ))
     }
 }
 
@@ -99,7 +109,13 @@ impl<'a> Cursor<'a> {
     /// A cursor over `text`, an excerpt of `path` whose first character is on line
     /// `first_line` (used for the contents of XML elements).
     pub fn starting_at_line(text: &'a str, path: &'a Path, first_line: usize) -> Self {
-        Self { path, rest: text, line: first_line.saturating_sub(1), current: "", comment: None }
+        Self {
+            path,
+            rest: text,
+            line: first_line.saturating_sub(1),
+            current: "",
+            comment: None,
+        }
     }
 
     /// Treats everything from `c` to the end of a line as a comment.
@@ -126,7 +142,10 @@ impl<'a> Cursor<'a> {
 
     /// An "unexpected end of file" error saying what was expected.
     pub fn eof_error(&self, expected: &str) -> ReadError {
-        self.error(self.eof_line(), format!("unexpected end of file: expected {expected}"))
+        self.error(
+            self.eof_line(),
+            format!("unexpected end of file: expected {expected}"),
+        )
     }
 
     /// The next raw line (line ending removed, comments kept, blank lines included),
@@ -178,7 +197,10 @@ impl<'a> Cursor<'a> {
     pub fn peek_token(&mut self) -> Option<Token<'a>> {
         loop {
             if let Some((text, _)) = split_token(self.current) {
-                return Some(Token { line: self.line, text });
+                return Some(Token {
+                    line: self.line,
+                    text,
+                });
             }
             let line = self.next_line()?;
             self.current = line.text;
@@ -226,7 +248,12 @@ pub(crate) struct Line<'a> {
 
 impl<'a> Line<'a> {
     fn new(path: &'a Path, no: usize, text: &'a str) -> Self {
-        Self { path, no, text, rest: text }
+        Self {
+            path,
+            no,
+            text,
+            rest: text,
+        }
     }
 
     /// A parse error on this line.
@@ -243,7 +270,8 @@ impl<'a> Line<'a> {
 
     /// The next token, or an error saying the line ends before `what`.
     pub fn token(&mut self, what: &str) -> Result<&'a str, ReadError> {
-        self.next_token().ok_or_else(|| self.error(format!("line ends early: expected {what}")))
+        self.next_token()
+            .ok_or_else(|| self.error(format!("line ends early: expected {what}")))
     }
 
     /// The next token parsed as a `T`.
@@ -270,9 +298,10 @@ impl<'a> Line<'a> {
     pub fn finish(&mut self, after: &str) -> Result<(), ReadError> {
         match self.next_token() {
             None => Ok(()),
-            Some(t) => {
-                Err(self.error(format!("unexpected extra value {} after {after}", quoted(t))))
-            }
+            Some(t) => Err(self.error(format!(
+                "unexpected extra value {} after {after}",
+                quoted(t)
+            ))),
         }
     }
 }

@@ -45,25 +45,33 @@ pub enum MeshFormat {
 
 /// True when `path` has the extension of a mesh format [`read_mesh`] reads.
 pub fn is_mesh_file(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| ["msh", "node", "ele", "vtk", "vtu"].iter().any(|m| e.eq_ignore_ascii_case(m)))
+    path.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+        ["msh", "node", "ele", "vtk", "vtu"]
+            .iter()
+            .any(|m| e.eq_ignore_ascii_case(m))
+    })
 }
 
 /// Reads a tetrahedral mesh, choosing the reader by the file extension: `.msh` (Gmsh),
 /// `.node` or `.ele` (TetGen; the sibling file with the other extension is read too),
 /// `.vtk` (legacy VTK) or `.vtu` (VTK XML).
 pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
-    let ext =
-        path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
     let format = match ext.as_str() {
         "msh" => MeshFormat::Gmsh,
         "vtk" => MeshFormat::VtkLegacy,
         "vtu" => MeshFormat::Vtu,
         "node" | "ele" => return read_tetgen(path),
         _ => {
-            let found =
-                if ext.is_empty() { "no extension".to_owned() } else { format!("`.{ext}`") };
+            let found = if ext.is_empty() {
+                "no extension".to_owned()
+            } else {
+                format!("`.{ext}`")
+            };
             return Err(ReadError::Format {
                 path: path.to_path_buf(),
                 message: format!(
@@ -93,8 +101,10 @@ pub fn read_mesh_from_str(
 /// Reads a whole file as text. Invalid UTF-8 is replaced rather than rejected so that the
 /// readers can still recognise headers (e.g. of binary files) and report a precise error.
 pub(crate) fn read_text(path: &Path) -> Result<String, ReadError> {
-    let bytes =
-        std::fs::read(path).map_err(|source| ReadError::Io { path: path.to_path_buf(), error: source })?;
+    let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        error: source,
+    })?;
     Ok(match String::from_utf8(bytes) {
         Ok(s) => s,
         Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
@@ -108,8 +118,10 @@ pub(crate) fn build_mesh(
     tets: Vec<[u32; 4]>,
     regions: Vec<u32>,
 ) -> Result<TetMesh, ReadError> {
-    let mut mesh = TetMesh::new(positions, tets, regions)
-        .map_err(|source| ReadError::Mesh { path: path.to_path_buf(), source })?;
+    let mut mesh = TetMesh::new(positions, tets, regions).map_err(|source| ReadError::Mesh {
+        path: path.to_path_buf(),
+        source,
+    })?;
     mesh.orient_positively();
     Ok(mesh)
 }

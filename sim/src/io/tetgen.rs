@@ -16,7 +16,10 @@ use crate::{Point3, ReadError, TetMesh};
 /// Reads a TetGen mesh given either of its files (`x.node` or `x.ele`); the sibling with the
 /// other extension is read too.
 pub fn read_tetgen(path: &Path) -> Result<TetMesh, ReadError> {
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
     let (node_path, ele_path): (PathBuf, PathBuf) = match ext.as_deref() {
         Some("node") => (path.to_path_buf(), path.with_extension("ele")),
         Some("ele") => (path.with_extension("node"), path.to_path_buf()),
@@ -41,8 +44,11 @@ pub fn read_tetgen_str(
     ele_path: &Path,
 ) -> Result<TetMesh, ReadError> {
     let (positions, base) = read_nodes(&mut Cursor::new(node_text, node_path).with_comments('#'))?;
-    let (tets, regions) =
-        read_tets(&mut Cursor::new(ele_text, ele_path).with_comments('#'), positions.len(), base)?;
+    let (tets, regions) = read_tets(
+        &mut Cursor::new(ele_text, ele_path).with_comments('#'),
+        positions.len(),
+        base,
+    )?;
     build_mesh(ele_path, positions, tets, regions)
 }
 
@@ -59,7 +65,9 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
         return Err(header.error(format!("dimension {dim}: only 3-D meshes are supported")));
     }
     if markers > 1 {
-        return Err(header.error(format!("number of boundary markers {markers}: expected 0 or 1")));
+        return Err(header.error(format!(
+            "number of boundary markers {markers}: expected 0 or 1"
+        )));
     }
     if n == 0 {
         return Err(header.error("no points (points listed in a .poly file are not supported)"));
@@ -67,8 +75,11 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
     let mut positions = Vec::with_capacity(capped(n));
     let mut base = 0i64;
     for i in 0..n {
-        let mut line =
-            cur.line(&format!("point {} of {n} (declared on line {})", i + 1, header.no))?;
+        let mut line = cur.line(&format!(
+            "point {} of {n} (declared on line {})",
+            i + 1,
+            header.no
+        ))?;
         let index: i64 = line.parse("point index")?;
         if i == 0 {
             if index != 0 && index != 1 {
@@ -137,8 +148,11 @@ fn read_tets(
     let mut tets = Vec::with_capacity(capped(n));
     let mut regions = Vec::with_capacity(capped(n));
     for i in 0..n {
-        let mut line =
-            cur.line(&format!("tetrahedron {} of {n} (declared on line {})", i + 1, header.no))?;
+        let mut line = cur.line(&format!(
+            "tetrahedron {} of {n} (declared on line {})",
+            i + 1,
+            header.no
+        ))?;
         let index: i64 = line.parse("tetrahedron index")?;
         let mut tet = [0u32; 4];
         for v in &mut tet {

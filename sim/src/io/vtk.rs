@@ -46,7 +46,9 @@ pub const REGION_ARRAY_NAMES: [&str; 12] = [
 /// Preference of a cell array named `name` as the region array (lower is better), or `None`
 /// if the name does not look like one.
 pub(crate) fn region_priority(name: &str) -> Option<usize> {
-    REGION_ARRAY_NAMES.iter().position(|n| n.eq_ignore_ascii_case(name))
+    REGION_ARRAY_NAMES
+        .iter()
+        .position(|n| n.eq_ignore_ascii_case(name))
 }
 
 /// A region array found in the cell data.
@@ -175,7 +177,11 @@ pub(crate) fn assemble_tets(
                 })?;
         }
         if let Some(v) = repeated_vertex(&tet) {
-            return Err(parse_error(path, line, format!("cell {c} lists point {v} twice")));
+            return Err(parse_error(
+                path,
+                line,
+                format!("cell {c} lists point {v} twice"),
+            ));
         }
         tets.push(tet);
         regions.push(region.and_then(|r| r.values.get(c).copied()).unwrap_or(0));
@@ -193,9 +199,16 @@ pub(crate) fn assemble_tets(
 pub fn read_vtk_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
     let mut cur = Cursor::new(text, path);
     let Some((no, first)) = cur.raw_line() else {
-        return Err(cur.error(1, "the file is empty: expected `# vtk DataFile Version ...`"));
+        return Err(cur.error(
+            1,
+            "the file is empty: expected `# vtk DataFile Version ...`",
+        ));
     };
-    if !first.trim().to_ascii_lowercase().starts_with("# vtk datafile") {
+    if !first
+        .trim()
+        .to_ascii_lowercase()
+        .starts_with("# vtk datafile")
+    {
         return Err(cur.error(
             no,
             format!(
@@ -204,7 +217,8 @@ pub fn read_vtk_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
             ),
         ));
     }
-    cur.raw_line().ok_or_else(|| cur.eof_error("the title line"))?;
+    cur.raw_line()
+        .ok_or_else(|| cur.eof_error("the title line"))?;
     let encoding = cur.line("`ASCII` or `BINARY`")?;
     if encoding.text.eq_ignore_ascii_case("BINARY") {
         return Err(
@@ -212,14 +226,19 @@ pub fn read_vtk_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
         );
     }
     if !encoding.text.eq_ignore_ascii_case("ASCII") {
-        return Err(encoding
-            .error(format!("expected `ASCII` or `BINARY`, found {}", quoted(encoding.text))));
+        return Err(encoding.error(format!(
+            "expected `ASCII` or `BINARY`, found {}",
+            quoted(encoding.text)
+        )));
     }
     let t = cur.token("`DATASET UNSTRUCTURED_GRID`")?;
     if !t.text.eq_ignore_ascii_case("DATASET") {
         return Err(cur.error(
             t.line,
-            format!("expected `DATASET UNSTRUCTURED_GRID`, found {}", quoted(t.text)),
+            format!(
+                "expected `DATASET UNSTRUCTURED_GRID`, found {}",
+                quoted(t.text)
+            ),
         ));
     }
     let t = cur.token("the dataset type")?;
@@ -258,7 +277,8 @@ struct Legacy {
 
 /// `a * b`, or an error at `line` if it overflows.
 fn product(cur: &Cursor<'_>, line: usize, a: usize, b: usize) -> Result<usize, ReadError> {
-    a.checked_mul(b).ok_or_else(|| cur.error(line, "array size overflows"))
+    a.checked_mul(b)
+        .ok_or_else(|| cur.error(line, "array size overflows"))
 }
 
 /// Skips `count` values.
@@ -367,9 +387,14 @@ impl Legacy {
         match keyword {
             "SCALARS" => {
                 cur.token("the data type")?;
-                let components =
-                    cur.rest_of_line().parse_opt::<usize>("number of components")?.unwrap_or(1);
-                if cur.peek_token().is_some_and(|t| t.text.eq_ignore_ascii_case("LOOKUP_TABLE")) {
+                let components = cur
+                    .rest_of_line()
+                    .parse_opt::<usize>("number of components")?
+                    .unwrap_or(1);
+                if cur
+                    .peek_token()
+                    .is_some_and(|t| t.text.eq_ignore_ascii_case("LOOKUP_TABLE"))
+                {
                     cur.token("LOOKUP_TABLE")?;
                     cur.token("the lookup table name")?;
                 }
@@ -431,9 +456,16 @@ impl Legacy {
                     let values = read_regions(cur, tuples, t.text)?;
                     RegionArray::keep_better(&mut self.region, RegionArray { priority, values });
                 }
-                _ => skip_values(cur, product(cur, t.line, components, tuples)?, "a field value")?,
+                _ => skip_values(
+                    cur,
+                    product(cur, t.line, components, tuples)?,
+                    "a field value",
+                )?,
             }
-            if cur.peek_token().is_some_and(|t| t.text.eq_ignore_ascii_case("METADATA")) {
+            if cur
+                .peek_token()
+                .is_some_and(|t| t.text.eq_ignore_ascii_case("METADATA"))
+            {
                 cur.token("METADATA")?;
                 skip_metadata(cur);
             }
@@ -443,12 +475,15 @@ impl Legacy {
 
     fn finish(self, cur: &Cursor<'_>) -> Result<TetMesh, ReadError> {
         let eof = cur.eof_line();
-        let points =
-            self.points.ok_or_else(|| cur.error(eof, "end of file without a POINTS section"))?;
-        let (cells, cells_line) =
-            self.cells.ok_or_else(|| cur.error(eof, "end of file without a CELLS section"))?;
-        let (types, types_line) =
-            self.types.ok_or_else(|| cur.error(eof, "end of file without a CELL_TYPES section"))?;
+        let points = self
+            .points
+            .ok_or_else(|| cur.error(eof, "end of file without a POINTS section"))?;
+        let (cells, cells_line) = self
+            .cells
+            .ok_or_else(|| cur.error(eof, "end of file without a CELLS section"))?;
+        let (types, types_line) = self
+            .types
+            .ok_or_else(|| cur.error(eof, "end of file without a CELL_TYPES section"))?;
         if types.len() != cells.len() {
             return Err(cur.error(
                 types_line,
@@ -464,11 +499,19 @@ impl Legacy {
         {
             return Err(cur.error(
                 line,
-                format!("CELL_DATA has {n} values but there are {} cells", cells.len()),
+                format!(
+                    "CELL_DATA has {n} values but there are {} cells",
+                    cells.len()
+                ),
             ));
         }
-        let (tets, regions) =
-            assemble_tets(cur.path(), points.len(), &cells, &types, self.region.as_ref())?;
+        let (tets, regions) = assemble_tets(
+            cur.path(),
+            points.len(),
+            &cells,
+            &types,
+            self.region.as_ref(),
+        )?;
         build_mesh(cur.path(), points, tets, regions)
     }
 }
@@ -500,7 +543,10 @@ fn read_cells(cur: &mut Cursor<'_>, line: usize) -> Result<CellList, ReadError> 
     let (a, _) = cur.parse::<usize>("number of cells")?;
     let (size, _) = cur.parse::<usize>("size of the cell list")?;
     let mut cells = CellList::default();
-    if cur.peek_token().is_some_and(|t| t.text.eq_ignore_ascii_case("OFFSETS")) {
+    if cur
+        .peek_token()
+        .is_some_and(|t| t.text.eq_ignore_ascii_case("OFFSETS"))
+    {
         cur.token("OFFSETS")?;
         cur.token("the data type of the offsets")?;
         let mut offsets_line = line;
@@ -525,9 +571,10 @@ fn read_cells(cur: &mut Cursor<'_>, line: usize) -> Result<CellList, ReadError> 
         }
         let t = cur.token("`CONNECTIVITY`")?;
         if !t.text.eq_ignore_ascii_case("CONNECTIVITY") {
-            return Err(
-                cur.error(t.line, format!("expected `CONNECTIVITY`, found {}", quoted(t.text)))
-            );
+            return Err(cur.error(
+                t.line,
+                format!("expected `CONNECTIVITY`, found {}", quoted(t.text)),
+            ));
         }
         cur.token("the data type of the connectivity")?;
         let mut value_lines = Vec::with_capacity(capped(size));
@@ -540,7 +587,12 @@ fn read_cells(cur: &mut Cursor<'_>, line: usize) -> Result<CellList, ReadError> 
         let cell_count = a.saturating_sub(1);
         cells.lines = (0..cell_count)
             .map(|c| {
-                cells.start.get(c).and_then(|&s| value_lines.get(s)).copied().unwrap_or(t.line)
+                cells
+                    .start
+                    .get(c)
+                    .and_then(|&s| value_lines.get(s))
+                    .copied()
+                    .unwrap_or(t.line)
             })
             .collect();
     } else {

@@ -44,7 +44,13 @@ struct LineIndex(Vec<usize>);
 
 impl LineIndex {
     fn new(text: &str) -> Self {
-        Self(text.bytes().enumerate().filter(|&(_, b)| b == b'\n').map(|(i, _)| i).collect())
+        Self(
+            text.bytes()
+                .enumerate()
+                .filter(|&(_, b)| b == b'\n')
+                .map(|(i, _)| i)
+                .collect(),
+        )
     }
 
     /// The 1-based line of byte `pos`.
@@ -97,7 +103,10 @@ impl<'a> Vtu<'a> {
     }
 
     fn xml_error(&self, e: &quick_xml::Error) -> ReadError {
-        self.error(self.lines.line_of(self.reader.error_position()), format!("malformed XML: {e}"))
+        self.error(
+            self.lines.line_of(self.reader.error_position()),
+            format!("malformed XML: {e}"),
+        )
     }
 
     fn run(&mut self) -> Result<(), ReadError> {
@@ -163,9 +172,11 @@ impl<'a> Vtu<'a> {
         for a in e.attributes() {
             let a = a.map_err(|err| self.error(line, format!("malformed XML attribute: {err}")))?;
             if a.key.local_name().as_ref() == key.as_bytes() {
-                let value = a.decode_and_unescape_value(self.reader.decoder()).map_err(|err| {
-                    self.error(line, format!("malformed XML attribute `{key}`: {err}"))
-                })?;
+                let value = a
+                    .decode_and_unescape_value(self.reader.decoder())
+                    .map_err(|err| {
+                        self.error(line, format!("malformed XML attribute `{key}`: {err}"))
+                    })?;
                 return Ok(Some(value.into_owned()));
             }
         }
@@ -182,10 +193,12 @@ impl<'a> Vtu<'a> {
         let value = self
             .attribute(e, key, line)?
             .ok_or_else(|| self.error(line, format!("<{name}> has no `{key}` attribute")))?;
-        value
-            .trim()
-            .parse()
-            .map_err(|_| self.error(line, format!("invalid {key} {} on <{name}>", quoted(&value))))
+        value.trim().parse().map_err(|_| {
+            self.error(
+                line,
+                format!("invalid {key} {} on <{name}>", quoted(&value)),
+            )
+        })
     }
 
     /// Handles the start of an element other than `<DataArray>`.
@@ -219,7 +232,12 @@ impl<'a> Vtu<'a> {
                 }
                 let points = self.count_attribute(e, "NumberOfPoints", line)?;
                 let cells = self.count_attribute(e, "NumberOfCells", line)?;
-                self.piece = Some(Piece { line, points, cells, ..Piece::default() });
+                self.piece = Some(Piece {
+                    line,
+                    points,
+                    cells,
+                    ..Piece::default()
+                });
                 Ok(())
             }
             _ => Ok(()),
@@ -239,7 +257,9 @@ impl<'a> Vtu<'a> {
     /// Reads the attributes of a `<DataArray>` and rejects non-ASCII data.
     fn check_data_array(&self, e: &BytesStart<'_>, line: usize) -> Result<ArrayInfo, ReadError> {
         let name = self.attribute(e, "Name", line)?.unwrap_or_default();
-        let format = self.attribute(e, "format", line)?.unwrap_or_else(|| "ascii".into());
+        let format = self
+            .attribute(e, "format", line)?
+            .unwrap_or_else(|| "ascii".into());
         if !format.eq_ignore_ascii_case("ascii") {
             return Err(self.error(
                 line,
@@ -255,7 +275,11 @@ impl<'a> Vtu<'a> {
                 self.error(line, format!("invalid NumberOfComponents {}", quoted(&v)))
             })?,
         };
-        Ok(ArrayInfo { name, components, line })
+        Ok(ArrayInfo {
+            name,
+            components,
+            line,
+        })
     }
 
     /// The text chunks `(first line, text)` of a `<DataArray>` up to its end tag, skipping
@@ -305,8 +329,16 @@ impl<'a> Vtu<'a> {
     /// Reads (or skips) a `<DataArray>` whose start tag was just read; `has_content` is false
     /// for `<DataArray/>`.
     fn data_array(&mut self, info: ArrayInfo, has_content: bool) -> Result<(), ReadError> {
-        let chunks = if has_content { self.content(info.line)? } else { Vec::new() };
-        let parent = self.stack.last().map(|(name, _)| name.as_str()).unwrap_or_default();
+        let chunks = if has_content {
+            self.content(info.line)?
+        } else {
+            Vec::new()
+        };
+        let parent = self
+            .stack
+            .last()
+            .map(|(name, _)| name.as_str())
+            .unwrap_or_default();
         let path = self.path;
         let Some(piece) = self.piece.as_mut() else {
             return Ok(());
@@ -317,7 +349,10 @@ impl<'a> Vtu<'a> {
                     return Err(parse_error(
                         path,
                         info.line,
-                        format!("the Points array has {} components, expected 3", info.components),
+                        format!(
+                            "the Points array has {} components, expected 3",
+                            info.components
+                        ),
                     ));
                 }
                 let mut coords = Vec::with_capacity(capped(piece.points.saturating_mul(3)));
@@ -336,8 +371,10 @@ impl<'a> Vtu<'a> {
                         ),
                     ));
                 }
-                let positions =
-                    coords.chunks_exact(3).map(|c| Point3::new(c[0], c[1], c[2])).collect();
+                let positions = coords
+                    .chunks_exact(3)
+                    .map(|c| Point3::new(c[0], c[1], c[2]))
+                    .collect();
                 piece.positions = Some(positions);
             }
             "Cells" => match info.name.as_str() {
@@ -411,14 +448,22 @@ impl<'a> Vtu<'a> {
     fn finish_piece(&mut self, piece: Piece, end_line: usize) -> Result<(), ReadError> {
         let path = self.path;
         let missing = |what: &str| {
-            parse_error(path, end_line, format!("the <Piece> on line {} has no {what}", piece.line))
+            parse_error(
+                path,
+                end_line,
+                format!("the <Piece> on line {} has no {what}", piece.line),
+            )
         };
         let positions = piece.positions.ok_or_else(|| missing("<Points> array"))?;
-        let (conn, value_lines, conn_line) =
-            piece.connectivity.ok_or_else(|| missing("`connectivity` array in <Cells>"))?;
-        let (mut offsets, offsets_line) =
-            piece.offsets.ok_or_else(|| missing("`offsets` array in <Cells>"))?;
-        let types = piece.types.ok_or_else(|| missing("`types` array in <Cells>"))?;
+        let (conn, value_lines, conn_line) = piece
+            .connectivity
+            .ok_or_else(|| missing("`connectivity` array in <Cells>"))?;
+        let (mut offsets, offsets_line) = piece
+            .offsets
+            .ok_or_else(|| missing("`offsets` array in <Cells>"))?;
+        let types = piece
+            .types
+            .ok_or_else(|| missing("`types` array in <Cells>"))?;
         // Offsets are the ends of the cells; some writers add a leading 0.
         if Some(offsets.len()) == piece.cells.checked_add(1) && offsets.first() == Some(&0) {
             offsets.remove(0);
@@ -464,7 +509,11 @@ impl<'a> Vtu<'a> {
         for tet in tets {
             let shifted = tet.map(|v| v.checked_add(base));
             let [Some(a), Some(b), Some(c), Some(d)] = shifted else {
-                return Err(parse_error(path, piece.line, "too many points for 32-bit vertex ids"));
+                return Err(parse_error(
+                    path,
+                    piece.line,
+                    "too many points for 32-bit vertex ids",
+                ));
             };
             self.tets.push([a, b, c, d]);
         }

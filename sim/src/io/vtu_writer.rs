@@ -38,9 +38,16 @@ impl PointData<'_> {
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
     #[error("{path}: {error}")]
-    Io { path: PathBuf, error: std::io::Error },
+    Io {
+        path: PathBuf,
+        error: std::io::Error,
+    },
     #[error("point data `{name}` has {len} values for {vertices} vertices")]
-    Length { name: String, len: usize, vertices: usize },
+    Length {
+        name: String,
+        len: usize,
+        vertices: usize,
+    },
     #[error("point data `{name}` has a NaN or infinite value at vertex {vertex}")]
     NonFinite { name: String, vertex: usize },
     #[error("vertex {vertex} has a NaN or infinite position")]
@@ -59,7 +66,10 @@ pub fn write_vtu(
     point_data: &[(&str, PointData<'_>)],
 ) -> Result<(), WriteError> {
     check(mesh, point_data)?;
-    let io_error = |source| WriteError::Io { path: path.to_path_buf(), error: source };
+    let io_error = |source| WriteError::Io {
+        path: path.to_path_buf(),
+        error: source,
+    };
     let file = std::fs::File::create(path).map_err(io_error)?;
     let mut out = std::io::BufWriter::new(file);
     write_body(&mut out, mesh, point_data).map_err(io_error)?;
@@ -73,18 +83,26 @@ pub fn vtu_string(
 ) -> Result<String, WriteError> {
     check(mesh, point_data)?;
     let mut out = Vec::new();
-    write_body(&mut out, mesh, point_data)
-        .map_err(|source| WriteError::Io { path: PathBuf::from("<memory>"), error: source })?;
+    write_body(&mut out, mesh, point_data).map_err(|source| WriteError::Io {
+        path: PathBuf::from("<memory>"),
+        error: source,
+    })?;
     Ok(String::from_utf8_lossy(&out).into_owned())
 }
 
 fn check(mesh: &TetMesh, point_data: &[(&str, PointData<'_>)]) -> Result<(), WriteError> {
-    if let Some(vertex) = mesh.positions().iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+    if let Some(vertex) = mesh
+        .positions()
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()))
+    {
         return Err(WriteError::NonFinitePosition { vertex });
     }
     for (i, (name, data)) in point_data.iter().enumerate() {
         if name.is_empty() || point_data[..i].iter().any(|(n, _)| n == name) {
-            return Err(WriteError::Name { name: (*name).to_owned() });
+            return Err(WriteError::Name {
+                name: (*name).to_owned(),
+            });
         }
         if data.len() != mesh.vertex_count() {
             return Err(WriteError::Length {
@@ -94,7 +112,10 @@ fn check(mesh: &TetMesh, point_data: &[(&str, PointData<'_>)]) -> Result<(), Wri
             });
         }
         if let Some(vertex) = data.first_non_finite() {
-            return Err(WriteError::NonFinite { name: (*name).to_owned(), vertex });
+            return Err(WriteError::NonFinite {
+                name: (*name).to_owned(),
+                vertex,
+            });
         }
     }
     Ok(())
@@ -136,7 +157,10 @@ fn write_body(
     point_data: &[(&str, PointData<'_>)],
 ) -> std::io::Result<()> {
     writeln!(out, r#"<?xml version="1.0"?>"#)?;
-    writeln!(out, r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">"#)?;
+    writeln!(
+        out,
+        r#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">"#
+    )?;
     writeln!(out, "  <UnstructuredGrid>")?;
     writeln!(
         out,
@@ -162,7 +186,13 @@ fn write_body(
                         r#"        <DataArray type="Float64" Name="{name}" NumberOfComponents="3" format="ascii">"#
                     )?;
                     for x in *v {
-                        writeln!(out, "          {} {} {}", Float(x.x), Float(x.y), Float(x.z))?;
+                        writeln!(
+                            out,
+                            "          {} {} {}",
+                            Float(x.x),
+                            Float(x.y),
+                            Float(x.z)
+                        )?;
                     }
                 }
             }
@@ -171,27 +201,48 @@ fn write_body(
         writeln!(out, "      </PointData>")?;
     }
     writeln!(out, r#"      <CellData Scalars="region">"#)?;
-    writeln!(out, r#"        <DataArray type="UInt32" Name="region" format="ascii">"#)?;
+    writeln!(
+        out,
+        r#"        <DataArray type="UInt32" Name="region" format="ascii">"#
+    )?;
     write_rows(out, mesh.regions().iter())?;
     writeln!(out, "        </DataArray>")?;
     writeln!(out, "      </CellData>")?;
     writeln!(out, "      <Points>")?;
-    writeln!(out, r#"        <DataArray type="Float64" NumberOfComponents="3" format="ascii">"#)?;
+    writeln!(
+        out,
+        r#"        <DataArray type="Float64" NumberOfComponents="3" format="ascii">"#
+    )?;
     for p in mesh.positions() {
-        writeln!(out, "          {} {} {}", Float(p.x), Float(p.y), Float(p.z))?;
+        writeln!(
+            out,
+            "          {} {} {}",
+            Float(p.x),
+            Float(p.y),
+            Float(p.z)
+        )?;
     }
     writeln!(out, "        </DataArray>")?;
     writeln!(out, "      </Points>")?;
     writeln!(out, "      <Cells>")?;
-    writeln!(out, r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#)?;
+    writeln!(
+        out,
+        r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#
+    )?;
     for [a, b, c, d] in mesh.tets() {
         writeln!(out, "          {a} {b} {c} {d}")?;
     }
     writeln!(out, "        </DataArray>")?;
-    writeln!(out, r#"        <DataArray type="Int64" Name="offsets" format="ascii">"#)?;
+    writeln!(
+        out,
+        r#"        <DataArray type="Int64" Name="offsets" format="ascii">"#
+    )?;
     write_rows(out, (1..=mesh.tet_count()).map(|i| 4 * i))?;
     writeln!(out, "        </DataArray>")?;
-    writeln!(out, r#"        <DataArray type="UInt8" Name="types" format="ascii">"#)?;
+    writeln!(
+        out,
+        r#"        <DataArray type="UInt8" Name="types" format="ascii">"#
+    )?;
     write_rows(out, std::iter::repeat_n(10, mesh.tet_count()))?;
     writeln!(out, "        </DataArray>")?;
     writeln!(out, "      </Cells>")?;

@@ -51,7 +51,9 @@ pub fn dihedral_angles(p: &[Point3; 4]) -> [f64; 6] {
     for (e, &[i, j]) in super::TET_EDGES.iter().enumerate() {
         // the two vertices not on edge (i, j)
         let mut others = (0..4).filter(|&v| v != i && v != j);
-        let (Some(k), Some(l)) = (others.next(), others.next()) else { unreachable!() };
+        let (Some(k), Some(l)) = (others.next(), others.next()) else {
+            unreachable!()
+        };
         let (nk, nl) = (n[k], n[l]);
         let denom = nk.norm() * nl.norm();
         out[e] = if denom > 0.0 {
@@ -84,7 +86,12 @@ mod tests {
 
     #[test]
     fn corner_tet_has_right_and_acute_angles() {
-        let p = [Point3::origin(), Point3::new(1.0, 0.0, 0.0), Point3::new(0.0, 1.0, 0.0), Point3::new(0.0, 0.0, 1.0)];
+        let p = [
+            Point3::origin(),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(0.0, 1.0, 0.0),
+            Point3::new(0.0, 0.0, 1.0),
+        ];
         assert!((tet_signed_volume(&p[0], &p[1], &p[2], &p[3]) - 1.0 / 6.0).abs() < 1e-15);
         let a = dihedral_angles(&p);
         // edges at the origin meet at right angles

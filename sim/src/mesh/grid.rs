@@ -27,8 +27,16 @@ fn key(c: [i64; 3]) -> u64 {
 impl PointGrid {
     /// Bins `points` in cells of side `cell_m` (> 0).
     pub fn build(points: &[Point3], cell_m: f64) -> Self {
-        let mut grid = Self { cell_m, entries: Vec::new(), binned: points.to_vec() };
-        let mut entries: Vec<(u64, u32)> = points.iter().enumerate().map(|(i, p)| (key(grid.cell_of(p)), i as u32)).collect();
+        let mut grid = Self {
+            cell_m,
+            entries: Vec::new(),
+            binned: points.to_vec(),
+        };
+        let mut entries: Vec<(u64, u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (key(grid.cell_of(p)), i as u32))
+            .collect();
         entries.sort_unstable();
         grid.entries = entries;
         grid
@@ -42,7 +50,9 @@ impl PointGrid {
             return;
         }
         self.binned.extend_from_slice(&points[from..]);
-        let mut added: Vec<(u64, u32)> = (from..points.len()).map(|i| (key(self.cell_of(&points[i])), i as u32)).collect();
+        let mut added: Vec<(u64, u32)> = (from..points.len())
+            .map(|i| (key(self.cell_of(&points[i])), i as u32))
+            .collect();
         added.sort_unstable();
         let old = std::mem::take(&mut self.entries);
         let mut merged = Vec::with_capacity(old.len() + added.len());
@@ -79,7 +89,11 @@ impl PointGrid {
     fn cell_of(&self, p: &Point3) -> [i64; 3] {
         [p.x, p.y, p.z].map(|c| {
             let q = (c / self.cell_m).floor();
-            if q.is_finite() { q.clamp(-(OFFSET as f64), OFFSET as f64) as i64 } else { 0 }
+            if q.is_finite() {
+                q.clamp(-(OFFSET as f64), OFFSET as f64) as i64
+            } else {
+                0
+            }
         })
     }
 
@@ -120,16 +134,25 @@ mod tests {
         let points: Vec<Point3> = (0..2000)
             .map(|i| {
                 let f = i as f64;
-                Point3::new((f * 0.618).sin() * 0.05, (f * 0.377).cos() * 0.04 - 0.01, (f * 0.131).sin() * 0.02)
+                Point3::new(
+                    (f * 0.618).sin() * 0.05,
+                    (f * 0.377).cos() * 0.04 - 0.01,
+                    (f * 0.131).sin() * 0.02,
+                )
             })
             .collect();
         let grid = PointGrid::build(&points, 0.007);
-        for (centre, r) in [(Point3::origin(), 0.01), (Point3::new(-0.03, 0.02, 0.0), 0.025), (Point3::new(1.0, 1.0, 1.0), 0.1)] {
+        for (centre, r) in [
+            (Point3::origin(), 0.01),
+            (Point3::new(-0.03, 0.02, 0.0), 0.025),
+            (Point3::new(1.0, 1.0, 1.0), 0.1),
+        ] {
             let mut found = Vec::new();
             grid.for_each_within(&centre, r, |i| found.push(i));
             found.sort_unstable();
-            let expected: Vec<u32> =
-                (0..points.len() as u32).filter(|&i| (points[i as usize] - centre).norm() <= r).collect();
+            let expected: Vec<u32> = (0..points.len() as u32)
+                .filter(|&i| (points[i as usize] - centre).norm() <= r)
+                .collect();
             assert_eq!(found, expected);
         }
         let mut none = 0;
@@ -139,8 +162,15 @@ mod tests {
 
     #[test]
     fn extending_a_grid_bins_the_new_points_as_building_it_anew_would() {
-        let points: Vec<Point3> =
-            (0..3000).map(|i| Point3::new((i as f64 * 0.618).sin() * 0.05, (i as f64 * 0.377).cos() * 0.04, (i as f64 * 0.131).sin() * 0.02)).collect();
+        let points: Vec<Point3> = (0..3000)
+            .map(|i| {
+                Point3::new(
+                    (i as f64 * 0.618).sin() * 0.05,
+                    (i as f64 * 0.377).cos() * 0.04,
+                    (i as f64 * 0.131).sin() * 0.02,
+                )
+            })
+            .collect();
         let mut grid = PointGrid::build(&points[..2000], 0.006);
         grid.extend(&points[..1500]); // nothing new: unchanged
         assert_eq!(grid.len(), 2000);

@@ -8,13 +8,15 @@ mod topology;
 mod topology_update;
 mod validate;
 
+pub use geometry::{
+    bounding_box, dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal,
+};
 pub use grid::PointGrid;
-pub use quality::tet_mu;
-pub use geometry::{bounding_box, dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal};
 pub use quality::QualityStats;
-pub(crate) use topology_update::PARALLEL_MIN_TETS;
+pub use quality::tet_mu;
 pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};
 pub(crate) use topology::{edge_key, face_key, sorted_pair, sorted_triple};
+pub(crate) use topology_update::PARALLEL_MIN_TETS;
 pub use validate::ValidationReport;
 
 use crate::{MeshError, Point3};
@@ -42,7 +44,11 @@ pub struct TetMesh {
 fn check_tet(t: usize, tet: &[VertexId; 4], vertex_count: usize) -> Result<(), MeshError> {
     for (i, &v) in tet.iter().enumerate() {
         if v as usize >= vertex_count {
-            return Err(MeshError::VertexOutOfRange { tet: t, vertex: v, vertex_count });
+            return Err(MeshError::VertexOutOfRange {
+                tet: t,
+                vertex: v,
+                vertex_count,
+            });
         }
         if tet[..i].contains(&v) {
             return Err(MeshError::RepeatedVertex { tet: t, vertex: v });
@@ -67,13 +73,21 @@ impl TetMesh {
             return Err(MeshError::TooManyVertices(positions.len()));
         }
         if regions.len() != tets.len() {
-            return Err(MeshError::RegionCount { regions: regions.len(), tets: tets.len() });
+            return Err(MeshError::RegionCount {
+                regions: regions.len(),
+                tets: tets.len(),
+            });
         }
         for (t, tet) in tets.iter().enumerate() {
             check_tet(t, tet, positions.len())?;
         }
         let topology = Topology::build(positions.len(), &tets);
-        Ok(Self { positions, tets, regions, topology })
+        Ok(Self {
+            positions,
+            tets,
+            regions,
+            topology,
+        })
     }
 
     /// [`TetMesh::new`] for a local change of `previous`: the tets `changed` (ascending ids of
@@ -97,14 +111,23 @@ impl TetMesh {
         if !local || positions.len() > u32::MAX as usize - 1 {
             return Self::new(positions, tets, regions);
         }
-        for t in changed.iter().copied().chain(old_count as u32..tets.len() as u32) {
+        for t in changed
+            .iter()
+            .copied()
+            .chain(old_count as u32..tets.len() as u32)
+        {
             check_tet(t as usize, &tets[t as usize], positions.len())?;
         }
         let topology = previous
             .topology
             .updated(&previous.tets, &tets, changed, positions.len())
             .unwrap_or_else(|| Topology::build(positions.len(), &tets));
-        Ok(Self { positions, tets, regions, topology })
+        Ok(Self {
+            positions,
+            tets,
+            regions,
+            topology,
+        })
     }
 
     /// Builds a mesh where every tetrahedron has region 0.
@@ -214,7 +237,10 @@ impl TetMesh {
         let mut order: Vec<u32> = (0..pos.len() as u32).collect();
         order.sort_by(|&a, &b| {
             let (p, q) = (&pos[a as usize], &pos[b as usize]);
-            p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)).then(p.z.total_cmp(&q.z)).then(a.cmp(&b))
+            p.x.total_cmp(&q.x)
+                .then(p.y.total_cmp(&q.y))
+                .then(p.z.total_cmp(&q.z))
+                .then(a.cmp(&b))
         });
         let mut pairs = Vec::new();
         for (i, &a) in order.iter().enumerate() {

@@ -16,7 +16,9 @@ pub struct QualityStats {
 
 /// The paper's pattern indicator for one tetrahedron: `mu = max(theta) / min(theta)`.
 pub fn tet_mu(angles: &[f64; 6]) -> f64 {
-    let (lo, hi) = angles.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &a| (lo.min(a), hi.max(a)));
+    let (lo, hi) = angles.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &a| {
+        (lo.min(a), hi.max(a))
+    });
     if lo > 0.0 { hi / lo } else { f64::INFINITY }
 }
 

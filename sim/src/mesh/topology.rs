@@ -32,7 +32,11 @@ impl Csr {
     /// Rebuilds these rows from the `(row, item)` pairs `pairs()` yields (called twice: to
     /// count the rows, then to fill them), the entries of a row in the order they come, in the
     /// allocations this one holds (no list of pairs needed).
-    pub(crate) fn refill<I: Iterator<Item = (u32, u32)>>(&mut self, rows: usize, pairs: impl Fn() -> I) {
+    pub(crate) fn refill<I: Iterator<Item = (u32, u32)>>(
+        &mut self,
+        rows: usize,
+        pairs: impl Fn() -> I,
+    ) {
         let Self { offsets, items } = self;
         offsets.clear();
         offsets.resize(rows + 1, 0);
@@ -55,7 +59,9 @@ impl Csr {
 
     /// From its parts (`offsets` ascending from 0 to `items.len()`).
     pub(crate) fn from_parts(offsets: Vec<u32>, items: Vec<u32>) -> Self {
-        debug_assert!(offsets.first() == Some(&0) && offsets.last().copied() == Some(items.len() as u32));
+        debug_assert!(
+            offsets.first() == Some(&0) && offsets.last().copied() == Some(items.len() as u32)
+        );
         Self { offsets, items }
     }
 
@@ -144,8 +150,16 @@ pub(super) fn tet_face_keys(tet: &[VertexId; 4]) -> [[VertexId; 3]; 4] {
 
 /// The sorted, deduplicated keys `keys_of` gives for the tets `ids` of `tets` (ids out of range
 /// skipped).
-pub(super) fn keys_of_tets<K: Ord, const L: usize>(tets: &[[VertexId; 4]], ids: &[u32], keys_of: impl Fn(&[VertexId; 4]) -> [K; L]) -> Vec<K> {
-    let mut keys: Vec<K> = ids.iter().filter_map(|&t| tets.get(t as usize)).flat_map(keys_of).collect();
+pub(super) fn keys_of_tets<K: Ord, const L: usize>(
+    tets: &[[VertexId; 4]],
+    ids: &[u32],
+    keys_of: impl Fn(&[VertexId; 4]) -> [K; L],
+) -> Vec<K> {
+    let mut keys: Vec<K> = ids
+        .iter()
+        .filter_map(|&t| tets.get(t as usize))
+        .flat_map(keys_of)
+        .collect();
     keys.sort_unstable();
     keys.dedup();
     keys
@@ -154,7 +168,11 @@ pub(super) fn keys_of_tets<K: Ord, const L: usize>(tets: &[[VertexId; 4]], ids: 
 /// Sorts `keys` (ascending, as `sort_unstable` would) by a counting sort on their first
 /// vertex, then a small sort within each bucket: linear in the mesh size, since a vertex has
 /// only a handful of edges and faces. The result is the same total order as a full sort.
-fn sort_by_first_vertex<K: Ord + Copy>(keys: &mut Vec<K>, vertex_count: usize, first: impl Fn(&K) -> u32) {
+fn sort_by_first_vertex<K: Ord + Copy>(
+    keys: &mut Vec<K>,
+    vertex_count: usize,
+    first: impl Fn(&K) -> u32,
+) {
     let mut offsets = vec![0usize; vertex_count + 1];
     for k in keys.iter() {
         offsets[first(k) as usize + 1] += 1;
@@ -190,7 +208,12 @@ impl Topology {
 
         let mut faces: Vec<([u32; 3], u32, u8)> = Vec::with_capacity(tets.len() * 4);
         for (t, tet) in tets.iter().enumerate() {
-            faces.extend(tet_face_keys(tet).into_iter().zip(0..).map(|(key, l)| (key, t as u32, l)));
+            faces.extend(
+                tet_face_keys(tet)
+                    .into_iter()
+                    .zip(0..)
+                    .map(|(key, l)| (key, t as u32, l)),
+            );
         }
         sort_by_first_vertex(&mut faces, vertex_count, |k| k.0[0]);
         let (mut boundary, mut overshared_faces) = (Vec::new(), Vec::new());
@@ -203,13 +226,26 @@ impl Topology {
         }
 
         let mut vertex_tets = Csr::default();
-        vertex_tets.refill(vertex_count, || tets.iter().enumerate().flat_map(|(t, tet)| tet.map(|v| (v, t as u32))));
-        Self { edges, boundary, overshared_faces, vertex_tets }
+        vertex_tets.refill(vertex_count, || {
+            tets.iter()
+                .enumerate()
+                .flat_map(|(t, tet)| tet.map(|v| (v, t as u32)))
+        });
+        Self {
+            edges,
+            boundary,
+            overshared_faces,
+            vertex_tets,
+        }
     }
 
     /// The tets around vertex `v`, ascending (none for a vertex out of range).
     pub fn tets_of_vertex(&self, v: VertexId) -> &[u32] {
-        if (v as usize) < self.vertex_tets.rows() { self.vertex_tets.row(v as usize) } else { &[] }
+        if (v as usize) < self.vertex_tets.rows() {
+            self.vertex_tets.row(v as usize)
+        } else {
+            &[]
+        }
     }
 
     /// The tets around the edge `[a, b]`, ascending: those of both vertices.
@@ -220,12 +256,16 @@ impl Topology {
     /// The tets around the face `[a, b, c]`, ascending: those of all three vertices.
     pub fn tets_of_face(&self, [a, b, c]: [VertexId; 3]) -> impl Iterator<Item = u32> + '_ {
         let third = self.tets_of_vertex(c);
-        common(self.tets_of_vertex(a), self.tets_of_vertex(b)).filter(move |t| third.binary_search(t).is_ok())
+        common(self.tets_of_vertex(a), self.tets_of_vertex(b))
+            .filter(move |t| third.binary_search(t).is_ok())
     }
 
     /// The id (place in [`Self::edges`]) of the edge between `a` and `b`, if there is one.
     pub fn edge_id(&self, a: VertexId, b: VertexId) -> Option<u32> {
-        self.edges.binary_search(&sorted_pair(a, b)).ok().map(|e| e as u32)
+        self.edges
+            .binary_search(&sorted_pair(a, b))
+            .ok()
+            .map(|e| e as u32)
     }
 
     /// The edge ids of `tet`'s six edges, in the local order of [`TET_EDGES`] ([`NONE`] for an
@@ -259,7 +299,10 @@ impl Topology {
 
 /// Edges of the oriented triangles `tris` (those `judge(a, b)` accepts) that are not used by
 /// exactly two of them in opposite directions, sorted.
-pub fn non_manifold_edges(tris: &[[VertexId; 3]], judge: impl Fn(u32, u32) -> bool) -> Vec<[VertexId; 2]> {
+pub fn non_manifold_edges(
+    tris: &[[VertexId; 3]],
+    judge: impl Fn(u32, u32) -> bool,
+) -> Vec<[VertexId; 2]> {
     let mut half: Vec<([u32; 2], i8)> = Vec::with_capacity(tris.len() * 3);
     for tri in tris {
         for k in 0..3 {

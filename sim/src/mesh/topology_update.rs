@@ -4,8 +4,10 @@
 //! vertices the changed tets touch are merged again, the edges and the boundary faces those
 //! tets had or have are looked up in the new rows, and everything between is copied whole.
 
-use super::topology::{Csr, Topology, keys_of_tets, oriented_face, sorted_triple, tet_edge_keys, tet_face_keys};
 use super::VertexId;
+use super::topology::{
+    Csr, Topology, keys_of_tets, oriented_face, sorted_triple, tet_edge_keys, tet_face_keys,
+};
 
 /// From this many tets on, the passes of a cut over the whole mesh run on two threads
 /// ([`Topology::updated`] merges the edges and the boundary side by side).
@@ -14,7 +16,12 @@ pub(crate) const PARALLEL_MIN_TETS: usize = 20_000;
 /// `old` (ascending by `key`) without its entries whose key is in `removed` (ascending), with
 /// `added` (ascending by `key`) merged in, an added entry before an old one of the same key.
 /// The runs of `old` between the changes are copied whole.
-fn merge_runs<T: Copy, K: Ord>(old: &[T], removed: &[K], added: &[T], key: impl Fn(&T) -> K) -> Vec<T> {
+fn merge_runs<T: Copy, K: Ord>(
+    old: &[T],
+    removed: &[K],
+    added: &[T],
+    key: impl Fn(&T) -> K,
+) -> Vec<T> {
     let mut out = Vec::with_capacity(old.len() + added.len());
     let (mut i, mut r, mut a) = (0, 0, 0);
     let place = |i: usize, k: &K| i + old[i..].partition_point(|x| key(x) < *k);
@@ -39,7 +46,11 @@ fn merge_runs<T: Copy, K: Ord>(old: &[T], removed: &[K], added: &[T], key: impl 
 }
 
 /// Appends to `out` the merge of two ascending runs of tet ids.
-fn merge_ascending(out: &mut Vec<u32>, kept: impl Iterator<Item = u32>, new: impl Iterator<Item = u32>) {
+fn merge_ascending(
+    out: &mut Vec<u32>,
+    kept: impl Iterator<Item = u32>,
+    new: impl Iterator<Item = u32>,
+) {
     let mut kept = kept.peekable();
     for t in new {
         while let Some(o) = kept.next_if(|&o| o < t) {
@@ -56,7 +67,13 @@ impl Topology {
     /// whose vertices changed) and every tet from `old_tets.len()` on (appended). Tet ids
     /// never move and vertex ids only grow. Returns `None` where the old topology cannot be
     /// carried over (faces shared by more than two tets), for [`Topology::build`] to do.
-    pub fn updated(&self, old_tets: &[[VertexId; 4]], tets: &[[VertexId; 4]], changed: &[u32], vertex_count: usize) -> Option<Self> {
+    pub fn updated(
+        &self,
+        old_tets: &[[VertexId; 4]],
+        tets: &[[VertexId; 4]],
+        changed: &[u32],
+        vertex_count: usize,
+    ) -> Option<Self> {
         let old_count = old_tets.len();
         if !self.overshared_faces.is_empty()
             || tets.len() < old_count
@@ -69,9 +86,17 @@ impl Topology {
         for &t in changed {
             *is_changed.get_mut(t as usize)? = true;
         }
-        let dirty: Vec<u32> = changed.iter().copied().chain(old_count as u32..tets.len() as u32).collect();
-        let vertex_tets = self.vertex_rows_updated(old_tets, tets, &dirty, &is_changed, vertex_count)?;
-        let mut new = Self { vertex_tets, ..Self::default() };
+        let dirty: Vec<u32> = changed
+            .iter()
+            .copied()
+            .chain(old_count as u32..tets.len() as u32)
+            .collect();
+        let vertex_tets =
+            self.vertex_rows_updated(old_tets, tets, &dirty, &is_changed, vertex_count)?;
+        let mut new = Self {
+            vertex_tets,
+            ..Self::default()
+        };
 
         // the edges the changed tets had and no tet has now, and those the dirty tets have and
         // no tet had
@@ -100,10 +125,13 @@ impl Topology {
                     _ => {}
                 }
             }
-            Some(merge_runs(&self.boundary, &faces, &added, |&tri| sorted_triple(tri)))
+            Some(merge_runs(&self.boundary, &faces, &added, |&tri| {
+                sorted_triple(tri)
+            }))
         };
         // independent: side by side on a large mesh (the same result either way)
-        let (edges, boundary) = crate::solver::system::join(tets.len() >= PARALLEL_MIN_TETS, edges, boundary);
+        let (edges, boundary) =
+            crate::solver::system::join(tets.len() >= PARALLEL_MIN_TETS, edges, boundary);
         new.edges = edges;
         new.boundary = boundary?;
         Some(new)
@@ -142,10 +170,17 @@ impl Topology {
             if !touched {
                 items.extend_from_slice(old_row);
             } else {
-                let count = vertex_pairs[j..].iter().take_while(|p| p.0 as usize == v).count();
+                let count = vertex_pairs[j..]
+                    .iter()
+                    .take_while(|p| p.0 as usize == v)
+                    .count();
                 let run = vertex_pairs[j..j + count].iter().map(|p| p.1);
                 j += count;
-                merge_ascending(&mut items, old_row.iter().copied().filter(|&t| !is_changed[t as usize]), run);
+                merge_ascending(
+                    &mut items,
+                    old_row.iter().copied().filter(|&t| !is_changed[t as usize]),
+                    run,
+                );
             }
             offsets.push(items.len() as u32);
         }

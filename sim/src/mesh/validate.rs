@@ -2,7 +2,7 @@
 
 use std::fmt;
 
-use super::{TetMesh, TetId, VertexId, triangle_normal};
+use super::{TetId, TetMesh, VertexId, triangle_normal};
 use crate::{Point3, Vector3};
 
 /// Tetrahedra whose normalised volume `6 sqrt(2) V / l_rms^3` (1 for a regular tetrahedron)
@@ -64,10 +64,18 @@ impl fmt::Display for ValidationReport {
         }
         list(f, "inverted tetrahedra", &self.inverted_tets)?;
         list(f, "degenerate tetrahedra", &self.degenerate_tets)?;
-        list(f, "faces shared by more than two tetrahedra", &self.overshared_faces)?;
+        list(
+            f,
+            "faces shared by more than two tetrahedra",
+            &self.overshared_faces,
+        )?;
         list(f, "hanging faces", &self.hanging_faces)?;
         list(f, "dangling vertices", &self.dangling_vertices)?;
-        list(f, "vertices with non-finite coordinates", &self.non_finite_vertices)
+        list(
+            f,
+            "vertices with non-finite coordinates",
+            &self.non_finite_vertices,
+        )
     }
 }
 
@@ -86,12 +94,19 @@ pub(super) fn validate(mesh: &TetMesh) -> ValidationReport {
         }
     }
     for (t, tet) in mesh.tets().iter().enumerate() {
-        if tet.iter().any(|&v| !pos[v as usize].iter().all(|c| c.is_finite())) {
+        if tet
+            .iter()
+            .any(|&v| !pos[v as usize].iter().all(|c| c.is_finite()))
+        {
             continue; // already reported through its vertices
         }
         let vol = mesh.tet_volume(t);
         let p = mesh.tet_corners(t);
-        let l2: f64 = super::TET_EDGES.iter().map(|&[i, j]| (p[i] - p[j]).norm_squared()).sum::<f64>() / 6.0;
+        let l2: f64 = super::TET_EDGES
+            .iter()
+            .map(|&[i, j]| (p[i] - p[j]).norm_squared())
+            .sum::<f64>()
+            / 6.0;
         let q = 6.0 * std::f64::consts::SQRT_2 * vol / l2.powf(1.5);
         // NaN quality (e.g. all corners coincide) counts as degenerate.
         if q.is_nan() || q.abs() < DEGENERATE_QUALITY {
@@ -112,7 +127,8 @@ pub(super) fn validate(mesh: &TetMesh) -> ValidationReport {
 /// other too, but each side is a closed surface, so they are not reported.
 fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
     let topo = mesh.topology();
-    let open_edges: std::collections::BTreeSet<[u32; 2]> = topo.boundary_non_manifold_edges().into_iter().collect();
+    let open_edges: std::collections::BTreeSet<[u32; 2]> =
+        topo.boundary_non_manifold_edges().into_iter().collect();
     if open_edges.is_empty() {
         return Vec::new();
     }
@@ -127,7 +143,10 @@ fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
     if tris.is_empty() {
         return Vec::new();
     }
-    let finite = |t: &[u32; 3]| t.iter().all(|&v| pos[v as usize].iter().all(|c| c.is_finite()));
+    let finite = |t: &[u32; 3]| {
+        t.iter()
+            .all(|&v| pos[v as usize].iter().all(|c| c.is_finite()))
+    };
     // Grid over boundary triangles with cells of the mean boundary edge length.
     let mut mean_len = 0.0;
     let mut n = 0usize;
@@ -174,7 +193,11 @@ fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
         for a in i..j {
             for b in i..j {
                 let (ta, tb) = (entries[a].1 as usize, entries[b].1 as usize);
-                if ta != tb && !hanging[ta] && (is_open(&tris[ta]) || is_open(&tris[tb])) && covers(pos, &tris[tb], &tris[ta], tol) {
+                if ta != tb
+                    && !hanging[ta]
+                    && (is_open(&tris[ta]) || is_open(&tris[tb]))
+                    && covers(pos, &tris[tb], &tris[ta], tol)
+                {
                     hanging[ta] = true;
                     hanging[tb] = true;
                 }
@@ -182,7 +205,11 @@ fn hanging_faces(mesh: &TetMesh) -> Vec<[VertexId; 3]> {
         }
         i = j;
     }
-    tris.iter().zip(&hanging).filter(|(_, h)| **h).map(|(t, _)| *t).collect()
+    tris.iter()
+        .zip(&hanging)
+        .filter(|(_, h)| **h)
+        .map(|(t, _)| *t)
+        .collect()
 }
 
 /// True when triangle `small` lies in the plane of `big` with opposite normal, its centroid

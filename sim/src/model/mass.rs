@@ -80,7 +80,13 @@ pub(super) struct MassScratch {
 }
 
 /// `m_p = l_p + sum over neighbours q (ascending) of what q gives p minus what p gives q`.
-pub(super) fn regularised_mass(mesh: &TetMesh, lumped: &[f64], floor_kg: f64, p: u32, n: &mut MassScratch) -> f64 {
+pub(super) fn regularised_mass(
+    mesh: &TetMesh,
+    lumped: &[f64],
+    floor_kg: f64,
+    p: u32,
+    n: &mut MassScratch,
+) -> f64 {
     let lp = lumped[p as usize];
     let mut m = lp;
     neighbours(mesh, p, &mut n.of_p);
@@ -124,11 +130,22 @@ mod tests {
     fn mesh() -> TetMesh {
         let p = |x: f64, y: f64, z: f64| Point3::new(x, y, z);
         let positions = vec![
-            p(0.0, 0.0, 0.0), p(1.0, 0.0, 0.0), p(0.0, 1.0, 0.0), p(0.0, 0.0, 1.0),
+            p(0.0, 0.0, 0.0),
+            p(1.0, 0.0, 0.0),
+            p(0.0, 1.0, 0.0),
+            p(0.0, 0.0, 1.0),
             p(0.335, 0.335, 0.335),
-            p(3.0, 0.0, 0.0), p(3.01, 0.0, 0.0), p(3.0, 0.01, 0.0), p(3.0, 0.0, 0.01),
+            p(3.0, 0.0, 0.0),
+            p(3.01, 0.0, 0.0),
+            p(3.0, 0.01, 0.0),
+            p(3.0, 0.0, 0.01),
         ];
-        TetMesh::new(positions, vec![[0, 1, 2, 3], [1, 2, 3, 4], [5, 6, 7, 8]], vec![0; 3]).expect("valid mesh")
+        TetMesh::new(
+            positions,
+            vec![[0, 1, 2, 3], [1, 2, 3, 4], [5, 6, 7, 8]],
+            vec![0; 3],
+        )
+        .expect("valid mesh")
     }
 
     #[test]
@@ -140,7 +157,11 @@ mod tests {
         assert!(lumped[4] < 0.1 * floor, "the apex is light: {lumped:?}");
         let mass = regularised_masses(&mesh, &lumped, floor);
         // the apex: 3 neighbours (1, 2, 3) above the floor, each giving a third of its deficit
-        assert!((mass[4] - floor).abs() <= 1e-12 * floor, "{} vs {floor}", mass[4]);
+        assert!(
+            (mass[4] - floor).abs() <= 1e-12 * floor,
+            "{} vs {floor}",
+            mass[4]
+        );
         // the donors keep at least the floor and half their surplus
         for q in 1..4 {
             assert!(mass[q] >= floor + 0.5 * (lumped[q] - floor) - 1e-18 && mass[q] < lumped[q]);
@@ -148,15 +169,31 @@ mod tests {
         // vertex 0 is no neighbour of the apex
         assert_eq!(mass[0], lumped[0]);
         // conserved over the attached particles; the chip lifted to the floor
-        let (before, after) = (lumped[..5].iter().sum::<f64>(), mass[..5].iter().sum::<f64>());
-        assert!((after - before).abs() <= 1e-15 * before, "{after} vs {before}");
+        let (before, after) = (
+            lumped[..5].iter().sum::<f64>(),
+            mass[..5].iter().sum::<f64>(),
+        );
+        assert!(
+            (after - before).abs() <= 1e-15 * before,
+            "{after} vs {before}"
+        );
         assert!(mass[5..].iter().all(|&m| m == floor), "{:?}", &mass[5..]);
         // each particle's mass on its own equals the whole pass
         let mut scratch = MassScratch::default();
         for p in 0..mesh.vertex_count() as u32 {
-            assert_eq!(regularised_mass(&mesh, &lumped, floor, p, &mut scratch).to_bits(), mass[p as usize].to_bits());
+            assert_eq!(
+                regularised_mass(&mesh, &lumped, floor, p, &mut scratch).to_bits(),
+                mass[p as usize].to_bits()
+            );
         }
         // below the lightest particle, nothing moves
-        assert_eq!(regularised_masses(&mesh, &lumped, lumped.iter().copied().fold(f64::INFINITY, f64::min)), lumped);
+        assert_eq!(
+            regularised_masses(
+                &mesh,
+                &lumped,
+                lumped.iter().copied().fold(f64::INFINITY, f64::min)
+            ),
+            lumped
+        );
     }
 }

@@ -30,7 +30,9 @@ impl Material {
     /// The paper's chest wall: 0.90 g/cm^3, 100 N/m, 0.05 N s/m, 4 % tension.
     pub const PAPER_CHEST_WALL: Self = Self {
         density_kg_per_m3: 900.0,
-        stiffness: SpringStiffness::Uniform { newtons_per_metre: 100.0 },
+        stiffness: SpringStiffness::Uniform {
+            newtons_per_metre: 100.0,
+        },
         damping_newton_seconds_per_metre: 0.05,
         pretension: 0.04,
     };
@@ -43,7 +45,10 @@ impl Material {
             SpringStiffness::YoungsModulus { pascals } => pascals,
         };
         if !(self.density_kg_per_m3 > 0.0 && self.density_kg_per_m3.is_finite()) {
-            return Err(format!("density must be positive and finite, got {}", self.density_kg_per_m3));
+            return Err(format!(
+                "density must be positive and finite, got {}",
+                self.density_kg_per_m3
+            ));
         }
         if !(k > 0.0 && k.is_finite()) {
             return Err(format!("stiffness must be positive and finite, got {k}"));
@@ -53,7 +58,10 @@ impl Material {
             return Err(format!("damping must be non-negative and finite, got {c}"));
         }
         if !(0.0..1.0).contains(&self.pretension) {
-            return Err(format!("pretension s must satisfy 0 <= s < 1, got {}", self.pretension));
+            return Err(format!(
+                "pretension s must satisfy 0 <= s < 1, got {}",
+                self.pretension
+            ));
         }
         Ok(())
     }

@@ -13,8 +13,8 @@ pub use springs::SpringSet;
 pub(crate) use springs::sorted_by_first_end;
 
 use crate::fem::{FemMaterial, FemModel};
-use mass::quarter_mass;
 use crate::{Point3, TetMesh, Vector3};
+use mass::quarter_mass;
 
 /// A problem with the model's set-up.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -99,7 +99,10 @@ pub struct State {
 impl State {
     /// At rest in the mesh's reference positions.
     pub fn at_rest(mesh: &TetMesh) -> Self {
-        Self { positions: mesh.positions().to_vec(), velocities: vec![Vector3::zeros(); mesh.vertex_count()] }
+        Self {
+            positions: mesh.positions().to_vec(),
+            velocities: vec![Vector3::zeros(); mesh.vertex_count()],
+        }
     }
 
     /// Largest particle speed in m/s.
@@ -111,7 +114,10 @@ impl State {
     pub fn non_finite_particles(&self) -> Vec<u32> {
         let finite = |c: &[f64]| c.iter().all(|c| c.is_finite());
         (0..self.positions.len())
-            .filter(|&i| !(finite(self.positions[i].coords.as_slice()) && finite(self.velocities[i].as_slice())))
+            .filter(|&i| {
+                !(finite(self.positions[i].coords.as_slice())
+                    && finite(self.velocities[i].as_slice()))
+            })
             .map(|i| i as u32)
             .collect()
     }
@@ -120,7 +126,11 @@ impl State {
     /// give equal hashes on every platform.
     pub fn bit_hash(&self) -> u64 {
         let mut h = crate::hash::Fnv1a::default();
-        let coords = self.positions.iter().flat_map(|p| p.coords.iter()).chain(self.velocities.iter().flat_map(|v| v.iter()));
+        let coords = self
+            .positions
+            .iter()
+            .flat_map(|p| p.coords.iter())
+            .chain(self.velocities.iter().flat_map(|v| v.iter()));
         coords.for_each(|&c| h.f64(c));
         h.finish()
     }
@@ -138,7 +148,10 @@ impl Model {
         materials.sort_by_key(|(id, _)| *id);
         materials.dedup_by_key(|(id, _)| *id);
         for (region, m) in &materials {
-            m.check().map_err(|message| ModelError::Material { region: *region, message })?;
+            m.check().map_err(|message| ModelError::Material {
+                region: *region,
+                message,
+            })?;
         }
         if !gravity.iter().all(|g| g.is_finite()) {
             return Err(ModelError::NonFiniteGravity);
@@ -146,14 +159,33 @@ impl Model {
         let n = mesh.vertex_count();
         let mut held = vec![false; n];
         for &v in held_vertices {
-            *held.get_mut(v as usize).ok_or(ModelError::HeldOutOfRange { vertex: v, vertex_count: n })? = true;
+            *held.get_mut(v as usize).ok_or(ModelError::HeldOutOfRange {
+                vertex: v,
+                vertex_count: n,
+            })? = true;
         }
         let material_of_tet = material_of_tets(&materials, &mesh)?;
         let lumped = lumped_masses(&mesh, &material_of_tet);
         let floor = lumped.iter().copied().fold(f64::INFINITY, f64::min);
         let d = derive(&material_of_tet, &mesh, &held, lumped, floor)?;
-        let Derived { lumped, mass, inv_mass, springs } = d;
-        Ok(Self { mesh, materials, lumped_mass: lumped, mass, mass_floor_kg: floor, inv_mass, held, springs, gravity, fem: None })
+        let Derived {
+            lumped,
+            mass,
+            inv_mass,
+            springs,
+        } = d;
+        Ok(Self {
+            mesh,
+            materials,
+            lumped_mass: lumped,
+            mass,
+            mass_floor_kg: floor,
+            inv_mass,
+            held,
+            springs,
+            gravity,
+            fem: None,
+        })
     }
 
     /// Switches the model to co-rotational finite elements with the given materials per region
@@ -162,13 +194,21 @@ impl Model {
         let mut fem_materials = fem_materials.to_vec();
         fem_materials.sort_by_key(|(id, _)| *id);
         fem_materials.dedup_by_key(|(id, _)| *id);
-        self.fem = Some(FemModel::build(&self.mesh, &self.materials, &fem_materials)?);
+        self.fem = Some(FemModel::build(
+            &self.mesh,
+            &self.materials,
+            &fem_materials,
+        )?);
         Ok(self)
     }
 
     /// The force model the solvers run.
     pub fn force_model(&self) -> ForceModel {
-        if self.fem.is_some() { ForceModel::CorotationalFem } else { ForceModel::Springs }
+        if self.fem.is_some() {
+            ForceModel::CorotationalFem
+        } else {
+            ForceModel::Springs
+        }
     }
 
     pub fn vertex_count(&self) -> usize {
@@ -177,7 +217,12 @@ impl Model {
 
     /// What the spring solvers read of the whole body.
     pub fn particles(&self) -> Particles<'_> {
-        Particles { mass: &self.mass, held: &self.held, springs: &self.springs, gravity: self.gravity }
+        Particles {
+            mass: &self.mass,
+            held: &self.held,
+            springs: &self.springs,
+            gravity: self.gravity,
+        }
     }
 
     /// Replaces the mesh after a topology change (a cut): masses, springs and held flags are
@@ -204,7 +249,13 @@ impl Model {
     /// lumped masses of the vertices of those tets (before and after), the masses of these
     /// vertices and their neighbours, and the springs on their edges are derived again;
     /// everything else is carried over. Finite elements are rebuilt whole.
-    pub fn rebuild_local(&mut self, mesh: TetMesh, held: Vec<bool>, dirty: &[u32], changed: &[u32]) -> Result<(), ModelError> {
+    pub fn rebuild_local(
+        &mut self,
+        mesh: TetMesh,
+        held: Vec<bool>,
+        dirty: &[u32],
+        changed: &[u32],
+    ) -> Result<(), ModelError> {
         // (finite elements, or held flags not one per vertex: the whole rebuild, which checks)
         if self.fem.is_some() || held.len() != mesh.vertex_count() {
             return self.rebuild(mesh, held);
@@ -216,8 +267,16 @@ impl Model {
 
         // lumped masses: l_i summed over the tets around i in ascending order, as
         // lumped_masses does
-        let mut touched: Vec<u32> = dirty.iter().flat_map(|&t| mesh.tets()[t as usize]).collect();
-        touched.extend(changed.iter().filter_map(|&t| old_mesh.tets().get(t as usize)).flatten());
+        let mut touched: Vec<u32> = dirty
+            .iter()
+            .flat_map(|&t| mesh.tets()[t as usize])
+            .collect();
+        touched.extend(
+            changed
+                .iter()
+                .filter_map(|&t| old_mesh.tets().get(t as usize))
+                .flatten(),
+        );
         touched.sort_unstable();
         touched.dedup();
         let mut lumped = self.lumped_mass.clone();
@@ -246,33 +305,47 @@ impl Model {
         let mut mass = self.mass.clone();
         mass.resize(n, 0.0);
         for &v in &reached {
-            mass[v as usize] = mass::regularised_mass(&mesh, &lumped, self.mass_floor_kg, v, &mut scratch);
+            mass[v as usize] =
+                mass::regularised_mass(&mesh, &lumped, self.mass_floor_kg, v, &mut scratch);
         }
         let mut inv_mass = self.inv_mass.clone();
         inv_mass.resize(n, 0.0);
         // derived again where the mass or the held flag may have changed, and for new particles
         let old_n = self.held.len().min(n);
         let held_changed = (0..old_n).filter(|&v| held[v] != self.held[v]);
-        for v in reached.iter().map(|&v| v as usize).chain(held_changed).chain(old_n..n) {
+        for v in reached
+            .iter()
+            .map(|&v| v as usize)
+            .chain(held_changed)
+            .chain(old_n..n)
+        {
             inv_mass[v] = if held[v] { 0.0 } else { 1.0 / mass[v] };
         }
 
         // springs: derived again on the edges of the dirty tets and on the old edges that lost
         // a changed tet; between them the old and new edges are the same run (an edge only
         // appears with a dirty tet and only disappears with its last changed one), copied whole
-        let mut dirty_edges: Vec<u32> = dirty.iter().flat_map(|&t| topo.tet_edge_ids(&mesh.tets()[t as usize])).collect();
+        let mut dirty_edges: Vec<u32> = dirty
+            .iter()
+            .flat_map(|&t| topo.tet_edge_ids(&mesh.tets()[t as usize]))
+            .collect();
         dirty_edges.sort_unstable();
         dirty_edges.dedup();
         let (old, old_topo) = (&self.springs, old_mesh.topology());
         let mut lost: Vec<u32> = if old.ends == old_topo.edges {
-            changed.iter().filter_map(|&t| old_mesh.tets().get(t as usize)).flat_map(|tet| old_topo.tet_edge_ids(tet)).collect()
+            changed
+                .iter()
+                .filter_map(|&t| old_mesh.tets().get(t as usize))
+                .flat_map(|tet| old_topo.tet_edge_ids(tet))
+                .collect()
         } else {
             (0..old.len() as u32).collect() // springs not of these edges: every one derived again
         };
         lost.sort_unstable();
         lost.dedup();
         let mut springs = SpringSet::with_capacity(topo.edges.len());
-        let (mut next_dirty, mut next_lost) = (dirty_edges.iter().peekable(), lost.iter().peekable());
+        let (mut next_dirty, mut next_lost) =
+            (dirty_edges.iter().peekable(), lost.iter().peekable());
         let (mut e, mut j) = (0, 0);
         while e < topo.edges.len() {
             while next_dirty.next_if(|&&d| (d as usize) < e).is_some() {}
@@ -297,14 +370,25 @@ impl Model {
                 _ => {
                     // (every tet's material was found above, with the masses: the default
                     // is never used)
-                    let params = SpringSet::edge_parameters(&mesh, e, &|t| material(t).unwrap_or(Material::PAPER_CHEST_WALL));
+                    let params = SpringSet::edge_parameters(&mesh, e, &|t| {
+                        material(t).unwrap_or(Material::PAPER_CHEST_WALL)
+                    });
                     springs.push(ends, params);
                 }
             }
             j += usize::from(old_match.is_some());
             e += 1;
         }
-        self.install(mesh, held, Derived { lumped, mass, inv_mass, springs });
+        self.install(
+            mesh,
+            held,
+            Derived {
+                lumped,
+                mass,
+                inv_mass,
+                springs,
+            },
+        );
         Ok(())
     }
 
@@ -331,12 +415,21 @@ impl Model {
 
 /// The material of `region` in `materials` (sorted by region id).
 fn material_of_region(materials: &[(u32, Material)], region: u32) -> Result<Material, ModelError> {
-    materials.binary_search_by_key(&region, |(id, _)| *id).map(|i| materials[i].1).map_err(|_| ModelError::MissingMaterial(region))
+    materials
+        .binary_search_by_key(&region, |(id, _)| *id)
+        .map(|i| materials[i].1)
+        .map_err(|_| ModelError::MissingMaterial(region))
 }
 
 /// Material of each tetrahedron from `materials` (sorted by region id).
-fn material_of_tets(materials: &[(u32, Material)], mesh: &TetMesh) -> Result<Vec<Material>, ModelError> {
-    mesh.regions().iter().map(|&r| material_of_region(materials, r)).collect()
+fn material_of_tets(
+    materials: &[(u32, Material)],
+    mesh: &TetMesh,
+) -> Result<Vec<Material>, ModelError> {
+    mesh.regions()
+        .iter()
+        .map(|&r| material_of_region(materials, r))
+        .collect()
 }
 
 /// What the model derives from mesh, materials and held flags.
@@ -349,11 +442,26 @@ struct Derived {
 }
 
 /// The masses (from the lumped masses `lumped` and the floor), inverse masses and springs.
-fn derive(material_of_tet: &[Material], mesh: &TetMesh, held: &[bool], lumped: Vec<f64>, floor_kg: f64) -> Result<Derived, ModelError> {
+fn derive(
+    material_of_tet: &[Material],
+    mesh: &TetMesh,
+    held: &[bool],
+    lumped: Vec<f64>,
+    floor_kg: f64,
+) -> Result<Derived, ModelError> {
     if let Some(v) = lumped.iter().position(|&m| !(m > 0.0)) {
         return Err(ModelError::ZeroMass { vertex: v as u32 });
     }
     let mass = mass::regularised_masses(mesh, &lumped, floor_kg);
-    let inv_mass = mass.iter().zip(held).map(|(&m, &h)| if h { 0.0 } else { 1.0 / m }).collect();
-    Ok(Derived { lumped, mass, inv_mass, springs: SpringSet::from_mesh(mesh, material_of_tet) })
+    let inv_mass = mass
+        .iter()
+        .zip(held)
+        .map(|(&m, &h)| if h { 0.0 } else { 1.0 / m })
+        .collect();
+    Ok(Derived {
+        lumped,
+        mass,
+        inv_mass,
+        springs: SpringSet::from_mesh(mesh, material_of_tet),
+    })
 }

@@ -40,19 +40,31 @@ impl SpringSet {
 
     /// [`Self::by_particle`] into `csr`, in the allocations it holds.
     pub(crate) fn by_particle_into(&self, particle_count: usize, csr: &mut crate::mesh::Csr) {
-        csr.refill(particle_count, || self.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]));
+        csr.refill(particle_count, || {
+            self.ends
+                .iter()
+                .enumerate()
+                .flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)])
+        });
     }
 
     /// An empty set with room for `n` springs.
     pub(crate) fn with_capacity(n: usize) -> Self {
-        Self { ends: Vec::with_capacity(n), rest_length: Vec::with_capacity(n), stiffness: Vec::with_capacity(n), damping: Vec::with_capacity(n) }
+        Self {
+            ends: Vec::with_capacity(n),
+            rest_length: Vec::with_capacity(n),
+            stiffness: Vec::with_capacity(n),
+            damping: Vec::with_capacity(n),
+        }
     }
 
     /// Appends the springs `range` of `other`.
     pub(crate) fn extend_from(&mut self, other: &Self, range: std::ops::Range<usize>) {
         self.ends.extend_from_slice(&other.ends[range.clone()]);
-        self.rest_length.extend_from_slice(&other.rest_length[range.clone()]);
-        self.stiffness.extend_from_slice(&other.stiffness[range.clone()]);
+        self.rest_length
+            .extend_from_slice(&other.rest_length[range.clone()]);
+        self.stiffness
+            .extend_from_slice(&other.stiffness[range.clone()]);
         self.damping.extend_from_slice(&other.damping[range]);
     }
 
@@ -66,7 +78,11 @@ impl SpringSet {
 
     /// `[rest length, stiffness, damping]` of the spring on edge `e` of `mesh`: the materials
     /// (`material_of_tet(t)`) averaged over the tets around the edge, `l = d (1 - s)`.
-    pub(crate) fn edge_parameters(mesh: &TetMesh, e: usize, material_of_tet: &dyn Fn(usize) -> Material) -> [f64; 3] {
+    pub(crate) fn edge_parameters(
+        mesh: &TetMesh,
+        e: usize,
+        material_of_tet: &dyn Fn(usize) -> Material,
+    ) -> [f64; 3] {
         let topo = mesh.topology();
         let pos = mesh.positions();
         let [a, b] = topo.edges[e];
@@ -81,7 +97,9 @@ impl SpringSet {
                     uniform_share += 1.0;
                     newtons_per_metre
                 }
-                SpringStiffness::YoungsModulus { pascals } => pascals * mesh.tet_volume(t as usize) / (d * d),
+                SpringStiffness::YoungsModulus { pascals } => {
+                    pascals * mesh.tet_volume(t as usize) / (d * d)
+                }
             };
             c += m.damping_newton_seconds_per_metre;
             s += m.pretension;
@@ -108,7 +126,10 @@ impl SpringSet {
             damping: Vec::with_capacity(n),
         };
         for (e, &ends) in topo.edges.iter().enumerate() {
-            set.push(ends, Self::edge_parameters(mesh, e, &|t| material_of_tet[t]));
+            set.push(
+                ends,
+                Self::edge_parameters(mesh, e, &|t| material_of_tet[t]),
+            );
         }
         set
     }
@@ -120,20 +141,35 @@ mod tests {
 
     #[test]
     fn by_particle_lists_each_particles_springs_in_order() {
-        let scene = crate::scene::Scene::load("chest-wall", crate::scene::BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let scene = crate::scene::Scene::load(
+            "chest-wall",
+            crate::scene::BuildOptions {
+                min_tets: Some(1_000),
+            },
+        )
+        .expect("built-in scene");
         let mut springs = scene.model.springs.clone();
         // and a spring from a particle to itself, listed twice in its row
         springs.push([3, 3], [0.0, 1.0, 0.0]);
         let n = scene.model.vertex_count();
-        let pairs: Vec<(u32, u32)> = springs.ends.iter().enumerate().flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)]).collect();
+        let pairs: Vec<(u32, u32)> = springs
+            .ends
+            .iter()
+            .enumerate()
+            .flat_map(|(e, &[a, b])| [(a, e as u32), (b, e as u32)])
+            .collect();
         let csr = springs.by_particle(n);
         assert_eq!(csr, Csr::from_pairs(n, &pairs));
         let last = springs.len() as u32 - 1;
         assert_eq!(csr.row(3).iter().filter(|&&e| e == last).count(), 2);
         // row by row, the springs with an end there, in the springs' order
         for i in 0..n as u32 {
-            let expected: Vec<u32> =
-                springs.ends.iter().enumerate().flat_map(|(e, ends)| ends.iter().filter(|&&v| v == i).map(move |_| e as u32)).collect();
+            let expected: Vec<u32> = springs
+                .ends
+                .iter()
+                .enumerate()
+                .flat_map(|(e, ends)| ends.iter().filter(|&&v| v == i).map(move |_| e as u32))
+                .collect();
             assert_eq!(csr.row(i as usize), expected.as_slice(), "row {i}");
         }
         assert!((0..n).all(|i| csr.row(i).windows(2).all(|w| w[0] <= w[1])));

@@ -37,36 +37,68 @@ impl Scene {
     }
 
     /// Builds a scene from its spec.
-    pub fn build(spec: SceneSpec, origin: &SpecOrigin, options: BuildOptions) -> Result<Self, SceneError> {
-        let invalid = |message: String| SceneError::Invalid { scene: spec.name.clone(), message };
+    pub fn build(
+        spec: SceneSpec,
+        origin: &SpecOrigin,
+        options: BuildOptions,
+    ) -> Result<Self, SceneError> {
+        let invalid = |message: String| SceneError::Invalid {
+            scene: spec.name.clone(),
+            message,
+        };
         spec.solver.check().map_err(invalid)?;
         spec.incision.unit().map_err(invalid)?;
         if !(spec.cut_threshold_newtons > 0.0 && spec.cut_threshold_newtons.is_finite()) {
-            return Err(invalid(format!("cut_threshold_newtons must be positive, got {}", spec.cut_threshold_newtons)));
+            return Err(invalid(format!(
+                "cut_threshold_newtons must be positive, got {}",
+                spec.cut_threshold_newtons
+            )));
         }
         if !(spec.cut_depth_mm > 0.0 && spec.cut_depth_mm.is_finite()) {
-            return Err(invalid(format!("cut_depth_mm must be positive, got {}", spec.cut_depth_mm)));
+            return Err(invalid(format!(
+                "cut_depth_mm must be positive, got {}",
+                spec.cut_depth_mm
+            )));
         }
         let base_dir = match origin {
             SpecOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),
             // Built-in scenes refer to the repository's data relative to `sim/scenes/`.
-            SpecOrigin::BuiltIn => std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes")),
+            SpecOrigin::BuiltIn => {
+                std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"))
+            }
         };
         let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options)?;
         let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(invalid)?;
-        let mut materials: Vec<(u32, Material)> = spec.materials.iter().map(|m| (m.region, m.material())).collect();
+        let mut materials: Vec<(u32, Material)> = spec
+            .materials
+            .iter()
+            .map(|m| (m.region, m.material()))
+            .collect();
         if materials.is_empty() {
             // no materials given (a bare mesh file): the default material on every region
-            materials = mesh.region_ids().into_iter().map(|r| (r, Material::default())).collect();
+            materials = mesh
+                .region_ids()
+                .into_iter()
+                .map(|r| (r, Material::default()))
+                .collect();
         }
         let gravity = Vector3::from(spec.gravity_m_per_s2);
-        let model_error = |source| SceneError::Model { scene: spec.name.clone(), source };
+        let model_error = |source| SceneError::Model {
+            scene: spec.name.clone(),
+            source,
+        };
         let mut model = Model::new(mesh, &materials, &held, gravity).map_err(model_error)?;
         if spec.force_model == ForceModelSpec::CorotationalFem {
             let fem: Vec<(u32, FemMaterial)> = if spec.materials.is_empty() {
-                materials.iter().map(|(r, _)| (*r, FemMaterial::default())).collect()
+                materials
+                    .iter()
+                    .map(|(r, _)| (*r, FemMaterial::default()))
+                    .collect()
             } else {
-                spec.materials.iter().map(|m| (m.region, m.fem.unwrap_or_default())).collect()
+                spec.materials
+                    .iter()
+                    .map(|m| (m.region, m.fem.unwrap_or_default()))
+                    .collect()
             };
             model = model.with_fem(&fem).map_err(model_error)?;
         }
@@ -90,19 +122,33 @@ fn build_mesh(
     base_dir: &Path,
     options: BuildOptions,
 ) -> Result<(TetMesh, Option<Vec<u32>>), SceneError> {
-    let mesh_err = |source| SceneError::Mesh { scene: spec.name.clone(), source };
-    let invalid = |message: String| SceneError::Invalid { scene: spec.name.clone(), message };
+    let mesh_err = |source| SceneError::Mesh {
+        scene: spec.name.clone(),
+        source,
+    };
+    let invalid = |message: String| SceneError::Invalid {
+        scene: spec.name.clone(),
+        message,
+    };
     let check_size = |size_mm: &[f64; 3], min_tets: usize| -> Result<(), SceneError> {
         if !size_mm.iter().all(|s| *s > 0.0 && s.is_finite()) {
-            return Err(invalid(format!("mesh size must be positive, got {size_mm:?} mm")));
+            return Err(invalid(format!(
+                "mesh size must be positive, got {size_mm:?} mm"
+            )));
         }
         if !(1..=50_000_000).contains(&min_tets) {
-            return Err(invalid(format!("min_tets must be between 1 and 50,000,000, got {min_tets}")));
+            return Err(invalid(format!(
+                "min_tets must be between 1 and 50,000,000, got {min_tets}"
+            )));
         }
         Ok(())
     };
     match &spec.mesh {
-        MeshSource::CurvedSlab { size_mm, radius_mm, min_tets } => {
+        MeshSource::CurvedSlab {
+            size_mm,
+            radius_mm,
+            min_tets,
+        } => {
             let min_tets = options.min_tets.unwrap_or(*min_tets);
             check_size(size_mm, min_tets)?;
             if !(*radius_mm > size_mm[2]) || size_mm[0] / radius_mm > std::f64::consts::PI {
@@ -134,16 +180,36 @@ fn build_mesh(
             }
             Ok((mesh, None))
         }
-        MeshSource::Segmentation { path, labels, masks, coarsen } => {
-            use crate::segmentation::{LabelVolume, MeshingOptions, NonManifold, Resample, mesh_labels};
-            let seg_err = |source: crate::SegmentationError| SceneError::Segmentation { scene: spec.name.clone(), source };
+        MeshSource::Segmentation {
+            path,
+            labels,
+            masks,
+            coarsen,
+        } => {
+            use crate::segmentation::{
+                LabelVolume, MeshingOptions, NonManifold, Resample, mesh_labels,
+            };
+            let seg_err = |source: crate::SegmentationError| SceneError::Segmentation {
+                scene: spec.name.clone(),
+                source,
+            };
             let (volume, labels) = match (path, masks.is_empty()) {
                 (Some(p), true) => (LabelVolume::read(base_dir.join(p))?, labels.clone()),
                 (None, false) => {
-                    let files: Vec<_> = masks.iter().map(|m| (base_dir.join(&m.path), m.region)).collect();
-                    (LabelVolume::from_mask_files(&files).map_err(seg_err)?, masks.iter().map(|m| m.region).collect())
+                    let files: Vec<_> = masks
+                        .iter()
+                        .map(|m| (base_dir.join(&m.path), m.region))
+                        .collect();
+                    (
+                        LabelVolume::from_mask_files(&files).map_err(seg_err)?,
+                        masks.iter().map(|m| m.region).collect(),
+                    )
                 }
-                _ => return Err(invalid("a segmentation mesh needs either `path` (with `labels`) or `masks`".into())),
+                _ => {
+                    return Err(invalid(
+                        "a segmentation mesh needs either `path` (with `labels`) or `masks`".into(),
+                    ));
+                }
             };
             let mut opts = MeshingOptions::new(labels);
             opts.resample = coarsen.map(Resample::Factor);
@@ -154,7 +220,11 @@ fn build_mesh(
     }
 }
 
-fn held_vertices(spec: &SceneSpec, mesh: &TetMesh, generated_rim: Option<&[u32]>) -> Result<Vec<u32>, String> {
+fn held_vertices(
+    spec: &SceneSpec,
+    mesh: &TetMesh,
+    generated_rim: Option<&[u32]>,
+) -> Result<Vec<u32>, String> {
     let mut held = Vec::new();
     for sel in &spec.held {
         match sel {
@@ -165,7 +235,11 @@ fn held_vertices(spec: &SceneSpec, mesh: &TetMesh, generated_rim: Option<&[u32]>
             HeldSelection::BoundingBoxFaces { axes, width_mm } => {
                 let axes: Vec<usize> = axes
                     .chars()
-                    .map(|c| "xyz".find(c).ok_or_else(|| format!("axes must be letters of \"xyz\", got {axes:?}")))
+                    .map(|c| {
+                        "xyz"
+                            .find(c)
+                            .ok_or_else(|| format!("axes must be letters of \"xyz\", got {axes:?}"))
+                    })
                     .collect::<Result<_, _>>()?;
                 if !(*width_mm >= 0.0) {
                     return Err(format!("width_mm must be non-negative, got {width_mm}"));
@@ -221,7 +295,8 @@ fn near_box_faces(mesh: &TetMesh, axes: &[usize], width: f64) -> Vec<u32> {
         .into_iter()
         .filter(|&v| {
             let p = pos[v as usize];
-            axes.iter().any(|&k| p[k] - lo[k] <= width || hi[k] - p[k] <= width)
+            axes.iter()
+                .any(|&k| p[k] - lo[k] <= width || hi[k] - p[k] <= width)
         })
         .collect()
 }

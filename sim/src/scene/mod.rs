@@ -6,7 +6,10 @@ mod build;
 mod spec;
 
 pub use build::{BuildOptions, Scene};
-pub use spec::{ForceModelSpec, HeldSelection, IncisionDirections, MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint};
+pub use spec::{
+    ForceModelSpec, HeldSelection, IncisionDirections, MaskFile, MeshSource, RegionMaterial,
+    SceneSpec, Target, Viewpoint,
+};
 
 use std::path::{Path, PathBuf};
 
@@ -15,7 +18,10 @@ use crate::ReadError;
 /// Built-in scenes: name and TOML text.
 pub const BUILTIN: [(&str, &str); 5] = [
     ("chest-wall", include_str!("../../scenes/chest-wall.toml")),
-    ("chest-wall-fem", include_str!("../../scenes/chest-wall-fem.toml")),
+    (
+        "chest-wall-fem",
+        include_str!("../../scenes/chest-wall-fem.toml"),
+    ),
     ("sheet", include_str!("../../scenes/sheet.toml")),
     ("bar", include_str!("../../scenes/bar.toml")),
     ("body-wall", include_str!("../../scenes/body-wall.toml")),
@@ -24,7 +30,10 @@ pub const BUILTIN: [(&str, &str); 5] = [
 /// Why a scene could not be loaded or built.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("unknown scene {name:?}: not a built-in scene ({}) nor an existing file", builtin_names())]
+    #[error(
+        "unknown scene {name:?}: not a built-in scene ({}) nor an existing file",
+        builtin_names()
+    )]
     Unknown { name: String },
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
@@ -33,11 +42,20 @@ pub enum SceneError {
     #[error(transparent)]
     Read(#[from] ReadError),
     #[error("scene {scene:?}: {source}")]
-    Model { scene: String, source: crate::model::ModelError },
+    Model {
+        scene: String,
+        source: crate::model::ModelError,
+    },
     #[error("scene {scene:?}: {source}")]
-    Segmentation { scene: String, source: crate::SegmentationError },
+    Segmentation {
+        scene: String,
+        source: crate::SegmentationError,
+    },
     #[error("scene {scene:?}: {source}")]
-    Mesh { scene: String, source: crate::MeshError },
+    Mesh {
+        scene: String,
+        source: crate::MeshError,
+    },
 }
 
 fn builtin_names() -> String {
@@ -47,12 +65,18 @@ fn builtin_names() -> String {
 /// Parses a scene from TOML (or JSON when `path` ends in `.json`); `path` names the source in
 /// errors.
 pub fn parse_spec(text: &str, path: &Path) -> Result<SceneSpec, SceneError> {
-    let parsed = if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) {
+    let parsed = if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
         serde_json::from_str(text).map_err(|e| e.to_string())
     } else {
         toml::from_str(text).map_err(|e| e.to_string())
     };
-    parsed.map_err(|message| SceneError::Parse { path: path.to_path_buf(), message })
+    parsed.map_err(|message| SceneError::Parse {
+        path: path.to_path_buf(),
+        message,
+    })
 }
 
 /// The spec of a built-in scene.
@@ -76,15 +100,23 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
     }
     let path = Path::new(name_or_path);
     if !path.exists() {
-        return Err(SceneError::Unknown { name: name_or_path.to_owned() });
+        return Err(SceneError::Unknown {
+            name: name_or_path.to_owned(),
+        });
     }
     if crate::io::is_mesh_file(path) {
         // A bare mesh file: the default material on every region, nothing held.
         let spec = SceneSpec {
-            name: path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default(),
+            name: path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
             description: format!("mesh file {}", path.display()),
             gravity_m_per_s2: [0.0; 3],
-            mesh: MeshSource::File { path: path.file_name().map(Into::into).unwrap_or_default(), unit_m: 1.0 },
+            mesh: MeshSource::File {
+                path: path.file_name().map(Into::into).unwrap_or_default(),
+                unit_m: 1.0,
+            },
             materials: Vec::new(),
             held: Vec::new(),
             targets: Vec::new(),
@@ -97,9 +129,14 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
         };
         return Ok((spec, SpecOrigin::File(path.to_path_buf())));
     }
-    let text = std::fs::read_to_string(path)
-        .map_err(|source| ReadError::Io { path: path.to_path_buf(), error: source })?;
-    Ok((parse_spec(&text, path)?, SpecOrigin::File(path.to_path_buf())))
+    let text = std::fs::read_to_string(path).map_err(|source| ReadError::Io {
+        path: path.to_path_buf(),
+        error: source,
+    })?;
+    Ok((
+        parse_spec(&text, path)?,
+        SpecOrigin::File(path.to_path_buf()),
+    ))
 }
 
 #[cfg(test)]
@@ -116,23 +153,45 @@ mod tests {
 
     #[test]
     fn unknown_fields_and_bad_values_are_errors() {
-        let bad = BUILTIN[0].1.replace("pretension = 0.04", "pretension = 0.04\ncolour = 3");
-        let err = parse_spec(&bad, Path::new("x.toml")).unwrap_err().to_string();
+        let bad = BUILTIN[0]
+            .1
+            .replace("pretension = 0.04", "pretension = 0.04\ncolour = 3");
+        let err = parse_spec(&bad, Path::new("x.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("x.toml") && err.contains("colour"), "{err}");
-        assert!(matches!(find_spec("no-such-scene"), Err(SceneError::Unknown { .. })));
+        assert!(matches!(
+            find_spec("no-such-scene"),
+            Err(SceneError::Unknown { .. })
+        ));
     }
 
     #[test]
     fn incision_directions_and_cut_threshold_are_checked_when_a_scene_is_built() {
         let spec = |extra: &str| {
-            let text = BUILTIN[0].1.replacen("[mesh]", &format!("{extra}\n[mesh]"), 1);
+            let text = BUILTIN[0]
+                .1
+                .replacen("[mesh]", &format!("{extra}\n[mesh]"), 1);
             parse_spec(&text, Path::new("x.toml")).expect("parses")
         };
-        let build = |extra: &str| Scene::build(spec(extra), &SpecOrigin::BuiltIn, BuildOptions { min_tets: Some(200) }).map(|s| s.spec);
+        let build = |extra: &str| {
+            Scene::build(
+                spec(extra),
+                &SpecOrigin::BuiltIn,
+                BuildOptions {
+                    min_tets: Some(200),
+                },
+            )
+            .map(|s| s.spec)
+        };
         assert_eq!(build("").expect("valid").cut_depth_mm, 4.0, "the default");
         let ok = build("cut_threshold_newtons = 0.1\ncut_depth_mm = 4.5\n[incision]\nup = [0.0, 2.0, 0.0]\nalong = [0.0, 1.0, 3.0]").expect("valid");
         let (up, along) = ok.incision.unit().expect("unit");
-        assert!((up - crate::Vector3::y()).norm() < 1e-15 && (along - crate::Vector3::z()).norm() < 1e-15, "{up:?} {along:?}");
+        assert!(
+            (up - crate::Vector3::y()).norm() < 1e-15
+                && (along - crate::Vector3::z()).norm() < 1e-15,
+            "{up:?} {along:?}"
+        );
         assert_eq!((ok.cut_threshold_newtons, ok.cut_depth_mm), (0.1, 4.5));
         for bad in [
             "[incision]\nup = [0.0, 0.0, 1.0]\nalong = [0.0, 0.0, -2.0]",
@@ -144,7 +203,12 @@ mod tests {
             "cut_depth_mm = -3.0",
         ] {
             let err = build(bad).expect_err(bad).to_string();
-            assert!(err.contains("incision") || err.contains("cut_threshold_newtons") || err.contains("cut_depth_mm"), "{bad}: {err}");
+            assert!(
+                err.contains("incision")
+                    || err.contains("cut_threshold_newtons")
+                    || err.contains("cut_depth_mm"),
+                "{bad}: {err}"
+            );
         }
     }
 }

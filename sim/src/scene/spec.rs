@@ -64,7 +64,11 @@ pub enum ForceModelSpec {
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum MeshSource {
     /// A slab curved about an axis parallel to y (see [`crate::generate::curved_slab`]).
-    CurvedSlab { size_mm: [f64; 3], radius_mm: f64, min_tets: usize },
+    CurvedSlab {
+        size_mm: [f64; 3],
+        radius_mm: f64,
+        min_tets: usize,
+    },
     /// An axis-aligned box with its minimum corner at the origin.
     Box { size_mm: [f64; 3], min_tets: usize },
     /// A mesh file (.msh, .node/.ele, .vtk, .vtu); relative paths are relative to the scene
@@ -179,7 +183,10 @@ pub struct IncisionDirections {
 impl Default for IncisionDirections {
     /// Along x across the top (+z).
     fn default() -> Self {
-        Self { up: [0.0, 0.0, 1.0], along: [1.0, 0.0, 0.0] }
+        Self {
+            up: [0.0, 0.0, 1.0],
+            along: [1.0, 0.0, 0.0],
+        }
     }
 }
 
@@ -189,7 +196,10 @@ impl IncisionDirections {
     pub fn unit(&self) -> Result<(crate::Vector3, crate::Vector3), String> {
         let up = crate::Vector3::from(self.up);
         let along = crate::Vector3::from(self.along);
-        let up = up.try_normalize(1e-12).filter(|u| u.iter().all(|c| c.is_finite())).ok_or("incision.up must be a finite, non-zero direction")?;
+        let up = up
+            .try_normalize(1e-12)
+            .filter(|u| u.iter().all(|c| c.is_finite()))
+            .ok_or("incision.up must be a finite, non-zero direction")?;
         let along = (along - up * along.dot(&up))
             .try_normalize(1e-9 * along.norm().max(1e-300))
             .filter(|a| a.iter().all(|c| c.is_finite()))

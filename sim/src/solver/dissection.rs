@@ -49,14 +49,27 @@ pub(crate) fn dissection_order(n: usize, ends: &[[u32; 2]]) -> (Vec<u32>, [usize
 
 /// The part ([`FIRST`], [`SECOND`], [`SEPARATOR`]) of each of `n` particles joined by springs
 /// `ends` (see the module documentation), into `part`, with the buffers of `scratch`.
-pub(crate) fn dissection_parts_into(n: usize, ends: &[[u32; 2]], scratch: &mut DissectionScratch, part: &mut Vec<u8>) {
+pub(crate) fn dissection_parts_into(
+    n: usize,
+    ends: &[[u32; 2]],
+    scratch: &mut DissectionScratch,
+    part: &mut Vec<u8>,
+) {
     part.clear();
     if n == 0 {
         return;
     }
-    let DissectionScratch { graph, level, queue } = scratch;
+    let DissectionScratch {
+        graph,
+        level,
+        queue,
+    } = scratch;
     // the graph: each spring's ends are each other's neighbours, rows in the springs' order
-    graph.refill(n, || ends.iter().filter(|[a, b]| a != b).flat_map(|&[a, b]| [(a, b), (b, a)]));
+    graph.refill(n, || {
+        ends.iter()
+            .filter(|[a, b]| a != b)
+            .flat_map(|&[a, b]| [(a, b), (b, a)])
+    });
     let graph = &*graph;
     level.clear();
     level.resize(n, u32::MAX);
@@ -64,7 +77,9 @@ pub(crate) fn dissection_parts_into(n: usize, ends: &[[u32; 2]], scratch: &mut D
     queue.reserve(n);
     // the particle with the most springs (the lowest such id) lies in the largest piece; the
     // particle reached last from it is a far end of that piece
-    let seed = (0..n).max_by_key(|&i| (graph.row(i).len(), std::cmp::Reverse(i))).unwrap_or(0);
+    let seed = (0..n)
+        .max_by_key(|&i| (graph.row(i).len(), std::cmp::Reverse(i)))
+        .unwrap_or(0);
     let far = levels_from(graph, seed, level, queue);
     let far = levels_from(graph, far, level, queue);
     let depth = level[far] as usize;
@@ -167,7 +182,13 @@ mod tests {
 
     #[test]
     fn the_halves_touch_only_through_the_separator() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(10_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(10_000),
+            },
+        )
+        .expect("built-in scene");
         let model = scene.model.particles();
         let n = model.vertex_count();
         let (order, [h, s]) = dissection_order(n, &model.springs.ends);
@@ -176,9 +197,22 @@ mod tests {
         assert_eq!(sorted, (0..n as u32).collect::<Vec<_>>(), "a permutation");
         let mut part = vec![0; n];
         for (k, &i) in order.iter().enumerate() {
-            part[i as usize] = if k < h { 0 } else if k < s { 1 } else { 2 };
+            part[i as usize] = if k < h {
+                0
+            } else if k < s {
+                1
+            } else {
+                2
+            };
         }
-        assert!(model.springs.ends.iter().all(|&[a, b]| part[a as usize] + part[b as usize] != 1), "a spring joins the halves");
+        assert!(
+            model
+                .springs
+                .ends
+                .iter()
+                .all(|&[a, b]| part[a as usize] + part[b as usize] != 1),
+            "a spring joins the halves"
+        );
         // balanced halves, a thin separator
         assert!(h > n / 3 && s - h > n / 3, "{h} {s} {n}");
         assert!((n - s) * 10 < n, "separator of {} particles", n - s);
@@ -195,9 +229,25 @@ mod tests {
         // 0 and 1 in the first half, 2 the separator, 3 and 4 the second half
         let mut part = vec![FIRST, FIRST, SEPARATOR, SECOND, SECOND];
         // 5 reaches 0 and 2, 6 reaches 4, 7 reaches 2 alone, 8 reaches 0 and 3, 9 reaches 5
-        let ends = [[0, 1], [1, 2], [2, 3], [3, 4], [0, 5], [2, 5], [4, 6], [2, 7], [0, 8], [3, 8], [5, 9]];
+        let ends = [
+            [0, 1],
+            [1, 2],
+            [2, 3],
+            [3, 4],
+            [0, 5],
+            [2, 5],
+            [4, 6],
+            [2, 7],
+            [0, 8],
+            [3, 8],
+            [5, 9],
+        ];
         assert!(extend_parts(&mut part, 10, &ends));
-        assert_eq!(part[5..], [SEPARATOR, SECOND, SEPARATOR, SEPARATOR, SEPARATOR], "5 reaches the new 9");
+        assert_eq!(
+            part[5..],
+            [SEPARATOR, SECOND, SEPARATOR, SEPARATOR, SEPARATOR],
+            "5 reaches the new 9"
+        );
         let mut part = vec![FIRST, FIRST, SEPARATOR, SECOND, SECOND];
         assert!(extend_parts(&mut part, 9, &ends[..10]));
         assert_eq!(part[5..], [FIRST, SECOND, SEPARATOR, SEPARATOR]);

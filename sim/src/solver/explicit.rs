@@ -35,8 +35,16 @@ pub fn spectral_bounds(model: &Model) -> (f64, f64) {
     let s = &model.springs;
     let k_est = POWER_MARGIN * laplacian_max_eigenvalue(model, &s.stiffness, POWER_ITERATIONS);
     // Damping proportional to stiffness (uniform materials): same eigenvectors, one iteration.
-    let ratio = s.damping.first().zip(s.stiffness.first()).map_or(0.0, |(c, k)| c / k);
-    let proportional = ratio.is_finite() && s.damping.iter().zip(&s.stiffness).all(|(&c, &k)| c == ratio * k);
+    let ratio = s
+        .damping
+        .first()
+        .zip(s.stiffness.first())
+        .map_or(0.0, |(c, k)| c / k);
+    let proportional = ratio.is_finite()
+        && s.damping
+            .iter()
+            .zip(&s.stiffness)
+            .all(|(&c, &k)| c == ratio * k);
     let c_est = if proportional {
         ratio * k_est
     } else {
@@ -126,7 +134,11 @@ pub fn laplacian_max_eigenvalue(model: &Model, w: &[f64], iterations: usize) -> 
 /// Largest stable step `h_crit` in seconds for the bounds of [`spectral_bounds`].
 pub fn critical_time_step(omega: f64, gamma: f64) -> f64 {
     if omega == 0.0 {
-        return if gamma == 0.0 { f64::INFINITY } else { 2.0 / gamma };
+        return if gamma == 0.0 {
+            f64::INFINITY
+        } else {
+            2.0 / gamma
+        };
     }
     (-gamma + (gamma * gamma + 4.0 * omega * omega).sqrt()) / (omega * omega)
 }
@@ -140,7 +152,14 @@ pub fn substeps_for(model: &Model, dt: f64, safety: f64) -> u32 {
 
 /// Advances `state` by `substeps` sub-steps of `dt / substeps`. Held particles keep their
 /// position and zero velocity.
-pub fn step(model: &Model, state: &mut State, external: &[Vector3], dt: f64, substeps: u32, forces: &mut Vec<Vector3>) {
+pub fn step(
+    model: &Model,
+    state: &mut State,
+    external: &[Vector3],
+    dt: f64,
+    substeps: u32,
+    forces: &mut Vec<Vector3>,
+) {
     let h = dt / substeps as f64;
     let n = model.vertex_count();
     forces.resize(n, Vector3::zeros());

@@ -10,7 +10,13 @@ use crate::{Point3, Vector3};
 
 /// Writes into `out` the total force on every particle (held ones included; the integrators
 /// ignore those): springs, dampers, `m_i g` and `external[i]`.
-pub fn total_forces(model: &Model, x: &[Point3], v: &[Vector3], external: &[Vector3], out: &mut [Vector3]) {
+pub fn total_forces(
+    model: &Model,
+    x: &[Point3],
+    v: &[Vector3],
+    external: &[Vector3],
+    out: &mut [Vector3],
+) {
     for ((f, &m), fe) in out.iter_mut().zip(&model.mass).zip(external) {
         *f = model.gravity * m + fe;
     }
@@ -35,7 +41,12 @@ pub fn spring_force(d: &Vector3, u: &Vector3, rest: f64, k: f64, c: f64) -> Vect
 /// Adds the spring and damper forces to `out`.
 pub fn add_spring_forces(model: &Model, x: &[Point3], v: &[Vector3], out: &mut [Vector3]) {
     let s = &model.springs;
-    let springs = s.ends.iter().zip(&s.rest_length).zip(&s.stiffness).zip(&s.damping);
+    let springs = s
+        .ends
+        .iter()
+        .zip(&s.rest_length)
+        .zip(&s.stiffness)
+        .zip(&s.damping);
     for (((&[a, b], &rest), &k), &c) in springs {
         let (a, b) = (a as usize, b as usize);
         let f = spring_force(&(x[b] - x[a]), &(v[b] - v[a]), rest, k, c);
@@ -61,16 +72,29 @@ pub fn potential_energy(model: &Model, x: &[Point3]) -> f64 {
 
 /// Kinetic energy in joules.
 pub fn kinetic_energy(model: &Model, v: &[Vector3]) -> f64 {
-    v.iter().zip(&model.mass).map(|(v, &m)| 0.5 * m * v.norm_squared()).sum()
+    v.iter()
+        .zip(&model.mass)
+        .map(|(v, &m)| 0.5 * m * v.norm_squared())
+        .sum()
 }
 
 /// Sum of the squared force magnitudes on the free particles, N^2 (the merit of the static
 /// line search).
 pub fn free_force_norm_squared(model: &Model, forces: &[Vector3]) -> f64 {
-    forces.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm_squared()).sum()
+    forces
+        .iter()
+        .zip(&model.held)
+        .filter(|(_, h)| !**h)
+        .map(|(f, _)| f.norm_squared())
+        .sum()
 }
 
 /// Largest force magnitude on a free particle (the equilibrium residual), in newtons.
 pub fn max_free_force(model: &Model, forces: &[Vector3]) -> f64 {
-    forces.iter().zip(&model.held).filter(|(_, h)| !**h).map(|(f, _)| f.norm()).fold(0.0, f64::max)
+    forces
+        .iter()
+        .zip(&model.held)
+        .filter(|(_, h)| !**h)
+        .map(|(f, _)| f.norm())
+        .fold(0.0, f64::max)
 }

@@ -114,7 +114,9 @@ fn step_on(
     let mid = if split {
         let first = |e: usize| s.ends[e][0];
         let half = m / 2;
-        (half..m).find(|&e| e == 0 || first(e) != first(e - 1)).unwrap_or(m)
+        (half..m)
+            .find(|&e| e == 0 || first(e) != first(e - 1))
+            .unwrap_or(m)
     } else {
         m
     };
@@ -129,7 +131,20 @@ fn step_on(
     let (rhs, diag) = (&mut rhs[..n], &mut diag[..n]);
     if mid == m {
         let store = |e: usize, c: [f64; 4]| coef[slots[e] as usize] = c;
-        assemble_springs(s, 0..m, x, v, h, Part { rhs, diag, lo: 0 }, Part { rhs: &mut [], diag: &mut [], lo: n }, store);
+        assemble_springs(
+            s,
+            0..m,
+            x,
+            v,
+            h,
+            Part { rhs, diag, lo: 0 },
+            Part {
+                rhs: &mut [],
+                diag: &mut [],
+                lo: n,
+            },
+            store,
+        );
     } else {
         spill_rhs.clear();
         spill_rhs.resize(n - at, Vector3::zeros());
@@ -141,23 +156,55 @@ fn step_on(
         // slot after; on one, each stores its own (the same blocks either way)
         let parallel = system::solver_threads() > 1;
         {
-            let own_first = Part { rhs: rhs_lo, diag: diag_lo, lo: 0 };
-            let spill = Part { rhs: &mut spill_rhs[..], diag: &mut spill_diag[..], lo: at };
-            let own_second = Part { rhs: &mut *rhs_hi, diag: &mut *diag_hi, lo: at };
-            let no_spill = Part { rhs: &mut [], diag: &mut [], lo: n };
+            let own_first = Part {
+                rhs: rhs_lo,
+                diag: diag_lo,
+                lo: 0,
+            };
+            let spill = Part {
+                rhs: &mut spill_rhs[..],
+                diag: &mut spill_diag[..],
+                lo: at,
+            };
+            let own_second = Part {
+                rhs: &mut *rhs_hi,
+                diag: &mut *diag_hi,
+                lo: at,
+            };
+            let no_spill = Part {
+                rhs: &mut [],
+                diag: &mut [],
+                lo: n,
+            };
             if parallel {
                 coef_by_spring.resize(m, [0.0; 4]);
                 let (coef_lo, coef_hi) = coef_by_spring.split_at_mut(mid);
                 system::side_by_side(
-                    || assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| coef_lo[e] = c),
-                    || assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| coef_hi[e - mid] = c),
+                    || {
+                        assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| {
+                            coef_lo[e] = c
+                        })
+                    },
+                    || {
+                        assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| {
+                            coef_hi[e - mid] = c
+                        })
+                    },
                 );
             } else {
-                assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| coef[slots[e] as usize] = c);
-                assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| coef[slots[e] as usize] = c);
+                assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| {
+                    coef[slots[e] as usize] = c
+                });
+                assemble_springs(s, mid..m, x, v, h, own_second, no_spill, |e, c| {
+                    coef[slots[e] as usize] = c
+                });
             }
         }
-        for ((r, d), (sr, sd)) in rhs_hi.iter_mut().zip(diag_hi.iter_mut()).zip(spill_rhs.iter().zip(spill_diag.iter())) {
+        for ((r, d), (sr, sd)) in rhs_hi
+            .iter_mut()
+            .zip(diag_hi.iter_mut())
+            .zip(spill_rhs.iter().zip(spill_diag.iter()))
+        {
             *r += sr;
             *d += *sd;
         }
@@ -176,7 +223,10 @@ fn step_on(
         }
     }
     guess.clear();
-    let cg = CgSettings { absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)), ..cg };
+    let cg = CgSettings {
+        absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)),
+        ..cg
+    };
     let report = if guessed {
         system::solve(sys, model, rhs, dv, cg, cg_scratch)
     } else {
@@ -220,12 +270,33 @@ fn assemble_springs(
     let mut run = usize::MAX;
     let (mut rhs_run, mut diag_run) = (Vector3::zeros(), Sym3::default());
     let mut buf = [[0.0; CHUNK]; 19];
-    let (mut inv_len, mut length, mut sqrt_gamma, mut ka_buf) = ([0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK]);
+    let (mut inv_len, mut length, mut sqrt_gamma, mut ka_buf) =
+        ([0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK], [0.0; CHUNK]);
     for start in range.clone().step_by(CHUNK) {
         let end = (start + CHUNK).min(range.end);
         let len = end - start;
         let ends = &s.ends[start..end];
-        let [dx, dy, dz, ux, uy, uz, gx, gy, gz, beta, wx, wy, wz, bxx, byy, bzz, bxy, bxz, byz] = &mut buf;
+        let [
+            dx,
+            dy,
+            dz,
+            ux,
+            uy,
+            uz,
+            gx,
+            gy,
+            gz,
+            beta,
+            wx,
+            wy,
+            wz,
+            bxx,
+            byy,
+            bzz,
+            bxy,
+            bxz,
+            byz,
+        ] = &mut buf;
         // d = x_b - x_a and u = v_a - v_b
         for (j, &[a, b]) in ends.iter().enumerate() {
             let (a, b) = (a as usize, b as usize);
@@ -234,16 +305,42 @@ fn assemble_springs(
             (dx[j], dy[j], dz[j]) = (d.x, d.y, d.z);
             (ux[j], uy[j], uz[j]) = (u.x, u.y, u.z);
         }
-        let (rest, k, c) = (&s.rest_length[start..end], &s.stiffness[start..end], &s.damping[start..end]);
-        let (dx, dy, dz, ux, uy, uz) = (&dx[..len], &dy[..len], &dz[..len], &ux[..len], &uy[..len], &uz[..len]);
-        let (gx, gy, gz, beta) = (&mut gx[..len], &mut gy[..len], &mut gz[..len], &mut beta[..len]);
+        let (rest, k, c) = (
+            &s.rest_length[start..end],
+            &s.stiffness[start..end],
+            &s.damping[start..end],
+        );
+        let (dx, dy, dz, ux, uy, uz) = (
+            &dx[..len],
+            &dy[..len],
+            &dz[..len],
+            &ux[..len],
+            &uy[..len],
+            &uz[..len],
+        );
+        let (gx, gy, gz, beta) = (
+            &mut gx[..len],
+            &mut gy[..len],
+            &mut gz[..len],
+            &mut beta[..len],
+        );
         let (wx, wy, wz) = (&mut wx[..len], &mut wy[..len], &mut wz[..len]);
-        let (bxx, byy, bzz, bxy, bxz, byz) =
-            (&mut bxx[..len], &mut byy[..len], &mut bzz[..len], &mut bxy[..len], &mut bxz[..len], &mut byz[..len]);
+        let (bxx, byy, bzz, bxy, bxz, byz) = (
+            &mut bxx[..len],
+            &mut byy[..len],
+            &mut bzz[..len],
+            &mut bxy[..len],
+            &mut bxz[..len],
+            &mut byz[..len],
+        );
         // (three loops: one long chain of square roots and divisions per spring would leave the
         // processor waiting)
-        let (inv_len, length, sqrt_gamma, ka_buf) =
-            (&mut inv_len[..len], &mut length[..len], &mut sqrt_gamma[..len], &mut ka_buf[..len]);
+        let (inv_len, length, sqrt_gamma, ka_buf) = (
+            &mut inv_len[..len],
+            &mut length[..len],
+            &mut sqrt_gamma[..len],
+            &mut ka_buf[..len],
+        );
         for j in 0..len {
             let l2 = dx[j] * dx[j] + dy[j] * dy[j] + dz[j] * dz[j];
             // a zero-length spring has no direction: no force and a zero block
@@ -274,7 +371,11 @@ fn assemble_springs(
             (gx[j], gy[j], gz[j], beta[j]) = (px, py, pz, b);
             // rhs += h f - h^2 K (v_a - v_b) on a, the opposite on b
             let along = f * h - kn * dvel_n * hh;
-            (wx[j], wy[j], wz[j]) = (nx * along - ux[j] * b, ny * along - uy[j] * b, nz * along - uz[j] * b);
+            (wx[j], wy[j], wz[j]) = (
+                nx * along - ux[j] * b,
+                ny * along - uy[j] * b,
+                nz * along - uz[j] * b,
+            );
             (bxx[j], byy[j], bzz[j]) = (b + px * px, b + py * py, b + pz * pz);
             (bxy[j], bxz[j], byz[j]) = (px * py, px * pz, py * pz);
         }
@@ -292,7 +393,14 @@ fn assemble_springs(
             store(start + j, [gx[j], gy[j], gz[j], beta[j]]);
             let w = Vector3::new(wx[j], wy[j], wz[j]);
             rhs_run += w;
-            let block = Sym3 { xx: bxx[j], yy: byy[j], zz: bzz[j], xy: bxy[j], xz: bxz[j], yz: byz[j] };
+            let block = Sym3 {
+                xx: bxx[j],
+                yy: byy[j],
+                zz: bzz[j],
+                xy: bxy[j],
+                xz: bxz[j],
+                yz: byz[j],
+            };
             diag_run += block;
             if b < own_hi {
                 own.rhs[b - own.lo] -= w;
@@ -315,7 +423,11 @@ fn assemble_springs(
 /// (Benchmark stroke on the chest wall at 12.8k tets, default tolerance: 7.4 iterations from the
 /// last change alone, 5.9 from the linear, 5.1 from the quadratic and 4.6 from the cubic
 /// extrapolation.) Shared by the springs and the finite elements.
-pub(crate) fn extrapolate_warm_start(dv: &mut [Vector3], previous: [&mut Vec<Vector3>; 3], history: &mut usize) {
+pub(crate) fn extrapolate_warm_start(
+    dv: &mut [Vector3],
+    previous: [&mut Vec<Vector3>; 3],
+    history: &mut usize,
+) {
     let c = match *history {
         0 => [0.0, 0.0, 0.0, 0.0],
         1 => [1.0, 0.0, 0.0, 0.0],
@@ -324,7 +436,12 @@ pub(crate) fn extrapolate_warm_start(dv: &mut [Vector3], previous: [&mut Vec<Vec
         _ => [4.0, -6.0, 4.0, -1.0],
     };
     let [p1, p2, p3] = previous;
-    for (((d, d2), d3), d4) in dv.iter_mut().zip(p1.iter_mut()).zip(p2.iter_mut()).zip(p3.iter_mut()) {
+    for (((d, d2), d3), d4) in dv
+        .iter_mut()
+        .zip(p1.iter_mut())
+        .zip(p2.iter_mut())
+        .zip(p3.iter_mut())
+    {
         let last = *d;
         *d = last * c[0] + *d2 * c[1] + *d3 * c[2] + *d4 * c[3];
         *d4 = *d3;
@@ -337,12 +454,24 @@ pub(crate) fn extrapolate_warm_start(dv: &mut [Vector3], previous: [&mut Vec<Vec
 /// The absolute floor of the CG residual, `VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free
 /// particles (see [`VELOCITY_FLOOR_M_PER_S`]).
 pub(crate) fn velocity_floor(model: &Particles<'_>) -> f64 {
-    let mass_norm = model.mass.iter().zip(model.held).filter(|(_, h)| !**h).map(|(m, _)| m * m).sum::<f64>().sqrt();
+    let mass_norm = model
+        .mass
+        .iter()
+        .zip(model.held)
+        .filter(|(_, h)| !**h)
+        .map(|(m, _)| m * m)
+        .sum::<f64>()
+        .sqrt();
     VELOCITY_FLOOR_M_PER_S * mass_norm
 }
 
 /// `v += dv`, then `x += h v`, for the free particles (the end of an implicit Euler step).
-pub(crate) fn apply_velocity_change(model: &Particles<'_>, state: &mut State, dv: &[Vector3], h: f64) {
+pub(crate) fn apply_velocity_change(
+    model: &Particles<'_>,
+    state: &mut State,
+    dv: &[Vector3],
+    h: f64,
+) {
     for i in 0..model.vertex_count() {
         if model.held[i] {
             continue;
@@ -361,24 +490,55 @@ mod tests {
     /// Five steps of the chest wall at 20k tets (over `PARALLEL_MIN_PARTICLES`) pressed on its
     /// top, from rest, on a pool of `threads`, with the assembly split or not: the positions.
     fn pressed_steps(threads: usize, split: bool) -> Vec<crate::Point3> {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(20_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(20_000),
+            },
+        )
+        .expect("built-in scene");
         let model = &scene.model;
         let particles = model.particles();
         assert!(particles.vertex_count() >= system::PARALLEL_MIN_PARTICLES);
         let mut state = State::at_rest(&model.mesh);
-        let top = state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        let top = state
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(f64::NEG_INFINITY, f64::max);
         let external: Vec<Vector3> = state
             .positions
             .iter()
-            .map(|p| if p.z > top - 1e-3 && p.x.abs() < 0.01 { Vector3::new(0.0, 0.0, -0.01) } else { Vector3::zeros() })
+            .map(|p| {
+                if p.z > top - 1e-3 && p.x.abs() < 0.01 {
+                    Vector3::new(0.0, 0.0, -0.01)
+                } else {
+                    Vector3::zeros()
+                }
+            })
             .collect();
         let settings = SolverSettings::default();
-        let cg = CgSettings { relative_tolerance: settings.cg_relative_tolerance, absolute_tolerance: 0.0, max_iterations: settings.cg_max_iterations };
+        let cg = CgSettings {
+            relative_tolerance: settings.cg_relative_tolerance,
+            absolute_tolerance: 0.0,
+            max_iterations: settings.cg_max_iterations,
+        };
         let mut scratch = ImplicitScratch::default();
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("thread pool");
         pool.install(|| {
             for _ in 0..5 {
-                let report = step_on(&particles, &mut state, &external, settings.time_step_s, cg, &mut scratch, split);
+                let report = step_on(
+                    &particles,
+                    &mut state,
+                    &external,
+                    settings.time_step_s,
+                    cg,
+                    &mut scratch,
+                    split,
+                );
                 assert!(report.converged, "{report:?}");
             }
         });
@@ -386,44 +546,103 @@ mod tests {
     }
 
     #[test]
-    fn the_split_assembly_gives_the_same_bits_on_one_thread_or_two_and_the_same_motion_as_one_part() {
+    fn the_split_assembly_gives_the_same_bits_on_one_thread_or_two_and_the_same_motion_as_one_part()
+    {
         let (one, two) = (pressed_steps(1, true), pressed_steps(2, true));
-        assert!(one.iter().zip(&two).all(|(a, b)| a.coords.map(f64::to_bits) == b.coords.map(f64::to_bits)));
+        assert!(
+            one.iter()
+                .zip(&two)
+                .all(|(a, b)| a.coords.map(f64::to_bits) == b.coords.map(f64::to_bits))
+        );
         // the split only sums in another order: the motion agrees to round-off (relative to
         // the largest displacement)
         let whole = pressed_steps(2, false);
-        let start = Scene::load("chest-wall", BuildOptions { min_tets: Some(20_000) }).expect("built-in scene");
+        let start = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(20_000),
+            },
+        )
+        .expect("built-in scene");
         let rest = start.model.mesh.positions();
-        let moved = whole.iter().zip(rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
-        let differ = whole.iter().zip(&one).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let moved = whole
+            .iter()
+            .zip(rest)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        let differ = whole
+            .iter()
+            .zip(&one)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
         assert!(moved > 1e-7, "the press moved the wall {moved} m");
-        assert!(differ > 0.0 && differ <= 1e-6 * moved, "split and whole differ by {differ} m of {moved} m");
+        assert!(
+            differ > 0.0 && differ <= 1e-6 * moved,
+            "split and whole differ by {differ} m of {moved} m"
+        );
     }
 
     #[test]
     fn a_guess_starts_the_solve_where_it_is_known_and_only_for_one_step() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(2_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(2_000),
+            },
+        )
+        .expect("built-in scene");
         let particles = scene.model.particles();
         let n = particles.vertex_count();
         let external = vec![Vector3::new(0.0, 0.0, -0.01); n];
         let settings = SolverSettings::default();
-        let cg = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 500 };
+        let cg = CgSettings {
+            relative_tolerance: 1e-10,
+            absolute_tolerance: 0.0,
+            max_iterations: 500,
+        };
         let from_rest = State::at_rest(&scene.model.mesh);
         let (mut state, mut scratch) = (from_rest.clone(), ImplicitScratch::default());
-        let plain = step(&particles, &mut state, &external, settings.time_step_s, cg, &mut scratch);
+        let plain = step(
+            &particles,
+            &mut state,
+            &external,
+            settings.time_step_s,
+            cg,
+            &mut scratch,
+        );
         assert!(plain.converged && plain.iterations > 5, "{plain:?}");
         let solution = scratch.dv.clone();
         // the same step again, started from its solution: nothing left to solve
         let (mut again, mut guessed) = (from_rest.clone(), ImplicitScratch::default());
         guessed.guess = solution.iter().copied().map(Some).collect();
-        let report = step(&particles, &mut again, &external, settings.time_step_s, cg, &mut guessed);
+        let report = step(
+            &particles,
+            &mut again,
+            &external,
+            settings.time_step_s,
+            cg,
+            &mut guessed,
+        );
         assert!(report.converged && report.iterations <= 1, "{report:?}");
-        assert!(again.positions.iter().zip(&state.positions).all(|(a, b)| (a - b).norm() <= 1e-12));
+        assert!(
+            again
+                .positions
+                .iter()
+                .zip(&state.positions)
+                .all(|(a, b)| (a - b).norm() <= 1e-12)
+        );
         assert!(guessed.guess.is_empty(), "one step only");
         // known nowhere: the extrapolation (from rest: zero), as without a guess
         let (mut third, mut unknown) = (from_rest, ImplicitScratch::default());
         unknown.guess = vec![None; n];
-        let report = step(&particles, &mut third, &external, settings.time_step_s, cg, &mut unknown);
+        let report = step(
+            &particles,
+            &mut third,
+            &external,
+            settings.time_step_s,
+            cg,
+            &mut unknown,
+        );
         assert_eq!(report.iterations, plain.iterations);
     }
 }

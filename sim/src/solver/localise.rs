@@ -36,11 +36,11 @@ use crate::mesh::{Csr, PointGrid};
 use crate::model::{Model, Particles, SpringSet, State};
 use crate::{Point3, Vector3};
 
-use super::forces::spring_force;
-use super::resume::{check_ids, RegionResume, ResumeError};
-use super::implicit::{self, ImplicitScratch};
-use super::system::{CgReport, CgSettings};
 use super::StepError;
+use super::forces::spring_force;
+use super::implicit::{self, ImplicitScratch};
+use super::resume::{RegionResume, ResumeError, check_ids};
+use super::system::{CgReport, CgSettings};
 
 /// Thresholds of the localisation (the `[solver.localisation]` table of a scene file).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -103,10 +103,14 @@ impl LocalisationSettings {
             }
         }
         if self.sleep_speed_m_per_s > self.wake_speed_m_per_s {
-            return Err("localisation.sleep_speed_m_per_s must not exceed wake_speed_m_per_s".into());
+            return Err(
+                "localisation.sleep_speed_m_per_s must not exceed wake_speed_m_per_s".into(),
+            );
         }
         if self.sleep_displacement_m > self.wake_displacement_m {
-            return Err("localisation.sleep_displacement_m must not exceed wake_displacement_m".into());
+            return Err(
+                "localisation.sleep_displacement_m must not exceed wake_displacement_m".into(),
+            );
         }
         if self.max_growth_rounds == 0 {
             return Err("localisation.max_growth_rounds must be at least 1".into());
@@ -140,7 +144,12 @@ impl Adjacency {
         springs.by_particle_into(n, &mut self.springs_at);
         let csr = &self.springs_at;
         self.stiffness_at.clear();
-        self.stiffness_at.extend((0..n).map(|i| csr.row(i).iter().map(|&e| springs.stiffness[e as usize]).sum::<f64>()));
+        self.stiffness_at.extend((0..n).map(|i| {
+            csr.row(i)
+                .iter()
+                .map(|&e| springs.stiffness[e as usize])
+                .sum::<f64>()
+        }));
         self.sorted_by_first = crate::model::sorted_by_first_end(&springs.ends);
         self.fresh = true;
     }
@@ -211,7 +220,9 @@ impl ActiveRegion {
         let n = positions.len();
         if let Some(grid) = &mut self.grid {
             let old = grid.len().min(n);
-            let moved = (0..old).map(|i| (positions[i] - grid.binned_position(i)).norm()).fold(0.0, f64::max);
+            let moved = (0..old)
+                .map(|i| (positions[i] - grid.binned_position(i)).norm())
+                .fold(0.0, f64::max);
             // (a NaN position: rebinned, as the step would)
             if moved.is_nan() || old < grid.len() {
                 self.grid = None;
@@ -251,8 +262,20 @@ impl ActiveRegion {
         if self.awake.is_empty() {
             return None;
         }
-        let awake = self.awake.iter().enumerate().filter(|(_, a)| **a).map(|(v, _)| v as u32).collect();
-        let quiet_steps = self.quiet_steps.iter().enumerate().filter(|(_, q)| **q > 0).map(|(v, &q)| (v as u32, q)).collect();
+        let awake = self
+            .awake
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| **a)
+            .map(|(v, _)| v as u32)
+            .collect();
+        let quiet_steps = self
+            .quiet_steps
+            .iter()
+            .enumerate()
+            .filter(|(_, q)| **q > 0)
+            .map(|(v, &q)| (v as u32, q))
+            .collect();
         Some(RegionResume {
             awake,
             quiet_steps,
@@ -272,10 +295,18 @@ impl ActiveRegion {
         let n = model.vertex_count();
         check_ids(&r.awake, n, "awake particles")?;
         check_ids(&r.sub_body, n, "sub-body")?;
-        if let Some(v) = r.to_wake.iter().chain(r.quiet_steps.iter().map(|(v, _)| v)).find(|&&v| v as usize >= n) {
-            return Err(ResumeError::Invalid(format!("particle {v} of {n} queued to wake or quiet")));
+        if let Some(v) = r
+            .to_wake
+            .iter()
+            .chain(r.quiet_steps.iter().map(|(v, _)| v))
+            .find(|&&v| v as usize >= n)
+        {
+            return Err(ResumeError::Invalid(format!(
+                "particle {v} of {n} queued to wake or quiet"
+            )));
         }
-        r.warm_start.check(r.sub_body.len(), "localised step", false)?;
+        r.warm_start
+            .check(r.sub_body.len(), "localised step", false)?;
         let mut me = Self {
             awake: vec![false; n],
             quiet_steps: vec![0; n],
@@ -289,7 +320,9 @@ impl ActiveRegion {
             ..Self::default()
         };
         r.awake.iter().for_each(|&v| me.awake[v as usize] = true);
-        r.quiet_steps.iter().for_each(|&(v, q)| me.quiet_steps[v as usize] = q);
+        r.quiet_steps
+            .iter()
+            .for_each(|&(v, q)| me.quiet_steps[v as usize] = q);
         if r.dirty {
             // the next step gathers the sub-body again, starting from this one's warm start
             me.global_of.clone_from(&r.sub_body);
@@ -300,7 +333,9 @@ impl ActiveRegion {
             me.adjacency.refresh(&model.springs, n);
             me.rebuild(model);
             if me.global_of != r.sub_body {
-                return Err(ResumeError::Invalid("the sub-body differs from the one the awake particles make".into()));
+                return Err(ResumeError::Invalid(
+                    "the sub-body differs from the one the awake particles make".into(),
+                ));
             }
         }
         me.implicit.install_warm_start(&r.warm_start);
@@ -320,7 +355,10 @@ impl ActiveRegion {
     fn ensure(&mut self, model: &Model, state: &State, settings: &LocalisationSettings) {
         let n = model.vertex_count();
         if self.awake.len() != n {
-            *self = Self { focus: std::mem::take(&mut self.focus), ..Self::default() };
+            *self = Self {
+                focus: std::mem::take(&mut self.focus),
+                ..Self::default()
+            };
             self.awake = vec![false; n];
             self.quiet_steps = vec![0; n];
             self.pinned = vec![false; n];
@@ -353,7 +391,11 @@ impl ActiveRegion {
         self.ensure(model, state, settings);
         self.pin(model, state, loaded, settings);
         self.apply_wakes(model);
-        let mut total = CgReport { iterations: 0, relative_residual: 0.0, converged: true };
+        let mut total = CgReport {
+            iterations: 0,
+            relative_residual: 0.0,
+            converged: true,
+        };
         if self.dirty {
             self.rebuild(model);
         }
@@ -362,7 +404,10 @@ impl ActiveRegion {
         for round in 1..=settings.max_growth_rounds {
             solves = round;
             let report = self.solve(model, state, external, h, cg)?;
-            total = CgReport { iterations: total.iterations + report.iterations, ..report };
+            total = CgReport {
+                iterations: total.iterations + report.iterations,
+                ..report
+            };
             // a border that was held back is woken, and the step solved again with it
             let grew = self.wake_border(model, state, external, settings);
             if grew == 0 || round == settings.max_growth_rounds {
@@ -372,7 +417,11 @@ impl ActiveRegion {
             // border from the extrapolation): it differs from it mostly near that border
             self.round_dv.clear();
             let solved = self.global_of.iter().zip(&self.held).zip(&self.implicit.dv);
-            self.round_dv.extend(solved.filter(|((_, held), _)| !**held).map(|((&g, _), &d)| (g, d)));
+            self.round_dv.extend(
+                solved
+                    .filter(|((_, held), _)| !**held)
+                    .map(|((&g, _), &d)| (g, d)),
+            );
             self.restore_history();
             self.apply_wakes(model);
             self.rebuild(model);
@@ -396,7 +445,9 @@ impl ActiveRegion {
                 state.positions[g] = self.state.positions[l];
                 state.velocities[g] = self.state.velocities[l];
                 if g < grid.len() {
-                    self.grid_slack_m = self.grid_slack_m.max((state.positions[g] - grid.binned_position(g)).norm());
+                    self.grid_slack_m = self
+                        .grid_slack_m
+                        .max((state.positions[g] - grid.binned_position(g)).norm());
                 }
             }
         }
@@ -410,20 +461,50 @@ impl ActiveRegion {
 
     /// Gathers the sub-body (the border held, at rest) and solves it; the global state is
     /// not touched.
-    fn solve(&mut self, model: &Model, state: &State, external: &[Vector3], h: f64, cg: CgSettings) -> Result<CgReport, StepError> {
+    fn solve(
+        &mut self,
+        model: &Model,
+        state: &State,
+        external: &[Vector3],
+        h: f64,
+        cg: CgSettings,
+    ) -> Result<CgReport, StepError> {
         for (l, &g) in self.global_of.iter().enumerate() {
             let g = g as usize;
             self.state.positions[l] = state.positions[g];
-            self.state.velocities[l] = if self.held[l] { Vector3::zeros() } else { state.velocities[g] };
+            self.state.velocities[l] = if self.held[l] {
+                Vector3::zeros()
+            } else {
+                state.velocities[g]
+            };
             self.external[l] = external[g];
         }
-        let particles = Particles { mass: &self.mass, held: &self.held, springs: &self.springs, gravity: model.gravity };
-        let report = implicit::step(&particles, &mut self.state, &self.external, h, cg, &mut self.implicit);
+        let particles = Particles {
+            mass: &self.mass,
+            held: &self.held,
+            springs: &self.springs,
+            gravity: model.gravity,
+        };
+        let report = implicit::step(
+            &particles,
+            &mut self.state,
+            &self.external,
+            h,
+            cg,
+            &mut self.implicit,
+        );
         if !report.relative_residual.is_finite() {
             self.reset_warm_start();
-            return Err(StepError::SolverFailed { residual: report.relative_residual });
+            return Err(StepError::SolverFailed {
+                residual: report.relative_residual,
+            });
         }
-        let bad: Vec<u32> = self.state.non_finite_particles().into_iter().map(|l| self.global_of[l as usize]).collect();
+        let bad: Vec<u32> = self
+            .state
+            .non_finite_particles()
+            .into_iter()
+            .map(|l| self.global_of[l as usize])
+            .collect();
         if !bad.is_empty() {
             self.reset_warm_start();
             return Err(StepError::NonFinite { vertices: bad });
@@ -432,7 +513,12 @@ impl ActiveRegion {
     }
 
     fn save_history(&mut self) {
-        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], history, .. } = &self.implicit;
+        let ImplicitScratch {
+            dv,
+            dv_previous: [p1, p2, p3],
+            history,
+            ..
+        } = &self.implicit;
         for (saved, local) in self.saved_history.iter_mut().zip([dv, p1, p2, p3]) {
             saved.clone_from(local);
         }
@@ -440,7 +526,12 @@ impl ActiveRegion {
     }
 
     fn restore_history(&mut self) {
-        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], history, .. } = &mut self.implicit;
+        let ImplicitScratch {
+            dv,
+            dv_previous: [p1, p2, p3],
+            history,
+            ..
+        } = &mut self.implicit;
         for (saved, local) in self.saved_history.iter().zip([dv, p1, p2, p3]) {
             local.clone_from(saved);
         }
@@ -449,13 +540,22 @@ impl ActiveRegion {
 
     /// Queues the border particles whose residual displacement (with the sub-body's solved
     /// positions) exceeds the wake threshold; returns how many.
-    fn wake_border(&mut self, model: &Model, state: &State, external: &[Vector3], settings: &LocalisationSettings) -> usize {
+    fn wake_border(
+        &mut self,
+        model: &Model,
+        state: &State,
+        external: &[Vector3],
+        settings: &LocalisationSettings,
+    ) -> usize {
         let springs_at = &self.adjacency.springs_at;
         let s = &model.springs;
         let before = self.to_wake.len();
         let position = |g: usize| match self.local_of[g] {
             NONE => (state.positions[g], state.velocities[g]),
-            l => (self.state.positions[l as usize], self.state.velocities[l as usize]),
+            l => (
+                self.state.positions[l as usize],
+                self.state.velocities[l as usize],
+            ),
         };
         for (l, &g) in self.global_of.iter().enumerate() {
             let gi = g as usize;
@@ -467,7 +567,13 @@ impl ActiveRegion {
                 let e = e as usize;
                 let [a, b] = s.ends[e].map(|v| v as usize);
                 let ((xa, va), (xb, vb)) = (position(a), position(b));
-                let pull = spring_force(&(xb - xa), &(vb - va), s.rest_length[e], s.stiffness[e], s.damping[e]);
+                let pull = spring_force(
+                    &(xb - xa),
+                    &(vb - va),
+                    s.rest_length[e],
+                    s.stiffness[e],
+                    s.damping[e],
+                );
                 f += if a == gi { pull } else { -pull };
             }
             if f.norm() > settings.wake_displacement_m * self.adjacency.stiffness_at[gi] {
@@ -478,7 +584,13 @@ impl ActiveRegion {
     }
 
     /// Pins (and wakes) the particles near a focus point and the loaded ones for this step.
-    fn pin(&mut self, model: &Model, state: &State, loaded: &[u32], settings: &LocalisationSettings) {
+    fn pin(
+        &mut self,
+        model: &Model,
+        state: &State,
+        loaded: &[u32],
+        settings: &LocalisationSettings,
+    ) {
         for &v in &self.pinned_list {
             self.pinned[v as usize] = false;
         }
@@ -522,10 +634,18 @@ impl ActiveRegion {
         // the old sub-body's warm start back to the global history (zero for sleepers)
         for (l, &g) in self.global_of.iter().enumerate() {
             let g = g as usize;
-            let ImplicitScratch { dv, dv_previous: [p1, p2, p3], .. } = &self.implicit;
+            let ImplicitScratch {
+                dv,
+                dv_previous: [p1, p2, p3],
+                ..
+            } = &self.implicit;
             let awake = self.awake[g];
             for (h, local) in self.history.iter_mut().zip([dv, p1, p2, p3]) {
-                h[g] = if awake { local.get(l).copied().unwrap_or_default() } else { Vector3::zeros() };
+                h[g] = if awake {
+                    local.get(l).copied().unwrap_or_default()
+                } else {
+                    Vector3::zeros()
+                };
             }
             self.local_of[g] = NONE;
         }
@@ -579,7 +699,9 @@ impl ActiveRegion {
         local.damping.clear();
         for &e in &self.local_spring_ids {
             let e = e as usize;
-            local.ends.push(s.ends[e].map(|v| self.local_of[v as usize]));
+            local
+                .ends
+                .push(s.ends[e].map(|v| self.local_of[v as usize]));
             local.rest_length.push(s.rest_length[e]);
             local.stiffness.push(s.stiffness[e]);
             local.damping.push(s.damping[e]);
@@ -594,7 +716,11 @@ impl ActiveRegion {
         self.state.positions.resize(m, Point3::origin());
         self.state.velocities.resize(m, Vector3::zeros());
         self.external.resize(m, Vector3::zeros());
-        let ImplicitScratch { dv, dv_previous: [p1, p2, p3], .. } = &mut self.implicit;
+        let ImplicitScratch {
+            dv,
+            dv_previous: [p1, p2, p3],
+            ..
+        } = &mut self.implicit;
         for (h, local) in self.history.iter().zip([dv, p1, p2, p3]) {
             local.clear();
             local.extend(self.global_of.iter().map(|&g| h[g as usize]));
@@ -603,7 +729,13 @@ impl ActiveRegion {
     }
 
     /// Who wakes at the next step (the neighbours of fast particles) and who falls asleep now.
-    fn decide(&mut self, model: &Model, state: &mut State, settings: &LocalisationSettings, h: f64) {
+    fn decide(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        settings: &LocalisationSettings,
+        h: f64,
+    ) {
         let springs_at = &self.adjacency.springs_at;
         let s = &model.springs;
         self.to_sleep.clear();
@@ -623,8 +755,11 @@ impl ActiveRegion {
                 }
             }
             // residual displacement m |dv| / (h K)
-            let residual_m = model.mass[gi] * self.implicit.dv[l].norm() / (h * self.adjacency.stiffness_at[gi]);
-            let quiet = !self.pinned[gi] && speed < settings.sleep_speed_m_per_s && residual_m < settings.sleep_displacement_m;
+            let residual_m =
+                model.mass[gi] * self.implicit.dv[l].norm() / (h * self.adjacency.stiffness_at[gi]);
+            let quiet = !self.pinned[gi]
+                && speed < settings.sleep_speed_m_per_s
+                && residual_m < settings.sleep_displacement_m;
             self.quiet_steps[gi] = if quiet { self.quiet_steps[gi] + 1 } else { 0 };
             if self.quiet_steps[gi] >= settings.sleep_after_steps {
                 self.to_sleep.push(g);
@@ -654,10 +789,21 @@ mod tests {
 
     #[test]
     fn the_awake_count_and_the_sub_body_stay_consistent_while_particles_sleep_and_wake() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(3_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(3_000),
+            },
+        )
+        .expect("built-in scene");
         let mut sim = scene.simulation();
         assert!(sim.settle(StaticSettings::default()).converged);
-        let z = sim.state.positions.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+        let z = sim
+            .state
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(f64::NEG_INFINITY, f64::max);
         let surface: Vec<u32> = sim.model.mesh.topology().boundary_vertices();
         // (the springs reversed as well: no longer sorted by their first end)
         for (scale, reversed) in [(1.0, false), (30.0, false), (1.0, true)] {
@@ -678,7 +824,10 @@ mod tests {
                 sim.clear_external_forces();
                 sim.set_focus(&[tip]);
                 if step % 40 < 20 {
-                    let near = surface.iter().copied().filter(|&v| (sim.state.positions[v as usize] - tip).norm() < 0.005);
+                    let near = surface
+                        .iter()
+                        .copied()
+                        .filter(|&v| (sim.state.positions[v as usize] - tip).norm() < 0.005);
                     for v in near.collect::<Vec<_>>() {
                         sim.add_external_force(v, Vector3::new(0.0, 0.0, -0.05));
                     }
@@ -689,12 +838,23 @@ mod tests {
                     sim.wake(0..sim.model.vertex_count() as u32);
                 }
                 let r = &sim.region;
-                assert_eq!(r.awake_count, r.awake.iter().filter(|a| **a).count(), "x{scale} step {step}: awake count");
-                assert!(r.global_of.windows(2).all(|w| w[0] < w[1]), "x{scale} step {step}: a particle twice in the sub-body");
+                assert_eq!(
+                    r.awake_count,
+                    r.awake.iter().filter(|a| **a).count(),
+                    "x{scale} step {step}: awake count"
+                );
+                assert!(
+                    r.global_of.windows(2).all(|w| w[0] < w[1]),
+                    "x{scale} step {step}: a particle twice in the sub-body"
+                );
                 if !r.dirty {
                     let ends = &sim.model.springs.ends;
-                    let with_awake_end = (0..ends.len() as u32).filter(|&e| ends[e as usize].iter().any(|&v| r.awake[v as usize]));
-                    assert!(r.local_spring_ids.iter().copied().eq(with_awake_end), "x{scale} {reversed} step {step}: the sub-body's springs");
+                    let with_awake_end = (0..ends.len() as u32)
+                        .filter(|&e| ends[e as usize].iter().any(|&v| r.awake[v as usize]));
+                    assert!(
+                        r.local_spring_ids.iter().copied().eq(with_awake_end),
+                        "x{scale} {reversed} step {step}: the sub-body's springs"
+                    );
                 }
             }
         }

@@ -6,6 +6,7 @@
 //! A step that would produce a non-finite value is rejected and the state left unchanged
 //! (quarantine), with the offending particles named in the error.
 
+mod dissection;
 pub mod explicit;
 pub mod forces;
 pub mod implicit;
@@ -14,7 +15,6 @@ pub mod resume;
 pub mod span;
 pub mod statics;
 pub mod system;
-mod dissection;
 
 use serde::{Deserialize, Serialize};
 
@@ -23,8 +23,8 @@ pub use resume::{RegionResume, ResumeError, ResumeState, WarmStart};
 pub use statics::{StaticReport, StaticSettings};
 pub use system::{CgReport, CgSettings};
 
-use crate::{Point3, Vector3};
 use crate::model::{Model, State};
+use crate::{Point3, Vector3};
 
 /// Time integrator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -54,7 +54,9 @@ impl std::str::FromStr for Integrator {
         Self::ALL
             .into_iter()
             .find(|i| i.name() == s)
-            .ok_or_else(|| format!("unknown integrator {s:?} (expected symplectic-euler or implicit-euler)"))
+            .ok_or_else(|| {
+                format!("unknown integrator {s:?} (expected symplectic-euler or implicit-euler)")
+            })
     }
 }
 
@@ -98,13 +100,22 @@ impl Default for SolverSettings {
 impl SolverSettings {
     pub fn check(&self) -> Result<(), String> {
         if !(self.time_step_s > 0.0 && self.time_step_s.is_finite()) {
-            return Err(format!("time_step_s must be positive, got {}", self.time_step_s));
+            return Err(format!(
+                "time_step_s must be positive, got {}",
+                self.time_step_s
+            ));
         }
         if !(self.explicit_safety > 0.0 && self.explicit_safety <= 1.0) {
-            return Err(format!("explicit_safety must be in (0, 1], got {}", self.explicit_safety));
+            return Err(format!(
+                "explicit_safety must be in (0, 1], got {}",
+                self.explicit_safety
+            ));
         }
         if !(self.cg_relative_tolerance > 0.0 && self.cg_relative_tolerance < 1.0) {
-            return Err(format!("cg_relative_tolerance must be in (0, 1), got {}", self.cg_relative_tolerance));
+            return Err(format!(
+                "cg_relative_tolerance must be in (0, 1), got {}",
+                self.cg_relative_tolerance
+            ));
         }
         if self.cg_max_iterations == 0 {
             return Err("cg_max_iterations must be at least 1".into());
@@ -131,7 +142,11 @@ pub enum StepError {
 
 fn list(v: &[u32]) -> String {
     let shown: Vec<String> = v.iter().take(8).map(u32::to_string).collect();
-    if v.len() > 8 { format!("{}, ... ({} in all)", shown.join(", "), v.len()) } else { shown.join(", ") }
+    if v.len() > 8 {
+        format!("{}, ... ({} in all)", shown.join(", "), v.len())
+    } else {
+        shown.join(", ")
+    }
 }
 
 /// What one step did.
@@ -261,7 +276,9 @@ impl Simulation {
     /// Sets every external force to zero.
     pub fn clear_external_forces(&mut self) {
         if self.loaded_unknown {
-            self.external_forces.iter_mut().for_each(|f| *f = Vector3::zeros());
+            self.external_forces
+                .iter_mut()
+                .for_each(|f| *f = Vector3::zeros());
         } else {
             for &v in &self.loaded {
                 self.external_forces[v as usize] = Vector3::zeros();
@@ -296,7 +313,9 @@ impl Simulation {
         self.reset_warm_start();
         let none = vec![Vector3::zeros(); self.model.vertex_count()];
         match &self.model.fem {
-            Some(fem) => crate::fem::solve::statics(&self.model, fem, &mut self.state, &none, settings),
+            Some(fem) => {
+                crate::fem::solve::statics(&self.model, fem, &mut self.state, &none, settings)
+            }
             None => statics::solve(&self.model, &mut self.state, settings),
         }
     }
@@ -307,7 +326,9 @@ impl Simulation {
         self.reset_warm_start();
         let external = &self.external_forces;
         match &self.model.fem {
-            Some(fem) => crate::fem::solve::statics(&self.model, fem, &mut self.state, external, settings),
+            Some(fem) => {
+                crate::fem::solve::statics(&self.model, fem, &mut self.state, external, settings)
+            }
             None => statics::solve_loaded(&self.model, &mut self.state, external, settings),
         }
     }
@@ -322,13 +343,18 @@ impl Simulation {
 
     /// Advances one fixed step of `settings.time_step_s`.
     pub fn step(&mut self) -> Result<StepReport, StepError> {
-        if let (Some(localisation), Integrator::ImplicitEuler, None) =
-            (self.settings.localisation, self.settings.integrator, &self.model.fem)
-        {
+        if let (Some(localisation), Integrator::ImplicitEuler, None) = (
+            self.settings.localisation,
+            self.settings.integrator,
+            &self.model.fem,
+        ) {
             return self.step_localised(&localisation);
         }
         self.check_external_forces(0..self.external_forces.len() as u32)?;
-        let backup = self.scratch.backup.get_or_insert_with(|| self.state.clone());
+        let backup = self
+            .scratch
+            .backup
+            .get_or_insert_with(|| self.state.clone());
         backup.positions.clone_from(&self.state.positions);
         backup.velocities.clone_from(&self.state.velocities);
 
@@ -341,11 +367,22 @@ impl Simulation {
                 report.substeps = substeps;
                 if let Some(fem) = &self.model.fem {
                     let forces = &mut self.scratch.forces;
-                    crate::fem::solve::explicit_step(&self.model, fem, &mut self.state, &self.external_forces, dt, substeps, forces);
+                    crate::fem::solve::explicit_step(
+                        &self.model,
+                        fem,
+                        &mut self.state,
+                        &self.external_forces,
+                        dt,
+                        substeps,
+                        forces,
+                    );
                 }
             }
             (Integrator::ImplicitEuler, Some(fem)) => {
-                let (tol, max_it) = (self.settings.cg_relative_tolerance, self.settings.cg_max_iterations);
+                let (tol, max_it) = (
+                    self.settings.cg_relative_tolerance,
+                    self.settings.cg_max_iterations,
+                );
                 let r = crate::fem::solve::implicit_step(
                     &self.model,
                     fem,
@@ -363,11 +400,25 @@ impl Simulation {
             (Integrator::SymplecticEuler, None) => {
                 let substeps = self.explicit_substeps();
                 report.substeps = substeps;
-                explicit::step(&self.model, &mut self.state, &self.external_forces, dt, substeps, &mut self.scratch.forces);
+                explicit::step(
+                    &self.model,
+                    &mut self.state,
+                    &self.external_forces,
+                    dt,
+                    substeps,
+                    &mut self.scratch.forces,
+                );
             }
             (Integrator::ImplicitEuler, None) => {
                 let cg = self.cg_settings();
-                let r = implicit::step(&self.model.particles(), &mut self.state, &self.external_forces, dt, cg, &mut self.scratch.implicit);
+                let r = implicit::step(
+                    &self.model.particles(),
+                    &mut self.state,
+                    &self.external_forces,
+                    dt,
+                    cg,
+                    &mut self.scratch.implicit,
+                );
                 report.substeps = 1;
                 report.cg_iterations = r.iterations;
                 report.cg_relative_residual = r.relative_residual;
@@ -379,7 +430,9 @@ impl Simulation {
                 self.state.velocities.clone_from(&backup.velocities);
             }
             self.reset_warm_start();
-            return Err(StepError::SolverFailed { residual: report.cg_relative_residual });
+            return Err(StepError::SolverFailed {
+                residual: report.cg_relative_residual,
+            });
         }
         let bad = self.state.non_finite_particles();
         if !bad.is_empty() {
@@ -409,15 +462,32 @@ impl Simulation {
 
     /// Rejects the step when the external force on one of `vertices` is not finite.
     fn check_external_forces(&self, vertices: impl Iterator<Item = u32>) -> Result<(), StepError> {
-        let bad: Vec<u32> = vertices.filter(|&v| !self.external_forces[v as usize].iter().all(|c| c.is_finite())).collect();
-        if bad.is_empty() { Ok(()) } else { Err(StepError::NonFiniteInput { vertices: bad }) }
+        let bad: Vec<u32> = vertices
+            .filter(|&v| {
+                !self.external_forces[v as usize]
+                    .iter()
+                    .all(|c| c.is_finite())
+            })
+            .collect();
+        if bad.is_empty() {
+            Ok(())
+        } else {
+            Err(StepError::NonFiniteInput { vertices: bad })
+        }
     }
 
     /// [`Self::step`] on the awake particles only (see [`localise`]).
-    fn step_localised(&mut self, localisation: &LocalisationSettings) -> Result<StepReport, StepError> {
+    fn step_localised(
+        &mut self,
+        localisation: &LocalisationSettings,
+    ) -> Result<StepReport, StepError> {
         if self.loaded_unknown {
             self.loaded.clear();
-            let loaded = self.external_forces.iter().enumerate().filter(|(_, f)| **f != Vector3::zeros());
+            let loaded = self
+                .external_forces
+                .iter()
+                .enumerate()
+                .filter(|(_, f)| **f != Vector3::zeros());
             self.loaded.extend(loaded.map(|(i, _)| i as u32));
             self.loaded_unknown = false;
         }
@@ -425,7 +495,15 @@ impl Simulation {
         self.loaded.dedup();
         self.check_external_forces(self.loaded.iter().copied())?;
         let (h, cg) = (self.settings.time_step_s, self.cg_settings());
-        let (r, solves) = self.region.step(&self.model, &mut self.state, &self.external_forces, &self.loaded, localisation, h, cg)?;
+        let (r, solves) = self.region.step(
+            &self.model,
+            &mut self.state,
+            &self.external_forces,
+            &self.loaded,
+            localisation,
+            h,
+            cg,
+        )?;
         self.step_index += 1;
         Ok(StepReport {
             substeps: 1,

@@ -16,12 +16,12 @@
 use serde::{Deserialize, Serialize};
 
 use super::implicit::ImplicitScratch;
-use super::system::SweepOrder;
 use super::localise::ActiveRegion;
+use super::system::SweepOrder;
 use super::{Scratch, Simulation};
+use crate::Vector3;
 use crate::mesh::TetMesh;
 use crate::model::{ModelError, State};
-use crate::Vector3;
 
 /// The implicit integrator's warm start: per particle, the last velocity change and the three
 /// before it (`dv`, `dv_1`, `dv_2`, `dv_3`), and how many of them hold solutions.
@@ -43,12 +43,27 @@ fn null_as_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error>
 
 impl WarmStart {
     pub(crate) fn of(dv: &[Vector3], [p1, p2, p3]: &[Vec<Vector3>; 3], count: usize) -> Self {
-        let rows = dv.iter().zip(p1).zip(p2).zip(p3).map(|(((&a, &b), &c), &d)| [a, b, c, d]).collect();
-        Self { count, rows, cg_residual_ratio: 0.0 }
+        let rows = dv
+            .iter()
+            .zip(p1)
+            .zip(p2)
+            .zip(p3)
+            .map(|(((&a, &b), &c), &d)| [a, b, c, d])
+            .collect();
+        Self {
+            count,
+            rows,
+            cg_residual_ratio: 0.0,
+        }
     }
 
     /// Writes the warm start into a solver's buffers.
-    pub(crate) fn install(&self, dv: &mut Vec<Vector3>, [p1, p2, p3]: &mut [Vec<Vector3>; 3], count: &mut usize) {
+    pub(crate) fn install(
+        &self,
+        dv: &mut Vec<Vector3>,
+        [p1, p2, p3]: &mut [Vec<Vector3>; 3],
+        count: &mut usize,
+    ) {
         for (k, buf) in [dv, p1, p2, p3].into_iter().enumerate() {
             buf.clear();
             buf.extend(self.rows.iter().map(|r| r[k]));
@@ -59,18 +74,43 @@ impl WarmStart {
     /// Whether this fits `rows` particles: as many rows, none, or (`fewer_allowed`, the
     /// whole-body steps) fewer, for a state captured after a cut added particles and before the
     /// next step gave them their zero rows.
-    pub(crate) fn check(&self, rows: usize, what: &str, fewer_allowed: bool) -> Result<(), ResumeError> {
+    pub(crate) fn check(
+        &self,
+        rows: usize,
+        what: &str,
+        fewer_allowed: bool,
+    ) -> Result<(), ResumeError> {
         if self.count > 4 {
-            return Err(ResumeError::Invalid(format!("{what}: warm-start count {} (at most 4)", self.count)));
+            return Err(ResumeError::Invalid(format!(
+                "{what}: warm-start count {} (at most 4)",
+                self.count
+            )));
         }
-        if !self.rows.is_empty() && self.rows.len() != rows && !(fewer_allowed && self.rows.len() < rows) {
-            return Err(ResumeError::Invalid(format!("{what}: {} warm-start rows for {rows} particles", self.rows.len())));
+        if !self.rows.is_empty()
+            && self.rows.len() != rows
+            && !(fewer_allowed && self.rows.len() < rows)
+        {
+            return Err(ResumeError::Invalid(format!(
+                "{what}: {} warm-start rows for {rows} particles",
+                self.rows.len()
+            )));
         }
         if !(self.cg_residual_ratio >= 0.0 && self.cg_residual_ratio.is_finite()) {
-            return Err(ResumeError::Invalid(format!("{what}: CG residual ratio {}", self.cg_residual_ratio)));
+            return Err(ResumeError::Invalid(format!(
+                "{what}: CG residual ratio {}",
+                self.cg_residual_ratio
+            )));
         }
-        if !self.rows.iter().flatten().flat_map(|v| v.iter()).all(|c| c.is_finite()) {
-            return Err(ResumeError::Invalid(format!("{what}: a non-finite warm start")));
+        if !self
+            .rows
+            .iter()
+            .flatten()
+            .flat_map(|v| v.iter())
+            .all(|c| c.is_finite())
+        {
+            return Err(ResumeError::Invalid(format!(
+                "{what}: a non-finite warm start"
+            )));
         }
         Ok(())
     }
@@ -78,7 +118,10 @@ impl WarmStart {
 
 impl ImplicitScratch {
     pub(crate) fn warm_start(&self) -> WarmStart {
-        WarmStart { cg_residual_ratio: self.cg.residual_ratio, ..WarmStart::of(&self.dv, &self.dv_previous, self.history) }
+        WarmStart {
+            cg_residual_ratio: self.cg.residual_ratio,
+            ..WarmStart::of(&self.dv, &self.dv_previous, self.history)
+        }
     }
 
     pub(crate) fn install_warm_start(&mut self, w: &WarmStart) {
@@ -143,7 +186,9 @@ pub(crate) fn check_ids(ids: &[u32], n: usize, what: &str) -> Result<(), ResumeE
         return Err(ResumeError::Invalid(format!("{what}: particle {v} of {n}")));
     }
     if !ids.windows(2).all(|w| w[0] < w[1]) {
-        return Err(ResumeError::Invalid(format!("{what}: ids not strictly ascending")));
+        return Err(ResumeError::Invalid(format!(
+            "{what}: ids not strictly ascending"
+        )));
     }
     Ok(())
 }
@@ -154,7 +199,14 @@ impl Simulation {
         let fem = &self.scratch.fem;
         ResumeState {
             step_index: self.step_index,
-            held: self.model.held.iter().enumerate().filter(|(_, h)| **h).map(|(v, _)| v as u32).collect(),
+            held: self
+                .model
+                .held
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| **h)
+                .map(|(v, _)| v as u32)
+                .collect(),
             warm_start: self.scratch.implicit.warm_start(),
             fem_warm_start: WarmStart::of(&fem.dv, &fem.dv_previous, fem.history),
             region: self.region.resume_state(),
@@ -167,13 +219,31 @@ impl Simulation {
     /// set, and the solver's warm start and localised region restored from `resume`. The
     /// following steps are bit-identical to those the captured run took. Inconsistent input
     /// (sizes, ids, non-finite values) is an error and leaves the simulation unchanged.
-    pub fn resume(&mut self, mesh: TetMesh, state: State, resume: &ResumeState) -> Result<(), ResumeError> {
+    pub fn resume(
+        &mut self,
+        mesh: TetMesh,
+        state: State,
+        resume: &ResumeState,
+    ) -> Result<(), ResumeError> {
         let n = mesh.vertex_count();
         if state.positions.len() != n || state.velocities.len() != n {
-            return Err(ResumeError::Invalid(format!("{} positions and {} velocities for {n} vertices", state.positions.len(), state.velocities.len())));
+            return Err(ResumeError::Invalid(format!(
+                "{} positions and {} velocities for {n} vertices",
+                state.positions.len(),
+                state.velocities.len()
+            )));
         }
-        if !state.positions.iter().map(|p| &p.coords).chain(&state.velocities).flat_map(|v| v.iter()).all(|c| c.is_finite()) {
-            return Err(ResumeError::Invalid("a non-finite position or velocity".into()));
+        if !state
+            .positions
+            .iter()
+            .map(|p| &p.coords)
+            .chain(&state.velocities)
+            .flat_map(|v| v.iter())
+            .all(|c| c.is_finite())
+        {
+            return Err(ResumeError::Invalid(
+                "a non-finite position or velocity".into(),
+            ));
         }
         check_ids(&resume.held, n, "held particles")?;
         resume.warm_start.check(n, "whole-body step", true)?;
@@ -195,7 +265,9 @@ impl Simulation {
             scratch.implicit.system.install_sweep_order(order);
         }
         let fem = &mut scratch.fem;
-        resume.fem_warm_start.install(&mut fem.dv, &mut fem.dv_previous, &mut fem.history);
+        resume
+            .fem_warm_start
+            .install(&mut fem.dv, &mut fem.dv_previous, &mut fem.history);
 
         self.model = model;
         self.state = state;
@@ -217,10 +289,23 @@ mod tests {
 
     #[test]
     fn a_null_cg_residual_ratio_reads_as_none() {
-        let read = |json: &str| serde_json::from_str::<WarmStart>(json).expect("reads").cg_residual_ratio;
-        assert_eq!(read(r#"{"count":4,"rows":[],"cg_residual_ratio":null}"#), 0.0);
+        let read = |json: &str| {
+            serde_json::from_str::<WarmStart>(json)
+                .expect("reads")
+                .cg_residual_ratio
+        };
+        assert_eq!(
+            read(r#"{"count":4,"rows":[],"cg_residual_ratio":null}"#),
+            0.0
+        );
         assert_eq!(read(r#"{"count":4,"rows":[]}"#), 0.0);
-        assert_eq!(read(r#"{"count":4,"rows":[],"cg_residual_ratio":0.5}"#), 0.5);
-        assert!(serde_json::from_str::<WarmStart>(r#"{"count":4,"rows":[],"cg_residual_ratio":"x"}"#).is_err());
+        assert_eq!(
+            read(r#"{"count":4,"rows":[],"cg_residual_ratio":0.5}"#),
+            0.5
+        );
+        assert!(
+            serde_json::from_str::<WarmStart>(r#"{"count":4,"rows":[],"cg_residual_ratio":"x"}"#)
+                .is_err()
+        );
     }
 }

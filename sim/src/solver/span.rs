@@ -18,7 +18,11 @@ const DEPENDENT: f64 = 1e-10;
 pub fn coefficients(g: &[[f64; SPAN]; SPAN], f: &[f64; SPAN]) -> [f64; SPAN] {
     let scale: [f64; SPAN] = std::array::from_fn(|j| {
         let d = g[j][j];
-        if d > 0.0 && d.is_finite() { 1.0 / d.sqrt() } else { 0.0 }
+        if d > 0.0 && d.is_finite() {
+            1.0 / d.sqrt()
+        } else {
+            0.0
+        }
     });
     let a = |i: usize, j: usize| g[i][j] * scale[i] * scale[j];
     let mut l = [[0.0; SPAN]; SPAN];
@@ -28,14 +32,21 @@ pub fn coefficients(g: &[[f64; SPAN]; SPAN], f: &[f64; SPAN]) -> [f64; SPAN] {
         if scale[k] == 0.0 {
             continue;
         }
-        let dk = a(k, k) - (0..k).filter(|&j| kept[j]).map(|j| l[k][j] * l[k][j] * d[j]).sum::<f64>();
+        let dk = a(k, k)
+            - (0..k)
+                .filter(|&j| kept[j])
+                .map(|j| l[k][j] * l[k][j] * d[j])
+                .sum::<f64>();
         if !(dk > DEPENDENT) {
             continue;
         }
         (kept[k], d[k]) = (true, dk);
         for i in k + 1..SPAN {
             if scale[i] != 0.0 {
-                let sum: f64 = (0..k).filter(|&j| kept[j]).map(|j| l[i][j] * l[k][j] * d[j]).sum();
+                let sum: f64 = (0..k)
+                    .filter(|&j| kept[j])
+                    .map(|j| l[i][j] * l[k][j] * d[j])
+                    .sum();
                 l[i][k] = (a(i, k) - sum) / dk;
             }
         }
@@ -43,16 +54,28 @@ pub fn coefficients(g: &[[f64; SPAN]; SPAN], f: &[f64; SPAN]) -> [f64; SPAN] {
     // L y = S f, then L^T c' = D^-1 y, c = S c'
     let mut y = [0.0; SPAN];
     for i in (0..SPAN).filter(|&i| kept[i]) {
-        y[i] = f[i] * scale[i] - (0..i).filter(|&j| kept[j]).map(|j| l[i][j] * y[j]).sum::<f64>();
+        y[i] = f[i] * scale[i]
+            - (0..i)
+                .filter(|&j| kept[j])
+                .map(|j| l[i][j] * y[j])
+                .sum::<f64>();
     }
     let mut c = [0.0; SPAN];
     for i in (0..SPAN).rev().filter(|&i| kept[i]) {
-        c[i] = y[i] / d[i] - (i + 1..SPAN).filter(|&j| kept[j]).map(|j| l[j][i] * c[j]).sum::<f64>();
+        c[i] = y[i] / d[i]
+            - (i + 1..SPAN)
+                .filter(|&j| kept[j])
+                .map(|j| l[j][i] * c[j])
+                .sum::<f64>();
     }
     for (c, s) in c.iter_mut().zip(scale) {
         *c *= s;
     }
-    if c.iter().all(|c| c.is_finite()) { c } else { [0.0; SPAN] }
+    if c.iter().all(|c| c.is_finite()) {
+        c
+    } else {
+        [0.0; SPAN]
+    }
 }
 
 #[cfg(test)]
@@ -60,18 +83,34 @@ mod tests {
     use super::*;
 
     fn gram(u: &[[f64; 3]; SPAN], a: &[[f64; 3]; 3]) -> [[f64; SPAN]; SPAN] {
-        let au = |v: &[f64; 3]| -> [f64; 3] { std::array::from_fn(|r| (0..3).map(|k| a[r][k] * v[k]).sum()) };
-        std::array::from_fn(|i| std::array::from_fn(|j| au(&u[j]).iter().zip(&u[i]).map(|(x, y)| x * y).sum()))
+        let au = |v: &[f64; 3]| -> [f64; 3] {
+            std::array::from_fn(|r| (0..3).map(|k| a[r][k] * v[k]).sum())
+        };
+        std::array::from_fn(|i| {
+            std::array::from_fn(|j| au(&u[j]).iter().zip(&u[i]).map(|(x, y)| x * y).sum())
+        })
     }
 
     #[test]
     fn independent_vectors_give_the_galerkin_solution() {
         // in 4 dimensions with 4 independent vectors the projection is the exact solution
-        let a = [[4.0, 1.0, 0.0, 0.5], [1.0, 3.0, 0.2, 0.0], [0.0, 0.2, 2.0, 0.1], [0.5, 0.0, 0.1, 1.5]];
-        let u = [[1.0, 0.0, 0.5, 0.0], [0.0, 2.0, 0.0, 0.1], [0.3, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 3.0]];
+        let a = [
+            [4.0, 1.0, 0.0, 0.5],
+            [1.0, 3.0, 0.2, 0.0],
+            [0.0, 0.2, 2.0, 0.1],
+            [0.5, 0.0, 0.1, 1.5],
+        ];
+        let u = [
+            [1.0, 0.0, 0.5, 0.0],
+            [0.0, 2.0, 0.0, 0.1],
+            [0.3, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 3.0],
+        ];
         let x_true = [0.7, -1.2, 0.4, 2.0];
         let b: [f64; 4] = std::array::from_fn(|r| (0..4).map(|k| a[r][k] * x_true[k]).sum());
-        let au = |v: &[f64; 4]| -> [f64; 4] { std::array::from_fn(|r| (0..4).map(|k| a[r][k] * v[k]).sum()) };
+        let au = |v: &[f64; 4]| -> [f64; 4] {
+            std::array::from_fn(|r| (0..4).map(|k| a[r][k] * v[k]).sum())
+        };
         let dot = |p: &[f64; 4], q: &[f64; 4]| p.iter().zip(q).map(|(x, y)| x * y).sum::<f64>();
         let g = std::array::from_fn(|i| std::array::from_fn(|j| dot(&u[i], &au(&u[j]))));
         let f = std::array::from_fn(|i| dot(&u[i], &b));
@@ -95,8 +134,14 @@ mod tests {
         // optimal over the two kept: the 2x2 Galerkin system
         let (g00, g03, g33) = (g[0][0], g[0][3], g[3][3]);
         let det = g00 * g33 - g03 * g03;
-        let (c0, c3) = ((g33 * f[0] - g03 * f[3]) / det, (g00 * f[3] - g03 * f[0]) / det);
-        assert!((c[0] - c0).abs() < 1e-12 && (c[3] - c3).abs() < 1e-12, "{c:?} vs {c0} {c3}");
+        let (c0, c3) = (
+            (g33 * f[0] - g03 * f[3]) / det,
+            (g00 * f[3] - g03 * f[0]) / det,
+        );
+        assert!(
+            (c[0] - c0).abs() < 1e-12 && (c[3] - c3).abs() < 1e-12,
+            "{c:?} vs {c0} {c3}"
+        );
     }
 
     #[test]
@@ -106,6 +151,9 @@ mod tests {
         g[0][0] = f64::NAN;
         g[1][1] = 1.0;
         assert_eq!(coefficients(&g, &[1.0, f64::NAN, 0.0, 0.0]), [0.0; SPAN]);
-        assert_eq!(coefficients(&g, &[1.0, 2.0, 0.0, 0.0]), [0.0, 2.0, 0.0, 0.0]);
+        assert_eq!(
+            coefficients(&g, &[1.0, 2.0, 0.0, 0.0]),
+            [0.0, 2.0, 0.0, 0.0]
+        );
     }
 }

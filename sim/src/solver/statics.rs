@@ -2,8 +2,8 @@
 //! solves `K dx = f(x)` by PCG (`K` the positive part of the stiffness matrix, see
 //! [`super::system::stiffness_block`]), then backtracks on the residual norm.
 
-use crate::{Point3, Vector3};
 use crate::model::{Model, State};
+use crate::{Point3, Vector3};
 
 use super::forces::{free_force_norm_squared, max_free_force, total_forces};
 use super::system::{self, CgScratch, CgSettings, SpringSystem, stiffness_block};
@@ -19,7 +19,10 @@ pub struct StaticSettings {
 
 impl Default for StaticSettings {
     fn default() -> Self {
-        Self { relative_force_tolerance: 1e-12, max_newton_iterations: 60 }
+        Self {
+            relative_force_tolerance: 1e-12,
+            max_newton_iterations: 60,
+        }
     }
 }
 
@@ -37,14 +40,27 @@ pub struct StaticReport {
 
 /// Moves the free particles of `state` to static equilibrium and zeroes all velocities.
 pub fn solve(model: &Model, state: &mut State, settings: StaticSettings) -> StaticReport {
-    solve_loaded(model, state, &vec![Vector3::zeros(); model.vertex_count()], settings)
+    solve_loaded(
+        model,
+        state,
+        &vec![Vector3::zeros(); model.vertex_count()],
+        settings,
+    )
 }
 
 /// [`solve`] under the constant external forces `external` (N per particle).
-pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], settings: StaticSettings) -> StaticReport {
+pub fn solve_loaded(
+    model: &Model,
+    state: &mut State,
+    external: &[Vector3],
+    settings: StaticSettings,
+) -> StaticReport {
     let n = model.vertex_count();
     let zero_ext = external;
-    state.velocities.iter_mut().for_each(|v| *v = Vector3::zeros());
+    state
+        .velocities
+        .iter_mut()
+        .for_each(|v| *v = Vector3::zeros());
     let mut f = vec![Vector3::zeros(); n];
     let mut dx = vec![Vector3::zeros(); n];
     let mut trial = state.positions.clone();
@@ -79,12 +95,25 @@ pub fn solve_loaded(model: &Model, state: &mut State, external: &[Vector3], sett
         }
         sys.update_preconditioner(&model.particles());
         dx.iter_mut().for_each(|d| *d = Vector3::zeros());
-        let cg = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 10 * n.max(100) };
-        cg_total += system::solve(&sys, &model.particles(), &f, &mut dx, cg, &mut cg_scratch).iterations;
+        let cg = CgSettings {
+            relative_tolerance: 1e-10,
+            absolute_tolerance: 0.0,
+            max_iterations: 10 * n.max(100),
+        };
+        cg_total +=
+            system::solve(&sys, &model.particles(), &f, &mut dx, cg, &mut cg_scratch).iterations;
 
-        match line_search(model, &mut state.positions, &mut f, &dx, residual, scale, &mut trial, &mut f_trial, |x, out| {
-            total_forces(model, x, &state.velocities, zero_ext, out)
-        }) {
+        match line_search(
+            model,
+            &mut state.positions,
+            &mut f,
+            &dx,
+            residual,
+            scale,
+            &mut trial,
+            &mut f_trial,
+            |x, out| total_forces(model, x, &state.velocities, zero_ext, out),
+        ) {
             Some(r) => residual = r,
             None => stalls += 1,
         }

@@ -51,14 +51,28 @@ impl Sym3 {
     /// `s I`.
     #[inline]
     pub fn scalar(s: f64) -> Self {
-        Self { xx: s, yy: s, zz: s, xy: 0.0, xz: 0.0, yz: 0.0 }
+        Self {
+            xx: s,
+            yy: s,
+            zz: s,
+            xy: 0.0,
+            xz: 0.0,
+            yz: 0.0,
+        }
     }
 
     /// `beta I + gamma n n^T`.
     #[inline]
     pub fn spring_block(beta: f64, gamma: f64, n: &Vector3) -> Self {
         let g = n * gamma;
-        Self { xx: beta + g.x * n.x, yy: beta + g.y * n.y, zz: beta + g.z * n.z, xy: g.x * n.y, xz: g.x * n.z, yz: g.y * n.z }
+        Self {
+            xx: beta + g.x * n.x,
+            yy: beta + g.y * n.y,
+            zz: beta + g.z * n.z,
+            xy: g.x * n.y,
+            xz: g.x * n.z,
+            yz: g.y * n.z,
+        }
     }
 
     /// The matrix-vector product.
@@ -125,21 +139,37 @@ impl Lower3 {
         let yy = (d.yy - yx * yx).sqrt();
         let zy = (d.yz - zx * yx) / yy;
         let zz = (d.zz - zx * zx - zy * zy).sqrt();
-        let g = Self { xx, yx, yy, zx, zy, zz };
+        let g = Self {
+            xx,
+            yx,
+            yy,
+            zx,
+            zy,
+            zz,
+        };
         // positive pivots (NaN from a negative square root fails the comparisons too)
-        (xx > 0.0 && yy > 0.0 && zz > 0.0 && [yx, zx, zy, zz].iter().all(|v| v.is_finite())).then_some(g)
+        (xx > 0.0 && yy > 0.0 && zz > 0.0 && [yx, zx, zy, zz].iter().all(|v| v.is_finite()))
+            .then_some(g)
     }
 
     /// `G v`.
     #[inline]
     pub fn mul(&self, v: &Vector3) -> Vector3 {
-        Vector3::new(self.xx * v.x, self.yx * v.x + self.yy * v.y, self.zx * v.x + self.zy * v.y + self.zz * v.z)
+        Vector3::new(
+            self.xx * v.x,
+            self.yx * v.x + self.yy * v.y,
+            self.zx * v.x + self.zy * v.y + self.zz * v.z,
+        )
     }
 
     /// `G^T v`.
     #[inline]
     pub fn mul_transpose(&self, v: &Vector3) -> Vector3 {
-        Vector3::new(self.xx * v.x + self.yx * v.y + self.zx * v.z, self.yy * v.y + self.zy * v.z, self.zz * v.z)
+        Vector3::new(
+            self.xx * v.x + self.yx * v.y + self.zx * v.z,
+            self.yy * v.y + self.zy * v.z,
+            self.zz * v.z,
+        )
     }
 }
 
@@ -190,15 +220,25 @@ impl BlockLayout {
         self.ends.clear();
         self.ends.extend_from_slice(ends);
         self.has_loop = ends.iter().any(|&[a, b]| a == b);
-        self.sorted_by_first = ends.iter().all(|&[a, b]| a < b) && crate::model::sorted_by_first_end(ends);
+        self.sorted_by_first =
+            ends.iter().all(|&[a, b]| a < b) && crate::model::sorted_by_first_end(ends);
         // carried over while no spring joins the halves and the separator has not grown past
         // twice its dissected size (and 64 particles): it is swept on one thread
         let carried = self.carry
             && !self.part.is_empty()
             && dissection::extend_parts(&mut self.part, n, ends)
-            && dissection::separator_count(&self.part) <= self.separator_when_dissected.saturating_mul(2).saturating_add(64);
+            && dissection::separator_count(&self.part)
+                <= self
+                    .separator_when_dissected
+                    .saturating_mul(2)
+                    .saturating_add(64);
         if !carried {
-            dissection::dissection_parts_into(n, ends, &mut self.scratch.dissection, &mut self.part);
+            dissection::dissection_parts_into(
+                n,
+                ends,
+                &mut self.scratch.dissection,
+                &mut self.part,
+            );
             self.separator_when_dissected = dissection::separator_count(&self.part);
         }
         self.halves = dissection::order_of_parts(&self.part, &mut self.order);
@@ -236,7 +276,10 @@ impl BlockLayout {
             let run = self.start[k]..self.start[k + 1];
             if run.len() > 1 {
                 keys.clear();
-                keys.extend(run.clone().map(|s| (u64::from(other[s]) << 32) | u64::from(spring[s])));
+                keys.extend(
+                    run.clone()
+                        .map(|s| (u64::from(other[s]) << 32) | u64::from(spring[s])),
+                );
                 keys.sort_unstable();
                 for (s, &key) in run.zip(&keys) {
                     (other[s], spring[s]) = ((key >> 32) as u32, key as u32);
@@ -265,13 +308,19 @@ impl SweepOrder {
     /// or 2, and a dissected separator of at most `n` (the springs are checked when it is used).
     pub fn check(&self, n: usize) -> Result<(), String> {
         if self.parts.len() > n {
-            return Err(format!("sweep order of {} particles for {n}", self.parts.len()));
+            return Err(format!(
+                "sweep order of {} particles for {n}",
+                self.parts.len()
+            ));
         }
         if let Some(p) = self.parts.iter().find(|&&p| p > dissection::SEPARATOR) {
             return Err(format!("sweep order: part {p} (0, 1 or 2)"));
         }
         if self.separator_when_dissected > n {
-            return Err(format!("sweep order: a separator of {} particles for {n}", self.separator_when_dissected));
+            return Err(format!(
+                "sweep order: a separator of {} particles for {n}",
+                self.separator_when_dissected
+            ));
         }
         Ok(())
     }
@@ -346,7 +395,14 @@ fn block_mul(c: &[f64; 4], v: &Vector3) -> Vector3 {
 #[inline(always)]
 pub fn block_matrix(c: &[f64; 4]) -> Sym3 {
     let [gx, gy, gz, beta] = *c;
-    Sym3 { xx: beta + gx * gx, yy: beta + gy * gy, zz: beta + gz * gz, xy: gx * gy, xz: gx * gz, yz: gy * gz }
+    Sym3 {
+        xx: beta + gx * gx,
+        yy: beta + gy * gy,
+        zz: beta + gz * gz,
+        xy: gx * gy,
+        xz: gx * gz,
+        yz: gy * gz,
+    }
 }
 
 impl SpringSystem {
@@ -425,11 +481,19 @@ impl SpringSystem {
     pub fn update_preconditioner(&mut self, model: &Particles<'_>) {
         let n = model.vertex_count();
         self.diag.clear();
-        self.diag.extend(model.mass.iter().map(|&m| Sym3::scalar(self.mass_weight * m)));
+        self.diag.extend(
+            model
+                .mass
+                .iter()
+                .map(|&m| Sym3::scalar(self.mass_weight * m)),
+        );
         let order = &self.layout.order;
         for (k, &i) in order[..n].iter().enumerate() {
             let slots = self.layout.start[k]..self.layout.start[k + 1];
-            for (&other, c) in self.layout.other[slots.clone()].iter().zip(&self.coef[slots]) {
+            for (&other, c) in self.layout.other[slots.clone()]
+                .iter()
+                .zip(&self.coef[slots])
+            {
                 let block = block_matrix(c);
                 self.diag[i as usize] += block;
                 self.diag[order[other as usize] as usize] += block;
@@ -453,7 +517,11 @@ impl SpringSystem {
         self.held.resize(n, false);
         // each rank on its own: the two halves of the ranks side by side on a large system
         let (diag, weight, order) = (&self.diag, self.mass_weight, &self.layout.order[..n]);
-        let fill = |order: &[u32], inv_diag: &mut [Sym3], chol: &mut [Lower3], mass: &mut [f64], held: &mut [bool]| {
+        let fill = |order: &[u32],
+                    inv_diag: &mut [Sym3],
+                    chol: &mut [Lower3],
+                    mass: &mut [f64],
+                    held: &mut [bool]| {
             let mut all_factored = true;
             for (k, &i) in order.iter().enumerate() {
                 let (i, h) = (i as usize, model.held[i as usize]);
@@ -519,8 +587,14 @@ impl SpringSystem {
         spill.clear();
         spill.resize(n - s, T::ZERO);
         let (y1, y2, y_s) = split3(y, h, s);
-        join(parallel, || self.apply_part(p, 0, y1, y_s), || self.apply_part(p, h, y2, spill));
-        y_s.iter_mut().zip(spill.iter()).for_each(|(a, v)| a.add(*v));
+        join(
+            parallel,
+            || self.apply_part(p, 0, y1, y_s),
+            || self.apply_part(p, h, y2, spill),
+        );
+        y_s.iter_mut()
+            .zip(spill.iter())
+            .for_each(|(a, v)| a.add(*v));
         self.apply_part(p, s, y_s, &mut []);
         for (y, &h) in y.iter_mut().zip(&self.held) {
             if h {
@@ -558,7 +632,15 @@ impl SpringSystem {
     /// see [`super::span`]): `x = U c` and its residual `r = b - A x = b - (A U) c` (held
     /// entries zero), whose norm this returns. The Gram matrix and `U^T b` are summed over the
     /// two halves of the ranks, side by side when `parallel` (the same bits either way).
-    fn project_start(&self, span: &[SpanEntries], b: &[Vector3], x: &mut [Vector3], r: &mut [Vector3], scratch: &mut SpanScratch, parallel: bool) -> f64 {
+    fn project_start(
+        &self,
+        span: &[SpanEntries],
+        b: &[Vector3],
+        x: &mut [Vector3],
+        r: &mut [Vector3],
+        scratch: &mut SpanScratch,
+        parallel: bool,
+    ) -> f64 {
         let n = b.len();
         let SpanScratch { y, spill } = scratch;
         y.resize(n, SpanEntries::ZERO);
@@ -589,7 +671,11 @@ impl SpringSystem {
         let mut rr = 0.0;
         for k in 0..n {
             x[k] = span[k].combine(&c);
-            r[k] = if self.held[k] { Vector3::zeros() } else { b[k] - y[k].combine(&c) };
+            r[k] = if self.held[k] {
+                Vector3::zeros()
+            } else {
+                b[k] - y[k].combine(&c)
+            };
             rr += r[k].norm_squared();
         }
         rr.sqrt()
@@ -638,7 +724,11 @@ struct SpanEntries {
 
 impl SpanEntries {
     fn of(v: [Vector3; SPAN]) -> Self {
-        Self { x: v.map(|v| v.x), y: v.map(|v| v.y), z: v.map(|v| v.z) }
+        Self {
+            x: v.map(|v| v.x),
+            y: v.map(|v| v.y),
+            z: v.map(|v| v.z),
+        }
     }
 
     fn get(&self, j: usize) -> Vector3 {
@@ -653,10 +743,18 @@ impl SpanEntries {
 }
 
 impl Lanes for SpanEntries {
-    const ZERO: Self = Self { x: [0.0; SPAN], y: [0.0; SPAN], z: [0.0; SPAN] };
+    const ZERO: Self = Self {
+        x: [0.0; SPAN],
+        y: [0.0; SPAN],
+        z: [0.0; SPAN],
+    };
     #[inline(always)]
     fn scaled(self, m: f64) -> Self {
-        Self { x: self.x.map(|v| v * m), y: self.y.map(|v| v * m), z: self.z.map(|v| v * m) }
+        Self {
+            x: self.x.map(|v| v * m),
+            y: self.y.map(|v| v * m),
+            z: self.z.map(|v| v * m),
+        }
     }
     #[inline(always)]
     fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self {
@@ -664,7 +762,11 @@ impl Lanes for SpanEntries {
         let [gx, gy, gz, beta] = *c;
         let mut out = Self::ZERO;
         for j in 0..SPAN {
-            let (dx, dy, dz) = (self.x[j] - other.x[j], self.y[j] - other.y[j], self.z[j] - other.z[j]);
+            let (dx, dy, dz) = (
+                self.x[j] - other.x[j],
+                self.y[j] - other.y[j],
+                self.z[j] - other.z[j],
+            );
             let gd = gx * dx + gy * dy + gz * dz;
             out.x[j] = beta * dx + gx * gd;
             out.y[j] = beta * dy + gy * gd;
@@ -748,14 +850,25 @@ pub fn solver_threads() -> usize {
 }
 
 /// `a` and `b`, on two threads when `parallel` (the same results either way).
-pub(crate) fn join<RA: Send, RB: Send>(parallel: bool, a: impl FnOnce() -> RA + Send, b: impl FnOnce() -> RB + Send) -> (RA, RB) {
-    if parallel { side_by_side(a, b) } else { (a(), b()) }
+pub(crate) fn join<RA: Send, RB: Send>(
+    parallel: bool,
+    a: impl FnOnce() -> RA + Send,
+    b: impl FnOnce() -> RB + Send,
+) -> (RA, RB) {
+    if parallel {
+        side_by_side(a, b)
+    } else {
+        (a(), b())
+    }
 }
 
 /// `a` and `b` on two threads. Called from outside rayon's pool (the simulation's own thread),
 /// `a` runs on the calling thread while a worker takes `b`, instead of both waiting for
 /// workers to wake while the caller sleeps ([`rayon::join`] from outside the pool).
-pub(crate) fn side_by_side<RA: Send, RB: Send>(a: impl FnOnce() -> RA + Send, b: impl FnOnce() -> RB + Send) -> (RA, RB) {
+pub(crate) fn side_by_side<RA: Send, RB: Send>(
+    a: impl FnOnce() -> RA + Send,
+    b: impl FnOnce() -> RB + Send,
+) -> (RA, RB) {
     if rayon::current_thread_index().is_some() {
         return rayon::join(a, b);
     }
@@ -829,17 +942,36 @@ fn solve_on(
             *xi = Vector3::zeros();
         }
     }
-    let b_norm = b.iter().zip(model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
+    let b_norm = b
+        .iter()
+        .zip(model.held)
+        .filter(|(_, h)| !**h)
+        .map(|(b, _)| b.norm_squared())
+        .sum::<f64>()
+        .sqrt();
     if b_norm == 0.0 {
         x.iter_mut().for_each(|xi| *xi = Vector3::zeros());
-        return CgReport { iterations: 0, relative_residual: 0.0, converged: true };
+        return CgReport {
+            iterations: 0,
+            relative_residual: 0.0,
+            converged: true,
+        };
     }
     // (every entry is written before it is read: no need to clear)
-    for buf in [&mut scratch.r, &mut scratch.z, &mut scratch.p, &mut scratch.q, &mut scratch.t] {
+    for buf in [
+        &mut scratch.r,
+        &mut scratch.z,
+        &mut scratch.p,
+        &mut scratch.q,
+        &mut scratch.t,
+    ] {
         buf.resize(n, Vector3::zeros());
     }
     let order = &sys.layout.order[..n];
-    let (mut b_ranked, mut x_ranked) = (std::mem::take(&mut scratch.b), std::mem::take(&mut scratch.x));
+    let (mut b_ranked, mut x_ranked) = (
+        std::mem::take(&mut scratch.b),
+        std::mem::take(&mut scratch.x),
+    );
     b_ranked.clear();
     b_ranked.extend(order.iter().map(|&i| b[i as usize]));
     x_ranked.clear();
@@ -852,14 +984,27 @@ fn solve_on(
             span.extend(order.iter().map(|&i| {
                 let i = i as usize;
                 let at = |v: &[Vector3]| v.get(i).copied().unwrap_or_else(Vector3::zeros);
-                if model.held[i] { SpanEntries::ZERO } else { SpanEntries::of([x[i], at(more[0]), at(more[1]), at(more[2])]) }
+                if model.held[i] {
+                    SpanEntries::ZERO
+                } else {
+                    SpanEntries::of([x[i], at(more[0]), at(more[1]), at(more[2])])
+                }
             }));
             x_ranked.resize(n, Vector3::zeros());
             let run = |scratch: &mut CgScratch, x: &mut [Vector3]| {
-                let CgScratch { span, span_products, z, .. } = scratch;
+                let CgScratch {
+                    span,
+                    span_products,
+                    z,
+                    ..
+                } = scratch;
                 sys.project_start(span, &b_ranked, x, z, span_products, parallel)
             };
-            Some(if parallel { rayon::scope(|_| run(scratch, &mut x_ranked)) } else { run(scratch, &mut x_ranked) })
+            Some(if parallel {
+                rayon::scope(|_| run(scratch, &mut x_ranked))
+            } else {
+                run(scratch, &mut x_ranked)
+            })
         }
         None => {
             x_ranked.extend(order.iter().map(|&i| x[i as usize]));
@@ -869,16 +1014,44 @@ fn solve_on(
     let report = if ssor {
         if parallel {
             // on one of rayon's threads, so that handing the other half of a sweep over is cheap
-            rayon::scope(|_| solve_ssor(sys, &b_ranked, &mut x_ranked, b_norm, known, settings, scratch, true))
+            rayon::scope(|_| {
+                solve_ssor(
+                    sys,
+                    &b_ranked,
+                    &mut x_ranked,
+                    b_norm,
+                    known,
+                    settings,
+                    scratch,
+                    true,
+                )
+            })
         } else {
-            solve_ssor(sys, &b_ranked, &mut x_ranked, b_norm, known, settings, scratch, false)
+            solve_ssor(
+                sys,
+                &b_ranked,
+                &mut x_ranked,
+                b_norm,
+                known,
+                settings,
+                scratch,
+                false,
+            )
         }
     } else {
         if known.is_some() {
             let CgScratch { r, z, .. } = &mut *scratch;
             r.copy_from_slice(z);
         }
-        solve_jacobi(sys, &b_ranked, &mut x_ranked, b_norm, known, settings, scratch)
+        solve_jacobi(
+            sys,
+            &b_ranked,
+            &mut x_ranked,
+            b_norm,
+            known,
+            settings,
+            scratch,
+        )
     };
     for (&i, x_k) in order.iter().zip(&x_ranked) {
         x[i as usize] = *x_k;
@@ -900,7 +1073,11 @@ fn residual(
     sys.apply_ranked(x, ax, spill, parallel);
     let mut rr = 0.0;
     for k in 0..b.len() {
-        r[k] = if sys.held[k] { Vector3::zeros() } else { b[k] - ax[k] };
+        r[k] = if sys.held[k] {
+            Vector3::zeros()
+        } else {
+            b[k] - ax[k]
+        };
         rr += r[k].norm_squared();
     }
     rr.sqrt()
@@ -908,9 +1085,19 @@ fn residual(
 
 /// Block-Jacobi preconditioned CG, by rank.
 /// `known`: the norm of the residual of `x`, already in `r`.
-fn solve_jacobi(sys: &SpringSystem, b: &[Vector3], x: &mut [Vector3], b_norm: f64, known: Option<f64>, settings: CgSettings, scratch: &mut CgScratch) -> CgReport {
+fn solve_jacobi(
+    sys: &SpringSystem,
+    b: &[Vector3],
+    x: &mut [Vector3],
+    b_norm: f64,
+    known: Option<f64>,
+    settings: CgSettings,
+    scratch: &mut CgScratch,
+) -> CgReport {
     let n = b.len();
-    let CgScratch { r, z, p, q, spill, .. } = scratch;
+    let CgScratch {
+        r, z, p, q, spill, ..
+    } = scratch;
     let mut r_norm = match known {
         Some(r_norm) => r_norm,
         None => residual(sys, b, x, r, q, spill, false),
@@ -946,7 +1133,11 @@ fn solve_jacobi(sys: &SpringSystem, b: &[Vector3], x: &mut [Vector3], b_norm: f6
         r_norm = rr.sqrt();
         iterations += 1;
     }
-    CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
+    CgReport {
+        iterations,
+        relative_residual: r_norm / b_norm,
+        converged: r_norm <= target,
+    }
 }
 
 /// What the sweeps read of the system, by rank.
@@ -966,7 +1157,13 @@ impl Sweeps<'_> {
     /// vector are `own`: `u = w D_k^-1 own_k`, then `B u` added to the later particles of `k`'s
     /// springs, in `own` or, beyond it, in the separator's `spill`. Returns `u`.
     #[inline(always)]
-    fn forward_at(&self, k: usize, lo: usize, own: &mut [Vector3], spill: &mut [Vector3]) -> Vector3 {
+    fn forward_at(
+        &self,
+        k: usize,
+        lo: usize,
+        own: &mut [Vector3],
+        spill: &mut [Vector3],
+    ) -> Vector3 {
         let u = self.inv_diag[k].mul(&own[k - lo]);
         let hi = lo + own.len();
         let slots = self.start[k]..self.start[k + 1];
@@ -982,7 +1179,14 @@ impl Sweeps<'_> {
     }
 
     /// The first forward sweep over a part: `r^ = G^T P^-1 r` (`acc` holds `r`), `p = 0`.
-    fn forward_first(&self, lo: usize, acc: &mut [Vector3], spill: &mut [Vector3], r: &mut [Vector3], p: &mut [Vector3]) {
+    fn forward_first(
+        &self,
+        lo: usize,
+        acc: &mut [Vector3],
+        spill: &mut [Vector3],
+        r: &mut [Vector3],
+        p: &mut [Vector3],
+    ) {
         for j in 0..acc.len() {
             let k = lo + j;
             let u = self.forward_at(k, lo, acc, spill);
@@ -993,7 +1197,15 @@ impl Sweeps<'_> {
 
     /// An iteration's forward sweep over a part: `u = P^-1 acc`, `q = G^T (t + u)`; returns
     /// the part's `p . q`.
-    fn forward(&self, lo: usize, acc: &mut [Vector3], spill: &mut [Vector3], t: &[Vector3], p: &[Vector3], q: &mut [Vector3]) -> f64 {
+    fn forward(
+        &self,
+        lo: usize,
+        acc: &mut [Vector3],
+        spill: &mut [Vector3],
+        t: &[Vector3],
+        p: &[Vector3],
+        q: &mut [Vector3],
+    ) -> f64 {
         let mut pq = 0.0;
         for j in 0..acc.len() {
             let k = lo + j;
@@ -1010,7 +1222,16 @@ impl Sweeps<'_> {
     /// `s = G p + sum of B t` over the later particles, `t = w D^-1 s` and `K t = (2 - w) s`. A
     /// particle's springs are summed from the last down, so that the product with the most
     /// recent result comes last in the dependency chain from one particle to the next.
-    fn backward(&self, lo: usize, beta: f64, r: &[Vector3], p: &mut [Vector3], t: &mut [Vector3], t_separator: &[Vector3], acc: &mut [Vector3]) {
+    fn backward(
+        &self,
+        lo: usize,
+        beta: f64,
+        r: &[Vector3],
+        p: &mut [Vector3],
+        t: &mut [Vector3],
+        t_separator: &[Vector3],
+        acc: &mut [Vector3],
+    ) {
         let two_minus_omega = 2.0 - SSOR_OMEGA;
         let hi = lo + t.len();
         for j in (0..t.len()).rev() {
@@ -1020,9 +1241,17 @@ impl Sweeps<'_> {
             let g = self.chol[k].mul(&pk);
             let mut sum = g;
             let slots = self.start[k]..self.start[k + 1];
-            for (&o, c) in self.other[slots.clone()].iter().zip(&self.coef[slots]).rev() {
+            for (&o, c) in self.other[slots.clone()]
+                .iter()
+                .zip(&self.coef[slots])
+                .rev()
+            {
                 let o = o as usize;
-                let to = if o < hi { t[o - lo] } else { t_separator[o - self.s] };
+                let to = if o < hi {
+                    t[o - lo]
+                } else {
+                    t_separator[o - self.s]
+                };
                 sum += block_mul(c, &to);
             }
             t[j] = self.inv_diag[k].mul(&sum);
@@ -1050,8 +1279,23 @@ fn solve_ssor(
     parallel: bool,
 ) -> CgReport {
     let n = b.len();
-    let CgScratch { r, z: acc, p, q, t, spill, residual_ratio, .. } = scratch;
-    let (r, acc, p, q, t) = (&mut r[..n], &mut acc[..n], &mut p[..n], &mut q[..n], &mut t[..n]);
+    let CgScratch {
+        r,
+        z: acc,
+        p,
+        q,
+        t,
+        spill,
+        residual_ratio,
+        ..
+    } = scratch;
+    let (r, acc, p, q, t) = (
+        &mut r[..n],
+        &mut acc[..n],
+        &mut p[..n],
+        &mut q[..n],
+        &mut t[..n],
+    );
     let [h, s] = sys.layout.halves;
     let sweeps = Sweeps {
         start: &sys.layout.start[..=n],
@@ -1069,7 +1313,11 @@ fn solve_ssor(
         None => residual(sys, b, x, acc, q, spill, parallel),
     };
     if r_norm <= target {
-        return CgReport { iterations: 0, relative_residual: r_norm / b_norm, converged: true };
+        return CgReport {
+            iterations: 0,
+            relative_residual: r_norm / b_norm,
+            converged: true,
+        };
     }
     // r^ = G^T P^-1 r: forward sweep on acc = r.
     {
@@ -1077,13 +1325,24 @@ fn solve_ssor(
         let (r1, r2, r_s) = split3(r, h, s);
         let (p1, p2, p_s) = split3(p, h, s);
         spill.iter_mut().for_each(|v| *v = Vector3::zeros());
-        join(parallel, || sweeps.forward_first(0, acc1, acc_s, r1, p1), || sweeps.forward_first(h, acc2, spill, r2, p2));
-        acc_s.iter_mut().zip(spill.iter()).for_each(|(a, v)| *a += v);
+        join(
+            parallel,
+            || sweeps.forward_first(0, acc1, acc_s, r1, p1),
+            || sweeps.forward_first(h, acc2, spill, r2, p2),
+        );
+        acc_s
+            .iter_mut()
+            .zip(spill.iter())
+            .for_each(|(a, v)| *a += v);
         sweeps.forward_first(s, acc_s, &mut [], r_s, p_s);
     }
     let mut rr = dot(r, r);
     let (r_norm0, rr0) = (r_norm, rr);
-    let ratio = if *residual_ratio > 0.0 { residual_ratio.clamp(0.1, 10.0) } else { 1.0 };
+    let ratio = if *residual_ratio > 0.0 {
+        residual_ratio.clamp(0.1, 10.0)
+    } else {
+        1.0
+    };
     let mut target_hat = rr.sqrt() * (target / r_norm) / ratio;
     let mut beta = 0.0;
     let mut iterations = 0;
@@ -1103,9 +1362,15 @@ fn solve_ssor(
         );
         // Forward sweep: the halves, then the separator with what both added to it.
         spill.iter_mut().for_each(|v| *v = Vector3::zeros());
-        let (pq1, pq2) =
-            join(parallel, || sweeps.forward(0, acc1, acc_s, t1, p1, q1), || sweeps.forward(h, acc2, spill, t2, p2, q2));
-        acc_s.iter_mut().zip(spill.iter()).for_each(|(a, v)| *a += v);
+        let (pq1, pq2) = join(
+            parallel,
+            || sweeps.forward(0, acc1, acc_s, t1, p1, q1),
+            || sweeps.forward(h, acc2, spill, t2, p2, q2),
+        );
+        acc_s
+            .iter_mut()
+            .zip(spill.iter())
+            .for_each(|(a, v)| *a += v);
         let pq = pq1 + pq2 + sweeps.forward(s, acc_s, &mut [], t_s, p_s, q_s);
         if !(pq > 0.0) {
             break; // breakdown: the matrix is singular along p, or the numbers are bad
@@ -1125,7 +1390,11 @@ fn solve_ssor(
         let (r1, r2) = r.split_at_mut(m);
         let (t1, t2) = t.split_at(m);
         let (q1, q2) = q.split_at(m);
-        let (rr1, rr2) = join(parallel, || update(x1, r1, t1, q1), || update(x2, r2, t2, q2));
+        let (rr1, rr2) = join(
+            parallel,
+            || update(x1, r1, t1, q1),
+            || update(x2, r2, t2, q2),
+        );
         let rr_next = rr1 + rr2;
         beta = rr_next / rr;
         rr = rr_next;
@@ -1147,7 +1416,11 @@ fn solve_ssor(
     if iterations == settings.max_iterations || !(r_norm <= target) {
         r_norm = residual(sys, b, x, acc, q, spill, parallel);
     }
-    CgReport { iterations, relative_residual: r_norm / b_norm, converged: r_norm <= target }
+    CgReport {
+        iterations,
+        relative_residual: r_norm / b_norm,
+        converged: r_norm <= target,
+    }
 }
 
 #[cfg(test)]
@@ -1156,14 +1429,26 @@ mod tests {
     use crate::scene::{BuildOptions, Scene};
 
     fn sym(xx: f64, yy: f64, zz: f64, xy: f64, xz: f64, yz: f64) -> Sym3 {
-        Sym3 { xx, yy, zz, xy, xz, yz }
+        Sym3 {
+            xx,
+            yy,
+            zz,
+            xy,
+            xz,
+            yz,
+        }
     }
 
     #[test]
     fn inverse_and_cholesky_of_a_positive_definite_block() {
         let d = sym(4.0, 3.0, 2.0, 0.5, -0.3, 0.2);
         let inv = d.inverse_or_zero();
-        for v in [Vector3::x(), Vector3::y(), Vector3::z(), Vector3::new(0.3, -1.2, 2.5)] {
+        for v in [
+            Vector3::x(),
+            Vector3::y(),
+            Vector3::z(),
+            Vector3::new(0.3, -1.2, 2.5),
+        ] {
             assert!((inv.mul(&d.mul(&v)) - v).norm() < 1e-14 * v.norm());
         }
         let g = Lower3::cholesky(&d).expect("positive definite");
@@ -1172,53 +1457,111 @@ mod tests {
         }
         assert!(Lower3::cholesky(&sym(1.0, 1.0, 1.0, 2.0, 0.0, 0.0)).is_none());
         assert!(Lower3::cholesky(&Sym3::default()).is_none());
-        assert_eq!(sym(1.0, 1.0, 0.0, 1.0, 0.0, 0.0).inverse_or_zero(), Sym3::default());
+        assert_eq!(
+            sym(1.0, 1.0, 0.0, 1.0, 0.0, 0.0).inverse_or_zero(),
+            Sym3::default()
+        );
     }
 
     /// An implicit-Euler-like system on the chest wall (1 ms step, current positions).
     fn system(model: &Particles<'_>, x: &[crate::Point3]) -> (SpringSystem, Vec<Vector3>) {
         let s = &model.springs;
         let h = 1e-3;
-        let mut sys = SpringSystem { mass_weight: 1.0, ..Default::default() };
+        let mut sys = SpringSystem {
+            mass_weight: 1.0,
+            ..Default::default()
+        };
         sys.begin(model);
         for (e, &[a, b]) in s.ends.iter().enumerate() {
-            let (ka, kn, n) = stiffness_block(s.stiffness[e], s.rest_length[e], &(x[b as usize] - x[a as usize]));
+            let (ka, kn, n) = stiffness_block(
+                s.stiffness[e],
+                s.rest_length[e],
+                &(x[b as usize] - x[a as usize]),
+            );
             sys.set_block(e, h * h * ka, h * s.damping[e] + h * h * kn, &n);
         }
         sys.update_preconditioner(model);
-        let rhs = (0..model.vertex_count()).map(|i| Vector3::new((i as f64).sin(), (0.7 * i as f64).cos(), 0.3) * 1e-6).collect();
+        let rhs = (0..model.vertex_count())
+            .map(|i| Vector3::new((i as f64).sin(), (0.7 * i as f64).cos(), 0.3) * 1e-6)
+            .collect();
         (sys, rhs)
     }
 
-    fn true_residual(sys: &SpringSystem, model: &Particles<'_>, b: &[Vector3], x: &[Vector3]) -> f64 {
+    fn true_residual(
+        sys: &SpringSystem,
+        model: &Particles<'_>,
+        b: &[Vector3],
+        x: &[Vector3],
+    ) -> f64 {
         let n = b.len();
         let mut ax = vec![Vector3::zeros(); n];
         sys.apply(model, x, &mut ax);
-        let r_norm = (0..n).filter(|&i| !model.held[i]).map(|i| (b[i] - ax[i]).norm_squared()).sum::<f64>().sqrt();
-        let b_norm = b.iter().zip(model.held).filter(|(_, h)| !**h).map(|(b, _)| b.norm_squared()).sum::<f64>().sqrt();
+        let r_norm = (0..n)
+            .filter(|&i| !model.held[i])
+            .map(|i| (b[i] - ax[i]).norm_squared())
+            .sum::<f64>()
+            .sqrt();
+        let b_norm = b
+            .iter()
+            .zip(model.held)
+            .filter(|(_, h)| !**h)
+            .map(|(b, _)| b.norm_squared())
+            .sum::<f64>()
+            .sqrt();
         r_norm / b_norm
     }
 
     #[test]
     fn ssor_and_jacobi_solve_the_same_system() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(1_000),
+            },
+        )
+        .expect("built-in scene");
         let positions = scene.model.mesh.positions();
         let model = &scene.model.particles();
         let (mut sys, b) = system(model, positions);
         assert!(sys.ssor);
-        let settings = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 1000 };
+        let settings = CgSettings {
+            relative_tolerance: 1e-10,
+            absolute_tolerance: 0.0,
+            max_iterations: 1000,
+        };
         let n = b.len();
         let mut x_ssor = vec![Vector3::zeros(); n];
-        let ssor = solve(&sys, model, &b, &mut x_ssor, settings, &mut CgScratch::default());
+        let ssor = solve(
+            &sys,
+            model,
+            &b,
+            &mut x_ssor,
+            settings,
+            &mut CgScratch::default(),
+        );
         assert!(ssor.converged, "{ssor:?}");
         assert!(true_residual(&sys, model, &b, &x_ssor) <= 1e-10);
         sys.ssor = false;
         let mut x_jacobi = vec![Vector3::zeros(); n];
-        let jacobi = solve(&sys, model, &b, &mut x_jacobi, settings, &mut CgScratch::default());
+        let jacobi = solve(
+            &sys,
+            model,
+            &b,
+            &mut x_jacobi,
+            settings,
+            &mut CgScratch::default(),
+        );
         assert!(jacobi.converged, "{jacobi:?}");
-        assert!(ssor.iterations * 2 < jacobi.iterations, "{ssor:?} vs {jacobi:?}");
+        assert!(
+            ssor.iterations * 2 < jacobi.iterations,
+            "{ssor:?} vs {jacobi:?}"
+        );
         let scale = x_jacobi.iter().map(|v| v.norm()).fold(0.0, f64::max);
-        let diff = x_ssor.iter().zip(&x_jacobi).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        let diff = x_ssor
+            .iter()
+            .zip(&x_jacobi)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
         assert!(diff < 1e-8 * scale, "{diff} vs {scale}");
         for (x, &h) in x_ssor.iter().zip(model.held.iter()) {
             assert!(!h || *x == Vector3::zeros());
@@ -1227,76 +1570,194 @@ mod tests {
 
     #[test]
     fn one_thread_or_two_give_the_same_bits() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(1_000),
+            },
+        )
+        .expect("built-in scene");
         let positions = scene.model.mesh.positions();
         let model = &scene.model.particles();
         let (sys, b) = system(model, positions);
         assert!(sys.ssor);
-        let settings = CgSettings { relative_tolerance: 1e-8, absolute_tolerance: 0.0, max_iterations: 1000 };
+        let settings = CgSettings {
+            relative_tolerance: 1e-8,
+            absolute_tolerance: 0.0,
+            max_iterations: 1000,
+        };
         // the solve from `start` (and the span of `more`) on one thread and on two: the same
         // report and the same bits; returns them
         let same_bits = |start: Vec<Vector3>, more: Option<[&[Vector3]; SPAN - 1]>| {
             let (mut one, mut two) = (start.clone(), start);
-            let a = solve_on(&sys, model, &b, &mut one, more, settings, &mut CgScratch::default(), false);
-            let c = solve_on(&sys, model, &b, &mut two, more, settings, &mut CgScratch::default(), true);
+            let a = solve_on(
+                &sys,
+                model,
+                &b,
+                &mut one,
+                more,
+                settings,
+                &mut CgScratch::default(),
+                false,
+            );
+            let c = solve_on(
+                &sys,
+                model,
+                &b,
+                &mut two,
+                more,
+                settings,
+                &mut CgScratch::default(),
+                true,
+            );
             assert_eq!(a, c);
-            assert!(one.iter().zip(&two).all(|(u, v)| u.map(f64::to_bits) == v.map(f64::to_bits)));
+            assert!(
+                one.iter()
+                    .zip(&two)
+                    .all(|(u, v)| u.map(f64::to_bits) == v.map(f64::to_bits))
+            );
             (a, one)
         };
         let (a, one) = same_bits(vec![Vector3::zeros(); b.len()], None);
         assert!(a.converged && a.iterations > 5, "{a:?}");
         assert!(true_residual(&sys, model, &b, &one) <= 1e-8);
         // started from a span
-        let more: Vec<Vec<Vector3>> = (1..SPAN).map(|j| one.iter().enumerate().map(|(i, v)| v * (1.0 + 0.1 * ((i * j) as f64).sin())).collect()).collect();
+        let more: Vec<Vec<Vector3>> = (1..SPAN)
+            .map(|j| {
+                one.iter()
+                    .enumerate()
+                    .map(|(i, v)| v * (1.0 + 0.1 * ((i * j) as f64).sin()))
+                    .collect()
+            })
+            .collect();
         let (a, _) = same_bits(b.clone(), Some([&more[0][..], &more[1][..], &more[2][..]]));
         assert!(a.converged, "{a:?}");
     }
 
     /// `|x - y|_A`.
-    fn a_norm_of_difference(sys: &SpringSystem, model: &Particles<'_>, x: &[Vector3], y: &[Vector3]) -> f64 {
+    fn a_norm_of_difference(
+        sys: &SpringSystem,
+        model: &Particles<'_>,
+        x: &[Vector3],
+        y: &[Vector3],
+    ) -> f64 {
         let d: Vec<Vector3> = x.iter().zip(y).map(|(x, y)| x - y).collect();
         let mut ad = vec![Vector3::zeros(); d.len()];
         sys.apply(model, &d, &mut ad);
-        d.iter().zip(&ad).zip(model.held).filter(|(_, h)| !**h).map(|((d, ad), _)| d.dot(ad)).sum::<f64>().sqrt()
+        d.iter()
+            .zip(&ad)
+            .zip(model.held)
+            .filter(|(_, h)| !**h)
+            .map(|((d, ad), _)| d.dot(ad))
+            .sum::<f64>()
+            .sqrt()
     }
 
     #[test]
     fn a_start_from_a_span_is_the_best_of_its_combinations() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(1_000),
+            },
+        )
+        .expect("built-in scene");
         let positions = scene.model.mesh.positions();
         let model = &scene.model.particles();
         let (sys, b) = system(model, positions);
         let n = b.len();
-        let tight = CgSettings { relative_tolerance: 1e-12, absolute_tolerance: 0.0, max_iterations: 1000 };
+        let tight = CgSettings {
+            relative_tolerance: 1e-12,
+            absolute_tolerance: 0.0,
+            max_iterations: 1000,
+        };
         let mut exact = vec![Vector3::zeros(); n];
-        assert!(solve(&sys, model, &b, &mut exact, tight, &mut CgScratch::default()).converged);
+        assert!(
+            solve(
+                &sys,
+                model,
+                &b,
+                &mut exact,
+                tight,
+                &mut CgScratch::default()
+            )
+            .converged
+        );
         // the solution disturbed in two ways, a vector with no part along it, and a repeat
-        let wave = |k: f64| -> Vec<Vector3> { exact.iter().enumerate().map(|(i, v)| v * (1.0 + 0.3 * (k * i as f64).sin())).collect() };
+        let wave = |k: f64| -> Vec<Vector3> {
+            exact
+                .iter()
+                .enumerate()
+                .map(|(i, v)| v * (1.0 + 0.3 * (k * i as f64).sin()))
+                .collect()
+        };
         let (u0, u1) = (wave(0.37), wave(1.9));
-        let u2: Vec<Vector3> = (0..n).map(|i| Vector3::new((0.5 * i as f64).cos(), 0.0, 1.0) * 1e-7).collect();
-        let no_iterations = CgSettings { max_iterations: 0, ..tight };
+        let u2: Vec<Vector3> = (0..n)
+            .map(|i| Vector3::new((0.5 * i as f64).cos(), 0.0, 1.0) * 1e-7)
+            .collect();
+        let no_iterations = CgSettings {
+            max_iterations: 0,
+            ..tight
+        };
         let mut start = u0.clone();
-        solve_from_span(&sys, model, &b, &mut start, [&u1, &u2, &u1], no_iterations, &mut CgScratch::default());
+        solve_from_span(
+            &sys,
+            model,
+            &b,
+            &mut start,
+            [&u1, &u2, &u1],
+            no_iterations,
+            &mut CgScratch::default(),
+        );
         let error = a_norm_of_difference(&sys, model, &start, &exact);
         let zero = vec![Vector3::zeros(); n];
-        for (name, other) in [("u0", &u0), ("u1", &u1), ("the mean", &u0.iter().zip(&u1).map(|(a, b)| (a + b) / 2.0).collect()), ("zero", &zero)] {
+        for (name, other) in [
+            ("u0", &u0),
+            ("u1", &u1),
+            (
+                "the mean",
+                &u0.iter().zip(&u1).map(|(a, b)| (a + b) / 2.0).collect(),
+            ),
+            ("zero", &zero),
+        ] {
             let e = a_norm_of_difference(&sys, model, other, &exact);
             assert!(error <= e, "{error} from the span, {e} from {name}");
         }
         // with the solution in the span, the start is the solution: no iteration needed
         let mut start = u0.clone();
-        let report = solve_from_span(&sys, model, &b, &mut start, [&u1, &exact, &u2], CgSettings { relative_tolerance: 1e-8, ..tight }, &mut CgScratch::default());
+        let report = solve_from_span(
+            &sys,
+            model,
+            &b,
+            &mut start,
+            [&u1, &exact, &u2],
+            CgSettings {
+                relative_tolerance: 1e-8,
+                ..tight
+            },
+            &mut CgScratch::default(),
+        );
         assert_eq!(report.iterations, 0, "{report:?}");
         assert!(true_residual(&sys, model, &b, &start) <= 1e-8);
     }
 
     #[test]
     fn springs_in_any_order_and_orientation_give_the_same_solution() {
-        let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) }).expect("built-in scene");
+        let scene = Scene::load(
+            "chest-wall",
+            BuildOptions {
+                min_tets: Some(1_000),
+            },
+        )
+        .expect("built-in scene");
         let positions = scene.model.mesh.positions();
         let model = &scene.model.particles();
         let (sys, b) = system(model, positions);
-        let settings = CgSettings { relative_tolerance: 1e-10, absolute_tolerance: 0.0, max_iterations: 1000 };
+        let settings = CgSettings {
+            relative_tolerance: 1e-10,
+            absolute_tolerance: 0.0,
+            max_iterations: 1000,
+        };
         let n = b.len();
         let mut x = vec![Vector3::zeros(); n];
         assert!(solve(&sys, model, &b, &mut x, settings, &mut CgScratch::default()).converged);
@@ -1306,21 +1767,51 @@ mod tests {
         let m = shuffled.len();
         let order: Vec<usize> = (0..m).rev().collect();
         let s = &model.springs;
-        shuffled.ends = order.iter().map(|&e| if e % 2 == 0 { s.ends[e] } else { [s.ends[e][1], s.ends[e][0]] }).collect();
+        shuffled.ends = order
+            .iter()
+            .map(|&e| {
+                if e % 2 == 0 {
+                    s.ends[e]
+                } else {
+                    [s.ends[e][1], s.ends[e][0]]
+                }
+            })
+            .collect();
         shuffled.rest_length = order.iter().map(|&e| s.rest_length[e]).collect();
         shuffled.stiffness = order.iter().map(|&e| s.stiffness[e]).collect();
         shuffled.damping = order.iter().map(|&e| s.damping[e]).collect();
-        let shuffled = Particles { springs: &shuffled, ..*model };
+        let shuffled = Particles {
+            springs: &shuffled,
+            ..*model
+        };
         let (sys2, _) = system(&shuffled, positions);
         assert!(sys2.ssor);
         let (mut y, mut y2) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
         sys.apply(model, &b, &mut y);
         sys2.apply(&shuffled, &b, &mut y2);
         let scale = y.iter().map(|v| v.norm()).fold(0.0, f64::max);
-        assert!(y.iter().zip(&y2).all(|(a, b)| (a - b).norm() <= 1e-12 * scale));
+        assert!(
+            y.iter()
+                .zip(&y2)
+                .all(|(a, b)| (a - b).norm() <= 1e-12 * scale)
+        );
         let mut x2 = vec![Vector3::zeros(); n];
-        assert!(solve(&sys2, &shuffled, &b, &mut x2, settings, &mut CgScratch::default()).converged);
+        assert!(
+            solve(
+                &sys2,
+                &shuffled,
+                &b,
+                &mut x2,
+                settings,
+                &mut CgScratch::default()
+            )
+            .converged
+        );
         let scale = x.iter().map(|v| v.norm()).fold(0.0, f64::max);
-        assert!(x.iter().zip(&x2).all(|(a, b)| (a - b).norm() <= 1e-8 * scale));
+        assert!(
+            x.iter()
+                .zip(&x2)
+                .all(|(a, b)| (a - b).norm() <= 1e-8 * scale)
+        );
     }
 }

@@ -24,7 +24,9 @@ impl std::fmt::Debug for GrantKey {
 }
 
 fn now_s() -> u64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs())
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
 }
 
 impl GrantKey {
@@ -35,7 +37,8 @@ impl GrantKey {
     }
 
     fn mac(&self, attempt_id: i64, user_id: i64, expires_s: u64) -> String {
-        let mut m = <Hmac<Sha256> as Mac>::new_from_slice(&self.0).unwrap_or_else(|_| unreachable!("HMAC takes any key length"));
+        let mut m = <Hmac<Sha256> as Mac>::new_from_slice(&self.0)
+            .unwrap_or_else(|_| unreachable!("HMAC takes any key length"));
         m.update(format!("rrd:{attempt_id}:{user_id}:{expires_s}").as_bytes());
         hex(&m.finalize().into_bytes())
     }
@@ -43,14 +46,22 @@ impl GrantKey {
     /// A grant for `user_id` to fetch attempt `attempt_id`'s `.rrd`: `USER-EXPIRES-MAC`.
     pub fn issue(&self, attempt_id: i64, user_id: i64) -> String {
         let expires = now_s() + GRANT_TTL_S;
-        format!("{user_id}-{expires}-{}", self.mac(attempt_id, user_id, expires))
+        format!(
+            "{user_id}-{expires}-{}",
+            self.mac(attempt_id, user_id, expires)
+        )
     }
 
     /// Whether `grant` is a live grant for attempt `attempt_id`.
     pub fn check(&self, attempt_id: i64, grant: &str) -> bool {
         let mut parts = grant.splitn(3, '-');
-        let (Some(user), Some(expires), Some(mac)) = (parts.next(), parts.next(), parts.next()) else { return false };
-        let (Ok(user), Ok(expires)) = (user.parse::<i64>(), expires.parse::<u64>()) else { return false };
+        let (Some(user), Some(expires), Some(mac)) = (parts.next(), parts.next(), parts.next())
+        else {
+            return false;
+        };
+        let (Ok(user), Ok(expires)) = (user.parse::<i64>(), expires.parse::<u64>()) else {
+            return false;
+        };
         expires >= now_s() && same_token(mac, &self.mac(attempt_id, user, expires))
     }
 }

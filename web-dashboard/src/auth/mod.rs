@@ -15,8 +15,8 @@ pub mod tokens;
 
 use axum::body::Body;
 use axum::extract::{FromRequestParts, Request, State};
-use axum::http::request::Parts;
 use axum::http::Method;
+use axum::http::request::Parts;
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Redirect, Response};
 use cutlab_assessor::store::{Role, User};
@@ -68,7 +68,11 @@ impl CurrentUser {
     }
     /// Errors unless an instructor or administrator.
     pub fn require_staff(&self) -> Result<(), AppError> {
-        if self.is_staff() { Ok(()) } else { Err(AppError::Forbidden("instructors and administrators only")) }
+        if self.is_staff() {
+            Ok(())
+        } else {
+            Err(AppError::Forbidden("instructors and administrators only"))
+        }
     }
 }
 
@@ -102,7 +106,10 @@ impl<S: Send + Sync> FromRequestParts<S> for CurrentUser {
 
 /// The path as the client sent it (routers nested under `/api` see it without the prefix).
 pub(crate) fn original_path(parts: &Parts) -> &str {
-    parts.extensions.get::<axum::extract::OriginalUri>().map_or_else(|| parts.uri.path(), |u| u.0.path())
+    parts
+        .extensions
+        .get::<axum::extract::OriginalUri>()
+        .map_or_else(|| parts.uri.path(), |u| u.0.path())
 }
 
 fn is_state_changing(m: &Method) -> bool {
@@ -145,12 +152,21 @@ fn req_is_api_path(path: &str) -> bool {
 async fn check_csrf(req: Request, expected: &str) -> Result<Request, (AppError, String)> {
     let path = req.uri().path().to_owned();
     if let Some(h) = req.headers().get("x-csrf-token") {
-        return if h.to_str().is_ok_and(|h| tokens::same_token(h, expected)) { Ok(req) } else { Err((AppError::Csrf, path)) };
+        return if h.to_str().is_ok_and(|h| tokens::same_token(h, expected)) {
+            Ok(req)
+        } else {
+            Err((AppError::Csrf, path))
+        };
     }
     let (parts, body) = req.into_parts();
     let bytes = match axum::body::to_bytes(body, MAX_FORM_BYTES).await {
         Ok(b) => b,
-        Err(_) => return Err((AppError::BadRequest(format!("form larger than {MAX_FORM_BYTES} bytes")), path)),
+        Err(_) => {
+            return Err((
+                AppError::BadRequest(format!("form larger than {MAX_FORM_BYTES} bytes")),
+                path,
+            ));
+        }
     };
     let given = form_urlencoded_field(&bytes, "csrf");
     if !given.is_some_and(|g| tokens::same_token(&g, expected)) {
@@ -161,17 +177,31 @@ async fn check_csrf(req: Request, expected: &str) -> Result<Request, (AppError, 
 
 /// The first value of `name` in an `application/x-www-form-urlencoded` body.
 fn form_urlencoded_field(body: &[u8], name: &str) -> Option<String> {
-    form_urlencoded::parse(body).find(|(k, _)| k == name).map(|(_, v)| v.into_owned())
+    form_urlencoded::parse(body)
+        .find(|(k, _)| k == name)
+        .map(|(_, v)| v.into_owned())
 }
 
 /// Headers on every answer: no sniffing, no framing by other sites, no referrer leaks.
 fn security_headers(r: &mut Response) {
     let h = r.headers_mut();
-    h.insert("x-content-type-options", axum::http::HeaderValue::from_static("nosniff"));
-    h.insert("x-frame-options", axum::http::HeaderValue::from_static("SAMEORIGIN"));
-    h.insert("referrer-policy", axum::http::HeaderValue::from_static("same-origin"));
+    h.insert(
+        "x-content-type-options",
+        axum::http::HeaderValue::from_static("nosniff"),
+    );
+    h.insert(
+        "x-frame-options",
+        axum::http::HeaderValue::from_static("SAMEORIGIN"),
+    );
+    h.insert(
+        "referrer-policy",
+        axum::http::HeaderValue::from_static("same-origin"),
+    );
     if !h.contains_key(axum::http::header::CACHE_CONTROL) {
-        h.insert(axum::http::header::CACHE_CONTROL, axum::http::HeaderValue::from_static("no-store"));
+        h.insert(
+            axum::http::header::CACHE_CONTROL,
+            axum::http::HeaderValue::from_static("no-store"),
+        );
     }
 }
 
@@ -179,7 +209,10 @@ fn security_headers(r: &mut Response) {
 pub fn session_cookie(token: Option<&str>, secure: bool) -> String {
     let secure = if secure { "; Secure" } else { "" };
     match token {
-        Some(t) => format!("{SESSION_COOKIE}={t}; Path=/; HttpOnly; SameSite=Strict; Max-Age={}{secure}", sessions::SESSION_TTL_NS / 1_000_000_000),
+        Some(t) => format!(
+            "{SESSION_COOKIE}={t}; Path=/; HttpOnly; SameSite=Strict; Max-Age={}{secure}",
+            sessions::SESSION_TTL_NS / 1_000_000_000
+        ),
         None => format!("{SESSION_COOKIE}=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0{secure}"),
     }
 }

@@ -18,17 +18,27 @@ pub struct RateLimiter {
 
 impl RateLimiter {
     pub fn new(max: usize, window: Duration) -> Self {
-        Self { max, window, failures: Mutex::new(HashMap::new()) }
+        Self {
+            max,
+            window,
+            failures: Mutex::new(HashMap::new()),
+        }
     }
 
     fn with<R>(&self, f: impl FnOnce(&mut HashMap<String, VecDeque<Instant>>) -> R) -> R {
         // a poisoned lock only means another thread panicked mid-update: the data is usable
-        let mut map = self.failures.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut map = self
+            .failures
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         f(&mut map)
     }
 
     fn prune(&self, q: &mut VecDeque<Instant>, now: Instant) {
-        while q.front().is_some_and(|t| now.duration_since(*t) >= self.window) {
+        while q
+            .front()
+            .is_some_and(|t| now.duration_since(*t) >= self.window)
+        {
             q.pop_front();
         }
     }
@@ -51,7 +61,10 @@ impl RateLimiter {
         let now = Instant::now();
         self.with(|map| {
             if map.len() >= MAX_KEYS {
-                map.retain(|_, q| q.back().is_some_and(|t| now.duration_since(*t) < self.window));
+                map.retain(|_, q| {
+                    q.back()
+                        .is_some_and(|t| now.duration_since(*t) < self.window)
+                });
             }
             for k in keys {
                 let q = map.entry(k.clone()).or_default();

@@ -21,17 +21,35 @@ use crate::pages::layout;
 const MAX_FIELD: usize = 256;
 
 pub fn router() -> Router<AppState> {
-    Router::new().route("/login", get(login_form).post(login)).route("/logout", post(logout))
+    Router::new()
+        .route("/login", get(login_form).post(login))
+        .route("/logout", post(logout))
 }
 
 async fn login_form(State(state): State<AppState>) -> Result<Response, AppError> {
     login_page(&state, StatusCode::OK, None)
 }
 
-fn login_page(state: &AppState, status: StatusCode, message: Option<&str>) -> Result<Response, AppError> {
+fn login_page(
+    state: &AppState,
+    status: StatusCode,
+    message: Option<&str>,
+) -> Result<Response, AppError> {
     let csrf = tokens::random_token()?;
-    let cookie = format!("{LOGIN_CSRF_COOKIE}={csrf}; Path=/login; HttpOnly; SameSite=Strict; Max-Age=3600{}", if state.config().secure_cookies { "; Secure" } else { "" });
-    Ok((status, [(SET_COOKIE, cookie)], layout::login_page(&csrf, message)).into_response())
+    let cookie = format!(
+        "{LOGIN_CSRF_COOKIE}={csrf}; Path=/login; HttpOnly; SameSite=Strict; Max-Age=3600{}",
+        if state.config().secure_cookies {
+            "; Secure"
+        } else {
+            ""
+        }
+    );
+    Ok((
+        status,
+        [(SET_COOKIE, cookie)],
+        layout::login_page(&csrf, message),
+    )
+        .into_response())
 }
 
 #[derive(Debug, Deserialize)]
@@ -49,14 +67,29 @@ struct ClientIp(String);
 
 impl<S: Send + Sync> axum::extract::FromRequestParts<S> for ClientIp {
     type Rejection = std::convert::Infallible;
-    async fn from_request_parts(parts: &mut axum::http::request::Parts, _: &S) -> Result<Self, Self::Rejection> {
-        Ok(ClientIp(parts.extensions.get::<ConnectInfo<SocketAddr>>().map_or_else(|| "unknown".to_owned(), |c| c.0.ip().to_string())))
+    async fn from_request_parts(
+        parts: &mut axum::http::request::Parts,
+        _: &S,
+    ) -> Result<Self, Self::Rejection> {
+        Ok(ClientIp(
+            parts
+                .extensions
+                .get::<ConnectInfo<SocketAddr>>()
+                .map_or_else(|| "unknown".to_owned(), |c| c.0.ip().to_string()),
+        ))
     }
 }
 
-async fn login(State(state): State<AppState>, headers: HeaderMap, ClientIp(ip): ClientIp, Form(form): Form<LoginForm>) -> Result<Response, AppError> {
+async fn login(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ClientIp(ip): ClientIp,
+    Form(form): Form<LoginForm>,
+) -> Result<Response, AppError> {
     // login CSRF: the hidden field must match the cookie set with the form
-    if !tokens::cookie(&headers, LOGIN_CSRF_COOKIE).is_some_and(|c| tokens::same_token(c, &form.csrf)) {
+    if !tokens::cookie(&headers, LOGIN_CSRF_COOKIE)
+        .is_some_and(|c| tokens::same_token(c, &form.csrf))
+    {
         return Err(AppError::Csrf);
     }
     let name = form.username.trim();
@@ -72,7 +105,11 @@ async fn login(State(state): State<AppState>, headers: HeaderMap, ClientIp(ip): 
     let Some(user) = user else {
         state.limiter().fail(&keys);
         tracing::info!("failed login for {name:?}");
-        return login_page(&state, StatusCode::UNAUTHORIZED, Some("Unknown user or wrong password."));
+        return login_page(
+            &state,
+            StatusCode::UNAUTHORIZED,
+            Some("Unknown user or wrong password."),
+        );
     };
     state.limiter().clear(&keys[0]);
     let token = sessions::create(&state, &user).await?;

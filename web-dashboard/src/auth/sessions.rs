@@ -20,7 +20,10 @@ pub async fn create(state: &AppState, user: &User) -> Result<String, AppError> {
     let now = now_ns();
     let pool = state.store().pool();
     // expired sessions go when someone logs in
-    sqlx::query("DELETE FROM login_sessions WHERE expires_ns < ?").bind(now).execute(pool).await?;
+    sqlx::query("DELETE FROM login_sessions WHERE expires_ns < ?")
+        .bind(now)
+        .execute(pool)
+        .await?;
     sqlx::query("INSERT INTO login_sessions (token_sha256, user_id, csrf_token, created_ns, expires_ns) VALUES (?, ?, ?, ?, ?)")
         .bind(token_hash(&token))
         .bind(user.id)
@@ -50,10 +53,24 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
     .bind(now_ns())
     .fetch_optional(state.store().pool())
     .await?;
-    let Some((id, name, role, password_hash, created_ns, csrf)) = row else { return Ok(None) };
-    let role: Role = role.parse().map_err(|e: cutlab_assessor::AssessError| AppError::Internal(e.to_string()))?;
-    let user = User { id, name, role, has_password: password_hash.is_some(), created_ns };
-    let s = AuthSession { user, csrf, token_hash: hash.clone() };
+    let Some((id, name, role, password_hash, created_ns, csrf)) = row else {
+        return Ok(None);
+    };
+    let role: Role = role
+        .parse()
+        .map_err(|e: cutlab_assessor::AssessError| AppError::Internal(e.to_string()))?;
+    let user = User {
+        id,
+        name,
+        role,
+        has_password: password_hash.is_some(),
+        created_ns,
+    };
+    let s = AuthSession {
+        user,
+        csrf,
+        token_hash: hash.clone(),
+    };
     cache.put(hash, s.clone(), stamp);
     Ok(Some(s))
 }
@@ -61,6 +78,9 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
 /// Ends a session.
 pub async fn delete(state: &AppState, token_hash: &str) -> Result<(), AppError> {
     state.caches().sessions.remove(&token_hash.to_owned());
-    sqlx::query("DELETE FROM login_sessions WHERE token_sha256 = ?").bind(token_hash).execute(state.store().pool()).await?;
+    sqlx::query("DELETE FROM login_sessions WHERE token_sha256 = ?")
+        .bind(token_hash)
+        .execute(state.store().pool())
+        .await?;
     Ok(())
 }

@@ -83,14 +83,23 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
         .collect();
     rows.sort_by_key(|r| metrics::catalogue_rank(&r.key));
     let recordings = match recording_paths(&a) {
-        Some((mcap, rrd)) => RecordingFiles { mcap: is_file(&mcap), rrd: is_file(&rrd) },
-        None => RecordingFiles { mcap: false, rrd: false },
+        Some((mcap, rrd)) => RecordingFiles {
+            mcap: is_file(&mcap),
+            rrd: is_file(&rrd),
+        },
+        None => RecordingFiles {
+            mcap: false,
+            rrd: false,
+        },
     };
     Ok(AttemptDetail {
         comments: debrief::comments(state, a.id).await?,
         signoff: debrief::signoff(state, a.id).await?,
         trainee,
-        exercise: ExerciseRef { id: e.id, name: e.name },
+        exercise: ExerciseRef {
+            id: e.id,
+            name: e.name,
+        },
         metrics: rows,
         recordings,
         attempt: a,

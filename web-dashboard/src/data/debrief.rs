@@ -32,17 +32,32 @@ pub async fn comments(state: &AppState, attempt_id: i64) -> Result<Vec<Comment>,
     .bind(attempt_id)
     .fetch_all(state.store().pool())
     .await?;
-    Ok(rows.into_iter().map(|(id, uid, name, body, created_ns)| Comment { id, author: UserRef { id: uid, name }, body, created_ns }).collect())
+    Ok(rows
+        .into_iter()
+        .map(|(id, uid, name, body, created_ns)| Comment {
+            id,
+            author: UserRef { id: uid, name },
+            body,
+            created_ns,
+        })
+        .collect())
 }
 
 /// Adds a comment (trimmed, not empty, at most [`MAX_COMMENT_CHARS`]).
-pub async fn add_comment(state: &AppState, attempt_id: i64, author_id: i64, body: &str) -> Result<(), AppError> {
+pub async fn add_comment(
+    state: &AppState,
+    attempt_id: i64,
+    author_id: i64,
+    body: &str,
+) -> Result<(), AppError> {
     let body = body.trim();
     if body.is_empty() {
         return Err(AppError::BadRequest("an empty comment".into()));
     }
     if body.chars().count() > MAX_COMMENT_CHARS {
-        return Err(AppError::BadRequest(format!("a comment has at most {MAX_COMMENT_CHARS} characters")));
+        return Err(AppError::BadRequest(format!(
+            "a comment has at most {MAX_COMMENT_CHARS} characters"
+        )));
     }
     sqlx::query("INSERT INTO attempt_comments (attempt_id, author_id, body, created_ns) VALUES (?, ?, ?, ?)")
         .bind(attempt_id)
@@ -54,7 +69,11 @@ pub async fn add_comment(state: &AppState, attempt_id: i64, author_id: i64, body
     Ok(())
 }
 
-pub async fn sign_off(state: &AppState, attempt_id: i64, instructor_id: i64) -> Result<(), AppError> {
+pub async fn sign_off(
+    state: &AppState,
+    attempt_id: i64,
+    instructor_id: i64,
+) -> Result<(), AppError> {
     let done = sqlx::query("INSERT INTO attempt_signoffs (attempt_id, instructor_id, signed_ns) VALUES (?, ?, ?) ON CONFLICT (attempt_id) DO NOTHING")
         .bind(attempt_id)
         .bind(instructor_id)
@@ -62,7 +81,9 @@ pub async fn sign_off(state: &AppState, attempt_id: i64, instructor_id: i64) -> 
         .execute(state.store().pool())
         .await?;
     if done.rows_affected() == 0 {
-        return Err(AppError::Conflict(format!("attempt {attempt_id} is already signed off")));
+        return Err(AppError::Conflict(format!(
+            "attempt {attempt_id} is already signed off"
+        )));
     }
     Ok(())
 }
@@ -72,5 +93,8 @@ pub async fn signoff(state: &AppState, attempt_id: i64) -> Result<Option<SignOff
         .bind(attempt_id)
         .fetch_optional(state.store().pool())
         .await?;
-    Ok(row.map(|(id, name, signed_ns)| SignOff { instructor: UserRef { id, name }, signed_ns }))
+    Ok(row.map(|(id, name, signed_ns)| SignOff {
+        instructor: UserRef { id, name },
+        signed_ns,
+    }))
 }

@@ -21,7 +21,10 @@ pub struct UserRef {
 
 impl From<&User> for UserRef {
     fn from(u: &User) -> Self {
-        Self { id: u.id, name: u.name.clone() }
+        Self {
+            id: u.id,
+            name: u.name.clone(),
+        }
     }
 }
 
@@ -87,7 +90,14 @@ impl ProficiencySummary {
         } else {
             Standing::NotStarted
         };
-        Self { attempts: s.attempts, passes: s.passes, consecutive_passes: s.consecutive_passes, proficient: s.proficient, trials_to_proficiency: trials, standing }
+        Self {
+            attempts: s.attempts,
+            passes: s.passes,
+            consecutive_passes: s.consecutive_passes,
+            proficient: s.proficient,
+            trials_to_proficiency: trials,
+            standing,
+        }
     }
 }
 
@@ -111,8 +121,17 @@ mod tests {
         assert_eq!(s.trials_to_proficiency, Some(5));
         assert_eq!(s.standing, Standing::Proficient);
         assert_eq!((s.attempts, s.passes, s.consecutive_passes), (6, 3, 0));
-        assert_eq!(ProficiencySummary::of([false, true], true).standing, Standing::Passed);
-        assert_eq!(ProficiencySummary::of([], true).standing, Standing::InProgress);
-        assert_eq!(ProficiencySummary::of([], false).standing, Standing::NotStarted);
+        assert_eq!(
+            ProficiencySummary::of([false, true], true).standing,
+            Standing::Passed
+        );
+        assert_eq!(
+            ProficiencySummary::of([], true).standing,
+            Standing::InProgress
+        );
+        assert_eq!(
+            ProficiencySummary::of([], false).standing,
+            Standing::NotStarted
+        );
     }
 }

@@ -40,7 +40,10 @@ pub async fn cohorts_of(state: &AppState, viewer: &CurrentUser) -> Result<Vec<Co
     let all = state.store().list_cohorts().await?;
     Ok(match viewer.role() {
         Role::Admin => all,
-        Role::Instructor => all.into_iter().filter(|c| c.instructor_id == Some(viewer.id())).collect(),
+        Role::Instructor => all
+            .into_iter()
+            .filter(|c| c.instructor_id == Some(viewer.id()))
+            .collect(),
         Role::Trainee => Vec::new(),
     })
 }
@@ -56,8 +59,22 @@ pub async fn cohort_overview(state: &AppState, cohort: Cohort) -> Result<CohortO
         Some(id) => Some(UserRef::from(&store.get_user(id).await?)),
         None => None,
     };
-    let exercises: Vec<ExerciseRef> = store.list_exercises().await?.into_iter().map(|e| ExerciseRef { id: e.id, name: e.name }).collect();
-    let members: Vec<UserRef> = store.cohort_members(cohort.id).await?.iter().filter(|u| u.role == Role::Trainee).map(UserRef::from).collect();
+    let exercises: Vec<ExerciseRef> = store
+        .list_exercises()
+        .await?
+        .into_iter()
+        .map(|e| ExerciseRef {
+            id: e.id,
+            name: e.name,
+        })
+        .collect();
+    let members: Vec<UserRef> = store
+        .cohort_members(cohort.id)
+        .await?
+        .iter()
+        .filter(|u| u.role == Role::Trainee)
+        .map(UserRef::from)
+        .collect();
     let rows: Vec<Row> = sqlx::query_as(
         "SELECT a.trainee_id, a.exercise_id, a.status, a.passed, a.scored, a.score FROM attempts a JOIN cohort_members m ON m.user_id = a.trainee_id \
          WHERE m.cohort_id = ? AND a.expert = FALSE ORDER BY a.started_ns, a.id",
@@ -81,18 +98,32 @@ pub async fn cohort_overview(state: &AppState, cohort: Cohort) -> Result<CohortO
             let cells = exercises
                 .iter()
                 .map(|e| {
-                    let (attempts, passes, last_score) = cells.remove(&(t.id, e.id)).unwrap_or_default();
-                    Cell { exercise_id: e.id, attempts, proficiency: ProficiencySummary::of(passes, attempts > 0), last_score }
+                    let (attempts, passes, last_score) =
+                        cells.remove(&(t.id, e.id)).unwrap_or_default();
+                    Cell {
+                        exercise_id: e.id,
+                        attempts,
+                        proficiency: ProficiencySummary::of(passes, attempts > 0),
+                        last_score,
+                    }
                 })
                 .collect();
             TraineeRow { trainee: t, cells }
         })
         .collect();
-    Ok(CohortOverview { cohort, instructor, exercises, trainees })
+    Ok(CohortOverview {
+        cohort,
+        instructor,
+        exercises,
+        trainees,
+    })
 }
 
 /// The grids of every cohort `viewer` oversees.
-pub async fn overview(state: &AppState, viewer: &CurrentUser) -> Result<Vec<CohortOverview>, AppError> {
+pub async fn overview(
+    state: &AppState,
+    viewer: &CurrentUser,
+) -> Result<Vec<CohortOverview>, AppError> {
     let mut out = Vec::new();
     for c in cohorts_of(state, viewer).await? {
         out.push(cohort_overview(state, c).await?);

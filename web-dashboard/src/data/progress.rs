@@ -120,12 +120,19 @@ pub struct Cached {
 
 impl Cached {
     pub fn new(data: Progress) -> Self {
-        Self { data, html: Default::default(), json: Default::default() }
+        Self {
+            data,
+            html: Default::default(),
+            json: Default::default(),
+        }
     }
 }
 
 /// [`progress`] through the cache.
-pub async fn cached_progress(state: &AppState, trainee: &User) -> Result<std::sync::Arc<Cached>, AppError> {
+pub async fn cached_progress(
+    state: &AppState,
+    trainee: &User,
+) -> Result<std::sync::Arc<Cached>, AppError> {
     let cache = &state.caches().progress;
     if let Some((c, refresh)) = cache.get_or_claim(&trainee.id) {
         if refresh {
@@ -134,14 +141,22 @@ pub async fn cached_progress(state: &AppState, trainee: &User) -> Result<std::sy
                 let cache = &state.caches().progress;
                 let stamp = cache.stamp();
                 match progress(&state, &trainee).await {
-                    Ok(data) => cache.put(trainee.id, std::sync::Arc::new(Cached::new(data)), stamp),
+                    Ok(data) => {
+                        cache.put(trainee.id, std::sync::Arc::new(Cached::new(data)), stamp)
+                    }
                     Err(e) => tracing::warn!("refreshing the progress of {}: {e}", trainee.name),
                 }
             });
         }
         return Ok(c);
     }
-    cache.load_once(trainee.id, || async { Ok(std::sync::Arc::new(Cached::new(progress(state, trainee).await?))) }).await
+    cache
+        .load_once(trainee.id, || async {
+            Ok(std::sync::Arc::new(Cached::new(
+                progress(state, trainee).await?,
+            )))
+        })
+        .await
 }
 
 type MetricRow = (i64, String, Option<f64>, String, Option<bool>);
@@ -158,13 +173,19 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
         .await?;
     let mut by_attempt: HashMap<i64, Vec<StoredValue>> = HashMap::new();
     for (a, metric, value, unit, passed) in rows {
-        by_attempt.entry(a).or_default().push((metric, value, unit, passed));
+        by_attempt
+            .entry(a)
+            .or_default()
+            .push((metric, value, unit, passed));
     }
     let exercises = store.list_exercises().await?;
     let mut standings: HashMap<i64, Standing> = HashMap::new();
     let mut out = Vec::new();
     for e in &exercises {
-        let mine: Vec<_> = attempts.iter().filter(|a| a.exercise_id == e.id && !a.expert).collect();
+        let mine: Vec<_> = attempts
+            .iter()
+            .filter(|a| a.exercise_id == e.id && !a.expert)
+            .collect();
         if mine.is_empty() {
             continue;
         }
@@ -177,11 +198,19 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
                     n += 1;
                     n
                 });
-                AttemptPoint { id: a.id, n: this, started_ns: a.started_ns, status: a.status, score: a.score, passed: a.passed }
+                AttemptPoint {
+                    id: a.id,
+                    n: this,
+                    started_ns: a.started_ns,
+                    status: a.status,
+                    score: a.score,
+                    passed: a.passed,
+                }
             })
             .collect();
         let scored: Vec<&AttemptPoint> = points.iter().filter(|p| p.n.is_some()).collect();
-        let proficiency = ProficiencySummary::of(scored.iter().map(|p| p.passed.unwrap_or(false)), true);
+        let proficiency =
+            ProficiencySummary::of(scored.iter().map(|p| p.passed.unwrap_or(false)), true);
         standings.insert(e.id, proficiency.standing);
         let thresholds = store.thresholds(e.id).await?;
         let mut series: BTreeMap<String, MetricSeries> = BTreeMap::new();
@@ -197,31 +226,73 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
                 upper_limit: t.upper,
                 n_experts: t.n_experts,
             };
-            series.insert(t.key.clone(), MetricSeries { key: t.key.clone(), unit: def.map_or("", |d| d.unit).to_owned(), better: Some(t.better), description: def.map_or("", |d| d.description).to_owned(), band: Some(band), points: Vec::new() });
+            series.insert(
+                t.key.clone(),
+                MetricSeries {
+                    key: t.key.clone(),
+                    unit: def.map_or("", |d| d.unit).to_owned(),
+                    better: Some(t.better),
+                    description: def.map_or("", |d| d.description).to_owned(),
+                    band: Some(band),
+                    points: Vec::new(),
+                },
+            );
         }
         for p in &scored {
             let n = p.n.unwrap_or(0);
             for (metric, value, unit, passed) in by_attempt.get(&p.id).into_iter().flatten() {
                 let s = series.entry(metric.clone()).or_insert_with(|| {
                     let def = metrics::metric(metric);
-                    MetricSeries { key: metric.clone(), unit: unit.clone(), better: def.map(|d| d.better), description: def.map_or("", |d| d.description).to_owned(), band: None, points: Vec::new() }
+                    MetricSeries {
+                        key: metric.clone(),
+                        unit: unit.clone(),
+                        better: def.map(|d| d.better),
+                        description: def.map_or("", |d| d.description).to_owned(),
+                        band: None,
+                        points: Vec::new(),
+                    }
                 });
-                s.points.push(SeriesPoint { n, attempt_id: p.id, value: *value, passed: *passed });
+                s.points.push(SeriesPoint {
+                    n,
+                    attempt_id: p.id,
+                    value: *value,
+                    passed: *passed,
+                });
             }
         }
         // thresholded metrics first, in catalogue order, then the rest in catalogue order
-        let mut metric_list: Vec<MetricSeries> = series.into_values().filter(|s| s.band.is_some() || s.points.iter().any(|p| p.value.is_some())).collect();
+        let mut metric_list: Vec<MetricSeries> = series
+            .into_values()
+            .filter(|s| s.band.is_some() || s.points.iter().any(|p| p.value.is_some()))
+            .collect();
         metric_list.sort_by_key(|s| (s.band.is_none(), metrics::catalogue_rank(&s.key)));
         let params = CusumParams::default();
         let passes: Vec<bool> = scored.iter().map(|p| p.passed.unwrap_or(false)).collect();
         let chart = cusum(&passes, &params)?;
-        let cusum_points = scored.iter().zip(chart).map(|(p, c)| CusumPointView { n: p.n.unwrap_or(0), attempt_id: p.id, value: c.value, signal: c.signal }).collect();
+        let cusum_points = scored
+            .iter()
+            .zip(chart)
+            .map(|(p, c)| CusumPointView {
+                n: p.n.unwrap_or(0),
+                attempt_id: p.id,
+                value: c.value,
+                signal: c.signal,
+            })
+            .collect();
         out.push(ExerciseProgress {
-            exercise: ExerciseRef { id: e.id, name: e.name.clone() },
+            exercise: ExerciseRef {
+                id: e.id,
+                name: e.name.clone(),
+            },
             attempts: points,
             proficiency,
             metrics: metric_list,
-            cusum: CusumChart { params, h0: params.h0(), h1: params.h1(), points: cusum_points },
+            cusum: CusumChart {
+                params,
+                h0: params.h0(),
+                h1: params.h1(),
+                points: cusum_points,
+            },
         });
     }
     let names: HashMap<i64, &str> = exercises.iter().map(|e| (e.id, e.name.as_str())).collect();
@@ -232,14 +303,36 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
             let ex: Vec<(ExerciseRef, Standing)> = m
                 .exercise_ids
                 .iter()
-                .map(|id| (ExerciseRef { id: *id, name: names.get(id).copied().unwrap_or("?").to_owned() }, standings.get(id).copied().unwrap_or(Standing::NotStarted)))
+                .map(|id| {
+                    (
+                        ExerciseRef {
+                            id: *id,
+                            name: names.get(id).copied().unwrap_or("?").to_owned(),
+                        },
+                        standings.get(id).copied().unwrap_or(Standing::NotStarted),
+                    )
+                })
                 .collect();
             let standing = module_standing(ex.iter().map(|e| e.1));
-            modules.push(ModuleProgress { id: m.id, position: m.position, name: m.name, standing, exercises: ex });
+            modules.push(ModuleProgress {
+                id: m.id,
+                position: m.position,
+                name: m.name,
+                standing,
+                exercises: ex,
+            });
         }
-        curricula.push(CurriculumProgress { id: c.id, name: c.name, modules });
+        curricula.push(CurriculumProgress {
+            id: c.id,
+            name: c.name,
+            modules,
+        });
     }
-    Ok(Progress { trainee: UserRef::from(trainee), exercises: out, curricula })
+    Ok(Progress {
+        trainee: UserRef::from(trainee),
+        exercises: out,
+        curricula,
+    })
 }
 
 /// A module is proficient when every exercise is, not started when none is started.

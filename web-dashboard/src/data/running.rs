@@ -23,7 +23,10 @@ pub struct RunningAttempt {
 type Row = (i64, i64, String, i64, String, i64, Option<String>);
 
 /// The running attempts `viewer` may see, oldest first.
-pub async fn running(state: &AppState, viewer: &CurrentUser) -> Result<Vec<RunningAttempt>, AppError> {
+pub async fn running(
+    state: &AppState,
+    viewer: &CurrentUser,
+) -> Result<Vec<RunningAttempt>, AppError> {
     let base = "SELECT a.id, u.id, u.name, e.id, e.name, a.started_ns, a.recording_path FROM attempts a JOIN users u ON u.id = a.trainee_id JOIN exercises e ON e.id = a.exercise_id WHERE a.status = 'running'";
     let pool = state.store().pool();
     let rows: Vec<Row> = match viewer.role() {
@@ -42,13 +45,23 @@ pub async fn running(state: &AppState, viewer: &CurrentUser) -> Result<Vec<Runni
     let now = now_ns();
     Ok(rows
         .into_iter()
-        .map(|(id, uid, uname, eid, ename, started_ns, path)| RunningAttempt {
-            id,
-            trainee: UserRef { id: uid, name: uname },
-            exercise: ExerciseRef { id: eid, name: ename },
-            started_ns,
-            elapsed_s: (now - started_ns).max(0) as f64 * 1e-9,
-            recording_bytes: path.and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len()),
-        })
+        .map(
+            |(id, uid, uname, eid, ename, started_ns, path)| RunningAttempt {
+                id,
+                trainee: UserRef {
+                    id: uid,
+                    name: uname,
+                },
+                exercise: ExerciseRef {
+                    id: eid,
+                    name: ename,
+                },
+                started_ns,
+                elapsed_s: (now - started_ns).max(0) as f64 * 1e-9,
+                recording_bytes: path
+                    .and_then(|p| std::fs::metadata(p).ok())
+                    .map(|m| m.len()),
+            },
+        )
         .collect())
 }

@@ -40,11 +40,19 @@ pub struct TraceCache(Mutex<HashMap<i64, (u64, Arc<AttemptTrace>)>>);
 
 impl TraceCache {
     fn get(&self, id: i64, len: u64) -> Option<Arc<AttemptTrace>> {
-        let map = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        map.get(&id).filter(|(l, _)| *l == len).map(|(_, t)| t.clone())
+        let map = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        map.get(&id)
+            .filter(|(l, _)| *l == len)
+            .map(|(_, t)| t.clone())
     }
     fn put(&self, id: i64, len: u64, t: Arc<AttemptTrace>) {
-        let mut map = self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut map = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         if map.len() >= CACHE_ENTRIES
             && !map.contains_key(&id)
             && let Some(k) = map.keys().next().copied()
@@ -60,7 +68,11 @@ fn thin<T: Copy>(v: &[T]) -> Vec<T> {
         return v.to_vec();
     }
     let step = v.len().div_ceil(MAX_POINTS);
-    v.iter().step_by(step).copied().chain(v.last().copied()).collect()
+    v.iter()
+        .step_by(step)
+        .copied()
+        .chain(v.last().copied())
+        .collect()
 }
 
 fn xy_mm(p: [f64; 3]) -> [f64; 2] {
@@ -69,8 +81,12 @@ fn xy_mm(p: [f64; 3]) -> [f64; 2] {
 
 /// The trace of attempt `a`, or `None` when it has no readable recording.
 pub async fn trace(state: &AppState, a: &Attempt) -> Result<Option<Arc<AttemptTrace>>, AppError> {
-    let Some((mcap, _)) = recording_paths(a) else { return Ok(None) };
-    let Ok(meta) = tokio::fs::metadata(&mcap).await else { return Ok(None) };
+    let Some((mcap, _)) = recording_paths(a) else {
+        return Ok(None);
+    };
+    let Ok(meta) = tokio::fs::metadata(&mcap).await else {
+        return Ok(None);
+    };
     if !meta.is_file() {
         return Ok(None);
     }
@@ -78,7 +94,9 @@ pub async fn trace(state: &AppState, a: &Attempt) -> Result<Option<Arc<AttemptTr
         return Ok(Some(t));
     }
     let plan = state.store().exercise_plan(a.exercise_id).await?;
-    let read = tokio::task::spawn_blocking(move || read_trace(&mcap, &plan)).await.map_err(|e| AppError::Internal(format!("trace reader: {e}")))?;
+    let read = tokio::task::spawn_blocking(move || read_trace(&mcap, &plan))
+        .await
+        .map_err(|e| AppError::Internal(format!("trace reader: {e}")))?;
     match read {
         Ok(t) => {
             let t = Arc::new(t);
@@ -95,10 +113,23 @@ pub async fn trace(state: &AppState, a: &Attempt) -> Result<Option<Arc<AttemptTr
 fn read_trace(mcap: &std::path::Path, plan: &ExpertPlan) -> Result<AttemptTrace, String> {
     let rec = Recording::open(mcap).map_err(|e| e.to_string())?;
     let data = attempt_data(&rec, plan).map_err(|e| e.to_string())?;
-    let line: Vec<[f64; 3]> = if plan.incision_m.len() >= 2 { plan.incision_m.clone() } else { vec![plan.entry_m, plan.exit_m] };
+    let line: Vec<[f64; 3]> = if plan.incision_m.len() >= 2 {
+        plan.incision_m.clone()
+    } else {
+        vec![plan.entry_m, plan.exit_m]
+    };
     let cut: Vec<[f64; 2]> = data.cuts.iter().map(|c| xy_mm(c.tip_m)).collect();
     let path: Vec<[f64; 2]> = data.poses.iter().map(|p| xy_mm(p.tip_m)).collect();
-    let force: Vec<[f64; 2]> = data.forces.iter().map(|f| [f.t_s, f.force_newtons.iter().map(|c| c * c).sum::<f64>().sqrt()]).collect();
+    let force: Vec<[f64; 2]> = data
+        .forces
+        .iter()
+        .map(|f| {
+            [
+                f.t_s,
+                f.force_newtons.iter().map(|c| c * c).sum::<f64>().sqrt(),
+            ]
+        })
+        .collect();
     Ok(AttemptTrace {
         planned_mm: line.into_iter().map(xy_mm).collect(),
         cut_mm: thin(&cut),

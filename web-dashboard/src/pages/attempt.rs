@@ -10,7 +10,6 @@ use maud::{Markup, html};
 use serde::Deserialize;
 
 use super::layout::{num, page, verdict, when};
-use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
@@ -20,16 +19,28 @@ use crate::data::debrief;
 use crate::data::display_unit;
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::PageResult;
+use crate::extract::Id;
 
 pub fn router() -> Router<AppState> {
-    Router::new().route("/attempts/{id}", get(attempt)).route("/attempts/{id}/comments", post(comment)).route("/attempts/{id}/signoff", post(sign_off))
+    Router::new()
+        .route("/attempts/{id}", get(attempt))
+        .route("/attempts/{id}/comments", post(comment))
+        .route("/attempts/{id}/signoff", post(sign_off))
 }
 
-async fn attempt(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
+async fn attempt(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> PageResult<Markup> {
     let a = visible_attempt(&state, &user, id).await?;
     let t = trace(&state, &a).await?;
     let d = detail(&state, a).await?;
-    Ok(page(&format!("Attempt {id}"), Some(&user), body(&user, &d, t.as_deref())))
+    Ok(page(
+        &format!("Attempt {id}"),
+        Some(&user),
+        body(&user, &d, t.as_deref()),
+    ))
 }
 
 fn limits(lower: Option<f64>, upper: Option<f64>, f: f64) -> String {
@@ -106,9 +117,18 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
 
 fn top_view(t: &AttemptTrace) -> Markup {
     let mut c = Chart::new("Incision, top view", "x (mm)", "y (mm)")
-        .layer(Layer::Line { points: t.path_mm.iter().map(|p| (p[0], Some(p[1]))).collect(), class: "series-2" })
-        .layer(Layer::Line { points: t.planned_mm.iter().map(|p| (p[0], Some(p[1]))).collect(), class: "plan" })
-        .layer(Layer::Line { points: t.cut_mm.iter().map(|p| (p[0], Some(p[1]))).collect(), class: "cut" });
+        .layer(Layer::Line {
+            points: t.path_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
+            class: "series-2",
+        })
+        .layer(Layer::Line {
+            points: t.planned_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
+            class: "plan",
+        })
+        .layer(Layer::Line {
+            points: t.cut_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
+            class: "cut",
+        });
     c.equal_aspect = true;
     c.height = 300.0;
     c.render()
@@ -116,8 +136,15 @@ fn top_view(t: &AttemptTrace) -> Markup {
 
 fn force_chart(t: &AttemptTrace) -> Markup {
     let mut c = Chart::new("Force on the hand", "time (s)", "|F| (N)")
-        .layer(Layer::HLine { y: t.force_limit_n, class: "limit", label: "limit".into() })
-        .layer(Layer::Line { points: t.force.iter().map(|p| (p[0], Some(p[1]))).collect(), class: "series" });
+        .layer(Layer::HLine {
+            y: t.force_limit_n,
+            class: "limit",
+            label: "limit".into(),
+        })
+        .layer(Layer::Line {
+            points: t.force.iter().map(|p| (p[0], Some(p[1]))).collect(),
+            class: "series",
+        });
     c.y_include = vec![0.0];
     c.height = 300.0;
     c.render()
@@ -128,14 +155,23 @@ struct CommentForm {
     body: String,
 }
 
-async fn comment(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(f): Form<CommentForm>) -> PageResult<Redirect> {
+async fn comment(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    Form(f): Form<CommentForm>,
+) -> PageResult<Redirect> {
     user.require_staff()?;
     let a = visible_attempt(&state, &user, id).await?;
     debrief::add_comment(&state, a.id, user.id(), &f.body).await?;
     Ok(Redirect::to(&format!("/attempts/{id}")))
 }
 
-async fn sign_off(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Redirect> {
+async fn sign_off(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> PageResult<Redirect> {
     user.require_staff()?;
     let a = visible_attempt(&state, &user, id).await?;
     debrief::sign_off(&state, a.id, user.id()).await?;

@@ -5,18 +5,18 @@ use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
 use axum::{Form, Router};
+use cutlab_assessor::ExpertPlan;
 use cutlab_assessor::metrics::{Better, METRICS};
 use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
 use cutlab_assessor::store::{NewExercise, ThresholdSource};
-use cutlab_assessor::ExpertPlan;
 use maud::{Markup, html};
 use serde::Deserialize;
 
 use super::layout::{num, page};
-use crate::extract::Id;
 use crate::AppState;
 use crate::auth::CurrentUser;
 use crate::error::{AppError, PageResult};
+use crate::extract::Id;
 
 /// The longest plan text taken.
 const MAX_PLAN_BYTES: usize = 64 * 1024;
@@ -37,16 +37,24 @@ pub fn router() -> Router<AppState> {
 /// A plan from TOML or JSON (JSON when it starts with `{`).
 pub fn parse_plan(text: &str) -> Result<ExpertPlan, AppError> {
     if text.len() > MAX_PLAN_BYTES {
-        return Err(AppError::BadRequest(format!("a plan has at most {MAX_PLAN_BYTES} bytes")));
+        return Err(AppError::BadRequest(format!(
+            "a plan has at most {MAX_PLAN_BYTES} bytes"
+        )));
     }
     let t = text.trim();
-    Ok(if t.starts_with('{') { ExpertPlan::from_json(t)? } else { ExpertPlan::from_toml(t)? })
+    Ok(if t.starts_with('{') {
+        ExpertPlan::from_json(t)?
+    } else {
+        ExpertPlan::from_toml(t)?
+    })
 }
 
 fn name_ok(what: &str, s: &str) -> Result<String, AppError> {
     let s = s.trim();
     if s.is_empty() || s.chars().count() > MAX_NAME || s.chars().any(char::is_control) {
-        return Err(AppError::BadRequest(format!("{what}: 1 to {MAX_NAME} printable characters")));
+        return Err(AppError::BadRequest(format!(
+            "{what}: 1 to {MAX_NAME} printable characters"
+        )));
     }
     Ok(s.to_owned())
 }
@@ -66,8 +74,16 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
         let modules = store.curriculum_modules(c.id).await?;
         curricula.push((c, modules));
     }
-    let name_of = |id: i64| exercises.iter().find(|e| e.id == id).map_or("?", |e| e.name.as_str());
-    let sample_plan = ExpertPlan::chest_wall().ok().and_then(|p| serde_json::to_string_pretty(&p).ok()).unwrap_or_default();
+    let name_of = |id: i64| {
+        exercises
+            .iter()
+            .find(|e| e.id == id)
+            .map_or("?", |e| e.name.as_str())
+    };
+    let sample_plan = ExpertPlan::chest_wall()
+        .ok()
+        .and_then(|p| serde_json::to_string_pretty(&p).ok())
+        .unwrap_or_default();
     Ok(page(
         "Curriculum",
         Some(&user),
@@ -132,33 +148,64 @@ struct ExerciseForm {
     plan: String,
 }
 
-async fn create_exercise(State(state): State<AppState>, user: CurrentUser, Form(f): Form<ExerciseForm>) -> PageResult<Redirect> {
+async fn create_exercise(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Form(f): Form<ExerciseForm>,
+) -> PageResult<Redirect> {
     user.require_staff()?;
     let name = name_ok("name", &f.name)?;
     let scene = name_ok("scene", &f.scene)?;
     let k = positive("k", &f.threshold_k)?;
     let plan = parse_plan(&f.plan)?;
     let thresholds = cutlab_assessor::store::default_thresholds();
-    let e = state.store().create_exercise(&NewExercise { name: &name, scene: &scene, description: f.description.trim(), plan: &plan, thresholds: &thresholds, threshold_k: k }).await?;
+    let e = state
+        .store()
+        .create_exercise(&NewExercise {
+            name: &name,
+            scene: &scene,
+            description: f.description.trim(),
+            plan: &plan,
+            thresholds: &thresholds,
+            threshold_k: k,
+        })
+        .await?;
     Ok(Redirect::to(&format!("/exercises/{}", e.id)))
 }
 
-async fn edit_exercise(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(f): Form<ExerciseForm>) -> PageResult<Redirect> {
+async fn edit_exercise(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    Form(f): Form<ExerciseForm>,
+) -> PageResult<Redirect> {
     user.require_staff()?;
     let scene = name_ok("scene", &f.scene)?;
     let k = positive("k", &f.threshold_k)?;
-    let plan = if f.plan.trim().is_empty() { None } else { Some(parse_plan(&f.plan)?) };
-    state.store().update_exercise(id, &scene, f.description.trim(), k, plan.as_ref()).await?;
+    let plan = if f.plan.trim().is_empty() {
+        None
+    } else {
+        Some(parse_plan(&f.plan)?)
+    };
+    state
+        .store()
+        .update_exercise(id, &scene, f.description.trim(), k, plan.as_ref())
+        .await?;
     state.caches().progress.clear();
     Ok(Redirect::to(&format!("/exercises/{id}")))
 }
 
-async fn exercise(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Markup> {
+async fn exercise(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> PageResult<Markup> {
     let store = state.store();
     let e = store.get_exercise(id).await?;
     let plan = store.get_plan(e.plan_id).await?;
     let t = store.thresholds(id).await?;
-    let plan_json = serde_json::to_string_pretty(&plan).map_err(|err| AppError::Internal(err.to_string()))?;
+    let plan_json =
+        serde_json::to_string_pretty(&plan).map_err(|err| AppError::Internal(err.to_string()))?;
     Ok(page(
         &format!("Exercise {}", e.name),
         Some(&user),
@@ -227,54 +274,93 @@ fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
 
 /// Thresholds from the form's rows `key_i, better_i, mean_i, sd_i, lower_i, upper_i`.
 fn thresholds_from_form(fields: &[(String, String)], k: f64) -> Result<Thresholds, AppError> {
-    let get = |name: String| fields.iter().find(|(n, _)| *n == name).map(|(_, v)| v.trim());
+    let get = |name: String| {
+        fields
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, v)| v.trim())
+    };
     let number = |name: String, what: &str, key: &str| -> Result<Option<f64>, AppError> {
         match get(name).filter(|v| !v.is_empty()) {
             None => Ok(None),
             Some(v) => match v.parse::<f64>() {
                 Ok(x) if x.is_finite() => Ok(Some(x)),
-                _ => Err(AppError::BadRequest(format!("{key}: {what} is not a number"))),
+                _ => Err(AppError::BadRequest(format!(
+                    "{key}: {what} is not a number"
+                ))),
             },
         }
     };
     let mut metrics: Vec<Threshold> = Vec::new();
     for i in 0..=MAX_THRESHOLDS {
-        let Some(key) = get(format!("key_{i}")) else { break };
+        let Some(key) = get(format!("key_{i}")) else {
+            break;
+        };
         if key.is_empty() {
             continue;
         }
         if i == MAX_THRESHOLDS {
-            return Err(AppError::BadRequest(format!("at most {MAX_THRESHOLDS} thresholds")));
+            return Err(AppError::BadRequest(format!(
+                "at most {MAX_THRESHOLDS} thresholds"
+            )));
         }
-        let def = cutlab_assessor::metrics::metric(key).filter(|d| d.scored).ok_or_else(|| AppError::BadRequest(format!("{key:?} is not a scored metric")))?;
+        let def = cutlab_assessor::metrics::metric(key)
+            .filter(|d| d.scored)
+            .ok_or_else(|| AppError::BadRequest(format!("{key:?} is not a scored metric")))?;
         if metrics.iter().any(|m| m.key == def.key) {
             return Err(AppError::BadRequest(format!("{} given twice", def.key)));
         }
-        let better = get(format!("better_{i}")).and_then(Better::parse).ok_or_else(|| AppError::BadRequest(format!("{key}: unknown direction")))?;
-        let mean = number(format!("mean_{i}"), "the mean", key)?.ok_or_else(|| AppError::BadRequest(format!("{key}: the mean is needed")))?;
+        let better = get(format!("better_{i}"))
+            .and_then(Better::parse)
+            .ok_or_else(|| AppError::BadRequest(format!("{key}: unknown direction")))?;
+        let mean = number(format!("mean_{i}"), "the mean", key)?
+            .ok_or_else(|| AppError::BadRequest(format!("{key}: the mean is needed")))?;
         let sd = number(format!("sd_{i}"), "the SD", key)?.unwrap_or(0.0);
         if sd < 0.0 {
             return Err(AppError::BadRequest(format!("{key}: a negative SD")));
         }
-        let (lower, upper) = (number(format!("lower_{i}"), "the lower limit", key)?, number(format!("upper_{i}"), "the upper limit", key)?);
+        let (lower, upper) = (
+            number(format!("lower_{i}"), "the lower limit", key)?,
+            number(format!("upper_{i}"), "the upper limit", key)?,
+        );
         if lower.is_none() && upper.is_none() {
-            return Err(AppError::BadRequest(format!("{key}: a threshold needs a limit")));
+            return Err(AppError::BadRequest(format!(
+                "{key}: a threshold needs a limit"
+            )));
         }
         if let (Some(l), Some(u)) = (lower, upper)
             && l > u
         {
-            return Err(AppError::BadRequest(format!("{key}: lower limit above upper")));
+            return Err(AppError::BadRequest(format!(
+                "{key}: lower limit above upper"
+            )));
         }
-        metrics.push(Threshold { key: def.key.into(), better, mean, sd, n_experts: 0, lower, upper });
+        metrics.push(Threshold {
+            key: def.key.into(),
+            better,
+            mean,
+            sd,
+            n_experts: 0,
+            lower,
+            upper,
+        });
     }
     Ok(Thresholds { k, metrics })
 }
 
-async fn edit_thresholds(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
+async fn edit_thresholds(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    Form(fields): Form<Vec<(String, String)>>,
+) -> PageResult<Redirect> {
     user.require_staff()?;
     let e = state.store().get_exercise(id).await?;
     let t = thresholds_from_form(&fields, e.threshold_k)?;
-    state.store().set_thresholds(id, &t, ThresholdSource::Default).await?;
+    state
+        .store()
+        .set_thresholds(id, &t, ThresholdSource::Default)
+        .await?;
     state.caches().progress.clear();
     Ok(Redirect::to(&format!("/exercises/{id}")))
 }
@@ -286,22 +372,44 @@ struct CurriculumForm {
     description: String,
 }
 
-async fn create_curriculum(State(state): State<AppState>, user: CurrentUser, Form(f): Form<CurriculumForm>) -> PageResult<Redirect> {
+async fn create_curriculum(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Form(f): Form<CurriculumForm>,
+) -> PageResult<Redirect> {
     user.require_staff()?;
     let name = name_ok("name", &f.name)?;
-    state.store().create_curriculum(&name, f.description.trim()).await?;
+    state
+        .store()
+        .create_curriculum(&name, f.description.trim())
+        .await?;
     state.caches().progress.clear();
     Ok(Redirect::to("/curriculum"))
 }
 
-async fn add_module(State(state): State<AppState>, user: CurrentUser, Id(id): Id, Form(fields): Form<Vec<(String, String)>>) -> PageResult<Redirect> {
+async fn add_module(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    Form(fields): Form<Vec<(String, String)>>,
+) -> PageResult<Redirect> {
     user.require_staff()?;
-    let name = name_ok("module name", fields.iter().find(|(k, _)| k == "name").map_or("", |(_, v)| v.as_str()))?;
+    let name = name_ok(
+        "module name",
+        fields
+            .iter()
+            .find(|(k, _)| k == "name")
+            .map_or("", |(_, v)| v.as_str()),
+    )?;
     let ids: Vec<i64> = fields
         .iter()
         .filter(|(k, _)| k == "exercise_id")
         .take(MAX_THRESHOLDS)
-        .map(|(_, v)| v.trim().parse::<i64>().map_err(|_| AppError::BadRequest("exercise ids are numbers".into())))
+        .map(|(_, v)| {
+            v.trim()
+                .parse::<i64>()
+                .map_err(|_| AppError::BadRequest("exercise ids are numbers".into()))
+        })
         .collect::<Result<_, _>>()?;
     state.store().get_curriculum(id).await?;
     state.store().add_module(id, &name, &ids).await?;

@@ -22,24 +22,46 @@ const CSP: &str = "default-src 'self'; script-src 'self'; style-src 'self'; img-
 pub fn router() -> Router<AppState> {
     Router::new()
         .route("/", get(home))
-        .route("/static/style.css", get(|| async { static_file("text/css", include_str!("static/style.css")) }))
-        .route("/static/supervision.js", get(|| async { static_file("text/javascript", include_str!("static/supervision.js")) }))
+        .route(
+            "/static/style.css",
+            get(|| async { static_file("text/css", include_str!("static/style.css")) }),
+        )
+        .route(
+            "/static/supervision.js",
+            get(|| async { static_file("text/javascript", include_str!("static/supervision.js")) }),
+        )
         .merge(cohorts::router())
         .merge(progress::router())
         .merge(attempt::router())
         .merge(supervision::router())
         .merge(curriculum::router())
-        .layer(axum::middleware::map_response(|mut r: Response| async move {
-            r.headers_mut().insert(header::CONTENT_SECURITY_POLICY, HeaderValue::from_static(CSP));
-            r
-        }))
+        .layer(axum::middleware::map_response(
+            |mut r: Response| async move {
+                r.headers_mut().insert(
+                    header::CONTENT_SECURITY_POLICY,
+                    HeaderValue::from_static(CSP),
+                );
+                r
+            },
+        ))
 }
 
 fn static_file(mime: &'static str, text: &'static str) -> Response {
-    ([(header::CONTENT_TYPE, mime), (header::CACHE_CONTROL, "public, max-age=3600")], text).into_response()
+    (
+        [
+            (header::CONTENT_TYPE, mime),
+            (header::CACHE_CONTROL, "public, max-age=3600"),
+        ],
+        text,
+    )
+        .into_response()
 }
 
 /// `/`: instructors and administrators to the cohorts, trainees to their progress.
 async fn home(user: CurrentUser) -> Redirect {
-    if user.is_staff() { Redirect::to("/cohorts") } else { Redirect::to(&format!("/trainees/{}", user.id())) }
+    if user.is_staff() {
+        Redirect::to("/cohorts")
+    } else {
+        Redirect::to(&format!("/trainees/{}", user.id()))
+    }
 }

@@ -9,7 +9,6 @@ use axum::routing::get;
 use maud::{Markup, html};
 
 use super::layout::{num, page_around, verdict, when};
-use crate::extract::Id;
 use crate::AppState;
 use crate::access::visible_user;
 use crate::auth::CurrentUser;
@@ -17,16 +16,27 @@ use crate::charts::{Chart, Layer};
 use crate::data::display_unit;
 use crate::data::progress::{ExerciseProgress, MetricSeries, Progress, cached_progress};
 use crate::error::PageResult;
+use crate::extract::Id;
 
 pub fn router() -> Router<AppState> {
     Router::new().route("/trainees/{id}", get(trainee))
 }
 
-async fn trainee(State(state): State<AppState>, user: CurrentUser, Id(id): Id) -> PageResult<Html<Bytes>> {
+async fn trainee(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> PageResult<Html<Bytes>> {
     let trainee = visible_user(&state, &user, id).await?;
     let c = cached_progress(&state, &trainee).await?;
-    let body = c.html.get_or_init(|| Bytes::from(body(&c.data).into_string()));
-    Ok(page_around(&format!("Progress of {}", c.data.trainee.name), Some(&user), body))
+    let body = c
+        .html
+        .get_or_init(|| Bytes::from(body(&c.data).into_string()));
+    Ok(page_around(
+        &format!("Progress of {}", c.data.trainee.name),
+        Some(&user),
+        body,
+    ))
 }
 
 fn body(p: &Progress) -> Markup {
@@ -56,17 +66,70 @@ fn body(p: &Progress) -> Markup {
 
 fn exercise_section(e: &ExerciseProgress) -> Markup {
     let pr = &e.proficiency;
-    let score_points: Vec<(f64, Option<f64>)> = e.attempts.iter().filter_map(|a| a.n.map(|n| (f64::from(n), a.score))).collect();
+    let score_points: Vec<(f64, Option<f64>)> = e
+        .attempts
+        .iter()
+        .filter_map(|a| a.n.map(|n| (f64::from(n), a.score)))
+        .collect();
     let score_chart = Chart::new("Normalised score", "attempt", "score")
-        .layer(Layer::HLine { y: 0.0, class: "limit", label: "pass ≥ 0".into() })
-        .layer(Layer::HLine { y: 1.0, class: "mean", label: "expert".into() })
-        .layer(Layer::Line { points: score_points.clone(), class: "series" })
-        .layer(Layer::Points { points: e.attempts.iter().filter_map(|a| Some((f64::from(a.n?), a.score?, if a.passed == Some(true) { "pt-pass" } else { "pt-fail" }))).collect() });
+        .layer(Layer::HLine {
+            y: 0.0,
+            class: "limit",
+            label: "pass ≥ 0".into(),
+        })
+        .layer(Layer::HLine {
+            y: 1.0,
+            class: "mean",
+            label: "expert".into(),
+        })
+        .layer(Layer::Line {
+            points: score_points.clone(),
+            class: "series",
+        })
+        .layer(Layer::Points {
+            points: e
+                .attempts
+                .iter()
+                .filter_map(|a| {
+                    Some((
+                        f64::from(a.n?),
+                        a.score?,
+                        if a.passed == Some(true) {
+                            "pt-pass"
+                        } else {
+                            "pt-fail"
+                        },
+                    ))
+                })
+                .collect(),
+        });
     let mut cusum = Chart::new("CUSUM of failures", "attempt", "CUSUM")
-        .layer(Layer::HLine { y: e.cusum.h1, class: "limit", label: format!("h1 {:.2}", e.cusum.h1) })
-        .layer(Layer::HLine { y: -e.cusum.h0, class: "ok", label: format!("−h0 {:.2}", e.cusum.h0) })
-        .layer(Layer::HLine { y: 0.0, class: "zero", label: String::new() })
-        .layer(Layer::Line { points: std::iter::once((0.0, Some(0.0))).chain(e.cusum.points.iter().map(|p| (f64::from(p.n), Some(p.value)))).collect(), class: "series" });
+        .layer(Layer::HLine {
+            y: e.cusum.h1,
+            class: "limit",
+            label: format!("h1 {:.2}", e.cusum.h1),
+        })
+        .layer(Layer::HLine {
+            y: -e.cusum.h0,
+            class: "ok",
+            label: format!("−h0 {:.2}", e.cusum.h0),
+        })
+        .layer(Layer::HLine {
+            y: 0.0,
+            class: "zero",
+            label: String::new(),
+        })
+        .layer(Layer::Line {
+            points: std::iter::once((0.0, Some(0.0)))
+                .chain(
+                    e.cusum
+                        .points
+                        .iter()
+                        .map(|p| (f64::from(p.n), Some(p.value))),
+                )
+                .collect(),
+            class: "series",
+        });
     cusum.y_include = vec![e.cusum.h1, -e.cusum.h0];
     html! {
         h2 { (e.exercise.name) }
@@ -103,19 +166,58 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
 
 fn metric_chart(m: &MetricSeries) -> Markup {
     let (f, unit) = display_unit(&m.unit);
-    let label = if unit.is_empty() { m.key.clone() } else { format!("{} ({unit})", m.key) };
+    let label = if unit.is_empty() {
+        m.key.clone()
+    } else {
+        format!("{} ({unit})", m.key)
+    };
     let mut c = Chart::new(label, "attempt", unit);
     if let Some(b) = &m.band {
         if b.sd > 0.0 {
-            c = c.layer(Layer::HBand { low: b.low * f, high: b.high * f, class: "band" });
+            c = c.layer(Layer::HBand {
+                low: b.low * f,
+                high: b.high * f,
+                class: "band",
+            });
         }
-        c = c.layer(Layer::HLine { y: b.mean * f, class: "mean", label: "expert".into() });
+        c = c.layer(Layer::HLine {
+            y: b.mean * f,
+            class: "mean",
+            label: "expert".into(),
+        });
         for l in [b.lower_limit, b.upper_limit].into_iter().flatten() {
-            c = c.layer(Layer::HLine { y: l * f, class: "limit", label: "pass".into() });
+            c = c.layer(Layer::HLine {
+                y: l * f,
+                class: "limit",
+                label: "pass".into(),
+            });
         }
     }
     c = c
-        .layer(Layer::Line { points: m.points.iter().map(|p| (f64::from(p.n), p.value.map(|v| v * f))).collect(), class: "series" })
-        .layer(Layer::Points { points: m.points.iter().filter_map(|p| Some((f64::from(p.n), p.value? * f, match p.passed { Some(true) => "pt-pass", Some(false) => "pt-fail", None => "pt" }))).collect() });
+        .layer(Layer::Line {
+            points: m
+                .points
+                .iter()
+                .map(|p| (f64::from(p.n), p.value.map(|v| v * f)))
+                .collect(),
+            class: "series",
+        })
+        .layer(Layer::Points {
+            points: m
+                .points
+                .iter()
+                .filter_map(|p| {
+                    Some((
+                        f64::from(p.n),
+                        p.value? * f,
+                        match p.passed {
+                            Some(true) => "pt-pass",
+                            Some(false) => "pt-fail",
+                            None => "pt",
+                        },
+                    ))
+                })
+                .collect(),
+        });
     c.render()
 }

@@ -22,7 +22,9 @@ use crate::error::PageResult;
 const PERIOD: Duration = Duration::from_secs(1);
 
 pub fn router() -> Router<AppState> {
-    Router::new().route("/supervision", get(supervision)).route("/supervision/events", get(events))
+    Router::new()
+        .route("/supervision", get(supervision))
+        .route("/supervision/events", get(events))
 }
 
 async fn supervision(State(state): State<AppState>, user: CurrentUser) -> PageResult<Markup> {
@@ -55,16 +57,23 @@ fn row(r: &RunningAttempt) -> Markup {
     }
 }
 
-async fn events(State(state): State<AppState>, user: CurrentUser) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
-    let stream = futures_util::stream::unfold((state, user, true), |(state, user, first)| async move {
-        if !first {
-            tokio::time::sleep(PERIOD).await;
-        }
-        let event = match running(&state, &user).await {
-            Ok(list) => Event::default().event("running").json_data(&list).unwrap_or_else(|_| Event::default().event("error").data("serialisation")),
-            Err(e) => Event::default().event("error").data(e.public_message()),
-        };
-        Some((Ok(event), (state, user, false)))
-    });
+async fn events(
+    State(state): State<AppState>,
+    user: CurrentUser,
+) -> Sse<impl Stream<Item = Result<Event, Infallible>>> {
+    let stream =
+        futures_util::stream::unfold((state, user, true), |(state, user, first)| async move {
+            if !first {
+                tokio::time::sleep(PERIOD).await;
+            }
+            let event = match running(&state, &user).await {
+                Ok(list) => Event::default()
+                    .event("running")
+                    .json_data(&list)
+                    .unwrap_or_else(|_| Event::default().event("error").data("serialisation")),
+                Err(e) => Event::default().event("error").data(e.public_message()),
+            };
+            Some((Ok(event), (state, user, false)))
+        });
     Sse::new(stream).keep_alive(KeepAlive::default())
 }

@@ -49,8 +49,13 @@ pub fn get(path: &str, s: Option<&Session>) -> Request<Body> {
 }
 
 pub fn post_form(path: &str, cookie: Option<&str>, form: &[(&str, &str)]) -> Request<Body> {
-    let body: String = form_urlencoded::Serializer::new(String::new()).extend_pairs(form).finish();
-    let mut b = Request::builder().method(Method::POST).uri(path).header(header::CONTENT_TYPE, "application/x-www-form-urlencoded");
+    let body: String = form_urlencoded::Serializer::new(String::new())
+        .extend_pairs(form)
+        .finish();
+    let mut b = Request::builder()
+        .method(Method::POST)
+        .uri(path)
+        .header(header::CONTENT_TYPE, "application/x-www-form-urlencoded");
     if let Some(c) = cookie {
         b = b.header(header::COOKIE, c);
     }
@@ -58,7 +63,18 @@ pub fn post_form(path: &str, cookie: Option<&str>, form: &[(&str, &str)]) -> Req
 }
 
 pub fn set_cookie(r: &Response<Body>, name: &str) -> Option<String> {
-    r.headers().get_all(header::SET_COOKIE).iter().filter_map(|v| v.to_str().ok()).find_map(|v| v.split(';').next()?.trim().strip_prefix(name)?.strip_prefix('=').map(str::to_owned))
+    r.headers()
+        .get_all(header::SET_COOKIE)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .find_map(|v| {
+            v.split(';')
+                .next()?
+                .trim()
+                .strip_prefix(name)?
+                .strip_prefix('=')
+                .map(str::to_owned)
+        })
 }
 
 /// The login form's CSRF cookie token.
@@ -71,7 +87,15 @@ pub async fn login_csrf(app: &Router) -> String {
 /// Posts the login form; returns the answer.
 pub async fn try_login(app: &Router, user: &str, password: &str) -> Response<Body> {
     let csrf = login_csrf(app).await;
-    send(app, post_form("/login", Some(&format!("cutlab_login_csrf={csrf}")), &[("username", user), ("password", password), ("csrf", &csrf)])).await
+    send(
+        app,
+        post_form(
+            "/login",
+            Some(&format!("cutlab_login_csrf={csrf}")),
+            &[("username", user), ("password", password), ("csrf", &csrf)],
+        ),
+    )
+    .await
 }
 
 /// Logs in (must succeed) and reads the session's CSRF token off a page.
@@ -80,7 +104,20 @@ pub async fn login(app: &Router, user: &str, password: &str) -> Session {
     assert_eq!(r.status(), StatusCode::SEE_OTHER, "login of {user}");
     let token = set_cookie(&r, "cutlab_session").unwrap();
     let cookie = format!("cutlab_session={token}");
-    let page = body_text(send(app, get("/curriculum", Some(&Session { cookie: cookie.clone(), csrf: String::new() }))).await).await;
+    let page = body_text(
+        send(
+            app,
+            get(
+                "/curriculum",
+                Some(&Session {
+                    cookie: cookie.clone(),
+                    csrf: String::new(),
+                }),
+            ),
+        )
+        .await,
+    )
+    .await;
     let at = page.find("name=\"csrf\" value=\"").unwrap() + "name=\"csrf\" value=\"".len();
     let csrf = page[at..at + 64].to_owned();
     Session { cookie, csrf }
@@ -92,9 +129,16 @@ pub async fn user_id(store: &Store, name: &str) -> i64 {
 
 /// The first attempt of `name`.
 pub async fn first_attempt(store: &Store, name: &str) -> i64 {
-    store.list_attempts(Some(user_id(store, name).await), None).await.unwrap()[0].id
+    store
+        .list_attempts(Some(user_id(store, name).await), None)
+        .await
+        .unwrap()[0]
+        .id
 }
 
 pub async fn count(store: &Store, table: &str) -> i64 {
-    sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT COUNT(*) FROM {table}"))).fetch_one(store.pool()).await.unwrap()
+    sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT COUNT(*) FROM {table}")))
+        .fetch_one(store.pool())
+        .await
+        .unwrap()
 }
