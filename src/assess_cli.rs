@@ -360,7 +360,7 @@ pub fn print_outcome(
             .collect();
         let p = &o.proficiency.state;
         let v = serde_json::json!({
-            "attempt": o.attempt.id, "score": o.verdict.score, "pass": o.verdict.pass, "metrics": metrics,
+            "attempt": o.attempt.id, "score": o.verdict.score, "pass": o.verdict.pass, "note": o.attempt.note, "metrics": metrics,
             "proficiency": { "attempts": p.attempts, "passes": p.passes, "consecutive_passes": p.consecutive_passes, "proficient": p.proficient, "cusum": o.proficiency.cusum },
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -372,6 +372,9 @@ pub fn print_outcome(
         o.verdict.score,
         if o.verdict.pass { "PASS" } else { "FAIL" }
     );
+    if let Some(note) = &o.attempt.note {
+        println!("  note: {note}");
+    }
     println!("  {:<28} {:>12} {:<8} verdict", "metric", "value", "unit");
     for v in values {
         let value = v

@@ -147,6 +147,10 @@ enum Command {
         /// Count every divergence instead of stopping at the first.
         #[arg(long)]
         keep_going: bool,
+        /// Accept a recording that is damaged or cut short: verify the readable part and say
+        /// up to when (without it, such a replay ends with an error).
+        #[arg(long)]
+        partial: bool,
         /// Threads replaying the stretches between keyframes side by side (0: one per core);
         /// an unpaced replay without rerun output only.
         #[arg(long, default_value_t = 0)]
@@ -459,6 +463,7 @@ fn run() -> anyhow::Result<()> {
             resimulate,
             to,
             keep_going,
+            partial,
             jobs,
             json,
             rrd,
@@ -473,6 +478,7 @@ fn run() -> anyhow::Result<()> {
                     resimulate,
                     to_s: to,
                     keep_going,
+                    partial,
                     jobs,
                     json,
                     rerun,

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use cutlab_recorder::replay::{self, ReplayOptions, Speed};
 use cutlab_recorder::writer::RecordObserver;
-use cutlab_recorder::{Recording, RerunSink, RerunTarget, recover as salvage};
+use cutlab_recorder::{DamageKind, Recording, RerunSink, RerunTarget, recover as salvage};
 
 /// What `--rerun` names.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,7 +67,11 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
             .collect();
         let v = serde_json::json!({
             "file": file.display().to_string(), "bytes": rec.file_bytes, "complete": rec.complete,
-            "damage": rec.damage.as_ref().map(|d| &d.reason), "duration_s": rec.duration_s(),
+            "damage": rec.damage.as_ref().map(|d| serde_json::json!({
+                "byte": d.byte, "kind": damage_kind(d.kind), "reason": d.reason, "records_read": d.records_read,
+            })),
+            "whole": rec.is_whole(), "announced_steps": rec.announced_steps(), "steps": rec.steps.len(),
+            "duration_s": rec.duration_s(),
             "channels": channels, "session": rec.meta, "session_end": rec.end,
             "attachments": rec.attachments.iter().map(|a| serde_json::json!({ "name": a.0, "media_type": a.1, "bytes": a.2.len() })).collect::<Vec<_>>(),
         });
@@ -78,23 +82,27 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
         "{}: {:.1} MB, {}",
         file.display(),
         rec.file_bytes as f64 * 1e-6,
-        if rec.complete {
-            "complete"
-        } else {
-            "INCOMPLETE"
+        match &rec.damage {
+            None if rec.is_whole() => "complete",
+            Some(d) if d.kind == DamageKind::Corrupt => "DAMAGED",
+            _ => "INCOMPLETE",
         }
     );
-    if let Some(d) = &rec.damage {
-        println!(
-            "  reading stopped after {} records: {}",
-            d.records_read, d.reason
-        );
+    if let Some(why) = rec.shortfall() {
+        if let Some(d) = &rec.damage {
+            println!("  reading stopped after {} records", d.records_read);
+        }
+        println!("  {why}");
+        if let Some(n) = rec.announced_steps() {
+            println!(
+                "  {} of the {n} simulation steps its summary announces are readable",
+                rec.steps.len()
+            );
+        }
         println!(
             "  (`cutlab recording recover {}` writes a complete copy of what is readable)",
             file.display()
         );
-    } else if !rec.complete {
-        println!("  the file ends without its footer: the session did not finish writing it");
     }
     println!("  duration {:.3} s", rec.duration_s());
     if let Some(m) = &rec.meta {
@@ -164,10 +172,33 @@ pub fn recover(file: &Path, out: Option<&Path>) -> anyhow::Result<()> {
             out.display()
         );
         if let Some(d) = &r.damage {
-            println!("  reading stopped at: {d}");
+            println!("  the input {d}");
+        }
+        if let Some(n) = r.announced_messages {
+            println!(
+                "  its summary announces {n} messages: {} lost",
+                n.saturating_sub(r.messages)
+            );
         }
     }
     Ok(())
+}
+
+/// Session log time of the last step a replay re-simulated, s (0 before any).
+fn verified_to_s(rec: &Recording, r: &replay::ReplayReport) -> f64 {
+    let first = r.resumed_at.map_or(0, |k| k.step as usize + 1);
+    let period = rec.meta.as_ref().map_or(1_000_000, |m| m.period_nanos);
+    (first + r.steps as usize)
+        .checked_sub(1)
+        .and_then(|i| rec.steps.get(i))
+        .map_or(0.0, |s| (s.tick * period) as f64 * 1e-9)
+}
+
+fn damage_kind(kind: DamageKind) -> &'static str {
+    match kind {
+        DamageKind::EndsEarly => "ends_early",
+        DamageKind::Corrupt => "corrupt",
+    }
 }
 
 #[derive(Debug)]
@@ -177,6 +208,8 @@ pub struct ReplayArgs {
     pub resimulate: bool,
     pub to_s: Option<f64>,
     pub keep_going: bool,
+    /// Accept a recording that is not whole: verify what is readable.
+    pub partial: bool,
     pub jobs: usize,
     pub json: bool,
     pub rerun: Option<RerunTarget>,
@@ -184,11 +217,20 @@ pub struct ReplayArgs {
 
 pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
     let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
-    if !rec.complete {
+    let shortfall = rec.shortfall();
+    if let Some(why) = &shortfall {
         eprintln!(
-            "warning: {} is incomplete; replaying what is readable",
+            "warning: {} is not whole ({why}); replaying what is readable",
             file.display()
         );
+    }
+    if let Some(m) = rec
+        .metadata
+        .iter()
+        .find(|m| m.0 == salvage::RECOVERED_METADATA)
+    {
+        let lost = m.1.get("damage").map_or("", String::as_str);
+        eprintln!("note: a recovered copy (its source {lost}); it holds only what was salvaged");
     }
     let observer = match &a.rerun {
         Some(target) => {
@@ -220,6 +262,7 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
             "cuts_recorded": r.cuts_recorded, "cuts_replayed": r.cuts_replayed, "divergences": r.divergences,
             "first_divergence": r.first_divergence.as_ref().map(|d| d.to_string()),
             "simulated_s": r.simulated_s, "wall_s": r.wall_s, "speed": r.speed(),
+            "whole": shortfall.is_none(), "verified_to_s": verified_to_s(&rec, &r), "announced_s": rec.readable_s().1,
             "final_state_hash": format!("{:016x}", r.final_hash.state),
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -245,6 +288,28 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     match &r.first_divergence {
+        // a recording that is not whole verifies only what is readable: said, and an error
+        // unless that was asked for
+        None if r.keyframes_checked > 0 && shortfall.is_some() => {
+            let upto = match rec.readable_s().1 {
+                Some(total) => format!("{:.2} of {total:.2} s", verified_to_s(&rec, &r)),
+                None => format!("{:.2} s of an unknown total", verified_to_s(&rec, &r)),
+            };
+            let why = shortfall.unwrap_or_default();
+            if a.partial {
+                if !a.json {
+                    println!(
+                        "  verified up to {upto}: bit-exact there; the rest is unreadable ({why})"
+                    );
+                }
+                Ok(())
+            } else {
+                bail!(
+                    "verified only up to {upto}: {} is not whole ({why}); --partial accepts a partial replay",
+                    file.display()
+                )
+            }
+        }
         None if r.keyframes_checked > 0 => {
             if !a.json {
                 println!("  verified: the replay is bit-exact");

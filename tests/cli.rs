@@ -341,6 +341,55 @@ fn a_session_recording_is_inspected_replayed_and_recovered_from_the_command_line
     assert!(ok, "{err}");
     assert!(out.contains("bit-exact"), "{out}");
 
+    // one chunk's CRC wrong in the middle of a complete file: damage, not a file cut short;
+    // the replay verifies only what is readable, so it fails unless --partial accepts that,
+    // and the attempt scored from it says it was
+    let mut damaged = bytes.clone();
+    let chunk = cutlab_recorder::scan::record_spans(&bytes)
+        .filter(|s| s.opcode == 0x06)
+        .map(|s| s.at)
+        .nth(4)
+        .expect("a fifth chunk");
+    damaged[chunk + 9 + 24] ^= 0x01;
+    let bad = dir.join("bad.mcap");
+    std::fs::write(&bad, &damaged).expect("write");
+    let b = bad.to_str().expect("utf8");
+    let (ok, out, err) = cutlab(&["recording", "info", b]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("DAMAGED") && out.contains(&format!("damaged at byte {chunk} (chunk CRC)")),
+        "{out}"
+    );
+    let (ok, _, err) = cutlab(&["replay", b]);
+    assert!(!ok, "a damaged recording does not pass as verified");
+    assert!(
+        err.contains("verified only up to") && err.contains("--partial"),
+        "{err}"
+    );
+    let (ok, out, err) = cutlab(&["replay", b, "--partial"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("verified up to") && out.contains(" of 3.00 s"),
+        "{out}"
+    );
+    let (ok, out, err) = cutlab(&[
+        "--db",
+        db.to_str().expect("utf8"),
+        "assess",
+        b,
+        "--trainee",
+        "tess",
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let a: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert!(
+        a["note"]
+            .as_str()
+            .is_some_and(|n| n.starts_with("Scored from a damaged recording: damaged at byte")),
+        "{a}"
+    );
+
     // not a recording at all
     let junk = dir.join("junk.mcap");
     std::fs::write(&junk, "hello").expect("write");

@@ -11,6 +11,9 @@ use crate::input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh}
 use crate::metrics::incision::depth_below_plan;
 use crate::plan::ExpertPlan;
 
+/// How the note of an attempt scored from a recording that is not whole begins.
+pub const DAMAGED_RECORDING_NOTE: &str = "Scored from a damaged recording";
+
 /// The data `plan` is assessed on, from `rec`. A cut sample's depth is its blade tip's depth
 /// below the planned surface (`depth_below_plan`).
 pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, AssessError> {
@@ -116,7 +119,9 @@ impl crate::store::Store {
     }
 
     /// Scores attempt `attempt_id` from its recording against its exercise's plan, stores the
-    /// metrics and the verdict, and updates the trainee's proficiency.
+    /// metrics and the verdict, and updates the trainee's proficiency. A recording that is not
+    /// whole (damaged, cut short) is scored on what is readable, and the attempt's note says so
+    /// ([`DAMAGED_RECORDING_NOTE`]).
     pub async fn score_recording(
         &self,
         attempt_id: i64,
@@ -126,7 +131,13 @@ impl crate::store::Store {
         let plan = self.exercise_plan(a.exercise_id).await?;
         let data = attempt_data(rec, &plan)?;
         let values = crate::metrics::assess(&plan, &data)?;
-        let outcome = self.finish_attempt(attempt_id, &values).await?;
+        // never silently: the attempt says what a damaged recording left out
+        let note = rec
+            .shortfall()
+            .map(|why| format!("{DAMAGED_RECORDING_NOTE}: {why}"));
+        let outcome = self
+            .finish_attempt_noted(attempt_id, &values, note.as_deref())
+            .await?;
         Ok((outcome, values))
     }
 }

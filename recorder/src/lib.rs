@@ -6,8 +6,10 @@
 //!   indexed MCAP file, flushed at least every second; [`writer::spawn`] runs it on the
 //!   `cutlab-recorder` thread fed by the session's lock-free tap.
 //! - [`reader`]: [`Recording`] reads a recording back (a complete one, or a damaged one up to
-//!   its last complete chunk), and [`reader::Info`] summarises it.
-//! - [`recover`]: salvages a recording cut short into a complete file.
+//!   its first damaged record).
+//! - [`scan`]: walks a file's records without trusting a length in it; says where and how a
+//!   file is damaged ([`Damage`]) and what its summary announces ([`Announced`]).
+//! - [`recover`]: salvages a damaged recording into a complete file.
 //! - [`rerun_log`]: [`RerunSink`] logs a session or a replay to a rerun `.rrd` file or a
 //!   live viewer (only when asked).
 //! - [`device`]: [`RecordedHand`] plays a recording's tool poses back as a haptic device.
@@ -24,6 +26,7 @@ pub mod record;
 pub mod recover;
 pub mod replay;
 pub mod rerun_log;
+pub mod scan;
 pub mod writer;
 
 pub use cutlab_haptics as haptics;
@@ -31,4 +34,5 @@ pub use device::RecordedHand;
 pub use error::RecorderError;
 pub use reader::Recording;
 pub use rerun_log::{RerunLogError, RerunSink, RerunTarget};
+pub use scan::{Announced, Damage, DamageKind};
 pub use writer::{McapSink, WriterOptions};

@@ -1,9 +1,12 @@
 //! Reading a recording back.
 //!
 //! [`Recording::open`] reads every record from the start of the file, checking chunk CRCs,
-//! and stops at the first damage (a file cut short by a killed process ends inside a chunk):
-//! everything up to the last complete chunk is kept, and [`Recording::damage`] says where and
-//! why it stopped. A file is complete when it ends with its footer and magic.
+//! and stops at the first damage (a file cut short by a killed process ends inside a chunk; a
+//! flipped bit fails a chunk's CRC): everything before the damaged record is kept, and
+//! [`Recording::damage`] says where and why it stopped ([`crate::scan`] bounds what a corrupt
+//! length may allocate). A file is complete when it ends with its footer and magic and nothing
+//! in it is damaged; [`Recording::announced`] is what its summary says it holds, read from the
+//! end of the file, so a file damaged in the middle still tells how much was lost.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -11,13 +14,13 @@ use std::path::Path;
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::{Point3, Rotation};
 use foxglove::Decode;
-use mcap::read::Options;
 use mcap::records::Record;
 
 use crate::RecorderError;
 use crate::channels::{
     self, KeyframeMsg, PlanMsg, SessionMeta, SimStepMsg, StateHashMsg, ToolStateMsg, TopologyMsg,
 };
+use crate::scan::{Announced, Damage, for_each_record};
 
 /// A channel as found in the file.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -26,14 +29,6 @@ pub struct ChannelInfo {
     pub schema: String,
     pub message_encoding: String,
     pub messages: u64,
-}
-
-/// Where reading stopped early, and why.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Damage {
-    /// Records read before the damage.
-    pub records_read: u64,
-    pub reason: String,
 }
 
 /// A recording, read back.
@@ -59,9 +54,11 @@ pub struct Recording {
     pub surfaces: u64,
     /// First and last message log times, ns.
     pub log_time_range: Option<(u64, u64)>,
-    /// The file ends with its footer and magic.
+    /// The file ends with its footer and magic, and nothing in it is damaged.
     pub complete: bool,
     pub damage: Option<Damage>,
+    /// What the file's summary says it holds (absent in a file cut short).
+    pub announced: Option<Announced>,
     pub file_bytes: u64,
 }
 
@@ -132,11 +129,9 @@ impl Recording {
             }
             Ok(())
         })?;
-        rec.damage = end.damage.map(|reason| Damage {
-            records_read: end.records_read,
-            reason,
-        });
+        rec.damage = end.damage;
         rec.complete = end.complete;
+        rec.announced = crate::scan::announced(bytes);
         Ok(rec)
     }
     fn take_message(
@@ -210,6 +205,52 @@ impl Recording {
             .collect()
     }
 
+    /// Simulation steps the file's summary announces (`None` without a readable summary).
+    pub fn announced_steps(&self) -> Option<u64> {
+        let a = self.announced.as_ref()?;
+        Some(a.messages.get(channels::SIM_STEP).copied().unwrap_or(0))
+    }
+
+    /// Everything the session wrote was read: the file is complete, nothing in it is damaged,
+    /// and every step its summary announces is here.
+    pub fn is_whole(&self) -> bool {
+        self.complete
+            && self.damage.is_none()
+            && self
+                .announced_steps()
+                .is_none_or(|n| n == self.steps.len() as u64)
+    }
+
+    /// Log time of the last message read and of the last the summary announces, s.
+    pub fn readable_s(&self) -> (f64, Option<f64>) {
+        let read = self.log_time_range.map_or(0.0, |(_, b)| b as f64 * 1e-9);
+        let announced = self
+            .announced
+            .as_ref()
+            .map(|a| a.message_end_time as f64 * 1e-9);
+        (read, announced)
+    }
+
+    /// What is missing from a recording that is not whole, in a line ("damaged at byte N
+    /// (chunk CRC); 1.80 of 3.00 s readable"); `None` for a whole one.
+    pub fn shortfall(&self) -> Option<String> {
+        if self.is_whole() {
+            return None;
+        }
+        let why = match &self.damage {
+            Some(d) => d.to_string(),
+            None => format!(
+                "{} of the {} steps its summary announces are readable",
+                self.steps.len(),
+                self.announced_steps().unwrap_or(0)
+            ),
+        };
+        Some(match self.readable_s() {
+            (read, Some(total)) => format!("{why}; {read:.2} of {total:.2} s readable"),
+            (read, None) => format!("{why}; {read:.2} s readable, the total is unknown"),
+        })
+    }
+
     /// Messages per topic.
     pub fn counts(&self) -> BTreeMap<String, u64> {
         self.channels
@@ -217,111 +258,6 @@ impl Recording {
             .map(|c| (c.topic.clone(), c.messages))
             .collect()
     }
-}
-
-/// How reading the records of a file ended.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub(crate) struct ReadEnd {
-    pub records_read: u64,
-    /// Why reading stopped before the end, if it did.
-    pub damage: Option<String>,
-    /// The file ended with its footer and magic.
-    pub complete: bool,
-}
-
-/// Length of the prefix of `bytes` made of the magic and whole top-level records (opcode,
-/// little-endian u64 length, body); the closing magic counts too. A record that claims more
-/// bytes than the file has (a file cut short, or garbage) ends the prefix, so the MCAP parser
-/// never sees it.
-fn whole_records(bytes: &[u8]) -> (usize, Option<String>) {
-    let magic = mcap::MAGIC.len();
-    let mut at = magic;
-    while at < bytes.len() {
-        if bytes.len() - at == magic && &bytes[at..] == mcap::MAGIC {
-            return (bytes.len(), None);
-        }
-        let Some(header) = bytes.get(at..at + 9) else {
-            return (
-                at,
-                Some(format!("the file ends inside a record header at byte {at}")),
-            );
-        };
-        let mut len = [0u8; 8];
-        len.copy_from_slice(&header[1..]);
-        let len = u64::from_le_bytes(len);
-        match (at as u64 + 9).checked_add(len) {
-            Some(end) if end <= bytes.len() as u64 => at = end as usize,
-            _ => {
-                return (
-                    at,
-                    Some(format!(
-                        "the record at byte {at} (opcode 0x{:02x}) claims {len} bytes; {} are left",
-                        header[0],
-                        bytes.len() - at - 9
-                    )),
-                );
-            }
-        }
-    }
-    (at, None)
-}
-
-/// An error unless `bytes` start with the MCAP magic.
-pub(crate) fn check_magic(bytes: &[u8]) -> Result<(), RecorderError> {
-    if bytes.starts_with(mcap::MAGIC) {
-        Ok(())
-    } else {
-        Err(RecorderError::NotCutlab(
-            "not an MCAP file (no MCAP magic at the start)".into(),
-        ))
-    }
-}
-
-/// Calls `f` with every record of the file (chunks flattened, chunk CRCs checked), in file
-/// order, until the first damage; `f`'s error ends the reading and is returned.
-pub(crate) fn for_each_record(
-    bytes: &[u8],
-    mut f: impl FnMut(Record<'_>) -> Result<(), RecorderError>,
-) -> Result<ReadEnd, RecorderError> {
-    check_magic(bytes)?;
-    let (prefix, mut damage) = whole_records(bytes);
-    let readable = &bytes[..prefix];
-    let mut records_read = 0u64;
-    let mut footer = false;
-    // The parser is given only whole records; should it still panic on a hostile record
-    // inside a chunk, that is damage like any other, not a crash.
-    let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(
-        || -> Result<Option<String>, RecorderError> {
-            for record in mcap::read::ChunkFlattener::new_with_options(
-                readable,
-                Options::IgnoreEndMagic | Options::ValidateChunkCrcs,
-            )? {
-                let record = match record {
-                    Ok(r) => r,
-                    Err(e) => return Ok(Some(e.to_string())),
-                };
-                records_read += 1;
-                if matches!(record, Record::Footer(_)) {
-                    footer = true;
-                }
-                f(record)?;
-            }
-            Ok(None)
-        },
-    ));
-    match parsed {
-        Ok(Ok(Some(e))) => damage = Some(e),
-        Ok(Ok(None)) => {}
-        Ok(Err(e)) => return Err(e),
-        Err(_) => damage = Some("the MCAP parser failed on malformed data".into()),
-    }
-    let complete =
-        damage.is_none() && footer && prefix == bytes.len() && bytes.ends_with(mcap::MAGIC);
-    Ok(ReadEnd {
-        records_read,
-        damage,
-        complete,
-    })
 }
 
 fn parse<T: serde::de::DeserializeOwned>(

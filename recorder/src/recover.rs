@@ -1,6 +1,7 @@
-//! Salvaging a recording cut short (a killed process, a full disk): every record up to the
-//! last complete chunk is copied into a new, complete file (summary, indexes, footer), with a
-//! `cutlab.recovered` metadata record saying what was lost. The damaged file is left as it is.
+//! Salvaging a damaged recording (cut short by a killed process or a full disk, or with wrong
+//! bytes inside): every record before the first damaged one is copied into a new, complete
+//! file (summary, indexes, footer), with a `cutlab.recovered` metadata record saying what was
+//! lost. The damaged file is left as it is.
 
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap};
@@ -11,7 +12,11 @@ use std::path::Path;
 use mcap::records::{MessageHeader, Metadata, Record};
 
 use crate::RecorderError;
-use crate::reader::{check_magic, for_each_record};
+use crate::scan::{Damage, check_magic, for_each_record};
+
+/// The name of the metadata record a recovered copy carries (source, what was kept, the
+/// damage).
+pub const RECOVERED_METADATA: &str = "cutlab.recovered";
 
 /// What a recovery kept.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -21,9 +26,11 @@ pub struct RecoverReport {
     pub attachments: u64,
     /// The input already ended with a footer (nothing was lost).
     pub input_complete: bool,
-    /// Why reading stopped early, if it did.
-    pub damage: Option<String>,
+    /// Where and why reading stopped early, if it did.
+    pub damage: Option<Damage>,
     pub input_bytes: u64,
+    /// Messages the input's summary announces (`None` when it has no readable summary).
+    pub announced_messages: Option<u64>,
     /// Last log time kept, ns.
     pub last_log_time: Option<u64>,
 }
@@ -57,6 +64,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
         input_complete: false,
         damage: None,
         input_bytes: bytes.len() as u64,
+        announced_messages: crate::scan::announced(&bytes).map(|a| a.messages.values().sum()),
         last_log_time: None,
     };
     // old id -> new id
@@ -132,10 +140,10 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport, RecorderErr
     );
     note.insert("messages_kept".to_owned(), report.messages.to_string());
     if let Some(d) = &report.damage {
-        note.insert("damage".to_owned(), d.clone());
+        note.insert("damage".to_owned(), d.to_string());
     }
     w.write_metadata(&Metadata {
-        name: "cutlab.recovered".into(),
+        name: RECOVERED_METADATA.into(),
         metadata: note,
     })?;
     w.finish()?;

@@ -12,7 +12,7 @@ use cutlab_recorder::channels::{self, BladeMsg};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
 use cutlab_recorder::replay::{self, ReplayOptions};
 use cutlab_recorder::writer::RecordObserver;
-use cutlab_recorder::{RecorderError, Recording, WriterOptions, recover};
+use cutlab_recorder::{DamageKind, RecorderError, Recording, WriterOptions, recover, scan};
 use cutlab_sim::scene::{BuildOptions, Scene};
 
 const SCENE: &str = "chest-wall";
@@ -518,6 +518,71 @@ fn truncation_at_random_offsets_is_read_and_recovered_without_panics() {
         }
     }
     assert!(replayed_partial, "some truncated recording kept a keyframe");
+}
+
+/// Damage in the middle of a complete file (a flipped CRC, a chunk size of 0xff bytes that
+/// once made the parser ask for exabytes) is told apart from a file cut short: it is found at
+/// the damaged chunk, every record before it is kept (as many as a file cut at that chunk
+/// holds), the summary still announces what was lost, and recovery keeps the same records.
+#[test]
+fn damage_in_the_middle_is_found_at_its_chunk_and_everything_before_is_kept() {
+    let r = recorded();
+    let bytes = std::fs::read(&r.path).expect("bytes");
+    let whole = Recording::from_bytes(&bytes).expect("whole");
+    assert!(whole.is_whole() && whole.shortfall().is_none());
+    assert_eq!(whole.announced_steps(), Some(whole.steps.len() as u64));
+    let chunks: Vec<usize> = scan::record_spans(&bytes)
+        .filter(|s| s.opcode == 0x06)
+        .map(|s| s.at)
+        .collect();
+    assert!(chunks.len() > 4, "{} chunks", chunks.len());
+    let at = chunks[chunks.len() / 2];
+    let cut_there = Recording::from_bytes(&bytes[..at]).expect("cut short");
+    let cut_damage = cut_there.damage.clone().expect("cut short is damage");
+    assert_eq!(cut_damage.kind, DamageKind::EndsEarly, "{cut_damage}");
+    let dir = temp_dir("mid-damage");
+    // chunk record: opcode, length, start time, end time, uncompressed size, uncompressed CRC
+    for (name, field, width, reason) in [("crc", 9 + 24, 4, "chunk CRC"), ("size", 9 + 16, 8, "")] {
+        let mut damaged = bytes.clone();
+        damaged[at + field..at + field + width].fill(0xff);
+        let rec = Recording::from_bytes(&damaged).expect("opens, damaged");
+        let d = rec.damage.clone().expect("damage found");
+        assert_eq!(
+            (d.kind, d.byte),
+            (DamageKind::Corrupt, at as u64),
+            "{name}: {d}"
+        );
+        assert!(d.reason.contains(reason), "{name}: {d}");
+        assert!(
+            d.to_string()
+                .starts_with(&format!("damaged at byte {at} ("))
+        );
+        assert!(!rec.complete && !rec.is_whole());
+        assert_eq!(
+            rec.counts(),
+            cut_there.counts(),
+            "{name}: every record before is kept"
+        );
+        assert_eq!(rec.announced_steps(), whole.announced_steps());
+        assert!(rec.steps.len() < whole.steps.len());
+        let why = rec.shortfall().expect("not whole");
+        assert!(
+            why.contains(&format!("damaged at byte {at}")) && why.contains(" of "),
+            "{why}"
+        );
+
+        let path = dir.join(format!("{name}.mcap"));
+        std::fs::write(&path, &damaged).expect("write");
+        let fixed = dir.join(format!("{name}.recovered.mcap"));
+        let report = recover::recover(&path, &fixed).expect("recovered");
+        let kept: u64 = rec.counts().values().sum();
+        assert_eq!(report.messages, kept, "{name}");
+        assert_eq!(report.damage.as_ref().map(|d| d.byte), Some(at as u64));
+        assert!(report.announced_messages.is_some_and(|n| n > kept));
+        let again = Recording::open(&fixed).expect("recovered opens");
+        assert!(again.is_whole(), "{:?}", again.damage);
+        assert_eq!(again.counts(), rec.counts());
+    }
 }
 
 #[test]

@@ -221,14 +221,26 @@ impl Store {
         attempt_id: i64,
         metrics: &[MetricValue],
     ) -> Result<Outcome> {
+        self.finish_attempt_noted(attempt_id, metrics, None).await
+    }
+
+    /// [`Store::finish_attempt`], with a note stored in the same transaction (what the scores
+    /// rest on, e.g. a damaged recording); `None` keeps the attempt's note.
+    pub async fn finish_attempt_noted(
+        &self,
+        attempt_id: i64,
+        metrics: &[MetricValue],
+        note: Option<&str>,
+    ) -> Result<Outcome> {
         let a = self.get_attempt(attempt_id).await?;
         let thresholds = self.thresholds(a.exercise_id).await?;
         let verdict = thresholds.verdict(metrics);
         let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, ?), scored = TRUE, score = ?, passed = ? WHERE id = ? AND status <> 'complete'")
+        let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, ?), scored = TRUE, score = ?, passed = ?, note = COALESCE(?, note) WHERE id = ? AND status <> 'complete'")
             .bind(now_ns())
             .bind(verdict.score)
             .bind(verdict.pass)
+            .bind(note)
             .bind(attempt_id)
             .execute(&mut *tx)
             .await?;

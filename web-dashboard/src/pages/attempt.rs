@@ -6,6 +6,7 @@ use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
 use axum::{Form, Router};
+use cutlab_assessor::from_recording::DAMAGED_RECORDING_NOTE;
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -60,7 +61,10 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             " · exercise " (d.exercise.name) " · started " (when(a.started_ns)) " UTC · " (a.status.as_str())
             @if let Some(s) = a.score { " · score " (num(Some(s), 2)) } " · " (verdict(a.passed))
         }
-        @if let Some(n) = &a.note { p class="muted" { (n) } }
+        @if let Some(n) = &a.note {
+            // an attempt scored from a damaged recording says so where it is seen
+            p class=(if n.starts_with(DAMAGED_RECORDING_NOTE) { "warning" } else { "muted" }) { (n) }
+        }
         p class="downloads" {
             @if d.recordings.mcap { a href=(format!("/attempts/{}/recording.mcap", a.id)) { "Download .mcap" } } @else { span class="muted" { "no .mcap" } }
             " · "
