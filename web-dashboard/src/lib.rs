@@ -9,7 +9,8 @@
 //! Security: argon2id passwords (the store's); a session cookie `cutlab_session` (HttpOnly,
 //! SameSite=Strict, a random 256-bit token of which the database keeps the SHA-256, 12 h);
 //! a per-session CSRF token checked on every state-changing request before any handler;
-//! login rate-limited (5 failures a minute per user name and per IP address, then 429);
+//! login rate-limited (5 failures a minute per user name, 100 per IP address, then 429: one
+//! address behind a clinic's NAT does not lock every user out);
 //! roles on every route: a trainee sees only their own data, an instructor the members of
 //! the cohorts they lead, an administrator everything; anything else is a 404, so ids leak
 //! nothing. See [`api`] for the JSON API.
@@ -43,8 +44,12 @@ pub use seed::{DEMO_ACCOUNTS, DEMO_COHORT, DemoAccount, seed_demo, seed_demo_acc
 pub struct Config {
     /// Mark cookies `Secure` (when served over HTTPS, e.g. behind a proxy).
     pub secure_cookies: bool,
-    /// Failed logins per key (user name, IP address) within `login_window`.
+    /// Failed logins per user name within `login_window`; beyond, that user waits (429).
     pub login_failures: usize,
+    /// Failed logins per client IP address (any user names) within `login_window`; beyond,
+    /// that address waits. Much higher than `login_failures`: a clinic's users share one
+    /// address behind its NAT, and one of them guessing must not lock the others out.
+    pub login_failures_per_ip: usize,
     pub login_window: Duration,
 }
 
@@ -53,6 +58,7 @@ impl Default for Config {
         Self {
             secure_cookies: false,
             login_failures: 5,
+            login_failures_per_ip: 100,
             login_window: Duration::from_secs(60),
         }
     }
@@ -66,7 +72,10 @@ pub struct AppState(Arc<Inner>);
 struct Inner {
     store: Store,
     config: Config,
+    /// Failed logins per user name.
     limiter: auth::rate_limit::RateLimiter,
+    /// Failed logins per client IP address.
+    ip_limiter: auth::rate_limit::RateLimiter,
     traces: data::trace::TraceCache,
     viewer: recordings::Viewer,
     grants: auth::grants::GrantKey,
@@ -103,12 +112,15 @@ impl AppState {
     pub fn new(store: Store, config: Config) -> Result<Self, AppError> {
         let limiter =
             auth::rate_limit::RateLimiter::new(config.login_failures, config.login_window);
+        let ip_limiter =
+            auth::rate_limit::RateLimiter::new(config.login_failures_per_ip, config.login_window);
         let grants = auth::grants::GrantKey::random()?;
         let caches = Caches::new();
         watch::spawn(store.pool(), &caches.changes);
         Ok(Self(Arc::new(Inner {
             store,
             limiter,
+            ip_limiter,
             config,
             traces: Default::default(),
             viewer: recordings::Viewer::load(),
@@ -124,6 +136,9 @@ impl AppState {
     }
     pub(crate) fn limiter(&self) -> &auth::rate_limit::RateLimiter {
         &self.0.limiter
+    }
+    pub(crate) fn ip_limiter(&self) -> &auth::rate_limit::RateLimiter {
+        &self.0.ip_limiter
     }
     pub(crate) fn traces(&self) -> &data::trace::TraceCache {
         &self.0.traces

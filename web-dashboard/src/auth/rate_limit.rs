@@ -1,6 +1,7 @@
-//! Failed-login rate limiting: at most `max` failures per key (a user name, an IP address) in
-//! a sliding window; beyond that, logins for the key are refused (429) until the oldest
-//! failure leaves the window. In memory: a restart forgets (acceptable for a throttle).
+//! Failed-login rate limiting: at most `max` failures per key in a sliding window; beyond
+//! that, logins for the key are refused (429) until the oldest failure leaves the window.
+//! The dashboard has two: per user name (low) and per IP address (high, for shared NATs).
+//! In memory: a restart forgets (acceptable for a throttle).
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Mutex;

@@ -93,8 +93,11 @@ async fn login(
         return Err(AppError::Csrf);
     }
     let name = form.username.trim();
-    let keys = [format!("user:{}", name.to_lowercase()), format!("ip:{ip}")];
-    if state.limiter().blocked(&keys) {
+    // two limits: per user name (low: guessing one account's password) and per address
+    // (high: the users of a clinic share its NAT's address)
+    let user_key = [format!("user:{}", name.to_lowercase())];
+    let ip_key = [format!("ip:{ip}")];
+    if state.limiter().blocked(&user_key) || state.ip_limiter().blocked(&ip_key) {
         return Err(AppError::TooManyRequests);
     }
     let user = if name.is_empty() || name.len() > MAX_FIELD || form.password.len() > MAX_FIELD {
@@ -103,7 +106,8 @@ async fn login(
         state.store().verify_password(name, &form.password).await?
     };
     let Some(user) = user else {
-        state.limiter().fail(&keys);
+        state.limiter().fail(&user_key);
+        state.ip_limiter().fail(&ip_key);
         tracing::info!("failed login for {name:?}");
         return login_page(
             &state,
@@ -111,7 +115,7 @@ async fn login(
             Some("Unknown user or wrong password."),
         );
     };
-    state.limiter().clear(&keys[0]);
+    state.limiter().clear(&user_key[0]);
     let token = sessions::create(&state, &user).await?;
     tracing::info!("{} ({}) logged in", user.name, user.role);
     let cookie = super::session_cookie(Some(&token), state.config().secure_cookies);

@@ -84,7 +84,8 @@ pub async fn login_csrf(app: &Router) -> String {
     set_cookie(&r, "cutlab_login_csrf").unwrap()
 }
 
-/// Posts the login form; returns the answer.
+/// Posts the login form; returns the answer. Without a client address (as `oneshot` sends
+/// it), every such login counts against one address.
 pub async fn try_login(app: &Router, user: &str, password: &str) -> Response<Body> {
     let csrf = login_csrf(app).await;
     send(
@@ -96,6 +97,21 @@ pub async fn try_login(app: &Router, user: &str, password: &str) -> Response<Bod
         ),
     )
     .await
+}
+
+/// Posts the login form from the client address `ip` (the connection info the server's
+/// `into_make_service_with_connect_info` would add).
+pub async fn try_login_from(app: &Router, ip: &str, user: &str, password: &str) -> Response<Body> {
+    let csrf = login_csrf(app).await;
+    let mut req = post_form(
+        "/login",
+        Some(&format!("cutlab_login_csrf={csrf}")),
+        &[("username", user), ("password", password), ("csrf", &csrf)],
+    );
+    let addr = std::net::SocketAddr::new(ip.parse().unwrap(), 40_000);
+    req.extensions_mut()
+        .insert(axum::extract::ConnectInfo(addr));
+    send(app, req).await
 }
 
 /// Logs in (must succeed) and reads the session's CSRF token off a page.
