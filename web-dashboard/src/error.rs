@@ -28,6 +28,10 @@ pub enum AppError {
     /// Input that cannot be used, with a message for the user.
     #[error("{0}")]
     BadRequest(String),
+    /// A request an extractor could not read (a form missing a field, a malformed path),
+    /// with the status the extractor chose (400, 413, 415, 422).
+    #[error("{message}")]
+    Malformed { status: StatusCode, message: String },
     /// A name already taken, an attempt already signed off...
     #[error("{0}")]
     Conflict(String),
@@ -44,6 +48,7 @@ impl AppError {
             AppError::Unauthorized => StatusCode::UNAUTHORIZED,
             AppError::TooManyRequests => StatusCode::TOO_MANY_REQUESTS,
             AppError::BadRequest(_) => StatusCode::BAD_REQUEST,
+            AppError::Malformed { status, .. } => *status,
             AppError::Conflict(_) => StatusCode::CONFLICT,
             AppError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }

@@ -8,7 +8,7 @@
 
 use axum::Router;
 use axum::body::{Body, Bytes};
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
@@ -20,7 +20,7 @@ use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
 use crate::data::attempt::recording_paths;
 use crate::error::AppError;
-use crate::extract::Id;
+use crate::extract::{Id, Path};
 use crate::pages::layout;
 
 /// rerun's web viewer files, read once.
@@ -123,7 +123,7 @@ async fn rrd(
 /// grant issued by the replay page (see [`crate::auth::grants`]).
 async fn granted_rrd(
     State(state): State<AppState>,
-    axum::extract::Path((id, grant)): axum::extract::Path<(i64, String)>,
+    Path((id, grant)): Path<(i64, String)>,
 ) -> Result<Response, AppError> {
     if !state.grants().check(id, &grant) {
         return Err(AppError::NotFound);

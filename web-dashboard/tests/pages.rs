@@ -424,3 +424,116 @@ async fn an_attempt_written_by_another_process_shows_without_waiting_for_the_cac
         written.elapsed()
     );
 }
+
+/// The answer is our error page (HTML, the layout), not axum's plain text.
+async fn assert_styled_error(
+    r: axum::http::Response<axum::body::Body>,
+    status: StatusCode,
+    says: &str,
+) {
+    assert_eq!(r.status(), status);
+    let ct = r.headers()[header::CONTENT_TYPE]
+        .to_str()
+        .unwrap()
+        .to_owned();
+    assert!(ct.starts_with("text/html"), "{ct}");
+    let page = body_text(r).await;
+    assert!(
+        page.starts_with("<!DOCTYPE html>")
+            && page.contains("/static/style.css")
+            && page.contains("Back to the dashboard"),
+        "{page}"
+    );
+    assert!(page.contains(says), "{says:?} in {page}");
+}
+
+#[tokio::test]
+async fn malformed_forms_and_paths_get_the_styled_error_page() {
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let a = first_attempt(&e.store, "ana").await;
+    let comments_before = count(&e.store, "attempt_comments").await;
+    // a form missing a field
+    for (path, form, field) in [
+        (
+            format!("/attempts/{a}/comments"),
+            vec![("csrf", kim.csrf.as_str())],
+            "body",
+        ),
+        (
+            "/exercises".to_owned(),
+            vec![("name", "x"), ("threshold_k", "2"), ("csrf", &kim.csrf)],
+            "scene",
+        ),
+        (
+            "/curricula".to_owned(),
+            vec![("csrf", kim.csrf.as_str())],
+            "name",
+        ),
+    ] {
+        let r = send(&e.app, post_form(&path, Some(&kim.cookie), &form)).await;
+        assert_styled_error(
+            r,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            &format!("missing field `{field}`"),
+        )
+        .await;
+    }
+    assert_eq!(count(&e.store, "attempt_comments").await, comments_before);
+    // not a form at all (the CSRF token in its header)
+    let r = send(
+        &e.app,
+        axum::http::Request::post(format!("/attempts/{a}/comments"))
+            .header(header::COOKIE, &kim.cookie)
+            .header("x-csrf-token", &kim.csrf)
+            .header(header::CONTENT_TYPE, "application/json")
+            .body(axum::body::Body::from(r#"{"body":"x"}"#))
+            .unwrap(),
+    )
+    .await;
+    assert_styled_error(
+        r,
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "x-www-form-urlencoded",
+    )
+    .await;
+    // the login form too
+    let r = send(
+        &e.app,
+        axum::http::Request::post("/login")
+            .header(header::CONTENT_TYPE, "text/plain")
+            .body(axum::body::Body::from("username=ana"))
+            .unwrap(),
+    )
+    .await;
+    assert_styled_error(
+        r,
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "x-www-form-urlencoded",
+    )
+    .await;
+    // malformed ids in the path
+    let r = send(&e.app, get("/attempts/abc", Some(&kim))).await;
+    assert_styled_error(r, StatusCode::BAD_REQUEST, "not a number").await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/attempts/1.5/comments",
+            Some(&kim.cookie),
+            &[("body", "x"), ("csrf", &kim.csrf)],
+        ),
+    )
+    .await;
+    assert_styled_error(r, StatusCode::BAD_REQUEST, "not a number").await;
+    let r = send(&e.app, get("/attempts/abc/grant/xyz/recording.rrd", None)).await;
+    assert_styled_error(r, StatusCode::BAD_REQUEST, "could not be read").await;
+    // the API still answers JSON
+    let r = send(&e.app, get("/api/attempts/abc", Some(&kim))).await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    assert!(
+        r.headers()[header::CONTENT_TYPE]
+            .to_str()
+            .unwrap()
+            .starts_with("application/json")
+    );
+}

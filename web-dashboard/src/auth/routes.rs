@@ -2,7 +2,6 @@
 
 use std::net::SocketAddr;
 
-use axum::Form;
 use axum::Router;
 use axum::extract::{ConnectInfo, State};
 use axum::http::header::SET_COOKIE;
@@ -14,6 +13,7 @@ use serde::Deserialize;
 use super::{CurrentUser, LOGIN_CSRF_COOKIE, sessions, tokens};
 use crate::AppState;
 use crate::error::AppError;
+use crate::extract::Form;
 use crate::pages::layout;
 
 /// The longest user name or password the form takes (argon2 has its own limits; this keeps

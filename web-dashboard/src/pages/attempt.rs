@@ -2,10 +2,10 @@
 //! against the planned line (top view), the force over time, downloads, replay review, and
 //! the debriefing (instructors comment and sign off; the trainee reads).
 
+use axum::Router;
 use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
-use axum::{Form, Router};
 use cutlab_assessor::from_recording::DAMAGED_RECORDING_NOTE;
 use maud::{Markup, html};
 use serde::Deserialize;
@@ -20,7 +20,7 @@ use crate::data::debrief;
 use crate::data::display_unit;
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::PageResult;
-use crate::extract::Id;
+use crate::extract::{Form, Id};
 
 pub fn router() -> Router<AppState> {
     Router::new()

@@ -1,10 +1,10 @@
 //! `/curriculum`: exercises (scene, expert plan, thresholds) and curricula (modules of
 //! exercises). Everyone reads; instructors and administrators create and edit.
 
+use axum::Router;
 use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
-use axum::{Form, Router};
 use cutlab_assessor::ExpertPlan;
 use cutlab_assessor::metrics::{Better, METRICS};
 use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
@@ -16,7 +16,7 @@ use super::layout::{num, page};
 use crate::AppState;
 use crate::auth::CurrentUser;
 use crate::error::{AppError, PageResult};
-use crate::extract::Id;
+use crate::extract::{Form, Id};
 
 /// The longest plan text taken.
 const MAX_PLAN_BYTES: usize = 64 * 1024;
