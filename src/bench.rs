@@ -5,10 +5,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{Integrator, StaticSettings};
+use cutlab_sim::stats::Summary;
 use cutlab_sim::{Point3, Vector3};
 use serde::Serialize;
 
-use crate::stats::Summary;
 use crate::stroke::Stroke;
 
 #[derive(Debug, Serialize)]

@@ -19,11 +19,11 @@ use cutlab_sim::cut::{Blade, CutError, CutEvent, Cutter};
 use cutlab_sim::model::Model;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{LocalisationSettings, Simulation, StaticSettings};
+use cutlab_sim::stats::Summary;
 use cutlab_sim::{Point3, TetMesh};
 use serde::Serialize;
 
 use crate::plot;
-use crate::stats::Summary;
 use crate::stroke::Stroke;
 
 /// The tool presses with this force, N ...

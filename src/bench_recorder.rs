@@ -20,9 +20,8 @@ use cutlab_recorder::replay::{self, ReplayOptions};
 use cutlab_recorder::{Recording, WriterOptions};
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
+use cutlab_sim::stats::Summary;
 use serde::Serialize;
-
-use crate::stats::Summary;
 
 #[derive(Debug, Serialize)]
 struct Figures {

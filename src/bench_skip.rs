@@ -23,10 +23,9 @@ use cutlab_recorder::{RerunSink, RerunTarget};
 use cutlab_sim::mesh::Topology;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{LocalisationSettings, Simulation, StaticSettings};
+use cutlab_sim::stats::Summary;
 use cutlab_sim::{Point3, Vector3};
 use serde::Serialize;
-
-use crate::stats::Summary;
 
 #[derive(Debug, Serialize)]
 struct SkipRow {

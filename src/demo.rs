@@ -9,8 +9,7 @@ use cutlab_sim::cut;
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
-
-use crate::stats::Summary;
+use cutlab_sim::stats::Summary;
 
 pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Result<()> {
     let t0 = Instant::now();

@@ -17,7 +17,6 @@ mod recording;
 mod scene_info;
 mod serve;
 mod session;
-mod stats;
 mod stroke;
 
 use std::path::PathBuf;

@@ -15,12 +15,11 @@ use cutlab_recorder::{RecordedHand, RerunTarget, WriterOptions};
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
+use cutlab_sim::stats::Summary;
 use cutlab_sim::{Point3, Vector3};
 
 use cutlab_assessor::Store;
 use cutlab_recorder::Recording;
-
-use crate::stats::Summary;
 
 /// `println!` unless `quiet`.
 macro_rules! say {

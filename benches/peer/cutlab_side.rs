@@ -9,9 +9,9 @@ use cutlab_sim::cut::{self, CutOptions, CutPolygon};
 use cutlab_sim::model::Model;
 use cutlab_sim::reference::{self, Elasticity, Solid};
 use cutlab_sim::solver::{Simulation, SolverSettings, StaticSettings};
+use cutlab_sim::stats::Summary;
 
 use crate::cases::{Case, bar_mesh};
-use crate::stats::Summary;
 
 /// Step times of one run.
 #[derive(Debug, Clone, serde::Serialize)]

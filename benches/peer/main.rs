@@ -11,9 +11,6 @@ mod cutlab_side;
 mod press;
 mod rapier_side;
 mod report;
-#[allow(unused_imports)]
-#[path = "../../src/stats.rs"]
-mod stats;
 
 use cutlab_sim::reference::{Elasticity, Solid};
 use indicatif::{ProgressBar, ProgressStyle};

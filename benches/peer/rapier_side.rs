@@ -7,6 +7,7 @@ use std::time::Instant;
 use anyhow::Context;
 use cutlab_sim::fem::FemMaterial;
 use cutlab_sim::model::Model;
+use cutlab_sim::stats::Summary;
 use cutlab_sim::{Point3, TetMesh, Vector3};
 use rapier3d_f64::prelude::{
     PhysicsWorld, SoftBodyBuilder, SoftBodyCellModel, SoftBodyHandle, SoftBodyMaterial,
@@ -15,7 +16,6 @@ use rapier3d_f64::prelude::{
 
 use crate::cantilever::CantileverLoad;
 use crate::cases::Case;
-use crate::stats::Summary;
 
 /// The time step of both engines, s.
 pub const TIME_STEP_S: f64 = 1e-3;

@@ -2,12 +2,12 @@
 
 use std::fmt::Write as _;
 
+use cutlab_sim::stats::Summary;
 use rapier3d_f64::prelude::SoftBodySolver;
 use serde::Serialize;
 
 use crate::cases::Case;
 use crate::rapier_side::{CantileverRun, CellDamping, Settle, damping_ratio_for};
-use crate::stats::Summary;
 
 /// Rapier's two soft-body solvers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

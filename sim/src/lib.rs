@@ -16,7 +16,8 @@
 //! - [`scene`]: scene files and built-in scenes;
 //! - [`reference`]: reference problems with known answers (patch test, cantilever, wound
 //!   opening, free vibration);
-//! - [`stability`]: stability stress cases (sweeps of step, stiffness, damping, mass ratio).
+//! - [`stability`]: stability stress cases (sweeps of step, stiffness, damping, mass ratio);
+//! - [`stats`]: percentiles and summaries of samples (timings).
 
 pub mod cut;
 pub mod error;
@@ -31,6 +32,7 @@ pub mod scene;
 pub mod segmentation;
 pub mod solver;
 pub mod stability;
+pub mod stats;
 
 pub use error::{MeshError, ReadError, SegmentationError};
 pub use mesh::TetMesh;
