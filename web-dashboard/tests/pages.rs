@@ -36,7 +36,35 @@ async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
     );
     let a = first_attempt(&e.store, "ana").await;
     let page = body_text(send(&e.app, get(&format!("/attempts/{a}"), Some(&kim))).await).await;
-    assert!(page.contains("entry_error_m") && page.contains("Pass limits"));
+    assert!(page.contains("Pass limits"));
+    // the metrics by name, in display units; no SI keys in the table
+    let table = &page[page.find("class=\"metrics\"").unwrap()..];
+    let table = &table[..table.find("</table>").unwrap()];
+    let row = |name: &str| {
+        let at = table
+            .find(&format!("<td>{name}"))
+            .unwrap_or_else(|| panic!("{name} in {table}"));
+        let row = &table[at..];
+        row[..row.find("</tr>").unwrap()].to_owned()
+    };
+    assert!(
+        row("Entry error").contains("<td>mm</td>"),
+        "{}",
+        row("Entry error")
+    );
+    assert!(row("Lateral deviation (mean)").contains("<td>mm</td>"));
+    assert!(row("Peak force").contains("<td>N</td>"));
+    assert!(row("Task time").contains("<td>s</td>"));
+    assert!(row("Cut within tolerance").contains("<td>%</td>"));
+    for key in ["entry_error_m", "lateral_mean_m", "peak_force_n", "time_s"] {
+        assert!(!table.contains(key), "{key} in the table");
+    }
+    // the JSON API keeps the keys (SI values)
+    let api = body_text(send(&e.app, get(&format!("/api/attempts/{a}"), Some(&kim))).await).await;
+    assert!(
+        api.contains("\"entry_error_m\"") && !api.contains("Entry error"),
+        "{api}"
+    );
     assert!(
         page.contains("no .mcap"),
         "synthetic attempts have no recording"

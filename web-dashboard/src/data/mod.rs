@@ -3,6 +3,7 @@
 
 pub mod attempt;
 pub mod debrief;
+pub mod labels;
 pub mod overview;
 pub mod progress;
 pub mod running;
@@ -11,6 +12,8 @@ pub mod trace;
 use cutlab_assessor::proficiency::ProficiencyState;
 use cutlab_assessor::store::User;
 use serde::Serialize;
+
+pub use labels::{Label, display_unit, label};
 
 /// A user, by id and name.
 #[derive(Debug, Clone, Serialize)]
@@ -98,16 +101,6 @@ impl ProficiencySummary {
             trials_to_proficiency: trials,
             standing,
         }
-    }
-}
-
-/// How a stored SI unit is shown: the factor and the display unit (metres as millimetres).
-pub fn display_unit(unit: &str) -> (f64, &str) {
-    match unit {
-        "m" => (1e3, "mm"),
-        "m^2" => (1e6, "mm²"),
-        "1" => (1.0, ""),
-        other => (1.0, other),
     }
 }
 

@@ -17,7 +17,7 @@ use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
 use crate::data::attempt::{AttemptDetail, detail};
 use crate::data::debrief;
-use crate::data::display_unit;
+use crate::data::label;
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::PageResult;
 use crate::extract::{Form, Id};
@@ -83,9 +83,10 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             thead { tr { th { "Metric" } th { "Value" } th { "Unit" } th { "Expert" } th { "Pass limits" } th { "Verdict" } th { "What" } } }
             tbody {
                 @for m in &d.metrics {
-                    @let (f, unit) = display_unit(&m.unit);
+                    @let l = label(&m.key, &m.unit);
+                    @let (f, unit) = (l.factor, l.unit);
                     tr {
-                        td { (m.key) @if m.scored { " *" } }
+                        td { (l.name) @if m.scored { " *" } }
                         td class="num" { (num(m.value.map(|v| v * f), 3)) @if let Some(w) = &m.missing { br; span class="muted" { (w) } } }
                         td { (unit) }
                         td class="num" { (num(m.mean.map(|v| v * f), 3)) }

@@ -15,6 +15,7 @@ use serde::Deserialize;
 use super::layout::{num, page};
 use crate::AppState;
 use crate::auth::CurrentUser;
+use crate::data::label;
 use crate::error::{AppError, PageResult};
 use crate::extract::{Form, Id};
 
@@ -239,6 +240,17 @@ async fn exercise(
     ))
 }
 
+/// A metric's display name with its SI unit (thresholds are edited in SI units).
+fn metric_name(key: &str) -> String {
+    let si = cutlab_assessor::metrics::metric(key).map_or("", |d| d.unit);
+    let name = label(key, si).name;
+    if si.is_empty() || si == "1" {
+        name.to_owned()
+    } else {
+        format!("{name} ({si})")
+    }
+}
+
 fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
     let f = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
     html! {
@@ -250,7 +262,7 @@ fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
                         tr {
                             td { select name=(format!("key_{i}")) {
                                 option value="" { "–" }
-                                @for d in METRICS.iter().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (d.key) } }
+                                @for d in METRICS.iter().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (metric_name(d.key)) } }
                             } }
                             td { select name=(format!("better_{i}")) {
                                 @for b in [Better::LowerIsBetter, Better::HigherIsBetter, Better::TwoSided] { option value=(b.as_str()) selected[m.is_some_and(|m| m.better == b)] { (b.as_str()) } }
@@ -264,7 +276,7 @@ fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
                     }
                 } @else {
                     @for m in &t.metrics {
-                        tr { td { (m.key) } td { (m.better.as_str()) } td class="num" { (m.mean) } td class="num" { (m.sd) } td class="num" { (f(m.lower)) } td class="num" { (f(m.upper)) } td class="num" { (m.n_experts) } }
+                        tr { td { (metric_name(&m.key)) } td { (m.better.as_str()) } td class="num" { (m.mean) } td class="num" { (m.sd) } td class="num" { (f(m.lower)) } td class="num" { (f(m.upper)) } td class="num" { (m.n_experts) } }
                     }
                 }
             }

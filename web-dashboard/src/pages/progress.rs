@@ -13,7 +13,7 @@ use crate::AppState;
 use crate::access::visible_user;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
-use crate::data::display_unit;
+use crate::data::label;
 use crate::data::progress::{ExerciseProgress, MetricSeries, Progress, cached_progress};
 use crate::error::PageResult;
 use crate::extract::Id;
@@ -165,13 +165,9 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
 }
 
 fn metric_chart(m: &MetricSeries) -> Markup {
-    let (f, unit) = display_unit(&m.unit);
-    let label = if unit.is_empty() {
-        m.key.clone()
-    } else {
-        format!("{} ({unit})", m.key)
-    };
-    let mut c = Chart::new(label, "attempt", unit);
+    let l = label(&m.key, &m.unit);
+    let (f, unit) = (l.factor, l.unit);
+    let mut c = Chart::new(l.with_unit(), "attempt", unit);
     if let Some(b) = &m.band {
         if b.sd > 0.0 {
             c = c.layer(Layer::HBand {
