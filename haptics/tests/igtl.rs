@@ -5,8 +5,11 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use cutlab_haptics::device::igtl::{HEADER_BYTES, Header, POINT_ELEMENT_BYTES, encode_transform};
-use cutlab_haptics::device::{DeviceFault, HapticDevice, IgtlDevice};
+use cutlab_haptics::device::igtl::{
+    HEADER_BYTES, Header, POINT_ELEMENT_BYTES, TRANSFORM_BODY_BYTES, content, decode_transform,
+    encode_transform,
+};
+use cutlab_haptics::device::{DeviceFault, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions};
 use cutlab_haptics::{Point3, Rotation, Vector3};
 
 fn local_device() -> IgtlDevice {
@@ -225,4 +228,47 @@ fn pyigtl_client_sends_poses_and_reads_forces() {
         0,
         "pyigtl's CRC and framing are accepted"
     );
+}
+
+#[test]
+fn the_force_can_go_back_as_a_transform_named_for_plus() {
+    let mut device = IgtlDevice::listen_with(
+        "127.0.0.1:0".parse().expect("address"),
+        IgtlOptions::plus_openhaptics("Ref"),
+    )
+    .expect("listen");
+    assert_eq!(device.force_output(), ForceOutput::Transform);
+    device.write_force(Vector3::new(0.75, -1.5, 2.25)).ok();
+    let mut s = TcpStream::connect(device.address()).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(5)))
+        .expect("timeout");
+    for k in 0..3 {
+        s.write_all(&transform_packet([10.0 + k as f64, 0.0, 0.0]))
+            .expect("send");
+        // every pose is answered by one TRANSFORM: the force in newtons, identity rotation
+        let mut reply = [0u8; HEADER_BYTES + TRANSFORM_BODY_BYTES];
+        s.read_exact(&mut reply).expect("force reply");
+        let mut hb = [0u8; HEADER_BYTES];
+        hb.copy_from_slice(&reply[..HEADER_BYTES]);
+        let h = Header::parse(&hb).expect("header");
+        assert_eq!(h.message_type(), b"TRANSFORM");
+        assert_eq!(h.device_name(), b"ForceToRef");
+        let (t, q) = decode_transform(content(&h, &reply[HEADER_BYTES..]).expect("crc"))
+            .expect("a rigid transform");
+        // (decode_transform scales by 1e-3 in f64: equal to rounding)
+        let f = t.coords * 1e3;
+        assert!(
+            (f - Vector3::new(0.75, -1.5, 2.25)).norm() < 1e-12,
+            "newtons, not mm: {f:?}"
+        );
+        assert_eq!(q, Rotation::identity());
+    }
+    let pose = device.read(0, 0.0).expect("pose");
+    assert!((pose.tip_in_world - Point3::new(0.012, 0.0, 0.0)).norm() < 1e-9);
+    // a name PLUS or the header could not take is refused up front
+    let long = IgtlOptions {
+        force_device_name: "ForceToAReferenceFrameTooLong".into(),
+        ..IgtlOptions::plus_openhaptics("Ref")
+    };
+    assert!(IgtlDevice::listen_with("127.0.0.1:0".parse().expect("address"), long).is_err());
 }

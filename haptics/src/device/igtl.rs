@@ -9,10 +9,21 @@
 //!   button (OpenIGTLink has no buttons; without this message the blade counts as engaged and
 //!   the cut force threshold alone decides when cutting starts).
 //!
-//! For every `TRANSFORM` received the device answers with the latest rendered force as a
-//! `POINT` message (device name `Force`, one point named `force`, group `haptics`, its
-//! x y z the force in **newtons**, world frame, its diameter the force's magnitude). `POINT`
-//! is read by Slicer (as a markups list), pyigtl, PLUS and the OpenIGTLink C++ library.
+//! For every `TRANSFORM` received the device answers with the latest rendered force, in
+//! **newtons**, in the frame the poses arrive in (the world), as one of ([`ForceOutput`],
+//! chosen when the device is created: [`IgtlDevice::listen_with`] and [`IgtlOptions`]):
+//! - [`ForceOutput::Point`] (the default): a `POINT` message (device name `Force`, one point
+//!   named `force`, group `haptics`, its x y z the force, its diameter the force's
+//!   magnitude), read by Slicer (as a markups list), pyigtl and the OpenIGTLink C++ library;
+//! - [`ForceOutput::Transform`]: a `TRANSFORM` message whose translation is the force (N, not
+//!   mm) and whose rotation is the identity: what PLUS Toolkit's OpenHaptics device (a
+//!   Geomagic Touch behind PLUS) takes as its force input, the translation of its tool with
+//!   port name `Force`, handed to OpenHaptics' `HD_CURRENT_FORCE` unchanged (in newtons, in
+//!   the device's base frame: the frame of the `Stylus` poses PLUS sends, in mm). PLUS reads
+//!   a TRANSFORM's device name as a transform name, `<From>To<To>`, and drops a name without
+//!   `To`: for its OpenIGTLinkTracker data source `Id="Force"` with
+//!   `ToolReferenceFrame="Ref"` the message must be named `ForceToRef`
+//!   ([`IgtlOptions::force_device_name`]; the default `Force` suits Slicer and pyigtl).
 //!
 //! Packets are checked: header version 1 or 2, a printable message type, a body of at most
 //! [`MAX_BODY_BYTES`], the header's CRC-64 (ECMA-182) over the body, the exact body size of a
@@ -253,8 +264,154 @@ pub fn encode_transform(
     out.extend_from_slice(&body);
 }
 
-/// Encodes the force as a POINT message (header + body) into `out`.
+/// Device name of the force message unless [`IgtlOptions::force_device_name`] says otherwise.
+pub const FORCE_DEVICE_NAME: &str = "Force";
+/// Longest device name of an OpenIGTLink header, bytes.
+pub const DEVICE_NAME_BYTES: usize = 20;
+
+/// How the device sends the rendered force back (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ForceOutput {
+    /// A `POINT` message: x y z the force in newtons (Slicer, pyigtl).
+    #[default]
+    Point,
+    /// A `TRANSFORM` message: identity rotation, translation the force in newtons (PLUS
+    /// Toolkit's OpenHaptics device).
+    Transform,
+}
+
+impl ForceOutput {
+    /// Encodes `force_newtons` as this kind of message named `device_name` into `out`.
+    pub fn encode(
+        self,
+        device_name: &str,
+        force_newtons: &Vector3,
+        timestamp: u64,
+        out: &mut Vec<u8>,
+    ) {
+        match self {
+            ForceOutput::Point => encode_force_point(device_name, force_newtons, timestamp, out),
+            ForceOutput::Transform => {
+                encode_force_transform(device_name, force_newtons, timestamp, out)
+            }
+        }
+    }
+
+    /// Size of one encoded force message (header + body), bytes.
+    pub fn message_bytes(self) -> usize {
+        HEADER_BYTES
+            + match self {
+                ForceOutput::Point => POINT_ELEMENT_BYTES,
+                ForceOutput::Transform => TRANSFORM_BODY_BYTES,
+            }
+    }
+}
+
+impl std::fmt::Display for ForceOutput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ForceOutput::Point => "point",
+            ForceOutput::Transform => "transform",
+        })
+    }
+}
+
+impl std::str::FromStr for ForceOutput {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "point" => Ok(ForceOutput::Point),
+            "transform" => Ok(ForceOutput::Transform),
+            _ => Err(format!(
+                "unknown force output {s:?} (expected point or transform)"
+            )),
+        }
+    }
+}
+
+/// Settings of an [`IgtlDevice`] chosen when it is created.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IgtlOptions {
+    /// The kind of message the force goes back as.
+    pub force_output: ForceOutput,
+    /// Device name of the force message: 1 to 20 printable ASCII characters (default
+    /// `Force`; PLUS needs `<Id>To<ToolReferenceFrame>`, e.g. `ForceToRef`).
+    pub force_device_name: String,
+}
+
+impl Default for IgtlOptions {
+    /// A `POINT` named `Force`: what the device always sent before the choice existed.
+    fn default() -> Self {
+        Self {
+            force_output: ForceOutput::Point,
+            force_device_name: FORCE_DEVICE_NAME.to_owned(),
+        }
+    }
+}
+
+impl IgtlOptions {
+    /// What PLUS Toolkit's OpenHaptics device takes: a `TRANSFORM` named
+    /// `ForceTo<reference_frame>`, for an OpenIGTLinkTracker device with
+    /// `ToolReferenceFrame="<reference_frame>"` and a data source `Id="Force"`.
+    pub fn plus_openhaptics(reference_frame: &str) -> Self {
+        Self {
+            force_output: ForceOutput::Transform,
+            force_device_name: format!("ForceTo{reference_frame}"),
+        }
+    }
+
+    /// Checks the device name (it must fit the header and be printable).
+    pub fn check(&self) -> Result<(), HapticsError> {
+        let name = self.force_device_name.as_bytes();
+        if name.is_empty()
+            || name.len() > DEVICE_NAME_BYTES
+            || !name.iter().all(|b| b.is_ascii_graphic())
+        {
+            return Err(HapticsError::Config(format!(
+                "OpenIGTLink force device name {:?}: 1 to {DEVICE_NAME_BYTES} printable ASCII characters without spaces",
+                self.force_device_name
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Encodes the force as a `POINT` message named `Force` (header + body) into `out`.
 pub fn encode_force(force_newtons: &Vector3, timestamp: u64, out: &mut Vec<u8>) {
+    encode_force_point(FORCE_DEVICE_NAME, force_newtons, timestamp, out);
+}
+
+/// Encodes the force as a `TRANSFORM` message named `device_name` (header + body) into
+/// `out`: identity rotation, translation the force in **newtons** (not millimetres: read back
+/// with [`decode_transform`], which takes millimetres, the "tip" is the force / 1000).
+pub fn encode_force_transform(
+    device_name: &str,
+    force_newtons: &Vector3,
+    timestamp: u64,
+    out: &mut Vec<u8>,
+) {
+    let mut body = [0u8; TRANSFORM_BODY_BYTES];
+    // R11 R21 R31 R12 R22 R32 R13 R23 R33 (the identity's columns), then TX TY TZ
+    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    for (k, v) in identity
+        .into_iter()
+        .chain(force_newtons.iter().copied())
+        .enumerate()
+    {
+        body[4 * k..4 * k + 4].copy_from_slice(&(v as f32).to_be_bytes());
+    }
+    out.clear();
+    Header::write("TRANSFORM", device_name, timestamp, &body, out);
+    out.extend_from_slice(&body);
+}
+
+/// Encodes the force as a `POINT` message named `device_name` (header + body) into `out`.
+pub fn encode_force_point(
+    device_name: &str,
+    force_newtons: &Vector3,
+    timestamp: u64,
+    out: &mut Vec<u8>,
+) {
     let mut body = [0u8; POINT_ELEMENT_BYTES];
     body[..5].copy_from_slice(b"force");
     body[64..71].copy_from_slice(b"haptics");
@@ -264,7 +421,7 @@ pub fn encode_force(force_newtons: &Vector3, timestamp: u64, out: &mut Vec<u8>) 
     }
     body[112..116].copy_from_slice(&(force_newtons.norm() as f32).to_be_bytes());
     out.clear();
-    Header::write("POINT", "Force", timestamp, &body, out);
+    Header::write("POINT", device_name, timestamp, &body, out);
     out.extend_from_slice(&body);
 }
 
@@ -308,6 +465,7 @@ pub struct IgtlDevice {
     epoch: Instant,
     /// A pose older than this is stale.
     pub stale_after_nanos: u64,
+    force_output: ForceOutput,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -317,8 +475,14 @@ impl IgtlDevice {
         Self::listen_on(SocketAddr::from(([0, 0, 0, 0], port)))
     }
 
-    /// Listens on `address`.
+    /// Listens on `address`; the force goes back as a `POINT` named `Force`.
     pub fn listen_on(address: SocketAddr) -> Result<Self, HapticsError> {
+        Self::listen_with(address, IgtlOptions::default())
+    }
+
+    /// Listens on `address`; the force goes back as `options` say.
+    pub fn listen_with(address: SocketAddr, options: IgtlOptions) -> Result<Self, HapticsError> {
+        options.check()?;
         let listen_err = |source| HapticsError::Listen {
             port: address.port(),
             source,
@@ -341,6 +505,8 @@ impl IgtlDevice {
             counters: counters.clone(),
             epoch,
             button: BUTTON_BLADE,
+            force_output: options.force_output,
+            force_device_name: options.force_device_name,
         };
         let thread = std::thread::Builder::new()
             .name("cutlab-igtl".into())
@@ -359,8 +525,14 @@ impl IgtlDevice {
             counters,
             epoch,
             stale_after_nanos: 100_000_000,
+            force_output: options.force_output,
             thread: Some(thread),
         })
+    }
+
+    /// The kind of message the force goes back as.
+    pub fn force_output(&self) -> ForceOutput {
+        self.force_output
     }
 
     /// The address the device listens on.
@@ -425,6 +597,8 @@ struct Server {
     counters: Arc<IgtlCounters>,
     epoch: Instant,
     button: u32,
+    force_output: ForceOutput,
+    force_device_name: String,
 }
 
 /// How long a client may take to finish a message it started.
@@ -504,7 +678,7 @@ impl Server {
         self.connected.store(true, Ordering::Release);
         let mut header = [0u8; HEADER_BYTES];
         let mut body = vec![0u8; MAX_BODY_BYTES as usize];
-        let mut reply = Vec::with_capacity(HEADER_BYTES + POINT_ELEMENT_BYTES);
+        let mut reply = Vec::with_capacity(self.force_output.message_bytes());
         loop {
             match self.fill(&mut stream, &mut header, true) {
                 Fill::Done => {}
@@ -528,7 +702,13 @@ impl Server {
             }
             match self.handle(&h, body) {
                 Ok(true) => {
-                    encode_force(self.forces.read(), timestamp_now(), &mut reply);
+                    let force_newtons = *self.forces.read();
+                    self.force_output.encode(
+                        &self.force_device_name,
+                        &force_newtons,
+                        timestamp_now(),
+                        &mut reply,
+                    );
                     if stream.write_all(&reply).is_err() {
                         return;
                     }
@@ -688,5 +868,55 @@ mod tests {
         let c = content(&h, &out[HEADER_BYTES..]).expect("crc");
         let y = f32::from_be_bytes([c[104], c[105], c[106], c[107]]);
         assert_eq!(y, -1.0);
+    }
+
+    #[test]
+    fn force_can_be_a_transform_for_plus() {
+        let force = Vector3::new(0.5, -1.25, 3.0);
+        let mut out = Vec::new();
+        ForceOutput::Transform.encode("ForceToRef", &force, 7, &mut out);
+        assert_eq!(out.len(), ForceOutput::Transform.message_bytes());
+        let mut hb = [0u8; HEADER_BYTES];
+        hb.copy_from_slice(&out[..HEADER_BYTES]);
+        let h = Header::parse(&hb).expect("header");
+        assert_eq!(
+            (h.message_type(), h.device_name(), h.timestamp),
+            (&b"TRANSFORM"[..], &b"ForceToRef"[..], 7)
+        );
+        let (t, q) = decode_transform(content(&h, &out[HEADER_BYTES..]).expect("crc"))
+            .expect("a rigid transform");
+        // the translation carries newtons; decode_transform reads millimetres
+        assert!((t.coords * 1e3 - force).norm() < 1e-12, "{t:?}");
+        assert_eq!(q, Rotation::identity());
+        // the point form keeps its name and layout
+        ForceOutput::Point.encode("Force", &force, 0, &mut out);
+        assert_eq!(out.len(), HEADER_BYTES + POINT_ELEMENT_BYTES);
+        assert_eq!(&out[2..7], b"POINT");
+    }
+
+    #[test]
+    fn force_output_options_parse_and_check() {
+        assert_eq!("point".parse(), Ok(ForceOutput::Point));
+        assert_eq!("transform".parse(), Ok(ForceOutput::Transform));
+        assert!("Transform".parse::<ForceOutput>().is_err());
+        assert_eq!(ForceOutput::Transform.to_string(), "transform");
+        assert!(IgtlOptions::default().check().is_ok());
+        let plus = IgtlOptions::plus_openhaptics("Ref");
+        assert_eq!(
+            (plus.force_output, plus.force_device_name.as_str()),
+            (ForceOutput::Transform, "ForceToRef")
+        );
+        for bad in [
+            "",
+            "Force To Ref",
+            "ForceToAVeryLongFrameName",
+            "Kraft\u{e9}",
+        ] {
+            let o = IgtlOptions {
+                force_device_name: bad.to_owned(),
+                ..IgtlOptions::default()
+            };
+            assert!(o.check().is_err(), "{bad:?} accepted");
+        }
     }
 }

@@ -5,7 +5,7 @@ pub mod igtl;
 mod trainee;
 
 pub use csv::CsvDevice;
-pub use igtl::IgtlDevice;
+pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use trainee::{Plan, Skill, SyntheticTrainee};
 
 use crate::{ToolPose, Vector3};
