@@ -9,7 +9,7 @@
 //! | `GET /api/cohorts` | instructors/admins: per cohort the trainees x exercises grid (attempts, standing, trials to proficiency, last score); trainees: 403 |
 //! | `GET /api/trainees` | the trainees the caller may see |
 //! | `GET /api/trainees/{id}/progress` | per exercise: attempts, proficiency, learning curves per metric with the expert band and limits, CUSUM with `h0`/`h1`; curriculum modules' state |
-//! | `GET /api/attempts/{id}` | the attempt, every metric with threshold and verdict, comments, sign-off, which recordings exist |
+//! | `GET /api/attempts/{id}` | the attempt, every metric with threshold and verdict, the peak-force pass limits (`peak_force_limits_n`, drawn on the force chart), comments, sign-off, which recordings exist |
 //! | `GET /api/attempts/{id}/trace` | from the recording: planned line and cut (top view, mm), tip path, force over time; 404 without a readable recording |
 //! | `GET /api/running` | attempts in progress with elapsed time and recording size |
 //! | `GET /api/exercises` | exercises with their thresholds |

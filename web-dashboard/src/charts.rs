@@ -43,6 +43,8 @@ pub struct Chart {
     pub y_include: Vec<f64>,
     /// Same scale on both axes (top views).
     pub equal_aspect: bool,
+    /// A legend in the right margin: `(class of the line, label)` per entry.
+    pub legend: Vec<(&'static str, String)>,
 }
 
 const MARGIN_L: f64 = 58.0;
@@ -65,7 +67,14 @@ impl Chart {
             height: 240.0,
             y_include: Vec::new(),
             equal_aspect: false,
+            legend: Vec::new(),
         }
+    }
+
+    /// Adds a legend entry: a short line of `class`, then `label`.
+    pub fn legend(mut self, class: &'static str, label: impl Into<String>) -> Self {
+        self.legend.push((class, label.into()));
+        self
     }
 
     pub fn layer(mut self, l: Layer) -> Self {
@@ -131,6 +140,15 @@ impl Chart {
                 }
                 text class="axis-label" x=(fmt(MARGIN_L + pw / 2.0)) y=(fmt(self.height - 6.0)) text-anchor="middle" { (self.x_label) }
                 text class="axis-label" transform=(format!("translate(12 {}) rotate(-90)", fmt(MARGIN_T + ph / 2.0))) text-anchor="middle" { (self.y_label) }
+                @if !self.legend.is_empty() {
+                    g class="legend" {
+                        @for (i, (class, label)) in self.legend.iter().enumerate() {
+                            @let y = MARGIN_T + 8.0 + 14.0 * i as f64;
+                            line class=(class) x1=(fmt(MARGIN_L + pw + 4.0)) x2=(fmt(MARGIN_L + pw + 20.0)) y1=(fmt(y)) y2=(fmt(y)) {}
+                            text x=(fmt(MARGIN_L + pw + 23.0)) y=(fmt(y + 3.5)) { (label) }
+                        }
+                    }
+                }
                 @for l in &self.layers {
                     @match l {
                         Layer::HBand { low, high, class } => {

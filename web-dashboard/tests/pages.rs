@@ -565,3 +565,53 @@ async fn malformed_forms_and_paths_get_the_styled_error_page() {
             .starts_with("application/json")
     );
 }
+
+/// The `peak_force_limits_n` of `/api/attempts/{a}`.
+async fn peak_force_limits(app: &axum::Router, s: &Session, a: i64) -> serde_json::Value {
+    let json: serde_json::Value = serde_json::from_str(
+        &body_text(send(app, get(&format!("/api/attempts/{a}"), Some(s))).await).await,
+    )
+    .unwrap();
+    json["peak_force_limits_n"].clone()
+}
+
+#[tokio::test]
+async fn the_force_limit_shown_is_the_exercises_peak_force_threshold() {
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let a = first_attempt(&e.store, "ana").await;
+    let ex = e.store.get_attempt(a).await.unwrap().exercise_id;
+    // the built-in thresholds: peak force at most 3 N (the plan's force limit is 2.5 N)
+    assert_eq!(
+        peak_force_limits(&e.app, &kim, a).await,
+        serde_json::json!({"lower": null, "upper": 3.0})
+    );
+    for (key, mean, upper, expected) in [
+        (
+            "peak_force_n",
+            "0.5",
+            "0.9",
+            serde_json::json!({"lower": null, "upper": 0.9}),
+        ),
+        // an exercise scored without a peak-force threshold: no limit
+        ("time_s", "8", "20", serde_json::Value::Null),
+    ] {
+        let r = send(
+            &e.app,
+            post_form(
+                &format!("/exercises/{ex}/thresholds"),
+                Some(&kim.cookie),
+                &[
+                    ("key_0", key),
+                    ("better_0", "lower-is-better"),
+                    ("mean_0", mean),
+                    ("upper_0", upper),
+                    ("csrf", &kim.csrf),
+                ],
+            ),
+        )
+        .await;
+        assert_eq!(r.status(), StatusCode::SEE_OTHER);
+        assert_eq!(peak_force_limits(&e.app, &kim, a).await, expected, "{key}");
+    }
+}

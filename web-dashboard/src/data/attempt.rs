@@ -17,6 +17,9 @@ pub struct AttemptDetail {
     pub trainee: UserRef,
     pub exercise: ExerciseRef,
     pub metrics: Vec<MetricRow>,
+    /// The exercise's pass limits on the peak force (its `peak_force_n` threshold), in N:
+    /// the force limit the attempt is scored with; `None` without such a threshold.
+    pub peak_force_limits_n: Option<PassLimits>,
     pub comments: Vec<Comment>,
     pub signoff: Option<SignOff>,
     pub recordings: RecordingFiles,
@@ -36,6 +39,16 @@ pub struct MetricRow {
     pub lower_limit: Option<f64>,
     pub upper_limit: Option<f64>,
 }
+
+/// A threshold's pass limits (SI units).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PassLimits {
+    pub lower: Option<f64>,
+    pub upper: Option<f64>,
+}
+
+/// The metric whose threshold is the force limit drawn on the force chart.
+pub const PEAK_FORCE: &str = "peak_force_n";
 
 /// Which of the attempt's recordings exist on disk.
 #[derive(Debug, Serialize)]
@@ -82,6 +95,15 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
         })
         .collect();
     rows.sort_by_key(|r| metrics::catalogue_rank(&r.key));
+    let peak_force_limits_n = thresholds
+        .metrics
+        .iter()
+        .find(|t| t.key == PEAK_FORCE)
+        .map(|t| PassLimits {
+            lower: t.lower,
+            upper: t.upper,
+        })
+        .filter(|l| l.lower.is_some() || l.upper.is_some());
     let recordings = match recording_paths(&a) {
         Some((mcap, rrd)) => RecordingFiles {
             mcap: is_file(&mcap),
@@ -101,6 +123,7 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
             name: e.name,
         },
         metrics: rows,
+        peak_force_limits_n,
         recordings,
         attempt: a,
     })

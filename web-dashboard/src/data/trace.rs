@@ -30,6 +30,8 @@ pub struct AttemptTrace {
     pub path_mm: Vec<[f64; 2]>,
     /// `[t_s, |F| in N]`.
     pub force: Vec<[f64; 2]>,
+    /// The plan's force limit (what `time_above_force_limit_s` counts above); not the pass
+    /// limit on the peak force, which is the exercise's threshold (drawn on the chart).
     pub force_limit_n: f64,
     pub tolerance_mm: f64,
 }

@@ -15,7 +15,7 @@ use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
-use crate::data::attempt::{AttemptDetail, detail};
+use crate::data::attempt::{AttemptDetail, PassLimits, detail};
 use crate::data::debrief;
 use crate::data::label;
 use crate::data::trace::{AttemptTrace, trace};
@@ -74,7 +74,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             } @else { span class="muted" { "no .rrd (replay review needs " code { "cutlab session --rrd" } ")" } }
         }
         @if let Some(t) = t {
-            div class="charts" { (top_view(t)) (force_chart(t)) }
+            div class="charts" { (top_view(t).render()) (force_chart(t, d.peak_force_limits_n).render()) }
         } @else {
             p class="muted" { "No readable recording: no incision or force plot." }
         }
@@ -120,39 +120,58 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
     }
 }
 
-fn top_view(t: &AttemptTrace) -> Markup {
+/// The incision seen from above: the tip's path (grey), the executed cut (orange) and the
+/// planned line (dashed blue, drawn last so it shows over a cut that follows it), with a
+/// legend.
+fn top_view(t: &AttemptTrace) -> Chart {
     let mut c = Chart::new("Incision, top view", "x (mm)", "y (mm)")
         .layer(Layer::Line {
             points: t.path_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
             class: "series-2",
         })
         .layer(Layer::Line {
+            points: t.cut_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
+            class: "cut",
+        })
+        .layer(Layer::Line {
             points: t.planned_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
             class: "plan",
         })
-        .layer(Layer::Line {
-            points: t.cut_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
-            class: "cut",
-        });
+        .legend("plan", "planned")
+        .legend("cut", "cut")
+        .legend("series-2", "tip path");
     c.equal_aspect = true;
     c.height = 300.0;
-    c.render()
+    c
 }
 
-fn force_chart(t: &AttemptTrace) -> Markup {
-    let mut c = Chart::new("Force on the hand", "time (s)", "|F| (N)")
-        .layer(Layer::HLine {
-            y: t.force_limit_n,
-            class: "limit",
-            label: "limit".into(),
-        })
-        .layer(Layer::Line {
-            points: t.force.iter().map(|p| (p[0], Some(p[1]))).collect(),
-            class: "series",
-        });
+/// The force over time with the pass limits the exercise scores the peak force with (its
+/// `peak_force_n` threshold); no limit line without one.
+fn force_chart(t: &AttemptTrace, limits: Option<PassLimits>) -> Chart {
+    let mut c = Chart::new("Force on the hand", "time (s)", "|F| (N)");
+    let limits = limits.map_or([None, None], |l| [l.lower, l.upper]);
+    for (limit, sign) in limits.into_iter().zip(["≥", "≤"]) {
+        if let Some(y) = limit.filter(|y| y.is_finite()) {
+            c = c.layer(Layer::HLine {
+                y,
+                class: "limit",
+                label: format!("pass {sign} {} N", num_short(y)),
+            });
+        }
+    }
+    c = c.layer(Layer::Line {
+        points: t.force.iter().map(|p| (p[0], Some(p[1]))).collect(),
+        class: "series",
+    });
     c.y_include = vec![0.0];
     c.height = 300.0;
-    c.render()
+    c
+}
+
+/// A number with at most 2 decimals, without trailing zeros (0.9, 2.5, 3).
+fn num_short(v: f64) -> String {
+    let s = format!("{v:.2}");
+    s.trim_end_matches('0').trim_end_matches('.').to_owned()
 }
 
 #[derive(Debug, Deserialize)]
@@ -181,4 +200,88 @@ async fn sign_off(
     let a = visible_attempt(&state, &user, id).await?;
     debrief::sign_off(&state, a.id, user.id()).await?;
     Ok(Redirect::to(&format!("/attempts/{id}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn trace() -> AttemptTrace {
+        AttemptTrace {
+            planned_mm: vec![[0.0, 0.0], [60.0, 0.0]],
+            cut_mm: vec![[1.0, 0.5], [30.0, 1.0], [58.0, 0.8]],
+            path_mm: vec![[-5.0, 3.0], [1.0, 0.5], [58.0, 0.8], [62.0, 4.0]],
+            force: vec![[0.0, 0.0], [1.0, 0.7], [2.0, 1.2], [3.0, 0.4]],
+            force_limit_n: 2.5,
+            tolerance_mm: 2.0,
+        }
+    }
+
+    fn hlines(c: &Chart) -> Vec<(f64, &str, &str)> {
+        c.layers
+            .iter()
+            .filter_map(|l| match l {
+                Layer::HLine { y, class, label } => Some((*y, *class, label.as_str())),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_force_chart_draws_the_exercises_peak_force_limit_not_the_plans() {
+        let t = trace();
+        let c = force_chart(
+            &t,
+            Some(PassLimits {
+                lower: None,
+                upper: Some(0.9),
+            }),
+        );
+        assert_eq!(hlines(&c), vec![(0.9, "limit", "pass ≤ 0.9 N")]);
+        let svg = c.render().into_string();
+        assert!(
+            svg.contains("pass ≤ 0.9 N") && !svg.contains("2.5"),
+            "{svg}"
+        );
+        // two-sided: both limits
+        let c = force_chart(
+            &t,
+            Some(PassLimits {
+                lower: Some(0.2),
+                upper: Some(3.0),
+            }),
+        );
+        assert_eq!(
+            hlines(&c),
+            vec![(0.2, "limit", "pass ≥ 0.2 N"), (3.0, "limit", "pass ≤ 3 N")]
+        );
+        // no threshold on the peak force: no limit line at all
+        let c = force_chart(&t, None);
+        assert!(hlines(&c).is_empty());
+        assert!(!c.render().into_string().contains("class=\"limit\""));
+    }
+
+    #[test]
+    fn the_top_view_tells_the_plan_from_the_cut() {
+        let svg = top_view(&trace()).render().into_string();
+        // the lines carry the styled classes (dashed blue plan, orange cut) ...
+        assert_eq!(svg.matches("<polyline class=\"plan\"").count(), 1, "{svg}");
+        assert_eq!(svg.matches("<polyline class=\"cut\"").count(), 1);
+        // ... and a legend names them with the same classes
+        let legend = &svg[svg.find("class=\"legend\"").unwrap()..];
+        for (class, label) in [
+            ("plan", "planned"),
+            ("cut", "cut"),
+            ("series-2", "tip path"),
+        ] {
+            assert!(
+                legend.contains(&format!("<line class=\"{class}\""))
+                    && legend.contains(&format!(">{label}</text>")),
+                "{class} {label}: {legend}"
+            );
+        }
+        let css = include_str!("static/style.css");
+        assert!(css.contains("svg.chart .plan {") && css.contains("stroke-dasharray"));
+        assert!(css.contains("svg.chart .cut {"));
+    }
 }
