@@ -128,12 +128,17 @@ impl CsvDevice {
                     format!("t_s must increase strictly: {t} after {previous}"),
                 ));
             }
-            let q = nalgebra::Quaternion::new(v[4], v[5], v[6], v[7]);
+            let mut q = nalgebra::Quaternion::new(v[4], v[5], v[6], v[7]);
             if q.norm() < 1e-9 {
                 return Err(err(
                     line,
                     "the quaternion qw qx qy qz has zero length".into(),
                 ));
+            }
+            if !q.norm().is_finite() {
+                // finite components whose squares overflow (e.g. 1e300 1e300 0 0): scaled
+                // first, or normalising would give the zero quaternion
+                q /= q.coords.amax();
             }
             let buttons = match fields[8] {
                 "0" => 0,
@@ -206,7 +211,19 @@ impl CsvDevice {
         let (a, b) = (self.poses[self.cursor], self.poses[self.cursor + 1]);
         let u = (time_s - self.times_s[self.cursor])
             / (self.times_s[self.cursor + 1] - self.times_s[self.cursor]);
-        let tip = a.tip_in_world + (b.tip_in_world - a.tip_in_world) * u;
+        let mut tip = a.tip_in_world + (b.tip_in_world - a.tip_in_world) * u;
+        if !tip.iter().all(|c| c.is_finite()) {
+            // a step between two finite samples that overflows (coordinates of opposite
+            // signs near f64::MAX): the convex form, else the nearer sample
+            tip = Point3::from(a.tip_in_world.coords * (1.0 - u) + b.tip_in_world.coords * u);
+            if !tip.iter().all(|c| c.is_finite()) {
+                tip = if u < 0.5 {
+                    a.tip_in_world
+                } else {
+                    b.tip_in_world
+                };
+            }
+        }
         let rotation = a
             .world_from_tool
             .try_slerp(&b.world_from_tool, u, 1e-9)
@@ -256,6 +273,32 @@ mod tests {
         assert_eq!(p.buttons, 0);
         assert_eq!(d.read(1000, 1.0).expect("pose").buttons, 1);
         assert!(d.finished(1.5) && !d.finished(0.9));
+    }
+
+    /// Found for the mutation test (tests/fuzz-regressions/trajectory_csv/, issue 32): finite
+    /// values whose arithmetic overflows gave a zero "unit" quaternion and an infinite tip.
+    #[test]
+    fn huge_but_finite_values_give_finite_poses() {
+        let header = "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n";
+        let mut d = parse(&format!(
+            "{header}0, 0, 0, 0, 1e300, 1e300, 0, 0, 0\n1, 0, 0, 0, 1, 0, 0, 0, 1\n"
+        ))
+        .expect("a long quaternion is normalised");
+        let q = d.pose_at(0.0).world_from_tool;
+        assert!((q.quaternion().norm() - 1.0).abs() < 1e-12, "{q:?}");
+        assert!(
+            (q.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-12,
+            "{q:?}"
+        );
+        let mut d = parse(&format!(
+            "{header}0, -1e308, 0, 0, 1, 0, 0, 0, 0\n1, 1e308, 0, 0, 1, 0, 0, 0, 1\n"
+        ))
+        .expect("finite values");
+        for t in [0.0, 0.25, 0.5, 0.75, 1.0] {
+            let tip = d.pose_at(t).tip_in_world;
+            assert!(tip.iter().all(|c| c.is_finite()), "{t}: {tip:?}");
+        }
+        assert_eq!(d.pose_at(0.5).tip_in_world.x, 0.0);
     }
 
     #[test]
