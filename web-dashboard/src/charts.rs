@@ -45,6 +45,8 @@ pub struct Chart {
     pub equal_aspect: bool,
     /// A legend in the right margin: `(class of the line, label)` per entry.
     pub legend: Vec<(&'static str, String)>,
+    /// Ticks on the x axis at whole numbers only (attempt numbers).
+    pub integer_x: bool,
 }
 
 const MARGIN_L: f64 = 58.0;
@@ -68,7 +70,14 @@ impl Chart {
             y_include: Vec::new(),
             equal_aspect: false,
             legend: Vec::new(),
+            integer_x: false,
         }
+    }
+
+    /// Ticks the x axis at whole numbers only (for counts such as attempt numbers).
+    pub fn integer_x(mut self) -> Self {
+        self.integer_x = true;
+        self
     }
 
     /// Adds a legend entry: a short line of `class`, then `label`.
@@ -131,11 +140,11 @@ impl Chart {
                 title { (self.title) }
                 text class="chart-title" x=(fmt(MARGIN_L)) y="16" { (self.title) }
                 rect class="plot-area" x=(fmt(MARGIN_L)) y=(fmt(MARGIN_T)) width=(fmt(pw)) height=(fmt(ph)) {}
-                @for t in ticks(y0, y1) {
+                @for t in ticks(y0, y1, false) {
                     line class="grid" x1=(fmt(MARGIN_L)) x2=(fmt(MARGIN_L + pw)) y1=(fmt(py(t))) y2=(fmt(py(t))) {}
                     text class="tick" x=(fmt(MARGIN_L - 4.0)) y=(fmt(py(t) + 4.0)) text-anchor="end" { (tick_label(t)) }
                 }
-                @for t in ticks(x0, x1) {
+                @for t in ticks(x0, x1, self.integer_x) {
                     text class="tick" x=(fmt(px(t))) y=(fmt(MARGIN_T + ph + 14.0)) text-anchor="middle" { (tick_label(t)) }
                 }
                 text class="axis-label" x=(fmt(MARGIN_L + pw / 2.0)) y=(fmt(self.height - 6.0)) text-anchor="middle" { (self.x_label) }
@@ -211,8 +220,9 @@ fn span(v: &[f64]) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
-/// About five round tick values within `[lo, hi]`.
-fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+/// About five round tick values within `[lo, hi]`; with `integer`, whole numbers only (a
+/// step of at least 1).
+fn ticks(lo: f64, hi: f64, integer: bool) -> Vec<f64> {
     let range = hi - lo;
     if !(range > 0.0) || !range.is_finite() {
         return Vec::new();
@@ -224,6 +234,7 @@ fn ticks(lo: f64, hi: f64) -> Vec<f64> {
         .map(|m| m * mag)
         .find(|s| range / s <= 6.0)
         .unwrap_or(10.0 * mag);
+    let step = if integer { step.max(1.0) } else { step };
     let first = (lo / step).ceil() as i64;
     let last = (hi / step).floor() as i64;
     (first..=last).map(|i| i as f64 * step).collect()
@@ -258,14 +269,44 @@ mod tests {
 
     #[test]
     fn ticks_are_round_and_inside() {
-        assert_eq!(ticks(0.0, 10.0), vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]);
-        let t = ticks(-0.37, 1.21);
+        assert_eq!(ticks(0.0, 10.0, false), vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]);
+        let t = ticks(-0.37, 1.21, false);
         assert!(
             t.iter().all(|v| (-0.37..=1.21).contains(v)) && t.len() >= 3,
             "{t:?}"
         );
-        assert!(ticks(1.0, 1.0).is_empty());
-        assert!(ticks(f64::NAN, 1.0).is_empty());
+        assert!(ticks(1.0, 1.0, false).is_empty());
+        assert!(ticks(f64::NAN, 1.0, false).is_empty());
+    }
+
+    #[test]
+    fn integer_ticks_are_whole_numbers() {
+        // two attempts, padded: 0.95 .. 2.05 (decimal ticks would be 1, 1.2, ... 2)
+        assert_eq!(ticks(0.95, 2.05, true), vec![1.0, 2.0]);
+        assert_eq!(ticks(0.9, 3.1, true), vec![1.0, 2.0, 3.0]);
+        assert_eq!(ticks(0.5, 1.5, true), vec![1.0]);
+        assert_eq!(ticks(0.0, 40.0, true), ticks(0.0, 40.0, false));
+        assert!(ticks(0.95, 2.05, false).iter().any(|t| t.fract() != 0.0));
+        for (lo, hi) in [(0.1, 0.9), (0.65, 8.35), (-3.3, 17.2), (0.99, 1.01)] {
+            assert!(
+                ticks(lo, hi, true).iter().all(|t| t.fract() == 0.0),
+                "{lo} {hi}"
+            );
+        }
+        // in the SVG: the x labels of an attempt chart
+        let svg = Chart::new("t", "attempt", "v")
+            .integer_x()
+            .layer(Layer::Line {
+                points: vec![(1.0, Some(0.3)), (2.0, Some(0.5))],
+                class: "series",
+            })
+            .render()
+            .into_string();
+        assert!(svg.contains(">1</text>") && svg.contains(">2</text>"));
+        assert!(
+            !svg.contains(">1.5</text>") && !svg.contains(">1.2</text>"),
+            "{svg}"
+        );
     }
 
     #[test]

@@ -615,3 +615,72 @@ async fn the_force_limit_shown_is_the_exercises_peak_force_threshold() {
         assert_eq!(peak_force_limits(&e.app, &kim, a).await, expected, "{key}");
     }
 }
+
+/// The x tick labels (`text-anchor="middle"`) of the charts in `html`.
+fn x_ticks(html: &str) -> Vec<String> {
+    html.split("<text class=\"tick\" ")
+        .skip(1)
+        .filter(|t| t[..t.find('>').unwrap()].contains("text-anchor=\"middle\""))
+        .map(|t| t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].to_owned())
+        .collect()
+}
+
+#[tokio::test]
+async fn the_progress_page_starts_with_a_summary_and_charts_on_demand() {
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let ana = user_id(&e.store, "ana").await;
+    let page = body_text(send(&e.app, get(&format!("/trainees/{ana}"), Some(&kim))).await).await;
+    let main = &page[page.find("<main>").unwrap()..];
+    // the exercise's heading, the standing, then the table before any chart
+    let (table, details, svg) = (
+        main.find("<table class=\"summary\">").unwrap(),
+        main.find("<details").unwrap(),
+        main.find("<svg").unwrap(),
+    );
+    assert!(table < details && details < svg, "{main}");
+    assert!(!main[..table].contains("<svg") && !main[..table].contains("<table"));
+    // every chart is inside a collapsed <details>
+    assert!(!main.contains("<details open"));
+    let charts_outside: usize = main
+        .split("<details")
+        .map(|part| part.find("</details>").map_or(part, |end| &part[end..]))
+        .map(|rest| rest.matches("<svg").count())
+        .sum();
+    assert_eq!(charts_outside, 0, "{main}");
+    // the summary: per metric by name, latest / best / mean, limits and the pass rate
+    let summary = &main[table..];
+    let summary = &summary[..summary.find("</table>").unwrap()];
+    for h in ["Latest", "Best", "Mean", "Pass limits", "Passed"] {
+        assert!(summary.contains(&format!("<th>{h}</th>")), "{h}");
+    }
+    let row = &summary[summary.find("<td>Entry error</td>").unwrap()..];
+    let row = &row[..row.find("</tr>").unwrap()];
+    assert!(
+        row.contains("<td>mm</td>") && row.contains("≤ 4.000") && row.contains(" of 8 ("),
+        "{row}"
+    );
+    // the CUSUM chart explained: its lines and what they mean for proficiency
+    assert!(
+        main.contains("green line −h0") && main.contains("red line h1"),
+        "the CUSUM's lines explained"
+    );
+    assert!(main.contains("proficient by CUSUM") && main.contains("CUSUM after attempt 8"));
+}
+
+#[tokio::test]
+async fn attempt_axes_tick_at_whole_attempts() {
+    let e = env().await;
+    // a trainee with 2 scored attempts: the axis spans 0.95 .. 2.05
+    let ids = cutlab_dashboard::seed::seed_load(&e.store, 1, 2)
+        .await
+        .unwrap();
+    let s = login(&e.app, "load-instructor", "load-demo").await;
+    let page = body_text(send(&e.app, get(&format!("/trainees/{}", ids[0]), Some(&s))).await).await;
+    let ticks = x_ticks(&page);
+    assert!(ticks.len() >= 10, "{ticks:?}");
+    for t in &ticks {
+        assert!(t.parse::<u32>().is_ok(), "attempt tick {t:?}");
+    }
+    assert!(ticks.iter().any(|t| t == "1") && ticks.iter().any(|t| t == "2"));
+}

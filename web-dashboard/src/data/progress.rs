@@ -68,6 +68,53 @@ pub struct MetricSeries {
     pub points: Vec<SeriesPoint>,
 }
 
+/// One metric over a trainee's scored attempts, for the summary table (SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MetricSummary {
+    /// The value of the last attempt with one.
+    pub latest: Option<f64>,
+    /// The best value: lowest or highest by the metric's direction; two-sided, the nearest
+    /// to the expert mean (none without a reference).
+    pub best: Option<f64>,
+    pub mean: Option<f64>,
+    /// Attempts passing this metric, of those with a verdict on it.
+    pub passes: usize,
+    pub verdicts: usize,
+}
+
+impl MetricSeries {
+    pub fn summary(&self) -> MetricSummary {
+        let values: Vec<f64> = self
+            .points
+            .iter()
+            .filter_map(|p| p.value.filter(|v| v.is_finite()))
+            .collect();
+        let fold = |pick: fn(f64, f64) -> f64| values.iter().copied().reduce(pick);
+        let best = match self.better {
+            Some(Better::LowerIsBetter) => fold(f64::min),
+            Some(Better::HigherIsBetter) => fold(f64::max),
+            Some(Better::TwoSided) => self.band.as_ref().and_then(|b| {
+                values
+                    .iter()
+                    .copied()
+                    .min_by(|x, y| (x - b.mean).abs().total_cmp(&(y - b.mean).abs()))
+            }),
+            None => None,
+        };
+        MetricSummary {
+            latest: values.last().copied(),
+            best,
+            mean: (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64),
+            passes: self
+                .points
+                .iter()
+                .filter(|p| p.passed == Some(true))
+                .count(),
+            verdicts: self.points.iter().filter(|p| p.passed.is_some()).count(),
+        }
+    }
+}
+
 #[derive(Debug, Serialize)]
 pub struct SeriesPoint {
     pub n: u32,
@@ -343,5 +390,71 @@ fn module_standing(s: impl Iterator<Item = Standing> + Clone) -> Standing {
         Standing::NotStarted
     } else {
         Standing::InProgress
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn series(better: Option<Better>, values: &[(Option<f64>, Option<bool>)]) -> MetricSeries {
+        MetricSeries {
+            key: "k".into(),
+            unit: "m".into(),
+            better,
+            description: String::new(),
+            band: Some(Band {
+                mean: 1.0,
+                sd: 0.1,
+                k: 2.0,
+                low: 0.8,
+                high: 1.2,
+                lower_limit: None,
+                upper_limit: Some(2.0),
+                n_experts: 0,
+            }),
+            points: values
+                .iter()
+                .enumerate()
+                .map(|(i, (value, passed))| SeriesPoint {
+                    n: i as u32 + 1,
+                    attempt_id: i as i64,
+                    value: *value,
+                    passed: *passed,
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn summaries_by_hand() {
+        let v = [
+            (Some(3.0), Some(false)),
+            (Some(0.25), Some(true)),
+            (None, Some(false)),
+            (Some(1.5), Some(true)),
+        ];
+        let s = series(Some(Better::LowerIsBetter), &v).summary();
+        assert_eq!(
+            s,
+            MetricSummary {
+                latest: Some(1.5),
+                best: Some(0.25),
+                mean: Some(4.75 / 3.0),
+                passes: 2,
+                verdicts: 4,
+            }
+        );
+        assert_eq!(
+            series(Some(Better::HigherIsBetter), &v).summary().best,
+            Some(3.0)
+        );
+        // two-sided: nearest the expert mean 1.0
+        assert_eq!(series(Some(Better::TwoSided), &v).summary().best, Some(1.5));
+        let empty = series(None, &[]).summary();
+        assert_eq!(
+            (empty.latest, empty.best, empty.mean, empty.verdicts),
+            (None, None, None, 0)
+        );
     }
 }

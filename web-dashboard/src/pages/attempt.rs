@@ -10,7 +10,7 @@ use cutlab_assessor::from_recording::DAMAGED_RECORDING_NOTE;
 use maud::{Markup, html};
 use serde::Deserialize;
 
-use super::layout::{num, page, verdict, when};
+use super::layout::{limits, num, page, verdict, when};
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
@@ -42,15 +42,6 @@ async fn attempt(
         Some(&user),
         body(&user, &d, t.as_deref()),
     ))
-}
-
-fn limits(lower: Option<f64>, upper: Option<f64>, f: f64) -> String {
-    match (lower, upper) {
-        (Some(l), Some(u)) => format!("{} … {}", num(Some(l * f), 3), num(Some(u * f), 3)),
-        (Some(l), None) => format!("≥ {}", num(Some(l * f), 3)),
-        (None, Some(u)) => format!("≤ {}", num(Some(u * f), 3)),
-        (None, None) => "–".into(),
-    }
 }
 
 fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Markup {

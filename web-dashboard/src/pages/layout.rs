@@ -107,6 +107,17 @@ pub fn num(v: Option<f64>, digits: usize) -> String {
     }
 }
 
+/// Pass limits (SI values times `f`, the display factor) with 3 decimals: "a … b", "≥ a",
+/// "≤ b", or a dash without any.
+pub fn limits(lower: Option<f64>, upper: Option<f64>, f: f64) -> String {
+    match (lower, upper) {
+        (Some(l), Some(u)) => format!("{} … {}", num(Some(l * f), 3), num(Some(u * f), 3)),
+        (Some(l), None) => format!("≥ {}", num(Some(l * f), 3)),
+        (None, Some(u)) => format!("≤ {}", num(Some(u * f), 3)),
+        (None, None) => "–".into(),
+    }
+}
+
 /// A pass / fail mark.
 pub fn verdict(passed: Option<bool>) -> Markup {
     match passed {

@@ -1,5 +1,7 @@
-//! `/trainees/{id}`: a trainee's progress: learning curves per metric with the expert band
-//! and the pass limits, the normalised score, the CUSUM chart, the curriculum modules.
+//! `/trainees/{id}`: a trainee's progress: per exercise a summary table (per metric the
+//! latest, best and mean values, the pass limits, the pass rate) first, then on demand
+//! (collapsed) the normalised score and CUSUM charts (explained) and the learning curves per
+//! metric with the expert band and the pass limits; the attempts; the curriculum modules.
 
 use axum::Router;
 use axum::body::Bytes;
@@ -8,15 +10,18 @@ use axum::response::Html;
 use axum::routing::get;
 use maud::{Markup, html};
 
-use super::layout::{num, page_around, verdict, when};
+use super::layout::{limits, num, page_around, verdict, when};
 use crate::AppState;
 use crate::access::visible_user;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
 use crate::data::label;
-use crate::data::progress::{ExerciseProgress, MetricSeries, Progress, cached_progress};
+use crate::data::progress::{
+    CusumChart, ExerciseProgress, MetricSeries, Progress, cached_progress,
+};
 use crate::error::PageResult;
 use crate::extract::Id;
+use cutlab_assessor::proficiency::{CusumSignal, REQUIRED_CONSECUTIVE_PASSES};
 
 pub fn router() -> Router<AppState> {
     Router::new().route("/trainees/{id}", get(trainee))
@@ -72,6 +77,7 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
         .filter_map(|a| a.n.map(|n| (f64::from(n), a.score)))
         .collect();
     let score_chart = Chart::new("Normalised score", "attempt", "score")
+        .integer_x()
         .layer(Layer::HLine {
             y: 0.0,
             class: "limit",
@@ -104,6 +110,7 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
                 .collect(),
         });
     let mut cusum = Chart::new("CUSUM of failures", "attempt", "CUSUM")
+        .integer_x()
         .layer(Layer::HLine {
             y: e.cusum.h1,
             class: "limit",
@@ -137,13 +144,21 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
             (pr.attempts) " scored attempts, " (pr.passes) " passed, " (pr.consecutive_passes) " consecutive; "
             @if let Some(t) = pr.trials_to_proficiency { strong class="pass" { "proficient after " (t) " attempts" } } @else { strong { (pr.standing.as_str()) } }
         }
-        div class="charts" {
-            (score_chart.render())
-            (cusum.render())
+        (cusum_status(&e.cusum))
+        (summary_table(&e.metrics))
+        details class="score-charts" {
+            summary { "Score and CUSUM charts" }
+            div class="charts" {
+                (score_chart.render())
+                (cusum.render())
+            }
+            (cusum_explanation(&e.cusum))
         }
-        h3 { "Learning curves" }
-        div class="charts learning-curves" {
-            @for m in &e.metrics { (metric_chart(m)) }
+        details class="curves" {
+            summary { "Learning curves (" (e.metrics.len()) " metrics)" }
+            div class="charts learning-curves" {
+                @for m in &e.metrics { (metric_chart(m)) }
+            }
         }
         h3 { "Attempts" }
         table {
@@ -164,10 +179,72 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
     }
 }
 
+/// Per metric (thresholded first): the latest, best and mean values in display units, the
+/// pass limits and the pass rate.
+fn summary_table(metrics: &[MetricSeries]) -> Markup {
+    html! {
+        table class="summary" {
+            thead { tr { th { "Metric" } th { "Unit" } th { "Latest" } th { "Best" } th { "Mean" } th { "Pass limits" } th { "Passed" } } }
+            tbody {
+                @for m in metrics {
+                    @let l = label(&m.key, &m.unit);
+                    @let s = m.summary();
+                    @let f = l.factor;
+                    tr {
+                        td { (l.name) }
+                        td { (l.unit) }
+                        td class="num" { (num(s.latest.map(|v| v * f), 2)) }
+                        td class="num" { (num(s.best.map(|v| v * f), 2)) }
+                        td class="num" { (num(s.mean.map(|v| v * f), 2)) }
+                        td class="num" { (m.band.as_ref().map_or_else(|| "–".into(), |b| limits(b.lower_limit, b.upper_limit, f))) }
+                        td class="num" {
+                            @if s.verdicts > 0 {
+                                (s.passes) " of " (s.verdicts) " (" (100 * s.passes / s.verdicts) " %)"
+                            } @else { "–" }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Where the CUSUM stands after the last scored attempt.
+fn cusum_status(c: &CusumChart) -> Markup {
+    html! {
+        @if let Some(last) = c.points.last() {
+            p {
+                "CUSUM after attempt " (last.n) ": " (num(Some(last.value), 2)) ", "
+                @match last.signal {
+                    CusumSignal::Acceptable => strong class="pass" { "acceptable failure rate" },
+                    CusumSignal::Unacceptable => strong class="fail" { "unacceptable failure rate" },
+                    CusumSignal::None => span { "no signal yet" },
+                }
+                " (acceptable at −h0 = −" (num(Some(c.h0), 2)) ", unacceptable at h1 = " (num(Some(c.h1), 2)) ")."
+            }
+        }
+    }
+}
+
+/// What the CUSUM chart's lines mean.
+fn cusum_explanation(c: &CusumChart) -> Markup {
+    let s = c.params.s();
+    let pct = |p: f64| format!("{:.0} %", 100.0 * p);
+    html! {
+        p class="muted explain" {
+            "The CUSUM line rises by " (num(Some(1.0 - s), 2)) " with each failed attempt and falls by "
+            (num(Some(s), 2)) " with each pass. Reaching the green line −h0 means the trainee's failure rate is acceptable (at most "
+            (pct(c.params.p0)) "): proficient by CUSUM; reaching the red line h1 means it is unacceptable (" (pct(c.params.p1))
+            " or more) and their technique needs review. (The standing above counts "
+            (REQUIRED_CONSECUTIVE_PASSES) " consecutive passes.)"
+        }
+    }
+}
+
 fn metric_chart(m: &MetricSeries) -> Markup {
     let l = label(&m.key, &m.unit);
     let (f, unit) = (l.factor, l.unit);
-    let mut c = Chart::new(l.with_unit(), "attempt", unit);
+    let mut c = Chart::new(l.with_unit(), "attempt", unit).integer_x();
     if let Some(b) = &m.band {
         if b.sd > 0.0 {
             c = c.layer(Layer::HBand {
