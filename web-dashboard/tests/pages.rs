@@ -684,3 +684,171 @@ async fn attempt_axes_tick_at_whole_attempts() {
     }
     assert!(ticks.iter().any(|t| t == "1") && ticks.iter().any(|t| t == "2"));
 }
+
+/// The value of the attribute `name` in the tag text `tag`.
+fn attr(tag: &str, name: &str) -> Option<String> {
+    let at = tag.find(&format!(" {name}=\""))? + name.len() + 3;
+    Some(tag[at..at + tag[at..].find('"')?].to_owned())
+}
+
+/// The tags `<input`, `<select`, `<textarea` of `html` (their opening tag's text), hidden
+/// inputs left out.
+fn controls(html: &str) -> Vec<&str> {
+    let mut out = Vec::new();
+    for kind in ["<input", "<select", "<textarea"] {
+        for part in html.split(kind).skip(1) {
+            let tag = &part[..part.find('>').unwrap()];
+            if attr(tag, "type").as_deref() != Some("hidden") {
+                out.push(tag);
+            }
+        }
+    }
+    out
+}
+
+/// The `(name, value)` of the inputs of the form posting to `action` (text areas empty).
+fn form_values(html: &str, action: &str) -> Vec<(String, String)> {
+    let form = &html[html.find(&format!("action=\"{action}\"")).unwrap()..];
+    let form = &form[..form.find("</form>").unwrap()];
+    let mut out: Vec<(String, String)> = form
+        .split("<input")
+        .skip(1)
+        .map(|p| &p[..p.find('>').unwrap()])
+        .filter_map(|t| Some((attr(t, "name")?, attr(t, "value").unwrap_or_default())))
+        .collect();
+    out.extend(
+        form.split("<textarea")
+            .skip(1)
+            .filter_map(|p| Some((attr(&p[..p.find('>').unwrap()], "name")?, String::new()))),
+    );
+    out
+}
+
+#[tokio::test]
+async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let ex = e.store.list_exercises().await.unwrap()[0].id;
+    e.store.create_curriculum("basics", "").await.unwrap();
+    for path in ["/curriculum".to_owned(), format!("/exercises/{ex}")] {
+        let page = body_text(send(&e.app, get(&path, Some(&kim))).await).await;
+        let controls = controls(&page);
+        assert!(controls.len() >= 15, "{path}: {controls:?}");
+        for c in controls {
+            let id = attr(c, "id").unwrap_or_else(|| panic!("{path}: no id on {c}"));
+            assert_eq!(
+                page.matches(&format!(" for=\"{id}\"")).count(),
+                1,
+                "{path}: one label for {id}"
+            );
+            assert_eq!(
+                page.matches(&format!(" id=\"{id}\"")).count(),
+                1,
+                "{path}: id {id} once"
+            );
+        }
+        // the plan: labelled fields, its documentation on the page, no source-tree path
+        for key in ["depth_mm", "force_limit_n", "entry_x_mm", "viewpoint_z_mm"] {
+            assert!(page.contains(&format!("name=\"{key}\"")), "{path}: {key}");
+        }
+        assert!(
+            page.contains("<code>corridor_half_width_m</code>")
+                && page.contains("href=\"/plans/example.toml\"")
+        );
+        assert!(!page.contains("assessor/examples"), "{path}");
+    }
+    let r = send(&e.app, get("/plans/example.toml", Some(&kim))).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    assert!(body_text(r).await.contains("corridor_half_width_m = 0.005"));
+    let r = send(&e.app, get("/static/plan.js", None)).await;
+    assert_eq!(r.status(), StatusCode::OK);
+
+    // a new exercise from the fields, as the page shows them with two changed
+    let page = body_text(send(&e.app, get("/curriculum", Some(&kim))).await).await;
+    let mut form = form_values(&page, "/exercises");
+    for (k, v) in form.iter_mut() {
+        match k.as_str() {
+            "name" => *v = "shallow-cut".into(),
+            "depth_mm" => *v = "5".into(),
+            "force_limit_n" => *v = "0.9".into(),
+            _ => {}
+        }
+    }
+    let pairs: Vec<(&str, &str)> = form.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let r = send(&e.app, post_form("/exercises", Some(&kim.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER, "{}", body_text(r).await);
+    let new = e.store.exercise_by_name("shallow-cut").await.unwrap();
+    let plan = e.store.get_plan(new.plan_id).await.unwrap();
+    let builtin = cutlab_dashboard::assessor::ExpertPlan::chest_wall().unwrap();
+    assert_eq!((plan.depth_m, plan.force_limit_n), (0.005, 0.9));
+    assert_eq!(
+        (plan.entry_m, plan.incision_m.len(), plan.tolerance_m),
+        (
+            builtin.entry_m,
+            builtin.incision_m.len(),
+            builtin.tolerance_m
+        )
+    );
+    // nothing about the plan: refused, nothing created
+    let before = count(&e.store, "exercises").await;
+    let r = send(
+        &e.app,
+        post_form(
+            "/exercises",
+            Some(&kim.cookie),
+            &[
+                ("name", "no-plan"),
+                ("scene", "chest-wall"),
+                ("threshold_k", "2"),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    assert_eq!(count(&e.store, "exercises").await, before);
+
+    // editing: the form posted back as shown keeps the plan; a changed field changes it
+    let edit = format!("/exercises/{}", new.id);
+    let page = body_text(send(&e.app, get(&edit, Some(&kim))).await).await;
+    let form = form_values(&page, &edit);
+    let pairs: Vec<(&str, &str)> = form.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let r = send(&e.app, post_form(&edit, Some(&kim.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    assert_eq!(
+        e.store.get_exercise(new.id).await.unwrap().plan_id,
+        new.plan_id
+    );
+    let pairs: Vec<(&str, &str)> = form
+        .iter()
+        .map(|(k, v)| (k.as_str(), if k == "exit_x_mm" { "45" } else { v.as_str() }))
+        .collect();
+    let r = send(&e.app, post_form(&edit, Some(&kim.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    let edited = e.store.get_exercise(new.id).await.unwrap();
+    assert_ne!(edited.plan_id, new.plan_id);
+    let plan = e.store.get_plan(edited.plan_id).await.unwrap();
+    assert_eq!(plan.exit_m[0], 0.045);
+    assert_eq!(
+        plan.incision_m,
+        vec![plan.entry_m, plan.exit_m],
+        "a straight line now"
+    );
+    assert_eq!(plan.depth_m, 0.005, "the rest kept");
+    // a bad number: 400 as a page, the plan unchanged
+    let pairs: Vec<(&str, &str)> = form
+        .iter()
+        .map(|(k, v)| {
+            (
+                k.as_str(),
+                if k == "depth_mm" { "deep" } else { v.as_str() },
+            )
+        })
+        .collect();
+    let r = send(&e.app, post_form(&edit, Some(&kim.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    assert_eq!(
+        e.store.get_exercise(new.id).await.unwrap().plan_id,
+        edited.plan_id
+    );
+}

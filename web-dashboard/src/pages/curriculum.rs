@@ -1,9 +1,16 @@
 //! `/curriculum`: exercises (scene, expert plan, thresholds) and curricula (modules of
-//! exercises). Everyone reads; instructors and administrators create and edit.
+//! exercises). Everyone reads; instructors and administrators create and edit. Every input
+//! has its `<label for>`; the expert plan is asked as labelled fields or as text
+//! ([`plan_form`]).
+
+mod plan_form;
+
+use std::collections::HashMap;
 
 use axum::Router;
 use axum::extract::State;
-use axum::response::Redirect;
+use axum::http::header;
+use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
 use cutlab_assessor::ExpertPlan;
 use cutlab_assessor::metrics::{Better, METRICS};
@@ -33,6 +40,20 @@ pub fn router() -> Router<AppState> {
         .route("/exercises/{id}/thresholds", post(edit_thresholds))
         .route("/curricula", post(create_curriculum))
         .route("/curricula/{id}/modules", post(add_module))
+        .route("/plans/example.toml", get(example_plan))
+        .route(
+            "/static/plan.js",
+            get(|| async { super::static_file("text/javascript", include_str!("static/plan.js")) }),
+        )
+}
+
+/// The built-in plan's TOML, every field commented: the example the forms link to.
+async fn example_plan(_user: CurrentUser) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+        cutlab_assessor::plan::CHEST_WALL_PLAN_TOML,
+    )
+        .into_response()
 }
 
 /// A plan from TOML or JSON (JSON when it starts with `{`).
@@ -81,10 +102,7 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
             .find(|e| e.id == id)
             .map_or("?", |e| e.name.as_str())
     };
-    let sample_plan = ExpertPlan::chest_wall()
-        .ok()
-        .and_then(|p| serde_json::to_string_pretty(&p).ok())
-        .unwrap_or_default();
+    let sample_plan = ExpertPlan::chest_wall()?;
     Ok(page(
         "Curriculum",
         Some(&user),
@@ -106,8 +124,10 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
                 @if user.is_staff() {
                     form method="post" action=(format!("/curricula/{}/modules", c.id)) {
                         input type="hidden" name="csrf" value=(user.csrf());
-                        "Add module " input type="text" name="name" required maxlength=(MAX_NAME) placeholder="module name";
-                        select name="exercise_id" { @for e in &exercises { option value=(e.id) { (e.name) } } }
+                        label for=(format!("module-name-{}", c.id)) { "Add module" } " "
+                        input type="text" id=(format!("module-name-{}", c.id)) name="name" required maxlength=(MAX_NAME) placeholder="module name"; " "
+                        label for=(format!("module-exercise-{}", c.id)) { "with exercise" } " "
+                        select id=(format!("module-exercise-{}", c.id)) name="exercise_id" { @for e in &exercises { option value=(e.id) { (e.name) } } } " "
                         button type="submit" { "Add" }
                     }
                 }
@@ -116,25 +136,47 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
                 h2 { "New curriculum" }
                 form method="post" action="/curricula" {
                     input type="hidden" name="csrf" value=(user.csrf());
-                    input type="text" name="name" required maxlength=(MAX_NAME) placeholder="name";
-                    input type="text" name="description" maxlength="2000" placeholder="description";
-                    button type="submit" { "Create" }
+                    p {
+                        label for="curriculum-name" { "Name" } " "
+                        input type="text" id="curriculum-name" name="name" required maxlength=(MAX_NAME); " "
+                        label for="curriculum-description" { "Description" } " "
+                        input type="text" id="curriculum-description" name="description" maxlength="2000" size="50"; " "
+                        button type="submit" { "Create" }
+                    }
                 }
                 h2 { "New exercise" }
                 form method="post" action="/exercises" {
                     input type="hidden" name="csrf" value=(user.csrf());
-                    p { input type="text" name="name" required maxlength=(MAX_NAME) placeholder="name";
-                        input type="text" name="scene" required maxlength=(MAX_NAME) value="chest-wall";
-                        " k " input type="text" name="threshold_k" value=(DEFAULT_K) size="4"; }
-                    p { input type="text" name="description" maxlength="2000" placeholder="description" size="80"; }
-                    p { "Expert plan (TOML or JSON; every field is documented in assessor/examples/plan.toml):" br;
-                        textarea name="plan" rows="12" { (sample_plan) } }
+                    (exercise_fields(true, "chest-wall", "", DEFAULT_K))
+                    (plan_form::plan_fields(&sample_plan))
+                    (plan_form::plan_text(MAX_PLAN_BYTES))
+                    (plan_form::plan_reference())
                     p class="muted" { "The new exercise starts with the built-in provisional thresholds; edit them on its page." }
                     button type="submit" { "Create exercise" }
                 }
             }
         },
     ))
+}
+
+/// The exercise's own fields (the name only for a new one), labelled.
+fn exercise_fields(with_name: bool, scene: &str, description: &str, k: f64) -> Markup {
+    html! {
+        p {
+            @if with_name {
+                label for="exercise-name" { "Name" } " "
+                input type="text" id="exercise-name" name="name" required maxlength=(MAX_NAME); " "
+            }
+            label for="exercise-scene" { "Scene" } " "
+            input type="text" id="exercise-scene" name="scene" required maxlength=(MAX_NAME) value=(scene); " "
+            label for="exercise-k" { "k (pass limits at the expert mean ± k SD)" } " "
+            input type="number" step="any" min="0" id="exercise-k" name="threshold_k" value=(k) size="4";
+        }
+        p {
+            label for="exercise-description" { "Description" } " "
+            input type="text" id="exercise-description" name="description" value=(description) maxlength="2000" size="80";
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -145,8 +187,12 @@ struct ExerciseForm {
     #[serde(default)]
     description: String,
     threshold_k: String,
+    /// The plan as TOML or JSON; when empty, the plan's fields (in `rest`) give it.
     #[serde(default)]
     plan: String,
+    /// The other fields: the plan's values (see [`plan_form`]) and the CSRF token.
+    #[serde(flatten)]
+    rest: HashMap<String, String>,
 }
 
 async fn create_exercise(
@@ -158,7 +204,12 @@ async fn create_exercise(
     let name = name_ok("name", &f.name)?;
     let scene = name_ok("scene", &f.scene)?;
     let k = positive("k", &f.threshold_k)?;
-    let plan = parse_plan(&f.plan)?;
+    let plan = plan_form::plan_from_form(&f.plan, &f.rest, &ExpertPlan::chest_wall()?)?
+        .ok_or_else(|| {
+            AppError::BadRequest(
+                "an exercise needs an expert plan: its fields or its text (TOML or JSON)".into(),
+            )
+        })?;
     let thresholds = cutlab_assessor::store::default_thresholds();
     let e = state
         .store()
@@ -183,11 +234,12 @@ async fn edit_exercise(
     user.require_staff()?;
     let scene = name_ok("scene", &f.scene)?;
     let k = positive("k", &f.threshold_k)?;
-    let plan = if f.plan.trim().is_empty() {
-        None
-    } else {
-        Some(parse_plan(&f.plan)?)
-    };
+    // nothing said about the plan, or its fields as shown: the plan stays
+    let current = state
+        .store()
+        .get_plan(state.store().get_exercise(id).await?.plan_id)
+        .await?;
+    let plan = plan_form::plan_from_form(&f.plan, &f.rest, &current)?.filter(|p| *p != current);
     state
         .store()
         .update_exercise(id, &scene, f.description.trim(), k, plan.as_ref())
@@ -227,15 +279,18 @@ async fn exercise(
             @if user.is_staff() {
                 form method="post" action=(format!("/exercises/{id}")) {
                     input type="hidden" name="csrf" value=(user.csrf());
-                    p { "Scene " input type="text" name="scene" value=(e.scene) required maxlength=(MAX_NAME);
-                        " k " input type="text" name="threshold_k" value=(e.threshold_k) size="4"; }
-                    p { input type="text" name="description" value=(e.description) size="80" maxlength="2000"; }
-                    textarea name="plan" rows="20" { (plan_json) }
-                    br; button type="submit" { "Save exercise" }
+                    (exercise_fields(false, &e.scene, &e.description, e.threshold_k))
+                    (plan_form::plan_fields(&plan))
+                    (plan_form::plan_text(MAX_PLAN_BYTES))
+                    p class="muted" { "Fields left as shown and an empty plan text keep the plan as it is." }
+                    button type="submit" { "Save exercise" }
                 }
-            } @else {
+            }
+            details {
+                summary { "The plan as stored (JSON)" }
                 pre { (plan_json) }
             }
+            (plan_form::plan_reference())
         },
     ))
 }
@@ -260,17 +315,31 @@ fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
                 @if editable {
                     @for (i, m) in t.metrics.iter().map(Some).chain(std::iter::once(None)).enumerate() {
                         tr {
-                            td { select name=(format!("key_{i}")) {
-                                option value="" { "–" }
-                                @for d in METRICS.iter().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (metric_name(d.key)) } }
-                            } }
-                            td { select name=(format!("better_{i}")) {
-                                @for b in [Better::LowerIsBetter, Better::HigherIsBetter, Better::TwoSided] { option value=(b.as_str()) selected[m.is_some_and(|m| m.better == b)] { (b.as_str()) } }
-                            } }
-                            td { input type="text" size="8" name=(format!("mean_{i}")) value=(f(m.map(|m| m.mean))); }
-                            td { input type="text" size="8" name=(format!("sd_{i}")) value=(f(m.map(|m| m.sd))); }
-                            td { input type="text" size="8" name=(format!("lower_{i}")) value=(f(m.and_then(|m| m.lower))); }
-                            td { input type="text" size="8" name=(format!("upper_{i}")) value=(f(m.and_then(|m| m.upper))); }
+                            @let row = m.map_or_else(|| "new metric".to_owned(), |m| metric_name(&m.key));
+                            td {
+                                label class="visually-hidden" for=(format!("key_{i}")) { "Metric (" (row) ")" }
+                                select id=(format!("key_{i}")) name=(format!("key_{i}")) {
+                                    option value="" { "–" }
+                                    @for d in METRICS.iter().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (metric_name(d.key)) } }
+                                }
+                            }
+                            td {
+                                label class="visually-hidden" for=(format!("better_{i}")) { "Direction (" (row) ")" }
+                                select id=(format!("better_{i}")) name=(format!("better_{i}")) {
+                                    @for b in [Better::LowerIsBetter, Better::HigherIsBetter, Better::TwoSided] { option value=(b.as_str()) selected[m.is_some_and(|m| m.better == b)] { (b.as_str()) } }
+                                }
+                            }
+                            @for (field, what, v) in [
+                                ("mean", "Expert mean", m.map(|m| m.mean)),
+                                ("sd", "SD", m.map(|m| m.sd)),
+                                ("lower", "Lower limit", m.and_then(|m| m.lower)),
+                                ("upper", "Upper limit", m.and_then(|m| m.upper)),
+                            ] {
+                                td {
+                                    label class="visually-hidden" for=(format!("{field}_{i}")) { (what) " (" (row) ")" }
+                                    input type="text" size="8" id=(format!("{field}_{i}")) name=(format!("{field}_{i}")) value=(f(v));
+                                }
+                            }
                             td class="num" { @if let Some(m) = m { (m.n_experts) } }
                         }
                     }
