@@ -3,8 +3,10 @@
 //! model.
 //!
 //! - [`device`]: the [`HapticDevice`] trait and its devices: a plan-following synthetic
-//!   trainee ([`device::SyntheticTrainee`]), a CSV trajectory ([`device::CsvDevice`]) and an
-//!   OpenIGTLink network device ([`device::IgtlDevice`]).
+//!   trainee ([`device::SyntheticTrainee`]), a CSV trajectory ([`device::CsvDevice`]), an
+//!   OpenIGTLink network device ([`device::IgtlDevice`], its force as a POINT or, for PLUS
+//!   Toolkit, a TRANSFORM) and the station page's pointer ([`device::PointerDevice`]: samples
+//!   pushed through a [`device::PointerFeed`], interpolated to the servo's ticks).
 //! - [`collision`]: the tissue surface as a parry BVH, refitted as it deforms, rebuilt after
 //!   cuts; the local contact model (plane, stiffness) it yields.
 //! - [`render`]: the god-object proxy, spring-damper coupling, cutting resistance, cut

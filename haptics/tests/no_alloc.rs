@@ -71,3 +71,61 @@ fn a_servo_tick_does_not_allocate() {
         "the trainee pressed on the plane: {max_force}"
     );
 }
+
+#[test]
+fn a_pointer_tick_does_not_allocate_while_a_page_pushes() {
+    use cutlab_haptics::device::{PointerDevice, PointerOptions, PointerSample};
+    let (mut pointer, feed) = PointerDevice::new(PointerOptions::default()).expect("device");
+    let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    // the page, on its own thread: a sample a millisecond of page time, as fast as it can
+    let page = {
+        let done = done.clone();
+        std::thread::spawn(move || {
+            let mut k = 0u64;
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                let x = (k % 100) as f64 * 1e-4;
+                if feed
+                    .push(PointerSample::new(k as f64, [x, 0.0, 0.0], 0.001, true))
+                    .is_ok()
+                {
+                    k += 1;
+                }
+                let _ = feed.latest_force_newtons();
+                let _ = feed.echo_ms(k);
+                std::thread::yield_now();
+            }
+            k
+        })
+    };
+    // the page has begun (its thread started), and the device has taken samples
+    let started = std::time::Instant::now();
+    let mut tick = 0;
+    while pointer
+        .counters()
+        .accepted
+        .load(std::sync::atomic::Ordering::Relaxed)
+        < 10
+        && started.elapsed().as_secs() < 10
+    {
+        let _ = pointer.read(tick, tick as f64 * 1e-6);
+        tick = (tick + 1).min(9);
+        std::thread::yield_now();
+    }
+    reset_violation_count();
+    let mut poses = 0u64;
+    // session time runs at a microsecond a tick here, so however the page thread is
+    // scheduled the device does not time out: every tick takes the sample path
+    assert_no_alloc(|| {
+        for tick in 10..15_000u64 {
+            if pointer.read(tick, tick as f64 * 1e-6).is_ok() {
+                poses += 1;
+            }
+            let _ = pointer.write_force(Vector3::new(0.0, 0.0, tick as f64 * 1e-4));
+        }
+    });
+    done.store(true, std::sync::atomic::Ordering::Relaxed);
+    let pushed = page.join().expect("page");
+    assert_eq!(violation_count(), 0, "allocations during pointer ticks");
+    assert!(pushed > 0, "the page pushed nothing");
+    assert_eq!((pointer.fault(), poses), (None, 14_990));
+}

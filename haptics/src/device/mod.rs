@@ -2,10 +2,12 @@
 
 mod csv;
 pub mod igtl;
+pub mod pointer;
 mod trainee;
 
 pub use csv::CsvDevice;
 pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
+pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
 pub use trainee::{Plan, Skill, SyntheticTrainee};
 
 use crate::{ToolPose, Vector3};

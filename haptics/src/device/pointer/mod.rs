@@ -1,0 +1,380 @@
+//! The `pointer` device: the trainee station's page (a mouse, a pen, a touch) as a haptic
+//! device. The page finds the point under the cursor on the tissue it renders and sends it,
+//! time-stamped by its own clock, with a depth and the button; this device turns those samples
+//! (tens to hundreds a second, irregular) into the servo loop's pose at every 1 kHz tick.
+//!
+//! - Input: [`PointerSample`]s pushed through a [`PointerFeed`] (`Clone + Send + Sync`, any
+//!   thread) into a bounded lock-free queue the servo thread drains without waiting; a full
+//!   queue refuses the sample ([`PushError::Full`], counted). The tip is the sample's surface
+//!   point moved `depth_m` into the tissue along the blade.
+//! - Orientation ([`PointerOrientation`]): fixed (a scalpel pointing down into the tissue,
+//!   cutting along a direction: [`scalpel_down`]) or each sample's quaternion.
+//! - Output: at tick time `s` the pose at page time `s + offset - delay` ([`PointerOptions::
+//!   delay_s`], 30 ms by default), linear between the two samples around it (tip), spherical
+//!   (orientation), the earlier sample's button; exactly a sample's pose at its time. Before
+//!   the first sample: [`PointerOptions::rest_pose`], above the tissue, blade not engaged.
+//! - Clocks: the first sample anchors the page clock to the session clock (its page time plays
+//!   `delay` later). The two clocks drift and the network is uneven, so the anchoring is done
+//!   again when samples arrive after the buffer ran dry (the cursor wanted to pass the newest
+//!   sample: the page stalled, or its clock runs slower) and when the newest sample is more
+//!   than [`PointerOptions::max_lag_s`] ahead of the cursor (its clock runs faster). The cursor
+//!   never moves back: an anchoring holds the pose a little longer, or skips forward.
+//! - When samples stop the pose is held; after [`PointerOptions::timeout_s`] without a usable
+//!   sample the device faults ([`PointerFault::TimedOut`], read as
+//!   [`DeviceFault::Stale`]); a closed feed (the page went away, Stop) faults it
+//!   ([`PointerFault::Closed`], read as [`DeviceFault::Disconnected`]). Faults last: the
+//!   renderer fades the force, the servo loop records the fault bits, and
+//!   [`PointerDevice::finished`] says the device has nothing more to play.
+//! - Bad input: a NaN or an infinity anywhere in a sample faults the device
+//!   ([`PointerFault::NonFinite`], read as [`DeviceFault::Disconnected`]: the page is
+//!   broken); a finite sample out of range (a surface point over 10 m from the origin, a depth
+//!   outside [-0.05, 0.1] m, a pressure outside [0, 1], a quaternion far from unit length, a
+//!   page clock jumping over 10 s) is dropped and counted, as is one not later than the last
+//!   used ([`PointerCounters`]).
+//! - Force: [`HapticDevice::write_force`] keeps the latest force for the page
+//!   ([`PointerFeed::latest_force_newtons`], for a force bar); [`PointerFeed::echo_ms`] tells
+//!   which sample a tick had seen (the page's latency).
+//!
+//! Determinism: given the same samples taken at the same ticks, the poses are the same bits
+//! (all arithmetic is on the samples and the tick's time). When samples arrive is not
+//! deterministic (network, page, scheduler), so a live session is not reproducible from the
+//! samples; the recording holds the poses this device produced each tick, and a replay uses
+//! those, bit for bit, without the page.
+//!
+//! The device runs on the live clock: the session's time must pass as the page's does (the
+//! virtual clock runs faster than real time, so every sample would arrive late).
+
+mod feed;
+mod sample;
+mod timeline;
+
+pub use feed::{PointerCounters, PointerFault, PointerFeed, PushError};
+pub use sample::{
+    MAX_DEPTH_M, MAX_DISTANCE_FROM_ORIGIN_M, MAX_TIME_JUMP_MS, MIN_DEPTH_M, PointerSample,
+    QUATERNION_NORM_TOLERANCE, SampleCheck,
+};
+
+use std::sync::Arc;
+
+use super::{DeviceFault, HapticDevice, Plan};
+use crate::{HapticsError, Point3, Rotation, ToolPose, Vector3};
+use feed::Shared;
+use timeline::{Keyed, Timeline};
+
+/// Where the tool's orientation comes from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PointerOrientation {
+    /// Always this `world_from_tool` (samples' quaternions are checked, not used).
+    Fixed(Rotation),
+    /// Each sample's `world_from_tool_xyzw`; a sample without one takes `fallback`.
+    PerSample { fallback: Rotation },
+}
+
+impl Default for PointerOrientation {
+    /// A scalpel pointing down -z, cutting along +x (the identity: the default scenes' up is
+    /// +z).
+    fn default() -> Self {
+        PointerOrientation::Fixed(Rotation::identity())
+    }
+}
+
+/// A scalpel pointing down into a tissue whose outward side is `up`, its sharp edge cutting
+/// along `cutting` (made perpendicular to `up`): tool +z along `up` (the edge from the tip
+/// towards the handle), +x along the cut. `None` when the directions are zero, not finite or
+/// parallel.
+pub fn scalpel_down(up: &Vector3, cutting: &Vector3) -> Option<Rotation> {
+    let z = up.try_normalize(1e-12)?;
+    let x = (cutting - z * z.dot(cutting)).try_normalize(1e-9)?;
+    let y = z.cross(&x);
+    if ![x, y, z].iter().all(|v| v.iter().all(|c| c.is_finite())) {
+        return None;
+    }
+    let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
+    Some(Rotation::from_rotation_matrix(
+        &nalgebra::Rotation3::from_matrix_unchecked(m),
+    ))
+}
+
+/// Settings of a [`PointerDevice`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointerOptions {
+    /// How far the played pose trails the newest sample, s (covers the page's and the
+    /// network's unevenness).
+    pub delay_s: f64,
+    /// Without a usable sample for this long the device faults, s.
+    pub timeout_s: f64,
+    /// The cursor is anchored again once the newest sample is this far ahead of it, s (more
+    /// than `delay_s`).
+    pub max_lag_s: f64,
+    /// Samples the feed's queue holds.
+    pub queue_capacity: usize,
+    pub orientation: PointerOrientation,
+    /// The pose before the first sample: above the tissue, blade not engaged (path metrics
+    /// count the move from it to the first sample, so above the planned entry is best: see
+    /// [`Self::above_entry`]).
+    pub rest_pose: ToolPose,
+}
+
+impl Default for PointerOptions {
+    fn default() -> Self {
+        Self {
+            delay_s: 0.03,
+            timeout_s: 0.5,
+            max_lag_s: 0.1,
+            queue_capacity: 256,
+            orientation: PointerOrientation::default(),
+            rest_pose: ToolPose {
+                tip_in_world: Point3::new(0.0, 0.0, 0.1),
+                ..ToolPose::default()
+            },
+        }
+    }
+}
+
+impl PointerOptions {
+    /// The defaults, with a scalpel pointing into the tissue at `plan`'s entry and cutting
+    /// along its line, at rest `plan.approach_height_m` above the entry.
+    pub fn above_entry(plan: &Plan) -> Result<Self, HapticsError> {
+        plan.check()?;
+        let (Some(&entry), Some(&next), Some(&normal)) = (
+            plan.line_m.first(),
+            plan.line_m.get(1),
+            plan.normals.first(),
+        ) else {
+            return Err(HapticsError::Config("plan: no line".into()));
+        };
+        let rotation = scalpel_down(&normal, &(next - entry)).ok_or_else(|| {
+            HapticsError::Config("plan: the line runs along the surface normal".into())
+        })?;
+        Ok(Self {
+            orientation: PointerOrientation::Fixed(rotation),
+            rest_pose: ToolPose {
+                tip_in_world: entry + normal * plan.approach_height_m,
+                world_from_tool: rotation,
+                buttons: 0,
+            },
+            ..Self::default()
+        })
+    }
+
+    /// Checks the numbers.
+    pub fn check(&self) -> Result<(), HapticsError> {
+        let bad = |m: &str| Err(HapticsError::Config(format!("pointer device: {m}")));
+        if !(self.delay_s >= 0.0 && self.delay_s <= 1.0) {
+            return bad("the delay must be in [0, 1] s");
+        }
+        if !(self.timeout_s > self.delay_s && self.timeout_s <= 60.0) {
+            return bad("the timeout must be longer than the delay and at most 60 s");
+        }
+        if !(self.max_lag_s > self.delay_s && self.max_lag_s <= 10.0) {
+            return bad("the largest lag must be longer than the delay and at most 10 s");
+        }
+        if !(2..=1 << 16).contains(&self.queue_capacity) {
+            return bad("the queue holds 2 to 65536 samples");
+        }
+        let rotation_ok = |r: &Rotation| r.coords.iter().all(|c| c.is_finite());
+        let orientation_ok = match &self.orientation {
+            PointerOrientation::Fixed(r) => rotation_ok(r),
+            PointerOrientation::PerSample { fallback } => rotation_ok(fallback),
+        };
+        if !orientation_ok || !self.rest_pose.is_finite() {
+            return bad("the orientation and the rest pose must be finite");
+        }
+        Ok(())
+    }
+}
+
+/// The pointer device (see the module documentation).
+#[derive(Debug)]
+pub struct PointerDevice {
+    options: PointerOptions,
+    samples: rtrb::Consumer<PointerSample>,
+    shared: Arc<Shared>,
+    timeline: Timeline,
+    /// Session time of the last usable sample, s.
+    last_usable_s: Option<f64>,
+    /// The latest usable sample's page time, ms (the order check).
+    last_t_ms: Option<f64>,
+    /// Session time when the fault began, s.
+    faulted_at_s: Option<f64>,
+    fault: Option<PointerFault>,
+    last_pose: ToolPose,
+}
+
+impl PointerDevice {
+    /// A device and the feed the page pushes its samples through.
+    pub fn new(options: PointerOptions) -> Result<(Self, PointerFeed), HapticsError> {
+        options.check()?;
+        let (producer, consumer) = rtrb::RingBuffer::new(options.queue_capacity);
+        let shared = Arc::new(Shared::new());
+        let feed = PointerFeed::new(producer, shared.clone(), options.queue_capacity);
+        let device = Self {
+            timeline: Timeline::new(
+                options.queue_capacity + 2,
+                options.delay_s * 1e3,
+                options.max_lag_s * 1e3,
+            ),
+            samples: consumer,
+            shared,
+            last_usable_s: None,
+            last_t_ms: None,
+            faulted_at_s: None,
+            fault: None,
+            last_pose: options.rest_pose,
+            options,
+        };
+        Ok((device, feed))
+    }
+
+    pub fn options(&self) -> &PointerOptions {
+        &self.options
+    }
+
+    /// Why the device stopped, if it did.
+    pub fn fault(&self) -> Option<PointerFault> {
+        self.fault
+    }
+
+    pub fn counters(&self) -> &PointerCounters {
+        &self.shared.counters
+    }
+
+    /// The latest force written, N (what [`PointerFeed::latest_force_newtons`] reads).
+    pub fn latest_force_newtons(&self) -> Vector3 {
+        self.shared.force()
+    }
+
+    fn fail(&mut self, fault: PointerFault, time_s: f64) -> DeviceFault {
+        if self.fault.is_none() {
+            self.fault = Some(fault);
+            self.faulted_at_s = Some(time_s);
+            self.shared.set_fault(fault);
+        }
+        self.fault_now(time_s)
+    }
+
+    /// The fault as the servo loop reads it.
+    fn fault_now(&self, time_s: f64) -> DeviceFault {
+        match self.fault {
+            Some(PointerFault::TimedOut) => {
+                let since_s = self.last_usable_s.unwrap_or(0.0);
+                DeviceFault::Stale {
+                    age_nanos: ((time_s - since_s).max(0.0) * 1e9) as u64,
+                }
+            }
+            _ => DeviceFault::Disconnected,
+        }
+    }
+
+    /// The sample as a pose (the tip `depth_m` into the tissue along the blade).
+    fn keyed(&self, s: &PointerSample) -> Keyed {
+        let rotation = match self.options.orientation {
+            PointerOrientation::Fixed(r) => r,
+            PointerOrientation::PerSample { fallback } => s
+                .world_from_tool_xyzw
+                .map(|[x, y, z, w]| Rotation::new_normalize(nalgebra::Quaternion::new(w, x, y, z)))
+                .unwrap_or(fallback),
+        };
+        let surface = Point3::from(s.surface_in_world_m);
+        Keyed {
+            t_ms: s.t_ms,
+            pose: ToolPose {
+                tip_in_world: surface - (rotation * Vector3::z()) * s.depth_m,
+                world_from_tool: rotation,
+                buttons: timeline::buttons(s.blade_engaged),
+            },
+        }
+    }
+
+    /// Takes what the queue holds; `Err` when a sample faults the device. True when a usable
+    /// sample was taken.
+    fn drain(&mut self, tick: u64, time_s: f64) -> Result<bool, PointerFault> {
+        let counters = &self.shared.counters;
+        let mut taken = false;
+        while let Ok(s) = self.samples.pop() {
+            match s.check() {
+                SampleCheck::NonFinite => {
+                    PointerCounters::add(&counters.non_finite);
+                    return Err(PointerFault::NonFinite);
+                }
+                SampleCheck::Absurd => {
+                    PointerCounters::add(&counters.dropped_invalid);
+                    continue;
+                }
+                SampleCheck::Usable => {}
+            }
+            if let Some(last_ms) = self.last_t_ms {
+                if !(s.t_ms > last_ms) {
+                    PointerCounters::add(&counters.dropped_out_of_order);
+                    continue;
+                }
+                if s.t_ms - last_ms > MAX_TIME_JUMP_MS {
+                    PointerCounters::add(&counters.dropped_invalid);
+                    continue;
+                }
+            }
+            PointerCounters::add(&counters.accepted);
+            self.last_t_ms = Some(s.t_ms);
+            let k = self.keyed(&s);
+            self.timeline.push(k);
+            taken = true;
+        }
+        if taken {
+            self.last_usable_s = Some(time_s);
+            if let Some(t_ms) = self.last_t_ms {
+                self.shared.echo(tick, t_ms);
+            }
+        }
+        Ok(taken)
+    }
+}
+
+impl HapticDevice for PointerDevice {
+    fn name(&self) -> &str {
+        "pointer"
+    }
+
+    fn read(&mut self, tick: u64, time_s: f64) -> Result<ToolPose, DeviceFault> {
+        if self.fault.is_some() {
+            return Err(self.fault_now(time_s));
+        }
+        let taken = match self.drain(tick, time_s) {
+            Ok(taken) => taken,
+            Err(fault) => return Err(self.fail(fault, time_s)),
+        };
+        if self.samples.is_abandoned() && self.samples.is_empty() {
+            return Err(self.fail(PointerFault::Closed, time_s));
+        }
+        let Some(last_usable_s) = self.last_usable_s else {
+            return Ok(self.options.rest_pose);
+        };
+        if time_s - last_usable_s > self.options.timeout_s {
+            return Err(self.fail(PointerFault::TimedOut, time_s));
+        }
+        let advance = self.timeline.advance(time_s * 1e3, taken);
+        let counters = &self.shared.counters;
+        if advance.reanchored {
+            PointerCounters::add(&counters.reanchors);
+        }
+        if advance.held {
+            PointerCounters::add(&counters.held_ticks);
+        }
+        if let Some(pose) = self.timeline.pose() {
+            self.last_pose = pose;
+        }
+        Ok(self.last_pose)
+    }
+
+    fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
+        self.shared.write_force(&force_newtons);
+        match self.fault {
+            Some(_) => Err(DeviceFault::Disconnected),
+            None => Ok(()),
+        }
+    }
+
+    /// True once the device faulted: it has nothing more to play.
+    fn finished(&self, _time_s: f64) -> bool {
+        self.fault.is_some()
+    }
+}
