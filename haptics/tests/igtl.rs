@@ -272,3 +272,68 @@ fn the_force_can_go_back_as_a_transform_named_for_plus() {
     };
     assert!(IgtlDevice::listen_with("127.0.0.1:0".parse().expect("address"), long).is_err());
 }
+
+const PYIGTL_FORCE_TRANSFORM_CLIENT: &str = r#"
+import json, sys, time
+import numpy as np
+import pyigtl
+
+port = int(sys.argv[1])
+client = pyigtl.OpenIGTLinkClient(host="127.0.0.1", port=port)
+t0 = time.time()
+while not client.is_connected() and time.time() - t0 < 10:
+    time.sleep(0.01)
+for i in range(10):
+    m = np.eye(4)
+    m[0:3, 3] = [10.0 + i, 0.0, 0.0]
+    client.send_message(pyigtl.TransformMessage(m, device_name="StylusToBase"), wait=True)
+    time.sleep(0.005)
+msg = client.wait_for_message("ForceToRef", timeout=5)
+print(json.dumps({"type": msg.message_type, "matrix": np.asarray(msg.matrix).tolist()}), flush=True)
+client.stop()
+"#;
+
+#[test]
+fn pyigtl_client_reads_the_force_as_a_transform() {
+    // .ci/run always sets this (it installs pyigtl from PyPI into a venv).
+    let Some(python) = std::env::var_os("CUTLAB_PYIGTL_PYTHON") else {
+        println!(
+            "SKIPPED pyigtl force transform: CUTLAB_PYIGTL_PYTHON is not set (run .ci/run, or point it at a python with pyigtl)"
+        );
+        return;
+    };
+    let mut device = IgtlDevice::listen_with(
+        "127.0.0.1:0".parse().expect("address"),
+        IgtlOptions::plus_openhaptics("Ref"),
+    )
+    .expect("listen");
+    device.write_force(Vector3::new(0.5, -1.25, 2.0)).ok();
+    let out = std::process::Command::new(&python)
+        .arg("-c")
+        .arg(PYIGTL_FORCE_TRANSFORM_CLIENT)
+        .arg(device.address().port().to_string())
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .expect("python runs");
+    let line = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "pyigtl client failed: {line}");
+    let v: serde_json::Value =
+        serde_json::from_str(line.trim()).unwrap_or_else(|e| panic!("{e}: {line}"));
+    assert_eq!(v["type"], "TRANSFORM");
+    let m: Vec<Vec<f64>> = serde_json::from_value(v["matrix"].clone()).expect("4x4 matrix");
+    // the force in newtons is the translation, the rotation the identity
+    let translation: Vec<f64> = m.iter().take(3).map(|row| row[3]).collect();
+    assert_eq!(translation, vec![0.5, -1.25, 2.0]);
+    for (i, row) in m.iter().take(3).enumerate() {
+        for (j, &x) in row.iter().take(3).enumerate() {
+            assert_eq!(x, if i == j { 1.0 } else { 0.0 }, "rotation ({i}, {j})");
+        }
+    }
+    assert_eq!(
+        device
+            .counters()
+            .rejected
+            .load(std::sync::atomic::Ordering::Relaxed),
+        0
+    );
+}
