@@ -233,7 +233,7 @@ async fn ensure_axial_exercise(store: &Store) -> anyhow::Result<()> {
 /// Runs each lane's attempts in order, the lanes side by side (one per core).
 fn run_lanes(db: &Path, dir: &Path, what: &str, lanes: &[Vec<Attempt>]) -> anyhow::Result<()> {
     let total: usize = lanes.iter().map(Vec::len).sum();
-    let bar = crate::progress::bar(total as u64, false);
+    let bar = cutlab_bench::progress::bar(total as u64, false);
     bar.set_message(what.to_owned());
     std::thread::scope(|scope| {
         let handles: Vec<_> = lanes

@@ -1,23 +1,13 @@
 //! cutlab: the command line. Thin commands that wire the crates together.
 
 mod assess_cli;
-mod bench;
-mod bench_accuracy;
-mod bench_dashboard;
-mod bench_perf;
-mod bench_recorder;
-mod bench_skip;
-mod bench_stability;
 mod demo;
 mod demo_seed;
 mod motion_metrics;
-mod plot;
-mod progress;
 mod recording;
 mod scene_info;
 mod serve;
 mod session;
-mod stroke;
 
 use std::path::PathBuf;
 
@@ -172,7 +162,7 @@ enum Command {
     /// Benchmarks that print figures.
     Bench {
         #[command(subcommand)]
-        command: BenchCommand,
+        command: cutlab_bench::BenchCommand,
     },
     #[command(flatten)]
     Assess(assess_cli::AssessCommand),
@@ -212,118 +202,6 @@ enum SceneCommand {
     },
     /// List the built-in scenes.
     List,
-}
-
-#[derive(Debug, Subcommand)]
-enum BenchCommand {
-    /// Step time per integrator on the chest wall at about 1k, 10k and 100k tetrahedra, and
-    /// the settle time of the default scene.
-    Step {
-        /// A reduced set (1k and 10k only, fewer steps).
-        #[arg(long)]
-        quick: bool,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-        /// Only these requested sizes (tets; repeatable), e.g. `--tets 100000` to profile one.
-        #[arg(long)]
-        tets: Vec<usize>,
-        /// Only this integrator (`symplectic-euler` or `implicit-euler`).
-        #[arg(long)]
-        integrator: Option<cutlab_sim::solver::Integrator>,
-    },
-    /// Run time against error per force model (springs, springs from E, co-rotational FEM),
-    /// mesh and integrator on problems with known answers: patch test, cantilever on the IPC
-    /// bars, wound opening of a pre-stressed sheet, first frequency of a bar.
-    Accuracy {
-        /// A reduced set (coarser sheets and bars, implicit Euler only; seconds).
-        #[arg(long)]
-        quick: bool,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-        /// Directory for the CSV table and the SVG plot.
-        #[arg(long, default_value = "out/bench-accuracy")]
-        out: PathBuf,
-    },
-    /// Speed on large meshes: a scripted press-and-cut session on the chest wall at 10k,
-    /// 50k, 100k and 200k tetrahedra and on the CT body wall, full and localised; step time,
-    /// cut latency, awake particles, CG iterations, the localised error, memory; a CSV and a
-    /// log-log SVG of step time against tet count.
-    Perf {
-        /// A reduced set (10k and 50k, short runs; about a minute).
-        #[arg(long)]
-        quick: bool,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-        /// Directory for the CSV table and the SVG plot.
-        #[arg(long, default_value = "out/bench-perf")]
-        out: PathBuf,
-    },
-    /// What the work a session skips would cost if it were done, on the settled chest wall at
-    /// 10k and 100k tets: the surface BVH built again against refitted (or not, when the
-    /// surface is still), the surface extracted again, a resting step full against localised,
-    /// rerun logging of a surface snapshot.
-    Skip {
-        /// 10k tets only, fewer repeats.
-        #[arg(long)]
-        quick: bool,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-        /// Directory for the `.rrd` files the rerun measurement writes.
-        #[arg(long, default_value = "out/bench-skip")]
-        out: PathBuf,
-    },
-    /// Recorder cost per servo tick (with and without), file size per minute, writer
-    /// throughput and replay speed, on a scripted chest-wall session.
-    Recorder {
-        /// Resolution of the chest wall (default: the default scene's).
-        #[arg(long)]
-        min_tets: Option<usize>,
-        /// Session length, s.
-        #[arg(long, default_value_t = 30.0)]
-        duration: f64,
-        /// Simulate only near the scalpel (recorded, so the replay is localised too).
-        #[arg(long)]
-        localise: bool,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-        /// Directory for the recording.
-        #[arg(long, default_value = "out/bench-recorder")]
-        out: PathBuf,
-    },
-    /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
-    /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
-    Stability {
-        /// A reduced set.
-        #[arg(long)]
-        quick: bool,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-    },
-    /// Load on the web dashboard: TRAINEES x ATTEMPTS synthetic attempts, CLIENTS concurrent
-    /// clients on the progress page and API; requests/s and latency percentiles.
-    Dashboard {
-        /// The database to seed and serve (reused if present).
-        #[arg(long, default_value = "out/bench-dashboard/cutlab.db")]
-        bench_db: PathBuf,
-        #[arg(long, default_value_t = 100)]
-        trainees: usize,
-        #[arg(long, default_value_t = 50)]
-        attempts: usize,
-        #[arg(long, default_value_t = 200)]
-        clients: usize,
-        /// Seconds per target.
-        #[arg(long, default_value_t = 10.0)]
-        duration: f64,
-        /// Machine-readable output.
-        #[arg(long)]
-        json: bool,
-    },
 }
 
 fn parse_clock(s: &str) -> Result<cutlab_haptics::servo::Clock, String> {
@@ -496,55 +374,7 @@ fn run() -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Command::Bench {
-            command:
-                BenchCommand::Step {
-                    quick,
-                    json,
-                    tets,
-                    integrator,
-                },
-        } => bench::step(quick, json, &tets, integrator),
-        Command::Bench {
-            command: BenchCommand::Accuracy { quick, json, out },
-        } => bench_accuracy::run(quick, json, &out),
-        Command::Bench {
-            command: BenchCommand::Stability { quick, json },
-        } => bench_stability::run(quick, json),
-        Command::Bench {
-            command: BenchCommand::Perf { quick, json, out },
-        } => bench_perf::run(quick, json, &out),
-        Command::Bench {
-            command: BenchCommand::Skip { quick, json, out },
-        } => bench_skip::run(quick, json, &out),
-        Command::Bench {
-            command:
-                BenchCommand::Dashboard {
-                    bench_db,
-                    trainees,
-                    attempts,
-                    clients,
-                    duration,
-                    json,
-                },
-        } => bench_dashboard::run_bench(&bench_dashboard::Options {
-            db: &bench_db,
-            trainees,
-            attempts,
-            clients,
-            duration_s: duration,
-            json,
-        }),
-        Command::Bench {
-            command:
-                BenchCommand::Recorder {
-                    min_tets,
-                    duration,
-                    localise,
-                    json,
-                    out,
-                },
-        } => bench_recorder::run(min_tets, duration, localise, json, &out),
+        Command::Bench { command } => cutlab_bench::run(command),
         Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
     }
 }

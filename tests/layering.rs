@@ -1,6 +1,7 @@
 //! The layering of the workspace, checked over `cargo metadata`: the simulation and haptics
-//! crates stay free of async runtimes, databases, web frameworks and recording formats, and
-//! no crate depends on a crate above it.
+//! crates stay free of async runtimes, databases, web frameworks and recording formats, no
+//! crate depends on a crate above it, only the command line depends on the benchmarks, and
+//! nothing on the peer engine of the benchmarks.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::process::Command;
@@ -64,7 +65,7 @@ fn reachable_names(crate_name: &str) -> BTreeSet<String> {
         .iter()
         .find(|(_, n)| *n == crate_name)
         .map(|(id, _)| id.clone())
-        .expect("crate in workspace");
+        .unwrap_or_else(|| panic!("{crate_name} is not in the workspace"));
     closure(&resolve, &root)
         .into_iter()
         .map(|id| names[&id].clone())
@@ -98,6 +99,7 @@ fn no_crate_depends_on_a_crate_above_it() {
         "cutlab-recorder",
         "cutlab-assessor",
         "cutlab-dashboard",
+        "cutlab-bench",
         "cutlab",
     ];
     for (i, krate) in layers.iter().enumerate() {
@@ -109,6 +111,28 @@ fn no_crate_depends_on_a_crate_above_it() {
 }
 
 #[test]
+fn only_the_command_line_depends_on_the_benchmarks() {
+    // `cutlab-bench` may depend on every library crate; of the workspace's crates, only the
+    // command line (`cutlab bench ...`) may depend on it.
+    let (_, names) = metadata();
+    let crates: BTreeSet<&String> = names
+        .values()
+        .filter(|n| n.starts_with("cutlab-") && *n != "cutlab-bench")
+        .collect();
+    assert!(
+        crates.len() >= 5,
+        "the library crates are in the metadata: {crates:?}"
+    );
+    for krate in crates {
+        assert!(
+            !reachable_names(krate).contains("cutlab-bench"),
+            "{krate} must not depend on cutlab-bench"
+        );
+    }
+    assert!(reachable_names("cutlab").contains("cutlab-bench"));
+}
+
+#[test]
 fn the_check_sees_real_dependencies() {
     // Guards the test itself: the sim closure does contain nalgebra.
     assert!(reachable_names("cutlab-sim").contains("nalgebra"));
@@ -116,9 +140,9 @@ fn the_check_sees_real_dependencies() {
 
 #[test]
 fn the_peer_engine_is_a_bench_only_dependency() {
-    // Rapier is compared with in `benches/peer` only (a dev-dependency of the root package):
-    // no crate, the command line included, may depend on it. (It is in the metadata, as a
-    // dev-dependency: the check below is not vacuous.)
+    // Rapier is compared with in `bench/benches/peer` only (a dev-dependency of
+    // `cutlab-bench`): no crate, the benchmarks' and the command line's included, may depend
+    // on it. (It is in the metadata, as a dev-dependency: the check below is not vacuous.)
     let (_, names) = metadata();
     assert!(
         names.values().any(|n| n == "rapier3d-f64"),
@@ -130,6 +154,7 @@ fn the_peer_engine_is_a_bench_only_dependency() {
         "cutlab-recorder",
         "cutlab-assessor",
         "cutlab-dashboard",
+        "cutlab-bench",
         "cutlab",
     ] {
         let rapier: Vec<String> = reachable_names(krate)

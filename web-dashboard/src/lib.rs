@@ -18,7 +18,6 @@
 pub mod access;
 pub mod api;
 pub mod auth;
-pub mod bench;
 pub mod cache;
 pub mod charts;
 pub mod data;

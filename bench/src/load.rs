@@ -1,7 +1,7 @@
 //! The load figure of `cutlab bench dashboard`: a seeded population (see
-//! [`crate::seed::seed_load`]), the dashboard on a loopback port, and `clients` concurrent
-//! HTTP/1.1 keep-alive clients (hyper) requesting pages for `duration`; requests per second
-//! and latency percentiles per target.
+//! [`cutlab_dashboard::seed::seed_load`]), the dashboard on a loopback port, and `clients`
+//! concurrent HTTP/1.1 keep-alive clients (hyper) requesting pages for `duration`; requests
+//! per second and latency percentiles per target.
 
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
@@ -51,8 +51,8 @@ pub async fn login(addr: SocketAddr, user: &str, password: &str) -> Result<Strin
         .request(get)
         .await
         .map_err(|e| format!("GET /login: {e}"))?;
-    let csrf =
-        set_cookie(r.headers(), crate::auth::LOGIN_CSRF_COOKIE).ok_or("no login CSRF cookie")?;
+    let csrf = set_cookie(r.headers(), cutlab_dashboard::auth::LOGIN_CSRF_COOKIE)
+        .ok_or("no login CSRF cookie")?;
     let form: String = form_urlencoded::Serializer::new(String::new())
         .append_pair("username", user)
         .append_pair("password", password)
@@ -64,7 +64,7 @@ pub async fn login(addr: SocketAddr, user: &str, password: &str) -> Result<Strin
         .header("content-type", "application/x-www-form-urlencoded")
         .header(
             "cookie",
-            format!("{}={csrf}", crate::auth::LOGIN_CSRF_COOKIE),
+            format!("{}={csrf}", cutlab_dashboard::auth::LOGIN_CSRF_COOKIE),
         )
         .body(Full::new(Bytes::from(form)))
         .map_err(|e| e.to_string())?;
@@ -72,10 +72,13 @@ pub async fn login(addr: SocketAddr, user: &str, password: &str) -> Result<Strin
         .request(post)
         .await
         .map_err(|e| format!("POST /login: {e}"))?;
-    let token = set_cookie(r.headers(), crate::auth::SESSION_COOKIE)
+    let token = set_cookie(r.headers(), cutlab_dashboard::auth::SESSION_COOKIE)
         .filter(|t| !t.is_empty())
         .ok_or_else(|| format!("login refused ({})", r.status()))?;
-    Ok(format!("{}={token}", crate::auth::SESSION_COOKIE))
+    Ok(format!(
+        "{}={token}",
+        cutlab_dashboard::auth::SESSION_COOKIE
+    ))
 }
 
 fn set_cookie(h: &hyper::HeaderMap, name: &str) -> Option<String> {

@@ -1,7 +1,8 @@
-//! `cargo bench --bench peer [-- --quick] [-- --json]`: cutlab side by side with a peer, Rapier's
-//! soft bodies (`rapier3d-f64` 0.36, a dev-dependency of this bench only), on the same tet
-//! meshes at the same 1 ms step and the same material: step time under a sliding press, the
-//! time of one cut through the middle, and the cantilever against Timoshenko on bar-2523.
+//! `cargo bench -p cutlab-bench --bench peer [-- --quick] [-- --json]`: cutlab side by side
+//! with a peer, Rapier's soft bodies (`rapier3d-f64` 0.36, a dev-dependency of this bench
+//! only), on the same tet meshes at the same 1 ms step and the same material: step time under
+//! a sliding press, the time of one cut through the middle, and the cantilever against
+//! Timoshenko on bar-2523.
 //! Progress on stderr, a Markdown report (or JSON) on stdout. Single thread (neither engine is
 //! built parallel here).
 
@@ -299,7 +300,7 @@ fn measure(plan: &Plan) -> anyhow::Result<Results> {
 fn main() -> anyhow::Result<()> {
     // `cargo test --benches` runs this without cargo bench's `--bench`: no four-minute run there
     if !std::env::args().any(|a| a == "--bench") {
-        eprintln!("the peer comparison runs under `cargo bench --bench peer`");
+        eprintln!("the peer comparison runs under `cargo bench -p cutlab-bench --bench peer`");
         return Ok(());
     }
     let plan = Plan::from_args();

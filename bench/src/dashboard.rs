@@ -8,9 +8,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use cutlab_assessor::store::Store;
-use cutlab_dashboard::bench::{LoadReport, login, run};
 use cutlab_dashboard::seed::{LOAD_INSTRUCTOR, seed_load};
 use cutlab_dashboard::{AppState, Config};
+
+use crate::load::{LoadReport, login, run};
 
 pub struct Options<'a> {
     pub db: &'a Path,

@@ -1,0 +1,176 @@
+//! cutlab-bench: the benchmarks of cutlab, out of the user-facing command line's code.
+//! `cutlab bench ...` parses [`BenchCommand`] and calls [`run`]; the figures are printed, not
+//! asserted. The side-by-side comparison with Rapier is `benches/peer`
+//! (`cargo bench -p cutlab-bench --bench peer`).
+//!
+//! Shared by the benchmarks: `plot` (log-log SVG plots, drawn by hand), `stroke` (a scripted
+//! tool pressing along a line), [`progress`] (the bar; the demo's seeding uses it too) and
+//! `cutlab_sim::stats` (median, p99). `load` is the dashboard's load client (hyper), which
+//! the dashboard library itself does not carry.
+
+mod accuracy;
+mod dashboard;
+mod load;
+mod perf;
+mod plot;
+pub mod progress;
+mod recorder;
+mod skip;
+mod stability;
+mod step;
+mod stroke;
+
+use std::path::PathBuf;
+
+use clap::Subcommand;
+
+/// `cutlab bench ...`: benchmarks that print figures.
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Step time per integrator on the chest wall at about 1k, 10k and 100k tetrahedra, and
+    /// the settle time of the default scene.
+    Step {
+        /// A reduced set (1k and 10k only, fewer steps).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Only these requested sizes (tets; repeatable), e.g. `--tets 100000` to profile one.
+        #[arg(long)]
+        tets: Vec<usize>,
+        /// Only this integrator (`symplectic-euler` or `implicit-euler`).
+        #[arg(long)]
+        integrator: Option<cutlab_sim::solver::Integrator>,
+    },
+    /// Run time against error per force model (springs, springs from E, co-rotational FEM),
+    /// mesh and integrator on problems with known answers: patch test, cantilever on the IPC
+    /// bars, wound opening of a pre-stressed sheet, first frequency of a bar.
+    Accuracy {
+        /// A reduced set (coarser sheets and bars, implicit Euler only; seconds).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the CSV table and the SVG plot.
+        #[arg(long, default_value = "out/bench-accuracy")]
+        out: PathBuf,
+    },
+    /// Speed on large meshes: a scripted press-and-cut session on the chest wall at 10k,
+    /// 50k, 100k and 200k tetrahedra and on the CT body wall, full and localised; step time,
+    /// cut latency, awake particles, CG iterations, the localised error, memory; a CSV and a
+    /// log-log SVG of step time against tet count.
+    Perf {
+        /// A reduced set (10k and 50k, short runs; about a minute).
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the CSV table and the SVG plot.
+        #[arg(long, default_value = "out/bench-perf")]
+        out: PathBuf,
+    },
+    /// What the work a session skips would cost if it were done, on the settled chest wall at
+    /// 10k and 100k tets: the surface BVH built again against refitted (or not, when the
+    /// surface is still), the surface extracted again, a resting step full against localised,
+    /// rerun logging of a surface snapshot.
+    Skip {
+        /// 10k tets only, fewer repeats.
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the `.rrd` files the rerun measurement writes.
+        #[arg(long, default_value = "out/bench-skip")]
+        out: PathBuf,
+    },
+    /// Recorder cost per servo tick (with and without), file size per minute, writer
+    /// throughput and replay speed, on a scripted chest-wall session.
+    Recorder {
+        /// Resolution of the chest wall (default: the default scene's).
+        #[arg(long)]
+        min_tets: Option<usize>,
+        /// Session length, s.
+        #[arg(long, default_value_t = 30.0)]
+        duration: f64,
+        /// Simulate only near the scalpel (recorded, so the replay is localised too).
+        #[arg(long)]
+        localise: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the recording.
+        #[arg(long, default_value = "out/bench-recorder")]
+        out: PathBuf,
+    },
+    /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
+    /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
+    Stability {
+        /// A reduced set.
+        #[arg(long)]
+        quick: bool,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Load on the web dashboard: TRAINEES x ATTEMPTS synthetic attempts, CLIENTS concurrent
+    /// clients on the progress page and API; requests/s and latency percentiles.
+    Dashboard {
+        /// The database to seed and serve (reused if present).
+        #[arg(long, default_value = "out/bench-dashboard/cutlab.db")]
+        bench_db: PathBuf,
+        #[arg(long, default_value_t = 100)]
+        trainees: usize,
+        #[arg(long, default_value_t = 50)]
+        attempts: usize,
+        #[arg(long, default_value_t = 200)]
+        clients: usize,
+        /// Seconds per target.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs one benchmark.
+pub fn run(command: BenchCommand) -> anyhow::Result<()> {
+    match command {
+        BenchCommand::Step {
+            quick,
+            json,
+            tets,
+            integrator,
+        } => step::step(quick, json, &tets, integrator),
+        BenchCommand::Accuracy { quick, json, out } => accuracy::run(quick, json, &out),
+        BenchCommand::Stability { quick, json } => stability::run(quick, json),
+        BenchCommand::Perf { quick, json, out } => perf::run(quick, json, &out),
+        BenchCommand::Skip { quick, json, out } => skip::run(quick, json, &out),
+        BenchCommand::Dashboard {
+            bench_db,
+            trainees,
+            attempts,
+            clients,
+            duration,
+            json,
+        } => dashboard::run_bench(&dashboard::Options {
+            db: &bench_db,
+            trainees,
+            attempts,
+            clients,
+            duration_s: duration,
+            json,
+        }),
+        BenchCommand::Recorder {
+            min_tets,
+            duration,
+            localise,
+            json,
+            out,
+        } => recorder::run(min_tets, duration, localise, json, &out),
+    }
+}
