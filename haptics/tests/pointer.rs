@@ -37,6 +37,18 @@ fn count(c: &std::sync::atomic::AtomicU64) -> u64 {
 }
 
 #[test]
+fn the_feed_can_go_to_any_thread_and_the_device_to_the_servo() {
+    fn page_side<T: Clone + Send + Sync + 'static>() {}
+    fn servo_side<T: HapticDevice + 'static>() {}
+    page_side::<PointerFeed>();
+    servo_side::<PointerDevice>();
+    servo_side::<Box<dyn HapticDevice>>();
+    let (d, _feed) = device(PointerOptions::default());
+    let boxed: Box<dyn HapticDevice> = Box::new(d);
+    assert_eq!(boxed.name(), "pointer");
+}
+
+#[test]
 fn before_any_sample_the_rest_pose_is_held_above_the_tissue() {
     let plan = Plan {
         line_m: vec![Point3::new(-0.03, 0.0, 0.0), Point3::new(0.03, 0.0, 0.0)],
