@@ -22,7 +22,7 @@
 //! Environment: `CUTLAB_MUTATIONS=N` runs N mutated cases per parser instead of the default
 //! (thousands, sized for CI: well under a minute for the whole file in release on two cores);
 //! `CUTLAB_MUTATION_ONLY=<parser>:<case>` runs just that case and saves its input (to
-//! reproduce a failure from its printed case number); `CUTLAB_WRITE_CORPUS=DIR` also writes
+//! reproduce a failure from its printed case number); `CUTLAB_WRITE_CORPUS=DIR` only writes
 //! every parser's seeds to `DIR/<parser>/` (the starting corpus of the fuzz targets).
 //!
 //! The same parser entry points are cargo-fuzz targets in `fuzz/` (see `fuzz/README.md`).
@@ -630,6 +630,7 @@ fn check(parser: Parser) {
     };
     if let Some(corpus) = std::env::var_os("CUTLAB_WRITE_CORPUS") {
         write_corpus(&parser, Path::new(&corpus));
+        return;
     }
     let failures = failures_dir();
     let watchdog_failures = failures.clone();
