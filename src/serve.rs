@@ -45,7 +45,16 @@ pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
                 std::future::pending::<()>().await;
             }
         };
-        cutlab_dashboard::serve(listener, AppState::new(store, Config::default())?, shutdown)
+        // the station's recordings beside the database, like the demo's
+        let station_dir = db
+            .parent()
+            .unwrap_or_else(|| Path::new("."))
+            .join("station-attempts");
+        let config = Config {
+            station: cutlab_station::StationSettings::new(station_dir),
+            ..Config::default()
+        };
+        cutlab_dashboard::serve(listener, AppState::new(store, config)?, shutdown)
             .await
             .context("serving")?;
         anyhow::Ok(())

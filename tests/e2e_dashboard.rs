@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use fantoccini::actions::{InputSource, MOUSE_BUTTON_LEFT, MouseActions, PointerAction};
 use fantoccini::{ClientBuilder, Locator};
 
 const CHROMIUM: &str = "/usr/bin/chromium";
@@ -65,8 +66,8 @@ fn artefacts() -> PathBuf {
     dir
 }
 
-#[test]
-fn instructor_reviews_progress_and_replay_in_headless_chromium() {
+/// Whether the browser is here (a missing one fails the test when `CUTLAB_E2E` is set).
+fn browser_present() -> bool {
     let missing: Vec<&str> = [CHROMIUM, CHROMEDRIVER]
         .into_iter()
         .filter(|p| !Path::new(p).exists())
@@ -79,15 +80,17 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
         eprintln!(
             "skipped: {missing:?} missing (apt-get install chromium chromium-driver; CUTLAB_E2E=1 makes this a failure)"
         );
-        return;
     }
-    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp).expect("temp dir");
-    let db = tmp.join("cutlab.db");
+    missing.is_empty()
+}
+
+/// `cutlab serve --demo` on a fresh database in `tmp`, and its port.
+fn demo_server(tmp: &Path) -> (Proc, u16) {
+    let _ = std::fs::remove_dir_all(tmp);
+    std::fs::create_dir_all(tmp).expect("temp dir");
     let port = free_port();
     let mut server = cutlab(
-        &db,
+        &tmp.join("cutlab.db"),
         &["serve", "--demo", "--addr", &format!("127.0.0.1:{port}")],
     )
     .stdout(Stdio::null())
@@ -95,7 +98,99 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
     .expect("cutlab serve");
     // (--demo first simulates the demo's attempts: about a minute)
     wait_for_port(port, "cutlab serve", &mut server, Duration::from_secs(600));
-    let _server = Proc(server);
+    (Proc(server), port)
+}
+
+/// chromedriver, and its port.
+fn chromedriver() -> (Proc, u16) {
+    let driver_port = free_port();
+    let mut driver = Command::new(CHROMEDRIVER)
+        .arg(format!("--port={driver_port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver");
+    wait_for_port(
+        driver_port,
+        "chromedriver",
+        &mut driver,
+        Duration::from_secs(60),
+    );
+    (Proc(driver), driver_port)
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+/// A headless Chromium session with a profile of its own in `profile`; with `webgl`, WebGL2
+/// on the CPU (SwiftShader) instead of no GPU at all.
+async fn chromium(driver_port: u16, profile: &Path, webgl: bool) -> fantoccini::Client {
+    let graphics: &[&str] = if webgl {
+        &["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+    } else {
+        &["--disable-gpu"]
+    };
+    let profile = format!("--user-data-dir={}", profile.display());
+    let mut args = vec![
+        "--headless",
+        "--no-sandbox",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--window-size=1400,1000",
+        &profile,
+    ];
+    args.extend(graphics);
+    let mut caps = serde_json::Map::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        serde_json::json!({ "binary": CHROMIUM, "args": args }),
+    );
+    ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
+        .capabilities(caps)
+        .connect(&format!("http://127.0.0.1:{driver_port}"))
+        .await
+        .expect("a chromium session")
+}
+
+async fn login(
+    c: &fantoccini::Client,
+    base: &str,
+    user: &str,
+    password: &str,
+) -> Result<(), fantoccini::error::CmdError> {
+    c.goto(&format!("{base}/login")).await?;
+    c.find(Locator::Css("input[name=username]"))
+        .await?
+        .send_keys(user)
+        .await?;
+    c.find(Locator::Css("input[name=password]"))
+        .await?
+        .send_keys(password)
+        .await?;
+    c.find(Locator::Css("form.login button"))
+        .await?
+        .click()
+        .await?;
+    c.wait().for_element(Locator::Css("header nav")).await?;
+    Ok(())
+}
+
+#[test]
+fn instructor_reviews_progress_and_replay_in_headless_chromium() {
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let db = tmp.join("cutlab.db");
     // a real recorded attempt of ana's (after the demo's)
     let out = tmp.join("session");
     let s = cutlab(
@@ -131,60 +226,17 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
         })
         .unwrap_or_else(|| panic!("the session names its attempt: {stdout}"));
 
-    let driver_port = free_port();
-    let mut driver = Command::new(CHROMEDRIVER)
-        .arg(format!("--port={driver_port}"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("chromedriver");
-    wait_for_port(
-        driver_port,
-        "chromedriver",
-        &mut driver,
-        Duration::from_secs(60),
-    );
-    let _driver = Proc(driver);
-
+    let (_driver, driver_port) = chromedriver();
     let profile = tmp.join("chromium-profile");
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .expect("runtime");
-    rt.block_on(browse(port, driver_port, attempt, &profile, &artefacts()));
+    runtime().block_on(browse(port, driver_port, attempt, &profile, &artefacts()));
     let _ = std::fs::remove_dir_all(&tmp);
 }
 
 async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots: &Path) {
-    let args = [
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--window-size=1400,1000",
-        &format!("--user-data-dir={}", profile.display()),
-    ];
-    let mut caps = serde_json::Map::new();
-    caps.insert(
-        "goog:chromeOptions".into(),
-        serde_json::json!({ "binary": CHROMIUM, "args": args }),
-    );
-    let c = ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
-        .capabilities(caps)
-        .connect(&format!("http://127.0.0.1:{driver_port}"))
-        .await
-        .expect("a chromium session");
+    let c = chromium(driver_port, profile, false).await;
     let base = format!("http://127.0.0.1:{port}");
     let result = async {
-        c.goto(&format!("{base}/login")).await?;
-        c.find(Locator::Css("input[name=username]")).await?.send_keys("dr-kim").await?;
-        c.find(Locator::Css("input[name=password]")).await?.send_keys("instructor-demo").await?;
-        c.find(Locator::Css("form.login button")).await?.click().await?;
+        login(&c, &base, "dr-kim", "instructor-demo").await?;
         c.wait().for_element(Locator::Css("table.grid")).await?;
         assert!(c.current_url().await?.path().ends_with("/cohorts"));
         c.find(Locator::LinkText("ana")).await?.click().await?;
@@ -229,4 +281,166 @@ async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots
     .await;
     let _ = c.close().await;
     result.expect("the browser flow");
+}
+
+/// The trainee station in a real browser: ana starts the built-in exercise in guided mode,
+/// drags the pointer along the planned line with the button held, the tissue is cut, and the
+/// debrief shows her score; the attempt is stored, scored and replays bit for bit. dr-kim,
+/// her instructor, sees the live view; ben, another trainee, gets a 404 for it. Screenshots
+/// of the station mid-cut, of the live view and of the debrief go to `target/e2e/`.
+#[test]
+fn a_trainee_cuts_at_the_station_and_is_scored_in_headless_chromium() {
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-station-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let (_driver, driver_port) = chromedriver();
+    let attempt = runtime().block_on(station(port, driver_port, &tmp, &artefacts()));
+    // the recording: a whole one, with the cut's topology changes, replayed bit for bit
+    let dir = std::fs::read_dir(tmp.join("station-attempts"))
+        .expect("the station's recordings")
+        .filter_map(Result::ok)
+        .find(|e| e.file_name().to_string_lossy().starts_with("station-ana-"))
+        .expect("ana's station recording");
+    let mcap = dir.path().join("session.mcap");
+    let db = tmp.join("cutlab.db");
+    let info = cutlab(
+        &db,
+        &["recording", "info", mcap.to_str().expect("utf8"), "--json"],
+    )
+    .output()
+    .expect("recording info");
+    let info: serde_json::Value = serde_json::from_slice(&info.stdout).expect("json");
+    assert_eq!(info["whole"], true, "{info}");
+    let topology = info["channels"]
+        .as_array()
+        .expect("channels")
+        .iter()
+        .find(|c| c["topic"].as_str().is_some_and(|t| t.contains("topology")))
+        .and_then(|c| c["messages"].as_u64());
+    assert!(
+        topology.is_some_and(|n| n > 0),
+        "the tissue was cut: {info}"
+    );
+    assert_eq!(
+        info["session"]["trainee"], "ana",
+        "attempt {attempt}: {info}"
+    );
+    let replay = cutlab(&db, &["replay", mcap.to_str().expect("utf8")])
+        .output()
+        .expect("replay");
+    assert!(
+        replay.status.success() && String::from_utf8_lossy(&replay.stdout).contains("bit-exact"),
+        "{}{}",
+        String::from_utf8_lossy(&replay.stdout),
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// Waits until `script` (a JavaScript expression) is true in `c`'s page.
+async fn until(
+    c: &fantoccini::Client,
+    script: &str,
+    timeout: Duration,
+) -> Result<(), fantoccini::error::CmdError> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        let v = c.execute(&format!("return !!({script})"), vec![]).await?;
+        if v.as_bool() == Some(true) {
+            return Ok(());
+        }
+        assert!(Instant::now() < deadline, "timed out waiting for {script}");
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+async fn station(port: u16, driver_port: u16, tmp: &Path, shots: &Path) -> i64 {
+    let base = format!("http://127.0.0.1:{port}");
+    let ana = chromium(driver_port, &tmp.join("profile-ana"), true).await;
+    let kim = chromium(driver_port, &tmp.join("profile-kim"), true).await;
+    let result = async {
+        login(&ana, &base, "ana", "trainee-demo").await?;
+        ana.goto(&format!("{base}/station")).await?;
+        ana.find(Locator::Css("option[value='chest-wall-incision']")).await?.click().await?;
+        ana.find(Locator::Css("input[value=guided]")).await?.click().await?;
+        ana.find(Locator::Id("start")).await?.click().await?;
+        ana.wait().for_element(Locator::Id("tissue")).await?;
+        let path = ana.current_url().await?.path().to_owned();
+        let attempt: i64 = path
+            .strip_prefix("/station/")
+            .and_then(|id| id.parse().ok())
+            .unwrap_or_else(|| panic!("the station's page: {path}"));
+        until(&ana, "window.cutlabStation && window.cutlabStation.stats().frames > 5", Duration::from_secs(60)).await?;
+        // the planned line, where the page draws it
+        let line = ana
+            .execute("const s = window.cutlabStation; return s.config.plan.line_m.map(p => s.project(p))", vec![])
+            .await?;
+        let line: Vec<(f64, f64)> = line
+            .as_array()
+            .expect("the plan's points on the page")
+            .iter()
+            .map(|p| (p[0].as_f64().expect("x"), p[1].as_f64().expect("y")))
+            .collect();
+        assert!(line.len() >= 2);
+        let to = |&(x, y): &(f64, f64), ms: u64| PointerAction::MoveTo {
+            duration: Some(Duration::from_millis(ms)),
+            x: x.round(),
+            y: y.round(),
+        };
+        // over the entry, press, and along the first half of the line
+        let half = line.len() / 2;
+        let mut first = MouseActions::new("mouse".into())
+            .then(to(&line[0], 300))
+            .pause(Duration::from_millis(500))
+            .then(PointerAction::Down { button: MOUSE_BUTTON_LEFT })
+            .pause(Duration::from_millis(600));
+        for p in &line[1..half] {
+            first = first.then(to(p, 180));
+        }
+        ana.perform_actions(first).await?;
+        std::fs::write(shots.join("station-mid-cut.png"), ana.screenshot().await?).expect("screenshot");
+
+        // dr-kim, her instructor, watches live (read only); ben may not
+        login(&kim, &base, "dr-kim", "instructor-demo").await?;
+        kim.goto(&format!("{base}/station/{attempt}")).await?;
+        until(&kim, "window.cutlabStation && window.cutlabStation.stats().frames > 5", Duration::from_secs(60)).await?;
+        assert!(kim.find_all(Locator::Id("stop")).await?.is_empty(), "the live view has no Stop");
+        std::fs::write(shots.join("station-live-view.png"), kim.screenshot().await?).expect("screenshot");
+
+        // the second half, and the blade lifted out: the session ends by itself
+        let mut second = MouseActions::new("mouse".into());
+        for p in &line[half..] {
+            second = second.then(to(p, 180));
+        }
+        second = second.then(PointerAction::Up { button: MOUSE_BUTTON_LEFT });
+        ana.perform_actions(second).await?;
+        let cut = ana.execute("return window.cutlabStation.stats()", vec![]).await?;
+        ana.wait().at_most(Duration::from_secs(180)).for_element(Locator::Id("debrief-summary")).await?;
+        let summary = ana.find(Locator::Id("debrief-summary")).await?.text().await?;
+        assert!(summary.starts_with("Score "), "{summary} ({cut})");
+        ana.wait().at_most(Duration::from_secs(60)).for_element(Locator::Css("#debrief-attempt table")).await?;
+        std::fs::write(shots.join("station-debrief.png"), ana.screenshot().await?).expect("screenshot");
+        // the live view of a session that ended leads to the attempt
+        let status = kim
+            .execute(&format!("return fetch('/attempts/{attempt}').then(r => r.status)"), vec![])
+            .await?;
+        assert_eq!(status.as_u64(), Some(200));
+
+        // ben, another trainee, gets a 404 for ana's station and her attempt
+        kim.delete_all_cookies().await?;
+        login(&kim, &base, "ben", "trainee-demo").await?;
+        for url in [format!("/station/{attempt}"), format!("/attempts/{attempt}")] {
+            let status = kim
+                .execute(&format!("return fetch('{url}').then(r => r.status)"), vec![])
+                .await?;
+            assert_eq!(status.as_u64(), Some(404), "{url}");
+        }
+        Ok::<i64, fantoccini::error::CmdError>(attempt)
+    }
+    .await;
+    let _ = ana.close().await;
+    let _ = kim.close().await;
+    result.expect("the station flow")
 }

@@ -19,6 +19,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use cutlab_sim::stats::percentile;
+
 use crate::device::HapticDevice;
 use crate::render::{ContactModel, ForceRenderer, Mode, RenderOutput};
 use crate::{Point3, ToolPose, Vector3};
@@ -151,8 +153,6 @@ impl ServoReport {
         let mut deviations: Vec<f64> = periods.iter().map(|p| (p - nominal).abs()).collect();
         periods.sort_by(f64::total_cmp);
         deviations.sort_by(f64::total_cmp);
-        let q =
-            |s: &[f64], p: f64| s[((p * (s.len() - 1) as f64).round() as usize).min(s.len() - 1)];
         let lateness = |k: usize| starts[k].saturating_sub(k as u64 * period_nanos);
         let missed = (0..starts.len())
             .filter(|&k| lateness(k) >= period_nanos)
@@ -161,10 +161,10 @@ impl ServoReport {
         let work = &self.tick_work_nanos;
         PeriodStats {
             mean_us: periods.iter().sum::<f64>() / periods.len() as f64,
-            p50_us: q(&periods, 0.5),
-            p99_us: q(&periods, 0.99),
+            p50_us: percentile(&periods, 0.5),
+            p99_us: percentile(&periods, 0.99),
             max_deviation_us: deviations[deviations.len() - 1],
-            p99_deviation_us: q(&deviations, 0.99),
+            p99_deviation_us: percentile(&deviations, 0.99),
             missed_deadlines: missed,
             max_lateness_us: max_lateness as f64 * 1e-3,
             mean_work_us: work.iter().map(|&w| w as f64).sum::<f64>() / work.len().max(1) as f64
@@ -273,7 +273,7 @@ pub fn spawn<D: HapticDevice + 'static>(
         let mut force_hash = cutlab_sim::hash::Fnv1a::default();
         let start = Instant::now();
         for tick in 0..config.ticks {
-            if links.abort.load(Ordering::Acquire) {
+            if links.abort.load(Ordering::Acquire) || device.ends_session() {
                 break;
             }
             match config.clock {

@@ -352,6 +352,22 @@ pub trait RecordObserver: Send {
     }
 }
 
+/// Several observers, each given every record in turn (a rerun log and a live view, say);
+/// the first error ends the call, and finishing finishes every one (the first error is
+/// returned).
+impl RecordObserver for Vec<Box<dyn RecordObserver>> {
+    fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
+        self.iter_mut().try_for_each(|o| o.on_tick(sample))
+    }
+    fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
+        self.iter_mut().try_for_each(|o| o.on_sim(record))
+    }
+    fn finish(self: Box<Self>) -> Result<(), RecorderError> {
+        let results: Vec<_> = self.into_iter().map(|o| o.finish()).collect();
+        results.into_iter().collect()
+    }
+}
+
 impl RecordObserver for crate::RerunSink {
     fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
         crate::RerunSink::on_tick(self, sample).map_err(|e| RecorderError::Rerun(e.to_string()))

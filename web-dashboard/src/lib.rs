@@ -50,6 +50,11 @@ pub struct Config {
     /// address behind its NAT, and one of them guessing must not lock the others out.
     pub login_failures_per_ip: usize,
     pub login_window: Duration,
+    /// How the trainee station runs its sessions (where their recordings go, their time limit).
+    pub station: cutlab_station::StationSettings,
+    /// Station sessions the server runs at once (each takes a servo, a simulation and a
+    /// recorder thread: about one core).
+    pub max_station_sessions: usize,
 }
 
 impl Default for Config {
@@ -59,6 +64,8 @@ impl Default for Config {
             login_failures: 5,
             login_failures_per_ip: 100,
             login_window: Duration::from_secs(60),
+            station: cutlab_station::StationSettings::new("station-attempts"),
+            max_station_sessions: 2,
         }
     }
 }
@@ -79,6 +86,7 @@ struct Inner {
     viewer: recordings::Viewer,
     grants: auth::grants::GrantKey,
     caches: Caches,
+    station: cutlab_station::StationSet,
 }
 
 /// The caches of the hot paths, valid until the database changes (see [`cache`]).
@@ -116,6 +124,7 @@ impl AppState {
         let grants = auth::grants::GrantKey::random()?;
         let caches = Caches::new();
         watch::spawn(store.pool(), &caches.changes);
+        let station = cutlab_station::StationSet::new(config.max_station_sessions);
         Ok(Self(Arc::new(Inner {
             store,
             limiter,
@@ -125,6 +134,7 @@ impl AppState {
             viewer: recordings::Viewer::load(),
             grants,
             caches,
+            station,
         })))
     }
     pub fn store(&self) -> &Store {
@@ -150,6 +160,13 @@ impl AppState {
     }
     pub(crate) fn grants(&self) -> &auth::grants::GrantKey {
         &self.0.grants
+    }
+    /// The station sessions running now.
+    pub fn station(&self) -> &cutlab_station::StationSet {
+        &self.0.station
+    }
+    pub(crate) fn station_settings(&self) -> &cutlab_station::StationSettings {
+        &self.0.config.station
     }
 }
 

@@ -75,6 +75,13 @@ pub trait HapticDevice: Send + std::fmt::Debug {
     fn finished(&self, _time_s: f64) -> bool {
         false
     }
+
+    /// True when the person at the device ended the session (a station's Stop, a page that
+    /// went away): the servo loop stops at the next tick and the session ends there, as one
+    /// that ran its whole duration does. Scripted devices never do.
+    fn ends_session(&self) -> bool {
+        false
+    }
 }
 
 impl HapticDevice for Box<dyn HapticDevice> {
@@ -92,5 +99,8 @@ impl HapticDevice for Box<dyn HapticDevice> {
     }
     fn finished(&self, time_s: f64) -> bool {
         (**self).finished(time_s)
+    }
+    fn ends_session(&self) -> bool {
+        (**self).ends_session()
     }
 }

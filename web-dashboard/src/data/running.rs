@@ -18,6 +18,8 @@ pub struct RunningAttempt {
     pub elapsed_s: f64,
     /// The recording's size so far (it is flushed every second).
     pub recording_bytes: Option<u64>,
+    /// A station session of this server: its live view is `/station/{id}`.
+    pub live: bool,
 }
 
 type Row = (i64, i64, String, i64, String, i64, Option<String>);
@@ -61,6 +63,7 @@ pub async fn running(
                 recording_bytes: path
                     .and_then(|p| std::fs::metadata(p).ok())
                     .map(|m| m.len()),
+                live: state.station().get(id).is_some(),
             },
         )
         .collect())

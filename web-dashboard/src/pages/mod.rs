@@ -6,6 +6,7 @@ pub mod cohorts;
 pub mod curriculum;
 pub mod layout;
 pub mod progress;
+pub mod station;
 pub mod supervision;
 
 use axum::Router;
@@ -34,6 +35,7 @@ pub fn router() -> Router<AppState> {
         .merge(progress::router())
         .merge(attempt::router())
         .merge(supervision::router())
+        .merge(station::router())
         .merge(curriculum::router())
         .layer(axum::middleware::map_response(
             |mut r: Response| async move {

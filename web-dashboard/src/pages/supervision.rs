@@ -35,7 +35,7 @@ async fn supervision(State(state): State<AppState>, user: CurrentUser) -> PageRe
         html! {
             p class="muted" { "Live: updated every second. " span id="live-status" {} }
             table id="running" {
-                thead { tr { th { "Attempt" } th { "Trainee" } th { "Exercise" } th { "Started (UTC)" } th { "Elapsed" } th { "Recorded" } } }
+                thead { tr { th { "Attempt" } th { "Trainee" } th { "Exercise" } th { "Started (UTC)" } th { "Elapsed" } th { "Recorded" } th { "Live" } } }
                 tbody { @for r in &list { (row(r)) } }
             }
             @if list.is_empty() { p id="none-running" class="muted" { "Nothing running right now." } }
@@ -53,6 +53,7 @@ fn row(r: &RunningAttempt) -> Markup {
             td { (when(r.started_ns)) }
             td class="num" { (format!("{:.0} s", r.elapsed_s)) }
             td class="num" { @if let Some(b) = r.recording_bytes { (format!("{:.1} MB", b as f64 / 1e6)) } @else { "–" } }
+            td { @if r.live { a href=(format!("/station/{}", r.id)) { "live view" } } @else { "–" } }
         }
     }
 }

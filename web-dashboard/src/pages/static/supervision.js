@@ -34,6 +34,7 @@
       cell(tr, when(r.started_ns));
       cell(tr, Math.round(r.elapsed_s) + " s").className = "num";
       cell(tr, r.recording_bytes == null ? "–" : (r.recording_bytes / 1e6).toFixed(1) + " MB").className = "num";
+      if (r.live) cell(tr, "live view", "/station/" + Number(r.id)); else cell(tr, "–");
       tbody.appendChild(tr);
     }
     if (none) none.hidden = list.length > 0;

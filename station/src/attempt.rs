@@ -1,0 +1,117 @@
+//! A session as an attempt: the exercise's plan projected onto the tissue before it starts,
+//! and after it ends the attempt scored from its recording or marked incomplete. One path for
+//! `cutlab session --trainee` and the station.
+
+use std::path::Path;
+
+use cutlab_assessor::store::{Exercise, Outcome, Store};
+use cutlab_assessor::{ExpertPlan, MetricSet};
+use cutlab_haptics::Session;
+use cutlab_haptics::device::Plan;
+use cutlab_recorder::Recording;
+use cutlab_sim::{Point3, Vector3};
+
+use crate::StationError;
+
+/// An exercise and its expert plan, by the exercise's name.
+pub async fn exercise_named(
+    store: &Store,
+    name: &str,
+) -> Result<(Exercise, ExpertPlan), StationError> {
+    let e = store.exercise_by_name(name).await?;
+    let plan = store.exercise_plan(e.id).await?;
+    Ok((e, plan))
+}
+
+/// The expert plan's incision projected onto the session's tissue (33 points evenly spaced
+/// along it), at the plan's depth: what a synthetic trainee follows and the station shows.
+pub fn plan_on_tissue(session: &Session, plan: &ExpertPlan) -> Result<Plan, StationError> {
+    let line: Vec<Point3> = plan.incision_m.iter().map(|&c| Point3::from(c)).collect();
+    Ok(session.plan_along(
+        &resample(&line, 33),
+        &Vector3::from(plan.normal),
+        plan.depth_m,
+    )?)
+}
+
+/// How a session's attempt ended.
+#[derive(Debug)]
+pub enum Finished {
+    /// Scored from its recording (its note says so when the recording was not whole).
+    Scored(Box<Outcome>, MetricSet),
+    /// Not scored: the session failed or was cut off; the reason is the attempt's note.
+    Incomplete(String),
+}
+
+/// Ends attempt `id`: scores it from the recording at `outcome`'s path, or marks it incomplete
+/// with `outcome`'s reason. A recording that cannot be read marks the attempt incomplete; a
+/// recording that cannot be scored marks it failed; both are errors too.
+pub async fn finish_attempt(
+    store: &Store,
+    id: i64,
+    outcome: Result<&Path, String>,
+) -> Result<Finished, StationError> {
+    let path = match outcome {
+        Ok(path) => path,
+        Err(why) => {
+            store.mark_incomplete(id, Some(&why)).await?;
+            return Ok(Finished::Incomplete(why));
+        }
+    };
+    let rec = match Recording::open(path) {
+        Ok(rec) => rec,
+        Err(e) => {
+            store.mark_incomplete(id, Some(&e.to_string())).await?;
+            return Err(e.into());
+        }
+    };
+    match store.score_recording(id, &rec).await {
+        Ok((outcome, values)) => Ok(Finished::Scored(Box::new(outcome), values)),
+        Err(e) => {
+            store.mark_failed(id, &e.to_string()).await?;
+            Err(e.into())
+        }
+    }
+}
+
+/// `n >= 2` points evenly spaced by arc length along the polyline `line`, its ends included.
+pub fn resample(line: &[Point3], n: usize) -> Vec<Point3> {
+    let lengths: Vec<f64> = line.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+    let total: f64 = lengths.iter().sum();
+    let (mut seg, mut walked) = (0, 0.0);
+    (0..n)
+        .map(|i| {
+            let s = total * i as f64 / (n - 1) as f64;
+            while seg + 1 < lengths.len() && walked + lengths[seg] < s {
+                walked += lengths[seg];
+                seg += 1;
+            }
+            match lengths.get(seg) {
+                Some(&l) if l > 0.0 => {
+                    line[seg] + (line[seg + 1] - line[seg]) * ((s - walked) / l).clamp(0.0, 1.0)
+                }
+                _ => line[seg],
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resampling_keeps_the_ends_and_spaces_evenly() {
+        let line = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.01, 0.0, 0.0),
+            Point3::new(0.01, 0.03, 0.0),
+        ];
+        let r = resample(&line, 5);
+        assert_eq!((r[0], r[4]), (line[0], line[2]));
+        for w in r.windows(2) {
+            assert!(((w[1] - w[0]).norm() - 0.01).abs() < 1e-12, "{r:?}");
+        }
+        assert!((r[1] - line[1]).norm() < 1e-12);
+    }
+}

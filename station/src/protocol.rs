@@ -1,0 +1,185 @@
+//! The station's WebSocket messages.
+//!
+//! Server to page, binary, little-endian, each starting with its kind byte; every array starts
+//! at a multiple of 4 bytes so the page reads it through a `Float32Array`/`Uint32Array` view
+//! without copying:
+//!
+//! | kind | layout |
+//! |---|---|
+//! | [`KIND_TOPOLOGY`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles` |
+//! | [`KIND_FRAME`] | `u8 kind, u8 mode, u8 engaged, u8 faults, u32 vertices, u64 tick, f64 echo_ms, f32 × 3 tip_m, f32 × 4 world_from_tool (w, x, y, z), f32 × 3 force_newtons, f32 × 3 × vertices positions_m` |
+//!
+//! A topology message comes first and again whenever the surface's triangles change (after a
+//! cut); the frames that follow carry one position per vertex of the last topology. `echo_ms`
+//! is the page's own time stamp of the newest pointer sample the frame's tick consumed (NaN
+//! when none), so the page measures the latency from its input to the frame that shows it.
+//!
+//! Page to server, text, JSON ([`ClientMessage`]): pointer samples and stop. Anything else, and
+//! anything longer than [`MAX_CLIENT_MESSAGE_BYTES`], is dropped and counted by the caller.
+
+use cutlab_haptics::device::PointerSample;
+use serde::Deserialize;
+
+use crate::view::{Topology, ViewFrame};
+
+/// The kind byte of a topology message.
+pub const KIND_TOPOLOGY: u8 = 1;
+/// The kind byte of a frame.
+pub const KIND_FRAME: u8 = 2;
+/// Bytes of a frame before its positions.
+pub const FRAME_HEADER_BYTES: usize = 4 + 4 + 8 + 8 + 12 + 16 + 12;
+/// The longest text message the server reads from a page.
+pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
+
+/// A topology message for `topology`.
+pub fn encode_topology(topology: &Topology) -> Vec<u8> {
+    let mut out = Vec::with_capacity(12 + 12 * topology.triangles.len());
+    out.extend([KIND_TOPOLOGY, 0, 0, 0]);
+    out.extend(u32_of(topology.vertex_count).to_le_bytes());
+    out.extend(u32_of(topology.triangles.len()).to_le_bytes());
+    for t in &topology.triangles {
+        for v in t {
+            out.extend(v.to_le_bytes());
+        }
+    }
+    out
+}
+
+/// A frame message for `frame`.
+pub fn encode_frame(frame: &ViewFrame) -> Vec<u8> {
+    let mut out = Vec::with_capacity(FRAME_HEADER_BYTES + 4 * frame.positions_m.len());
+    out.extend([
+        KIND_FRAME,
+        frame.mode,
+        u8::from(frame.engaged),
+        frame.faults,
+    ]);
+    out.extend(u32_of(frame.positions_m.len() / 3).to_le_bytes());
+    out.extend(frame.tick.to_le_bytes());
+    out.extend(frame.echo_ms.to_le_bytes());
+    for x in frame
+        .tip_m
+        .iter()
+        .chain(&frame.world_from_tool_wxyz)
+        .chain(&frame.force_newtons)
+        .chain(&frame.positions_m)
+    {
+        out.extend(x.to_le_bytes());
+    }
+    out
+}
+
+fn u32_of(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+/// What a page sends.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// One pointer or pen sample: where the cursor meets the tissue and what the trainee does
+    /// there (checked by the pointer device: a NaN faults it, an absurd value is dropped).
+    Pointer(PointerSample),
+    /// The trainee pressed Stop.
+    Stop {},
+}
+
+/// Why a message from a page was dropped.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ClientMessageError {
+    #[error("a message of {0} bytes (at most {MAX_CLIENT_MESSAGE_BYTES})")]
+    TooLong(usize),
+    #[error("not a station message: {0}")]
+    Malformed(String),
+}
+
+/// Reads one text message of a page.
+pub fn decode_client(text: &str) -> Result<ClientMessage, ClientMessageError> {
+    if text.len() > MAX_CLIENT_MESSAGE_BYTES {
+        return Err(ClientMessageError::TooLong(text.len()));
+    }
+    serde_json::from_str(text).map_err(|e| ClientMessageError::Malformed(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn f32_at(b: &[u8], at: usize) -> f32 {
+        f32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"))
+    }
+
+    #[test]
+    fn a_frame_is_laid_out_as_documented() {
+        let frame = ViewFrame {
+            tick: 1234,
+            echo_ms: 56.5,
+            mode: 2,
+            engaged: true,
+            faults: 0,
+            tip_m: [0.1, 0.2, 0.3],
+            world_from_tool_wxyz: [1.0, 0.0, 0.0, 0.0],
+            force_newtons: [0.0, 0.5, -1.0],
+            positions_m: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        };
+        let b = encode_frame(&frame);
+        assert_eq!(b.len(), FRAME_HEADER_BYTES + 6 * 4);
+        assert_eq!(&b[..4], &[KIND_FRAME, 2, 1, 0]);
+        assert_eq!(u32::from_le_bytes(b[4..8].try_into().expect("4")), 2);
+        assert_eq!(u64::from_le_bytes(b[8..16].try_into().expect("8")), 1234);
+        assert_eq!(f64::from_le_bytes(b[16..24].try_into().expect("8")), 56.5);
+        assert_eq!(f32_at(&b, 24), 0.1);
+        assert_eq!(f32_at(&b, 36), 1.0);
+        assert_eq!(f32_at(&b, 52 + 8), -1.0);
+        assert_eq!(FRAME_HEADER_BYTES % 4, 0);
+        assert_eq!(f32_at(&b, FRAME_HEADER_BYTES), 1.0);
+        assert_eq!(f32_at(&b, b.len() - 4), 6.0);
+    }
+
+    #[test]
+    fn a_topology_lists_its_triangles() {
+        let t = Topology {
+            vertex_count: 4,
+            triangles: vec![[0, 1, 2], [2, 1, 3]],
+        };
+        let b = encode_topology(&t);
+        assert_eq!(b.len(), 12 + 24);
+        assert_eq!(b[0], KIND_TOPOLOGY);
+        let words: Vec<u32> = b[4..]
+            .chunks(4)
+            .map(|c| u32::from_le_bytes(c.try_into().expect("4")))
+            .collect();
+        assert_eq!(words, [4, 2, 0, 1, 2, 2, 1, 3]);
+    }
+
+    #[test]
+    fn pages_send_samples_and_stop_and_nothing_else() {
+        let m = decode_client(
+            r#"{"type":"pointer","t_ms":12.5,"surface_in_world_m":[0,0.01,0.02],"depth_m":0.004,"blade_engaged":true}"#,
+        )
+        .expect("a sample");
+        assert!(matches!(m, ClientMessage::Pointer(p) if p.blade_engaged && p.depth_m == 0.004));
+        assert_eq!(
+            decode_client(r#"{"type":"stop"}"#).expect("stop"),
+            ClientMessage::Stop {}
+        );
+        for bad in [
+            "",
+            "{}",
+            r#"{"type":"teleport"}"#,
+            r#"{"type":"pointer","t_ms":1}"#,
+            r#"{"type":"pointer","t_ms":1,"surface_in_world_m":[0,0],"depth_m":0,"blade_engaged":false}"#,
+            r#"{"type":"stop","extra":1}"#,
+        ] {
+            assert!(
+                matches!(decode_client(bad), Err(ClientMessageError::Malformed(_))),
+                "{bad}"
+            );
+        }
+        let long = format!(r#"{{"type":"stop","pad":"{}"}}"#, "x".repeat(2000));
+        assert!(matches!(
+            decode_client(&long),
+            Err(ClientMessageError::TooLong(_))
+        ));
+    }
+}

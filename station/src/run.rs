@@ -1,0 +1,339 @@
+//! Running a station session: an ordinary recorded [`Session`] of an exercise, driven by the
+//! station's device and published to its viewers, whose attempt is scored the moment it ends
+//! (through [`crate::attempt`], the path `cutlab session --trainee` takes).
+//!
+//! The session ends at the exercise's time limit, when the trainee presses Stop, or when the
+//! page goes away (a lost device: the recording is completed and the attempt marked
+//! incomplete). The session runs on threads of its own (servo, simulation, recorder); the
+//! async side only starts it and waits for its end.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use cutlab_assessor::store::Store;
+use cutlab_haptics::device::{
+    DeviceFault, DeviceLimits, HapticDevice, Plan, PointerDevice, PointerFeed, PointerOptions,
+};
+use cutlab_haptics::servo::Clock;
+use cutlab_haptics::tap::TapSettings;
+use cutlab_haptics::{Session, SessionConfig, ToolPose, Vector3};
+use cutlab_recorder::record::{self, Provenance, RecordSettings};
+use cutlab_recorder::writer::RecordObserver;
+use cutlab_recorder::{RerunSink, RerunTarget, WriterOptions};
+use cutlab_sim::scene::{BuildOptions, Scene, Viewpoint};
+use tokio::sync::watch;
+
+use crate::StationError;
+use crate::attempt::{self, Finished};
+use crate::view::{EchoSource, ViewFeed, ViewPublisher};
+
+/// How a station runs its sessions.
+#[derive(Debug, Clone)]
+pub struct StationSettings {
+    /// Each session's recordings go to a folder of their own in here.
+    pub recordings_dir: PathBuf,
+    /// The longest session (the exercise's time limit), s.
+    pub duration_s: f64,
+    /// Frames the viewers get per second (the recording's surface rate too), Hz.
+    pub view_hz: f64,
+    /// A keyframe every this many seconds (a replay resumes at each).
+    pub keyframe_every_s: f64,
+    /// The live clock for a person; the virtual clock for tests and benchmarks.
+    pub clock: Clock,
+    /// Also write the `.rrd` the dashboard's replay review opens.
+    pub rrd: bool,
+}
+
+impl StationSettings {
+    /// Settings for a station recording into `recordings_dir`.
+    pub fn new(recordings_dir: impl Into<PathBuf>) -> Self {
+        Self {
+            recordings_dir: recordings_dir.into(),
+            duration_s: 300.0,
+            view_hz: 60.0,
+            keyframe_every_s: 1.0,
+            clock: Clock::Live,
+            rrd: true,
+        }
+    }
+}
+
+/// Who trains on what.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StartRequest {
+    pub exercise: String,
+    pub trainee: String,
+    /// Guided (the plan shown on the tissue) or exam (nothing shown).
+    pub guided: bool,
+}
+
+/// How a running session is asked to end, and how it did.
+#[derive(Debug, Default)]
+pub struct Control {
+    stop: AtomicBool,
+    lost: AtomicBool,
+}
+
+impl Control {
+    /// The trainee pressed Stop.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Release);
+    }
+
+    /// The page that drove the session went away: the attempt will be incomplete.
+    pub fn lose(&self) {
+        self.lost.store(true, Ordering::Release);
+    }
+
+    fn should_end(&self) -> bool {
+        self.stop.load(Ordering::Acquire) || self.lost.load(Ordering::Acquire)
+    }
+
+    /// Whether the page was lost.
+    pub fn lost(&self) -> bool {
+        self.lost.load(Ordering::Acquire)
+    }
+}
+
+/// The station's device: the page's device, ended by [`Control`].
+#[derive(Debug)]
+struct StationDevice {
+    inner: Box<dyn HapticDevice>,
+    control: Arc<Control>,
+}
+
+impl HapticDevice for StationDevice {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+    fn limits(&self) -> DeviceLimits {
+        self.inner.limits()
+    }
+    fn read(&mut self, tick: u64, time_s: f64) -> Result<ToolPose, DeviceFault> {
+        self.inner.read(tick, time_s)
+    }
+    fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
+        self.inner.write_force(force_newtons)
+    }
+    fn ends_session(&self) -> bool {
+        self.control.should_end() || self.inner.ends_session()
+    }
+}
+
+/// How a session ended, for the page's debrief.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Ending {
+    /// Scored: the attempt's id, score and verdict.
+    Scored {
+        attempt: i64,
+        score: f64,
+        passed: bool,
+    },
+    /// Not scored (the page went away, the session failed): why.
+    Incomplete { attempt: i64, why: String },
+}
+
+/// A started session: what its page and its viewers need.
+#[derive(Debug)]
+pub struct Running {
+    pub attempt: i64,
+    pub exercise: String,
+    pub trainee: String,
+    pub guided: bool,
+    /// The planned incision on the tissue (shown in guided mode).
+    pub plan: Plan,
+    /// Where the exercise is seen from, if its scene says.
+    pub viewpoint: Option<Viewpoint>,
+    pub feed: ViewFeed,
+    /// Where the page's samples go, when the page drives the session.
+    pub pointer: Option<PointerFeed>,
+    pub control: Arc<Control>,
+    /// `None` while the session runs.
+    pub ending: watch::Receiver<Option<Ending>>,
+}
+
+/// Makes a device for the session's plan (a synthetic trainee follows it, say).
+pub type DeviceFactory =
+    Box<dyn FnOnce(&Plan) -> Result<Box<dyn HapticDevice>, StationError> + Send>;
+
+/// What drives a station session.
+pub enum Input {
+    /// The page's pointer or pen ([`PointerDevice`]: a scalpel pointing into the tissue along
+    /// the plan, at rest above its entry); its samples go through [`Running::pointer`].
+    Pointer,
+    /// Another device (a synthetic trainee, an OpenIGTLink tracker or haptic bridge) with the
+    /// page as its view.
+    Device(DeviceFactory),
+}
+
+impl std::fmt::Debug for Input {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Input::Pointer => "Pointer",
+            Input::Device(_) => "Device",
+        })
+    }
+}
+
+/// Starts `request`'s session driven by `input`, publishing its frames to the returned feed.
+/// Returns once the session runs; the attempt is scored or marked incomplete on a thread of
+/// its own when it ends.
+pub async fn start(
+    store: Store,
+    settings: &StationSettings,
+    request: StartRequest,
+    input: Input,
+) -> Result<Running, StationError> {
+    let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
+    let scene_name = exercise.scene.clone();
+    // building and settling the tissue takes a while: off the async threads
+    let (scene, session, plan) = tokio::task::spawn_blocking(move || {
+        let scene = Scene::load(&scene_name, BuildOptions::default())?;
+        let session = Session::new(&scene)?;
+        let plan = attempt::plan_on_tissue(&session, &expert_plan)?;
+        Ok::<_, StationError>((scene, session, plan))
+    })
+    .await
+    .map_err(|e| StationError::Plan(format!("preparing the session: {e}")))??;
+
+    let (device, pointer): (Box<dyn HapticDevice>, Option<PointerFeed>) = match input {
+        Input::Pointer => {
+            let (device, feed) = PointerDevice::new(PointerOptions::above_entry(&plan)?)?;
+            (Box::new(device), Some(feed))
+        }
+        Input::Device(make) => (make(&plan)?, None),
+    };
+    let echo = pointer
+        .clone()
+        .map(|feed| Arc::new(feed) as Arc<dyn EchoSource>);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let dir = settings
+        .recordings_dir
+        .join(format!("station-{}-{nanos}", request.trainee));
+    std::fs::create_dir_all(&dir).map_err(|source| StationError::Io {
+        what: format!("creating {}", dir.display()),
+        source,
+    })?;
+    let mcap = dir.join("session.mcap");
+    let attempt = store
+        .start_recorded_attempt(&request.exercise, &request.trainee, &mcap, false)
+        .await?
+        .id;
+
+    let mut config = SessionConfig {
+        clock: settings.clock,
+        duration_s: settings.duration_s,
+        ..SessionConfig::default()
+    };
+    config.render.cut_threshold_newtons = scene.spec.cut_threshold_newtons;
+    config.render.cut_depth_m = scene.spec.cut_depth_mm * 1e-3;
+    let step_s = scene.solver.time_step_s;
+    let keyframe_every_steps = ((settings.keyframe_every_s / step_s).round() as u64).max(1);
+    config.collider_rebuild_every_steps = keyframe_every_steps;
+    let record_settings = RecordSettings {
+        tap: TapSettings {
+            keyframe_every_steps,
+            surface_every_steps: ((1.0 / (settings.view_hz * step_s)).round() as u64).max(1),
+            ..TapSettings::default()
+        },
+        writer: WriterOptions::default(),
+    };
+    let provenance = Provenance {
+        scene: exercise.scene.clone(),
+        min_tets: None,
+        seed: 0,
+        trainee: request.trainee.clone(),
+        exercise: request.exercise.clone(),
+        device: device.name().to_owned(),
+    };
+    let (publisher, feed) = ViewPublisher::new(echo);
+    let mut observers: Vec<Box<dyn RecordObserver>> = vec![Box::new(publisher)];
+    if settings.rrd {
+        let mut rerun = RerunSink::new(
+            &RerunTarget::File(dir.join("session.rrd")),
+            "cutlab",
+            config.period_nanos,
+            config.blade_length_m,
+        )
+        .map_err(|e| StationError::Plan(format!("starting the rerun log: {e}")))?;
+        rerun
+            .log_plan(&plan.line_m)
+            .map_err(|e| StationError::Plan(format!("logging the plan: {e}")))?;
+        observers.push(Box::new(rerun));
+    }
+    let control = Arc::new(Control::default());
+    let device = Box::new(StationDevice {
+        inner: device,
+        control: control.clone(),
+    });
+    let (ending_tx, ending) = watch::channel(None);
+    let runtime = tokio::runtime::Handle::current();
+    let thread_control = control.clone();
+    let thread_plan = plan.clone();
+    let spec = scene.spec.clone();
+    std::thread::Builder::new()
+        .name("cutlab-station".into())
+        .spawn(move || {
+            let recorded = record::run_recorded(
+                session,
+                device,
+                &config,
+                &provenance,
+                Some(&thread_plan),
+                &spec,
+                &mcap,
+                record_settings,
+                Some(Box::new(observers)),
+            );
+            let outcome = match recorded {
+                Ok(r) => {
+                    if let Some(o) = r.observer
+                        && let Err(e) = o.finish()
+                    {
+                        tracing::warn!("attempt {attempt}: finishing the view and rerun log: {e}");
+                    }
+                    match r.report {
+                        Ok(_) if thread_control.lost() => {
+                            Err("the station's page went away before the end".to_owned())
+                        }
+                        Ok(_) => Ok(mcap.as_path()),
+                        Err(e) => Err(format!("the session failed: {e}")),
+                    }
+                }
+                Err(e) => Err(format!("recording failed: {e}")),
+            };
+            let ending = match runtime.block_on(attempt::finish_attempt(&store, attempt, outcome)) {
+                Ok(Finished::Scored(o, _)) => Ending::Scored {
+                    attempt,
+                    score: o.verdict.score,
+                    passed: o.verdict.pass,
+                },
+                Ok(Finished::Incomplete(why)) => Ending::Incomplete { attempt, why },
+                Err(e) => Ending::Incomplete {
+                    attempt,
+                    why: e.to_string(),
+                },
+            };
+            tracing::info!("station attempt {attempt} ended: {ending:?}");
+            let _ = ending_tx.send(Some(ending));
+        })
+        .map_err(|source| StationError::Io {
+            what: "starting the station's session thread".into(),
+            source,
+        })?;
+    Ok(Running {
+        attempt,
+        exercise: request.exercise,
+        trainee: request.trainee,
+        guided: request.guided,
+        plan,
+        viewpoint: scene.viewpoint,
+        feed,
+        pointer,
+        control,
+        ending,
+    })
+}

@@ -1,0 +1,233 @@
+//! What a station's viewers see: the latest frame of the session, published by the recorder
+//! thread (a [`RecordObserver`]), latest wins.
+//!
+//! The session's records reach the recorder thread through its lock-free tap, so publishing
+//! never touches the servo or the simulation thread. Each tissue surface the tap carries
+//! becomes a [`ViewFrame`] with the tool's latest pose and force; a viewer that is slow skips
+//! frames (a [`tokio::sync::watch`] slot holds only the newest) and never queues them.
+
+use std::sync::Arc;
+
+use cutlab_haptics::render::Mode;
+use cutlab_haptics::servo::ServoSample;
+use cutlab_haptics::tap::SimRecord;
+use cutlab_recorder::RecorderError;
+use cutlab_recorder::writer::RecordObserver;
+use tokio::sync::watch;
+
+/// The surface's triangles over its vertex list.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Topology {
+    pub vertex_count: usize,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// One frame of the view.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewFrame {
+    /// The servo tick of the tool's pose and force.
+    pub tick: u64,
+    /// The page's time stamp of the newest pointer sample that tick consumed, ms (NaN: none).
+    pub echo_ms: f64,
+    /// 0 free, 1 touching, 2 cutting.
+    pub mode: u8,
+    pub engaged: bool,
+    pub faults: u8,
+    pub tip_m: [f32; 3],
+    pub world_from_tool_wxyz: [f32; 4],
+    pub force_newtons: [f32; 3],
+    /// The surface's vertices, `x, y, z` each, in the order of the current topology.
+    pub positions_m: Vec<f32>,
+}
+
+/// What the slot holds: the frame and the topology its positions belong to.
+#[derive(Debug, Clone, Default)]
+pub struct ViewState {
+    pub topology: Arc<Topology>,
+    pub frame: Option<Arc<ViewFrame>>,
+    /// The session has ended (no frame follows).
+    pub ended: bool,
+}
+
+/// The receiving side: one per viewer (clone it).
+pub type ViewFeed = watch::Receiver<ViewState>;
+
+/// Where a pointer sample's page time stamp can be found for a tick (the station's device
+/// reports which sample each tick consumed).
+pub trait EchoSource: Send + Sync {
+    /// The page's time stamp of the newest sample consumed by tick `tick` or before, ms.
+    fn echo_ms(&self, tick: u64) -> Option<f64>;
+}
+
+/// The pointer device knows which of the page's samples each tick played.
+impl EchoSource for cutlab_haptics::device::PointerFeed {
+    fn echo_ms(&self, tick: u64) -> Option<f64> {
+        cutlab_haptics::device::PointerFeed::echo_ms(self, tick)
+    }
+}
+
+/// Publishes the session's frames (the [`RecordObserver`] the station hands the recorder).
+pub struct ViewPublisher {
+    slot: watch::Sender<ViewState>,
+    last_tick: Option<ServoSample>,
+    echo: Option<Arc<dyn EchoSource>>,
+}
+
+impl std::fmt::Debug for ViewPublisher {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ViewPublisher")
+            .field("viewers", &self.slot.receiver_count())
+            .finish_non_exhaustive()
+    }
+}
+
+impl ViewPublisher {
+    /// A publisher and the feed its viewers clone.
+    pub fn new(echo: Option<Arc<dyn EchoSource>>) -> (Self, ViewFeed) {
+        let (slot, feed) = watch::channel(ViewState::default());
+        (
+            Self {
+                slot,
+                last_tick: None,
+                echo,
+            },
+            feed,
+        )
+    }
+
+    fn publish(&mut self, vertices: &[cutlab_sim::Point3], triangles: &[[u32; 3]]) {
+        let Some(s) = &self.last_tick else {
+            return;
+        };
+        let q = s.pose.world_from_tool.quaternion();
+        let frame = ViewFrame {
+            tick: s.tick,
+            echo_ms: self
+                .echo
+                .as_ref()
+                .and_then(|e| e.echo_ms(s.tick))
+                .unwrap_or(f64::NAN),
+            mode: match s.render.mode {
+                Mode::Free => 0,
+                Mode::Touching => 1,
+                Mode::Cutting => 2,
+            },
+            engaged: s.pose.blade_engaged(),
+            faults: s.render.faults,
+            tip_m: f32x3(s.pose.tip_in_world.coords.into()),
+            world_from_tool_wxyz: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+            force_newtons: f32x3(s.render.force_newtons.into()),
+            positions_m: vertices
+                .iter()
+                .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+                .collect(),
+        };
+        self.slot.send_modify(|state| {
+            if state.topology.vertex_count != vertices.len()
+                || state.topology.triangles != triangles
+            {
+                state.topology = Arc::new(Topology {
+                    vertex_count: vertices.len(),
+                    triangles: triangles.to_vec(),
+                });
+            }
+            state.frame = Some(Arc::new(frame));
+        });
+    }
+}
+
+fn f32x3(v: [f64; 3]) -> [f32; 3] {
+    v.map(|x| x as f32)
+}
+
+impl RecordObserver for ViewPublisher {
+    fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
+        self.last_tick = Some(*sample);
+        Ok(())
+    }
+
+    fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
+        if let SimRecord::Surface(s) = record {
+            self.publish(&s.vertices, &s.triangles);
+        }
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<(), RecorderError> {
+        self.slot.send_modify(|state| state.ended = true);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use cutlab_haptics::render::RenderOutput;
+    use cutlab_haptics::tap::SurfaceSnapshot;
+    use cutlab_haptics::{Point3, ToolPose, Vector3};
+
+    use super::*;
+
+    fn sample(tick: u64) -> ServoSample {
+        ServoSample {
+            tick,
+            pose: ToolPose {
+                tip_in_world: Point3::new(0.01, 0.02, 0.03),
+                ..ToolPose::default()
+            },
+            render: RenderOutput {
+                force_newtons: Vector3::new(0.0, 0.0, 0.5),
+                proxy: Point3::origin(),
+                mode: Mode::Touching,
+                faults: 0,
+                gain: 1.0,
+            },
+        }
+    }
+
+    fn surface(step: u64, triangles: Vec<[u32; 3]>) -> SimRecord {
+        SimRecord::Surface(Box::new(SurfaceSnapshot {
+            step,
+            tick: step,
+            vertices: vec![
+                Point3::origin(),
+                Point3::new(1.0, 0.0, 0.0),
+                Point3::new(0.0, 1.0, 0.0),
+            ],
+            triangles,
+        }))
+    }
+
+    struct Echo;
+    impl EchoSource for Echo {
+        fn echo_ms(&self, tick: u64) -> Option<f64> {
+            Some(tick as f64 * 0.5)
+        }
+    }
+
+    #[test]
+    fn the_newest_frame_wins_and_topology_changes_are_new() {
+        let (mut p, mut feed) = ViewPublisher::new(Some(Arc::new(Echo)));
+        // no frame before the first tick
+        p.on_sim(&surface(0, vec![[0, 1, 2]])).expect("sim");
+        assert!(feed.borrow().frame.is_none());
+        for tick in 0..10 {
+            p.on_tick(&sample(tick)).expect("tick");
+        }
+        p.on_sim(&surface(9, vec![[0, 1, 2]])).expect("sim");
+        let first = feed.borrow_and_update().topology.clone();
+        p.on_tick(&sample(10)).expect("tick");
+        p.on_sim(&surface(10, vec![[0, 1, 2]])).expect("sim");
+        p.on_tick(&sample(11)).expect("tick");
+        p.on_sim(&surface(11, vec![[0, 2, 1]])).expect("sim");
+        // a viewer that did not look in between sees only the newest
+        let state = feed.borrow_and_update().clone();
+        let frame = state.frame.expect("a frame");
+        assert_eq!((frame.tick, frame.echo_ms, frame.mode), (11, 5.5, 1));
+        assert_eq!(frame.positions_m.len(), 9);
+        assert_eq!(frame.force_newtons, [0.0, 0.0, 0.5]);
+        assert!(!Arc::ptr_eq(&first, &state.topology));
+        assert_eq!(state.topology.triangles, vec![[0, 2, 1]]);
+        Box::new(p).finish().expect("finish");
+        assert!(feed.borrow().ended);
+    }
+}

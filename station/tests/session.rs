@@ -1,0 +1,187 @@
+//! A station session end to end on the server side: an exercise started through the station,
+//! driven by a device, seen through the view feed, scored the moment it ends; the set's limits.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use cutlab_assessor::store::{AttemptStatus, Store};
+use cutlab_haptics::device::{HapticDevice, Skill, SyntheticTrainee};
+use cutlab_haptics::servo::Clock;
+use cutlab_station::protocol::{self, KIND_FRAME, KIND_TOPOLOGY};
+use cutlab_station::run::{self, DeviceFactory};
+use cutlab_station::{Ending, Input, StartRequest, StationError, StationSet, StationSettings};
+
+const EXERCISE: &str = cutlab_assessor::store::BUILTIN_EXERCISE;
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("cutlab-station-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+async fn store(dir: &std::path::Path) -> Store {
+    let store = Store::open(&dir.join("cutlab.db")).await.expect("store");
+    store.ensure_builtins().await.expect("builtins");
+    store
+}
+
+fn expert() -> DeviceFactory {
+    Box::new(|plan| {
+        let skill = Skill::preset("expert").expect("preset");
+        let hand = SyntheticTrainee::new("expert", plan.clone(), skill, 3)?;
+        Ok(Box::new(hand) as Box<dyn HapticDevice>)
+    })
+}
+
+fn settings(dir: &std::path::Path, duration_s: f64) -> StationSettings {
+    StationSettings {
+        duration_s,
+        clock: Clock::Virtual,
+        rrd: false,
+        ..StationSettings::new(dir)
+    }
+}
+
+async fn ending(running: &cutlab_station::Running) -> Ending {
+    let mut rx = running.ending.clone();
+    let wait = rx.wait_for(Option::is_some);
+    tokio::time::timeout(Duration::from_secs(300), wait)
+        .await
+        .expect("the session ends")
+        .expect("the session thread reports")
+        .clone()
+        .expect("an ending")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
+    let dir = temp_dir("scored");
+    let store = store(&dir).await;
+    let request = StartRequest {
+        exercise: EXERCISE.into(),
+        trainee: "ana".into(),
+        guided: true,
+    };
+    let running = run::start(
+        store.clone(),
+        &settings(&dir, 6.0),
+        request,
+        Input::Device(expert()),
+    )
+    .await
+    .expect("started");
+    assert!(running.pointer.is_none());
+    assert!(running.plan.line_m.len() >= 2);
+    // the view: a topology, then frames whose positions match it
+    let mut feed = running.feed.clone();
+    let mut frames = 0;
+    let mut cut_seen = false;
+    let mut last_tick = None;
+    while let Ok(()) = feed.changed().await {
+        let state = feed.borrow_and_update().clone();
+        if state.ended {
+            break;
+        }
+        let Some(frame) = state.frame else { continue };
+        let topology = protocol::encode_topology(&state.topology);
+        assert_eq!(topology[0], KIND_TOPOLOGY);
+        assert_eq!(frame.positions_m.len(), 3 * state.topology.vertex_count);
+        let bytes = protocol::encode_frame(&frame);
+        assert_eq!(bytes[0], KIND_FRAME);
+        assert!(
+            last_tick.is_none_or(|t| frame.tick > t),
+            "frames move forward"
+        );
+        last_tick = Some(frame.tick);
+        cut_seen |= frame.mode == 2;
+        frames += 1;
+    }
+    assert!(frames > 10, "{frames} frames");
+    assert!(cut_seen, "a frame shows the blade cutting");
+    let Ending::Scored { attempt, score, .. } = ending(&running).await else {
+        panic!("scored")
+    };
+    assert_eq!(attempt, running.attempt);
+    assert!((-1.0..=1.0).contains(&score));
+    let a = store.get_attempt(attempt).await.expect("attempt");
+    assert_eq!(a.status, AttemptStatus::Complete);
+    assert!(a.scored && a.note.is_none(), "{a:?}");
+    let path = a.recording_path.expect("recording path");
+    let rec = cutlab_recorder::Recording::open(std::path::Path::new(&path)).expect("recording");
+    assert!(rec.is_whole() && !rec.topology.is_empty());
+    store.close().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
+    let dir = temp_dir("stop");
+    let store = store(&dir).await;
+    let set = Arc::new(StationSet::new(1));
+    let request = |trainee: &str| StartRequest {
+        exercise: EXERCISE.into(),
+        trainee: trainee.into(),
+        guided: false,
+    };
+    let settings = settings(&dir, 60.0);
+    let running = set
+        .insert(
+            run::start(
+                store.clone(),
+                &settings,
+                request("ana"),
+                Input::Device(expert()),
+            )
+            .await
+            .expect("started"),
+        )
+        .expect("room");
+    // one session per trainee, and at most one here
+    assert!(matches!(set.check_room("ana"), Err(StationError::Busy(m)) if m.contains("already")));
+    assert!(matches!(set.check_room("ben"), Err(StationError::Busy(m)) if m.contains("at most 1")));
+    running.control.stop();
+    let Ending::Scored { attempt, .. } = ending(&running).await else {
+        panic!("a stopped session is scored")
+    };
+    let rec_path = store
+        .get_attempt(attempt)
+        .await
+        .expect("attempt")
+        .recording_path
+        .expect("path");
+    let rec = cutlab_recorder::Recording::open(std::path::Path::new(&rec_path)).expect("rec");
+    assert!(
+        rec.duration_s() < 30.0,
+        "stopped long before 60 s: {}",
+        rec.duration_s()
+    );
+    assert!(set.get(attempt).is_none() && set.check_room("ben").is_ok());
+
+    let lost = set
+        .insert(
+            run::start(
+                store.clone(),
+                &settings,
+                request("ben"),
+                Input::Device(expert()),
+            )
+            .await
+            .expect("started"),
+        )
+        .expect("room");
+    lost.control.lose();
+    let Ending::Incomplete { attempt, why } = ending(&lost).await else {
+        panic!("a lost page leaves the attempt incomplete")
+    };
+    assert!(why.contains("went away"), "{why}");
+    let a = store.get_attempt(attempt).await.expect("attempt");
+    assert_eq!(a.status, AttemptStatus::Incomplete);
+    let rec =
+        cutlab_recorder::Recording::open(std::path::Path::new(&a.recording_path.expect("path")))
+            .expect("the recording of a lost session");
+    assert!(
+        rec.is_whole(),
+        "the recording is complete: {:?}",
+        rec.damage
+    );
+    store.close().await;
+}

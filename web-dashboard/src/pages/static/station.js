@@ -1,0 +1,362 @@
+// cutlab trainee station: renders the running session's tissue with WebGL2 from the server's
+// frames (one WebSocket), and, on the trainee's page, sends pointer and pen samples back.
+// Our own code; no library, nothing loaded from elsewhere. The messages are documented in
+// station/src/protocol.rs.
+"use strict";
+(function () {
+  const canvas = document.getElementById("tissue");
+  if (!canvas) return;
+  const config = JSON.parse(canvas.dataset.config);
+  const KIND_TOPOLOGY = 1, KIND_FRAME = 2, FRAME_HEADER_BYTES = 64;
+  const BLADE_LENGTH_M = 0.015;
+  const status = (text) => { document.getElementById("status").textContent = text; };
+
+  // ---- small vector and matrix helpers (column-major 4x4, as WebGL wants) ----
+  const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+  const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+  const scale = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const norm = (a) => Math.hypot(a[0], a[1], a[2]);
+  const unit = (a) => { const n = norm(a) || 1; return scale(a, 1 / n); };
+  function lookAt(eye, target, up) {
+    const f = unit(sub(target, eye)), s = unit(cross(f, up)), u = cross(s, f);
+    return [s[0], u[0], -f[0], 0, s[1], u[1], -f[1], 0, s[2], u[2], -f[2], 0,
+      -dot(s, eye), -dot(u, eye), dot(f, eye), 1];
+  }
+  function perspective(fovy, aspect, near, far) {
+    const t = 1 / Math.tan(fovy / 2), d = near - far;
+    return [t / aspect, 0, 0, 0, 0, t, 0, 0, 0, 0, (far + near) / d, -1, 0, 0, 2 * far * near / d, 0];
+  }
+  function rotate(q, v) { // q = [w, x, y, z]
+    const u = [q[1], q[2], q[3]], w = q[0];
+    const t = scale(cross(u, v), 2);
+    return add(add(v, scale(t, w)), cross(u, t));
+  }
+
+  // ---- WebGL2 ----
+  const gl = canvas.getContext("webgl2", { antialias: true });
+  if (!gl) { status("This browser has no WebGL2: the station cannot show the tissue."); return; }
+  function program(vs, fs) {
+    const p = gl.createProgram();
+    for (const [type, src] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
+      const s = gl.createShader(type);
+      gl.shaderSource(s, src);
+      gl.compileShader(s);
+      if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+      gl.attachShader(p, s);
+    }
+    gl.linkProgram(p);
+    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
+    return p;
+  }
+  // the tissue: lit from the eye, both sides; the inside of the wound (back faces) darker red
+  const tissue = program(`#version 300 es
+    in vec3 position; in vec3 normal;
+    uniform mat4 view, projection;
+    out vec3 v_normal; out vec3 v_eye;
+    void main() {
+      vec4 p = view * vec4(position, 1.0);
+      v_eye = -p.xyz; v_normal = mat3(view) * normal;
+      gl_Position = projection * p;
+    }`, `#version 300 es
+    precision highp float;
+    in vec3 v_normal; in vec3 v_eye; out vec4 color;
+    void main() {
+      vec3 n = normalize(v_normal); if (!gl_FrontFacing) n = -n;
+      vec3 l = normalize(v_eye);
+      float diffuse = max(dot(n, l), 0.0);
+      float spec = pow(max(dot(reflect(-l, n), l), 0.0), 24.0) * 0.25;
+      vec3 base = gl_FrontFacing ? vec3(0.88, 0.62, 0.56) : vec3(0.62, 0.16, 0.14);
+      color = vec4(base * (0.3 + 0.7 * diffuse) + spec, 1.0);
+    }`);
+  const lines = program(`#version 300 es
+    in vec3 position; uniform mat4 view, projection; uniform float point_size;
+    void main() { gl_Position = projection * view * vec4(position, 1.0); gl_PointSize = point_size; }`,
+  `#version 300 es
+    precision highp float; uniform vec3 tint; out vec4 color;
+    void main() { color = vec4(tint, 1.0); }`);
+  const mesh = { vao: gl.createVertexArray(), positions: gl.createBuffer(), normals: gl.createBuffer(),
+    indices: gl.createBuffer(), count: 0, vertices: 0, capacity: 0, triangles: null, xyz: null };
+  const overlay = { vao: gl.createVertexArray(), buffer: gl.createBuffer() };
+  gl.bindVertexArray(mesh.vao);
+  for (const [buffer, name] of [[mesh.positions, "position"], [mesh.normals, "normal"]]) {
+    gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
+    const at = gl.getAttribLocation(tissue, name);
+    gl.enableVertexAttribArray(at);
+    gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
+  }
+  gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, mesh.indices);
+  gl.bindVertexArray(overlay.vao);
+  gl.bindBuffer(gl.ARRAY_BUFFER, overlay.buffer);
+  gl.enableVertexAttribArray(gl.getAttribLocation(lines, "position"));
+  gl.vertexAttribPointer(gl.getAttribLocation(lines, "position"), 3, gl.FLOAT, false, 0, 0);
+  gl.bindVertexArray(null);
+
+  function setTopology(view) {
+    const vertices = view.getUint32(4, true), triangles = view.getUint32(8, true);
+    mesh.triangles = new Uint32Array(view.buffer, 12, 3 * triangles).slice();
+    mesh.count = 3 * triangles;
+    mesh.vertices = vertices;
+    gl.bindVertexArray(mesh.vao);
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, mesh.indices);
+    gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, mesh.triangles, gl.DYNAMIC_DRAW);
+    if (vertices > mesh.capacity) { // headroom for the vertices the next cuts add
+      mesh.capacity = Math.ceil(vertices * 1.5);
+      for (const b of [mesh.positions, mesh.normals]) {
+        gl.bindBuffer(gl.ARRAY_BUFFER, b);
+        gl.bufferData(gl.ARRAY_BUFFER, 12 * mesh.capacity, gl.DYNAMIC_DRAW);
+      }
+    }
+    gl.bindVertexArray(null);
+  }
+
+  function vertexNormals(xyz, tris, n) {
+    const out = new Float32Array(3 * n);
+    for (let t = 0; t < tris.length; t += 3) {
+      const a = 3 * tris[t], b = 3 * tris[t + 1], c = 3 * tris[t + 2];
+      const e1 = [xyz[b] - xyz[a], xyz[b + 1] - xyz[a + 1], xyz[b + 2] - xyz[a + 2]];
+      const e2 = [xyz[c] - xyz[a], xyz[c + 1] - xyz[a + 1], xyz[c + 2] - xyz[a + 2]];
+      const f = cross(e1, e2); // area-weighted
+      for (const v of [a, b, c]) { out[v] += f[0]; out[v + 1] += f[1]; out[v + 2] += f[2]; }
+    }
+    return out;
+  }
+
+  // ---- the camera: the exercise's viewpoint, or above the tissue along its up ----
+  const up = config.up || [0, 0, 1];
+  let camera = null;
+  function frameCamera(xyz) {
+    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (let i = 0; i < xyz.length; i += 3) for (let k = 0; k < 3; k++) {
+      lo[k] = Math.min(lo[k], xyz[i + k]); hi[k] = Math.max(hi[k], xyz[i + k]);
+    }
+    const size = norm(sub(hi, lo));
+    let target = scale(add(lo, hi), 0.5), eye;
+    if (config.plan) { // frame the incision
+      const line = config.plan.line_m;
+      target = scale(add(line[0], line[line.length - 1]), 0.5);
+    }
+    if (config.viewpoint) {
+      eye = config.viewpoint.eye_m; target = config.viewpoint.look_at_m;
+    } else {
+      const side = unit(cross(up, Math.abs(up[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0]));
+      eye = add(target, add(scale(up, 0.55 * size), scale(side, -0.35 * size)));
+    }
+    const viewUp = Math.abs(dot(unit(sub(target, eye)), up)) > 0.99 ? cross(up, [1, 0, 0]) : up;
+    camera = { eye, target, up: viewUp, near: 0.01 * size, far: 10 * size };
+  }
+  function matrices() {
+    const aspect = canvas.clientWidth / Math.max(1, canvas.clientHeight);
+    return { view: lookAt(camera.eye, camera.target, camera.up), projection: perspective(0.7, aspect, camera.near, camera.far) };
+  }
+
+  // ---- the latest frame, what the page shows ----
+  let latest = null, fresh = false, forceLimit = 2.0;
+  const stats = { frames: 0, since: performance.now(), latencies: [], bytes: 0 };
+  function takeFrame(view) {
+    const vertices = view.getUint32(4, true);
+    const f32 = (at, n) => Array.from(new Float32Array(view.buffer, at, n));
+    latest = {
+      mode: view.getUint8(1), engaged: view.getUint8(2) === 1, faults: view.getUint8(3),
+      tick: Number(view.getBigUint64(8, true)), echo: view.getFloat64(16, true),
+      tip: f32(24, 3), rotation: f32(36, 4), force: f32(52, 3),
+      xyz: new Float32Array(view.buffer, FRAME_HEADER_BYTES, 3 * vertices),
+    };
+    fresh = true;
+  }
+
+  function draw() {
+    requestAnimationFrame(draw);
+    if (!latest || !mesh.triangles || latest.xyz.length !== 3 * mesh.vertices) return;
+    if (!camera) frameCamera(latest.xyz);
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    gl.viewport(0, 0, canvas.width, canvas.height);
+    gl.clearColor(0.12, 0.15, 0.17, 1);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+    gl.enable(gl.DEPTH_TEST);
+    const { view, projection } = matrices();
+    if (fresh) {
+      gl.bindBuffer(gl.ARRAY_BUFFER, mesh.positions);
+      gl.bufferSubData(gl.ARRAY_BUFFER, 0, latest.xyz);
+      gl.bindBuffer(gl.ARRAY_BUFFER, mesh.normals);
+      gl.bufferSubData(gl.ARRAY_BUFFER, 0, vertexNormals(latest.xyz, mesh.triangles, mesh.vertices));
+      mesh.xyz = latest.xyz;
+      fresh = false;
+      stats.frames += 1;
+      if (Number.isFinite(latest.echo)) stats.latencies.push(performance.now() - latest.echo);
+      hud(latest);
+    }
+    gl.useProgram(tissue);
+    gl.uniformMatrix4fv(gl.getUniformLocation(tissue, "view"), false, view);
+    gl.uniformMatrix4fv(gl.getUniformLocation(tissue, "projection"), false, projection);
+    gl.bindVertexArray(mesh.vao);
+    gl.drawElements(gl.TRIANGLES, mesh.count, gl.UNSIGNED_INT, 0);
+    // overlays: the plan (guided), the blade
+    gl.useProgram(lines);
+    gl.uniformMatrix4fv(gl.getUniformLocation(lines, "view"), false, view);
+    gl.uniformMatrix4fv(gl.getUniformLocation(lines, "projection"), false, projection);
+    gl.bindVertexArray(overlay.vao);
+    const strip = (points, mode, tint, size) => {
+      gl.bindBuffer(gl.ARRAY_BUFFER, overlay.buffer);
+      gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(points.flat()), gl.STREAM_DRAW);
+      gl.uniform3fv(gl.getUniformLocation(lines, "tint"), tint);
+      gl.uniform1f(gl.getUniformLocation(lines, "point_size"), size || 1);
+      gl.drawArrays(mode, 0, points.length);
+    };
+    if (config.plan) {
+      const lift = (p, i) => add(p, scale(config.plan.normals[i] || up, 0.0005));
+      const line = config.plan.line_m.map(lift);
+      strip(line, gl.LINE_STRIP, [0.16, 0.78, 0.35]);
+      strip([line[0]], gl.POINTS, [0.16, 0.78, 0.35], 10);
+      strip([line[line.length - 1]], gl.POINTS, [0.95, 0.75, 0.2], 10);
+    }
+    const edge = rotate(latest.rotation, [0, 0, 1]);
+    gl.disable(gl.DEPTH_TEST); // the blade is always seen, also inside the tissue
+    strip([latest.tip, add(latest.tip, scale(edge, BLADE_LENGTH_M))], gl.LINES, latest.engaged ? [0.95, 0.95, 1.0] : [0.6, 0.62, 0.66]);
+    strip([latest.tip], gl.POINTS, latest.mode === 2 ? [1, 0.3, 0.2] : [0.9, 0.9, 0.95], 6);
+  }
+  requestAnimationFrame(draw);
+
+  const MODES = ["free", "touching", "cutting"];
+  let cutSeen = false, releasedAt = null;
+  function hud(f) {
+    const force = norm(f.force);
+    document.getElementById("force-value").textContent = force.toFixed(2) + " N";
+    const bar = document.getElementById("force-bar");
+    bar.style.width = Math.min(100, 100 * force / forceLimit).toFixed(0) + "%";
+    bar.className = force > forceLimit ? "over" : force > 0.7 * forceLimit ? "near" : "";
+    document.getElementById("force-warning").hidden = force <= forceLimit;
+    document.getElementById("elapsed").textContent = (f.tick * 1e-3).toFixed(1) + " s";
+    document.getElementById("blade").textContent = (f.engaged ? "engaged, " : "") + MODES[f.mode];
+    cutSeen = cutSeen || f.mode === 2;
+  }
+
+  // ---- the socket ----
+  const socket = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + config.ws);
+  socket.binaryType = "arraybuffer";
+  let ended = false;
+  socket.onmessage = (event) => {
+    if (typeof event.data === "string") return onText(JSON.parse(event.data));
+    stats.bytes += event.data.byteLength;
+    const view = new DataView(event.data);
+    const kind = view.getUint8(0);
+    if (kind === KIND_TOPOLOGY) setTopology(view);
+    else if (kind === KIND_FRAME) takeFrame(view);
+  };
+  socket.onclose = () => { if (!ended) status("The connection to the session was lost."); };
+  function onText(m) {
+    if (m.type !== "ended") return;
+    ended = true;
+    const debrief = document.getElementById("debrief");
+    const link = `/attempts/${m.attempt}`;
+    status(m.scored ? `Ended: score ${m.score.toFixed(2)}, ${m.passed ? "PASS" : "FAIL"}.` : `Ended, not scored: ${m.why}`);
+    debrief.innerHTML = "";
+    const p = document.createElement("p");
+    p.id = "debrief-summary";
+    p.textContent = m.scored ? `Score ${m.score.toFixed(2)} (${m.passed ? "pass" : "fail"}). ` : `Not scored: ${m.why}. `;
+    const a = document.createElement("a"); a.href = link; a.textContent = "The attempt, its metrics and its replay";
+    p.appendChild(a);
+    debrief.appendChild(p);
+    // the attempt's page (metrics and their verdicts, the cut against the plan, the replay link)
+    fetch(link, { credentials: "same-origin" }).then((r) => r.ok ? r.text() : "").then((html) => {
+      const main = new DOMParser().parseFromString(html, "text/html").querySelector("main");
+      if (main) { const section = document.createElement("section"); section.id = "debrief-attempt"; section.append(...main.childNodes); debrief.appendChild(section); }
+    });
+  }
+
+  window.cutlabStation = {
+    // the figures `cutlab bench station` reads
+    stats() {
+      const l = stats.latencies.slice().sort((a, b) => a - b);
+      const q = (p) => l.length ? l[Math.min(l.length - 1, Math.floor(p * l.length))] : null;
+      const s = (performance.now() - stats.since) / 1000;
+      return { fps: stats.frames / s, latency_p50_ms: q(0.5), latency_p95_ms: q(0.95), bytes_per_s: stats.bytes / s, frames: stats.frames, ended };
+    },
+    config,
+    // where a world point (m) is on the page, in CSS pixels of the viewport (for tests)
+    project(point) {
+      if (!camera) return null;
+      const { view, projection } = matrices();
+      const v = [point[0], point[1], point[2], 1];
+      const mul = (m, x) => [0, 1, 2, 3].map((r) => m[r] * x[0] + m[4 + r] * x[1] + m[8 + r] * x[2] + m[12 + r] * x[3]);
+      const c = mul(projection, mul(view, v));
+      const r = canvas.getBoundingClientRect();
+      return [r.left + (c[0] / c[3] + 1) / 2 * r.width, r.top + (1 - c[1] / c[3]) / 2 * r.height];
+    },
+  };
+  if (!config.driver) return;
+
+  // ---- the trainee's input: the point under the pointer on the tissue, depth, button ----
+  let hit = null, engaged = false, depth = config.plan ? config.plan.depth_m : 0.004, lastSent = 0;
+  document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
+  function ray(event) {
+    const r = canvas.getBoundingClientRect();
+    const x = 2 * (event.clientX - r.left) / r.width - 1, y = 1 - 2 * (event.clientY - r.top) / r.height;
+    const f = unit(sub(camera.target, camera.eye)), s = unit(cross(f, camera.up)), u = cross(s, f);
+    const t = Math.tan(0.35), aspect = r.width / r.height;
+    return { origin: camera.eye, dir: unit(add(f, add(scale(s, x * t * aspect), scale(u, y * t)))) };
+  }
+  function pick(event) { // the nearest triangle the ray meets (Möller–Trumbore)
+    if (!camera || !mesh.xyz || !mesh.triangles) return null;
+    const { origin, dir } = ray(event), xyz = mesh.xyz, tris = mesh.triangles;
+    let best = Infinity, normal = null;
+    for (let i = 0; i < tris.length; i += 3) {
+      const a = 3 * tris[i], b = 3 * tris[i + 1], c = 3 * tris[i + 2];
+      const p0 = [xyz[a], xyz[a + 1], xyz[a + 2]];
+      const e1 = [xyz[b] - p0[0], xyz[b + 1] - p0[1], xyz[b + 2] - p0[2]];
+      const e2 = [xyz[c] - p0[0], xyz[c + 1] - p0[1], xyz[c + 2] - p0[2]];
+      const p = cross(dir, e2), det = dot(e1, p);
+      if (Math.abs(det) < 1e-14) continue;
+      const tv = sub(origin, p0), uu = dot(tv, p) / det;
+      if (uu < 0 || uu > 1) continue;
+      const q = cross(tv, e1), vv = dot(dir, q) / det;
+      if (vv < 0 || uu + vv > 1) continue;
+      const d = dot(e2, q) / det;
+      if (d > 0 && d < best) { best = d; normal = cross(e1, e2); }
+    }
+    return best < Infinity ? { point: add(origin, scale(dir, best)), normal: unit(normal) } : null;
+  }
+  function send(t_ms) {
+    if (!hit || socket.readyState !== WebSocket.OPEN || !(t_ms > lastSent)) return;
+    lastSent = t_ms;
+    socket.send(JSON.stringify({ type: "pointer", t_ms, surface_in_world_m: hit.point, depth_m: engaged ? depth : 0, blade_engaged: engaged }));
+  }
+  canvas.addEventListener("pointermove", (event) => {
+    const events = event.getCoalescedEvents ? event.getCoalescedEvents() : [event];
+    for (const e of events.length ? events : [event]) {
+      if (e.pointerType === "pen" && e.pressure > 0) depth = Math.min(0.02, e.pressure * 0.012);
+      const h = pick(e);
+      if (h) { hit = h; send(e.timeStamp); }
+    }
+  });
+  canvas.addEventListener("pointerdown", (event) => {
+    if (event.button !== 0) return;
+    canvas.setPointerCapture(event.pointerId);
+    engaged = true; releasedAt = null;
+    const h = pick(event); if (h) hit = h;
+    send(event.timeStamp);
+  });
+  canvas.addEventListener("pointerup", (event) => { engaged = false; releasedAt = performance.now(); send(event.timeStamp); });
+  canvas.addEventListener("wheel", (event) => {
+    event.preventDefault();
+    depth = Math.max(0, Math.min(0.02, depth - Math.sign(event.deltaY) * 0.0005));
+    document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
+  }, { passive: false });
+  window.addEventListener("keydown", (event) => {
+    if (event.key === "ArrowUp") depth = Math.max(0, depth - 0.0005);
+    else if (event.key === "ArrowDown") depth = Math.min(0.02, depth + 0.0005);
+    else return;
+    document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
+  });
+  function stop() { if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify({ type: "stop" })); }
+  document.getElementById("stop").addEventListener("click", stop);
+  // the pose must keep arriving while the hand holds still: a sample every frame; and the
+  // blade lifted out for 1.5 s after a cut ends the session
+  (function heartbeat() {
+    requestAnimationFrame(heartbeat);
+    send(performance.now());
+    if (cutSeen && !engaged && releasedAt !== null && performance.now() - releasedAt > 1500 && !ended) { stop(); releasedAt = null; }
+  })();
+})();

@@ -1,0 +1,349 @@
+//! `/station`: the trainee station. A trainee picks an exercise and a mode, presses Start, sees
+//! the tissue (WebGL2, our `static/station.js`) and cuts it with the pointer or a pen; the
+//! attempt is scored the moment the session ends and the page shows the debrief. The same
+//! page, read-only, is the instructors' live view of a running session (`/supervision` links
+//! to it).
+//!
+//! One WebSocket per viewer (`/station/{attempt}/ws`): binary frames from the server
+//! ([`cutlab_station::protocol`]), pointer samples and Stop from the trainee's page (anything
+//! else, or longer than the limit, is dropped and counted). The upgrade checks the session
+//! cookie like every route, and the `Origin` against the `Host`, so another site's page cannot
+//! open it with the user's cookie.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::State;
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::http::HeaderMap;
+use axum::response::{IntoResponse, Redirect, Response};
+use axum::routing::{get, post};
+use cutlab_station::protocol::{self, ClientMessage};
+use cutlab_station::{Ending, Input, Running, StartRequest, StationError};
+use maud::{Markup, html};
+use serde::Deserialize;
+
+use super::layout::page;
+use crate::AppState;
+use crate::access::visible_attempt;
+use crate::auth::CurrentUser;
+use crate::error::{AppError, PageResult};
+use crate::extract::{Form, Id};
+
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route("/station", get(choose))
+        .route("/station/start", post(start))
+        .route("/station/{id}", get(station))
+        .route("/station/{id}/ws", get(socket))
+        .route(
+            "/static/station.js",
+            get(|| async {
+                super::static_file("text/javascript", include_str!("static/station.js"))
+            }),
+        )
+}
+
+fn station_error(e: StationError) -> AppError {
+    match e {
+        StationError::Busy(m) => AppError::Conflict(m),
+        StationError::Assess(cutlab_assessor::AssessError::NotFound(_)) => {
+            AppError::BadRequest("no such exercise".into())
+        }
+        other => AppError::Internal(other.to_string()),
+    }
+}
+
+/// `/station`: the exercises, the mode, Start.
+async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<Markup> {
+    let exercises = state.store().list_exercises().await?;
+    let running = state
+        .station()
+        .running()
+        .into_iter()
+        .find(|r| r.trainee == user.user().name);
+    Ok(page(
+        "Station",
+        Some(&user),
+        html! {
+            @if let Some(r) = running {
+                p { "Your session of " (r.exercise) " is running: "
+                    a href=(format!("/station/{}", r.attempt)) { "back to it" } "." }
+            }
+            form class="station-start" method="post" action="/station/start" {
+                input type="hidden" name="csrf" value=(user.csrf());
+                p {
+                    label for="exercise" { "Exercise" } " "
+                    select id="exercise" name="exercise" {
+                        @for e in &exercises { option value=(e.name) { (e.name) } }
+                    }
+                }
+                @for e in &exercises {
+                    p class="muted brief" { strong { (e.name) ": " } (e.description) }
+                }
+                fieldset {
+                    legend { "Mode" }
+                    label { input type="radio" name="mode" value="guided" checked; " guided: the planned incision, its entry and exit and the depth shown on the tissue" }
+                    br;
+                    label { input type="radio" name="mode" value="exam"; " exam: nothing shown" }
+                }
+                p class="muted" { "Move the pointer over the tissue; hold the button to engage the blade; the wheel (or pen pressure, or the ↑/↓ keys) sets the depth. The session ends at Stop, at the time limit, or when you lift the blade out after cutting." }
+                button id="start" type="submit" { "Start" }
+            }
+        },
+    ))
+}
+
+#[derive(Debug, Deserialize)]
+struct StartForm {
+    exercise: String,
+    mode: String,
+}
+
+/// `POST /station/start`: starts the session, then to its page.
+async fn start(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Form(form): Form<StartForm>,
+) -> Result<Response, AppError> {
+    let guided = match form.mode.as_str() {
+        "guided" => true,
+        "exam" => false,
+        other => return Err(AppError::BadRequest(format!("unknown mode {other:?}"))),
+    };
+    let trainee = user.user().name.clone();
+    state
+        .station()
+        .check_room(&trainee)
+        .map_err(station_error)?;
+    let settings = state.station_settings().clone();
+    let request = StartRequest {
+        exercise: form.exercise,
+        trainee,
+        guided,
+    };
+    let running =
+        cutlab_station::run::start(state.store().clone(), &settings, request, Input::Pointer)
+            .await
+            .map_err(station_error)?;
+    let running = state.station().insert(running).map_err(station_error)?;
+    Ok(Redirect::to(&format!("/station/{}", running.attempt)).into_response())
+}
+
+/// What the page's script needs, in the canvas's `data-config`.
+fn config_json(r: &Running, driver: bool) -> String {
+    let plan = r.guided.then(|| {
+        serde_json::json!({
+            "line_m": r.plan.line_m.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
+            "normals": r.plan.normals.iter().map(|n| [n.x, n.y, n.z]).collect::<Vec<_>>(),
+            "depth_m": r.plan.depth_m,
+        })
+    });
+    let viewpoint = r.viewpoint.as_ref().map(|v| {
+        serde_json::json!({
+            "eye_m": v.eye_mm.map(|c| c * 1e-3),
+            "look_at_m": v.look_at_mm.map(|c| c * 1e-3),
+        })
+    });
+    serde_json::json!({
+        "attempt": r.attempt,
+        "driver": driver,
+        "exercise": r.exercise,
+        "trainee": r.trainee,
+        "guided": r.guided,
+        "plan": plan,
+        "viewpoint": viewpoint,
+        "up": r.plan.normals.first().map(|n| [n.x, n.y, n.z]),
+        "ws": format!("/station/{}/ws", r.attempt),
+    })
+    .to_string()
+}
+
+/// `/station/{attempt}`: the trainee's station, or an instructor's live view; once the session
+/// ended, its attempt.
+async fn station(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+) -> Result<Response, AppError> {
+    visible_attempt(&state, &user, id).await?;
+    let Some(r) = state.station().get(id) else {
+        return Ok(Redirect::to(&format!("/attempts/{id}")).into_response());
+    };
+    let driver = r.trainee == user.user().name;
+    let title = if driver {
+        format!("Station: {}", r.exercise)
+    } else {
+        format!("Live: {} at {}", r.trainee, r.exercise)
+    };
+    Ok(page(
+        &title,
+        Some(&user),
+        html! {
+            div class="station" {
+                canvas id="tissue" width="960" height="600" data-config=(config_json(&r, driver)) {}
+                div class="hud" {
+                    div { "Force " span id="force-value" { "0.00 N" } }
+                    div class="force-bar" { div id="force-bar" {} }
+                    div id="force-warning" class="fail" hidden { "Too much force" }
+                    div { "Time " span id="elapsed" { "0.0 s" } }
+                    div { "Blade " span id="blade" { "free" } }
+                    div { "Depth " span id="depth" { "–" } }
+                    @if driver { button id="stop" type="button" { "Stop" } }
+                    @else { p class="muted" { "Live view (read only)." } }
+                    div id="status" class="muted" {}
+                }
+            }
+            div id="debrief" {}
+            script src="/static/station.js" {}
+        },
+    )
+    .into_response())
+}
+
+/// Whether the request's `Origin` is this server (the `Host` it was sent to).
+fn same_origin(headers: &HeaderMap) -> bool {
+    let header = |name| headers.get(name).and_then(|v| v.to_str().ok());
+    let (Some(origin), Some(host)) = (header("origin"), header("host")) else {
+        return false;
+    };
+    origin
+        .strip_prefix("http://")
+        .or_else(|| origin.strip_prefix("https://"))
+        .is_some_and(|o| o == host)
+}
+
+/// `/station/{attempt}/ws`: the session's frames; the trainee's pointer samples and Stop.
+async fn socket(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    headers: HeaderMap,
+    Id(id): Id,
+    upgrade: WebSocketUpgrade,
+) -> Result<Response, AppError> {
+    if !same_origin(&headers) {
+        return Err(AppError::Forbidden(
+            "the station's socket is opened by its own page only",
+        ));
+    }
+    visible_attempt(&state, &user, id).await?;
+    let r = state.station().get(id).ok_or(AppError::NotFound)?;
+    let driver = r.trainee == user.user().name;
+    Ok(upgrade
+        .max_message_size(protocol::MAX_CLIENT_MESSAGE_BYTES * 4)
+        .on_upgrade(move |ws| serve(ws, r, driver)))
+}
+
+/// How often the server looks for a new frame when none was announced (the end of a session
+/// is announced on its own channel).
+const IDLE: Duration = Duration::from_millis(250);
+
+async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
+    let (mut tx, mut rx) = futures_util::StreamExt::split(ws);
+    let mut feed = r.feed.clone();
+    let mut ending = r.ending.clone();
+    let sender = async {
+        use futures_util::SinkExt;
+        let mut topology = None;
+        loop {
+            let state = feed.borrow_and_update().clone();
+            if let Some(frame) = &state.frame {
+                if !topology
+                    .as_ref()
+                    .is_some_and(|t| Arc::ptr_eq(t, &state.topology))
+                {
+                    let bytes = protocol::encode_topology(&state.topology);
+                    if tx.send(Message::Binary(bytes.into())).await.is_err() {
+                        return;
+                    }
+                    topology = Some(state.topology.clone());
+                }
+                let bytes = protocol::encode_frame(frame);
+                if tx.send(Message::Binary(bytes.into())).await.is_err() {
+                    return;
+                }
+            }
+            tokio::select! {
+                changed = feed.changed() => if changed.is_err() { break },
+                _ = ending.wait_for(Option::is_some) => break,
+                _ = tokio::time::sleep(IDLE) => {}
+            }
+        }
+        // the session ended: say how, then close
+        let done =
+            tokio::time::timeout(Duration::from_secs(120), ending.wait_for(Option::is_some)).await;
+        let text = match done.ok().and_then(Result::ok).and_then(|e| e.clone()) {
+            Some(Ending::Scored {
+                attempt,
+                score,
+                passed,
+            }) => serde_json::json!({
+                "type": "ended", "attempt": attempt, "scored": true, "score": score, "passed": passed,
+            }),
+            Some(Ending::Incomplete { attempt, why }) => serde_json::json!({
+                "type": "ended", "attempt": attempt, "scored": false, "why": why,
+            }),
+            None => {
+                serde_json::json!({ "type": "ended", "attempt": r.attempt, "scored": false, "why": "no answer from the session" })
+            }
+        };
+        let _ = tx.send(Message::Text(text.to_string().into())).await;
+        let _ = tx.close().await;
+    };
+    let receiver = async {
+        let mut dropped = 0u64;
+        while let Some(Ok(msg)) = futures_util::StreamExt::next(&mut rx).await {
+            let Message::Text(text) = msg else {
+                if matches!(msg, Message::Close(_)) {
+                    break;
+                }
+                if !matches!(msg, Message::Ping(_) | Message::Pong(_)) {
+                    dropped += 1;
+                }
+                continue;
+            };
+            if !driver {
+                dropped += 1;
+                continue;
+            }
+            match protocol::decode_client(text.as_str()) {
+                Ok(ClientMessage::Pointer(sample)) => {
+                    if let Some(p) = &r.pointer
+                        && p.push(sample).is_err()
+                    {
+                        dropped += 1;
+                    }
+                }
+                Ok(ClientMessage::Stop {}) => r.control.stop(),
+                Err(_) => dropped += 1,
+            }
+        }
+        dropped
+    };
+    tokio::pin!(sender);
+    tokio::pin!(receiver);
+    let dropped = tokio::select! {
+        () = &mut sender => {
+            // the session ended; what the page still sends does not matter
+            0
+        }
+        dropped = &mut receiver => {
+            // the page went away: a lost device when it was the trainee's and still running
+            if driver && r.ending.borrow().is_none() {
+                r.control.lose();
+                if let Some(p) = &r.pointer {
+                    p.close();
+                }
+                tracing::warn!("station attempt {}: the trainee's page went away", r.attempt);
+            }
+            dropped
+        }
+    };
+    if dropped > 0 {
+        tracing::info!(
+            "station attempt {}: {dropped} messages from a page dropped (malformed, oversized or refused)",
+            r.attempt
+        );
+    }
+}
