@@ -11,15 +11,15 @@ use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
-use cutlab_recorder::{RecordedHand, RerunTarget, WriterOptions};
+use cutlab_recorder::{RecordedHand, Recording, RerunTarget, WriterOptions};
+use cutlab_sim::Vector3;
 use cutlab_sim::io::PointData;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
 use cutlab_sim::stats::Summary;
-use cutlab_sim::{Point3, Vector3};
 
 use cutlab_assessor::Store;
-use cutlab_recorder::Recording;
+use cutlab_station::attempt::{self, Finished};
 
 /// `println!` unless `quiet`.
 macro_rules! say {
@@ -178,30 +178,17 @@ impl OpenAttempt {
             quiet,
         } = self;
         rt.block_on(async {
-            let result = match outcome {
-                Ok(path) => match Recording::open(path) {
-                    Ok(rec) => match store.score_recording(id, &rec).await {
-                        Ok((o, values)) if !quiet => {
-                            crate::assess_cli::print_outcome(&o, &values, false)
-                        }
-                        Ok(_) => Ok(()),
-                        Err(e) => {
-                            store.mark_failed(id, &e.to_string()).await?;
-                            Err(anyhow::anyhow!("scoring attempt {id}: {e}"))
-                        }
-                    },
-                    Err(e) => {
-                        store.mark_incomplete(id, Some(&e.to_string())).await?;
-                        Err(anyhow::anyhow!(
-                            "reading the recording of attempt {id}: {e}"
-                        ))
-                    }
-                },
-                Err(why) => {
-                    store.mark_incomplete(id, Some(&why)).await?;
+            // the path the station's attempts take too
+            let result = match attempt::finish_attempt(&store, id, outcome).await {
+                Ok(Finished::Scored(o, values)) if !quiet => {
+                    crate::assess_cli::print_outcome(&o, &values, false)
+                }
+                Ok(Finished::Scored(..)) => Ok(()),
+                Ok(Finished::Incomplete(why)) => {
                     say!(quiet, "attempt {id} marked incomplete: {why}");
                     Ok(())
                 }
+                Err(e) => Err(anyhow::Error::new(e).context(format!("finishing attempt {id}"))),
             };
             store.close().await;
             result
@@ -259,12 +246,9 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         .map(|a| exercise_plan(a, &o.scene, &scene.spec.name))
         .transpose()?;
     let plan = match &expert_plan {
-        Some(p) => {
-            let line: Vec<Point3> = p.incision_m.iter().map(|&c| Point3::from(c)).collect();
-            session
-                .plan_along(&resample(&line, 33), &Vector3::from(p.normal), p.depth_m)
-                .context("projecting the exercise's plan onto the tissue")
-        }
+        Some(p) => attempt::plan_on_tissue(&session, p)
+            .map_err(anyhow::Error::new)
+            .context("projecting the exercise's plan onto the tissue"),
         None => {
             // the scene's incision directions were checked when it was built
             let (up, along) = scene.spec.incision.unit().map_err(anyhow::Error::msg)?;
@@ -577,28 +561,6 @@ fn exercise_plan(a: &AttemptArgs, scene_arg: &str, scene_name: &str) -> anyhow::
     })
 }
 
-/// `n >= 2` points evenly spaced by arc length along the polyline `line`, its ends included.
-fn resample(line: &[Point3], n: usize) -> Vec<Point3> {
-    let lengths: Vec<f64> = line.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
-    let total: f64 = lengths.iter().sum();
-    let (mut seg, mut walked) = (0, 0.0);
-    (0..n)
-        .map(|i| {
-            let s = total * i as f64 / (n - 1) as f64;
-            while seg + 1 < lengths.len() && walked + lengths[seg] < s {
-                walked += lengths[seg];
-                seg += 1;
-            }
-            match lengths.get(seg) {
-                Some(&l) if l > 0.0 => {
-                    line[seg] + (line[seg + 1] - line[seg]) * ((s - walked) / l).clamp(0.0, 1.0)
-                }
-                _ => line[seg],
-            }
-        })
-        .collect()
-}
-
 fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
     std::fs::write(path, serde_json::to_string_pretty(v)?)
         .with_context(|| format!("writing {}", path.display()))
@@ -607,21 +569,6 @@ fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn resampling_keeps_the_ends_and_spaces_evenly() {
-        let line = [
-            Point3::new(0.0, 0.0, 0.0),
-            Point3::new(0.01, 0.0, 0.0),
-            Point3::new(0.01, 0.03, 0.0),
-        ];
-        let r = resample(&line, 5);
-        assert_eq!((r[0], r[4]), (line[0], line[2]));
-        for w in r.windows(2) {
-            assert!(((w[1] - w[0]).norm() - 0.01).abs() < 1e-12, "{r:?}");
-        }
-        assert!((r[1] - line[1]).norm() < 1e-12);
-    }
 
     #[test]
     fn skill_levels_parse_and_bad_ones_are_refused() {
