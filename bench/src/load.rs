@@ -6,6 +6,7 @@
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
+use cutlab_sim::stats::percentile;
 use http_body_util::{BodyExt, Full};
 use hyper::body::Bytes;
 use hyper::{Method, Request, StatusCode};
@@ -24,6 +25,7 @@ pub struct LoadReport {
     /// Answers other than 200, and transport errors.
     pub errors: u64,
     pub requests_per_s: f64,
+    /// Latency percentiles (`cutlab_sim::stats::percentile`, nearest rank) and maximum.
     pub p50_ms: f64,
     pub p90_ms: f64,
     pub p99_ms: f64,
@@ -152,16 +154,9 @@ pub async fn run(
         }
     }
     let elapsed = started.elapsed().as_secs_f64();
-    lat.sort();
-    let pct = |p: f64| {
-        lat.get(
-            ((lat.len() as f64 * p).ceil() as usize)
-                .saturating_sub(1)
-                .min(lat.len().saturating_sub(1)),
-        )
-        .map_or(f64::NAN, |d| d.as_secs_f64() * 1e3)
-    };
-    let requests = lat.len() as u64;
+    let mut ms: Vec<f64> = lat.iter().map(|d| d.as_secs_f64() * 1e3).collect();
+    ms.sort_by(f64::total_cmp);
+    let requests = ms.len() as u64;
     LoadReport {
         target: target.to_owned(),
         clients,
@@ -169,10 +164,10 @@ pub async fn run(
         requests,
         errors,
         requests_per_s: requests as f64 / elapsed,
-        p50_ms: pct(0.50),
-        p90_ms: pct(0.90),
-        p99_ms: pct(0.99),
-        max_ms: lat.last().map_or(f64::NAN, |d| d.as_secs_f64() * 1e3),
+        p50_ms: percentile(&ms, 0.50),
+        p90_ms: percentile(&ms, 0.90),
+        p99_ms: percentile(&ms, 0.99),
+        max_ms: ms.last().copied().unwrap_or(f64::NAN),
         mean_bytes: if requests > 0 {
             bytes as f64 / requests as f64
         } else {

@@ -12,20 +12,17 @@ use std::time::Instant;
 use cutlab_sim::cut::{Blade, Cutter};
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
+use cutlab_sim::stats::Summary;
 use cutlab_sim::{Point3, Vector3};
 
-fn summary(mut v: Vec<f64>) -> String {
+fn summary(v: &[f64]) -> String {
     if v.is_empty() {
         return "none".into();
     }
-    v.sort_by(f64::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    let s = Summary::of(v);
     format!(
         "{} cuts, median {:.0} us, p99 {:.0} us, max {:.0} us",
-        v.len(),
-        at(0.5),
-        at(0.99),
-        v[v.len() - 1]
+        s.count, s.median, s.p99, s.max
     )
 }
 
@@ -109,8 +106,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         tets,
         sim.model.mesh.tet_count()
     );
-    println!("changing: {}", summary(changed));
-    println!("idle:     {}", summary(idle));
+    println!("changing: {}", summary(&changed));
+    println!("idle:     {}", summary(&idle));
     let mean = |sum: usize, of: &[f64]| sum as f64 / of.len().max(1) as f64;
     let cg = (
         mean(cg_after_cut, &step_after_cut),
@@ -118,12 +115,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!(
         "steps right after a changing cut: {}, {:.1} CG it.",
-        summary(step_after_cut).replace("cuts", "steps"),
+        summary(&step_after_cut).replace("cuts", "steps"),
         cg.0
     );
     println!(
         "other steps: {}, {:.1} CG it.",
-        summary(step_other).replace("cuts", "steps"),
+        summary(&step_other).replace("cuts", "steps"),
         cg.1
     );
     println!("hash {hash:016x}");

@@ -9,6 +9,7 @@ use std::time::Instant;
 use cutlab_sim::Vector3;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
+use cutlab_sim::stats::percentile;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -73,14 +74,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
-    let at = |q: f64| sorted[((sorted.len() - 1) as f64 * q).round() as usize];
     println!(
         "{} tets, {} particles, {} steps: median {:.0} us, p99 {:.0} us, mean {:.0} us, {:.2} CG it., positions hash {:016x}",
         sim.model.mesh.tet_count(),
         sim.model.vertex_count(),
         steps,
-        at(0.5),
-        at(0.99),
+        percentile(&sorted, 0.5),
+        percentile(&sorted, 0.99),
         times.iter().sum::<f64>() / steps as f64,
         cg as f64 / steps as f64,
         hash

@@ -18,6 +18,7 @@
 //!   the opening seen along `n`; approximate (the stations are ~1.5 mm apart on the 60 mm
 //!   plan, ends of the wound between stations are linearly interpolated).
 
+use cutlab_sim::stats::percentile;
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::{Ray, RayCast};
@@ -149,7 +150,7 @@ pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>)
             continue;
         }
         depths.sort_by(f64::total_cmp);
-        let reference = depths[depths.len() / 2];
+        let reference = percentile(&depths, 0.5);
         let open: Vec<bool> = hits
             .iter()
             .map(|h| h.is_none_or(|d| d > reference + 0.5 * plan.depth_m))
