@@ -4,12 +4,13 @@
 //! (with `LOCALISED=1` in the environment, the localised step with its default thresholds).
 //! Prints the median, p99 and max time of the cuts that changed the tissue and of those that
 //! did not, of the steps right after a changing cut and of the others, the tets split, and a
-//! hash of the final mesh and positions (to see whether a change to the cutter changed its
-//! results).
+//! hash of the final mesh and positions (FNV-1a, to see whether a change to the cutter changed
+//! its results).
 
 use std::time::Instant;
 
 use cutlab_sim::cut::{Blade, Cutter};
+use cutlab_sim::hash::Fnv1a;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
 use cutlab_sim::stats::Summary;
@@ -89,18 +90,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    let hash = sim.state.positions.iter().fold(0u64, |h, p| {
-        [p.x, p.y, p.z]
-            .iter()
-            .fold(h, |h, c| (h ^ c.to_bits()).wrapping_mul(0x100000001b3))
-    });
-    let hash = sim
-        .model
+    let mut hash = Fnv1a::default();
+    for p in &sim.state.positions {
+        [p.x, p.y, p.z].into_iter().for_each(|c| hash.f64(c));
+    }
+    sim.model
         .mesh
         .tets()
         .iter()
         .flatten()
-        .fold(hash, |h, &v| (h ^ v as u64).wrapping_mul(0x100000001b3));
+        .for_each(|&v| hash.u32(v));
+    let hash = hash.finish();
     println!(
         "{} tets before, {} after, {split} tets split",
         tets,

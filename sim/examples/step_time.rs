@@ -2,11 +2,12 @@
 //! top (the solver's hot path alone, without the CLI's benchmarks around it):
 //! `cargo run --release -p cutlab-sim --example step_time -- [TETS] [STEPS]`.
 //! Prints the median and p99 step time, the mean CG iterations and a hash of the final
-//! positions (to see whether a change to the solver changed its results).
+//! positions (FNV-1a, to see whether a change to the solver changed its results).
 
 use std::time::Instant;
 
 use cutlab_sim::Vector3;
+use cutlab_sim::hash::Fnv1a;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
 use cutlab_sim::stats::percentile;
@@ -67,11 +68,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         times.push(t.elapsed().as_secs_f64() * 1e6);
         cg += report.cg_iterations;
     }
-    let hash = sim.state.positions.iter().fold(0u64, |h, p| {
-        [p.x, p.y, p.z]
-            .iter()
-            .fold(h, |h, c| (h ^ c.to_bits()).wrapping_mul(0x100000001b3))
-    });
+    let mut hash = Fnv1a::default();
+    for p in &sim.state.positions {
+        [p.x, p.y, p.z].into_iter().for_each(|c| hash.f64(c));
+    }
+    let hash = hash.finish();
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     println!(
