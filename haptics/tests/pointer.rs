@@ -181,7 +181,7 @@ fn a_non_finite_sample_faults_the_device_for_good() {
     assert_eq!(d.fault(), Some(PointerFault::NonFinite));
     assert_eq!(feed.fault(), Some(PointerFault::NonFinite));
     assert_eq!(count(&d.counters().non_finite), 1);
-    assert!(d.finished(0.002));
+    assert!(d.finished(0.002) && d.ends_session());
     // it stays faulted, whatever comes next; the page is told
     assert_eq!(read(&mut d, 2), Err(DeviceFault::Disconnected));
     assert_eq!(
@@ -213,6 +213,7 @@ fn a_stalled_page_holds_the_pose_then_times_out() {
     }
     assert_eq!(d.fault(), Some(PointerFault::TimedOut));
     assert_eq!(feed.fault(), Some(PointerFault::TimedOut));
+    assert!(d.ends_session(), "a lost page ends the session");
     // a sample after the timeout does not bring it back: the session's input was lost
     assert_eq!(
         feed.push(on_line(500.0, 0.0)),
@@ -237,6 +238,7 @@ fn a_page_that_comes_back_before_the_timeout_plays_on_without_going_back() {
         last = x;
     }
     assert_eq!(d.fault(), None);
+    assert!(!d.ends_session() && !d.finished(0.8));
     assert!(count(&d.counters().reanchors) >= 1);
     // after the stall the pose trails the page by the delay again
     assert!((x_at(&mut d, 800) - 0.077).abs() < 1e-12);
@@ -252,7 +254,7 @@ fn closing_the_feed_faults_the_device() {
     assert_eq!(feed.push(on_line(5.0, 0.0)), Err(PushError::Closed));
     assert_eq!(read(&mut d, 1), Err(DeviceFault::Disconnected));
     assert_eq!(d.fault(), Some(PointerFault::Closed));
-    assert!(d.finished(0.001));
+    assert!(d.finished(0.001) && d.ends_session());
 
     // dropping every clone of the feed closes it too (a tab closed without a word)
     let (mut d, feed) = device(PointerOptions::default());
@@ -262,6 +264,7 @@ fn closing_the_feed_faults_the_device() {
         read(&mut d, 0).is_ok(),
         "one clone still open: the rest pose"
     );
+    assert!(!d.ends_session());
     drop(other);
     assert_eq!(read(&mut d, 1), Err(DeviceFault::Disconnected));
     assert_eq!(d.fault(), Some(PointerFault::Closed));

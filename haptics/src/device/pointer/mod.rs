@@ -23,8 +23,9 @@
 //!   sample the device faults ([`PointerFault::TimedOut`], read as
 //!   [`DeviceFault::Stale`]); a closed feed (the page went away, Stop) faults it
 //!   ([`PointerFault::Closed`], read as [`DeviceFault::Disconnected`]). Faults last: the
-//!   renderer fades the force, the servo loop records the fault bits, and
-//!   [`PointerDevice::finished`] says the device has nothing more to play.
+//!   servo loop records the tick's fault bits, `finished` and `ends_session` turn true, so
+//!   the session ends at the next tick, and [`PointerFeed::push`] answers
+//!   [`PushError::Faulted`].
 //! - Bad input: a NaN or an infinity anywhere in a sample faults the device
 //!   ([`PointerFault::NonFinite`], read as [`DeviceFault::Disconnected`]: the page is
 //!   broken); a finite sample out of range (a surface point over 10 m from the origin, a depth
@@ -375,6 +376,13 @@ impl HapticDevice for PointerDevice {
 
     /// True once the device faulted: it has nothing more to play.
     fn finished(&self, _time_s: f64) -> bool {
+        self.fault.is_some()
+    }
+
+    /// True once the device faulted (the feed closed, the page stalled past the timeout or
+    /// sent a NaN): it gives no pose again, so the servo loop ends the session at the next
+    /// tick (the faulted tick is recorded with its fault bits).
+    fn ends_session(&self) -> bool {
         self.fault.is_some()
     }
 }
