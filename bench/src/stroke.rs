@@ -44,13 +44,7 @@ impl Stroke {
     ) -> Self {
         let direction = direction.normalize();
         // 4 mm, or more on a coarse mesh, so that the tool always has particles under it
-        let mut edges = sim.model.springs.rest_length.clone();
-        let mid = edges.len() / 2;
-        let median_edge = if edges.is_empty() {
-            0.0
-        } else {
-            *edges.select_nth_unstable_by(mid, f64::total_cmp).1
-        };
+        let median_edge = sim.model.median_edge_length().unwrap_or(0.0);
         let radius_m = (0.75 * median_edge).max(0.004);
         let across = |d: Vector3| d - direction * d.dot(&direction);
         let x = &sim.state.positions;

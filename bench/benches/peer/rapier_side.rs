@@ -132,12 +132,7 @@ fn unit_beta(
 
 /// Half the median edge length: Rapier's particle radius (it bounds the travel per substep).
 fn particle_radius_m(model: &Model) -> f64 {
-    let mut lengths = model.springs.rest_length.clone();
-    if lengths.is_empty() {
-        return 1e-3;
-    }
-    let mid = lengths.len() / 2;
-    0.5 * *lengths.select_nth_unstable_by(mid, f64::total_cmp).1
+    model.median_edge_length().map_or(1e-3, |m| 0.5 * m)
 }
 
 /// A world with `model`'s mesh, masses and held vertices as one soft body; `linear_damping`

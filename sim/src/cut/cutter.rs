@@ -31,16 +31,6 @@ pub struct CutterResume {
     pub snap_distance_m: Option<f64>,
 }
 
-/// The median length of the springs' rest lengths (the mesh's edges), m.
-fn median_edge_length(sim: &Simulation) -> f64 {
-    let mut lengths = sim.model.springs.rest_length.clone();
-    if lengths.is_empty() {
-        return 0.0;
-    }
-    let mid = lengths.len() / 2;
-    *lengths.select_nth_unstable_by(mid, f64::total_cmp).1
-}
-
 impl Default for Cutter {
     fn default() -> Self {
         Self::new(CutOptions::default())
@@ -133,7 +123,8 @@ impl Cutter {
         // a snapping distance left open is derived from the first mesh cut and then kept in
         // the options, so that it does not shrink as the cuts refine the mesh
         if self.options.snap_distance_m.is_none() {
-            self.options.snap_distance_m = Some(self.options.snap * median_edge_length(sim));
+            self.options.snap_distance_m =
+                Some(self.options.snap * sim.model.median_edge_length().unwrap_or(0.0));
         }
         match CutPolygon::new(&corners) {
             Some(polygon) => cut_remembering(sim, &polygon, &self.options, &mut self.stroke),

@@ -411,6 +411,14 @@ impl Model {
     pub fn held_count(&self) -> usize {
         self.held.iter().filter(|&&h| h).count()
     }
+
+    /// The median of the springs' rest lengths (the mesh's edges), m: the upper middle of an
+    /// even count (`stats::percentile(sorted, 0.5)`, by selection); `None` without springs.
+    pub fn median_edge_length(&self) -> Option<f64> {
+        let mut lengths = self.springs.rest_length.clone();
+        let mid = lengths.len() / 2;
+        (!lengths.is_empty()).then(|| *lengths.select_nth_unstable_by(mid, f64::total_cmp).1)
+    }
 }
 
 /// The material of `region` in `materials` (sorted by region id).
