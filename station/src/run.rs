@@ -272,6 +272,7 @@ pub async fn start(
     let (ending_tx, ending) = watch::channel(None);
     let runtime = tokio::runtime::Handle::current();
     let thread_control = control.clone();
+    let thread_pointer = pointer.clone();
     let thread_plan = plan.clone();
     let spec = scene.spec.clone();
     std::thread::Builder::new()
@@ -295,9 +296,15 @@ pub async fn start(
                     {
                         tracing::warn!("attempt {attempt}: finishing the view and rerun log: {e}");
                     }
+                    // a pointer that faulted (a stalled or broken page) ended the session as a
+                    // lost device does: the attempt is not scored
+                    let fault = thread_pointer.as_ref().and_then(PointerFeed::fault);
                     match r.report {
                         Ok(_) if thread_control.lost() => {
                             Err("the station's page went away before the end".to_owned())
+                        }
+                        Ok(_) if let Some(fault) = fault => {
+                            Err(format!("the station's pointer failed: {fault}"))
                         }
                         Ok(_) => Ok(mcap.as_path()),
                         Err(e) => Err(format!("the session failed: {e}")),

@@ -185,3 +185,35 @@ async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
     );
     store.close().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
+    use cutlab_haptics::device::PointerSample;
+    let dir = temp_dir("stalled");
+    let store = store(&dir).await;
+    let settings = StationSettings {
+        clock: Clock::Live,
+        ..settings(&dir, 60.0)
+    };
+    let request = StartRequest {
+        exercise: EXERCISE.into(),
+        trainee: "ana".into(),
+        guided: true,
+    };
+    let running = run::start(store.clone(), &settings, request, Input::Pointer)
+        .await
+        .expect("started");
+    let feed = running.pointer.clone().expect("the page's pointer");
+    let entry = running.plan.line_m[0];
+    feed.push(PointerSample::new(1.0, entry.into(), 0.0, false))
+        .expect("a sample");
+    // then nothing: the pointer times out, the session ends, the attempt is not scored
+    let Ending::Incomplete { attempt, why } = ending(&running).await else {
+        panic!("a stalled page is not scored")
+    };
+    assert!(why.contains("pointer failed"), "{why}");
+    let a = store.get_attempt(attempt).await.expect("attempt");
+    assert_eq!(a.status, AttemptStatus::Incomplete);
+    assert!(a.note.is_some_and(|n| n.contains("pointer")));
+    store.close().await;
+}
