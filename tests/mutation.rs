@@ -548,6 +548,18 @@ const CHILD: &str = "CUTLAB_MUTATION_CHILD";
 fn isolated(test: &str, parser: impl FnOnce() -> Parser) {
     if std::env::var_os(CHILD).is_some() {
         check(parser());
+        // passed: this process's scratch directories (see `scratch`) are not needed
+        let suffix = format!("-{}", std::process::id());
+        for entry in std::fs::read_dir(env!("CARGO_TARGET_TMPDIR"))
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with("mutation-") && name.ends_with(&suffix) {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
         return;
     }
     let exe = std::env::current_exe().expect("the test binary");
