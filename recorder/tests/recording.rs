@@ -465,7 +465,7 @@ fn a_different_scene_is_reported_before_the_first_step() {
 
 /// A deterministic sequence of offsets in `0..len`.
 fn offsets(len: u64, n: usize, seed: u64) -> Vec<u64> {
-    let mut rng = cutlab_haptics::pose::Rng::new(seed);
+    let mut rng = cutlab_sim::rng::Rng::new(seed);
     (0..n).map(|_| rng.next_u64() % len).collect()
 }
 

@@ -17,7 +17,8 @@
 //! - [`reference`]: reference problems with known answers (patch test, cantilever, wound
 //!   opening, free vibration);
 //! - [`stability`]: stability stress cases (sweeps of step, stiffness, damping, mass ratio);
-//! - [`stats`]: percentiles and summaries of samples (timings).
+//! - [`stats`]: percentiles and summaries of samples (timings);
+//! - [`rng`]: a small seeded random number generator (SplitMix64).
 
 pub mod cut;
 pub mod error;
@@ -28,6 +29,7 @@ pub mod io;
 pub mod mesh;
 pub mod model;
 pub mod reference;
+pub mod rng;
 pub mod scene;
 pub mod segmentation;
 pub mod solver;

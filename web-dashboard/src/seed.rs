@@ -7,7 +7,7 @@ use cutlab_assessor::metrics::{self, MetricValue};
 use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Cohort, Role, Store, User};
 use cutlab_assessor::{AssessError, Better};
-use cutlab_haptics::pose::Rng;
+use cutlab_sim::rng::Rng;
 use serde::Serialize;
 
 /// A demo login.
