@@ -10,7 +10,9 @@
 //!   [`record_length_limit`] of the file's size, so a flipped bit in a chunk's
 //!   `uncompressed_size` is an error ("damaged at byte N"), never an allocation of exabytes;
 //! - a chunk's CRC is checked before any of its records is handed on, so the records of a
-//!   damaged chunk are never read as if they were good.
+//!   damaged chunk are never read as if they were good;
+//! - every length inside a record (a string, a map, an attachment's data) is checked to fit
+//!   the record before the MCAP parser, which reserves a declared length, sees it.
 //!
 //! Damage is either the file ending early (a killed process, a full disk: [`DamageKind::EndsEarly`])
 //! or bytes that are wrong ([`DamageKind::Corrupt`]), each with the offset of the top-level record
@@ -175,6 +177,98 @@ fn record_holding(bytes: &[u8], pos: usize) -> usize {
         .map_or(mcap::MAGIC.len(), |s| s.at)
 }
 
+/// Reads the length-prefixed fields of a record's body without allocating, to check that each
+/// length fits what is left (the MCAP parser reserves a declared length before reading it).
+struct Fields<'a>(&'a [u8]);
+
+impl<'a> Fields<'a> {
+    fn skip(&mut self, n: usize) -> Option<&'a [u8]> {
+        let (head, rest) = self.0.split_at_checked(n)?;
+        self.0 = rest;
+        Some(head)
+    }
+    fn len_u32(&mut self) -> Option<usize> {
+        let b = self.skip(4)?;
+        usize::try_from(u32::from_le_bytes(b.try_into().ok()?)).ok()
+    }
+    fn len_u64(&mut self) -> Option<usize> {
+        let b = self.skip(8)?;
+        usize::try_from(u64::from_le_bytes(b.try_into().ok()?)).ok()
+    }
+    /// A string or a byte array with a u32 length.
+    fn string(&mut self) -> Option<()> {
+        let n = self.len_u32()?;
+        self.skip(n).map(|_| ())
+    }
+    /// A map of strings to strings with a u32 byte length.
+    fn string_map(&mut self) -> Option<()> {
+        let n = self.len_u32()?;
+        let mut map = Fields(self.skip(n)?);
+        while !map.0.is_empty() {
+            map.string()?;
+            map.string()?;
+        }
+        Some(())
+    }
+    /// A map of fixed-size entries with a u32 byte length.
+    fn fixed_map(&mut self, entry: usize) -> Option<()> {
+        let n = self.len_u32()?;
+        (n % entry == 0).then_some(())?;
+        self.skip(n).map(|_| ())
+    }
+}
+
+/// Whether every length inside a record of `opcode` fits its body (MCAP specification,
+/// "Records"); records without lengths inside pass.
+fn lengths_fit(opcode: u8, body: &[u8]) -> bool {
+    let mut f = Fields(body);
+    let fit = match opcode {
+        // header: profile, library
+        0x01 => f.string().and_then(|()| f.string()),
+        // schema: id, name, encoding, data
+        0x03 => f
+            .skip(2)
+            .and_then(|_| f.string())
+            .and_then(|()| f.string())
+            .and_then(|()| f.string()),
+        // channel: id, schema id, topic, message encoding, metadata
+        0x04 => f
+            .skip(4)
+            .and_then(|_| f.string())
+            .and_then(|()| f.string())
+            .and_then(|()| f.string_map()),
+        // message index: channel id, (log time, offset) pairs
+        0x07 => f.skip(2).and_then(|_| f.fixed_map(16)),
+        // chunk index: times, offset, length, message index offsets, index length,
+        // compression, sizes
+        0x08 => f
+            .skip(32)
+            .and_then(|_| f.fixed_map(10))
+            .and_then(|()| f.skip(8))
+            .and_then(|_| f.string()),
+        // attachment: times, name, media type, data (u64 length)
+        0x09 => f
+            .skip(16)
+            .and_then(|_| f.string())
+            .and_then(|()| f.string())
+            .and_then(|()| f.len_u64())
+            .and_then(|n| f.skip(n).map(|_| ())),
+        // attachment index: offset, length, times, data size, name, media type
+        0x0a => f
+            .skip(40)
+            .and_then(|_| f.string())
+            .and_then(|()| f.string()),
+        // statistics: counts and times, then message counts per channel
+        0x0b => f.skip(42).and_then(|_| f.fixed_map(10)),
+        // metadata: name, metadata
+        0x0c => f.string().and_then(|()| f.string_map()),
+        // metadata index: offset, length, name
+        0x0d => f.skip(16).and_then(|_| f.string()),
+        _ => Some(()),
+    };
+    fit.is_some()
+}
+
 /// A short name for what the MCAP parser found wrong.
 fn reason_of(e: &mcap::McapError) -> String {
     match e {
@@ -233,6 +327,13 @@ pub(crate) fn for_each_record(
                         fed += n;
                     }
                     Ok(LinearReadEvent::Record { opcode, data }) => {
+                        if !lengths_fit(opcode, data) {
+                            let why = format!(
+                                "a length inside a record (opcode 0x{opcode:02x}) runs past it"
+                            );
+                            stopped = Some((here, why));
+                            return Ok(());
+                        }
                         let record = match mcap::parse_record(opcode, data) {
                             Ok(r) => r,
                             Err(e) => {
@@ -353,7 +454,9 @@ pub(crate) fn announced(bytes: &[u8]) -> Option<Announced> {
         let mut statistics = None;
         for span in spans_from(bytes, start).take_while(|s| s.at < footer) {
             let body = &bytes[span.at + RECORD_HEADER_BYTES..span.end?];
-            if span.opcode == OP_CHANNEL || span.opcode == OP_STATISTICS {
+            if (span.opcode == OP_CHANNEL || span.opcode == OP_STATISTICS)
+                && lengths_fit(span.opcode, body)
+            {
                 match mcap::parse_record(span.opcode, body).ok()? {
                     Record::Channel(c) => {
                         topics.insert(c.id, c.topic);
@@ -388,6 +491,43 @@ mod tests {
         assert_eq!(record_length_limit(0), 64 << 20);
         assert_eq!(record_length_limit(10 << 20), 640 << 20);
         assert_eq!(record_length_limit(usize::MAX), 1 << 30);
+    }
+
+    #[test]
+    fn a_length_inside_a_record_must_fit_it() {
+        let string = |s: &str| {
+            let mut b = (s.len() as u32).to_le_bytes().to_vec();
+            b.extend(s.as_bytes());
+            b
+        };
+        let mut metadata = string("cutlab.session");
+        let mut map = string("seed");
+        map.extend(string("5"));
+        metadata.extend((map.len() as u32).to_le_bytes());
+        metadata.extend(&map);
+        assert!(lengths_fit(0x0c, &metadata));
+        assert!(matches!(
+            mcap::parse_record(0x0c, &metadata),
+            Ok(Record::Metadata(_))
+        ));
+        // a value's length of 3 GB inside a record of 40 bytes
+        let mut bad = metadata.clone();
+        let at = bad.len() - 5;
+        bad[at..at + 4].copy_from_slice(&3_000_000_000u32.to_le_bytes());
+        assert!(!lengths_fit(0x0c, &bad));
+        // the map's own length
+        let mut bad = metadata.clone();
+        bad[18..22].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(!lengths_fit(0x0c, &bad));
+        // an attachment whose data claims more than the record holds
+        let mut attachment = vec![0u8; 16];
+        attachment.extend(string("plan.json"));
+        attachment.extend(string("application/json"));
+        attachment.extend(u64::MAX.to_le_bytes());
+        attachment.extend([0u8; 8]);
+        assert!(!lengths_fit(0x09, &attachment));
+        // records without lengths inside pass
+        assert!(lengths_fit(0x05, &[0u8; 30]));
     }
 
     #[test]
