@@ -277,6 +277,7 @@ fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
             name: format!("level:{}", a.level),
             skill,
         },
+        igtl: Default::default(),
         clock: Clock::Virtual,
         duration_s: a.duration_s(),
         seed: a.seed,

@@ -69,6 +69,15 @@ enum Command {
         /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
         #[arg(long, default_value = "expert")]
         device: session::DeviceArg,
+        /// With `--device igtl:PORT`: how the force goes back, `point` (a POINT message) or
+        /// `transform` (the force as a TRANSFORM's translation, what PLUS Toolkit's OpenHaptics
+        /// device takes).
+        #[arg(long, default_value = "point")]
+        force_output: cutlab_haptics::device::ForceOutput,
+        /// With `--device igtl:PORT`: the force message's device name (PLUS Toolkit takes
+        /// `ForceTo<reference frame>`, e.g. `ForceToRef`).
+        #[arg(long, default_value = cutlab_haptics::device::igtl::FORCE_DEVICE_NAME)]
+        force_name: String,
         /// live (real time) or virtual (as fast as possible, same ticks).
         #[arg(long, default_value = "virtual", value_parser = parse_clock)]
         clock: cutlab_haptics::servo::Clock,
@@ -291,6 +300,8 @@ fn run() -> anyhow::Result<()> {
             scene,
             min_tets,
             device,
+            force_output,
+            force_name,
             clock,
             duration,
             seed,
@@ -307,6 +318,10 @@ fn run() -> anyhow::Result<()> {
             scene,
             min_tets,
             device,
+            igtl: cutlab_haptics::device::IgtlOptions {
+                force_output,
+                force_device_name: force_name,
+            },
             clock,
             duration_s: duration,
             seed,

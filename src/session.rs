@@ -2,11 +2,14 @@
 //! servo loop while the simulation runs at its fixed step; prints a summary and writes the
 //! final tissue, `summary.json` and `steps.csv` (the servo tick each simulation step consumed).
 
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use cutlab_assessor::ExpertPlan;
-use cutlab_haptics::device::{CsvDevice, HapticDevice, IgtlDevice, Skill, SyntheticTrainee};
+use cutlab_haptics::device::{
+    CsvDevice, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, Skill, SyntheticTrainee,
+};
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig};
@@ -101,6 +104,8 @@ pub struct Options {
     pub scene: String,
     pub min_tets: Option<usize>,
     pub device: DeviceArg,
+    /// How an OpenIGTLink device sends the force back.
+    pub igtl: IgtlOptions,
     pub clock: Clock,
     pub duration_s: f64,
     pub seed: u64,
@@ -217,11 +222,17 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
             )?))
         }
         DeviceArg::Igtl(port) => {
-            let d = IgtlDevice::listen(*port)?;
+            let d =
+                IgtlDevice::listen_with(SocketAddr::from(([0, 0, 0, 0], *port)), o.igtl.clone())?;
             say!(
                 o.quiet,
-                "OpenIGTLink device listening on {} (TRANSFORM in, mm; POINT \"Force\" out, N)",
-                d.address()
+                "OpenIGTLink device listening on {} (TRANSFORM in, mm; {} {:?} out, N)",
+                d.address(),
+                match d.force_output() {
+                    ForceOutput::Point => "POINT",
+                    ForceOutput::Transform => "TRANSFORM",
+                },
+                o.igtl.force_device_name
             );
             Some(Box::new(d))
         }
