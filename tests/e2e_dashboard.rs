@@ -66,6 +66,11 @@ fn artefacts() -> PathBuf {
     dir
 }
 
+/// The browser flows run one at a time: each starts a server that simulates the demo's
+/// attempts and a browser, and side by side on two cores the rerun viewer's wasm took longer
+/// than the flows allow.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Whether the browser is here (a missing one fails the test when `CUTLAB_E2E` is set).
 fn browser_present() -> bool {
     let missing: Vec<&str> = [CHROMIUM, CHROMEDRIVER]
@@ -185,6 +190,9 @@ async fn login(
 
 #[test]
 fn instructor_reviews_progress_and_replay_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     if !browser_present() {
         return;
     }
@@ -259,7 +267,7 @@ async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots
         // inside the frame: rerun's viewer page, its wasm fetched from us
         frame.enter_frame().await?;
         c.wait().for_element(Locator::Id("the_canvas_id")).await?;
-        let deadline = Instant::now() + Duration::from_secs(60);
+        let deadline = Instant::now() + Duration::from_secs(120);
         loop {
             let fetched = c
                 .execute("return performance.getEntriesByType('resource').filter(e => e.name.endsWith('re_viewer_bg.wasm') || e.name.includes('recording.rrd')).map(e => [e.name, e.responseStatus])", vec![])
@@ -290,6 +298,9 @@ async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots
 /// of the station mid-cut, of the live view and of the debrief go to `target/e2e/`.
 #[test]
 fn a_trainee_cuts_at_the_station_and_is_scored_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     if !browser_present() {
         return;
     }
