@@ -213,7 +213,9 @@ enum SceneCommand {
     List,
 }
 
-fn parse_clock(s: &str) -> Result<cutlab_haptics::servo::Clock, String> {
+fn parse_clock(
+    s: &str,
+) -> Result<cutlab_haptics::servo::Clock, cutlab_haptics::servo::UnknownClock> {
     s.parse()
 }
 

@@ -58,9 +58,7 @@ pub fn run_bench(o: &Options<'_>) -> anyhow::Result<()> {
                 let _ = stopped.await;
             },
         ));
-        let cookie = login(addr, LOAD_INSTRUCTOR.name, LOAD_INSTRUCTOR.password)
-            .await
-            .map_err(anyhow::Error::msg)?;
+        let cookie = login(addr, LOAD_INSTRUCTOR.name, LOAD_INSTRUCTOR.password).await?;
         let d = Duration::from_secs_f64(o.duration_s);
         let pages: Vec<String> = ids.iter().map(|id| format!("/trainees/{id}")).collect();
         let api: Vec<String> = ids

@@ -6,6 +6,7 @@
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
 use cutlab_sim::stats::percentile;
 use http_body_util::{BodyExt, Full};
 use hyper::body::Bytes;
@@ -44,17 +45,12 @@ fn client(max_idle: usize) -> HttpClient {
 }
 
 /// Logs in at `addr` as `user` and returns the `Cookie` header value of the session.
-pub async fn login(addr: SocketAddr, user: &str, password: &str) -> Result<String, String> {
+pub async fn login(addr: SocketAddr, user: &str, password: &str) -> anyhow::Result<String> {
     let c = client(1);
-    let get = Request::get(format!("http://{addr}/login"))
-        .body(Full::new(Bytes::new()))
-        .map_err(|e| e.to_string())?;
-    let r = c
-        .request(get)
-        .await
-        .map_err(|e| format!("GET /login: {e}"))?;
+    let get = Request::get(format!("http://{addr}/login")).body(Full::new(Bytes::new()))?;
+    let r = c.request(get).await.context("GET /login")?;
     let csrf = set_cookie(r.headers(), cutlab_dashboard::auth::LOGIN_CSRF_COOKIE)
-        .ok_or("no login CSRF cookie")?;
+        .context("no login CSRF cookie")?;
     let form: String = form_urlencoded::Serializer::new(String::new())
         .append_pair("username", user)
         .append_pair("password", password)
@@ -68,15 +64,11 @@ pub async fn login(addr: SocketAddr, user: &str, password: &str) -> Result<Strin
             "cookie",
             format!("{}={csrf}", cutlab_dashboard::auth::LOGIN_CSRF_COOKIE),
         )
-        .body(Full::new(Bytes::from(form)))
-        .map_err(|e| e.to_string())?;
-    let r = c
-        .request(post)
-        .await
-        .map_err(|e| format!("POST /login: {e}"))?;
+        .body(Full::new(Bytes::from(form)))?;
+    let r = c.request(post).await.context("POST /login")?;
     let token = set_cookie(r.headers(), cutlab_dashboard::auth::SESSION_COOKIE)
         .filter(|t| !t.is_empty())
-        .ok_or_else(|| format!("login refused ({})", r.status()))?;
+        .with_context(|| format!("login refused ({})", r.status()))?;
     Ok(format!(
         "{}={token}",
         cutlab_dashboard::auth::SESSION_COOKIE

@@ -20,6 +20,8 @@ pub enum HapticsError {
     Listen { port: u16, source: std::io::Error },
     #[error("invalid configuration: {0}")]
     Config(String),
+    #[error("invalid configuration: {0}")]
+    Render(#[from] crate::render::RenderSettingsError),
     #[error("scene: {0}")]
     Scene(#[from] cutlab_sim::scene::SceneError),
     #[error("the scene's tissue has no surface to touch: {0}")]

@@ -120,8 +120,19 @@ impl Default for RenderSettings {
     }
 }
 
+/// A [`RenderSettings`] value out of range.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum RenderSettingsError {
+    #[error("{name} must be positive and finite, got {value}")]
+    NotPositive { name: &'static str, value: f64 },
+    #[error("damping and cut resistance must not be negative")]
+    Negative,
+    #[error("fade, recover and stale tick counts must be at least 1")]
+    ZeroTicks,
+}
+
 impl RenderSettings {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), RenderSettingsError> {
         let l = &self.limits;
         let positive = [
             ("max force", l.max_force_newtons),
@@ -132,16 +143,16 @@ impl RenderSettings {
             ("cut depth", self.cut_depth_m),
             ("cut resistance speed", self.cut_resistance_speed_m_per_s),
         ];
-        for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(format!("{name} must be positive and finite, got {v}"));
+        for (name, value) in positive {
+            if !(value > 0.0 && value.is_finite()) {
+                return Err(RenderSettingsError::NotPositive { name, value });
             }
         }
         if !(self.damping_newton_seconds_per_m >= 0.0 && self.cut_resistance_newtons >= 0.0) {
-            return Err("damping and cut resistance must not be negative".into());
+            return Err(RenderSettingsError::Negative);
         }
         if self.fade_ticks == 0 || self.recover_ticks == 0 || self.stale_after_ticks == 0 {
-            return Err("fade, recover and stale tick counts must be at least 1".into());
+            return Err(RenderSettingsError::ZeroTicks);
         }
         Ok(())
     }

@@ -34,13 +34,18 @@ pub enum Clock {
     Virtual,
 }
 
+/// A name that is not a [`Clock`]'s.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown clock {0:?} (expected live or virtual)")]
+pub struct UnknownClock(pub String);
+
 impl std::str::FromStr for Clock {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownClock;
+    fn from_str(s: &str) -> Result<Self, UnknownClock> {
         match s {
             "live" => Ok(Clock::Live),
             "virtual" => Ok(Clock::Virtual),
-            _ => Err(format!("unknown clock {s:?} (expected live or virtual)")),
+            _ => Err(UnknownClock(s.to_owned())),
         }
     }
 }
@@ -102,7 +107,7 @@ pub struct ServoReport {
     pub tick_work_nanos: Vec<u32>,
     pub wall_nanos: u64,
     /// Outcome of asking for real-time priority (`None`: not asked).
-    pub realtime_priority: Option<Result<(), String>>,
+    pub realtime_priority: Option<Result<(), RealtimeError>>,
     pub max_force_newtons: f64,
     pub non_finite_count: u64,
     /// Ticks with any fault, and ticks when the force was faded out completely.
@@ -220,15 +225,25 @@ fn wait_until(deadline: Instant, spin: Duration) {
     }
 }
 
-fn try_realtime() -> Result<(), String> {
+/// Why the servo thread runs at normal priority. Shown as `thread-priority` reports it
+/// (`Debug`, e.g. `OS(1)` where SCHED_FIFO is not permitted), as before it was typed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RealtimeError {
+    #[error("{0:?}")]
+    Priority(String),
+    #[error("{0:?}")]
+    Os(thread_priority::Error),
+}
+
+fn try_realtime() -> Result<(), RealtimeError> {
     use thread_priority::{RealtimeThreadSchedulePolicy, ThreadPriority, ThreadSchedulePolicy};
-    let priority = ThreadPriority::Crossplatform(80u8.try_into().map_err(|e| format!("{e:?}"))?);
+    let priority = ThreadPriority::Crossplatform(80u8.try_into().map_err(RealtimeError::Priority)?);
     thread_priority::set_thread_priority_and_policy(
         thread_priority::thread_native_id(),
         priority,
         ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
     )
-    .map_err(|e| format!("{e:?}"))
+    .map_err(RealtimeError::Os)
 }
 
 /// Starts the servo thread (named `cutlab-servo`).

@@ -255,7 +255,7 @@ impl Session {
             .max_force_rate_newtons_per_s
             .min(limits.max_force_rate_newtons_per_s);
         render.period_s = config.period_nanos as f64 * 1e-9;
-        render.check().map_err(HapticsError::Config)?;
+        render.check()?;
         if !(config.duration_s > 0.0 && config.duration_s <= 86_400.0) {
             return Err(HapticsError::Config(format!(
                 "duration must be in (0, 86400] s, got {}",

@@ -169,7 +169,9 @@ impl SessionStepper {
             return Err(invalid("the last cut's tip is not finite".into()));
         }
         let mut cutter = self.cutter.clone();
-        cutter.resume(&r.cutter, n).map_err(invalid)?;
+        cutter
+            .resume(&r.cutter, n)
+            .map_err(|e| invalid(e.to_string()))?;
         let mut sim = self.sim.clone();
         sim.resume(mesh, state, &r.sim)
             .map_err(|e| invalid(e.to_string()))?;

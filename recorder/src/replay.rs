@@ -39,20 +39,37 @@ pub enum Speed {
     Factor(f64),
 }
 
+/// A replay speed that is not `max`, `realtime` or a positive factor.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SpeedError {
+    #[error("speed must be max, realtime or a factor such as 4 or x4, got {given:?}")]
+    NotASpeed {
+        given: String,
+        #[source]
+        error: std::num::ParseFloatError,
+    },
+    #[error("speed factor must be positive, got {0:?}")]
+    NotPositive(String),
+}
+
 impl std::str::FromStr for Speed {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = SpeedError;
+    fn from_str(s: &str) -> Result<Self, SpeedError> {
         match s {
             "max" => Ok(Speed::Max),
             "realtime" | "real-time" => Ok(Speed::Factor(1.0)),
             _ => {
-                let f: f64 = s.trim_start_matches('x').parse().map_err(|_| {
-                    format!("speed must be max, realtime or a factor such as 4 or x4, got {s:?}")
-                })?;
+                let f: f64 =
+                    s.trim_start_matches('x')
+                        .parse()
+                        .map_err(|error| SpeedError::NotASpeed {
+                            given: s.to_owned(),
+                            error,
+                        })?;
                 if f > 0.0 && f.is_finite() {
                     Ok(Speed::Factor(f))
                 } else {
-                    Err(format!("speed factor must be positive, got {s:?}"))
+                    Err(SpeedError::NotPositive(s.to_owned()))
                 }
             }
         }

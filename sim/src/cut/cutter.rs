@@ -31,6 +31,15 @@ pub struct CutterResume {
     pub snap_distance_m: Option<f64>,
 }
 
+/// A [`CutterResume`] that does not fit the mesh (or is not finite).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum CutterResumeError {
+    #[error("the cutter's trail or snapping distance is not finite")]
+    NotFinite,
+    #[error("the stroke's vertex {vertex} is not one of the {vertex_count}")]
+    StrokeVertex { vertex: u32, vertex_count: usize },
+}
+
 impl Default for Cutter {
     fn default() -> Self {
         Self::new(CutOptions::default())
@@ -65,16 +74,21 @@ impl Cutter {
 
     /// Continues a stroke captured by [`Self::resume_state`] (with this cutter's other options),
     /// over a mesh of `vertex_count` vertices.
-    pub fn resume(&mut self, r: &CutterResume, vertex_count: usize) -> Result<(), String> {
+    pub fn resume(
+        &mut self,
+        r: &CutterResume,
+        vertex_count: usize,
+    ) -> Result<(), CutterResumeError> {
         if !r.trail.iter().all(Blade::is_finite)
             || !r.snap_distance_m.is_none_or(|d| d.is_finite() && d >= 0.0)
         {
-            return Err("the cutter's trail or snapping distance is not finite".into());
+            return Err(CutterResumeError::NotFinite);
         }
-        if let Some(v) = r.stroke.iter().find(|&&v| v as usize >= vertex_count) {
-            return Err(format!(
-                "the stroke's vertex {v} is not one of the {vertex_count}"
-            ));
+        if let Some(&vertex) = r.stroke.iter().find(|&&v| v as usize >= vertex_count) {
+            return Err(CutterResumeError::StrokeVertex {
+                vertex,
+                vertex_count,
+            });
         }
         self.trail = r.trail.iter().copied().collect();
         self.stroke = StrokeVertices::from_members(&r.stroke);

@@ -17,7 +17,7 @@ mod separate;
 use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 
-pub use cutter::{Cutter, CutterResume};
+pub use cutter::{Cutter, CutterResume, CutterResumeError};
 pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};

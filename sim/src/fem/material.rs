@@ -56,30 +56,37 @@ impl FemMaterial {
         )
     }
 
-    /// Checks the ranges; returns a description of the first problem.
-    pub fn check(&self) -> Result<(), String> {
+    /// Checks the ranges; the error names the first problem.
+    pub fn check(&self) -> Result<(), FemMaterialError> {
         let e = self.youngs_modulus_pa;
         if !(e > 0.0 && e.is_finite()) {
-            return Err(format!(
-                "Young's modulus must be positive and finite, got {e} Pa"
-            ));
+            return Err(FemMaterialError::YoungsModulus(e));
         }
         let nu = self.poisson_ratio;
         if !(nu > -1.0 && nu < 0.5) {
-            return Err(format!(
-                "Poisson's ratio must satisfy -1 < nu < 0.5, got {nu}"
-            ));
+            return Err(FemMaterialError::PoissonRatio(nu));
         }
-        for (name, v) in [
+        for (name, value) in [
             ("rayleigh_mass_per_s", self.rayleigh_mass_per_s),
             ("rayleigh_stiffness_s", self.rayleigh_stiffness_s),
         ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(format!("{name} must be non-negative and finite, got {v}"));
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err(FemMaterialError::Rayleigh { name, value });
             }
         }
         Ok(())
     }
+}
+
+/// A [`FemMaterial`] parameter out of range (with the value given).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum FemMaterialError {
+    #[error("Young's modulus must be positive and finite, got {0} Pa")]
+    YoungsModulus(f64),
+    #[error("Poisson's ratio must satisfy -1 < nu < 0.5, got {0}")]
+    PoissonRatio(f64),
+    #[error("{name} must be non-negative and finite, got {value}")]
+    Rayleigh { name: &'static str, value: f64 },
 }
 
 impl Default for FemMaterial {

@@ -47,7 +47,7 @@ pub mod quadratic;
 pub mod solve;
 pub mod system;
 
-pub use material::FemMaterial;
+pub use material::{FemMaterial, FemMaterialError};
 
 use nalgebra::Matrix3;
 
@@ -89,9 +89,9 @@ impl FemModel {
         fem_materials: &[(u32, FemMaterial)],
     ) -> Result<Self, ModelError> {
         for (region, m) in fem_materials {
-            m.check().map_err(|message| ModelError::Material {
+            m.check().map_err(|error| ModelError::FemMaterial {
                 region: *region,
-                message,
+                error,
             })?;
         }
         let find = |r: u32| -> Result<(Material, FemMaterial), ModelError> {

@@ -37,34 +37,40 @@ impl Material {
         pretension: 0.04,
     };
 
-    /// Checks that every parameter is finite and in range; returns a description of the first
-    /// problem.
-    pub fn check(&self) -> Result<(), String> {
+    /// Checks that every parameter is finite and in range; the error names the first problem.
+    pub fn check(&self) -> Result<(), MaterialError> {
         let k = match self.stiffness {
             SpringStiffness::Uniform { newtons_per_metre } => newtons_per_metre,
             SpringStiffness::YoungsModulus { pascals } => pascals,
         };
         if !(self.density_kg_per_m3 > 0.0 && self.density_kg_per_m3.is_finite()) {
-            return Err(format!(
-                "density must be positive and finite, got {}",
-                self.density_kg_per_m3
-            ));
+            return Err(MaterialError::Density(self.density_kg_per_m3));
         }
         if !(k > 0.0 && k.is_finite()) {
-            return Err(format!("stiffness must be positive and finite, got {k}"));
+            return Err(MaterialError::Stiffness(k));
         }
         let c = self.damping_newton_seconds_per_metre;
         if !(c >= 0.0 && c.is_finite()) {
-            return Err(format!("damping must be non-negative and finite, got {c}"));
+            return Err(MaterialError::Damping(c));
         }
         if !(0.0..1.0).contains(&self.pretension) {
-            return Err(format!(
-                "pretension s must satisfy 0 <= s < 1, got {}",
-                self.pretension
-            ));
+            return Err(MaterialError::Pretension(self.pretension));
         }
         Ok(())
     }
+}
+
+/// A [`Material`] parameter out of range (with the value given).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum MaterialError {
+    #[error("density must be positive and finite, got {0}")]
+    Density(f64),
+    #[error("stiffness must be positive and finite, got {0}")]
+    Stiffness(f64),
+    #[error("damping must be non-negative and finite, got {0}")]
+    Damping(f64),
+    #[error("pretension s must satisfy 0 <= s < 1, got {0}")]
+    Pretension(f64),
 }
 
 impl Default for Material {

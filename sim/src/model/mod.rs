@@ -8,19 +8,24 @@ mod material;
 mod springs;
 
 pub use mass::{DONATED_SHARE, lumped_masses};
-pub use material::{Material, SpringStiffness};
+pub use material::{Material, MaterialError, SpringStiffness};
 pub use springs::SpringSet;
 pub(crate) use springs::sorted_by_first_end;
 
-use crate::fem::{FemMaterial, FemModel};
+use crate::fem::{FemMaterial, FemMaterialError, FemModel};
 use crate::{Point3, TetMesh, Vector3};
 use mass::quarter_mass;
 
 /// A problem with the model's set-up.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ModelError {
-    #[error("region {region}: {message}")]
-    Material { region: u32, message: String },
+    #[error("region {region}: {error}")]
+    Material { region: u32, error: MaterialError },
+    #[error("region {region}: {error}")]
+    FemMaterial {
+        region: u32,
+        error: FemMaterialError,
+    },
     #[error("no material for region {0}")]
     MissingMaterial(u32),
     #[error("no finite-element material for region {0}")]
@@ -148,9 +153,9 @@ impl Model {
         materials.sort_by_key(|(id, _)| *id);
         materials.dedup_by_key(|(id, _)| *id);
         for (region, m) in &materials {
-            m.check().map_err(|message| ModelError::Material {
+            m.check().map_err(|error| ModelError::Material {
                 region: *region,
-                message,
+                error,
             })?;
         }
         if !gravity.iter().all(|g| g.is_finite()) {

@@ -46,8 +46,14 @@ impl Scene {
             scene: spec.name.clone(),
             message,
         };
-        spec.solver.check().map_err(invalid)?;
-        spec.incision.unit().map_err(invalid)?;
+        spec.solver.check().map_err(|error| SceneError::Solver {
+            scene: spec.name.clone(),
+            error,
+        })?;
+        spec.incision.unit().map_err(|error| SceneError::Incision {
+            scene: spec.name.clone(),
+            error,
+        })?;
         if !(spec.cut_threshold_newtons > 0.0 && spec.cut_threshold_newtons.is_finite()) {
             return Err(invalid(format!(
                 "cut_threshold_newtons must be positive, got {}",
@@ -68,7 +74,12 @@ impl Scene {
             }
         };
         let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options)?;
-        let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(invalid)?;
+        let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(|error| {
+            SceneError::Held {
+                scene: spec.name.clone(),
+                error,
+            }
+        })?;
         let mut materials: Vec<(u32, Material)> = spec
             .materials
             .iter()
@@ -220,11 +231,22 @@ fn build_mesh(
     }
 }
 
+/// A `[[held]]` selection that selects nothing sensible.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HeldError {
+    #[error("axes must be letters of \"xyz\", got {0:?}")]
+    Axes(String),
+    #[error("width_mm must be non-negative, got {0}")]
+    Width(f64),
+    #[error("held region {0} has no tetrahedra")]
+    EmptyRegion(u32),
+}
+
 fn held_vertices(
     spec: &SceneSpec,
     mesh: &TetMesh,
     generated_rim: Option<&[u32]>,
-) -> Result<Vec<u32>, String> {
+) -> Result<Vec<u32>, HeldError> {
     let mut held = Vec::new();
     for sel in &spec.held {
         match sel {
@@ -235,14 +257,10 @@ fn held_vertices(
             HeldSelection::BoundingBoxFaces { axes, width_mm } => {
                 let axes: Vec<usize> = axes
                     .chars()
-                    .map(|c| {
-                        "xyz"
-                            .find(c)
-                            .ok_or_else(|| format!("axes must be letters of \"xyz\", got {axes:?}"))
-                    })
+                    .map(|c| "xyz".find(c).ok_or_else(|| HeldError::Axes(axes.clone())))
                     .collect::<Result<_, _>>()?;
                 if !(*width_mm >= 0.0) {
-                    return Err(format!("width_mm must be non-negative, got {width_mm}"));
+                    return Err(HeldError::Width(*width_mm));
                 }
                 held.extend(near_box_faces(mesh, &axes, width_mm * MM));
             }
@@ -265,7 +283,7 @@ fn held_vertices(
                     }
                 }
                 if held.len() == before {
-                    return Err(format!("held region {region} has no tetrahedra"));
+                    return Err(HeldError::EmptyRegion(*region));
                 }
             }
         }

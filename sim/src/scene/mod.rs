@@ -5,10 +5,10 @@
 mod build;
 mod spec;
 
-pub use build::{BuildOptions, Scene};
+pub use build::{BuildOptions, HeldError, Scene};
 pub use spec::{
-    ForceModelSpec, HeldSelection, IncisionDirections, MaskFile, MeshSource, RegionMaterial,
-    SceneSpec, Target, Viewpoint,
+    ForceModelSpec, HeldSelection, IncisionDirections, IncisionError, MaskFile, MeshSource,
+    RegionMaterial, SceneSpec, Target, Viewpoint,
 };
 
 use std::path::{Path, PathBuf};
@@ -35,10 +35,22 @@ pub enum SceneError {
         builtin_names()
     )]
     Unknown { name: String },
-    #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
+    #[error("{path}: {error}")]
+    Parse {
+        path: PathBuf,
+        error: SpecSyntaxError,
+    },
     #[error("scene {scene:?}: {message}")]
     Invalid { scene: String, message: String },
+    #[error("scene {scene:?}: {error}")]
+    Solver {
+        scene: String,
+        error: crate::solver::SettingsError,
+    },
+    #[error("scene {scene:?}: {error}")]
+    Incision { scene: String, error: IncisionError },
+    #[error("scene {scene:?}: {error}")]
+    Held { scene: String, error: HeldError },
     #[error(transparent)]
     Read(#[from] ReadError),
     #[error("scene {scene:?}: {source}")]
@@ -58,6 +70,15 @@ pub enum SceneError {
     },
 }
 
+/// A scene file that is not valid TOML (or JSON) for a [`SceneSpec`].
+#[derive(Debug, thiserror::Error)]
+pub enum SpecSyntaxError {
+    #[error(transparent)]
+    Toml(#[from] toml::de::Error),
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+}
+
 fn builtin_names() -> String {
     BUILTIN.map(|(n, _)| n).join(", ")
 }
@@ -69,13 +90,13 @@ pub fn parse_spec(text: &str, path: &Path) -> Result<SceneSpec, SceneError> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"))
     {
-        serde_json::from_str(text).map_err(|e| e.to_string())
+        serde_json::from_str(text).map_err(SpecSyntaxError::from)
     } else {
-        toml::from_str(text).map_err(|e| e.to_string())
+        toml::from_str(text).map_err(SpecSyntaxError::from)
     };
-    parsed.map_err(|message| SceneError::Parse {
+    parsed.map_err(|error| SceneError::Parse {
         path: path.to_path_buf(),
-        message,
+        error,
     })
 }
 

@@ -193,19 +193,28 @@ impl Default for IncisionDirections {
 impl IncisionDirections {
     /// The unit directions `(up, along)`, `along` made perpendicular to `up`; an error when
     /// either is not finite, zero, or they are parallel.
-    pub fn unit(&self) -> Result<(crate::Vector3, crate::Vector3), String> {
+    pub fn unit(&self) -> Result<(crate::Vector3, crate::Vector3), IncisionError> {
         let up = crate::Vector3::from(self.up);
         let along = crate::Vector3::from(self.along);
         let up = up
             .try_normalize(1e-12)
             .filter(|u| u.iter().all(|c| c.is_finite()))
-            .ok_or("incision.up must be a finite, non-zero direction")?;
+            .ok_or(IncisionError::Up)?;
         let along = (along - up * along.dot(&up))
             .try_normalize(1e-9 * along.norm().max(1e-300))
             .filter(|a| a.iter().all(|c| c.is_finite()))
-            .ok_or("incision.along must be a finite direction not parallel to incision.up")?;
+            .ok_or(IncisionError::Along)?;
         Ok((up, along))
     }
+}
+
+/// [`IncisionDirections`] that give no frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum IncisionError {
+    #[error("incision.up must be a finite, non-zero direction")]
+    Up,
+    #[error("incision.along must be a finite direction not parallel to incision.up")]
+    Along,
 }
 
 /// The planned viewpoint: an eye position looking at a point.

@@ -89,7 +89,7 @@ impl LocalisationSettings {
         }
     }
 
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), LocalisationError> {
         let positive = [
             ("focus_radius_m", self.focus_radius_m),
             ("wake_speed_m_per_s", self.wake_speed_m_per_s),
@@ -97,26 +97,35 @@ impl LocalisationSettings {
             ("sleep_speed_m_per_s", self.sleep_speed_m_per_s),
             ("sleep_displacement_m", self.sleep_displacement_m),
         ];
-        for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(format!("localisation.{name} must be positive, got {v}"));
+        for (name, value) in positive {
+            if !(value > 0.0 && value.is_finite()) {
+                return Err(LocalisationError::NotPositive { name, value });
             }
         }
         if self.sleep_speed_m_per_s > self.wake_speed_m_per_s {
-            return Err(
-                "localisation.sleep_speed_m_per_s must not exceed wake_speed_m_per_s".into(),
-            );
+            return Err(LocalisationError::SleepSpeedAboveWake);
         }
         if self.sleep_displacement_m > self.wake_displacement_m {
-            return Err(
-                "localisation.sleep_displacement_m must not exceed wake_displacement_m".into(),
-            );
+            return Err(LocalisationError::SleepDisplacementAboveWake);
         }
         if self.max_growth_rounds == 0 {
-            return Err("localisation.max_growth_rounds must be at least 1".into());
+            return Err(LocalisationError::NoGrowthRounds);
         }
         Ok(())
     }
+}
+
+/// A [`LocalisationSettings`] value out of range.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum LocalisationError {
+    #[error("localisation.{name} must be positive, got {value}")]
+    NotPositive { name: &'static str, value: f64 },
+    #[error("localisation.sleep_speed_m_per_s must not exceed wake_speed_m_per_s")]
+    SleepSpeedAboveWake,
+    #[error("localisation.sleep_displacement_m must not exceed wake_displacement_m")]
+    SleepDisplacementAboveWake,
+    #[error("localisation.max_growth_rounds must be at least 1")]
+    NoGrowthRounds,
 }
 
 const NONE: u32 = u32::MAX;

@@ -18,7 +18,7 @@ pub mod system;
 
 use serde::{Deserialize, Serialize};
 
-pub use localise::LocalisationSettings;
+pub use localise::{LocalisationError, LocalisationSettings};
 pub use resume::{RegionResume, ResumeError, ResumeState, WarmStart};
 pub use statics::{StaticReport, StaticSettings};
 pub use system::{CgReport, CgSettings};
@@ -48,15 +48,18 @@ impl Integrator {
     }
 }
 
+/// A name that is not an [`Integrator`]'s.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown integrator {0:?} (expected symplectic-euler or implicit-euler)")]
+pub struct UnknownIntegrator(pub String);
+
 impl std::str::FromStr for Integrator {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownIntegrator;
+    fn from_str(s: &str) -> Result<Self, UnknownIntegrator> {
         Self::ALL
             .into_iter()
             .find(|i| i.name() == s)
-            .ok_or_else(|| {
-                format!("unknown integrator {s:?} (expected symplectic-euler or implicit-euler)")
-            })
+            .ok_or_else(|| UnknownIntegrator(s.to_owned()))
     }
 }
 
@@ -97,28 +100,34 @@ impl Default for SolverSettings {
     }
 }
 
+/// A [`SolverSettings`] value out of range (with the value given).
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum SettingsError {
+    #[error("time_step_s must be positive, got {0}")]
+    TimeStep(f64),
+    #[error("explicit_safety must be in (0, 1], got {0}")]
+    ExplicitSafety(f64),
+    #[error("cg_relative_tolerance must be in (0, 1), got {0}")]
+    CgTolerance(f64),
+    #[error("cg_max_iterations must be at least 1")]
+    CgMaxIterations,
+    #[error(transparent)]
+    Localisation(#[from] LocalisationError),
+}
+
 impl SolverSettings {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SettingsError> {
         if !(self.time_step_s > 0.0 && self.time_step_s.is_finite()) {
-            return Err(format!(
-                "time_step_s must be positive, got {}",
-                self.time_step_s
-            ));
+            return Err(SettingsError::TimeStep(self.time_step_s));
         }
         if !(self.explicit_safety > 0.0 && self.explicit_safety <= 1.0) {
-            return Err(format!(
-                "explicit_safety must be in (0, 1], got {}",
-                self.explicit_safety
-            ));
+            return Err(SettingsError::ExplicitSafety(self.explicit_safety));
         }
         if !(self.cg_relative_tolerance > 0.0 && self.cg_relative_tolerance < 1.0) {
-            return Err(format!(
-                "cg_relative_tolerance must be in (0, 1), got {}",
-                self.cg_relative_tolerance
-            ));
+            return Err(SettingsError::CgTolerance(self.cg_relative_tolerance));
         }
         if self.cg_max_iterations == 0 {
-            return Err("cg_max_iterations must be at least 1".into());
+            return Err(SettingsError::CgMaxIterations);
         }
         if let Some(l) = &self.localisation {
             l.check()?;

@@ -176,6 +176,8 @@ pub struct ResumeState {
 pub enum ResumeError {
     #[error("resume state: {0}")]
     Invalid(String),
+    #[error("resume state: {0}")]
+    SweepOrder(#[from] super::system::SweepOrderError),
     #[error("resume state: rebuilding the model: {0}")]
     Model(#[from] ModelError),
 }
@@ -249,7 +251,7 @@ impl Simulation {
         resume.warm_start.check(n, "whole-body step", true)?;
         resume.fem_warm_start.check(n, "finite elements", true)?;
         if let Some(order) = &resume.sweep_order {
-            order.check(n).map_err(ResumeError::Invalid)?;
+            order.check(n)?;
         }
         let mut held = vec![false; n];
         resume.held.iter().for_each(|&v| held[v as usize] = true);

@@ -306,24 +306,35 @@ impl SweepOrder {
     /// Whether this fits `n` particles: at most `n` parts (particles a cut added since the
     /// order was last laid out get theirs at the next step, as in the captured run), each 0, 1
     /// or 2, and a dissected separator of at most `n` (the springs are checked when it is used).
-    pub fn check(&self, n: usize) -> Result<(), String> {
+    pub fn check(&self, n: usize) -> Result<(), SweepOrderError> {
         if self.parts.len() > n {
-            return Err(format!(
-                "sweep order of {} particles for {n}",
-                self.parts.len()
-            ));
+            return Err(SweepOrderError::TooManyParts {
+                parts: self.parts.len(),
+                particles: n,
+            });
         }
-        if let Some(p) = self.parts.iter().find(|&&p| p > dissection::SEPARATOR) {
-            return Err(format!("sweep order: part {p} (0, 1 or 2)"));
+        if let Some(&p) = self.parts.iter().find(|&&p| p > dissection::SEPARATOR) {
+            return Err(SweepOrderError::Part(p));
         }
         if self.separator_when_dissected > n {
-            return Err(format!(
-                "sweep order: a separator of {} particles for {n}",
-                self.separator_when_dissected
-            ));
+            return Err(SweepOrderError::Separator {
+                separator: self.separator_when_dissected,
+                particles: n,
+            });
         }
         Ok(())
     }
+}
+
+/// A [`SweepOrder`] that does not fit the particles it is given for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum SweepOrderError {
+    #[error("sweep order of {parts} particles for {particles}")]
+    TooManyParts { parts: usize, particles: usize },
+    #[error("sweep order: part {0} (0, 1 or 2)")]
+    Part(u8),
+    #[error("sweep order: a separator of {separator} particles for {particles}")]
+    Separator { separator: usize, particles: usize },
 }
 
 /// Buffers of [`BlockLayout::build`], kept between builds.

@@ -112,9 +112,18 @@ pub async fn trace(state: &AppState, a: &Attempt) -> Result<Option<Arc<AttemptTr
     }
 }
 
-fn read_trace(mcap: &std::path::Path, plan: &ExpertPlan) -> Result<AttemptTrace, String> {
-    let rec = Recording::open(mcap).map_err(|e| e.to_string())?;
-    let data = attempt_data(&rec, plan).map_err(|e| e.to_string())?;
+/// Why an attempt's recording gave no trace (logged; the page goes without it).
+#[derive(Debug, thiserror::Error)]
+enum TraceError {
+    #[error(transparent)]
+    Recording(#[from] cutlab_recorder::RecorderError),
+    #[error(transparent)]
+    Attempt(#[from] cutlab_assessor::AssessError),
+}
+
+fn read_trace(mcap: &std::path::Path, plan: &ExpertPlan) -> Result<AttemptTrace, TraceError> {
+    let rec = Recording::open(mcap)?;
+    let data = attempt_data(&rec, plan)?;
     let line: Vec<[f64; 3]> = if plan.incision_m.len() >= 2 {
         plan.incision_m.clone()
     } else {
