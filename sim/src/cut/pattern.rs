@@ -94,12 +94,6 @@ impl TetSplit {
         s
     }
 
-    /// True when the plane splits the tetrahedron (it has vertices strictly on both sides).
-    pub fn is_split(&self) -> bool {
-        let (p, n, _) = self.sides();
-        !p.is_empty() && !n.is_empty()
-    }
-
     /// The quadrilaterals whose diagonals the split needs.
     pub fn quads(&self) -> Vec<Quad> {
         let (mut p, mut n, z) = self.sides();

@@ -256,38 +256,4 @@ impl TetMesh {
         pairs.sort_unstable();
         pairs
     }
-
-    /// Removes vertices that no tetrahedron uses, renumbering the rest in order.
-    /// Returns the number removed.
-    pub fn remove_dangling_vertices(&mut self) -> usize {
-        let mut used = vec![false; self.positions.len()];
-        for tet in &self.tets {
-            for &v in tet {
-                used[v as usize] = true;
-            }
-        }
-        let mut new_id = vec![NONE; self.positions.len()];
-        let mut next = 0u32;
-        for (v, &u) in used.iter().enumerate() {
-            if u {
-                new_id[v] = next;
-                next += 1;
-            }
-        }
-        let removed = self.positions.len() - next as usize;
-        if removed == 0 {
-            return 0;
-        }
-        let mut i = 0;
-        self.positions.retain(|_| {
-            let keep = used[i];
-            i += 1;
-            keep
-        });
-        for tet in &mut self.tets {
-            *tet = tet.map(|v| new_id[v as usize]);
-        }
-        self.topology = Topology::build(self.positions.len(), &self.tets);
-        removed
-    }
 }

@@ -61,20 +61,6 @@ impl Sym3 {
         }
     }
 
-    /// `beta I + gamma n n^T`.
-    #[inline]
-    pub fn spring_block(beta: f64, gamma: f64, n: &Vector3) -> Self {
-        let g = n * gamma;
-        Self {
-            xx: beta + g.x * n.x,
-            yy: beta + g.y * n.y,
-            zz: beta + g.z * n.z,
-            xy: g.x * n.y,
-            xz: g.x * n.z,
-            yz: g.y * n.z,
-        }
-    }
-
     /// The matrix-vector product.
     #[inline]
     pub fn mul(&self, v: &Vector3) -> Vector3 {
