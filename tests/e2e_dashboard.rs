@@ -132,16 +132,12 @@ fn runtime() -> tokio::runtime::Runtime {
         .expect("runtime")
 }
 
-/// A headless Chromium session with a profile of its own in `profile`; with `webgl`, WebGL2
-/// on the CPU (SwiftShader) instead of no GPU at all.
-async fn chromium(driver_port: u16, profile: &Path, webgl: bool) -> fantoccini::Client {
-    let graphics: &[&str] = if webgl {
-        &["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
-    } else {
-        &["--disable-gpu"]
-    };
+/// A headless Chromium session with a profile of its own in `profile`, WebGL2 on the CPU
+/// (SwiftShader): the station and rerun's viewer both draw with it, and Chromium no longer
+/// falls back to SwiftShader by itself.
+async fn chromium(driver_port: u16, profile: &Path) -> fantoccini::Client {
     let profile = format!("--user-data-dir={}", profile.display());
-    let mut args = vec![
+    let args = vec![
         "--headless",
         "--no-sandbox",
         "--disable-quic",
@@ -150,9 +146,10 @@ async fn chromium(driver_port: u16, profile: &Path, webgl: bool) -> fantoccini::
         "--disable-component-update",
         "--disable-sync",
         "--window-size=1400,1000",
+        "--use-angle=swiftshader",
+        "--enable-unsafe-swiftshader",
         &profile,
     ];
-    args.extend(graphics);
     let mut caps = serde_json::Map::new();
     caps.insert(
         "goog:chromeOptions".into(),
@@ -241,7 +238,7 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
 }
 
 async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots: &Path) {
-    let c = chromium(driver_port, profile, false).await;
+    let c = chromium(driver_port, profile).await;
     let base = format!("http://127.0.0.1:{port}");
     let result = async {
         login(&c, &base, "dr-kim", "instructor-demo").await?;
@@ -274,6 +271,12 @@ async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots
                 .await?;
             let entries = fetched.as_array().cloned().unwrap_or_default();
             let status_of = |suffix: &str| entries.iter().find(|e| e[0].as_str().is_some_and(|n| n.ends_with(suffix))).map(|e| e[1].as_u64());
+            if status_of("recording.rrd").is_none() && Instant::now() > deadline {
+                // what the viewer says (a graphics failure is shown as page text)
+                std::fs::write(shots.join("replay-timeout.png"), c.screenshot().await?).expect("screenshot");
+                let text = c.execute("return document.body.innerText.slice(0, 1000)", vec![]).await?;
+                panic!("the viewer never fetched the attempt's .rrd: {entries:?}; the page says {text}");
+            }
             if status_of("recording.rrd").is_some() || Instant::now() > deadline {
                 assert_eq!(status_of("re_viewer_bg.wasm"), Some(Some(200)), "the viewer's wasm was loaded: {entries:?}");
                 assert_eq!(status_of("recording.rrd"), Some(Some(200)), "the viewer fetched the attempt's .rrd: {entries:?}");
@@ -369,8 +372,8 @@ async fn until(
 
 async fn station(port: u16, driver_port: u16, tmp: &Path, shots: &Path) -> i64 {
     let base = format!("http://127.0.0.1:{port}");
-    let ana = chromium(driver_port, &tmp.join("profile-ana"), true).await;
-    let kim = chromium(driver_port, &tmp.join("profile-kim"), true).await;
+    let ana = chromium(driver_port, &tmp.join("profile-ana")).await;
+    let kim = chromium(driver_port, &tmp.join("profile-kim")).await;
     let result = async {
         login(&ana, &base, "ana", "trainee-demo").await?;
         ana.goto(&format!("{base}/station")).await?;
