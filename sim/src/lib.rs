@@ -28,6 +28,7 @@ pub mod hash;
 pub mod io;
 pub mod mesh;
 pub mod model;
+mod parallel;
 pub mod reference;
 pub mod rng;
 pub mod scene;

@@ -107,7 +107,7 @@ fn candidates(
         })
         .collect();
     let (count, half) = (mesh_tets.len(), mesh_tets.len() / 2);
-    let (mut first, second) = crate::solver::system::join(
+    let (mut first, second) = crate::parallel::join(
         count >= PARALLEL_MIN_TETS,
         || candidates_in(mesh_tets, 0..half, x, &beyond, polygon, margin, near),
         || candidates_in(mesh_tets, half..count, x, &beyond, polygon, margin, near),

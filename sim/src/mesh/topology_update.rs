@@ -131,7 +131,7 @@ impl Topology {
         };
         // independent: side by side on a large mesh (the same result either way)
         let (edges, boundary) =
-            crate::solver::system::join(tets.len() >= PARALLEL_MIN_TETS, edges, boundary);
+            crate::parallel::join(tets.len() >= PARALLEL_MIN_TETS, edges, boundary);
         new.edges = edges;
         new.boundary = boundary?;
         Some(new)

@@ -179,7 +179,7 @@ fn step_on(
             if parallel {
                 coef_by_spring.resize(m, [0.0; 4]);
                 let (coef_lo, coef_hi) = coef_by_spring.split_at_mut(mid);
-                system::side_by_side(
+                crate::parallel::side_by_side(
                     || {
                         assemble_springs(s, 0..mid, x, v, h, own_first, spill, |e, c| {
                             coef_lo[e] = c

@@ -9,7 +9,8 @@ use super::super::span::SPAN;
 use super::lanes::{Lanes, SpanEntries};
 use super::layout::split3;
 use super::preconditioner::Sweeps;
-use super::{PARALLEL_MIN_PARTICLES, SpringSystem, join, solver_threads};
+use super::{PARALLEL_MIN_PARTICLES, SpringSystem, solver_threads};
+use crate::parallel::join;
 
 /// Settings of the conjugate-gradient solve.
 #[derive(Debug, Clone, Copy, PartialEq)]

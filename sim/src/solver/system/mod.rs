@@ -64,34 +64,3 @@ pub const PARALLEL_MIN_PARTICLES: usize = 4_000;
 pub fn solver_threads() -> usize {
     rayon::current_num_threads().min(2)
 }
-
-/// `a` and `b`, on two threads when `parallel` (the same results either way).
-pub(crate) fn join<RA: Send, RB: Send>(
-    parallel: bool,
-    a: impl FnOnce() -> RA + Send,
-    b: impl FnOnce() -> RB + Send,
-) -> (RA, RB) {
-    if parallel {
-        side_by_side(a, b)
-    } else {
-        (a(), b())
-    }
-}
-
-/// `a` and `b` on two threads. Called from outside rayon's pool (the simulation's own thread),
-/// `a` runs on the calling thread while a worker takes `b`, instead of both waiting for
-/// workers to wake while the caller sleeps ([`rayon::join`] from outside the pool).
-pub(crate) fn side_by_side<RA: Send, RB: Send>(
-    a: impl FnOnce() -> RA + Send,
-    b: impl FnOnce() -> RB + Send,
-) -> (RA, RB) {
-    if rayon::current_thread_index().is_some() {
-        return rayon::join(a, b);
-    }
-    let mut rb = None;
-    let ra = rayon::in_place_scope(|s| {
-        s.spawn(|_| rb = Some(b()));
-        a()
-    });
-    (ra, rb.expect("the scope waits for its spawned job"))
-}

@@ -5,9 +5,9 @@ use crate::Vector3;
 use crate::model::Particles;
 
 use super::blocks::{Lower3, Sym3, block_coefficients};
-use super::join;
 use super::lanes::Lanes;
 use super::layout::{BlockLayout, split3};
+use crate::parallel::join;
 
 /// The system matrix: per-spring blocks, diagonal blocks and the preconditioner.
 ///

@@ -6,7 +6,8 @@ use crate::Vector3;
 use crate::model::Particles;
 
 use super::blocks::{Lower3, Sym3, block_matrix, block_mul};
-use super::{PARALLEL_MIN_PARTICLES, SpringSystem, join, solver_threads};
+use super::{PARALLEL_MIN_PARTICLES, SpringSystem, solver_threads};
+use crate::parallel::join;
 
 /// Relaxation factor of the SSOR preconditioner. Mean iterations on the benchmark stroke at
 /// 12.8k tets: 11.9 at 1.0, 10.6 at 1.2, 10.3 at 1.4 and 11.6 at 1.6 (relative tolerance 1e-6,
