@@ -33,13 +33,18 @@ use crate::{HapticsError, Point3, Vector3};
 /// Settings of a session.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SessionConfig {
+    /// Live (real time) or virtual (as fast as possible, the same ticks).
     pub clock: Clock,
+    /// How long the session runs, in simulated seconds.
     pub duration_s: f64,
     /// Servo period (default 1 ms).
     pub period_nanos: u64,
     /// Force rendering; its force limits are lowered to the device's when those are lower.
     pub render: RenderSettings,
+    /// Ask for real-time scheduling of the servo thread (live clock only).
     pub realtime_priority: bool,
+    /// The servo spins (instead of sleeping) for the last this many nanoseconds before a
+    /// tick's deadline.
     pub spin_nanos: u64,
     /// Length of the blade's cutting edge, m.
     pub blade_length_m: f64,
@@ -81,8 +86,11 @@ impl Default for SessionConfig {
 /// What a session did.
 #[derive(Debug)]
 pub struct SessionReport {
+    /// What the servo thread measured.
     pub servo: ServoReport,
+    /// The servo period, ns.
     pub period_nanos: u64,
+    /// Simulation steps taken.
     pub sim_steps: u64,
     /// The servo tick each simulation step consumed.
     pub tick_of_step: Vec<u64>,
@@ -90,12 +98,15 @@ pub struct SessionReport {
     pub step_nanos: Vec<u64>,
     /// Cuts, cut length, rejected steps, solver iterations.
     pub stats: StepperStats,
+    /// Times the surface's BVH was built again (instead of refitted).
     pub collider_rebuilds: u64,
+    /// Triangles of the tissue surface at the end.
     pub surface_triangles: usize,
     /// The simulation at the end.
     pub simulation: Simulation,
     /// Hash of the final state's bits.
     pub state_hash: u64,
+    /// Wall-clock time the session took, s.
     pub wall_s: f64,
 }
 
@@ -109,6 +120,7 @@ impl SessionReport {
 /// A scene ready for a session: settled, with its surface collider.
 #[derive(Debug)]
 pub struct Session {
+    /// The settled simulation.
     pub sim: Simulation,
     collider: SurfaceCollider,
 }
@@ -135,6 +147,7 @@ impl Session {
         Ok(Self { sim, collider })
     }
 
+    /// The tissue surface's collider, built on the settled state.
     pub fn collider(&self) -> &SurfaceCollider {
         &self.collider
     }

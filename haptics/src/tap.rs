@@ -55,14 +55,21 @@ impl Default for TapSettings {
 /// (through `hash`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Keyframe {
+    /// The simulation step.
     pub step: u64,
+    /// The servo tick that step consumed.
     pub tick: u64,
+    /// The hash of the state's bits.
     pub hash: StateHash,
+    /// Positions of the vertices, m.
     pub positions: Vec<Point3>,
+    /// Velocities of the vertices, m/s.
     pub velocities: Vec<cutlab_sim::Vector3>,
     /// Reference (rest) positions of the vertices.
     pub rest_positions: Vec<Point3>,
+    /// The mesh's tetrahedra.
     pub tets: Vec<[u32; 4]>,
+    /// The region id of each tetrahedron.
     pub regions: Vec<u32>,
     /// What else the steps after this one depend on, when the stepper can say
     /// ([`SessionStepper::resume_state`]): with it a replay seeks here without re-simulating.
@@ -70,6 +77,7 @@ pub struct Keyframe {
 }
 
 impl Keyframe {
+    /// The stepper's state after step `step` (which consumed tick `tick`).
     pub fn of(stepper: &SessionStepper, step: u64, tick: u64) -> Self {
         let sim = &stepper.sim;
         let mesh = &sim.model.mesh;
@@ -90,13 +98,18 @@ impl Keyframe {
 /// The deformed tissue surface: triangles over its own vertex list.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SurfaceSnapshot {
+    /// The simulation step.
     pub step: u64,
+    /// The servo tick that step consumed.
     pub tick: u64,
+    /// Positions of the surface's vertices, m.
     pub vertices: Vec<Point3>,
+    /// The triangles, over `vertices`.
     pub triangles: Vec<[u32; 3]>,
 }
 
 impl SurfaceSnapshot {
+    /// The collider's surface at `positions` (the mesh's vertex positions).
     pub fn of(collider: &SurfaceCollider, positions: &[Point3], step: u64, tick: u64) -> Self {
         Self {
             step,
@@ -116,24 +129,34 @@ impl SurfaceSnapshot {
 pub enum SimRecord {
     /// Step `step` consumed the sample of servo tick `tick`.
     Step {
+        /// The step.
         step: u64,
+        /// The tick.
         tick: u64,
+        /// Whether the simulation rejected the step (the state was kept).
         rejected: bool,
     },
     /// The cut step `step` made.
     Cut {
+        /// The step.
         step: u64,
+        /// The tick that step consumed.
         tick: u64,
+        /// The blade's pose at the cut.
         blade: Blade,
+        /// Everything the cut changed.
         event: Box<CutEvent>,
     },
+    /// The full state at a step.
     Keyframe(Box<Keyframe>),
+    /// The tissue surface at a step.
     Surface(Box<SurfaceSnapshot>),
 }
 
 /// The producer side, held by the session.
 #[derive(Debug)]
 pub struct RecordTap {
+    /// How much is recorded, and the queue sizes.
     pub settings: TapSettings,
     pub(crate) ticks: rtrb::Producer<ServoSample>,
     pub(crate) sim: rtrb::Producer<SimRecord>,
@@ -143,7 +166,9 @@ pub struct RecordTap {
 /// (`is_abandoned`) and empty has ended.
 #[derive(Debug)]
 pub struct TapFeed {
+    /// Every servo tick's sample.
     pub ticks: rtrb::Consumer<ServoSample>,
+    /// The simulation thread's records.
     pub sim: rtrb::Consumer<SimRecord>,
 }
 
