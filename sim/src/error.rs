@@ -3,20 +3,38 @@
 /// A structural problem with mesh data handed to [`crate::TetMesh`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MeshError {
+    /// No tetrahedra were given.
     #[error("mesh has no tetrahedra")]
     Empty,
     #[error(
         "tetrahedron {tet} refers to vertex {vertex}, but the mesh has {vertex_count} vertices"
     )]
+    /// A tetrahedron names a vertex past the end of the vertex list.
     VertexOutOfRange {
+        /// The tetrahedron's index.
         tet: usize,
+        /// The vertex it names.
         vertex: u32,
+        /// How many vertices the mesh has.
         vertex_count: usize,
     },
     #[error("tetrahedron {tet} repeats vertex {vertex}")]
-    RepeatedVertex { tet: usize, vertex: u32 },
+    /// A tetrahedron names the same vertex twice.
+    RepeatedVertex {
+        /// The tetrahedron's index.
+        tet: usize,
+        /// The vertex it repeats.
+        vertex: u32,
+    },
     #[error("{regions} region ids given for {tets} tetrahedra")]
-    RegionCount { regions: usize, tets: usize },
+    /// The region ids are not one per tetrahedron.
+    RegionCount {
+        /// How many region ids were given.
+        regions: usize,
+        /// How many tetrahedra there are.
+        tets: usize,
+    },
+    /// More vertices (the count given) than a `u32` id can name.
     #[error("too many vertices ({0}) for 32-bit vertex ids")]
     TooManyVertices(usize),
 }
@@ -25,25 +43,39 @@ pub enum MeshError {
 /// errors also name the 1-based line (text formats) and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
+    /// The file could not be opened or read.
     #[error("{path}: {error}")]
     Io {
+        /// The file.
         path: std::path::PathBuf,
+        /// What the operating system said.
         error: std::io::Error,
     },
     #[error("{path}:{line}: {message}")]
+    /// A line of a text format could not be parsed.
     Parse {
+        /// The file.
         path: std::path::PathBuf,
+        /// The line, counted from 1.
         line: usize,
+        /// What is wrong with it.
         message: String,
     },
     #[error("{path}: {message}")]
+    /// The file is not of the format expected (a bad header, a missing section, a binary
+    /// part that does not decode), where no single line is to blame.
     Format {
+        /// The file.
         path: std::path::PathBuf,
+        /// What is wrong with it.
         message: String,
     },
     #[error("{path}: {source}")]
+    /// The file was read, but its tetrahedra do not make a valid mesh.
     Mesh {
+        /// The file.
         path: std::path::PathBuf,
+        /// What is wrong with the mesh.
         source: MeshError,
     },
 }
@@ -56,7 +88,10 @@ pub enum SegmentationError {
     Read(#[from] ReadError),
     /// None of the requested labels occurs in the volume (after resampling).
     #[error("no voxel carries labels {labels:?}")]
-    NoVoxels { labels: Vec<u32> },
+    NoVoxels {
+        /// The labels asked for.
+        labels: Vec<u32>,
+    },
     /// Inconsistent data handed to [`crate::segmentation::LabelVolume::new`].
     #[error("invalid label volume: {0}")]
     InvalidVolume(String),

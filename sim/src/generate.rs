@@ -8,6 +8,7 @@ use crate::{MeshError, Point3, TetMesh};
 /// A generated mesh with the vertex sets that scenes refer to by name.
 #[derive(Debug, Clone)]
 pub struct GeneratedMesh {
+    /// The mesh.
     pub mesh: TetMesh,
     /// Vertices on the lateral sides of the grid (i or j at its first or last index): the
     /// rim by which a slab or sheet is held.
@@ -19,8 +20,11 @@ pub struct GeneratedMesh {
 /// Cell counts along the grid's three index directions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct GridCells {
+    /// Cells along i (x before any bending).
     pub nx: usize,
+    /// Cells along j (y).
     pub ny: usize,
+    /// Cells along k (z, through the thickness).
     pub nz: usize,
 }
 

@@ -12,20 +12,24 @@ impl Default for Fnv1a {
 }
 
 impl Fnv1a {
+    /// Hashes `bytes`: per byte `h = (h ^ b) * 0x100000001b3` (wrapping).
     pub fn bytes(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
         }
     }
 
+    /// Hashes the bits of `x` (little-endian), so `0.0` and `-0.0` differ.
     pub fn f64(&mut self, x: f64) {
         self.bytes(&x.to_bits().to_le_bytes());
     }
 
+    /// Hashes `x`'s four bytes, little-endian.
     pub fn u32(&mut self, x: u32) {
         self.bytes(&x.to_le_bytes());
     }
 
+    /// The hash of everything hashed so far.
     pub fn finish(&self) -> u64 {
         self.0
     }

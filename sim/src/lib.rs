@@ -20,6 +20,8 @@
 //! - [`stats`]: percentiles and summaries of samples (timings);
 //! - [`rng`]: a small seeded random number generator (SplitMix64).
 
+#![warn(missing_docs)]
+
 pub mod cut;
 pub mod error;
 pub mod fem;

@@ -26,14 +26,19 @@ use crate::{Point3, ReadError, TetMesh, Vector3};
 /// A problem with a reference computation.
 #[derive(Debug, thiserror::Error)]
 pub enum ReferenceError {
+    /// A mesh file of the problem could not be read.
     #[error(transparent)]
     Read(#[from] ReadError),
+    /// The problem's mesh is invalid.
     #[error(transparent)]
     Mesh(#[from] crate::MeshError),
+    /// The model could not be built on the mesh.
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// A step or a static solve failed.
     #[error(transparent)]
     Step(#[from] StepError),
+    /// The computation ran but gave no answer (it did not converge, found no crossing).
     #[error("{0}")]
     Failed(String),
 }
@@ -72,6 +77,7 @@ impl Elasticity {
         Elasticity::QuadraticFem,
     ];
 
+    /// The model's name in reports (kebab case).
     pub fn name(self) -> &'static str {
         match self {
             Elasticity::SpringsUniform => "springs-uniform",
@@ -85,8 +91,11 @@ impl Elasticity {
 /// An isotropic elastic solid.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Solid {
+    /// Young's modulus `E` in Pa.
     pub youngs_modulus_pa: f64,
+    /// Poisson's ratio `nu`.
     pub poisson_ratio: f64,
+    /// Mass density in kg/m^3.
     pub density_kg_per_m3: f64,
 }
 
@@ -216,6 +225,7 @@ fn tight() -> StaticSettings {
 /// Result of the displacement patch test.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PatchResult {
+    /// Tetrahedra in the mesh.
     pub tets: usize,
     /// Largest deviation of an interior vertex from the linear field, relative to `eps L`.
     pub displacement_error: f64,
@@ -348,12 +358,15 @@ pub fn read_bar(path: &std::path::Path, unit_m: f64) -> Result<TetMesh, Referenc
 /// Result of a cantilever computation.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct CantileverResult {
+    /// Tetrahedra in the mesh.
     pub tets: usize,
+    /// The bar's length, m.
     pub length_m: f64,
     /// Mean deflection of the tip face along the load, m.
     pub deflection_m: f64,
     /// Timoshenko's deflection, m.
     pub analytic_m: f64,
+    /// `|deflection - analytic| / analytic`.
     pub relative_error: f64,
 }
 
@@ -468,12 +481,15 @@ pub fn cantilever(
 /// Result of a wound-opening computation.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct WoundResult {
+    /// Tetrahedra in the mesh.
     pub tets: usize,
+    /// Half the slit's length `a`, m.
     pub half_length_m: f64,
     /// Gap across the slit at its middle, m.
     pub centre_gap_m: f64,
     /// `4 sigma a / E`, m.
     pub analytic_centre_gap_m: f64,
+    /// `|centre gap - analytic| / analytic`.
     pub centre_error: f64,
     /// Largest `|delta - delta_analytic|` along the slit over `4 sigma a / E`.
     pub profile_error: f64,
@@ -638,10 +654,15 @@ pub fn wound_opening(
 /// Result of a free-vibration computation.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct VibrationResult {
+    /// Tetrahedra in the mesh.
     pub tets: usize,
+    /// Steps simulated.
     pub steps: u64,
+    /// The first frequency measured from the simulated motion, Hz.
     pub frequency_hz: f64,
+    /// The beam theory's first frequency, Hz.
     pub analytic_hz: f64,
+    /// `|frequency - analytic| / analytic`.
     pub relative_error: f64,
 }
 

@@ -6,10 +6,13 @@
 pub struct Rng(u64);
 
 impl Rng {
+    /// A generator whose sequence is fixed by `seed`.
     pub fn new(seed: u64) -> Self {
         Self(seed ^ 0x5851_f42d_4c95_7f2d)
     }
 
+    /// The next 64 random bits: the state advances by `0x9e3779b97f4a7c15` and is mixed by
+    /// SplitMix64's finaliser (two xor-shift-multiply rounds and a final xor-shift).
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;

@@ -14,8 +14,11 @@ use crate::{Point3, TetMesh, Vector3};
 /// One configuration.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct StabilityCase {
+    /// The force model.
     pub model: Elasticity,
+    /// The time integrator.
     pub integrator: Integrator,
+    /// The time step, s.
     pub time_step_s: f64,
     /// Young's modulus (springs: van Gelder constants from it; uniform springs: their mean).
     pub youngs_modulus_pa: f64,
@@ -47,12 +50,16 @@ pub enum Outcome {
 /// What a run measured.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct StabilityResult {
+    /// How the run ended.
     pub outcome: Outcome,
+    /// Steps taken.
     pub steps: u64,
+    /// Sub-steps per step (symplectic Euler; 1 for implicit Euler).
     pub substeps: u32,
     /// Largest total energy over the initial one (kinetic + elastic, relative to the settled
     /// state).
     pub energy_ratio: f64,
+    /// The largest particle speed seen, m/s.
     pub max_speed_m_per_s: f64,
 }
 

@@ -16,10 +16,15 @@ pub fn percentile(sorted: &[f64], p: f64) -> f64 {
 /// Median, 99th percentile, mean and maximum of a sample, in the sample's unit.
 #[derive(Debug, Clone, Copy, Serialize, PartialEq)]
 pub struct Summary {
+    /// The number of samples.
     pub count: usize,
+    /// The 50th percentile (nearest rank).
     pub median: f64,
+    /// The 99th percentile (nearest rank).
     pub p99: f64,
+    /// The arithmetic mean.
     pub mean: f64,
+    /// The largest sample.
     pub max: f64,
 }
 

@@ -14,6 +14,7 @@ use crate::solver::Simulation;
 /// Cuts a simulation along the path of a blade, pose by pose.
 #[derive(Debug, Clone)]
 pub struct Cutter {
+    /// The settings of every cut it makes.
     pub options: CutOptions,
     /// Length of tip path behind the blade that each step cuts along, metres.
     pub window_m: f64,
@@ -28,16 +29,25 @@ pub struct CutterResume {
     pub trail: Vec<Blade>,
     /// The vertices the stroke has cut, ascending.
     pub stroke: Vec<u32>,
+    /// The snapping distance derived from the mesh first cut (see
+    /// [`CutOptions::snap_distance_m`]), once derived.
     pub snap_distance_m: Option<f64>,
 }
 
 /// A [`CutterResume`] that does not fit the mesh (or is not finite).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum CutterResumeError {
+    /// A pose of the trail or the snapping distance has a non-finite number.
     #[error("the cutter's trail or snapping distance is not finite")]
     NotFinite,
     #[error("the stroke's vertex {vertex} is not one of the {vertex_count}")]
-    StrokeVertex { vertex: u32, vertex_count: usize },
+    /// A vertex of the stroke is past the end of the mesh's vertices.
+    StrokeVertex {
+        /// The vertex.
+        vertex: u32,
+        /// How many vertices the mesh has.
+        vertex_count: usize,
+    },
 }
 
 impl Default for Cutter {
@@ -47,6 +57,7 @@ impl Default for Cutter {
 }
 
 impl Cutter {
+    /// A cutter with no stroke yet, cutting along the last 10 mm of the tip's path.
     pub fn new(options: CutOptions) -> Self {
         Self {
             options,

@@ -6,23 +6,31 @@ use serde::{Deserialize, Serialize};
 /// A vertex created on a cut edge at `a + t (b - a)`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CreatedVertex {
+    /// The new vertex's id.
     pub id: u32,
+    /// The cut edge `[a, b]`.
     pub edge: [u32; 2],
+    /// Where along the edge it lies, from 0 at `a` to 1 at `b`.
     pub t: f64,
 }
 
 /// A vertex moved onto the clipping plane (current and reference positions, metres).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MovedVertex {
+    /// The vertex's id.
     pub id: u32,
+    /// Its position before the move.
     pub from: [f64; 3],
+    /// Its position on the plane.
     pub to: [f64; 3],
 }
 
 /// A vertex split in two: `copy` takes over the tetrahedra on one side.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SplitVertex {
+    /// The vertex that was split (it keeps the tetrahedra on the other side).
     pub original: u32,
+    /// The new vertex.
     pub copy: u32,
 }
 
@@ -36,11 +44,15 @@ pub struct CutEvent {
     pub tets_added: Vec<(u32, [u32; 4])>,
     /// Tetrahedra whose vertices changed because a vertex was split.
     pub tets_relinked: Vec<(u32, [u32; 4])>,
+    /// Vertices created on cut edges.
     pub vertices_created: Vec<CreatedVertex>,
+    /// Vertices moved onto the clipping plane.
     pub vertices_moved: Vec<MovedVertex>,
+    /// Vertices split in two, the sides of the cut taking one each.
     pub vertices_split: Vec<SplitVertex>,
-    /// Springs (edges) removed and added.
+    /// Springs (edges) removed.
     pub springs_removed: Vec<[u32; 2]>,
+    /// Springs (edges) added.
     pub springs_added: Vec<[u32; 2]>,
     /// Triangles of the new cut surface (one per side).
     pub cut_faces: usize,

@@ -44,6 +44,7 @@ pub enum PatternChoice {
 /// Settings of the cutter.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CutOptions {
+    /// How the diagonals of the quadrilaterals a cut makes are chosen.
     pub pattern: PatternChoice,
     /// Crossing parameters closer than this to an end move that vertex onto the plane.
     pub snap: f64,
@@ -69,14 +70,17 @@ impl Default for CutOptions {
 /// A cut that could not be applied (the simulation is unchanged).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CutError {
+    /// The blade's pose has a non-finite number or a depth that is not positive.
     #[error("the blade pose is not finite")]
     NonFiniteBlade,
     /// The step's cut could not be resolved; nothing changed, and the next step (whose
     /// trailing window covers the same place) tries again.
     #[error("cut left tetrahedron {0} incompletely intersected; step skipped")]
     Unresolved(u32),
+    /// The cut mesh failed validation (a bug in the cutter; nothing changed).
     #[error("cut produced an invalid mesh: {0}")]
     Mesh(#[from] MeshError),
+    /// The model could not be rebuilt on the cut mesh (nothing changed).
     #[error("cut produced an invalid model: {0}")]
     Model(#[from] ModelError),
 }

@@ -31,7 +31,9 @@ pub enum QuadKey {
 /// A quadrilateral with its vertices in cyclic order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Quad {
+    /// Which quadrilateral it is (a face, or a section).
     pub key: QuadKey,
+    /// Its four vertices in cyclic order.
     pub ring: [u32; 4],
 }
 
@@ -56,15 +58,21 @@ impl Quad {
 /// edge (in the order of [`TET_EDGES`], [`crate::mesh::NONE`] where the edge does not cross).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TetSplit {
+    /// The tetrahedron's vertices.
     pub verts: [u32; 4],
+    /// The side of the plane of each vertex: +1, -1, or 0 on it.
     pub signs: [i8; 4],
+    /// The new vertex on each edge, in the order of [`TET_EDGES`] ([`crate::mesh::NONE`]
+    /// where the edge does not cross).
     pub split: [u32; 6],
 }
 
 /// The children of a split and the triangles of its section (the cut faces).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Children {
+    /// The tetrahedra the split makes.
     pub tets: Vec<[u32; 4]>,
+    /// The triangles of the section, the faces on the plane.
     pub section: Vec<[u32; 3]>,
 }
 

@@ -6,9 +6,11 @@ use crate::{Point3, Vector3};
 /// A scalpel blade: the cutting edge runs from the tip along `edge_direction` for `depth_m`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Blade {
+    /// The tip of the blade, in metres.
     pub tip: Point3,
     /// Unit vector from the tip along the cutting edge (towards the handle).
     pub edge_direction: Vector3,
+    /// The length of the cutting edge, in metres.
     pub depth_m: f64,
 }
 
@@ -50,8 +52,11 @@ impl Blade {
 /// A planar convex or simple polygon C with its plane `n . x = offset` (`n` unit).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CutPolygon {
+    /// The corners in order round the polygon.
     pub corners: Vec<Point3>,
+    /// The unit normal `n` of its plane.
     pub normal: Vector3,
+    /// The plane's offset: `n . x = offset` on it.
     pub offset: f64,
     /// In-plane basis for point-in-polygon tests.
     u: Vector3,

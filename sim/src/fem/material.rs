@@ -81,12 +81,20 @@ impl FemMaterial {
 /// A [`FemMaterial`] parameter out of range (with the value given).
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum FemMaterialError {
+    /// Young's modulus (given) is not positive and finite.
     #[error("Young's modulus must be positive and finite, got {0} Pa")]
     YoungsModulus(f64),
+    /// Poisson's ratio (given) is outside `(-1, 0.5)`.
     #[error("Poisson's ratio must satisfy -1 < nu < 0.5, got {0}")]
     PoissonRatio(f64),
     #[error("{name} must be non-negative and finite, got {value}")]
-    Rayleigh { name: &'static str, value: f64 },
+    /// A Rayleigh damping coefficient is negative or not finite.
+    Rayleigh {
+        /// The coefficient's name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
 }
 
 impl Default for FemMaterial {

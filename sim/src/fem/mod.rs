@@ -65,8 +65,9 @@ pub struct FemModel {
     pub rest_inverse: Vec<Matrix3<f64>>,
     /// Rest volume `W = det(D_m) / 6` in m^3 (zero for degenerate tetrahedra).
     pub rest_volume_m3: Vec<f64>,
-    /// Lame parameters in Pa.
+    /// The Lame parameter `mu` (the shear modulus) per tetrahedron, Pa.
     pub mu_pa: Vec<f64>,
+    /// The Lame parameter `lambda` per tetrahedron, Pa.
     pub lambda_pa: Vec<f64>,
     /// Rayleigh stiffness coefficient beta per tetrahedron, s.
     pub beta_s: Vec<f64>,
@@ -165,6 +166,7 @@ impl FemModel {
         self.tets.len()
     }
 
+    /// Whether there are no tetrahedra.
     pub fn is_empty(&self) -> bool {
         self.tets.is_empty()
     }

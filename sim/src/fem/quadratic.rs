@@ -59,13 +59,16 @@ pub struct QuadraticMesh {
     pub nodes: Vec<Point3>,
     /// Corners, then the edge middles in [`TET_EDGES`] order.
     pub tets: Vec<[u32; NODES]>,
+    /// The region id of each tetrahedron (the mesh's).
     pub regions: Vec<u32>,
+    /// The mesh's vertex count: the corner nodes are `0..vertex_count`.
     pub vertex_count: usize,
     /// The mesh's edges (sorted), whose middles are the nodes from `vertex_count` on.
     pub edges: Vec<[u32; 2]>,
 }
 
 impl QuadraticMesh {
+    /// The quadratic elements of `mesh`: its vertices, then a node at the middle of each edge.
     pub fn new(mesh: &TetMesh) -> Self {
         let topology = mesh.topology();
         let vertex_count = mesh.vertex_count();
@@ -196,8 +199,11 @@ pub fn gradient_integrals(mesh: &QuadraticMesh, t: usize) -> [Vector3; NODES] {
 /// Per region: Lame parameters `(mu, lambda)` in Pa and the isotropic pre-strain `e`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QuadraticMaterial {
+    /// The Lame parameter `mu`, Pa.
     pub mu_pa: f64,
+    /// The Lame parameter `lambda`, Pa.
     pub lambda_pa: f64,
+    /// The isotropic pre-strain `e` (the rest shape is the mesh scaled by `1 - e`).
     pub pre_strain: f64,
 }
 
@@ -215,10 +221,12 @@ pub struct QuadraticStatics {
 /// The solution of [`QuadraticStatics::solve`].
 #[derive(Debug, Clone)]
 pub struct QuadraticSolution {
+    /// The displacement of every node (held nodes: zero), m.
     pub displacements: Vec<Vector3>,
     /// The elastic (internal) force on every node at the solution, `-(K u) - f_0` with `f_0`
     /// the pre-stress: the reactions at held nodes (with the sign of a force the body exerts).
     pub internal_forces: Vec<Vector3>,
+    /// How the conjugate-gradient solve went.
     pub report: BlockCgReport,
 }
 

@@ -29,8 +29,11 @@ use crate::{Point3, Vector3};
 /// Buffers kept between steps.
 #[derive(Debug, Clone, Default)]
 pub struct FemScratch {
+    /// The step's (or the Newton iteration's) block system on the mesh edges.
     pub system: BlockSystem,
+    /// The conjugate-gradient solver's buffers.
     pub cg: BlockCgScratch,
+    /// The right-hand side of the system.
     pub rhs: Vec<Vector3>,
     /// The previous step's velocity change, then the warm start and the solution.
     pub dv: Vec<Vector3>,
@@ -38,6 +41,7 @@ pub struct FemScratch {
     pub dv_previous: [Vec<Vector3>; 3],
     /// How many of `dv` and `dv_previous` hold solutions (0 after a reset).
     pub history: usize,
+    /// The force on each vertex (see [`total_forces`]).
     pub forces: Vec<Vector3>,
 }
 

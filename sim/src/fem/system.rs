@@ -42,8 +42,11 @@ pub struct BlockCgScratch {
 /// Outcome of a solve.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BlockCgReport {
+    /// Iterations taken.
     pub iterations: usize,
+    /// `|b - A x| / |b|` at the end.
     pub relative_residual: f64,
+    /// Whether the residual reached the tolerance.
     pub converged: bool,
 }
 

@@ -37,23 +37,44 @@ impl PointData<'_> {
 /// Why a `.vtu` file could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
+    /// The file could not be created or written.
     #[error("{path}: {error}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the operating system said.
         error: std::io::Error,
     },
     #[error("point data `{name}` has {len} values for {vertices} vertices")]
+    /// A point-data array is not one value per vertex.
     Length {
+        /// The array's name.
         name: String,
+        /// How many values it has.
         len: usize,
+        /// How many vertices the mesh has.
         vertices: usize,
     },
     #[error("point data `{name}` has a NaN or infinite value at vertex {vertex}")]
-    NonFinite { name: String, vertex: usize },
+    /// A point-data array has a NaN or infinite value.
+    NonFinite {
+        /// The array's name.
+        name: String,
+        /// The first vertex with such a value.
+        vertex: usize,
+    },
     #[error("vertex {vertex} has a NaN or infinite position")]
-    NonFinitePosition { vertex: usize },
+    /// A vertex position has a NaN or infinite coordinate.
+    NonFinitePosition {
+        /// The first such vertex.
+        vertex: usize,
+    },
     #[error("point data name {name:?} is empty or used twice")]
-    Name { name: String },
+    /// A point-data name is empty or repeated.
+    Name {
+        /// The name.
+        name: String,
+    },
 }
 
 /// Writes `mesh` as an ASCII `.vtu` file at `path`: points, tetrahedra (VTK type 10), the

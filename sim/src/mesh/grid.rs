@@ -77,6 +77,7 @@ impl PointGrid {
         self.binned.len()
     }
 
+    /// Whether no point was binned.
     pub fn is_empty(&self) -> bool {
         self.binned.is_empty()
     }

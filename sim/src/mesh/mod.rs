@@ -182,10 +182,12 @@ impl TetMesh {
         &self.topology
     }
 
+    /// The number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
 
+    /// The number of tetrahedra.
     pub fn tet_count(&self) -> usize {
         self.tets.len()
     }

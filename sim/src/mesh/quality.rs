@@ -5,7 +5,9 @@ use super::{TetMesh, dihedral_angles};
 /// Dihedral-angle statistics (degrees) over the tetrahedra of a mesh.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct QualityStats {
+    /// The smallest dihedral angle of any tetrahedron.
     pub min_dihedral_deg: f64,
+    /// The largest dihedral angle of any tetrahedron.
     pub max_dihedral_deg: f64,
     /// Mean over tetrahedra of `max dihedral / min dihedral` (the paper's mu; 1.0 would
     /// be ideal, a regular tetrahedron has 1.0).

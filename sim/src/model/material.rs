@@ -7,10 +7,16 @@ use serde::{Deserialize, Serialize};
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum SpringStiffness {
     /// The same constant on every edge (the paper: 100 N/m).
-    Uniform { newtons_per_metre: f64 },
+    Uniform {
+        /// The spring constant in N/m.
+        newtons_per_metre: f64,
+    },
     /// Derived from Young's modulus after van Gelder:
     /// `k_e = sum over tets t sharing edge e of E_t V_t / |l_e|^2`.
-    YoungsModulus { pascals: f64 },
+    YoungsModulus {
+        /// Young's modulus `E` in Pa, the same in every tet of the region.
+        pascals: f64,
+    },
 }
 
 /// Material of a region of the mesh.
@@ -19,6 +25,7 @@ pub enum SpringStiffness {
 pub struct Material {
     /// Mass density rho in kg/m^3 (the paper's chest wall: 0.90 g/cm^3 = 900 kg/m^3).
     pub density_kg_per_m3: f64,
+    /// How each edge's spring constant is chosen.
     pub stiffness: SpringStiffness,
     /// Damper coefficient along each edge in N s/m (the paper: 0.05).
     pub damping_newton_seconds_per_metre: f64,
@@ -63,12 +70,16 @@ impl Material {
 /// A [`Material`] parameter out of range (with the value given).
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum MaterialError {
+    /// The density (given) is not positive and finite.
     #[error("density must be positive and finite, got {0}")]
     Density(f64),
+    /// The stiffness (given) is not positive and finite.
     #[error("stiffness must be positive and finite, got {0}")]
     Stiffness(f64),
+    /// The damping (given) is negative or not finite.
     #[error("damping must be non-negative and finite, got {0}")]
     Damping(f64),
+    /// The pre-tension (given) is outside `[0, 1)`.
     #[error("pretension s must satisfy 0 <= s < 1, got {0}")]
     Pretension(f64),
 }

@@ -19,23 +19,45 @@ use mass::quarter_mass;
 /// A problem with the model's set-up.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ModelError {
+    /// A region's spring material is out of range.
     #[error("region {region}: {error}")]
-    Material { region: u32, error: MaterialError },
-    #[error("region {region}: {error}")]
-    FemMaterial {
+    Material {
+        /// The region id.
         region: u32,
+        /// What is wrong with its material.
+        error: MaterialError,
+    },
+    #[error("region {region}: {error}")]
+    /// A region's finite-element material is out of range.
+    FemMaterial {
+        /// The region id.
+        region: u32,
+        /// What is wrong with its material.
         error: FemMaterialError,
     },
+    /// A region (the id given) of the mesh has no spring material.
     #[error("no material for region {0}")]
     MissingMaterial(u32),
+    /// A region (the id given) of the mesh has no finite-element material.
     #[error("no finite-element material for region {0}")]
     MissingFemMaterial(u32),
     #[error("held vertex {vertex} is out of range (mesh has {vertex_count} vertices)")]
-    HeldOutOfRange { vertex: u32, vertex_count: usize },
+    /// A held vertex is past the end of the mesh's vertices.
+    HeldOutOfRange {
+        /// The vertex.
+        vertex: u32,
+        /// How many vertices the mesh has.
+        vertex_count: usize,
+    },
+    /// The gravity vector has a non-finite component.
     #[error("gravity must be finite")]
     NonFiniteGravity,
     #[error("vertex {vertex} has zero mass (it belongs to no tetrahedron of positive volume)")]
-    ZeroMass { vertex: u32 },
+    /// A free vertex has no mass: no tetrahedron of positive volume uses it.
+    ZeroMass {
+        /// The vertex.
+        vertex: u32,
+    },
 }
 
 /// The particle model (everything but the changing state).
@@ -58,6 +80,7 @@ pub struct Model {
     pub inv_mass: Vec<f64>,
     /// Vertices held at their position.
     pub held: Vec<bool>,
+    /// The springs and dampers on the mesh edges.
     pub springs: SpringSet,
     /// Gravitational acceleration in m/s^2 (zero when gravity is off).
     pub gravity: Vector3,
@@ -73,13 +96,18 @@ pub struct Model {
 /// held.
 #[derive(Debug, Clone, Copy)]
 pub struct Particles<'a> {
+    /// The mass of each particle in kg.
     pub mass: &'a [f64],
+    /// Whether each particle is held at its position.
     pub held: &'a [bool],
+    /// The springs between the particles.
     pub springs: &'a SpringSet,
+    /// Gravitational acceleration in m/s^2.
     pub gravity: Vector3,
 }
 
 impl Particles<'_> {
+    /// The number of particles.
     pub fn vertex_count(&self) -> usize {
         self.mass.len()
     }
@@ -97,7 +125,9 @@ pub enum ForceModel {
 /// Positions (m) and velocities (m/s) of the particles.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct State {
+    /// The position of each particle in m.
     pub positions: Vec<Point3>,
+    /// The velocity of each particle in m/s.
     pub velocities: Vec<Vector3>,
 }
 
@@ -216,6 +246,7 @@ impl Model {
         }
     }
 
+    /// The number of particles (the mesh's vertices).
     pub fn vertex_count(&self) -> usize {
         self.mass.len()
     }

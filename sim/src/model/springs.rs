@@ -22,10 +22,12 @@ pub struct SpringSet {
 }
 
 impl SpringSet {
+    /// The number of springs.
     pub fn len(&self) -> usize {
         self.ends.len()
     }
 
+    /// Whether there are no springs.
     pub fn is_empty(&self) -> bool {
         self.ends.is_empty()
     }

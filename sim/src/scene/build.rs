@@ -22,10 +22,15 @@ pub struct BuildOptions {
 /// A built scene, ready to simulate.
 #[derive(Debug, Clone)]
 pub struct Scene {
+    /// The spec the scene was built from.
     pub spec: SceneSpec,
+    /// The particle model: mesh, materials, masses, held vertices and springs.
     pub model: Model,
+    /// The spec's targets (in millimetres, as written).
     pub targets: Vec<Target>,
+    /// The spec's viewpoint (in millimetres), if it gives one.
     pub viewpoint: Option<Viewpoint>,
+    /// The solver settings of the spec's `[solver]` table.
     pub solver: SolverSettings,
 }
 
@@ -234,10 +239,13 @@ fn build_mesh(
 /// A `[[held]]` selection that selects nothing sensible.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum HeldError {
+    /// The axes (given) are not letters of `xyz`.
     #[error("axes must be letters of \"xyz\", got {0:?}")]
     Axes(String),
+    /// The width (given) is negative or not a number.
     #[error("width_mm must be non-negative, got {0}")]
     Width(f64),
+    /// The region (given) has no tetrahedra to hold.
     #[error("held region {0} has no tetrahedra")]
     EmptyRegion(u32),
 }

@@ -34,38 +34,76 @@ pub enum SceneError {
         "unknown scene {name:?}: not a built-in scene ({}) nor an existing file",
         builtin_names()
     )]
-    Unknown { name: String },
+    /// Neither a built-in scene's name nor an existing file.
+    Unknown {
+        /// The name given.
+        name: String,
+    },
     #[error("{path}: {error}")]
+    /// The scene file is not valid TOML or JSON for a [`SceneSpec`].
     Parse {
+        /// The file.
         path: PathBuf,
+        /// What the parser said.
         error: SpecSyntaxError,
     },
     #[error("scene {scene:?}: {message}")]
-    Invalid { scene: String, message: String },
-    #[error("scene {scene:?}: {error}")]
-    Solver {
+    /// The spec parsed but says something impossible (a bad size, a duplicate region).
+    Invalid {
+        /// The scene's name.
         scene: String,
+        /// What is wrong.
+        message: String,
+    },
+    #[error("scene {scene:?}: {error}")]
+    /// The `[solver]` settings are out of range.
+    Solver {
+        /// The scene's name.
+        scene: String,
+        /// The setting out of range.
         error: crate::solver::SettingsError,
     },
     #[error("scene {scene:?}: {error}")]
-    Incision { scene: String, error: IncisionError },
+    /// The incision directions are unusable.
+    Incision {
+        /// The scene's name.
+        scene: String,
+        /// What is wrong with them.
+        error: IncisionError,
+    },
     #[error("scene {scene:?}: {error}")]
-    Held { scene: String, error: HeldError },
+    /// A `[[held]]` selection is unusable.
+    Held {
+        /// The scene's name.
+        scene: String,
+        /// What is wrong with it.
+        error: HeldError,
+    },
+    /// The mesh file (or a segmentation file) could not be read.
     #[error(transparent)]
     Read(#[from] ReadError),
     #[error("scene {scene:?}: {source}")]
+    /// The model could not be built from the mesh and the materials.
     Model {
+        /// The scene's name.
         scene: String,
+        /// Why not.
         source: crate::model::ModelError,
     },
     #[error("scene {scene:?}: {source}")]
+    /// The segmentation could not be meshed.
     Segmentation {
+        /// The scene's name.
         scene: String,
+        /// Why not.
         source: crate::SegmentationError,
     },
     #[error("scene {scene:?}: {source}")]
+    /// The generated mesh is invalid.
     Mesh {
+        /// The scene's name.
         scene: String,
+        /// What is wrong with it.
         source: crate::MeshError,
     },
 }
@@ -73,8 +111,10 @@ pub enum SceneError {
 /// A scene file that is not valid TOML (or JSON) for a [`SceneSpec`].
 #[derive(Debug, thiserror::Error)]
 pub enum SpecSyntaxError {
+    /// The TOML parser's error.
     #[error(transparent)]
     Toml(#[from] toml::de::Error),
+    /// The JSON parser's error.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
 }
@@ -110,7 +150,9 @@ pub fn builtin_spec(name: &str) -> Option<SceneSpec> {
 /// Where a scene spec came from, for resolving relative paths.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SpecOrigin {
+    /// One of the built-in scenes (`sim/scenes/*.toml`): paths are relative to `sim/scenes/`.
     BuiltIn,
+    /// A scene file (its path): paths in it are relative to its directory.
     File(PathBuf),
 }
 

@@ -13,12 +13,15 @@ use crate::solver::SolverSettings;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneSpec {
+    /// The scene's name (a built-in scene's is how it is loaded).
     pub name: String,
+    /// A sentence or two on what the scene is, for listings.
     #[serde(default)]
     pub description: String,
     /// Gravitational acceleration in m/s^2; zero (the default) turns gravity off.
     #[serde(default)]
     pub gravity_m_per_s2: [f64; 3],
+    /// Where the tetrahedral mesh comes from.
     pub mesh: MeshSource,
     /// Material per region id of the mesh.
     pub materials: Vec<RegionMaterial>,
@@ -43,6 +46,7 @@ pub struct SceneSpec {
     /// or loosely held tissue yields instead of pushing back), mm (default 4 mm).
     #[serde(default = "default_cut_depth_mm")]
     pub cut_depth_mm: f64,
+    /// The solver settings (the `[solver]` table; defaults where absent).
     #[serde(default)]
     pub solver: SolverSettings,
     /// The force model: the paper's `springs` (default) or `corotational-fem`.
@@ -54,8 +58,10 @@ pub struct SceneSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ForceModelSpec {
+    /// The paper's springs and dampers on the edges.
     #[default]
     Springs,
+    /// Co-rotational linear tetrahedral finite elements.
     CorotationalFem,
 }
 
@@ -65,16 +71,26 @@ pub enum ForceModelSpec {
 pub enum MeshSource {
     /// A slab curved about an axis parallel to y (see [`crate::generate::curved_slab`]).
     CurvedSlab {
+        /// Length, width and thickness of the slab before it is bent, in mm.
         size_mm: [f64; 3],
+        /// The radius of curvature of its mid-surface, in mm.
         radius_mm: f64,
+        /// The fewest tetrahedra the mesh may have (the resolution).
         min_tets: usize,
     },
     /// An axis-aligned box with its minimum corner at the origin.
-    Box { size_mm: [f64; 3], min_tets: usize },
+    Box {
+        /// Its extent along x, y and z, in mm.
+        size_mm: [f64; 3],
+        /// The fewest tetrahedra the mesh may have (the resolution).
+        min_tets: usize,
+    },
     /// A mesh file (.msh, .node/.ele, .vtk, .vtu); relative paths are relative to the scene
     /// file. `unit_m` is the length of one file unit in metres (0.001 for millimetres).
     File {
+        /// The mesh file.
         path: PathBuf,
+        /// The length of one file unit in metres (default 1).
         #[serde(default = "one")]
         unit_m: f64,
     },
@@ -103,7 +119,9 @@ fn one() -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaskFile {
+    /// The NIfTI mask (non-zero voxels are in it).
     pub path: PathBuf,
+    /// The region id its voxels get.
     pub region: u32,
 }
 
@@ -111,10 +129,15 @@ pub struct MaskFile {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegionMaterial {
+    /// The region id of the mesh it applies to.
     pub region: u32,
+    /// See [`Material::density_kg_per_m3`].
     pub density_kg_per_m3: f64,
+    /// See [`Material::stiffness`].
     pub stiffness: crate::model::SpringStiffness,
+    /// See [`Material::damping_newton_seconds_per_metre`].
     pub damping_newton_seconds_per_metre: f64,
+    /// See [`Material::pretension`].
     pub pretension: f64,
     /// Finite-element parameters, used when the scene's `force_model` is `corotational-fem`
     /// (default: [`crate::fem::FemMaterial::CHEST_WALL`]).
@@ -123,6 +146,7 @@ pub struct RegionMaterial {
 }
 
 impl RegionMaterial {
+    /// The spring material (without the region id and the finite-element parameters).
     pub fn material(&self) -> Material {
         Material {
             density_kg_per_m3: self.density_kg_per_m3,
@@ -141,24 +165,41 @@ pub enum HeldSelection {
     /// boundary vertices within `width_mm` of the bounding-box faces across the two longest
     /// axes (default: 2 % of the bounding-box diagonal).
     Rim {
+        /// How far from the bounding-box faces a vertex may be, in mm (see above).
         #[serde(default)]
         width_mm: Option<f64>,
     },
     /// Vertices within `width_mm` of the bounding-box faces across the given axes
     /// (`axes` is a subset of "xyz"), e.g. the two cut ends of a scanned slab.
-    BoundingBoxFaces { axes: String, width_mm: f64 },
+    BoundingBoxFaces {
+        /// The axes whose two faces hold vertices, letters of "xyz".
+        axes: String,
+        /// How far from those faces a vertex may be, in mm.
+        width_mm: f64,
+    },
     /// Vertices inside an axis-aligned box.
-    Box { min_mm: [f64; 3], max_mm: [f64; 3] },
+    Box {
+        /// The box's minimum corner, in mm.
+        min_mm: [f64; 3],
+        /// The box's maximum corner, in mm.
+        max_mm: [f64; 3],
+    },
     /// All vertices of tetrahedra of a region.
-    Region { region: u32 },
+    Region {
+        /// The region id.
+        region: u32,
+    },
 }
 
 /// An ellipsoidal target behind the tissue (e.g. the heart).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Target {
+    /// What the target is (shown in reports).
     pub name: String,
+    /// The ellipsoid's centre, in mm.
     pub centre_mm: [f64; 3],
+    /// Its semi-axes along x, y and z, in mm.
     pub radii_mm: [f64; 3],
 }
 
@@ -176,7 +217,9 @@ fn default_cut_depth_mm() -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IncisionDirections {
+    /// Out of the tissue, towards where the tool comes from.
     pub up: [f64; 3],
+    /// The direction the incision runs in.
     pub along: [f64; 3],
 }
 
@@ -211,8 +254,10 @@ impl IncisionDirections {
 /// [`IncisionDirections`] that give no frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum IncisionError {
+    /// `up` is zero or not finite.
     #[error("incision.up must be a finite, non-zero direction")]
     Up,
+    /// `along` is not finite, or parallel to `up`.
     #[error("incision.along must be a finite direction not parallel to incision.up")]
     Along,
 }
@@ -221,6 +266,8 @@ pub enum IncisionError {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Viewpoint {
+    /// The eye's position, in mm.
     pub eye_mm: [f64; 3],
+    /// The point it looks at, in mm.
     pub look_at_mm: [f64; 3],
 }

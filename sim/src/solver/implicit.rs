@@ -31,7 +31,9 @@ const CHUNK: usize = 64;
 /// Buffers kept between implicit steps.
 #[derive(Debug, Clone, Default)]
 pub struct ImplicitScratch {
+    /// The step's matrix `M + h C + h^2 K` (see the module documentation).
     pub system: SpringSystem,
+    /// The right-hand side `h (f(x, v) - h K v)`.
     pub rhs: Vec<Vector3>,
     /// The previous step's velocity change, then the warm start and the solution.
     pub dv: Vec<Vector3>,
@@ -39,6 +41,7 @@ pub struct ImplicitScratch {
     pub dv_previous: [Vec<Vector3>; 3],
     /// How many of `dv` and `dv_previous` hold solutions (0 after a reset).
     pub history: usize,
+    /// The conjugate-gradient solver's buffers.
     pub cg: CgScratch,
     /// The spring blocks in the springs' order, and the first part's contributions to the
     /// second's particles, when the assembly is split (see [`step`]).

@@ -89,6 +89,8 @@ impl LocalisationSettings {
         }
     }
 
+    /// Checks every value: distances, speeds and displacements positive and finite, sleeping
+    /// thresholds no higher than waking ones, at least one growth round.
     pub fn check(&self) -> Result<(), LocalisationError> {
         let positive = [
             ("focus_radius_m", self.focus_radius_m),
@@ -119,11 +121,20 @@ impl LocalisationSettings {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum LocalisationError {
     #[error("localisation.{name} must be positive, got {value}")]
-    NotPositive { name: &'static str, value: f64 },
+    /// A value that must be positive and finite is not.
+    NotPositive {
+        /// The setting's name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The speed below which particles sleep is above the one at which they wake.
     #[error("localisation.sleep_speed_m_per_s must not exceed wake_speed_m_per_s")]
     SleepSpeedAboveWake,
+    /// The displacement below which particles sleep is above the one at which they wake.
     #[error("localisation.sleep_displacement_m must not exceed wake_displacement_m")]
     SleepDisplacementAboveWake,
+    /// `max_growth_rounds` is zero.
     #[error("localisation.max_growth_rounds must be at least 1")]
     NoGrowthRounds,
 }

@@ -38,8 +38,10 @@ pub enum Integrator {
 }
 
 impl Integrator {
+    /// Every integrator.
     pub const ALL: [Integrator; 2] = [Integrator::SymplecticEuler, Integrator::ImplicitEuler];
 
+    /// The integrator's name in scene files and on the command line (kebab case).
     pub fn name(self) -> &'static str {
         match self {
             Integrator::SymplecticEuler => "symplectic-euler",
@@ -67,6 +69,7 @@ impl std::str::FromStr for Integrator {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SolverSettings {
+    /// The time integrator (default implicit Euler).
     pub integrator: Integrator,
     /// Fixed simulation step in seconds (default 1 ms).
     pub time_step_s: f64,
@@ -81,6 +84,7 @@ pub struct SolverSettings {
     /// 1e-3 and 12.6 at 1e-2 from the extrapolated start (12.2 at 1e-3 from the projected
     /// start now used, see [`implicit`]).
     pub cg_relative_tolerance: f64,
+    /// The most iterations the implicit CG may take in one solve.
     pub cg_max_iterations: usize,
     /// Simulate only near the scalpel and the disturbance it causes (see [`localise`]);
     /// `None` (the default) simulates every particle every step.
@@ -103,19 +107,25 @@ impl Default for SolverSettings {
 /// A [`SolverSettings`] value out of range (with the value given).
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum SettingsError {
+    /// The time step is not positive and finite.
     #[error("time_step_s must be positive, got {0}")]
     TimeStep(f64),
+    /// The explicit safety factor is outside `(0, 1]`.
     #[error("explicit_safety must be in (0, 1], got {0}")]
     ExplicitSafety(f64),
+    /// The CG tolerance is outside `(0, 1)`.
     #[error("cg_relative_tolerance must be in (0, 1), got {0}")]
     CgTolerance(f64),
+    /// The CG may take no iteration.
     #[error("cg_max_iterations must be at least 1")]
     CgMaxIterations,
+    /// A localisation setting is out of range.
     #[error(transparent)]
     Localisation(#[from] LocalisationError),
 }
 
 impl SolverSettings {
+    /// Checks every value's range (see [`SettingsError`]).
     pub fn check(&self) -> Result<(), SettingsError> {
         if !(self.time_step_s > 0.0 && self.time_step_s.is_finite()) {
             return Err(SettingsError::TimeStep(self.time_step_s));
@@ -140,13 +150,24 @@ impl SolverSettings {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum StepError {
     #[error("non-finite external force on particles {}", list(.vertices))]
-    NonFiniteInput { vertices: Vec<u32> },
+    /// An external force given for the step is not finite.
+    NonFiniteInput {
+        /// The particles with such a force.
+        vertices: Vec<u32>,
+    },
     #[error("step rejected: it would make the state of particles {} non-finite", list(.vertices))]
-    NonFinite { vertices: Vec<u32> },
+    /// The step would have made positions or velocities non-finite.
+    NonFinite {
+        /// The particles that would have been.
+        vertices: Vec<u32>,
+    },
     /// The implicit solve produced a non-finite residual (e.g. forces so large that their
     /// squares overflow): its result cannot be trusted.
     #[error("step rejected: the implicit solve failed (residual {residual})")]
-    SolverFailed { residual: f64 },
+    SolverFailed {
+        /// The residual the solve ended with.
+        residual: f64,
+    },
 }
 
 fn list(v: &[u32]) -> String {
@@ -161,8 +182,11 @@ fn list(v: &[u32]) -> String {
 /// What one step did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepReport {
+    /// Sub-steps taken (symplectic Euler; 1 for implicit Euler).
     pub substeps: u32,
+    /// CG iterations over the step's solves (implicit Euler).
     pub cg_iterations: usize,
+    /// The relative residual of the step's last solve (implicit Euler).
     pub cg_relative_residual: f64,
     /// Particles the step simulated (all free ones unless localised).
     pub awake_particles: usize,
@@ -192,8 +216,11 @@ impl Scratch {
 /// The particle simulation: model, state, inputs and scratch.
 #[derive(Debug, Clone)]
 pub struct Simulation {
+    /// The model: mesh, masses, held particles, springs (and finite elements).
     pub model: Model,
+    /// Positions and velocities.
     pub state: State,
+    /// The integrator, time step and solver settings.
     pub settings: SolverSettings,
     /// External force on each particle for the next steps (N), e.g. the scalpel contact.
     external_forces: Vec<Vector3>,

@@ -27,7 +27,9 @@ use crate::model::{ModelError, State};
 /// before it (`dv`, `dv_1`, `dv_2`, `dv_3`), and how many of them hold solutions.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct WarmStart {
+    /// How many of the four velocity changes hold solutions (0 to 4).
     pub count: usize,
+    /// Per particle, `[dv, dv_1, dv_2, dv_3]`.
     pub rows: Vec<[Vector3; 4]>,
     /// The last SSOR-preconditioned CG solve's ratio of true to preconditioned relative
     /// residual, which the next solve's stopping test starts from (0: none yet). Read as 0
@@ -144,8 +146,9 @@ pub struct RegionResume {
     pub to_wake: Vec<u32>,
     /// The sub-body must be gathered again at the next step (the awake set changed).
     pub dirty: bool,
-    /// The particles of the sub-body (ascending) and its warm start, row by row.
+    /// The particles of the sub-body (ascending).
     pub sub_body: Vec<u32>,
+    /// The sub-body's warm start, a row per particle of `sub_body`.
     pub warm_start: WarmStart,
 }
 
@@ -156,8 +159,9 @@ pub struct ResumeState {
     pub step_index: u64,
     /// Held particles, ascending.
     pub held: Vec<u32>,
-    /// The warm start of the whole-body implicit step (springs) and of the finite elements'.
+    /// The warm start of the whole-body implicit step (springs).
     pub warm_start: WarmStart,
+    /// The warm start of the finite elements' implicit step.
     #[serde(default)]
     pub fem_warm_start: WarmStart,
     /// The localised step's region, once it has stepped.
@@ -174,10 +178,13 @@ pub struct ResumeState {
 /// A resume state that does not fit the mesh it comes with.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ResumeError {
+    /// A part of the state does not fit the mesh (says which).
     #[error("resume state: {0}")]
     Invalid(String),
+    /// The sweep order does not fit the particles.
     #[error("resume state: {0}")]
     SweepOrder(#[from] super::system::SweepOrderError),
+    /// The model could not be rebuilt with the held particles given.
     #[error("resume state: rebuilding the model: {0}")]
     Model(#[from] ModelError),
 }

@@ -14,6 +14,7 @@ pub struct StaticSettings {
     /// Converged when the largest force on a free particle is below this fraction of the
     /// largest spring force in the initial state.
     pub relative_force_tolerance: f64,
+    /// The most Newton iterations the solve may take.
     pub max_newton_iterations: usize,
 }
 
@@ -29,12 +30,15 @@ impl Default for StaticSettings {
 /// What the static solve did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticReport {
+    /// Newton iterations taken.
     pub newton_iterations: usize,
+    /// CG iterations over all the Newton iterations' solves.
     pub cg_iterations: usize,
     /// Largest force on a free particle at the end, N.
     pub residual_newtons: f64,
     /// The residual the tolerance asked for, N.
     pub tolerance_newtons: f64,
+    /// Whether the residual reached the tolerance.
     pub converged: bool,
 }
 

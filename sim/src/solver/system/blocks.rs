@@ -7,11 +7,17 @@ use crate::Vector3;
 /// A symmetric 3x3 matrix stored by its six distinct entries.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sym3 {
+    /// Row x, column x.
     pub xx: f64,
+    /// Row y, column y.
     pub yy: f64,
+    /// Row z, column z.
     pub zz: f64,
+    /// Rows x and y, columns y and x.
     pub xy: f64,
+    /// Rows x and z, columns z and x.
     pub xz: f64,
+    /// Rows y and z, columns z and y.
     pub yz: f64,
 }
 
@@ -77,11 +83,17 @@ impl std::ops::AddAssign for Sym3 {
 /// A lower-triangular 3x3 matrix.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Lower3 {
+    /// Row x, column x.
     pub xx: f64,
+    /// Row y, column x.
     pub yx: f64,
+    /// Row y, column y.
     pub yy: f64,
+    /// Row z, column x.
     pub zx: f64,
+    /// Row z, column y.
     pub zy: f64,
+    /// Row z, column z.
     pub zz: f64,
 }
 

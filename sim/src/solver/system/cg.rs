@@ -19,14 +19,18 @@ pub struct CgSettings {
     pub relative_tolerance: f64,
     /// In the units of `b`; zero for a purely relative tolerance.
     pub absolute_tolerance: f64,
+    /// The most iterations the solve may take.
     pub max_iterations: usize,
 }
 
 /// Outcome of a conjugate-gradient solve.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CgReport {
+    /// Iterations taken.
     pub iterations: usize,
+    /// `|b - A x| / |b|` at the end (over the free particles).
     pub relative_residual: f64,
+    /// Whether the residual reached the tolerance.
     pub converged: bool,
 }
 

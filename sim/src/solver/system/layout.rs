@@ -124,7 +124,10 @@ impl BlockLayout {
 /// 0 (the first half), 1 (the second) or 2 (the separator).
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct SweepOrder {
+    /// The part of each particle: 0, 1 or 2.
     pub parts: Vec<u8>,
+    /// How many particles the separator had when the parts were last found by dissection
+    /// (a carried order is dissected anew once its separator grows past twice that and 64).
     pub separator_when_dissected: usize,
 }
 
@@ -156,11 +159,24 @@ impl SweepOrder {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum SweepOrderError {
     #[error("sweep order of {parts} particles for {particles}")]
-    TooManyParts { parts: usize, particles: usize },
+    /// More parts than particles.
+    TooManyParts {
+        /// How many parts.
+        parts: usize,
+        /// How many particles.
+        particles: usize,
+    },
+    /// A part (given) that is not 0, 1 or 2.
     #[error("sweep order: part {0} (0, 1 or 2)")]
     Part(u8),
     #[error("sweep order: a separator of {separator} particles for {particles}")]
-    Separator { separator: usize, particles: usize },
+    /// A dissected separator larger than the particles.
+    Separator {
+        /// The separator's size.
+        separator: usize,
+        /// How many particles.
+        particles: usize,
+    },
 }
 
 /// Buffers of [`BlockLayout::build`], kept between builds.
