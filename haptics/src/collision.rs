@@ -26,12 +26,15 @@ fn from_parry(v: PVec) -> Vector3 {
 /// The closest surface point to a query point.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SurfaceHit {
+    /// The closest point on the surface, m.
     pub point: Point3,
     /// Outward unit normal of the triangle hit.
     pub normal: Vector3,
     /// Particles (simulation vertex ids) of the triangle and the point's barycentric weights.
     pub vertices: [u32; 3],
+    /// The point's barycentric weights on those particles (summing to 1).
     pub weights: [f64; 3],
+    /// The distance from the query point to `point`, m.
     pub distance_m: f64,
 }
 

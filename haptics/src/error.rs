@@ -5,34 +5,56 @@ use std::path::PathBuf;
 /// Why a device, a session or a configuration could not be set up.
 #[derive(Debug, thiserror::Error)]
 pub enum HapticsError {
+    /// A file could not be read.
     #[error("{path}: {error}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// What the operating system said.
         error: std::io::Error,
     },
     #[error("{path}:{line}: {message}")]
+    /// A line of a trajectory CSV could not be parsed.
     Csv {
+        /// The file.
         path: PathBuf,
+        /// The line, counted from 1.
         line: usize,
+        /// What is wrong with it.
         message: String,
     },
     #[error("OpenIGTLink: cannot listen on port {port}: {source}")]
-    Listen { port: u16, source: std::io::Error },
+    /// The OpenIGTLink device could not listen on its port.
+    Listen {
+        /// The port.
+        port: u16,
+        /// What the operating system said.
+        source: std::io::Error,
+    },
+    /// A setting out of range (says which).
     #[error("invalid configuration: {0}")]
     Config(String),
+    /// A force-rendering setting out of range.
     #[error("invalid configuration: {0}")]
     Render(#[from] crate::render::RenderSettingsError),
+    /// The scene could not be loaded or built.
     #[error("scene: {0}")]
     Scene(#[from] cutlab_sim::scene::SceneError),
+    /// The tissue has no boundary surface a tool could touch.
     #[error("the scene's tissue has no surface to touch: {0}")]
     Surface(String),
     #[error("cannot start the {name} thread: {source}")]
+    /// A session thread could not be started.
     Thread {
+        /// The thread's name.
         name: &'static str,
+        /// What the operating system said.
         source: std::io::Error,
     },
+    /// A session thread (named) panicked.
     #[error("the {0} thread panicked")]
     Panicked(&'static str),
+    /// The simulation failed (settling, a step).
     #[error("simulation: {0}")]
     Simulation(String),
 }

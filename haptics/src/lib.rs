@@ -23,6 +23,8 @@
 //! Units: SI inside (metres, newtons, seconds); durations in integer nanoseconds where
 //! named `_nanos`; a tick is one servo period.
 
+#![warn(missing_docs)]
+
 pub mod collision;
 pub mod device;
 pub mod error;

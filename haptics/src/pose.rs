@@ -15,8 +15,11 @@ pub const BUTTON_BLADE: u32 = 1;
 /// cutting direction (the sharp side).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToolPose {
+    /// The blade's tip, in the world frame, m.
     pub tip_in_world: Point3,
+    /// The tool frame's orientation in the world.
     pub world_from_tool: Rotation,
+    /// The device's buttons, one bit each ([`BUTTON_BLADE`]: the blade engaged).
     pub buttons: u32,
 }
 
@@ -48,6 +51,7 @@ impl ToolPose {
         self.tip_in_world + self.edge_direction() * blade_length_m
     }
 
+    /// Whether the blade is engaged (may cut).
     pub fn blade_engaged(&self) -> bool {
         self.buttons & BUTTON_BLADE != 0
     }

@@ -38,8 +38,9 @@ pub struct ContactModel {
     pub at_heel: bool,
     /// A surface is near the proxy.
     pub valid: bool,
-    /// Closest surface point to the proxy and the outward normal there.
+    /// Closest surface point to the proxy.
     pub plane_point: Point3,
+    /// The outward unit normal of the surface at `plane_point`.
     pub plane_normal: Vector3,
     /// Local stiffness of the tissue along the normal, N/m.
     pub stiffness_newtons_per_m: f64,
@@ -80,6 +81,7 @@ impl ContactModel {
 /// Settings of the force renderer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
+    /// The device's force and force-rate limits.
     pub limits: DeviceLimits,
     /// Servo period, s.
     pub period_s: f64,
@@ -92,13 +94,15 @@ pub struct RenderSettings {
     /// Depth below the surface where the tip first touched it (along the normal there) at
     /// which an engaged blade enters the tissue whatever the force, m.
     pub cut_depth_m: f64,
-    /// Cutting resistance at speed (N) and the speed scale of its onset (m/s).
+    /// Cutting resistance at speed, N.
     pub cut_resistance_newtons: f64,
+    /// The speed scale of the cutting resistance's onset, m/s.
     pub cut_resistance_speed_m_per_s: f64,
     /// A model older than this many ticks means the simulation stalled.
     pub stale_after_ticks: u64,
-    /// Ticks to fade the force out on a fault, and to ramp it back in after.
+    /// Ticks to fade the force out on a fault.
     pub fade_ticks: u32,
+    /// Ticks to ramp the force back in after a fault cleared.
     pub recover_ticks: u32,
 }
 
@@ -124,14 +128,23 @@ impl Default for RenderSettings {
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum RenderSettingsError {
     #[error("{name} must be positive and finite, got {value}")]
-    NotPositive { name: &'static str, value: f64 },
+    /// A value that must be positive and finite is not.
+    NotPositive {
+        /// The setting's name.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The damping or the cutting resistance is negative (or not a number).
     #[error("damping and cut resistance must not be negative")]
     Negative,
+    /// A tick count is zero.
     #[error("fade, recover and stale tick counts must be at least 1")]
     ZeroTicks,
 }
 
 impl RenderSettings {
+    /// Checks every value's range (see [`RenderSettingsError`]).
     pub fn check(&self) -> Result<(), RenderSettingsError> {
         let l = &self.limits;
         let positive = [
@@ -172,9 +185,13 @@ pub enum Mode {
 
 /// Fault bits of a tick.
 pub mod fault {
+    /// The device is disconnected.
     pub const DEVICE_LOST: u8 = 1;
+    /// The device's last pose is too old.
     pub const DEVICE_STALE: u8 = 2;
+    /// A pose, contact model or force had a non-finite value.
     pub const NON_FINITE: u8 = 4;
+    /// The simulation's contact model is too old.
     pub const SIM_STALLED: u8 = 8;
 
     /// Names of the set bits, for logs.
@@ -193,9 +210,13 @@ pub mod fault {
 /// What the renderer produced this tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RenderOutput {
+    /// The force sent to the device (clamped, rate-limited, faded), N.
     pub force_newtons: Vector3,
+    /// The proxy's position, m.
     pub proxy: Point3,
+    /// What the tool is doing.
     pub mode: Mode,
+    /// The tick's fault bits (see [`fault`]).
     pub faults: u8,
     /// Fade gain applied, 0..1.
     pub gain: f64,
@@ -204,6 +225,7 @@ pub struct RenderOutput {
 /// The force renderer's state.
 #[derive(Debug, Clone)]
 pub struct ForceRenderer {
+    /// The renderer's settings.
     pub settings: RenderSettings,
     /// Length of the blade from the tip (0: the tip alone touches).
     blade_length_m: f64,
@@ -224,6 +246,7 @@ pub struct ForceRenderer {
 }
 
 impl ForceRenderer {
+    /// A renderer at rest: no contact, the proxy at the origin, full gain.
     pub fn new(settings: RenderSettings) -> Self {
         Self {
             settings,

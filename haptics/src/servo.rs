@@ -53,7 +53,9 @@ impl std::str::FromStr for Clock {
 /// Settings of the servo thread.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoConfig {
+    /// Live (real time) or virtual (as fast as possible, the same ticks).
     pub clock: Clock,
+    /// The servo period, ns.
     pub period_nanos: u64,
     /// Ticks to run.
     pub ticks: u64,
@@ -68,25 +70,44 @@ pub struct ServoConfig {
 /// One tick as the simulation (and a recorder) sees it.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ServoSample {
+    /// The tick, counted from 0.
     pub tick: u64,
     /// The device's pose (the last good one when `faults` say the device failed).
     pub pose: ToolPose,
+    /// What the force renderer produced.
     pub render: RenderOutput,
 }
 
 /// Something the log should hear about, sent from the servo thread without allocating.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ServoEvent {
-    FaultBegan { tick: u64, faults: u8 },
-    FaultCleared { tick: u64 },
-    FadedOut { tick: u64 },
+    /// A fault began (the force starts fading out).
+    FaultBegan {
+        /// The tick.
+        tick: u64,
+        /// The fault bits (see [`crate::render::fault`]).
+        faults: u8,
+    },
+    /// Every fault cleared (the force ramps back in).
+    FaultCleared {
+        /// The tick.
+        tick: u64,
+    },
+    /// The force has faded out completely.
+    FadedOut {
+        /// The tick.
+        tick: u64,
+    },
 }
 
 /// The channels between the servo thread and the simulation thread.
 #[derive(Debug)]
 pub struct ServoLinks {
+    /// The latest contact model the simulation published.
     pub contact: triple_buffer::Output<ContactModel>,
+    /// Each tick's sample, to the simulation.
     pub samples: rtrb::Producer<ServoSample>,
+    /// Events for the log.
     pub events: rtrb::Producer<ServoEvent>,
     /// Ticks the simulation has consumed (the last consumed tick + 1).
     pub sim_ticks_done: Arc<AtomicU64>,
@@ -99,19 +120,25 @@ pub struct ServoLinks {
 /// What the servo thread measured.
 #[derive(Debug, Clone)]
 pub struct ServoReport {
+    /// Ticks run.
     pub ticks: u64,
+    /// The clock the servo ran on.
     pub clock: Clock,
     /// Start of each tick after the session's start, ns.
     pub tick_start_nanos: Vec<u64>,
     /// Work per tick (read, render, write, push), ns.
     pub tick_work_nanos: Vec<u32>,
+    /// Wall-clock time of the whole run, ns.
     pub wall_nanos: u64,
     /// Outcome of asking for real-time priority (`None`: not asked).
     pub realtime_priority: Option<Result<(), RealtimeError>>,
+    /// The largest force magnitude sent, N.
     pub max_force_newtons: f64,
+    /// Non-finite values the renderer met (poses, models or forces).
     pub non_finite_count: u64,
-    /// Ticks with any fault, and ticks when the force was faded out completely.
+    /// Ticks with any fault.
     pub fault_ticks: u64,
+    /// Ticks when the force was faded out completely.
     pub faded_ticks: u64,
     /// Samples the simulation could not take in time (queue full).
     pub dropped_samples: u64,
@@ -128,8 +155,11 @@ pub struct ServoReport {
 /// Period statistics of a live run.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PeriodStats {
+    /// Mean period between tick starts, us.
     pub mean_us: f64,
+    /// Median period, us.
     pub p50_us: f64,
+    /// 99th percentile of the period, us.
     pub p99_us: f64,
     /// Largest |period - nominal|, us.
     pub max_deviation_us: f64,
@@ -139,7 +169,9 @@ pub struct PeriodStats {
     pub missed_deadlines: u64,
     /// Latest start after a deadline, us.
     pub max_lateness_us: f64,
+    /// Mean work per tick, us.
     pub mean_work_us: f64,
+    /// Largest work of a tick, us.
     pub max_work_us: f64,
 }
 
@@ -197,6 +229,8 @@ fn prefaulted<T: Copy + Default>(n: usize) -> Vec<T> {
 pub struct Backoff(u32);
 
 impl Backoff {
+    /// Waits a little, longer the more often it was called: a spin for the first 64 calls,
+    /// a yield of the thread for the next 64, then 20 us sleeps.
     pub fn wait(&mut self) {
         self.0 = self.0.saturating_add(1);
         if self.0 < 64 {
@@ -229,8 +263,10 @@ fn wait_until(deadline: Instant, spin: Duration) {
 /// (`Debug`, e.g. `OS(1)` where SCHED_FIFO is not permitted), as before it was typed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RealtimeError {
+    /// The priority value was refused (the message given).
     #[error("{0:?}")]
     Priority(String),
+    /// The operating system refused the real-time policy.
     #[error("{0:?}")]
     Os(thread_priority::Error),
 }

@@ -21,13 +21,15 @@ use crate::{HapticsError, Point3};
 /// What the stepper counted.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct StepperStats {
-    /// Steps whose cut changed the tissue, tetrahedra split, cuts skipped as unresolved and
-    /// cuts that failed.
+    /// Steps whose cut changed the tissue.
     pub cut_steps: u64,
     /// Length of the blade tip's path while it cut (sampled every `cut_step_m`), m.
     pub cut_length_m: f64,
+    /// Tetrahedra the cuts split.
     pub tets_split: u64,
+    /// Cuts skipped as unresolved (the next step tries again).
     pub unresolved_cuts: u64,
+    /// Cuts that failed.
     pub failed_cuts: u64,
     /// Steps the simulation rejected (non-finite state).
     pub rejected_steps: u64,
@@ -49,7 +51,9 @@ pub struct StepOutput {
 /// The simulation, its surface collider and the cutter, stepped one servo sample at a time.
 #[derive(Debug)]
 pub struct SessionStepper {
+    /// The simulation.
     pub sim: Simulation,
+    /// The tissue surface's collider, refitted after each step.
     pub collider: SurfaceCollider,
     cutter: Cutter,
     blade_length_m: f64,
@@ -61,6 +65,7 @@ pub struct SessionStepper {
     /// Where the blade went in, while it cuts (the contact the renderer started the cut on).
     cut_entry: Option<SurfaceHit>,
     last_cut_tip: Option<Point3>,
+    /// What the steps did so far.
     pub stats: StepperStats,
     /// Steps taken.
     steps: u64,
@@ -83,7 +88,9 @@ pub struct SessionStepper {
 pub struct StepperResume {
     /// Steps taken.
     pub steps: u64,
+    /// The simulation's resume state.
     pub sim: ResumeState,
+    /// The cutter's stroke.
     pub cutter: CutterResume,
     /// Where the tool touched after the last step (the next step presses there).
     pub last_hit: Option<SurfaceHit>,
@@ -92,10 +99,13 @@ pub struct StepperResume {
     pub cut_entry: Option<SurfaceHit>,
     /// Where the blade's tip last cut in this stroke.
     pub last_cut_tip: Option<Point3>,
+    /// What the steps did so far.
     pub stats: StepperStats,
 }
 
 impl SessionStepper {
+    /// Takes the settled simulation and collider of `session`, with the blade, contact and
+    /// cutting settings of `config`.
     pub fn new(session: Session, config: &SessionConfig) -> Self {
         let (sim, collider) = session.into_parts();
         Self {
@@ -341,6 +351,7 @@ pub struct StateHash {
 }
 
 impl StateHash {
+    /// The hashes (FNV-1a over the bits) of `sim`'s state and mesh.
     pub fn of(sim: &Simulation) -> Self {
         let mesh = &sim.model.mesh;
         let mut h = Fnv1a::default();

@@ -183,6 +183,7 @@ impl CsvDevice {
         self.poses.len()
     }
 
+    /// Whether the trajectory has no poses.
     pub fn is_empty(&self) -> bool {
         self.poses.is_empty()
     }

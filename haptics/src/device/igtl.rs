@@ -83,27 +83,39 @@ pub fn crc64_ecma(bytes: &[u8]) -> u64 {
 /// A parsed OpenIGTLink header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Header {
+    /// The header version (1 or 2).
     pub version: u16,
+    /// The message type (`TRANSFORM`, `POINT`...), padded with zero bytes.
     pub message_type: [u8; 12],
+    /// The device name, padded with zero bytes.
     pub device_name: [u8; 20],
+    /// The sender's timestamp: seconds in the high 32 bits, the fraction in the low 32.
     pub timestamp: u64,
+    /// The size of the body that follows, bytes.
     pub body_bytes: u64,
+    /// The CRC-64 (ECMA-182) of the body.
     pub crc: u64,
 }
 
 /// Why a packet was rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum PacketError {
+    /// A header version (given) other than 1 or 2.
     #[error("unsupported header version {0}")]
     Version(u16),
+    /// The message type is empty or not printable ASCII padded with zeros.
     #[error("message type is not printable ASCII")]
     MessageType,
+    /// The body (its size given) is larger than any message this device reads.
     #[error("body of {0} bytes exceeds the limit")]
     TooLarge(u64),
+    /// The body's CRC is not the header's.
     #[error("CRC mismatch")]
     Crc,
+    /// The body's size (given) is not the message type's.
     #[error("body of {0} bytes does not fit the message")]
     Size(usize),
+    /// A transform with a non-finite number or a rotation part that is not a rotation.
     #[error("non-finite or non-rigid transform")]
     Transform,
 }
@@ -151,10 +163,12 @@ impl Header {
         })
     }
 
+    /// The message type without its zero padding.
     pub fn message_type(&self) -> &[u8] {
         trimmed(&self.message_type)
     }
 
+    /// The device name without its zero padding.
     pub fn device_name(&self) -> &[u8] {
         trimmed(&self.device_name)
     }
@@ -445,10 +459,15 @@ struct Received {
 /// Counters of the network thread.
 #[derive(Debug, Default)]
 pub struct IgtlCounters {
+    /// Connections accepted.
     pub connections: AtomicU64,
+    /// Transforms received and taken as poses.
     pub transforms: AtomicU64,
+    /// Force messages sent.
     pub forces_sent: AtomicU64,
+    /// Packets rejected (a bad header, CRC or body), and forces that could not be sent.
     pub rejected: AtomicU64,
+    /// Well-formed messages of types the device does not read.
     pub ignored: AtomicU64,
 }
 
@@ -545,6 +564,7 @@ impl IgtlDevice {
         &self.counters
     }
 
+    /// Whether a client is connected now.
     pub fn is_connected(&self) -> bool {
         self.connected.load(Ordering::Acquire)
     }

@@ -37,7 +37,10 @@ pub enum DeviceFault {
     /// No device (not connected yet, or the connection was lost).
     Disconnected,
     /// The last pose is older than the device's staleness limit.
-    Stale { age_nanos: u64 },
+    Stale {
+        /// How old the last pose is, ns.
+        age_nanos: u64,
+    },
 }
 
 impl std::fmt::Display for DeviceFault {

@@ -69,9 +69,11 @@ impl Plan {
 pub struct Skill {
     /// Physiological tremor: amplitude (m) and frequency (Hz).
     pub tremor_amplitude_m: f64,
+    /// The tremor's frequency, Hz.
     pub tremor_frequency_hz: f64,
     /// Slow lateral drift off the line: standard deviation (m) and time constant (s).
     pub drift_m: f64,
+    /// The drift's time constant, s.
     pub drift_time_constant_s: f64,
     /// Mean cutting speed along the line, m/s.
     pub cut_speed_m_per_s: f64,
@@ -79,6 +81,7 @@ pub struct Skill {
     pub speed_variability: f64,
     /// Number of pauses along the stroke and their mean length, s.
     pub hesitations: usize,
+    /// The mean length of a pause, s.
     pub hesitation_s: f64,
     /// How far the stroke runs past the exit point, m.
     pub overshoot_m: f64,
@@ -87,6 +90,7 @@ pub struct Skill {
 }
 
 impl Skill {
+    /// The names of the presets.
     pub const PRESETS: [&'static str; 3] = ["expert", "intermediate", "novice"];
 
     /// The presets `expert`, `intermediate` and `novice`.

@@ -306,6 +306,7 @@ impl PointerFeed {
         self.shared.echo.at_or_before(tick)
     }
 
+    /// The feed's counters (shared with its device).
     pub fn counters(&self) -> &PointerCounters {
         &self.shared.counters
     }

@@ -68,7 +68,10 @@ pub enum PointerOrientation {
     /// Always this `world_from_tool` (samples' quaternions are checked, not used).
     Fixed(Rotation),
     /// Each sample's `world_from_tool_xyzw`; a sample without one takes `fallback`.
-    PerSample { fallback: Rotation },
+    PerSample {
+        /// The orientation of a sample that has none.
+        fallback: Rotation,
+    },
 }
 
 impl Default for PointerOrientation {
@@ -109,6 +112,7 @@ pub struct PointerOptions {
     pub max_lag_s: f64,
     /// Samples the feed's queue holds.
     pub queue_capacity: usize,
+    /// Where the tool's orientation comes from.
     pub orientation: PointerOrientation,
     /// The pose before the first sample: above the tissue, blade not engaged (path metrics
     /// count the move from it to the first sample, so above the planned entry is best: see
@@ -227,6 +231,7 @@ impl PointerDevice {
         Ok((device, feed))
     }
 
+    /// The options the device was made with.
     pub fn options(&self) -> &PointerOptions {
         &self.options
     }
@@ -236,6 +241,7 @@ impl PointerDevice {
         self.fault
     }
 
+    /// The device's counters (shared with its feed).
     pub fn counters(&self) -> &PointerCounters {
         &self.shared.counters
     }
