@@ -13,8 +13,8 @@ pub enum HapticsError {
         /// What the operating system said.
         error: std::io::Error,
     },
-    #[error("{path}:{line}: {message}")]
     /// A line of a trajectory CSV could not be parsed.
+    #[error("{path}:{line}: {message}")]
     Csv {
         /// The file.
         path: PathBuf,
@@ -23,8 +23,8 @@ pub enum HapticsError {
         /// What is wrong with it.
         message: String,
     },
-    #[error("OpenIGTLink: cannot listen on port {port}: {source}")]
     /// The OpenIGTLink device could not listen on its port.
+    #[error("OpenIGTLink: cannot listen on port {port}: {source}")]
     Listen {
         /// The port.
         port: u16,
@@ -43,8 +43,8 @@ pub enum HapticsError {
     /// The tissue has no boundary surface a tool could touch.
     #[error("the scene's tissue has no surface to touch: {0}")]
     Surface(String),
-    #[error("cannot start the {name} thread: {source}")]
     /// A session thread could not be started.
+    #[error("cannot start the {name} thread: {source}")]
     Thread {
         /// The thread's name.
         name: &'static str,

@@ -127,8 +127,8 @@ impl Default for RenderSettings {
 /// A [`RenderSettings`] value out of range.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum RenderSettingsError {
-    #[error("{name} must be positive and finite, got {value}")]
     /// A value that must be positive and finite is not.
+    #[error("{name} must be positive and finite, got {value}")]
     NotPositive {
         /// The setting's name.
         name: &'static str,

@@ -6,10 +6,10 @@ pub enum MeshError {
     /// No tetrahedra were given.
     #[error("mesh has no tetrahedra")]
     Empty,
+    /// A tetrahedron names a vertex past the end of the vertex list.
     #[error(
         "tetrahedron {tet} refers to vertex {vertex}, but the mesh has {vertex_count} vertices"
     )]
-    /// A tetrahedron names a vertex past the end of the vertex list.
     VertexOutOfRange {
         /// The tetrahedron's index.
         tet: usize,
@@ -18,16 +18,16 @@ pub enum MeshError {
         /// How many vertices the mesh has.
         vertex_count: usize,
     },
-    #[error("tetrahedron {tet} repeats vertex {vertex}")]
     /// A tetrahedron names the same vertex twice.
+    #[error("tetrahedron {tet} repeats vertex {vertex}")]
     RepeatedVertex {
         /// The tetrahedron's index.
         tet: usize,
         /// The vertex it repeats.
         vertex: u32,
     },
-    #[error("{regions} region ids given for {tets} tetrahedra")]
     /// The region ids are not one per tetrahedron.
+    #[error("{regions} region ids given for {tets} tetrahedra")]
     RegionCount {
         /// How many region ids were given.
         regions: usize,
@@ -51,8 +51,8 @@ pub enum ReadError {
         /// What the operating system said.
         error: std::io::Error,
     },
-    #[error("{path}:{line}: {message}")]
     /// A line of a text format could not be parsed.
+    #[error("{path}:{line}: {message}")]
     Parse {
         /// The file.
         path: std::path::PathBuf,
@@ -61,17 +61,17 @@ pub enum ReadError {
         /// What is wrong with it.
         message: String,
     },
-    #[error("{path}: {message}")]
     /// The file is not of the format expected (a bad header, a missing section, a binary
     /// part that does not decode), where no single line is to blame.
+    #[error("{path}: {message}")]
     Format {
         /// The file.
         path: std::path::PathBuf,
         /// What is wrong with it.
         message: String,
     },
-    #[error("{path}: {source}")]
     /// The file was read, but its tetrahedra do not make a valid mesh.
+    #[error("{path}: {source}")]
     Mesh {
         /// The file.
         path: std::path::PathBuf,

@@ -40,8 +40,8 @@ pub enum CutterResumeError {
     /// A pose of the trail or the snapping distance has a non-finite number.
     #[error("the cutter's trail or snapping distance is not finite")]
     NotFinite,
-    #[error("the stroke's vertex {vertex} is not one of the {vertex_count}")]
     /// A vertex of the stroke is past the end of the mesh's vertices.
+    #[error("the stroke's vertex {vertex} is not one of the {vertex_count}")]
     StrokeVertex {
         /// The vertex.
         vertex: u32,

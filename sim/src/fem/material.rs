@@ -87,8 +87,8 @@ pub enum FemMaterialError {
     /// Poisson's ratio (given) is outside `(-1, 0.5)`.
     #[error("Poisson's ratio must satisfy -1 < nu < 0.5, got {0}")]
     PoissonRatio(f64),
-    #[error("{name} must be non-negative and finite, got {value}")]
     /// A Rayleigh damping coefficient is negative or not finite.
+    #[error("{name} must be non-negative and finite, got {value}")]
     Rayleigh {
         /// The coefficient's name.
         name: &'static str,

@@ -45,8 +45,8 @@ pub enum WriteError {
         /// What the operating system said.
         error: std::io::Error,
     },
-    #[error("point data `{name}` has {len} values for {vertices} vertices")]
     /// A point-data array is not one value per vertex.
+    #[error("point data `{name}` has {len} values for {vertices} vertices")]
     Length {
         /// The array's name.
         name: String,
@@ -55,22 +55,22 @@ pub enum WriteError {
         /// How many vertices the mesh has.
         vertices: usize,
     },
-    #[error("point data `{name}` has a NaN or infinite value at vertex {vertex}")]
     /// A point-data array has a NaN or infinite value.
+    #[error("point data `{name}` has a NaN or infinite value at vertex {vertex}")]
     NonFinite {
         /// The array's name.
         name: String,
         /// The first vertex with such a value.
         vertex: usize,
     },
-    #[error("vertex {vertex} has a NaN or infinite position")]
     /// A vertex position has a NaN or infinite coordinate.
+    #[error("vertex {vertex} has a NaN or infinite position")]
     NonFinitePosition {
         /// The first such vertex.
         vertex: usize,
     },
-    #[error("point data name {name:?} is empty or used twice")]
     /// A point-data name is empty or repeated.
+    #[error("point data name {name:?} is empty or used twice")]
     Name {
         /// The name.
         name: String,

@@ -27,8 +27,8 @@ pub enum ModelError {
         /// What is wrong with its material.
         error: MaterialError,
     },
-    #[error("region {region}: {error}")]
     /// A region's finite-element material is out of range.
+    #[error("region {region}: {error}")]
     FemMaterial {
         /// The region id.
         region: u32,
@@ -41,8 +41,8 @@ pub enum ModelError {
     /// A region (the id given) of the mesh has no finite-element material.
     #[error("no finite-element material for region {0}")]
     MissingFemMaterial(u32),
-    #[error("held vertex {vertex} is out of range (mesh has {vertex_count} vertices)")]
     /// A held vertex is past the end of the mesh's vertices.
+    #[error("held vertex {vertex} is out of range (mesh has {vertex_count} vertices)")]
     HeldOutOfRange {
         /// The vertex.
         vertex: u32,
@@ -52,8 +52,8 @@ pub enum ModelError {
     /// The gravity vector has a non-finite component.
     #[error("gravity must be finite")]
     NonFiniteGravity,
-    #[error("vertex {vertex} has zero mass (it belongs to no tetrahedron of positive volume)")]
     /// A free vertex has no mass: no tetrahedron of positive volume uses it.
+    #[error("vertex {vertex} has zero mass (it belongs to no tetrahedron of positive volume)")]
     ZeroMass {
         /// The vertex.
         vertex: u32,

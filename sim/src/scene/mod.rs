@@ -30,49 +30,49 @@ pub const BUILTIN: [(&str, &str); 5] = [
 /// Why a scene could not be loaded or built.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
+    /// Neither a built-in scene's name nor an existing file.
     #[error(
         "unknown scene {name:?}: not a built-in scene ({}) nor an existing file",
         builtin_names()
     )]
-    /// Neither a built-in scene's name nor an existing file.
     Unknown {
         /// The name given.
         name: String,
     },
-    #[error("{path}: {error}")]
     /// The scene file is not valid TOML or JSON for a [`SceneSpec`].
+    #[error("{path}: {error}")]
     Parse {
         /// The file.
         path: PathBuf,
         /// What the parser said.
         error: SpecSyntaxError,
     },
-    #[error("scene {scene:?}: {message}")]
     /// The spec parsed but says something impossible (a bad size, a duplicate region).
+    #[error("scene {scene:?}: {message}")]
     Invalid {
         /// The scene's name.
         scene: String,
         /// What is wrong.
         message: String,
     },
-    #[error("scene {scene:?}: {error}")]
     /// The `[solver]` settings are out of range.
+    #[error("scene {scene:?}: {error}")]
     Solver {
         /// The scene's name.
         scene: String,
         /// The setting out of range.
         error: crate::solver::SettingsError,
     },
-    #[error("scene {scene:?}: {error}")]
     /// The incision directions are unusable.
+    #[error("scene {scene:?}: {error}")]
     Incision {
         /// The scene's name.
         scene: String,
         /// What is wrong with them.
         error: IncisionError,
     },
-    #[error("scene {scene:?}: {error}")]
     /// A `[[held]]` selection is unusable.
+    #[error("scene {scene:?}: {error}")]
     Held {
         /// The scene's name.
         scene: String,
@@ -82,24 +82,24 @@ pub enum SceneError {
     /// The mesh file (or a segmentation file) could not be read.
     #[error(transparent)]
     Read(#[from] ReadError),
-    #[error("scene {scene:?}: {source}")]
     /// The model could not be built from the mesh and the materials.
+    #[error("scene {scene:?}: {source}")]
     Model {
         /// The scene's name.
         scene: String,
         /// Why not.
         source: crate::model::ModelError,
     },
-    #[error("scene {scene:?}: {source}")]
     /// The segmentation could not be meshed.
+    #[error("scene {scene:?}: {source}")]
     Segmentation {
         /// The scene's name.
         scene: String,
         /// Why not.
         source: crate::SegmentationError,
     },
-    #[error("scene {scene:?}: {source}")]
     /// The generated mesh is invalid.
+    #[error("scene {scene:?}: {source}")]
     Mesh {
         /// The scene's name.
         scene: String,

@@ -120,8 +120,8 @@ impl LocalisationSettings {
 /// A [`LocalisationSettings`] value out of range.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum LocalisationError {
-    #[error("localisation.{name} must be positive, got {value}")]
     /// A value that must be positive and finite is not.
+    #[error("localisation.{name} must be positive, got {value}")]
     NotPositive {
         /// The setting's name.
         name: &'static str,

@@ -149,14 +149,14 @@ impl SolverSettings {
 /// A step that was rejected; the state is unchanged.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum StepError {
-    #[error("non-finite external force on particles {}", list(.vertices))]
     /// An external force given for the step is not finite.
+    #[error("non-finite external force on particles {}", list(.vertices))]
     NonFiniteInput {
         /// The particles with such a force.
         vertices: Vec<u32>,
     },
-    #[error("step rejected: it would make the state of particles {} non-finite", list(.vertices))]
     /// The step would have made positions or velocities non-finite.
+    #[error("step rejected: it would make the state of particles {} non-finite", list(.vertices))]
     NonFinite {
         /// The particles that would have been.
         vertices: Vec<u32>,

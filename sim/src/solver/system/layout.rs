@@ -158,8 +158,8 @@ impl SweepOrder {
 /// A [`SweepOrder`] that does not fit the particles it is given for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum SweepOrderError {
-    #[error("sweep order of {parts} particles for {particles}")]
     /// More parts than particles.
+    #[error("sweep order of {parts} particles for {particles}")]
     TooManyParts {
         /// How many parts.
         parts: usize,
@@ -169,8 +169,8 @@ pub enum SweepOrderError {
     /// A part (given) that is not 0, 1 or 2.
     #[error("sweep order: part {0} (0, 1 or 2)")]
     Part(u8),
-    #[error("sweep order: a separator of {separator} particles for {particles}")]
     /// A dissected separator larger than the particles.
+    #[error("sweep order: a separator of {separator} particles for {particles}")]
     Separator {
         /// The separator's size.
         separator: usize,
