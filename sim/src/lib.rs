@@ -19,6 +19,37 @@
 //! - [`stability`]: stability stress cases (sweeps of step, stiffness, damping, mass ratio);
 //! - [`stats`]: percentiles and summaries of samples (timings);
 //! - [`rng`]: a small seeded random number generator (SplitMix64).
+//!
+//! A first cut: load a built-in scene, settle it, draw a scalpel across it while the
+//! simulation steps, and write the result as a `.vtu` file (here into a string;
+//! [`io::write_vtu`] writes a file). `sim/examples/first_cut.rs` is the same, runnable.
+//!
+//! ```
+//! use cutlab_sim::cut::{Blade, Cutter};
+//! use cutlab_sim::io::{PointData, vtu_string};
+//! use cutlab_sim::scene::{BuildOptions, Scene};
+//! use cutlab_sim::solver::StaticSettings;
+//!
+//! let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(2_000) })?;
+//! let mut sim = scene.simulation();
+//! assert!(sim.settle(StaticSettings::default()).converged);
+//! let tets_before = sim.model.mesh.tet_count();
+//! let mut cutter = Cutter::default();
+//! for k in 0..=20 {
+//!     // the blade normal to the wall's outer surface (radius 150 mm), 8 mm deep
+//!     let x_m = -0.01 + 0.001 * k as f64;
+//!     let blade = Blade::normal_to_curved_slab(x_m, 0.0004, 0.15, 0.008, 0.005);
+//!     cutter.advance(&mut sim, blade)?;
+//!     sim.step()?;
+//! }
+//! assert!(sim.model.mesh.tet_count() > tets_before); // tetrahedra were split
+//! let vtu = vtu_string(
+//!     &sim.model.mesh,
+//!     &[("velocity", PointData::Vector(&sim.state.velocities))],
+//! )?;
+//! assert!(vtu.contains("UnstructuredGrid"));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -217,6 +217,38 @@ impl StrokeVertices {
 }
 
 /// Cuts the simulation's tissue along a planar polygon C.
+///
+/// A square blade path through the middle of a held 1 cm cube, from its top face to half its
+/// depth:
+///
+/// ```
+/// use cutlab_sim::cut::{CutOptions, CutPolygon, cut};
+/// use cutlab_sim::generate::{GridCells, boxed};
+/// use cutlab_sim::model::{Material, Model};
+/// use cutlab_sim::solver::{Simulation, SolverSettings};
+/// use cutlab_sim::{Point3, Vector3};
+///
+/// let cube = boxed(Point3::origin(), [0.01; 3], GridCells { nx: 3, ny: 3, nz: 3 })?.mesh;
+/// let bottom: Vec<u32> = (0..cube.vertex_count() as u32)
+///     .filter(|&v| cube.positions()[v as usize].z == 0.0)
+///     .collect();
+/// let model = Model::new(cube, &[(0, Material::default())], &bottom, Vector3::zeros())?;
+/// let mut sim = Simulation::new(model, SolverSettings::default());
+/// let tets_before = sim.model.mesh.tet_count();
+/// // the plane y = 4.5 mm, from above the top (z = 12 mm) down to z = 5 mm
+/// let polygon = CutPolygon::new(&[
+///     Point3::new(-0.001, 0.0045, 0.012),
+///     Point3::new(0.011, 0.0045, 0.012),
+///     Point3::new(0.011, 0.0045, 0.005),
+///     Point3::new(-0.001, 0.0045, 0.005),
+/// ])
+/// .expect("a planar polygon");
+/// let event = cut(&mut sim, &polygon, &CutOptions::default())?;
+/// assert!(!event.is_empty());
+/// assert!(sim.model.mesh.tet_count() > tets_before);
+/// sim.step()?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn cut(
     sim: &mut Simulation,
     polygon: &CutPolygon,

@@ -86,6 +86,22 @@ pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
 }
 
 /// Reads a tetrahedral mesh from `text` in `format`; `path` is only used in error messages.
+///
+/// ```
+/// use std::path::Path;
+///
+/// use cutlab_sim::io::{MeshFormat, read_mesh_from_str};
+///
+/// // one tetrahedron in Gmsh 2.2 (element type 4), physical group 7
+/// let msh = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n\
+///            $Nodes\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$EndNodes\n\
+///            $Elements\n1\n1 4 2 7 7 1 2 3 4\n$EndElements\n";
+/// let mesh = read_mesh_from_str(msh, MeshFormat::Gmsh, Path::new("tet.msh"))?;
+/// assert_eq!((mesh.vertex_count(), mesh.tet_count()), (4, 1));
+/// assert_eq!(mesh.regions(), &[7]);
+/// assert!((mesh.volume() - 1.0 / 6.0).abs() < 1e-15);
+/// # Ok::<(), cutlab_sim::ReadError>(())
+/// ```
 pub fn read_mesh_from_str(
     text: &str,
     format: MeshFormat,

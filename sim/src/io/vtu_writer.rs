@@ -81,6 +81,21 @@ pub enum WriteError {
 /// cell array `region`, and the named per-vertex `point_data` (e.g.
 /// `&[("velocity", PointData::Vector(&v))]`). NaN or infinite values are refused because
 /// VTK's ASCII parser cannot read them.
+///
+/// ```
+/// use cutlab_sim::Point3;
+/// use cutlab_sim::generate::{GridCells, boxed};
+/// use cutlab_sim::io::{PointData, read_mesh, write_vtu};
+///
+/// let mesh = boxed(Point3::origin(), [0.01; 3], GridCells { nx: 1, ny: 1, nz: 1 })?.mesh;
+/// let height: Vec<f64> = mesh.positions().iter().map(|p| p.z).collect();
+/// let path = std::env::temp_dir().join(format!("cube-{}.vtu", std::process::id()));
+/// write_vtu(&path, &mesh, &[("height", PointData::Scalar(&height))])?;
+/// // read back, the positions bit for bit
+/// assert_eq!(read_mesh(&path)?.positions(), mesh.positions());
+/// std::fs::remove_file(&path)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn write_vtu(
     path: &Path,
     mesh: &TetMesh,

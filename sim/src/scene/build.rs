@@ -35,7 +35,19 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Builds a built-in scene or a scene file.
+    /// Builds a built-in scene (by name, see [`super::BUILTIN`]) or a scene file (by path,
+    /// `.toml` or `.json`).
+    ///
+    /// ```
+    /// use cutlab_sim::scene::{BuildOptions, Scene};
+    ///
+    /// // the chest wall at a coarse resolution (at least 1,000 tetrahedra)
+    /// let scene = Scene::load("chest-wall", BuildOptions { min_tets: Some(1_000) })?;
+    /// assert!(scene.model.mesh.tet_count() >= 1_000);
+    /// let sim = scene.simulation();
+    /// assert_eq!(sim.state.positions.len(), scene.model.vertex_count());
+    /// # Ok::<(), cutlab_sim::scene::SceneError>(())
+    /// ```
     pub fn load(name_or_path: &str, options: BuildOptions) -> Result<Self, SceneError> {
         let (spec, origin) = super::find_spec(name_or_path)?;
         Self::build(spec, &origin, options)

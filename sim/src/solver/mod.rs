@@ -378,6 +378,39 @@ impl Simulation {
     }
 
     /// Advances one fixed step of `settings.time_step_s`.
+    ///
+    /// A 1 cm cube of tissue held at its bottom face, pushed sideways at its top:
+    ///
+    /// ```
+    /// use cutlab_sim::generate::{GridCells, boxed};
+    /// use cutlab_sim::model::{Material, Model};
+    /// use cutlab_sim::solver::{Simulation, SolverSettings, StaticSettings};
+    /// use cutlab_sim::{Point3, Vector3};
+    ///
+    /// let cube = boxed(Point3::origin(), [0.01; 3], GridCells { nx: 2, ny: 2, nz: 2 })?.mesh;
+    /// let bottom: Vec<u32> = (0..cube.vertex_count() as u32)
+    ///     .filter(|&v| cube.positions()[v as usize].z == 0.0)
+    ///     .collect();
+    /// let top: Vec<u32> = (0..cube.vertex_count() as u32)
+    ///     .filter(|&v| cube.positions()[v as usize].z == 0.01)
+    ///     .collect();
+    /// let model = Model::new(cube, &[(0, Material::default())], &bottom, Vector3::zeros())?;
+    /// let mut sim = Simulation::new(model, SolverSettings::default());
+    /// sim.settle(StaticSettings::default()); // equilibrium under the pre-tension
+    /// let mean_top_x = |sim: &Simulation| {
+    ///     top.iter().map(|&v| sim.state.positions[v as usize].x).sum::<f64>() / top.len() as f64
+    /// };
+    /// let settled_x = mean_top_x(&sim);
+    /// for &v in &top {
+    ///     sim.add_external_force(v, Vector3::new(0.01, 0.0, 0.0));
+    /// }
+    /// for _ in 0..10 {
+    ///     sim.step()?;
+    /// }
+    /// assert_eq!(sim.step_index(), 10);
+    /// assert!(mean_top_x(&sim) > settled_x); // the top has moved along the push
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn step(&mut self) -> Result<StepReport, StepError> {
         if let (Some(localisation), Integrator::ImplicitEuler, None) = (
             self.settings.localisation,
