@@ -287,6 +287,25 @@ async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots
         tokio::time::sleep(Duration::from_secs(3)).await;
         c.enter_parent_frame().await?;
         std::fs::write(shots.join("replay.png"), c.screenshot().await?).expect("screenshot");
+        // a note pinned to a moment: back on the replay, which names the moment; the attempt page links it
+        c.find(Locator::Css("form.comment-form input[name=at]")).await?.send_keys("1.5").await?;
+        c.find(Locator::Css("form.comment-form textarea[name=body]")).await?.send_keys("The blade enters here.").await?;
+        c.find(Locator::Css("form.comment-form button[type=submit]")).await?.click().await?;
+        until(&c, "location.search === '?at=1.5' && document.readyState === 'complete'", Duration::from_secs(60)).await?;
+        assert!(c.current_url().await?.path().ends_with(&format!("/attempts/{attempt}/replay")));
+        let frame = c.find(Locator::Id("replay")).await?;
+        let hint = c.find(Locator::Css("p.moment-hint")).await?.text().await?;
+        assert!(hint.contains("0:01.500") && hint.contains("+1.500 s"), "{hint}");
+        let note = c.find(Locator::Css("div.comment a.moment")).await?;
+        assert_eq!(note.text().await?, "at 0:01.500");
+        frame.enter_frame().await?;
+        c.wait().for_element(Locator::Id("the_canvas_id")).await?;
+        tokio::time::sleep(Duration::from_secs(10)).await;
+        c.enter_parent_frame().await?;
+        std::fs::write(shots.join("replay-note.png"), c.screenshot().await?).expect("screenshot");
+        c.goto(&format!("{base}/attempts/{attempt}")).await?;
+        let link = c.find(Locator::Css("div.comment a.moment")).await?;
+        assert_eq!(link.attr("href").await?.as_deref(), Some(format!("/attempts/{attempt}/replay?at=1.5").as_str()));
         Ok::<(), fantoccini::error::CmdError>(())
     }
     .await;

@@ -8,7 +8,7 @@
 
 use axum::Router;
 use axum::body::{Body, Bytes};
-use axum::extract::State;
+use axum::extract::{RawQuery, State};
 use axum::http::{HeaderMap, HeaderValue, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
@@ -18,10 +18,13 @@ use re_web_viewer_server::WebViewerData;
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
+use cutlab_recorder::rerun_log::TIMELINE_SIM_TIME;
+
 use crate::data::attempt::recording_paths;
+use crate::data::debrief;
 use crate::error::AppError;
 use crate::extract::{Id, Path};
-use crate::pages::layout;
+use crate::pages::{attempt, layout};
 
 /// rerun's web viewer files, read once.
 #[derive(Debug)]
@@ -178,13 +181,25 @@ pub fn viewer_url(origin: &str, id: i64, grant: &str) -> String {
     format!("/viewer/?{q}&hide_welcome_screen")
 }
 
+/// The replay in rerun's viewer with the attempt's notes below it and, for instructors, a form
+/// that pins a note to a moment. `?at=` (seconds, a note's link) names the moment to look at:
+/// rerun 0.36's web viewer takes no start time for a file it fetches over HTTP (its `#when=`
+/// fragment is ignored there), so the page says where to put the time cursor.
 async fn replay_page(
     State(state): State<AppState>,
     user: CurrentUser,
     headers: HeaderMap,
     Id(id): Id,
+    RawQuery(query): RawQuery,
 ) -> Result<Response, AppError> {
+    let at_ns = match form_urlencoded::parse(query.unwrap_or_default().as_bytes())
+        .find(|(k, _)| k == "at")
+    {
+        Some((_, v)) => debrief::parse_moment(&v)?,
+        None => None,
+    };
     let a = visible_attempt(&state, &user, id).await?;
+    let notes = debrief::comments(&state, id).await?;
     let has_rrd = recording_paths(&a)
         .is_some_and(|(_, rrd)| std::fs::metadata(rrd).is_ok_and(|m| m.is_file()));
     let origin = request_origin(&headers, state.config().secure_cookies);
@@ -195,10 +210,17 @@ async fn replay_page(
         } @else if !has_rrd {
             p class="fail" { "Attempt " (id) " has no .rrd recording (record with " code { "cutlab session --rrd" } ")." }
         } @else if let Some(origin) = origin {
+            @if let Some(at) = at_ns {
+                p class="moment-hint" { "Note at " strong { (debrief::moment_label(at)) } ": move the viewer's time cursor (timeline " code { (TIMELINE_SIM_TIME) } ") to +" (format!("{:.3}", at as f64 / 1e9)) " s." }
+            }
             iframe id="replay" class="replay" title="rerun viewer" src=(viewer_url(&origin, id, &state.grants().issue(id, user.id()))) {}
         } @else {
             p class="fail" { "Cannot tell the viewer where this server is (no usable Host header)." }
         }
+        h2 { "Notes" }
+        @if notes.is_empty() { p class="muted" { "No notes yet." } }
+        @for c in &notes { (attempt::comment_markup(id, c, has_rrd)) }
+        @if user.is_staff() { (attempt::comment_form(&user, id, true)) }
     };
     Ok(layout::page(&format!("Replay of attempt {id}"), Some(&user), body).into_response())
 }

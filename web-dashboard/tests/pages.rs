@@ -83,6 +83,45 @@ async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
     )
     .await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    // a review note pinned to a moment, as the viewer shows it; from the replay page, the
+    // answer is the replay at that moment
+    let r = send(
+        &e.app,
+        post_form(
+            &format!("/attempts/{a}/comments"),
+            Some(&kim.cookie),
+            &[
+                ("body", "Here the blade tilts."),
+                ("at", "+1.700s"),
+                ("next", "replay"),
+                ("csrf", &kim.csrf),
+            ],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    assert_eq!(
+        r.headers()["location"],
+        format!("/attempts/{a}/replay?at=1.7").as_str()
+    );
+    for bad in ["NaN", "-1", "1:75", "1e9"] {
+        let r = send(
+            &e.app,
+            post_form(
+                &format!("/attempts/{a}/comments"),
+                Some(&kim.cookie),
+                &[("body", "never kept"), ("at", bad), ("csrf", &kim.csrf)],
+            ),
+        )
+        .await;
+        assert_eq!(r.status(), StatusCode::BAD_REQUEST, "{bad}");
+    }
+    let r = send(
+        &e.app,
+        get(&format!("/attempts/{a}/replay?at=soon"), Some(&kim)),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
     let r = send(
         &e.app,
         post_form(
@@ -112,11 +151,19 @@ async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
         !page.contains("Add comment"),
         "trainees read, they do not comment"
     );
+    assert!(
+        page.contains("Here the blade tilts.") && page.contains("at 0:01.700"),
+        "the trainee reads the pinned note with its moment"
+    );
+    assert!(!page.contains("never kept"));
     let json: serde_json::Value = serde_json::from_str(
         &body_text(send(&e.app, get(&format!("/api/attempts/{a}"), Some(&trainee))).await).await,
     )
     .unwrap();
     assert_eq!(json["comments"][0]["body"], "Keep the blade perpendicular.");
+    assert_eq!(json["comments"][0]["at_ns"], serde_json::Value::Null);
+    assert_eq!(json["comments"][1]["at_ns"], 1_700_000_000_i64);
+    assert_eq!(json["comments"].as_array().map(Vec::len), Some(2));
     assert_eq!(json["signoff"]["instructor"]["name"], "dr-kim");
 }
 

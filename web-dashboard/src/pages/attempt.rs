@@ -16,7 +16,7 @@ use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
 use crate::data::attempt::{AttemptDetail, PassLimits, detail};
-use crate::data::debrief;
+use crate::data::debrief::{self, Comment, moment_label};
 use crate::data::label;
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::PageResult;
@@ -92,21 +92,51 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
         h2 { "Debriefing" }
         @if let Some(s) = &d.signoff { p class="pass" { "Signed off by " (s.instructor.name) " at " (when(s.signed_ns)) " UTC" } }
         @if d.comments.is_empty() { p class="muted" { "No comments yet." } }
-        @for c in &d.comments {
-            div class="comment" { strong { (c.author.name) } " · " span class="muted" { (when(c.created_ns)) } br; (c.body) }
-        }
+        @for c in &d.comments { (comment_markup(a.id, c, d.recordings.rrd)) }
         @if user.is_staff() {
-            form method="post" action=(format!("/attempts/{}/comments", a.id)) {
-                input type="hidden" name="csrf" value=(user.csrf());
-                textarea name="body" rows="3" maxlength=(debrief::MAX_COMMENT_CHARS) required placeholder="Comment for the trainee" {}
-                br; button type="submit" { "Add comment" }
-            }
+            (comment_form(user, a.id, false))
             @if d.signoff.is_none() {
                 form method="post" action=(format!("/attempts/{}/signoff", a.id)) {
                     input type="hidden" name="csrf" value=(user.csrf());
                     button type="submit" { "Sign off" }
                 }
             }
+        }
+    }
+}
+
+/// One debriefing comment; a review note (pinned to a moment) links to the replay at that
+/// moment when the attempt has one.
+pub(crate) fn comment_markup(attempt_id: i64, c: &Comment, has_replay: bool) -> Markup {
+    html! {
+        div class="comment" {
+            strong { (c.author.name) } " · " span class="muted" { (when(c.created_ns)) }
+            @if let Some(at) = c.at_ns {
+                " · "
+                @if has_replay {
+                    a class="moment" href=(format!("/attempts/{attempt_id}/replay?at={}", at as f64 / 1e9)) { "at " (moment_label(at)) }
+                } @else {
+                    span class="moment" { "at " (moment_label(at)) }
+                }
+            }
+            br; (c.body)
+        }
+    }
+}
+
+/// The form an instructor comments with: on the attempt page, or beside the replay (`replay`:
+/// back to the replay at the note's moment afterwards). The moment is optional.
+pub(crate) fn comment_form(user: &CurrentUser, attempt_id: i64, replay: bool) -> Markup {
+    html! {
+        form class="comment-form" method="post" action=(format!("/attempts/{attempt_id}/comments")) {
+            input type="hidden" name="csrf" value=(user.csrf());
+            @if replay { input type="hidden" name="next" value="replay"; }
+            label { "At (s, or m:ss; the viewer's time, e.g. +1.700s; empty: the whole attempt) "
+                input type="text" name="at" size="10" maxlength="20" inputmode="decimal" placeholder="e.g. 1.7"; }
+            br;
+            label { "Note for the trainee" br;
+                textarea name="body" rows="3" maxlength=(debrief::MAX_COMMENT_CHARS) required placeholder="Comment for the trainee" {} }
+            br; button type="submit" { @if replay { "Pin note" } @else { "Add comment" } }
         }
     }
 }
@@ -168,6 +198,12 @@ fn num_short(v: f64) -> String {
 #[derive(Debug, Deserialize)]
 struct CommentForm {
     body: String,
+    /// The moment the note is pinned to (see [`debrief::parse_moment`]); absent or empty: none.
+    #[serde(default)]
+    at: String,
+    /// `replay`: answer with the replay at the note's moment instead of the attempt page.
+    #[serde(default)]
+    next: String,
 }
 
 async fn comment(
@@ -178,8 +214,13 @@ async fn comment(
 ) -> PageResult<Redirect> {
     user.require_staff()?;
     let a = visible_attempt(&state, &user, id).await?;
-    debrief::add_comment(&state, a.id, user.id(), &f.body).await?;
-    Ok(Redirect::to(&format!("/attempts/{id}")))
+    let at_ns = debrief::parse_moment(&f.at)?;
+    debrief::add_comment(&state, a.id, user.id(), &f.body, at_ns).await?;
+    Ok(Redirect::to(&match (f.next.as_str(), at_ns) {
+        ("replay", Some(at)) => format!("/attempts/{id}/replay?at={}", at as f64 / 1e9),
+        ("replay", None) => format!("/attempts/{id}/replay"),
+        _ => format!("/attempts/{id}"),
+    }))
 }
 
 async fn sign_off(
