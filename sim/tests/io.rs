@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 
 use cutlab_sim::io::{
-    MeshFormat, PointData, WriteError, read_mesh, read_mesh_from_str, read_tetgen_str, vtu_string,
-    write_vtu,
+    MeshFormat, PointData, ReadNote, WriteError, read_mesh, read_mesh_from_str,
+    read_mesh_from_str_noting, read_mesh_noting, read_tetgen_str, vtu_string, write_vtu,
 };
 use cutlab_sim::{Point3, ReadError, TetMesh, Vector3};
 
@@ -1498,5 +1498,207 @@ fn huge_counts_do_not_allocate_or_panic() {
         "small.node",
         8,
         "expected point 6 of 18446744073709551615",
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// lenient reading: unused vertices dropped, undeclared TetGen values ignored, with notes
+
+/// The [`cube`] with unused vertices inserted before vertices 0, 3 and after the last (at
+/// file places 0, 4 and 10), as a [`TetMesh`] to write.
+fn cube_with_unused_vertices() -> TetMesh {
+    let (points, tets) = cube();
+    let unused = Point3::new(5.0, 5.0, 5.0);
+    let mut positions = vec![unused];
+    let mut place = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        if i == 3 {
+            positions.push(unused);
+        }
+        place.push(positions.len() as u32);
+        positions.push(Point3::new(p[0], p[1], p[2]));
+    }
+    positions.push(unused);
+    let tets = tets.iter().map(|t| t.map(|v| place[v])).collect();
+    TetMesh::new(positions, tets, CUBE_REGIONS.to_vec()).expect("mesh")
+}
+
+#[test]
+fn vtu_with_unused_vertices_loads_without_them_and_says_so() {
+    let text = vtu_string(&cube_with_unused_vertices(), &[]).expect("vtu");
+    let read = read_mesh_from_str_noting(&text, MeshFormat::Vtu, Path::new("small.vtu"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_cube(&read.mesh, &CUBE_REGIONS);
+    assert_eq!(
+        read.notes,
+        [ReadNote::UnusedVertices {
+            path: PathBuf::from("small.vtu"),
+            count: 3,
+            first: 0,
+        }]
+    );
+    assert!(read.notes[0].to_string().contains("dropped 3 vertices"));
+    // the plain reader drops them too
+    assert_cube(&vtu(&text).unwrap_or_else(|e| panic!("{e}")), &CUBE_REGIONS);
+}
+
+#[test]
+fn gmsh_with_unused_nodes_loads_without_them_and_says_so() {
+    // two nodes of no tetrahedron (tags 5 and 90), one of them also a point element's
+    let msh = cube_msh22()
+        .replacen("$Nodes\n8\n", "$Nodes\n10\n5 9 9 9\n", 1)
+        .replacen("$EndNodes", "90 -1 -1 -1\n$EndNodes", 1)
+        .replacen("1 15 2 0 1 10\n", "1 15 2 0 1 5\n", 1);
+    let read = read_mesh_from_str_noting(&msh, MeshFormat::Gmsh, Path::new("small.msh"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_cube(&read.mesh, &CUBE_REGIONS);
+    assert!(
+        matches!(
+            read.notes[..],
+            [ReadNote::UnusedVertices {
+                count: 2,
+                first: 0,
+                ..
+            }]
+        ),
+        "{:?}",
+        read.notes
+    );
+    // a file that uses every node gives no note
+    let read = read_mesh_from_str_noting(&cube_msh22(), MeshFormat::Gmsh, Path::new("c.msh"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(read.notes.is_empty(), "{:?}", read.notes);
+}
+
+#[test]
+fn a_scene_whose_mesh_file_has_unused_vertices_loads_with_a_note() {
+    use cutlab_sim::scene::{BuildOptions, Scene};
+    let dir = scratch_dir("unused");
+    write_vtu(&dir.join("cube.vtu"), &cube_with_unused_vertices(), &[]).expect("write");
+    let scene_path = dir.join("cube.toml");
+    std::fs::write(
+        &scene_path,
+        r#"
+name = "cube"
+
+[mesh]
+kind = "file"
+path = "cube.vtu"
+
+[[materials]]
+region = 1
+density_kg_per_m3 = 900.0
+stiffness = { uniform = { newtons_per_metre = 100.0 } }
+damping_newton_seconds_per_metre = 0.05
+pretension = 0.04
+
+[[materials]]
+region = 2
+density_kg_per_m3 = 900.0
+stiffness = { uniform = { newtons_per_metre = 100.0 } }
+damping_newton_seconds_per_metre = 0.05
+pretension = 0.04
+
+[[held]]
+kind = "box"
+min_mm = [-1.0, -1.0, -1.0]
+max_mm = [2000.0, 2000.0, 1.0]
+"#,
+    )
+    .expect("write scene");
+    // (before, the unused vertices had no mass: the model refused them)
+    let scene = Scene::load(scene_path.to_str().expect("utf-8"), BuildOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(scene.model.vertex_count(), 8);
+    assert!(
+        matches!(
+            scene.read_notes[..],
+            [ReadNote::UnusedVertices { count: 3, .. }]
+        ),
+        "{:?}",
+        scene.read_notes
+    );
+    let mut sim = scene.simulation();
+    sim.step().expect("step");
+    // read_mesh_noting on the file says the same
+    let read = read_mesh_noting(&dir.join("cube.vtu")).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(read.notes, scene.read_notes);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn tetgen_node_values_past_the_declared_ones_are_ignored_with_a_note() {
+    // no attribute nor marker declared, yet lines 3 to 6 carry an attribute and a marker
+    let node = "\
+5 3 0 0
+1 0 0 0
+2 1 0 0 0.5 1
+3 0 1 0 0.5 1
+4 0 0 1 0.5 0
+5 1 1 1 0.5 0
+";
+    let read_node = |node: &str| {
+        let mut notes = Vec::new();
+        let dir = scratch_dir("tetgen-extra");
+        std::fs::write(dir.join("m.node"), node).expect("write");
+        std::fs::write(dir.join("m.ele"), ELE).expect("write");
+        let read = read_mesh_noting(&dir.join("m.ele"));
+        std::fs::remove_dir_all(&dir).ok();
+        if let Ok(read) = &read {
+            notes.clone_from(&read.notes);
+        }
+        (read.map(|r| r.mesh), notes)
+    };
+    let (mesh, notes) = read_node(node);
+    let mesh = mesh.unwrap_or_else(|e| panic!("{e}"));
+    let expected = tetgen(NODE, ELE).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(mesh.positions(), expected.positions());
+    assert_eq!(mesh.tets(), expected.tets());
+    assert!(
+        matches!(
+            notes[..],
+            [ReadNote::ExtraNodeValues {
+                lines: 4,
+                first_line: 3,
+                ..
+            }]
+        ),
+        "{notes:?}"
+    );
+    assert!(notes[0].to_string().contains("m.node:3:"), "{}", notes[0]);
+    // one attribute declared, a marker beyond it: the marker is ignored
+    let (mesh, notes) = read_node(&node.replacen("5 3 0 0", "5 3 1 0", 1).replacen(
+        "1 0 0 0\n",
+        "1 0 0 0 0.5\n",
+        1,
+    ));
+    assert_eq!(
+        mesh.unwrap_or_else(|e| panic!("{e}")).positions(),
+        expected.positions()
+    );
+    assert!(
+        matches!(
+            notes[..],
+            [ReadNote::ExtraNodeValues {
+                lines: 4,
+                first_line: 3,
+                ..
+            }]
+        ),
+        "{notes:?}"
+    );
+    // what is not a number is still an error
+    assert_parse_error(
+        tetgen(&with_line(NODE, 4, "2 1 0 0 0 x"), ELE),
+        "small.node",
+        4,
+        "invalid trailing value",
+    );
+    // the plain reader reads the same mesh
+    assert_eq!(
+        tetgen(node, ELE)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .positions(),
+        expected.positions()
     );
 }

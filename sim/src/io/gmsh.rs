@@ -17,7 +17,13 @@ use super::lines::{Cursor, Line, capped, quoted};
 use crate::{Point3, ReadError, TetMesh};
 
 /// Reads a Gmsh mesh from `text`; `path` is only used in error messages.
+/// Vertices no tetrahedron uses are dropped (see [`super::read_mesh_noting`]).
 pub fn read_gmsh_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
+    super::without_unused_vertices(parse(text, path)?, path, &mut Vec::new())
+}
+
+/// The mesh as the file has it, unused vertices included.
+pub(super) fn parse(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
     let mut cur = Cursor::new(text, path);
     let first = cur.line("`$MeshFormat` (Gmsh 2 or 4) or `$NOD` (Gmsh 1): the file is empty")?;
     let version = match first.text {

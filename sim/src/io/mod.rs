@@ -7,8 +7,14 @@
 //! or cell data where present, else 0), and every tetrahedron positively oriented
 //! ([`TetMesh::orient_positively`]). Lower-dimensional elements (points, lines, triangles,
 //! quads) are skipped silently; other volume elements, higher-order tetrahedra and files
-//! without any tetrahedron are errors. Node numbering of the file is kept: vertex `i` of the
-//! mesh is the `i`-th node in the file.
+//! without any tetrahedron are errors. Node order of the file is kept: vertex `i` of the mesh
+//! is the `i`-th node in the file that a tetrahedron uses.
+//!
+//! Like other tools, the readers are lenient where nothing is lost: nodes that no tetrahedron
+//! uses (a geometry's construction points, the nodes of skipped surface elements) are
+//! dropped, and a TetGen `.node` line may carry values its header does not declare
+//! (attributes, boundary markers), which are ignored. Neither is an error; [`read_mesh_noting`]
+//! and [`read_mesh_from_str_noting`] say what was left out ([`ReadNote`]).
 //!
 //! Malformed input never panics: it gives a [`ReadError`] naming the file and, for these
 //! text formats, the 1-based line and the problem. NaN or infinite coordinates are errors.
@@ -22,7 +28,7 @@ mod vtk;
 mod vtu;
 mod vtu_writer;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 pub use gmsh::read_gmsh_str;
 pub use tetgen::{read_tetgen, read_tetgen_str};
@@ -56,6 +62,83 @@ pub fn is_mesh_file(path: &Path) -> bool {
 /// `.node` or `.ele` (TetGen; the sibling file with the other extension is read too),
 /// `.vtk` (legacy VTK) or `.vtu` (VTK XML).
 pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
+    read_mesh_noting(path).map(|read| read.mesh)
+}
+
+/// Something a reader left out of a mesh without failing: worth telling the user, not an
+/// error.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ReadNote {
+    /// Vertices that no tetrahedron uses were dropped; the others keep their order.
+    UnusedVertices {
+        /// The file.
+        path: PathBuf,
+        /// How many were dropped.
+        count: usize,
+        /// The first dropped, by its place (from 0) among the file's nodes.
+        first: usize,
+    },
+    /// Lines of a TetGen `.node` file had values past the coordinates and the attributes and
+    /// boundary marker its header declares; they were ignored.
+    ExtraNodeValues {
+        /// The `.node` file.
+        path: PathBuf,
+        /// How many lines had them.
+        lines: usize,
+        /// The first such line (from 1).
+        first_line: usize,
+    },
+}
+
+impl std::fmt::Display for ReadNote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReadNote::UnusedVertices { path, count, first } => write!(
+                f,
+                "{}: dropped {count} vertices no tetrahedron uses (the first: node {first} of \
+                 the file, counting from 0)",
+                path.display()
+            ),
+            ReadNote::ExtraNodeValues {
+                path,
+                lines,
+                first_line,
+            } => write!(
+                f,
+                "{}:{first_line}: ignored values the header does not declare on {lines} \
+                 line(s)",
+                path.display()
+            ),
+        }
+    }
+}
+
+/// A mesh read from a file, and what the reader left out of it.
+#[derive(Debug, Clone)]
+pub struct MeshRead {
+    /// The mesh.
+    pub mesh: TetMesh,
+    /// What was left out (empty when the file was read as it is).
+    pub notes: Vec<ReadNote>,
+}
+
+/// [`read_mesh`], with what the reader left out.
+///
+/// ```
+/// use std::path::Path;
+///
+/// use cutlab_sim::io::{MeshFormat, ReadNote, read_mesh_from_str_noting};
+///
+/// // a tetrahedron and a fifth node nothing uses (legacy VTK)
+/// let vtk = "# vtk DataFile Version 3.0\nt\nASCII\nDATASET UNSTRUCTURED_GRID\n\
+///            POINTS 5 double\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n9 9 9\n\
+///            CELLS 1 5\n4 0 1 2 3\nCELL_TYPES 1\n10\n";
+/// let read = read_mesh_from_str_noting(vtk, MeshFormat::VtkLegacy, Path::new("t.vtk"))?;
+/// assert_eq!(read.mesh.vertex_count(), 4);
+/// assert!(matches!(read.notes[..], [ReadNote::UnusedVertices { count: 1, first: 4, .. }]));
+/// # Ok::<(), cutlab_sim::ReadError>(())
+/// ```
+pub fn read_mesh_noting(path: &Path) -> Result<MeshRead, ReadError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -65,7 +148,11 @@ pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
         "msh" => MeshFormat::Gmsh,
         "vtk" => MeshFormat::VtkLegacy,
         "vtu" => MeshFormat::Vtu,
-        "node" | "ele" => return read_tetgen(path),
+        "node" | "ele" => {
+            let mut notes = Vec::new();
+            let mesh = tetgen::read_tetgen_noting(path, &mut notes)?;
+            return Ok(MeshRead { mesh, notes });
+        }
         _ => {
             let found = if ext.is_empty() {
                 "no extension".to_owned()
@@ -82,7 +169,7 @@ pub fn read_mesh(path: &Path) -> Result<TetMesh, ReadError> {
         }
     };
     let text = read_text(path)?;
-    read_mesh_from_str(&text, format, path)
+    read_mesh_from_str_noting(&text, format, path)
 }
 
 /// Reads a tetrahedral mesh from `text` in `format`; `path` is only used in error messages.
@@ -107,11 +194,23 @@ pub fn read_mesh_from_str(
     format: MeshFormat,
     path: &Path,
 ) -> Result<TetMesh, ReadError> {
-    match format {
-        MeshFormat::Gmsh => read_gmsh_str(text, path),
-        MeshFormat::VtkLegacy => read_vtk_str(text, path),
-        MeshFormat::Vtu => read_vtu_str(text, path),
-    }
+    read_mesh_from_str_noting(text, format, path).map(|read| read.mesh)
+}
+
+/// [`read_mesh_from_str`], with what the reader left out (see [`read_mesh_noting`]).
+pub fn read_mesh_from_str_noting(
+    text: &str,
+    format: MeshFormat,
+    path: &Path,
+) -> Result<MeshRead, ReadError> {
+    let mesh = match format {
+        MeshFormat::Gmsh => gmsh::parse(text, path),
+        MeshFormat::VtkLegacy => vtk::parse(text, path),
+        MeshFormat::Vtu => vtu::parse(text, path),
+    }?;
+    let mut notes = Vec::new();
+    let mesh = without_unused_vertices(mesh, path, &mut notes)?;
+    Ok(MeshRead { mesh, notes })
 }
 
 /// Reads a whole file as text. Invalid UTF-8 is replaced rather than rejected so that the
@@ -139,6 +238,53 @@ pub(crate) fn build_mesh(
         source,
     })?;
     mesh.orient_positively();
+    Ok(mesh)
+}
+
+/// `mesh` without the vertices no tetrahedron uses (the others keep their order and
+/// positions, the tetrahedra their regions and orientation); a note on `notes` when some were
+/// dropped.
+pub(crate) fn without_unused_vertices(
+    mesh: TetMesh,
+    path: &Path,
+    notes: &mut Vec<ReadNote>,
+) -> Result<TetMesh, ReadError> {
+    let n = mesh.vertex_count();
+    let mut used = vec![false; n];
+    for tet in mesh.tets() {
+        for &v in tet {
+            used[v as usize] = true;
+        }
+    }
+    let Some(first) = used.iter().position(|&u| !u) else {
+        return Ok(mesh);
+    };
+    // new id of each kept vertex, in the file's order
+    let mut new_id = vec![u32::MAX; n];
+    let mut positions = Vec::with_capacity(n);
+    for (v, &p) in mesh.positions().iter().enumerate() {
+        if used[v] {
+            new_id[v] = positions.len() as u32;
+            positions.push(p);
+        }
+    }
+    let count = n - positions.len();
+    let tets = mesh
+        .tets()
+        .iter()
+        .map(|tet| tet.map(|v| new_id[v as usize]))
+        .collect();
+    let mesh = TetMesh::new(positions, tets, mesh.regions().to_vec()).map_err(|source| {
+        ReadError::Mesh {
+            path: path.to_path_buf(),
+            source,
+        }
+    })?;
+    notes.push(ReadNote::UnusedVertices {
+        path: path.to_path_buf(),
+        count,
+        first,
+    });
     Ok(mesh)
 }
 

@@ -1,7 +1,8 @@
 //! TetGen `.node` + `.ele` reader.
 //!
 //! `.node`: a header `points dimension(3) attributes boundary-markers(0|1)`, then one line
-//! per point `index x y z [attributes...] [marker]`. `.ele`: a header
+//! per point `index x y z [attributes...] [marker]`; values past those the header declares
+//! (attributes or markers a tool wrote without declaring them) are ignored, with a note. `.ele`: a header
 //! `tetrahedra nodes-per-tet(4) attributes`, then `index n1 n2 n3 n4 [attributes...]`.
 //! Indices start at 0 or 1, as declared by the first point's index, and are consecutive.
 //! `#` starts a comment. The first tetrahedron attribute (TetGen's region attribute, `-A`)
@@ -10,12 +11,21 @@
 use std::path::{Path, PathBuf};
 
 use super::lines::{Cursor, capped, quoted};
-use super::{build_mesh, read_text, region_id, repeated_vertex};
+use super::{ReadNote, build_mesh, read_text, region_id, repeated_vertex};
 use crate::{Point3, ReadError, TetMesh};
 
 /// Reads a TetGen mesh given either of its files (`x.node` or `x.ele`); the sibling with the
 /// other extension is read too.
+/// Vertices no tetrahedron uses are dropped (see [`super::read_mesh_noting`]).
 pub fn read_tetgen(path: &Path) -> Result<TetMesh, ReadError> {
+    read_tetgen_noting(path, &mut Vec::new())
+}
+
+/// [`read_tetgen`], adding what it left out to `notes`.
+pub(super) fn read_tetgen_noting(
+    path: &Path,
+    notes: &mut Vec<ReadNote>,
+) -> Result<TetMesh, ReadError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -32,28 +42,54 @@ pub fn read_tetgen(path: &Path) -> Result<TetMesh, ReadError> {
     };
     let node_text = read_text(&node_path)?;
     let ele_text = read_text(&ele_path)?;
-    read_tetgen_str(&node_text, &node_path, &ele_text, &ele_path)
+    read_tetgen_str_noting(&node_text, &node_path, &ele_text, &ele_path, notes)
 }
 
 /// Reads a TetGen mesh from the texts of its `.node` and `.ele` files; the paths are only
-/// used in error messages.
+/// used in error messages. Vertices no tetrahedron uses are dropped (see
+/// [`super::read_mesh_noting`]).
 pub fn read_tetgen_str(
     node_text: &str,
     node_path: &Path,
     ele_text: &str,
     ele_path: &Path,
 ) -> Result<TetMesh, ReadError> {
-    let (positions, base) = read_nodes(&mut Cursor::new(node_text, node_path).with_comments('#'))?;
+    read_tetgen_str_noting(node_text, node_path, ele_text, ele_path, &mut Vec::new())
+}
+
+/// [`read_tetgen_str`], adding what it left out to `notes`.
+pub(super) fn read_tetgen_str_noting(
+    node_text: &str,
+    node_path: &Path,
+    ele_text: &str,
+    ele_path: &Path,
+    notes: &mut Vec<ReadNote>,
+) -> Result<TetMesh, ReadError> {
+    let (positions, base, extra) =
+        read_nodes(&mut Cursor::new(node_text, node_path).with_comments('#'))?;
+    if let Some((lines, first_line)) = extra {
+        notes.push(ReadNote::ExtraNodeValues {
+            path: node_path.to_path_buf(),
+            lines,
+            first_line,
+        });
+    }
     let (tets, regions) = read_tets(
         &mut Cursor::new(ele_text, ele_path).with_comments('#'),
         positions.len(),
         base,
     )?;
-    build_mesh(ele_path, positions, tets, regions)
+    let mesh = build_mesh(ele_path, positions, tets, regions)?;
+    super::without_unused_vertices(mesh, ele_path, notes)
 }
 
-/// Reads the `.node` file: positions and the index base (0 or 1).
-fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
+/// The lines of a `.node` file with values past those its header declares: how many, and the
+/// first (1-based).
+type ExtraValues = Option<(usize, usize)>;
+
+/// Reads the `.node` file: positions, the index base (0 or 1) and the lines with undeclared
+/// values, which are ignored (numbers only: other text is an error).
+fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64, ExtraValues), ReadError> {
     let mut header =
         cur.line("the header `points dimension attributes boundary-markers`: the file is empty")?;
     let n: usize = header.parse("number of points")?;
@@ -74,6 +110,7 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
     }
     let mut positions = Vec::with_capacity(capped(n));
     let mut base = 0i64;
+    let mut extra: ExtraValues = None;
     for i in 0..n {
         let mut line = cur.line(&format!(
             "point {} of {n} (declared on line {})",
@@ -103,11 +140,18 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
         for _ in 0..markers {
             line.parse::<i64>("boundary marker")?;
         }
-        line.finish(&format!(
-            "the coordinates, {attributes} attribute(s) and {markers} boundary marker(s) \
-             declared on line {}",
+        let what = format!(
+            "trailing value (a number: an attribute or a boundary marker the header on line {} \
+             does not declare)",
             header.no
-        ))?;
+        );
+        let mut undeclared = false;
+        while line.parse_opt::<f64>(&what)?.is_some() {
+            undeclared = true;
+        }
+        if undeclared {
+            extra.get_or_insert((0, line.no)).0 += 1;
+        }
         positions.push(Point3::new(x, y, z));
     }
     if let Some(line) = cur.next_line() {
@@ -117,7 +161,7 @@ fn read_nodes(cur: &mut Cursor<'_>) -> Result<(Vec<Point3>, i64), ReadError> {
             quoted(line.text)
         )));
     }
-    Ok((positions, base))
+    Ok((positions, base, extra))
 }
 
 /// Reads the `.ele` file given the number of points and their index base.

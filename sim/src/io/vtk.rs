@@ -196,7 +196,13 @@ pub(crate) fn assemble_tets(
 }
 
 /// Reads a legacy VTK unstructured grid from `text`; `path` is only used in error messages.
+/// Vertices no tetrahedron uses are dropped (see [`super::read_mesh_noting`]).
 pub fn read_vtk_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
+    super::without_unused_vertices(parse(text, path)?, path, &mut Vec::new())
+}
+
+/// The mesh as the file has it, unused vertices included.
+pub(super) fn parse(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
     let mut cur = Cursor::new(text, path);
     let Some((no, first)) = cur.raw_line() else {
         return Err(cur.error(

@@ -15,7 +15,13 @@ use crate::{Point3, ReadError, TetMesh};
 
 /// Reads an ASCII `.vtu` unstructured grid from `text`; `path` is only used in error
 /// messages.
+/// Vertices no tetrahedron uses are dropped (see [`super::read_mesh_noting`]).
 pub fn read_vtu_str(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
+    super::without_unused_vertices(parse(text, path)?, path, &mut Vec::new())
+}
+
+/// The mesh as the file has it, unused vertices included.
+pub(super) fn parse(text: &str, path: &Path) -> Result<TetMesh, ReadError> {
     let mut vtu = Vtu {
         src: text,
         path,

@@ -6,6 +6,7 @@ use super::spec::{ForceModelSpec, HeldSelection, MeshSource, SceneSpec, Target, 
 use super::{SceneError, SpecOrigin};
 use crate::fem::FemMaterial;
 use crate::generate::{self, GridCells};
+use crate::io::ReadNote;
 use crate::model::{Material, Model};
 use crate::solver::{Simulation, SolverSettings};
 use crate::{Point3, TetMesh, Vector3};
@@ -32,6 +33,9 @@ pub struct Scene {
     pub viewpoint: Option<Viewpoint>,
     /// The solver settings of the spec's `[solver]` table.
     pub solver: SolverSettings,
+    /// What the reader left out of the scene's mesh file (vertices no tetrahedron uses,
+    /// undeclared TetGen values), for the user to hear about; empty for other meshes.
+    pub read_notes: Vec<ReadNote>,
 }
 
 impl Scene {
@@ -90,7 +94,8 @@ impl Scene {
                 std::path::PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes"))
             }
         };
-        let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options)?;
+        let mut read_notes = Vec::new();
+        let (mesh, generated_rim) = build_mesh(&spec, &base_dir, options, &mut read_notes)?;
         let held = held_vertices(&spec, &mesh, generated_rim.as_deref()).map_err(|error| {
             SceneError::Held {
                 scene: spec.name.clone(),
@@ -134,6 +139,7 @@ impl Scene {
             targets: spec.targets.clone(),
             viewpoint: spec.viewpoint.clone(),
             solver: spec.solver,
+            read_notes,
             model,
             spec,
         })
@@ -149,6 +155,7 @@ fn build_mesh(
     spec: &SceneSpec,
     base_dir: &Path,
     options: BuildOptions,
+    read_notes: &mut Vec<ReadNote>,
 ) -> Result<(TetMesh, Option<Vec<u32>>), SceneError> {
     let mesh_err = |source| SceneError::Mesh {
         scene: spec.name.clone(),
@@ -202,7 +209,9 @@ fn build_mesh(
             if !(*unit_m > 0.0 && unit_m.is_finite()) {
                 return Err(invalid(format!("unit_m must be positive, got {unit_m}")));
             }
-            let mut mesh = crate::io::read_mesh(&path)?;
+            let read = crate::io::read_mesh_noting(&path)?;
+            read_notes.extend(read.notes);
+            let mut mesh = read.mesh;
             for p in mesh.positions_mut() {
                 *p *= *unit_m;
             }
