@@ -6,9 +6,9 @@
 //! level at which half the particles have been reached is the separator (no spring joins two
 //! particles whose levels differ by more than one), the levels before it the first half, the
 //! levels after it and the pieces not reached the second. Within each part the particles keep
-//! their own order, which is what the Gauss-Seidel sweeps are good at: on the chest wall at
-//! 100k tets the separator is 2.8 % of the particles and the solves need 3.7 % more CG
-//! iterations than in the plain particle order.
+//! their own order, which is what the Gauss-Seidel sweeps are good at: the separator is a few
+//! per cent of the particles, and the solves need only a few per cent more CG iterations than
+//! in the plain particle order (`docs/design/solver.md`).
 //!
 //! A forward sweep then visits the first half, the second half, the separator; a backward sweep
 //! the reverse. The two halves touch each other only through the separator, so a sweep over one

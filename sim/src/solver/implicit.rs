@@ -7,9 +7,8 @@
 //! The system is solved by SSOR preconditioned CG (see [`super::system`]), started from the
 //! combination of the last four steps' velocity changes closest to the solution in the norm of
 //! the system's matrix (a Galerkin projection onto their span, see [`super::span`]; before,
-//! their cubic extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4`, which that span holds). On the
-//! 100k-tet chest wall while it is cut (`cut_time 100000 6`, tolerance 1e-3) the steps need 12.2
-//! CG iterations from the projection against 17.3 from the extrapolation. The forces, the
+//! their cubic extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4`, which that span holds, and
+//! which it starts from in fewer iterations: see `docs/design/solver.md`). The forces, the
 //! blocks, the right-hand side and the diagonal blocks are assembled in one pass over the
 //! springs, chunk by chunk (gather, vectorised arithmetic, scatter).
 
@@ -22,7 +21,7 @@ use super::system::{self, CgReport, CgScratch, CgSettings, SpringSystem, Sym3};
 /// `|r| <= VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free particles (`r = b - A dv` is a
 /// momentum and `A` is close to `M` for the slow motions, so this is an error of about this
 /// many m/s). It matters only near rest, where `rhs` is round-off and a relative tolerance
-/// would have the solver chase noise (9 iterations per step on the settled chest wall).
+/// would have the solver chase noise.
 pub const VELOCITY_FLOOR_M_PER_S: f64 = 1e-12;
 
 /// Springs per chunk of the assembly (its buffers stay in the L1 cache).
@@ -423,9 +422,8 @@ fn assemble_springs(
 /// Warm start of the velocity change `dv` (which holds the last one on entry): the cubic
 /// extrapolation `4 dv_1 - 6 dv_2 + 4 dv_3 - dv_4` of the last four velocity changes, of lower
 /// order while fewer are known (`history`, which this advances); `previous` shifts by one.
-/// (Benchmark stroke on the chest wall at 12.8k tets, default tolerance: 7.4 iterations from the
-/// last change alone, 5.9 from the linear, 5.1 from the quadratic and 4.6 from the cubic
-/// extrapolation.) Shared by the springs and the finite elements.
+/// Each order up to the cubic starts the solve closer (`docs/design/solver.md`). Shared by the
+/// springs and the finite elements.
 pub(crate) fn extrapolate_warm_start(
     dv: &mut [Vector3],
     previous: [&mut Vec<Vector3>; 3],

@@ -75,14 +75,9 @@ pub struct SolverSettings {
     pub time_step_s: f64,
     /// Explicit sub-steps are kept below `explicit_safety` times the stability limit.
     pub explicit_safety: f64,
-    /// Relative residual at which the implicit CG stops. The default 1e-3 keeps the solver's
-    /// error far below the integrator's own (6e-3 of the largest displacement between 1 ms and
-    /// 0.5 ms steps on the chest wall): the positions differ from those of a 1e-8 solve by
-    /// 5e-7 of the largest displacement over 0.5 s of the benchmark stroke at 12.8k tets, and
-    /// by 2e-5 (0.03 um) after the 100k-tet wall's 40 cuts in 0.49 s (`cut_time 100000 6`:
-    /// 1e-4 gave 4e-6 there, 1e-2 1e-4), with 22.8 CG iterations per step at 1e-4, 17.3 at
-    /// 1e-3 and 12.6 at 1e-2 from the extrapolated start (12.2 at 1e-3 from the projected
-    /// start now used, see [`implicit`]).
+    /// Relative residual `|b - A x| / |b|` at which the implicit CG stops. The default 1e-3
+    /// keeps the solver's error far below the integrator's own (the figures are in
+    /// `docs/design/solver.md`, "The tolerance").
     pub cg_relative_tolerance: f64,
     /// The most iterations the implicit CG may take in one solve.
     pub cg_max_iterations: usize,

@@ -55,8 +55,8 @@ pub use operator::SpringSystem;
 pub use preconditioner::SSOR_OMEGA;
 
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
-/// on one, in the same order, with the same result). A half sweep of the 10k-tet chest wall
-/// (2.9k particles) takes some 25 us, too little to be worth waking another thread for.
+/// on one, in the same order, with the same result). Below it a half sweep is too short to be
+/// worth waking another thread for (`docs/design/solver.md`).
 pub const PARALLEL_MIN_PARTICLES: usize = 4_000;
 
 /// The threads the solver's sweeps may use: rayon's (one per core; `RAYON_NUM_THREADS=1` for

@@ -9,10 +9,8 @@ use super::blocks::{Lower3, Sym3, block_matrix, block_mul};
 use super::{PARALLEL_MIN_PARTICLES, SpringSystem, solver_threads};
 use crate::parallel::join;
 
-/// Relaxation factor of the SSOR preconditioner. Mean iterations on the benchmark stroke at
-/// 12.8k tets: 11.9 at 1.0, 10.6 at 1.2, 10.3 at 1.4 and 11.6 at 1.6 (relative tolerance 1e-6,
-/// linear warm start); 4.68 at 1.15, 4.61 at 1.25, 4.62 at 1.3, 4.67 at 1.35 and 4.87 at 1.45
-/// (1e-4, cubic warm start).
+/// Relaxation factor `w` of the SSOR preconditioner `M = (D/w + L) D^-1 (D/w + L^T)`, where
+/// the chest wall's solves took the fewest iterations (`docs/design/solver.md`).
 pub const SSOR_OMEGA: f64 = 1.3;
 
 impl SpringSystem {
