@@ -88,9 +88,11 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
         assert_eq!(frame.positions_m.len(), 3 * state.topology.vertex_count);
         let bytes = protocol::encode_frame(&frame);
         assert_eq!(bytes[0], KIND_FRAME);
+        // two surfaces may reach the view within one servo tick (the step-0 surface and the
+        // next, on a loaded machine): a frame's tick never goes back
         assert!(
-            last_tick.is_none_or(|t| frame.tick > t),
-            "frames move forward"
+            last_tick.is_none_or(|t| frame.tick >= t),
+            "frames never go back"
         );
         last_tick = Some(frame.tick);
         cut_seen |= frame.mode == 2;
