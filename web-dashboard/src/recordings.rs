@@ -15,11 +15,11 @@ use axum::routing::get;
 use maud::html;
 use re_web_viewer_server::WebViewerData;
 
+use cutlab_recorder::rerun_log::TIMELINE_SIM_TIME;
+
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
-use cutlab_recorder::rerun_log::TIMELINE_SIM_TIME;
-
 use crate::data::attempt::recording_paths;
 use crate::data::debrief;
 use crate::error::AppError;
@@ -179,6 +179,14 @@ pub fn viewer_url(origin: &str, id: i64, grant: &str) -> String {
         .append_pair("url", &rrd)
         .finish();
     format!("/viewer/?{q}&hide_welcome_screen")
+}
+
+/// The replay page of attempt `id`, naming the moment `at_ns` (a review note's) if given.
+pub fn replay_url(id: i64, at_ns: Option<i64>) -> String {
+    match at_ns {
+        Some(at) => format!("/attempts/{id}/replay?at={}", at as f64 / 1e9),
+        None => format!("/attempts/{id}/replay"),
+    }
 }
 
 /// The replay in rerun's viewer with the attempt's notes below it and, for instructors, a form

@@ -21,6 +21,7 @@ use crate::data::label;
 use crate::data::trace::{AttemptTrace, trace};
 use crate::error::PageResult;
 use crate::extract::{Form, Id};
+use crate::recordings::replay_url;
 
 pub fn router() -> Router<AppState> {
     Router::new()
@@ -114,7 +115,7 @@ pub(crate) fn comment_markup(attempt_id: i64, c: &Comment, has_replay: bool) -> 
             @if let Some(at) = c.at_ns {
                 " · "
                 @if has_replay {
-                    a class="moment" href=(format!("/attempts/{attempt_id}/replay?at={}", at as f64 / 1e9)) { "at " (moment_label(at)) }
+                    a class="moment" href=(replay_url(attempt_id, Some(at))) { "at " (moment_label(at)) }
                 } @else {
                     span class="moment" { "at " (moment_label(at)) }
                 }
@@ -216,10 +217,10 @@ async fn comment(
     let a = visible_attempt(&state, &user, id).await?;
     let at_ns = debrief::parse_moment(&f.at)?;
     debrief::add_comment(&state, a.id, user.id(), &f.body, at_ns).await?;
-    Ok(Redirect::to(&match (f.next.as_str(), at_ns) {
-        ("replay", Some(at)) => format!("/attempts/{id}/replay?at={}", at as f64 / 1e9),
-        ("replay", None) => format!("/attempts/{id}/replay"),
-        _ => format!("/attempts/{id}"),
+    Ok(Redirect::to(&if f.next == "replay" {
+        replay_url(id, at_ns)
+    } else {
+        format!("/attempts/{id}")
     }))
 }
 
