@@ -1,4 +1,4 @@
--- wrk script for the dashboard load figures of the README: cycles the progress page (or,
+-- wrk script for the dashboard load figures (docs/bench/dashboard.md): cycles the progress page (or,
 -- with PREFIX=/api, the progress API) over the trainees FIRST..LAST, logged in by the
 -- session cookie COOKIE. Usage:
 --   COOKIE=<token> FIRST=2 LAST=101 PREFIX= wrk -t2 -c200 -d10s --latency -s docs/wrk-progress.lua http://127.0.0.1:8099

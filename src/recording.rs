@@ -295,7 +295,10 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
                 Some(total) => format!("{:.2} of {total:.2} s", verified_to_s(&rec, &r)),
                 None => format!("{:.2} s of an unknown total", verified_to_s(&rec, &r)),
             };
-            let why = shortfall.unwrap_or_default();
+            let why = rec
+                .damage
+                .as_ref()
+                .map_or_else(|| shortfall.unwrap_or_default(), ToString::to_string);
             if a.partial {
                 if !a.json {
                     println!(

@@ -405,7 +405,7 @@ async fn station(port: u16, driver_port: u16, tmp: &Path, shots: &Path) -> i64 {
             .strip_prefix("/station/")
             .and_then(|id| id.parse().ok())
             .unwrap_or_else(|| panic!("the station's page: {path}"));
-        until(&ana, "window.cutlabStation && window.cutlabStation.stats().frames > 5", Duration::from_secs(60)).await?;
+        until(&ana, "window.cutlabStation && window.cutlabStation.stats().frames > 5", Duration::from_secs(120)).await?;
         // the planned line, where the page draws it
         let line = ana
             .execute("const s = window.cutlabStation; return s.config.plan.line_m.map(p => s.project(p))", vec![])
@@ -438,7 +438,7 @@ async fn station(port: u16, driver_port: u16, tmp: &Path, shots: &Path) -> i64 {
         // dr-kim, her instructor, watches live (read only); ben may not
         login(&kim, &base, "dr-kim", "instructor-demo").await?;
         kim.goto(&format!("{base}/station/{attempt}")).await?;
-        until(&kim, "window.cutlabStation && window.cutlabStation.stats().frames > 5", Duration::from_secs(60)).await?;
+        until(&kim, "window.cutlabStation && window.cutlabStation.stats().frames > 5", Duration::from_secs(120)).await?;
         assert!(kim.find_all(Locator::Id("stop")).await?.is_empty(), "the live view has no Stop");
         std::fs::write(shots.join("station-live-view.png"), kim.screenshot().await?).expect("screenshot");
 

@@ -557,7 +557,7 @@ impl SimWorker {
             });
         }
         let every = |k: u64| k > 0 && (n + 1).is_multiple_of(k);
-        if every(settings.surface_every_steps) {
+        if crate::tap::surface_due(n, settings.surface_every_steps) {
             let s = SurfaceSnapshot::of(
                 &self.stepper.collider,
                 &self.stepper.sim.state.positions,

@@ -24,12 +24,20 @@ pub struct TapSettings {
     /// the last step); the session's surface BVH is built again at each (see
     /// [`crate::SessionConfig::collider_rebuild_every_steps`]).
     pub keyframe_every_steps: u64,
-    /// The tissue surface every this many simulation steps (0: never).
+    /// The tissue surface after the first step and every this many simulation steps
+    /// (0: never); see [`surface_due`].
     pub surface_every_steps: u64,
     /// Capacity of the tick queue, records (a 1 kHz servo fills 1,000 per second).
     pub tick_capacity: usize,
     /// Capacity of the simulation queue, records.
     pub sim_capacity: usize,
+}
+
+/// Whether step `step` records the tissue surface, at one surface every `every_steps` steps
+/// (0: never): after the first step too, so that a recording shows the tissue from its first
+/// frame. The session and a replay that logs to rerun both follow this rule.
+pub fn surface_due(step: u64, every_steps: u64) -> bool {
+    every_steps > 0 && (step == 0 || (step + 1).is_multiple_of(every_steps))
 }
 
 impl Default for TapSettings {

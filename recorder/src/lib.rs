@@ -1,7 +1,7 @@
 //! cutlab-recorder: session recordings and deterministic replay.
 //!
 //! - [`channels`]: the channels of a recording (topics, schemas, messages; documented
-//!   there and in the README).
+//!   there and in `docs/reference/recording-format.md`).
 //! - [`writer`]: [`McapSink`] writes a session's records into a chunked, zstd-compressed,
 //!   indexed MCAP file, flushed at least every second; [`writer::spawn`] runs it on the
 //!   `cutlab-recorder` thread fed by the session's lock-free tap.

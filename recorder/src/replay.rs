@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::stepper::{SessionStepper, StateHash, StepOutput};
-use cutlab_haptics::tap::{Keyframe, SimRecord, SurfaceSnapshot};
+use cutlab_haptics::tap::{Keyframe, SimRecord, SurfaceSnapshot, surface_due};
 use cutlab_haptics::{Session, SessionConfig};
 use cutlab_sim::scene::{BuildOptions, Scene};
 
@@ -539,6 +539,8 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
         }
         let sample = sample_of(&samples, step)?;
         let playing = step.tick >= from_tick;
+        // a window's first step shows the tissue too, whatever the surface rate
+        let first_played = playing && play_started.is_none();
         if playing {
             let (t0, tick0) = *play_started.get_or_insert((Instant::now(), step.tick));
             if let Some(Speed::Factor(f)) = options.speed {
@@ -572,8 +574,7 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
                     event: Box::new(event),
                 })?;
             }
-            let every = meta.surface_every_steps;
-            if every > 0 && (step.step + 1).is_multiple_of(every) {
+            if first_played || surface_due(step.step, meta.surface_every_steps) {
                 o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(
                     &stepper.collider,
                     &stepper.sim.state.positions,

@@ -16,6 +16,10 @@
 //! | `world/plan` | `LineStrips3D` (static) | [`RerunSink::log_plan`] |
 //! | `events` | `TextLog` | cuts, keyframes (with their hashes), rejected steps, fault changes |
 //!
+//! Every log carries [`review_blueprint`], the layout a review opens in (a large 3D view of
+//! the tissue above the force plot and the events), and the tissue is there from the first
+//! step ([`cutlab_haptics::tap::surface_due`]).
+//!
 //! The 1 kHz series never cost one rerun call per tick: [`RerunSink::on_tick`] appends to
 //! column buffers and sends them (`send_columns`) every [`FILE_BATCH_TICKS`] ticks to a file,
 //! every [`LIVE_BATCH_TICKS`] to a viewer (so its plots lag by a tenth of a second at most).
@@ -239,6 +243,13 @@ impl RerunSink {
             ticks_logged: 0,
         };
         sink.log_static_styles(blade_length_m)?;
+        review_blueprint().send(
+            &sink.rec,
+            rerun::blueprint::BlueprintActivation {
+                make_active: true,
+                make_default: true,
+            },
+        )?;
         Ok(sink)
     }
 
@@ -524,6 +535,33 @@ impl Drop for RerunSink {
             );
         }
     }
+}
+
+/// The layout an instructor reviews a cut in, sent with every log: a large 3D view of the
+/// tissue, the blade and the planned incision (`world`); below it the force and contact series
+/// in one plot and the events as a compact log; the blueprint and selection panels collapsed,
+/// the time panel on `sim_time`.
+pub fn review_blueprint() -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::components::PanelState;
+    use rerun::blueprint::{
+        Blueprint, BlueprintPanel, Horizontal, SelectionPanel, Spatial3DView, TextLogView,
+        TimePanel, TimeSeriesView, Vertical,
+    };
+    let scene = Spatial3DView::new("Tissue").with_origin("world");
+    let series = TimeSeriesView::new("Force (N) and contact")
+        .with_origin("/")
+        .with_contents(["force/**", "contact/**"]);
+    let events = TextLogView::new("Events").with_origin(paths::EVENTS);
+    let below = Horizontal::new([series.into(), events.into()]).with_column_shares([3.0, 1.0]);
+    Blueprint::new(Vertical::new([scene.into(), below.into()]).with_row_shares([3.0, 1.0]))
+        .with_auto_views(false)
+        .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
+        .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
+        .with_time_panel(
+            TimePanel::new()
+                .with_state(PanelState::Collapsed)
+                .with_timeline(TIMELINE_SIM_TIME),
+        )
 }
 
 fn to_i64(v: u64) -> i64 {

@@ -178,6 +178,7 @@ fn a_recording_reads_back_with_every_message_intact() {
     }
     // every simulation record
     let (mut steps, mut cuts, mut keyframes, mut surfaces) = (0, 0, 0, 0);
+    let mut surface_steps = Vec::new();
     for record in &r.seen.sim {
         match record {
             SimRecord::Step {
@@ -218,9 +219,15 @@ fn a_recording_reads_back_with_every_message_intact() {
                 assert_eq!(m.tets, k.tets);
                 keyframes += 1;
             }
-            SimRecord::Surface(_) => surfaces += 1,
+            SimRecord::Surface(s) => {
+                surface_steps.push(s.step);
+                surfaces += 1;
+            }
         }
     }
+    // the tissue from the first step on, then one surface every 100 steps
+    assert_eq!(surface_steps.first(), Some(&0));
+    assert_eq!(surface_steps.get(1..4), Some(&[99, 199, 299][..]));
     assert_eq!(steps, r.steps);
     assert_eq!(cuts as u64, r.cut_steps);
     assert_eq!(cuts, rec.topology.len());

@@ -93,6 +93,10 @@ struct Decoded {
     chunks: usize,
     timelines: HashMap<String, Vec<String>>,
     last_force_row: Option<(i64, i64)>,
+    /// Entity paths of the blueprint store (`viewport`, `container/…`, `view/…`).
+    blueprint: Vec<String>,
+    /// A blueprint activation asked to make it active and the default.
+    blueprint_activated: bool,
 }
 
 /// Reads an `.rrd` with rerun's own decoder.
@@ -102,8 +106,13 @@ fn decode(path: &Path) -> Decoded {
     let mut out = Decoded::default();
     for msg in decoder {
         let msg = msg.expect("a message decodes");
-        let LogMsg::ArrowMsg(_, arrow) = msg else {
-            continue;
+        let (store, arrow) = match msg {
+            LogMsg::ArrowMsg(store, arrow) => (store, arrow),
+            LogMsg::BlueprintActivationCommand(cmd) => {
+                out.blueprint_activated |= cmd.make_active && cmd.make_default;
+                continue;
+            }
+            LogMsg::SetStoreInfo(_) => continue,
         };
         let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk decodes");
         let path = chunk
@@ -111,6 +120,10 @@ fn decode(path: &Path) -> Decoded {
             .to_string()
             .trim_start_matches('/')
             .to_owned();
+        if store.kind() == rerun::StoreKind::Blueprint {
+            out.blueprint.push(path);
+            continue;
+        }
         out.chunks += 1;
         *out.rows.entry(path.clone()).or_default() += chunk.num_rows();
         let names = out.timelines.entry(path.clone()).or_default();
@@ -251,6 +264,33 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
         Some((last, last * PERIOD_NANOS as i64))
     );
     assert_eq!(decoded.rows.get(paths::TISSUE).copied(), Some(surfaces));
+    // the review layout travels with the file: a viewport, its two containers and three views
+    // (the tissue in 3D, the force and contact plot, the events), made active and the default
+    assert!(decoded.blueprint_activated);
+    assert!(
+        decoded.blueprint.iter().any(|p| p == "viewport"),
+        "{:?}",
+        decoded.blueprint
+    );
+    let count = |kind: &str| {
+        let ids: std::collections::BTreeSet<_> = decoded
+            .blueprint
+            .iter()
+            .filter_map(|p| p.split_once('/'))
+            .filter(|(k, _)| *k == kind)
+            .map(|(_, rest)| rest.split('/').next())
+            .collect();
+        ids.len()
+    };
+    assert_eq!(
+        (count("view"), count("container")),
+        (3, 2),
+        "{:?}",
+        decoded.blueprint
+    );
+    for panel in ["blueprint_panel", "selection_panel", "time_panel"] {
+        assert!(decoded.blueprint.iter().any(|p| p == panel), "{panel}");
+    }
     assert!(
         decoded.timelines[paths::TISSUE]
             .iter()
