@@ -120,6 +120,9 @@ pub enum ExerciseCommand {
         /// k of the thresholds mean +/- k SD.
         #[arg(long, default_value_t = proficiency::DEFAULT_K)]
         k: f64,
+        /// The station runs it in exam mode only (the planned incision never shown).
+        #[arg(long)]
+        exam_only: bool,
     },
     /// Lists the exercises.
     List,
@@ -264,6 +267,7 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                     plan,
                     description,
                     k,
+                    exam_only,
                 },
         } => {
             let plan = ExpertPlan::load(&plan)?;
@@ -275,6 +279,7 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                     plan: &plan,
                     thresholds: &[],
                     threshold_k: k,
+                    exam_only,
                 })
                 .await?;
             println!(

@@ -220,6 +220,7 @@ async fn ensure_axial_exercise(store: &Store) -> anyhow::Result<()> {
                 plan: &plan,
                 thresholds: &default_thresholds(),
                 threshold_k: DEFAULT_K,
+                exam_only: false,
             };
             match store.create_exercise(&new).await {
                 Ok(_) | Err(AssessError::Conflict(_)) => Ok(()),

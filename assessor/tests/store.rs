@@ -40,6 +40,7 @@ async fn exercise_with_one_threshold(store: &Store) -> i64 {
         plan: &plan,
         thresholds: &t,
         threshold_k: 2.0,
+        exam_only: false,
     };
     store.create_exercise(&new).await.expect("exercise").id
 }

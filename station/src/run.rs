@@ -64,7 +64,8 @@ impl StationSettings {
 pub struct StartRequest {
     pub exercise: String,
     pub trainee: String,
-    /// Guided (the plan shown on the tissue) or exam (nothing shown).
+    /// Guided (the plan shown on the tissue) or exam (nothing shown); an exam-only exercise
+    /// runs as an exam whatever this says.
     pub guided: bool,
 }
 
@@ -140,9 +141,12 @@ pub struct Running {
     pub attempt: i64,
     pub exercise: String,
     pub trainee: String,
+    /// The plan is shown (guided) or not (exam, also whenever the exercise is exam-only).
     pub guided: bool,
     /// The planned incision on the tissue (shown in guided mode).
     pub plan: Plan,
+    /// The force the tissue should not be loaded beyond, the exercise's (N).
+    pub force_limit_newtons: f64,
     /// Where the exercise is seen from, if its scene says.
     pub viewpoint: Option<Viewpoint>,
     pub feed: ViewFeed,
@@ -187,6 +191,8 @@ pub async fn start(
 ) -> Result<Running, StationError> {
     let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
     let scene_name = exercise.scene.clone();
+    let guided = request.guided && !exercise.exam_only;
+    let force_limit_newtons = expert_plan.force_limit_n;
     // building and settling the tissue takes a while: off the async threads
     let (scene, session, plan) = tokio::task::spawn_blocking(move || {
         let scene = Scene::load(&scene_name, BuildOptions::default())?;
@@ -335,8 +341,9 @@ pub async fn start(
         attempt,
         exercise: request.exercise,
         trainee: request.trainee,
-        guided: request.guided,
+        guided,
         plan,
+        force_limit_newtons,
         viewpoint: scene.viewpoint,
         feed,
         pointer,

@@ -219,3 +219,52 @@ async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
     assert!(a.note.is_some_and(|n| n.contains("pointer")));
     store.close().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit() {
+    use cutlab_assessor::ExpertPlan;
+    use cutlab_assessor::store::NewExercise;
+    let dir = temp_dir("exam-only");
+    let store = store(&dir).await;
+    let plan = ExpertPlan {
+        force_limit_n: 1.75,
+        ..ExpertPlan::chest_wall().expect("the built-in plan")
+    };
+    store
+        .create_exercise(&NewExercise {
+            name: "chest-wall-exam",
+            scene: cutlab_assessor::store::BUILTIN_SCENE,
+            description: "the chest wall incision, examined",
+            plan: &plan,
+            thresholds: &[],
+            threshold_k: 2.0,
+            exam_only: true,
+        })
+        .await
+        .expect("exercise");
+    let settings = settings(&dir, 60.0);
+    let start = |exercise: &str, guided| {
+        run::start(
+            store.clone(),
+            &settings,
+            StartRequest {
+                exercise: exercise.into(),
+                trainee: "ana".into(),
+                guided,
+            },
+            Input::Device(expert()),
+        )
+    };
+    // asked for guided, run as an exam, with the exercise's force limit
+    let exam = start("chest-wall-exam", true).await.expect("started");
+    assert!(!exam.guided, "an exam-only exercise runs as an exam");
+    assert_eq!(exam.force_limit_newtons, 1.75);
+    exam.control.stop();
+    ending(&exam).await;
+    // an ordinary exercise honours the choice
+    let guided = start(EXERCISE, true).await.expect("started");
+    assert!(guided.guided);
+    guided.control.stop();
+    ending(&guided).await;
+    store.close().await;
+}

@@ -277,6 +277,7 @@ async fn instructors_create_and_edit_exercises_and_curricula() {
                 ("scene", "chest-wall"),
                 ("threshold_k", "2.5"),
                 ("description", "deeper"),
+                ("exam_only", "on"),
                 ("plan", plan),
                 ("csrf", &kim.csrf),
             ],
@@ -286,6 +287,7 @@ async fn instructors_create_and_edit_exercises_and_curricula() {
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let e2 = e.store.exercise_by_name("deep-cut").await.unwrap();
     assert!((e2.threshold_k - 2.5).abs() < 1e-12);
+    assert!(e2.exam_only, "the exam-only box was ticked");
     let r = send(
         &e.app,
         post_form(
@@ -307,6 +309,7 @@ async fn instructors_create_and_edit_exercises_and_curricula() {
         (e3.scene.as_str(), e3.description.as_str(), e3.plan_id),
         ("body-wall", "edited", e2.plan_id)
     );
+    assert!(!e3.exam_only, "an unticked box clears it");
     let r = send(
         &e.app,
         post_form(

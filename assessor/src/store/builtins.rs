@@ -53,6 +53,7 @@ impl Store {
             plan: &plan,
             thresholds: &thresholds,
             threshold_k: DEFAULT_K,
+            exam_only: false,
         };
         match self.create_exercise(&new).await {
             Ok(e) => Ok(e),

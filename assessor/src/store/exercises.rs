@@ -19,6 +19,8 @@ pub struct Exercise {
     /// The `k` of `mean +/- k SD` for expert-derived thresholds.
     pub threshold_k: f64,
     pub created_ns: i64,
+    /// The station runs it in exam mode only (the plan never shown on the tissue).
+    pub exam_only: bool,
 }
 
 /// What [`Store::create_exercise`] needs.
@@ -31,6 +33,17 @@ pub struct NewExercise<'a> {
     /// Hand-set thresholds until expert attempts replace them (may be empty).
     pub thresholds: &'a [Threshold],
     pub threshold_k: f64,
+    /// The station runs it in exam mode only.
+    pub exam_only: bool,
+}
+
+/// What [`Store::update_exercise`] changes (besides the plan).
+#[derive(Debug, Clone, Copy)]
+pub struct ExerciseEdit<'a> {
+    pub scene: &'a str,
+    pub description: &'a str,
+    pub threshold_k: f64,
+    pub exam_only: bool,
 }
 
 /// Where an exercise's thresholds came from.
@@ -53,12 +66,11 @@ impl ThresholdSource {
 }
 
 type ThresholdRow = (String, String, f64, f64, i64, Option<f64>, Option<f64>);
-type ExerciseRow = (i64, String, String, String, i64, f64, i64);
-const EXERCISE_SELECT: &str =
-    "SELECT id, name, scene, description, plan_id, threshold_k, created_ns FROM exercises";
+type ExerciseRow = (i64, String, String, String, i64, f64, i64, bool);
+const EXERCISE_SELECT: &str = "SELECT id, name, scene, description, plan_id, threshold_k, created_ns, exam_only FROM exercises";
 
 fn exercise(
-    (id, name, scene, description, plan_id, threshold_k, created_ns): ExerciseRow,
+    (id, name, scene, description, plan_id, threshold_k, created_ns, exam_only): ExerciseRow,
 ) -> Exercise {
     Exercise {
         id,
@@ -68,6 +80,7 @@ fn exercise(
         plan_id,
         threshold_k,
         created_ns,
+        exam_only,
     }
 }
 
@@ -135,13 +148,14 @@ impl Store {
             .fetch_one(&mut *tx)
             .await?;
         let name = new.name.trim().to_owned();
-        let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+        let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns, exam_only) VALUES (?, ?, ?, ?, ?, ?, ?) RETURNING id")
             .bind(&name)
             .bind(new.scene)
             .bind(new.description)
             .bind(plan_id)
             .bind(new.threshold_k)
             .bind(now_ns())
+            .bind(new.exam_only)
             .fetch_one(&mut *tx)
             .await
             .map_err(conflict(|| format!("an exercise named {name:?} exists")))?;
@@ -181,16 +195,21 @@ impl Store {
         Ok(rows.into_iter().map(exercise).collect())
     }
 
-    /// Edits an exercise: its scene, description and `k`, and (if given) a new expert plan
-    /// (stored as a new plan; attempts already scored keep their results). One transaction.
+    /// Edits an exercise: its scene, description, `k` and exam-only flag, and (if given) a new
+    /// expert plan (stored as a new plan; attempts already scored keep their results). One
+    /// transaction.
     pub async fn update_exercise(
         &self,
         id: i64,
-        scene: &str,
-        description: &str,
-        threshold_k: f64,
+        edit: &ExerciseEdit<'_>,
         plan: Option<&ExpertPlan>,
     ) -> Result<Exercise> {
+        let ExerciseEdit {
+            scene,
+            description,
+            threshold_k,
+            exam_only,
+        } = *edit;
         if scene.trim().is_empty() {
             return Err(AssessError::InvalidInput(
                 "an exercise needs a scene".into(),
@@ -206,11 +225,12 @@ impl Store {
         }
         let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
         let done = sqlx::query(
-            "UPDATE exercises SET scene = ?, description = ?, threshold_k = ? WHERE id = ?",
+            "UPDATE exercises SET scene = ?, description = ?, threshold_k = ?, exam_only = ? WHERE id = ?",
         )
         .bind(scene.trim())
         .bind(description)
         .bind(threshold_k)
+        .bind(exam_only)
         .bind(id)
         .execute(&mut *tx)
         .await?;

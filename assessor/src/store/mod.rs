@@ -24,7 +24,7 @@ pub use attempts::{Attempt, AttemptStatus, Outcome, ProficiencyRecord, StoredMet
 pub use builtins::{BUILTIN_EXERCISE, BUILTIN_SCENE, default_thresholds};
 pub use cohorts::Cohort;
 pub use curricula::{Curriculum, Module};
-pub use exercises::{Exercise, NewExercise, ThresholdSource};
+pub use exercises::{Exercise, ExerciseEdit, NewExercise, ThresholdSource};
 pub use users::{Role, User};
 
 use crate::error::{AssessError, Result};

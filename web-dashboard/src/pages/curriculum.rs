@@ -15,7 +15,7 @@ use axum::routing::{get, post};
 use cutlab_assessor::ExpertPlan;
 use cutlab_assessor::metrics::{Better, METRICS};
 use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
-use cutlab_assessor::store::{NewExercise, ThresholdSource};
+use cutlab_assessor::store::{ExerciseEdit, NewExercise, ThresholdSource};
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -147,7 +147,7 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
                 h2 { "New exercise" }
                 form method="post" action="/exercises" {
                     input type="hidden" name="csrf" value=(user.csrf());
-                    (exercise_fields(true, "chest-wall", "", DEFAULT_K))
+                    (exercise_fields(true, "chest-wall", "", DEFAULT_K, false))
                     (plan_form::plan_fields(&sample_plan))
                     (plan_form::plan_text(MAX_PLAN_BYTES))
                     (plan_form::plan_reference())
@@ -160,7 +160,13 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
 }
 
 /// The exercise's own fields (the name only for a new one), labelled.
-fn exercise_fields(with_name: bool, scene: &str, description: &str, k: f64) -> Markup {
+fn exercise_fields(
+    with_name: bool,
+    scene: &str,
+    description: &str,
+    k: f64,
+    exam_only: bool,
+) -> Markup {
     html! {
         p {
             @if with_name {
@@ -176,6 +182,12 @@ fn exercise_fields(with_name: bool, scene: &str, description: &str, k: f64) -> M
             label for="exercise-description" { "Description" } " "
             input type="text" id="exercise-description" name="description" value=(description) maxlength="2000" size="80";
         }
+        p {
+            label {
+                input type="checkbox" id="exercise-exam-only" name="exam_only" value="on" checked[exam_only];
+                " Exam only: the station never shows the planned incision"
+            }
+        }
     }
 }
 
@@ -187,6 +199,9 @@ struct ExerciseForm {
     #[serde(default)]
     description: String,
     threshold_k: String,
+    /// The exam-only checkbox (`on` when ticked, absent otherwise).
+    #[serde(default)]
+    exam_only: Option<String>,
     /// The plan as TOML or JSON; when empty, the plan's fields (in `rest`) give it.
     #[serde(default)]
     plan: String,
@@ -220,6 +235,7 @@ async fn create_exercise(
             plan: &plan,
             thresholds: &thresholds,
             threshold_k: k,
+            exam_only: f.exam_only.is_some(),
         })
         .await?;
     Ok(Redirect::to(&format!("/exercises/{}", e.id)))
@@ -242,7 +258,16 @@ async fn edit_exercise(
     let plan = plan_form::plan_from_form(&f.plan, &f.rest, &current)?.filter(|p| *p != current);
     state
         .store()
-        .update_exercise(id, &scene, f.description.trim(), k, plan.as_ref())
+        .update_exercise(
+            id,
+            &ExerciseEdit {
+                scene: &scene,
+                description: f.description.trim(),
+                threshold_k: k,
+                exam_only: f.exam_only.is_some(),
+            },
+            plan.as_ref(),
+        )
         .await?;
     state.caches().progress.clear();
     Ok(Redirect::to(&format!("/exercises/{id}")))
@@ -279,7 +304,7 @@ async fn exercise(
             @if user.is_staff() {
                 form method="post" action=(format!("/exercises/{id}")) {
                     input type="hidden" name="csrf" value=(user.csrf());
-                    (exercise_fields(false, &e.scene, &e.description, e.threshold_k))
+                    (exercise_fields(false, &e.scene, &e.description, e.threshold_k, e.exam_only))
                     (plan_form::plan_fields(&plan))
                     (plan_form::plan_text(MAX_PLAN_BYTES))
                     p class="muted" { "Fields left as shown and an empty plan text keep the plan as it is." }

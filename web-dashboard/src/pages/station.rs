@@ -80,7 +80,10 @@ async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<
                     }
                 }
                 @for e in &exercises {
-                    p class="muted brief" { strong { (e.name) ": " } (e.description) }
+                    p class="muted brief" {
+                        strong { (e.name) ": " } (e.description)
+                        @if e.exam_only { " " em class="exam-only" { "(exam only: the plan is never shown)" } }
+                    }
                 }
                 fieldset {
                     legend { "Mode" }
@@ -152,6 +155,7 @@ fn config_json(r: &Running, driver: bool) -> String {
         "exercise": r.exercise,
         "trainee": r.trainee,
         "guided": r.guided,
+        "force_limit_n": r.force_limit_newtons,
         "plan": plan,
         "viewpoint": viewpoint,
         "up": r.plan.normals.first().map(|n| [n.x, n.y, n.z]),
@@ -190,6 +194,7 @@ async fn station(
                     div { "Time " span id="elapsed" { "0.0 s" } }
                     div { "Blade " span id="blade" { "free" } }
                     div { "Depth " span id="depth" { "–" } }
+                    div { "Mode " span id="mode" { (if r.guided { "guided" } else { "exam" }) } }
                     @if driver { button id="stop" type="button" { "Stop" } }
                     @else { p class="muted" { "Live view (read only)." } }
                     div id="status" class="muted" {}

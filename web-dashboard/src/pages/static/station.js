@@ -152,7 +152,8 @@
   }
 
   // ---- the latest frame, what the page shows ----
-  let latest = null, fresh = false, forceLimit = 2.0;
+  let latest = null, fresh = false;
+  const forceLimit = config.force_limit_n > 0 ? config.force_limit_n : 2.5;
   const stats = { frames: 0, since: performance.now(), latencies: [], bytes: 0 };
   function takeFrame(view) {
     const vertices = view.getUint32(4, true);
