@@ -24,6 +24,29 @@ struct Cli {
     db: Option<PathBuf>,
 }
 
+/// How an OpenIGTLink device (`igtl:PORT`) sends the force back.
+#[derive(Debug, clap::Args)]
+struct IgtlArgs {
+    /// With an `igtl:PORT` device: how the force goes back, `point` (a POINT message) or
+    /// `transform` (the force as a TRANSFORM's translation, what PLUS Toolkit's OpenHaptics
+    /// device takes).
+    #[arg(long, default_value = "point")]
+    force_output: cutlab_haptics::device::ForceOutput,
+    /// With an `igtl:PORT` device: the force message's device name (PLUS Toolkit takes
+    /// `ForceTo<reference frame>`, e.g. `ForceToRef`).
+    #[arg(long, default_value = cutlab_haptics::device::igtl::FORCE_DEVICE_NAME)]
+    force_name: String,
+}
+
+impl IgtlArgs {
+    fn options(self) -> cutlab_haptics::device::IgtlOptions {
+        cutlab_haptics::device::IgtlOptions {
+            force_output: self.force_output,
+            force_device_name: self.force_name,
+        }
+    }
+}
+
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Build the default scene, settle it, run a scripted scalpel stroke and report.
@@ -54,6 +77,32 @@ enum Command {
         /// a minute; recordings in demo-attempts/ beside the database; see the README).
         #[arg(long)]
         demo: bool,
+        /// A device the station offers besides the page's pointer (repeatable): expert,
+        /// intermediate, novice, level:L (a synthetic trainee cuts, the trainee watches),
+        /// csv:PATH, recording:PATH or igtl:PORT (a tracker or haptic bridge).
+        #[arg(long = "station-device")]
+        station_devices: Vec<session::DeviceArg>,
+        #[command(flatten)]
+        igtl: IgtlArgs,
+    },
+    /// The trainee station on this PC for one trainee: serves the dashboard on this machine
+    /// and opens the station page in the browser, logged in through a one-time link (a new
+    /// trainee is added without a password).
+    Station {
+        /// The trainee (e.g. ana).
+        #[arg(long)]
+        trainee: String,
+        /// Address to listen on (port 0: any free port).
+        #[arg(long, default_value = "127.0.0.1:8080")]
+        addr: String,
+        /// A device offered besides the page's pointer (repeatable), as for `serve`.
+        #[arg(long)]
+        device: Vec<session::DeviceArg>,
+        #[command(flatten)]
+        igtl: IgtlArgs,
+        /// Only print the station's link (no browser is opened).
+        #[arg(long)]
+        no_browser: bool,
     },
     /// Run one training session: a device drives the scalpel through the 1 kHz servo loop
     /// while the simulation runs; prints a summary and writes DIR/final.vtu.
@@ -69,15 +118,8 @@ enum Command {
         /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
         #[arg(long, default_value = "expert")]
         device: session::DeviceArg,
-        /// With `--device igtl:PORT`: how the force goes back, `point` (a POINT message) or
-        /// `transform` (the force as a TRANSFORM's translation, what PLUS Toolkit's OpenHaptics
-        /// device takes).
-        #[arg(long, default_value = "point")]
-        force_output: cutlab_haptics::device::ForceOutput,
-        /// With `--device igtl:PORT`: the force message's device name (PLUS Toolkit takes
-        /// `ForceTo<reference frame>`, e.g. `ForceToRef`).
-        #[arg(long, default_value = cutlab_haptics::device::igtl::FORCE_DEVICE_NAME)]
-        force_name: String,
+        #[command(flatten)]
+        igtl: IgtlArgs,
         /// live (real time) or virtual (as fast as possible, same ticks).
         #[arg(long, default_value = "virtual", value_parser = parse_clock)]
         clock: cutlab_haptics::servo::Clock,
@@ -274,21 +316,56 @@ fn run() -> anyhow::Result<()> {
         } => {
             demo::run(&out, min_tets, &scene)?;
             match addr {
-                Some(addr) => serve::run(
-                    &cutlab_assessor::default_db_path(cli.db.as_deref()),
-                    &addr,
-                    Some(&out.join("attempts")),
-                ),
+                Some(addr) => serve::run(serve::Options {
+                    db: &cutlab_assessor::default_db_path(cli.db.as_deref()),
+                    addr: &addr,
+                    demo: Some(&out.join("attempts")),
+                    station_devices: Vec::new(),
+                    igtl: Default::default(),
+                    kiosk: None,
+                }),
                 None => Ok(()),
             }
         }
-        Command::Serve { addr, demo } => {
+        Command::Serve {
+            addr,
+            demo,
+            station_devices,
+            igtl,
+        } => {
             let db = cutlab_assessor::default_db_path(cli.db.as_deref());
             let recordings = db
                 .parent()
                 .unwrap_or(std::path::Path::new("."))
                 .join("demo-attempts");
-            serve::run(&db, &addr, demo.then_some(recordings.as_path()))
+            serve::run(serve::Options {
+                db: &db,
+                addr: &addr,
+                demo: demo.then_some(recordings.as_path()),
+                station_devices,
+                igtl: igtl.options(),
+                kiosk: None,
+            })
+        }
+        Command::Station {
+            trainee,
+            addr,
+            device,
+            igtl,
+            no_browser,
+        } => {
+            let db = cutlab_assessor::default_db_path(cli.db.as_deref());
+            serve::run(serve::Options {
+                db: &db,
+                addr: &addr,
+                demo: None,
+                station_devices: device,
+                igtl: igtl.options(),
+                kiosk: Some(serve::Kiosk {
+                    trainee,
+                    open_browser: !no_browser,
+                }),
+            })
         }
         Command::Scene {
             command:
@@ -302,8 +379,7 @@ fn run() -> anyhow::Result<()> {
             scene,
             min_tets,
             device,
-            force_output,
-            force_name,
+            igtl,
             clock,
             duration,
             seed,
@@ -320,10 +396,7 @@ fn run() -> anyhow::Result<()> {
             scene,
             min_tets,
             device,
-            igtl: cutlab_haptics::device::IgtlOptions {
-                force_output,
-                force_device_name: force_name,
-            },
+            igtl: igtl.options(),
             clock,
             duration_s: duration,
             seed,

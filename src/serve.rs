@@ -1,16 +1,43 @@
 //! `cutlab serve`: the web dashboard on the assessment database (and the end of
-//! `cutlab demo --addr`).
+//! `cutlab demo --addr`); `cutlab station`: the same for one trainee on this PC, the station
+//! page opened in the browser.
 
 use std::path::Path;
 
 use anyhow::Context;
-use cutlab_assessor::store::Store;
+use cutlab_assessor::AssessError;
+use cutlab_assessor::store::{Role, Store};
 use cutlab_dashboard::{AppState, Config, DEMO_ACCOUNTS};
+use cutlab_haptics::device::{DeviceSpec, IgtlOptions};
+
+/// What a served dashboard runs with.
+#[derive(Debug)]
+pub struct Options<'a> {
+    pub db: &'a Path,
+    pub addr: &'a str,
+    /// Seed the demo first (a directory for its recordings).
+    pub demo: Option<&'a Path>,
+    /// The station's devices besides the page's pointer.
+    pub station_devices: Vec<DeviceSpec>,
+    pub igtl: IgtlOptions,
+    /// A kiosk for one trainee (`cutlab station`).
+    pub kiosk: Option<Kiosk>,
+}
+
+/// `cutlab station`: one trainee at this PC.
+#[derive(Debug)]
+pub struct Kiosk {
+    pub trainee: String,
+    /// Open the station in the default browser (else only print its link).
+    pub open_browser: bool,
+}
 
 /// Serves the dashboard on `addr` until Ctrl-C; with `demo` (a directory for recordings),
 /// first makes sure the demo accounts, cohort, curriculum and simulated attempts exist (see
-/// [`crate::demo_seed`]) and prints the accounts.
-pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
+/// [`crate::demo_seed`]) and prints the accounts; with a kiosk, logs its trainee in through a
+/// one-time link (created as a trainee without a password if new) and opens it.
+pub fn run(o: Options<'_>) -> anyhow::Result<()> {
+    let Options { db, addr, demo, .. } = o;
     if let Some(dir) = demo
         && !crate::demo_seed::run(db, dir)?
     {
@@ -51,12 +78,47 @@ pub fn run(db: &Path, addr: &str, demo: Option<&Path>) -> anyhow::Result<()> {
             .unwrap_or_else(|| Path::new("."))
             .join("station-attempts");
         let config = Config {
-            station: cutlab_station::StationSettings::new(station_dir),
+            station: cutlab_station::StationSettings {
+                devices: o.station_devices,
+                igtl: o.igtl,
+                ..cutlab_station::StationSettings::new(station_dir)
+            },
             ..Config::default()
         };
-        cutlab_dashboard::serve(listener, AppState::new(store, config)?, shutdown)
+        let state = AppState::new(store, config)?;
+        if let Some(kiosk) = &o.kiosk {
+            let at = listener.local_addr()?;
+            let url = format!("http://{at}{}", kiosk_link(&state, &kiosk.trainee).await?);
+            println!("station for {}: {url}", kiosk.trainee);
+            if kiosk.open_browser
+                && let Err(e) = webbrowser::open(&url)
+            {
+                println!("(could not open a browser: {e}; open the link above)");
+            }
+        }
+        cutlab_dashboard::serve(listener, state, shutdown)
             .await
             .context("serving")?;
         anyhow::Ok(())
     })
+}
+
+/// The kiosk's one-time link for `trainee`, who is created (a trainee without a password: the
+/// kiosk is their only way in) if the database does not know them.
+async fn kiosk_link(state: &AppState, trainee: &str) -> anyhow::Result<String> {
+    let store = state.store();
+    match store.user_by_name(trainee).await {
+        Ok(_) => {}
+        Err(AssessError::NotFound(_)) => {
+            store
+                .create_user(trainee, Role::Trainee, None)
+                .await
+                .with_context(|| format!("adding the trainee {trainee:?}"))?;
+            println!("added trainee {trainee} (no password: the station's link logs them in)");
+        }
+        Err(e) => return Err(e).context("reading the users"),
+    }
+    cutlab_dashboard::auth::kiosk::issue(state, trainee)
+        .await
+        .map_err(|e| anyhow::anyhow!("the station's link for {trainee}: {e}"))
 }

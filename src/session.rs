@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use cutlab_assessor::ExpertPlan;
 use cutlab_haptics::device::{
-    CsvDevice, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, Skill, SyntheticTrainee,
+    CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, SyntheticTrainee,
 };
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
@@ -33,70 +33,8 @@ macro_rules! say {
     };
 }
 
-/// What `--device` names.
-#[derive(Debug, Clone, PartialEq)]
-pub enum DeviceArg {
-    /// A synthetic trainee: a preset's name or `level:L`, and its hand.
-    Trainee {
-        name: String,
-        skill: Skill,
-    },
-    Csv(PathBuf),
-    Igtl(u16),
-    /// A recorded session's hand, played back.
-    Recording(PathBuf),
-}
-
-impl std::str::FromStr for DeviceArg {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        if let Some(skill) = Skill::preset(s) {
-            return Ok(DeviceArg::Trainee {
-                name: s.to_owned(),
-                skill,
-            });
-        }
-        if let Some(level) = s.strip_prefix("level:") {
-            let skill = level
-                .parse::<f64>()
-                .ok()
-                .and_then(Skill::at_level)
-                .ok_or_else(|| {
-                    format!(
-                        "level: needs a skill level from 0 (novice) to 1 (expert), got {level:?}"
-                    )
-                })?;
-            return Ok(DeviceArg::Trainee {
-                name: s.to_owned(),
-                skill,
-            });
-        }
-        if let Some(path) = s.strip_prefix("csv:") {
-            if path.is_empty() {
-                return Err("csv: needs a file path, e.g. csv:stroke.csv".into());
-            }
-            return Ok(DeviceArg::Csv(PathBuf::from(path)));
-        }
-        if let Some(path) = s.strip_prefix("recording:") {
-            if path.is_empty() {
-                return Err(
-                    "recording: needs a session recording, e.g. recording:out/session/session.mcap"
-                        .into(),
-                );
-            }
-            return Ok(DeviceArg::Recording(PathBuf::from(path)));
-        }
-        if let Some(port) = s.strip_prefix("igtl:") {
-            return port
-                .parse::<u16>()
-                .map(DeviceArg::Igtl)
-                .map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
-        }
-        Err(format!(
-            "unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH, recording:PATH or igtl:PORT)"
-        ))
-    }
-}
+/// What `--device` names (parsed by [`DeviceSpec`]).
+pub type DeviceArg = DeviceSpec;
 
 /// Options of `cutlab session`.
 #[derive(Debug)]
@@ -575,23 +513,4 @@ fn exercise_plan(a: &AttemptArgs, scene_arg: &str, scene_name: &str) -> anyhow::
 fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
     std::fs::write(path, serde_json::to_string_pretty(v)?)
         .with_context(|| format!("writing {}", path.display()))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn skill_levels_parse_and_bad_ones_are_refused() {
-        assert!(matches!(
-            "level:0.25".parse::<DeviceArg>(),
-            Ok(DeviceArg::Trainee { .. })
-        ));
-        for bad in ["level:", "level:1.5", "level:NaN", "level:x"] {
-            assert!(
-                bad.parse::<DeviceArg>().is_err_and(|e| e.contains("level")),
-                "{bad}"
-            );
-        }
-    }
 }

@@ -492,3 +492,56 @@ fn bench_skip_measures_each_skipped_piece_of_work() {
     assert!(rrd.metadata().expect("metadata").len() > 1000);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn station_serves_one_trainee_through_a_one_time_link() {
+    use std::io::{BufRead, BufReader, Read, Write};
+    let dir = std::env::temp_dir().join(format!("cutlab-cli-station-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+        .args(["--db", dir.join("k.db").to_str().expect("utf8")])
+        .args(["station", "--trainee", "zoe", "--addr", "127.0.0.1:0"])
+        .args(["--device", "expert", "--no-browser"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("cutlab station");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    let mut printed = String::new();
+    let url = loop {
+        let line = lines.next().expect("a line").expect("utf8");
+        printed.push_str(&line);
+        printed.push('\n');
+        if let Some(url) = line.strip_prefix("station for zoe: ") {
+            break url.to_owned();
+        }
+    };
+    assert!(printed.contains("added trainee zoe"), "{printed}");
+    let rest = url.strip_prefix("http://").expect("a link");
+    let (host, path) = rest.split_at(rest.find('/').expect("a path"));
+    let get = |path: &str| {
+        let mut s = std::net::TcpStream::connect(host).expect("connect");
+        write!(
+            s,
+            "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+        )
+        .expect("send");
+        let mut answer = String::new();
+        s.read_to_string(&mut answer).expect("read");
+        answer
+    };
+    let first = get(path);
+    let second = get(path);
+    let _ = child.kill();
+    let _ = child.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(first.starts_with("HTTP/1.1 303"), "{first}");
+    assert!(
+        first.contains("location: /station") && first.contains("cutlab_session="),
+        "{first}"
+    );
+    assert!(
+        second.starts_with("HTTP/1.1 403"),
+        "the link works once: {second}"
+    );
+}

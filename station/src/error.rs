@@ -19,6 +19,9 @@ pub enum StationError {
     /// The exercise's plan does not fit its scene.
     #[error("the exercise's plan: {0}")]
     Plan(String),
+    /// The device asked for is not one this station has.
+    #[error("{0}")]
+    NoSuchDevice(String),
     /// The station takes no more sessions now (one per trainee, a limit per server).
     #[error("{0}")]
     Busy(String),

@@ -20,6 +20,7 @@ pub mod run;
 pub mod set;
 pub mod view;
 
+pub use cutlab_haptics::device::DeviceSpec;
 pub use error::StationError;
-pub use run::{Control, Ending, Input, Running, StartRequest, StationSettings};
+pub use run::{Control, Ending, Input, POINTER, Running, StartRequest, StationSettings};
 pub use set::StationSet;

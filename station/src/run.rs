@@ -13,7 +13,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
-    DeviceFault, DeviceLimits, HapticDevice, Plan, PointerDevice, PointerFeed, PointerOptions,
+    CsvDevice, DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan,
+    PointerDevice, PointerFeed, PointerOptions, SyntheticTrainee,
 };
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
@@ -43,6 +44,12 @@ pub struct StationSettings {
     pub clock: Clock,
     /// Also write the `.rrd` the dashboard's replay review opens.
     pub rrd: bool,
+    /// The devices a trainee may pick besides the page's pointer (a synthetic trainee, an
+    /// OpenIGTLink tracker or haptic bridge on a port of this machine), set by whoever runs
+    /// the server.
+    pub devices: Vec<DeviceSpec>,
+    /// How an OpenIGTLink device sends the force back.
+    pub igtl: IgtlOptions,
 }
 
 impl StationSettings {
@@ -55,9 +62,35 @@ impl StationSettings {
             keyframe_every_s: 1.0,
             clock: Clock::Live,
             rrd: true,
+            devices: Vec::new(),
+            igtl: IgtlOptions::default(),
         }
     }
+
+    /// The input a trainee picked by name: [`POINTER`] or one of [`Self::devices`] as it
+    /// prints.
+    pub fn input_named(&self, name: &str) -> Result<Input, StationError> {
+        if name == POINTER {
+            return Ok(Input::Pointer);
+        }
+        self.devices
+            .iter()
+            .find(|d| d.to_string() == name)
+            .map(|d| Input::Spec(d.clone()))
+            .ok_or_else(|| {
+                StationError::NoSuchDevice(format!(
+                    "this station has no device {name:?} (it has {POINTER}{})",
+                    self.devices
+                        .iter()
+                        .map(|d| format!(", {d}"))
+                        .collect::<String>()
+                ))
+            })
+    }
 }
+
+/// The name of the page's own pointer or pen among a station's devices.
+pub const POINTER: &str = "pointer";
 
 /// Who trains on what.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -166,8 +199,10 @@ pub enum Input {
     /// The page's pointer or pen ([`PointerDevice`]: a scalpel pointing into the tissue along
     /// the plan, at rest above its entry); its samples go through [`Running::pointer`].
     Pointer,
-    /// Another device (a synthetic trainee, an OpenIGTLink tracker or haptic bridge) with the
-    /// page as its view.
+    /// A device of the station's (a synthetic trainee following the plan, a trajectory file,
+    /// a recorded hand, an OpenIGTLink tracker or haptic bridge) with the page as its view.
+    Spec(DeviceSpec),
+    /// Any other device, made for the session's plan, with the page as its view.
     Device(DeviceFactory),
 }
 
@@ -175,9 +210,39 @@ impl std::fmt::Debug for Input {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Input::Pointer => "Pointer",
+            Input::Spec(_) => "Spec",
             Input::Device(_) => "Device",
         })
     }
+}
+
+/// The device `spec` names, for a session on `scene` along `plan`.
+fn device_of(
+    spec: &DeviceSpec,
+    plan: &Plan,
+    scene: &Scene,
+    igtl: &IgtlOptions,
+) -> Result<Box<dyn HapticDevice>, StationError> {
+    Ok(match spec {
+        DeviceSpec::Trainee { name, skill } => Box::new(
+            SyntheticTrainee::new(name, plan.clone(), *skill, 0)?.expecting_cut(
+                scene.spec.cut_threshold_newtons,
+                scene.spec.cut_depth_mm * 1e-3,
+            ),
+        ),
+        DeviceSpec::Csv(path) => Box::new(CsvDevice::open(path)?),
+        DeviceSpec::Recording(path) => Box::new(cutlab_recorder::device::RecordedHand::new(
+            &cutlab_recorder::Recording::open(path)?,
+        )?),
+        DeviceSpec::Igtl(port) => {
+            let d = IgtlDevice::listen_with(
+                std::net::SocketAddr::from(([0, 0, 0, 0], *port)),
+                igtl.clone(),
+            )?;
+            tracing::info!("station: OpenIGTLink device listening on {}", d.address());
+            Box::new(d)
+        }
+    })
 }
 
 /// Starts `request`'s session driven by `input`, publishing its frames to the returned feed.
@@ -208,6 +273,7 @@ pub async fn start(
             let (device, feed) = PointerDevice::new(PointerOptions::above_entry(&plan)?)?;
             (Box::new(device), Some(feed))
         }
+        Input::Spec(spec) => (device_of(&spec, &plan, &scene, &settings.igtl)?, None),
         Input::Device(make) => (make(&plan)?, None),
     };
     let echo = pointer

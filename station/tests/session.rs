@@ -62,14 +62,22 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
         trainee: "ana".into(),
         guided: true,
     };
-    let running = run::start(
-        store.clone(),
-        &settings(&dir, 6.0),
-        request,
-        Input::Device(expert()),
-    )
-    .await
-    .expect("started");
+    // the station's own synthetic expert, picked by name as the page does
+    let settings = StationSettings {
+        devices: vec!["expert".parse().expect("a device")],
+        ..settings(&dir, 6.0)
+    };
+    assert!(matches!(
+        settings.input_named("novice"),
+        Err(StationError::NoSuchDevice(m)) if m.contains("pointer, expert")
+    ));
+    let input = settings
+        .input_named("expert")
+        .expect("the station's expert");
+    assert!(matches!(input, Input::Spec(_)));
+    let running = run::start(store.clone(), &settings, request, input)
+        .await
+        .expect("started");
     assert!(running.pointer.is_none());
     assert!(running.plan.line_m.len() >= 2);
     // the view: a topology, then frames whose positions match it

@@ -87,6 +87,7 @@ struct Inner {
     grants: auth::grants::GrantKey,
     caches: Caches,
     station: cutlab_station::StationSet,
+    kiosk: auth::kiosk::KioskTicket,
 }
 
 /// The caches of the hot paths, valid until the database changes (see [`cache`]).
@@ -135,6 +136,7 @@ impl AppState {
             grants,
             caches,
             station,
+            kiosk: Default::default(),
         })))
     }
     pub fn store(&self) -> &Store {
@@ -165,6 +167,9 @@ impl AppState {
     pub fn station(&self) -> &cutlab_station::StationSet {
         &self.0.station
     }
+    pub(crate) fn kiosk(&self) -> &auth::kiosk::KioskTicket {
+        &self.0.kiosk
+    }
     pub(crate) fn station_settings(&self) -> &cutlab_station::StationSettings {
         &self.0.config.station
     }
@@ -174,6 +179,7 @@ impl AppState {
 pub fn app(state: AppState) -> Router {
     Router::new()
         .merge(auth::routes::router())
+        .merge(auth::kiosk::router())
         .merge(pages::router())
         .merge(recordings::router())
         .nest("/api", api::router())

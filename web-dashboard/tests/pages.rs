@@ -902,3 +902,76 @@ async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
         edited.plan_id
     );
 }
+
+#[tokio::test]
+async fn a_kiosk_link_logs_its_trainee_in_once() {
+    use cutlab_dashboard::auth::kiosk;
+    let (e, state) = env_with(cutlab_dashboard::Config::default()).await;
+    // a staff member gets no kiosk
+    assert!(kiosk::issue(&state, "dr-kim").await.is_err());
+    assert!(kiosk::issue(&state, "nobody").await.is_err());
+    let link = kiosk::issue(&state, "ana").await.unwrap();
+    // someone else's guess neither works nor spends the link
+    let wrong = format!("/kiosk/{}", "0".repeat(64));
+    assert_eq!(
+        send(&e.app, get(&wrong, None)).await.status(),
+        StatusCode::FORBIDDEN
+    );
+    let r = send(&e.app, get(&link, None)).await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    assert_eq!(r.headers()[header::LOCATION], "/station");
+    let token = set_cookie(&r, "cutlab_session").expect("a session cookie");
+    let ana = Session {
+        cookie: format!("cutlab_session={token}"),
+        csrf: String::new(),
+    };
+    let page = body_text(send(&e.app, get("/station", Some(&ana))).await).await;
+    assert!(
+        page.contains("ana") && page.contains("id=\"start\""),
+        "{page}"
+    );
+    // once only
+    let again = send(&e.app, get(&link, None)).await;
+    assert_eq!(again.status(), StatusCode::FORBIDDEN);
+    assert!(set_cookie(&again, "cutlab_session").is_none());
+}
+
+#[tokio::test]
+async fn the_station_offers_its_devices_and_refuses_others() {
+    let mut config = cutlab_dashboard::Config::default();
+    config.station.devices = vec!["expert".parse().unwrap(), "igtl:18944".parse().unwrap()];
+    let (e, state) = env_with(config).await;
+    let ana = login(&e.app, "ana", "trainee-demo").await;
+    let page = body_text(send(&e.app, get("/station", Some(&ana))).await).await;
+    for option in [
+        "value=\"pointer\"",
+        "value=\"expert\"",
+        "value=\"igtl:18944\"",
+    ] {
+        assert!(page.contains(option), "{option}: {page}");
+    }
+    let r = send(
+        &e.app,
+        post_form(
+            "/station/start",
+            Some(&ana.cookie),
+            &[
+                (
+                    "exercise",
+                    cutlab_dashboard::assessor::store::BUILTIN_EXERCISE,
+                ),
+                ("mode", "guided"),
+                ("device", "igtl:1"),
+                ("csrf", &ana.csrf),
+            ],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    let text = body_text(r).await;
+    assert!(
+        text.contains("no device") && text.contains("igtl:1"),
+        "{text}"
+    );
+    assert!(state.station().running().is_empty(), "nothing started");
+}

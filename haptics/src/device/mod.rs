@@ -3,11 +3,13 @@
 mod csv;
 pub mod igtl;
 pub mod pointer;
+mod spec;
 mod trainee;
 
 pub use csv::CsvDevice;
 pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
+pub use spec::DeviceSpec;
 pub use trainee::{Plan, Skill, SyntheticTrainee};
 
 use crate::{ToolPose, Vector3};

@@ -8,6 +8,7 @@
 //! `X-CSRF-Token`) before the handler sees the request: 403 when missing or wrong.
 
 pub mod grants;
+pub mod kiosk;
 pub mod rate_limit;
 pub mod routes;
 pub mod sessions;

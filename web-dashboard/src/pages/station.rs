@@ -19,8 +19,9 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::HeaderMap;
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
+use cutlab_station::DeviceSpec;
 use cutlab_station::protocol::{self, ClientMessage};
-use cutlab_station::{Ending, Input, Running, StartRequest, StationError};
+use cutlab_station::{Ending, Running, StartRequest, StationError};
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -48,6 +49,7 @@ pub fn router() -> Router<AppState> {
 fn station_error(e: StationError) -> AppError {
     match e {
         StationError::Busy(m) => AppError::Conflict(m),
+        StationError::NoSuchDevice(m) => AppError::BadRequest(m),
         StationError::Assess(cutlab_assessor::AssessError::NotFound(_)) => {
             AppError::BadRequest("no such exercise".into())
         }
@@ -58,6 +60,7 @@ fn station_error(e: StationError) -> AppError {
 /// `/station`: the exercises, the mode, Start.
 async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<Markup> {
     let exercises = state.store().list_exercises().await?;
+    let devices = &state.station_settings().devices;
     let running = state
         .station()
         .running()
@@ -91,17 +94,41 @@ async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<
                     br;
                     label { input type="radio" name="mode" value="exam"; " exam: nothing shown" }
                 }
-                p class="muted" { "Move the pointer over the tissue; hold the button to engage the blade; the wheel (or pen pressure, or the ↑/↓ keys) sets the depth. The session ends at Stop, at the time limit, or when you lift the blade out after cutting." }
+                p {
+                    label for="device" { "Device" } " "
+                    select id="device" name="device" {
+                        option value=(cutlab_station::POINTER) selected { "this page's pointer or pen" }
+                        @for d in devices {
+                            option value=(d.to_string()) { (device_label(d)) }
+                        }
+                    }
+                }
+                p class="muted" { "With the pointer: move it over the tissue; hold the button to engage the blade; the wheel (or pen pressure, or the ↑/↓ keys) sets the depth. With another device this page is its view. The session ends at Stop, at the time limit, or when you lift the blade out after cutting." }
                 button id="start" type="submit" { "Start" }
             }
         },
     ))
 }
 
+/// How the picker names a station's device.
+fn device_label(d: &DeviceSpec) -> String {
+    match d {
+        DeviceSpec::Trainee { name, .. } => format!("a synthetic trainee ({name}) cuts, you watch"),
+        DeviceSpec::Csv(path) => format!("the trajectory {}", path.display()),
+        DeviceSpec::Recording(path) => format!("the hand recorded in {}", path.display()),
+        DeviceSpec::Igtl(port) => {
+            format!("the OpenIGTLink tracker or haptic device on port {port}")
+        }
+    }
+}
+
 #[derive(Debug, Deserialize)]
 struct StartForm {
     exercise: String,
     mode: String,
+    /// `pointer` (the default) or one of the station's devices as it prints.
+    #[serde(default)]
+    device: Option<String>,
 }
 
 /// `POST /station/start`: starts the session, then to its page.
@@ -121,15 +148,17 @@ async fn start(
         .check_room(&trainee)
         .map_err(station_error)?;
     let settings = state.station_settings().clone();
+    let input = settings
+        .input_named(form.device.as_deref().unwrap_or(cutlab_station::POINTER))
+        .map_err(station_error)?;
     let request = StartRequest {
         exercise: form.exercise,
         trainee,
         guided,
     };
-    let running =
-        cutlab_station::run::start(state.store().clone(), &settings, request, Input::Pointer)
-            .await
-            .map_err(station_error)?;
+    let running = cutlab_station::run::start(state.store().clone(), &settings, request, input)
+        .await
+        .map_err(station_error)?;
     let running = state.station().insert(running).map_err(station_error)?;
     Ok(Redirect::to(&format!("/station/{}", running.attempt)).into_response())
 }
@@ -152,6 +181,8 @@ fn config_json(r: &Running, driver: bool) -> String {
     serde_json::json!({
         "attempt": r.attempt,
         "driver": driver,
+        // the page's pointer drives the session (else another device does, the page views)
+        "pointer": r.pointer.is_some(),
         "exercise": r.exercise,
         "trainee": r.trainee,
         "guided": r.guided,

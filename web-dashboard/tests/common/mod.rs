@@ -18,11 +18,17 @@ pub struct Env {
 }
 
 pub async fn env() -> Env {
+    env_with(Config::default()).await.0
+}
+
+/// [`env`] with `config`, and the app's state.
+pub async fn env_with(config: Config) -> (Env, AppState) {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(&dir.path().join("cutlab.db")).await.unwrap();
     seed_demo(&store).await.unwrap();
-    let app = app(AppState::new(store.clone(), Config::default()).unwrap());
-    Env { app, store, dir }
+    let state = AppState::new(store.clone(), config).unwrap();
+    let app = app(state.clone());
+    (Env { app, store, dir }, state)
 }
 
 /// A logged-in browser: its cookie and the session's CSRF token.

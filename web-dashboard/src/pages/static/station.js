@@ -288,6 +288,9 @@
     },
   };
   if (!config.driver) return;
+  function stop() { if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify({ type: "stop" })); }
+  document.getElementById("stop").addEventListener("click", stop);
+  if (!config.pointer) { document.getElementById("depth").textContent = "the device's"; return; }
 
   // ---- the trainee's input: the point under the pointer on the tissue, depth, button ----
   let hit = null, engaged = false, depth = config.plan ? config.plan.depth_m : 0.004, lastSent = 0;
@@ -351,8 +354,6 @@
     else return;
     document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   });
-  function stop() { if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify({ type: "stop" })); }
-  document.getElementById("stop").addEventListener("click", stop);
   // the pose must keep arriving while the hand holds still: a sample every frame; and the
   // blade lifted out for 1.5 s after a cut ends the session
   (function heartbeat() {
