@@ -7,16 +7,13 @@
 //! Needs Debian's `chromium` and `chromium-driver` (installed by `.ci/run`). Without them the
 //! test says why and passes, unless `CUTLAB_E2E` is set (CI sets it): then it fails.
 
-use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use cutlab_bench::browser;
+use fantoccini::Locator;
 use fantoccini::actions::{InputSource, MOUSE_BUTTON_LEFT, MouseActions, PointerAction};
-use fantoccini::{ClientBuilder, Locator};
-
-const CHROMIUM: &str = "/usr/bin/chromium";
-const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
 
 /// A child process killed when dropped.
 struct Proc(Child);
@@ -29,25 +26,11 @@ impl Drop for Proc {
 }
 
 fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .expect("a free port")
+    browser::free_port().expect("a free port")
 }
 
 fn wait_for_port(port: u16, what: &str, child: &mut Child, timeout: Duration) {
-    let deadline = Instant::now() + timeout;
-    let addr = SocketAddr::from(([127, 0, 0, 1], port));
-    while TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
-        if let Ok(Some(status)) = child.try_wait() {
-            panic!("{what} exited: {status}");
-        }
-        assert!(
-            Instant::now() < deadline,
-            "{what} does not listen on {port}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    browser::wait_for_port(port, what, child, timeout).unwrap_or_else(|e| panic!("{e}"));
 }
 
 fn cutlab(db: &Path, args: &[&str]) -> Command {
@@ -73,10 +56,7 @@ static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Whether the browser is here (a missing one fails the test when `CUTLAB_E2E` is set).
 fn browser_present() -> bool {
-    let missing: Vec<&str> = [CHROMIUM, CHROMEDRIVER]
-        .into_iter()
-        .filter(|p| !Path::new(p).exists())
-        .collect();
+    let missing = browser::missing();
     if !missing.is_empty() {
         assert!(
             std::env::var_os("CUTLAB_E2E").is_none(),
@@ -106,22 +86,9 @@ fn demo_server(tmp: &Path) -> (Proc, u16) {
     (Proc(server), port)
 }
 
-/// chromedriver, and its port.
-fn chromedriver() -> (Proc, u16) {
-    let driver_port = free_port();
-    let mut driver = Command::new(CHROMEDRIVER)
-        .arg(format!("--port={driver_port}"))
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("chromedriver");
-    wait_for_port(
-        driver_port,
-        "chromedriver",
-        &mut driver,
-        Duration::from_secs(60),
-    );
-    (Proc(driver), driver_port)
+/// chromedriver.
+fn chromedriver() -> browser::Driver {
+    browser::chromedriver().expect("chromedriver")
 }
 
 fn runtime() -> tokio::runtime::Runtime {
@@ -132,32 +99,9 @@ fn runtime() -> tokio::runtime::Runtime {
         .expect("runtime")
 }
 
-/// A headless Chromium session with a profile of its own in `profile`, WebGL2 on the CPU
-/// (SwiftShader): the station and rerun's viewer both draw with it, and Chromium no longer
-/// falls back to SwiftShader by itself.
-async fn chromium(driver_port: u16, profile: &Path) -> fantoccini::Client {
-    let profile = format!("--user-data-dir={}", profile.display());
-    let args = vec![
-        "--headless",
-        "--no-sandbox",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--window-size=1400,1000",
-        "--use-angle=swiftshader",
-        "--enable-unsafe-swiftshader",
-        &profile,
-    ];
-    let mut caps = serde_json::Map::new();
-    caps.insert(
-        "goog:chromeOptions".into(),
-        serde_json::json!({ "binary": CHROMIUM, "args": args }),
-    );
-    ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
-        .capabilities(caps)
-        .connect(&format!("http://127.0.0.1:{driver_port}"))
+/// A headless Chromium session with a profile of its own (see [`browser::chromium`]).
+async fn chromium(driver: &browser::Driver, profile: &Path) -> fantoccini::Client {
+    browser::chromium(driver, profile)
         .await
         .expect("a chromium session")
 }
@@ -231,14 +175,14 @@ fn instructor_reviews_progress_and_replay_in_headless_chromium() {
         })
         .unwrap_or_else(|| panic!("the session names its attempt: {stdout}"));
 
-    let (_driver, driver_port) = chromedriver();
+    let driver = chromedriver();
     let profile = tmp.join("chromium-profile");
-    runtime().block_on(browse(port, driver_port, attempt, &profile, &artefacts()));
+    runtime().block_on(browse(port, &driver, attempt, &profile, &artefacts()));
     let _ = std::fs::remove_dir_all(&tmp);
 }
 
-async fn browse(port: u16, driver_port: u16, attempt: i64, profile: &Path, shots: &Path) {
-    let c = chromium(driver_port, profile).await;
+async fn browse(port: u16, driver: &browser::Driver, attempt: i64, profile: &Path, shots: &Path) {
+    let c = chromium(driver, profile).await;
     let base = format!("http://127.0.0.1:{port}");
     let result = async {
         login(&c, &base, "dr-kim", "instructor-demo").await?;
@@ -328,8 +272,8 @@ fn a_trainee_cuts_at_the_station_and_is_scored_in_headless_chromium() {
     }
     let tmp = std::env::temp_dir().join(format!("cutlab-e2e-station-{}", std::process::id()));
     let (_server, port) = demo_server(&tmp);
-    let (_driver, driver_port) = chromedriver();
-    let attempt = runtime().block_on(station(port, driver_port, &tmp, &artefacts()));
+    let driver = chromedriver();
+    let attempt = runtime().block_on(station(port, &driver, &tmp, &artefacts()));
     // the recording: a whole one, with the cut's topology changes, replayed bit for bit
     let dir = std::fs::read_dir(tmp.join("station-attempts"))
         .expect("the station's recordings")
@@ -389,10 +333,10 @@ async fn until(
     }
 }
 
-async fn station(port: u16, driver_port: u16, tmp: &Path, shots: &Path) -> i64 {
+async fn station(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) -> i64 {
     let base = format!("http://127.0.0.1:{port}");
-    let ana = chromium(driver_port, &tmp.join("profile-ana")).await;
-    let kim = chromium(driver_port, &tmp.join("profile-kim")).await;
+    let ana = chromium(driver, &tmp.join("profile-ana")).await;
+    let kim = chromium(driver, &tmp.join("profile-kim")).await;
     let result = async {
         login(&ana, &base, "ana", "trainee-demo").await?;
         ana.goto(&format!("{base}/station")).await?;

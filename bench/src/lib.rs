@@ -9,6 +9,7 @@
 //! the dashboard library itself does not carry.
 
 mod accuracy;
+pub mod browser;
 mod dashboard;
 mod load;
 mod perf;
@@ -17,6 +18,7 @@ pub mod progress;
 mod recorder;
 mod skip;
 mod stability;
+mod station;
 mod step;
 mod stroke;
 
@@ -116,6 +118,23 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The trainee station in headless Chromium at each size of the chest wall: frames drawn
+    /// per second, the latency from a pointer sample to the frame that shows it, bytes per
+    /// second to the viewer, and the servo period's p99 deviation with and without a viewer.
+    Station {
+        /// Sizes of the chest wall, tets (repeatable; default 12800 and 100000).
+        #[arg(long)]
+        tets: Vec<usize>,
+        /// Only 12,800 tets, shorter sessions.
+        #[arg(long)]
+        quick: bool,
+        /// Seconds each measured session runs.
+        #[arg(long, default_value_t = 10.0)]
+        duration: f64,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Load on the web dashboard: TRAINEES x ATTEMPTS synthetic attempts, CLIENTS concurrent
     /// clients on the progress page and API; requests/s and latency percentiles.
     Dashboard {
@@ -163,6 +182,20 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
             attempts,
             clients,
             duration_s: duration,
+            json,
+        }),
+        BenchCommand::Station {
+            tets,
+            quick,
+            duration,
+            json,
+        } => station::run(&station::Options {
+            tets: match (tets.is_empty(), quick) {
+                (false, _) => tets,
+                (true, true) => vec![12_800],
+                (true, false) => vec![12_800, 100_000],
+            },
+            duration_s: if quick { duration.min(5.0) } else { duration },
             json,
         }),
         BenchCommand::Recorder {

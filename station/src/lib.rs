@@ -22,5 +22,7 @@ pub mod view;
 
 pub use cutlab_haptics::device::DeviceSpec;
 pub use error::StationError;
-pub use run::{Control, Ending, Input, POINTER, Running, StartRequest, StationSettings};
+pub use run::{
+    Control, Ending, Input, POINTER, Running, SessionFigures, StartRequest, StationSettings,
+};
 pub use set::StationSet;

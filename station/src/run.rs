@@ -9,6 +9,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use cutlab_assessor::store::Store;
@@ -16,7 +17,7 @@ use cutlab_haptics::device::{
     CsvDevice, DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan,
     PointerDevice, PointerFeed, PointerOptions, SyntheticTrainee,
 };
-use cutlab_haptics::servo::Clock;
+use cutlab_haptics::servo::{Clock, PeriodStats};
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig, ToolPose, Vector3};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
@@ -36,8 +37,11 @@ pub struct StationSettings {
     pub recordings_dir: PathBuf,
     /// The longest session (the exercise's time limit), s.
     pub duration_s: f64,
-    /// Frames the viewers get per second (the recording's surface rate too), Hz.
+    /// Frames the viewers get per second at least (the recording's surface rate too), Hz.
     pub view_hz: f64,
+    /// The scene's resolution when it is generated: at least this many tetrahedra (`None`:
+    /// the scene's own).
+    pub min_tets: Option<usize>,
     /// A keyframe every this many seconds (a replay resumes at each).
     pub keyframe_every_s: f64,
     /// The live clock for a person; the virtual clock for tests and benchmarks.
@@ -59,6 +63,7 @@ impl StationSettings {
             recordings_dir: recordings_dir.into(),
             duration_s: 300.0,
             view_hz: 60.0,
+            min_tets: None,
             keyframe_every_s: 1.0,
             clock: Clock::Live,
             rrd: true,
@@ -188,6 +193,21 @@ pub struct Running {
     pub control: Arc<Control>,
     /// `None` while the session runs.
     pub ending: watch::Receiver<Option<Ending>>,
+    /// What the session measured, once it ended (before [`Self::ending`] is sent).
+    pub figures: Arc<OnceLock<SessionFigures>>,
+}
+
+/// What a station session measured (for `cutlab bench station`).
+#[derive(Debug, Clone)]
+pub struct SessionFigures {
+    /// The servo's periods.
+    pub servo: PeriodStats,
+    /// Simulated seconds per wall-clock second.
+    pub speed: f64,
+    /// Simulation steps taken.
+    pub sim_steps: u64,
+    /// Tetrahedra at the start.
+    pub tets: usize,
 }
 
 /// Makes a device for the session's plan (a synthetic trainee follows it, say).
@@ -257,10 +277,11 @@ pub async fn start(
     let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
     let scene_name = exercise.scene.clone();
     let guided = request.guided && !exercise.exam_only;
+    let min_tets = settings.min_tets;
     let force_limit_newtons = expert_plan.force_limit_n;
     // building and settling the tissue takes a while: off the async threads
     let (scene, session, plan) = tokio::task::spawn_blocking(move || {
-        let scene = Scene::load(&scene_name, BuildOptions::default())?;
+        let scene = Scene::load(&scene_name, BuildOptions { min_tets })?;
         let session = Session::new(&scene)?;
         let plan = attempt::plan_on_tissue(&session, &expert_plan)?;
         Ok::<_, StationError>((scene, session, plan))
@@ -308,7 +329,8 @@ pub async fn start(
     let record_settings = RecordSettings {
         tap: TapSettings {
             keyframe_every_steps,
-            surface_every_steps: ((1.0 / (settings.view_hz * step_s)).round() as u64).max(1),
+            // at least `view_hz` (60 Hz at 1 ms: every 16th step, 62.5 Hz)
+            surface_every_steps: ((1.0 / (settings.view_hz * step_s)).floor() as u64).max(1),
             ..TapSettings::default()
         },
         writer: WriterOptions::default(),
@@ -347,6 +369,9 @@ pub async fn start(
     let thread_pointer = pointer.clone();
     let thread_plan = plan.clone();
     let spec = scene.spec.clone();
+    let tets = scene.model.mesh.tet_count();
+    let figures = Arc::new(OnceLock::new());
+    let thread_figures = figures.clone();
     std::thread::Builder::new()
         .name("cutlab-station".into())
         .spawn(move || {
@@ -363,6 +388,14 @@ pub async fn start(
             );
             let outcome = match recorded {
                 Ok(r) => {
+                    if let Ok(report) = &r.report {
+                        let _ = thread_figures.set(SessionFigures {
+                            servo: report.servo.period_stats(report.period_nanos),
+                            speed: report.speed(),
+                            sim_steps: report.sim_steps,
+                            tets,
+                        });
+                    }
                     if let Some(o) = r.observer
                         && let Err(e) = o.finish()
                     {
@@ -415,5 +448,6 @@ pub async fn start(
         pointer,
         control,
         ending,
+        figures,
     })
 }

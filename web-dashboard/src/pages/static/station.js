@@ -35,7 +35,16 @@
   }
 
   // ---- WebGL2 ----
-  const gl = canvas.getContext("webgl2", { antialias: true });
+  // multisampling costs little on a GPU and four times the pixels on a software renderer
+  // (SwiftShader, llvmpipe): there the edges stay aliased and the frames keep up
+  const software = (() => {
+    const probe = document.createElement("canvas").getContext("webgl2");
+    const info = probe && probe.getExtension("WEBGL_debug_renderer_info");
+    const name = info ? String(probe.getParameter(info.UNMASKED_RENDERER_WEBGL)) : "";
+    if (probe) { const lose = probe.getExtension("WEBGL_lose_context"); if (lose) lose.loseContext(); }
+    return /swiftshader|llvmpipe|software/i.test(name);
+  })();
+  const gl = canvas.getContext("webgl2", { antialias: !software });
   if (!gl) { status("This browser has no WebGL2: the station cannot show the tissue."); return; }
   function program(vs, fs) {
     const p = gl.createProgram();
@@ -154,7 +163,7 @@
   // ---- the latest frame, what the page shows ----
   let latest = null, fresh = false;
   const forceLimit = config.force_limit_n > 0 ? config.force_limit_n : 2.5;
-  const stats = { frames: 0, since: performance.now(), latencies: [], bytes: 0 };
+  const stats = { frames: 0, draws: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 };
   function takeFrame(view) {
     const vertices = view.getUint32(4, true);
     const f32 = (at, n) => Array.from(new Float32Array(view.buffer, at, n));
@@ -172,7 +181,11 @@
     if (!latest || !mesh.triangles || latest.xyz.length !== 3 * mesh.vertices) return;
     if (!camera) frameCamera(latest.xyz);
     const w = canvas.clientWidth, h = canvas.clientHeight;
-    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; }
+    const resized = canvas.width !== w || canvas.height !== h;
+    // nothing new to show: the last picture stays (no work for the CPU or the GPU)
+    if (!fresh && !resized) return;
+    const started = performance.now();
+    if (resized) { canvas.width = w; canvas.height = h; }
     gl.viewport(0, 0, canvas.width, canvas.height);
     gl.clearColor(0.12, 0.15, 0.17, 1);
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
@@ -217,6 +230,8 @@
     gl.disable(gl.DEPTH_TEST); // the blade is always seen, also inside the tissue
     strip([latest.tip, add(latest.tip, scale(edge, BLADE_LENGTH_M))], gl.LINES, latest.engaged ? [0.95, 0.95, 1.0] : [0.6, 0.62, 0.66]);
     strip([latest.tip], gl.POINTS, latest.mode === 2 ? [1, 0.3, 0.2] : [0.9, 0.9, 0.95], 6);
+    stats.draws += 1;
+    stats.work_ms += performance.now() - started;
   }
   requestAnimationFrame(draw);
 
@@ -273,9 +288,14 @@
       const l = stats.latencies.slice().sort((a, b) => a - b);
       const q = (p) => l.length ? l[Math.min(l.length - 1, Math.floor(p * l.length))] : null;
       const s = (performance.now() - stats.since) / 1000;
-      return { fps: stats.frames / s, latency_p50_ms: q(0.5), latency_p95_ms: q(0.95), bytes_per_s: stats.bytes / s, frames: stats.frames, ended };
+      // fps: frames drawn; updates_per_s: of them, those with new positions from the session
+      return { fps: stats.draws / s, updates_per_s: stats.frames / s, latency_p50_ms: q(0.5), latency_p95_ms: q(0.95), bytes_per_s: stats.bytes / s, frames: stats.frames, draws: stats.draws, page_ms_per_frame: stats.work_ms / Math.max(1, stats.draws), seconds: s, ended };
     },
+    // starts the figures afresh (a benchmark's measured window)
+    reset() { Object.assign(stats, { frames: 0, draws: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 }); },
     config,
+    // the surface's vertex count now
+    vertices() { return mesh.vertices || 0; },
     // where a world point (m) is on the page, in CSS pixels of the viewport (for tests)
     project(point) {
       if (!camera) return null;
