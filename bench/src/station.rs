@@ -48,6 +48,12 @@ struct SizeFigures {
     updates_per_s: f64,
     /// The page's script per frame drawn (decoding, normals, WebGL calls), ms.
     page_ms_per_frame: f64,
+    /// The browser's animation frames per second (what it could draw at most).
+    animation_frames_per_s: f64,
+    /// Frames the server sent per second (latest wins: it skips what the page cannot take).
+    messages_per_s: f64,
+    /// Simulation steps per wall-clock second of the pointer session.
+    sim_steps_per_s: f64,
     latency_p50_ms: Option<f64>,
     latency_p95_ms: Option<f64>,
     tick_to_frame_p95_ms: Option<f64>,
@@ -100,12 +106,14 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
 fn print_size(f: &SizeFigures) {
     let ms = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"));
     println!(
-        "{} tets ({} surface vertices): {:.1} fps drawn ({:.2} ms of script each), {:.1} updates/s, latency p50 {} ms p95 {} ms (tick to frame p95 {} ms), {:.0} kB/s, speed {:.2}x",
+        "{} tets ({} surface vertices): {:.1} fps drawn ({:.2} ms of script each; {:.0} animation frames/s, {:.0} frames sent/s, {:.0} simulation steps/s), latency p50 {} ms p95 {} ms (tick to frame p95 {} ms), {:.0} kB/s, speed {:.2}x",
         f.tets,
         f.surface_vertices,
         f.fps,
         f.page_ms_per_frame,
-        f.updates_per_s,
+        f.animation_frames_per_s,
+        f.messages_per_s,
+        f.sim_steps_per_s,
         ms(f.latency_p50_ms),
         ms(f.latency_p95_ms),
         ms(f.tick_to_frame_p95_ms),
@@ -185,6 +193,9 @@ async fn size(
             fps: stroke["fps"].as_f64().unwrap_or(0.0),
             updates_per_s: stroke["updates_per_s"].as_f64().unwrap_or(0.0),
             page_ms_per_frame: stroke["page_ms_per_frame"].as_f64().unwrap_or(0.0),
+            animation_frames_per_s: stroke["animation_frames_per_s"].as_f64().unwrap_or(0.0),
+            messages_per_s: stroke["messages_per_s"].as_f64().unwrap_or(0.0),
+            sim_steps_per_s: pointer.sim_steps_per_s,
             latency_p50_ms: stroke["latency_p50_ms"].as_f64(),
             latency_p95_ms: p95,
             tick_to_frame_p95_ms: p95.map(|l| l - POINTER_DELAY_MS),

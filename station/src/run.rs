@@ -206,6 +206,8 @@ pub struct SessionFigures {
     pub speed: f64,
     /// Simulation steps taken.
     pub sim_steps: u64,
+    /// Simulation steps per wall-clock second.
+    pub sim_steps_per_s: f64,
     /// Tetrahedra at the start.
     pub tets: usize,
 }
@@ -393,6 +395,7 @@ pub async fn start(
                             servo: report.servo.period_stats(report.period_nanos),
                             speed: report.speed(),
                             sim_steps: report.sim_steps,
+                            sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
                             tets,
                         });
                     }

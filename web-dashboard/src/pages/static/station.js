@@ -163,7 +163,7 @@
   // ---- the latest frame, what the page shows ----
   let latest = null, fresh = false;
   const forceLimit = config.force_limit_n > 0 ? config.force_limit_n : 2.5;
-  const stats = { frames: 0, draws: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 };
+  const stats = { frames: 0, draws: 0, rafs: 0, messages: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 };
   function takeFrame(view) {
     const vertices = view.getUint32(4, true);
     const f32 = (at, n) => Array.from(new Float32Array(view.buffer, at, n));
@@ -178,9 +178,13 @@
 
   function draw() {
     requestAnimationFrame(draw);
+    stats.rafs += 1;
     if (!latest || !mesh.triangles || latest.xyz.length !== 3 * mesh.vertices) return;
     if (!camera) frameCamera(latest.xyz);
-    const w = canvas.clientWidth, h = canvas.clientHeight;
+    // the drawing buffer: the screen's pixels on a GPU, half the CSS pixels each way on a
+    // software renderer (a quarter of the work; the browser scales the picture up)
+    const density = software ? 0.5 : Math.min(2, window.devicePixelRatio || 1);
+    const w = Math.round(canvas.clientWidth * density), h = Math.round(canvas.clientHeight * density);
     const resized = canvas.width !== w || canvas.height !== h;
     // nothing new to show: the last picture stays (no work for the CPU or the GPU)
     if (!fresh && !resized) return;
@@ -256,6 +260,7 @@
   socket.onmessage = (event) => {
     if (typeof event.data === "string") return onText(JSON.parse(event.data));
     stats.bytes += event.data.byteLength;
+    stats.messages += 1;
     const view = new DataView(event.data);
     const kind = view.getUint8(0);
     if (kind === KIND_TOPOLOGY) setTopology(view);
@@ -289,10 +294,10 @@
       const q = (p) => l.length ? l[Math.min(l.length - 1, Math.floor(p * l.length))] : null;
       const s = (performance.now() - stats.since) / 1000;
       // fps: frames drawn; updates_per_s: of them, those with new positions from the session
-      return { fps: stats.draws / s, updates_per_s: stats.frames / s, latency_p50_ms: q(0.5), latency_p95_ms: q(0.95), bytes_per_s: stats.bytes / s, frames: stats.frames, draws: stats.draws, page_ms_per_frame: stats.work_ms / Math.max(1, stats.draws), seconds: s, ended };
+      return { fps: stats.draws / s, updates_per_s: stats.frames / s, latency_p50_ms: q(0.5), latency_p95_ms: q(0.95), bytes_per_s: stats.bytes / s, frames: stats.frames, draws: stats.draws, page_ms_per_frame: stats.work_ms / Math.max(1, stats.draws), animation_frames_per_s: stats.rafs / s, messages_per_s: stats.messages / s, seconds: s, ended };
     },
     // starts the figures afresh (a benchmark's measured window)
-    reset() { Object.assign(stats, { frames: 0, draws: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 }); },
+    reset() { Object.assign(stats, { frames: 0, draws: 0, rafs: 0, messages: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 }); },
     config,
     // the surface's vertex count now
     vertices() { return mesh.vertices || 0; },
