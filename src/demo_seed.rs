@@ -274,6 +274,7 @@ fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
     session::run(&session::Options {
         scene: BUILTIN_SCENE.into(),
         min_tets: Some(MIN_TETS),
+        time_step_s: None,
         device: DeviceArg::Trainee {
             name: format!("level:{}", a.level),
             skill,

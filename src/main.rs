@@ -82,6 +82,9 @@ enum Command {
         /// csv:PATH, recording:PATH or igtl:PORT (a tracker or haptic bridge).
         #[arg(long = "station-device")]
         station_devices: Vec<session::DeviceArg>,
+        /// The station's simulation step, ms (0.1-10; default the scene's), as for `session`.
+        #[arg(long)]
+        station_time_step_ms: Option<f64>,
         #[command(flatten)]
         igtl: IgtlArgs,
     },
@@ -98,6 +101,9 @@ enum Command {
         /// A device offered besides the page's pointer (repeatable), as for `serve`.
         #[arg(long)]
         device: Vec<session::DeviceArg>,
+        /// The simulation step, ms (0.1-10; default the scene's), as for `session`.
+        #[arg(long)]
+        time_step_ms: Option<f64>,
         #[command(flatten)]
         igtl: IgtlArgs,
         /// Only print the station's link (no browser is opened).
@@ -113,6 +119,10 @@ enum Command {
         /// Resolution of a generated mesh: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,
+        /// The simulation step, ms (0.1-10, a whole number of servo periods; default the
+        /// scene's): longer steps keep a big mesh in real time at some cost in accuracy.
+        #[arg(long)]
+        time_step_ms: Option<f64>,
         /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
         /// 0 novice to 1 expert), csv:PATH (trajectory file), recording:PATH (the hand of a
         /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
@@ -321,6 +331,7 @@ fn run() -> anyhow::Result<()> {
                     addr: &addr,
                     demo: Some(&out.join("attempts")),
                     station_devices: Vec::new(),
+                    station_time_step_s: None,
                     igtl: Default::default(),
                     kiosk: None,
                 }),
@@ -331,6 +342,7 @@ fn run() -> anyhow::Result<()> {
             addr,
             demo,
             station_devices,
+            station_time_step_ms,
             igtl,
         } => {
             let db = cutlab_assessor::default_db_path(cli.db.as_deref());
@@ -343,6 +355,7 @@ fn run() -> anyhow::Result<()> {
                 addr: &addr,
                 demo: demo.then_some(recordings.as_path()),
                 station_devices,
+                station_time_step_s: station_time_step_ms.map(|ms| ms / 1e3),
                 igtl: igtl.options(),
                 kiosk: None,
             })
@@ -351,6 +364,7 @@ fn run() -> anyhow::Result<()> {
             trainee,
             addr,
             device,
+            time_step_ms,
             igtl,
             no_browser,
         } => {
@@ -360,6 +374,7 @@ fn run() -> anyhow::Result<()> {
                 addr: &addr,
                 demo: None,
                 station_devices: device,
+                station_time_step_s: time_step_ms.map(|ms| ms / 1e3),
                 igtl: igtl.options(),
                 kiosk: Some(serve::Kiosk {
                     trainee,
@@ -378,6 +393,7 @@ fn run() -> anyhow::Result<()> {
         Command::Session {
             scene,
             min_tets,
+            time_step_ms,
             device,
             igtl,
             clock,
@@ -395,6 +411,7 @@ fn run() -> anyhow::Result<()> {
         } => session::run(&session::Options {
             scene,
             min_tets,
+            time_step_s: time_step_ms.map(|ms| ms / 1e3),
             device,
             igtl: igtl.options(),
             clock,

@@ -19,6 +19,8 @@ pub struct Options<'a> {
     pub demo: Option<&'a Path>,
     /// The station's devices besides the page's pointer.
     pub station_devices: Vec<DeviceSpec>,
+    /// The station's simulation step instead of the scene's, s.
+    pub station_time_step_s: Option<f64>,
     pub igtl: IgtlOptions,
     /// A kiosk for one trainee (`cutlab station`).
     pub kiosk: Option<Kiosk>,
@@ -80,6 +82,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
         let config = Config {
             station: cutlab_station::StationSettings {
                 devices: o.station_devices,
+                time_step_s: o.station_time_step_s,
                 igtl: o.igtl,
                 ..cutlab_station::StationSettings::new(station_dir)
             },

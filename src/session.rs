@@ -41,6 +41,8 @@ pub type DeviceArg = DeviceSpec;
 pub struct Options {
     pub scene: String,
     pub min_tets: Option<usize>,
+    /// The simulation step instead of the scene's, s.
+    pub time_step_s: Option<f64>,
     pub device: DeviceArg,
     /// How an OpenIGTLink device sends the force back.
     pub igtl: IgtlOptions,
@@ -182,6 +184,10 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         },
     )
     .with_context(|| format!("loading scene {:?}", o.scene))?;
+    let scene = match o.time_step_s {
+        Some(dt) => scene.with_time_step(dt)?,
+        None => scene,
+    };
     let mut session = Session::new(&scene).context("preparing the session")?;
     if o.localise {
         session.sim.settings.localisation = Some(LocalisationSettings::default());
@@ -335,11 +341,15 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         o.seed,
         o.duration_s
     );
+    // step n's own tick is (n + 1) * ticks_per_step - 1
+    let ticks_per_step = (r.simulation.settings.time_step_s * 1e9 / r.period_nanos as f64)
+        .round()
+        .max(1.0) as u64;
     let max_lag = r
         .tick_of_step
         .iter()
         .enumerate()
-        .map(|(n, &t)| t.saturating_sub(n as u64))
+        .map(|(n, &t)| t.saturating_sub((n as u64 + 1) * ticks_per_step - 1))
         .max()
         .unwrap_or(0);
     say!(

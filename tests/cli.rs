@@ -116,7 +116,7 @@ fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result()
 
 #[test]
 fn bad_session_arguments_give_a_clear_error() {
-    let cases: [(&[&str], &str); 6] = [
+    let cases: [(&[&str], &str); 9] = [
         (
             &["session", "--scene", "no-such-scene", "--duration", "1"],
             "unknown scene \"no-such-scene\"",
@@ -140,6 +140,18 @@ fn bad_session_arguments_give_a_clear_error() {
         (&["session", "--device", "igtl:99999"], "port number"),
         (&["session", "--clock", "sundial"], "unknown clock"),
         (&["session", "--duration=-1"], "--duration must be"),
+        (
+            &["session", "--time-step-ms", "20", "--min-tets", "500"],
+            "outside 0.1-10 ms",
+        ),
+        (
+            &["session", "--time-step-ms", "NaN", "--min-tets", "500"],
+            "outside 0.1-10 ms",
+        ),
+        (
+            &["session", "--time-step-ms", "2.5", "--min-tets", "500"],
+            "whole number of servo periods",
+        ),
     ];
     for (args, expected) in cases {
         let (ok, _, err) = cutlab(args);
@@ -544,4 +556,33 @@ fn station_serves_one_trainee_through_a_one_time_link() {
         second.starts_with("HTTP/1.1 403"),
         "the link works once: {second}"
     );
+}
+
+#[test]
+fn a_longer_simulation_step_is_recorded_and_replayed_bit_exact() {
+    let out = std::env::temp_dir().join(format!("cutlab-cli-step4-{}", std::process::id()));
+    let out_s = out.to_str().expect("utf8");
+    let (ok, stdout, err) = cutlab(&[
+        "session",
+        "--time-step-ms",
+        "4",
+        "--min-tets",
+        "1500",
+        "--duration",
+        "3",
+        "--out",
+        out_s,
+    ]);
+    assert!(ok, "{err}");
+    // 4 servo ticks per simulation step, none skipped on the virtual clock
+    assert!(
+        stdout.contains(
+            "ticks 3000, sim steps 750 (largest skip ahead of the step's own tick: 0 ticks)"
+        ),
+        "{stdout}"
+    );
+    let mcap = out.join("session.mcap");
+    let (ok, stdout, err) = cutlab(&["replay", mcap.to_str().expect("utf8")]);
+    let _ = std::fs::remove_dir_all(&out);
+    assert!(ok && stdout.contains("bit-exact"), "{stdout}{err}");
 }

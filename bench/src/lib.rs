@@ -131,6 +131,9 @@ pub enum BenchCommand {
         /// Seconds each measured session runs.
         #[arg(long, default_value_t = 10.0)]
         duration: f64,
+        /// The simulation step, ms (default the scene's, 1 ms).
+        #[arg(long)]
+        time_step_ms: Option<f64>,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -188,8 +191,10 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
             tets,
             quick,
             duration,
+            time_step_ms,
             json,
         } => station::run(&station::Options {
+            time_step_s: time_step_ms.map(|ms| ms / 1e3),
             tets: match (tets.is_empty(), quick) {
                 (false, _) => tets,
                 (true, true) => vec![12_800],

@@ -35,6 +35,8 @@ pub struct Options {
     pub tets: Vec<usize>,
     /// Length of each measured session, s.
     pub duration_s: f64,
+    /// The simulation step instead of the scene's, s.
+    pub time_step_s: Option<f64>,
     pub json: bool,
 }
 
@@ -43,6 +45,8 @@ pub struct Options {
 struct SizeFigures {
     tets_requested: usize,
     tets: usize,
+    /// The simulation step, ms.
+    time_step_ms: f64,
     surface_vertices: u64,
     fps: f64,
     updates_per_s: f64,
@@ -88,7 +92,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         if !o.json {
             eprintln!("station at {tets} tets ...");
         }
-        let f = rt.block_on(size(tets, o.duration_s, &driver))?;
+        let f = rt.block_on(size(tets, o, &driver))?;
         if !o.json {
             print_size(&f);
         }
@@ -106,9 +110,10 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
 fn print_size(f: &SizeFigures) {
     let ms = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.1}"));
     println!(
-        "{} tets ({} surface vertices): {:.1} fps drawn ({:.2} ms of script each; {:.0} animation frames/s, {:.0} frames sent/s, {:.0} simulation steps/s), latency p50 {} ms p95 {} ms (tick to frame p95 {} ms), {:.0} kB/s, speed {:.2}x",
+        "{} tets ({} surface vertices, {} ms steps): {:.1} fps drawn ({:.2} ms of script each; {:.0} animation frames/s, {:.0} frames sent/s, {:.0} simulation steps/s), latency p50 {} ms p95 {} ms (tick to frame p95 {} ms), {:.0} kB/s, speed {:.2}x",
         f.tets,
         f.surface_vertices,
+        f.time_step_ms,
         f.fps,
         f.page_ms_per_frame,
         f.animation_frames_per_s,
@@ -128,16 +133,14 @@ fn print_size(f: &SizeFigures) {
     );
 }
 
-async fn size(
-    tets: usize,
-    duration_s: f64,
-    driver: &browser::Driver,
-) -> anyhow::Result<SizeFigures> {
+async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Result<SizeFigures> {
+    let duration_s = o.duration_s;
     let dir = tempfile::tempdir()?;
     let store = Store::open(&dir.path().join("cutlab.db")).await?;
     cutlab_dashboard::seed_demo_accounts(&store).await?;
     let settings = StationSettings {
         min_tets: Some(tets),
+        time_step_s: o.time_step_s,
         devices: vec!["expert".parse().map_err(anyhow::Error::msg)?],
         duration_s: 600.0,
         ..StationSettings::new(dir.path().join("station-attempts"))
@@ -189,6 +192,7 @@ async fn size(
         anyhow::Ok(SizeFigures {
             tets_requested: tets,
             tets: pointer.tets,
+            time_step_ms: pointer.time_step_s * 1e3,
             surface_vertices: stroke["vertices"].as_u64().unwrap_or(0),
             fps: stroke["fps"].as_f64().unwrap_or(0.0),
             updates_per_s: stroke["updates_per_s"].as_f64().unwrap_or(0.0),

@@ -199,6 +199,15 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
         },
     )
     .map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?;
+    // the session's step, when it ran with another than its scene's (`--time-step-ms`)
+    let time_step_s = meta.time_step_nanos as f64 / 1e9;
+    let scene = if scene.solver.time_step_s == time_step_s {
+        scene
+    } else {
+        scene
+            .with_time_step(time_step_s)
+            .map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?
+    };
     let mut session = Session::new(&scene)?;
     if meta.localisation.is_some() {
         session.sim.settings.localisation = meta.localisation;

@@ -42,6 +42,8 @@ pub struct StationSettings {
     /// The scene's resolution when it is generated: at least this many tetrahedra (`None`:
     /// the scene's own).
     pub min_tets: Option<usize>,
+    /// The simulation step instead of the scene's, s (`None`: the scene's).
+    pub time_step_s: Option<f64>,
     /// A keyframe every this many seconds (a replay resumes at each).
     pub keyframe_every_s: f64,
     /// The live clock for a person; the virtual clock for tests and benchmarks.
@@ -64,6 +66,7 @@ impl StationSettings {
             duration_s: 300.0,
             view_hz: 60.0,
             min_tets: None,
+            time_step_s: None,
             keyframe_every_s: 1.0,
             clock: Clock::Live,
             rrd: true,
@@ -210,6 +213,8 @@ pub struct SessionFigures {
     pub sim_steps_per_s: f64,
     /// Tetrahedra at the start.
     pub tets: usize,
+    /// The simulation step, s.
+    pub time_step_s: f64,
 }
 
 /// Makes a device for the session's plan (a synthetic trainee follows it, say).
@@ -279,11 +284,15 @@ pub async fn start(
     let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
     let scene_name = exercise.scene.clone();
     let guided = request.guided && !exercise.exam_only;
-    let min_tets = settings.min_tets;
+    let (min_tets, time_step_s) = (settings.min_tets, settings.time_step_s);
     let force_limit_newtons = expert_plan.force_limit_n;
     // building and settling the tissue takes a while: off the async threads
     let (scene, session, plan) = tokio::task::spawn_blocking(move || {
         let scene = Scene::load(&scene_name, BuildOptions { min_tets })?;
+        let scene = match time_step_s {
+            Some(dt) => scene.with_time_step(dt)?,
+            None => scene,
+        };
         let session = Session::new(&scene)?;
         let plan = attempt::plan_on_tissue(&session, &expert_plan)?;
         Ok::<_, StationError>((scene, session, plan))
@@ -397,6 +406,7 @@ pub async fn start(
                             sim_steps: report.sim_steps,
                             sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
                             tets,
+                            time_step_s: step_s,
                         });
                     }
                     if let Some(o) = r.observer

@@ -20,6 +20,9 @@ pub struct BuildOptions {
     pub min_tets: Option<usize>,
 }
 
+/// The simulation steps [`Scene::with_time_step`] accepts, s.
+pub const TIME_STEP_RANGE_S: (f64, f64) = (1e-4, 1e-2);
+
 /// A built scene, ready to simulate.
 #[derive(Debug, Clone)]
 pub struct Scene {
@@ -55,6 +58,26 @@ impl Scene {
     pub fn load(name_or_path: &str, options: BuildOptions) -> Result<Self, SceneError> {
         let (spec, origin) = super::find_spec(name_or_path)?;
         Self::build(spec, &origin, options)
+    }
+
+    /// The same scene simulated with steps of `time_step_s` (0.1 to 10 ms) instead of its
+    /// spec's: how a session trades accuracy for real time on a big mesh. The spec records
+    /// the new step.
+    pub fn with_time_step(mut self, time_step_s: f64) -> Result<Self, SceneError> {
+        if !(TIME_STEP_RANGE_S.0..=TIME_STEP_RANGE_S.1).contains(&time_step_s) {
+            return Err(SceneError::Invalid {
+                scene: self.spec.name.clone(),
+                message: format!(
+                    "a simulation step of {} ms is outside {}-{} ms",
+                    time_step_s * 1e3,
+                    TIME_STEP_RANGE_S.0 * 1e3,
+                    TIME_STEP_RANGE_S.1 * 1e3
+                ),
+            });
+        }
+        self.solver.time_step_s = time_step_s;
+        self.spec.solver.time_step_s = time_step_s;
+        Ok(self)
     }
 
     /// Builds a scene from its spec.

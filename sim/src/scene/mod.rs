@@ -5,7 +5,7 @@
 mod build;
 mod spec;
 
-pub use build::{BuildOptions, HeldError, Scene};
+pub use build::{BuildOptions, HeldError, Scene, TIME_STEP_RANGE_S};
 pub use spec::{
     ForceModelSpec, HeldSelection, IncisionDirections, IncisionError, MaskFile, MeshSource,
     RegionMaterial, SceneSpec, Target, Viewpoint,
