@@ -7,14 +7,11 @@
 //! hash of the final mesh and positions (FNV-1a, to see whether a change to the cutter changed
 //! its results).
 
-use std::time::Instant;
+#[path = "workloads/mod.rs"]
+mod workloads;
 
-use cutlab_sim::cut::{Blade, Cutter};
-use cutlab_sim::hash::Fnv1a;
-use cutlab_sim::scene::{BuildOptions, Scene};
-use cutlab_sim::solver::StaticSettings;
 use cutlab_sim::stats::Summary;
-use cutlab_sim::{Point3, Vector3};
+use workloads::Timed;
 
 fn summary(v: &[f64]) -> String {
     if v.is_empty() {
@@ -35,72 +32,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?
         .unwrap_or(100_000);
     let between: usize = args.next().map(|a| a.parse()).transpose()?.unwrap_or(3);
-    let scene = Scene::load(
-        "chest-wall",
-        BuildOptions {
-            min_tets: Some(tets),
-        },
-    )?;
-    let mut sim = scene.simulation();
-    let settle = sim.settle(StaticSettings::default());
-    assert!(settle.converged, "{settle:?}");
-    let x = &sim.state.positions;
-    let top = |tool_x: f64| {
-        x.iter()
-            .filter(|p| (p.x - tool_x).abs() < 0.002 && p.y.abs() < 0.002)
-            .map(|p| p.z)
-            .fold(f64::NEG_INFINITY, f64::max)
-    };
-    let (z0, z1) = (top(-0.02), top(0.02));
-    if std::env::var_os("LOCALISED").is_some() {
-        sim.settings.localisation = Some(cutlab_sim::solver::LocalisationSettings::default());
-    }
-    let mut cutter = Cutter::default();
+    let mut sim = workloads::settled("chest-wall", tets)?;
     let (mut changed, mut idle) = (Vec::new(), Vec::new());
     let (mut step_after_cut, mut step_other) = (Vec::new(), Vec::new());
     let (mut cg_after_cut, mut cg_other) = (0usize, 0usize);
     let mut split = 0;
-    for k in 0..=80 {
-        let tx = -0.02 + 0.0005 * k as f64;
-        let z = z0 + (z1 - z0) * (k as f64 / 80.0) - 0.003;
-        let blade = Blade {
-            tip: Point3::new(tx, 0.0, z),
-            edge_direction: Vector3::z(),
-            depth_m: 0.008,
-        };
-        let t = Instant::now();
-        let event = cutter.advance(&mut sim, blade)?;
-        let us = t.elapsed().as_secs_f64() * 1e6;
-        if event.is_empty() {
-            idle.push(us);
-        } else {
-            split += event.tets_removed.len();
+    let localised = std::env::var_os("LOCALISED").is_some();
+    workloads::cut_along_top(&mut sim, between, localised, |timed| match timed {
+        Timed::Cut { us, split: 0 } => idle.push(us),
+        Timed::Cut { us, split: n } => {
+            split += n;
             changed.push(us);
         }
-        for j in 0..between {
-            let t = Instant::now();
-            let report = sim.step()?;
-            let us = t.elapsed().as_secs_f64() * 1e6;
-            if j == 0 && !event.is_empty() {
-                step_after_cut.push(us);
-                cg_after_cut += report.cg_iterations;
-            } else {
-                step_other.push(us);
-                cg_other += report.cg_iterations;
-            }
+        Timed::Step {
+            us,
+            cg,
+            after_cut: true,
+        } => {
+            step_after_cut.push(us);
+            cg_after_cut += cg;
         }
-    }
-    let mut hash = Fnv1a::default();
-    for p in &sim.state.positions {
-        [p.x, p.y, p.z].into_iter().for_each(|c| hash.f64(c));
-    }
-    sim.model
-        .mesh
-        .tets()
-        .iter()
-        .flatten()
-        .for_each(|&v| hash.u32(v));
-    let hash = hash.finish();
+        Timed::Step { us, cg, .. } => {
+            step_other.push(us);
+            cg_other += cg;
+        }
+    })?;
+    let hash = workloads::mesh_hash(&sim);
     println!(
         "{} tets before, {} after, {split} tets split",
         tets,
