@@ -237,15 +237,26 @@ async fn browse(port: u16, driver: &browser::Driver, attempt: i64, profile: &Pat
         c.find(Locator::Css("form.comment-form button[type=submit]")).await?.click().await?;
         until(&c, "location.search === '?at=1.5' && document.readyState === 'complete'", Duration::from_secs(60)).await?;
         assert!(c.current_url().await?.path().ends_with(&format!("/attempts/{attempt}/replay")));
-        let frame = c.find(Locator::Id("replay")).await?;
         let hint = c.find(Locator::Css("p.moment-hint")).await?.text().await?;
         assert!(hint.contains("0:01.500") && hint.contains("+1.500 s"), "{hint}");
         let note = c.find(Locator::Css("div.comment a.moment")).await?;
         assert_eq!(note.text().await?, "at 0:01.500");
-        frame.enter_frame().await?;
-        c.wait().for_element(Locator::Id("the_canvas_id")).await?;
-        tokio::time::sleep(Duration::from_secs(10)).await;
-        c.enter_parent_frame().await?;
+        assert_eq!(note.attr("data-at-ns").await?.as_deref(), Some("1500000000"));
+        // the viewer opens at the note's moment, paused: our script moved its time cursor
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while c.execute("return !!(window.cutlabReplay && window.cutlabReplay.applied_ns === 1500000000)", vec![]).await?.as_bool() != Some(true) {
+            if Instant::now() > deadline {
+                std::fs::write(shots.join("replay-note-timeout.png"), c.screenshot().await?).expect("screenshot");
+                panic!("the viewer was not moved to the note's moment");
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+        let at = c
+            .execute("const h = document.getElementById('replay').contentWindow._handle, id = h.get_active_recording_id(); return [h.get_time_for_timeline(id, 'sim_time'), h.get_playing(id)]", vec![])
+            .await?;
+        assert_eq!(at[0].as_f64(), Some(1.5e9), "the viewer's time: {at}");
+        assert_eq!(at[1].as_bool(), Some(false), "paused: {at}");
+        tokio::time::sleep(Duration::from_secs(3)).await;
         std::fs::write(shots.join("replay-note.png"), c.screenshot().await?).expect("screenshot");
         c.goto(&format!("{base}/attempts/{attempt}")).await?;
         let link = c.find(Locator::Css("div.comment a.moment")).await?;

@@ -68,10 +68,18 @@ impl Viewer {
     }
 }
 
+/// How the viewer's `index.html` hands its app to the page: rerun 0.36 passes `start()`'s
+/// result (nothing) to `on_app_started`, which stores it as `window._handle`; we pass the
+/// `WebHandle` itself, so the replay page can move the viewer's time cursor to a note.
+const APP_STARTED: (&str, &str) = (
+    ".then(on_app_started)",
+    ".then(() => on_app_started(handle))",
+);
+
 /// The viewer's `index.html` without its links to Google's font servers (the viewer draws its
-/// own text; offline, those requests would only fail).
+/// own text; offline, those requests would only fail), its `WebHandle` in `window._handle`.
 fn offline_index(html: &[u8]) -> Vec<u8> {
-    let text = String::from_utf8_lossy(html);
+    let text = String::from_utf8_lossy(html).replace(APP_STARTED.0, APP_STARTED.1);
     let mut out = String::with_capacity(text.len());
     let mut rest: &str = &text;
     while let Some(start) = rest.find("<link") {
@@ -94,6 +102,12 @@ pub fn router() -> Router<AppState> {
         .route("/attempts/{id}/recording.mcap", get(mcap))
         .route("/attempts/{id}/recording.rrd", get(rrd))
         .route("/attempts/{id}/replay", get(replay_page))
+        .route(
+            "/static/replay.js",
+            get(|| async {
+                crate::pages::static_file("text/javascript", include_str!("pages/static/replay.js"))
+            }),
+        )
         .route(
             "/attempts/{id}/grant/{grant}/recording.rrd",
             get(granted_rrd),
@@ -192,7 +206,9 @@ pub fn replay_url(id: i64, at_ns: Option<i64>) -> String {
 /// The replay in rerun's viewer with the attempt's notes below it and, for instructors, a form
 /// that pins a note to a moment. `?at=` (seconds, a note's link) names the moment to look at:
 /// rerun 0.36's web viewer takes no start time for a file it fetches over HTTP (its `#when=`
-/// fragment is ignored there), so the page says where to put the time cursor.
+/// fragment is ignored there), so our `static/replay.js` moves its time cursor there through
+/// the viewer's `WebHandle` once the file has loaded that far (and to a note's moment when
+/// one is clicked); the page also names the moment.
 async fn replay_page(
     State(state): State<AppState>,
     user: CurrentUser,
@@ -219,9 +235,10 @@ async fn replay_page(
             p class="fail" { "Attempt " (id) " has no .rrd recording (record with " code { "cutlab session --rrd" } ")." }
         } @else if let Some(origin) = origin {
             @if let Some(at) = at_ns {
-                p class="moment-hint" { "Note at " strong { (debrief::moment_label(at)) } ": move the viewer's time cursor (timeline " code { (TIMELINE_SIM_TIME) } ") to +" (format!("{:.3}", at as f64 / 1e9)) " s." }
+                p id="moment-hint" class="moment-hint" { "Note at " strong { (debrief::moment_label(at)) } ": the viewer opens there, paused (timeline " code { (TIMELINE_SIM_TIME) } ", +" (format!("{:.3}", at as f64 / 1e9)) " s)." }
             }
-            iframe id="replay" class="replay" title="rerun viewer" src=(viewer_url(&origin, id, &state.grants().issue(id, user.id()))) {}
+            iframe id="replay" class="replay" title="rerun viewer" data-timeline=(TIMELINE_SIM_TIME) data-at-ns=[at_ns] src=(viewer_url(&origin, id, &state.grants().issue(id, user.id()))) {}
+            script src="/static/replay.js" {}
         } @else {
             p class="fail" { "Cannot tell the viewer where this server is (no usable Host header)." }
         }
@@ -290,6 +307,11 @@ mod tests {
         assert!(files.viewer_wasm.len() > 1_000_000 && files.viewer_wasm.starts_with(b"\0asm"));
         let index = String::from_utf8_lossy(&files.index_html);
         assert!(index.contains("re_viewer.js") && !index.contains("fonts.googleapis.com"));
+        // the viewer's handle reaches the page (the replay page moves its time cursor)
+        assert!(
+            index.contains(APP_STARTED.1) && !index.contains(APP_STARTED.0),
+            "rerun's index.html changed: the replay page cannot reach the viewer's WebHandle"
+        );
     }
 
     #[test]

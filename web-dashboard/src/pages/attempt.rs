@@ -115,7 +115,7 @@ pub(crate) fn comment_markup(attempt_id: i64, c: &Comment, has_replay: bool) -> 
             @if let Some(at) = c.at_ns {
                 " · "
                 @if has_replay {
-                    a class="moment" href=(replay_url(attempt_id, Some(at))) { "at " (moment_label(at)) }
+                    a class="moment" href=(replay_url(attempt_id, Some(at))) data-at-ns=(at) { "at " (moment_label(at)) }
                 } @else {
                     span class="moment" { "at " (moment_label(at)) }
                 }

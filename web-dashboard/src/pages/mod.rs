@@ -48,7 +48,7 @@ pub fn router() -> Router<AppState> {
         ))
 }
 
-fn static_file(mime: &'static str, text: &'static str) -> Response {
+pub(crate) fn static_file(mime: &'static str, text: &'static str) -> Response {
     (
         [
             (header::CONTENT_TYPE, mime),
