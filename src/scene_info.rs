@@ -23,6 +23,8 @@ struct Info {
     quality: QualityStats,
     valid: bool,
     problems: String,
+    /// What the mesh reader left out (unused vertices, undeclared TetGen values).
+    notes: Vec<String>,
 }
 
 pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<()> {
@@ -55,6 +57,7 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
         } else {
             report.to_string()
         },
+        notes: built.read_notes.iter().map(ToString::to_string).collect(),
     };
     if json {
         println!("{}", serde_json::to_string_pretty(&info)?);
@@ -93,5 +96,8 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
             info.problems.clone()
         }
     );
+    for note in &info.notes {
+        println!("note       {note}");
+    }
     Ok(())
 }

@@ -184,6 +184,9 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         },
     )
     .with_context(|| format!("loading scene {:?}", o.scene))?;
+    for note in &scene.read_notes {
+        say!(o.quiet, "note: {note}");
+    }
     let scene = match o.time_step_s {
         Some(dt) => scene.with_time_step(dt)?,
         None => scene,

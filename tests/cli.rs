@@ -32,6 +32,25 @@ fn scene_info_reads_bare_mesh_files() {
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["tets"], 596);
     assert_eq!(v["vertices"], 181);
+    assert_eq!(v["notes"], serde_json::json!([]));
+    // a TetGen pair with a vertex no tetrahedron uses: loaded without it, and said so
+    let dir = std::env::temp_dir().join(format!("cutlab-cli-notes-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    std::fs::write(
+        dir.join("t.node"),
+        "5 3 0 0\n0 0 0 0\n1 1 0 0\n2 0 1 0\n3 0 0 1\n4 9 9 9\n",
+    )
+    .expect("node");
+    std::fs::write(dir.join("t.ele"), "1 4 0\n0 0 1 2 3\n").expect("ele");
+    let node = dir.join("t.node");
+    let (ok, out, err) = cutlab(&["scene", "info", node.to_str().expect("utf8")]);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert!(ok, "{err}");
+    assert!(out.contains("vertices   4"), "{out}");
+    assert!(
+        out.contains("note") && out.contains("dropped 1 vertices no tetrahedron uses"),
+        "{out}"
+    );
 }
 
 #[test]

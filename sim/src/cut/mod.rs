@@ -610,8 +610,8 @@ pub fn cut_remembering(
     Ok(event)
 }
 
-/// The entries of `a` that are not in `b`, both sorted: one merge pass (a binary search per
-/// entry cost 10 ms per cut at 100k tets).
+/// The entries of `a` that are not in `b`, both sorted: one merge pass (see
+/// `docs/decisions.md` for the binary search it replaced).
 fn sorted_difference(a: &[[u32; 2]], b: &[[u32; 2]]) -> Vec<[u32; 2]> {
     let mut out = Vec::new();
     let mut j = 0;
