@@ -184,6 +184,17 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
         bar.inc(1);
     }
     bar.finish_and_clear();
+    // the simulation step against its error on a session (what `--time-step-ms` trades)
+    let session_tets = if quick { 5_000 } else { 12_800 };
+    for (scene, model) in [
+        ("chest-wall", "springs"),
+        ("chest-wall-fem", Elasticity::CorotationalFem.name()),
+    ] {
+        if !json {
+            eprintln!("press-and-cut session at 1-10 ms steps, {model}...");
+        }
+        rows.extend(crate::step_size::rows(scene, model, session_tets)?);
+    }
     // Richardson extrapolation of the finite elements' cantilever on the two finest bars.
     let fem_bars: Vec<CantileverResult> = IPC_BARS[1..]
         .iter()

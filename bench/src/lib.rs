@@ -20,6 +20,7 @@ mod skip;
 mod stability;
 mod station;
 mod step;
+mod step_size;
 mod stroke;
 
 use std::path::PathBuf;
