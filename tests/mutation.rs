@@ -29,6 +29,8 @@
 
 #[path = "mutation/recording_targets.rs"]
 mod recording_targets;
+#[path = "mutation/station_targets.rs"]
+mod station_targets;
 #[path = "mutation/targets.rs"]
 mod targets;
 
@@ -1175,6 +1177,35 @@ fn igtl_never_panics_on_damaged_input() {
         seeds: igtl_packets(),
         default_cases: 10000,
         run: one(targets::igtl),
+    });
+}
+
+/// A page's stream: pointer samples along a line (as `station.js` sends them), a pen's, and
+/// Stop, one message per line.
+fn station_messages() -> Vec<Input> {
+    let mut lines = Vec::new();
+    for k in 0..20 {
+        let x = -0.03 + 0.003 * f64::from(k);
+        lines.push(format!(
+            r#"{{"type":"pointer","t_ms":{},"surface_in_world_m":[{x},0.001,0.0151],"depth_m":0.004,"blade_engaged":{}}}"#,
+            1000.0 + 16.7 * f64::from(k),
+            k > 3
+        ));
+    }
+    lines.push(r#"{"type":"pointer","t_ms":1400.5,"surface_in_world_m":[0.03,0,0.015],"depth_m":0.006,"blade_engaged":true,"pressure":0.5,"world_from_tool_xyzw":[0,0,0,1]}"#.to_owned());
+    lines.push(r#"{"type":"stop"}"#.to_owned());
+    vec![vec![lines.join("\n").into_bytes()]]
+}
+
+#[test]
+fn station_ws_never_panics_on_damaged_input() {
+    isolated("station_ws_never_panics_on_damaged_input", || Parser {
+        name: "station_ws",
+        parts: &["txt"],
+        text: true,
+        seeds: station_messages(),
+        default_cases: 10000,
+        run: one(station_targets::station_ws),
     });
 }
 

@@ -183,10 +183,9 @@ fn exercise_fields(
             input type="text" id="exercise-description" name="description" value=(description) maxlength="2000" size="80";
         }
         p {
-            label {
-                input type="checkbox" id="exercise-exam-only" name="exam_only" value="on" checked[exam_only];
-                " Exam only: the station never shows the planned incision"
-            }
+            input type="checkbox" id="exercise-exam-only" name="exam_only" value="on" checked[exam_only];
+            " "
+            label for="exercise-exam-only" { "Exam only: the station never shows the planned incision" }
         }
     }
 }
