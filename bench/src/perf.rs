@@ -767,7 +767,7 @@ pub fn run(quick: bool, json: bool, out: &Path) -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
     let load = [load_before, load_average()];
-    let threads = cutlab_sim::solver::system::solver_threads();
+    let threads = cutlab_sim::solver::solver_threads();
 
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let csv_path = out.join("perf.csv");

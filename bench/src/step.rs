@@ -141,7 +141,7 @@ pub fn step(
     }
     println!(
         "chest-wall, 1 ms steps while a 0.3 N stroke presses along the wall; {}",
-        crate::perf::threads_text(cutlab_sim::solver::system::solver_threads())
+        crate::perf::threads_text(cutlab_sim::solver::solver_threads())
     );
     println!(
         "| model | tets | particles | integrator | substeps | CG it. | median us | p99 us | x real time | settle ms |"

@@ -3,7 +3,7 @@
 
 use cutlab_sim::cut::{Blade, Cutter, CutterResume};
 use cutlab_sim::scene::{BuildOptions, Scene};
-use cutlab_sim::solver::system::SweepOrder;
+use cutlab_sim::solver::SweepOrder;
 use cutlab_sim::solver::{LocalisationSettings, ResumeState, Simulation, StaticSettings};
 use cutlab_sim::{Point3, TetMesh, Vector3};
 

@@ -43,9 +43,9 @@
 //! Tetrahedra of zero reference volume (possible slivers) get no stiffness.
 
 pub mod material;
-pub mod quadratic;
-pub mod solve;
-pub mod system;
+pub(crate) mod quadratic;
+pub(crate) mod solve;
+pub(crate) mod system;
 
 pub use material::{FemMaterial, FemMaterialError};
 

@@ -41,8 +41,6 @@ pub struct FemScratch {
     pub dv_previous: [Vec<Vector3>; 3],
     /// How many of `dv` and `dv_previous` hold solutions (0 after a reset).
     pub history: usize,
-    /// The force on each vertex (see [`total_forces`]).
-    pub forces: Vec<Vector3>,
 }
 
 impl FemScratch {

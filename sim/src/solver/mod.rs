@@ -7,21 +7,21 @@
 //! (quarantine), with the offending particles named in the error.
 
 mod dissection;
-pub mod explicit;
-pub mod forces;
-pub mod implicit;
-pub mod localise;
-pub mod resume;
-pub mod span;
-pub mod statics;
-pub mod system;
+pub(crate) mod explicit;
+pub(crate) mod forces;
+pub(crate) mod implicit;
+pub(crate) mod localise;
+pub(crate) mod resume;
+pub(crate) mod span;
+pub(crate) mod statics;
+pub(crate) mod system;
 
 use serde::{Deserialize, Serialize};
 
 pub use localise::{LocalisationError, LocalisationSettings};
 pub use resume::{RegionResume, ResumeError, ResumeState, WarmStart};
 pub use statics::{StaticReport, StaticSettings};
-pub use system::{CgReport, CgSettings};
+pub use system::{CgReport, CgSettings, PARALLEL_MIN_PARTICLES, SweepOrder, solver_threads};
 
 use crate::model::{Model, State};
 use crate::{Point3, Vector3};

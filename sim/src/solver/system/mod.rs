@@ -3,7 +3,7 @@
 //!
 //! Preconditioner: block SSOR, `M = (D/w + L) D^-1 (D/w + L^T)` (up to a constant factor) with
 //! `D` the 3x3 diagonal blocks, `L` the strictly lower block triangle in the particle order and
-//! `w` = [`SSOR_OMEGA`], applied with Eisenstat's trick: with `P = D/w + L`, `G` the Cholesky
+//! `w` = [`preconditioner::SSOR_OMEGA`], applied with Eisenstat's trick: with `P = D/w + L`, `G` the Cholesky
 //! factors of `D` (`G G^T = D`) and `K = (2/w - 1) D`, so that `A = P + P^T - K`, CG runs on
 //! `C^-1 A C^-T` with `C = P G^-T` (so `C C^T = M`), whose product with `v` is
 //! `G^T [t + P^-1 (G v - K t)]` with `t = P^-T G v`: one backward and one forward block sweep
@@ -28,7 +28,7 @@
 //!
 //! The files, by concern:
 //!
-//! - [`blocks`]: the 3x3 blocks (symmetric [`Sym3`], lower-triangular [`Lower3`]) and the
+//! - [`blocks`]: the 3x3 blocks (symmetric [`Sym3`], lower-triangular [`blocks::Lower3`]) and the
 //!   spring blocks' stored form;
 //! - [`operator`]: [`SpringSystem`], the block-sparse matrix: its assembly and its products;
 //! - [`layout`]: where the blocks are stored, in the sweep order of halves and separator, and
@@ -48,11 +48,10 @@ mod preconditioner;
 #[cfg(test)]
 mod tests;
 
-pub use blocks::{Lower3, Sym3, block_coefficients, block_matrix, stiffness_block};
+pub use blocks::{Sym3, stiffness_block};
 pub use cg::{CgReport, CgScratch, CgSettings, solve, solve_from_span};
 pub use layout::{SweepOrder, SweepOrderError};
 pub use operator::SpringSystem;
-pub use preconditioner::SSOR_OMEGA;
 
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
 /// on one, in the same order, with the same result). Below it a half sweep is too short to be

@@ -81,6 +81,7 @@ impl SpringSystem {
     }
 
     /// `y = A p` with held rows zeroed (after [`Self::prepare`]).
+    #[cfg(test)]
     pub fn apply(&self, model: &Particles<'_>, p: &[Vector3], y: &mut [Vector3]) {
         let n = model.vertex_count();
         let order = &self.layout.order[..n];
