@@ -217,6 +217,13 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
                 .context("planning the incision across the tissue")
         }
     };
+    let mut config = SessionConfig {
+        clock: o.clock,
+        duration_s: o.duration_s,
+        realtime_priority: o.realtime_priority,
+        ..SessionConfig::default()
+    };
+    config.render = config.render.with_scene_cut(&scene.spec);
     if let DeviceArg::Trainee { name, skill } = &o.device {
         let trainee = SyntheticTrainee::new(
             name,
@@ -224,22 +231,11 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
             *skill,
             o.seed,
         )?;
-        device = Some(Box::new(trainee.expecting_cut(
-            scene.spec.cut_threshold_newtons,
-            scene.spec.cut_depth_mm * 1e-3,
-        )));
+        device = Some(Box::new(trainee.expecting_cut_of(&config.render)));
     }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
-    let mut config = SessionConfig {
-        clock: o.clock,
-        duration_s: o.duration_s,
-        realtime_priority: o.realtime_priority,
-        ..SessionConfig::default()
-    };
-    config.render.cut_threshold_newtons = scene.spec.cut_threshold_newtons;
-    config.render.cut_depth_m = scene.spec.cut_depth_mm * 1e-3;
     if !(o.keyframe_every_s > 0.0
         && o.keyframe_every_s.is_finite()
         && o.surface_hz >= 0.0
@@ -344,17 +340,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         o.seed,
         o.duration_s
     );
-    // step n's own tick is (n + 1) * ticks_per_step - 1
-    let ticks_per_step = (r.simulation.settings.time_step_s * 1e9 / r.period_nanos as f64)
-        .round()
-        .max(1.0) as u64;
-    let max_lag = r
-        .tick_of_step
-        .iter()
-        .enumerate()
-        .map(|(n, &t)| t.saturating_sub((n as u64 + 1) * ticks_per_step - 1))
-        .max()
-        .unwrap_or(0);
+    let max_lag = r.largest_skip_ahead_ticks();
     say!(
         o.quiet,
         "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)",

@@ -21,7 +21,8 @@ use std::time::Duration;
 use anyhow::{Context, bail};
 use cutlab_assessor::store::{BUILTIN_EXERCISE, Store};
 use cutlab_dashboard::{AppState, Config};
-use cutlab_station::{Ending, Input, Running, SessionFigures, StartRequest, StationSettings};
+use cutlab_haptics::device::PointerOptions;
+use cutlab_station::{Ending, Running, SessionFigures, StartRequest, StationSettings};
 use fantoccini::actions::{InputSource, MOUSE_BUTTON_LEFT, MouseActions, PointerAction};
 use fantoccini::{Client, Locator};
 use serde::Serialize;
@@ -68,9 +69,6 @@ struct SizeFigures {
     servo_p99_deviation_us_with_viewer: f64,
     servo_p99_deviation_us_without_viewer: f64,
 }
-
-/// The pointer device's fixed delay (`PointerOptions::delay_s`), ms.
-const POINTER_DELAY_MS: f64 = 30.0;
 
 pub fn run(o: &Options) -> anyhow::Result<()> {
     let missing = browser::missing();
@@ -169,10 +167,10 @@ async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Res
             .map_err(|e| anyhow::anyhow!("{e}"))?;
         page.goto(&format!("{base}{link}")).await?;
         // 1. the pointer
-        let (running, stroke) = pointer_session(&page, &state, duration_s).await?;
+        let (running, stroke) = pointer_session(&page, &base, &state, duration_s).await?;
         let pointer = figures_of(&running).await?;
         // 2. the expert, the page watching
-        let watched = start_expert(&page, &base, &state).await?;
+        let watched = start_from_page(&page, &base, &state, "expert").await?;
         tokio::time::sleep(Duration::from_secs_f64(duration_s)).await;
         watched.control.stop();
         let with_viewer = figures_of(&watched).await?;
@@ -182,7 +180,7 @@ async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Res
             store.clone(),
             &settings,
             request(),
-            Input::Spec("expert".parse().map_err(anyhow::Error::msg)?),
+            settings.input_named("expert")?,
         )
         .await?;
         tokio::time::sleep(Duration::from_secs_f64(duration_s)).await;
@@ -202,7 +200,8 @@ async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Res
             sim_steps_per_s: pointer.sim_steps_per_s,
             latency_p50_ms: stroke["latency_p50_ms"].as_f64(),
             latency_p95_ms: p95,
-            tick_to_frame_p95_ms: p95.map(|l| l - POINTER_DELAY_MS),
+            // the station's pointer plays the page's samples this much behind them
+            tick_to_frame_p95_ms: p95.map(|l| l - 1e3 * PointerOptions::default().delay_s),
             bytes_per_s: stroke["bytes_per_s"].as_f64().unwrap_or(0.0),
             speed: pointer.speed,
             servo_p99_deviation_us_pointer: pointer.servo.p99_deviation_us,
@@ -268,22 +267,15 @@ async fn start_from_page(
     Ok(running)
 }
 
-async fn start_expert(page: &Client, base: &str, state: &AppState) -> anyhow::Result<Arc<Running>> {
-    let running = start_from_page(page, base, state, "expert").await?;
-    page.execute("window.cutlabStation.reset()", vec![]).await?;
-    Ok(running)
-}
-
 /// The pointer's session: a stroke along the planned line over `duration_s`, then Stop; the
 /// page's figures of the stroke.
 async fn pointer_session(
     page: &Client,
+    base: &str,
     state: &AppState,
     duration_s: f64,
 ) -> anyhow::Result<(Arc<Running>, serde_json::Value)> {
-    let base = page.current_url().await?;
-    let base = format!("{}://{}", base.scheme(), base.authority());
-    let running = start_from_page(page, &base, state, cutlab_station::POINTER).await?;
+    let running = start_from_page(page, base, state, cutlab_station::POINTER).await?;
     let line = page
         .execute(
             "const s = window.cutlabStation; return s.config.plan.line_m.map(p => s.project(p))",

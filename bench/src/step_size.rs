@@ -25,20 +25,18 @@ fn session(scene: &Scene, step_ms: u32) -> anyhow::Result<(SessionReport, f64)> 
     let scene = scene.clone().with_time_step(f64::from(step_ms) / 1e3)?;
     let session = Session::new(&scene)?;
     let plan = session.plan_across_top(0.06, 0.008)?;
+    let mut config = SessionConfig {
+        duration_s: DURATION_S,
+        ..SessionConfig::default()
+    };
+    config.render = config.render.with_scene_cut(&scene.spec);
     let hand = SyntheticTrainee::new(
         "expert",
         plan,
         Skill::preset("expert").context("the expert preset")?,
         1,
     )?
-    .expecting_cut(
-        scene.spec.cut_threshold_newtons,
-        scene.spec.cut_depth_mm * 1e-3,
-    );
-    let config = SessionConfig {
-        duration_s: DURATION_S,
-        ..SessionConfig::default()
-    };
+    .expecting_cut_of(&config.render);
     let t = Instant::now();
     let report = session.run(Box::new(hand), &config)?;
     Ok((report, t.elapsed().as_secs_f64()))

@@ -124,6 +124,16 @@ impl Default for RenderSettings {
     }
 }
 
+impl RenderSettings {
+    /// These settings with `scene`'s cut threshold and depth (`cut_threshold_newtons`,
+    /// `cut_depth_mm`): what a session on that scene renders with.
+    pub fn with_scene_cut(mut self, scene: &cutlab_sim::scene::SceneSpec) -> Self {
+        self.cut_threshold_newtons = scene.cut_threshold_newtons;
+        self.cut_depth_m = scene.cut_depth_mm * 1e-3;
+        self
+    }
+}
+
 /// A [`RenderSettings`] value out of range.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum RenderSettingsError {

@@ -90,6 +90,8 @@ pub struct SessionReport {
     pub servo: ServoReport,
     /// The servo period, ns.
     pub period_nanos: u64,
+    /// Servo ticks per simulation step.
+    pub ticks_per_step: u64,
     /// Simulation steps taken.
     pub sim_steps: u64,
     /// The servo tick each simulation step consumed.
@@ -115,6 +117,22 @@ impl SessionReport {
     pub fn speed(&self) -> f64 {
         self.servo.ticks as f64 * self.period_nanos as f64 * 1e-9 / self.wall_s.max(1e-12)
     }
+
+    /// The most ticks a step's sample was taken after the step's own tick (a live simulation
+    /// that fell behind skips ahead; 0 on the virtual clock).
+    pub fn largest_skip_ahead_ticks(&self) -> u64 {
+        self.tick_of_step
+            .iter()
+            .zip(0u64..)
+            .map(|(&t, n)| t.saturating_sub(own_tick(n, self.ticks_per_step)))
+            .max()
+            .unwrap_or(0)
+    }
+}
+
+/// Simulation step `n`'s own servo tick (the last of its `ticks_per_step`).
+fn own_tick(n: u64, ticks_per_step: u64) -> u64 {
+    (n + 1) * ticks_per_step - 1
 }
 
 /// A scene ready for a session: settled, with its surface collider.
@@ -391,6 +409,7 @@ impl Session {
         let wall_s = started.elapsed().as_secs_f64();
         Ok(SessionReport {
             period_nanos: config.period_nanos,
+            ticks_per_step,
             sim_steps: outcome.tick_of_step.len() as u64,
             tick_of_step: outcome.tick_of_step,
             step_nanos: outcome.step_nanos,
@@ -490,7 +509,7 @@ impl SimWorker {
         for n in 0..steps as u64 {
             // The step's own tick; once a lagging live simulation skipped ahead, the tick
             // after the last one consumed (never the same tick twice).
-            let own = (n + 1) * self.ticks_per_step - 1;
+            let own = own_tick(n, self.ticks_per_step);
             let target = match out_ticks.last() {
                 Some(&last) => own.max(last + self.ticks_per_step),
                 None => own,

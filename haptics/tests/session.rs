@@ -335,15 +335,13 @@ fn an_expert_cuts_the_chest_wall_in_one_stroke_along_the_whole_line() {
             seed,
         )
         .expect("trainee");
-        let device = Box::new(hand.expecting_cut(
-            scene.spec.cut_threshold_newtons,
-            scene.spec.cut_depth_mm * 1e-3,
-        ));
-        let config = SessionConfig {
+        let mut config = SessionConfig {
             clock: Clock::Virtual,
             duration_s: 6.0,
             ..SessionConfig::default()
         };
+        config.render = config.render.with_scene_cut(&scene.spec);
+        let device = Box::new(hand.expecting_cut_of(&config.render));
         let r = session.run(device, &config).expect("run");
         let what = format!(
             "seed {seed}, localised {localise}: {} entries, cut {:.1} mm, max force {:.2} N",

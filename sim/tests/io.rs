@@ -1654,17 +1654,18 @@ fn tetgen_node_values_past_the_declared_ones_are_ignored_with_a_note() {
     let expected = tetgen(NODE, ELE).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(mesh.positions(), expected.positions());
     assert_eq!(mesh.tets(), expected.tets());
-    assert!(
+    // one note: four lines from line 3 on carried values the header does not declare
+    let extra_from_line_3 = |notes: &[ReadNote]| {
         matches!(
-            notes[..],
+            notes,
             [ReadNote::ExtraNodeValues {
                 lines: 4,
                 first_line: 3,
                 ..
             }]
-        ),
-        "{notes:?}"
-    );
+        )
+    };
+    assert!(extra_from_line_3(&notes), "{notes:?}");
     assert!(notes[0].to_string().contains("m.node:3:"), "{}", notes[0]);
     // one attribute declared, a marker beyond it: the marker is ignored
     let (mesh, notes) = read_node(&node.replacen("5 3 0 0", "5 3 1 0", 1).replacen(
@@ -1676,17 +1677,7 @@ fn tetgen_node_values_past_the_declared_ones_are_ignored_with_a_note() {
         mesh.unwrap_or_else(|e| panic!("{e}")).positions(),
         expected.positions()
     );
-    assert!(
-        matches!(
-            notes[..],
-            [ReadNote::ExtraNodeValues {
-                lines: 4,
-                first_line: 3,
-                ..
-            }]
-        ),
-        "{notes:?}"
-    );
+    assert!(extra_from_line_3(&notes), "{notes:?}");
     // what is not a number is still an error
     assert_parse_error(
         tetgen(&with_line(NODE, 4, "2 1 0 0 0 x"), ELE),

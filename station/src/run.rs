@@ -17,6 +17,7 @@ use cutlab_haptics::device::{
     CsvDevice, DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan,
     PointerDevice, PointerFeed, PointerOptions, SyntheticTrainee,
 };
+use cutlab_haptics::render::RenderSettings;
 use cutlab_haptics::servo::{Clock, PeriodStats};
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig, ToolPose, Vector3};
@@ -207,8 +208,6 @@ pub struct SessionFigures {
     pub servo: PeriodStats,
     /// Simulated seconds per wall-clock second.
     pub speed: f64,
-    /// Simulation steps taken.
-    pub sim_steps: u64,
     /// Simulation steps per wall-clock second.
     pub sim_steps_per_s: f64,
     /// Tetrahedra at the start.
@@ -243,20 +242,17 @@ impl std::fmt::Debug for Input {
     }
 }
 
-/// The device `spec` names, for a session on `scene` along `plan`.
+/// The device `spec` names, for a session along `plan` rendered with `render`.
 fn device_of(
     spec: &DeviceSpec,
     plan: &Plan,
-    scene: &Scene,
+    render: &RenderSettings,
     igtl: &IgtlOptions,
 ) -> Result<Box<dyn HapticDevice>, StationError> {
     Ok(match spec {
-        DeviceSpec::Trainee { name, skill } => Box::new(
-            SyntheticTrainee::new(name, plan.clone(), *skill, 0)?.expecting_cut(
-                scene.spec.cut_threshold_newtons,
-                scene.spec.cut_depth_mm * 1e-3,
-            ),
-        ),
+        DeviceSpec::Trainee { name, skill } => {
+            Box::new(SyntheticTrainee::new(name, plan.clone(), *skill, 0)?.expecting_cut_of(render))
+        }
         DeviceSpec::Csv(path) => Box::new(CsvDevice::open(path)?),
         DeviceSpec::Recording(path) => Box::new(cutlab_recorder::device::RecordedHand::new(
             &cutlab_recorder::Recording::open(path)?,
@@ -300,12 +296,21 @@ pub async fn start(
     .await
     .map_err(|e| StationError::Plan(format!("preparing the session: {e}")))??;
 
+    let mut config = SessionConfig {
+        clock: settings.clock,
+        duration_s: settings.duration_s,
+        ..SessionConfig::default()
+    };
+    config.render = config.render.with_scene_cut(&scene.spec);
     let (device, pointer): (Box<dyn HapticDevice>, Option<PointerFeed>) = match input {
         Input::Pointer => {
             let (device, feed) = PointerDevice::new(PointerOptions::above_entry(&plan)?)?;
             (Box::new(device), Some(feed))
         }
-        Input::Spec(spec) => (device_of(&spec, &plan, &scene, &settings.igtl)?, None),
+        Input::Spec(spec) => (
+            device_of(&spec, &plan, &config.render, &settings.igtl)?,
+            None,
+        ),
         Input::Device(make) => (make(&plan)?, None),
     };
     let echo = pointer
@@ -327,13 +332,6 @@ pub async fn start(
         .await?
         .id;
 
-    let mut config = SessionConfig {
-        clock: settings.clock,
-        duration_s: settings.duration_s,
-        ..SessionConfig::default()
-    };
-    config.render.cut_threshold_newtons = scene.spec.cut_threshold_newtons;
-    config.render.cut_depth_m = scene.spec.cut_depth_mm * 1e-3;
     let step_s = scene.solver.time_step_s;
     let keyframe_every_steps = ((settings.keyframe_every_s / step_s).round() as u64).max(1);
     config.collider_rebuild_every_steps = keyframe_every_steps;
@@ -403,7 +401,6 @@ pub async fn start(
                         let _ = thread_figures.set(SessionFigures {
                             servo: report.servo.period_stats(report.period_nanos),
                             speed: report.speed(),
-                            sim_steps: report.sim_steps,
                             sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
                             tets,
                             time_step_s: step_s,

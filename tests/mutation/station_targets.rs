@@ -1,6 +1,7 @@
 //! The station's WebSocket messages (`cutlab_station::protocol::decode_client`), fed to the
 //! pointer device as a page's stream is: in their own file because the fuzz targets of the
-//! other parsers are built without the station (see `targets.rs`).
+//! other parsers are built without the station (see `targets.rs`, whose pose check it uses:
+//! include both).
 
 use cutlab_haptics::HapticDevice;
 use cutlab_haptics::device::{PointerDevice, PointerOptions};
@@ -29,14 +30,10 @@ pub fn station_ws(data: &[u8]) -> Outcome {
     }
     for tick in 0..60u64 {
         if let Ok(pose) = device.read(tick, tick as f64 * 1e-3) {
-            assert!(
-                pose.tip_in_world.iter().all(|c| c.is_finite()),
-                "a finite tip at tick {tick}: {pose:?}"
-            );
-            let q = pose.world_from_tool.quaternion();
-            assert!(
-                q.coords.iter().all(|c| c.is_finite()) && (q.norm() - 1.0).abs() < 1e-6,
-                "a unit rotation at tick {tick}: {pose:?}"
+            crate::targets::check_rigid(
+                &pose.tip_in_world,
+                &pose.world_from_tool,
+                &format!("at tick {tick}: {pose:?}"),
             );
         }
     }

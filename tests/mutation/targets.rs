@@ -115,14 +115,10 @@ pub fn trajectory_csv(data: &[u8]) -> Outcome {
     let end = device.duration_s();
     for t in [-1.0, 0.0, 0.25 * end, 0.5 * end, end, end + 1.0] {
         let pose = device.pose_at(t);
-        assert!(
-            pose.tip_in_world.iter().all(|c| c.is_finite()),
-            "finite tip at {t}: {pose:?}"
-        );
-        let q = pose.world_from_tool.quaternion();
-        assert!(
-            q.coords.iter().all(|c| c.is_finite()) && (q.norm() - 1.0).abs() < 1e-6,
-            "a unit rotation at {t}: {pose:?}"
+        check_rigid(
+            &pose.tip_in_world,
+            &pose.world_from_tool,
+            &format!("at {t}: {pose:?}"),
         );
     }
     Ok(())
@@ -157,13 +153,18 @@ fn check_transform(
     >,
 ) {
     if let Ok((tip, rotation)) = decoded {
-        assert!(tip.iter().all(|c| c.is_finite()), "finite tip {tip:?}");
-        let q = rotation.quaternion();
-        assert!(
-            q.coords.iter().all(|c| c.is_finite()) && (q.norm() - 1.0).abs() < 1e-6,
-            "a unit rotation {rotation:?}"
-        );
+        check_rigid(&tip, &rotation, &format!("{tip:?} {rotation:?}"));
     }
+}
+
+/// What an accepted pose must be: a finite tip and a unit rotation (`what` names it).
+pub fn check_rigid(tip: &cutlab_haptics::Point3, rotation: &cutlab_haptics::Rotation, what: &str) {
+    assert!(tip.iter().all(|c| c.is_finite()), "a finite tip {what}");
+    let q = rotation.quaternion();
+    assert!(
+        q.coords.iter().all(|c| c.is_finite()) && (q.norm() - 1.0).abs() < 1e-6,
+        "a unit rotation {what}"
+    );
 }
 
 fn igtl_packet(data: &[u8]) -> Outcome {

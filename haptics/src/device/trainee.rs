@@ -296,6 +296,11 @@ impl SyntheticTrainee {
         self
     }
 
+    /// [`Self::expecting_cut`] with the cut threshold and depth the session renders with.
+    pub fn expecting_cut_of(self, render: &crate::render::RenderSettings) -> Self {
+        self.expecting_cut(render.cut_threshold_newtons, render.cut_depth_m)
+    }
+
     /// Point, outward normal and unit tangent of the line at arc length `s` (extrapolated
     /// along the last segment past the exit).
     fn along(&self, s: f64) -> (Point3, Vector3, Vector3) {

@@ -130,21 +130,24 @@ pub fn cut_along_top(
     Ok(())
 }
 
-/// FNV-1a of the positions' bits.
-pub fn positions_hash(sim: &Simulation) -> u64 {
-    let mut hash = Fnv1a::default();
+/// The positions' bits fed to `hash`.
+fn hash_positions(hash: &mut Fnv1a, sim: &Simulation) {
     for p in &sim.state.positions {
         [p.x, p.y, p.z].into_iter().for_each(|c| hash.f64(c));
     }
+}
+
+/// FNV-1a of the positions' bits.
+pub fn positions_hash(sim: &Simulation) -> u64 {
+    let mut hash = Fnv1a::default();
+    hash_positions(&mut hash, sim);
     hash.finish()
 }
 
 /// FNV-1a of the positions' bits, then of the tets' vertex ids.
 pub fn mesh_hash(sim: &Simulation) -> u64 {
     let mut hash = Fnv1a::default();
-    for p in &sim.state.positions {
-        [p.x, p.y, p.z].into_iter().for_each(|c| hash.f64(c));
-    }
+    hash_positions(&mut hash, sim);
     sim.model
         .mesh
         .tets()
