@@ -179,8 +179,9 @@ fn quadratic_material(solid: Solid, pretension: f64) -> QuadraticMaterial {
 }
 
 /// Linear statics on the quadratic elements: `held` nodes at their prescribed displacements,
-/// `external` nodal forces, CG to `relative_tolerance` of the right-hand side (1e-10 leaves
-/// the cantilever's deflection unchanged in its first five digits against 1e-12).
+/// `external` nodal forces, CG to `relative_tolerance` of the right-hand side (its true
+/// residual, checked; 1e-9 leaves the cantilever's deflection unchanged in its first four
+/// digits against 1e-10).
 fn solve_quadratic(
     quadratic: &QuadraticMesh,
     solid: Solid,
@@ -437,7 +438,9 @@ pub fn cantilever(
         for (f, w) in external.iter_mut().zip(&weight) {
             f[axis] = load * w / area;
         }
-        let solution = solve_quadratic(&quadratic, solid, 0.0, &held, &external, 1e-10)?;
+        // (the true residual of the coarsest bar's system, computed in f64, stays near
+        // 5e-10 of the right-hand side however long CG runs: 1e-10 is out of reach there)
+        let solution = solve_quadratic(&quadratic, solid, 0.0, &held, &external, 1e-9)?;
         solution
             .displacements
             .iter()

@@ -42,10 +42,10 @@
 //! change: the tetrahedra a cut creates get their rest shapes by the same pre-strain rule.
 //! Tetrahedra of zero reference volume (possible slivers) get no stiffness.
 
+pub(crate) mod assemble;
 pub mod material;
 pub(crate) mod quadratic;
 pub(crate) mod solve;
-pub(crate) mod system;
 
 pub use material::{FemMaterial, FemMaterialError};
 
@@ -79,6 +79,11 @@ pub struct FemModel {
     pub tet_edges: Vec<[u32; 6]>,
     /// Tetrahedra that got no stiffness because their rest shape is degenerate.
     pub degenerate_tets: usize,
+    /// `W mu (b_i . b_j)` of each tetrahedron: `i = j` for the four vertices, then the six
+    /// edges of [`crate::mesh::topology::TET_EDGES`] (zero for degenerate tetrahedra).
+    pub rest_dots: Vec<[f64; 10]>,
+    /// Where each particle and edge is in the tetrahedra (the implicit step's gather lists).
+    pub(crate) incidence: assemble::Incidence,
 }
 
 impl FemModel {
@@ -112,6 +117,8 @@ impl FemModel {
             tets: mesh.tets().to_vec(),
             rest_inverse: Vec::with_capacity(nt),
             rest_volume_m3: Vec::with_capacity(nt),
+            rest_dots: Vec::with_capacity(nt),
+            incidence: assemble::Incidence::default(),
             mu_pa: Vec::with_capacity(nt),
             lambda_pa: Vec::with_capacity(nt),
             beta_s: Vec::with_capacity(nt),
@@ -136,13 +143,23 @@ impl FemModel {
             let (mu, lambda) = fem.lame_pa();
             match inverse {
                 Some(inv) => {
+                    let (b, w) = (gradients(&inv), det / 6.0);
+                    let mut dots = [0.0; 10];
+                    for i in 0..4 {
+                        dots[i] = w * mu * b[i].dot(&b[i]);
+                    }
+                    for (l, &[i, j]) in crate::mesh::TET_EDGES.iter().enumerate() {
+                        dots[4 + l] = w * mu * b[i].dot(&b[j]);
+                    }
+                    model.rest_dots.push(dots);
                     model.rest_inverse.push(inv);
-                    model.rest_volume_m3.push(det / 6.0);
+                    model.rest_volume_m3.push(w);
                     model.mu_pa.push(mu);
                     model.lambda_pa.push(lambda);
                 }
                 None => {
                     model.degenerate_tets += 1;
+                    model.rest_dots.push([0.0; 10]);
                     model.rest_inverse.push(Matrix3::zeros());
                     model.rest_volume_m3.push(0.0);
                     model.mu_pa.push(0.0);
@@ -158,6 +175,12 @@ impl FemModel {
                 model.damping_mass[v as usize] += quarter;
             }
         }
+        model.incidence = assemble::Incidence::build(
+            mesh.vertex_count(),
+            &model.tets,
+            model.edges.len(),
+            &model.tet_edges,
+        );
         Ok(model)
     }
 
@@ -311,25 +334,29 @@ pub fn rotation(f: &Matrix3<f64>) -> Matrix3<f64> {
 pub const POLAR_MAX_ITERATIONS: usize = 40;
 
 /// The polar factor of `f` (`det f > 0`) by the scaled Newton iteration; `None` if it does not
-/// converge (a nearly singular `f`).
+/// converge (a nearly singular `f`). `X^-T = cof(X) / det X`, with the cofactor matrix's
+/// columns the cross products of `X`'s (`[x_1 x x_2, x_2 x x_0, x_0 x x_1]`) and
+/// `det X = x_0 . (x_1 x x_2)`.
 fn polar_newton(f: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     let mut x = *f;
     // scaling pays only for large volume changes (near rest, plain Newton takes ~4 steps)
     let mut scaled = (f.determinant() - 1.0).abs() > 0.2;
     for _ in 0..POLAR_MAX_ITERATIONS {
-        let det = x.determinant();
+        let (c0, c1, c2) = (x.column(0), x.column(1), x.column(2));
+        let cofactor = Matrix3::from_columns(&[c1.cross(&c2), c2.cross(&c0), c0.cross(&c1)]);
+        let det = c0.dot(&cofactor.column(0));
         if !(det > 0.0 && det.is_finite()) {
             return None;
         }
-        let inv_t = x.try_inverse()?.transpose();
         let g = if scaled { 1.0 / det.cbrt() } else { 1.0 };
-        let next = (x * g + inv_t * (1.0 / g)) * 0.5;
+        let next = (x * g + cofactor * (1.0 / (g * det))) * 0.5;
         let change = (next - x).norm();
         x = next;
         if change < 1e-3 {
             scaled = false; // close: plain Newton converges quadratically
         }
-        if change < 1e-14 {
+        // quadratic convergence: the error of `next` is about `change^2 / 2`
+        if change < 1e-8 {
             return Some(x);
         }
     }

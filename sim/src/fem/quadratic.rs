@@ -40,8 +40,8 @@
 use nalgebra::Matrix3;
 
 use super::gradients;
-use super::system::{BlockCgReport, BlockCgScratch, BlockSystem};
 use crate::mesh::TET_EDGES;
+use crate::solver::system::{self, CgReport, CgScratch, CgSettings, ElementSystem, Sym3};
 use crate::{Point3, TetMesh, Vector3};
 
 /// Nodes per element: four corners, then the middles of the edges in [`TET_EDGES`] order.
@@ -210,10 +210,10 @@ pub struct QuadraticMaterial {
 /// A linear static problem on a [`QuadraticMesh`].
 #[derive(Debug, Clone)]
 pub struct QuadraticStatics {
-    /// `K`, its off-diagonal blocks on the node pairs that share an element. Never prepared
-    /// (the preconditioner zeroes the held nodes' diagonal blocks): its `apply` is the whole
-    /// `K u`.
-    system: BlockSystem,
+    /// `K`, its off-diagonal blocks on the node pairs that share an element, prepared with no
+    /// node held (the preconditioner zeroes the held nodes' diagonal blocks): its `apply` is
+    /// the whole `K u`.
+    system: ElementSystem,
     /// The pre-strain's nodal forces.
     pre_stress_forces: Vec<Vector3>,
 }
@@ -227,7 +227,7 @@ pub struct QuadraticSolution {
     /// the pre-stress: the reactions at held nodes (with the sign of a force the body exerts).
     pub internal_forces: Vec<Vector3>,
     /// How the conjugate-gradient solve went.
-    pub report: BlockCgReport,
+    pub report: CgReport,
 }
 
 impl QuadraticStatics {
@@ -245,14 +245,15 @@ impl QuadraticStatics {
         }
         pairs.sort_unstable();
         pairs.dedup();
-        let mut system = BlockSystem::default();
-        system.begin(n, &pairs);
+        let mut system = ElementSystem::default();
+        system.begin_edges(n, &pairs);
+        system.diag = vec![Sym3::default(); n];
         let mut pre_stress_forces = vec![Vector3::zeros(); n];
         for (t, tet) in mesh.tets.iter().enumerate() {
             let m = material(mesh.regions[t]);
             let k = element_stiffness(mesh, t, m.mu_pa, m.lambda_pa);
             for a in 0..NODES {
-                system.diag[tet[a] as usize] += k[a][a];
+                system.diag[tet[a] as usize] += Sym3::symmetric_part(&k[a][a]);
                 for c in a + 1..NODES {
                     let (ga, gc) = (tet[a], tet[c]);
                     let Ok(e) = pairs.binary_search(&[ga.min(gc), ga.max(gc)]) else {
@@ -268,6 +269,7 @@ impl QuadraticStatics {
                 }
             }
         }
+        system.prepare_held(&vec![false; n], &[]);
         Self {
             system,
             pre_stress_forces,
@@ -304,15 +306,20 @@ impl QuadraticStatics {
             .collect();
         // the preconditioner zeroes the held diagonal blocks: prepare a copy, keep K whole
         let mut system = self.system.clone();
-        system.prepare(&is_held);
+        system.prepare_held(&is_held, &[]);
         let mut free = vec![Vector3::zeros(); n];
-        let report = system.solve(
+        let settings = CgSettings {
+            relative_tolerance,
+            absolute_tolerance: 0.0,
+            max_iterations: 20 * n.max(100),
+        };
+        let report = system::solve(
+            &system,
+            &is_held,
             &rhs,
             &mut free,
-            relative_tolerance,
-            0.0,
-            20 * n.max(100),
-            &mut BlockCgScratch::default(),
+            settings,
+            &mut CgScratch::default(),
         );
         let displacements: Vec<Vector3> =
             free.iter().zip(&prescribed).map(|(x, p)| x + p).collect();

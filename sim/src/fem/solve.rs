@@ -4,8 +4,10 @@
 //!   `f_el,i = -W R sigma(epsilon) b_i` and `(K v)_i = W R sigma(sym(R^T G)) b_i`.
 //! - Implicit (linearised backward) Euler, as for the springs:
 //!   `(M + h C + h^2 K) dv = h (f(x, v) - h K v)`, then `v += dv`, `x += h v`, with
-//!   `C = alpha M + beta K`; solved by block symmetric Gauss-Seidel preconditioned CG
-//!   ([`super::system`]), warm-started from the cubic extrapolation of the last four `dv`.
+//!   `C = alpha M + beta K`; assembled in passes that split in halves ([`super::assemble`])
+//!   and solved on the springs' solver stack ([`crate::solver::system`]: block SSOR in
+//!   Eisenstat's form on the nested-dissection order, two threads on large systems), started
+//!   from the projection onto the last four `dv`.
 //! - Symplectic Euler, sub-stepped below the stability limit of the bounds
 //!   `omega^2 <= max_i sum_j |K_ij|_F / sqrt(m_i m_j)` (block Gershgorin on
 //!   `M^-1/2 K M^-1/2`, rotation-invariant, so it holds in every configuration) and
@@ -15,7 +17,7 @@
 
 use nalgebra::Matrix3;
 
-use super::system::{BlockCgScratch, BlockSystem};
+use super::assemble::{StepInputs, TetTerms, implicit_system};
 use super::{FemModel, rotation, strain, stress};
 use crate::mesh::TET_EDGES;
 use crate::model::{Model, State};
@@ -23,30 +25,37 @@ use crate::solver::explicit::critical_time_step;
 use crate::solver::forces::max_free_force;
 use crate::solver::implicit::{apply_velocity_change, extrapolate_warm_start, velocity_floor};
 use crate::solver::statics::line_search;
+use crate::solver::system::{self, CgReport, CgScratch, CgSettings, ElementSystem, Sym3};
 use crate::solver::{StaticReport, StaticSettings};
 use crate::{Point3, Vector3};
 
 /// Buffers kept between steps.
 #[derive(Debug, Clone, Default)]
 pub struct FemScratch {
-    /// The step's (or the Newton iteration's) block system on the mesh edges.
-    pub system: BlockSystem,
+    /// The step's block system on the mesh edges.
+    pub system: ElementSystem,
     /// The conjugate-gradient solver's buffers.
-    pub cg: BlockCgScratch,
+    pub cg: CgScratch,
     /// The right-hand side of the system.
     pub rhs: Vec<Vector3>,
     /// The previous step's velocity change, then the warm start and the solution.
     pub dv: Vec<Vector3>,
-    /// The velocity changes of the three steps before: with `dv`, the cubic extrapolation.
+    /// The velocity changes of the three steps before: with `dv`, the span the start is
+    /// projected onto.
     pub dv_previous: [Vec<Vector3>; 3],
     /// How many of `dv` and `dv_previous` hold solutions (0 after a reset).
     pub history: usize,
+    /// The tetrahedra's terms of the step.
+    terms: Vec<TetTerms>,
 }
 
 impl FemScratch {
     /// Forgets the past velocity changes (after a jump of the state).
     pub fn reset_warm_start(&mut self) {
-        self.dv.iter_mut().for_each(|d| *d = Vector3::zeros());
+        let [p1, p2, p3] = &mut self.dv_previous;
+        for buf in [&mut self.dv, p1, p2, p3] {
+            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
+        }
         self.history = 0;
     }
 }
@@ -55,7 +64,7 @@ impl FemScratch {
 /// forces on local vertices 1..3 (`-W R sigma(epsilon) D_m^-T`, the elastic force) and
 /// `W R sigma(sym(R^T G)) D_m^-T` (the product `K v`); vertex 0 gets minus their sum.
 #[inline]
-fn element(
+pub(super) fn element(
     fem: &FemModel,
     t: usize,
     x: &[Point3],
@@ -126,7 +135,7 @@ pub fn potential_energy(model: &Model, fem: &FemModel, x: &[Point3]) -> f64 {
 }
 
 /// Adds `weight K(x)` (the warped stiffness) to the blocks of `sys`.
-fn add_stiffness(fem: &FemModel, t: usize, r: &Matrix3<f64>, weight: f64, sys: &mut BlockSystem) {
+fn add_stiffness(fem: &FemModel, t: usize, r: &Matrix3<f64>, weight: f64, sys: &mut ElementSystem) {
     if fem.rest_volume_m3[t] == 0.0 || weight == 0.0 {
         return;
     }
@@ -139,11 +148,11 @@ fn add_blocks(
     t: usize,
     k: &[[Matrix3<f64>; 4]; 4],
     weight: f64,
-    sys: &mut BlockSystem,
+    sys: &mut ElementSystem,
 ) {
     let tet = fem.tets[t];
     for i in 0..4 {
-        sys.diag[tet[i] as usize] += k[i][i] * weight;
+        sys.diag[tet[i] as usize] += Sym3::symmetric_part(&(k[i][i] * weight));
     }
     for (l, &[i, j]) in TET_EDGES.iter().enumerate() {
         let e = fem.tet_edges[t][l] as usize;
@@ -151,7 +160,8 @@ fn add_blocks(
     }
 }
 
-/// One implicit Euler step of `h` seconds; returns the CG iterations.
+/// One implicit Euler step of `h` seconds.
+#[allow(clippy::too_many_arguments)]
 pub fn implicit_step(
     model: &Model,
     fem: &FemModel,
@@ -161,7 +171,7 @@ pub fn implicit_step(
     relative_tolerance: f64,
     max_iterations: usize,
     scratch: &mut FemScratch,
-) -> super::system::BlockCgReport {
+) -> CgReport {
     let n = model.vertex_count();
     let FemScratch {
         system: sys,
@@ -170,35 +180,31 @@ pub fn implicit_step(
         dv,
         dv_previous: [p1, p2, p3],
         history,
-        ..
+        terms,
     } = scratch;
     for buf in [&mut *rhs, &mut *dv, &mut *p1, &mut *p2, &mut *p3] {
         buf.resize(n, Vector3::zeros());
     }
-    sys.begin(n, &fem.edges);
-    let (x, v) = (&state.positions[..n], &state.velocities[..n]);
-    for i in 0..n {
-        rhs[i] = (model.gravity * model.mass[i] + external[i] - v[i] * fem.damping_mass[i]) * h;
-        sys.diag[i] = Matrix3::identity() * (model.mass[i] + h * fem.damping_mass[i]);
-    }
-    for t in 0..fem.len() {
-        let (r, h_el, h_kv) = element(fem, t, x, v);
-        let kw = h * fem.beta_s[t] + h * h;
-        scatter(&fem.tets[t], &h_el, h, rhs);
-        scatter(&fem.tets[t], &h_kv, -kw, rhs);
-        add_stiffness(fem, t, &r, kw, sys);
-    }
-    sys.prepare(&model.held);
+    sys.begin_edges(n, &fem.edges);
+    let inputs = StepInputs {
+        model,
+        fem,
+        x: &state.positions[..n],
+        v: &state.velocities[..n],
+        external,
+        h,
+    };
+    implicit_system(&inputs, terms, sys, rhs);
+    sys.prepare_held(&model.held, &[]);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
-    let report = sys.solve(
-        rhs,
-        dv,
+    let particles = model.particles();
+    let settings = CgSettings {
         relative_tolerance,
-        velocity_floor(&model.particles()),
+        absolute_tolerance: velocity_floor(&particles),
         max_iterations,
-        cg,
-    );
-    apply_velocity_change(&model.particles(), state, dv, h);
+    };
+    let report = system::solve_from_span(sys, &model.held, rhs, dv, [p1, p2, p3], settings, cg);
+    apply_velocity_change(&particles, state, dv, h);
     report
 }
 
@@ -290,8 +296,8 @@ pub fn statics(
     let mut f_trial = f.clone();
     let mut dx = vec![Vector3::zeros(); n];
     let mut trial = state.positions.clone();
-    let mut sys = BlockSystem::default();
-    let mut cg = BlockCgScratch::default();
+    let mut sys = ElementSystem::default();
+    let mut cg = CgScratch::default();
 
     // Scale: the largest elastic nodal force magnitude of an element in the initial state, the
     // largest weight and the largest external force.
@@ -315,7 +321,9 @@ pub fn statics(
         // Newton with the exact tangent where it is positive definite; where the solve breaks
         // down on it (an indefinite tangent far from equilibrium), the warped stiffness.
         for attempt in [exact, false] {
-            sys.begin(n, &fem.edges);
+            sys.begin_edges(n, &fem.edges);
+            sys.diag.clear();
+            sys.diag.resize(n, Sym3::default());
             for t in 0..fem.len() {
                 match attempt
                     .then(|| fem.exact_stiffness_blocks(t, &state.positions))
@@ -331,9 +339,14 @@ pub fn statics(
                     ),
                 }
             }
-            sys.prepare(&model.held);
+            sys.prepare_held(&model.held, &[]);
             dx.iter_mut().for_each(|d| *d = Vector3::zeros());
-            let report = sys.solve(&f, &mut dx, 1e-10, 0.0, 10 * n.max(100), &mut cg);
+            let settings = CgSettings {
+                relative_tolerance: 1e-10,
+                absolute_tolerance: 0.0,
+                max_iterations: 10 * n.max(100),
+            };
+            let report = system::solve(&sys, &model.held, &f, &mut dx, settings, &mut cg);
             cg_total += report.iterations;
             if report.converged || !attempt {
                 break;
@@ -397,6 +410,14 @@ mod tests {
         (model, fem)
     }
 
+    /// An empty system on the elements' edges.
+    fn stiffness_system(n: usize, fem: &FemModel) -> ElementSystem {
+        let mut sys = ElementSystem::default();
+        sys.begin_edges(n, &fem.edges);
+        sys.diag = vec![Sym3::default(); n];
+        sys
+    }
+
     #[test]
     fn rotation_is_proper_even_for_inverted_elements() {
         let f = Matrix3::new(1.0, 0.2, 0.0, 0.1, -0.8, 0.3, 0.0, 0.1, 1.2);
@@ -455,13 +476,12 @@ mod tests {
         total_forces(&model, &fem, &x, &v, &zero, &mut f);
         let scale = 30e3 * 0.01 * 0.01;
         assert!(f.iter().all(|f| f.norm() < 1e-12 * scale), "{f:?}");
-        let mut sys = BlockSystem::default();
-        sys.begin(n, &fem.edges);
+        let mut sys = stiffness_system(n, &fem);
         for t in 0..fem.len() {
             let r = rotation(&fem.deformation_gradient(t, &x));
             add_stiffness(&fem, t, &r, 1.0, &mut sys);
         }
-        sys.prepare(&model.held);
+        sys.prepare_held(&model.held, &[]);
         let dir: Vec<Vector3> = (0..n)
             .map(|i| Vector3::new((i as f64).sin(), (1.3 * i as f64).cos(), 0.2))
             .collect();
@@ -474,7 +494,7 @@ mod tests {
         model: &Model,
         fem: &FemModel,
         x: &[Point3],
-        sys: &BlockSystem,
+        sys: &ElementSystem,
         dir: &[Vector3],
     ) {
         let n = x.len();
@@ -514,15 +534,14 @@ mod tests {
                 rot * p + Vector3::new((i as f64).sin(), (2.0 * i as f64).cos(), 0.5) * 1e-3
             })
             .collect();
-        let mut sys = BlockSystem::default();
-        sys.begin(n, &fem.edges);
+        let mut sys = stiffness_system(n, &fem);
         for t in 0..fem.len() {
             let k = fem
                 .exact_stiffness_blocks(t, &x)
                 .expect("not near inversion");
             add_blocks(&fem, t, &k, 1.0, &mut sys);
         }
-        sys.prepare(&model.held);
+        sys.prepare_held(&model.held, &[]);
         let dir: Vec<Vector3> = (0..n)
             .map(|i| Vector3::new((0.7 * i as f64).cos(), (1.1 * i as f64).sin(), -0.4))
             .collect();

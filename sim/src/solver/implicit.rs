@@ -230,9 +230,9 @@ fn step_on(
         ..cg
     };
     let report = if guessed {
-        system::solve(sys, model, rhs, dv, cg, cg_scratch)
+        system::solve(sys, model.held, rhs, dv, cg, cg_scratch)
     } else {
-        system::solve_from_span(sys, model, rhs, dv, [p1, p2, p3], cg, cg_scratch)
+        system::solve_from_span(sys, model.held, rhs, dv, [p1, p2, p3], cg, cg_scratch)
     };
     apply_velocity_change(model, state, dv, h);
     report

@@ -118,19 +118,28 @@ impl WarmStart {
     }
 }
 
-impl ImplicitScratch {
-    pub(crate) fn warm_start(&self) -> WarmStart {
-        WarmStart {
-            cg_residual_ratio: self.cg.residual_ratio,
-            ..WarmStart::of(&self.dv, &self.dv_previous, self.history)
-        }
-    }
+/// The warm start of a solver's scratch: its past velocity changes and its CG's residual
+/// ratio.
+macro_rules! warm_start_of {
+    ($scratch:ty) => {
+        impl $scratch {
+            pub(crate) fn warm_start(&self) -> WarmStart {
+                WarmStart {
+                    cg_residual_ratio: self.cg.residual_ratio,
+                    ..WarmStart::of(&self.dv, &self.dv_previous, self.history)
+                }
+            }
 
-    pub(crate) fn install_warm_start(&mut self, w: &WarmStart) {
-        w.install(&mut self.dv, &mut self.dv_previous, &mut self.history);
-        self.cg.residual_ratio = w.cg_residual_ratio;
-    }
+            pub(crate) fn install_warm_start(&mut self, w: &WarmStart) {
+                w.install(&mut self.dv, &mut self.dv_previous, &mut self.history);
+                self.cg.residual_ratio = w.cg_residual_ratio;
+            }
+        }
+    };
 }
+
+warm_start_of!(ImplicitScratch);
+warm_start_of!(crate::fem::solve::FemScratch);
 
 /// What a localised simulation carries from one step to the next (see the module
 /// documentation): ids are global particle ids.
@@ -205,7 +214,6 @@ pub(crate) fn check_ids(ids: &[u32], n: usize, what: &str) -> Result<(), ResumeE
 impl Simulation {
     /// What [`Self::resume`] needs, beyond the state and the mesh, to continue from here.
     pub fn resume_state(&self) -> ResumeState {
-        let fem = &self.scratch.fem;
         ResumeState {
             step_index: self.step_index,
             held: self
@@ -217,7 +225,7 @@ impl Simulation {
                 .map(|(v, _)| v as u32)
                 .collect(),
             warm_start: self.scratch.implicit.warm_start(),
-            fem_warm_start: WarmStart::of(&fem.dv, &fem.dv_previous, fem.history),
+            fem_warm_start: self.scratch.fem.warm_start(),
             region: self.region.resume_state(),
             sweep_order: self.scratch.implicit.system.sweep_order(),
         }
@@ -273,10 +281,7 @@ impl Simulation {
         if let Some(order) = &resume.sweep_order {
             scratch.implicit.system.install_sweep_order(order);
         }
-        let fem = &mut scratch.fem;
-        resume
-            .fem_warm_start
-            .install(&mut fem.dv, &mut fem.dv_previous, &mut fem.history);
+        scratch.fem.install_warm_start(&resume.fem_warm_start);
 
         self.model = model;
         self.state = state;

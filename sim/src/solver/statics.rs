@@ -104,8 +104,7 @@ pub fn solve_loaded(
             absolute_tolerance: 0.0,
             max_iterations: 10 * n.max(100),
         };
-        cg_total +=
-            system::solve(&sys, &model.particles(), &f, &mut dx, cg, &mut cg_scratch).iterations;
+        cg_total += system::solve(&sys, &model.held, &f, &mut dx, cg, &mut cg_scratch).iterations;
 
         match line_search(
             model,

@@ -1,8 +1,67 @@
 //! The 3x3 blocks of the system: symmetric ([`Sym3`], the diagonal blocks and their inverses),
-//! lower-triangular ([`Lower3`], the diagonal blocks' Cholesky factors), and a spring's block
-//! `B = beta I + gamma n n^T` in the stored form `[g_x, g_y, g_z, beta]`, `g = sqrt(gamma) n`.
+//! lower-triangular ([`Lower3`], the diagonal blocks' Cholesky factors), and the off-diagonal
+//! blocks as stored ([`OffBlock`]): a spring's `B = beta I + gamma n n^T` in the form
+//! `[g_x, g_y, g_z, beta]`, `g = sqrt(gamma) n` ([`SpringBlock`]), or a general 3x3 matrix (the
+//! finite elements').
 
+use nalgebra::Matrix3;
+
+use super::lanes::Lanes;
 use crate::Vector3;
+
+/// A spring's block `B = beta I + g g^T` as `[g_x, g_y, g_z, beta]`.
+pub type SpringBlock = [f64; 4];
+
+/// An off-diagonal block as the system stores it: for the slot of particles `k` and `l`, `k`
+/// first in the sweep order, `N = -A_kl` (so `A_lk = -N^T`).
+pub trait OffBlock: Copy + Default + Send + Sync + std::fmt::Debug {
+    /// Whether `A = a_m M + sum of the blocks' pattern [+N, -N; -N, +N]` (the springs': the
+    /// diagonal blocks follow from the off-diagonal ones, and a product is taken in the
+    /// difference form `N (p_k - p_l)`); otherwise `A`'s diagonal blocks are given.
+    const LAPLACIAN: bool;
+    /// `N v`.
+    fn mul(&self, v: &Vector3) -> Vector3;
+    /// `N^T v`.
+    fn mul_transpose(&self, v: &Vector3) -> Vector3;
+    /// The slot's part of `y = A p` (off the diagonal, and for [`Self::LAPLACIAN`] blocks the
+    /// diagonal's share too): added to `y_k` and `y_l`.
+    fn apply_pair<T: Lanes>(&self, p_k: T, p_l: T, y_k: &mut T, y_l: &mut T);
+}
+
+impl OffBlock for SpringBlock {
+    const LAPLACIAN: bool = true;
+    #[inline(always)]
+    fn mul(&self, v: &Vector3) -> Vector3 {
+        block_mul(self, v)
+    }
+    #[inline(always)]
+    fn mul_transpose(&self, v: &Vector3) -> Vector3 {
+        block_mul(self, v)
+    }
+    #[inline(always)]
+    fn apply_pair<T: Lanes>(&self, p_k: T, p_l: T, y_k: &mut T, y_l: &mut T) {
+        let w = p_k.block_mul_difference(self, p_l);
+        y_k.add(w);
+        y_l.sub(w);
+    }
+}
+
+impl OffBlock for Matrix3<f64> {
+    const LAPLACIAN: bool = false;
+    #[inline(always)]
+    fn mul(&self, v: &Vector3) -> Vector3 {
+        self * v
+    }
+    #[inline(always)]
+    fn mul_transpose(&self, v: &Vector3) -> Vector3 {
+        self.tr_mul(v)
+    }
+    #[inline(always)]
+    fn apply_pair<T: Lanes>(&self, p_k: T, p_l: T, y_k: &mut T, y_l: &mut T) {
+        y_k.sub(p_l.matrix_mul(self));
+        y_l.sub(p_k.matrix_tr_mul(self));
+    }
+}
 
 /// A symmetric 3x3 matrix stored by its six distinct entries.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -64,6 +123,35 @@ impl Sym3 {
             xy: c_xy * inv,
             xz: c_xz * inv,
             yz: (self.xy * self.xz - self.xx * self.yz) * inv,
+        }
+    }
+}
+
+impl Sym3 {
+    /// The symmetric part `(m + m^T) / 2` of a 3x3 matrix.
+    #[inline]
+    pub fn symmetric_part(m: &Matrix3<f64>) -> Self {
+        Self {
+            xx: m[(0, 0)],
+            yy: m[(1, 1)],
+            zz: m[(2, 2)],
+            xy: 0.5 * (m[(0, 1)] + m[(1, 0)]),
+            xz: 0.5 * (m[(0, 2)] + m[(2, 0)]),
+            yz: 0.5 * (m[(1, 2)] + m[(2, 1)]),
+        }
+    }
+
+    /// `s a a^T`.
+    #[inline(always)]
+    pub fn outer(a: &Vector3, s: f64) -> Self {
+        let sa = a * s;
+        Self {
+            xx: sa.x * a.x,
+            yy: sa.y * a.y,
+            zz: sa.z * a.z,
+            xy: sa.x * a.y,
+            xz: sa.x * a.z,
+            yz: sa.y * a.z,
         }
     }
 }

@@ -3,13 +3,13 @@
 //! onto a span of vectors (see [`super::super::span`]).
 
 use crate::Vector3;
-use crate::model::Particles;
 
 use super::super::span::SPAN;
+use super::blocks::OffBlock;
 use super::lanes::{Lanes, SpanEntries};
 use super::layout::split3;
 use super::preconditioner::Sweeps;
-use super::{PARALLEL_MIN_PARTICLES, SpringSystem, solver_threads};
+use super::{BlockSystem, PARALLEL_MIN_PARTICLES, solver_threads};
 use crate::parallel::join;
 
 /// Settings of the conjugate-gradient solve.
@@ -71,16 +71,16 @@ fn dot(a: &[Vector3], b: &[Vector3]) -> f64 {
 /// not apply; see the module documentation), starting from the `x` given (warm start). Held
 /// entries of `b` and `x` are treated as zero. Stops when
 /// `|b - A x| <= max(relative_tolerance |b|, absolute_tolerance)`.
-pub fn solve(
-    sys: &SpringSystem,
-    model: &Particles<'_>,
+pub fn solve<B: OffBlock>(
+    sys: &BlockSystem<B>,
+    held: &[bool],
     b: &[Vector3],
     x: &mut [Vector3],
     settings: CgSettings,
     scratch: &mut CgScratch,
 ) -> CgReport {
     let parallel = b.len() >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
-    solve_on(sys, model, b, x, None, settings, scratch, parallel)
+    solve_on(sys, held, b, x, None, settings, scratch, parallel)
 }
 
 /// [`solve`], starting from the projection onto the span of `x` (as given) and `more` (see
@@ -88,9 +88,9 @@ pub fn solve(
 /// combinations. Its residual comes with the products, so the projection costs one pass over
 /// the springs that multiplies by all four vectors, in place of the first residual's. Vectors
 /// of `more` that do not have one entry per particle are left out of the span.
-pub fn solve_from_span(
-    sys: &SpringSystem,
-    model: &Particles<'_>,
+pub fn solve_from_span<B: OffBlock>(
+    sys: &BlockSystem<B>,
+    held: &[bool],
     b: &[Vector3],
     x: &mut [Vector3],
     more: [&[Vector3]; SPAN - 1],
@@ -100,15 +100,15 @@ pub fn solve_from_span(
     let parallel = b.len() >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
     let n = b.len();
     let more = more.map(|v| if v.len() == n { v } else { &[] as &[Vector3] });
-    solve_on(sys, model, b, x, Some(more), settings, scratch, parallel)
+    solve_on(sys, held, b, x, Some(more), settings, scratch, parallel)
 }
 
 /// [`solve`] or [`solve_from_span`] (with `more`), with the halves' sweeps on two threads or
 /// not (the same bits either way).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn solve_on(
-    sys: &SpringSystem,
-    model: &Particles<'_>,
+pub(super) fn solve_on<B: OffBlock>(
+    sys: &BlockSystem<B>,
+    held: &[bool],
     b: &[Vector3],
     x: &mut [Vector3],
     more: Option<[&[Vector3]; SPAN - 1]>,
@@ -117,14 +117,14 @@ pub(super) fn solve_on(
     parallel: bool,
 ) -> CgReport {
     let n = b.len();
-    for (xi, &h) in x.iter_mut().zip(model.held) {
+    for (xi, &h) in x.iter_mut().zip(held) {
         if h {
             *xi = Vector3::zeros();
         }
     }
     let b_norm = b
         .iter()
-        .zip(model.held)
+        .zip(held)
         .filter(|(_, h)| !**h)
         .map(|(b, _)| b.norm_squared())
         .sum::<f64>()
@@ -164,7 +164,7 @@ pub(super) fn solve_on(
             span.extend(order.iter().map(|&i| {
                 let i = i as usize;
                 let at = |v: &[Vector3]| v.get(i).copied().unwrap_or_else(Vector3::zeros);
-                if model.held[i] {
+                if held[i] {
                     SpanEntries::ZERO
                 } else {
                     SpanEntries::of([x[i], at(more[0]), at(more[1]), at(more[2])])
@@ -241,8 +241,8 @@ pub(super) fn solve_on(
 }
 
 /// `r = b - A x` (held entries zero), by rank; returns `|r|`.
-fn residual(
-    sys: &SpringSystem,
+fn residual<B: OffBlock>(
+    sys: &BlockSystem<B>,
     b: &[Vector3],
     x: &[Vector3],
     r: &mut [Vector3],
@@ -265,8 +265,8 @@ fn residual(
 
 /// Block-Jacobi preconditioned CG, by rank.
 /// `known`: the norm of the residual of `x`, already in `r`.
-fn solve_jacobi(
-    sys: &SpringSystem,
+fn solve_jacobi<B: OffBlock>(
+    sys: &BlockSystem<B>,
     b: &[Vector3],
     x: &mut [Vector3],
     b_norm: f64,
@@ -328,8 +328,8 @@ fn solve_jacobi(
 /// checked, and the iteration continued with a tighter target if it is not yet small enough.
 /// `known`: the norm of the residual of `x`, already in the scratch's `z`.
 #[allow(clippy::too_many_arguments)]
-fn solve_ssor(
-    sys: &SpringSystem,
+fn solve_ssor<B: OffBlock>(
+    sys: &BlockSystem<B>,
     b: &[Vector3],
     x: &mut [Vector3],
     b_norm: f64,
@@ -380,22 +380,24 @@ fn solve_ssor(
         };
     }
     // r^ = G^T P^-1 r: forward sweep on acc = r.
-    {
-        let (acc1, acc2, acc_s) = split3(acc, h, s);
-        let (r1, r2, r_s) = split3(r, h, s);
-        let (p1, p2, p_s) = split3(p, h, s);
-        spill.iter_mut().for_each(|v| *v = Vector3::zeros());
-        join(
-            parallel,
-            || sweeps.forward_first(0, acc1, acc_s, r1, p1),
-            || sweeps.forward_first(h, acc2, spill, r2, p2),
-        );
-        acc_s
-            .iter_mut()
-            .zip(spill.iter())
-            .for_each(|(a, v)| *a += v);
-        sweeps.forward_first(s, acc_s, &mut [], r_s, p_s);
-    }
+    let transform =
+        |acc: &mut [Vector3], r: &mut [Vector3], p: &mut [Vector3], spill: &mut [Vector3]| {
+            let (acc1, acc2, acc_s) = split3(acc, h, s);
+            let (r1, r2, r_s) = split3(r, h, s);
+            let (p1, p2, p_s) = split3(p, h, s);
+            spill.iter_mut().for_each(|v| *v = Vector3::zeros());
+            join(
+                parallel,
+                || sweeps.forward_first(0, acc1, acc_s, r1, p1),
+                || sweeps.forward_first(h, acc2, spill, r2, p2),
+            );
+            acc_s
+                .iter_mut()
+                .zip(spill.iter())
+                .for_each(|(a, v)| *a += v);
+            sweeps.forward_first(s, acc_s, &mut [], r_s, p_s);
+        };
+    transform(acc, r, p, spill);
     let mut rr = dot(r, r);
     let (r_norm0, rr0) = (r_norm, rr);
     let ratio = if *residual_ratio > 0.0 {
@@ -405,7 +407,7 @@ fn solve_ssor(
     };
     let mut target_hat = rr.sqrt() * (target / r_norm) / ratio;
     let mut beta = 0.0;
-    let mut iterations = 0;
+    let (mut iterations, mut checks) = (0, 0);
     while iterations < settings.max_iterations {
         let (r1, r2, r_s) = split3(r, h, s);
         let (p1, p2, p_s) = split3(p, h, s);
@@ -469,8 +471,19 @@ fn solve_ssor(
             if r_norm <= target {
                 break;
             }
-            // not there yet in the true norm: tighten the transformed target accordingly
-            target_hat *= 0.5 * target / r_norm;
+            checks += 1;
+            if checks == 1 {
+                // not there yet in the true norm: tighten the transformed target accordingly
+                target_hat *= 0.5 * target / r_norm;
+            } else {
+                // again: the recursive residual has drifted from the true one (long solves of
+                // stiff systems, such as the quadratic elements' slender bars); restart from
+                // the true residual, now in `acc`
+                transform(acc, r, p, spill);
+                rr = dot(r, r);
+                target_hat = 0.5 * rr.sqrt() * (target / r_norm);
+                beta = 0.0;
+            }
         }
     }
     if iterations == settings.max_iterations || !(r_norm <= target) {
@@ -483,7 +496,7 @@ fn solve_ssor(
     }
 }
 
-impl SpringSystem {
+impl<B: OffBlock> BlockSystem<B> {
     /// The start of a solve projected onto the span of `span` (by rank, held entries zero;
     /// see [`super::span`]): `x = U c` and its residual `r = b - A x = b - (A U) c` (held
     /// entries zero), whose norm this returns. The Gram matrix and `U^T b` are summed over the

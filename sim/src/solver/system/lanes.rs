@@ -1,16 +1,25 @@
 //! A particle's entries of one vector ([`Vector3`]) or of [`SPAN`] vectors side by side
 //! ([`SpanEntries`]), so that one pass over the springs multiplies the matrix by all of them.
 
+use nalgebra::Matrix3;
+
 use crate::Vector3;
 
 use super::super::span::SPAN;
+use super::blocks::Sym3;
 use super::blocks::block_mul;
 
 /// A particle's entries of one vector or of several multiplied by the matrix together (the
 /// springs' blocks read once for all).
-pub(super) trait Lanes: Copy + Send + Sync {
+pub trait Lanes: Copy + Send + Sync {
     const ZERO: Self;
     fn scaled(self, m: f64) -> Self;
+    /// `d self`.
+    fn sym_mul(self, d: &Sym3) -> Self;
+    /// `m self`.
+    fn matrix_mul(self, m: &Matrix3<f64>) -> Self;
+    /// `m^T self`.
+    fn matrix_tr_mul(self, m: &Matrix3<f64>) -> Self;
     /// `B (self - other)` for the stored block `c`.
     fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self;
     fn add(&mut self, v: Self);
@@ -22,6 +31,18 @@ impl Lanes for Vector3 {
     #[inline(always)]
     fn scaled(self, m: f64) -> Self {
         self * m
+    }
+    #[inline(always)]
+    fn sym_mul(self, d: &Sym3) -> Self {
+        d.mul(&self)
+    }
+    #[inline(always)]
+    fn matrix_mul(self, m: &Matrix3<f64>) -> Self {
+        m * self
+    }
+    #[inline(always)]
+    fn matrix_tr_mul(self, m: &Matrix3<f64>) -> Self {
+        m.tr_mul(&self)
     }
     #[inline(always)]
     fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self {
@@ -59,6 +80,12 @@ impl SpanEntries {
         Vector3::new(self.x[j], self.y[j], self.z[j])
     }
 
+    /// `f` applied to each vector.
+    #[inline(always)]
+    fn each(self, f: impl Fn(Vector3) -> Vector3) -> Self {
+        Self::of(std::array::from_fn(|j| f(self.get(j))))
+    }
+
     /// `sum_j c_j v_j`.
     pub(super) fn combine(&self, c: &[f64; SPAN]) -> Vector3 {
         let dot = |a: &[f64; SPAN]| a.iter().zip(c).map(|(a, c)| a * c).sum::<f64>();
@@ -79,6 +106,18 @@ impl Lanes for SpanEntries {
             y: self.y.map(|v| v * m),
             z: self.z.map(|v| v * m),
         }
+    }
+    #[inline(always)]
+    fn sym_mul(self, d: &Sym3) -> Self {
+        self.each(|v| d.mul(&v))
+    }
+    #[inline(always)]
+    fn matrix_mul(self, m: &Matrix3<f64>) -> Self {
+        self.each(|v| m * v)
+    }
+    #[inline(always)]
+    fn matrix_tr_mul(self, m: &Matrix3<f64>) -> Self {
+        self.each(|v| m.tr_mul(&v))
     }
     #[inline(always)]
     fn block_mul_difference(self, c: &[f64; 4], other: Self) -> Self {

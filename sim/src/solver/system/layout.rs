@@ -41,6 +41,11 @@ pub(super) struct BlockLayout {
 }
 
 impl BlockLayout {
+    /// Each particle's rank (after [`Self::build`]).
+    pub(super) fn rank(&self) -> &[u32] {
+        &self.scratch.rank
+    }
+
     pub(super) fn build(&mut self, n: usize, ends: &[[u32; 2]]) {
         let m = ends.len();
         self.ends.clear();

@@ -51,7 +51,7 @@ mod tests;
 pub use blocks::{Sym3, stiffness_block};
 pub use cg::{CgReport, CgScratch, CgSettings, solve, solve_from_span};
 pub use layout::{SweepOrder, SweepOrderError};
-pub use operator::SpringSystem;
+pub use operator::{BlockSystem, ElementSystem, SpringSystem};
 
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
 /// on one, in the same order, with the same result). Below it a half sweep is too short to be

@@ -1,40 +1,109 @@
-//! [`SpringSystem`], the block-sparse matrix `A = a_m M + sum over springs e of B_e`: its
-//! assembly from the springs' blocks and its products with one vector or several.
+//! [`BlockSystem`], the block-sparse symmetric matrix on the edges of a graph (the springs', or
+//! the mesh edges the finite elements couple): its assembly and its products with one vector
+//! or several. [`SpringSystem`] is `A = a_m M + sum over springs e of B_e`; [`ElementSystem`]
+//! has general 3x3 blocks.
+
+use nalgebra::Matrix3;
 
 use crate::Vector3;
 use crate::model::Particles;
 
-use super::blocks::{Lower3, Sym3, block_coefficients};
+use super::blocks::{Lower3, OffBlock, SpringBlock, Sym3, block_coefficients};
 use super::lanes::Lanes;
 use super::layout::{BlockLayout, split3};
 use crate::parallel::join;
 
-/// The system matrix: per-spring blocks, diagonal blocks and the preconditioner.
-///
-/// Each spring block is stored as `B_e = beta I + g g^T` with `g = sqrt(gamma) n` (which needs
-/// `gamma >= 0`, as non-negative stiffness and damping give), by the spring's lower-numbered
-/// particle. Fill it with [`Self::begin`] and [`Self::set_block`] (or [`Self::parts_mut`]),
-/// then either fill `diag` and call [`Self::prepare`], or call
-/// [`Self::update_preconditioner`], which computes `diag` from the blocks and the masses.
+/// The springs' system: each spring block stored as `B_e = beta I + g g^T` with
+/// `g = sqrt(gamma) n` (which needs `gamma >= 0`, as non-negative stiffness and damping give).
+/// Fill it with [`BlockSystem::begin`] and [`BlockSystem::set_block`] (or
+/// [`BlockSystem::parts_mut`]), then either fill `diag` and call [`BlockSystem::prepare`], or
+/// call [`BlockSystem::update_preconditioner`], which computes `diag` from the blocks and the
+/// masses.
+pub type SpringSystem = BlockSystem<SpringBlock>;
+
+/// The finite elements' system: general 3x3 blocks (`A_ab` of an edge `a < b` added by
+/// [`BlockSystem::add_off`], or stored by slot as `-A` of the pair's first particle in the
+/// sweep order), and the diagonal blocks given.
+pub type ElementSystem = BlockSystem<Matrix3<f64>>;
+
+/// The system matrix: off-diagonal blocks on the edges of a graph, diagonal blocks and the
+/// preconditioner, stored in the sweep order of [`super::layout`].
 #[derive(Debug, Clone, Default)]
-pub struct SpringSystem {
-    /// Weight `a_m` of the lumped masses in `A`.
+pub struct BlockSystem<B> {
+    /// Weight `a_m` of the lumped masses in `A` (springs only).
     pub mass_weight: f64,
     /// The 3x3 diagonal blocks `D_i` of `A` (zero for held particles after [`Self::prepare`]).
     pub diag: Vec<Sym3>,
     pub(super) layout: BlockLayout,
-    /// `[g_x, g_y, g_z, beta]` per slot.
-    pub(super) coef: Vec<[f64; 4]>,
+    /// The off-diagonal block of each slot (see [`OffBlock`]).
+    pub(super) coef: Vec<B>,
     /// By rank: `w D_i^-1` (zero for held particles and singular blocks): the sweeps' diagonal
     /// solves, and (the factor `w` changes nothing there) the block-Jacobi preconditioner.
     pub(super) inv_diag: Vec<Sym3>,
     /// By rank: Cholesky factors of the diagonal blocks (zero for held particles).
     pub(super) chol: Vec<Lower3>,
-    /// By rank: `a_m m_i`, and whether the particle is held.
+    /// By rank: `a_m m_i` (springs) or the diagonal block (general blocks), and whether the
+    /// particle is held.
     pub(super) mass: Vec<f64>,
+    pub(super) diag_ranked: Vec<Sym3>,
     pub(super) held: Vec<bool>,
-    /// Whether [`solve`] uses SSOR (otherwise block-Jacobi).
+    /// Whether [`super::solve`] uses SSOR (otherwise block-Jacobi).
     pub(super) ssor: bool,
+}
+
+impl<B: OffBlock> BlockSystem<B> {
+    /// Sizes the block storage for the edges `ends` of `n` particles (the layout is rebuilt
+    /// only when they changed), the blocks zeroed.
+    pub fn begin_edges(&mut self, n: usize, ends: &[[u32; 2]]) {
+        if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
+            self.layout.build(n, ends);
+        }
+        self.coef.clear();
+        self.coef.resize(ends.len(), B::default());
+    }
+
+    /// For assembling in one pass: the slot of each edge (after [`Self::begin`]), the block
+    /// storage by slot (see [`OffBlock`]) and the diagonal blocks.
+    pub fn parts_mut(&mut self) -> (&[u32], &mut [B], &mut Vec<Sym3>) {
+        (&self.layout.slot, &mut self.coef, &mut self.diag)
+    }
+
+    /// For assembling by slot (after [`Self::begin_edges`]): each particle's place in the
+    /// sweep order (a slot's first particle is its edge's end of lower rank), the edge of each
+    /// slot, the block storage by slot (see [`OffBlock`]) and the diagonal blocks.
+    pub fn slot_parts_mut(&mut self) -> (&[u32], &[u32], &mut [B], &mut Vec<Sym3>) {
+        (
+            self.layout.rank(),
+            &self.layout.spring,
+            &mut self.coef,
+            &mut self.diag,
+        )
+    }
+}
+
+impl ElementSystem {
+    /// Adds `k` to `A_ab` (and so `k^T` to `A_ba`) for edge `e = [a, b]` of those
+    /// [`Self::begin_edges`] was given.
+    pub fn add_off(&mut self, e: usize, a: u32, b: u32, k: &Matrix3<f64>) {
+        let rank = self.layout.rank();
+        let slot = self.layout.slot[e] as usize;
+        if rank[a as usize] < rank[b as usize] {
+            self.coef[slot] -= k;
+        } else {
+            self.coef[slot] -= k.transpose();
+        }
+    }
+
+    /// `y = A p` (after [`Self::prepare`]; held rows zeroed).
+    pub fn apply(&self, p: &[Vector3], y: &mut [Vector3]) {
+        let order = &self.layout.order[..p.len()];
+        let p_ranked: Vec<Vector3> = order.iter().map(|&i| p[i as usize]).collect();
+        let mut y_ranked = vec![Vector3::zeros(); p.len()];
+        self.apply_ranked(&p_ranked, &mut y_ranked, &mut Vec::new(), false);
+        for (&i, y_k) in order.iter().zip(&y_ranked) {
+            y[i as usize] = *y_k;
+        }
+    }
 }
 
 impl SpringSystem {
@@ -47,12 +116,6 @@ impl SpringSystem {
             self.layout.build(n, ends);
         }
         self.coef.resize(ends.len(), [0.0; 4]);
-    }
-
-    /// For assembling in one pass: the slot of each spring (after [`Self::begin`]), the block
-    /// storage by slot (see [`block_coefficients`]) and the diagonal blocks.
-    pub fn parts_mut(&mut self) -> (&[u32], &mut [[f64; 4]], &mut Vec<Sym3>) {
-        (&self.layout.slot, &mut self.coef, &mut self.diag)
     }
 
     /// Whether the springs (of [`Self::begin`]) come sorted by their first end, each `[a, b]`
@@ -92,7 +155,9 @@ impl SpringSystem {
             y[i as usize] = *y_k;
         }
     }
+}
 
+impl<B: OffBlock> BlockSystem<B> {
     /// `y = A p` with held rows zeroed, both by rank: the halves side by side when `parallel`
     /// (the second's products with the separator gathered in `spill` first), then the
     /// separator; the same bits either way. `p` may hold one vector or several ([`Lanes`]).
@@ -103,10 +168,16 @@ impl SpringSystem {
         spill: &mut Vec<T>,
         parallel: bool,
     ) {
-        let n = self.mass.len();
+        let n = self.held.len();
         let (p, y) = (&p[..n], &mut y[..n]);
-        for ((y, p), &m) in y.iter_mut().zip(p).zip(&self.mass) {
-            *y = p.scaled(m);
+        if B::LAPLACIAN {
+            for ((y, p), &m) in y.iter_mut().zip(p).zip(&self.mass) {
+                *y = p.scaled(m);
+            }
+        } else {
+            for ((y, p), d) in y.iter_mut().zip(p).zip(&self.diag_ranked) {
+                *y = p.sym_mul(d);
+            }
         }
         let [h, s] = self.layout.halves;
         spill.clear();
@@ -128,7 +199,7 @@ impl SpringSystem {
         }
     }
 
-    /// The springs of the part of ranks from `lo` whose entries of `y` are `own`: their products
+    /// The slots of the part of ranks from `lo` whose entries of `y` are `own`: their products
     /// added to `own` or, beyond it, to the separator's `spill`. The products on the first
     /// particle are summed in a register and stored once per particle; the summation order is
     /// fixed, so results stay deterministic.
@@ -141,13 +212,12 @@ impl SpringSystem {
             let mut yk = T::ZERO;
             for (&o, c) in other[slots.clone()].iter().zip(&self.coef[slots]) {
                 let o = o as usize;
-                let w = pk.block_mul_difference(c, p[o]);
-                yk.add(w);
-                if o < hi {
-                    own[o - lo].sub(w);
+                let yo = if o < hi {
+                    &mut own[o - lo]
                 } else {
-                    spill[o - s].sub(w);
-                }
+                    &mut spill[o - s]
+                };
+                c.apply_pair(pk, p[o], &mut yk, yo);
             }
             own[k - lo].add(yk);
         }

@@ -5,8 +5,8 @@
 use crate::Vector3;
 use crate::model::Particles;
 
-use super::blocks::{Lower3, Sym3, block_matrix, block_mul};
-use super::{PARALLEL_MIN_PARTICLES, SpringSystem, solver_threads};
+use super::blocks::{Lower3, OffBlock, Sym3, block_matrix};
+use super::{BlockSystem, PARALLEL_MIN_PARTICLES, SpringSystem, solver_threads};
 use crate::parallel::join;
 
 /// Relaxation factor `w` of the SSOR preconditioner `M = (D/w + L) D^-1 (D/w + L^T)`, where
@@ -40,30 +40,46 @@ impl SpringSystem {
         self.prepare(model);
     }
 
-    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing the held ones),
-    /// in the sweep order of the layout [`Self::begin`] built.
+    /// [`BlockSystem::prepare`] for the particles of `model`.
     pub fn prepare(&mut self, model: &Particles<'_>) {
-        let n = model.vertex_count();
-        for (d, &h) in self.diag[..n].iter_mut().zip(model.held) {
+        self.prepare_held(model.held, model.mass);
+    }
+}
+
+impl<B: OffBlock> BlockSystem<B> {
+    /// Builds the preconditioner from the diagonal blocks in `diag` (zeroing those of the
+    /// `held` particles), in the sweep order of the layout [`Self::begin_edges`] built. `mass`:
+    /// the particles' masses (weighted by `mass_weight` in `A`), for springs only.
+    pub fn prepare_held(&mut self, held: &[bool], mass: &[f64]) {
+        let n = held.len();
+        for (d, &h) in self.diag[..n].iter_mut().zip(held) {
             if h {
                 *d = Sym3::default();
             }
         }
         self.inv_diag.resize(n, Sym3::default());
         self.chol.resize(n, Lower3::default());
-        self.mass.resize(n, 0.0);
+        self.mass.resize(if B::LAPLACIAN { n } else { 0 }, 0.0);
+        self.diag_ranked
+            .resize(if B::LAPLACIAN { 0 } else { n }, Sym3::default());
         self.held.resize(n, false);
         // each rank on its own: the two halves of the ranks side by side on a large system
         let (diag, weight, order) = (&self.diag, self.mass_weight, &self.layout.order[..n]);
+        let model_held = held;
         let fill = |order: &[u32],
                     inv_diag: &mut [Sym3],
                     chol: &mut [Lower3],
-                    mass: &mut [f64],
+                    ranked_mass: &mut [f64],
+                    ranked_diag: &mut [Sym3],
                     held: &mut [bool]| {
             let mut all_factored = true;
             for (k, &i) in order.iter().enumerate() {
-                let (i, h) = (i as usize, model.held[i as usize]);
-                mass[k] = weight * model.mass[i];
+                let (i, h) = (i as usize, model_held[i as usize]);
+                if B::LAPLACIAN {
+                    ranked_mass[k] = weight * mass[i];
+                } else {
+                    ranked_diag[k] = diag[i];
+                }
                 held[k] = h;
                 if h {
                     inv_diag[k] = Sym3::default();
@@ -89,34 +105,43 @@ impl SpringSystem {
         let half = n / 2;
         let (inv_lo, inv_hi) = self.inv_diag[..n].split_at_mut(half);
         let (chol_lo, chol_hi) = self.chol[..n].split_at_mut(half);
-        let (mass_lo, mass_hi) = self.mass[..n].split_at_mut(half);
+        let (mass_len, diag_len) = (self.mass.len(), self.diag_ranked.len());
+        let (mass_lo, mass_hi) = self.mass.split_at_mut(half.min(mass_len));
+        let (diag_lo, diag_hi) = self.diag_ranked.split_at_mut(half.min(diag_len));
         let (held_lo, held_hi) = self.held[..n].split_at_mut(half);
         let parallel = n >= PARALLEL_MIN_PARTICLES && solver_threads() > 1;
         let (lo, hi) = join(
             parallel,
-            || fill(&order[..half], inv_lo, chol_lo, mass_lo, held_lo),
-            || fill(&order[half..], inv_hi, chol_hi, mass_hi, held_hi),
+            || fill(&order[..half], inv_lo, chol_lo, mass_lo, diag_lo, held_lo),
+            || fill(&order[half..], inv_hi, chol_hi, mass_hi, diag_hi, held_hi),
         );
         self.ssor = !self.layout.has_loop && lo && hi;
     }
 }
 
 /// What the sweeps read of the system, by rank.
-#[derive(Clone, Copy)]
-pub(super) struct Sweeps<'a> {
+pub(super) struct Sweeps<'a, B> {
     pub(super) start: &'a [usize],
     pub(super) other: &'a [u32],
-    pub(super) coef: &'a [[f64; 4]],
+    pub(super) coef: &'a [B],
     pub(super) inv_diag: &'a [Sym3],
     pub(super) chol: &'a [Lower3],
     /// Where the separator starts.
     pub(super) s: usize,
 }
 
-impl Sweeps<'_> {
+impl<B> Clone for Sweeps<'_, B> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<B> Copy for Sweeps<'_, B> {}
+
+impl<B: OffBlock> Sweeps<'_, B> {
     /// The forward sweep at rank `k` of a part starting at `lo` whose entries of the sweep's
-    /// vector are `own`: `u = w D_k^-1 own_k`, then `B u` added to the later particles of `k`'s
-    /// springs, in `own` or, beyond it, in the separator's `spill`. Returns `u`.
+    /// vector are `own`: `u = w D_k^-1 own_k`, then `N^T u` added to the later particles of
+    /// `k`'s slots, in `own` or, beyond it, in the separator's `spill`. Returns `u`.
     #[inline(always)]
     fn forward_at(
         &self,
@@ -129,7 +154,7 @@ impl Sweeps<'_> {
         let hi = lo + own.len();
         let slots = self.start[k]..self.start[k + 1];
         for (&o, c) in self.other[slots.clone()].iter().zip(&self.coef[slots]) {
-            let (o, w) = (o as usize, block_mul(c, &u));
+            let (o, w) = (o as usize, c.mul_transpose(&u));
             if o < hi {
                 own[o - lo] += w;
             } else {
@@ -180,7 +205,7 @@ impl Sweeps<'_> {
 
     /// An iteration's backward sweep over a part: `p = r^ + beta p`, `t = P^-T G p`,
     /// `acc = G p - K t`, with `t` of the separator (`t_separator`) already known. With
-    /// `s = G p + sum of B t` over the later particles, `t = w D^-1 s` and `K t = (2 - w) s`. A
+    /// `s = G p + sum of N t` over the later particles, `t = w D^-1 s` and `K t = (2 - w) s`. A
     /// particle's springs are summed from the last down, so that the product with the most
     /// recent result comes last in the dependency chain from one particle to the next.
     pub(super) fn backward(
@@ -213,7 +238,7 @@ impl Sweeps<'_> {
                 } else {
                     t_separator[o - self.s]
                 };
-                sum += block_mul(c, &to);
+                sum += c.mul(&to);
             }
             t[j] = self.inv_diag[k].mul(&sum);
             acc[j] = g - sum * two_minus_omega;

@@ -70,7 +70,7 @@ fn ssor_and_jacobi_solve_the_same_system() {
     let mut x_ssor = vec![Vector3::zeros(); n];
     let ssor = solve(
         &sys,
-        model,
+        model.held,
         &b,
         &mut x_ssor,
         settings,
@@ -82,7 +82,7 @@ fn ssor_and_jacobi_solve_the_same_system() {
     let mut x_jacobi = vec![Vector3::zeros(); n];
     let jacobi = solve(
         &sys,
-        model,
+        model.held,
         &b,
         &mut x_jacobi,
         settings,
@@ -129,7 +129,7 @@ fn one_thread_or_two_give_the_same_bits() {
         let (mut one, mut two) = (start.clone(), start);
         let a = solve_on(
             &sys,
-            model,
+            model.held,
             &b,
             &mut one,
             more,
@@ -139,7 +139,7 @@ fn one_thread_or_two_give_the_same_bits() {
         );
         let c = solve_on(
             &sys,
-            model,
+            model.held,
             &b,
             &mut two,
             more,
@@ -212,7 +212,7 @@ fn a_start_from_a_span_is_the_best_of_its_combinations() {
     assert!(
         solve(
             &sys,
-            model,
+            model.held,
             &b,
             &mut exact,
             tight,
@@ -239,7 +239,7 @@ fn a_start_from_a_span_is_the_best_of_its_combinations() {
     let mut start = u0.clone();
     solve_from_span(
         &sys,
-        model,
+        model.held,
         &b,
         &mut start,
         [&u1, &u2, &u1],
@@ -264,7 +264,7 @@ fn a_start_from_a_span_is_the_best_of_its_combinations() {
     let mut start = u0.clone();
     let report = solve_from_span(
         &sys,
-        model,
+        model.held,
         &b,
         &mut start,
         [&u1, &exact, &u2],
@@ -297,7 +297,17 @@ fn springs_in_any_order_and_orientation_give_the_same_solution() {
     };
     let n = b.len();
     let mut x = vec![Vector3::zeros(); n];
-    assert!(solve(&sys, model, &b, &mut x, settings, &mut CgScratch::default()).converged);
+    assert!(
+        solve(
+            &sys,
+            model.held,
+            &b,
+            &mut x,
+            settings,
+            &mut CgScratch::default()
+        )
+        .converged
+    );
 
     // the springs reversed in order, every other one with its ends swapped
     let mut shuffled = model.springs.clone();
@@ -336,7 +346,7 @@ fn springs_in_any_order_and_orientation_give_the_same_solution() {
     assert!(
         solve(
             &sys2,
-            &shuffled,
+            shuffled.held,
             &b,
             &mut x2,
             settings,
@@ -349,5 +359,78 @@ fn springs_in_any_order_and_orientation_give_the_same_solution() {
         x.iter()
             .zip(&x2)
             .all(|(a, b)| (a - b).norm() <= 1e-8 * scale)
+    );
+}
+
+/// General (non-symmetric) off-diagonal blocks, the finite elements' kind: SSOR in Eisenstat's
+/// form and block-Jacobi both solve the system, on one thread and on two with the same bits.
+#[test]
+fn general_blocks_are_solved_with_either_preconditioner() {
+    use nalgebra::Matrix3;
+
+    use super::ElementSystem;
+    use super::blocks::Sym3;
+
+    let n = 5_000; // past PARALLEL_MIN_PARTICLES: the halves side by side
+    let edges: Vec<[u32; 2]> = (0..n as u32 - 1)
+        .map(|i| [i, i + 1])
+        .chain((0..n as u32 - 7).map(|i| [i, i + 7]))
+        .collect();
+    let mut sorted = edges.clone();
+    sorted.sort_unstable();
+    let mut sys = ElementSystem::default();
+    sys.begin_edges(n, &sorted);
+    sys.diag = vec![Sym3::default(); n];
+    for (e, &[a, b]) in sorted.iter().enumerate() {
+        let s = 1.0 + 0.1 * (e % 5) as f64;
+        let k = Matrix3::new(-1.0, 0.3, 0.0, 0.1, -0.5, 0.2, 0.0, -0.1, -0.7) * s;
+        sys.add_off(e, a, b, &k);
+        // diagonally dominant: each end gets more than the block's absolute row sums
+        for v in [a, b] {
+            sys.diag[v as usize] += Sym3::scalar(2.5 * s);
+        }
+    }
+    let mut held = vec![false; n];
+    held[0] = true;
+    sys.prepare_held(&held, &[]);
+    let b: Vec<Vector3> = (0..n)
+        .map(|i| Vector3::new(1.0, -((i % 13) as f64), 0.5))
+        .collect();
+    let settings = CgSettings {
+        relative_tolerance: 1e-12,
+        absolute_tolerance: 0.0,
+        max_iterations: 1_000,
+    };
+    let mut solutions = Vec::new();
+    for (ssor, parallel) in [(true, true), (true, false), (false, false)] {
+        sys.ssor = ssor;
+        let mut x = vec![Vector3::zeros(); n];
+        let report = solve_on(
+            &sys,
+            &held,
+            &b,
+            &mut x,
+            None,
+            settings,
+            &mut CgScratch::default(),
+            parallel,
+        );
+        assert!(report.converged, "{ssor}: {report:?}");
+        let mut y = vec![Vector3::zeros(); n];
+        sys.apply(&x, &mut y);
+        for i in 1..n {
+            assert!(
+                (y[i] - b[i]).norm() < 1e-10,
+                "{ssor}, {i}: {} vs {}",
+                y[i],
+                b[i]
+            );
+        }
+        assert_eq!(x[0], Vector3::zeros());
+        solutions.push(x);
+    }
+    assert_eq!(
+        solutions[0], solutions[1],
+        "the same bits on one thread or two"
     );
 }
