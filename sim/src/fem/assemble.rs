@@ -21,7 +21,7 @@ use crate::solver::system::{ElementSystem, Sym3};
 use crate::{Point3, Vector3};
 
 /// Tetrahedra from which the assembly's passes run on two threads (fewer: one, the same bits).
-pub(crate) const PARALLEL_MIN_TETS: usize = 1_000;
+pub(crate) const PARALLEL_MIN_TETS: usize = 4_000;
 
 /// Where each particle and each edge is in the tetrahedra: the passes' gather lists, derived
 /// with the elements (after every topology change).
