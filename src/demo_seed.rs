@@ -274,7 +274,7 @@ fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
     session::run(&session::Options {
         scene: BUILTIN_SCENE.into(),
         min_tets: Some(MIN_TETS),
-        time_step_s: None,
+        time_step: Default::default(),
         device: DeviceArg::Trainee {
             name: format!("level:{}", a.level),
             skill,

@@ -12,6 +12,7 @@ mod session;
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
+use cutlab_haptics::TimeStep;
 
 /// Training and assessment platform for surgical soft-tissue cutting.
 #[derive(Debug, Parser)]
@@ -82,9 +83,9 @@ enum Command {
         /// csv:PATH, recording:PATH or igtl:PORT (a tracker or haptic bridge).
         #[arg(long = "station-device")]
         station_devices: Vec<session::DeviceArg>,
-        /// The station's simulation step, ms (0.1-10; default the scene's), as for `session`.
-        #[arg(long)]
-        station_time_step_ms: Option<f64>,
+        /// The station's simulation step: ms (0.1-10), `auto` or `scene`, as for `session`.
+        #[arg(long, default_value = "scene")]
+        station_time_step_ms: TimeStep,
         #[command(flatten)]
         igtl: IgtlArgs,
     },
@@ -101,9 +102,10 @@ enum Command {
         /// A device offered besides the page's pointer (repeatable), as for `serve`.
         #[arg(long)]
         device: Vec<session::DeviceArg>,
-        /// The simulation step, ms (0.1-10; default the scene's), as for `session`.
-        #[arg(long)]
-        time_step_ms: Option<f64>,
+        /// The simulation step: ms (0.1-10), `scene`, or `auto` (the smallest that keeps real
+        /// time on this PC, measured at each start), as for `session`.
+        #[arg(long, default_value = "auto")]
+        time_step_ms: TimeStep,
         #[command(flatten)]
         igtl: IgtlArgs,
         /// Only print the station's link (no browser is opened).
@@ -119,10 +121,12 @@ enum Command {
         /// Resolution of a generated mesh: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,
-        /// The simulation step, ms (0.1-10, a whole number of servo periods; default the
-        /// scene's): longer steps keep a big mesh in real time at some cost in accuracy.
-        #[arg(long)]
-        time_step_ms: Option<f64>,
+        /// The simulation step: ms (0.1-10, a whole number of servo periods), `scene` (the
+        /// scene's own), or `auto` (the smallest of 1, 2, 4, 5, 10 ms whose loaded step takes at
+        /// most 70 % of it on this machine, measured at the start): longer steps keep a big
+        /// mesh in real time at some cost in accuracy.
+        #[arg(long, default_value = "scene")]
+        time_step_ms: TimeStep,
         /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
         /// 0 novice to 1 expert), csv:PATH (trajectory file), recording:PATH (the hand of a
         /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
@@ -331,7 +335,7 @@ fn run() -> anyhow::Result<()> {
                     addr: &addr,
                     demo: Some(&out.join("attempts")),
                     station_devices: Vec::new(),
-                    station_time_step_s: None,
+                    station_time_step: TimeStep::Scene,
                     igtl: Default::default(),
                     kiosk: None,
                 }),
@@ -355,7 +359,7 @@ fn run() -> anyhow::Result<()> {
                 addr: &addr,
                 demo: demo.then_some(recordings.as_path()),
                 station_devices,
-                station_time_step_s: station_time_step_ms.map(|ms| ms / 1e3),
+                station_time_step: station_time_step_ms,
                 igtl: igtl.options(),
                 kiosk: None,
             })
@@ -374,7 +378,7 @@ fn run() -> anyhow::Result<()> {
                 addr: &addr,
                 demo: None,
                 station_devices: device,
-                station_time_step_s: time_step_ms.map(|ms| ms / 1e3),
+                station_time_step: time_step_ms,
                 igtl: igtl.options(),
                 kiosk: Some(serve::Kiosk {
                     trainee,
@@ -411,7 +415,7 @@ fn run() -> anyhow::Result<()> {
         } => session::run(&session::Options {
             scene,
             min_tets,
-            time_step_s: time_step_ms.map(|ms| ms / 1e3),
+            time_step: time_step_ms,
             device,
             igtl: igtl.options(),
             clock,

@@ -8,6 +8,7 @@ use anyhow::Context;
 use cutlab_assessor::AssessError;
 use cutlab_assessor::store::{Role, Store};
 use cutlab_dashboard::{AppState, Config, DEMO_ACCOUNTS};
+use cutlab_haptics::TimeStep;
 use cutlab_haptics::device::{DeviceSpec, IgtlOptions};
 
 /// What a served dashboard runs with.
@@ -19,8 +20,8 @@ pub struct Options<'a> {
     pub demo: Option<&'a Path>,
     /// The station's devices besides the page's pointer.
     pub station_devices: Vec<DeviceSpec>,
-    /// The station's simulation step instead of the scene's, s.
-    pub station_time_step_s: Option<f64>,
+    /// The station's simulation step.
+    pub station_time_step: TimeStep,
     pub igtl: IgtlOptions,
     /// A kiosk for one trainee (`cutlab station`).
     pub kiosk: Option<Kiosk>,
@@ -82,7 +83,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
         let config = Config {
             station: cutlab_station::StationSettings {
                 devices: o.station_devices,
-                time_step_s: o.station_time_step_s,
+                time_step: o.station_time_step,
                 igtl: o.igtl,
                 ..cutlab_station::StationSettings::new(station_dir)
             },

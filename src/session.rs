@@ -11,8 +11,9 @@ use cutlab_haptics::device::{
     CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, SyntheticTrainee,
 };
 use cutlab_haptics::servo::Clock;
+use cutlab_haptics::step_choice::AUTO_BUDGET;
 use cutlab_haptics::tap::TapSettings;
-use cutlab_haptics::{Session, SessionConfig};
+use cutlab_haptics::{Session, SessionConfig, TimeStep};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
 use cutlab_recorder::{RecordedHand, Recording, RerunTarget, WriterOptions};
 use cutlab_sim::Vector3;
@@ -41,8 +42,8 @@ pub type DeviceArg = DeviceSpec;
 pub struct Options {
     pub scene: String,
     pub min_tets: Option<usize>,
-    /// The simulation step instead of the scene's, s.
-    pub time_step_s: Option<f64>,
+    /// The simulation step.
+    pub time_step: TimeStep,
     pub device: DeviceArg,
     /// How an OpenIGTLink device sends the force back.
     pub igtl: IgtlOptions,
@@ -187,11 +188,17 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     for note in &scene.read_notes {
         say!(o.quiet, "note: {note}");
     }
-    let scene = match o.time_step_s {
+    let scene = match o.time_step.fixed_s() {
         Some(dt) => scene.with_time_step(dt)?,
         None => scene,
     };
     let mut session = Session::new(&scene).context("preparing the session")?;
+    if o.time_step == TimeStep::Auto {
+        let choice = session
+            .choose_real_time_step(AUTO_BUDGET)
+            .context("measuring the simulation step")?;
+        say!(o.quiet, "simulation step: {choice}");
+    }
     if o.localise {
         session.sim.settings.localisation = Some(LocalisationSettings::default());
     }
@@ -243,7 +250,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     {
         bail!("--keyframe-every must be positive and --surface-hz non-negative");
     }
-    let step_s = scene.solver.time_step_s;
+    let step_s = session.sim.settings.time_step_s;
     let keyframe_every_steps = ((o.keyframe_every_s / step_s).round() as u64).max(1);
     // the surface BVH is built again at every keyframe, so that a replay can resume at each
     config.collider_rebuild_every_steps = keyframe_every_steps;

@@ -135,7 +135,7 @@ fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result()
 
 #[test]
 fn bad_session_arguments_give_a_clear_error() {
-    let cases: [(&[&str], &str); 9] = [
+    let cases: [(&[&str], &str); 10] = [
         (
             &["session", "--scene", "no-such-scene", "--duration", "1"],
             "unknown scene \"no-such-scene\"",
@@ -165,7 +165,11 @@ fn bad_session_arguments_give_a_clear_error() {
         ),
         (
             &["session", "--time-step-ms", "NaN", "--min-tets", "500"],
-            "outside 0.1-10 ms",
+            "not `NaN`",
+        ),
+        (
+            &["session", "--time-step-ms", "fast", "--min-tets", "500"],
+            "`auto`, `scene` or milliseconds",
         ),
         (
             &["session", "--time-step-ms", "2.5", "--min-tets", "500"],
@@ -600,6 +604,35 @@ fn a_longer_simulation_step_is_recorded_and_replayed_bit_exact() {
         ),
         "{stdout}"
     );
+    let mcap = out.join("session.mcap");
+    let (ok, stdout, err) = cutlab(&["replay", mcap.to_str().expect("utf8")]);
+    let _ = std::fs::remove_dir_all(&out);
+    assert!(ok && stdout.contains("bit-exact"), "{stdout}{err}");
+}
+
+/// `--time-step-ms auto` measures this machine, says what it chose and why, and records the
+/// step it chose, so the replay is bit-exact whatever another machine would choose.
+#[test]
+fn an_automatic_simulation_step_is_said_recorded_and_replayed_bit_exact() {
+    let out = std::env::temp_dir().join(format!("cutlab-cli-auto-{}", std::process::id()));
+    let out_s = out.to_str().expect("utf8");
+    let (ok, stdout, err) = cutlab(&[
+        "session",
+        "--time-step-ms",
+        "auto",
+        "--min-tets",
+        "1500",
+        "--duration",
+        "2",
+        "--out",
+        out_s,
+    ]);
+    assert!(ok, "{err}");
+    let said = stdout
+        .lines()
+        .find(|l| l.starts_with("simulation step: "))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(said.contains("a loaded step took"), "{said}");
     let mcap = out.join("session.mcap");
     let (ok, stdout, err) = cutlab(&["replay", mcap.to_str().expect("utf8")]);
     let _ = std::fs::remove_dir_all(&out);

@@ -132,9 +132,10 @@ pub enum BenchCommand {
         /// Seconds each measured session runs.
         #[arg(long, default_value_t = 10.0)]
         duration: f64,
-        /// The simulation step, ms (default the scene's, 1 ms).
-        #[arg(long)]
-        time_step_ms: Option<f64>,
+        /// The simulation step: ms, `scene` (the scene's, 1 ms) or `auto` (the smallest that
+        /// keeps real time here, measured at each session's start).
+        #[arg(long, default_value = "scene")]
+        time_step_ms: cutlab_haptics::TimeStep,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -195,7 +196,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
             time_step_ms,
             json,
         } => station::run(&station::Options {
-            time_step_s: time_step_ms.map(|ms| ms / 1e3),
+            time_step: time_step_ms,
             tets: match (tets.is_empty(), quick) {
                 (false, _) => tets,
                 (true, true) => vec![12_800],

@@ -36,8 +36,8 @@ pub struct Options {
     pub tets: Vec<usize>,
     /// Length of each measured session, s.
     pub duration_s: f64,
-    /// The simulation step instead of the scene's, s.
-    pub time_step_s: Option<f64>,
+    /// The simulation step.
+    pub time_step: cutlab_haptics::TimeStep,
     pub json: bool,
 }
 
@@ -138,7 +138,7 @@ async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Res
     cutlab_dashboard::seed_demo_accounts(&store).await?;
     let settings = StationSettings {
         min_tets: Some(tets),
-        time_step_s: o.time_step_s,
+        time_step: o.time_step,
         devices: vec!["expert".parse().map_err(anyhow::Error::msg)?],
         duration_s: 600.0,
         ..StationSettings::new(dir.path().join("station-attempts"))

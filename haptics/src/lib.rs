@@ -32,6 +32,7 @@ pub mod pose;
 pub mod render;
 pub mod servo;
 pub mod session;
+pub mod step_choice;
 pub mod stepper;
 pub mod tap;
 
@@ -41,6 +42,7 @@ pub use device::{DeviceFault, DeviceLimits, HapticDevice};
 pub use error::HapticsError;
 pub use pose::ToolPose;
 pub use session::{Session, SessionConfig, SessionReport};
+pub use step_choice::{StepChoice, TimeStep};
 pub use stepper::{SessionStepper, StateHash, StepOutput};
 pub use tap::{RecordTap, SimRecord, TapFeed, TapSettings};
 

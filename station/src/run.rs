@@ -19,8 +19,9 @@ use cutlab_haptics::device::{
 };
 use cutlab_haptics::render::RenderSettings;
 use cutlab_haptics::servo::{Clock, PeriodStats};
+use cutlab_haptics::step_choice::AUTO_BUDGET;
 use cutlab_haptics::tap::TapSettings;
-use cutlab_haptics::{Session, SessionConfig, ToolPose, Vector3};
+use cutlab_haptics::{Session, SessionConfig, TimeStep, ToolPose, Vector3};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
 use cutlab_recorder::writer::RecordObserver;
 use cutlab_recorder::{RerunSink, RerunTarget, WriterOptions};
@@ -43,8 +44,9 @@ pub struct StationSettings {
     /// The scene's resolution when it is generated: at least this many tetrahedra (`None`:
     /// the scene's own).
     pub min_tets: Option<usize>,
-    /// The simulation step instead of the scene's, s (`None`: the scene's).
-    pub time_step_s: Option<f64>,
+    /// The simulation step (the scene's, a fixed one, or the smallest that keeps real time
+    /// here, measured at each session's start).
+    pub time_step: TimeStep,
     /// A keyframe every this many seconds (a replay resumes at each).
     pub keyframe_every_s: f64,
     /// The live clock for a person; the virtual clock for tests and benchmarks.
@@ -67,7 +69,7 @@ impl StationSettings {
             duration_s: 300.0,
             view_hz: 60.0,
             min_tets: None,
-            time_step_s: None,
+            time_step: TimeStep::Scene,
             keyframe_every_s: 1.0,
             clock: Clock::Live,
             rrd: true,
@@ -280,16 +282,20 @@ pub async fn start(
     let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
     let scene_name = exercise.scene.clone();
     let guided = request.guided && !exercise.exam_only;
-    let (min_tets, time_step_s) = (settings.min_tets, settings.time_step_s);
+    let (min_tets, time_step) = (settings.min_tets, settings.time_step);
     let force_limit_newtons = expert_plan.force_limit_n;
     // building and settling the tissue takes a while: off the async threads
     let (scene, session, plan) = tokio::task::spawn_blocking(move || {
         let scene = Scene::load(&scene_name, BuildOptions { min_tets })?;
-        let scene = match time_step_s {
+        let scene = match time_step.fixed_s() {
             Some(dt) => scene.with_time_step(dt)?,
             None => scene,
         };
-        let session = Session::new(&scene)?;
+        let mut session = Session::new(&scene)?;
+        if time_step == TimeStep::Auto {
+            let choice = session.choose_real_time_step(AUTO_BUDGET)?;
+            tracing::info!("station: simulation step {choice}");
+        }
         let plan = attempt::plan_on_tissue(&session, &expert_plan)?;
         Ok::<_, StationError>((scene, session, plan))
     })
@@ -332,7 +338,7 @@ pub async fn start(
         .await?
         .id;
 
-    let step_s = scene.solver.time_step_s;
+    let step_s = session.sim.settings.time_step_s;
     let keyframe_every_steps = ((settings.keyframe_every_s / step_s).round() as u64).max(1);
     config.collider_rebuild_every_steps = keyframe_every_steps;
     let record_settings = RecordSettings {
