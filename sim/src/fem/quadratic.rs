@@ -31,8 +31,8 @@
 //!
 //! # Scope
 //!
-//! Small displacements (linear elasticity), solved once by the block symmetric Gauss-Seidel
-//! PCG of [`super::system`], some nodes held at prescribed displacements. Static only: no mass
+//! Small displacements (linear elasticity), solved once by the block-SSOR PCG of
+//! [`crate::solver::system`] (general 3x3 blocks), some nodes held at prescribed displacements. Static only: no mass
 //! (the lumped mass of quadratic elements needs special treatment), no rotation, no cutting:
 //! this is the converged reference beside the co-rotational linear elements of the same mesh,
 //! for the problems whose answer is linear (small loads), not a model the session runs.
