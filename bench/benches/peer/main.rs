@@ -304,6 +304,12 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     let plan = Plan::from_args();
+    // single thread on both sides: cutlab's sweeps and assembly take a second thread on large
+    // systems, Rapier's soft bodies run on one
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build_global()
+        .map_err(|e| anyhow::anyhow!("a one-thread pool for cutlab: {e}"))?;
     let results = measure(&plan)?;
     if plan.json {
         println!("{}", serde_json::to_string_pretty(&results)?);
