@@ -82,8 +82,8 @@ pub struct StepInputs<'a> {
     pub h: f64,
 }
 
-/// Fills `sys` (after `begin_edges` on the elements' edges) and `rhs` with the implicit
-/// step's system `(M + h C + h^2 K) dv = h (f - h K v)`, `terms` as scratch.
+/// Fills `sys` (after `begin_edges` on the elements' edges: every block is written) and `rhs`
+/// with the implicit step's system `(M + h C + h^2 K) dv = h (f - h K v)`, `terms` as scratch.
 pub fn implicit_system(
     inputs: &StepInputs<'_>,
     terms: &mut Vec<TetTerms>,
@@ -107,8 +107,6 @@ pub fn implicit_system(
     let n = rhs.len();
     let edges = &fem.edges;
     let (rank, edge_of_slot, coef, diag) = sys.slot_parts_mut();
-    diag.clear();
-    diag.resize(n, Sym3::default());
     {
         let half = n / 2;
         let (rhs_lo, rhs_hi) = rhs.split_at_mut(half);

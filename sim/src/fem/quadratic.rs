@@ -246,8 +246,7 @@ impl QuadraticStatics {
         pairs.sort_unstable();
         pairs.dedup();
         let mut system = ElementSystem::default();
-        system.begin_edges(n, &pairs);
-        system.diag = vec![Sym3::default(); n];
+        system.begin_sums(n, &pairs);
         let mut pre_stress_forces = vec![Vector3::zeros(); n];
         for (t, tet) in mesh.tets.iter().enumerate() {
             let m = material(mesh.regions[t]);

@@ -49,17 +49,6 @@ pub struct FemScratch {
     terms: Vec<TetTerms>,
 }
 
-impl FemScratch {
-    /// Forgets the past velocity changes (after a jump of the state).
-    pub fn reset_warm_start(&mut self) {
-        let [p1, p2, p3] = &mut self.dv_previous;
-        for buf in [&mut self.dv, p1, p2, p3] {
-            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
-        }
-        self.history = 0;
-    }
-}
-
 /// What one tetrahedron contributes: its rotation, and the matrices whose columns are the
 /// forces on local vertices 1..3 (`-W R sigma(epsilon) D_m^-T`, the elastic force) and
 /// `W R sigma(sym(R^T G)) D_m^-T` (the product `K v`); vertex 0 gets minus their sum.
@@ -321,9 +310,7 @@ pub fn statics(
         // Newton with the exact tangent where it is positive definite; where the solve breaks
         // down on it (an indefinite tangent far from equilibrium), the warped stiffness.
         for attempt in [exact, false] {
-            sys.begin_edges(n, &fem.edges);
-            sys.diag.clear();
-            sys.diag.resize(n, Sym3::default());
+            sys.begin_sums(n, &fem.edges);
             for t in 0..fem.len() {
                 match attempt
                     .then(|| fem.exact_stiffness_blocks(t, &state.positions))
@@ -416,8 +403,7 @@ mod tests {
     /// An empty system on the elements' edges.
     fn stiffness_system(n: usize, fem: &FemModel) -> ElementSystem {
         let mut sys = ElementSystem::default();
-        sys.begin_edges(n, &fem.edges);
-        sys.diag = vec![Sym3::default(); n];
+        sys.begin_sums(n, &fem.edges);
         sys
     }
 

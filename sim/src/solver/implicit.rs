@@ -52,17 +52,6 @@ pub struct ImplicitScratch {
     pub(crate) guess: Vec<Option<Vector3>>,
 }
 
-impl ImplicitScratch {
-    /// Forgets the past velocity changes (after a jump of the state).
-    pub fn reset_warm_start(&mut self) {
-        let [p1, p2, p3] = &mut self.dv_previous;
-        for buf in [&mut self.dv, p1, p2, p3] {
-            buf.iter_mut().for_each(|d| *d = Vector3::zeros());
-        }
-        self.history = 0;
-    }
-}
-
 /// One backward-Euler step of `h` seconds.
 pub fn step(
     model: &Particles<'_>,

@@ -118,11 +118,20 @@ impl WarmStart {
     }
 }
 
-/// The warm start of a solver's scratch: its past velocity changes and its CG's residual
-/// ratio.
+/// The warm start of a solver's scratch (the springs' and the finite elements' keep the same
+/// fields): its past velocity changes and its CG's residual ratio.
 macro_rules! warm_start_of {
     ($scratch:ty) => {
         impl $scratch {
+            /// Forgets the past velocity changes (after a jump of the state).
+            pub fn reset_warm_start(&mut self) {
+                let [p1, p2, p3] = &mut self.dv_previous;
+                for buf in [&mut self.dv, p1, p2, p3] {
+                    buf.iter_mut().for_each(|d| *d = crate::Vector3::zeros());
+                }
+                self.history = 0;
+            }
+
             pub(crate) fn warm_start(&self) -> WarmStart {
                 WarmStart {
                     cg_residual_ratio: self.cg.residual_ratio,

@@ -53,13 +53,22 @@ pub struct BlockSystem<B> {
 
 impl<B: OffBlock> BlockSystem<B> {
     /// Sizes the block storage for the edges `ends` of `n` particles (the layout is rebuilt
-    /// only when they changed), the blocks zeroed.
+    /// only when they changed). The blocks keep what they held: for an assembly that writes
+    /// every one (see [`Self::begin_sums`] for one that adds into them).
     pub fn begin_edges(&mut self, n: usize, ends: &[[u32; 2]]) {
         if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
             self.layout.build(n, ends);
         }
-        self.coef.clear();
         self.coef.resize(ends.len(), B::default());
+        self.diag.resize(n, Sym3::default());
+    }
+
+    /// [`Self::begin_edges`] with every block (off the diagonal and on it) zeroed: for an
+    /// assembly that adds into them.
+    pub fn begin_sums(&mut self, n: usize, ends: &[[u32; 2]]) {
+        self.begin_edges(n, ends);
+        self.coef.fill(B::default());
+        self.diag.fill(Sym3::default());
     }
 
     /// For assembling in one pass: the slot of each edge (after [`Self::begin`]), the block
@@ -71,7 +80,7 @@ impl<B: OffBlock> BlockSystem<B> {
     /// For assembling by slot (after [`Self::begin_edges`]): each particle's place in the
     /// sweep order (a slot's first particle is its edge's end of lower rank), the edge of each
     /// slot, the block storage by slot (see [`OffBlock`]) and the diagonal blocks.
-    pub fn slot_parts_mut(&mut self) -> (&[u32], &[u32], &mut [B], &mut Vec<Sym3>) {
+    pub fn slot_parts_mut(&mut self) -> (&[u32], &[u32], &mut [B], &mut [Sym3]) {
         (
             self.layout.rank(),
             &self.layout.spring,
@@ -93,29 +102,13 @@ impl ElementSystem {
             self.coef[slot] -= k.transpose();
         }
     }
-
-    /// `y = A p` (after [`Self::prepare`]; held rows zeroed).
-    pub fn apply(&self, p: &[Vector3], y: &mut [Vector3]) {
-        let order = &self.layout.order[..p.len()];
-        let p_ranked: Vec<Vector3> = order.iter().map(|&i| p[i as usize]).collect();
-        let mut y_ranked = vec![Vector3::zeros(); p.len()];
-        self.apply_ranked(&p_ranked, &mut y_ranked, &mut Vec::new(), false);
-        for (&i, y_k) in order.iter().zip(&y_ranked) {
-            y[i as usize] = *y_k;
-        }
-    }
 }
 
 impl SpringSystem {
     /// Sizes the block storage for the springs of `model` (the layout is rebuilt only when the
     /// springs changed).
     pub fn begin(&mut self, model: &Particles<'_>) {
-        let n = model.vertex_count();
-        let ends = &model.springs.ends;
-        if self.layout.ends != *ends || self.layout.start.len() != n + 1 {
-            self.layout.build(n, ends);
-        }
-        self.coef.resize(ends.len(), [0.0; 4]);
+        self.begin_edges(model.vertex_count(), &model.springs.ends);
     }
 
     /// Whether the springs (of [`Self::begin`]) come sorted by their first end, each `[a, b]`
@@ -142,22 +135,20 @@ impl SpringSystem {
     pub fn set_block(&mut self, e: usize, beta: f64, gamma: f64, n: &Vector3) {
         self.coef[self.layout.slot[e] as usize] = block_coefficients(beta, gamma, n);
     }
+}
 
-    /// `y = A p` with held rows zeroed (after [`Self::prepare`]).
-    #[cfg(test)]
-    pub fn apply(&self, model: &Particles<'_>, p: &[Vector3], y: &mut [Vector3]) {
-        let n = model.vertex_count();
-        let order = &self.layout.order[..n];
+impl<B: OffBlock> BlockSystem<B> {
+    /// `y = A p` with held rows zeroed (after [`Self::prepare_held`]).
+    pub fn apply(&self, p: &[Vector3], y: &mut [Vector3]) {
+        let order = &self.layout.order[..p.len()];
         let p_ranked: Vec<Vector3> = order.iter().map(|&i| p[i as usize]).collect();
-        let mut y_ranked = vec![Vector3::zeros(); n];
+        let mut y_ranked = vec![Vector3::zeros(); p.len()];
         self.apply_ranked(&p_ranked, &mut y_ranked, &mut Vec::new(), false);
         for (&i, y_k) in order.iter().zip(&y_ranked) {
             y[i as usize] = *y_k;
         }
     }
-}
 
-impl<B: OffBlock> BlockSystem<B> {
     /// `y = A p` with held rows zeroed, both by rank: the halves side by side when `parallel`
     /// (the second's products with the separator gathered in `spill` first), then the
     /// separator; the same bits either way. `p` may hold one vector or several ([`Lanes`]).

@@ -65,22 +65,21 @@ impl<B: OffBlock> BlockSystem<B> {
         self.held.resize(n, false);
         // each rank on its own: the two halves of the ranks side by side on a large system
         let (diag, weight, order) = (&self.diag, self.mass_weight, &self.layout.order[..n]);
-        let model_held = held;
         let fill = |order: &[u32],
                     inv_diag: &mut [Sym3],
                     chol: &mut [Lower3],
                     ranked_mass: &mut [f64],
                     ranked_diag: &mut [Sym3],
-                    held: &mut [bool]| {
+                    ranked_held: &mut [bool]| {
             let mut all_factored = true;
             for (k, &i) in order.iter().enumerate() {
-                let (i, h) = (i as usize, model_held[i as usize]);
+                let (i, h) = (i as usize, held[i as usize]);
                 if B::LAPLACIAN {
                     ranked_mass[k] = weight * mass[i];
                 } else {
                     ranked_diag[k] = diag[i];
                 }
-                held[k] = h;
+                ranked_held[k] = h;
                 if h {
                     inv_diag[k] = Sym3::default();
                     chol[k] = Lower3::default();
