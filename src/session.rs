@@ -11,7 +11,6 @@ use cutlab_haptics::device::{
     CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, SyntheticTrainee,
 };
 use cutlab_haptics::servo::Clock;
-use cutlab_haptics::step_choice::AUTO_BUDGET;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig, TimeStep};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
@@ -188,15 +187,9 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     for note in &scene.read_notes {
         say!(o.quiet, "note: {note}");
     }
-    let scene = match o.time_step.fixed_s() {
-        Some(dt) => scene.with_time_step(dt)?,
-        None => scene,
-    };
-    let mut session = Session::new(&scene).context("preparing the session")?;
-    if o.time_step == TimeStep::Auto {
-        let choice = session
-            .choose_real_time_step(AUTO_BUDGET)
-            .context("measuring the simulation step")?;
+    let (scene, mut session, choice) =
+        Session::at_time_step(scene, o.time_step).context("preparing the session")?;
+    if let Some(choice) = choice {
         say!(o.quiet, "simulation step: {choice}");
     }
     if o.localise {

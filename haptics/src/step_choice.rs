@@ -14,7 +14,7 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use cutlab_sim::Vector3;
-use cutlab_sim::scene::TIME_STEP_RANGE_S;
+use cutlab_sim::scene::{Scene, TIME_STEP_RANGE_S};
 
 use crate::{HapticsError, Session};
 
@@ -137,6 +137,26 @@ impl fmt::Display for StepChoice {
 }
 
 impl Session {
+    /// Settles `scene` at the simulation step `step` asks for: the scene's own, a fixed one
+    /// (the scene is changed to it, which checks it against the scene's rules), or the one
+    /// [`Self::choose_real_time_step`] measures with [`AUTO_BUDGET`] (returned with what it
+    /// measured).
+    pub fn at_time_step(
+        scene: Scene,
+        step: TimeStep,
+    ) -> Result<(Scene, Self, Option<StepChoice>), HapticsError> {
+        let scene = match step.fixed_s() {
+            Some(dt) => scene.with_time_step(dt)?,
+            None => scene,
+        };
+        let mut session = Self::new(&scene)?;
+        let choice = match step {
+            TimeStep::Auto => Some(session.choose_real_time_step(AUTO_BUDGET)?),
+            TimeStep::Scene | TimeStep::Fixed(_) => None,
+        };
+        Ok((scene, session, choice))
+    }
+
     /// Times loaded steps of the settled tissue at each of [`AUTO_STEPS_S`] (see the module
     /// documentation) and sets the simulation's step to the first whose median takes at most
     /// `budget` (0-1] of it, or to the largest. The session's state is left as it was.

@@ -19,7 +19,6 @@ use cutlab_haptics::device::{
 };
 use cutlab_haptics::render::RenderSettings;
 use cutlab_haptics::servo::{Clock, PeriodStats};
-use cutlab_haptics::step_choice::AUTO_BUDGET;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig, TimeStep, ToolPose, Vector3};
 use cutlab_recorder::record::{self, Provenance, RecordSettings};
@@ -287,13 +286,8 @@ pub async fn start(
     // building and settling the tissue takes a while: off the async threads
     let (scene, session, plan) = tokio::task::spawn_blocking(move || {
         let scene = Scene::load(&scene_name, BuildOptions { min_tets })?;
-        let scene = match time_step.fixed_s() {
-            Some(dt) => scene.with_time_step(dt)?,
-            None => scene,
-        };
-        let mut session = Session::new(&scene)?;
-        if time_step == TimeStep::Auto {
-            let choice = session.choose_real_time_step(AUTO_BUDGET)?;
+        let (scene, session, choice) = Session::at_time_step(scene, time_step)?;
+        if let Some(choice) = choice {
             tracing::info!("station: simulation step {choice}");
         }
         let plan = attempt::plan_on_tissue(&session, &expert_plan)?;
