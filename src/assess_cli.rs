@@ -3,11 +3,11 @@
 //! migrated on first use, with the built-in exercise).
 
 use std::io::BufRead;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Subcommand;
-use cutlab_assessor::store::{NewExercise, Role, Store, default_db_path};
+use cutlab_assessor::store::{DbLocation, NewExercise, Role, Store, default_db};
 use cutlab_assessor::{ExpertPlan, proficiency};
 
 /// The assessment commands, flattened into the top-level command enum.
@@ -147,19 +147,19 @@ pub enum ExportCommand {
 }
 
 /// Runs an assessment command; `db` is the global `--db`.
-pub fn run(db: Option<&Path>, command: AssessCommand) -> anyhow::Result<()> {
+pub fn run(db: Option<&DbLocation>, command: AssessCommand) -> anyhow::Result<()> {
     match command {
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json),
         command => {
-            let path = default_db_path(db);
+            let location = default_db(db);
             let rt = tokio::runtime::Builder::new_current_thread()
                 .enable_all()
                 .build()
                 .context("starting the async runtime")?;
             rt.block_on(async {
-                let store = Store::open(&path)
+                let store = Store::open(&location)
                     .await
-                    .with_context(|| format!("opening the database {}", path.display()))?;
+                    .with_context(|| format!("opening the database {location}"))?;
                 store.ensure_builtins().await?;
                 let result = with_store(&store, command).await;
                 store.close().await;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use cutlab_assessor::proficiency::DEFAULT_K;
 use cutlab_assessor::store::{
-    BUILTIN_EXERCISE, BUILTIN_SCENE, NewExercise, Store, default_thresholds,
+    BUILTIN_EXERCISE, BUILTIN_SCENE, DbLocation, NewExercise, Store, default_thresholds,
 };
 use cutlab_assessor::{AssessError, ExpertPlan};
 use cutlab_dashboard::seed_demo_accounts;
@@ -67,7 +67,7 @@ pub fn axial_plan() -> Result<ExpertPlan, AssessError> {
 /// Seeds the demo's history into the database `db` (recordings under `dir`) unless
 /// [`DEMO_CURRICULUM`] exists already; returns whether it seeded. The accounts and cohort are
 /// made sure of either way.
-pub fn run(db: &Path, dir: &Path) -> anyhow::Result<bool> {
+pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -75,7 +75,7 @@ pub fn run(db: &Path, dir: &Path) -> anyhow::Result<bool> {
     let open = || async {
         Store::open(db)
             .await
-            .with_context(|| format!("opening the database {}", db.display()))
+            .with_context(|| format!("opening the database {db}"))
     };
     let done = rt.block_on(async {
         let store = open().await?;
@@ -232,7 +232,12 @@ async fn ensure_axial_exercise(store: &Store) -> anyhow::Result<()> {
 }
 
 /// Runs each lane's attempts in order, the lanes side by side (one per core).
-fn run_lanes(db: &Path, dir: &Path, what: &str, lanes: &[Vec<Attempt>]) -> anyhow::Result<()> {
+fn run_lanes(
+    db: &DbLocation,
+    dir: &Path,
+    what: &str,
+    lanes: &[Vec<Attempt>],
+) -> anyhow::Result<()> {
     let total: usize = lanes.iter().map(Vec::len).sum();
     let bar = cutlab_bench::progress::bar(total as u64, false);
     bar.set_message(what.to_owned());
@@ -266,7 +271,7 @@ fn run_lanes(db: &Path, dir: &Path, what: &str, lanes: &[Vec<Attempt>]) -> anyho
 }
 
 /// One attempt: a recorded session of a synthetic trainee at the attempt's level, scored.
-fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
+fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
     let out: PathBuf = dir
         .join(a.exercise)
         .join(format!("{}-{}", a.trainee, a.seed));
@@ -290,7 +295,7 @@ fn simulate(db: &Path, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
         // the dashboard's replay review opens the .rrd in the rerun viewer
         rerun: Some(RerunTarget::File(PathBuf::from("session.rrd"))),
         attempt: Some(AttemptArgs {
-            db: db.to_owned(),
+            db: db.clone(),
             exercise: a.exercise.into(),
             trainee: a.trainee.into(),
             expert: a.expert,

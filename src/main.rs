@@ -20,9 +20,10 @@ use cutlab_haptics::TimeStep;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// The assessment database (else $CUTLAB_DB, else ./cutlab.db).
+    /// The assessment database: an SQLite file or a `postgres://` URL (else $CUTLAB_DB, else
+    /// ./cutlab.db).
     #[arg(long, global = true)]
-    db: Option<PathBuf>,
+    db: Option<cutlab_assessor::DbLocation>,
 }
 
 /// How an OpenIGTLink device (`igtl:PORT`) sends the force back.
@@ -281,10 +282,27 @@ fn main() -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             // the whole chain on one line, without a backtrace: errors are for users
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", one_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes on one line, each said once: a cause whose text is already in
+/// the line (an error that shows its source, `#[error("database: {0}")]`) is not repeated.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
 }
 
 /// `print!` panics when stdout is gone (`cutlab scene list | head -1`). Such a panic ends
@@ -316,7 +334,9 @@ fn stdout_errors_end_quietly() {
 fn run() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                // PostgreSQL's notices ("... already exists, skipping") are not news
+                .unwrap_or_else(|_| "info,sqlx::postgres::notice=warn".into()),
         )
         .with_writer(std::io::stderr)
         .init();
@@ -331,7 +351,7 @@ fn run() -> anyhow::Result<()> {
             demo::run(&out, min_tets, &scene)?;
             match addr {
                 Some(addr) => serve::run(serve::Options {
-                    db: &cutlab_assessor::default_db_path(cli.db.as_deref()),
+                    db: &cutlab_assessor::default_db(cli.db.as_ref()),
                     addr: &addr,
                     demo: Some(&out.join("attempts")),
                     station_devices: Vec::new(),
@@ -349,9 +369,11 @@ fn run() -> anyhow::Result<()> {
             station_time_step_ms,
             igtl,
         } => {
-            let db = cutlab_assessor::default_db_path(cli.db.as_deref());
+            let db = cutlab_assessor::default_db(cli.db.as_ref());
+            // beside an SQLite file; in the working directory for a server
             let recordings = db
-                .parent()
+                .sqlite_path()
+                .and_then(std::path::Path::parent)
                 .unwrap_or(std::path::Path::new("."))
                 .join("demo-attempts");
             serve::run(serve::Options {
@@ -372,7 +394,7 @@ fn run() -> anyhow::Result<()> {
             igtl,
             no_browser,
         } => {
-            let db = cutlab_assessor::default_db_path(cli.db.as_deref());
+            let db = cutlab_assessor::default_db(cli.db.as_ref());
             serve::run(serve::Options {
                 db: &db,
                 addr: &addr,
@@ -430,7 +452,7 @@ fn run() -> anyhow::Result<()> {
                 rerun.as_ref(),
             ),
             attempt: trainee.map(|trainee| session::AttemptArgs {
-                db: cutlab_assessor::default_db_path(cli.db.as_deref()),
+                db: cutlab_assessor::default_db(cli.db.as_ref()),
                 exercise,
                 trainee,
                 expert: false,
@@ -486,6 +508,33 @@ fn run() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Bench { command } => cutlab_bench::run(command),
-        Command::Assess(command) => assess_cli::run(cli.db.as_deref(), command),
+        Command::Assess(command) => assess_cli::run(cli.db.as_ref(), command),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_line;
+
+    #[test]
+    fn a_cause_is_said_once() {
+        /// An error that shows its source, as `#[error("database: {0}")]` does.
+        #[derive(Debug)]
+        struct Shows(std::io::Error);
+        impl std::fmt::Display for Shows {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                write!(f, "database: {}", self.0)
+            }
+        }
+        impl std::error::Error for Shows {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                Some(&self.0)
+            }
+        }
+        let io = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "refused");
+        let e = anyhow::Error::new(Shows(io)).context("opening the database x");
+        assert_eq!(one_line(&e), "opening the database x: database: refused");
+        let plain = anyhow::anyhow!("inner").context("outer");
+        assert_eq!(one_line(&plain), "outer: inner");
     }
 }

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::Context;
 use cutlab_assessor::AssessError;
-use cutlab_assessor::store::{Role, Store};
+use cutlab_assessor::store::{DbLocation, Role, Store};
 use cutlab_dashboard::{AppState, Config, DEMO_ACCOUNTS};
 use cutlab_haptics::TimeStep;
 use cutlab_haptics::device::{DeviceSpec, IgtlOptions};
@@ -14,7 +14,7 @@ use cutlab_haptics::device::{DeviceSpec, IgtlOptions};
 /// What a served dashboard runs with.
 #[derive(Debug)]
 pub struct Options<'a> {
-    pub db: &'a Path,
+    pub db: &'a DbLocation,
     pub addr: &'a str,
     /// Seed the demo first (a directory for its recordings).
     pub demo: Option<&'a Path>,
@@ -44,7 +44,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
     if let Some(dir) = demo
         && !crate::demo_seed::run(db, dir)?
     {
-        println!("demo curriculum and attempts already in {}", db.display());
+        println!("demo curriculum and attempts already in {}", db);
     }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -53,7 +53,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
     rt.block_on(async {
         let store = Store::open(db)
             .await
-            .with_context(|| format!("opening the database {}", db.display()))?;
+            .with_context(|| format!("opening the database {}", db))?;
         store.ensure_builtins().await?;
         if demo.is_some() {
             println!("demo accounts (user / password / role):");
@@ -67,7 +67,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
         println!(
             "dashboard: http://{} (database {}); Ctrl-C stops it",
             listener.local_addr()?,
-            db.display()
+            db
         );
         let shutdown = async {
             // no signal handler: run until killed
@@ -75,9 +75,10 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
                 std::future::pending::<()>().await;
             }
         };
-        // the station's recordings beside the database, like the demo's
+        // the station's recordings beside an SQLite database, like the demo's
         let station_dir = db
-            .parent()
+            .sqlite_path()
+            .and_then(Path::parent)
             .unwrap_or_else(|| Path::new("."))
             .join("station-attempts");
         let config = Config {

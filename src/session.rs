@@ -6,7 +6,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use cutlab_assessor::ExpertPlan;
+use cutlab_assessor::{DbLocation, ExpertPlan};
 use cutlab_haptics::device::{
     CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, SyntheticTrainee,
 };
@@ -68,7 +68,7 @@ pub struct Options {
 /// The attempt a session is (`--trainee`, `--exercise`, `--db`).
 #[derive(Debug)]
 pub struct AttemptArgs {
-    pub db: PathBuf,
+    pub db: DbLocation,
     pub exercise: String,
     pub trainee: String,
     /// An expert's reference attempt (its metrics set the exercise's thresholds).
@@ -92,7 +92,7 @@ impl OpenAttempt {
         let (store, id) = rt.block_on(async {
             let store = Store::open(&a.db)
                 .await
-                .with_context(|| format!("opening the database {}", a.db.display()))?;
+                .with_context(|| format!("opening the database {}", a.db))?;
             store.ensure_builtins().await?;
             let attempt = store
                 .start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert)
@@ -104,7 +104,7 @@ impl OpenAttempt {
             "attempt {id} of {} at {} (running; database {})",
             a.trainee,
             a.exercise,
-            a.db.display()
+            a.db
         );
         Ok(Self {
             rt,
@@ -492,7 +492,7 @@ fn exercise_plan(a: &AttemptArgs, scene_arg: &str, scene_name: &str) -> anyhow::
     rt.block_on(async {
         let store = Store::open(&a.db)
             .await
-            .with_context(|| format!("opening the database {}", a.db.display()))?;
+            .with_context(|| format!("opening the database {}", a.db))?;
         store.ensure_builtins().await?;
         let e = store.exercise_by_name(&a.exercise).await?;
         let plan = store.exercise_plan(e.id).await?;

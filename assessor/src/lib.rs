@@ -26,4 +26,4 @@ pub use proficiency::{CusumParams, Threshold, Thresholds, Verdict};
 pub mod store;
 pub mod xapi;
 
-pub use store::{Store, default_db_path};
+pub use store::{DbLocation, Store, default_db};

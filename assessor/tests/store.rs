@@ -1,11 +1,56 @@
-//! The store on a fresh SQLite database per test (`#[sqlx::test]` applies `migrations/`).
+//! The store on a fresh database per test, each test twice: on SQLite (`name::sqlite`) and
+//! on PostgreSQL (`name::postgres`, on the server `$CUTLAB_TEST_POSTGRES` names; CI starts
+//! one).
 
 use cutlab_assessor::metrics::{METRICS, MetricValue};
 use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds};
 use cutlab_assessor::store::{AttemptStatus, BUILTIN_EXERCISE, NewExercise, Role, ThresholdSource};
-use cutlab_assessor::{AssessError, Better, ExpertPlan, Store};
-use sqlx::SqlitePool;
-use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
+use cutlab_assessor::store::{DbLocation, TEST_POSTGRES_ENV, scratch_postgres};
+use cutlab_assessor::{AssessError, Better, ExpertPlan, Store, on_db};
+
+/// A fresh SQLite database in a temporary folder (kept alive by the returned guard).
+async fn sqlite_store() -> (Store, tempfile::TempDir) {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let store = Store::open(&dir.path().join("cutlab.db"))
+        .await
+        .expect("store");
+    (store, dir)
+}
+
+/// A fresh database on the PostgreSQL server of `$CUTLAB_TEST_POSTGRES`; `None` (saying
+/// so) without one.
+async fn postgres_location() -> Option<DbLocation> {
+    let Ok(server) = std::env::var(TEST_POSTGRES_ENV) else {
+        eprintln!("skipped: {TEST_POSTGRES_ENV} names no PostgreSQL server");
+        return None;
+    };
+    Some(
+        scratch_postgres(&server, "cutlab_store_test")
+            .await
+            .expect("a scratch database"),
+    )
+}
+
+/// `name::sqlite` and `name::postgres`: the test `name(store)` on a fresh database of each.
+macro_rules! on_both {
+    ($name:ident) => {
+        mod $name {
+            #[tokio::test]
+            async fn sqlite() {
+                let (store, _dir) = super::sqlite_store().await;
+                super::$name(store).await;
+            }
+
+            #[tokio::test]
+            async fn postgres() {
+                if let Some(at) = super::postgres_location().await {
+                    let store = cutlab_assessor::Store::open(&at).await.expect("store");
+                    super::$name(store).await;
+                }
+            }
+        }
+    };
+}
 
 /// Metric values: every catalogue metric missing except the given ones.
 fn values(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
@@ -45,9 +90,8 @@ async fn exercise_with_one_threshold(store: &Store) -> i64 {
     store.create_exercise(&new).await.expect("exercise").id
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn users_and_passwords(pool: SqlitePool) {
-    let store = Store::from_pool(pool.clone()).await.expect("store");
+on_both!(users_and_passwords);
+async fn users_and_passwords(store: Store) {
     let alice = store
         .create_user("alice", Role::Trainee, Some("s3cret"))
         .await
@@ -93,10 +137,12 @@ async fn users_and_passwords(pool: SqlitePool) {
             .is_none()
     );
     // never the plain text
-    let hash: String = sqlx::query_scalar("SELECT password_hash FROM users WHERE name = 'alice'")
-        .fetch_one(&pool)
-        .await
-        .expect("hash");
+    let hash: String = on_db!(store.db(), pool => {
+        sqlx::query_scalar("SELECT password_hash FROM users WHERE name = 'alice'")
+            .fetch_one(pool)
+            .await
+    })
+    .expect("hash");
     assert!(
         hash.starts_with("$argon2id$") && !hash.contains("s3cret"),
         "{hash}"
@@ -116,9 +162,8 @@ async fn users_and_passwords(pool: SqlitePool) {
     ));
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn cohorts_and_curricula(pool: SqlitePool) {
-    let store = Store::from_pool(pool).await.expect("store");
+on_both!(cohorts_and_curricula);
+async fn cohorts_and_curricula(store: Store) {
     let teacher = store
         .create_user("dr-who", Role::Instructor, None)
         .await
@@ -186,9 +231,8 @@ async fn cohorts_and_curricula(pool: SqlitePool) {
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn the_builtin_exercise_is_there_once(pool: SqlitePool) {
-    let store = Store::from_pool(pool).await.expect("store");
+on_both!(the_builtin_exercise_is_there_once);
+async fn the_builtin_exercise_is_there_once(store: Store) {
     let a = store.ensure_builtins().await.expect("builtins");
     let b = store.ensure_builtins().await.expect("builtins again");
     assert_eq!(a.id, b.id);
@@ -207,9 +251,8 @@ async fn the_builtin_exercise_is_there_once(pool: SqlitePool) {
     assert_eq!(store.list_exercises().await.expect("list").len(), 1);
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn attempts_scores_and_proficiency(pool: SqlitePool) {
-    let store = Store::from_pool(pool).await.expect("store");
+on_both!(attempts_scores_and_proficiency);
+async fn attempts_scores_and_proficiency(store: Store) {
     let ex = exercise_with_one_threshold(&store).await;
     let t = store
         .create_user("trainee", Role::Trainee, None)
@@ -299,9 +342,8 @@ async fn attempts_scores_and_proficiency(pool: SqlitePool) {
     );
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn thresholds_from_expert_attempts(pool: SqlitePool) {
-    let store = Store::from_pool(pool).await.expect("store");
+on_both!(thresholds_from_expert_attempts);
+async fn thresholds_from_expert_attempts(store: Store) {
     let ex = exercise_with_one_threshold(&store).await;
     let expert = store
         .create_user("expert", Role::Instructor, None)
@@ -338,12 +380,13 @@ async fn thresholds_from_expert_attempts(pool: SqlitePool) {
     );
     let stored = store.thresholds(ex).await.expect("stored");
     assert_eq!(stored.metrics.len(), 2);
-    let src: String =
-        sqlx::query_scalar("SELECT DISTINCT source FROM metric_thresholds WHERE exercise_id = ?")
+    let src: String = on_db!(store.db(), pool => {
+        sqlx::query_scalar("SELECT DISTINCT source FROM metric_thresholds WHERE exercise_id = $1")
             .bind(ex)
-            .fetch_one(store.pool())
+            .fetch_one(pool)
             .await
-            .expect("source");
+    })
+    .expect("source");
     assert_eq!(src, "experts");
     store
         .set_thresholds(
@@ -366,9 +409,8 @@ async fn thresholds_from_expert_attempts(pool: SqlitePool) {
     );
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn xapi_of_a_trainee(pool: SqlitePool) {
-    let store = Store::from_pool(pool).await.expect("store");
+on_both!(xapi_of_a_trainee);
+async fn xapi_of_a_trainee(store: Store) {
     let ex = exercise_with_one_threshold(&store).await;
     let t = store
         .create_user("trainee", Role::Trainee, None)
@@ -405,14 +447,11 @@ async fn xapi_of_a_trainee(pool: SqlitePool) {
     ));
 }
 
-/// Two pools (two stations) on one file write attempts at the same time: nothing is lost.
-#[sqlx::test(migrations = "../migrations")]
-async fn concurrent_writers_on_one_file(
-    _pool_options: SqlitePoolOptions,
-    options: SqliteConnectOptions,
-) {
-    let a = Store::open_with(options.clone()).await.expect("store a");
-    let b = Store::open_with(options).await.expect("store b");
+/// Two stores (two stations) on one database write attempts at the same time: nothing is
+/// lost.
+async fn concurrent_writers(at: &DbLocation) {
+    let a = Store::open(at).await.expect("store a");
+    let b = Store::open(at).await.expect("store b");
     let ex = a.ensure_builtins().await.expect("builtins").id;
     assert_eq!(b.ensure_builtins().await.expect("builtins").id, ex);
     let ua = a
@@ -456,18 +495,35 @@ async fn concurrent_writers_on_one_file(
     let all = a.list_attempts(None, None).await.expect("list");
     assert_eq!(all.len(), 20);
     assert!(all.iter().all(|x| x.status == AttemptStatus::Complete));
-    let results: i64 = sqlx::query_scalar("SELECT COUNT(*) FROM metric_results")
-        .fetch_one(b.pool())
-        .await
-        .expect("count");
+    let results: i64 = on_db!(b.db(), pool => {
+        sqlx::query_scalar("SELECT COUNT(*) FROM metric_results")
+            .fetch_one(pool)
+            .await
+    })
+    .expect("count");
     assert_eq!(results, 20 * METRICS.len() as i64);
     assert_eq!(a.proficiency(ua, ex).await.expect("p").state.attempts, 10);
     assert_eq!(b.proficiency(ub, ex).await.expect("p").state.attempts, 10);
-    let mode: String = sqlx::query_scalar("PRAGMA journal_mode")
-        .fetch_one(a.pool())
-        .await
-        .expect("pragma");
+}
+
+#[tokio::test]
+async fn concurrent_writers_on_one_sqlite_file() {
+    let dir = tempfile::tempdir().expect("temporary folder");
+    let at = DbLocation::Sqlite(dir.path().join("cutlab.db"));
+    concurrent_writers(&at).await;
+    let store = Store::open(&at).await.expect("store");
+    let mode: String = on_db!(store.db(), pool => {
+        sqlx::query_scalar("PRAGMA journal_mode").fetch_one(pool).await
+    })
+    .expect("pragma");
     assert_eq!(mode, "wal");
+}
+
+#[tokio::test]
+async fn concurrent_writers_on_one_postgres_database() {
+    if let Some(at) = postgres_location().await {
+        concurrent_writers(&at).await;
+    }
 }
 
 #[tokio::test]
@@ -544,9 +600,8 @@ fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData
     d
 }
 
-#[sqlx::test(migrations = "../migrations")]
-async fn score_attempts_on_the_builtin_exercise(pool: SqlitePool) {
-    let store = Store::from_pool(pool).await.expect("store");
+on_both!(score_attempts_on_the_builtin_exercise);
+async fn score_attempts_on_the_builtin_exercise(store: Store) {
     let ex = store.ensure_builtins().await.expect("builtins").id;
     let t = store
         .create_user("t", Role::Trainee, None)

@@ -143,9 +143,10 @@ pub enum BenchCommand {
     /// Load on the web dashboard: TRAINEES x ATTEMPTS synthetic attempts, CLIENTS concurrent
     /// clients on the progress page and API; requests/s and latency percentiles.
     Dashboard {
-        /// The database to seed and serve (reused if present).
+        /// The database to seed and serve (reused if present): an SQLite file or a
+        /// `postgres://` URL; given again, each in turn, the figures side by side.
         #[arg(long, default_value = "out/bench-dashboard/cutlab.db")]
-        bench_db: PathBuf,
+        bench_db: Vec<cutlab_assessor::DbLocation>,
         #[arg(long, default_value_t = 100)]
         trainees: usize,
         #[arg(long, default_value_t = 50)]
@@ -182,7 +183,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
             duration,
             json,
         } => dashboard::run_bench(&dashboard::Options {
-            db: &bench_db,
+            dbs: &bench_db,
             trainees,
             attempts,
             clients,

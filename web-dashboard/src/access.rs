@@ -25,11 +25,10 @@ pub async fn can_see_user(
                 .caches()
                 .access
                 .load_once((viewer.id(), target_id), || async {
-                    let led: Option<i64> = sqlx::query_scalar("SELECT 1 FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = ? AND m.user_id = ? LIMIT 1")
+                    let led: Option<i64> = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query_scalar("SELECT m.user_id FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = $1 AND m.user_id = $2 LIMIT 1")
                         .bind(viewer.id())
                         .bind(target_id)
-                        .fetch_optional(state.store().pool())
-                        .await?;
+                        .fetch_optional(pool).await)?;
                     Ok::<_, AppError>(led.is_some())
                 })
                 .await?
@@ -79,10 +78,9 @@ pub async fn visible_trainees(
         Role::Admin => store.list_users(Some(Role::Trainee)).await?,
         Role::Trainee => vec![viewer.user().clone()],
         Role::Instructor => {
-            let ids: Vec<i64> = sqlx::query_scalar("SELECT DISTINCT m.user_id FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id JOIN users u ON u.id = m.user_id WHERE c.instructor_id = ? AND u.role = 'trainee'")
+            let ids: Vec<i64> = cutlab_assessor::on_db!(store.db(), pool => sqlx::query_scalar("SELECT DISTINCT m.user_id FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id JOIN users u ON u.id = m.user_id WHERE c.instructor_id = $1 AND u.role = 'trainee'")
                 .bind(viewer.id())
-                .fetch_all(store.pool())
-                .await?;
+                .fetch_all(pool).await)?;
             let mut users = Vec::with_capacity(ids.len());
             for id in ids {
                 users.push(store.get_user(id).await?);

@@ -124,7 +124,7 @@ impl AppState {
             auth::rate_limit::RateLimiter::new(config.login_failures_per_ip, config.login_window);
         let grants = auth::grants::GrantKey::random()?;
         let caches = Caches::new();
-        watch::spawn(store.pool(), &caches.changes);
+        watch::spawn(store.db(), &caches.changes);
         let station = cutlab_station::StationSet::new(config.max_station_sessions);
         Ok(Self(Arc::new(Inner {
             store,

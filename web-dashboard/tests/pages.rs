@@ -388,11 +388,9 @@ async fn the_replay_viewer_is_served_by_the_dashboard() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("session.mcap"), b"x").unwrap();
     std::fs::write(dir.join("session.rrd"), b"RRF2").unwrap();
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+    on_db!(e.store.db(), pool => sqlx::query("UPDATE attempts SET recording_path = $1 WHERE id = $2")
         .bind(dir.join("session.mcap").display().to_string())
-        .bind(a)
-        .execute(e.store.pool())
-        .await
+        .bind(a).execute(pool).await.map(|_| ()))
         .unwrap();
     let mut req = get(&format!("/attempts/{a}/replay"), Some(&ana));
     req.headers_mut()
@@ -478,7 +476,7 @@ async fn an_attempt_written_by_another_process_shows_without_waiting_for_the_cac
     };
     assert_eq!(attempts(progress().await), 8);
     // another process (its own connections) starts an attempt for ana and gives up on it
-    let other = Store::open(&e.dir.path().join("cutlab.db")).await.unwrap();
+    let other = Store::open(&e.db).await.unwrap();
     let exercise = other.exercise_by_name("chest-wall-incision").await.unwrap();
     let a = other
         .start_attempt(ana, exercise.id, None, false)

@@ -70,9 +70,7 @@ async fn login_logout_happy_path() {
     );
     // the database keeps a hash of the token, never the token
     let token = set_cookie(&r, "cutlab_session").unwrap();
-    let stored: String = sqlx::query_scalar("SELECT token_sha256 FROM login_sessions")
-        .fetch_one(e.store.pool())
-        .await
+    let stored: String = on_db!(e.store.db(), pool => sqlx::query_scalar("SELECT token_sha256 FROM login_sessions").fetch_one(pool).await)
         .unwrap();
     assert_ne!(stored, token);
     let s = login(&e.app, "dr-kim", "instructor-demo").await;
@@ -350,11 +348,9 @@ async fn a_trainee_sees_only_their_own_data() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("session.mcap"), b"ben's recording").unwrap();
     std::fs::write(dir.join("session.rrd"), b"ben's rrd").unwrap();
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+    on_db!(e.store.db(), pool => sqlx::query("UPDATE attempts SET recording_path = $1 WHERE id = $2")
         .bind(dir.join("session.mcap").display().to_string())
-        .bind(bens)
-        .execute(e.store.pool())
-        .await
+        .bind(bens).execute(pool).await.map(|_| ()))
         .unwrap();
     for path in [
         format!("/attempts/{bens}"),
@@ -475,11 +471,9 @@ async fn downloads_serve_only_the_stored_recording() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("session.mcap"), b"MCAP bytes").unwrap();
     std::fs::write(e.dir.path().join("secret.txt"), b"secret").unwrap();
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+    on_db!(e.store.db(), pool => sqlx::query("UPDATE attempts SET recording_path = $1 WHERE id = $2")
         .bind(dir.join("session.mcap").display().to_string())
-        .bind(a)
-        .execute(e.store.pool())
-        .await
+        .bind(a).execute(pool).await.map(|_| ()))
         .unwrap();
     let r = send(
         &e.app,
@@ -526,11 +520,9 @@ async fn downloads_serve_only_the_stored_recording() {
         );
     }
     // a stored path that is a directory is not served
-    sqlx::query("UPDATE attempts SET recording_path = ? WHERE id = ?")
+    on_db!(e.store.db(), pool => sqlx::query("UPDATE attempts SET recording_path = $1 WHERE id = $2")
         .bind(dir.display().to_string())
-        .bind(a)
-        .execute(e.store.pool())
-        .await
+        .bind(a).execute(pool).await.map(|_| ()))
         .unwrap();
     assert_eq!(
         send(

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Store, now_ns};
+use super::{BeginWrite, Store, now_ns};
 use crate::error::{AssessError, Result};
 use crate::metrics::{self, Better, MetricValue};
 use crate::proficiency::{
@@ -140,24 +140,22 @@ impl Store {
     ) -> Result<Attempt> {
         self.get_user(trainee_id).await?;
         self.get_exercise(exercise_id).await?;
-        let id: i64 = sqlx::query_scalar("INSERT INTO attempts (trainee_id, exercise_id, recording_path, started_ns, status, expert) VALUES (?, ?, ?, ?, 'running', ?) RETURNING id")
+        let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO attempts (trainee_id, exercise_id, recording_path, started_ns, status, expert) VALUES ($1, $2, $3, $4, 'running', $5) RETURNING id")
             .bind(trainee_id)
             .bind(exercise_id)
             .bind(recording_path)
             .bind(now_ns())
             .bind(expert)
-            .fetch_one(&self.pool)
-            .await?;
+            .fetch_one(pool).await)?;
         self.get_attempt(id).await
     }
 
     pub async fn get_attempt(&self, id: i64) -> Result<Attempt> {
-        let row: Option<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
-            "{ATTEMPT_COLUMNS} WHERE id = ?"
+        let row: Option<AttemptRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{ATTEMPT_COLUMNS} WHERE id = $1"
         )))
         .bind(id)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         attempt(row.ok_or_else(|| AssessError::NotFound(format!("attempt {id}")))?)
     }
 
@@ -167,13 +165,12 @@ impl Store {
         trainee_id: Option<i64>,
         exercise_id: Option<i64>,
     ) -> Result<Vec<Attempt>> {
-        let rows: Vec<AttemptRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE (? IS NULL OR trainee_id = ?) AND (? IS NULL OR exercise_id = ?) ORDER BY started_ns, id")))
+        let rows: Vec<AttemptRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE ($1 IS NULL OR trainee_id = $2) AND ($3 IS NULL OR exercise_id = $4) ORDER BY started_ns, id")))
             .bind(trainee_id)
             .bind(trainee_id)
             .bind(exercise_id)
             .bind(exercise_id)
-            .fetch_all(&self.pool)
-            .await?;
+            .fetch_all(pool).await)?;
         rows.into_iter().map(attempt).collect()
     }
 
@@ -184,14 +181,13 @@ impl Store {
         status: AttemptStatus,
         note: Option<&str>,
     ) -> Result<Attempt> {
-        let done = sqlx::query("UPDATE attempts SET status = ?, ended_ns = COALESCE(ended_ns, ?), note = COALESCE(?, note) WHERE id = ? AND status = 'running'")
+        let done = crate::on_db!(&self.db, pool => sqlx::query("UPDATE attempts SET status = $1, ended_ns = COALESCE(ended_ns, $2), note = COALESCE($3, note) WHERE id = $4 AND status = 'running'")
             .bind(status.as_str())
             .bind(now_ns())
             .bind(note)
             .bind(attempt_id)
-            .execute(&self.pool)
-            .await?;
-        if done.rows_affected() == 0 {
+            .execute(pool).await.map(|r| r.rows_affected()))?;
+        if done == 0 {
             let a = self.get_attempt(attempt_id).await?;
             return Err(AssessError::Conflict(format!(
                 "attempt {attempt_id} is {}, not running",
@@ -235,66 +231,82 @@ impl Store {
         let a = self.get_attempt(attempt_id).await?;
         let thresholds = self.thresholds(a.exercise_id).await?;
         let verdict = thresholds.verdict(metrics);
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, ?), scored = TRUE, score = ?, passed = ?, note = COALESCE(?, note) WHERE id = ? AND status <> 'complete'")
-            .bind(now_ns())
-            .bind(verdict.score)
-            .bind(verdict.pass)
-            .bind(note)
-            .bind(attempt_id)
-            .execute(&mut *tx)
-            .await?;
-        if done.rows_affected() == 0 {
-            return Err(AssessError::Conflict(format!(
-                "attempt {attempt_id} is already scored"
-            )));
-        }
-        sqlx::query("DELETE FROM metric_results WHERE attempt_id = ?")
-            .bind(attempt_id)
-            .execute(&mut *tx)
-            .await?;
-        for m in metrics {
-            let passed = verdict
-                .metrics
-                .iter()
-                .find(|v| v.key == m.key)
-                .map(|v| v.pass);
-            sqlx::query("INSERT INTO metric_results (attempt_id, metric, value, unit, passed, missing) VALUES (?, ?, ?, ?, ?, ?)")
-                .bind(attempt_id)
-                .bind(&m.key)
-                .bind(m.value.filter(|v| v.is_finite()))
-                .bind(&m.unit)
-                .bind(passed)
-                .bind(&m.missing)
-                .execute(&mut *tx)
-                .await
-                .map_err(super::conflict(|| format!("metric {:?} given twice", m.key)))?;
-        }
-        let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = ? AND exercise_id = ? AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
+        let record = crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            // the trainee's proficiency row first, locked (PostgreSQL: a row lock until
+            // commit, so a second scoring of the same trainee and exercise waits and then
+            // reads this one's history; SQLite holds the whole database already)
+            sqlx::query(
+                "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, cusum, updated_ns) \
+                 VALUES ($1, $2, 0, 0, 0, FALSE, 0, $3) \
+                 ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET updated_ns = proficiency.updated_ns",
+            )
             .bind(a.trainee_id)
             .bind(a.exercise_id)
-            .fetch_all(&mut *tx)
+            .bind(now_ns())
+            .execute(&mut *tx)
             .await?;
-        let record = proficiency_of(a.trainee_id, a.exercise_id, &history)?;
-        sqlx::query(
-            "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum, updated_ns) \
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) \
-             ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET attempts = excluded.attempts, passes = excluded.passes, \
-             consecutive_passes = excluded.consecutive_passes, proficient = excluded.proficient, \
-             proficient_attempt_id = excluded.proficient_attempt_id, cusum = excluded.cusum, updated_ns = excluded.updated_ns",
-        )
-        .bind(record.trainee_id)
-        .bind(record.exercise_id)
-        .bind(i64::from(record.state.attempts))
-        .bind(i64::from(record.state.passes))
-        .bind(i64::from(record.state.consecutive_passes))
-        .bind(record.state.proficient)
-        .bind(record.proficient_attempt_id)
-        .bind(record.cusum)
-        .bind(now_ns())
-        .execute(&mut *tx)
-        .await?;
-        tx.commit().await?;
+            let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, $1), scored = TRUE, score = $2, passed = $3, note = COALESCE($4, note) WHERE id = $5 AND status <> 'complete'")
+                .bind(now_ns())
+                .bind(verdict.score)
+                .bind(verdict.pass)
+                .bind(note)
+                .bind(attempt_id)
+                .execute(&mut *tx)
+                .await?;
+            if done.rows_affected() == 0 {
+                return Err(AssessError::Conflict(format!(
+                    "attempt {attempt_id} is already scored"
+                )));
+            }
+            sqlx::query("DELETE FROM metric_results WHERE attempt_id = $1")
+                .bind(attempt_id)
+                .execute(&mut *tx)
+                .await?;
+            for m in metrics {
+                let passed = verdict
+                    .metrics
+                    .iter()
+                    .find(|v| v.key == m.key)
+                    .map(|v| v.pass);
+                sqlx::query("INSERT INTO metric_results (attempt_id, metric, value, unit, passed, missing) VALUES ($1, $2, $3, $4, $5, $6)")
+                    .bind(attempt_id)
+                    .bind(&m.key)
+                    .bind(m.value.filter(|v| v.is_finite()))
+                    .bind(&m.unit)
+                    .bind(passed)
+                    .bind(&m.missing)
+                    .execute(&mut *tx)
+                    .await
+                    .map_err(super::conflict(|| format!("metric {:?} given twice", m.key)))?;
+            }
+            let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = $1 AND exercise_id = $2 AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
+                .bind(a.trainee_id)
+                .bind(a.exercise_id)
+                .fetch_all(&mut *tx)
+                .await?;
+            let record = proficiency_of(a.trainee_id, a.exercise_id, &history)?;
+            sqlx::query(
+                "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum, updated_ns) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) \
+                 ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET attempts = excluded.attempts, passes = excluded.passes, \
+                 consecutive_passes = excluded.consecutive_passes, proficient = excluded.proficient, \
+                 proficient_attempt_id = excluded.proficient_attempt_id, cusum = excluded.cusum, updated_ns = excluded.updated_ns",
+            )
+            .bind(record.trainee_id)
+            .bind(record.exercise_id)
+            .bind(i64::from(record.state.attempts))
+            .bind(i64::from(record.state.passes))
+            .bind(i64::from(record.state.consecutive_passes))
+            .bind(record.state.proficient)
+            .bind(record.proficient_attempt_id)
+            .bind(record.cusum)
+            .bind(now_ns())
+            .execute(&mut *tx)
+            .await?;
+            tx.commit().await?;
+            record
+        });
         Ok(Outcome {
             attempt: self.get_attempt(attempt_id).await?,
             verdict,
@@ -317,7 +329,7 @@ impl Store {
 
     /// The stored metric results of an attempt, by metric.
     pub async fn attempt_metrics(&self, attempt_id: i64) -> Result<Vec<StoredMetric>> {
-        let rows: Vec<MetricRow> = sqlx::query_as("SELECT metric, value, unit, passed, missing FROM metric_results WHERE attempt_id = ? ORDER BY metric").bind(attempt_id).fetch_all(&self.pool).await?;
+        let rows: Vec<MetricRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT metric, value, unit, passed, missing FROM metric_results WHERE attempt_id = $1 ORDER BY metric").bind(attempt_id).fetch_all(pool).await)?;
         Ok(rows
             .into_iter()
             .map(|(metric, value, unit, passed, missing)| StoredMetric {
@@ -357,11 +369,10 @@ impl Store {
         trainee_id: i64,
         exercise_id: i64,
     ) -> Result<ProficiencyRecord> {
-        let row: Option<ProficiencyRow> = sqlx::query_as("SELECT attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum FROM proficiency WHERE trainee_id = ? AND exercise_id = ?")
+        let row: Option<ProficiencyRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum FROM proficiency WHERE trainee_id = $1 AND exercise_id = $2")
                 .bind(trainee_id)
                 .bind(exercise_id)
-                .fetch_optional(&self.pool)
-                .await?;
+                .fetch_optional(pool).await)?;
         let u = |v: i64| u32::try_from(v).unwrap_or(0);
         Ok(match row {
             Some((attempts, passes, consecutive, proficient, at, cusum)) => ProficiencyRecord {
@@ -394,11 +405,10 @@ impl Store {
         exercise_id: i64,
         params: &CusumParams,
     ) -> Result<Vec<(i64, CusumPoint)>> {
-        let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = ? AND exercise_id = ? AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
+        let history: Vec<(i64, bool)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = $1 AND exercise_id = $2 AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
             .bind(trainee_id)
             .bind(exercise_id)
-            .fetch_all(&self.pool)
-            .await?;
+            .fetch_all(pool).await)?;
         let passes: Vec<bool> = history.iter().map(|h| h.1).collect();
         Ok(history
             .iter()

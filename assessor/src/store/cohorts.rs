@@ -31,44 +31,38 @@ impl Store {
         if let Some(i) = instructor_id {
             self.get_user(i).await?;
         }
-        let id: i64 = sqlx::query_scalar(
-            "INSERT INTO cohorts (name, instructor_id, created_ns) VALUES (?, ?, ?) RETURNING id",
+        let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar(
+            "INSERT INTO cohorts (name, instructor_id, created_ns) VALUES ($1, $2, $3) RETURNING id",
         )
         .bind(name)
         .bind(instructor_id)
         .bind(now_ns())
-        .fetch_one(&self.pool)
-        .await
+        .fetch_one(pool).await)
         .map_err(conflict(|| format!("a cohort named {name:?} exists")))?;
         self.get_cohort(id).await
     }
 
     pub async fn get_cohort(&self, id: i64) -> Result<Cohort> {
-        let row: Option<CohortRow> =
-            sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts WHERE id = ?")
+        let row: Option<CohortRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts WHERE id = $1")
                 .bind(id)
-                .fetch_optional(&self.pool)
-                .await?;
+                .fetch_optional(pool).await)?;
         row.map(cohort)
             .ok_or_else(|| AssessError::NotFound(format!("cohort {id}")))
     }
 
     pub async fn cohort_by_name(&self, name: &str) -> Result<Cohort> {
-        let row: Option<CohortRow> = sqlx::query_as(
-            "SELECT id, name, instructor_id, created_ns FROM cohorts WHERE name = ?",
+        let row: Option<CohortRow> = crate::on_db!(&self.db, pool => sqlx::query_as(
+            "SELECT id, name, instructor_id, created_ns FROM cohorts WHERE name = $1",
         )
         .bind(name)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         row.map(cohort)
             .ok_or_else(|| AssessError::NotFound(format!("cohort {name:?}")))
     }
 
     pub async fn list_cohorts(&self) -> Result<Vec<Cohort>> {
-        let rows: Vec<CohortRow> =
-            sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts ORDER BY name")
-                .fetch_all(&self.pool)
-                .await?;
+        let rows: Vec<CohortRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, instructor_id, created_ns FROM cohorts ORDER BY name")
+                .fetch_all(pool).await)?;
         Ok(rows.into_iter().map(cohort).collect())
     }
 
@@ -76,18 +70,17 @@ impl Store {
     pub async fn join_cohort(&self, cohort_id: i64, user_id: i64) -> Result<()> {
         self.get_cohort(cohort_id).await?;
         self.get_user(user_id).await?;
-        sqlx::query("INSERT INTO cohort_members (cohort_id, user_id, joined_ns) VALUES (?, ?, ?) ON CONFLICT (cohort_id, user_id) DO NOTHING")
+        crate::on_db!(&self.db, pool => sqlx::query("INSERT INTO cohort_members (cohort_id, user_id, joined_ns) VALUES ($1, $2, $3) ON CONFLICT (cohort_id, user_id) DO NOTHING")
             .bind(cohort_id)
             .bind(user_id)
             .bind(now_ns())
-            .execute(&self.pool)
-            .await?;
+            .execute(pool).await.map(|r| r.rows_affected()))?;
         Ok(())
     }
 
     /// The members of a cohort, by name.
     pub async fn cohort_members(&self, cohort_id: i64) -> Result<Vec<User>> {
-        let ids: Vec<i64> = sqlx::query_scalar("SELECT u.id FROM users u JOIN cohort_members m ON m.user_id = u.id WHERE m.cohort_id = ? ORDER BY u.name").bind(cohort_id).fetch_all(&self.pool).await?;
+        let ids: Vec<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT u.id FROM users u JOIN cohort_members m ON m.user_id = u.id WHERE m.cohort_id = $1 ORDER BY u.name").bind(cohort_id).fetch_all(pool).await)?;
         let mut out = Vec::with_capacity(ids.len());
         for id in ids {
             out.push(self.get_user(id).await?);

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Store, conflict, now_ns};
+use super::{BeginWrite, Store, conflict, now_ns};
 use crate::error::{AssessError, Result};
 
 /// A curriculum.
@@ -26,14 +26,13 @@ pub struct Module {
 
 impl Store {
     pub async fn create_curriculum(&self, name: &str, description: &str) -> Result<Curriculum> {
-        let id: i64 = sqlx::query_scalar(
-            "INSERT INTO curricula (name, description, created_ns) VALUES (?, ?, ?) RETURNING id",
+        let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar(
+            "INSERT INTO curricula (name, description, created_ns) VALUES ($1, $2, $3) RETURNING id",
         )
         .bind(name)
         .bind(description)
         .bind(now_ns())
-        .fetch_one(&self.pool)
-        .await
+        .fetch_one(pool).await)
         .map_err(conflict(|| format!("a curriculum named {name:?} exists")))?;
         Ok(Curriculum {
             id,
@@ -43,11 +42,9 @@ impl Store {
     }
 
     pub async fn get_curriculum(&self, id: i64) -> Result<Curriculum> {
-        let row: Option<(i64, String, String)> =
-            sqlx::query_as("SELECT id, name, description FROM curricula WHERE id = ?")
+        let row: Option<(i64, String, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description FROM curricula WHERE id = $1")
                 .bind(id)
-                .fetch_optional(&self.pool)
-                .await?;
+                .fetch_optional(pool).await)?;
         row.map(|(id, name, description)| Curriculum {
             id,
             name,
@@ -57,11 +54,9 @@ impl Store {
     }
 
     pub async fn curriculum_by_name(&self, name: &str) -> Result<Curriculum> {
-        let row: Option<(i64, String, String)> =
-            sqlx::query_as("SELECT id, name, description FROM curricula WHERE name = ?")
+        let row: Option<(i64, String, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description FROM curricula WHERE name = $1")
                 .bind(name)
-                .fetch_optional(&self.pool)
-                .await?;
+                .fetch_optional(pool).await)?;
         row.map(|(id, name, description)| Curriculum {
             id,
             name,
@@ -71,10 +66,8 @@ impl Store {
     }
 
     pub async fn list_curricula(&self) -> Result<Vec<Curriculum>> {
-        let rows: Vec<(i64, String, String)> =
-            sqlx::query_as("SELECT id, name, description FROM curricula ORDER BY name")
-                .fetch_all(&self.pool)
-                .await?;
+        let rows: Vec<(i64, String, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description FROM curricula ORDER BY name")
+                .fetch_all(pool).await)?;
         Ok(rows
             .into_iter()
             .map(|(id, name, description)| Curriculum {
@@ -95,39 +88,42 @@ impl Store {
         for &e in exercise_ids {
             self.get_exercise(e).await?;
         }
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let exists: Option<i64> = sqlx::query_scalar("SELECT id FROM curricula WHERE id = ?")
-            .bind(curriculum_id)
-            .fetch_optional(&mut *tx)
-            .await?;
-        if exists.is_none() {
-            return Err(AssessError::NotFound(format!("curriculum {curriculum_id}")));
-        }
-        let position: i64 = sqlx::query_scalar(
-            "SELECT COALESCE(MAX(position), 0) + 1 FROM modules WHERE curriculum_id = ?",
-        )
-        .bind(curriculum_id)
-        .fetch_one(&mut *tx)
-        .await?;
-        let id: i64 = sqlx::query_scalar(
-            "INSERT INTO modules (curriculum_id, position, name) VALUES (?, ?, ?) RETURNING id",
-        )
-        .bind(curriculum_id)
-        .bind(position)
-        .bind(name)
-        .fetch_one(&mut *tx)
-        .await?;
-        for (i, &e) in exercise_ids.iter().enumerate() {
-            sqlx::query(
-                "INSERT INTO module_exercises (module_id, position, exercise_id) VALUES (?, ?, ?)",
+        let (id, position) = crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            let exists: Option<i64> = sqlx::query_scalar("SELECT id FROM curricula WHERE id = $1")
+                .bind(curriculum_id)
+                .fetch_optional(&mut *tx)
+                .await?;
+            if exists.is_none() {
+                return Err(AssessError::NotFound(format!("curriculum {curriculum_id}")));
+            }
+            let position: i64 = sqlx::query_scalar(
+                "SELECT COALESCE(MAX(position), 0) + 1 FROM modules WHERE curriculum_id = $1",
             )
-            .bind(id)
-            .bind(i as i64 + 1)
-            .bind(e)
-            .execute(&mut *tx)
+            .bind(curriculum_id)
+            .fetch_one(&mut *tx)
             .await?;
-        }
-        tx.commit().await?;
+            let id: i64 = sqlx::query_scalar(
+                "INSERT INTO modules (curriculum_id, position, name) VALUES ($1, $2, $3) RETURNING id",
+            )
+            .bind(curriculum_id)
+            .bind(position)
+            .bind(name)
+            .fetch_one(&mut *tx)
+            .await?;
+            for (i, &e) in exercise_ids.iter().enumerate() {
+                sqlx::query(
+                    "INSERT INTO module_exercises (module_id, position, exercise_id) VALUES ($1, $2, $3)",
+                )
+                .bind(id)
+                .bind(i as i64 + 1)
+                .bind(e)
+                .execute(&mut *tx)
+                .await?;
+            }
+            tx.commit().await?;
+            (id, position)
+        });
         Ok(Module {
             id,
             curriculum_id,
@@ -139,20 +135,18 @@ impl Store {
 
     /// A curriculum's modules in order, each with its exercises in order.
     pub async fn curriculum_modules(&self, curriculum_id: i64) -> Result<Vec<Module>> {
-        let rows: Vec<(i64, i64, String)> = sqlx::query_as(
-            "SELECT id, position, name FROM modules WHERE curriculum_id = ? ORDER BY position",
+        let rows: Vec<(i64, i64, String)> = crate::on_db!(&self.db, pool => sqlx::query_as(
+            "SELECT id, position, name FROM modules WHERE curriculum_id = $1 ORDER BY position",
         )
         .bind(curriculum_id)
-        .fetch_all(&self.pool)
-        .await?;
+        .fetch_all(pool).await)?;
         let mut out = Vec::with_capacity(rows.len());
         for (id, position, name) in rows {
-            let exercise_ids: Vec<i64> = sqlx::query_scalar(
-                "SELECT exercise_id FROM module_exercises WHERE module_id = ? ORDER BY position",
+            let exercise_ids: Vec<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar(
+                "SELECT exercise_id FROM module_exercises WHERE module_id = $1 ORDER BY position",
             )
             .bind(id)
-            .fetch_all(&self.pool)
-            .await?;
+            .fetch_all(pool).await)?;
             out.push(Module {
                 id,
                 curriculum_id,

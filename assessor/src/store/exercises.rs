@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Store, conflict, now_ns};
+use super::{BeginWrite, Store, conflict, now_ns};
 use crate::error::{AssessError, Result};
 use crate::metrics::{Better, MetricValue};
 use crate::plan::ExpertPlan;
@@ -84,29 +84,47 @@ fn exercise(
     }
 }
 
+/// Inserts `thresholds` of `exercise_id` from `source` in the write transaction `tx` (of
+/// either engine).
+macro_rules! write_thresholds {
+    ($tx:expr, $exercise_id:expr, $thresholds:expr, $source:expr) => {
+            for t in $thresholds {
+                sqlx::query("INSERT INTO metric_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, source) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)")
+                    .bind($exercise_id)
+                    .bind(&t.key)
+                    .bind(t.better.as_str())
+                    .bind(t.mean)
+                    .bind(t.sd)
+                    .bind(i64::try_from(t.n_experts).unwrap_or(i64::MAX))
+                    .bind(t.lower)
+                    .bind(t.upper)
+                    .bind($source.as_str())
+                    .execute(&mut *$tx)
+                    .await?;
+            }
+    };
+}
+
 impl Store {
     /// Stores a plan (checked first); returns its id.
     pub async fn create_plan(&self, plan: &ExpertPlan) -> Result<i64> {
         plan.check()?;
-        let id = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
+        let id = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
             .bind(&plan.name)
             .bind(&plan.scene)
             .bind(plan.depth_m)
             .bind(plan.tolerance_m)
             .bind(serde_json::to_string(plan)?)
             .bind(now_ns())
-            .fetch_one(&self.pool)
-            .await?;
+            .fetch_one(pool).await)?;
         Ok(id)
     }
 
     /// The plan with `id`.
     pub async fn get_plan(&self, id: i64) -> Result<ExpertPlan> {
-        let json: Option<String> =
-            sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = ?")
+        let json: Option<String> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = $1")
                 .bind(id)
-                .fetch_optional(&self.pool)
-                .await?;
+                .fetch_optional(pool).await)?;
         ExpertPlan::from_json(
             &json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?,
         )
@@ -114,10 +132,8 @@ impl Store {
 
     /// All stored plans `(id, plan)`, oldest first.
     pub async fn list_plans(&self) -> Result<Vec<(i64, ExpertPlan)>> {
-        let rows: Vec<(i64, String)> =
-            sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id")
-                .fetch_all(&self.pool)
-                .await?;
+        let rows: Vec<(i64, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id")
+                .fetch_all(pool).await)?;
         rows.into_iter()
             .map(|(id, json)| Ok((id, ExpertPlan::from_json(&json)?)))
             .collect()
@@ -137,61 +153,61 @@ impl Store {
                 new.threshold_k
             )));
         }
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
-            .bind(&new.plan.name)
-            .bind(&new.plan.scene)
-            .bind(new.plan.depth_m)
-            .bind(new.plan.tolerance_m)
-            .bind(serde_json::to_string(new.plan)?)
-            .bind(now_ns())
-            .fetch_one(&mut *tx)
-            .await?;
-        let name = new.name.trim().to_owned();
-        let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns, exam_only) VALUES (?, ?, ?, ?, ?, ?, ?) RETURNING id")
-            .bind(&name)
-            .bind(new.scene)
-            .bind(new.description)
-            .bind(plan_id)
-            .bind(new.threshold_k)
-            .bind(now_ns())
-            .bind(new.exam_only)
-            .fetch_one(&mut *tx)
-            .await
-            .map_err(conflict(|| format!("an exercise named {name:?} exists")))?;
-        write_thresholds(&mut tx, id, new.thresholds, ThresholdSource::Default).await?;
-        tx.commit().await?;
+        let id = crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
+                .bind(&new.plan.name)
+                .bind(&new.plan.scene)
+                .bind(new.plan.depth_m)
+                .bind(new.plan.tolerance_m)
+                .bind(serde_json::to_string(new.plan)?)
+                .bind(now_ns())
+                .fetch_one(&mut *tx)
+                .await?;
+            let name = new.name.trim().to_owned();
+            let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns, exam_only) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id")
+                .bind(&name)
+                .bind(new.scene)
+                .bind(new.description)
+                .bind(plan_id)
+                .bind(new.threshold_k)
+                .bind(now_ns())
+                .bind(new.exam_only)
+                .fetch_one(&mut *tx)
+                .await
+                .map_err(conflict(|| format!("an exercise named {name:?} exists")))?;
+            write_thresholds!(tx, id, new.thresholds, ThresholdSource::Default);
+            tx.commit().await?;
+            id
+        });
         self.get_exercise(id).await
     }
 
     pub async fn get_exercise(&self, id: i64) -> Result<Exercise> {
-        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
-            "{EXERCISE_SELECT} WHERE id = ?"
+        let row: Option<ExerciseRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{EXERCISE_SELECT} WHERE id = $1"
         )))
         .bind(id)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         row.map(exercise)
             .ok_or_else(|| AssessError::NotFound(format!("exercise {id}")))
     }
 
     pub async fn exercise_by_name(&self, name: &str) -> Result<Exercise> {
-        let row: Option<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
-            "{EXERCISE_SELECT} WHERE name = ?"
+        let row: Option<ExerciseRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!(
+            "{EXERCISE_SELECT} WHERE name = $1"
         )))
         .bind(name)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         row.map(exercise)
             .ok_or_else(|| AssessError::NotFound(format!("exercise {name:?}")))
     }
 
     pub async fn list_exercises(&self) -> Result<Vec<Exercise>> {
-        let rows: Vec<ExerciseRow> = sqlx::query_as(sqlx::AssertSqlSafe(format!(
+        let rows: Vec<ExerciseRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!(
             "{EXERCISE_SELECT} ORDER BY name"
         )))
-        .fetch_all(&self.pool)
-        .await?;
+        .fetch_all(pool).await)?;
         Ok(rows.into_iter().map(exercise).collect())
     }
 
@@ -223,37 +239,39 @@ impl Store {
         if let Some(p) = plan {
             p.check()?;
         }
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        let done = sqlx::query(
-            "UPDATE exercises SET scene = ?, description = ?, threshold_k = ?, exam_only = ? WHERE id = ?",
-        )
-        .bind(scene.trim())
-        .bind(description)
-        .bind(threshold_k)
-        .bind(exam_only)
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-        if done.rows_affected() == 0 {
-            return Err(AssessError::NotFound(format!("exercise {id}")));
-        }
-        if let Some(p) = plan {
-            let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES (?, ?, ?, ?, ?, ?) RETURNING id")
-                .bind(&p.name)
-                .bind(&p.scene)
-                .bind(p.depth_m)
-                .bind(p.tolerance_m)
-                .bind(serde_json::to_string(p)?)
-                .bind(now_ns())
-                .fetch_one(&mut *tx)
-                .await?;
-            sqlx::query("UPDATE exercises SET plan_id = ? WHERE id = ?")
-                .bind(plan_id)
-                .bind(id)
-                .execute(&mut *tx)
-                .await?;
-        }
-        tx.commit().await?;
+        crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            let done = sqlx::query(
+                "UPDATE exercises SET scene = $1, description = $2, threshold_k = $3, exam_only = $4 WHERE id = $5",
+            )
+            .bind(scene.trim())
+            .bind(description)
+            .bind(threshold_k)
+            .bind(exam_only)
+            .bind(id)
+            .execute(&mut *tx)
+            .await?;
+            if done.rows_affected() == 0 {
+                return Err(AssessError::NotFound(format!("exercise {id}")));
+            }
+            if let Some(p) = plan {
+                let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
+                    .bind(&p.name)
+                    .bind(&p.scene)
+                    .bind(p.depth_m)
+                    .bind(p.tolerance_m)
+                    .bind(serde_json::to_string(p)?)
+                    .bind(now_ns())
+                    .fetch_one(&mut *tx)
+                    .await?;
+                sqlx::query("UPDATE exercises SET plan_id = $1 WHERE id = $2")
+                    .bind(plan_id)
+                    .bind(id)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await?;
+        });
         self.get_exercise(id).await
     }
 
@@ -266,7 +284,7 @@ impl Store {
     /// The exercise's current thresholds.
     pub async fn thresholds(&self, exercise_id: i64) -> Result<Thresholds> {
         let e = self.get_exercise(exercise_id).await?;
-        let rows: Vec<ThresholdRow> = sqlx::query_as("SELECT metric, better, mean, sd, n_experts, lower_limit, upper_limit FROM metric_thresholds WHERE exercise_id = ? ORDER BY metric").bind(exercise_id).fetch_all(&self.pool).await?;
+        let rows: Vec<ThresholdRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT metric, better, mean, sd, n_experts, lower_limit, upper_limit FROM metric_thresholds WHERE exercise_id = $1 ORDER BY metric").bind(exercise_id).fetch_all(pool).await)?;
         let mut metrics = Vec::with_capacity(rows.len());
         for (key, better, mean, sd, n, lower, upper) in rows {
             let better = Better::parse(&better).ok_or_else(|| {
@@ -298,13 +316,15 @@ impl Store {
         source: ThresholdSource,
     ) -> Result<()> {
         self.get_exercise(exercise_id).await?;
-        let mut tx = self.pool.begin_with("BEGIN IMMEDIATE").await?;
-        sqlx::query("DELETE FROM metric_thresholds WHERE exercise_id = ?")
-            .bind(exercise_id)
-            .execute(&mut *tx)
-            .await?;
-        write_thresholds(&mut tx, exercise_id, &thresholds.metrics, source).await?;
-        tx.commit().await?;
+        crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            sqlx::query("DELETE FROM metric_thresholds WHERE exercise_id = $1")
+                .bind(exercise_id)
+                .execute(&mut *tx)
+                .await?;
+            write_thresholds!(tx, exercise_id, &thresholds.metrics, source);
+            tx.commit().await?;
+        });
         Ok(())
     }
 
@@ -313,7 +333,7 @@ impl Store {
     /// no metric has at least 2 expert values.
     pub async fn thresholds_from_experts(&self, exercise_id: i64) -> Result<Thresholds> {
         let e = self.get_exercise(exercise_id).await?;
-        let ids: Vec<i64> = sqlx::query_scalar("SELECT id FROM attempts WHERE exercise_id = ? AND expert = TRUE AND status = 'complete' ORDER BY id").bind(exercise_id).fetch_all(&self.pool).await?;
+        let ids: Vec<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT id FROM attempts WHERE exercise_id = $1 AND expert = TRUE AND status = 'complete' ORDER BY id").bind(exercise_id).fetch_all(pool).await)?;
         let mut attempts: Vec<Vec<MetricValue>> = Vec::with_capacity(ids.len());
         for id in ids {
             attempts.push(self.attempt_metric_values(id).await?);
@@ -330,27 +350,4 @@ impl Store {
             .await?;
         Ok(t)
     }
-}
-
-async fn write_thresholds(
-    tx: &mut sqlx::Transaction<'_, sqlx::Sqlite>,
-    exercise_id: i64,
-    thresholds: &[Threshold],
-    source: ThresholdSource,
-) -> Result<()> {
-    for t in thresholds {
-        sqlx::query("INSERT INTO metric_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)")
-            .bind(exercise_id)
-            .bind(&t.key)
-            .bind(t.better.as_str())
-            .bind(t.mean)
-            .bind(t.sd)
-            .bind(i64::try_from(t.n_experts).unwrap_or(i64::MAX))
-            .bind(t.lower)
-            .bind(t.upper)
-            .bind(source.as_str())
-            .execute(&mut **tx)
-            .await?;
-    }
-    Ok(())
 }

@@ -1,8 +1,9 @@
-//! The database: SQLite through sqlx, migrations from the repository's `migrations/`
-//! (embedded at build time, applied at open), WAL journal, a busy timeout and foreign keys,
-//! so several simulator stations (processes) can write to one file at once. Multi-statement
-//! writes run in `BEGIN IMMEDIATE` transactions (they take the write lock up front and wait
-//! for it instead of failing on an upgrade).
+//! The database, through sqlx: an embedded SQLite file by default, or a PostgreSQL server
+//! when many stations and a dashboard share one ([`DbLocation`], [`Db`]). Migrations from the
+//! repository's `migrations/sqlite/` or `migrations/postgres/` (embedded at build time,
+//! applied at open). SQLite runs with a WAL journal, a busy timeout and foreign keys, so
+//! several simulator stations (processes) can write to one file at once. Multi-statement
+//! writes run in transactions that write ([`BeginWrite`](db::BeginWrite)).
 //!
 //! Times are integer nanoseconds since the Unix epoch (UTC), see [`now_ns`] and
 //! [`iso8601`].
@@ -11,39 +12,48 @@ mod attempts;
 mod builtins;
 mod cohorts;
 mod curricula;
+mod db;
 mod exercises;
 mod users;
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
-use sqlx::SqlitePool;
+use sqlx::postgres::{PgConnectOptions, PgPoolOptions};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::{ConnectOptions, Connection};
+use sqlx::{PgPool, SqlitePool};
 
 pub use attempts::{Attempt, AttemptStatus, Outcome, ProficiencyRecord, StoredMetric};
 pub use builtins::{BUILTIN_EXERCISE, BUILTIN_SCENE, default_thresholds};
 pub use cohorts::Cohort;
 pub use curricula::{Curriculum, Module};
+pub(crate) use db::BeginWrite;
+pub use db::{Db, DbLocation, TEST_POSTGRES_ENV, scratch_postgres};
 pub use exercises::{Exercise, ExerciseEdit, NewExercise, ThresholdSource};
 pub use users::{Role, User};
 
 use crate::error::{AssessError, Result};
 
-/// The migrations in the repository's `migrations/` directory.
-pub static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations");
+/// The SQLite migrations, `migrations/sqlite/`.
+pub static SQLITE_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations/sqlite");
+/// The PostgreSQL migrations, `migrations/postgres/`.
+pub static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("../migrations/postgres");
 
 /// The environment variable naming the database when `--db` is not given.
 pub const DB_ENV: &str = "CUTLAB_DB";
 
-/// The database path: `cli` (`--db`) if given, else `$CUTLAB_DB` if set and not empty, else
-/// `./cutlab.db`.
-pub fn default_db_path(cli: Option<&Path>) -> PathBuf {
-    if let Some(p) = cli {
-        return p.to_path_buf();
+/// The database: `cli` (`--db`) if given, else `$CUTLAB_DB` if set and not empty, else the
+/// SQLite file `./cutlab.db`.
+pub fn default_db(cli: Option<&DbLocation>) -> DbLocation {
+    if let Some(l) = cli {
+        return l.clone();
     }
-    match std::env::var_os(DB_ENV) {
-        Some(p) if !p.is_empty() => PathBuf::from(p),
-        _ => PathBuf::from("cutlab.db"),
+    match std::env::var(DB_ENV) {
+        Ok(v) if !v.trim().is_empty() => v
+            .parse()
+            .unwrap_or_else(|_| DbLocation::Sqlite(PathBuf::from(v))),
+        _ => DbLocation::Sqlite(PathBuf::from("cutlab.db")),
     }
 }
 
@@ -80,7 +90,7 @@ pub fn iso8601(ns: i64) -> String {
 /// The assessor's database.
 #[derive(Debug, Clone)]
 pub struct Store {
-    pool: SqlitePool,
+    db: Db,
 }
 
 /// Maps a unique-constraint violation to [`AssessError::Conflict`] with `what`.
@@ -92,19 +102,49 @@ pub(crate) fn conflict(what: impl FnOnce() -> String) -> impl FnOnce(sqlx::Error
 }
 
 impl Store {
-    /// Opens (creating if needed) the database at `path` and applies the migrations.
-    pub async fn open(path: &Path) -> Result<Self> {
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).map_err(|source| AssessError::Io {
-                path: dir.display().to_string(),
-                error: source,
-            })?;
+    /// Opens the database at `location` and applies the migrations. An SQLite file is created
+    /// if missing, with its folder; so is a PostgreSQL database on a server that has none of
+    /// that name (given the right to create one).
+    pub async fn open(location: impl Into<DbLocation>) -> Result<Self> {
+        match location.into() {
+            DbLocation::Sqlite(path) => {
+                if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    std::fs::create_dir_all(dir).map_err(|source| AssessError::Io {
+                        path: dir.display().to_string(),
+                        error: source,
+                    })?;
+                }
+                Self::open_with(SqliteConnectOptions::new().filename(path)).await
+            }
+            DbLocation::Postgres(url) => {
+                let connect: PgConnectOptions = url.parse()?;
+                // one connection first: its error is the cause (refused, password, ...),
+                // where a pool's is a timeout
+                match connect.connect().await {
+                    Ok(c) => c.close().await?,
+                    // a server without the database: create it, like SQLite's file
+                    Err(sqlx::Error::Database(e)) if e.code().as_deref() == Some("3D000") => {
+                        use sqlx::migrate::MigrateDatabase;
+                        if let Err(e) = sqlx::Postgres::create_database(&url).await {
+                            // another process may have created it meanwhile
+                            tracing::debug!("creating the database: {e}");
+                        }
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+                let pool = PgPoolOptions::new()
+                    .max_connections(16)
+                    .acquire_timeout(Duration::from_secs(10))
+                    .connect_with(connect)
+                    .await?;
+                Self::from_postgres(pool).await
+            }
         }
-        Self::open_with(SqliteConnectOptions::new().filename(path)).await
     }
 
-    /// Opens with the given connection options plus the store's settings (create if missing,
-    /// WAL, synchronous NORMAL, 30 s busy timeout, foreign keys) and migrates.
+    /// Opens an SQLite database with the given connection options plus the store's settings
+    /// (create if missing, WAL, synchronous NORMAL, 30 s busy timeout, foreign keys) and
+    /// migrates.
     pub async fn open_with(options: SqliteConnectOptions) -> Result<Self> {
         let options = options
             .create_if_missing(true)
@@ -119,32 +159,52 @@ impl Store {
         Self::from_pool(pool).await
     }
 
-    /// Uses an existing pool (tests), applying the migrations. Another process migrating the
-    /// same file at the same moment is tolerated (retried).
+    /// Uses an existing SQLite pool (tests), applying the migrations.
     pub async fn from_pool(pool: SqlitePool) -> Result<Self> {
-        let mut tries = 0;
-        loop {
-            match MIGRATOR.run(&pool).await {
-                Ok(()) => break,
-                Err(e) if tries < 5 => {
-                    tracing::debug!("migration attempt {tries} failed ({e}); retrying");
-                    tries += 1;
-                    tokio::time::sleep(Duration::from_millis(100 * tries)).await;
-                }
-                Err(e) => return Err(e.into()),
-            }
-        }
-        Ok(Self { pool })
+        migrate(&SQLITE_MIGRATOR, &pool).await?;
+        Ok(Self {
+            db: Db::Sqlite(pool),
+        })
     }
 
-    /// The connection pool, for queries the store does not offer.
-    pub fn pool(&self) -> &SqlitePool {
-        &self.pool
+    /// Uses an existing PostgreSQL pool, applying the migrations.
+    pub async fn from_postgres(pool: PgPool) -> Result<Self> {
+        migrate(&POSTGRES_MIGRATOR, &pool).await?;
+        Ok(Self {
+            db: Db::Postgres(pool),
+        })
     }
 
-    /// Closes the pool (waits for connections to finish; checkpoints the WAL).
+    /// The connection pool, for queries the store does not offer (run them with
+    /// [`on_db!`](crate::on_db)).
+    pub fn db(&self) -> &Db {
+        &self.db
+    }
+
+    /// Closes the pool (waits for connections to finish; SQLite checkpoints the WAL).
     pub async fn close(&self) {
-        self.pool.close().await;
+        crate::on_db!(&self.db, pool => pool.close().await);
+    }
+}
+
+/// Applies `migrator`'s migrations. Another process migrating the same database at the same
+/// moment is tolerated (retried).
+async fn migrate<'a, A>(migrator: &sqlx::migrate::Migrator, pool: A) -> Result<()>
+where
+    A: sqlx::Acquire<'a> + Copy,
+    <A::Connection as std::ops::Deref>::Target: sqlx::migrate::Migrate,
+{
+    let mut tries = 0;
+    loop {
+        match migrator.run(pool).await {
+            Ok(()) => return Ok(()),
+            Err(e) if tries < 5 => {
+                tracing::debug!("migration attempt {tries} failed ({e}); retrying");
+                tries += 1;
+                tokio::time::sleep(Duration::from_millis(100 * tries)).await;
+            }
+            Err(e) => return Err(e.into()),
+        }
     }
 }
 
@@ -161,15 +221,16 @@ mod tests {
     }
 
     #[test]
-    fn db_path_resolution() {
-        assert_eq!(
-            default_db_path(Some(Path::new("x.db"))),
-            PathBuf::from("x.db")
-        );
+    fn db_resolution() {
+        let given = DbLocation::Sqlite(PathBuf::from("x.db"));
+        assert_eq!(default_db(Some(&given)), given);
         // the environment is shared by the test threads: only read it here
-        let expected = std::env::var_os(DB_ENV)
-            .filter(|p| !p.is_empty())
-            .map_or(PathBuf::from("cutlab.db"), PathBuf::from);
-        assert_eq!(default_db_path(None), expected);
+        let expected = std::env::var(DB_ENV)
+            .ok()
+            .filter(|p| !p.trim().is_empty())
+            .map_or(DbLocation::Sqlite(PathBuf::from("cutlab.db")), |v| {
+                v.parse().expect("location")
+            });
+        assert_eq!(default_db(None), expected);
     }
 }

@@ -91,58 +91,53 @@ impl Store {
             return Err(AssessError::InvalidInput("empty user name".into()));
         }
         let hash = password.map(hash_password).transpose()?;
-        let id: i64 = sqlx::query_scalar("INSERT INTO users (name, role, password_hash, created_ns) VALUES (?, ?, ?, ?) RETURNING id")
+        let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO users (name, role, password_hash, created_ns) VALUES ($1, $2, $3, $4) RETURNING id")
             .bind(name)
             .bind(role.as_str())
             .bind(&hash)
             .bind(now_ns())
-            .fetch_one(&self.pool)
-            .await
+            .fetch_one(pool).await)
             .map_err(conflict(|| format!("a user named {name:?} exists")))?;
         self.get_user(id).await
     }
 
     /// The user with `id`.
     pub async fn get_user(&self, id: i64) -> Result<User> {
-        let row: Option<UserRow> = sqlx::query_as(
-            "SELECT id, name, role, password_hash, created_ns FROM users WHERE id = ?",
+        let row: Option<UserRow> = crate::on_db!(&self.db, pool => sqlx::query_as(
+            "SELECT id, name, role, password_hash, created_ns FROM users WHERE id = $1",
         )
         .bind(id)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         user(row.ok_or_else(|| AssessError::NotFound(format!("user {id}")))?)
     }
 
     /// The user named `name`.
     pub async fn user_by_name(&self, name: &str) -> Result<User> {
-        let row: Option<UserRow> = sqlx::query_as(
-            "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?",
+        let row: Option<UserRow> = crate::on_db!(&self.db, pool => sqlx::query_as(
+            "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = $1",
         )
         .bind(name)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         user(row.ok_or_else(|| AssessError::NotFound(format!("user {name:?}")))?)
     }
 
     /// All users (of one role if given), by name.
     pub async fn list_users(&self, role: Option<Role>) -> Result<Vec<User>> {
-        let rows: Vec<UserRow> = sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE (? IS NULL OR role = ?) ORDER BY name")
+        let rows: Vec<UserRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, role, password_hash, created_ns FROM users WHERE ($1 IS NULL OR role = $2) ORDER BY name")
             .bind(role.map(Role::as_str))
             .bind(role.map(Role::as_str))
-            .fetch_all(&self.pool)
-            .await?;
+            .fetch_all(pool).await)?;
         rows.into_iter().map(user).collect()
     }
 
     /// Sets (or replaces) a user's password.
     pub async fn set_password(&self, user_id: i64, password: &str) -> Result<()> {
         let hash = hash_password(password)?;
-        let done = sqlx::query("UPDATE users SET password_hash = ? WHERE id = ?")
+        let done = crate::on_db!(&self.db, pool => sqlx::query("UPDATE users SET password_hash = $1 WHERE id = $2")
             .bind(hash)
             .bind(user_id)
-            .execute(&self.pool)
-            .await?;
-        if done.rows_affected() == 0 {
+            .execute(pool).await.map(|r| r.rows_affected()))?;
+        if done == 0 {
             return Err(AssessError::NotFound(format!("user {user_id}")));
         }
         Ok(())
@@ -151,12 +146,11 @@ impl Store {
     /// The user if `name` exists, has a password and `password` matches it; `None` otherwise
     /// (unknown user, no password or a wrong one alike).
     pub async fn verify_password(&self, name: &str, password: &str) -> Result<Option<User>> {
-        let row: Option<UserRow> = sqlx::query_as(
-            "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = ?",
+        let row: Option<UserRow> = crate::on_db!(&self.db, pool => sqlx::query_as(
+            "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = $1",
         )
         .bind(name)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(pool).await)?;
         let Some(row) = row else { return Ok(None) };
         let Some(hash) = row.3.clone() else {
             return Ok(None);

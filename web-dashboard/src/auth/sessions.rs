@@ -18,20 +18,21 @@ pub async fn create(state: &AppState, user: &User) -> Result<String, AppError> {
     let token = random_token()?;
     let csrf = random_token()?;
     let now = now_ns();
-    let pool = state.store().pool();
-    // expired sessions go when someone logs in
-    sqlx::query("DELETE FROM login_sessions WHERE expires_ns < ?")
-        .bind(now)
-        .execute(pool)
-        .await?;
-    sqlx::query("INSERT INTO login_sessions (token_sha256, user_id, csrf_token, created_ns, expires_ns) VALUES (?, ?, ?, ?, ?)")
-        .bind(token_hash(&token))
-        .bind(user.id)
-        .bind(&csrf)
-        .bind(now)
-        .bind(now + SESSION_TTL_NS)
-        .execute(pool)
-        .await?;
+    cutlab_assessor::on_db!(state.store().db(), pool => {
+        // expired sessions go when someone logs in
+        sqlx::query("DELETE FROM login_sessions WHERE expires_ns < $1")
+            .bind(now)
+            .execute(pool)
+            .await?;
+        sqlx::query("INSERT INTO login_sessions (token_sha256, user_id, csrf_token, created_ns, expires_ns) VALUES ($1, $2, $3, $4, $5)")
+            .bind(token_hash(&token))
+            .bind(user.id)
+            .bind(&csrf)
+            .bind(now)
+            .bind(now + SESSION_TTL_NS)
+            .execute(pool)
+            .await?;
+    });
     Ok(token)
 }
 
@@ -46,13 +47,12 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
         return Ok(Some(s));
     }
     let stamp = cache.stamp();
-    let row: Option<Row> = sqlx::query_as(
-        "SELECT u.id, u.name, u.role, u.password_hash, u.created_ns, s.csrf_token FROM login_sessions s JOIN users u ON u.id = s.user_id WHERE s.token_sha256 = ? AND s.expires_ns > ?",
+    let row: Option<Row> = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query_as(
+        "SELECT u.id, u.name, u.role, u.password_hash, u.created_ns, s.csrf_token FROM login_sessions s JOIN users u ON u.id = s.user_id WHERE s.token_sha256 = $1 AND s.expires_ns > $2",
     )
     .bind(&hash)
     .bind(now_ns())
-    .fetch_optional(state.store().pool())
-    .await?;
+    .fetch_optional(pool).await)?;
     let Some((id, name, role, password_hash, created_ns, csrf)) = row else {
         return Ok(None);
     };
@@ -78,9 +78,8 @@ pub async fn lookup(state: &AppState, token: &str) -> Result<Option<AuthSession>
 /// Ends a session.
 pub async fn delete(state: &AppState, token_hash: &str) -> Result<(), AppError> {
     state.caches().sessions.remove(&token_hash.to_owned());
-    sqlx::query("DELETE FROM login_sessions WHERE token_sha256 = ?")
+    cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query("DELETE FROM login_sessions WHERE token_sha256 = $1")
         .bind(token_hash)
-        .execute(state.store().pool())
-        .await?;
+        .execute(pool).await.map(|_| ()))?;
     Ok(())
 }

@@ -77,12 +77,11 @@ pub struct SignOff {
 }
 
 pub async fn comments(state: &AppState, attempt_id: i64) -> Result<Vec<Comment>, AppError> {
-    let rows: Vec<(i64, i64, String, String, i64, Option<i64>)> = sqlx::query_as(
-        "SELECT c.id, u.id, u.name, c.body, c.created_ns, c.at_ns FROM attempt_comments c JOIN users u ON u.id = c.author_id WHERE c.attempt_id = ? ORDER BY c.created_ns, c.id",
+    let rows: Vec<(i64, i64, String, String, i64, Option<i64>)> = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query_as(
+        "SELECT c.id, u.id, u.name, c.body, c.created_ns, c.at_ns FROM attempt_comments c JOIN users u ON u.id = c.author_id WHERE c.attempt_id = $1 ORDER BY c.created_ns, c.id",
     )
     .bind(attempt_id)
-    .fetch_all(state.store().pool())
-    .await?;
+    .fetch_all(pool).await)?;
     Ok(rows
         .into_iter()
         .map(|(id, uid, name, body, created_ns, at_ns)| Comment {
@@ -118,14 +117,13 @@ pub async fn add_comment(
             "a note's moment is outside the attempt".into(),
         ));
     }
-    sqlx::query("INSERT INTO attempt_comments (attempt_id, author_id, body, created_ns, at_ns) VALUES (?, ?, ?, ?, ?)")
+    cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query("INSERT INTO attempt_comments (attempt_id, author_id, body, created_ns, at_ns) VALUES ($1, $2, $3, $4, $5)")
         .bind(attempt_id)
         .bind(author_id)
         .bind(body)
         .bind(now_ns())
         .bind(at_ns)
-        .execute(state.store().pool())
-        .await?;
+        .execute(pool).await.map(|_| ()))?;
     Ok(())
 }
 
@@ -134,13 +132,12 @@ pub async fn sign_off(
     attempt_id: i64,
     instructor_id: i64,
 ) -> Result<(), AppError> {
-    let done = sqlx::query("INSERT INTO attempt_signoffs (attempt_id, instructor_id, signed_ns) VALUES (?, ?, ?) ON CONFLICT (attempt_id) DO NOTHING")
+    let done = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query("INSERT INTO attempt_signoffs (attempt_id, instructor_id, signed_ns) VALUES ($1, $2, $3) ON CONFLICT (attempt_id) DO NOTHING")
         .bind(attempt_id)
         .bind(instructor_id)
         .bind(now_ns())
-        .execute(state.store().pool())
-        .await?;
-    if done.rows_affected() == 0 {
+        .execute(pool).await.map(|r| r.rows_affected()))?;
+    if done == 0 {
         return Err(AppError::Conflict(format!(
             "attempt {attempt_id} is already signed off"
         )));
@@ -149,10 +146,9 @@ pub async fn sign_off(
 }
 
 pub async fn signoff(state: &AppState, attempt_id: i64) -> Result<Option<SignOff>, AppError> {
-    let row: Option<(i64, String, i64)> = sqlx::query_as("SELECT u.id, u.name, s.signed_ns FROM attempt_signoffs s JOIN users u ON u.id = s.instructor_id WHERE s.attempt_id = ?")
+    let row: Option<(i64, String, i64)> = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query_as("SELECT u.id, u.name, s.signed_ns FROM attempt_signoffs s JOIN users u ON u.id = s.instructor_id WHERE s.attempt_id = $1")
         .bind(attempt_id)
-        .fetch_optional(state.store().pool())
-        .await?;
+        .fetch_optional(pool).await)?;
     Ok(row.map(|(id, name, signed_ns)| SignOff {
         instructor: UserRef { id, name },
         signed_ns,

@@ -75,13 +75,12 @@ pub async fn cohort_overview(state: &AppState, cohort: Cohort) -> Result<CohortO
         .filter(|u| u.role == Role::Trainee)
         .map(UserRef::from)
         .collect();
-    let rows: Vec<Row> = sqlx::query_as(
+    let rows: Vec<Row> = cutlab_assessor::on_db!(store.db(), pool => sqlx::query_as(
         "SELECT a.trainee_id, a.exercise_id, a.status, a.passed, a.scored, a.score FROM attempts a JOIN cohort_members m ON m.user_id = a.trainee_id \
-         WHERE m.cohort_id = ? AND a.expert = FALSE ORDER BY a.started_ns, a.id",
+         WHERE m.cohort_id = $1 AND a.expert = FALSE ORDER BY a.started_ns, a.id",
     )
     .bind(cohort.id)
-    .fetch_all(store.pool())
-    .await?;
+    .fetch_all(pool).await)?;
     // (trainee, exercise) -> (attempts, scored passes, last score)
     let mut cells: BTreeMap<(i64, i64), CellAcc> = BTreeMap::new();
     for (trainee, exercise, status, passed, scored, score) in rows {

@@ -214,10 +214,9 @@ type StoredValue = (String, Option<f64>, String, Option<bool>);
 pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppError> {
     let store = state.store();
     let attempts = store.list_attempts(Some(trainee.id), None).await?;
-    let rows: Vec<MetricRow> = sqlx::query_as("SELECT r.attempt_id, r.metric, r.value, r.unit, r.passed FROM metric_results r JOIN attempts a ON a.id = r.attempt_id WHERE a.trainee_id = ?")
+    let rows: Vec<MetricRow> = cutlab_assessor::on_db!(store.db(), pool => sqlx::query_as("SELECT r.attempt_id, r.metric, r.value, r.unit, r.passed FROM metric_results r JOIN attempts a ON a.id = r.attempt_id WHERE a.trainee_id = $1")
         .bind(trainee.id)
-        .fetch_all(store.pool())
-        .await?;
+        .fetch_all(pool).await)?;
     let mut by_attempt: HashMap<i64, Vec<StoredValue>> = HashMap::new();
     for (a, metric, value, unit, passed) in rows {
         by_attempt

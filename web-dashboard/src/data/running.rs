@@ -30,20 +30,21 @@ pub async fn running(
     viewer: &CurrentUser,
 ) -> Result<Vec<RunningAttempt>, AppError> {
     let base = "SELECT a.id, u.id, u.name, e.id, e.name, a.started_ns, a.recording_path FROM attempts a JOIN users u ON u.id = a.trainee_id JOIN exercises e ON e.id = a.exercise_id WHERE a.status = 'running'";
-    let pool = state.store().pool();
-    let rows: Vec<Row> = match viewer.role() {
-        Role::Admin => sqlx::query_as(sqlx::AssertSqlSafe(format!("{base} ORDER BY a.started_ns"))).fetch_all(pool).await?,
-        Role::Trainee => sqlx::query_as(sqlx::AssertSqlSafe(format!("{base} AND a.trainee_id = ? ORDER BY a.started_ns"))).bind(viewer.id()).fetch_all(pool).await?,
-        Role::Instructor => {
-            sqlx::query_as(sqlx::AssertSqlSafe(format!(
-                "{base} AND (a.trainee_id = ? OR a.trainee_id IN (SELECT m.user_id FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = ?)) ORDER BY a.started_ns"
-            )))
-            .bind(viewer.id())
-            .bind(viewer.id())
-            .fetch_all(pool)
-            .await?
+    let rows: Vec<Row> = cutlab_assessor::on_db!(state.store().db(), pool => {
+        match viewer.role() {
+            Role::Admin => sqlx::query_as(sqlx::AssertSqlSafe(format!("{base} ORDER BY a.started_ns"))).fetch_all(pool).await?,
+            Role::Trainee => sqlx::query_as(sqlx::AssertSqlSafe(format!("{base} AND a.trainee_id = $1 ORDER BY a.started_ns"))).bind(viewer.id()).fetch_all(pool).await?,
+            Role::Instructor => {
+                sqlx::query_as(sqlx::AssertSqlSafe(format!(
+                    "{base} AND (a.trainee_id = $1 OR a.trainee_id IN (SELECT m.user_id FROM cohort_members m JOIN cohorts c ON c.id = m.cohort_id WHERE c.instructor_id = $2)) ORDER BY a.started_ns"
+                )))
+                .bind(viewer.id())
+                .bind(viewer.id())
+                .fetch_all(pool)
+                .await?
+            }
         }
-    };
+    });
     let now = now_ns();
     Ok(rows
         .into_iter()

@@ -1,11 +1,14 @@
-//! Shared by the HTTP tests: a fresh database per test (a temporary file) with the demo
-//! seeded, the app, and a tiny client over `tower::ServiceExt::oneshot`.
+//! Shared by the HTTP tests: a fresh database per test with the demo seeded, the app, and a
+//! tiny client over `tower::ServiceExt::oneshot`. The database is a temporary SQLite file,
+//! or with `CUTLAB_TEST_DASHBOARD_ON=postgres` a scratch database on the PostgreSQL server of
+//! `$CUTLAB_TEST_POSTGRES` (CI runs the suite both ways).
 #![allow(dead_code, clippy::unwrap_used)]
 
 use axum::Router;
 use axum::body::Body;
 use axum::http::{Method, Request, Response, StatusCode, header};
-use cutlab_dashboard::assessor::store::Store;
+pub use cutlab_dashboard::assessor::on_db;
+use cutlab_dashboard::assessor::store::{DbLocation, Store, TEST_POSTGRES_ENV, scratch_postgres};
 use cutlab_dashboard::{AppState, Config, app, seed_demo};
 use http_body_util::BodyExt;
 use tower::ServiceExt;
@@ -14,6 +17,8 @@ use tower::ServiceExt;
 pub struct Env {
     pub app: Router,
     pub store: Store,
+    /// Where `store` is (another process may open it too).
+    pub db: DbLocation,
     pub dir: tempfile::TempDir,
 }
 
@@ -24,11 +29,39 @@ pub async fn env() -> Env {
 /// [`env`] with `config`, and the app's state.
 pub async fn env_with(config: Config) -> (Env, AppState) {
     let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(&dir.path().join("cutlab.db")).await.unwrap();
+    let db = database(&dir).await;
+    let store = Store::open(&db).await.unwrap();
     seed_demo(&store).await.unwrap();
     let state = AppState::new(store.clone(), config).unwrap();
     let app = app(state.clone());
-    (Env { app, store, dir }, state)
+    (
+        Env {
+            app,
+            store,
+            db,
+            dir,
+        },
+        state,
+    )
+}
+
+/// The environment variable that puts the suite on PostgreSQL (`postgres`).
+pub const ENGINE_ENV: &str = "CUTLAB_TEST_DASHBOARD_ON";
+
+/// A fresh database for one test: an SQLite file in `dir`, or a scratch PostgreSQL database
+/// when [`ENGINE_ENV`] asks for one.
+pub async fn database(dir: &tempfile::TempDir) -> DbLocation {
+    match std::env::var(ENGINE_ENV).as_deref() {
+        Ok("postgres") => {
+            let server = std::env::var(TEST_POSTGRES_ENV)
+                .unwrap_or_else(|_| panic!("{ENGINE_ENV}=postgres needs {TEST_POSTGRES_ENV}"));
+            scratch_postgres(&server, "cutlab_dashboard_test")
+                .await
+                .unwrap()
+        }
+        Ok("sqlite") | Err(_) => DbLocation::Sqlite(dir.path().join("cutlab.db")),
+        Ok(other) => panic!("{ENGINE_ENV}={other}: postgres or sqlite"),
+    }
 }
 
 /// A logged-in browser: its cookie and the session's CSRF token.
@@ -159,8 +192,10 @@ pub async fn first_attempt(store: &Store, name: &str) -> i64 {
 }
 
 pub async fn count(store: &Store, table: &str) -> i64 {
-    sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT COUNT(*) FROM {table}")))
-        .fetch_one(store.pool())
-        .await
-        .unwrap()
+    on_db!(store.db(), pool => {
+        sqlx::query_scalar(sqlx::AssertSqlSafe(format!("SELECT COUNT(*) FROM {table}")))
+            .fetch_one(pool)
+            .await
+    })
+    .unwrap()
 }
