@@ -638,3 +638,25 @@ fn an_automatic_simulation_step_is_said_recorded_and_replayed_bit_exact() {
     let _ = std::fs::remove_dir_all(&out);
     assert!(ok && stdout.contains("bit-exact"), "{stdout}{err}");
 }
+
+#[test]
+fn an_unreachable_or_malformed_database_ends_with_one_clear_line() {
+    // nothing listens on port 1; the password never shows
+    let (ok, _, err) = cutlab(&[
+        "--db",
+        "postgres://ann:s3cret@127.0.0.1:1/cutlab",
+        "user",
+        "list",
+    ]);
+    assert!(!ok);
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].starts_with("error: opening the database"), "{err}");
+    assert!(lines[0].contains("postgres://ann:***@127.0.0.1:1/cutlab"), "{err}");
+    assert!(lines[0].contains("refused"), "{err}");
+    assert!(!err.contains("s3cret") && !err.contains("panick"), "{err}");
+    let (ok, _, err) = cutlab(&["--db", "postgres://h:notaport/x", "user", "list"]);
+    assert!(!ok);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("port"), "{err}");
+}
