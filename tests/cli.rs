@@ -652,7 +652,10 @@ fn an_unreachable_or_malformed_database_ends_with_one_clear_line() {
     let lines: Vec<&str> = err.lines().collect();
     assert_eq!(lines.len(), 1, "{err}");
     assert!(lines[0].starts_with("error: opening the database"), "{err}");
-    assert!(lines[0].contains("postgres://ann:***@127.0.0.1:1/cutlab"), "{err}");
+    assert!(
+        lines[0].contains("postgres://ann:***@127.0.0.1:1/cutlab"),
+        "{err}"
+    );
     assert!(lines[0].contains("refused"), "{err}");
     assert!(!err.contains("s3cret") && !err.contains("panick"), "{err}");
     let (ok, _, err) = cutlab(&["--db", "postgres://h:notaport/x", "user", "list"]);
