@@ -42,17 +42,18 @@ pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<Reru
     }
 }
 
-/// A rerun sink for a recording's session, with its planned incision logged.
+/// A rerun sink for a recording's session, with its planned incision logged and the 3D view
+/// framed on it.
 pub fn rerun_sink(
     target: &RerunTarget,
     period_nanos: u64,
     blade_length_m: f64,
-    plan: Option<&[cutlab_sim::Point3]>,
+    plan: Option<&cutlab_haptics::device::Plan>,
 ) -> anyhow::Result<Box<dyn RecordObserver>> {
     let mut sink = RerunSink::new(target, "cutlab", period_nanos, blade_length_m)
         .context("starting the rerun logger")?;
-    if let Some(line) = plan {
-        sink.log_plan(line).context("logging the plan to rerun")?;
+    if let Some(plan) = plan {
+        sink.log_plan(plan).context("logging the plan to rerun")?;
     }
     Ok(Box::new(sink))
 }
@@ -234,13 +235,13 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
     }
     let observer = match &a.rerun {
         Some(target) => {
-            let plan = rec.plan()?.map(|p| p.to_plan().line_m);
+            let plan = rec.plan()?.map(|p| p.to_plan());
             let meta = rec.meta()?;
             Some(rerun_sink(
                 target,
                 meta.period_nanos,
                 meta.blade_length_m,
-                plan.as_deref(),
+                plan.as_ref(),
             )?)
         }
         None => None,

@@ -281,12 +281,12 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
                 RerunTarget::File(rrd) => RerunTarget::File(o.out.join(rrd)),
                 other => other.clone(),
             };
-            let plan_line = plan.as_ref().ok().map(|p| p.line_m.as_slice());
+
             Some(crate::recording::rerun_sink(
                 &target,
                 config.period_nanos,
                 config.blade_length_m,
-                plan_line,
+                plan.as_ref().ok(),
             )?)
         }
         None => None,

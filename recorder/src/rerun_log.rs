@@ -32,6 +32,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
+use cutlab_haptics::device::Plan;
 use cutlab_haptics::render::{Mode, fault};
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::sim::cut::{Blade, CutEvent};
@@ -243,13 +244,7 @@ impl RerunSink {
             ticks_logged: 0,
         };
         sink.log_static_styles(blade_length_m)?;
-        review_blueprint().send(
-            &sink.rec,
-            rerun::blueprint::BlueprintActivation {
-                make_active: true,
-                make_default: true,
-            },
-        )?;
+        send_review_blueprint(&sink.rec, None)?;
         Ok(sink)
     }
 
@@ -291,16 +286,31 @@ impl RerunSink {
         Ok(())
     }
 
-    /// The planned incision, as a static line strip (metres, world frame).
-    pub fn log_plan(&mut self, line_m: &[Point3]) -> Result<(), RerunLogError> {
-        let strip: Vec<[f32; 3]> = line_m.iter().map(f32x3).collect();
+    /// Frames the review's 3D view: the eye at `eye_m` looking at `target_m` (metres, world
+    /// frame), the exercise's viewpoint; the layout is sent again with it.
+    pub fn frame_view(&mut self, eye_m: &Point3, target_m: &Point3) -> Result<(), RerunLogError> {
+        if !(eye_m.iter().chain(target_m.iter()).all(|v| v.is_finite()) && eye_m != target_m) {
+            return Err(RerunLogError::Settings(format!(
+                "a view from {eye_m:?} to {target_m:?}: two different finite points needed"
+            )));
+        }
+        send_review_blueprint(&self.rec, Some((eye_m, target_m)))
+    }
+
+    /// The planned incision, as a static line strip (metres, world frame), and the 3D view
+    /// framed on it ([`plan_view`]).
+    pub fn log_plan(&mut self, plan: &Plan) -> Result<(), RerunLogError> {
+        let strip: Vec<[f32; 3]> = plan.line_m.iter().map(f32x3).collect();
         self.rec.log_static(
             paths::PLAN,
             &rerun::LineStrips3D::new([strip])
                 .with_radii([rerun::Radius::new_ui_points(1.5)])
                 .with_colors([rerun::Color::from_rgb(40, 200, 90)]),
         )?;
-        Ok(())
+        match plan_view(plan) {
+            Some((eye, target)) => self.frame_view(&eye, &target),
+            None => Ok(()),
+        }
     }
 
     /// One servo tick: buffered; the series go out every batch, the scalpel at ~30 Hz.
@@ -537,31 +547,127 @@ impl Drop for RerunSink {
     }
 }
 
+/// Where a review looks at a planned incision from: the eye on the outward normal (the mean of
+/// the plan's normals) above the incision's middle, at twice its length (at least 8 cm), so
+/// the whole line and the tissue around it are in view; `None` for a plan without a usable
+/// line or normal.
+pub fn plan_view(plan: &Plan) -> Option<(Point3, Point3)> {
+    let (first, last) = (plan.line_m.first()?, plan.line_m.last()?);
+    let target = Point3::from((first.coords + last.coords) * 0.5);
+    let length: f64 = plan.line_m.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let normal = plan
+        .normals
+        .iter()
+        .fold(cutlab_haptics::Vector3::zeros(), |a, n| a + n)
+        .try_normalize(1e-12)?;
+    let eye = target + normal * (2.0 * length).max(0.08);
+    (eye.iter().chain(target.iter()).all(|v| v.is_finite())).then_some((eye, target))
+}
+
+/// The name of the 3D view's eye property in the blueprint (`view/<id>/EyeControls3D`).
+const EYE_CONTROLS: &str = "EyeControls3D";
+
+/// Sends [`review_blueprint`] to `rec`, made active and the default; with `eye` (position,
+/// look target), its 3D view looks from there.
+///
+/// rerun 0.36's blueprint builder has no eye controls for a 3D view, so the blueprint goes
+/// first into memory, the view's `EyeControls3D` property is logged into the same blueprint
+/// store, and the whole is sent with the blueprint's own activation.
+fn send_review_blueprint(
+    rec: &RecordingStream,
+    eye: Option<(&Point3, &Point3)>,
+) -> Result<(), RerunLogError> {
+    use rerun::blueprint::BlueprintActivation;
+    use rerun::log::LogMsg;
+    let activation = BlueprintActivation {
+        make_active: true,
+        make_default: true,
+    };
+    let (blueprint, view_path) = review_layout();
+    let Some((eye_m, target_m)) = eye else {
+        blueprint.send(rec, activation)?;
+        return Ok(());
+    };
+    let application: rerun::ApplicationId = rec
+        .store_info()
+        .map_or_else(|| "cutlab".into(), |i| i.application_id().clone());
+    let (memory, storage) = RecordingStreamBuilder::new(application.clone()).memory()?;
+    blueprint.send(&memory, activation)?;
+    memory.flush_blocking()?;
+    let msgs = storage.take();
+    let Some(command) = msgs.iter().find_map(|m| match m {
+        LogMsg::BlueprintActivationCommand(c) => Some(c.clone()),
+        _ => None,
+    }) else {
+        return Err(RerunLogError::Settings(
+            "the review blueprint carries no activation".into(),
+        ));
+    };
+    let mut layout: Vec<LogMsg> = msgs
+        .into_iter()
+        .filter(|m| {
+            !matches!(m, LogMsg::BlueprintActivationCommand(_))
+                && *m.store_id() == command.blueprint_id
+        })
+        .collect();
+    let (eye_store, eye_storage) = RecordingStreamBuilder::new(application.clone())
+        .recording_id(command.blueprint_id.recording_id().clone())
+        .blueprint()
+        .memory()?;
+    eye_store.set_time_sequence("blueprint", 0);
+    eye_store.log(
+        format!("{view_path}/{EYE_CONTROLS}"),
+        &rerun::external::re_sdk_types::blueprint::archetypes::EyeControls3D::new()
+            .with_position(f32x3(eye_m))
+            .with_look_target(f32x3(target_m)),
+    )?;
+    eye_store.flush_blocking()?;
+    layout.extend(
+        eye_storage
+            .take()
+            .into_iter()
+            .filter(|m| matches!(m, LogMsg::ArrowMsg(..))),
+    );
+    rec.send_blueprint(layout, command);
+    Ok(())
+}
+
 /// The layout an instructor reviews a cut in, sent with every log: a large 3D view of the
 /// tissue, the blade and the planned incision (`world`); below it the force and contact series
 /// in one plot and the events as a compact log; the blueprint and selection panels collapsed,
 /// the time panel on `sim_time`.
 pub fn review_blueprint() -> rerun::blueprint::Blueprint {
+    review_layout().0
+}
+
+/// [`review_blueprint`] and the blueprint path of its 3D view.
+fn review_layout() -> (rerun::blueprint::Blueprint, String) {
     use rerun::blueprint::components::PanelState;
     use rerun::blueprint::{
-        Blueprint, BlueprintPanel, Horizontal, SelectionPanel, Spatial3DView, TextLogView,
-        TimePanel, TimeSeriesView, Vertical,
+        Blueprint, BlueprintPanel, ContainerLike, Horizontal, SelectionPanel, Spatial3DView,
+        TextLogView, TimePanel, TimeSeriesView, Vertical,
     };
-    let scene = Spatial3DView::new("Tissue").with_origin("world");
+    let scene: ContainerLike = Spatial3DView::new("Tissue").with_origin("world").into();
+    let view_path = match &scene {
+        ContainerLike::View(v) => v.blueprint_path().to_string(),
+        _ => String::new(),
+    };
     let series = TimeSeriesView::new("Force (N) and contact")
         .with_origin("/")
         .with_contents(["force/**", "contact/**"]);
     let events = TextLogView::new("Events").with_origin(paths::EVENTS);
     let below = Horizontal::new([series.into(), events.into()]).with_column_shares([3.0, 1.0]);
-    Blueprint::new(Vertical::new([scene.into(), below.into()]).with_row_shares([3.0, 1.0]))
-        .with_auto_views(false)
-        .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
-        .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
-        .with_time_panel(
-            TimePanel::new()
-                .with_state(PanelState::Collapsed)
-                .with_timeline(TIMELINE_SIM_TIME),
-        )
+    let blueprint =
+        Blueprint::new(Vertical::new([scene, below.into()]).with_row_shares([3.0, 1.0]))
+            .with_auto_views(false)
+            .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
+            .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
+            .with_time_panel(
+                TimePanel::new()
+                    .with_state(PanelState::Collapsed)
+                    .with_timeline(TIMELINE_SIM_TIME),
+            );
+    (blueprint, view_path.trim_start_matches('/').to_owned())
 }
 
 fn to_i64(v: u64) -> i64 {

@@ -363,7 +363,7 @@ pub async fn start(
         )
         .map_err(|e| StationError::Plan(format!("starting the rerun log: {e}")))?;
         rerun
-            .log_plan(&plan.line_m)
+            .log_plan(&plan)
             .map_err(|e| StationError::Plan(format!("logging the plan: {e}")))?;
         observers.push(Box::new(rerun));
     }

@@ -161,8 +161,13 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
         0.015,
     )
     .expect("sink");
-    sink.log_plan(&[Point3::new(0.0, 0.05, 0.0), Point3::new(0.1, 0.05, 0.0)])
-        .expect("plan");
+    sink.log_plan(&cutlab_haptics::device::Plan {
+        line_m: vec![Point3::new(0.0, 0.05, 0.0), Point3::new(0.1, 0.05, 0.0)],
+        normals: vec![Vector3::z(); 2],
+        depth_m: 0.005,
+        approach_height_m: 0.02,
+    })
+    .expect("plan");
 
     let mut surfaces = 0;
     let mut events = 0;
@@ -265,7 +270,8 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
     );
     assert_eq!(decoded.rows.get(paths::TISSUE).copied(), Some(surfaces));
     // the review layout travels with the file: a viewport, its two containers and three views
-    // (the tissue in 3D, the force and contact plot, the events), made active and the default
+    // (the tissue in 3D, the force and contact plot, the events), made active and the default;
+    // sent twice, the second time framed on the plan
     assert!(decoded.blueprint_activated);
     assert!(
         decoded.blueprint.iter().any(|p| p == "viewport"),
@@ -284,7 +290,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
     };
     assert_eq!(
         (count("view"), count("container")),
-        (3, 2),
+        (6, 4),
         "{:?}",
         decoded.blueprint
     );
@@ -513,5 +519,89 @@ fn event_texts_carry_the_figures() {
         text.contains("state hash 0000000000000abc")
             && text.contains("topology hash 0000000000000001"),
         "{text}"
+    );
+}
+
+/// The review's 3D view looks from the exercise's viewpoint: its `EyeControls3D` property is
+/// in the blueprint that is made active, under the 3D view of that blueprint.
+#[test]
+fn the_review_view_looks_from_the_exercise_viewpoint() {
+    let file = TempFile::new("framed.rrd");
+    let mut sink = RerunSink::new(
+        &RerunTarget::File(file.0.clone()),
+        "cutlab-test",
+        PERIOD_NANOS,
+        0.015,
+    )
+    .expect("sink");
+    let eye = Point3::new(0.05, 0.12, 0.2);
+    let target = Point3::new(0.05, 0.0, 0.0);
+    sink.frame_view(&eye, &target).expect("framed");
+    assert!(
+        sink.frame_view(&eye, &eye).is_err(),
+        "a view needs two points"
+    );
+    let plan = cutlab_haptics::device::Plan {
+        line_m: vec![Point3::new(0.0, 0.0, 0.0), Point3::new(0.1, 0.0, 0.0)],
+        normals: vec![Vector3::y(); 2],
+        depth_m: 0.005,
+        approach_height_m: 0.02,
+    };
+    let (plan_eye, plan_target) = plan_view(&plan).expect("a view of the plan");
+    assert!((plan_target - Point3::new(0.05, 0.0, 0.0)).norm() < 1e-12);
+    assert!(
+        (plan_eye - Point3::new(0.05, 0.2, 0.0)).norm() < 1e-12,
+        "{plan_eye}"
+    );
+    let flat = cutlab_haptics::device::Plan {
+        normals: vec![Vector3::zeros(); 2],
+        ..plan
+    };
+    assert_eq!(plan_view(&flat), None);
+    assert!(
+        sink.frame_view(&Point3::new(f64::NAN, 0.0, 0.0), &target)
+            .is_err()
+    );
+    drop(sink);
+
+    let reader = std::fs::File::open(&file.0).expect("open the rrd");
+    let decoder = DecoderApp::decode_eager(std::io::BufReader::new(reader)).expect("rrd");
+    let mut activated = Vec::new();
+    let mut eye_controls = Vec::new();
+    let mut views = Vec::new();
+    for msg in decoder {
+        match msg.expect("a message decodes") {
+            LogMsg::BlueprintActivationCommand(cmd) if cmd.make_active => {
+                activated.push(cmd.blueprint_id);
+            }
+            LogMsg::ArrowMsg(store, arrow) if store.kind() == rerun::StoreKind::Blueprint => {
+                let chunk = Chunk::from_arrow_msg(&arrow).expect("a chunk decodes");
+                let path = chunk.entity_path().to_string();
+                let path = path.trim_start_matches('/');
+                if let Some(view) = path.strip_suffix("/EyeControls3D") {
+                    assert!(
+                        chunk
+                            .components()
+                            .keys()
+                            .any(|c| c.as_str().contains("position")),
+                        "{:?}",
+                        chunk.components().keys().collect::<Vec<_>>()
+                    );
+                    eye_controls.push((store.clone(), view.to_owned()));
+                } else if path.starts_with("view/") && path.matches('/').count() == 1 {
+                    views.push((store.clone(), path.to_owned()));
+                }
+            }
+            _ => {}
+        }
+    }
+    // the unframed layout first, then the framed one, which is the last made active
+    assert_eq!(activated.len(), 2, "{activated:?}");
+    let last = activated.last().expect("activated");
+    assert_eq!(eye_controls.len(), 1, "{eye_controls:?}");
+    assert_eq!(&eye_controls[0].0, last);
+    assert!(
+        views.contains(&eye_controls[0]),
+        "the eye belongs to a view of the same blueprint: {eye_controls:?} {views:?}"
     );
 }
