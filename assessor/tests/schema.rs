@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use cutlab_assessor::Store;
 use cutlab_assessor::on_db;
-use cutlab_assessor::store::{DbLocation, TEST_POSTGRES_ENV, scratch_postgres};
+use cutlab_assessor::store::test_postgres;
 use cutlab_assessor::store::{POSTGRES_MIGRATOR, SQLITE_MIGRATOR};
 
 /// A column as both engines can describe it.
@@ -137,13 +137,9 @@ async fn both_engines_have_the_same_schema() {
     let (sqlite_tables, sqlite_indexes) = sqlite_schema(&sqlite).await;
     assert!(sqlite_tables.len() >= 14, "{:?}", sqlite_tables.keys());
     assert!(sqlite_indexes.len() >= 5, "{sqlite_indexes:?}");
-    let Ok(server) = std::env::var(TEST_POSTGRES_ENV) else {
-        eprintln!("skipped: {TEST_POSTGRES_ENV} names no PostgreSQL server");
+    let Some(at) = test_postgres("cutlab_schema_test").await else {
         return;
     };
-    let at: DbLocation = scratch_postgres(&server, "cutlab_schema_test")
-        .await
-        .expect("scratch database");
     let postgres = Store::open(&at).await.expect("postgres");
     let (pg_tables, pg_indexes) = postgres_schema(&postgres).await;
     assert_eq!(

@@ -5,7 +5,7 @@
 use cutlab_assessor::metrics::{METRICS, MetricValue};
 use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds};
 use cutlab_assessor::store::{AttemptStatus, BUILTIN_EXERCISE, NewExercise, Role, ThresholdSource};
-use cutlab_assessor::store::{DbLocation, TEST_POSTGRES_ENV, scratch_postgres};
+use cutlab_assessor::store::{DbLocation, test_postgres};
 use cutlab_assessor::{AssessError, Better, ExpertPlan, Store, on_db};
 
 /// A fresh SQLite database in a temporary folder (kept alive by the returned guard).
@@ -20,15 +20,7 @@ async fn sqlite_store() -> (Store, tempfile::TempDir) {
 /// A fresh database on the PostgreSQL server of `$CUTLAB_TEST_POSTGRES`; `None` (saying
 /// so) without one.
 async fn postgres_location() -> Option<DbLocation> {
-    let Ok(server) = std::env::var(TEST_POSTGRES_ENV) else {
-        eprintln!("skipped: {TEST_POSTGRES_ENV} names no PostgreSQL server");
-        return None;
-    };
-    Some(
-        scratch_postgres(&server, "cutlab_store_test")
-            .await
-            .expect("a scratch database"),
-    )
+    test_postgres("cutlab_store_test").await
 }
 
 /// `name::sqlite` and `name::postgres`: the test `name(store)` on a fresh database of each.

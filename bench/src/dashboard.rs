@@ -56,75 +56,73 @@ struct DbReport {
 
 /// Seeds `db`, serves it and loads it.
 async fn load_one(o: &Options<'_>, db: &DbLocation) -> anyhow::Result<DbReport> {
-    {
-        let store = Store::open(db)
-            .await
-            .with_context(|| format!("opening {db}"))?;
-        let engine = store.db().engine();
-        let t0 = Instant::now();
-        let ids = seed_load(&store, o.trainees, o.attempts).await?;
-        eprintln!(
-            "seeded {} trainees x {} attempts in {} ({:.1} s)",
-            ids.len(),
-            o.attempts,
-            db,
-            t0.elapsed().as_secs_f64()
-        );
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
-        let addr = listener.local_addr()?;
-        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-        let server = tokio::spawn(cutlab_dashboard::serve(
-            listener,
-            AppState::new(store, Config::default())?,
-            async move {
-                let _ = stopped.await;
-            },
-        ));
-        let cookie = login(addr, LOAD_INSTRUCTOR.name, LOAD_INSTRUCTOR.password).await?;
-        let d = Duration::from_secs_f64(o.duration_s);
-        let pages: Vec<String> = ids.iter().map(|id| format!("/trainees/{id}")).collect();
-        let api: Vec<String> = ids
-            .iter()
-            .map(|id| format!("/api/trainees/{id}/progress"))
-            .collect();
-        // warm up (connections, caches), then measure
+    let store = Store::open(db)
+        .await
+        .with_context(|| format!("opening {db}"))?;
+    let engine = store.db().engine();
+    let t0 = Instant::now();
+    let ids = seed_load(&store, o.trainees, o.attempts).await?;
+    eprintln!(
+        "seeded {} trainees x {} attempts in {} ({:.1} s)",
+        ids.len(),
+        o.attempts,
+        db,
+        t0.elapsed().as_secs_f64()
+    );
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+    let addr = listener.local_addr()?;
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(cutlab_dashboard::serve(
+        listener,
+        AppState::new(store, Config::default())?,
+        async move {
+            let _ = stopped.await;
+        },
+    ));
+    let cookie = login(addr, LOAD_INSTRUCTOR.name, LOAD_INSTRUCTOR.password).await?;
+    let d = Duration::from_secs_f64(o.duration_s);
+    let pages: Vec<String> = ids.iter().map(|id| format!("/trainees/{id}")).collect();
+    let api: Vec<String> = ids
+        .iter()
+        .map(|id| format!("/api/trainees/{id}/progress"))
+        .collect();
+    // warm up (connections, caches), then measure
+    run(
+        addr,
+        "warm-up",
+        &pages,
+        &cookie,
+        o.clients,
+        Duration::from_secs(1),
+    )
+    .await;
+    let reports = vec![
         run(
             addr,
-            "warm-up",
+            "progress page /trainees/{id}",
             &pages,
             &cookie,
             o.clients,
-            Duration::from_secs(1),
+            d,
         )
-        .await;
-        let reports = vec![
-            run(
-                addr,
-                "progress page /trainees/{id}",
-                &pages,
-                &cookie,
-                o.clients,
-                d,
-            )
-            .await,
-            run(
-                addr,
-                "progress API /api/trainees/{id}/progress",
-                &api,
-                &cookie,
-                o.clients,
-                d,
-            )
-            .await,
-        ];
-        let _ = stop.send(());
-        let _ = server.await;
-        Ok(DbReport {
-            engine,
-            database: db.to_string(),
-            reports,
-        })
-    }
+        .await,
+        run(
+            addr,
+            "progress API /api/trainees/{id}/progress",
+            &api,
+            &cookie,
+            o.clients,
+            d,
+        )
+        .await,
+    ];
+    let _ = stop.send(());
+    let _ = server.await;
+    Ok(DbReport {
+        engine,
+        database: db.to_string(),
+        reports,
+    })
 }
 
 fn print(all: &[DbReport], json: bool) -> anyhow::Result<()> {

@@ -118,31 +118,50 @@ pub async fn scratch_postgres(server_url: &str, prefix: &str) -> sqlx::Result<Db
     Ok(DbLocation::Postgres(url))
 }
 
+/// The byte ranges of `url`'s `scheme://` and of its authority (`user:password@host:port`)
+/// after it; `None` without a scheme.
+fn scheme_and_authority(url: &str) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
+    let scheme_end = url.find("://")? + 3;
+    let authority_len = url[scheme_end..]
+        .find(['/', '?'])
+        .unwrap_or(url.len() - scheme_end);
+    Some((0..scheme_end, scheme_end..scheme_end + authority_len))
+}
+
+/// A scratch database ([`scratch_postgres`]) on the server `$CUTLAB_TEST_POSTGRES` names,
+/// for a test's PostgreSQL half; `None`, saying the half is skipped, without one.
+pub async fn test_postgres(prefix: &str) -> Option<DbLocation> {
+    let Ok(server) = std::env::var(TEST_POSTGRES_ENV) else {
+        eprintln!("skipped: {TEST_POSTGRES_ENV} names no PostgreSQL server");
+        return None;
+    };
+    match scratch_postgres(&server, prefix).await {
+        Ok(at) => Some(at),
+        Err(e) => panic!("a scratch database on {TEST_POSTGRES_ENV}'s server: {e}"),
+    }
+}
+
 /// `url` naming the database `name` instead of its own (its query kept).
 fn with_database(url: &str, name: &str) -> String {
-    let scheme_end = url.find("://").map_or(0, |i| i + 3);
-    let rest = &url[scheme_end..];
-    let authority_end = rest.find(['/', '?']).unwrap_or(rest.len());
-    let query = rest[authority_end..]
+    let authority_end = scheme_and_authority(url).map_or(0, |(_, a)| a.end);
+    let query = url[authority_end..]
         .find('?')
-        .map_or("", |q| &rest[authority_end + q..]);
-    format!("{}/{name}{query}", &url[..scheme_end + authority_end])
+        .map_or("", |q| &url[authority_end + q..]);
+    format!("{}/{name}{query}", &url[..authority_end])
 }
 
 /// `scheme://user:password@host/...` with the password replaced by `***`.
 fn redact_password(url: &str) -> String {
-    let Some(scheme_end) = url.find("://").map(|i| i + 3) else {
+    let Some((scheme, authority)) = scheme_and_authority(url) else {
         return url.to_owned();
     };
-    let rest = &url[scheme_end..];
-    let authority_end = rest.find(['/', '?']).unwrap_or(rest.len());
-    let authority = &rest[..authority_end];
-    match (authority.rfind('@'), authority.find(':')) {
+    let userinfo = &url[authority.clone()];
+    match (userinfo.rfind('@'), userinfo.find(':')) {
         (Some(at), Some(colon)) if colon < at => format!(
             "{}{}:***{}",
-            &url[..scheme_end],
-            &authority[..colon],
-            &url[scheme_end + at..]
+            &url[scheme],
+            &userinfo[..colon],
+            &url[authority.start + at..]
         ),
         _ => url.to_owned(),
     }

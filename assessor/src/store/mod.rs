@@ -29,7 +29,7 @@ pub use builtins::{BUILTIN_EXERCISE, BUILTIN_SCENE, default_thresholds};
 pub use cohorts::Cohort;
 pub use curricula::{Curriculum, Module};
 pub(crate) use db::BeginWrite;
-pub use db::{Db, DbLocation, TEST_POSTGRES_ENV, scratch_postgres};
+pub use db::{Db, DbLocation, TEST_POSTGRES_ENV, scratch_postgres, test_postgres};
 pub use exercises::{Exercise, ExerciseEdit, NewExercise, ThresholdSource};
 pub use users::{Role, User};
 
