@@ -296,6 +296,7 @@ fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
         rerun: Some(RerunTarget::File(PathBuf::from("session.rrd"))),
         attempt: Some(AttemptArgs {
             db: db.clone(),
+            recordings: None,
             exercise: a.exercise.into(),
             trainee: a.trainee.into(),
             expert: a.expert,

@@ -24,6 +24,22 @@ struct Cli {
     /// ./cutlab.db).
     #[arg(long, global = true)]
     db: Option<cutlab_assessor::DbLocation>,
+    /// The recording store an attempt's recordings are put into when it ends (besides the
+    /// station's disk), and the dashboard serves them from: a folder or `s3://bucket/prefix`
+    /// (else $CUTLAB_RECORDINGS, else none).
+    #[arg(long, global = true)]
+    recordings: Option<String>,
+}
+
+impl Cli {
+    /// `--recordings`, else `$CUTLAB_RECORDINGS` if set and not empty.
+    fn recordings(&self) -> Option<String> {
+        self.recordings.clone().or_else(|| {
+            std::env::var(cutlab_assessor::recordings::RECORDINGS_ENV)
+                .ok()
+                .filter(|v| !v.trim().is_empty())
+        })
+    }
 }
 
 /// How an OpenIGTLink device (`igtl:PORT`) sends the force back.
@@ -341,6 +357,7 @@ fn run() -> anyhow::Result<()> {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
+    let recordings = cli.recordings();
     match cli.command {
         Command::Demo {
             out,
@@ -357,6 +374,7 @@ fn run() -> anyhow::Result<()> {
                     station_devices: Vec::new(),
                     station_time_step: TimeStep::Scene,
                     igtl: Default::default(),
+                    recordings: recordings.clone(),
                     kiosk: None,
                 }),
                 None => Ok(()),
@@ -371,7 +389,7 @@ fn run() -> anyhow::Result<()> {
         } => {
             let db = cutlab_assessor::default_db(cli.db.as_ref());
             // beside an SQLite file; in the working directory for a server
-            let recordings = db
+            let demo_attempts = db
                 .sqlite_path()
                 .and_then(std::path::Path::parent)
                 .unwrap_or(std::path::Path::new("."))
@@ -379,10 +397,11 @@ fn run() -> anyhow::Result<()> {
             serve::run(serve::Options {
                 db: &db,
                 addr: &addr,
-                demo: demo.then_some(recordings.as_path()),
+                demo: demo.then_some(demo_attempts.as_path()),
                 station_devices,
                 station_time_step: station_time_step_ms,
                 igtl: igtl.options(),
+                recordings: recordings.clone(),
                 kiosk: None,
             })
         }
@@ -402,6 +421,7 @@ fn run() -> anyhow::Result<()> {
                 station_devices: device,
                 station_time_step: time_step_ms,
                 igtl: igtl.options(),
+                recordings: recordings.clone(),
                 kiosk: Some(serve::Kiosk {
                     trainee,
                     open_browser: !no_browser,
@@ -453,6 +473,7 @@ fn run() -> anyhow::Result<()> {
             ),
             attempt: trainee.map(|trainee| session::AttemptArgs {
                 db: cutlab_assessor::default_db(cli.db.as_ref()),
+                recordings: recordings.clone(),
                 exercise,
                 trainee,
                 expert: false,

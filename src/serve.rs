@@ -23,6 +23,9 @@ pub struct Options<'a> {
     /// The station's simulation step.
     pub station_time_step: TimeStep,
     pub igtl: IgtlOptions,
+    /// The recording store (`--recordings`): where the station puts its attempts'
+    /// recordings and the dashboard serves them from.
+    pub recordings: Option<String>,
     /// A kiosk for one trainee (`cutlab station`).
     pub kiosk: Option<Kiosk>,
 }
@@ -55,6 +58,14 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("opening the database {}", db))?;
         store.ensure_builtins().await?;
+        let recordings = match o.recordings.as_deref() {
+            Some(at) => Some(
+                cutlab_assessor::recordings::RecordingStore::connect(at)
+                    .await
+                    .context("opening the recording store")?,
+            ),
+            None => None,
+        };
         if demo.is_some() {
             println!("demo accounts (user / password / role):");
             for a in DEMO_ACCOUNTS {
@@ -86,8 +97,10 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
                 devices: o.station_devices,
                 time_step: o.station_time_step,
                 igtl: o.igtl,
+                recordings: recordings.clone(),
                 ..cutlab_station::StationSettings::new(station_dir)
             },
+            recordings,
             ..Config::default()
         };
         let state = AppState::new(store, config)?;

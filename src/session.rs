@@ -6,6 +6,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::{DbLocation, ExpertPlan};
 use cutlab_haptics::device::{
     CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, SyntheticTrainee,
@@ -69,6 +70,8 @@ pub struct Options {
 #[derive(Debug)]
 pub struct AttemptArgs {
     pub db: DbLocation,
+    /// The recording store (`--recordings`) the attempt's recordings are put into.
+    pub recordings: Option<String>,
     pub exercise: String,
     pub trainee: String,
     /// An expert's reference attempt (its metrics set the exercise's thresholds).
@@ -81,6 +84,8 @@ struct OpenAttempt {
     store: Store,
     id: i64,
     quiet: bool,
+    /// Where the recordings go once the attempt ends (besides `--out`).
+    recordings: Option<RecordingStore>,
 }
 
 impl OpenAttempt {
@@ -89,15 +94,24 @@ impl OpenAttempt {
             .enable_all()
             .build()
             .context("starting the async runtime")?;
-        let (store, id) = rt.block_on(async {
+        let (store, id, recordings) = rt.block_on(async {
             let store = Store::open(&a.db)
                 .await
                 .with_context(|| format!("opening the database {}", a.db))?;
             store.ensure_builtins().await?;
+            // before the attempt starts: a store that does not answer stops the session here
+            let recordings = match a.recordings.as_deref() {
+                Some(at) => Some(
+                    RecordingStore::connect(at)
+                        .await
+                        .context("opening the recording store")?,
+                ),
+                None => None,
+            };
             let attempt = store
                 .start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert)
                 .await?;
-            anyhow::Ok((store, attempt.id))
+            anyhow::Ok((store, attempt.id, recordings))
         })?;
         say!(
             quiet,
@@ -111,6 +125,7 @@ impl OpenAttempt {
             store,
             id,
             quiet,
+            recordings,
         })
     }
 
@@ -121,20 +136,22 @@ impl OpenAttempt {
             store,
             id,
             quiet,
+            recordings,
         } = self;
         rt.block_on(async {
             // the path the station's attempts take too
-            let result = match attempt::finish_attempt(&store, id, outcome).await {
-                Ok(Finished::Scored(o, values)) if !quiet => {
-                    crate::assess_cli::print_outcome(&o, &values, false)
-                }
-                Ok(Finished::Scored(..)) => Ok(()),
-                Ok(Finished::Incomplete(why)) => {
-                    say!(quiet, "attempt {id} marked incomplete: {why}");
-                    Ok(())
-                }
-                Err(e) => Err(anyhow::Error::new(e).context(format!("finishing attempt {id}"))),
-            };
+            let result =
+                match attempt::finish_attempt(&store, id, outcome, recordings.as_ref()).await {
+                    Ok(Finished::Scored(o, values)) if !quiet => {
+                        crate::assess_cli::print_outcome(&o, &values, false)
+                    }
+                    Ok(Finished::Scored(..)) => Ok(()),
+                    Ok(Finished::Incomplete(why)) => {
+                        say!(quiet, "attempt {id} marked incomplete: {why}");
+                        Ok(())
+                    }
+                    Err(e) => Err(anyhow::Error::new(e).context(format!("finishing attempt {id}"))),
+                };
             store.close().await;
             result
         })

@@ -663,3 +663,53 @@ fn an_unreachable_or_malformed_database_ends_with_one_clear_line() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("port"), "{err}");
 }
+
+#[test]
+fn an_unreachable_recording_store_ends_with_one_clear_line() {
+    let dir = tempfile::tempdir().expect("folder");
+    let db = dir.path().join("cutlab.db");
+    // an S3 endpoint where nothing listens: the command stops as it starts, in seconds
+    let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+        .args(["--db", db.to_str().expect("utf-8")])
+        .args(["--recordings", "s3://cutlab-recordings/centre-a"])
+        .args(["serve", "--addr", "127.0.0.1:0"])
+        .env("AWS_ENDPOINT", "http://127.0.0.1:1")
+        .env("AWS_ALLOW_HTTP", "true")
+        .env("AWS_ACCESS_KEY_ID", "station")
+        .env("AWS_SECRET_ACCESS_KEY", "not-a-secret-that-shows")
+        .env("AWS_REGION", "us-east-1")
+        .output()
+        .expect("cutlab runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].starts_with("error: opening the recording store")
+            && lines[0].contains("s3://cutlab-recordings/centre-a"),
+        "{err}"
+    );
+    assert!(
+        !err.contains("not-a-secret") && !err.contains("panick"),
+        "{err}"
+    );
+    // and a folder that cannot be made is said as plainly
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, b"not a folder").expect("file");
+    let (ok, _, err) = cutlab(&[
+        "--db",
+        db.to_str().expect("utf-8"),
+        "--recordings",
+        file.join("recordings").to_str().expect("utf-8"),
+        "serve",
+        "--addr",
+        "127.0.0.1:0",
+    ]);
+    assert!(!ok);
+    assert_eq!(
+        err.lines().filter(|l| l.starts_with("error")).count(),
+        1,
+        "{err}"
+    );
+    assert!(err.contains("opening the recording store"), "{err}");
+}

@@ -27,6 +27,9 @@ pub enum AssessError {
     /// Applying the migrations.
     #[error("database migration: {0}")]
     Migrate(#[from] sqlx::migrate::MigrateError),
+    /// The recording store (object store) refused or failed.
+    #[error("recording store: {0}")]
+    Recordings(String),
     /// Reading a file.
     #[error("{path}: {error}")]
     Io { path: String, error: std::io::Error },

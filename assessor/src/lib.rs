@@ -16,6 +16,7 @@ pub mod input;
 pub mod metrics;
 pub mod plan;
 pub mod proficiency;
+pub mod recordings;
 
 pub use error::{AssessError, Result};
 pub use from_recording::attempt_data;

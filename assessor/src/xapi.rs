@@ -143,6 +143,8 @@ mod tests {
             trainee_id: 7,
             exercise_id: 1,
             recording_path: None,
+            recording_sha256: None,
+            rrd_sha256: None,
             started_ns: id * 100_000_000_000,
             ended_ns: Some(id * 100_000_000_000 + 10_500_000_000),
             status,

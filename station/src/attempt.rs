@@ -4,8 +4,9 @@
 
 use std::path::Path;
 
+use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Outcome, Store};
-use cutlab_assessor::{ExpertPlan, MetricSet};
+use cutlab_assessor::{AssessError, ExpertPlan, MetricSet};
 use cutlab_haptics::Session;
 use cutlab_haptics::device::Plan;
 use cutlab_recorder::Recording;
@@ -47,6 +48,37 @@ pub enum Finished {
 /// with `outcome`'s reason. A recording that cannot be read marks the attempt incomplete; a
 /// recording that cannot be scored marks it failed; both are errors too.
 pub async fn finish_attempt(
+    store: &Store,
+    id: i64,
+    outcome: Result<&Path, String>,
+    recordings: Option<&RecordingStore>,
+) -> Result<Finished, StationError> {
+    let finished = end_attempt(store, id, outcome).await;
+    if let Some(recordings) = recordings {
+        keep(store, id, recordings).await;
+    }
+    finished
+}
+
+/// Puts the attempt's recordings into the recording store. A failure loses nothing (the
+/// files stay on this machine's disk) and is said, not an error of the attempt.
+async fn keep(store: &Store, id: i64, recordings: &RecordingStore) {
+    match store.keep_recordings(id, recordings).await {
+        Ok(a) => tracing::info!(
+            "attempt {id}: recording {} stored in {}",
+            a.recording_sha256.as_deref().unwrap_or("?"),
+            recordings.location()
+        ),
+        // a session that failed before it recorded anything
+        Err(AssessError::Io { .. }) => {}
+        Err(e) => tracing::warn!(
+            "attempt {id}: the recording stays on this machine only, {}: {e}",
+            recordings.location()
+        ),
+    }
+}
+
+async fn end_attempt(
     store: &Store,
     id: i64,
     outcome: Result<&Path, String>,

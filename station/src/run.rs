@@ -58,6 +58,9 @@ pub struct StationSettings {
     pub devices: Vec<DeviceSpec>,
     /// How an OpenIGTLink device sends the force back.
     pub igtl: IgtlOptions,
+    /// The recording store the attempts' recordings are put into once they end (they stay
+    /// in `recordings_dir` too); `None`: only there.
+    pub recordings: Option<cutlab_assessor::recordings::RecordingStore>,
 }
 
 impl StationSettings {
@@ -74,6 +77,7 @@ impl StationSettings {
             rrd: true,
             devices: Vec::new(),
             igtl: IgtlOptions::default(),
+            recordings: None,
         }
     }
 
@@ -381,6 +385,7 @@ pub async fn start(
     let tets = scene.model.mesh.tet_count();
     let figures = Arc::new(OnceLock::new());
     let thread_figures = figures.clone();
+    let recordings = settings.recordings.clone();
     std::thread::Builder::new()
         .name("cutlab-station".into())
         .spawn(move || {
@@ -427,7 +432,12 @@ pub async fn start(
                 }
                 Err(e) => Err(format!("recording failed: {e}")),
             };
-            let ending = match runtime.block_on(attempt::finish_attempt(&store, attempt, outcome)) {
+            let ending = match runtime.block_on(attempt::finish_attempt(
+                &store,
+                attempt,
+                outcome,
+                recordings.as_ref(),
+            )) {
                 Ok(Finished::Scored(o, _)) => Ending::Scored {
                     attempt,
                     score: o.verdict.score,

@@ -55,6 +55,9 @@ pub struct Config {
     /// Station sessions the server runs at once (each takes a servo, a simulation and a
     /// recorder thread: about one core).
     pub max_station_sessions: usize,
+    /// The recording store (object store) recordings are served from when an attempt has
+    /// keys there; else from the path the attempt recorded.
+    pub recordings: Option<cutlab_assessor::recordings::RecordingStore>,
 }
 
 impl Default for Config {
@@ -66,6 +69,7 @@ impl Default for Config {
             login_window: Duration::from_secs(60),
             station: cutlab_station::StationSettings::new("station-attempts"),
             max_station_sessions: 2,
+            recordings: None,
         }
     }
 }

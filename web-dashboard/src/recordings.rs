@@ -9,7 +9,7 @@
 use axum::Router;
 use axum::body::{Body, Bytes};
 use axum::extract::{RawQuery, State};
-use axum::http::{HeaderMap, HeaderValue, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use maud::html;
@@ -116,24 +116,31 @@ pub fn router() -> Router<AppState> {
         .route("/viewer/{file}", get(viewer_file))
 }
 
+/// Which of an attempt's two recordings.
+#[derive(Debug, Clone, Copy)]
+enum Kind {
+    Mcap,
+    Rrd,
+}
+
 async fn mcap(
     State(state): State<AppState>,
     user: CurrentUser,
     Id(id): Id,
+    headers: HeaderMap,
 ) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
-    let (path, _) = recording_paths(&a).ok_or(AppError::NotFound)?;
-    send_file(&path, &format!("attempt-{id}.mcap")).await
+    send_recording(&state, &a, Kind::Mcap, &headers).await
 }
 
 async fn rrd(
     State(state): State<AppState>,
     user: CurrentUser,
     Id(id): Id,
+    headers: HeaderMap,
 ) -> Result<Response, AppError> {
     let a = visible_attempt(&state, &user, id).await?;
-    let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
-    send_file(&path, &format!("attempt-{id}.rrd")).await
+    send_recording(&state, &a, Kind::Rrd, &headers).await
 }
 
 /// The `.rrd` for rerun's web viewer, which fetches without cookies: the path carries a
@@ -141,18 +148,124 @@ async fn rrd(
 async fn granted_rrd(
     State(state): State<AppState>,
     Path((id, grant)): Path<(i64, String)>,
+    headers: HeaderMap,
 ) -> Result<Response, AppError> {
     if !state.grants().check(id, &grant) {
         return Err(AppError::NotFound);
     }
     let a = state.store().get_attempt(id).await?;
-    let (_, path) = recording_paths(&a).ok_or(AppError::NotFound)?;
-    send_file(&path, &format!("attempt-{id}.rrd")).await
+    send_recording(&state, &a, Kind::Rrd, &headers).await
 }
 
-/// A regular file as an attachment, streamed.
-async fn send_file(path: &std::path::Path, download_name: &str) -> Result<Response, AppError> {
-    let file = match tokio::fs::File::open(path).await {
+/// An attempt's recording as an attachment named by us (`attempt-N.ext`, never the stored
+/// path): from the recording store when the attempt has a key there and the server has a
+/// store, else from the recorded path. A `Range: bytes=...` request gets that part (206).
+async fn send_recording(
+    state: &AppState,
+    a: &cutlab_assessor::store::Attempt,
+    kind: Kind,
+    headers: &HeaderMap,
+) -> Result<Response, AppError> {
+    let (key, ext) = match kind {
+        Kind::Mcap => (a.recording_sha256.as_deref(), "mcap"),
+        Kind::Rrd => (a.rrd_sha256.as_deref(), "rrd"),
+    };
+    let name = format!("attempt-{}.{ext}", a.id);
+    let range = headers.get(header::RANGE).and_then(|v| v.to_str().ok());
+    if let (Some(key), Some(store)) = (key, state.config().recordings.as_ref()) {
+        return send_object(store, key, &name, range).await;
+    }
+    let (mcap, rrd) = recording_paths(a).ok_or(AppError::NotFound)?;
+    let path = match kind {
+        Kind::Mcap => mcap,
+        Kind::Rrd => rrd,
+    };
+    send_file(&path, &name, range).await
+}
+
+/// The part of a `len`-byte body a `Range` header asks for: `Ok(None)` for the whole (no
+/// header, or one this server does not answer in part: several ranges, other units),
+/// `Err(())` for a range past the end (416).
+fn requested_range(range: Option<&str>, len: u64) -> Result<Option<std::ops::Range<u64>>, ()> {
+    let Some(spec) = range.and_then(|r| r.trim().strip_prefix("bytes=")) else {
+        return Ok(None);
+    };
+    if spec.contains(',') {
+        return Ok(None);
+    }
+    let Some((first, last)) = spec.split_once('-') else {
+        return Ok(None);
+    };
+    let (first, last) = (first.trim(), last.trim());
+    let r = match (first.parse::<u64>(), last.parse::<u64>()) {
+        // bytes=a-b
+        (Ok(a), Ok(b)) if a <= b => a..b.saturating_add(1).min(len),
+        // bytes=a-
+        (Ok(a), Err(_)) if last.is_empty() => a..len,
+        // bytes=-n: the last n
+        (Err(_), Ok(n)) if first.is_empty() => len.saturating_sub(n)..len,
+        _ => return Ok(None),
+    };
+    if r.start >= len || r.is_empty() {
+        return Err(());
+    }
+    Ok(Some(r))
+}
+
+/// The response's headers and status for `range` of a `len`-byte body.
+fn ranged(
+    body: Body,
+    len: u64,
+    range: Option<&std::ops::Range<u64>>,
+    download_name: &str,
+) -> Response {
+    let mut r = body.into_response();
+    let h = r.headers_mut();
+    h.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/octet-stream"),
+    );
+    h.insert(header::ACCEPT_RANGES, HeaderValue::from_static("bytes"));
+    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{download_name}\"")) {
+        h.insert(header::CONTENT_DISPOSITION, v);
+    }
+    match range {
+        Some(part) => {
+            h.insert(
+                header::CONTENT_LENGTH,
+                HeaderValue::from(part.end - part.start),
+            );
+            if let Ok(v) =
+                HeaderValue::from_str(&format!("bytes {}-{}/{len}", part.start, part.end - 1))
+            {
+                h.insert(header::CONTENT_RANGE, v);
+            }
+            *r.status_mut() = StatusCode::PARTIAL_CONTENT;
+        }
+        None => {
+            h.insert(header::CONTENT_LENGTH, HeaderValue::from(len));
+        }
+    }
+    r
+}
+
+/// 416 for a range past the end of a `len`-byte body.
+fn unsatisfiable(len: u64) -> Response {
+    let mut r = StatusCode::RANGE_NOT_SATISFIABLE.into_response();
+    if let Ok(v) = HeaderValue::from_str(&format!("bytes */{len}")) {
+        r.headers_mut().insert(header::CONTENT_RANGE, v);
+    }
+    r
+}
+
+/// A regular file, streamed (the part a range asks for).
+async fn send_file(
+    path: &std::path::Path,
+    download_name: &str,
+    range: Option<&str>,
+) -> Result<Response, AppError> {
+    use tokio::io::{AsyncReadExt, AsyncSeekExt};
+    let mut file = match tokio::fs::File::open(path).await {
         Ok(f) => f,
         Err(_) => return Err(AppError::NotFound),
     };
@@ -160,19 +273,41 @@ async fn send_file(path: &std::path::Path, download_name: &str) -> Result<Respon
     if !meta.is_file() {
         return Err(AppError::NotFound);
     }
-    let body = Body::from_stream(tokio_util::io::ReaderStream::new(file));
-    let mut r = body.into_response();
-    let h = r.headers_mut();
-    h.insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/octet-stream"),
-    );
-    h.insert(header::CONTENT_LENGTH, HeaderValue::from(meta.len()));
-    // the name is ours (attempt-N.ext), never the stored path
-    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{download_name}\"")) {
-        h.insert(header::CONTENT_DISPOSITION, v);
-    }
-    Ok(r)
+    let len = meta.len();
+    let Ok(part) = requested_range(range, len) else {
+        return Ok(unsatisfiable(len));
+    };
+    let body = match &part {
+        Some(p) => {
+            file.seek(std::io::SeekFrom::Start(p.start))
+                .await
+                .map_err(|e| AppError::Internal(format!("reading a recording: {e}")))?;
+            Body::from_stream(tokio_util::io::ReaderStream::new(
+                file.take(p.end - p.start),
+            ))
+        }
+        None => Body::from_stream(tokio_util::io::ReaderStream::new(file)),
+    };
+    Ok(ranged(body, len, part.as_ref(), download_name))
+}
+
+/// An object of the recording store (the part a range asks for; the whole is checked against
+/// its key before a byte is sent).
+async fn send_object(
+    store: &cutlab_assessor::recordings::RecordingStore,
+    key: &str,
+    download_name: &str,
+    range: Option<&str>,
+) -> Result<Response, AppError> {
+    let len = store.size(key).await?;
+    let Ok(part) = requested_range(range, len) else {
+        return Ok(unsatisfiable(len));
+    };
+    let body = match &part {
+        Some(p) => store.get_range(key, p.clone()).await?,
+        None => store.get(key).await?,
+    };
+    Ok(ranged(Body::from(body), len, part.as_ref(), download_name))
 }
 
 /// The host the browser used, if it is a plain host[:port] (for the viewer's absolute URL).
@@ -224,8 +359,7 @@ async fn replay_page(
     };
     let a = visible_attempt(&state, &user, id).await?;
     let notes = debrief::comments(&state, id).await?;
-    let has_rrd = recording_paths(&a)
-        .is_some_and(|(_, rrd)| std::fs::metadata(rrd).is_ok_and(|m| m.is_file()));
+    let has_rrd = crate::data::attempt::RecordingFiles::of(&state, &a).rrd;
     let origin = request_origin(&headers, state.config().secure_cookies);
     let body = html! {
         p { a href=(format!("/attempts/{id}")) { "Back to attempt " (id) } " · " a href=(format!("/attempts/{id}/recording.rrd")) { "Download .rrd" } }
@@ -289,6 +423,25 @@ fn serve_viewer_file(state: &AppState, name: &str) -> Result<Response, AppError>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ranges_this_server_answers() {
+        assert_eq!(requested_range(None, 100), Ok(None));
+        assert_eq!(requested_range(Some("bytes=0-9"), 100), Ok(Some(0..10)));
+        assert_eq!(requested_range(Some("bytes=90-"), 100), Ok(Some(90..100)));
+        assert_eq!(requested_range(Some("bytes=-10"), 100), Ok(Some(90..100)));
+        assert_eq!(
+            requested_range(Some("bytes=50-500"), 100),
+            Ok(Some(50..100))
+        );
+        assert_eq!(requested_range(Some("bytes=100-"), 100), Err(()));
+        assert_eq!(requested_range(Some("bytes=-0"), 100), Err(()));
+        // several ranges, other units, nonsense: the whole body
+        assert_eq!(requested_range(Some("bytes=0-1,5-6"), 100), Ok(None));
+        assert_eq!(requested_range(Some("items=0-1"), 100), Ok(None));
+        assert_eq!(requested_range(Some("bytes=9-1"), 100), Ok(None));
+        assert_eq!(requested_range(Some("bytes=x-y"), 100), Ok(None));
+    }
 
     #[test]
     fn the_viewer_index_loses_only_the_font_links() {

@@ -535,6 +535,79 @@ async fn downloads_serve_only_the_stored_recording() {
     );
 }
 
+/// With a recording store, an attempt's recording is served from there (whole, checked
+/// against its key, or in the ranges rerun's viewer asks for), even when the station's
+/// file is gone; a changed object is refused.
+#[tokio::test]
+async fn recordings_are_served_from_the_store_in_ranges_and_checked() {
+    use cutlab_dashboard::assessor::recordings::RecordingStore;
+    let dir = tempfile::tempdir().unwrap();
+    let store_dir = dir.path().join("store");
+    let recordings = RecordingStore::open(store_dir.to_str().unwrap()).unwrap();
+    let config = cutlab_dashboard::Config {
+        recordings: Some(recordings.clone()),
+        ..Default::default()
+    };
+    let (e, _state) = env_with(config).await;
+    let ana = login(&e.app, "ana", "trainee-demo").await;
+    let a = first_attempt(&e.store, "ana").await;
+    let rec = e.dir.path().join("rec");
+    std::fs::create_dir_all(&rec).unwrap();
+    let mcap = rec.join("session.mcap");
+    std::fs::write(&mcap, b"0123456789 MCAP bytes").unwrap();
+    on_db!(e.store.db(), pool => {
+        sqlx::query("UPDATE attempts SET recording_path = $1 WHERE id = $2")
+            .bind(mcap.display().to_string())
+            .bind(a)
+            .execute(pool)
+            .await
+            .map(|_| ())
+    })
+    .unwrap();
+    let kept = e.store.keep_recordings(a, &recordings).await.unwrap();
+    let key = kept.recording_sha256.clone().unwrap();
+    assert_eq!(kept.rrd_sha256, None, "no .rrd beside it");
+    // the station's copy is gone: the store serves
+    std::fs::remove_file(&mcap).unwrap();
+    let url = format!("/attempts/{a}/recording.mcap");
+    let r = send(&e.app, get(&url, Some(&ana))).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(r.headers()[header::ACCEPT_RANGES], "bytes");
+    assert_eq!(body_text(r).await, "0123456789 MCAP bytes");
+    let ranged = |range: &'static str| {
+        let mut req = get(&url, Some(&ana));
+        req.headers_mut()
+            .insert(header::RANGE, header::HeaderValue::from_static(range));
+        req
+    };
+    let r = send(&e.app, ranged("bytes=2-5")).await;
+    assert_eq!(r.status(), StatusCode::PARTIAL_CONTENT);
+    assert_eq!(r.headers()[header::CONTENT_RANGE], "bytes 2-5/21");
+    assert_eq!(r.headers()[header::CONTENT_LENGTH], "4");
+    assert_eq!(body_text(r).await, "2345");
+    let r = send(&e.app, ranged("bytes=-5")).await;
+    assert_eq!(r.status(), StatusCode::PARTIAL_CONTENT);
+    assert_eq!(body_text(r).await, "bytes");
+    let r = send(&e.app, ranged("bytes=21-")).await;
+    assert_eq!(r.status(), StatusCode::RANGE_NOT_SATISFIABLE);
+    assert_eq!(r.headers()[header::CONTENT_RANGE], "bytes */21");
+    // an object changed in the store is refused, never served
+    std::fs::write(
+        store_dir.join("sha256").join(&key),
+        b"0123456789 other bytes",
+    )
+    .unwrap();
+    let r = send(&e.app, get(&url, Some(&ana))).await;
+    assert!(r.status().is_server_error(), "{}", r.status());
+    assert!(!body_text(r).await.contains("other bytes"));
+    // another trainee sees nothing of it
+    let ben = login(&e.app, "ben", "trainee-demo").await;
+    assert_eq!(
+        send(&e.app, get(&url, Some(&ben))).await.status(),
+        StatusCode::NOT_FOUND
+    );
+}
+
 #[tokio::test]
 async fn hostile_parameters_get_4xx_and_change_nothing() {
     let e = env().await;

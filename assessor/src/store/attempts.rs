@@ -52,6 +52,10 @@ pub struct Attempt {
     pub trainee_id: i64,
     pub exercise_id: i64,
     pub recording_path: Option<String>,
+    /// The `.mcap`'s key (SHA-256, hex) in the recording store, once stored there.
+    pub recording_sha256: Option<String>,
+    /// The `.rrd`'s key in the recording store, once stored there.
+    pub rrd_sha256: Option<String>,
     pub started_ns: i64,
     pub ended_ns: Option<i64>,
     pub status: AttemptStatus,
@@ -78,8 +82,10 @@ type AttemptRow = (
     Option<f64>,
     Option<bool>,
     Option<String>,
+    Option<String>,
+    Option<String>,
 );
-const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note FROM attempts";
+const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256 FROM attempts";
 
 fn attempt(r: AttemptRow) -> Result<Attempt> {
     Ok(Attempt {
@@ -95,6 +101,8 @@ fn attempt(r: AttemptRow) -> Result<Attempt> {
         score: r.9,
         passed: r.10,
         note: r.11,
+        recording_sha256: r.12,
+        rrd_sha256: r.13,
     })
 }
 
@@ -157,6 +165,25 @@ impl Store {
         .bind(id)
         .fetch_optional(pool).await)?;
         attempt(row.ok_or_else(|| AssessError::NotFound(format!("attempt {id}")))?)
+    }
+
+    /// Records where the attempt's recordings are in the recording store: the keys
+    /// (SHA-256, hex) of its `.mcap` and `.rrd` (`None` keeps what is recorded).
+    pub async fn set_recording_keys(
+        &self,
+        attempt_id: i64,
+        mcap_sha256: Option<&str>,
+        rrd_sha256: Option<&str>,
+    ) -> Result<Attempt> {
+        let done = crate::on_db!(&self.db, pool => sqlx::query("UPDATE attempts SET recording_sha256 = COALESCE($1, recording_sha256), rrd_sha256 = COALESCE($2, rrd_sha256) WHERE id = $3")
+            .bind(mcap_sha256)
+            .bind(rrd_sha256)
+            .bind(attempt_id)
+            .execute(pool).await.map(|r| r.rows_affected()))?;
+        if done == 0 {
+            return Err(AssessError::NotFound(format!("attempt {attempt_id}")));
+        }
+        self.get_attempt(attempt_id).await
     }
 
     /// Attempts, optionally of one trainee and/or exercise, oldest first.

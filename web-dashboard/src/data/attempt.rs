@@ -50,11 +50,26 @@ pub struct PassLimits {
 /// The metric whose threshold is the force limit drawn on the force chart.
 pub const PEAK_FORCE: &str = "peak_force_n";
 
-/// Which of the attempt's recordings exist on disk.
+/// Which of the attempt's recordings the dashboard can serve: from the recording store or
+/// from this machine's disk.
 #[derive(Debug, Serialize)]
 pub struct RecordingFiles {
     pub mcap: bool,
     pub rrd: bool,
+}
+
+impl RecordingFiles {
+    pub fn of(state: &AppState, a: &Attempt) -> Self {
+        let stored = state.config().recordings.is_some();
+        let (mcap, rrd) = match recording_paths(a) {
+            Some((mcap, rrd)) => (is_file(&mcap), is_file(&rrd)),
+            None => (false, false),
+        };
+        Self {
+            mcap: mcap || (stored && a.recording_sha256.is_some()),
+            rrd: rrd || (stored && a.rrd_sha256.is_some()),
+        }
+    }
 }
 
 /// The attempt's files: the stored `.mcap` path and the `.rrd` beside it (same stem), the
@@ -104,16 +119,7 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
             upper: t.upper,
         })
         .filter(|l| l.lower.is_some() || l.upper.is_some());
-    let recordings = match recording_paths(&a) {
-        Some((mcap, rrd)) => RecordingFiles {
-            mcap: is_file(&mcap),
-            rrd: is_file(&rrd),
-        },
-        None => RecordingFiles {
-            mcap: false,
-            rrd: false,
-        },
-    };
+    let recordings = RecordingFiles::of(state, &a);
     Ok(AttemptDetail {
         comments: debrief::comments(state, a.id).await?,
         signoff: debrief::signoff(state, a.id).await?,
