@@ -642,3 +642,108 @@ async fn score_attempts_on_the_builtin_exercise(store: Store) {
         );
     }
 }
+
+on_both!(a_station_queues_and_a_hub_takes_each_attempt_once);
+async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
+    // the station: an SQLite file of its own, as in a simulation centre
+    let (station, _dir) = sqlite_store().await;
+    exercise_with_one_threshold(&hub).await;
+    let ex = exercise_with_one_threshold(&station).await;
+    let t = station
+        .create_user("sam", Role::Trainee, None)
+        .await
+        .expect("trainee");
+    let running = station
+        .start_attempt(t.id, ex, Some("rec/b.mcap"), false)
+        .await
+        .expect("running");
+    let done = station
+        .start_attempt(t.id, ex, Some("rec/a.mcap"), false)
+        .await
+        .expect("start");
+    assert!(cutlab_assessor::store::is_uuid(
+        done.uuid.as_deref().expect("id")
+    ));
+    station
+        .finish_attempt(done.id, &values(&[("lateral_mean_m", 0.001)]))
+        .await
+        .expect("scored");
+    // only ended attempts are queued, and they stay queued until taken
+    let queue = station.sync_queue().await.expect("queue");
+    assert_eq!(queue.iter().map(|a| a.id).collect::<Vec<_>>(), [done.id]);
+    assert!(queue.iter().all(|a| a.id != running.id));
+    station
+        .set_synced(done.id, Err("hub down"))
+        .await
+        .expect("failed upload");
+    let queue = station.sync_queue().await.expect("queue");
+    assert_eq!(queue[0].sync_error.as_deref(), Some("hub down"));
+
+    let up = station.upload_of(done.id).await.expect("upload");
+    assert_eq!(
+        (up.trainee.as_str(), up.exercise.as_str()),
+        ("sam", "one-metric")
+    );
+    let first = hub.import_attempt(&up).await.expect("import");
+    assert!(first.created);
+    assert_eq!(first.attempt.status, AttemptStatus::Complete);
+    assert_eq!(first.attempt.passed, Some(true), "scored on the hub");
+    assert_eq!(first.attempt.started_ns, done.started_ns);
+    // a retry is the same attempt, not a second one
+    let again = hub.import_attempt(&up).await.expect("retry");
+    assert!(!again.created);
+    assert_eq!(again.attempt.id, first.attempt.id);
+    let sam = hub.user_by_name("sam").await.expect("made on the hub");
+    assert_eq!(
+        hub.list_attempts(Some(sam.id), None)
+            .await
+            .expect("list")
+            .len(),
+        1
+    );
+    let p = hub
+        .proficiency(sam.id, first.attempt.exercise_id)
+        .await
+        .expect("proficiency");
+    assert_eq!(p.state.attempts, 1, "counted once");
+    station.set_synced(done.id, Ok(())).await.expect("taken");
+    assert!(station.sync_queue().await.expect("queue").is_empty());
+
+    // what a hub refuses
+    let mut bad = up.clone();
+    bad.uuid = "1; DROP TABLE attempts".into();
+    assert!(matches!(
+        hub.import_attempt(&bad).await,
+        Err(AssessError::InvalidInput(_))
+    ));
+    let mut bad = up.clone();
+    bad.uuid = cutlab_assessor::store::new_uuid().expect("id");
+    bad.exercise = "not-on-this-hub".into();
+    let err = hub
+        .import_attempt(&bad)
+        .await
+        .expect_err("unknown exercise");
+    assert!(err.to_string().contains("not-on-this-hub"), "{err}");
+    bad.exercise = up.exercise.clone();
+    bad.status = AttemptStatus::Running;
+    assert!(hub.import_attempt(&bad).await.is_err());
+
+    // station tokens: shown once, revoked, never another's
+    let token = hub.create_station_token("or-2").await.expect("token");
+    assert!(matches!(
+        hub.create_station_token("or-2").await,
+        Err(AssessError::Conflict(_))
+    ));
+    let s = hub.station_by_token(&token).await.expect("lookup");
+    assert_eq!(s.expect("valid").name, "or-2");
+    assert_eq!(
+        hub.station_by_token("cutlab-station-guess")
+            .await
+            .expect("lookup"),
+        None
+    );
+    hub.revoke_station_token("or-2").await.expect("revoke");
+    assert_eq!(hub.station_by_token(&token).await.expect("lookup"), None);
+    let listed = hub.list_station_tokens().await.expect("list");
+    assert!(listed[0].revoked_ns.is_some() && listed[0].last_used_ns.is_some());
+}

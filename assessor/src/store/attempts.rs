@@ -65,44 +65,59 @@ pub struct Attempt {
     pub score: Option<f64>,
     pub passed: Option<bool>,
     pub note: Option<String>,
+    /// The attempt's global id, made where it was recorded: the same attempt on a station
+    /// and on its hub.
+    pub uuid: Option<String>,
+    /// On a station: when the hub took the attempt (`None`: not yet, or no hub).
+    pub synced_ns: Option<i64>,
+    /// On a station: why the last upload to the hub failed.
+    pub sync_error: Option<String>,
 }
 
 type MetricRow = (String, Option<f64>, String, Option<bool>, Option<String>);
 type ProficiencyRow = (i64, i64, i64, bool, Option<i64>, f64);
-type AttemptRow = (
-    i64,
-    i64,
-    i64,
-    Option<String>,
-    i64,
-    Option<i64>,
-    String,
-    bool,
-    bool,
-    Option<f64>,
-    Option<bool>,
-    Option<String>,
-    Option<String>,
-    Option<String>,
-);
-const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256 FROM attempts";
+/// An `attempts` row as stored.
+#[derive(sqlx::FromRow)]
+struct AttemptRow {
+    id: i64,
+    trainee_id: i64,
+    exercise_id: i64,
+    recording_path: Option<String>,
+    started_ns: i64,
+    ended_ns: Option<i64>,
+    status: String,
+    expert: bool,
+    scored: bool,
+    score: Option<f64>,
+    passed: Option<bool>,
+    note: Option<String>,
+    recording_sha256: Option<String>,
+    rrd_sha256: Option<String>,
+    uuid: Option<String>,
+    synced_ns: Option<i64>,
+    sync_error: Option<String>,
+}
+const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error FROM attempts";
 
 fn attempt(r: AttemptRow) -> Result<Attempt> {
     Ok(Attempt {
-        id: r.0,
-        trainee_id: r.1,
-        exercise_id: r.2,
-        recording_path: r.3,
-        started_ns: r.4,
-        ended_ns: r.5,
-        status: AttemptStatus::parse(&r.6)?,
-        expert: r.7,
-        scored: r.8,
-        score: r.9,
-        passed: r.10,
-        note: r.11,
-        recording_sha256: r.12,
-        rrd_sha256: r.13,
+        id: r.id,
+        trainee_id: r.trainee_id,
+        exercise_id: r.exercise_id,
+        recording_path: r.recording_path,
+        started_ns: r.started_ns,
+        ended_ns: r.ended_ns,
+        status: AttemptStatus::parse(&r.status)?,
+        expert: r.expert,
+        scored: r.scored,
+        score: r.score,
+        passed: r.passed,
+        note: r.note,
+        recording_sha256: r.recording_sha256,
+        rrd_sha256: r.rrd_sha256,
+        uuid: r.uuid,
+        synced_ns: r.synced_ns,
+        sync_error: r.sync_error,
     })
 }
 
@@ -148,12 +163,13 @@ impl Store {
     ) -> Result<Attempt> {
         self.get_user(trainee_id).await?;
         self.get_exercise(exercise_id).await?;
-        let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO attempts (trainee_id, exercise_id, recording_path, started_ns, status, expert) VALUES ($1, $2, $3, $4, 'running', $5) RETURNING id")
+        let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO attempts (trainee_id, exercise_id, recording_path, started_ns, status, expert, uuid) VALUES ($1, $2, $3, $4, 'running', $5, $6) RETURNING id")
             .bind(trainee_id)
             .bind(exercise_id)
             .bind(recording_path)
             .bind(now_ns())
             .bind(expert)
+            .bind(super::hub::new_uuid()?)
             .fetch_one(pool).await)?;
         self.get_attempt(id).await
     }

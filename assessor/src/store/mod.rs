@@ -14,6 +14,7 @@ mod cohorts;
 mod curricula;
 mod db;
 mod exercises;
+mod hub;
 mod users;
 
 use std::path::PathBuf;
@@ -31,6 +32,7 @@ pub use curricula::{Curriculum, Module};
 pub(crate) use db::BeginWrite;
 pub use db::{Db, DbLocation, TEST_POSTGRES_ENV, scratch_postgres, test_postgres};
 pub use exercises::{Exercise, ExerciseEdit, NewExercise, ThresholdSource};
+pub use hub::{AttemptUpload, Imported, StationToken, is_uuid, new_uuid};
 pub use users::{Role, User};
 
 use crate::error::{AssessError, Result};
