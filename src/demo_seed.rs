@@ -297,6 +297,7 @@ fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
         attempt: Some(AttemptArgs {
             db: db.clone(),
             recordings: None,
+            hub: None,
             exercise: a.exercise.into(),
             trainee: a.trainee.into(),
             expert: a.expert,

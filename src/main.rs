@@ -3,6 +3,7 @@
 mod assess_cli;
 mod demo;
 mod demo_seed;
+mod hub_cli;
 mod motion_metrics;
 mod recording;
 mod scene_info;
@@ -29,6 +30,14 @@ struct Cli {
     /// (else $CUTLAB_RECORDINGS, else none).
     #[arg(long, global = true)]
     recordings: Option<String>,
+    /// The hub this station sends its ended attempts to (after each attempt, and with
+    /// `cutlab sync`): the hub's dashboard URL (else $CUTLAB_HUB, else none).
+    #[arg(long, global = true)]
+    hub: Option<String>,
+    /// This station's token for the hub (`cutlab hub token create` on the hub; else
+    /// $CUTLAB_HUB_TOKEN).
+    #[arg(long, global = true)]
+    hub_token: Option<String>,
 }
 
 impl Cli {
@@ -241,6 +250,13 @@ enum Command {
         #[command(subcommand)]
         command: SceneCommand,
     },
+    /// Send this station's queue (ended attempts and their recordings) to its hub (--hub).
+    Sync,
+    /// A hub's stations: the tokens they upload with.
+    Hub {
+        #[command(subcommand)]
+        command: hub_cli::HubCommand,
+    },
     /// Benchmarks that print figures.
     Bench {
         #[command(subcommand)]
@@ -358,6 +374,7 @@ fn run() -> anyhow::Result<()> {
         .init();
     let cli = Cli::parse();
     let recordings = cli.recordings();
+    let hub = hub_cli::hub(cli.hub.as_deref(), cli.hub_token.as_deref())?;
     match cli.command {
         Command::Demo {
             out,
@@ -375,6 +392,7 @@ fn run() -> anyhow::Result<()> {
                     station_time_step: TimeStep::Scene,
                     igtl: Default::default(),
                     recordings: recordings.clone(),
+                    hub: hub.clone(),
                     kiosk: None,
                 }),
                 None => Ok(()),
@@ -402,6 +420,7 @@ fn run() -> anyhow::Result<()> {
                 station_time_step: station_time_step_ms,
                 igtl: igtl.options(),
                 recordings: recordings.clone(),
+                hub: hub.clone(),
                 kiosk: None,
             })
         }
@@ -422,6 +441,7 @@ fn run() -> anyhow::Result<()> {
                 station_time_step: time_step_ms,
                 igtl: igtl.options(),
                 recordings: recordings.clone(),
+                hub: hub.clone(),
                 kiosk: Some(serve::Kiosk {
                     trainee,
                     open_browser: !no_browser,
@@ -474,6 +494,7 @@ fn run() -> anyhow::Result<()> {
             attempt: trainee.map(|trainee| session::AttemptArgs {
                 db: cutlab_assessor::default_db(cli.db.as_ref()),
                 recordings: recordings.clone(),
+                hub: hub.clone(),
                 exercise,
                 trainee,
                 expert: false,
@@ -527,6 +548,14 @@ fn run() -> anyhow::Result<()> {
                 );
             }
             Ok(())
+        }
+        Command::Sync => hub_cli::sync(
+            &cutlab_assessor::default_db(cli.db.as_ref()),
+            hub,
+            recordings.as_deref(),
+        ),
+        Command::Hub { command } => {
+            hub_cli::run(&cutlab_assessor::default_db(cli.db.as_ref()), command)
         }
         Command::Bench { command } => cutlab_bench::run(command),
         Command::Assess(command) => assess_cli::run(cli.db.as_ref(), command),

@@ -26,6 +26,8 @@ pub struct Options<'a> {
     /// The recording store (`--recordings`): where the station puts its attempts'
     /// recordings and the dashboard serves them from.
     pub recordings: Option<String>,
+    /// The hub the station sends its ended attempts to (`--hub`).
+    pub hub: Option<cutlab_station::sync::Hub>,
     /// A kiosk for one trainee (`cutlab station`).
     pub kiosk: Option<Kiosk>,
 }
@@ -98,6 +100,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
                 time_step: o.station_time_step,
                 igtl: o.igtl,
                 recordings: recordings.clone(),
+                hub: o.hub.clone(),
                 ..cutlab_station::StationSettings::new(station_dir)
             },
             recordings,

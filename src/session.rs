@@ -72,6 +72,8 @@ pub struct AttemptArgs {
     pub db: DbLocation,
     /// The recording store (`--recordings`) the attempt's recordings are put into.
     pub recordings: Option<String>,
+    /// The hub the attempt is sent to once it ends (`--hub`).
+    pub hub: Option<cutlab_station::sync::Hub>,
     pub exercise: String,
     pub trainee: String,
     /// An expert's reference attempt (its metrics set the exercise's thresholds).
@@ -86,6 +88,7 @@ struct OpenAttempt {
     quiet: bool,
     /// Where the recordings go once the attempt ends (besides `--out`).
     recordings: Option<RecordingStore>,
+    hub: Option<cutlab_station::sync::Hub>,
 }
 
 impl OpenAttempt {
@@ -126,6 +129,7 @@ impl OpenAttempt {
             id,
             quiet,
             recordings,
+            hub: a.hub.clone(),
         })
     }
 
@@ -137,6 +141,7 @@ impl OpenAttempt {
             id,
             quiet,
             recordings,
+            hub,
         } = self;
         rt.block_on(async {
             // the path the station's attempts take too
@@ -152,6 +157,19 @@ impl OpenAttempt {
                     }
                     Err(e) => Err(anyhow::Error::new(e).context(format!("finishing attempt {id}"))),
                 };
+            if let Some(hub) = &hub {
+                // a hub that is down leaves the attempt queued, not the session failed
+                match cutlab_station::sync::sync(&store, hub, recordings.as_ref()).await {
+                    Ok(r) => say!(
+                        quiet,
+                        "sent to the hub {}: {} attempt(s), {} left queued",
+                        hub.url(),
+                        r.uploaded + r.already,
+                        r.refused.len()
+                    ),
+                    Err(e) => eprintln!("warning: {e}"),
+                }
+            }
             store.close().await;
             result
         })

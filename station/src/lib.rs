@@ -18,6 +18,7 @@ pub mod error;
 pub mod protocol;
 pub mod run;
 pub mod set;
+pub mod sync;
 pub mod view;
 
 pub use cutlab_haptics::device::DeviceSpec;

@@ -61,6 +61,8 @@ pub struct StationSettings {
     /// The recording store the attempts' recordings are put into once they end (they stay
     /// in `recordings_dir` too); `None`: only there.
     pub recordings: Option<cutlab_assessor::recordings::RecordingStore>,
+    /// The hub each ended attempt is sent to (with the rest of the queue); `None`: none.
+    pub hub: Option<crate::sync::Hub>,
 }
 
 impl StationSettings {
@@ -78,6 +80,7 @@ impl StationSettings {
             devices: Vec::new(),
             igtl: IgtlOptions::default(),
             recordings: None,
+            hub: None,
         }
     }
 
@@ -386,6 +389,7 @@ pub async fn start(
     let figures = Arc::new(OnceLock::new());
     let thread_figures = figures.clone();
     let recordings = settings.recordings.clone();
+    let hub = settings.hub.clone();
     std::thread::Builder::new()
         .name("cutlab-station".into())
         .spawn(move || {
@@ -451,6 +455,15 @@ pub async fn start(
             };
             tracing::info!("station attempt {attempt} ended: {ending:?}");
             let _ = ending_tx.send(Some(ending));
+            if let Some(hub) = hub {
+                // the queue to the hub in the background; a hub that is down only waits
+                runtime.spawn(async move {
+                    match crate::sync::sync(&store, &hub, recordings.as_ref()).await {
+                        Ok(r) => tracing::info!("sent to the hub {}: {r:?}", hub.url()),
+                        Err(e) => tracing::warn!("{e}"),
+                    }
+                });
+            }
         })
         .map_err(|source| StationError::Io {
             what: "starting the station's session thread".into(),

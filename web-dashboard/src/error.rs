@@ -22,6 +22,12 @@ pub enum AppError {
     /// Not logged in (API calls; pages redirect to the login form instead).
     #[error("not logged in")]
     Unauthorized,
+    /// A hub upload without a valid station token (missing, wrong or revoked).
+    #[error("the station token is missing, wrong or revoked")]
+    StationToken,
+    /// A service this server is not set up for, with what it lacks.
+    #[error("{0}")]
+    Unavailable(String),
     /// Too many failed logins.
     #[error("too many failed logins; try again in a minute")]
     TooManyRequests,
@@ -45,7 +51,8 @@ impl AppError {
         match self {
             AppError::NotFound => StatusCode::NOT_FOUND,
             AppError::Forbidden(_) | AppError::Csrf => StatusCode::FORBIDDEN,
-            AppError::Unauthorized => StatusCode::UNAUTHORIZED,
+            AppError::Unauthorized | AppError::StationToken => StatusCode::UNAUTHORIZED,
+            AppError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             AppError::TooManyRequests => StatusCode::TOO_MANY_REQUESTS,
             AppError::BadRequest(_) => StatusCode::BAD_REQUEST,
             AppError::Malformed { status, .. } => *status,
@@ -103,13 +110,20 @@ impl<E: Into<AppError>> From<E> for ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.0.status();
-        (
+        let mut response = (
             status,
             Json(
                 serde_json::json!({ "error": self.0.public_message(), "status": status.as_u16() }),
             ),
         )
-            .into_response()
+            .into_response();
+        if matches!(self.0, AppError::StationToken) {
+            response.headers_mut().insert(
+                axum::http::header::WWW_AUTHENTICATE,
+                axum::http::HeaderValue::from_static("Bearer"),
+            );
+        }
+        response
     }
 }
 

@@ -23,6 +23,7 @@ pub mod charts;
 pub mod data;
 pub mod error;
 pub mod extract;
+pub mod hub;
 pub mod pages;
 pub mod recordings;
 pub mod seed;
@@ -186,6 +187,7 @@ pub fn app(state: AppState) -> Router {
         .merge(auth::kiosk::router())
         .merge(pages::router())
         .merge(recordings::router())
+        .nest("/api/hub", hub::router())
         .nest("/api", api::router())
         .fallback(|| async { AppError::NotFound })
         .layer(axum::middleware::from_fn_with_state(

@@ -1,0 +1,169 @@
+//! The hub's side of stations and hub: stations upload their attempts here, each with its
+//! own token (`Authorization: Bearer ...`, made by `cutlab hub token create`), which may
+//! create attempts and nothing else (no page or API call takes it, and these calls take no
+//! login). Errors are JSON like the API's; a missing, wrong or revoked token is a 401.
+//!
+//! | Call | Answer |
+//! |---|---|
+//! | `PUT /api/hub/recordings/{sha256}` | the body is stored in the hub's recording store under its SHA-256, which must be the key in the path (else 422, nothing stored); 201 (200 if it was there) |
+//! | `PUT /api/hub/attempts/{uuid}` | an [`AttemptUpload`] whose `uuid` is the path's: the attempt taken once (201; 200 with the same attempt for a retry); its recordings must be in the store already (else 422) |
+
+use axum::Json;
+use axum::Router;
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, Path, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::routing::put;
+use cutlab_assessor::recordings::{RecordingStore, is_sha256_hex, sha256_hex};
+use cutlab_assessor::store::{AttemptUpload, StationToken, is_uuid};
+use serde::Serialize;
+
+use crate::AppState;
+use crate::error::{ApiError, AppError};
+
+/// The largest recording a station may upload in one request.
+pub const MAX_UPLOAD_BYTES: usize = 1 << 30;
+
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route(
+            "/recordings/{sha256}",
+            put(put_recording).layer(DefaultBodyLimit::max(MAX_UPLOAD_BYTES)),
+        )
+        .route("/attempts/{uuid}", put(put_attempt))
+        .fallback(|| async { ApiError(AppError::NotFound) })
+}
+
+/// The station whose token the request carries.
+async fn station(state: &AppState, headers: &HeaderMap) -> Result<StationToken, ApiError> {
+    let token = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .map(str::trim)
+        .filter(|t| !t.is_empty() && t.len() <= 200)
+        .ok_or(AppError::StationToken)?;
+    state
+        .store()
+        .station_by_token(token)
+        .await?
+        .ok_or(ApiError(AppError::StationToken))
+}
+
+fn recording_store(state: &AppState) -> Result<&RecordingStore, ApiError> {
+    state.config().recordings.as_ref().ok_or_else(|| {
+        ApiError(AppError::Unavailable(
+            "this hub keeps no recordings: start it with --recordings".into(),
+        ))
+    })
+}
+
+fn unprocessable(message: String) -> ApiError {
+    ApiError(AppError::Malformed {
+        status: StatusCode::UNPROCESSABLE_ENTITY,
+        message,
+    })
+}
+
+#[derive(Debug, Serialize)]
+struct RecordingTaken {
+    sha256: String,
+    bytes: usize,
+}
+
+async fn put_recording(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    Path(key): Path<String>,
+    body: Bytes,
+) -> Result<(StatusCode, Json<RecordingTaken>), ApiError> {
+    let station = station(&state, &headers).await?;
+    if !is_sha256_hex(&key) {
+        return Err(ApiError(AppError::BadRequest(format!(
+            "{key:?} is not a SHA-256 key"
+        ))));
+    }
+    let store = recording_store(&state)?;
+    let actual = sha256_hex(&body);
+    if actual != key {
+        tracing::warn!(
+            "station {}: a recording sent as {key} hashes to {actual}; refused",
+            station.name
+        );
+        return Err(unprocessable(format!(
+            "the recording's content hashes to {actual}, not {key}: refused"
+        )));
+    }
+    let existed = store.size(&key).await.is_ok_and(|n| n == body.len() as u64);
+    let bytes = body.len();
+    store.put(body).await.map_err(AppError::from)?;
+    let status = if existed {
+        StatusCode::OK
+    } else {
+        StatusCode::CREATED
+    };
+    Ok((status, Json(RecordingTaken { sha256: key, bytes })))
+}
+
+#[derive(Debug, Serialize)]
+struct AttemptTaken {
+    id: i64,
+    uuid: String,
+    created: bool,
+}
+
+async fn put_attempt(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    Path(uuid): Path<String>,
+    body: Bytes,
+) -> Result<(StatusCode, Json<AttemptTaken>), ApiError> {
+    let station = station(&state, &headers).await?;
+    let up: AttemptUpload = serde_json::from_slice(&body)
+        .map_err(|e| unprocessable(format!("not an attempt upload: {e}")))?;
+    if !is_uuid(&uuid) || up.uuid != uuid {
+        return Err(ApiError(AppError::BadRequest(
+            "the attempt's id must be the path's (a UUID)".into(),
+        )));
+    }
+    if up.recording_sha256.is_some() || up.rrd_sha256.is_some() {
+        let store = recording_store(&state)?;
+        for key in [&up.recording_sha256, &up.rrd_sha256].into_iter().flatten() {
+            if store.size(key).await.is_err() {
+                return Err(unprocessable(format!(
+                    "recording {key} is not on this hub: upload it first"
+                )));
+            }
+        }
+    }
+    let taken = state
+        .store()
+        .import_attempt(&up)
+        .await
+        .map_err(|e| match e {
+            cutlab_assessor::AssessError::InvalidInput(m) => unprocessable(m),
+            e => ApiError::from(e),
+        })?;
+    if taken.created {
+        tracing::info!(
+            "station {}: attempt {} of {} taken as {}",
+            station.name,
+            up.uuid,
+            up.trainee,
+            taken.attempt.id
+        );
+    }
+    let status = if taken.created {
+        StatusCode::CREATED
+    } else {
+        StatusCode::OK
+    };
+    Ok((
+        status,
+        Json(AttemptTaken {
+            id: taken.attempt.id,
+            uuid,
+            created: taken.created,
+        }),
+    ))
+}
