@@ -11,6 +11,7 @@
 mod accuracy;
 pub mod browser;
 mod dashboard;
+mod hub;
 mod load;
 mod perf;
 mod plot;
@@ -140,6 +141,29 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Stations uploading to one hub (a `cutlab serve` process): attempts per second and the
+    /// time of an upload, then the hub killed mid-upload and restarted: every attempt must
+    /// be there exactly once, every recording intact.
+    Hub {
+        /// The folder for the hub's and the stations' databases and recordings (those of a
+        /// previous run removed).
+        #[arg(long, default_value = "out/bench-hub")]
+        out: PathBuf,
+        #[arg(long, default_value_t = 10)]
+        stations: usize,
+        /// Seconds of load.
+        #[arg(long, default_value_t = 60.0)]
+        duration: f64,
+        /// The size of each attempt's recording, KiB.
+        #[arg(long, default_value_t = 1024)]
+        recording_kib: usize,
+        /// Attempts each station has queued when the hub is killed.
+        #[arg(long, default_value_t = 20)]
+        queued: usize,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Load on the web dashboard: TRAINEES x ATTEMPTS synthetic attempts, CLIENTS concurrent
     /// clients on the progress page and API; requests/s and latency percentiles.
     Dashboard {
@@ -175,6 +199,21 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Stability { quick, json } => stability::run(quick, json),
         BenchCommand::Perf { quick, json, out } => perf::run(quick, json, &out),
         BenchCommand::Skip { quick, json, out } => skip::run(quick, json, &out),
+        BenchCommand::Hub {
+            out,
+            stations,
+            duration,
+            recording_kib,
+            queued,
+            json,
+        } => hub::run(&hub::Options {
+            out: &out,
+            stations,
+            duration_s: duration,
+            recording_kib,
+            queued,
+            json,
+        }),
         BenchCommand::Dashboard {
             bench_db,
             trainees,
