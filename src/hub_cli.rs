@@ -42,6 +42,13 @@ pub fn hub(url: Option<&str>, token: Option<&str>) -> anyhow::Result<Option<Hub>
     Ok(Some(Hub::new(&url, token.as_deref().unwrap_or_default())?))
 }
 
+fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}
+
 async fn open(db: &DbLocation) -> anyhow::Result<Store> {
     Store::open(db)
         .await
@@ -51,20 +58,11 @@ async fn open(db: &DbLocation) -> anyhow::Result<Store> {
 /// `cutlab sync`: the station's queue to its hub, once.
 pub fn sync(db: &DbLocation, hub: Option<Hub>, recordings: Option<&str>) -> anyhow::Result<()> {
     let hub = hub.with_context(|| format!("no hub: name one with --hub or ${HUB_ENV}"))?;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    rt.block_on(async {
+    runtime()?.block_on(async {
         let store = open(db).await?;
-        let recordings = match recordings {
-            Some(at) => Some(
-                RecordingStore::connect(at)
-                    .await
-                    .context("opening the recording store")?,
-            ),
-            None => None,
-        };
+        let recordings = RecordingStore::connect_if(recordings)
+            .await
+            .context("opening the recording store")?;
         let result = cutlab_station::sync::sync(&store, &hub, recordings.as_ref()).await;
         store.close().await;
         let report = result?;
@@ -89,11 +87,7 @@ pub fn sync(db: &DbLocation, hub: Option<Hub>, recordings: Option<&str>) -> anyh
 
 /// `cutlab hub ...`.
 pub fn run(db: &DbLocation, command: HubCommand) -> anyhow::Result<()> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    rt.block_on(async {
+    runtime()?.block_on(async {
         let store = open(db).await?;
         let HubCommand::Token { command } = command;
         let result = match command {

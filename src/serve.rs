@@ -60,14 +60,10 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("opening the database {}", db))?;
         store.ensure_builtins().await?;
-        let recordings = match o.recordings.as_deref() {
-            Some(at) => Some(
-                cutlab_assessor::recordings::RecordingStore::connect(at)
-                    .await
-                    .context("opening the recording store")?,
-            ),
-            None => None,
-        };
+        let recordings =
+            cutlab_assessor::recordings::RecordingStore::connect_if(o.recordings.as_deref())
+                .await
+                .context("opening the recording store")?;
         if demo.is_some() {
             println!("demo accounts (user / password / role):");
             for a in DEMO_ACCOUNTS {

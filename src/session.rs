@@ -103,14 +103,9 @@ impl OpenAttempt {
                 .with_context(|| format!("opening the database {}", a.db))?;
             store.ensure_builtins().await?;
             // before the attempt starts: a store that does not answer stops the session here
-            let recordings = match a.recordings.as_deref() {
-                Some(at) => Some(
-                    RecordingStore::connect(at)
-                        .await
-                        .context("opening the recording store")?,
-                ),
-                None => None,
-            };
+            let recordings = RecordingStore::connect_if(a.recordings.as_deref())
+                .await
+                .context("opening the recording store")?;
             let attempt = store
                 .start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert)
                 .await?;

@@ -105,6 +105,14 @@ impl RecordingStore {
         Ok(store)
     }
 
+    /// [`RecordingStore::connect`] when a location is given.
+    pub async fn connect_if(location: Option<&str>) -> Result<Option<Self>> {
+        match location {
+            Some(at) => Self::connect(at).await.map(Some),
+            None => Ok(None),
+        }
+    }
+
     /// Where the store is, as given.
     pub fn location(&self) -> &str {
         &self.location

@@ -19,10 +19,13 @@ const SCENE: &str = "chest-wall";
 const MIN_TETS: usize = 3000;
 const DURATION_S: f64 = 30.0;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("cutlab-recorder-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
+/// A temporary folder, removed when the guard drops (with `name` in its name, for a look
+/// while a test runs).
+fn temp_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("cutlab-recorder-{name}-"))
+        .tempdir()
+        .expect("temp dir")
 }
 
 /// Every record the writer thread saw, for comparison with what the file gives back.
@@ -75,7 +78,8 @@ fn recorded() -> &'static Recorded {
             duration_s: DURATION_S,
             ..SessionConfig::default()
         };
-        let path = temp_dir("shared").join("session.mcap");
+        // one recording shared by the tests of this process (a static: never dropped)
+        let path = temp_dir("shared").keep().join("session.mcap");
         let seen = Arc::new(Mutex::new(Seen::default()));
         let provenance = Provenance {
             scene: SCENE.into(),
@@ -475,7 +479,8 @@ fn truncation_at_random_offsets_is_read_and_recovered_without_panics() {
     let bytes = std::fs::read(&r.path).expect("bytes");
     let full = Recording::from_bytes(&bytes).expect("full");
     let full_messages: u64 = full.counts().values().sum();
-    let dir = temp_dir("truncated");
+    let dir_guard = temp_dir("truncated");
+    let dir = dir_guard.path();
     let mut cuts = offsets(bytes.len() as u64, 24, 11);
     cuts.extend([
         0,
@@ -547,7 +552,8 @@ fn damage_in_the_middle_is_found_at_its_chunk_and_everything_before_is_kept() {
     let cut_there = Recording::from_bytes(&bytes[..at]).expect("cut short");
     let cut_damage = cut_there.damage.clone().expect("cut short is damage");
     assert_eq!(cut_damage.kind, DamageKind::EndsEarly, "{cut_damage}");
-    let dir = temp_dir("mid-damage");
+    let dir_guard = temp_dir("mid-damage");
+    let dir = dir_guard.path();
     // chunk record: opcode, length, start time, end time, uncompressed size, uncompressed CRC
     for (name, field, width, reason) in [("crc", 9 + 24, 4, "chunk CRC"), ("size", 9 + 16, 8, "")] {
         let mut damaged = bytes.clone();
@@ -608,7 +614,8 @@ fn a_flushed_recording_is_readable_while_still_open() {
     let r = recorded();
     let rec = Recording::open(&r.path).expect("readable");
     let meta = rec.meta().expect("meta").clone();
-    let path = temp_dir("open").join("open.mcap");
+    let dir = temp_dir("open");
+    let path = dir.path().join("open.mcap");
     let mut sink = cutlab_recorder::McapSink::create(&path, &meta, &[], WriterOptions::default())
         .expect("sink");
     for s in r.seen.ticks.iter().take(1500) {
@@ -694,7 +701,8 @@ fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
         duration_s: 8.0,
         ..SessionConfig::default()
     };
-    let path = temp_dir("localised").join("session.mcap");
+    let dir = temp_dir("localised");
+    let path = dir.path().join("session.mcap");
     let provenance = Provenance {
         scene: SCENE.into(),
         min_tets: Some(MIN_TETS),

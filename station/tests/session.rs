@@ -13,10 +13,12 @@ use cutlab_station::{Ending, Input, StartRequest, StationError, StationSet, Stat
 
 const EXERCISE: &str = cutlab_assessor::store::BUILTIN_EXERCISE;
 
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("cutlab-station-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
+/// A temporary folder, removed when the guard drops.
+fn temp_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("cutlab-station-{name}-"))
+        .tempdir()
+        .expect("temp dir")
 }
 
 async fn store(dir: &std::path::Path) -> Store {
@@ -55,8 +57,9 @@ async fn ending(running: &cutlab_station::Running) -> Ending {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
-    let dir = temp_dir("scored");
-    let store = store(&dir).await;
+    let dir_guard = temp_dir("scored");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
     let request = StartRequest {
         exercise: EXERCISE.into(),
         trainee: "ana".into(),
@@ -65,7 +68,7 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
     // the station's own synthetic expert, picked by name as the page does
     let settings = StationSettings {
         devices: vec!["expert".parse().expect("a device")],
-        ..settings(&dir, 6.0)
+        ..settings(dir, 6.0)
     };
     assert!(matches!(
         settings.input_named("novice"),
@@ -124,15 +127,16 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
-    let dir = temp_dir("stop");
-    let store = store(&dir).await;
+    let dir_guard = temp_dir("stop");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
     let set = Arc::new(StationSet::new(1));
     let request = |trainee: &str| StartRequest {
         exercise: EXERCISE.into(),
         trainee: trainee.into(),
         guided: false,
     };
-    let settings = settings(&dir, 60.0);
+    let settings = settings(dir, 60.0);
     let running = set
         .insert(
             run::start(
@@ -199,11 +203,12 @@ async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
     use cutlab_haptics::device::PointerSample;
-    let dir = temp_dir("stalled");
-    let store = store(&dir).await;
+    let dir_guard = temp_dir("stalled");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
     let settings = StationSettings {
         clock: Clock::Live,
-        ..settings(&dir, 60.0)
+        ..settings(dir, 60.0)
     };
     let request = StartRequest {
         exercise: EXERCISE.into(),
@@ -232,8 +237,9 @@ async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
 async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit() {
     use cutlab_assessor::ExpertPlan;
     use cutlab_assessor::store::NewExercise;
-    let dir = temp_dir("exam-only");
-    let store = store(&dir).await;
+    let dir_guard = temp_dir("exam-only");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
     let plan = ExpertPlan {
         force_limit_n: 1.75,
         ..ExpertPlan::chest_wall().expect("the built-in plan")
@@ -250,7 +256,7 @@ async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit()
         })
         .await
         .expect("exercise");
-    let settings = settings(&dir, 60.0);
+    let settings = settings(dir, 60.0);
     let start = |exercise: &str, guided| {
         run::start(
             store.clone(),
