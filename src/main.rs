@@ -16,7 +16,8 @@ use clap::{Parser, Subcommand};
 use cutlab_haptics::TimeStep;
 
 /// Training and assessment platform for surgical soft-tissue cutting.
-#[derive(Debug, Parser)]
+// no Debug: it holds the hub token
+#[derive(Parser)]
 #[command(name = "cutlab", version, about)]
 struct Cli {
     #[command(subcommand)]

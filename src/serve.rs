@@ -103,6 +103,16 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
             ..Config::default()
         };
         let state = AppState::new(store, config)?;
+        if let Some(hub) = o.hub.clone() {
+            // the station's queue now and every minute: a hub that was down gets it later
+            println!("sending ended attempts to the hub {}", hub.url());
+            tokio::spawn(cutlab_station::sync::keep_syncing(
+                state.store().clone(),
+                hub,
+                state.config().recordings.clone(),
+                cutlab_station::sync::RETRY_EVERY,
+            ));
+        }
         if let Some(kiosk) = &o.kiosk {
             let at = listener.local_addr()?;
             let url = format!("http://{at}{}", kiosk_link(&state, &kiosk.trainee).await?);

@@ -154,7 +154,7 @@ impl OpenAttempt {
                 };
             if let Some(hub) = &hub {
                 // a hub that is down leaves the attempt queued, not the session failed
-                match cutlab_station::sync::sync(&store, hub, recordings.as_ref()).await {
+                match cutlab_station::sync::sync_new(&store, hub, recordings.as_ref()).await {
                     Ok(r) => say!(
                         quiet,
                         "sent to the hub {}: {} attempt(s), {} left queued",

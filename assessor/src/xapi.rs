@@ -148,6 +148,7 @@ mod tests {
             uuid: None,
             synced_ns: None,
             sync_error: None,
+            station: None,
             started_ns: id * 100_000_000_000,
             ended_ns: Some(id * 100_000_000_000 + 10_500_000_000),
             status,

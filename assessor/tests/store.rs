@@ -684,13 +684,14 @@ async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
         (up.trainee.as_str(), up.exercise.as_str()),
         ("sam", "one-metric")
     );
-    let first = hub.import_attempt(&up).await.expect("import");
+    let first = hub.import_attempt(&up, "or-1").await.expect("import");
     assert!(first.created);
     assert_eq!(first.attempt.status, AttemptStatus::Complete);
     assert_eq!(first.attempt.passed, Some(true), "scored on the hub");
     assert_eq!(first.attempt.started_ns, done.started_ns);
+    assert_eq!(first.attempt.station.as_deref(), Some("or-1"));
     // a retry is the same attempt, not a second one
-    let again = hub.import_attempt(&up).await.expect("retry");
+    let again = hub.import_attempt(&up, "or-1").await.expect("retry");
     assert!(!again.created);
     assert_eq!(again.attempt.id, first.attempt.id);
     let sam = hub.user_by_name("sam").await.expect("made on the hub");
@@ -713,20 +714,49 @@ async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
     let mut bad = up.clone();
     bad.uuid = "1; DROP TABLE attempts".into();
     assert!(matches!(
-        hub.import_attempt(&bad).await,
+        hub.import_attempt(&bad, "or-1").await,
         Err(AssessError::InvalidInput(_))
     ));
     let mut bad = up.clone();
     bad.uuid = cutlab_assessor::store::new_uuid().expect("id");
     bad.exercise = "not-on-this-hub".into();
     let err = hub
-        .import_attempt(&bad)
+        .import_attempt(&bad, "or-1")
         .await
         .expect_err("unknown exercise");
     assert!(err.to_string().contains("not-on-this-hub"), "{err}");
     bad.exercise = up.exercise.clone();
     bad.status = AttemptStatus::Running;
-    assert!(hub.import_attempt(&bad).await.is_err());
+    assert!(hub.import_attempt(&bad, "or-1").await.is_err());
+    // a station token never sets thresholds, never writes as an instructor, never scores a
+    // metric twice, and a name is the name
+    let refused = |change: fn(&mut cutlab_assessor::store::AttemptUpload)| {
+        let mut u = up.clone();
+        u.uuid = cutlab_assessor::store::new_uuid().expect("id");
+        change(&mut u);
+        u
+    };
+    hub.create_user("dr-x", Role::Instructor, None)
+        .await
+        .expect("instructor");
+    for u in [
+        refused(|u| u.expert = true),
+        refused(|u| u.trainee = "dr-x".into()),
+        refused(|u| u.trainee = " sam".into()),
+        refused(|u| {
+            let m = u.metrics[0].clone();
+            u.metrics.push(m);
+        }),
+    ] {
+        assert!(
+            matches!(
+                hub.import_attempt(&u, "or-1").await,
+                Err(AssessError::InvalidInput(_))
+            ),
+            "{u:?}"
+        );
+    }
+    assert_eq!(hub.list_attempts(None, None).await.expect("list").len(), 1);
 
     // station tokens: shown once, revoked, never another's
     let token = hub.create_station_token("or-2").await.expect("token");

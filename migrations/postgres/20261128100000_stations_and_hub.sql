@@ -4,6 +4,8 @@
 ALTER TABLE attempts ADD COLUMN uuid TEXT;
 ALTER TABLE attempts ADD COLUMN synced_ns BIGINT;
 ALTER TABLE attempts ADD COLUMN sync_error TEXT;
+-- On a hub: the station that uploaded the attempt (its token's name); NULL: recorded here.
+ALTER TABLE attempts ADD COLUMN station TEXT;
 CREATE UNIQUE INDEX attempts_uuid ON attempts (uuid);
 
 -- On a hub: the stations that may upload attempts, each with a token of its own (only its

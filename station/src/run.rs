@@ -458,7 +458,7 @@ pub async fn start(
             if let Some(hub) = hub {
                 // the queue to the hub in the background; a hub that is down only waits
                 runtime.spawn(async move {
-                    match crate::sync::sync(&store, &hub, recordings.as_ref()).await {
+                    match crate::sync::sync_new(&store, &hub, recordings.as_ref()).await {
                         Ok(r) => tracing::info!("sent to the hub {}: {r:?}", hub.url()),
                         Err(e) => tracing::warn!("{e}"),
                     }

@@ -210,14 +210,73 @@ async fn recording(
     }
 }
 
-/// Sends the station's queue to `hub`, oldest first; see the module's documentation.
+/// Sends the station's whole queue to `hub`, oldest first, the attempts the hub refused
+/// before too (`cutlab sync`: after the hub's administrator has put right why); see the
+/// module's documentation.
 pub async fn sync(
     store: &Store,
     hub: &Hub,
     recordings: Option<&RecordingStore>,
 ) -> Result<SyncReport, SyncError> {
+    send(store, hub, recordings, true).await
+}
+
+/// [`sync`] without the attempts the hub refused before: what runs after each attempt and
+/// every [`RETRY_EVERY`], so that a refused recording is not sent again and again.
+pub async fn sync_new(
+    store: &Store,
+    hub: &Hub,
+    recordings: Option<&RecordingStore>,
+) -> Result<SyncReport, SyncError> {
+    send(store, hub, recordings, false).await
+}
+
+/// How often a station server tries its queue while it runs ([`keep_syncing`]).
+pub const RETRY_EVERY: Duration = Duration::from_secs(60);
+
+/// [`sync_new`] now and every `every`, for as long as the server runs: a hub that was down
+/// gets the queue once it is back, without a new attempt or a hand on the station.
+pub async fn keep_syncing(
+    store: Store,
+    hub: Hub,
+    recordings: Option<RecordingStore>,
+    every: Duration,
+) {
+    let mut tick = tokio::time::interval(every);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut last_error = String::new();
+    loop {
+        tick.tick().await;
+        match sync_new(&store, &hub, recordings.as_ref()).await {
+            Ok(r) => {
+                if r.uploaded + r.already > 0 {
+                    tracing::info!("sent to the hub {}: {r:?}", hub.url());
+                }
+                last_error.clear();
+            }
+            Err(e) => {
+                // said once while it lasts, not every minute
+                let e = e.to_string();
+                if e != last_error {
+                    tracing::warn!("{e}");
+                    last_error = e;
+                }
+            }
+        }
+    }
+}
+
+async fn send(
+    store: &Store,
+    hub: &Hub,
+    recordings: Option<&RecordingStore>,
+    refused_too: bool,
+) -> Result<SyncReport, SyncError> {
     let _one_at_a_time = hub.busy.lock().await;
-    let queue = store.sync_queue().await?;
+    let mut queue = store.sync_queue().await?;
+    if !refused_too {
+        queue.retain(|a| a.sync_error.is_none());
+    }
     let mut report = SyncReport::default();
     for (i, a) in queue.iter().enumerate() {
         let left = queue.len() - i;

@@ -1,19 +1,23 @@
 //! The hub's side of stations and hub: stations upload their attempts here, each with its
 //! own token (`Authorization: Bearer ...`, made by `cutlab hub token create`), which may
 //! create attempts and nothing else (no page or API call takes it, and these calls take no
-//! login). Errors are JSON like the API's; a missing, wrong or revoked token is a 401.
+//! login). The token is checked before a byte of the body is read, and a few uploads are
+//! read at a time. Errors are JSON like the API's; a missing, wrong or revoked token is a
+//! 401.
 //!
 //! | Call | Answer |
 //! |---|---|
-//! | `PUT /api/hub/recordings/{sha256}` | the body is stored in the hub's recording store under its SHA-256, which must be the key in the path (else 422, nothing stored); 201 (200 if it was there) |
+//! | `PUT /api/hub/recordings/{sha256}` | the body (up to [`MAX_UPLOAD_BYTES`]) is stored in the hub's recording store under its SHA-256, which must be the key in the path (else 422, nothing stored); 201 (200 if it was there) |
 //! | `PUT /api/hub/attempts/{uuid}` | an [`AttemptUpload`] whose `uuid` is the path's: the attempt taken once (201; 200 with the same attempt for a retry); its recordings must be in the store already (else 422) |
 
 use axum::Json;
 use axum::Router;
 use axum::body::Bytes;
-use axum::extract::{DefaultBodyLimit, Path, State};
-use axum::http::{HeaderMap, StatusCode, header};
+use axum::extract::{DefaultBodyLimit, FromRequestParts, Path, State};
+use axum::http::request::Parts;
+use axum::http::{StatusCode, header};
 use axum::routing::put;
+use cutlab_assessor::AssessError;
 use cutlab_assessor::recordings::{RecordingStore, is_sha256_hex, sha256_hex};
 use cutlab_assessor::store::{AttemptUpload, StationToken, is_uuid};
 use serde::Serialize;
@@ -21,8 +25,14 @@ use serde::Serialize;
 use crate::AppState;
 use crate::error::{ApiError, AppError};
 
-/// The largest recording a station may upload in one request.
-pub const MAX_UPLOAD_BYTES: usize = 1 << 30;
+/// The largest recording a station may upload in one request (a 60 s attempt records about
+/// 11 MB).
+pub const MAX_UPLOAD_BYTES: usize = 512 << 20;
+
+/// Recording uploads read at once (each is held in memory while it is hashed and stored);
+/// more wait their turn.
+const UPLOADS_AT_ONCE: usize = 4;
+static UPLOADS: tokio::sync::Semaphore = tokio::sync::Semaphore::const_new(UPLOADS_AT_ONCE);
 
 pub fn router() -> Router<AppState> {
     Router::new()
@@ -34,20 +44,42 @@ pub fn router() -> Router<AppState> {
         .fallback(|| async { ApiError(AppError::NotFound) })
 }
 
-/// The station whose token the request carries.
-async fn station(state: &AppState, headers: &HeaderMap) -> Result<StationToken, ApiError> {
-    let token = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .map(str::trim)
-        .filter(|t| !t.is_empty() && t.len() <= 200)
-        .ok_or(AppError::StationToken)?;
-    state
-        .store()
-        .station_by_token(token)
-        .await?
-        .ok_or(ApiError(AppError::StationToken))
+/// The station whose token the request carries: an extractor, so that it runs before the
+/// body is read (a caller without a valid token never gets to send one).
+struct Station(StationToken);
+
+impl FromRequestParts<AppState> for Station {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &AppState) -> Result<Self, ApiError> {
+        let token = parts
+            .headers
+            .get(header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.strip_prefix("Bearer "))
+            .map(str::trim)
+            .filter(|t| !t.is_empty() && t.len() <= 200)
+            .ok_or(AppError::StationToken)?;
+        match state.store().station_by_token(token).await? {
+            Some(s) => Ok(Station(s)),
+            None => Err(ApiError(AppError::StationToken)),
+        }
+    }
+}
+
+/// A turn to upload a recording (after the token, before the body).
+struct UploadTurn(#[allow(dead_code)] tokio::sync::SemaphorePermit<'static>);
+
+impl FromRequestParts<AppState> for UploadTurn {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(_: &mut Parts, _: &AppState) -> Result<Self, ApiError> {
+        UPLOADS
+            .acquire()
+            .await
+            .map(UploadTurn)
+            .map_err(|_| ApiError(AppError::Unavailable("the hub is stopping".into())))
+    }
 }
 
 fn recording_store(state: &AppState) -> Result<&RecordingStore, ApiError> {
@@ -56,6 +88,14 @@ fn recording_store(state: &AppState) -> Result<&RecordingStore, ApiError> {
             "this hub keeps no recordings: start it with --recordings".into(),
         ))
     })
+}
+
+/// A recording store that failed (not the request's fault): 503, the station tries later.
+fn unavailable(e: AssessError) -> ApiError {
+    tracing::error!("the hub's recording store: {e}");
+    ApiError(AppError::Unavailable(
+        "the hub's recording store failed; try later".into(),
+    ))
 }
 
 fn unprocessable(message: String) -> ApiError {
@@ -73,11 +113,11 @@ struct RecordingTaken {
 
 async fn put_recording(
     State(state): State<AppState>,
-    headers: HeaderMap,
+    Station(station): Station,
+    _turn: UploadTurn,
     Path(key): Path<String>,
     body: Bytes,
 ) -> Result<(StatusCode, Json<RecordingTaken>), ApiError> {
-    let station = station(&state, &headers).await?;
     if !is_sha256_hex(&key) {
         return Err(ApiError(AppError::BadRequest(format!(
             "{key:?} is not a SHA-256 key"
@@ -96,7 +136,8 @@ async fn put_recording(
     }
     let existed = store.size(&key).await.is_ok_and(|n| n == body.len() as u64);
     let bytes = body.len();
-    store.put(body).await.map_err(AppError::from)?;
+    // written even when an object of that size is there: it may be a damaged one
+    store.put(body).await.map_err(unavailable)?;
     let status = if existed {
         StatusCode::OK
     } else {
@@ -114,11 +155,10 @@ struct AttemptTaken {
 
 async fn put_attempt(
     State(state): State<AppState>,
-    headers: HeaderMap,
+    Station(station): Station,
     Path(uuid): Path<String>,
     body: Bytes,
 ) -> Result<(StatusCode, Json<AttemptTaken>), ApiError> {
-    let station = station(&state, &headers).await?;
     let up: AttemptUpload = serde_json::from_slice(&body)
         .map_err(|e| unprocessable(format!("not an attempt upload: {e}")))?;
     if !is_uuid(&uuid) || up.uuid != uuid {
@@ -129,19 +169,26 @@ async fn put_attempt(
     if up.recording_sha256.is_some() || up.rrd_sha256.is_some() {
         let store = recording_store(&state)?;
         for key in [&up.recording_sha256, &up.rrd_sha256].into_iter().flatten() {
-            if store.size(key).await.is_err() {
-                return Err(unprocessable(format!(
-                    "recording {key} is not on this hub: upload it first"
-                )));
+            match store.size(key).await {
+                Ok(_) => {}
+                Err(AssessError::NotFound(_)) => {
+                    return Err(unprocessable(format!(
+                        "recording {key} is not on this hub: upload it first"
+                    )));
+                }
+                // the store, not the attempt: the station stops and tries later
+                Err(e) => return Err(unavailable(e)),
             }
         }
     }
     let taken = state
         .store()
-        .import_attempt(&up)
+        .import_attempt(&up, &station.name)
         .await
         .map_err(|e| match e {
-            cutlab_assessor::AssessError::InvalidInput(m) => unprocessable(m),
+            // this attempt's own problem: it stays queued on its station, the rest go on
+            AssessError::InvalidInput(m) | AssessError::Conflict(m) => unprocessable(m),
+            AssessError::NotFound(m) => unprocessable(format!("not on this hub: {m}")),
             e => ApiError::from(e),
         })?;
     if taken.created {

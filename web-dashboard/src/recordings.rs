@@ -173,7 +173,11 @@ async fn send_recording(
     let name = format!("attempt-{}.{ext}", a.id);
     let range = headers.get(header::RANGE).and_then(|v| v.to_str().ok());
     if let (Some(key), Some(store)) = (key, state.config().recordings.as_ref()) {
-        return send_object(store, key, &name, range).await;
+        match send_object(store, key, &name, range).await {
+            // not in this server's store: the file, if this machine has it
+            Err(AppError::NotFound) => {}
+            other => return other,
+        }
     }
     let (mcap, rrd) = recording_paths(a).ok_or(AppError::NotFound)?;
     let path = match kind {

@@ -10,7 +10,7 @@ use common::*;
 use cutlab_dashboard::Config;
 use cutlab_dashboard::assessor::recordings::{RecordingStore, sha256_hex};
 use cutlab_dashboard::assessor::store::{AttemptStatus, BUILTIN_EXERCISE, Role, Store};
-use cutlab_station::sync::{Hub, SyncError, sync};
+use cutlab_station::sync::{Hub, SyncError, SyncReport, sync, sync_new};
 
 fn put(path: &str, token: Option<&str>, body: Vec<u8>) -> Request<Body> {
     let mut b = Request::builder().method(Method::PUT).uri(path);
@@ -107,6 +107,12 @@ async fn a_station_sends_its_queue_once_and_keeps_what_is_refused() {
     let left = station.sync_queue().await.unwrap();
     assert_eq!(left.len(), 1);
     assert!(left[0].sync_error.as_deref().unwrap().contains("hashes to"));
+    // the automatic syncs do not send it again and again; `cutlab sync` does
+    let report = sync_new(&station, &hub, None).await.unwrap();
+    assert_eq!(report, SyncReport::default());
+    assert_eq!(queued().await, 1);
+    let report = sync(&station, &hub, None).await.unwrap();
+    assert_eq!(report.refused.len(), 1);
 
     // the key put right (the file is the recording): it goes
     let bytes = std::fs::read(left[0].recording_path.as_deref().unwrap()).unwrap();
@@ -252,4 +258,50 @@ async fn the_upload_calls_refuse_what_they_must() {
     let r = send(&bare.app, put(&path, Some(&token), body)).await;
     assert_eq!(r.status(), StatusCode::SERVICE_UNAVAILABLE);
     assert!(body_text(r).await.contains("--recordings"));
+}
+
+#[tokio::test]
+async fn a_station_server_sends_its_queue_once_the_hub_is_back() {
+    let (e, state, _recordings, _guard) = hub_env().await;
+    let token = e.store.create_station_token("or-4").await.unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (station, _) = station_with_two_attempts(dir.path()).await;
+    // a port where the hub will be, nothing listening yet
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let hub = Hub::new(&format!("http://127.0.0.1:{port}"), &token).unwrap();
+    let retrying = tokio::spawn(cutlab_station::sync::keep_syncing(
+        station.clone(),
+        hub,
+        None,
+        std::time::Duration::from_millis(100),
+    ));
+    tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+    assert_eq!(station.sync_queue().await.unwrap().len(), 2, "hub down");
+    let listener = tokio::net::TcpListener::bind(("127.0.0.1", port))
+        .await
+        .unwrap();
+    tokio::spawn(cutlab_dashboard::serve(
+        listener,
+        state,
+        std::future::pending(),
+    ));
+    let t0 = std::time::Instant::now();
+    while !station.sync_queue().await.unwrap().is_empty() {
+        assert!(t0.elapsed().as_secs() < 30, "the queue was not sent");
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    retrying.abort();
+    let zoe = e.store.user_by_name("zoe").await.unwrap();
+    assert_eq!(
+        e.store
+            .list_attempts(Some(zoe.id), None)
+            .await
+            .unwrap()
+            .len(),
+        2
+    );
 }

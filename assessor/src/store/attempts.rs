@@ -72,6 +72,8 @@ pub struct Attempt {
     pub synced_ns: Option<i64>,
     /// On a station: why the last upload to the hub failed.
     pub sync_error: Option<String>,
+    /// On a hub: the station that uploaded the attempt (`None`: recorded here).
+    pub station: Option<String>,
 }
 
 type MetricRow = (String, Option<f64>, String, Option<bool>, Option<String>);
@@ -96,8 +98,9 @@ struct AttemptRow {
     uuid: Option<String>,
     synced_ns: Option<i64>,
     sync_error: Option<String>,
+    station: Option<String>,
 }
-const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error FROM attempts";
+const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error, station FROM attempts";
 
 fn attempt(r: AttemptRow) -> Result<Attempt> {
     Ok(Attempt {
@@ -118,6 +121,7 @@ fn attempt(r: AttemptRow) -> Result<Attempt> {
         uuid: r.uuid,
         synced_ns: r.synced_ns,
         sync_error: r.sync_error,
+        station: r.station,
     })
 }
 

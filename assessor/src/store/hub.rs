@@ -75,8 +75,20 @@ impl AttemptUpload {
                 return bad(format!("{key:?} is not a recording key (SHA-256)"));
             }
         }
-        if self.trainee.trim().is_empty() || self.exercise.trim().is_empty() {
-            return bad("an attempt without trainee or exercise".into());
+        for (what, name) in [("trainee", &self.trainee), ("exercise", &self.exercise)] {
+            if name.trim().is_empty() || name.trim() != name.as_str() {
+                return bad(format!("the {what}'s name {name:?}"));
+            }
+        }
+        if self.expert {
+            // an expert's reference attempt sets the exercise's thresholds: recorded on the
+            // hub itself, never uploaded with a station's token
+            return bad("expert reference attempts are not taken from stations".into());
+        }
+        let mut keys: Vec<&str> = self.metrics.iter().map(|m| m.key.as_str()).collect();
+        keys.sort_unstable();
+        if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
+            return bad(format!("metric {:?} given twice", w[0]));
         }
         Ok(())
     }
@@ -185,12 +197,13 @@ impl Store {
         })
     }
 
-    /// Takes an attempt uploaded by a station: once per global id (a second upload answers
+    /// Takes an attempt uploaded by `station`: once per global id (a second upload answers
     /// with the attempt already there), the trainee created (without a password) if the hub
-    /// does not know them, the exercise the hub's own (unknown: an error), a complete
-    /// attempt scored against the hub's thresholds. The recordings' keys are taken as given:
-    /// the caller checks they are in its recording store.
-    pub async fn import_attempt(&self, up: &AttemptUpload) -> Result<Imported> {
+    /// does not know them (a name the hub gives an instructor or administrator is refused),
+    /// the exercise the hub's own (unknown: an error), a complete attempt scored against the
+    /// hub's thresholds. The recordings' keys are taken as given: the caller checks they are
+    /// in its recording store.
+    pub async fn import_attempt(&self, up: &AttemptUpload, station: &str) -> Result<Imported> {
         up.validate()?;
         if let Ok(a) = self.attempt_by_uuid(&up.uuid).await {
             // a retry; or the first upload stopped between insert and scoring
@@ -221,9 +234,15 @@ impl Store {
             }
             Err(e) => return Err(e),
         };
+        if trainee.role != Role::Trainee {
+            return Err(AssessError::InvalidInput(format!(
+                "{:?} is not a trainee on this hub",
+                up.trainee
+            )));
+        }
         let id: Option<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar(
-            "INSERT INTO attempts (trainee_id, exercise_id, started_ns, ended_ns, status, expert, note, recording_sha256, rrd_sha256, uuid) \
-             VALUES ($1, $2, $3, $4, 'running', $5, $6, $7, $8, $9) ON CONFLICT (uuid) DO NOTHING RETURNING id")
+            "INSERT INTO attempts (trainee_id, exercise_id, started_ns, ended_ns, status, expert, note, recording_sha256, rrd_sha256, uuid, station) \
+             VALUES ($1, $2, $3, $4, 'running', $5, $6, $7, $8, $9, $10) ON CONFLICT (uuid) DO NOTHING RETURNING id")
             .bind(trainee.id)
             .bind(exercise.id)
             .bind(up.started_ns)
@@ -233,6 +252,7 @@ impl Store {
             .bind(&up.recording_sha256)
             .bind(&up.rrd_sha256)
             .bind(&up.uuid)
+            .bind(station)
             .fetch_optional(pool).await)?;
         let a = self.attempt_by_uuid(&up.uuid).await?;
         Ok(Imported {
@@ -259,8 +279,15 @@ impl Store {
         };
         match ended {
             Ok(a) => Ok(a),
-            // ended meanwhile by a concurrent upload of the same attempt
-            Err(AssessError::Conflict(_)) => self.get_attempt(a.id).await,
+            Err(AssessError::Conflict(m)) => {
+                // ended meanwhile by a concurrent upload of the same attempt; anything else
+                // that conflicts is this upload's own error
+                let now = self.get_attempt(a.id).await?;
+                if now.status == AttemptStatus::Running {
+                    return Err(AssessError::Conflict(m));
+                }
+                Ok(now)
+            }
             Err(e) => Err(e),
         }
     }
