@@ -28,7 +28,7 @@ struct Cli {
     db: Option<cutlab_assessor::DbLocation>,
     /// The recording store an attempt's recordings are put into when it ends (besides the
     /// station's disk), and the dashboard serves them from: a folder or `s3://bucket/prefix`
-    /// (else $CUTLAB_RECORDINGS, else none).
+    /// (else $CUTLAB_RECORDINGS, else the folder recordings/ beside an SQLite database).
     #[arg(long, global = true)]
     recordings: Option<String>,
     /// The hub this station sends its ended attempts to (after each attempt, and with
@@ -42,12 +42,22 @@ struct Cli {
 }
 
 impl Cli {
-    /// `--recordings`, else `$CUTLAB_RECORDINGS` if set and not empty.
+    /// `--recordings`, else `$CUTLAB_RECORDINGS` if set and not empty, else the folder
+    /// `recordings/` beside an SQLite database (in the working directory for PostgreSQL).
     fn recordings(&self) -> Option<String> {
-        self.recordings.clone().or_else(|| {
+        let given = self.recordings.clone().or_else(|| {
             std::env::var(cutlab_assessor::recordings::RECORDINGS_ENV)
                 .ok()
                 .filter(|v| !v.trim().is_empty())
+        });
+        given.or_else(|| {
+            let db = cutlab_assessor::default_db(self.db.as_ref());
+            let dir = db
+                .sqlite_path()
+                .and_then(std::path::Path::parent)
+                .unwrap_or(std::path::Path::new(""))
+                .join("recordings");
+            Some(dir.display().to_string())
         })
     }
 }

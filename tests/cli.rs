@@ -713,3 +713,34 @@ fn an_unreachable_recording_store_ends_with_one_clear_line() {
     );
     assert!(err.contains("opening the recording store"), "{err}");
 }
+
+#[test]
+fn an_attempt_keeps_its_recordings_in_the_store_beside_the_database() {
+    let dir = tempfile::tempdir().expect("folder");
+    let db = dir.path().join("cutlab.db");
+    let out = dir.path().join("tess-1");
+    let (ok, _, err) = cutlab(&[
+        "--db",
+        db.to_str().expect("utf-8"),
+        "session",
+        "--device",
+        "expert",
+        "--clock",
+        "virtual",
+        "--duration",
+        "1",
+        "--min-tets",
+        "3000",
+        "--out",
+        out.to_str().expect("utf-8"),
+        "--trainee",
+        "tess",
+    ]);
+    assert!(ok, "{err}");
+    // the default store: recordings/ beside the SQLite file, the file under its SHA-256
+    let bytes = std::fs::read(out.join("session.mcap")).expect("recording");
+    let key = cutlab_assessor::recordings::sha256_hex(&bytes);
+    let kept = std::fs::read(dir.path().join("recordings").join("sha256").join(&key))
+        .expect("in the store");
+    assert_eq!(kept, bytes);
+}
