@@ -30,12 +30,14 @@ pub struct RecordingStore {
     location: String,
 }
 
+/// `bytes` in lowercase hex.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
 /// The SHA-256 of `bytes`, lowercase hex.
 pub fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    hex(&Sha256::digest(bytes))
 }
 
 /// Whether `key` is a SHA-256 in lowercase hex (64 digits): anything else is never looked up.
@@ -216,14 +218,12 @@ impl crate::Store {
         recordings: &RecordingStore,
     ) -> Result<crate::store::Attempt> {
         let a = self.get_attempt(attempt_id).await?;
-        let Some(mcap) = a.recording_path.as_deref().filter(|p| !p.is_empty()) else {
+        let Some((mcap, rrd)) = a.recording_files() else {
             return Err(AssessError::NotFound(format!(
                 "attempt {attempt_id} has no recording"
             )));
         };
-        let mcap = std::path::PathBuf::from(mcap);
         let mcap_key = recordings.put_file(&mcap).await?;
-        let rrd = mcap.with_extension("rrd");
         let rrd_key = if rrd.is_file() {
             Some(recordings.put_file(&rrd).await?)
         } else {

@@ -10,7 +10,6 @@
 //! next: the hub refusing it (a recording whose content does not match its key, an exercise
 //! the hub lacks), or its recording missing on this machine.
 
-use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -188,14 +187,10 @@ async fn recording(
     {
         return Ok(Some((key.to_owned(), bytes)));
     }
-    let Some(mcap) = a.recording_path.as_deref().filter(|p| !p.is_empty()) else {
+    let Some((mcap, rrd_path)) = a.recording_files() else {
         return Ok(None);
     };
-    let path = if rrd {
-        PathBuf::from(mcap).with_extension("rrd")
-    } else {
-        PathBuf::from(mcap)
-    };
+    let path = if rrd { rrd_path } else { mcap };
     match tokio::fs::read(&path).await {
         // the key on record if there is one: a file changed since is refused by the hub
         Ok(bytes) => Ok(Some((

@@ -20,7 +20,6 @@ use cutlab_recorder::rerun_log::TIMELINE_SIM_TIME;
 use crate::AppState;
 use crate::access::visible_attempt;
 use crate::auth::CurrentUser;
-use crate::data::attempt::recording_paths;
 use crate::data::debrief;
 use crate::error::AppError;
 use crate::extract::{Id, Path};
@@ -179,7 +178,8 @@ async fn send_recording(
             other => return other,
         }
     }
-    let (mcap, rrd) = recording_paths(a).ok_or(AppError::NotFound)?;
+    // the attempt's own files, the only ones ever served for it
+    let (mcap, rrd) = a.recording_files().ok_or(AppError::NotFound)?;
     let path = match kind {
         Kind::Mcap => mcap,
         Kind::Rrd => rrd,

@@ -78,9 +78,20 @@ pub struct Attempt {
 
 type MetricRow = (String, Option<f64>, String, Option<bool>, Option<String>);
 type ProficiencyRow = (i64, i64, i64, bool, Option<i64>, f64);
+impl Attempt {
+    /// The attempt's files on this machine: its recorded `.mcap` path and the `.rrd` beside
+    /// it (same stem); `None` for an attempt that recorded none.
+    pub fn recording_files(&self) -> Option<(std::path::PathBuf, std::path::PathBuf)> {
+        let mcap =
+            std::path::PathBuf::from(self.recording_path.as_deref().filter(|p| !p.is_empty())?);
+        let rrd = mcap.with_extension("rrd");
+        Some((mcap, rrd))
+    }
+}
+
 /// An `attempts` row as stored.
 #[derive(sqlx::FromRow)]
-struct AttemptRow {
+pub(super) struct AttemptRow {
     id: i64,
     trainee_id: i64,
     exercise_id: i64,
@@ -100,9 +111,9 @@ struct AttemptRow {
     sync_error: Option<String>,
     station: Option<String>,
 }
-const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error, station FROM attempts";
+pub(super) const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error, station FROM attempts";
 
-fn attempt(r: AttemptRow) -> Result<Attempt> {
+pub(super) fn attempt(r: AttemptRow) -> Result<Attempt> {
     Ok(Attempt {
         id: r.id,
         trainee_id: r.trainee_id,

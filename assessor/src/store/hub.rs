@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::attempts::{Attempt, AttemptStatus};
+use super::attempts::{ATTEMPT_COLUMNS, Attempt, AttemptRow, AttemptStatus, attempt};
 use super::{Role, Store, now_ns};
 use crate::error::{AssessError, Result};
 use crate::metrics::MetricValue;
@@ -18,7 +18,7 @@ pub fn new_uuid() -> Result<String> {
         .map_err(|e| AssessError::InvalidInput(format!("no randomness for an id: {e}")))?;
     b[6] = (b[6] & 0x0f) | 0x40;
     b[8] = (b[8] & 0x3f) | 0x80;
-    let h: String = b.iter().map(|x| format!("{x:02x}")).collect();
+    let h = crate::recordings::hex(&b);
     Ok(format!(
         "{}-{}-{}-{}-{}",
         &h[0..8],
@@ -132,24 +132,17 @@ fn token_hash(token: &str) -> String {
 impl Store {
     /// The attempt with global id `uuid`.
     pub async fn attempt_by_uuid(&self, uuid: &str) -> Result<Attempt> {
-        let id: Option<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT id FROM attempts WHERE uuid = $1")
+        let row: Option<AttemptRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE uuid = $1")))
             .bind(uuid)
             .fetch_optional(pool).await)?;
-        match id {
-            Some(id) => self.get_attempt(id).await,
-            None => Err(AssessError::NotFound(format!("attempt {uuid}"))),
-        }
+        attempt(row.ok_or_else(|| AssessError::NotFound(format!("attempt {uuid}")))?)
     }
 
     /// The station's queue: ended attempts its hub has not taken, oldest first.
     pub async fn sync_queue(&self) -> Result<Vec<Attempt>> {
-        let ids: Vec<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT id FROM attempts WHERE status <> 'running' AND synced_ns IS NULL ORDER BY id")
+        let rows: Vec<AttemptRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE status <> 'running' AND synced_ns IS NULL ORDER BY id")))
             .fetch_all(pool).await)?;
-        let mut out = Vec::with_capacity(ids.len());
-        for id in ids {
-            out.push(self.get_attempt(id).await?);
-        }
-        Ok(out)
+        rows.into_iter().map(attempt).collect()
     }
 
     /// Records how the upload of attempt `id` went: taken by the hub (`Ok`), or why not
@@ -303,7 +296,7 @@ impl Store {
         let mut b = [0u8; 32];
         getrandom::fill(&mut b)
             .map_err(|e| AssessError::InvalidInput(format!("no randomness for a token: {e}")))?;
-        let token = format!("cutlab-station-{}", crate::recordings::sha256_hex(&b));
+        let token = format!("cutlab-station-{}", crate::recordings::hex(&b));
         crate::on_db!(&self.db, pool => sqlx::query("INSERT INTO station_tokens (name, token_hash, created_ns) VALUES ($1, $2, $3)")
             .bind(name)
             .bind(token_hash(&token))

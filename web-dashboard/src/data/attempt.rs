@@ -1,7 +1,5 @@
 //! One attempt: every metric with its threshold and verdict, the debriefing, its recordings.
 
-use std::path::PathBuf;
-
 use cutlab_assessor::metrics;
 use cutlab_assessor::store::Attempt;
 use serde::Serialize;
@@ -61,7 +59,7 @@ pub struct RecordingFiles {
 impl RecordingFiles {
     pub fn of(state: &AppState, a: &Attempt) -> Self {
         let stored = state.config().recordings.is_some();
-        let (mcap, rrd) = match recording_paths(a) {
+        let (mcap, rrd) = match a.recording_files() {
             Some((mcap, rrd)) => (is_file(&mcap), is_file(&rrd)),
             None => (false, false),
         };
@@ -70,14 +68,6 @@ impl RecordingFiles {
             rrd: rrd || (stored && a.rrd_sha256.is_some()),
         }
     }
-}
-
-/// The attempt's files: the stored `.mcap` path and the `.rrd` beside it (same stem), the
-/// only files the dashboard ever serves for it.
-pub fn recording_paths(a: &Attempt) -> Option<(PathBuf, PathBuf)> {
-    let mcap = PathBuf::from(a.recording_path.as_deref().filter(|p| !p.is_empty())?);
-    let rrd = mcap.with_extension("rrd");
-    Some((mcap, rrd))
 }
 
 fn is_file(p: &std::path::Path) -> bool {

@@ -11,7 +11,6 @@ use cutlab_assessor::{ExpertPlan, attempt_data};
 use cutlab_recorder::Recording;
 use serde::Serialize;
 
-use super::attempt::recording_paths;
 use crate::AppState;
 use crate::error::AppError;
 
@@ -83,7 +82,7 @@ fn xy_mm(p: [f64; 3]) -> [f64; 2] {
 
 /// The trace of attempt `a`, or `None` when it has no readable recording.
 pub async fn trace(state: &AppState, a: &Attempt) -> Result<Option<Arc<AttemptTrace>>, AppError> {
-    let Some((mcap, _)) = recording_paths(a) else {
+    let Some((mcap, _)) = a.recording_files() else {
         return Ok(None);
     };
     let Ok(meta) = tokio::fs::metadata(&mcap).await else {
