@@ -254,6 +254,7 @@ impl Session {
             normals,
             depth_m,
             approach_height_m: 0.015,
+            viewpoint_m: None,
         };
         plan.check()?;
         Ok(plan)

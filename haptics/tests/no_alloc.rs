@@ -18,6 +18,7 @@ fn a_servo_tick_does_not_allocate() {
         normals: vec![Vector3::z(); 2],
         depth_m: 0.005,
         approach_height_m: 0.015,
+        viewpoint_m: None,
     };
     let mut trainee =
         SyntheticTrainee::new("novice", plan, Skill::preset("novice").expect("preset"), 1)

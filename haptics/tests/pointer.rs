@@ -55,6 +55,7 @@ fn before_any_sample_the_rest_pose_is_held_above_the_tissue() {
         normals: vec![Vector3::z(); 2],
         depth_m: 0.005,
         approach_height_m: 0.015,
+        viewpoint_m: None,
     };
     let options = PointerOptions::above_entry(&plan).expect("plan");
     let (mut d, _feed) = device(options);

@@ -37,7 +37,7 @@ use cutlab_haptics::render::{Mode, fault};
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::sim::cut::{Blade, CutEvent};
 use cutlab_haptics::tap::{Keyframe, SurfaceSnapshot};
-use cutlab_haptics::{Point3, SimRecord};
+use cutlab_haptics::{Point3, SimRecord, Vector3};
 use rerun::{RecordingStream, RecordingStreamBuilder, RecordingStreamError};
 
 /// Name of the sequence timeline of servo ticks.
@@ -286,15 +286,27 @@ impl RerunSink {
         Ok(())
     }
 
-    /// Frames the review's 3D view: the eye at `eye_m` looking at `target_m` (metres, world
-    /// frame), the exercise's viewpoint; the layout is sent again with it.
-    pub fn frame_view(&mut self, eye_m: &Point3, target_m: &Point3) -> Result<(), RerunLogError> {
-        if !(eye_m.iter().chain(target_m.iter()).all(|v| v.is_finite()) && eye_m != target_m) {
+    /// Frames the review's 3D view from `eye` (the exercise's viewpoint, [`plan_view`]); the
+    /// layout is sent again with it.
+    pub fn frame_view(&mut self, eye: &ReviewEye) -> Result<(), RerunLogError> {
+        let ReviewEye {
+            position_m,
+            look_target_m,
+            up,
+        } = eye;
+        let finite = position_m
+            .iter()
+            .chain(look_target_m.iter())
+            .chain(up.iter().flat_map(|u| u.iter()))
+            .all(|v| v.is_finite());
+        let up_ok = up.is_none_or(|u| u.norm() > 1e-9);
+        if !(finite && up_ok && position_m != look_target_m) {
             return Err(RerunLogError::Settings(format!(
-                "a view from {eye_m:?} to {target_m:?}: two different finite points needed"
+                "a view from {position_m:?} to {look_target_m:?} (up {up:?}): two different \
+                 finite points and a finite, non-zero up needed"
             )));
         }
-        send_review_blueprint(&self.rec, Some((eye_m, target_m)))
+        send_review_blueprint(&self.rec, Some(eye))
     }
 
     /// The planned incision, as a static line strip (metres, world frame), and the 3D view
@@ -308,7 +320,7 @@ impl RerunSink {
                 .with_colors([rerun::Color::from_rgb(40, 200, 90)]),
         )?;
         match plan_view(plan) {
-            Some((eye, target)) => self.frame_view(&eye, &target),
+            Some(eye) => self.frame_view(&eye),
             None => Ok(()),
         }
     }
@@ -547,35 +559,74 @@ impl Drop for RerunSink {
     }
 }
 
-/// Where a review looks at a planned incision from: the eye on the outward normal (the mean of
-/// the plan's normals) above the incision's middle, at twice its length (at least 8 cm), so
-/// the whole line and the tissue around it are in view; `None` for a plan without a usable
-/// line or normal.
-pub fn plan_view(plan: &Plan) -> Option<(Point3, Point3)> {
+/// How the review's 3D view looks at the scene (metres, world frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReviewEye {
+    /// Where the eye is.
+    pub position_m: Point3,
+    /// The point it looks at (and orbits around).
+    pub look_target_m: Point3,
+    /// The screen's up in the world, if not the scene's (+z).
+    pub up: Option<Vector3>,
+}
+
+/// Where a review looks at a planned incision from: at the incision's middle `c`, from the
+/// direction of the exercise's viewpoint (the plan's `viewpoint_m`) or, for a plan without
+/// one, along its mean outward normal. The eye stands at `d = max(2 L, 8 cm)` from `c` for an
+/// incision of length `L`, so the whole line and the tissue around it are in view; a viewpoint
+/// between `d / 2` and `2 d` away is taken as it is. The screen's up is `a x v` for the
+/// incision's direction `a` and the viewing direction `v` (both projected apart), so the
+/// incision runs across the screen, entry on the left. `None` for a plan without a usable
+/// line, normal or viewpoint.
+pub fn plan_view(plan: &Plan) -> Option<ReviewEye> {
     let (first, last) = (plan.line_m.first()?, plan.line_m.last()?);
-    let target = Point3::from((first.coords + last.coords) * 0.5);
-    let length: f64 = plan.line_m.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
-    let normal = plan
-        .normals
+    let middle = Point3::from((first.coords + last.coords) * 0.5);
+    let framing_m = (2.0 * plan.length_m()).max(0.08);
+    let from_middle = match plan.viewpoint_m {
+        Some(v) => {
+            let away = v - middle;
+            let distance = away.norm().clamp(0.5 * framing_m, 2.0 * framing_m);
+            away.try_normalize(1e-9)? * distance
+        }
+        None => {
+            let normal = plan
+                .normals
+                .iter()
+                .fold(Vector3::zeros(), |a, n| a + n)
+                .try_normalize(1e-12)?;
+            normal * framing_m
+        }
+    };
+    let position_m = middle + from_middle;
+    let view = -from_middle.normalize();
+    let along = last - first;
+    let across = along - view * along.dot(&view);
+    let up = across
+        .try_normalize(1e-9)
+        .map(|a| a.cross(&view).normalize());
+    (position_m
         .iter()
-        .fold(cutlab_haptics::Vector3::zeros(), |a, n| a + n)
-        .try_normalize(1e-12)?;
-    let eye = target + normal * (2.0 * length).max(0.08);
-    (eye.iter().chain(target.iter()).all(|v| v.is_finite())).then_some((eye, target))
+        .chain(middle.iter())
+        .all(|c| c.is_finite()))
+    .then_some(ReviewEye {
+        position_m,
+        look_target_m: middle,
+        up,
+    })
 }
 
 /// The name of the 3D view's eye property in the blueprint (`view/<id>/EyeControls3D`).
 const EYE_CONTROLS: &str = "EyeControls3D";
 
-/// Sends [`review_blueprint`] to `rec`, made active and the default; with `eye` (position,
-/// look target), its 3D view looks from there.
+/// Sends [`review_blueprint`] to `rec`, made active and the default; with `eye`, its 3D view
+/// looks from there.
 ///
 /// rerun 0.36's blueprint builder has no eye controls for a 3D view, so the blueprint goes
 /// first into memory, the view's `EyeControls3D` property is logged into the same blueprint
 /// store, and the whole is sent with the blueprint's own activation.
 fn send_review_blueprint(
     rec: &RecordingStream,
-    eye: Option<(&Point3, &Point3)>,
+    eye: Option<&ReviewEye>,
 ) -> Result<(), RerunLogError> {
     use rerun::blueprint::BlueprintActivation;
     use rerun::log::LogMsg;
@@ -584,7 +635,7 @@ fn send_review_blueprint(
         make_default: true,
     };
     let (blueprint, view_path) = review_layout();
-    let Some((eye_m, target_m)) = eye else {
+    let Some(eye) = eye else {
         blueprint.send(rec, activation)?;
         return Ok(());
     };
@@ -615,12 +666,13 @@ fn send_review_blueprint(
         .blueprint()
         .memory()?;
     eye_store.set_time_sequence("blueprint", 0);
-    eye_store.log(
-        format!("{view_path}/{EYE_CONTROLS}"),
-        &rerun::external::re_sdk_types::blueprint::archetypes::EyeControls3D::new()
-            .with_position(f32x3(eye_m))
-            .with_look_target(f32x3(target_m)),
-    )?;
+    let mut controls = rerun::external::re_sdk_types::blueprint::archetypes::EyeControls3D::new()
+        .with_position(f32x3(&eye.position_m))
+        .with_look_target(f32x3(&eye.look_target_m));
+    if let Some(up) = eye.up {
+        controls = controls.with_eye_up([up.x as f32, up.y as f32, up.z as f32]);
+    }
+    eye_store.log(format!("{view_path}/{EYE_CONTROLS}"), &controls)?;
     eye_store.flush_blocking()?;
     layout.extend(
         eye_storage

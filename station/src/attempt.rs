@@ -25,14 +25,20 @@ pub async fn exercise_named(
 }
 
 /// The expert plan's incision projected onto the session's tissue (33 points evenly spaced
-/// along it), at the plan's depth: what a synthetic trainee follows and the station shows.
+/// along it), at the plan's depth, with its viewpoint: what a synthetic trainee follows, the
+/// station shows and a review of the recording looks from.
 pub fn plan_on_tissue(session: &Session, plan: &ExpertPlan) -> Result<Plan, StationError> {
     let line: Vec<Point3> = plan.incision_m.iter().map(|&c| Point3::from(c)).collect();
-    Ok(session.plan_along(
-        &resample(&line, 33),
-        &Vector3::from(plan.normal),
-        plan.depth_m,
-    )?)
+    let on_tissue = Plan {
+        viewpoint_m: Some(Point3::from(plan.viewpoint_m)),
+        ..session.plan_along(
+            &resample(&line, 33),
+            &Vector3::from(plan.normal),
+            plan.depth_m,
+        )?
+    };
+    on_tissue.check()?;
+    Ok(on_tissue)
 }
 
 /// How a session's attempt ended.

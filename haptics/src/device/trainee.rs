@@ -28,6 +28,9 @@ pub struct Plan {
     pub depth_m: f64,
     /// Height above the entry point where the hand starts and ends, m.
     pub approach_height_m: f64,
+    /// Where the exercise views the surgical field from (the expert plan's eye), m; a review
+    /// of the cut looks from there. `None` when the plan names none.
+    pub viewpoint_m: Option<Point3>,
 }
 
 impl Plan {
@@ -54,6 +57,12 @@ impl Plan {
         }
         if self.length_m() < 1e-4 {
             return bad("the line is shorter than 0.1 mm");
+        }
+        if self
+            .viewpoint_m
+            .is_some_and(|v| !v.iter().all(|c| c.is_finite()))
+        {
+            return bad("the viewpoint must be finite");
         }
         Ok(())
     }
@@ -495,6 +504,7 @@ mod tests {
             normals: vec![Vector3::z(); 2],
             depth_m: 0.005,
             approach_height_m: 0.015,
+            viewpoint_m: None,
         }
     }
 

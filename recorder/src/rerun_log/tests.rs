@@ -166,6 +166,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
         normals: vec![Vector3::z(); 2],
         depth_m: 0.005,
         approach_height_m: 0.02,
+        viewpoint_m: None,
     })
     .expect("plan");
 
@@ -534,33 +535,79 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
         0.015,
     )
     .expect("sink");
-    let eye = Point3::new(0.05, 0.12, 0.2);
-    let target = Point3::new(0.05, 0.0, 0.0);
-    sink.frame_view(&eye, &target).expect("framed");
-    assert!(
-        sink.frame_view(&eye, &eye).is_err(),
-        "a view needs two points"
-    );
+    // a 100 mm incision along x on a surface facing +y, seen from a viewpoint above and behind
     let plan = cutlab_haptics::device::Plan {
         line_m: vec![Point3::new(0.0, 0.0, 0.0), Point3::new(0.1, 0.0, 0.0)],
         normals: vec![Vector3::y(); 2],
         depth_m: 0.005,
         approach_height_m: 0.02,
+        viewpoint_m: Some(Point3::new(0.05, 0.15, -0.15)),
     };
-    let (plan_eye, plan_target) = plan_view(&plan).expect("a view of the plan");
-    assert!((plan_target - Point3::new(0.05, 0.0, 0.0)).norm() < 1e-12);
+    let eye = plan_view(&plan).expect("a view of the plan");
+    let middle = Point3::new(0.05, 0.0, 0.0);
+    assert!((eye.look_target_m - middle).norm() < 1e-12);
+    // the viewpoint is 212 mm away, within [100, 400] mm of the 200 mm framing: taken as it is
     assert!(
-        (plan_eye - Point3::new(0.05, 0.2, 0.0)).norm() < 1e-12,
-        "{plan_eye}"
+        (eye.position_m - Point3::new(0.05, 0.15, -0.15)).norm() < 1e-12,
+        "{eye:?}"
+    );
+    // the incision runs left to right: up is the incision's direction crossed with the view's
+    let up = eye.up.expect("an up");
+    let view = (middle - eye.position_m).normalize();
+    assert!(up.dot(&view).abs() < 1e-12 && up.dot(&Vector3::x()).abs() < 1e-12);
+    assert!((view.cross(&up) - Vector3::x()).norm() < 1e-12, "{up}");
+    // a far viewpoint gives its direction, at twice the framing distance
+    let far = plan_view(&cutlab_haptics::device::Plan {
+        viewpoint_m: Some(Point3::new(0.05, 3.0, 0.0)),
+        ..plan.clone()
+    })
+    .expect("a view");
+    assert!(
+        (far.position_m - Point3::new(0.05, 0.4, 0.0)).norm() < 1e-12,
+        "{far:?}"
+    );
+    // without a viewpoint: along the mean normal, at the framing distance
+    let unplaced = cutlab_haptics::device::Plan {
+        viewpoint_m: None,
+        ..plan.clone()
+    };
+    let normal_eye = plan_view(&unplaced).expect("a view along the normal");
+    assert!(
+        (normal_eye.position_m - Point3::new(0.05, 0.2, 0.0)).norm() < 1e-12,
+        "{normal_eye:?}"
     );
     let flat = cutlab_haptics::device::Plan {
         normals: vec![Vector3::zeros(); 2],
-        ..plan
+        ..unplaced
     };
     assert_eq!(plan_view(&flat), None);
+    let on_the_line = cutlab_haptics::device::Plan {
+        viewpoint_m: Some(middle),
+        ..plan.clone()
+    };
+    assert_eq!(plan_view(&on_the_line), None);
+    sink.frame_view(&eye).expect("framed");
     assert!(
-        sink.frame_view(&Point3::new(f64::NAN, 0.0, 0.0), &target)
-            .is_err()
+        sink.frame_view(&ReviewEye {
+            position_m: middle,
+            ..eye
+        })
+        .is_err(),
+        "a view needs two points"
+    );
+    assert!(
+        sink.frame_view(&ReviewEye {
+            position_m: Point3::new(f64::NAN, 0.0, 0.0),
+            ..eye
+        })
+        .is_err()
+    );
+    assert!(
+        sink.frame_view(&ReviewEye {
+            up: Some(Vector3::zeros()),
+            ..eye
+        })
+        .is_err()
     );
     drop(sink);
 
@@ -579,14 +626,16 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
                 let path = chunk.entity_path().to_string();
                 let path = path.trim_start_matches('/');
                 if let Some(view) = path.strip_suffix("/EyeControls3D") {
-                    assert!(
-                        chunk
-                            .components()
-                            .keys()
-                            .any(|c| c.as_str().contains("position")),
-                        "{:?}",
-                        chunk.components().keys().collect::<Vec<_>>()
-                    );
+                    for field in ["position", "look_target", "eye_up"] {
+                        assert!(
+                            chunk
+                                .components()
+                                .keys()
+                                .any(|c| c.as_str().contains(field)),
+                            "{field}: {:?}",
+                            chunk.components().keys().collect::<Vec<_>>()
+                        );
+                    }
                     eye_controls.push((store.clone(), view.to_owned()));
                 } else if path.starts_with("view/") && path.matches('/').count() == 1 {
                     views.push((store.clone(), path.to_owned()));
