@@ -230,7 +230,15 @@ async fn browse(port: u16, driver: &browser::Driver, attempt: i64, profile: &Pat
         }
         tokio::time::sleep(Duration::from_secs(3)).await;
         c.enter_parent_frame().await?;
-        std::fs::write(shots.join("replay.png"), c.screenshot().await?).expect("screenshot");
+        let shot = c.screenshot().await?;
+        std::fs::write(shots.join("replay.png"), &shot).expect("screenshot");
+        let frame = c
+            .execute("const r = document.getElementById('replay').getBoundingClientRect(); return [r.left, r.top, r.width, r.height, window.devicePixelRatio]", vec![])
+            .await?;
+        let frame: Vec<f64> = frame.as_array().map(|a| a.iter().filter_map(serde_json::Value::as_f64).collect()).unwrap_or_default();
+        if let Err(e) = framed_on_the_incision(&shot, &frame) {
+            panic!("the replay (target/e2e/replay.png) is not framed on the incision: {e}");
+        }
         // a note pinned to a moment: back on the replay, which names the moment; the attempt page links it
         c.find(Locator::Css("form.comment-form input[name=at]")).await?.send_keys("1.5").await?;
         c.find(Locator::Css("form.comment-form textarea[name=body]")).await?.send_keys("The blade enters here.").await?;
@@ -266,6 +274,96 @@ async fn browse(port: u16, driver: &browser::Driver, attempt: i64, profile: &Pat
     .await;
     let _ = c.close().await;
     result.expect("the browser flow");
+}
+
+/// Whether a screenshot shows the replay's 3D view framed on the incision: in the upper part
+/// of the viewer's frame (`frame`: left, top, width, height in CSS pixels, device pixel
+/// ratio), below rerun's top bar and the view's tab, the tissue (its albedo 225, 150, 140,
+/// shaded) covers at least a quarter, and the planned incision (green, 40, 200, 90) is drawn
+/// across the middle third, running left to right.
+fn framed_on_the_incision(png_bytes: &[u8], frame: &[f64]) -> Result<(), String> {
+    let &[left, top, width, height, scale] = frame else {
+        return Err(format!("the viewer's frame: {frame:?}"));
+    };
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png_bytes))
+        .read_info()
+        .map_err(|e| e.to_string())?;
+    let mut pixels = vec![
+        0;
+        reader
+            .output_buffer_size()
+            .ok_or("a screenshot too large")?
+    ];
+    let info = reader.next_frame(&mut pixels).map_err(|e| e.to_string())?;
+    let channels = info.color_type.samples();
+    if info.bit_depth != png::BitDepth::Eight || channels < 3 {
+        return Err(format!(
+            "a {:?} {:?} screenshot",
+            info.bit_depth, info.color_type
+        ));
+    }
+    let px = |v: f64| (v * scale).round().max(0.0) as usize;
+    let (x0, x1) = (
+        px(left + 2.0),
+        px(left + width - 2.0).min(info.width as usize),
+    );
+    let (y0, y1) = (
+        px(top + 60.0),
+        px(top + 0.6 * height).min(info.height as usize),
+    );
+    if x1 <= x0 + 100 || y1 <= y0 + 100 {
+        return Err(format!(
+            "the 3D view's part of the screenshot is {x0}..{x1} x {y0}..{y1}"
+        ));
+    }
+    let (mut all, mut tissue) = (0usize, 0usize);
+    let mut green: Vec<(f64, f64)> = Vec::new();
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let at = y * info.line_size + x * channels;
+            let [r, g, b] = [0, 1, 2].map(|i| i32::from(pixels[at + i]));
+            all += 1;
+            if r > 120 && r > g + 45 && r > b + 45 {
+                tissue += 1;
+            }
+            if g > r + 80 && g > b + 60 {
+                green.push((
+                    (x - x0) as f64 / (x1 - x0) as f64,
+                    (y - y0) as f64 / (y1 - y0) as f64,
+                ));
+            }
+        }
+    }
+    let covered = tissue as f64 / all as f64;
+    if covered < 0.25 {
+        return Err(format!(
+            "the tissue covers {:.0} % of the view",
+            100.0 * covered
+        ));
+    }
+    if green.len() < 30 {
+        return Err(format!("the incision is {} pixels", green.len()));
+    }
+    let n = green.len() as f64;
+    let (cx, cy) = green
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let spread = |f: fn(&(f64, f64)) -> f64| {
+        green.iter().map(f).fold(f64::NEG_INFINITY, f64::max)
+            - green.iter().map(f).fold(f64::INFINITY, f64::min)
+    };
+    let (wide, tall) = (spread(|p| p.0), spread(|p| p.1));
+    if !((1.0 / 3.0..2.0 / 3.0).contains(&cx) && (1.0 / 3.0..2.0 / 3.0).contains(&cy)) {
+        return Err(format!(
+            "the incision's middle is at ({cx:.2}, {cy:.2}) of the view"
+        ));
+    }
+    if wide < 3.0 * tall * (y1 - y0) as f64 / (x1 - x0) as f64 {
+        return Err(format!(
+            "the incision spans {wide:.2} of the width and {tall:.2} of the height"
+        ));
+    }
+    Ok(())
 }
 
 /// The trainee station in a real browser: ana starts the built-in exercise in guided mode,

@@ -572,31 +572,25 @@ pub struct ReviewEye {
 
 /// Where a review looks at a planned incision from: at the incision's middle `c`, from the
 /// direction of the exercise's viewpoint (the plan's `viewpoint_m`) or, for a plan without
-/// one, along its mean outward normal. The eye stands at `d = max(2 L, 8 cm)` from `c` for an
-/// incision of length `L`, so the whole line and the tissue around it are in view; a viewpoint
-/// between `d / 2` and `2 d` away is taken as it is. The screen's up is `a x v` for the
+/// one, along its mean outward normal. The eye stands at `d = max(1.2 L, 5 cm)` from `c` for
+/// an incision of length `L`: the whole line in view and the tissue around it filling the
+/// view (rerun's vertical field of view is about 55 degrees). The screen's up is `a x v` for the
 /// incision's direction `a` and the viewing direction `v` (both projected apart), so the
 /// incision runs across the screen, entry on the left. `None` for a plan without a usable
 /// line, normal or viewpoint.
 pub fn plan_view(plan: &Plan) -> Option<ReviewEye> {
     let (first, last) = (plan.line_m.first()?, plan.line_m.last()?);
     let middle = Point3::from((first.coords + last.coords) * 0.5);
-    let framing_m = (2.0 * plan.length_m()).max(0.08);
-    let from_middle = match plan.viewpoint_m {
-        Some(v) => {
-            let away = v - middle;
-            let distance = away.norm().clamp(0.5 * framing_m, 2.0 * framing_m);
-            away.try_normalize(1e-9)? * distance
-        }
-        None => {
-            let normal = plan
-                .normals
-                .iter()
-                .fold(Vector3::zeros(), |a, n| a + n)
-                .try_normalize(1e-12)?;
-            normal * framing_m
-        }
+    let framing_m = (1.2 * plan.length_m()).max(0.05);
+    let towards_eye = match plan.viewpoint_m {
+        Some(v) => (v - middle).try_normalize(1e-9)?,
+        None => plan
+            .normals
+            .iter()
+            .fold(Vector3::zeros(), |a, n| a + n)
+            .try_normalize(1e-12)?,
     };
+    let from_middle = towards_eye * framing_m;
     let position_m = middle + from_middle;
     let view = -from_middle.normalize();
     let along = last - first;

@@ -546,9 +546,10 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
     let eye = plan_view(&plan).expect("a view of the plan");
     let middle = Point3::new(0.05, 0.0, 0.0);
     assert!((eye.look_target_m - middle).norm() < 1e-12);
-    // the viewpoint is 212 mm away, within [100, 400] mm of the 200 mm framing: taken as it is
+    // from the viewpoint's direction, at 1.2 times the incision's length
+    let towards = Vector3::new(0.0, 1.0, -1.0).normalize();
     assert!(
-        (eye.position_m - Point3::new(0.05, 0.15, -0.15)).norm() < 1e-12,
+        (eye.position_m - (middle + towards * 0.12)).norm() < 1e-12,
         "{eye:?}"
     );
     // the incision runs left to right: up is the incision's direction crossed with the view's
@@ -556,15 +557,24 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
     let view = (middle - eye.position_m).normalize();
     assert!(up.dot(&view).abs() < 1e-12 && up.dot(&Vector3::x()).abs() < 1e-12);
     assert!((view.cross(&up) - Vector3::x()).norm() < 1e-12, "{up}");
-    // a far viewpoint gives its direction, at twice the framing distance
+    // a far viewpoint gives its direction only; a short incision is seen from 5 cm
     let far = plan_view(&cutlab_haptics::device::Plan {
         viewpoint_m: Some(Point3::new(0.05, 3.0, 0.0)),
         ..plan.clone()
     })
     .expect("a view");
     assert!(
-        (far.position_m - Point3::new(0.05, 0.4, 0.0)).norm() < 1e-12,
+        (far.position_m - Point3::new(0.05, 0.12, 0.0)).norm() < 1e-12,
         "{far:?}"
+    );
+    let short = plan_view(&cutlab_haptics::device::Plan {
+        line_m: vec![Point3::new(0.0, 0.0, 0.0), Point3::new(0.01, 0.0, 0.0)],
+        ..plan.clone()
+    })
+    .expect("a view");
+    assert!(
+        ((short.position_m - short.look_target_m).norm() - 0.05).abs() < 1e-12,
+        "{short:?}"
     );
     // without a viewpoint: along the mean normal, at the framing distance
     let unplaced = cutlab_haptics::device::Plan {
@@ -573,7 +583,7 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
     };
     let normal_eye = plan_view(&unplaced).expect("a view along the normal");
     assert!(
-        (normal_eye.position_m - Point3::new(0.05, 0.2, 0.0)).norm() < 1e-12,
+        (normal_eye.position_m - Point3::new(0.05, 0.12, 0.0)).norm() < 1e-12,
         "{normal_eye:?}"
     );
     let flat = cutlab_haptics::device::Plan {
