@@ -103,6 +103,12 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
             ..Config::default()
         };
         let state = AppState::new(store, config)?;
+        // attempts left running by a station that died: ended before new ones start
+        cutlab_station::attempt::end_abandoned_and_say(
+            state.store(),
+            state.config().recordings.as_ref(),
+        )
+        .await;
         if let Some(hub) = o.hub.clone() {
             // the station's queue now and every minute: a hub that was down gets it later
             println!("sending ended attempts to the hub {}", hub.url());

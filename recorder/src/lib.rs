@@ -35,4 +35,4 @@ pub use error::RecorderError;
 pub use reader::Recording;
 pub use rerun_log::{RerunLogError, RerunSink, RerunTarget};
 pub use scan::{Announced, Damage, DamageKind};
-pub use writer::{McapSink, WriterOptions};
+pub use writer::{McapSink, WriterOptions, recording_in_use};

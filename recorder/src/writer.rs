@@ -89,22 +89,55 @@ impl<W: Write + Seek> std::fmt::Debug for McapSink<W> {
 impl McapSink<BufWriter<File>> {
     /// Creates `path` (replacing it) and writes the header, the channels, the session
     /// metadata and the attachments `(name, media type, bytes)`.
+    ///
+    /// The file stays locked (an exclusive advisory lock) while the sink writes it, so another
+    /// process can tell a recording being made from one whose writer died
+    /// ([`recording_in_use`]); a file another sink is writing is refused, not truncated.
     pub fn create(
         path: &Path,
         meta: &SessionMeta,
         attachments: &[(&str, &str, Vec<u8>)],
         options: WriterOptions,
     ) -> Result<Self, RecorderError> {
-        let file = File::create(path).map_err(|source| RecorderError::Io {
+        let io = |error| RecorderError::Io {
             path: path.to_owned(),
-            error: source,
-        })?;
+            error,
+        };
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .map_err(io)?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(io(std::io::Error::new(
+                    std::io::ErrorKind::ResourceBusy,
+                    "another session is recording to this file",
+                )));
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
+        }
+        file.set_len(0).map_err(io)?;
         Self::new(
             BufWriter::with_capacity(1 << 16, file),
             meta,
             attachments,
             options,
         )
+    }
+}
+
+/// Whether a sink ([`McapSink::create`]) of any process is writing the recording at `path`
+/// now: its lock is held. A process that died lets go of it, so a recording that is not in
+/// use and whose session never ended was cut short.
+pub fn recording_in_use(path: &Path) -> std::io::Result<bool> {
+    let file = File::open(path)?;
+    match file.try_lock() {
+        Ok(()) => Ok(false),
+        Err(std::fs::TryLockError::WouldBlock) => Ok(true),
+        Err(std::fs::TryLockError::Error(e)) => Err(e),
     }
 }
 
@@ -207,8 +240,7 @@ impl<W: Write + Seek> McapSink<W> {
         msg: &T,
     ) -> Result<(), RecorderError> {
         self.buf.clear();
-        serde_json::to_writer(&mut self.buf, msg)
-            .map_err(|e| RecorderError::Encode(e.to_string()))?;
+        serde_json::to_writer(&mut self.buf, msg)?;
         self.write(channel_id, topic, tick)
     }
 
@@ -370,13 +402,13 @@ impl RecordObserver for Vec<Box<dyn RecordObserver>> {
 
 impl RecordObserver for crate::RerunSink {
     fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
-        crate::RerunSink::on_tick(self, sample).map_err(|e| RecorderError::Rerun(e.to_string()))
+        Ok(crate::RerunSink::on_tick(self, sample)?)
     }
     fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
-        crate::RerunSink::on_sim(self, record).map_err(|e| RecorderError::Rerun(e.to_string()))
+        Ok(crate::RerunSink::on_sim(self, record)?)
     }
     fn finish(self: Box<Self>) -> Result<(), RecorderError> {
-        crate::RerunSink::finish(*self).map_err(|e| RecorderError::Rerun(e.to_string()))
+        Ok(crate::RerunSink::finish(*self)?)
     }
 }
 

@@ -626,7 +626,16 @@ fn a_flushed_recording_is_readable_while_still_open() {
     let open = Recording::open(&path).expect("readable while open");
     assert!(!open.complete);
     assert_eq!(open.samples().len(), 1500);
+    // a recording being made is known as such, and a second sink may not truncate it
+    assert!(cutlab_recorder::recording_in_use(&path).expect("lock state"));
+    let bytes = std::fs::metadata(&path).expect("metadata").len();
+    let busy = cutlab_recorder::McapSink::create(&path, &meta, &[], WriterOptions::default())
+        .expect_err("a file being recorded is refused");
+    assert!(busy.to_string().contains("another session"), "{busy}");
+    assert_eq!(std::fs::metadata(&path).expect("metadata").len(), bytes);
     drop(sink);
+    // its writer gone (as when a process dies), the file is free
+    assert!(!cutlab_recorder::recording_in_use(&path).expect("lock state"));
 }
 
 /// The `mcap` package from PyPI (a reader nobody here wrote) reads the recording with CRC

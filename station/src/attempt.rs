@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use cutlab_assessor::recordings::RecordingStore;
-use cutlab_assessor::store::{Exercise, Outcome, Store};
+use cutlab_assessor::store::{AttemptStatus, Exercise, Outcome, Store};
 use cutlab_assessor::{AssessError, ExpertPlan, MetricSet};
 use cutlab_haptics::Session;
 use cutlab_haptics::device::Plan;
@@ -109,6 +109,79 @@ async fn end_attempt(
             store.mark_failed(id, &e.to_string()).await?;
             Err(e.into())
         }
+    }
+}
+
+/// How long after its start an attempt may still be without its recording file (its session
+/// preparing the tissue) before [`end_abandoned`] takes it for dead.
+pub const STARTING_GRACE_NS: i64 = 10 * 60 * 1_000_000_000;
+
+/// Ends the attempts whose session died with its process (a station killed, a power cut):
+/// `running` in this database, but their recording is written by no process (the writer's
+/// lock is free, [`cutlab_recorder::recording_in_use`]) or, [`STARTING_GRACE_NS`] after their
+/// start, there is none. A recording that was finished is scored (its process died while
+/// scoring it); any other is marked incomplete with the reason, its file kept for review.
+/// Either way it is put into `recordings` and enters the station's queue for the hub.
+/// Returns the attempts ended and how; one that cannot be ended is said and left.
+///
+/// Only on a station's own SQLite database, whose sessions all record on this machine: on a
+/// shared PostgreSQL database another machine's session is running and nothing here can
+/// tell, so none is ended.
+pub async fn end_abandoned(
+    store: &Store,
+    recordings: Option<&RecordingStore>,
+) -> Result<Vec<(i64, Finished)>, StationError> {
+    let mut ended = Vec::new();
+    if !matches!(store.db(), cutlab_assessor::store::Db::Sqlite(_)) {
+        return Ok(ended);
+    }
+    let now_ns = cutlab_assessor::store::now_ns();
+    for a in store.list_attempts(None, None).await? {
+        if a.status != AttemptStatus::Running {
+            continue;
+        }
+        let path = a.recording_path.as_deref().map(Path::new);
+        let outcome = match path.map(|p| (p, cutlab_recorder::recording_in_use(p))) {
+            Some((_, Ok(true))) => continue,
+            Some((p, Ok(false))) => match Recording::open(p) {
+                Ok(rec) if rec.complete => Ok(p),
+                _ => Err(
+                    "the session's process stopped before the session ended; its \
+                     recording is kept as far as it was written"
+                        .to_owned(),
+                ),
+            },
+            Some((_, Err(e))) if e.kind() != std::io::ErrorKind::NotFound => {
+                tracing::warn!("attempt {}: its recording cannot be checked: {e}", a.id);
+                continue;
+            }
+            _ if now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS => continue,
+            _ => Err("the session's process stopped before it recorded anything".to_owned()),
+        };
+        match finish_attempt(store, a.id, outcome, recordings).await {
+            Ok(finished) => ended.push((a.id, finished)),
+            Err(e) => tracing::warn!("attempt {}: abandoned, but not ended: {e}", a.id),
+        }
+    }
+    Ok(ended)
+}
+
+/// [`end_abandoned`], each attempt ended (or the failure to look) said in the log.
+pub async fn end_abandoned_and_say(store: &Store, recordings: Option<&RecordingStore>) {
+    match end_abandoned(store, recordings).await {
+        Ok(ended) => {
+            for (id, finished) in ended {
+                match finished {
+                    Finished::Scored(..) => tracing::info!(
+                        "attempt {id}: its process stopped after the session; scored now"
+                    ),
+                    Finished::Incomplete(why) => {
+                        tracing::warn!("attempt {id}: marked incomplete: {why}");
+                    }
+                }
+            }
+        }
+        Err(e) => tracing::warn!("looking for attempts left running: {e}"),
     }
 }
 

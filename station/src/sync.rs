@@ -268,6 +268,8 @@ async fn send(
     refused_too: bool,
 ) -> Result<SyncReport, SyncError> {
     let _one_at_a_time = hub.busy.lock().await;
+    // an attempt whose station died mid-session is ended first, so that it is sent too
+    crate::attempt::end_abandoned_and_say(store, recordings).await;
     let mut queue = store.sync_queue().await?;
     if !refused_too {
         queue.retain(|a| a.sync_error.is_none());

@@ -119,9 +119,73 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
     let a = store.get_attempt(attempt).await.expect("attempt");
     assert_eq!(a.status, AttemptStatus::Complete);
     assert!(a.scored && a.note.is_none(), "{a:?}");
-    let path = a.recording_path.expect("recording path");
+    let path = a.recording_path.clone().expect("recording path");
     let rec = cutlab_recorder::Recording::open(std::path::Path::new(&path)).expect("recording");
     assert!(rec.is_whole() && !rec.topology.is_empty());
+
+    // attempts left `running` by a station process that died: with the whole recording
+    // (died while scoring), cut short, still being written (locked), not yet recording
+    let bytes = std::fs::read(&path).expect("the recording");
+    let start = |name: &str, content: Option<&[u8]>| {
+        let file = dir.join(name);
+        if let Some(c) = content {
+            std::fs::write(&file, c).expect("a copy");
+        }
+        let store = store.clone();
+        async move {
+            let file = file.to_str().map(str::to_owned);
+            store
+                .start_attempt(a.trainee_id, a.exercise_id, file.as_deref(), false)
+                .await
+                .expect("started")
+                .id
+        }
+    };
+    let whole = start("whole.mcap", Some(&bytes)).await;
+    let cut_short = start("cut-short.mcap", Some(&bytes[..bytes.len() / 2])).await;
+    let writing = start("writing.mcap", Some(&bytes[..bytes.len() / 2])).await;
+    let starting = start("starting.mcap", None).await;
+    let lock = std::fs::File::open(dir.join("writing.mcap")).expect("open");
+    lock.lock().expect("the writer's lock");
+    let ended = cutlab_station::attempt::end_abandoned(&store, None)
+        .await
+        .expect("swept");
+    let ids: Vec<i64> = ended.iter().map(|e| e.0).collect();
+    assert_eq!(ids, [whole, cut_short]);
+    let status = |id| {
+        let store = store.clone();
+        async move { store.get_attempt(id).await.expect("attempt") }
+    };
+    assert_eq!(status(whole).await.status, AttemptStatus::Complete);
+    let short = status(cut_short).await;
+    assert_eq!(short.status, AttemptStatus::Incomplete);
+    assert!(
+        short
+            .note
+            .as_deref()
+            .is_some_and(|n| n.contains("stopped before the session ended")),
+        "{short:?}"
+    );
+    for id in [writing, starting] {
+        assert_eq!(status(id).await.status, AttemptStatus::Running);
+    }
+    // both ended ones wait for the hub; the writer let go, the third is ended too
+    let queued: Vec<i64> = store
+        .sync_queue()
+        .await
+        .expect("queue")
+        .iter()
+        .map(|a| a.id)
+        .collect();
+    assert!(
+        queued.contains(&whole) && queued.contains(&cut_short),
+        "{queued:?}"
+    );
+    drop(lock);
+    let ended = cutlab_station::attempt::end_abandoned(&store, None)
+        .await
+        .expect("swept");
+    assert_eq!(ended.iter().map(|e| e.0).collect::<Vec<_>>(), [writing]);
     store.close().await;
 }
 

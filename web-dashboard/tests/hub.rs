@@ -243,14 +243,13 @@ async fn the_upload_calls_refuse_what_they_must() {
     assert_eq!(r.status(), StatusCode::CREATED);
     let r = send(&e.app, put(&apath, Some(&token), upload(&uuid, &key))).await;
     assert_eq!(r.status(), StatusCode::OK);
-    assert_eq!(
-        e.store
-            .attempt_by_uuid(&uuid)
-            .await
-            .unwrap()
-            .recording_sha256,
-        Some(key.clone())
-    );
+    let taken = e.store.attempt_by_uuid(&uuid).await.unwrap();
+    assert_eq!(taken.recording_sha256, Some(key.clone()));
+    // the instructor's page of it says where it came from
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let page =
+        body_text(send(&e.app, get(&format!("/attempts/{}", taken.id), Some(&kim))).await).await;
+    assert!(page.contains("uploaded by station or-2"), "{page}");
 
     // a hub without a recording store says so
     let (bare, _) = env_with(Config::default()).await;

@@ -290,11 +290,9 @@
   window.cutlabStation = {
     // the figures `cutlab bench station` reads
     stats() {
-      const l = stats.latencies.slice().sort((a, b) => a - b);
-      const q = (p) => l.length ? l[Math.min(l.length - 1, Math.floor(p * l.length))] : null;
       const s = (performance.now() - stats.since) / 1000;
       // fps: frames drawn; updates_per_s: of them, those with new positions from the session
-      return { fps: stats.draws / s, updates_per_s: stats.frames / s, latency_p50_ms: q(0.5), latency_p95_ms: q(0.95), bytes_per_s: stats.bytes / s, frames: stats.frames, draws: stats.draws, page_ms_per_frame: stats.work_ms / Math.max(1, stats.draws), animation_frames_per_s: stats.rafs / s, messages_per_s: stats.messages / s, seconds: s, ended };
+      return { fps: stats.draws / s, updates_per_s: stats.frames / s, latencies_ms: stats.latencies.slice(), bytes_per_s: stats.bytes / s, frames: stats.frames, draws: stats.draws, page_ms_per_frame: stats.work_ms / Math.max(1, stats.draws), animation_frames_per_s: stats.rafs / s, messages_per_s: stats.messages / s, seconds: s, ended };
     },
     // starts the figures afresh (a benchmark's measured window)
     reset() { Object.assign(stats, { frames: 0, draws: 0, rafs: 0, messages: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 }); },
