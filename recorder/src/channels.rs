@@ -327,7 +327,7 @@ pub struct SessionMeta {
 impl SessionMeta {
     /// As an MCAP metadata map (every value a string; floats in round-trip form).
     pub fn to_map(&self) -> Result<std::collections::BTreeMap<String, String>, RecorderError> {
-        let value = serde_json::to_value(self).map_err(|e| RecorderError::Encode(e.to_string()))?;
+        let value = serde_json::to_value(self)?;
         let mut map = std::collections::BTreeMap::new();
         if let serde_json::Value::Object(fields) = value {
             for (k, v) in fields {

@@ -14,6 +14,8 @@ pub enum RecorderError {
     Mcap(#[from] mcap::McapError),
     #[error("encoding a message: {0}")]
     Encode(String),
+    #[error("encoding JSON: {0}")]
+    Json(#[from] serde_json::Error),
     #[error("malformed recording: {0}")]
     Malformed(String),
     #[error("not a cutlab recording: {0}")]
@@ -22,8 +24,11 @@ pub enum RecorderError {
     Replay(String),
     #[error(transparent)]
     Haptics(#[from] cutlab_haptics::HapticsError),
-    #[error("scene: {0}")]
-    Scene(String),
+    #[error("scene {name}: {source}")]
+    Scene {
+        name: String,
+        source: Box<cutlab_haptics::sim::scene::SceneError>,
+    },
     #[error("rerun: {0}")]
-    Rerun(String),
+    Rerun(#[from] crate::rerun_log::RerunLogError),
 }

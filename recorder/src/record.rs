@@ -146,5 +146,5 @@ fn meta_of(
 }
 
 fn json<T: serde::Serialize>(v: &T) -> Result<Vec<u8>, RecorderError> {
-    serde_json::to_vec_pretty(v).map_err(|e| RecorderError::Encode(e.to_string()))
+    Ok(serde_json::to_vec_pretty(v)?)
 }

@@ -198,7 +198,10 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
             min_tets: meta.provenance.min_tets,
         },
     )
-    .map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?;
+    .map_err(|source| RecorderError::Scene {
+        name: meta.provenance.scene.clone(),
+        source: Box::new(source),
+    })?;
     // the session's step, when it ran with another than its scene's (`--time-step-ms`)
     let time_step_s = meta.time_step_nanos as f64 / 1e9;
     let scene = if scene.solver.time_step_s == time_step_s {
@@ -206,7 +209,10 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
     } else {
         scene
             .with_time_step(time_step_s)
-            .map_err(|e| RecorderError::Scene(format!("{}: {e}", meta.provenance.scene)))?
+            .map_err(|source| RecorderError::Scene {
+                name: meta.provenance.scene.clone(),
+                source: Box::new(source),
+            })?
     };
     let mut session = Session::new(&scene)?;
     if meta.localisation.is_some() {
