@@ -516,9 +516,9 @@ impl std::fmt::Display for Case {
 
 /// The input of mutated case `case` of `parser`: a pure function of the two.
 fn mutated_input(parser: &Parser, case: u64) -> Input {
-    let name_hash = parser.name.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    });
+    let mut name_hash = cutlab_sim::hash::Fnv1a::default();
+    name_hash.bytes(parser.name.as_bytes());
+    let name_hash = name_hash.finish();
     let mut rng = Rng::new(name_hash ^ case.wrapping_mul(0xD1B5_4A32_D192_ED03));
     let mut input = rng.pick(&parser.seeds).clone();
     let k = input.len();

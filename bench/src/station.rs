@@ -22,6 +22,7 @@ use anyhow::{Context, bail};
 use cutlab_assessor::store::{BUILTIN_EXERCISE, Store};
 use cutlab_dashboard::{AppState, Config};
 use cutlab_haptics::device::PointerOptions;
+use cutlab_sim::stats::percentile;
 use cutlab_station::{Ending, Running, SessionFigures, StartRequest, StationSettings};
 use fantoccini::actions::{InputSource, MOUSE_BUTTON_LEFT, MouseActions, PointerAction};
 use fantoccini::{Client, Locator};
@@ -186,7 +187,14 @@ async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Res
         tokio::time::sleep(Duration::from_secs_f64(duration_s)).await;
         alone.control.stop();
         let without_viewer = figures_of(&alone).await?;
-        let p95 = stroke["latency_p95_ms"].as_f64();
+        // the page's echo latencies, ranked as every figure here (`stats::percentile`)
+        let mut latencies_ms: Vec<f64> = stroke["latencies_ms"]
+            .as_array()
+            .map(|l| l.iter().filter_map(serde_json::Value::as_f64).collect())
+            .unwrap_or_default();
+        latencies_ms.sort_by(f64::total_cmp);
+        let latency = |p: f64| (!latencies_ms.is_empty()).then(|| percentile(&latencies_ms, p));
+        let p95 = latency(0.95);
         anyhow::Ok(SizeFigures {
             tets_requested: tets,
             tets: pointer.tets,
@@ -198,7 +206,7 @@ async fn size(tets: usize, o: &Options, driver: &browser::Driver) -> anyhow::Res
             animation_frames_per_s: stroke["animation_frames_per_s"].as_f64().unwrap_or(0.0),
             messages_per_s: stroke["messages_per_s"].as_f64().unwrap_or(0.0),
             sim_steps_per_s: pointer.sim_steps_per_s,
-            latency_p50_ms: stroke["latency_p50_ms"].as_f64(),
+            latency_p50_ms: latency(0.5),
             latency_p95_ms: p95,
             // the station's pointer plays the page's samples this much behind them
             tick_to_frame_p95_ms: p95.map(|l| l - 1e3 * PointerOptions::default().delay_s),

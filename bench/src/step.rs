@@ -77,8 +77,7 @@ pub fn step(
             integrator.name()
         ));
         let mut sim = scene.simulation();
-        sim.settings.integrator = integrator;
-        sim.model_changed();
+        sim.edit(|_, settings| settings.integrator = integrator);
         let t = Instant::now();
         let settle = sim.settle(StaticSettings::default());
         let settle_ms = t.elapsed().as_secs_f64() * 1e3;

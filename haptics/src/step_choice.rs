@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use cutlab_sim::Vector3;
 use cutlab_sim::scene::{Scene, TIME_STEP_RANGE_S};
+use cutlab_sim::stats::percentile;
 
 use crate::{HapticsError, Session};
 
@@ -190,7 +191,7 @@ impl Session {
                 }
             }
             times.sort_by(f64::total_cmp);
-            let median_step_s = times[times.len() / 2];
+            let median_step_s = percentile(&times, 0.5);
             trials.push(StepTrial {
                 time_step_s: dt,
                 median_step_s,

@@ -255,8 +255,7 @@ fn held_pretensioned_fem_body_stays_at_rest() {
     ];
     for (integrator, material) in cases {
         let mut sim = fem_chest_wall(2_000, material);
-        sim.settings.integrator = integrator;
-        sim.model_changed();
+        sim.edit(|_, settings| settings.integrator = integrator);
         let report = sim.settle(StaticSettings::default());
         assert!(report.converged, "{report:?}");
         let moved = sim

@@ -45,8 +45,7 @@ fn settled_scene_stays_at_rest_for_ten_seconds() {
     for integrator in Integrator::ALL {
         let scene = chest_wall(10_000);
         let mut sim = scene.simulation();
-        sim.settings.integrator = integrator;
-        sim.model_changed();
+        sim.edit(|_, settings| settings.integrator = integrator);
         let report = sim.settle(StaticSettings::default());
         assert!(report.converged, "{report:?}");
         // the pre-tension really moved the tissue
@@ -82,8 +81,7 @@ fn free_vertex_near_centre(scene: &Scene) -> usize {
 fn run_pressed(integrator: Integrator, steps: usize) -> u64 {
     let scene = chest_wall(1_000);
     let mut sim = scene.simulation();
-    sim.settings.integrator = integrator;
-    sim.model_changed();
+    sim.edit(|_, settings| settings.integrator = integrator);
     sim.settle(StaticSettings::default());
     let top = free_vertex_near_centre(&scene);
     for k in 0..steps {
@@ -136,8 +134,7 @@ fn non_finite_force_is_rejected_and_state_kept() {
 fn explicit_substeps_keep_an_unsettled_start_bounded() {
     let scene = chest_wall(1_000);
     let mut sim = scene.simulation();
-    sim.settings.integrator = Integrator::SymplecticEuler;
-    sim.model_changed();
+    sim.edit(|_, settings| settings.integrator = Integrator::SymplecticEuler);
     let n = sim.explicit_substeps();
     assert!(n > 1);
     // Unsettled start: the pre-tension sets everything in motion; stays bounded.

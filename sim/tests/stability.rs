@@ -229,8 +229,8 @@ fn a_free_cut_off_piece_does_not_explode() {
         let mut held = sim.model.held.clone();
         held.resize(positions.len(), false);
         let separated = cutlab_sim::TetMesh::new(positions, tets, regions).expect("mesh");
-        sim.model.rebuild(separated, held).expect("rebuild");
-        sim.model_changed();
+        sim.edit(|model, _| model.rebuild(separated, held))
+            .expect("rebuild");
         let free_piece: Vec<usize> = (0..sim.model.vertex_count())
             .filter(|&i| x_ref.get(i).is_none_or(|p| p.x > 0.02 + 1e-9))
             .collect();

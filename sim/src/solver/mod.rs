@@ -275,7 +275,27 @@ impl Simulation {
         })
     }
 
-    /// Call after changing the model's springs or masses.
+    /// Changes the model or the settings through `edit`, then brings what depends on them up
+    /// to date ([`Self::model_changed`]): the way to change either. Returns what `edit` returns.
+    ///
+    /// ```
+    /// use cutlab_sim::scene::{BuildOptions, Scene};
+    /// use cutlab_sim::solver::Integrator;
+    ///
+    /// let scene = Scene::load("sheet", BuildOptions::default())?;
+    /// let mut sim = scene.simulation();
+    /// sim.edit(|_, settings| settings.integrator = Integrator::SymplecticEuler);
+    /// assert!(sim.explicit_substeps() >= 1);
+    /// # Ok::<(), cutlab_sim::scene::SceneError>(())
+    /// ```
+    pub fn edit<R>(&mut self, edit: impl FnOnce(&mut Model, &mut SolverSettings) -> R) -> R {
+        let r = edit(&mut self.model, &mut self.settings);
+        self.model_changed();
+        r
+    }
+
+    /// Brings what depends on the model and the settings up to date; [`Self::edit`] calls it.
+    /// Call after changing the model's springs or masses or the settings directly.
     pub fn model_changed(&mut self) {
         self.explicit_substeps = None;
         let n = self.model.vertex_count();
