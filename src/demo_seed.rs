@@ -16,6 +16,7 @@ use cutlab_dashboard::seed_demo_accounts;
 use cutlab_haptics::servo::Clock;
 use cutlab_recorder::RerunTarget;
 
+use crate::localise_choice::Localise;
 use crate::session::{self, AttemptArgs, DeviceArg};
 
 /// The demo's curriculum (created last: its presence means the history is complete).
@@ -302,7 +303,7 @@ fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
             trainee: a.trainee.into(),
             expert: a.expert,
         }),
-        localise: false,
+        localise: Localise::Off,
         quiet: true,
     })
 }

@@ -4,6 +4,7 @@ mod assess_cli;
 mod demo;
 mod demo_seed;
 mod hub_cli;
+mod localise_choice;
 mod motion_metrics;
 mod recording;
 mod scene_info;
@@ -14,6 +15,7 @@ use std::path::PathBuf;
 
 use clap::{Parser, Subcommand};
 use cutlab_haptics::TimeStep;
+use localise_choice::Localise;
 
 /// Training and assessment platform for surgical soft-tissue cutting.
 // no Debug: it holds the hub token
@@ -206,9 +208,11 @@ enum Command {
         #[arg(long, default_value = cutlab_assessor::store::BUILTIN_EXERCISE, requires = "trainee")]
         exercise: String,
         /// Simulate only near the scalpel and the disturbance it causes (default thresholds;
-        /// the recording keeps them, so the replay is localised too).
-        #[arg(long)]
-        localise: bool,
+        /// the recording keeps them, so the replay is localised too): `auto` where
+        /// `cutlab bench perf` measured it to pay on this scene and size (docs/bench/perf.md),
+        /// `on` (also plain `--localise`), `off`.
+        #[arg(long, value_enum, default_value_t = Localise::Auto, num_args = 0..=1, default_missing_value = "on")]
+        localise: Localise,
     },
     /// Session recordings (MCAP): what is in one, and salvaging one cut short.
     Recording {

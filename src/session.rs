@@ -25,6 +25,8 @@ use cutlab_sim::stats::Summary;
 use cutlab_assessor::Store;
 use cutlab_station::attempt::{self, Finished};
 
+use crate::localise_choice::{self, Localise};
+
 /// `println!` unless `quiet`.
 macro_rules! say {
     ($quiet:expr, $($arg:tt)*) => {
@@ -60,8 +62,8 @@ pub struct Options {
     pub rerun: Option<RerunTarget>,
     /// Store the session as an attempt and score it.
     pub attempt: Option<AttemptArgs>,
-    /// Simulate only near the scalpel (the default localisation thresholds).
-    pub localise: bool,
+    /// Whether to simulate only near the scalpel (the default localisation thresholds).
+    pub localise: Localise,
     /// Print nothing (the demo's seeding runs many sessions).
     pub quiet: bool,
 }
@@ -222,9 +224,30 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     if let Some(choice) = choice {
         say!(o.quiet, "simulation step: {choice}");
     }
-    if o.localise {
-        session.sim.settings.localisation = Some(LocalisationSettings::default());
-    }
+    let scene_localises = session.sim.settings.localisation.is_some();
+    let localisation = if scene_localises && o.localise == Localise::Auto {
+        localise_choice::Choice {
+            localise: true,
+            why: "auto: the scene's solver settings localise".into(),
+        }
+    } else {
+        localise_choice::choose(o.localise, &scene.spec.name, scene.model.mesh.tet_count())
+    };
+    say!(
+        o.quiet,
+        "localisation: {} ({})",
+        if localisation.localise { "on" } else { "off" },
+        localisation.why
+    );
+    session.sim.settings.localisation = match o.localise {
+        _ if !localisation.localise => None,
+        Localise::Auto => session
+            .sim
+            .settings
+            .localisation
+            .or(Some(LocalisationSettings::default())),
+        Localise::On | Localise::Off => Some(LocalisationSettings::default()),
+    };
     // The planned incision (what a synthetic trainee follows; recorded with every session):
     // the exercise's expert plan when the session is an attempt, else 60 mm across the
     // tissue in the scene's `incision` directions.
@@ -365,10 +388,15 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     };
     say!(
         o.quiet,
-        "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s",
+        "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s, {}",
         scene.spec.name,
         o.seed,
-        o.duration_s
+        o.duration_s,
+        if localisation.localise {
+            "localised"
+        } else {
+            "whole body"
+        }
     );
     let max_lag = r.largest_skip_ahead_ticks();
     say!(
@@ -484,6 +512,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     .with_context(|| format!("writing {}", path.display()))?;
     let summary = serde_json::json!({
         "scene": scene.spec.name, "tets": tets, "device": device_name, "seed": o.seed, "clock": clock,
+        "localised": localisation.localise, "localisation": localisation.why,
         "duration_s": o.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
         "cut_length_mm": r.stats.cut_length_m * 1e3, "blade_entries": r.servo.blade_entries, "tets_split": r.stats.tets_split, "max_force_newtons": r.servo.max_force_newtons,
         "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,

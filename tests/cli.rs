@@ -113,6 +113,14 @@ fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result()
             .expect("json");
     let max_force = summary["max_force_newtons"].as_f64().expect("max force");
     assert!(max_force > 0.1 && max_force <= 3.3, "{max_force}");
+    // `--localise auto`, the default: no measurement of the chest wall near 1.5k tets
+    assert_eq!(summary["localised"], false);
+    let why = summary["localisation"].as_str().unwrap_or_default();
+    assert!(why.starts_with("auto: not measured on chest-wall"), "{why}");
+    assert!(
+        out.contains("localisation: off (auto: not measured"),
+        "{out}"
+    );
     let mesh = cutlab_sim::io::read_mesh(&dir.join("final.vtu")).expect("final.vtu reads back");
     assert!(mesh.tet_count() >= 1500);
     let steps = std::fs::read_to_string(dir.join("steps.csv")).expect("steps.csv");
@@ -130,6 +138,14 @@ fn session_runs_a_synthetic_trainee_on_the_virtual_clock_and_writes_the_result()
             .expect("json");
     assert_eq!(summary["state_hash"], again["state_hash"]);
     assert_eq!(summary["force_hash"], again["force_hash"]);
+    // a plain `--localise` asks for it
+    let (ok, _, err) = cutlab(&[&args[..], &["--localise"]].concat());
+    assert!(ok, "{err}");
+    let localised: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary"))
+            .expect("json");
+    assert_eq!(localised["localised"], true);
+    assert_eq!(localised["localisation"], "--localise on");
     std::fs::remove_dir_all(&dir).ok();
 }
 
