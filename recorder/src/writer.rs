@@ -109,15 +109,23 @@ impl McapSink<BufWriter<File>> {
             .truncate(false)
             .open(path)
             .map_err(io)?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                return Err(io(std::io::Error::new(
-                    std::io::ErrorKind::ResourceBusy,
-                    "another session is recording to this file",
-                )));
+        // a process asking whether the file is in use holds the lock for an instant: wait that
+        let mut attempts = 0;
+        loop {
+            match file.try_lock() {
+                Ok(()) => break,
+                Err(std::fs::TryLockError::WouldBlock) if attempts < 20 => {
+                    attempts += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(5));
+                }
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(io(std::io::Error::new(
+                        std::io::ErrorKind::ResourceBusy,
+                        "another session is recording to this file",
+                    )));
+                }
+                Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
             }
-            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
         }
         file.set_len(0).map_err(io)?;
         Self::new(

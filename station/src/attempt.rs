@@ -144,6 +144,14 @@ pub async fn end_abandoned(
         let outcome = match path.map(|p| (p, cutlab_recorder::recording_in_use(p))) {
             Some((_, Ok(true))) => continue,
             Some((p, Ok(false))) => match Recording::open(p) {
+                // an older session's file where this one will record (`--out` used again):
+                // this attempt has not begun recording
+                Ok(rec) if rec.meta().is_ok_and(|m| began_before(m, a.started_ns)) => {
+                    if now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS {
+                        continue;
+                    }
+                    Err("the session's process stopped before it recorded anything".to_owned())
+                }
                 Ok(rec) if rec.complete => Ok(p),
                 _ => Err(
                     "the session's process stopped before the session ended; its \
@@ -164,6 +172,12 @@ pub async fn end_abandoned(
         }
     }
     Ok(ended)
+}
+
+/// Whether the recording with metadata `meta` began before an attempt that started at
+/// `started_ns` (a session records after its attempt starts; a second of slack for clocks).
+fn began_before(meta: &cutlab_recorder::channels::SessionMeta, started_ns: i64) -> bool {
+    meta.started_unix_s * 1e9 < started_ns as f64 - 1e9
 }
 
 /// [`end_abandoned`], each attempt ended (or the failure to look) said in the log.

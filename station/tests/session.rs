@@ -4,7 +4,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use cutlab_assessor::store::{AttemptStatus, Store};
+use cutlab_assessor::store::{AttemptStatus, Role, Store};
 use cutlab_haptics::device::{HapticDevice, Skill, SyntheticTrainee};
 use cutlab_haptics::servo::Clock;
 use cutlab_station::protocol::{self, KIND_FRAME, KIND_TOPOLOGY};
@@ -60,6 +60,25 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
     let dir_guard = temp_dir("scored");
     let dir = dir_guard.path();
     let store = store(dir).await;
+    // attempts a station process that died will have left `running` (whose files come
+    // later, below)
+    let zoe = store
+        .create_user("zoe", Role::Trainee, None)
+        .await
+        .expect("zoe");
+    let exercise = store.exercise_by_name(EXERCISE).await.expect("exercise");
+    let mut orphans = [0; 4];
+    for (id, name) in orphans
+        .iter_mut()
+        .zip(["whole", "cut-short", "writing", "starting"])
+    {
+        let file = dir.join(format!("{name}.mcap"));
+        *id = store
+            .start_attempt(zoe.id, exercise.id, file.to_str(), false)
+            .await
+            .expect("started")
+            .id;
+    }
     let request = StartRequest {
         exercise: EXERCISE.into(),
         trainee: "ana".into(),
@@ -126,25 +145,17 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
     // attempts left `running` by a station process that died: with the whole recording
     // (died while scoring), cut short, still being written (locked), not yet recording
     let bytes = std::fs::read(&path).expect("the recording");
-    let start = |name: &str, content: Option<&[u8]>| {
-        let file = dir.join(name);
-        if let Some(c) = content {
-            std::fs::write(&file, c).expect("a copy");
-        }
-        let store = store.clone();
-        async move {
-            let file = file.to_str().map(str::to_owned);
-            store
-                .start_attempt(a.trainee_id, a.exercise_id, file.as_deref(), false)
-                .await
-                .expect("started")
-                .id
-        }
-    };
-    let whole = start("whole.mcap", Some(&bytes)).await;
-    let cut_short = start("cut-short.mcap", Some(&bytes[..bytes.len() / 2])).await;
-    let writing = start("writing.mcap", Some(&bytes[..bytes.len() / 2])).await;
-    let starting = start("starting.mcap", None).await;
+    let [whole, cut_short, writing, starting] = orphans;
+    std::fs::write(dir.join("whole.mcap"), &bytes).expect("a copy");
+    let half = &bytes[..bytes.len() / 2];
+    std::fs::write(dir.join("cut-short.mcap"), half).expect("a copy");
+    std::fs::write(dir.join("writing.mcap"), half).expect("a copy");
+    // an attempt started after that recording began, where it lies: an older session's file
+    let late = store
+        .start_attempt(zoe.id, exercise.id, dir.join("whole.mcap").to_str(), false)
+        .await
+        .expect("started")
+        .id;
     let lock = std::fs::File::open(dir.join("writing.mcap")).expect("open");
     lock.lock().expect("the writer's lock");
     let ended = cutlab_station::attempt::end_abandoned(&store, None)
@@ -166,7 +177,7 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
             .is_some_and(|n| n.contains("stopped before the session ended")),
         "{short:?}"
     );
-    for id in [writing, starting] {
+    for id in [writing, starting, late] {
         assert_eq!(status(id).await.status, AttemptStatus::Running);
     }
     // both ended ones wait for the hub; the writer let go, the third is ended too
