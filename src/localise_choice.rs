@@ -75,7 +75,8 @@ fn measured(csv: &str, scene: &str, tets: usize) -> Option<(Run, Run)> {
             median_us,
             p99_us,
             error: number(c_error),
-            same_cuts: f.get(c_events) == Some(&"same topology"),
+            // `bench perf`'s verdicts: "identical", "same topology", "diverged at ..."
+            same_cuts: matches!(f.get(c_events), Some(&"identical" | &"same topology")),
         };
         match f.get(c_mode) {
             Some(&"full") => full.push(run),
@@ -141,7 +142,7 @@ mod tests {
 
     const CSV: &str = "scene,tets,mode,step_median_us,step_p99_us,error,cut_events\n\
         wall,10000,full,800,1400,,\n\
-        wall,10000,localised,700,1300,0.04,same topology\n\
+        wall,10000,localised,700,1300,0.04,identical\n\
         wall,50000,full,3000,7000,,\n\
         wall,50000,localised,2000,9000,0.03,same topology\n\
         wall,100000,full,7000,14000,,\n\

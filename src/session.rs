@@ -91,6 +91,8 @@ struct OpenAttempt {
     /// Where the recordings go once the attempt ends (besides `--out`).
     recordings: Option<RecordingStore>,
     hub: Option<cutlab_station::sync::Hub>,
+    /// The attempt's lock, let go once it has ended.
+    lock: attempt::AttemptLock,
 }
 
 impl OpenAttempt {
@@ -99,6 +101,8 @@ impl OpenAttempt {
             .enable_all()
             .build()
             .context("starting the async runtime")?;
+        // held until the attempt has ended, so that no sweep takes it for a dead one
+        let lock = attempt::AttemptLock::hold(recording)?;
         let (store, id, recordings) = rt.block_on(async {
             let store = Store::open(&a.db)
                 .await
@@ -127,6 +131,7 @@ impl OpenAttempt {
             quiet,
             recordings,
             hub: a.hub.clone(),
+            lock,
         })
     }
 
@@ -139,6 +144,7 @@ impl OpenAttempt {
             quiet,
             recordings,
             hub,
+            lock,
         } = self;
         rt.block_on(async {
             // the path the station's attempts take too
@@ -154,6 +160,7 @@ impl OpenAttempt {
                     }
                     Err(e) => Err(anyhow::Error::new(e).context(format!("finishing attempt {id}"))),
                 };
+            drop(lock);
             if let Some(hub) = &hub {
                 // a hub that is down leaves the attempt queued, not the session failed
                 match cutlab_station::sync::sync_new(&store, hub, recordings.as_ref()).await {

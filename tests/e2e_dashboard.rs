@@ -280,7 +280,7 @@ async fn browse(port: u16, driver: &browser::Driver, attempt: i64, profile: &Pat
 /// of the viewer's frame (`frame`: left, top, width, height in CSS pixels, device pixel
 /// ratio), below rerun's top bar and the view's tab, the tissue (its albedo 225, 150, 140,
 /// shaded) covers at least a quarter, and the planned incision (green, 40, 200, 90) is drawn
-/// across the middle third, running left to right.
+/// across the middle third, wider than tall (which end is the entry: the recorder's unit test).
 fn framed_on_the_incision(png_bytes: &[u8], frame: &[f64]) -> Result<(), String> {
     let &[left, top, width, height, scale] = frame else {
         return Err(format!("the viewer's frame: {frame:?}"));

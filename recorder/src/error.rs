@@ -14,7 +14,7 @@ pub enum RecorderError {
     Mcap(#[from] mcap::McapError),
     #[error("encoding a message: {0}")]
     Encode(String),
-    #[error("encoding JSON: {0}")]
+    #[error("JSON: {0}")]
     Json(#[from] serde_json::Error),
     #[error("malformed recording: {0}")]
     Malformed(String),

@@ -112,21 +112,59 @@ async fn end_attempt(
     }
 }
 
-/// How long after its start an attempt may still be without its recording file (its session
-/// preparing the tissue) before [`end_abandoned`] takes it for dead.
+/// How long after its start an attempt may be without its lock ([`AttemptLock`]) before
+/// [`end_abandoned`] takes it for dead: an attempt from before the lock, or one assessed from a
+/// file (`cutlab assess`), which is scored at once.
 pub const STARTING_GRACE_NS: i64 = 10 * 60 * 1_000_000_000;
 
-/// Ends the attempts whose session died with its process (a station killed, a power cut):
-/// `running` in this database, but their recording is written by no process (the writer's
-/// lock is free, [`cutlab_recorder::recording_in_use`]) or, [`STARTING_GRACE_NS`] after their
-/// start, there is none. A recording that was finished is scored (its process died while
-/// scoring it); any other is marked incomplete with the reason, its file kept for review.
-/// Either way it is put into `recordings` and enters the station's queue for the hub.
-/// Returns the attempts ended and how; one that cannot be ended is said and left.
+/// The process running an attempt: an exclusive lock on `<recording>.lock`, held from before
+/// the attempt starts until it has ended (scored or marked incomplete). The operating system
+/// lets go of it when the process dies, which is how [`end_abandoned`] tells a dead station's
+/// attempt from a live one. The file stays (empty).
+#[derive(Debug)]
+pub struct AttemptLock {
+    _file: std::fs::File,
+}
+
+impl AttemptLock {
+    /// Takes the lock of the attempt recorded at `recording`.
+    pub fn hold(recording: &Path) -> Result<Self, StationError> {
+        let path = lock_path(recording);
+        let io = |source| StationError::Io {
+            what: format!("locking {}", path.display()),
+            source,
+        };
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io)?;
+        file.lock().map_err(io)?;
+        // stamped: a lock file older than its attempt is an earlier attempt's, at the same path
+        file.set_modified(std::time::SystemTime::now())
+            .map_err(io)?;
+        Ok(Self { _file: file })
+    }
+}
+
+fn lock_path(recording: &Path) -> std::path::PathBuf {
+    let mut name = recording.as_os_str().to_owned();
+    name.push(".lock");
+    name.into()
+}
+
+/// Ends the attempts whose process died (a station killed, a power cut): `running` in this
+/// database, but their [`AttemptLock`] is free, or was never taken [`STARTING_GRACE_NS`] after
+/// their start. One whose recording is whole and says the session completed is scored (its
+/// process died before it could score it); any other is marked incomplete with the reason,
+/// its recording kept for review. Either way it is put into `recordings` and enters the
+/// station's queue for the hub. Returns the attempts ended and how; one that cannot be ended
+/// is said and left.
 ///
-/// Only on a station's own SQLite database, whose sessions all record on this machine: on a
-/// shared PostgreSQL database another machine's session is running and nothing here can
-/// tell, so none is ended.
+/// Only on a station's own SQLite database, whose sessions all run on this machine (on a
+/// shared PostgreSQL database another machine's session may be running), and only for
+/// attempts recorded at an absolute path (a relative one was the recording process's own).
 pub async fn end_abandoned(
     store: &Store,
     recordings: Option<&RecordingStore>,
@@ -140,31 +178,44 @@ pub async fn end_abandoned(
         if a.status != AttemptStatus::Running {
             continue;
         }
+        let young = now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS;
         let path = a.recording_path.as_deref().map(Path::new);
-        let outcome = match path.map(|p| (p, cutlab_recorder::recording_in_use(p))) {
-            Some((_, Ok(true))) => continue,
-            Some((p, Ok(false))) => match Recording::open(p) {
-                // an older session's file where this one will record (`--out` used again):
-                // this attempt has not begun recording
+        if path.is_some_and(Path::is_relative) {
+            continue;
+        }
+        let owner = path.map(|p| owner_of(&lock_path(p), a.started_ns));
+        match owner {
+            Some(Ok(Owner::Alive)) => continue,
+            Some(Ok(Owner::Dead)) => {}
+            Some(Err(e)) => {
+                tracing::warn!("attempt {}: its lock cannot be checked: {e}", a.id);
+                continue;
+            }
+            Some(Ok(Owner::Never)) | None if young => continue,
+            Some(Ok(Owner::Never)) | None => {}
+        }
+        let nothing = || "the session's process stopped before it recorded anything".to_owned();
+        let outcome = match path {
+            // a sink of a process from before the attempt's lock
+            Some(p) if cutlab_recorder::recording_in_use(p).unwrap_or(false) => continue,
+            None => Err(nothing()),
+            Some(p) => match Recording::open(p) {
+                // an older session's file where this one was to record (`--out` used again)
                 Ok(rec) if rec.meta().is_ok_and(|m| began_before(m, a.started_ns)) => {
-                    if now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS {
-                        continue;
-                    }
-                    Err("the session's process stopped before it recorded anything".to_owned())
+                    Err(nothing())
                 }
-                Ok(rec) if rec.complete => Ok(p),
-                _ => Err(
-                    "the session's process stopped before the session ended; its \
+                Ok(rec) if rec.is_whole() && ended_complete(&rec) => Ok(p),
+                Ok(_) => Err(
+                    "the session's process stopped before the attempt ended; its \
                      recording is kept as far as it was written"
                         .to_owned(),
                 ),
+                Err(_) if !p.exists() => Err(nothing()),
+                Err(e) => Err(format!(
+                    "the session's process stopped before the attempt ended; its recording \
+                     cannot be read: {e}"
+                )),
             },
-            Some((_, Err(e))) if e.kind() != std::io::ErrorKind::NotFound => {
-                tracing::warn!("attempt {}: its recording cannot be checked: {e}", a.id);
-                continue;
-            }
-            _ if now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS => continue,
-            _ => Err("the session's process stopped before it recorded anything".to_owned()),
         };
         match finish_attempt(store, a.id, outcome, recordings).await {
             Ok(finished) => ended.push((a.id, finished)),
@@ -172,6 +223,42 @@ pub async fn end_abandoned(
         }
     }
     Ok(ended)
+}
+
+/// What an attempt's lock file says of the process that runs it.
+enum Owner {
+    /// The lock is held.
+    Alive,
+    /// Taken for this attempt, and let go without the attempt ending.
+    Dead,
+    /// Never taken for this attempt (no file, or an earlier attempt's at the same path).
+    Never,
+}
+
+fn owner_of(lock: &Path, started_ns: i64) -> std::io::Result<Owner> {
+    let modified = match std::fs::metadata(lock).and_then(|m| m.modified()) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Owner::Never),
+        Err(e) => return Err(e),
+    };
+    let modified_ns = modified
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX));
+    if cutlab_recorder::recording_in_use(lock)? {
+        Ok(Owner::Alive)
+    } else if modified_ns < started_ns.saturating_sub(1_000_000_000) {
+        Ok(Owner::Never)
+    } else {
+        Ok(Owner::Dead)
+    }
+}
+
+/// Whether the recording's session-end metadata says the session completed.
+fn ended_complete(rec: &Recording) -> bool {
+    rec.end
+        .as_ref()
+        .and_then(|e| e.get("status"))
+        .is_some_and(|s| s == "complete")
 }
 
 /// Whether the recording with metadata `meta` began before an attempt that started at

@@ -334,6 +334,8 @@ pub async fn start(
         source,
     })?;
     let mcap = dir.join("session.mcap");
+    // held by the session's thread until the attempt has ended
+    let attempt_lock = attempt::AttemptLock::hold(&mcap)?;
     let attempt = store
         .start_recorded_attempt(&request.exercise, &request.trainee, &mcap, false)
         .await?
@@ -453,6 +455,7 @@ pub async fn start(
                     why: e.to_string(),
                 },
             };
+            drop(attempt_lock);
             tracing::info!("station attempt {attempt} ended: {ending:?}");
             let _ = ending_tx.send(Some(ending));
             if let Some(hub) = hub {

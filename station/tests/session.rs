@@ -7,6 +7,7 @@ use std::time::Duration;
 use cutlab_assessor::store::{AttemptStatus, Role, Store};
 use cutlab_haptics::device::{HapticDevice, Skill, SyntheticTrainee};
 use cutlab_haptics::servo::Clock;
+use cutlab_station::attempt::AttemptLock;
 use cutlab_station::protocol::{self, KIND_FRAME, KIND_TOPOLOGY};
 use cutlab_station::run::{self, DeviceFactory};
 use cutlab_station::{Ending, Input, StartRequest, StationError, StationSet, StationSettings};
@@ -68,11 +69,13 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
         .expect("zoe");
     let exercise = store.exercise_by_name(EXERCISE).await.expect("exercise");
     let mut orphans = [0; 4];
+    let mut locks = Vec::new();
     for (id, name) in orphans
         .iter_mut()
         .zip(["whole", "cut-short", "writing", "starting"])
     {
         let file = dir.join(format!("{name}.mcap"));
+        locks.push(AttemptLock::hold(&file).expect("the attempt's lock"));
         *id = store
             .start_attempt(zoe.id, exercise.id, file.to_str(), false)
             .await
@@ -142,45 +145,58 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
     let rec = cutlab_recorder::Recording::open(std::path::Path::new(&path)).expect("recording");
     assert!(rec.is_whole() && !rec.topology.is_empty());
 
-    // attempts left `running` by a station process that died: with the whole recording
-    // (died while scoring), cut short, still being written (locked), not yet recording
+    // attempts left `running` by station processes: dead with the whole recording (died
+    // before scoring it) or with it cut short; alive, recording; alive, not yet recording
     let bytes = std::fs::read(&path).expect("the recording");
     let [whole, cut_short, writing, starting] = orphans;
     std::fs::write(dir.join("whole.mcap"), &bytes).expect("a copy");
     let half = &bytes[..bytes.len() / 2];
     std::fs::write(dir.join("cut-short.mcap"), half).expect("a copy");
     std::fs::write(dir.join("writing.mcap"), half).expect("a copy");
-    // an attempt started after that recording began, where it lies: an older session's file
+    let [died_whole, died_short, writer, starter] =
+        <[AttemptLock; 4]>::try_from(locks).expect("four");
+    drop((died_whole, died_short));
+    // dead too, started after that recording began where it lies: an older session's file
+    let late_lock = AttemptLock::hold(&dir.join("whole.mcap")).expect("lock");
     let late = store
         .start_attempt(zoe.id, exercise.id, dir.join("whole.mcap").to_str(), false)
         .await
         .expect("started")
         .id;
-    let lock = std::fs::File::open(dir.join("writing.mcap")).expect("open");
-    lock.lock().expect("the writer's lock");
+    drop(late_lock);
+    // never locked, just started (`cutlab assess` scores such an attempt at once)
+    let fresh = store
+        .start_attempt(
+            zoe.id,
+            exercise.id,
+            dir.join("cut-short.mcap").to_str(),
+            false,
+        )
+        .await
+        .expect("started")
+        .id;
     let ended = cutlab_station::attempt::end_abandoned(&store, None)
         .await
         .expect("swept");
     let ids: Vec<i64> = ended.iter().map(|e| e.0).collect();
-    assert_eq!(ids, [whole, cut_short]);
+    assert_eq!(ids, [whole, cut_short, late]);
     let status = |id| {
         let store = store.clone();
         async move { store.get_attempt(id).await.expect("attempt") }
     };
     assert_eq!(status(whole).await.status, AttemptStatus::Complete);
-    let short = status(cut_short).await;
-    assert_eq!(short.status, AttemptStatus::Incomplete);
-    assert!(
-        short
-            .note
-            .as_deref()
-            .is_some_and(|n| n.contains("stopped before the session ended")),
-        "{short:?}"
-    );
-    for id in [writing, starting, late] {
+    for (id, why) in [
+        (cut_short, "stopped before the attempt ended"),
+        (late, "stopped before it recorded anything"),
+    ] {
+        let a = status(id).await;
+        assert_eq!(a.status, AttemptStatus::Incomplete);
+        assert!(a.note.as_deref().is_some_and(|n| n.contains(why)), "{a:?}");
+    }
+    for id in [writing, starting, fresh] {
         assert_eq!(status(id).await.status, AttemptStatus::Running);
     }
-    // both ended ones wait for the hub; the writer let go, the third is ended too
+    // the ended ones wait for the hub; once the writer is gone, its attempt is ended too
     let queued: Vec<i64> = store
         .sync_queue()
         .await
@@ -189,14 +205,17 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
         .map(|a| a.id)
         .collect();
     assert!(
-        queued.contains(&whole) && queued.contains(&cut_short),
+        [whole, cut_short, late]
+            .iter()
+            .all(|id| queued.contains(id)),
         "{queued:?}"
     );
-    drop(lock);
+    drop(writer);
     let ended = cutlab_station::attempt::end_abandoned(&store, None)
         .await
         .expect("swept");
     assert_eq!(ended.iter().map(|e| e.0).collect::<Vec<_>>(), [writing]);
+    drop(starter);
     store.close().await;
 }
 
