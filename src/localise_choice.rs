@@ -95,8 +95,15 @@ fn measured(csv: &str, scene: &str, tets: usize) -> Option<(Run, Run)> {
 }
 
 /// Whether a session on `scene` with `tets` tetrahedra is localised, by `setting` and the
-/// measurements in `csv` (`docs/bench-perf.csv` by [`choose`]).
-fn choose_from(csv: &str, setting: Localise, scene: &str, tets: usize) -> Choice {
+/// measurements in `csv` (`docs/bench-perf.csv` by [`choose`]); `auto` follows a scene file
+/// that asks for localisation (`scene_localises`).
+fn choose_from(
+    csv: &str,
+    setting: Localise,
+    scene: &str,
+    tets: usize,
+    scene_localises: bool,
+) -> Choice {
     match setting {
         Localise::On => Choice {
             localise: true,
@@ -105,6 +112,10 @@ fn choose_from(csv: &str, setting: Localise, scene: &str, tets: usize) -> Choice
         Localise::Off => Choice {
             localise: false,
             why: "--localise off".into(),
+        },
+        Localise::Auto if scene_localises => Choice {
+            localise: true,
+            why: "auto: the scene's solver settings localise".into(),
         },
         Localise::Auto => match measured(csv, scene, tets) {
             None => Choice {
@@ -131,9 +142,10 @@ fn choose_from(csv: &str, setting: Localise, scene: &str, tets: usize) -> Choice
     }
 }
 
-/// Whether a session on `scene` with `tets` tetrahedra is localised, and why.
-pub fn choose(setting: Localise, scene: &str, tets: usize) -> Choice {
-    choose_from(MEASURED, setting, scene, tets)
+/// Whether a session on `scene` with `tets` tetrahedra is localised, and why; `auto` follows
+/// a scene file that asks for localisation (`scene_localises`).
+pub fn choose(setting: Localise, scene: &str, tets: usize, scene_localises: bool) -> Choice {
+    choose_from(MEASURED, setting, scene, tets, scene_localises)
 }
 
 #[cfg(test)]
@@ -152,7 +164,7 @@ mod tests {
     #[test]
     fn auto_localises_only_where_it_was_measured_to_pay() {
         // faster at the median and p99, 4 % off, the same cuts
-        let c = choose_from(CSV, Localise::Auto, "wall", 12_000);
+        let c = choose_from(CSV, Localise::Auto, "wall", 12_000, false);
         assert!(c.localise, "{}", c.why);
         assert!(
             c.why.contains("10000 tets") && c.why.contains("4.0 %"),
@@ -160,28 +172,36 @@ mod tests {
             c.why
         );
         // slower at p99
-        let c = choose_from(CSV, Localise::Auto, "wall", 50_000);
+        let c = choose_from(CSV, Localise::Auto, "wall", 50_000, false);
         assert!(!c.localise && c.why.contains("1.29x at p99"), "{}", c.why);
         // too far off, other cuts (the coarse variant is not the default's measurement)
-        let c = choose_from(CSV, Localise::Auto, "wall", 90_000);
+        let c = choose_from(CSV, Localise::Auto, "wall", 90_000, false);
         assert!(!c.localise && c.why.contains("other cuts"), "{}", c.why);
         // no measurement near the size, or of the scene
         for (scene, tets) in [("wall", 400_000), ("wall", 2_000), ("sheet", 10_000)] {
-            let c = choose_from(CSV, Localise::Auto, scene, tets);
+            let c = choose_from(CSV, Localise::Auto, scene, tets, false);
             assert!(!c.localise && c.why.contains("not measured"), "{}", c.why);
         }
         // asked for: as asked
-        assert!(choose_from(CSV, Localise::On, "sheet", 10).localise);
-        assert!(!choose_from(CSV, Localise::Off, "wall", 12_000).localise);
+        assert!(choose_from(CSV, Localise::On, "sheet", 10, false).localise);
+        assert!(!choose_from(CSV, Localise::Off, "wall", 12_000, false).localise);
+        // a scene file that asks for it: auto follows it, off still wins
+        let c = choose_from(CSV, Localise::Auto, "sheet", 10, true);
+        assert!(
+            c.localise && c.why.contains("scene's solver settings"),
+            "{}",
+            c.why
+        );
+        assert!(!choose_from(CSV, Localise::Off, "sheet", 10, true).localise);
         // a malformed table decides nothing
-        let c = choose_from("garbage", Localise::Auto, "wall", 12_000);
+        let c = choose_from("garbage", Localise::Auto, "wall", 12_000, false);
         assert!(!c.localise);
     }
 
     #[test]
     fn the_checked_in_measurements_are_read() {
         // the chest wall is measured at several sizes: auto gives a measured reason there
-        let c = choose(Localise::Auto, "chest-wall", 12_768);
+        let c = choose(Localise::Auto, "chest-wall", 12_768, false);
         assert!(
             c.why.contains("measured on chest-wall at 12768 tets"),
             "{}",

@@ -54,14 +54,18 @@ impl Cli {
         });
         given.or_else(|| {
             let db = cutlab_assessor::default_db(self.db.as_ref());
-            let dir = db
-                .sqlite_path()
-                .and_then(std::path::Path::parent)
-                .unwrap_or(std::path::Path::new(""))
-                .join("recordings");
-            Some(dir.display().to_string())
+            Some(beside_db(&db, "recordings").display().to_string())
         })
     }
+}
+
+/// The folder `name` beside an SQLite database's file (in the working directory for
+/// PostgreSQL): where recordings and attempts' files are kept by default.
+pub fn beside_db(db: &cutlab_assessor::DbLocation, name: &str) -> PathBuf {
+    db.sqlite_path()
+        .and_then(std::path::Path::parent)
+        .unwrap_or(std::path::Path::new("."))
+        .join(name)
 }
 
 /// How an OpenIGTLink device (`igtl:PORT`) sends the force back.
@@ -422,11 +426,7 @@ fn run() -> anyhow::Result<()> {
         } => {
             let db = cutlab_assessor::default_db(cli.db.as_ref());
             // beside an SQLite file; in the working directory for a server
-            let demo_attempts = db
-                .sqlite_path()
-                .and_then(std::path::Path::parent)
-                .unwrap_or(std::path::Path::new("."))
-                .join("demo-attempts");
+            let demo_attempts = beside_db(&db, "demo-attempts");
             serve::run(serve::Options {
                 db: &db,
                 addr: &addr,

@@ -85,11 +85,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
             }
         };
         // the station's recordings beside an SQLite database, like the demo's
-        let station_dir = db
-            .sqlite_path()
-            .and_then(Path::parent)
-            .unwrap_or_else(|| Path::new("."))
-            .join("station-attempts");
+        let station_dir = crate::beside_db(db, "station-attempts");
         let config = Config {
             station: cutlab_station::StationSettings {
                 devices: o.station_devices,

@@ -231,29 +231,24 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     if let Some(choice) = choice {
         say!(o.quiet, "simulation step: {choice}");
     }
-    let scene_localises = session.sim.settings.localisation.is_some();
-    let localisation = if scene_localises && o.localise == Localise::Auto {
-        localise_choice::Choice {
-            localise: true,
-            why: "auto: the scene's solver settings localise".into(),
-        }
-    } else {
-        localise_choice::choose(o.localise, &scene.spec.name, scene.model.mesh.tet_count())
-    };
+    let scene_settings = session.sim.settings.localisation;
+    let localisation = localise_choice::choose(
+        o.localise,
+        &scene.spec.name,
+        scene.model.mesh.tet_count(),
+        scene_settings.is_some(),
+    );
     say!(
         o.quiet,
         "localisation: {} ({})",
         if localisation.localise { "on" } else { "off" },
         localisation.why
     );
-    session.sim.settings.localisation = match o.localise {
-        _ if !localisation.localise => None,
-        Localise::Auto => session
-            .sim
-            .settings
-            .localisation
-            .or(Some(LocalisationSettings::default())),
-        Localise::On | Localise::Off => Some(LocalisationSettings::default()),
+    // `on` with the default thresholds; `auto` keeps the scene's own when it has them
+    session.sim.settings.localisation = match (localisation.localise, o.localise) {
+        (false, _) => None,
+        (true, Localise::Auto) => scene_settings.or(Some(LocalisationSettings::default())),
+        (true, _) => Some(LocalisationSettings::default()),
     };
     // The planned incision (what a synthetic trainee follows; recorded with every session):
     // the exercise's expert plan when the session is an attempt, else 60 mm across the

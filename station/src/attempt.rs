@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use cutlab_assessor::recordings::RecordingStore;
-use cutlab_assessor::store::{AttemptStatus, Exercise, Outcome, Store};
+use cutlab_assessor::store::{Exercise, Outcome, Store};
 use cutlab_assessor::{AssessError, ExpertPlan, MetricSet};
 use cutlab_haptics::Session;
 use cutlab_haptics::device::Plan;
@@ -174,10 +174,7 @@ pub async fn end_abandoned(
         return Ok(ended);
     }
     let now_ns = cutlab_assessor::store::now_ns();
-    for a in store.list_attempts(None, None).await? {
-        if a.status != AttemptStatus::Running {
-            continue;
-        }
+    for a in store.running_attempts().await? {
         let young = now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS;
         let path = a.recording_path.as_deref().map(Path::new);
         if path.is_some_and(Path::is_relative) {
@@ -246,7 +243,7 @@ fn owner_of(lock: &Path, started_ns: i64) -> std::io::Result<Owner> {
         .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX));
     if cutlab_recorder::recording_in_use(lock)? {
         Ok(Owner::Alive)
-    } else if modified_ns < started_ns.saturating_sub(1_000_000_000) {
+    } else if modified_ns < started_ns.saturating_sub(CLOCK_SLACK_NS) {
         Ok(Owner::Never)
     } else {
         Ok(Owner::Dead)
@@ -261,10 +258,14 @@ fn ended_complete(rec: &Recording) -> bool {
         .is_some_and(|s| s == "complete")
 }
 
+/// How much earlier than its attempt's start a lock or recording of that attempt may be
+/// stamped (clocks read at different moments).
+const CLOCK_SLACK_NS: i64 = 1_000_000_000;
+
 /// Whether the recording with metadata `meta` began before an attempt that started at
-/// `started_ns` (a session records after its attempt starts; a second of slack for clocks).
+/// `started_ns` (a session records after its attempt starts).
 fn began_before(meta: &cutlab_recorder::channels::SessionMeta, started_ns: i64) -> bool {
-    meta.started_unix_s * 1e9 < started_ns as f64 - 1e9
+    meta.started_unix_s * 1e9 < (started_ns - CLOCK_SLACK_NS) as f64
 }
 
 /// [`end_abandoned`], each attempt ended (or the failure to look) said in the log.

@@ -218,6 +218,13 @@ impl Store {
     }
 
     /// Attempts, optionally of one trainee and/or exercise, oldest first.
+    /// The attempts still running (status `running`), oldest first.
+    pub async fn running_attempts(&self) -> Result<Vec<Attempt>> {
+        let rows: Vec<AttemptRow> = crate::on_db!(&self.db, pool => sqlx::query_as(sqlx::AssertSqlSafe(format!("{ATTEMPT_COLUMNS} WHERE status = 'running' ORDER BY started_ns, id")))
+            .fetch_all(pool).await)?;
+        rows.into_iter().map(attempt).collect()
+    }
+
     pub async fn list_attempts(
         &self,
         trainee_id: Option<i64>,
