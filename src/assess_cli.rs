@@ -225,7 +225,9 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             command: UserCommand::List,
         } => {
             for u in store.list_users(None).await? {
-                println!("{:>4}  {:<11} {}", u.id, u.role.as_str(), u.name);
+                // names from before names were checked may hold control characters
+                let name = cutlab_assessor::store::printable(&u.name);
+                println!("{:>4}  {:<11} {name}", u.id, u.role.as_str());
             }
         }
         AssessCommand::Cohort {

@@ -69,6 +69,20 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
     })
 }
 
+/// `rec`'s metrics against `plan`, and what the attempt's note must say of a recording that
+/// is not whole (damaged, cut short: scored on what is readable, never silently).
+pub fn assess_recording(
+    rec: &Recording,
+    plan: &ExpertPlan,
+) -> Result<(crate::MetricSet, Option<String>), AssessError> {
+    let data = attempt_data(rec, plan)?;
+    let values = crate::metrics::assess(plan, &data)?;
+    let note = rec
+        .shortfall()
+        .map(|why| format!("{DAMAGED_RECORDING_NOTE}: {why}"));
+    Ok((values, note))
+}
+
 /// The boundary of the last keyframe's mesh at its deformed positions.
 fn last_surface(rec: &Recording) -> Option<SurfaceMesh> {
     let k = rec.keyframes.last()?;
@@ -129,12 +143,7 @@ impl crate::store::Store {
     ) -> crate::Result<(crate::store::Outcome, crate::MetricSet)> {
         let a = self.get_attempt(attempt_id).await?;
         let plan = self.exercise_plan(a.exercise_id).await?;
-        let data = attempt_data(rec, &plan)?;
-        let values = crate::metrics::assess(&plan, &data)?;
-        // never silently: the attempt says what a damaged recording left out
-        let note = rec
-            .shortfall()
-            .map(|why| format!("{DAMAGED_RECORDING_NOTE}: {why}"));
+        let (values, note) = assess_recording(rec, &plan)?;
         let outcome = self
             .finish_attempt_noted(attempt_id, &values, note.as_deref())
             .await?;

@@ -149,6 +149,8 @@ mod tests {
             synced_ns: None,
             sync_error: None,
             station: None,
+            mode: None,
+            device: None,
             started_ns: id * 100_000_000_000,
             ended_ns: Some(id * 100_000_000_000 + 10_500_000_000),
             status,

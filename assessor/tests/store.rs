@@ -679,19 +679,29 @@ async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
     let queue = station.sync_queue().await.expect("queue");
     assert_eq!(queue[0].sync_error.as_deref(), Some("hub down"));
 
-    let up = station.upload_of(done.id).await.expect("upload");
+    let mut up = station.upload_of(done.id).await.expect("upload");
     assert_eq!(
         (up.trainee.as_str(), up.exercise.as_str()),
         ("sam", "one-metric")
     );
-    let first = hub.import_attempt(&up, "or-1").await.expect("import");
+    // a complete attempt comes with its recording, which the hub measures (here: the
+    // station's values, as the hub's own measure would give)
+    assert!(hub.import_attempt(&up, "or-1", &up.metrics).await.is_err());
+    up.recording_sha256 = Some(cutlab_assessor::recordings::sha256_hex(b"a.mcap"));
+    let first = hub
+        .import_attempt(&up, "or-1", &up.metrics)
+        .await
+        .expect("import");
     assert!(first.created);
     assert_eq!(first.attempt.status, AttemptStatus::Complete);
     assert_eq!(first.attempt.passed, Some(true), "scored on the hub");
     assert_eq!(first.attempt.started_ns, done.started_ns);
     assert_eq!(first.attempt.station.as_deref(), Some("or-1"));
     // a retry is the same attempt, not a second one
-    let again = hub.import_attempt(&up, "or-1").await.expect("retry");
+    let again = hub
+        .import_attempt(&up, "or-1", &up.metrics)
+        .await
+        .expect("retry");
     assert!(!again.created);
     assert_eq!(again.attempt.id, first.attempt.id);
     let sam = hub.user_by_name("sam").await.expect("made on the hub");
@@ -714,20 +724,20 @@ async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
     let mut bad = up.clone();
     bad.uuid = "1; DROP TABLE attempts".into();
     assert!(matches!(
-        hub.import_attempt(&bad, "or-1").await,
+        hub.import_attempt(&bad, "or-1", &[]).await,
         Err(AssessError::InvalidInput(_))
     ));
     let mut bad = up.clone();
     bad.uuid = cutlab_assessor::store::new_uuid().expect("id");
     bad.exercise = "not-on-this-hub".into();
     let err = hub
-        .import_attempt(&bad, "or-1")
+        .import_attempt(&bad, "or-1", &[])
         .await
         .expect_err("unknown exercise");
     assert!(err.to_string().contains("not-on-this-hub"), "{err}");
     bad.exercise = up.exercise.clone();
     bad.status = AttemptStatus::Running;
-    assert!(hub.import_attempt(&bad, "or-1").await.is_err());
+    assert!(hub.import_attempt(&bad, "or-1", &[]).await.is_err());
     // a station token never sets thresholds, never writes as an instructor, never scores a
     // metric twice, and a name is the name
     let refused = |change: fn(&mut cutlab_assessor::store::AttemptUpload)| {
@@ -750,7 +760,7 @@ async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
     ] {
         assert!(
             matches!(
-                hub.import_attempt(&u, "or-1").await,
+                hub.import_attempt(&u, "or-1", &u.metrics).await,
                 Err(AssessError::InvalidInput(_))
             ),
             "{u:?}"
@@ -776,4 +786,95 @@ async fn a_station_queues_and_a_hub_takes_each_attempt_once(hub: Store) {
     assert_eq!(hub.station_by_token(&token).await.expect("lookup"), None);
     let listed = hub.list_station_tokens().await.expect("list");
     assert!(listed[0].revoked_ns.is_some() && listed[0].last_used_ns.is_some());
+}
+
+on_both!(a_hub_refuses_forged_and_impossible_attempts);
+async fn a_hub_refuses_forged_and_impossible_attempts(hub: Store) {
+    use cutlab_assessor::store::{AttemptUpload, new_uuid, now_ns};
+    exercise_with_one_threshold(&hub).await;
+    let second = 1_000_000_000;
+    let good = |key: &[u8]| AttemptUpload {
+        uuid: new_uuid().expect("id"),
+        trainee: "sam".into(),
+        exercise: "one-metric".into(),
+        started_ns: now_ns() - 60 * second,
+        ended_ns: Some(now_ns() - 30 * second),
+        status: AttemptStatus::Complete,
+        expert: false,
+        note: None,
+        recording_sha256: Some(cutlab_assessor::recordings::sha256_hex(key)),
+        rrd_sha256: None,
+        metrics: values(&[("lateral_mean_m", 0.001)]),
+    };
+    let up = good(b"one");
+    let taken = hub
+        .import_attempt(&up, "or-1", &up.metrics)
+        .await
+        .expect("taken");
+    assert!(taken.created);
+    // another station claiming the id; a second attempt scored by the same recording
+    assert!(matches!(
+        hub.import_attempt(&up, "or-2", &up.metrics).await,
+        Err(AssessError::Conflict(_))
+    ));
+    let mut copy = good(b"one");
+    copy.uuid = new_uuid().expect("id");
+    assert!(matches!(
+        hub.import_attempt(&copy, "or-1", &copy.metrics).await,
+        Err(AssessError::Conflict(_))
+    ));
+    // times out of order, in the future, lasting for ever, before 2020; impossible or
+    // unknown metrics; names that are no one's
+    type Change = fn(&mut AttemptUpload);
+    let cases: Vec<(&str, Change)> = vec![
+        ("ended before it started", |u| {
+            u.ended_ns = Some(u.started_ns - 1)
+        }),
+        ("started at i64::MAX", |u| {
+            u.started_ns = i64::MAX;
+            u.ended_ns = Some(i64::MAX);
+        }),
+        ("lasted two days", |u| {
+            u.started_ns -= 2 * 86_400 * 1_000_000_000;
+        }),
+        ("started in 1970", |u| u.started_ns = 0),
+        ("no end", |u| u.ended_ns = None),
+        ("1e308 m", |u| u.metrics[0].value = Some(1e308)),
+        ("a negative time", |u| {
+            let t = u
+                .metrics
+                .iter_mut()
+                .find(|m| m.key == "time_s")
+                .expect("time");
+            t.value = Some(-5.0);
+        }),
+        ("an unknown metric", |u| {
+            let mut m = u.metrics[0].clone();
+            m.key = "made_up_m".into();
+            u.metrics.push(m);
+        }),
+        ("a wrong unit", |u| u.metrics[0].unit = "mm".into()),
+        ("a control character", |u| u.trainee = "sam\u{1b}[2J".into()),
+        ("a long name", |u| u.trainee = "x".repeat(2_000_000)),
+        ("a long note", |u| u.note = Some("n".repeat(10_000))),
+    ];
+    for (what, change) in cases {
+        let mut u = good(what.as_bytes());
+        change(&mut u);
+        let err = hub
+            .import_attempt(&u, "or-1", &u.metrics)
+            .await
+            .expect_err(what);
+        assert!(matches!(err, AssessError::InvalidInput(_)), "{what}: {err}");
+        assert!(err.to_string().len() < 600, "{what}: a bounded message");
+    }
+    // a look-alike of a staff name is not made a trainee
+    hub.create_user("dr-kim", Role::Instructor, None)
+        .await
+        .expect("instructor");
+    let mut u = good(b"look-alike");
+    u.trainee = "DR-KIM".into();
+    assert!(hub.import_attempt(&u, "or-1", &u.metrics).await.is_err());
+    assert!(hub.user_by_name("DR-KIM").await.is_err());
+    assert_eq!(hub.list_attempts(None, None).await.expect("list").len(), 1);
 }

@@ -50,7 +50,38 @@ struct Report {
     kill_interrupted_syncs: usize,
     kill_present_once: usize,
     kill_hashes_verified: usize,
+    /// Complete attempts of the kill whose metrics on the hub are the station's (the hub
+    /// scores them from their recordings).
+    kill_scored: usize,
+    /// Attempts of the kill lost or changed on their way (goal: none).
+    kill_lost: usize,
     kill_drain_s: f64,
+    slow: SlowReport,
+    /// Attempts lost or changed by the time the hostile clients are gone (goal: none).
+    slow_lost: usize,
+    /// How each lost attempt was lost.
+    lost: Vec<String>,
+}
+
+/// The hostile clients of phase 3 and the honest stations' uploads meanwhile.
+#[derive(Debug, serde::Serialize)]
+struct SlowReport {
+    /// Recording uploads by hostile stations whose bodies crawled (a byte every 200 ms) or
+    /// stalled, how many the hub cut off (408), the last after how many seconds.
+    slow_bodies: usize,
+    slow_bodies_cut: usize,
+    slow_cut_after_s: f64,
+    /// Connections from one address that sent part of their headers and no more: refused at
+    /// once past the address's cap (503), or closed by the hub's header timeout.
+    unfinished_headers: usize,
+    unfinished_refused: usize,
+    unfinished_closed: usize,
+    /// The honest stations' attempts meanwhile (each station from its own clients), and
+    /// the time of one attempt's upload.
+    honest_attempts: usize,
+    honest_p50_ms: f64,
+    honest_p99_ms: f64,
+    honest_max_ms: f64,
 }
 
 /// The hub process.
@@ -143,7 +174,8 @@ impl Station {
             .with_context(|| format!("{}", path.display()))
     }
 
-    /// An ended attempt with a recording of `kib` KiB no other attempt has.
+    /// An attempt that ended incomplete, with a recording of `kib` KiB no other attempt
+    /// has (the hub stores it without scoring it: the load is the upload).
     async fn end_attempt(&mut self, kib: usize) -> anyhow::Result<()> {
         self.made += 1;
         let path = self.dir.join(format!("attempt-{}.mcap", self.made));
@@ -160,9 +192,284 @@ impl Station {
             .store
             .start_attempt(self.trainee, self.exercise, path.to_str(), false)
             .await?;
-        self.store.finish_attempt(a.id, &[]).await?;
+        self.store
+            .mark_incomplete(a.id, Some("bench: load"))
+            .await?;
         Ok(())
     }
+
+    /// An attempt recorded a day ago (a station offline for a day), scored on the station
+    /// from a real recording of its own: a copy of `base` that no other attempt has (the
+    /// recorder's salvage of it, which names its source).
+    async fn end_day_old_attempt(&mut self, base: &Path) -> anyhow::Result<()> {
+        self.made += 1;
+        let source = self.dir.join(format!("source-{}.mcap", self.made));
+        let path = self.dir.join(format!("attempt-{}.mcap", self.made));
+        tokio::fs::copy(base, &source).await?;
+        let (from, to) = (source.clone(), path.clone());
+        tokio::task::spawn_blocking(move || cutlab_recorder::recover::recover(&from, &to))
+            .await??;
+        tokio::fs::remove_file(&source).await?;
+        let a = self
+            .store
+            .start_attempt(self.trainee, self.exercise, path.to_str(), false)
+            .await?;
+        let rec = cutlab_recorder::Recording::open(&path)?;
+        self.store.score_recording(a.id, &rec).await?;
+        const DAY_NS: i64 = 86_400 * 1_000_000_000;
+        let minute = 60 * 1_000_000_000_i64;
+        cutlab_assessor::on_db!(self.store.db(), pool => sqlx::query("UPDATE attempts SET started_ns = ended_ns - $1, ended_ns = ended_ns - $2 WHERE id = $3")
+            .bind(DAY_NS + minute)
+            .bind(DAY_NS)
+            .bind(a.id)
+            .execute(pool).await.map(|_| ()))?;
+        Ok(())
+    }
+}
+
+/// What [`verify`] found.
+struct Verified {
+    /// Attempts on the hub (each exactly once).
+    present: usize,
+    /// Complete attempts whose metrics on the hub are the station's.
+    scored: usize,
+    /// Recordings whose content hashed to their key.
+    verified: usize,
+    /// The attempts lost or changed on their way, with how.
+    lost: Vec<String>,
+}
+
+/// Every attempt of every station on the hub exactly once, ended as on its station, a
+/// complete one with the station's metrics (the hub scores it from its recording), its
+/// recording intact (the station's file where the station kept it). An error if a queue is
+/// not empty or a recording damaged.
+async fn verify(
+    stations: &[Station],
+    hub_store: &Store,
+    recordings: &RecordingStore,
+) -> anyhow::Result<Verified> {
+    let mut v = Verified {
+        present: 0,
+        scored: 0,
+        verified: 0,
+        lost: Vec::new(),
+    };
+    let values = |m: Vec<cutlab_assessor::store::StoredMetric>| {
+        m.into_iter()
+            .map(|m| (m.metric, m.value))
+            .collect::<Vec<_>>()
+    };
+    for s in stations {
+        ensure!(
+            s.store.sync_queue().await?.is_empty(),
+            "a station's queue is not empty"
+        );
+        for a in s.store.list_attempts(None, None).await? {
+            let uuid = a.uuid.clone().context("an attempt without id")?;
+            let Ok(h) = hub_store.attempt_by_uuid(&uuid).await else {
+                v.lost.push(format!("{uuid}: not on the hub"));
+                continue;
+            };
+            v.present += 1;
+            if (h.status, h.started_ns) != (a.status, a.started_ns) {
+                v.lost.push(format!(
+                    "{uuid}: {:?} on the hub, {:?} on its station",
+                    h.status, a.status
+                ));
+            } else if a.status == AttemptStatus::Complete {
+                let mine = values(s.store.attempt_metrics(a.id).await?);
+                if mine.is_empty() || mine != values(hub_store.attempt_metrics(h.id).await?) {
+                    v.lost
+                        .push(format!("{uuid}: the hub's metrics are not the station's"));
+                } else {
+                    v.scored += 1;
+                }
+            }
+            let key = h.recording_sha256.context("an attempt without recording")?;
+            // its content hashes to its key (else an error)
+            let bytes = recordings.get(&key).await?;
+            if let Ok(local) =
+                tokio::fs::read(a.recording_path.as_deref().unwrap_or_default()).await
+            {
+                ensure!(bytes == local, "attempt {uuid}'s recording differs");
+            }
+            v.verified += 1;
+        }
+    }
+    // each found by its id (unique on the hub) and none besides: each exactly once
+    let hub_total = hub_store.list_attempts(None, None).await?.len();
+    ensure!(
+        hub_total == v.present,
+        "the hub has {hub_total} attempts, the stations {}",
+        v.present
+    );
+    Ok(v)
+}
+
+/// A connection to the hub on `port` from the loopback address `from`.
+async fn connect_from(from: &str, port: u16) -> anyhow::Result<tokio::net::TcpStream> {
+    let socket = tokio::net::TcpSocket::new_v4()?;
+    socket.bind(format!("{from}:0").parse()?)?;
+    Ok(socket.connect(([127, 0, 0, 1], port).into()).await?)
+}
+
+/// The status the hub answers on `read` within `within`; `None`: closed without one, or
+/// still silent.
+async fn status_within(
+    read: &mut (impl tokio::io::AsyncRead + Unpin),
+    within: Duration,
+) -> Option<u16> {
+    use tokio::io::AsyncReadExt;
+    let mut got = Vec::new();
+    let _ = tokio::time::timeout(within, async {
+        let mut buf = [0u8; 512];
+        while !got.windows(2).any(|w| w == b"\r\n") {
+            match read.read(&mut buf).await {
+                Ok(0) | Err(_) => return,
+                Ok(n) => got.extend_from_slice(&buf[..n]),
+            }
+        }
+    })
+    .await;
+    String::from_utf8_lossy(&got)
+        .split(' ')
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+}
+
+/// A hostile station's recording upload from 127.0.0.2: 100 MiB announced, then a byte every
+/// 200 ms (`crawl`) or one byte and nothing; the hub's status and when it came.
+async fn slow_body(
+    port: u16,
+    token: String,
+    crawl: bool,
+    t0: Instant,
+) -> anyhow::Result<(Option<u16>, f64)> {
+    use tokio::io::AsyncWriteExt;
+    let mut s = connect_from("127.0.0.2", port).await?;
+    let key = cutlab_assessor::recordings::sha256_hex(b"never sent whole");
+    s.write_all(format!("PUT /api/hub/recordings/{key} HTTP/1.1\r\nHost: hub\r\nAuthorization: Bearer {token}\r\nContent-Length: {}\r\n\r\n", 100u64 << 20).as_bytes()).await?;
+    let (mut read, mut write) = s.split();
+    let writing = async {
+        for _ in 0..if crawl { 3000 } else { 1 } {
+            if write.write_all(b"x").await.is_err() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+        std::future::pending::<()>().await
+    };
+    let status = tokio::select! {
+        s = status_within(&mut read, Duration::from_secs(120)) => s,
+        () = writing => None,
+    };
+    Ok((status, t0.elapsed().as_secs_f64()))
+}
+
+/// A connection from 127.0.0.3 that sends part of a request's headers and no more: `true`
+/// if the hub refused it at once (503), `false` when it closed it.
+async fn unfinished_headers(port: u16) -> anyhow::Result<bool> {
+    use tokio::io::AsyncWriteExt;
+    let mut s = connect_from("127.0.0.3", port).await?;
+    // a refused connection may be closed before this is written
+    let _ = s
+        .write_all(b"PUT /api/hub/recordings/x HTTP/1.1\r\nHost: hub\r\nX-Slow: ")
+        .await;
+    Ok(status_within(&mut s, Duration::from_secs(60)).await == Some(503))
+}
+
+/// Phase 3: four hostile stations' slow uploads and 300 unfinished requests from other
+/// addresses, while every station ends and sends five attempts of `kib` KiB.
+async fn slow_clients(
+    stations: &mut Vec<Station>,
+    hub_store: &Store,
+    port: u16,
+    kib: usize,
+) -> anyhow::Result<SlowReport> {
+    let t0 = Instant::now();
+    let mut slow = tokio::task::JoinSet::new();
+    for k in 0..4 {
+        let token = hub_store
+            .create_station_token(&format!("bench-hostile-{k}"))
+            .await?;
+        slow.spawn(slow_body(port, token, k != 3, t0));
+    }
+    let mut unfinished = tokio::task::JoinSet::new();
+    for _ in 0..300 {
+        unfinished.spawn(unfinished_headers(port));
+    }
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let mut honest = tokio::task::JoinSet::new();
+    for mut s in std::mem::take(stations) {
+        honest.spawn(async move {
+            let mut ms = Vec::new();
+            for _ in 0..5 {
+                s.end_attempt(kib).await?;
+                let t = Instant::now();
+                loop {
+                    match sync(&s.store, &s.hub, None).await {
+                        Ok(r) => {
+                            ensure!(r.refused.is_empty(), "refused: {:?}", r.refused);
+                            break;
+                        }
+                        Err(SyncError::Unreachable { .. }) if t.elapsed().as_secs() < 120 => {
+                            tokio::time::sleep(Duration::from_millis(100)).await;
+                        }
+                        Err(e) => return Err(e.into()),
+                    }
+                }
+                ms.push(t.elapsed().as_secs_f64() * 1e3);
+            }
+            anyhow::Ok((s, ms))
+        });
+    }
+    let mut honest_ms = Vec::new();
+    while let Some(done) = honest.join_next().await {
+        let (s, ms) = done??;
+        honest_ms.extend(ms);
+        stations.push(s);
+    }
+    let (mut cut, mut cut_after_s) = (0, 0.0_f64);
+    while let Some(done) = slow.join_next().await {
+        let (status, at_s) = done??;
+        if status == Some(408) {
+            cut += 1;
+            cut_after_s = cut_after_s.max(at_s);
+        }
+    }
+    let (mut refused, mut closed) = (0, 0);
+    while let Some(done) = unfinished.join_next().await {
+        if done?? {
+            refused += 1;
+        } else {
+            closed += 1;
+        }
+    }
+    let honest = Summary::of(&honest_ms);
+    Ok(SlowReport {
+        slow_bodies: 4,
+        slow_bodies_cut: cut,
+        slow_cut_after_s: cut_after_s,
+        unfinished_headers: 300,
+        unfinished_refused: refused,
+        unfinished_closed: closed,
+        honest_attempts: honest_ms.len(),
+        honest_p50_ms: honest.median,
+        honest_p99_ms: honest.p99,
+        honest_max_ms: honest.max,
+    })
+}
+
+/// A real recording of a short session (the synthetic expert on the chest wall, 0.5 s).
+async fn record_base(path: &Path) -> anyhow::Result<()> {
+    let path = path.to_owned();
+    tokio::task::spawn_blocking(move || {
+        use cutlab_sim::scene::{BuildOptions, Scene};
+        let scene = Scene::load("chest-wall", BuildOptions::default())?;
+        cutlab_recorder::record::record_expert(&scene, "chest-wall", 0.5, 1, &path)?;
+        anyhow::Ok(())
+    })
+    .await?
 }
 
 fn free_port() -> anyhow::Result<u16> {
@@ -199,6 +506,11 @@ pub fn run(o: &Options<'_>) -> anyhow::Result<()> {
     let report = rt.block_on(bench(o))?;
     if o.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
+        ensure!(
+            report.lost.is_empty(),
+            "{} attempts lost",
+            report.lost.len()
+        );
         return Ok(());
     }
     println!(
@@ -217,12 +529,37 @@ pub fn run(o: &Options<'_>) -> anyhow::Result<()> {
         report.upload_max_ms
     );
     println!(
-        "hub killed mid-upload: {} attempts queued, {} syncs interrupted; after the restart every queue empty in {:.1} s, {} attempts on the hub exactly once, {} recordings' hashes verified",
+        "hub killed mid-upload of attempts recorded a day ago: {} attempts queued, {} syncs interrupted; after the restart every queue empty in {:.1} s, {} attempts on the hub exactly once, {} scored by the hub as on their station, {} recordings' hashes verified; lost: {}",
         report.kill_queued,
         report.kill_interrupted_syncs,
         report.kill_drain_s,
         report.kill_present_once,
-        report.kill_hashes_verified
+        report.kill_scored,
+        report.kill_hashes_verified,
+        report.kill_lost
+    );
+    let w = &report.slow;
+    println!(
+        "hostile clients: {} slow uploads, {} cut off (the last after {:.1} s); {} unfinished requests, {} refused at once, {} closed; meanwhile {} honest attempts, upload p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; lost: {}",
+        w.slow_bodies,
+        w.slow_bodies_cut,
+        w.slow_cut_after_s,
+        w.unfinished_headers,
+        w.unfinished_refused,
+        w.unfinished_closed,
+        w.honest_attempts,
+        w.honest_p50_ms,
+        w.honest_p99_ms,
+        w.honest_max_ms,
+        report.slow_lost
+    );
+    for why in &report.lost {
+        println!("lost: {why}");
+    }
+    ensure!(
+        report.lost.is_empty(),
+        "{} attempts lost",
+        report.lost.len()
     );
     Ok(())
 }
@@ -282,10 +619,13 @@ async fn bench(o: &Options<'_>) -> anyhow::Result<Report> {
     let attempts = upload_ms.len();
     let upload = Summary::of(&upload_ms);
 
-    // 2. the kill
+    // 2. the kill, while the stations send attempts recorded a day ago (complete, each
+    // with its real recording, which the hub scores)
+    let base = o.out.join("base.mcap");
+    record_base(&base).await?;
     for s in &mut stations {
         for _ in 0..o.queued {
-            s.end_attempt(o.recording_kib).await?;
+            s.end_day_old_attempt(&base).await?;
         }
     }
     let kill_queued = o.stations * o.queued;
@@ -347,42 +687,13 @@ async fn bench(o: &Options<'_>) -> anyhow::Result<Report> {
     }
     let drain_s = t_restart.elapsed().as_secs_f64();
 
-    // every attempt of every station on the hub exactly once, its recording intact
     let recordings = RecordingStore::open(hub_recordings.to_str().context("a UTF-8 path")?)?;
-    let mut present = 0;
-    let mut verified = 0;
-    for s in &stations {
-        ensure!(
-            s.store.sync_queue().await?.is_empty(),
-            "a station's queue is not empty"
-        );
-        for a in s.store.list_attempts(None, None).await? {
-            let uuid = a.uuid.clone().context("an attempt without id")?;
-            let h = hub_store.attempt_by_uuid(&uuid).await?;
-            ensure!(
-                h.status == AttemptStatus::Complete && h.started_ns == a.started_ns,
-                "attempt {uuid} is {:?} on the hub",
-                h.status
-            );
-            present += 1;
-            let key = h.recording_sha256.context("an attempt without recording")?;
-            // its content hashes to its key (else an error), and is the station's file where
-            // the station kept it (the attempts of the kill)
-            let bytes = recordings.get(&key).await?;
-            if let Ok(local) =
-                tokio::fs::read(a.recording_path.as_deref().unwrap_or_default()).await
-            {
-                ensure!(bytes == local, "attempt {uuid}'s recording differs");
-            }
-            verified += 1;
-        }
-    }
-    // each found by its id (unique on the hub) and none besides: each exactly once
-    let hub_total = hub_store.list_attempts(None, None).await?.len();
-    ensure!(
-        hub_total == present,
-        "the hub has {hub_total} attempts, the stations {present}"
-    );
+    let kill = verify(&stations, &hub_store, &recordings).await?;
+
+    // 3. hostile clients: slow bodies and unfinished headers from another address, while
+    // the stations go on uploading
+    let slow = slow_clients(&mut stations, &hub_store, port, o.recording_kib).await?;
+    let after = verify(&stations, &hub_store, &recordings).await?;
     // the recordings only: the databases and the hub's log stay for a look
     std::fs::remove_dir_all(&hub_recordings)?;
     for s in &stations {
@@ -405,8 +716,13 @@ async fn bench(o: &Options<'_>) -> anyhow::Result<Report> {
         megabytes_per_s: (attempts * o.recording_kib * 1024) as f64 / elapsed / 1e6,
         kill_queued,
         kill_interrupted_syncs: interrupted,
-        kill_present_once: present,
-        kill_hashes_verified: verified,
+        kill_present_once: kill.present,
+        kill_scored: kill.scored,
+        kill_hashes_verified: kill.verified,
+        kill_lost: kill.lost.len(),
         kill_drain_s: drain_s,
+        slow,
+        slow_lost: after.lost.len(),
+        lost: kill.lost.into_iter().chain(after.lost).collect(),
     })
 }

@@ -148,3 +148,45 @@ fn meta_of(
 fn json<T: serde::Serialize>(v: &T) -> Result<Vec<u8>, RecorderError> {
     Ok(serde_json::to_vec_pretty(v)?)
 }
+
+/// Records `duration_s` (simulated) of the synthetic expert (seeded by `seed`) cutting a
+/// 60 mm, 8 mm deep incision across `scene`'s top, on the virtual clock, to `path`: a real,
+/// whole recording in a moment, for the tests and benchmarks that need one (a hub that
+/// scores what it takes, say).
+pub fn record_expert(
+    scene: &cutlab_haptics::sim::scene::Scene,
+    scene_name: &str,
+    duration_s: f64,
+    seed: u64,
+    path: &Path,
+) -> Result<SessionReport, RecorderError> {
+    use cutlab_haptics::device::{Skill, SyntheticTrainee};
+    let session = Session::new(scene)?;
+    let plan = session.plan_across_top(0.06, 0.008)?;
+    let skill = Skill::preset("expert")
+        .ok_or_else(|| RecorderError::Malformed("no expert preset".into()))?;
+    let device = Box::new(SyntheticTrainee::new("expert", plan.clone(), skill, seed)?);
+    let config = SessionConfig {
+        clock: cutlab_haptics::servo::Clock::Virtual,
+        duration_s,
+        ..SessionConfig::default()
+    };
+    let provenance = Provenance {
+        scene: scene_name.into(),
+        seed,
+        device: "expert".into(),
+        ..Provenance::default()
+    };
+    let recorded = run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        Some(&plan),
+        &scene.spec,
+        path,
+        RecordSettings::default(),
+        None,
+    )?;
+    Ok(recorded.report?)
+}

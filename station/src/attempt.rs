@@ -175,6 +175,11 @@ pub async fn end_abandoned(
     }
     let now_ns = cutlab_assessor::store::now_ns();
     for a in store.running_attempts().await? {
+        if a.station.is_some() {
+            // a hub's import, never a session of this machine's (an older hub's, left
+            // between its insert and its scoring): the station's retry ends it
+            continue;
+        }
         let young = now_ns.saturating_sub(a.started_ns) < STARTING_GRACE_NS;
         let path = a.recording_path.as_deref().map(Path::new);
         if path.is_some_and(Path::is_relative) {

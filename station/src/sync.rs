@@ -145,7 +145,8 @@ impl Hub {
                 hub: self.base.clone(),
                 queued,
             }),
-            s if s >= 500 || s == 404 || s == 405 => {
+            // the hub's trouble or a timeout (408: the upload stalled), not the attempt's
+            s if s >= 500 || matches!(s, 404 | 405 | 408 | 429) => {
                 Err(unreachable(format!("it answered {status}: {message}")))
             }
             _ => Ok(Answer::Refused(format!(

@@ -27,6 +27,7 @@ pub mod hub;
 pub mod pages;
 pub mod recordings;
 pub mod seed;
+pub mod serve;
 pub mod watch;
 
 use std::sync::Arc;
@@ -59,6 +60,8 @@ pub struct Config {
     /// The recording store (object store) recordings are served from when an attempt has
     /// keys there; else from the path the attempt recorded.
     pub recordings: Option<cutlab_assessor::recordings::RecordingStore>,
+    /// What the server allows its clients: header time, connections held.
+    pub limits: serve::Limits,
 }
 
 impl Default for Config {
@@ -71,6 +74,7 @@ impl Default for Config {
             station: cutlab_station::StationSettings::new("station-attempts"),
             max_station_sessions: 2,
             recordings: None,
+            limits: serve::Limits::default(),
         }
     }
 }
@@ -93,6 +97,8 @@ struct Inner {
     caches: Caches,
     station: cutlab_station::StationSet,
     kiosk: auth::kiosk::KioskTicket,
+    /// The hub's recording uploads under way.
+    uploads: hub::Uploads,
 }
 
 /// The caches of the hot paths, valid until the database changes (see [`cache`]).
@@ -142,6 +148,7 @@ impl AppState {
             caches,
             station,
             kiosk: Default::default(),
+            uploads: Default::default(),
         })))
     }
     pub fn store(&self) -> &Store {
@@ -175,6 +182,9 @@ impl AppState {
     pub(crate) fn kiosk(&self) -> &auth::kiosk::KioskTicket {
         &self.0.kiosk
     }
+    pub(crate) fn uploads(&self) -> &hub::Uploads {
+        &self.0.uploads
+    }
     pub(crate) fn station_settings(&self) -> &cutlab_station::StationSettings {
         &self.0.config.station
     }
@@ -197,14 +207,13 @@ pub fn app(state: AppState) -> Router {
         .with_state(state)
 }
 
-/// Serves the dashboard on `listener` until the future `shutdown` completes.
+/// Serves the dashboard on `listener` until the future `shutdown` completes, within the
+/// configured [`serve::Limits`].
 pub async fn serve(
     listener: tokio::net::TcpListener,
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let service = app(state).into_make_service_with_connect_info::<std::net::SocketAddr>();
-    axum::serve(listener, service)
-        .with_graceful_shutdown(shutdown)
-        .await
+    let limits = state.config().limits;
+    serve::serve_with_limits(listener, app(state), limits, shutdown).await
 }

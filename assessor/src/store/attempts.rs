@@ -74,6 +74,10 @@ pub struct Attempt {
     pub sync_error: Option<String>,
     /// On a hub: the station that uploaded the attempt (`None`: recorded here).
     pub station: Option<String>,
+    /// `guided` (the plan shown) or `exam`, for a station's attempt.
+    pub mode: Option<String>,
+    /// The input the attempt was made with, as the station names it (`pointer`...).
+    pub device: Option<String>,
 }
 
 type MetricRow = (String, Option<f64>, String, Option<bool>, Option<String>);
@@ -110,8 +114,10 @@ pub(super) struct AttemptRow {
     synced_ns: Option<i64>,
     sync_error: Option<String>,
     station: Option<String>,
+    mode: Option<String>,
+    device: Option<String>,
 }
-pub(super) const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error, station FROM attempts";
+pub(super) const ATTEMPT_COLUMNS: &str = "SELECT id, trainee_id, exercise_id, recording_path, started_ns, ended_ns, status, expert, scored, score, passed, note, recording_sha256, rrd_sha256, uuid, synced_ns, sync_error, station, mode, device FROM attempts";
 
 pub(super) fn attempt(r: AttemptRow) -> Result<Attempt> {
     Ok(Attempt {
@@ -133,6 +139,8 @@ pub(super) fn attempt(r: AttemptRow) -> Result<Attempt> {
         synced_ns: r.synced_ns,
         sync_error: r.sync_error,
         station: r.station,
+        mode: r.mode,
+        device: r.device,
     })
 }
 
@@ -167,6 +175,95 @@ pub struct Outcome {
     pub proficiency: ProficiencyRecord,
 }
 
+/// Scores attempt `$attempt_id` (of `$trainee_id` at `$exercise_id`, not yet complete) in
+/// the open write transaction `$tx`: the verdict and metrics stored, the attempt marked
+/// complete, the trainee's proficiency re-derived; evaluates to the new
+/// [`ProficiencyRecord`]. A macro, as the transaction's type differs per engine
+/// ([`crate::on_db!`]); used by [`Store::finish_attempt_noted`] and by a hub's import, which
+/// inserts the attempt in the same transaction.
+macro_rules! score_in_tx {
+    ($tx:ident, $attempt_id:expr, $trainee_id:expr, $exercise_id:expr, $verdict:expr, $metrics:expr, $note:expr) => {{
+        let (attempt_id, trainee_id, exercise_id): (i64, i64, i64) =
+            ($attempt_id, $trainee_id, $exercise_id);
+        let verdict: &crate::proficiency::Verdict = $verdict;
+        let metrics: &[MetricValue] = $metrics;
+        let note: Option<&str> = $note;
+        // the trainee's proficiency row first, locked (PostgreSQL: a row lock until
+        // commit, so a second scoring of the same trainee and exercise waits and then
+        // reads this one's history; SQLite holds the whole database already)
+        sqlx::query(
+            "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, cusum, updated_ns) \
+             VALUES ($1, $2, 0, 0, 0, FALSE, 0, $3) \
+             ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET updated_ns = proficiency.updated_ns",
+        )
+        .bind(trainee_id)
+        .bind(exercise_id)
+        .bind(now_ns())
+        .execute(&mut *$tx)
+        .await?;
+        let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, $1), scored = TRUE, score = $2, passed = $3, note = COALESCE($4, note) WHERE id = $5 AND status <> 'complete'")
+            .bind(now_ns())
+            .bind(verdict.score)
+            .bind(verdict.pass)
+            .bind(note)
+            .bind(attempt_id)
+            .execute(&mut *$tx)
+            .await?;
+        if done.rows_affected() == 0 {
+            return Err(AssessError::Conflict(format!(
+                "attempt {attempt_id} is already scored"
+            )));
+        }
+        sqlx::query("DELETE FROM metric_results WHERE attempt_id = $1")
+            .bind(attempt_id)
+            .execute(&mut *$tx)
+            .await?;
+        for m in metrics {
+            let passed = verdict
+                .metrics
+                .iter()
+                .find(|v| v.key == m.key)
+                .map(|v| v.pass);
+            sqlx::query("INSERT INTO metric_results (attempt_id, metric, value, unit, passed, missing) VALUES ($1, $2, $3, $4, $5, $6)")
+                .bind(attempt_id)
+                .bind(&m.key)
+                .bind(m.value.filter(|v| v.is_finite()))
+                .bind(&m.unit)
+                .bind(passed)
+                .bind(&m.missing)
+                .execute(&mut *$tx)
+                .await
+                .map_err(super::conflict(|| format!("metric {:?} given twice", m.key)))?;
+        }
+        let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = $1 AND exercise_id = $2 AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
+            .bind(trainee_id)
+            .bind(exercise_id)
+            .fetch_all(&mut *$tx)
+            .await?;
+        let record = crate::store::attempts::proficiency_of(trainee_id, exercise_id, &history)?;
+        sqlx::query(
+            "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum, updated_ns) \
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) \
+             ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET attempts = excluded.attempts, passes = excluded.passes, \
+             consecutive_passes = excluded.consecutive_passes, proficient = excluded.proficient, \
+             proficient_attempt_id = excluded.proficient_attempt_id, cusum = excluded.cusum, updated_ns = excluded.updated_ns",
+        )
+        .bind(record.trainee_id)
+        .bind(record.exercise_id)
+        .bind(i64::from(record.state.attempts))
+        .bind(i64::from(record.state.passes))
+        .bind(i64::from(record.state.consecutive_passes))
+        .bind(record.state.proficient)
+        .bind(record.proficient_attempt_id)
+        .bind(record.cusum)
+        .bind(now_ns())
+        .execute(&mut *$tx)
+        .await?;
+        record
+    }};
+}
+pub(super) use score_in_tx;
+
 impl Store {
     /// Records the start of an attempt (status `running`).
     pub async fn start_attempt(
@@ -187,6 +284,16 @@ impl Store {
             .bind(super::hub::new_uuid()?)
             .fetch_one(pool).await)?;
         self.get_attempt(id).await
+    }
+
+    /// Records how a station attempt is made: `mode` (`guided` or `exam`) and `device`.
+    pub async fn set_attempt_setup(&self, id: i64, mode: &str, device: &str) -> Result<()> {
+        crate::on_db!(&self.db, pool => sqlx::query("UPDATE attempts SET mode = $1, device = $2 WHERE id = $3")
+            .bind(mode)
+            .bind(device)
+            .bind(id)
+            .execute(pool).await.map(|_| ()))?;
+        Ok(())
     }
 
     pub async fn get_attempt(&self, id: i64) -> Result<Attempt> {
@@ -298,77 +405,7 @@ impl Store {
         let verdict = thresholds.verdict(metrics);
         let record = crate::on_db!(&self.db, pool => {
             let mut tx = pool.begin_write().await?;
-            // the trainee's proficiency row first, locked (PostgreSQL: a row lock until
-            // commit, so a second scoring of the same trainee and exercise waits and then
-            // reads this one's history; SQLite holds the whole database already)
-            sqlx::query(
-                "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, cusum, updated_ns) \
-                 VALUES ($1, $2, 0, 0, 0, FALSE, 0, $3) \
-                 ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET updated_ns = proficiency.updated_ns",
-            )
-            .bind(a.trainee_id)
-            .bind(a.exercise_id)
-            .bind(now_ns())
-            .execute(&mut *tx)
-            .await?;
-            let done = sqlx::query("UPDATE attempts SET status = 'complete', ended_ns = COALESCE(ended_ns, $1), scored = TRUE, score = $2, passed = $3, note = COALESCE($4, note) WHERE id = $5 AND status <> 'complete'")
-                .bind(now_ns())
-                .bind(verdict.score)
-                .bind(verdict.pass)
-                .bind(note)
-                .bind(attempt_id)
-                .execute(&mut *tx)
-                .await?;
-            if done.rows_affected() == 0 {
-                return Err(AssessError::Conflict(format!(
-                    "attempt {attempt_id} is already scored"
-                )));
-            }
-            sqlx::query("DELETE FROM metric_results WHERE attempt_id = $1")
-                .bind(attempt_id)
-                .execute(&mut *tx)
-                .await?;
-            for m in metrics {
-                let passed = verdict
-                    .metrics
-                    .iter()
-                    .find(|v| v.key == m.key)
-                    .map(|v| v.pass);
-                sqlx::query("INSERT INTO metric_results (attempt_id, metric, value, unit, passed, missing) VALUES ($1, $2, $3, $4, $5, $6)")
-                    .bind(attempt_id)
-                    .bind(&m.key)
-                    .bind(m.value.filter(|v| v.is_finite()))
-                    .bind(&m.unit)
-                    .bind(passed)
-                    .bind(&m.missing)
-                    .execute(&mut *tx)
-                    .await
-                    .map_err(super::conflict(|| format!("metric {:?} given twice", m.key)))?;
-            }
-            let history: Vec<(i64, bool)> = sqlx::query_as("SELECT id, passed FROM attempts WHERE trainee_id = $1 AND exercise_id = $2 AND status = 'complete' AND scored = TRUE ORDER BY started_ns, id")
-                .bind(a.trainee_id)
-                .bind(a.exercise_id)
-                .fetch_all(&mut *tx)
-                .await?;
-            let record = proficiency_of(a.trainee_id, a.exercise_id, &history)?;
-            sqlx::query(
-                "INSERT INTO proficiency (trainee_id, exercise_id, attempts, passes, consecutive_passes, proficient, proficient_attempt_id, cusum, updated_ns) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) \
-                 ON CONFLICT (trainee_id, exercise_id) DO UPDATE SET attempts = excluded.attempts, passes = excluded.passes, \
-                 consecutive_passes = excluded.consecutive_passes, proficient = excluded.proficient, \
-                 proficient_attempt_id = excluded.proficient_attempt_id, cusum = excluded.cusum, updated_ns = excluded.updated_ns",
-            )
-            .bind(record.trainee_id)
-            .bind(record.exercise_id)
-            .bind(i64::from(record.state.attempts))
-            .bind(i64::from(record.state.passes))
-            .bind(i64::from(record.state.consecutive_passes))
-            .bind(record.state.proficient)
-            .bind(record.proficient_attempt_id)
-            .bind(record.cusum)
-            .bind(now_ns())
-            .execute(&mut *tx)
-            .await?;
+            let record = score_in_tx!(tx, attempt_id, a.trainee_id, a.exercise_id, &verdict, metrics, note);
             tx.commit().await?;
             record
         });
@@ -483,7 +520,7 @@ impl Store {
     }
 }
 
-fn proficiency_of(
+pub(super) fn proficiency_of(
     trainee_id: i64,
     exercise_id: i64,
     history: &[(i64, bool)],

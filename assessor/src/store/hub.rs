@@ -5,8 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::attempts::{ATTEMPT_COLUMNS, Attempt, AttemptRow, AttemptStatus, attempt};
-use super::{Role, Store, now_ns};
+use super::attempts::{ATTEMPT_COLUMNS, Attempt, AttemptRow, AttemptStatus, attempt, score_in_tx};
+use super::{BeginWrite, Role, Store, now_ns};
 use crate::error::{AssessError, Result};
 use crate::metrics::MetricValue;
 use crate::recordings::is_sha256_hex;
@@ -57,12 +57,27 @@ pub struct AttemptUpload {
     pub metrics: Vec<MetricValue>,
 }
 
+/// The earliest time an attempt may have started: 2020-01-01 (cutlab did not exist).
+const EARLIEST_NS: i64 = 1_577_836_800 * 1_000_000_000;
+/// The longest an attempt may last.
+pub const MAX_ATTEMPT_NS: i64 = 24 * 3600 * 1_000_000_000;
+/// How far ahead of the hub's clock a station's may be.
+pub const CLOCK_SKEW_NS: i64 = 10 * 60 * 1_000_000_000;
+/// The longest note an upload may carry, in characters.
+const MAX_NOTE_CHARS: usize = 4000;
+
 impl AttemptUpload {
-    /// Refuses what a hub must never store: a malformed id or key, a running attempt.
-    pub fn validate(&self) -> Result<()> {
+    /// Refuses what a hub must never store: a malformed id or key, a running attempt, times
+    /// out of order, in the future or before 2020, names that are no user's names, unknown,
+    /// repeated, non-finite or physically impossible metrics ([`check_metric`]). `now_ns` is
+    /// the hub's clock.
+    pub fn validate(&self, now_ns: i64) -> Result<()> {
         let bad = |m: String| Err(AssessError::InvalidInput(m));
         if !is_uuid(&self.uuid) {
-            return bad(format!("{:?} is not an attempt id (a UUID)", self.uuid));
+            return bad(format!(
+                "{:?} is not an attempt id (a UUID)",
+                short(&self.uuid)
+            ));
         }
         if self.status == AttemptStatus::Running {
             return bad(format!("attempt {} has not ended", self.uuid));
@@ -72,26 +87,107 @@ impl AttemptUpload {
             .flatten()
         {
             if !is_sha256_hex(key) {
-                return bad(format!("{key:?} is not a recording key (SHA-256)"));
+                return bad(format!("{:?} is not a recording key (SHA-256)", short(key)));
             }
         }
-        for (what, name) in [("trainee", &self.trainee), ("exercise", &self.exercise)] {
-            if name.trim().is_empty() || name.trim() != name.as_str() {
-                return bad(format!("the {what}'s name {name:?}"));
-            }
+        if super::names::check_name(&self.trainee)? != self.trainee {
+            return bad(format!("the trainee's name {:?}", short(&self.trainee)));
+        }
+        if self.exercise.trim().is_empty() || self.exercise.len() > 200 {
+            return bad(format!("the exercise's name {:?}", short(&self.exercise)));
+        }
+        if self
+            .note
+            .as_ref()
+            .is_some_and(|n| n.chars().count() > MAX_NOTE_CHARS)
+        {
+            return bad(format!("a note longer than {MAX_NOTE_CHARS} characters"));
         }
         if self.expert {
             // an expert's reference attempt sets the exercise's thresholds: recorded on the
             // hub itself, never uploaded with a station's token
             return bad("expert reference attempts are not taken from stations".into());
         }
+        self.check_times(now_ns)?;
+        if self.status == AttemptStatus::Complete && self.recording_sha256.is_none() {
+            return bad("a complete attempt comes with its recording (the hub scores it)".into());
+        }
+        if self.metrics.len() > crate::metrics::METRICS.len() {
+            return bad(format!(
+                "{} metrics: more than there are",
+                self.metrics.len()
+            ));
+        }
         let mut keys: Vec<&str> = self.metrics.iter().map(|m| m.key.as_str()).collect();
         keys.sort_unstable();
         if let Some(w) = keys.windows(2).find(|w| w[0] == w[1]) {
             return bad(format!("metric {:?} given twice", w[0]));
         }
-        Ok(())
+        self.metrics.iter().try_for_each(check_metric)
     }
+
+    /// Started after 2020 and not in the future, ended after it started, within a day.
+    fn check_times(&self, now_ns: i64) -> Result<()> {
+        let latest = now_ns.saturating_add(CLOCK_SKEW_NS);
+        let ended = self.ended_ns.ok_or_else(|| {
+            AssessError::InvalidInput(format!("attempt {} has no end time", self.uuid))
+        })?;
+        let why = if !(EARLIEST_NS..=latest).contains(&self.started_ns) {
+            "started before 2020 or in the future"
+        } else if ended < self.started_ns {
+            "ended before it started"
+        } else if ended > latest {
+            "ended in the future"
+        } else if ended - self.started_ns > MAX_ATTEMPT_NS {
+            "lasted more than a day"
+        } else {
+            return Ok(());
+        };
+        Err(AssessError::InvalidInput(format!(
+            "attempt {} {why} (started {}, ended {})",
+            self.uuid, self.started_ns, ended
+        )))
+    }
+}
+
+/// At most 64 characters of `s`, for an error message about a value a client sent.
+fn short(s: &str) -> String {
+    s.chars().take(64).collect()
+}
+
+/// A metric a station may send: in the catalogue, in its unit, finite, and within what is
+/// physically possible for its unit (lengths within 10 m, times within a day, forces within
+/// 1 kN, angles within a turn; times, forces, areas and one-sided lengths not negative).
+pub fn check_metric(m: &MetricValue) -> Result<()> {
+    let bad = |why: &str| {
+        Err(AssessError::InvalidInput(format!(
+            "metric {:?}: {why}",
+            short(&m.key)
+        )))
+    };
+    let Some(def) = crate::metrics::metric(&m.key) else {
+        return bad("not a metric of this hub");
+    };
+    if m.unit != def.unit {
+        return bad(&format!("unit {:?}, not {:?}", short(&m.unit), def.unit));
+    }
+    if m.missing.as_ref().is_some_and(|w| w.len() > 500) {
+        return bad("a reason longer than 500 bytes");
+    }
+    let Some(v) = m.value else { return Ok(()) };
+    let (limit, signed) = match def.unit {
+        "m" => (10.0, def.better == crate::metrics::Better::TwoSided),
+        "s" => (86_400.0, false),
+        "N" => (1_000.0, false),
+        "m^2" => (100.0, false),
+        "deg" => (360.0, true),
+        "rad" => (1e4, false),
+        _ => (1e6, true),
+    };
+    if !v.is_finite() || v.abs() > limit || (!signed && v < 0.0) {
+        return bad(&format!("{v} {} is not possible", def.unit));
+    }
+    Ok(())
 }
 
 /// What a hub did with an upload.
@@ -190,18 +286,42 @@ impl Store {
         })
     }
 
-    /// Takes an attempt uploaded by `station`: once per global id (a second upload answers
-    /// with the attempt already there), the trainee created (without a password) if the hub
-    /// does not know them (a name the hub gives an instructor or administrator is refused),
-    /// the exercise the hub's own (unknown: an error), a complete attempt scored against the
-    /// hub's thresholds. The recordings' keys are taken as given: the caller checks they are
-    /// in its recording store.
-    pub async fn import_attempt(&self, up: &AttemptUpload, station: &str) -> Result<Imported> {
-        up.validate()?;
-        if let Ok(a) = self.attempt_by_uuid(&up.uuid).await {
-            // a retry; or the first upload stopped between insert and scoring
+    /// The attempt with global id `uuid` if the hub holds it, as a retry of `station`'s
+    /// sees it: `Ok(None)` if absent, a [`AssessError::Conflict`] if another station (or this
+    /// hub itself) recorded it.
+    pub async fn imported_by(&self, uuid: &str, station: &str) -> Result<Option<Attempt>> {
+        match self.attempt_by_uuid(uuid).await {
+            Ok(a) if a.station.as_deref() == Some(station) => Ok(Some(a)),
+            Ok(_) => Err(AssessError::Conflict(format!(
+                "attempt {uuid} belongs to another station"
+            ))),
+            Err(AssessError::NotFound(_)) => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Takes an attempt uploaded by `station`, in one transaction (a crash leaves it absent
+    /// or whole): once per global id (a retry answers with the attempt the hub holds; another
+    /// station's id is a conflict), the trainee created (without a password) if the hub does
+    /// not know them (a name the hub gives an instructor or administrator, or one that looks
+    /// like another user's, is refused), the exercise the hub's own (unknown: an error). A
+    /// complete attempt is scored with `metrics`, which the caller measured from the
+    /// attempt's recording (the station's own are checked, [`AttemptUpload::validate`], and
+    /// not used), against the hub's thresholds; its recording may score no other attempt.
+    /// The recordings' keys are taken as given: the caller checks that `station` uploaded
+    /// them.
+    pub async fn import_attempt(
+        &self,
+        up: &AttemptUpload,
+        station: &str,
+        metrics: &[MetricValue],
+    ) -> Result<Imported> {
+        up.validate(now_ns())?;
+        if let Some(a) = self.imported_by(&up.uuid, station).await? {
+            // a retry; or a hub from before imports were one transaction stopped between
+            // its insert and its scoring
             return Ok(Imported {
-                attempt: self.end_imported(a, up).await?,
+                attempt: self.end_imported(a, up, metrics).await?,
                 created: false,
             });
         }
@@ -215,55 +335,111 @@ impl Store {
             }
             Err(e) => return Err(e),
         };
-        let trainee = match self.user_by_name(&up.trainee).await {
-            Ok(u) => u,
-            Err(AssessError::NotFound(_)) => {
-                match self.create_user(&up.trainee, Role::Trainee, None).await {
-                    Ok(u) => u,
-                    // made meanwhile by another upload
-                    Err(AssessError::Conflict(_)) => self.user_by_name(&up.trainee).await?,
-                    Err(e) => return Err(e),
-                }
-            }
-            Err(e) => return Err(e),
-        };
+        let trainee = self.trainee_named(&up.trainee).await?;
         if trainee.role != Role::Trainee {
             return Err(AssessError::InvalidInput(format!(
                 "{:?} is not a trainee on this hub",
                 up.trainee
             )));
         }
-        let id: Option<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar(
-            "INSERT INTO attempts (trainee_id, exercise_id, started_ns, ended_ns, status, expert, note, recording_sha256, rrd_sha256, uuid, station) \
-             VALUES ($1, $2, $3, $4, 'running', $5, $6, $7, $8, $9, $10) ON CONFLICT (uuid) DO NOTHING RETURNING id")
-            .bind(trainee.id)
-            .bind(exercise.id)
-            .bind(up.started_ns)
-            .bind(up.ended_ns)
-            .bind(up.expert)
-            .bind(&up.note)
-            .bind(&up.recording_sha256)
-            .bind(&up.rrd_sha256)
-            .bind(&up.uuid)
-            .bind(station)
-            .fetch_optional(pool).await)?;
+        let verdict = match up.status {
+            AttemptStatus::Complete => Some(self.thresholds(exercise.id).await?.verdict(metrics)),
+            _ => None,
+        };
+        let id = self
+            .insert_imported(
+                up,
+                station,
+                trainee.id,
+                exercise.id,
+                verdict.as_ref(),
+                metrics,
+            )
+            .await?;
         let a = self.attempt_by_uuid(&up.uuid).await?;
+        if id.is_none() && a.station.as_deref() != Some(station) {
+            return Err(AssessError::Conflict(format!(
+                "attempt {} belongs to another station",
+                up.uuid
+            )));
+        }
         Ok(Imported {
             created: id == Some(a.id),
-            attempt: self.end_imported(a, up).await?,
+            attempt: a,
         })
     }
 
-    /// Ends an imported attempt as it ended on its station, unless that is done.
-    async fn end_imported(&self, a: Attempt, up: &AttemptUpload) -> Result<Attempt> {
+    /// Inserts an imported attempt as it ended, scored with `verdict` when complete, in one
+    /// transaction; `None` if the id was taken meanwhile (a concurrent upload).
+    async fn insert_imported(
+        &self,
+        up: &AttemptUpload,
+        station: &str,
+        trainee_id: i64,
+        exercise_id: i64,
+        verdict: Option<&crate::proficiency::Verdict>,
+        metrics: &[MetricValue],
+    ) -> Result<Option<i64>> {
+        let note = match up.status {
+            AttemptStatus::Failed if up.note.is_none() => Some("failed on its station"),
+            _ => up.note.as_deref(),
+        };
+        // complete once scored, below, in the same transaction
+        let status = match up.status {
+            AttemptStatus::Complete => AttemptStatus::Running,
+            s => s,
+        };
+        let id = crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            if let Some(key) = &up.recording_sha256 {
+                let other: Option<String> = sqlx::query_scalar("SELECT uuid FROM attempts WHERE recording_sha256 = $1 AND uuid <> $2")
+                    .bind(key)
+                    .bind(&up.uuid)
+                    .fetch_optional(&mut *tx)
+                    .await?;
+                if other.is_some() {
+                    return Err(AssessError::Conflict(format!(
+                        "recording {key} is another attempt's"
+                    )));
+                }
+            }
+            let id: Option<i64> = sqlx::query_scalar(
+                "INSERT INTO attempts (trainee_id, exercise_id, started_ns, ended_ns, status, expert, note, recording_sha256, rrd_sha256, uuid, station) \
+                 VALUES ($1, $2, $3, $4, $5, FALSE, $6, $7, $8, $9, $10) ON CONFLICT (uuid) DO NOTHING RETURNING id")
+                .bind(trainee_id)
+                .bind(exercise_id)
+                .bind(up.started_ns)
+                .bind(up.ended_ns)
+                .bind(status.as_str())
+                .bind(note)
+                .bind(&up.recording_sha256)
+                .bind(&up.rrd_sha256)
+                .bind(&up.uuid)
+                .bind(station)
+                .fetch_optional(&mut *tx)
+                .await?;
+            if let (Some(id), Some(verdict)) = (id, verdict) {
+                score_in_tx!(tx, id, trainee_id, exercise_id, verdict, metrics, None);
+            }
+            tx.commit().await?;
+            id
+        });
+        Ok(id)
+    }
+
+    /// Ends an imported attempt as it ended on its station, unless that is done (an attempt
+    /// a hub from before one-transaction imports left running).
+    async fn end_imported(
+        &self,
+        a: Attempt,
+        up: &AttemptUpload,
+        metrics: &[MetricValue],
+    ) -> Result<Attempt> {
         if a.status != AttemptStatus::Running {
             return Ok(a);
         }
         let ended = match up.status {
-            AttemptStatus::Complete => self
-                .finish_attempt(a.id, &up.metrics)
-                .await
-                .map(|o| o.attempt),
+            AttemptStatus::Complete => self.finish_attempt(a.id, metrics).await.map(|o| o.attempt),
             AttemptStatus::Incomplete => self.mark_incomplete(a.id, up.note.as_deref()).await,
             AttemptStatus::Failed | AttemptStatus::Running => {
                 let reason = up.note.as_deref().unwrap_or("failed on its station");
@@ -283,6 +459,25 @@ impl Store {
             }
             Err(e) => Err(e),
         }
+    }
+
+    /// Records that `station` uploaded the recording `sha256`; `false` if it had already.
+    pub async fn own_recording(&self, sha256: &str, station: &str) -> Result<bool> {
+        let done = crate::on_db!(&self.db, pool => sqlx::query("INSERT INTO recording_owners (sha256, station, uploaded_ns) VALUES ($1, $2, $3) ON CONFLICT (sha256, station) DO NOTHING")
+            .bind(sha256)
+            .bind(station)
+            .bind(now_ns())
+            .execute(pool).await.map(|r| r.rows_affected()))?;
+        Ok(done > 0)
+    }
+
+    /// Whether `station` uploaded the recording `sha256`.
+    pub async fn owns_recording(&self, sha256: &str, station: &str) -> Result<bool> {
+        let n: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT COUNT(*) FROM recording_owners WHERE sha256 = $1 AND station = $2")
+            .bind(sha256)
+            .bind(station)
+            .fetch_one(pool).await)?;
+        Ok(n > 0)
     }
 
     /// A new station token `name`: the token, shown once (the hub keeps its hash).
@@ -328,16 +523,40 @@ impl Store {
         Ok(rows.into_iter().map(station_token).collect())
     }
 
-    /// The station whose valid (not revoked) token is `token`, its use recorded; `None`
-    /// for any other string.
+    /// The station whose valid (not revoked) token is `token`, its use recorded (at most
+    /// once a minute: a read does not wait for the write lock); `None` for any other string.
     pub async fn station_by_token(&self, token: &str) -> Result<Option<StationToken>> {
-        let row: Option<TokenRow> = crate::on_db!(&self.db, pool => sqlx::query_as("UPDATE station_tokens SET last_used_ns = $1 WHERE token_hash = $2 AND revoked_ns IS NULL RETURNING id, name, created_ns, revoked_ns, last_used_ns")
-            .bind(now_ns())
+        let row: Option<TokenRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, created_ns, revoked_ns, last_used_ns FROM station_tokens WHERE token_hash = $1 AND revoked_ns IS NULL")
             .bind(token_hash(token))
             .fetch_optional(pool).await)?;
-        Ok(row.map(station_token))
+        let Some(mut station) = row.map(station_token) else {
+            return Ok(None);
+        };
+        let now = now_ns();
+        if station
+            .last_used_ns
+            .is_none_or(|t| now.saturating_sub(t) > LAST_USED_EVERY_NS)
+        {
+            crate::on_db!(&self.db, pool => sqlx::query("UPDATE station_tokens SET last_used_ns = $1 WHERE id = $2")
+                .bind(now)
+                .bind(station.id)
+                .execute(pool).await.map(|_| ()))?;
+            station.last_used_ns = Some(now);
+        }
+        Ok(Some(station))
+    }
+
+    /// Whether station `id`'s token is still valid (not revoked since it was checked).
+    pub async fn station_token_valid(&self, id: i64) -> Result<bool> {
+        let row: Option<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT id FROM station_tokens WHERE id = $1 AND revoked_ns IS NULL")
+            .bind(id)
+            .fetch_optional(pool).await)?;
+        Ok(row.is_some())
     }
 }
+
+/// How often a token's `last_used_ns` is written.
+const LAST_USED_EVERY_NS: i64 = 60 * 1_000_000_000;
 
 #[cfg(test)]
 mod tests {

@@ -15,6 +15,7 @@ mod curricula;
 mod db;
 mod exercises;
 mod hub;
+mod names;
 mod users;
 
 use std::path::PathBuf;
@@ -33,6 +34,7 @@ pub(crate) use db::BeginWrite;
 pub use db::{Db, DbLocation, TEST_POSTGRES_ENV, scratch_postgres, test_postgres};
 pub use exercises::{Exercise, ExerciseEdit, NewExercise, ThresholdSource};
 pub use hub::{AttemptUpload, Imported, StationToken, is_uuid, new_uuid};
+pub use names::{MAX_NAME_CHARS, check_name, printable, skeleton};
 pub use users::{Role, User};
 
 use crate::error::{AssessError, Result};

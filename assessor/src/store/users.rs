@@ -86,10 +86,8 @@ impl Store {
         role: Role,
         password: Option<&str>,
     ) -> Result<User> {
-        let name = name.trim();
-        if name.is_empty() {
-            return Err(AssessError::InvalidInput("empty user name".into()));
-        }
+        let name = super::names::check_name(name)?;
+        self.refuse_look_alike(name).await?;
         let hash = password.map(hash_password).transpose()?;
         let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO users (name, role, password_hash, created_ns) VALUES ($1, $2, $3, $4) RETURNING id")
             .bind(name)
@@ -99,6 +97,23 @@ impl Store {
             .fetch_one(pool).await)
             .map_err(conflict(|| format!("a user named {name:?} exists")))?;
         self.get_user(id).await
+    }
+
+    /// Refuses a new name that looks like another user's ([`super::names::skeleton`]):
+    /// `DR-KIM` beside the instructor `dr-kim`. The same name is left to the unique index.
+    async fn refuse_look_alike(&self, name: &str) -> Result<()> {
+        let names: Vec<String> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT name FROM users")
+            .fetch_all(pool).await)?;
+        let key = super::names::skeleton(name);
+        match names
+            .iter()
+            .find(|n| n.as_str() != name && super::names::skeleton(n) == key)
+        {
+            Some(other) => Err(AssessError::Conflict(format!(
+                "the user name {name:?} looks like the existing {other:?}"
+            ))),
+            None => Ok(()),
+        }
     }
 
     /// The user with `id`.

@@ -127,10 +127,13 @@ pub async fn session_layer(State(state): State<AppState>, req: Request, next: Ne
         None => None,
     };
     let mut req = req;
-    // `/login` has its own double-submit token (there may be no session yet)
+    // `/login` has its own double-submit token (there may be no session yet); the hub's
+    // uploads take a station's bearer token and no session, so a cookie sent along is
+    // no authority there and its CSRF check (which reads a form body) is not theirs
     if let Some(s) = &session
         && is_state_changing(req.method())
         && req.uri().path() != "/login"
+        && !req.uri().path().starts_with("/api/hub/")
     {
         req = match check_csrf(req, &s.csrf).await {
             Ok(r) => r,

@@ -199,3 +199,30 @@ pub async fn count(store: &Store, table: &str) -> i64 {
     })
     .unwrap()
 }
+
+/// `n` real, whole recordings in `dir` (`real-<k>.mcap`): the synthetic expert cutting the
+/// chest wall for 0.3 s of simulated time, seeded by `k` so each is its own. What a hub
+/// takes as a complete attempt's recording (it scores it).
+pub async fn real_recordings(dir: &std::path::Path, n: usize) -> Vec<std::path::PathBuf> {
+    let dir = dir.to_owned();
+    tokio::task::spawn_blocking(move || {
+        use cutlab_sim::scene::{BuildOptions, Scene};
+        let scene = Scene::load("chest-wall", BuildOptions::default()).unwrap();
+        (0..n)
+            .map(|k| {
+                let path = dir.join(format!("real-{k}.mcap"));
+                cutlab_recorder::record::record_expert(
+                    &scene,
+                    "chest-wall",
+                    0.3,
+                    k as u64 + 1,
+                    &path,
+                )
+                .unwrap();
+                path
+            })
+            .collect()
+    })
+    .await
+    .unwrap()
+}
