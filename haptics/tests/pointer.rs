@@ -193,9 +193,10 @@ fn a_non_finite_sample_faults_the_device_for_good() {
 }
 
 #[test]
-fn a_stalled_page_holds_the_pose_then_times_out() {
+fn a_stalled_page_pauses_the_blade_then_ends_after_the_absence() {
     let (mut d, feed) = device(PointerOptions {
         timeout_s: 0.2,
+        absence_s: 1.0,
         ..PointerOptions::default()
     });
     feed.push(on_line(0.0, 0.0)).expect("queued");
@@ -208,19 +209,63 @@ fn a_stalled_page_holds_the_pose_then_times_out() {
         }
     }
     assert!(count(&d.counters().held_ticks) > 150);
-    match read(&mut d, 201) {
-        Err(DeviceFault::Stale { age_nanos }) => assert!(age_nanos > 200_000_000),
-        other => panic!("expected a stale fault, got {other:?}"),
+    // past the timeout: paused (stale, the servo holds the pose and fades the force), not
+    // ended
+    for tick in 201..1000 {
+        match read(&mut d, tick) {
+            Err(DeviceFault::Stale { age_nanos }) => assert!(age_nanos > 200_000_000),
+            other => panic!("tick {tick}: expected a pause, got {other:?}"),
+        }
     }
+    assert_eq!(d.fault(), None);
+    assert!(!d.ends_session(), "a pause does not end the session");
+    assert!(count(&d.counters().paused_ticks) >= 799);
+    // past the absence: the page is gone, the session ends
+    assert!(matches!(read(&mut d, 1001), Err(DeviceFault::Stale { .. })));
     assert_eq!(d.fault(), Some(PointerFault::TimedOut));
     assert_eq!(feed.fault(), Some(PointerFault::TimedOut));
     assert!(d.ends_session(), "a lost page ends the session");
-    // a sample after the timeout does not bring it back: the session's input was lost
+    // a sample after the absence does not bring it back: the session's input was lost
     assert_eq!(
-        feed.push(on_line(500.0, 0.0)),
+        feed.push(on_line(5000.0, 0.0)),
         Err(PushError::Faulted(PointerFault::TimedOut))
     );
-    assert!(matches!(read(&mut d, 202), Err(DeviceFault::Stale { .. })));
+}
+
+#[test]
+fn a_page_back_after_a_pause_plays_on_even_with_its_clock_started_again() {
+    let (mut d, feed) = device(PointerOptions::default());
+    // the page samples every 10 ms for 300 ms, goes away for 2 s (a hidden tab), then comes
+    // back reloaded: its clock starts again near zero, a long way from where it was
+    for tick in 0..300u64 {
+        if tick % 10 == 0 {
+            feed.push(on_line(1000.0 + tick as f64, tick as f64 * 1e-4))
+                .expect("queued");
+        }
+        assert!(read(&mut d, tick).is_ok(), "tick {tick}");
+    }
+    for tick in 300..2300u64 {
+        let r = read(&mut d, tick);
+        assert!(
+            tick < 900 || matches!(r, Err(DeviceFault::Stale { .. })),
+            "tick {tick}: {r:?}"
+        );
+    }
+    assert!(count(&d.counters().paused_ticks) > 1000);
+    for tick in 2300..2600u64 {
+        if tick % 10 == 0 {
+            let page_ms = (tick - 2300) as f64 + 5.0;
+            feed.push(on_line(page_ms, 0.05 + page_ms * 1e-5))
+                .expect("queued");
+        }
+        let r = read(&mut d, tick);
+        assert!(r.is_ok(), "tick {tick}: {r:?}");
+    }
+    assert_eq!(d.fault(), None);
+    assert_eq!(count(&d.counters().resumes), 1);
+    assert_eq!(count(&d.counters().dropped_out_of_order), 0);
+    // it plays the new samples: near the last one, the delay behind
+    assert!((x_at(&mut d, 2600) - (0.05 + 265.0 * 1e-5)).abs() < 1e-3);
 }
 
 #[test]
@@ -399,6 +444,10 @@ fn options_are_checked() {
         },
         PointerOptions {
             max_lag_s: 0.01,
+            ..PointerOptions::default()
+        },
+        PointerOptions {
+            absence_s: 0.1,
             ..PointerOptions::default()
         },
         PointerOptions {

@@ -30,6 +30,10 @@ pub const KIND_FRAME: u8 = 2;
 pub const FRAME_HEADER_BYTES: usize = 4 + 4 + 8 + 8 + 12 + 16 + 12;
 /// The longest text message the server reads from a page.
 pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
+/// The longest message the socket takes at all: a longer one closes the connection (the
+/// socket cannot skip it), and the page connects again. Between the two, a message is read
+/// and dropped, the connection kept.
+pub const MAX_WIRE_MESSAGE_BYTES: usize = 1 << 20;
 
 /// A topology message for `topology`.
 pub fn encode_topology(topology: &Topology) -> Vec<u8> {

@@ -10,7 +10,8 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
@@ -63,6 +64,9 @@ pub struct StationSettings {
     pub recordings: Option<cutlab_assessor::recordings::RecordingStore>,
     /// The hub each ended attempt is sent to (with the rest of the queue); `None`: none.
     pub hub: Option<crate::sync::Hub>,
+    /// How long a session goes on without its page (a reload, a lost network, a hidden tab
+    /// that sends nothing) before it ends incomplete, s. Shorter gaps pause the blade.
+    pub absence_s: f64,
 }
 
 impl StationSettings {
@@ -81,6 +85,7 @@ impl StationSettings {
             igtl: IgtlOptions::default(),
             recordings: None,
             hub: None,
+            absence_s: 30.0,
         }
     }
 
@@ -119,31 +124,88 @@ pub struct StartRequest {
     pub guided: bool,
 }
 
-/// How a running session is asked to end, and how it did.
-#[derive(Debug, Default)]
+/// How a running session is asked to end, and how it did. The pages that show it come and
+/// go (a reload, a lost network): the session ends when the trainee presses Stop, at its time
+/// limit, or when no page has been connected for longer than the absence allowed.
+#[derive(Debug)]
 pub struct Control {
     stop: AtomicBool,
     lost: AtomicBool,
+    /// Pages connected now.
+    pages: AtomicUsize,
+    /// When the last page left, nanoseconds after `epoch`; [`PRESENT`] while one is
+    /// connected (and before the first comes).
+    away_since_nanos: AtomicU64,
+    epoch: Instant,
+    absence: Duration,
 }
 
+/// [`Control::away_since_nanos`] while a page is there.
+const PRESENT: u64 = u64::MAX;
+
 impl Control {
+    /// A control that ends the session once no page has been there for `absence`.
+    pub fn new(absence: Duration) -> Self {
+        Self {
+            stop: AtomicBool::new(false),
+            lost: AtomicBool::new(false),
+            pages: AtomicUsize::new(0),
+            away_since_nanos: AtomicU64::new(PRESENT),
+            epoch: Instant::now(),
+            absence,
+        }
+    }
+
     /// The trainee pressed Stop.
     pub fn stop(&self) {
         self.stop.store(true, Ordering::Release);
     }
 
-    /// The page that drove the session went away: the attempt will be incomplete.
+    /// The session cannot go on without its page (it could not be registered): the attempt
+    /// will be incomplete.
     pub fn lose(&self) {
         self.lost.store(true, Ordering::Release);
     }
 
-    fn should_end(&self) -> bool {
-        self.stop.load(Ordering::Acquire) || self.lost.load(Ordering::Acquire)
+    /// A page connected (the first, or one back after a reload).
+    pub fn attach(&self) {
+        self.pages.fetch_add(1, Ordering::AcqRel);
+        self.away_since_nanos.store(PRESENT, Ordering::Release);
     }
 
-    /// Whether the page was lost.
+    /// A page went away; when it was the last, the absence starts counting.
+    pub fn leave(&self) {
+        if self.pages.fetch_sub(1, Ordering::AcqRel) == 1 {
+            let now = u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(PRESENT - 1);
+            self.away_since_nanos.store(now, Ordering::Release);
+        }
+    }
+
+    /// No page has been connected for longer than the absence allowed.
+    pub fn away_too_long(&self) -> bool {
+        let since = self.away_since_nanos.load(Ordering::Acquire);
+        since != PRESENT
+            && self
+                .epoch
+                .elapsed()
+                .as_nanos()
+                .saturating_sub(u128::from(since))
+                > self.absence.as_nanos()
+    }
+
+    fn should_end(&self) -> bool {
+        self.stop.load(Ordering::Acquire) || self.lost() || self.away_too_long()
+    }
+
+    /// Whether the page was lost: it could not be registered, or no page came back within
+    /// the absence allowed.
     pub fn lost(&self) -> bool {
-        self.lost.load(Ordering::Acquire)
+        self.lost.load(Ordering::Acquire) || self.away_too_long()
+    }
+
+    /// The absence allowed.
+    pub fn absence(&self) -> Duration {
+        self.absence
     }
 }
 
@@ -309,9 +371,19 @@ pub async fn start(
         ..SessionConfig::default()
     };
     config.render = config.render.with_scene_cut(&scene.spec);
+    // what the attempt records it was made with (a programme's own device: its name)
+    let device_name = match &input {
+        Input::Pointer => Some(POINTER.to_owned()),
+        Input::Spec(spec) => Some(spec.to_string()),
+        Input::Device(_) => None,
+    };
     let (device, pointer): (Box<dyn HapticDevice>, Option<PointerFeed>) = match input {
         Input::Pointer => {
-            let (device, feed) = PointerDevice::new(PointerOptions::above_entry(&plan)?)?;
+            let options = PointerOptions {
+                absence_s: settings.absence_s,
+                ..PointerOptions::above_entry(&plan)?
+            };
+            let (device, feed) = PointerDevice::new(options)?;
             (Box::new(device), Some(feed))
         }
         Input::Spec(spec) => (
@@ -320,6 +392,7 @@ pub async fn start(
         ),
         Input::Device(make) => (make(&plan)?, None),
     };
+    let device_name = device_name.unwrap_or_else(|| device.name().to_owned());
     let echo = pointer
         .clone()
         .map(|feed| Arc::new(feed) as Arc<dyn EchoSource>);
@@ -340,6 +413,8 @@ pub async fn start(
         .start_recorded_attempt(&request.exercise, &request.trainee, &mcap, false)
         .await?
         .id;
+    let mode = if guided { "guided" } else { "exam" };
+    store.set_attempt_setup(attempt, mode, &device_name).await?;
 
     let step_s = session.sim.settings.time_step_s;
     let keyframe_every_steps = ((settings.keyframe_every_s / step_s).round() as u64).max(1);
@@ -376,7 +451,7 @@ pub async fn start(
             .map_err(|e| StationError::Plan(format!("logging the plan: {e}")))?;
         observers.push(Box::new(rerun));
     }
-    let control = Arc::new(Control::default());
+    let control = Arc::new(Control::new(Duration::from_secs_f64(settings.absence_s)));
     let device = Box::new(StationDevice {
         inner: device,
         control: control.clone(),
@@ -426,9 +501,10 @@ pub async fn start(
                     // lost device does: the attempt is not scored
                     let fault = thread_pointer.as_ref().and_then(PointerFeed::fault);
                     match r.report {
-                        Ok(_) if thread_control.lost() => {
-                            Err("the station's page went away before the end".to_owned())
-                        }
+                        Ok(_) if thread_control.lost() => Err(format!(
+                            "the station's page went away and did not come back within {:.0} s",
+                            thread_control.absence().as_secs_f64()
+                        )),
                         Ok(_) if let Some(fault) = fault => {
                             Err(format!("the station's pointer failed: {fault}"))
                         }

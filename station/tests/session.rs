@@ -302,6 +302,7 @@ async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
     let store = store(dir).await;
     let settings = StationSettings {
         clock: Clock::Live,
+        absence_s: 2.0,
         ..settings(dir, 60.0)
     };
     let request = StartRequest {
@@ -316,14 +317,103 @@ async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
     let entry = running.plan.line_m[0];
     feed.push(PointerSample::new(1.0, entry.into(), 0.0, false))
         .expect("a sample");
-    // then nothing: the pointer times out, the session ends, the attempt is not scored
+    // then nothing: the blade pauses; past the absence the session ends, not scored
     let Ending::Incomplete { attempt, why } = ending(&running).await else {
         panic!("a stalled page is not scored")
     };
     assert!(why.contains("pointer failed"), "{why}");
+    assert!(
+        feed.counters()
+            .paused_ticks
+            .load(std::sync::atomic::Ordering::Relaxed)
+            > 1000
+    );
     let a = store.get_attempt(attempt).await.expect("attempt");
     assert_eq!(a.status, AttemptStatus::Incomplete);
     assert!(a.note.is_some_and(|n| n.contains("pointer")));
+    store.close().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_that_pauses_or_reconnects_keeps_its_attempt() {
+    use cutlab_haptics::device::PointerSample;
+    use std::sync::atomic::Ordering::Relaxed;
+    let dir_guard = temp_dir("paused");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
+    let settings = StationSettings {
+        clock: Clock::Live,
+        absence_s: 3.0,
+        ..settings(dir, 60.0)
+    };
+    let request = StartRequest {
+        exercise: EXERCISE.into(),
+        trainee: "ana".into(),
+        guided: true,
+    };
+    let running = run::start(store.clone(), &settings, request, Input::Pointer)
+        .await
+        .expect("started");
+    let feed = running.pointer.clone().expect("the page's pointer");
+    let line = running.plan.line_m.clone();
+    // a page at 60 Hz along the first half of the line; then it is hidden for a second and a
+    // half (nothing sent) and reloaded (its socket gone and back, its clock from zero again)
+    let send = |t0_ms: f64, from: usize, to: usize| {
+        let feed = feed.clone();
+        let line = line.clone();
+        async move {
+            for (k, p) in line[from..to].iter().enumerate() {
+                let s = PointerSample::new(t0_ms + 16.7 * k as f64, (*p).into(), 0.004, true);
+                feed.push(s).expect("a sample");
+                tokio::time::sleep(Duration::from_millis(17)).await;
+            }
+        }
+    };
+    running.control.attach();
+    send(1000.0, 0, line.len() / 2).await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    running.control.leave();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    running.control.attach();
+    send(3.0, line.len() / 2, line.len()).await;
+    assert!(running.ending.borrow().is_none(), "still running");
+    running.control.stop();
+    let Ending::Scored { attempt, .. } = ending(&running).await else {
+        panic!("a paused and reconnected page's attempt is scored")
+    };
+    assert!(feed.counters().paused_ticks.load(Relaxed) > 500);
+    assert_eq!(feed.counters().resumes.load(Relaxed), 1);
+    let a = store.get_attempt(attempt).await.expect("attempt");
+    assert_eq!(a.status, AttemptStatus::Complete);
+    store.close().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_gone_past_the_absence_ends_its_attempt_incomplete() {
+    let dir_guard = temp_dir("gone");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
+    let settings = StationSettings {
+        absence_s: 1.0,
+        clock: Clock::Live,
+        ..settings(dir, 60.0)
+    };
+    let request = StartRequest {
+        exercise: EXERCISE.into(),
+        trainee: "ana".into(),
+        guided: false,
+    };
+    let running = run::start(store.clone(), &settings, request, Input::Device(expert()))
+        .await
+        .expect("started");
+    running.control.attach();
+    running.control.leave();
+    let t0 = std::time::Instant::now();
+    let Ending::Incomplete { why, .. } = ending(&running).await else {
+        panic!("a page that never came back leaves the attempt incomplete")
+    };
+    assert!(why.contains("did not come back within 1 s"), "{why}");
+    assert!(t0.elapsed() < Duration::from_secs(20));
     store.close().await;
 }
 

@@ -40,6 +40,9 @@ pub struct AttemptPoint {
     pub status: AttemptStatus,
     pub score: Option<f64>,
     pub passed: Option<bool>,
+    /// How it was made (`guided` or `exam`, the device), for a station's attempt.
+    pub mode: Option<String>,
+    pub device: Option<String>,
 }
 
 /// The expert reference and limits of one metric.
@@ -251,6 +254,8 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
                     status: a.status,
                     score: a.score,
                     passed: a.passed,
+                    mode: a.mode.clone(),
+                    device: a.device.clone(),
                 }
             })
             .collect();

@@ -52,6 +52,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             "Trainee " a href=(format!("/trainees/{}", d.trainee.id)) { (d.trainee.name) }
             " · exercise " (d.exercise.name) " · started " (when(a.started_ns)) " UTC · " (a.status.as_str())
             @if let Some(s) = a.score { " · score " (num(Some(s), 2)) } " · " (verdict(a.passed))
+            @if let Some(mode) = &a.mode { " · " span class="setup" { (mode) @if let Some(device) = &a.device { ", " (device) } } }
             @if let Some(station) = &a.station { " · " span class="station" { "uploaded by station " (station) } }
         }
         @if let Some(n) = &a.note {

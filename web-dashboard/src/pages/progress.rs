@@ -162,13 +162,15 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
         }
         h3 { "Attempts" }
         table {
-            thead { tr { th { "#" } th { "Attempt" } th { "Started (UTC)" } th { "Status" } th { "Score" } th { "Verdict" } } }
+            thead { tr { th { "#" } th { "Attempt" } th { "Started (UTC)" } th { "Mode" } th { "Device" } th { "Status" } th { "Score" } th { "Verdict" } } }
             tbody {
                 @for a in e.attempts.iter().rev() {
                     tr {
                         td class="num" { @if let Some(n) = a.n { (n) } }
                         td { a href=(format!("/attempts/{}", a.id)) { "attempt " (a.id) } }
                         td { (when(a.started_ns)) }
+                        td { (a.mode.as_deref().unwrap_or("")) }
+                        td { (a.device.as_deref().unwrap_or("")) }
                         td { (a.status.as_str()) }
                         td class="num" { (num(a.score, 2)) }
                         td { (verdict(a.passed)) }

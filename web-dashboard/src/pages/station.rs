@@ -6,7 +6,10 @@
 //!
 //! One WebSocket per viewer (`/station/{attempt}/ws`): binary frames from the server
 //! ([`cutlab_station::protocol`]), pointer samples and Stop from the trainee's page (anything
-//! else, or longer than the limit, is dropped and counted). The upgrade checks the session
+//! else, or longer than the limit, is dropped and counted; the connection stays). A page that
+//! goes away (a reload, a lost network) does not end the attempt: the page connects again
+//! and drives on; only Stop, the time limit, or no page for the station's absence
+//! (`StationSettings::absence_s`) ends it. The upgrade checks the session
 //! cookie like every route, and the `Origin` against the `Host`, so another site's page cannot
 //! open it with the user's cookie.
 
@@ -188,6 +191,11 @@ fn config_json(r: &Running, driver: bool) -> String {
         "guided": r.guided,
         "force_limit_n": r.force_limit_newtons,
         "plan": plan,
+        // the depth the blade starts at, in exam mode too (the depth is part of the task
+        // the page states; the line is not shown)
+        "start_depth_m": r.plan.depth_m,
+        // how long the session waits for a page that lost its connection
+        "absence_s": r.control.absence().as_secs_f64(),
         "viewpoint": viewpoint,
         "up": r.plan.normals.first().map(|n| [n.x, n.y, n.z]),
         "ws": format!("/station/{}/ws", r.attempt),
@@ -267,7 +275,8 @@ async fn socket(
     let r = state.station().get(id).ok_or(AppError::NotFound)?;
     let driver = r.trainee == user.user().name;
     Ok(upgrade
-        .max_message_size(protocol::MAX_CLIENT_MESSAGE_BYTES * 4)
+        .max_message_size(protocol::MAX_WIRE_MESSAGE_BYTES)
+        .max_frame_size(protocol::MAX_WIRE_MESSAGE_BYTES)
         .on_upgrade(move |ws| serve(ws, r, driver)))
 }
 
@@ -276,6 +285,9 @@ async fn socket(
 const IDLE: Duration = Duration::from_millis(250);
 
 async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
+    if driver {
+        r.control.attach();
+    }
     let (mut tx, mut rx) = futures_util::StreamExt::split(ws);
     let mut feed = r.feed.clone();
     let mut ending = r.ending.clone();
@@ -365,17 +377,21 @@ async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
             0
         }
         dropped = &mut receiver => {
-            // the page went away: a lost device when it was the trainee's and still running
+            // the page went away: the session waits for it (the blade pauses) and ends only if
+            // none comes back within the absence allowed
             if driver && r.ending.borrow().is_none() {
-                r.control.lose();
-                if let Some(p) = &r.pointer {
-                    p.close();
-                }
-                tracing::warn!("station attempt {}: the trainee's page went away", r.attempt);
+                tracing::warn!(
+                    "station attempt {}: the trainee's page went away; waiting {:.0} s for it",
+                    r.attempt,
+                    r.control.absence().as_secs_f64()
+                );
             }
             dropped
         }
     };
+    if driver {
+        r.control.leave();
+    }
     if dropped > 0 {
         tracing::info!(
             "station attempt {}: {dropped} messages from a page dropped (malformed, oversized or refused)",

@@ -19,8 +19,8 @@ pub enum PointerFault {
     /// A sample with a NaN or an infinity: the page is broken.
     #[error("a pointer sample with a NaN or an infinity")]
     NonFinite,
-    /// No usable sample arrived for longer than the device's timeout (the page stalled).
-    #[error("no pointer sample within the timeout")]
+    /// No usable sample arrived for longer than the device's absence (the page went away).
+    #[error("the page sent no pointer sample for longer than the absence allowed")]
     TimedOut,
     /// The feed was closed (the page went away or pressed Stop).
     #[error("the pointer feed was closed")]
@@ -83,6 +83,11 @@ pub struct PointerCounters {
     pub held_ticks: AtomicU64,
     /// Times the page clock was anchored to the session clock again (see the module docs).
     pub reanchors: AtomicU64,
+    /// Servo ticks paused: no usable sample for longer than the timeout (the pose held, the
+    /// force faded).
+    pub paused_ticks: AtomicU64,
+    /// Times samples came again after a pause.
+    pub resumes: AtomicU64,
 }
 
 impl PointerCounters {

@@ -20,8 +20,13 @@
 //!   than [`PointerOptions::max_lag_s`] ahead of the cursor (its clock runs faster). The cursor
 //!   never moves back: an anchoring holds the pose a little longer, or skips forward.
 //! - When samples stop the pose is held; after [`PointerOptions::timeout_s`] without a usable
-//!   sample the device faults ([`PointerFault::TimedOut`], read as
-//!   [`DeviceFault::Stale`]); a closed feed (the page went away, Stop) faults it
+//!   sample the device pauses: each tick reads as [`DeviceFault::Stale`] (the servo holds the
+//!   last pose and fades the force; the cut stroke ends), counted in
+//!   [`PointerCounters::paused_ticks`], until samples come again (the page was busy, hidden,
+//!   or reloaded: its clock may start again from zero), when the page clock is anchored anew
+//!   and the device plays on ([`PointerCounters::resumes`]). Only after
+//!   [`PointerOptions::absence_s`] without a usable sample does it fault
+//!   ([`PointerFault::TimedOut`]); a closed feed (Stop) faults it
 //!   ([`PointerFault::Closed`], read as [`DeviceFault::Disconnected`]). Faults last: the
 //!   servo loop records the tick's fault bits, `finished` and `ends_session` turn true, so
 //!   the session ends at the next tick, and [`PointerFeed::push`] answers
@@ -105,8 +110,11 @@ pub struct PointerOptions {
     /// How far the played pose trails the newest sample, s (covers the page's and the
     /// network's unevenness).
     pub delay_s: f64,
-    /// Without a usable sample for this long the device faults, s.
+    /// Without a usable sample for this long the device pauses (the pose held, the force
+    /// faded) until samples come again, s.
     pub timeout_s: f64,
+    /// Without a usable sample for this long the device faults and the session ends, s.
+    pub absence_s: f64,
     /// The cursor is anchored again once the newest sample is this far ahead of it, s (more
     /// than `delay_s`).
     pub max_lag_s: f64,
@@ -125,6 +133,7 @@ impl Default for PointerOptions {
         Self {
             delay_s: 0.03,
             timeout_s: 0.5,
+            absence_s: 30.0,
             max_lag_s: 0.1,
             queue_capacity: 256,
             orientation: PointerOrientation::default(),
@@ -171,6 +180,9 @@ impl PointerOptions {
         if !(self.timeout_s > self.delay_s && self.timeout_s <= 60.0) {
             return bad("the timeout must be longer than the delay and at most 60 s");
         }
+        if !(self.absence_s >= self.timeout_s && self.absence_s <= 3600.0) {
+            return bad("the absence must be at least the timeout and at most 3600 s");
+        }
         if !(self.max_lag_s > self.delay_s && self.max_lag_s <= 10.0) {
             return bad("the largest lag must be longer than the delay and at most 10 s");
         }
@@ -203,6 +215,8 @@ pub struct PointerDevice {
     /// Session time when the fault began, s.
     faulted_at_s: Option<f64>,
     fault: Option<PointerFault>,
+    /// No usable sample for longer than the timeout: the pose held until samples return.
+    paused: bool,
     last_pose: ToolPose,
 }
 
@@ -225,6 +239,7 @@ impl PointerDevice {
             last_t_ms: None,
             faulted_at_s: None,
             fault: None,
+            paused: false,
             last_pose: options.rest_pose,
             options,
         };
@@ -310,6 +325,13 @@ impl PointerDevice {
                 }
                 SampleCheck::Usable => {}
             }
+            if self.paused {
+                // back after a pause: the page's clock may have started again (a reload)
+                self.paused = false;
+                self.last_t_ms = None;
+                self.timeline.restart();
+                PointerCounters::add(&counters.resumes);
+            }
             if let Some(last_ms) = self.last_t_ms {
                 if !(s.t_ms > last_ms) {
                     PointerCounters::add(&counters.dropped_out_of_order);
@@ -355,8 +377,16 @@ impl HapticDevice for PointerDevice {
         let Some(last_usable_s) = self.last_usable_s else {
             return Ok(self.options.rest_pose);
         };
-        if time_s - last_usable_s > self.options.timeout_s {
+        let gap_s = time_s - last_usable_s;
+        if gap_s > self.options.absence_s {
             return Err(self.fail(PointerFault::TimedOut, time_s));
+        }
+        if gap_s > self.options.timeout_s {
+            self.paused = true;
+            PointerCounters::add(&self.shared.counters.paused_ticks);
+            return Err(DeviceFault::Stale {
+                age_nanos: (gap_s * 1e9) as u64,
+            });
         }
         let advance = self.timeline.advance(time_s * 1e3, taken);
         let counters = &self.shared.counters;
@@ -385,7 +415,7 @@ impl HapticDevice for PointerDevice {
         self.fault.is_some()
     }
 
-    /// True once the device faulted (the feed closed, the page stalled past the timeout or
+    /// True once the device faulted (the feed closed, the page was away past the absence or
     /// sent a NaN): it gives no pose again, so the servo loop ends the session at the next
     /// tick (the faulted tick is recorded with its fault bits).
     fn ends_session(&self) -> bool {

@@ -55,6 +55,15 @@ impl Timeline {
         }
     }
 
+    /// Forgets the samples and the clock mapping (the allocation is kept): the next sample
+    /// anchors the page clock anew, as the first did. The pose stays where it was until then.
+    pub fn restart(&mut self) {
+        self.samples.clear();
+        self.offset_ms = None;
+        self.cursor_ms = f64::NEG_INFINITY;
+        self.dry = false;
+    }
+
     /// The newest sample's page time, ms.
     pub fn newest_ms(&self) -> Option<f64> {
         self.samples.back().map(|k| k.t_ms)

@@ -254,19 +254,32 @@
   }
 
   // ---- the socket ----
-  const socket = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + config.ws);
-  socket.binaryType = "arraybuffer";
-  let ended = false;
-  socket.onmessage = (event) => {
-    if (typeof event.data === "string") return onText(JSON.parse(event.data));
-    stats.bytes += event.data.byteLength;
-    stats.messages += 1;
-    const view = new DataView(event.data);
-    const kind = view.getUint8(0);
-    if (kind === KIND_TOPOLOGY) setTopology(view);
-    else if (kind === KIND_FRAME) takeFrame(view);
-  };
-  socket.onclose = () => { if (!ended) status("The connection to the session was lost."); };
+  // a lost connection (a reload, the network, an oversized message) is made again: the
+  // session waits for its page (the blade pauses) for `config.absence_s`
+  let socket = null, ended = false, lostAt = null;
+  function connect() {
+    socket = new WebSocket((location.protocol === "https:" ? "wss://" : "ws://") + location.host + config.ws);
+    socket.binaryType = "arraybuffer";
+    socket.onopen = () => { if (lostAt !== null) { lostAt = null; status("Connected again: carry on."); } };
+    socket.onmessage = (event) => {
+      if (typeof event.data === "string") return onText(JSON.parse(event.data));
+      stats.bytes += event.data.byteLength;
+      stats.messages += 1;
+      const view = new DataView(event.data);
+      const kind = view.getUint8(0);
+      if (kind === KIND_TOPOLOGY) setTopology(view);
+      else if (kind === KIND_FRAME) takeFrame(view);
+    };
+    socket.onclose = () => {
+      if (ended) return;
+      if (lostAt === null) lostAt = performance.now();
+      const away_s = (performance.now() - lostAt) / 1000;
+      if (away_s > (config.absence_s || 30)) { status("The connection to the session was lost."); return; }
+      status("The connection was lost: connecting again…");
+      setTimeout(connect, Math.min(2000, 250 + away_s * 200));
+    };
+  }
+  connect();
   function onText(m) {
     if (m.type !== "ended") return;
     ended = true;
@@ -316,7 +329,7 @@
   if (!config.pointer) { document.getElementById("depth").textContent = "the device's"; return; }
 
   // ---- the trainee's input: the point under the pointer on the tissue, depth, button ----
-  let hit = null, engaged = false, depth = config.plan ? config.plan.depth_m : 0.004, lastSent = 0;
+  let hit = null, engaged = false, depth = config.start_depth_m ?? 0.004, lastSent = 0;
   document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   function ray(event) {
     const r = canvas.getBoundingClientRect();
