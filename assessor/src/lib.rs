@@ -9,6 +9,7 @@
 //!
 //! SI units inside (metres, seconds, newtons); millimetres only for display.
 
+pub mod advice;
 pub mod error;
 pub mod from_recording;
 mod geom;

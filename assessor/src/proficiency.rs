@@ -11,9 +11,11 @@
 //! to the plan than the experts' never fails (experts who cut 2.3 mm deeper than planned do not
 //! make an exact depth a fail). Metrics with fewer than 2 expert values get no threshold.
 //!
-//! **Pass.** An attempt passes a metric when its value is within the limits (inclusive); a
-//! missing value fails. It passes overall when it passes every thresholded metric (and there
-//! is at least one). A trainee is proficient in an exercise after
+//! **Pass.** Only the metrics that decide ([`decides`]: not [`FEEDBACK_ONLY`]) count. An
+//! attempt passes a metric when its value is within the limits (inclusive); a missing value
+//! fails; an attempt that did not do the task ([`task_done`]: less than half the planned line
+//! cut within the tolerance) fails every metric and scores -1 on each. It passes overall when
+//! it passes every deciding thresholded metric (and there is at least one). A trainee is proficient in an exercise after
 //! [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes (and stays so).
 //!
 //! **Score.** Per metric, the distance to the limit in units of the expert margin
@@ -38,6 +40,22 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{AssessError, Result};
 use crate::metrics::{Better, METRICS, MetricValue};
+
+/// Metrics that are feedback only: they have an expert reference (and limits, shown) but do
+/// not decide pass/fail or the score, until thresholds come from people. A person's time,
+/// path, movements and smoothness with a mouse or a pen are not a scripted expert's (who
+/// makes one movement), and a reach, a lift or a pause is not a skill error; see
+/// docs/decisions.md ("What decides a verdict").
+pub const FEEDBACK_ONLY: &[&str] = &["time_s", "path_length_m", "movements", "ldlj"];
+
+/// The share of the planned line an attempt must have cut within the tolerance to have done
+/// the task at all: below it (no cut, or a cut far from the plan) no metric passes.
+pub const TASK_DONE_MIN_FRACTION: f64 = 0.5;
+
+/// Whether metric `key` decides pass/fail (thresholded and not [`FEEDBACK_ONLY`]).
+pub fn decides(key: &str) -> bool {
+    !FEEDBACK_ONLY.contains(&key)
+}
 
 /// Consecutive passes that make a trainee proficient.
 pub const REQUIRED_CONSECUTIVE_PASSES: u32 = 2;
@@ -253,16 +271,21 @@ impl Thresholds {
 
     /// The verdict on one attempt's metric values.
     pub fn verdict(&self, attempt: &[MetricValue]) -> Verdict {
+        let done = task_done(attempt);
         let metrics: Vec<MetricVerdict> = self
             .metrics
             .iter()
+            .filter(|t| decides(&t.key))
             .map(|t| {
                 let value = crate::metrics::value_of(attempt, &t.key);
                 MetricVerdict {
                     key: t.key.clone(),
                     value,
-                    pass: value.is_some_and(|v| t.passes(v)),
-                    score: value.map_or(-1.0, |v| t.score(v)),
+                    pass: done && value.is_some_and(|v| t.passes(v)),
+                    score: match value {
+                        Some(v) if done => t.score(v),
+                        _ => -1.0,
+                    },
                 }
             })
             .collect();
@@ -277,6 +300,19 @@ impl Thresholds {
             pass,
             score,
         }
+    }
+}
+
+/// Whether the attempt did the task: at least [`TASK_DONE_MIN_FRACTION`] of the planned line
+/// cut within the tolerance. An attempt without that metric (a kind of exercise that does not
+/// measure it) is taken as done.
+pub fn task_done(attempt: &[MetricValue]) -> bool {
+    match attempt
+        .iter()
+        .find(|m| m.key == "fraction_cut_in_tolerance")
+    {
+        None => true,
+        Some(m) => m.value.is_some_and(|f| f >= TASK_DONE_MIN_FRACTION),
     }
 }
 
@@ -414,6 +450,55 @@ pub fn cusum(passes: &[bool], params: &CusumParams) -> Result<Vec<CusumPoint>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn motion_is_feedback_and_an_attempt_that_did_not_cut_passes_nothing() {
+        let t = Thresholds {
+            k: 2.0,
+            metrics: vec![
+                Threshold::fixed("lateral_mean_m", Better::LowerIsBetter, 0.0005, 0.002),
+                Threshold::fixed(
+                    "fraction_cut_in_tolerance",
+                    Better::HigherIsBetter,
+                    0.95,
+                    0.8,
+                ),
+                Threshold::fixed("time_s", Better::LowerIsBetter, 4.0, 5.5),
+                Threshold::fixed("movements", Better::LowerIsBetter, 1.0, 1.1),
+                Threshold::fixed("peak_force_n", Better::LowerIsBetter, 0.5, 2.5),
+            ],
+        };
+        // a careful person: the line right, slower than a script and in three movements
+        let careful = attempt(&[
+            ("lateral_mean_m", 0.0006),
+            ("fraction_cut_in_tolerance", 0.99),
+            ("time_s", 11.3),
+            ("movements", 3.0),
+            ("peak_force_n", 1.2),
+        ]);
+        let v = t.verdict(&careful);
+        assert!(v.pass, "{v:?}");
+        assert!(v.metrics.iter().all(|m| decides(&m.key)));
+        assert_eq!(v.metrics.len(), 3, "time and movements do not decide");
+        // started and stopped without cutting: the geometry is missing or nil, nothing passes
+        let idle = attempt(&[
+            ("fraction_cut_in_tolerance", 0.0),
+            ("time_s", 0.5),
+            ("movements", 0.0),
+            ("peak_force_n", 0.0),
+        ]);
+        let v = t.verdict(&idle);
+        assert!(!v.pass && v.metrics.iter().all(|m| !m.pass), "{v:?}");
+        assert_eq!(v.score, -1.0);
+        // a sloppy cut that did the task scores above doing nothing
+        let sloppy = attempt(&[
+            ("lateral_mean_m", 0.003),
+            ("fraction_cut_in_tolerance", 0.6),
+            ("peak_force_n", 2.0),
+        ]);
+        let v = t.verdict(&sloppy);
+        assert!(!v.pass && v.score > -1.0, "{v:?}");
+    }
 
     fn attempt(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
         pairs

@@ -45,11 +45,18 @@ macro_rules! on_both {
 }
 
 /// Metric values: every catalogue metric missing except the given ones.
+/// Every metric of the catalogue, `pairs` given, the rest missing; the task done (the whole
+/// line cut within the tolerance) unless `pairs` says otherwise.
 fn values(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
     METRICS
         .iter()
         .map(|m| {
-            let v = pairs.iter().find(|(k, _)| *k == m.key).map(|p| p.1);
+            let done = (m.key == "fraction_cut_in_tolerance").then_some(1.0);
+            let v = pairs
+                .iter()
+                .find(|(k, _)| *k == m.key)
+                .map(|p| p.1)
+                .or(done);
             MetricValue {
                 key: m.key.into(),
                 value: v,
@@ -368,10 +375,10 @@ async fn thresholds_from_expert_attempts(store: Store) {
     assert!((lat.upper.expect("upper") - (5.0 + 2.0 * 7.5f64.sqrt()) * 1e-3).abs() < 1e-12);
     assert_eq!(
         t.metrics.iter().map(|m| m.key.as_str()).collect::<Vec<_>>(),
-        ["lateral_mean_m", "time_s"]
+        ["lateral_mean_m", "fraction_cut_in_tolerance", "time_s"]
     );
     let stored = store.thresholds(ex).await.expect("stored");
-    assert_eq!(stored.metrics.len(), 2);
+    assert_eq!(stored.metrics.len(), 3);
     let src: String = on_db!(store.db(), pool => {
         sqlx::query_scalar("SELECT DISTINCT source FROM metric_thresholds WHERE exercise_id = $1")
             .bind(ex)
@@ -877,4 +884,52 @@ async fn a_hub_refuses_forged_and_impossible_attempts(hub: Store) {
     assert!(hub.import_attempt(&u, "or-1", &u.metrics).await.is_err());
     assert!(hub.user_by_name("DR-KIM").await.is_err());
     assert_eq!(hub.list_attempts(None, None).await.expect("list").len(), 1);
+}
+
+on_both!(a_peak_force_band_from_experts_gives_way_to_the_plans_limit);
+async fn a_peak_force_band_from_experts_gives_way_to_the_plans_limit(store: Store) {
+    let ex = exercise_with_one_threshold(&store).await;
+    let expert = store
+        .create_user("expert", Role::Instructor, None)
+        .await
+        .expect("user");
+    // scripted experts, all pressing about 0.8 N: a band near 0.9 N
+    for force in [0.78, 0.8, 0.82, 0.8] {
+        let a = store
+            .start_attempt(expert.id, ex, None, true)
+            .await
+            .expect("start");
+        store
+            .finish_attempt(a.id, &values(&[("peak_force_n", force)]))
+            .await
+            .expect("finish");
+    }
+    store.thresholds_from_experts(ex).await.expect("thresholds");
+    let limit = |t: &Thresholds| {
+        t.metrics
+            .iter()
+            .find(|m| m.key == "peak_force_n")
+            .and_then(|m| m.upper)
+    };
+    let plan_limit = ExpertPlan::chest_wall().expect("plan").force_limit_n;
+    let t = store.thresholds(ex).await.expect("stored");
+    assert_eq!(limit(&t), Some(plan_limit), "the plan's safety limit");
+    // one set by hand stays
+    let hand = Thresholds {
+        k: 2.0,
+        metrics: vec![Threshold::fixed(
+            "peak_force_n",
+            Better::LowerIsBetter,
+            0.5,
+            0.9,
+        )],
+    };
+    store
+        .set_thresholds(ex, &hand, ThresholdSource::Default)
+        .await
+        .expect("set");
+    assert_eq!(
+        limit(&store.thresholds(ex).await.expect("stored")),
+        Some(0.9)
+    );
 }

@@ -351,7 +351,16 @@ pub async fn start(
     let scene_name = exercise.scene.clone();
     let guided = request.guided && !exercise.exam_only;
     let (min_tets, time_step) = (settings.min_tets, settings.time_step);
-    let force_limit_newtons = expert_plan.force_limit_n;
+    // the limit the attempt is scored with (one source for the score and the page's force
+    // bar): the exercise's peak-force threshold, else its plan's force limit
+    let force_limit_newtons = store
+        .thresholds(exercise.id)
+        .await?
+        .metrics
+        .iter()
+        .find(|t| t.key == "peak_force_n")
+        .and_then(|t| t.upper)
+        .unwrap_or(expert_plan.force_limit_n);
     // building and settling the tissue takes a while: off the async threads
     let (scene, session, plan) = tokio::task::spawn_blocking(move || {
         let scene = Scene::load(&scene_name, BuildOptions { min_tets })?;

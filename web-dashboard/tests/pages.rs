@@ -629,10 +629,10 @@ async fn the_force_limit_shown_is_the_exercises_peak_force_threshold() {
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let a = first_attempt(&e.store, "ana").await;
     let ex = e.store.get_attempt(a).await.unwrap().exercise_id;
-    // the built-in thresholds: peak force at most 3 N (the plan's force limit is 2.5 N)
+    // the built-in thresholds: peak force at most the plan's force limit, 2.5 N
     assert_eq!(
         peak_force_limits(&e.app, &kim, a).await,
-        serde_json::json!({"lower": null, "upper": 3.0})
+        serde_json::json!({"lower": null, "upper": 2.5})
     );
     for (key, mean, upper, expected) in [
         (

@@ -27,7 +27,8 @@ pub fn default_thresholds() -> Vec<Threshold> {
         ("depth_error_m", TwoSided, 0.0, 0.003),
         ("time_s", LowerIsBetter, 8.0, 20.0),
         ("path_length_m", LowerIsBetter, 0.15, 0.35),
-        ("peak_force_n", LowerIsBetter, 1.5, 3.0),
+        // the plan's force limit (the station's force bar shows it)
+        ("peak_force_n", LowerIsBetter, 1.5, 2.5),
         ("cut_outside_corridor_m", LowerIsBetter, 0.0, 0.005),
     ]
     .into_iter()

@@ -302,6 +302,17 @@ impl Store {
                 upper,
             });
         }
+        // a peak-force limit derived from expert attempts (a scripted hand's, whose spread is
+        // a robot's) is the plan's force limit, a safety limit; one set by hand stays
+        let force_limit_n = self.get_plan(e.plan_id).await?.force_limit_n;
+        if let Some(t) = metrics
+            .iter_mut()
+            .find(|t| t.key == "peak_force_n" && t.n_experts > 0)
+        {
+            t.upper = Some(force_limit_n);
+            t.lower = None;
+            t.mean = t.mean.min(force_limit_n);
+        }
         Ok(Thresholds {
             k: e.threshold_k,
             metrics,

@@ -6,7 +6,9 @@ use axum::Router;
 use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
+use cutlab_assessor::advice::{MetricResult, advice};
 use cutlab_assessor::from_recording::DAMAGED_RECORDING_NOTE;
+use cutlab_assessor::proficiency::decides;
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -45,6 +47,35 @@ async fn attempt(
     ))
 }
 
+/// The debrief's first lines: what to fix next (or what went well), then the feedback-only
+/// metrics against the experts.
+fn fix_next(d: &AttemptDetail) -> Markup {
+    let results: Vec<MetricResult<'_>> = d
+        .metrics
+        .iter()
+        .map(|m| MetricResult {
+            key: &m.key,
+            value: m.value,
+            passed: m.passed,
+            mean: m.mean,
+            lower: m.lower_limit,
+            upper: m.upper_limit,
+        })
+        .collect();
+    let a = advice(&results);
+    html! {
+        section id="fix-next" {
+            h2 { "What to fix next" }
+            @if let Some(p) = &a.praise { p class="pass" { (p) } }
+            @if !a.fix.is_empty() { ol { @for f in &a.fix { li { (f) } } } }
+            @if !a.feedback.is_empty() {
+                p class="muted" { "Feedback (does not decide the verdict):" }
+                ul class="muted" { @for f in &a.feedback { li { (f) } } }
+            }
+        }
+    }
+}
+
 fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Markup {
     let a = &d.attempt;
     html! {
@@ -72,6 +103,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
         } @else {
             p class="muted" { "No readable recording: no incision or force plot." }
         }
+        @if a.scored { (fix_next(d)) }
         h2 { "Metrics" }
         table class="metrics" {
             thead { tr { th { "Metric" } th { "Value" } th { "Unit" } th { "Expert" } th { "Pass limits" } th { "Verdict" } th { "What" } } }
@@ -80,7 +112,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
                     @let l = label(&m.key, &m.unit);
                     @let (f, unit) = (l.factor, l.unit);
                     tr {
-                        td { (l.name) @if m.scored { " *" } }
+                        td { (l.name) @if m.scored && decides(&m.key) { " *" } }
                         td class="num" { (num(m.value.map(|v| v * f), 3)) @if let Some(w) = &m.missing { br; span class="muted" { (w) } } }
                         td { (unit) }
                         td class="num" { (num(m.mean.map(|v| v * f), 3)) }
@@ -91,7 +123,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
                 }
             }
         }
-        p class="muted" { "* scored: pass/fail and the score use it." }
+        p class="muted" { "* decides: pass/fail and the score use it. Time, path, movements and smoothness are feedback only (shown against the experts, not deciding) until thresholds come from people." }
         h2 { "Debriefing" }
         @if let Some(s) = &d.signoff { p class="pass" { "Signed off by " (s.instructor.name) " at " (when(s.signed_ns)) " UTC" } }
         @if d.comments.is_empty() { p class="muted" { "No comments yet." } }

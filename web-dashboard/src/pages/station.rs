@@ -227,12 +227,13 @@ async fn station(
             div class="station" {
                 canvas id="tissue" width="960" height="600" data-config=(config_json(&r, driver)) {}
                 div class="hud" {
-                    div { "Force " span id="force-value" { "0.00 N" } }
+                    div { "Force " span id="force-value" { "0.00 N" } " (limit " (format!("{:.1}", r.force_limit_newtons)) " N)" }
                     div class="force-bar" { div id="force-bar" {} }
-                    div id="force-warning" class="fail" hidden { "Too much force" }
+                    div id="force-warning" class="fail" hidden { "Too much force: over the limit the score uses" }
                     div { "Time " span id="elapsed" { "0.0 s" } }
                     div { "Blade " span id="blade" { "free" } }
-                    div { "Depth " span id="depth" { "–" } }
+                    div { "Blade depth " span id="depth" { "–" } @if r.guided { " (planned " (format!("{:.1}", r.plan.depth_m * 1e3)) " mm)" } }
+                    @if driver && r.pointer.is_some() { div class="muted" { "Wheel down or ↓: deeper; wheel up or ↑: shallower." } }
                     div { "Mode " span id="mode" { (if r.guided { "guided" } else { "exam" }) } }
                     @if driver { button id="stop" type="button" { "Stop" } }
                     @else { p class="muted" { "Live view (read only)." } }

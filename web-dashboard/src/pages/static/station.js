@@ -241,13 +241,18 @@
 
   const MODES = ["free", "touching", "cutting"];
   let cutSeen = false, releasedAt = null;
+  // the force as a person can read it: smoothed over about 150 ms (the servo's force jumps
+  // between ticks), the warning held for a second after the limit the score uses was passed
+  let forceShown = 0, overUntil = 0;
   function hud(f) {
-    const force = norm(f.force);
-    document.getElementById("force-value").textContent = force.toFixed(2) + " N";
+    const force = norm(f.force), now = performance.now();
+    forceShown += (force - forceShown) * 0.25;
+    if (force > forceLimit) overUntil = now + 1000;
+    document.getElementById("force-value").textContent = forceShown.toFixed(2) + " N";
     const bar = document.getElementById("force-bar");
-    bar.style.width = Math.min(100, 100 * force / forceLimit).toFixed(0) + "%";
-    bar.className = force > forceLimit ? "over" : force > 0.7 * forceLimit ? "near" : "";
-    document.getElementById("force-warning").hidden = force <= forceLimit;
+    bar.style.width = Math.min(100, 100 * forceShown / forceLimit).toFixed(0) + "%";
+    bar.className = now < overUntil ? "over" : forceShown > 0.7 * forceLimit ? "near" : "";
+    document.getElementById("force-warning").hidden = now >= overUntil;
     document.getElementById("elapsed").textContent = (f.tick * 1e-3).toFixed(1) + " s";
     document.getElementById("blade").textContent = (f.engaged ? "engaged, " : "") + MODES[f.mode];
     cutSeen = cutSeen || f.mode === 2;
