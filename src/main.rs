@@ -129,6 +129,10 @@ enum Command {
         /// The station's simulation step: ms (0.1-10), `auto` or `scene`, as for `session`.
         #[arg(long, default_value = "scene")]
         station_time_step_ms: TimeStep,
+        /// How long a station attempt waits for its page (a reload, a lost network, a hidden
+        /// tab) before it ends incomplete, s (1-3600); shorter gaps pause the blade.
+        #[arg(long, default_value_t = 30.0)]
+        absence_s: f64,
         #[command(flatten)]
         igtl: IgtlArgs,
     },
@@ -149,6 +153,10 @@ enum Command {
         /// time on this PC, measured at each start), as for `session`.
         #[arg(long, default_value = "auto")]
         time_step_ms: TimeStep,
+        /// How long an attempt waits for its page before it ends incomplete, s, as for
+        /// `serve`.
+        #[arg(long, default_value_t = 30.0)]
+        absence_s: f64,
         #[command(flatten)]
         igtl: IgtlArgs,
         /// Only print the station's link (no browser is opened).
@@ -409,6 +417,7 @@ fn run() -> anyhow::Result<()> {
                     demo: Some(&out.join("attempts")),
                     station_devices: Vec::new(),
                     station_time_step: TimeStep::Scene,
+                    station_absence_s: 30.0,
                     igtl: Default::default(),
                     recordings: recordings.clone(),
                     hub: hub.clone(),
@@ -422,6 +431,7 @@ fn run() -> anyhow::Result<()> {
             demo,
             station_devices,
             station_time_step_ms,
+            absence_s,
             igtl,
         } => {
             let db = cutlab_assessor::default_db(cli.db.as_ref());
@@ -433,6 +443,7 @@ fn run() -> anyhow::Result<()> {
                 demo: demo.then_some(demo_attempts.as_path()),
                 station_devices,
                 station_time_step: station_time_step_ms,
+                station_absence_s: absence_s,
                 igtl: igtl.options(),
                 recordings: recordings.clone(),
                 hub: hub.clone(),
@@ -444,6 +455,7 @@ fn run() -> anyhow::Result<()> {
             addr,
             device,
             time_step_ms,
+            absence_s,
             igtl,
             no_browser,
         } => {
@@ -454,6 +466,7 @@ fn run() -> anyhow::Result<()> {
                 demo: None,
                 station_devices: device,
                 station_time_step: time_step_ms,
+                station_absence_s: absence_s,
                 igtl: igtl.options(),
                 recordings: recordings.clone(),
                 hub: hub.clone(),

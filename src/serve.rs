@@ -22,6 +22,8 @@ pub struct Options<'a> {
     pub station_devices: Vec<DeviceSpec>,
     /// The station's simulation step.
     pub station_time_step: TimeStep,
+    /// How long a station attempt waits for its page, s.
+    pub station_absence_s: f64,
     pub igtl: IgtlOptions,
     /// The recording store (`--recordings`): where the station puts its attempts'
     /// recordings and the dashboard serves them from.
@@ -46,6 +48,11 @@ pub struct Kiosk {
 /// one-time link (created as a trainee without a password if new) and opens it.
 pub fn run(o: Options<'_>) -> anyhow::Result<()> {
     let Options { db, addr, demo, .. } = o;
+    anyhow::ensure!(
+        (1.0..=3600.0).contains(&o.station_absence_s),
+        "--absence-s must be between 1 and 3600 s, not {}",
+        o.station_absence_s
+    );
     if let Some(dir) = demo
         && !crate::demo_seed::run(db, dir)?
     {
@@ -90,6 +97,7 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
             station: cutlab_station::StationSettings {
                 devices: o.station_devices,
                 time_step: o.station_time_step,
+                absence_s: o.station_absence_s,
                 igtl: o.igtl,
                 recordings: recordings.clone(),
                 hub: o.hub.clone(),

@@ -201,6 +201,29 @@ fn bad_session_arguments_give_a_clear_error() {
 }
 
 #[test]
+fn a_station_absence_out_of_range_is_refused() {
+    for args in [
+        &["serve", "--absence-s", "0"][..],
+        &["serve", "--absence-s", "NaN"],
+        &[
+            "station",
+            "--trainee",
+            "ana",
+            "--absence-s",
+            "9000",
+            "--no-browser",
+        ],
+    ] {
+        let (ok, _, err) = cutlab(args);
+        assert!(!ok, "{args:?}");
+        assert!(
+            err.contains("--absence-s must be between 1 and 3600"),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+#[test]
 fn session_reports_a_port_in_use() {
     let listener = std::net::TcpListener::bind("0.0.0.0:0").expect("bind");
     let port = listener.local_addr().expect("addr").port().to_string();
