@@ -175,15 +175,13 @@ fn unavailable(e: AssessError) -> ApiError {
     ))
 }
 
-fn unprocessable(message: String) -> ApiError {
-    ApiError(AppError::Malformed {
-        status: StatusCode::UNPROCESSABLE_ENTITY,
-        message,
-    })
-}
-
+/// A refusal with its own status (the request's fault, not the hub's).
 fn with_status(status: StatusCode, message: String) -> ApiError {
     ApiError(AppError::Malformed { status, message })
+}
+
+fn unprocessable(message: String) -> ApiError {
+    with_status(StatusCode::UNPROCESSABLE_ENTITY, message)
 }
 
 #[derive(Debug, Serialize)]
