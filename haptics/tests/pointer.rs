@@ -170,26 +170,31 @@ fn absurd_samples_are_dropped_and_counted_without_a_fault() {
 }
 
 #[test]
-fn a_non_finite_sample_faults_the_device_for_good() {
+fn a_non_finite_sample_is_dropped_and_counted_and_the_device_goes_on() {
     let (mut d, feed) = device(PointerOptions::default());
     feed.push(on_line(100.0, 0.001)).expect("queued");
     assert!(read(&mut d, 0).is_ok());
     let mut nan = on_line(110.0, 0.0);
     nan.surface_in_world_m[2] = f64::NAN;
-    feed.push(nan).expect("queued");
-    feed.push(on_line(120.0, 0.002)).expect("queued");
-    assert_eq!(read(&mut d, 1), Err(DeviceFault::Disconnected));
-    assert_eq!(d.fault(), Some(PointerFault::NonFinite));
-    assert_eq!(feed.fault(), Some(PointerFault::NonFinite));
-    assert_eq!(count(&d.counters().non_finite), 1);
-    assert!(d.finished(0.002) && d.ends_session());
-    // it stays faulted, whatever comes next; the page is told
-    assert_eq!(read(&mut d, 2), Err(DeviceFault::Disconnected));
-    assert_eq!(
-        feed.push(on_line(130.0, 0.0)),
-        Err(PushError::Faulted(PointerFault::NonFinite))
-    );
-    assert!(d.write_force(Vector3::zeros()).is_err());
+    let mut inf = on_line(115.0, 0.0);
+    inf.depth_m = f64::INFINITY;
+    for s in [nan, inf, on_line(120.0, 0.002)] {
+        feed.push(s).expect("queued");
+    }
+    assert!(read(&mut d, 1).is_ok());
+    assert_eq!(d.fault(), None);
+    assert_eq!(feed.fault(), None);
+    assert_eq!(count(&d.counters().non_finite), 2);
+    assert_eq!(count(&d.counters().accepted), 2);
+    assert!(!d.finished(0.002) && !d.ends_session());
+    // the poses stay finite and the next samples are taken
+    feed.push(on_line(130.0, 0.003)).expect("queued");
+    for tick in 2..200 {
+        let pose = read(&mut d, tick).expect("a pose");
+        assert!(pose.tip_in_world.iter().all(|c| c.is_finite()));
+    }
+    assert_eq!(count(&d.counters().accepted), 3);
+    assert!(d.write_force(Vector3::zeros()).is_ok());
 }
 
 #[test]

@@ -16,9 +16,6 @@ use crate::Vector3;
 /// Why a pointer device stopped taking samples (it stays faulted).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum PointerFault {
-    /// A sample with a NaN or an infinity: the page is broken.
-    #[error("a pointer sample with a NaN or an infinity")]
-    NonFinite,
     /// No usable sample arrived for longer than the device's absence (the page went away).
     #[error("the page sent no pointer sample for longer than the absence allowed")]
     TimedOut,
@@ -30,7 +27,6 @@ pub enum PointerFault {
 impl PointerFault {
     fn code(self) -> u8 {
         match self {
-            PointerFault::NonFinite => 1,
             PointerFault::TimedOut => 2,
             PointerFault::Closed => 3,
         }
@@ -38,7 +34,6 @@ impl PointerFault {
 
     fn of_code(code: u8) -> Option<Self> {
         match code {
-            1 => Some(PointerFault::NonFinite),
             2 => Some(PointerFault::TimedOut),
             3 => Some(PointerFault::Closed),
             _ => None,
@@ -77,7 +72,7 @@ pub struct PointerCounters {
     pub dropped_out_of_order: AtomicU64,
     /// Not used: finite but absurd (out of range, or a jump of the page clock).
     pub dropped_invalid: AtomicU64,
-    /// Samples with a NaN or an infinity (the first faults the device).
+    /// Samples with a NaN or an infinity (dropped).
     pub non_finite: AtomicU64,
     /// Servo ticks when the newest sample was older than the tick's time (the pose held).
     pub held_ticks: AtomicU64,

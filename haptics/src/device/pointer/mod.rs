@@ -31,12 +31,12 @@
 //!   servo loop records the tick's fault bits, `finished` and `ends_session` turn true, so
 //!   the session ends at the next tick, and [`PointerFeed::push`] answers
 //!   [`PushError::Faulted`].
-//! - Bad input: a NaN or an infinity anywhere in a sample faults the device
-//!   ([`PointerFault::NonFinite`], read as [`DeviceFault::Disconnected`]: the page is
-//!   broken); a finite sample out of range (a surface point over 10 m from the origin, a depth
-//!   outside [-0.05, 0.1] m, a pressure outside [0, 1], a quaternion far from unit length, a
-//!   page clock jumping over 10 s) is dropped and counted, as is one not later than the last
-//!   used ([`PointerCounters`]).
+//! - Bad input: a sample with a NaN or an infinity anywhere is dropped and counted
+//!   ([`PointerCounters::non_finite`]: a page's glitch, or a hostile one, does not end the
+//!   attempt; the pose is held as for a gap), as is a finite sample out of range (a surface
+//!   point over 10 m from the origin, a depth outside [-0.05, 0.1] m, a pressure outside
+//!   [0, 1], a quaternion far from unit length, a page clock jumping over 10 s) and one not
+//!   later than the last used ([`PointerCounters`]).
 //! - Force: [`HapticDevice::write_force`] keeps the latest force for the page
 //!   ([`PointerFeed::latest_force_newtons`], for a force bar); [`PointerFeed::echo_ms`] tells
 //!   which sample a tick had seen (the page's latency).
@@ -308,16 +308,16 @@ impl PointerDevice {
         }
     }
 
-    /// Takes what the queue holds; `Err` when a sample faults the device. True when a usable
-    /// sample was taken.
-    fn drain(&mut self, tick: u64, time_s: f64) -> Result<bool, PointerFault> {
+    /// Takes what the queue holds, dropping (and counting) what is not usable; true when a
+    /// usable sample was taken.
+    fn drain(&mut self, tick: u64, time_s: f64) -> bool {
         let counters = &self.shared.counters;
         let mut taken = false;
         while let Ok(s) = self.samples.pop() {
             match s.check() {
                 SampleCheck::NonFinite => {
                     PointerCounters::add(&counters.non_finite);
-                    return Err(PointerFault::NonFinite);
+                    continue;
                 }
                 SampleCheck::Absurd => {
                     PointerCounters::add(&counters.dropped_invalid);
@@ -354,7 +354,7 @@ impl PointerDevice {
                 self.shared.echo(tick, t_ms);
             }
         }
-        Ok(taken)
+        taken
     }
 }
 
@@ -367,10 +367,7 @@ impl HapticDevice for PointerDevice {
         if self.fault.is_some() {
             return Err(self.fault_now(time_s));
         }
-        let taken = match self.drain(tick, time_s) {
-            Ok(taken) => taken,
-            Err(fault) => return Err(self.fail(fault, time_s)),
-        };
+        let taken = self.drain(tick, time_s);
         if self.samples.is_abandoned() && self.samples.is_empty() {
             return Err(self.fail(PointerFault::Closed, time_s));
         }
