@@ -368,7 +368,7 @@ pub fn print_outcome(
         let p = &o.proficiency.state;
         let v = serde_json::json!({
             "attempt": o.attempt.id, "score": o.verdict.score, "pass": o.verdict.pass, "note": o.attempt.note, "metrics": metrics,
-            "proficiency": { "attempts": p.attempts, "passes": p.passes, "consecutive_passes": p.consecutive_passes, "proficient": p.proficient, "cusum": o.proficiency.cusum },
+            "proficiency": { "attempts": p.attempts, "passes": p.passes, "consecutive_passes": p.consecutive_passes, "proficient": p.proficient, "lapsed": o.proficiency.lapsed(), "cusum": o.proficiency.cusum },
         });
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
@@ -408,6 +408,8 @@ pub fn print_outcome(
         p.consecutive_passes,
         if p.proficient {
             "proficient"
+        } else if o.proficiency.lapsed() {
+            "proficiency lapsed (an unacceptable failure rate after it): retrain"
         } else {
             "not yet proficient"
         },

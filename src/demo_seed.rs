@@ -47,22 +47,25 @@ impl Attempt {
 }
 
 /// The axial exercise's plan: 40 mm along the top of the wall (y, 5 mm off the middle), 5 mm
-/// deep, with the built-in plan's target, viewpoint and tolerances.
+/// deep, with the built-in plan's viewpoint and tolerances, and as target what it lays open
+/// (as many points as the built-in plan's, half its depth below its middle third).
 pub fn axial_plan() -> Result<ExpertPlan, AssessError> {
     let base = ExpertPlan::chest_wall()?;
+    let targets = base.target_m.len();
     // on the curved surface z = sqrt(R^2 - x^2) - R, R = 150 mm
     let (x, r) = (0.005f64, 0.15f64);
     let z = (r * r - x * x).sqrt() - r;
     let (entry_m, exit_m) = ([x, -0.02, z], [x, 0.02, z]);
-    ExpertPlan {
+    let mut plan = ExpertPlan {
         name: "chest-wall axial incision".into(),
         entry_m,
         exit_m,
         incision_m: vec![entry_m, exit_m],
         depth_m: 0.005,
         ..base
-    }
-    .normalised()
+    };
+    plan.target_m = plan.mid_depth_targets(targets);
+    plan.normalised()
 }
 
 /// Seeds the demo's history into the database `db` (recordings under `dir`) unless
@@ -193,8 +196,10 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
                     println!(
                         "  {trainee} at {name}: scores {}; {}",
                         scores.join(" "),
-                        if p.proficient_attempt_id.is_some() {
+                        if p.state.proficient {
                             "proficient"
+                        } else if p.lapsed() {
+                            "proficiency lapsed"
                         } else {
                             "not yet proficient"
                         }
@@ -321,9 +326,15 @@ mod tests {
         assert!(
             (axial.length_m() - 0.04).abs() < 1e-12 && axial.length_m() < transverse.length_m()
         );
-        assert_eq!(
-            (axial.viewpoint_m, &axial.target_m),
-            (transverse.viewpoint_m, &transverse.target_m)
-        );
+        assert_eq!(axial.viewpoint_m, transverse.viewpoint_m);
+        // its own target: along its line, within its depth
+        assert_eq!(axial.target_m.len(), transverse.target_m.len());
+        for t in &axial.target_m {
+            let below = cutlab_assessor::metrics::incision::depth_below_plan(&axial, *t);
+            assert!(
+                (t[0] - 0.005).abs() < 1e-12 && below > 0.0 && below <= axial.depth_m,
+                "{t:?}: {below}"
+            );
+        }
     }
 }

@@ -530,3 +530,350 @@ async fn station(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) 
     let _ = kim.close().await;
     result.expect("the station flow")
 }
+
+/// What a person at the station does in one attempt (see [`cutlab_bench::hand`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Trial {
+    /// A steady stroke along the planned line at the planned depth.
+    Skilled,
+    /// The same stroke 3 mm shallower than planned (six steps of ↑ before it).
+    Shallow,
+    /// A steady stroke that stops at 45 % of the line and lifts.
+    HalfWay,
+    /// A shaky, hurried zig-zag along the line, 4 mm to each side.
+    Sloppy,
+    /// Start, then Stop without cutting.
+    NoCut,
+    /// The skilled stroke, with a flood of bad messages and a 2 s switch to another tab at
+    /// 30 % and a reload at 60 %.
+    Interrupted,
+}
+
+/// People at the station, in a real browser at 60 Hz pointer input with a human hand's
+/// noise, tremor, reach and lift (not a robot's line): on the demo database a skilled stroke
+/// along the built-in exercise's plan passes; a sloppy one, one 3 mm too shallow, one that
+/// stops half way and an attempt without a cut fail; a 2 s switch to another tab and a
+/// reload mid-cut keep the attempt, which is scored. Screenshots of the HUD mid-cut and of
+/// the debrief go to `target/e2e/`.
+#[test]
+fn people_cut_at_the_station_and_the_verdicts_are_fair_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-people-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let verdicts = runtime().block_on(people(port, &driver, &tmp, &artefacts()));
+    let summary = |t: Trial| {
+        verdicts
+            .iter()
+            .find(|(trial, _)| *trial == t)
+            .map(|(_, s)| s.clone())
+            .unwrap_or_default()
+    };
+    let all = format!("{verdicts:?}");
+    assert!(summary(Trial::Skilled).contains("(pass)"), "{all}");
+    for t in [Trial::Shallow, Trial::HalfWay, Trial::Sloppy, Trial::NoCut] {
+        let s = summary(t);
+        assert!(
+            s.contains("(fail)") || s.starts_with("Not scored"),
+            "{t:?} must not pass: {all}"
+        );
+        let fix = s.split(" | What to fix next").nth(1).unwrap_or_default();
+        assert!(
+            fix.trim_start_matches(';').trim().len() > 10,
+            "{t:?}: the debrief says what to fix: {all}"
+        );
+    }
+    assert!(
+        summary(Trial::Interrupted).starts_with("Score "),
+        "the interrupted attempt is kept and scored: {all}"
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+async fn people(
+    port: u16,
+    driver: &browser::Driver,
+    tmp: &Path,
+    shots: &Path,
+) -> Vec<(Trial, String)> {
+    let base = format!("http://127.0.0.1:{port}");
+    let ana = chromium(driver, &tmp.join("profile-people")).await;
+    let result = async {
+        login(&ana, &base, "ana", "trainee-demo").await?;
+        let mut verdicts = Vec::new();
+        for (k, trial) in [
+            Trial::Skilled,
+            Trial::Shallow,
+            Trial::HalfWay,
+            Trial::Sloppy,
+            Trial::NoCut,
+            Trial::Interrupted,
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let summary = attempt(&ana, &base, trial, 40 + k as u64, shots).await?;
+            eprintln!("{trial:?}: {summary}");
+            verdicts.push((trial, summary));
+        }
+        Ok::<_, fantoccini::error::CmdError>(verdicts)
+    }
+    .await;
+    let _ = ana.close().await;
+    result.expect("the people's attempts")
+}
+
+/// The planned line on the page (CSS px) and pixels to a millimetre along it, once the page
+/// shows the tissue and has its rest surface.
+async fn line_on_page(
+    c: &fantoccini::Client,
+) -> Result<(Vec<[f64; 2]>, f64), fantoccini::error::CmdError> {
+    until(
+        c,
+        "window.cutlabStation && window.cutlabStation.stats().frames > 5",
+        Duration::from_secs(120),
+    )
+    .await?;
+    let v = c
+        .execute(
+            "const s = window.cutlabStation, l = s.config.plan.line_m; \
+             let mm = 0; for (let i = 1; i < l.length; i++) mm += Math.hypot(l[i][0] - l[i-1][0], l[i][1] - l[i-1][1], l[i][2] - l[i-1][2]) * 1e3; \
+             return { px: l.map(p => s.project(p)), mm }",
+            vec![],
+        )
+        .await?;
+    let px: Vec<[f64; 2]> = v["px"]
+        .as_array()
+        .expect("the plan's points on the page")
+        .iter()
+        .map(|p| [p[0].as_f64().expect("x"), p[1].as_f64().expect("y")])
+        .collect();
+    let along: f64 = px
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    let mm = v["mm"].as_f64().expect("the plan's length");
+    Ok((px, along / mm))
+}
+
+/// The hand's gestures as WebDriver pointer actions.
+fn as_actions(gestures: &[cutlab_bench::hand::Gesture]) -> MouseActions {
+    use cutlab_bench::hand::Gesture;
+    let mut a = MouseActions::new("mouse".into());
+    for g in gestures {
+        a = match *g {
+            Gesture::Move { x, y, ms } => a.then(PointerAction::MoveTo {
+                duration: Some(Duration::from_millis(ms)),
+                x: x.round(),
+                y: y.round(),
+            }),
+            Gesture::Press => a.then(PointerAction::Down {
+                button: MOUSE_BUTTON_LEFT,
+            }),
+            Gesture::Release => a.then(PointerAction::Up {
+                button: MOUSE_BUTTON_LEFT,
+            }),
+            Gesture::Wait { ms } => a.pause(Duration::from_millis(ms)),
+        };
+    }
+    a
+}
+
+/// Starts a guided attempt at the built-in exercise, does `trial`, and returns the debrief's
+/// summary line.
+async fn attempt(
+    c: &fantoccini::Client,
+    base: &str,
+    trial: Trial,
+    seed: u64,
+    shots: &Path,
+) -> Result<String, fantoccini::error::CmdError> {
+    use cutlab_bench::hand::{Gesture, Hand};
+    c.goto(&format!("{base}/station")).await?;
+    c.find(Locator::Css("option[value='chest-wall-incision']"))
+        .await?
+        .click()
+        .await?;
+    c.find(Locator::Css("input[value=guided]"))
+        .await?
+        .click()
+        .await?;
+    c.find(Locator::Id("start")).await?.click().await?;
+    c.wait().for_element(Locator::Id("tissue")).await?;
+    let url = c.current_url().await?.to_string();
+    let (line, px_per_mm) = line_on_page(c).await?;
+    let mut hand = match trial {
+        Trial::Sloppy => Hand::sloppy(px_per_mm, seed),
+        _ => Hand::steady(px_per_mm, seed),
+    };
+    let rest = [line[0][0] - 140.0, line[0][1] + 170.0];
+    let mut g = vec![
+        Gesture::Move {
+            x: rest[0],
+            y: rest[1],
+            ms: 16,
+        },
+        Gesture::Wait { ms: 400 },
+    ];
+    g.extend(hand.reach(rest, line[0], 0.8));
+    let length_mm = line
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum::<f64>()
+        / px_per_mm;
+    // a careful person's pace: about 12 mm a second
+    let stroke_s = length_mm / 12.0;
+    match trial {
+        Trial::NoCut => {
+            c.perform_actions(as_actions(&g)).await?;
+            tokio::time::sleep(Duration::from_secs(2)).await;
+            c.find(Locator::Id("stop")).await?.click().await?;
+        }
+        Trial::Sloppy => {
+            g.extend(hand.zigzag(&line, 0.5 * stroke_s, 4.0 * px_per_mm, 5.0));
+            c.perform_actions(as_actions(&g)).await?;
+        }
+        Trial::Interrupted => interrupted(c, &url, &mut hand, g, &line, stroke_s).await?,
+        _ => {
+            if trial == Trial::Shallow {
+                let mut keys = fantoccini::actions::KeyActions::new("keys".into());
+                for _ in 0..6 {
+                    keys = keys
+                        .then(fantoccini::actions::KeyAction::Down { value: '\u{E013}' })
+                        .then(fantoccini::actions::KeyAction::Up { value: '\u{E013}' });
+                }
+                c.perform_actions(keys).await?;
+                let set = c.find(Locator::Id("depth")).await?.text().await?;
+                assert_eq!(
+                    set, "5.0 mm",
+                    "six steps of 0.5 mm up from the planned 8 mm"
+                );
+            }
+            let stop_at = if trial == Trial::HalfWay { 0.45 } else { 1.0 };
+            g.extend(hand.stroke(&line, stroke_s, stop_at));
+            let end = g.iter().rev().find_map(|g| match *g {
+                Gesture::Move { x, y, .. } => Some([x, y]),
+                _ => None,
+            });
+            // the mid-cut screenshot: the HUD with the blade in the tissue
+            let half = g.len() - (stroke_s * 30.0) as usize;
+            c.perform_actions(as_actions(&g[..half])).await?;
+            if trial == Trial::Skilled {
+                std::fs::write(
+                    shots.join("station-human-mid-cut.png"),
+                    c.screenshot().await?,
+                )
+                .expect("screenshot");
+            }
+            c.perform_actions(as_actions(&g[half..])).await?;
+            let away = hand.withdraw(end.unwrap_or(line[0]), [60.0, -120.0], 0.5);
+            c.perform_actions(as_actions(&away)).await?;
+        }
+    }
+    c.wait()
+        .at_most(Duration::from_secs(240))
+        .for_element(Locator::Id("debrief-summary"))
+        .await?;
+    let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
+    // the debrief says what to fix next
+    c.wait()
+        .at_most(Duration::from_secs(60))
+        .for_element(Locator::Css("#debrief-attempt #fix-next"))
+        .await?;
+    let fix = c
+        .find(Locator::Css("#debrief-attempt #fix-next"))
+        .await?
+        .text()
+        .await?;
+    if trial == Trial::Skilled {
+        c.execute(
+            "document.getElementById('debrief').scrollIntoView()",
+            vec![],
+        )
+        .await?;
+        let shot = c.screenshot().await?;
+        std::fs::write(shots.join("station-human-debrief.png"), shot).expect("screenshot");
+    }
+    c.release_actions().await?;
+    Ok(format!("{summary} | {}", fix.replace('\n', "; ")))
+}
+
+/// A second socket of the trainee's page (the script's callback gets `{ open, sent }`): one
+/// 100 kB message, then 10,000 unusable messages in about a second (malformed, or a pointer
+/// sample out of range).
+const FLOOD: &str = r#"
+const done = arguments[arguments.length - 1], s = window.cutlabStation.config;
+const ws = new WebSocket("ws://" + location.host + s.ws);
+let sent = 0;
+ws.onerror = () => done({ open: false, sent });
+ws.onopen = () => {
+  ws.send("x".repeat(100000)); sent += 1;
+  const bad = ['{"type":"pointer","depth_m":null}', '{"type":"pointer","t_ms":1,"surface_in_world_m":[0,0,0],"depth_m":5,"blade_engaged":true}', 'not json'];
+  (function burst() {
+    for (let i = 0; i < 1000; i++) { ws.send(bad[sent % 3]); sent += 1; }
+    if (sent < 10001) setTimeout(burst, 100);
+    else setTimeout(() => { const open = ws.readyState === WebSocket.OPEN; ws.close(); done({ open, sent }); }, 300);
+  })();
+};
+"#;
+
+/// The skilled stroke, interrupted: at 30 % the trainee switches to another tab for 2 s, at
+/// 60 % the page is reloaded; each time the hand takes up the stroke where it was.
+async fn interrupted(
+    c: &fantoccini::Client,
+    url: &str,
+    hand: &mut cutlab_bench::hand::Hand,
+    reach: Vec<cutlab_bench::hand::Gesture>,
+    line: &[[f64; 2]],
+    stroke_s: f64,
+) -> Result<(), fantoccini::error::CmdError> {
+    use cutlab_bench::hand::Gesture;
+    let stroke = hand.stroke(line, stroke_s, 1.0);
+    let moves: Vec<usize> = (0..stroke.len())
+        .filter(|&i| matches!(stroke[i], Gesture::Move { .. }))
+        .collect();
+    let (at30, at60) = (moves[moves.len() * 3 / 10], moves[moves.len() * 6 / 10]);
+    let mut first = reach;
+    first.extend_from_slice(&stroke[..at30]);
+    c.perform_actions(as_actions(&first)).await?;
+    // a hostile or broken page beside it: one 100 kB message and 10,000 in a second, none
+    // usable; they are dropped and counted, the connection stays and the attempt goes on
+    let flood = c.execute_async(FLOOD, vec![]).await?;
+    assert_eq!(
+        flood["open"], true,
+        "the flooding socket stays open: {flood}"
+    );
+    assert!(
+        flood["sent"].as_u64().is_some_and(|n| n >= 10_000),
+        "{flood}"
+    );
+    // another tab for 2 s: the page is hidden, its samples stop, the blade pauses
+    let mine = c.window().await?;
+    let other = c.new_window(true).await?;
+    c.switch_to_window(other.handle).await?;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    c.close_window().await?;
+    c.switch_to_window(mine).await?;
+    c.perform_actions(as_actions(&stroke[at30..at60])).await?;
+    // a reload mid-cut: the page comes back to the same attempt; the hand lets go, and
+    // presses again where it was
+    c.goto(url).await?;
+    line_on_page(c).await?;
+    let Gesture::Move { x, y, .. } = stroke[at60] else {
+        unreachable!("a move")
+    };
+    let mut again = vec![
+        Gesture::Release,
+        Gesture::Move { x, y, ms: 16 },
+        Gesture::Wait { ms: 300 },
+        Gesture::Press,
+    ];
+    again.extend_from_slice(&stroke[at60..]);
+    c.perform_actions(as_actions(&again)).await?;
+    Ok(())
+}

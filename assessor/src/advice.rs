@@ -68,9 +68,12 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
     let praise = fix
         .is_empty()
         .then(|| "Within every limit: the line, its depth and the force were right.".to_owned());
+    // the motion of an attempt that did not do the task says nothing of how it was done
+    let done = !matches!(fraction.map(|m| m.value), Some(None))
+        && !matches!(fraction.map(|m| m.value), Some(Some(f)) if f < TASK_DONE_MIN_FRACTION);
     let feedback = results
         .iter()
-        .filter(|m| !decides(m.key))
+        .filter(|m| done && !decides(m.key))
         .filter_map(feedback_words)
         .collect();
     Advice {
@@ -254,17 +257,75 @@ mod tests {
     }
 
     #[test]
+    fn what_the_device_cannot_measure_is_not_something_to_fix() {
+        // the approach with the station's pointer: no value, no verdict (left out of it)
+        let plan = crate::ExpertPlan::chest_wall().unwrap();
+        let data = crate::AttemptData {
+            device: Some("pointer".into()),
+            ..Default::default()
+        };
+        let values = crate::metrics::assess(&plan, &data).unwrap();
+        let approach = values
+            .iter()
+            .find(|v| v.key == "approach_error_deg")
+            .unwrap();
+        assert!(approach.not_measured(), "{approach:?}");
+        let thresholds = crate::proficiency::Thresholds {
+            k: 2.0,
+            metrics: vec![crate::proficiency::Threshold::fixed(
+                "approach_error_deg",
+                crate::Better::LowerIsBetter,
+                2.0,
+                10.0,
+            )],
+        };
+        let verdict = thresholds.verdict(&values);
+        let passed = verdict
+            .metrics
+            .iter()
+            .find(|m| m.key == approach.key)
+            .map(|m| m.pass);
+        assert_eq!(passed, None);
+        let a = advice(&[
+            r(
+                "lateral_mean_m",
+                Some(0.0004),
+                Some(true),
+                0.0005,
+                None,
+                Some(0.002),
+            ),
+            MetricResult {
+                key: &approach.key,
+                value: approach.value,
+                passed,
+                mean: Some(2.0),
+                lower: None,
+                upper: Some(10.0),
+            },
+        ]);
+        assert!(a.fix.is_empty() && a.praise.is_some(), "{a:?}");
+    }
+
+    #[test]
     fn an_attempt_without_a_cut_is_told_to_cut_and_a_good_one_is_praised() {
-        let none = advice(&[r(
-            "fraction_cut_in_tolerance",
-            None,
-            Some(false),
-            0.95,
-            Some(0.8),
-            None,
-        )]);
+        let none = advice(&[
+            r(
+                "fraction_cut_in_tolerance",
+                None,
+                Some(false),
+                0.95,
+                Some(0.8),
+                None,
+            ),
+            r("time_s", Some(4.0), None, 5.0, None, Some(8.0)),
+        ]);
         assert_eq!(none.fix.len(), 1);
         assert!(none.fix[0].starts_with("No incision"), "{none:?}");
+        assert!(
+            none.feedback.is_empty(),
+            "no praise of the speed of no cut: {none:?}"
+        );
         let little = advice(&[
             r(
                 "fraction_cut_in_tolerance",

@@ -2,8 +2,11 @@
 //! blade path while it was in the tissue, and the deformed tissue surface of the last
 //! keyframe.
 
+use std::collections::BTreeMap;
+
 use cutlab_recorder::Recording;
 use cutlab_recorder::haptics::render::Mode;
+use cutlab_recorder::haptics::servo::ServoSample;
 use cutlab_sim::TetMesh;
 
 use crate::AssessError;
@@ -14,8 +17,9 @@ use crate::plan::ExpertPlan;
 /// How the note of an attempt scored from a recording that is not whole begins.
 pub const DAMAGED_RECORDING_NOTE: &str = "Scored from a damaged recording";
 
-/// The data `plan` is assessed on, from `rec`. A cut sample's depth is its blade tip's depth
-/// below the planned surface (`depth_below_plan`).
+/// The data `plan` is assessed on, from `rec`: the poses and forces of every tick, the cut's
+/// trace ([`cut_samples`]), the last keyframe's surface and the device named in the session
+/// metadata.
 pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, AssessError> {
     let meta = rec
         .meta()
@@ -45,28 +49,50 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
             cutting: s.render.mode == Mode::Cutting,
         })
         .collect();
-    // The cut's trace: the blade at every tick the renderer had it in the tissue (the blade
-    // path; the topology events only mark where the mesh changed, a few per centimetre on a
-    // coarse mesh).
-    let cuts = samples
-        .values()
-        .filter(|s| s.render.mode == Mode::Cutting)
-        .map(|s| {
-            let tip_m: [f64; 3] = s.pose.tip_in_world.coords.into();
-            CutSample {
-                t_s: t_s(s.tick),
-                tip_m,
-                edge_dir: s.pose.edge_direction().into(),
-                depth_m: depth_below_plan(plan, tip_m),
-            }
-        })
-        .collect();
     Ok(AttemptData {
         poses,
         forces,
-        cuts,
+        cuts: cut_samples(&samples, period_s, plan),
         surface: last_surface(rec),
+        device: Some(meta.provenance.device.clone()),
     })
+}
+
+/// The cut's trace in recorded servo `samples` (by tick, `period_s` apart): the blade at every
+/// tick the renderer had it in the tissue (mode `Cutting`: the blade path; the topology events
+/// only mark where the mesh changed, a few per centimetre on a coarse mesh). A sample's depth
+/// is its blade tip's depth below the planned surface ([`depth_below_plan`]).
+///
+/// Each sample carries its stroke ([`CutSample::stroke`]): a new one begins at a `Cutting`
+/// tick whose recorded predecessor was not cutting (the blade left the tissue and entered it
+/// again). Within a stroke the simulation cuts along the blade's whole sweep, whatever the
+/// distance between two ticks: a device that skips forward (the pointer's clock anchored
+/// again after a stalled page) or ticks the recording dropped do not end it.
+pub fn cut_samples(
+    samples: &BTreeMap<u64, ServoSample>,
+    period_s: f64,
+    plan: &ExpertPlan,
+) -> Vec<CutSample> {
+    let mut cuts = Vec::new();
+    let (mut stroke, mut cutting) = (None::<u32>, false);
+    for s in samples.values() {
+        let was_cutting = std::mem::replace(&mut cutting, s.render.mode == Mode::Cutting);
+        if !cutting {
+            continue;
+        }
+        if !was_cutting {
+            stroke = Some(stroke.map_or(0, |n| n + 1));
+        }
+        let tip_m: [f64; 3] = s.pose.tip_in_world.coords.into();
+        cuts.push(CutSample {
+            t_s: s.tick as f64 * period_s,
+            tip_m,
+            edge_dir: s.pose.edge_direction().into(),
+            depth_m: depth_below_plan(plan, tip_m),
+            stroke,
+        });
+    }
+    cuts
 }
 
 /// `rec`'s metrics against `plan`, and what the attempt's note must say of a recording that
@@ -148,5 +174,131 @@ impl crate::store::Store {
             .finish_attempt_noted(attempt_id, &values, note.as_deref())
             .await?;
         Ok((outcome, values))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::metrics::incision::{STROKE_GAP_M, incision, trace_point};
+    use cutlab_recorder::haptics::device::{PointerDevice, PointerOptions, PointerSample};
+    use cutlab_recorder::haptics::render::RenderOutput;
+    use cutlab_recorder::haptics::{HapticDevice, Vector3};
+
+    /// A 60 mm plan along x on flat tissue (the surface z = 0), 8 mm deep.
+    fn plan() -> ExpertPlan {
+        ExpertPlan::from_json(
+            r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#,
+        )
+        .unwrap()
+    }
+
+    /// The servo samples of a pointer attempt along [`plan`], played by the station's pointer
+    /// device at 1 kHz: the page sends a sample every 8 ms, each arriving 5 ms after it was
+    /// taken; the cursor rests on the entry, then with the button held (8 mm deep) crosses to
+    /// the exit at 40 mm/s (page times 1100 to 2600 ms), then rests on the exit. Once, from
+    /// page time 1800 ms, the page stalls for 160 ms (a busy browser): the samples of the stall
+    /// arrive together at its end. With `lift`, the button is up from 1400 to 1500 ms. The
+    /// renderer's mode is emulated: cutting while the blade is engaged and below the surface.
+    fn pointer_attempt(lift: bool) -> BTreeMap<u64, ServoSample> {
+        let (mut device, feed) = PointerDevice::new(PointerOptions::default()).unwrap();
+        let pages: Vec<(f64, PointerSample)> = (0..=250)
+            .map(|i| {
+                let p_ms = 1000.0 + 8.0 * f64::from(i);
+                let x = (0.06 * (p_ms - 1100.0) / 1500.0).clamp(0.0, 0.06);
+                let engaged = (1100.0..=2600.0).contains(&p_ms)
+                    && !(lift && (1400.0..1500.0).contains(&p_ms));
+                let depth = if engaged { 0.008 } else { 0.0 };
+                let sample = PointerSample::new(p_ms, [x, 0.0, 0.0], depth, engaged);
+                let sent_ms = if (1800.0..1960.0).contains(&p_ms) {
+                    1960.0
+                } else {
+                    p_ms
+                };
+                (sent_ms - 1000.0 + 5.0, sample)
+            })
+            .collect();
+        let mut next = 0;
+        let mut samples = BTreeMap::new();
+        for tick in 0..2000u64 {
+            let now_ms = tick as f64;
+            while next < pages.len() && pages[next].0 <= now_ms {
+                feed.push(pages[next].1).unwrap();
+                next += 1;
+            }
+            let pose = device.read(tick, now_ms * 1e-3).unwrap();
+            let cutting = pose.blade_engaged() && pose.tip_in_world.z < 0.0;
+            let render = RenderOutput {
+                force_newtons: Vector3::zeros(),
+                proxy: pose.tip_in_world,
+                mode: if cutting { Mode::Cutting } else { Mode::Free },
+                faults: 0,
+                gain: 1.0,
+            };
+            samples.insert(tick, ServoSample { tick, pose, render });
+        }
+        samples
+    }
+
+    /// The largest distance between consecutive trace points (projected along +z).
+    fn widest_step(cuts: &[CutSample]) -> f64 {
+        cuts.windows(2)
+            .map(|w| {
+                let (a, b) = (trace_point(&w[0]), trace_point(&w[1]));
+                (a[0] - b[0]).hypot(a[1] - b[1])
+            })
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn a_pointer_that_skips_forward_cuts_one_stroke_the_plans_length() {
+        let plan = plan();
+        let cuts = cut_samples(&pointer_attempt(false), 1e-3, &plan);
+        // the cause: after the stall the device's clock is anchored again and the blade skips
+        // forward, further than the distance that used to end a stroke, while still cutting
+        let skip = widest_step(&cuts);
+        assert!(skip > STROKE_GAP_M, "{skip}");
+        assert!(cuts.iter().all(|c| c.stroke == Some(0)), "one stroke");
+        let m = incision(&plan, &cuts).unwrap();
+        assert!(m.entry_error_m < 5e-4 && m.exit_error_m < 5e-4, "{m:?}");
+        assert!(m.length_error_m.abs() <= 1e-3, "{m:?}");
+        assert!(m.fraction_cut_in_tolerance > 0.99, "{m:?}");
+        // as it was, strokes guessed from the distance: the skip was not cut, the ends were
+        let guessed: Vec<CutSample> = cuts
+            .iter()
+            .map(|c| CutSample { stroke: None, ..*c })
+            .collect();
+        let was = incision(&plan, &guessed).unwrap();
+        println!(
+            "skip {:.2} mm; length error {:.2} mm in one stroke, {:.2} mm guessed",
+            skip * 1e3,
+            m.length_error_m * 1e3,
+            was.length_error_m * 1e3
+        );
+        assert!(was.length_error_m < -STROKE_GAP_M, "{was:?}");
+        assert!(
+            was.entry_error_m < 5e-4 && was.exit_error_m < 5e-4,
+            "{was:?}"
+        );
+    }
+
+    #[test]
+    fn a_pointer_whose_button_was_let_go_cuts_two_strokes_and_not_the_gap() {
+        let plan = plan();
+        let cuts = cut_samples(&pointer_attempt(true), 1e-3, &plan);
+        let strokes: Vec<u32> = cuts.iter().filter_map(|c| c.stroke).collect();
+        assert_eq!(strokes.len(), cuts.len());
+        assert_eq!(
+            (strokes[0], strokes[strokes.len() - 1]),
+            (0, 1),
+            "two strokes"
+        );
+        let m = incision(&plan, &cuts).unwrap();
+        // 100 ms at 40 mm/s without the blade in the tissue: about 4 mm not cut
+        assert!(m.entry_error_m < 5e-4 && m.exit_error_m < 5e-4, "{m:?}");
+        assert!(
+            m.length_error_m < -STROKE_GAP_M && m.length_error_m > -0.006,
+            "{m:?}"
+        );
     }
 }

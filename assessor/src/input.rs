@@ -43,6 +43,14 @@ pub struct CutSample {
     /// recorder fills it from the simulation's surface (or, lacking it, with
     /// [`crate::metrics::incision::depth_below_plan`]); positive inside the tissue.
     pub depth_m: f64,
+    /// The blade's stroke this sample belongs to, when the recorder knows it: strokes are
+    /// numbered in time order, a new one each time the blade enters the tissue again, so two
+    /// samples of one stroke were cut without the blade leaving the tissue however far apart
+    /// they are (a device that skips forward, ticks not recorded). `None` when unknown: the
+    /// metrics then start a new stroke where consecutive samples are more than
+    /// [`crate::metrics::incision::STROKE_GAP_M`] apart.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stroke: Option<u32>,
 }
 
 /// The tissue's boundary surface (deformed, after the cut), for the field-of-view metrics.
@@ -66,4 +74,9 @@ pub struct AttemptData {
     /// The deformed tissue surface at the end of the attempt, if recorded.
     #[serde(default)]
     pub surface: Option<SurfaceMesh>,
+    /// The device the attempt was made with, as the recording names it (`pointer`, `expert`,
+    /// `recording of pointer`...), if known: some metrics measure what only some devices let
+    /// the trainee choose ([`crate::metrics::incision::device_sets_approach`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<String>,
 }

@@ -39,7 +39,10 @@ pub struct ExpertPlan {
     #[serde(default)]
     pub approach_dir: Option<[f64; 3]>,
     /// Points on the target that must become visible through the opening (m); may be empty
-    /// (then the visibility metric is missing).
+    /// (then the visibility metric is missing). What the planned incision lays open: no deeper
+    /// below the planned line than `depth_m` (a target beyond it, tissue the planned cut does
+    /// not reach, could only be seen after cutting deeper than planned, so the visibility
+    /// metric is missing then too); [`ExpertPlan::mid_depth_targets`] are such points.
     #[serde(default)]
     pub target_m: Vec<[f64; 3]>,
     /// Where the target is seen from (m).
@@ -207,6 +210,26 @@ impl ExpertPlan {
         self.incision_m.iter().map(|&p| Point3::from(p)).collect()
     }
 
+    /// `count` points (at least 1) evenly along the middle third of the planned line, half the
+    /// planned depth below it along `-normal`: what a cut of the planned depth lays open in
+    /// the middle of the incision, seen from above (the built-in plans' targets).
+    pub fn mid_depth_targets(&self, count: usize) -> Vec<[f64; 3]> {
+        let line = self.line();
+        let length = geom::polyline_length(&line);
+        let down = -Vector3::from(self.normal) * (0.5 * self.depth_m);
+        let count = count.max(1);
+        (0..count)
+            .map(|k| {
+                let u = if count == 1 {
+                    0.5
+                } else {
+                    1.0 / 3.0 + k as f64 / (3 * (count - 1)) as f64
+                };
+                (geom::point_at_arc(&line, u * length).0 + down).into()
+            })
+            .collect()
+    }
+
     /// The approach direction (unit), `-normal` unless given.
     pub fn approach(&self) -> [f64; 3] {
         self.approach_dir
@@ -232,6 +255,24 @@ mod tests {
         assert!((plan.tolerance_m - 0.002).abs() < 1e-12);
         assert!(!plan.target_m.is_empty());
         assert_eq!(plan.approach(), [0.0, 0.0, -1.0]);
+    }
+
+    #[test]
+    fn the_builtin_target_is_what_its_incision_lays_open() {
+        // the points in plan.toml are the rule's: the middle third, half the depth down
+        let plan = ExpertPlan::chest_wall().unwrap();
+        let rule = plan.mid_depth_targets(plan.target_m.len());
+        assert_eq!(rule.len(), plan.target_m.len());
+        for (a, b) in plan.target_m.iter().zip(&rule) {
+            assert!(
+                (Point3::from(*a) - Point3::from(*b)).norm() < 1e-6,
+                "{a:?} vs {b:?}"
+            );
+        }
+        for t in &plan.target_m {
+            let depth = crate::metrics::incision::depth_below_plan(&plan, *t);
+            assert!(depth > 0.0 && depth <= plan.depth_m, "{depth}");
+        }
     }
 
     #[test]

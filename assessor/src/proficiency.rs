@@ -13,10 +13,26 @@
 //!
 //! **Pass.** Only the metrics that decide ([`decides`]: not [`FEEDBACK_ONLY`]) count. An
 //! attempt passes a metric when its value is within the limits (inclusive); a missing value
-//! fails; an attempt that did not do the task ([`task_done`]: less than half the planned line
-//! cut within the tolerance) fails every metric and scores -1 on each. It passes overall when
-//! it passes every deciding thresholded metric (and there is at least one). A trainee is proficient in an exercise after
-//! [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes (and stays so).
+//! fails, except one the attempt's device cannot measure
+//! ([`crate::metrics::MetricValue::not_measured`]: the approach angle with the station's
+//! pointer, whose blade enters the tissue along an orientation the station fixes), which is
+//! left out of the verdict: it neither passes nor fails and does not count in the score. An
+//! attempt that did not do the task ([`task_done`]: less than half the planned line cut within
+//! the tolerance) fails every metric and scores -1 on each. It passes overall when it passes
+//! every deciding thresholded metric (and there is at least one).
+//!
+//! **Proficiency and CUSUM** ([`Course`]; docs/decisions.md, "Proficiency and CUSUM"). A
+//! trainee becomes proficient in an exercise at the attempt that completes
+//! [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes ("proficient since attempt N"). The
+//! CUSUM of failures below watches the failure rate, counted afresh from 0 in each phase of
+//! the trainee's course: from the first attempt while learning, and from the attempt after each
+//! change of standing. So the failures of the learning phase, expected and behind a trainee
+//! who has become proficient, do not count against them afterwards; but once proficient, a
+//! CUSUM that reaches the unacceptable limit `h1` at attempt M ends the proficiency: "lapsed:
+//! unacceptable failure rate since attempt M, retrain". A lapsed trainee is not proficient
+//! (nor are the curriculum modules that need the exercise) until they again complete the
+//! consecutive passes, when the CUSUM restarts once more. While learning, an unacceptable
+//! signal only confirms that the trainee is not proficient yet.
 //!
 //! **Score.** Per metric, the distance to the limit in units of the expert margin
 //! `|limit - mu|`: lower-is-better `s = (upper - x) / (upper - mu)`, higher-is-better
@@ -34,7 +50,8 @@
 //! `P = ln(p1 / p0)`, `Q = ln((1 - p0) / (1 - p1))`, `s = Q / (P + Q)`; each failure adds
 //! `1 - s`, each pass subtracts `s`. The chart signals an unacceptable rate when it reaches
 //! `h1 = ln((1 - beta) / alpha) / (P + Q)` and an acceptable one when it falls to
-//! `-h0 = -ln((1 - alpha) / beta) / (P + Q)`.
+//! `-h0 = -ln((1 - alpha) / beta) / (P + Q)`. [`cusum`] is the plain chart of a pass/fail
+//! sequence; [`Course`] restarts it as the standing changes (above).
 
 use serde::{Deserialize, Serialize};
 
@@ -275,7 +292,7 @@ impl Thresholds {
         let metrics: Vec<MetricVerdict> = self
             .metrics
             .iter()
-            .filter(|t| decides(&t.key))
+            .filter(|t| decides(&t.key) && !crate::metrics::not_measured(attempt, &t.key))
             .map(|t| {
                 let value = crate::metrics::value_of(attempt, &t.key);
                 MetricVerdict {
@@ -322,30 +339,106 @@ pub struct ProficiencyState {
     pub attempts: u32,
     pub passes: u32,
     pub consecutive_passes: u32,
-    /// Reached [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes at some point.
+    /// Proficient now: reached [`REQUIRED_CONSECUTIVE_PASSES`] consecutive passes, and no
+    /// lapse since ([`Course`]).
     pub proficient: bool,
 }
 
 impl ProficiencyState {
-    /// After one more scored attempt.
-    pub fn update(&mut self, pass: bool) {
-        self.attempts += 1;
-        if pass {
-            self.passes += 1;
-            self.consecutive_passes += 1;
-        } else {
-            self.consecutive_passes = 0;
-        }
-        self.proficient |= self.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES;
-    }
-
-    /// The state after a sequence of pass/fail outcomes.
+    /// The state after a sequence of pass/fail outcomes, oldest first ([`Course`] with the
+    /// default CUSUM parameters).
     pub fn from_outcomes(passes: &[bool]) -> Self {
-        let mut s = Self::default();
-        for &p in passes {
-            s.update(p);
+        Course::of(passes, &CusumParams::default())
+            .map(|c| c.state)
+            .unwrap_or_default()
+    }
+}
+
+/// Where a trainee stands in an exercise after their scored attempts (see the module
+/// documentation, "Proficiency and CUSUM"). Attempts are numbered from 1 among the scored
+/// ones, oldest first.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "state")]
+pub enum ProficiencyStatus {
+    /// Not proficient yet (no attempt, or never the consecutive passes).
+    #[default]
+    Learning,
+    /// Proficient since attempt `since`, the one that completed the consecutive passes.
+    Proficient { since: u32 },
+    /// Was proficient; the CUSUM after it reached the unacceptable limit at attempt `since`:
+    /// to retrain, proficient again after the consecutive passes.
+    Lapsed { since: u32 },
+}
+
+/// A trainee's course through an exercise: the counters, the standing and the CUSUM chart
+/// restarted with each change of standing (see the module documentation).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Course {
+    /// The counters; `state.proficient` is whether the trainee is proficient now.
+    pub state: ProficiencyState,
+    pub status: ProficiencyStatus,
+    /// The attempt that first completed the consecutive passes: the trials to proficiency.
+    pub first_proficient: Option<u32>,
+    /// Per attempt, the CUSUM after it in its phase, with its signal (at an attempt that
+    /// changed the standing: the phase it ended).
+    pub cusum: Vec<CusumPoint>,
+    /// The attempts after which the CUSUM restarted from 0 (the standing changed at them).
+    pub restarts: Vec<u32>,
+    /// The CUSUM now: after the last attempt, 0 with no signal when the standing changed at it.
+    pub current: CusumPoint,
+}
+
+impl Course {
+    /// The course of a pass/fail sequence, oldest first.
+    pub fn of(passes: &[bool], params: &CusumParams) -> Result<Self> {
+        params.check()?;
+        let s = params.s();
+        let fresh = CusumPoint {
+            value: 0.0,
+            signal: CusumSignal::None,
+        };
+        let mut c = Course {
+            current: fresh,
+            ..Course::default()
+        };
+        for (n, &pass) in (1u32..).zip(passes) {
+            let st = &mut c.state;
+            st.attempts += 1;
+            if pass {
+                st.passes += 1;
+                st.consecutive_passes += 1;
+            } else {
+                st.consecutive_passes = 0;
+            }
+            let value = c.current.value + if pass { -s } else { 1.0 - s };
+            let point = CusumPoint {
+                value,
+                signal: params.signal(value),
+            };
+            c.cusum.push(point);
+            c.current = point;
+            let changed = match c.status {
+                ProficiencyStatus::Proficient { .. }
+                    if point.signal == CusumSignal::Unacceptable =>
+                {
+                    Some(ProficiencyStatus::Lapsed { since: n })
+                }
+                ProficiencyStatus::Learning | ProficiencyStatus::Lapsed { .. }
+                    if st.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES =>
+                {
+                    c.first_proficient.get_or_insert(n);
+                    Some(ProficiencyStatus::Proficient { since: n })
+                }
+                _ => None,
+            };
+            if let Some(status) = changed {
+                c.status = status;
+                c.restarts.push(n);
+                c.current = fresh;
+            }
+            c.state.proficient = matches!(c.status, ProficiencyStatus::Proficient { .. });
         }
-        s
+        Ok(c)
     }
 }
 
@@ -406,12 +499,23 @@ impl CusumParams {
     pub fn h1(&self) -> f64 {
         ((1.0 - self.beta) / self.alpha).ln() / self.p_plus_q()
     }
+    /// What a CUSUM value says against the limits.
+    pub fn signal(&self, value: f64) -> CusumSignal {
+        if value >= self.h1() {
+            CusumSignal::Unacceptable
+        } else if value <= -self.h0() {
+            CusumSignal::Acceptable
+        } else {
+            CusumSignal::None
+        }
+    }
 }
 
 /// What a CUSUM point says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum CusumSignal {
+    #[default]
     None,
     /// At or below `-h0`: the failure rate is acceptable (`p0`).
     Acceptable,
@@ -420,29 +524,26 @@ pub enum CusumSignal {
 }
 
 /// One point of the chart, after an attempt.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct CusumPoint {
     pub value: f64,
     pub signal: CusumSignal,
 }
 
-/// The CUSUM chart of a pass/fail sequence (no reset at the limits).
+/// The CUSUM chart of a pass/fail sequence (no reset at the limits; [`Course`] restarts it
+/// as the standing changes).
 pub fn cusum(passes: &[bool], params: &CusumParams) -> Result<Vec<CusumPoint>> {
     params.check()?;
-    let (s, h0, h1) = (params.s(), params.h0(), params.h1());
+    let s = params.s();
     let mut value = 0.0;
     Ok(passes
         .iter()
         .map(|&pass| {
             value += if pass { -s } else { 1.0 - s };
-            let signal = if value >= h1 {
-                CusumSignal::Unacceptable
-            } else if value <= -h0 {
-                CusumSignal::Acceptable
-            } else {
-                CusumSignal::None
-            };
-            CusumPoint { value, signal }
+            CusumPoint {
+                value,
+                signal: params.signal(value),
+            }
         })
         .collect())
 }
@@ -498,6 +599,90 @@ mod tests {
         ]);
         let v = t.verdict(&sloppy);
         assert!(!v.pass && v.score > -1.0, "{v:?}");
+    }
+
+    #[test]
+    fn a_metric_the_device_cannot_measure_neither_fails_nor_counts() {
+        // a threshold on the approach angle (hand-set, or from a hub's experts)
+        let t = Thresholds {
+            k: 2.0,
+            metrics: vec![
+                Threshold::fixed("lateral_mean_m", Better::LowerIsBetter, 0.0005, 0.002),
+                Threshold::fixed("approach_error_deg", Better::LowerIsBetter, 2.0, 10.0),
+            ],
+        };
+        let with = |missing: &str| {
+            let mut a = attempt(&[("lateral_mean_m", 0.0005)]);
+            let m = crate::metrics::metric("approach_error_deg").unwrap();
+            a.push(MetricValue {
+                key: m.key.into(),
+                value: None,
+                unit: m.unit.into(),
+                better: m.better,
+                scored: m.scored,
+                missing: Some(missing.into()),
+            });
+            a
+        };
+        let pointer = t.verdict(&with(&format!(
+            "{}: the pointer pushes the blade in",
+            crate::metrics::NOT_MEASURED_WITH_DEVICE
+        )));
+        assert!(pointer.pass, "{pointer:?}");
+        assert_eq!(pointer.metrics.len(), 1, "left out of the verdict");
+        assert!((pointer.score - 1.0).abs() < 1e-12, "and of the score");
+        // missing for what the trainee did (no approach before the cut): a fail, as before
+        let other = t.verdict(&with("no approach before a first cut"));
+        assert!(!other.pass && other.metrics.len() == 2, "{other:?}");
+        assert!(
+            (other.score - 0.0).abs() < 1e-12,
+            "(1 - 1) / 2: {}",
+            other.score
+        );
+    }
+
+    #[test]
+    fn proficiency_lapses_when_the_cusum_after_it_is_unacceptable() {
+        let p = CusumParams::default();
+        // failing while learning, then proficient: the learning's failures are behind
+        let mut passes = vec![false; 5];
+        passes.extend([true, true]);
+        let learning = cusum(&passes, &p).unwrap();
+        assert_eq!(
+            learning[6].signal,
+            CusumSignal::Unacceptable,
+            "{learning:?}"
+        );
+        let c = Course::of(&passes, &p).unwrap();
+        assert_eq!(c.status, ProficiencyStatus::Proficient { since: 7 });
+        assert!(c.state.proficient && c.first_proficient == Some(7));
+        assert_eq!(
+            (c.restarts.clone(), c.current),
+            (vec![7], CusumPoint::default())
+        );
+        assert_eq!(
+            c.cusum[6], learning[6],
+            "the point at 7 ends the learning phase"
+        );
+        // failures after it: the CUSUM counts from 0 and lapses where it reaches h1
+        let mut after = passes.clone();
+        let needed = (p.h1() / (1.0 - p.s())).ceil() as usize;
+        after.extend(vec![false; needed]);
+        let c = Course::of(&after, &p).unwrap();
+        let m = u32::try_from(after.len()).unwrap();
+        assert_eq!(c.status, ProficiencyStatus::Lapsed { since: m }, "{c:?}");
+        assert!(!c.state.proficient && c.first_proficient == Some(7));
+        assert_eq!(c.cusum.last().unwrap().signal, CusumSignal::Unacceptable);
+        let short = Course::of(&after[..after.len() - 1], &p).unwrap();
+        assert_eq!(short.status, ProficiencyStatus::Proficient { since: 7 });
+        assert_ne!(short.current.signal, CusumSignal::Unacceptable);
+        assert_eq!(ProficiencyState::from_outcomes(&after), c.state);
+        // two passes again: proficient since the second, the CUSUM restarted once more
+        after.extend([true, true]);
+        let c = Course::of(&after, &p).unwrap();
+        assert_eq!(c.status, ProficiencyStatus::Proficient { since: m + 2 });
+        assert_eq!(c.restarts, vec![7, m, m + 2]);
+        assert!(c.state.proficient);
     }
 
     fn attempt(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
@@ -678,7 +863,7 @@ mod tests {
     fn proficient_after_two_consecutive_passes() {
         assert!(!ProficiencyState::from_outcomes(&[true, false, true, false]).proficient);
         let s = ProficiencyState::from_outcomes(&[false, true, true, false]);
-        assert!(s.proficient, "stays proficient");
+        assert!(s.proficient, "stays proficient through a failure");
         assert_eq!((s.attempts, s.passes, s.consecutive_passes), (4, 2, 0));
     }
 

@@ -1,6 +1,7 @@
 //! The metrics on a really cut chest wall: the demo's scripted incision (60 mm along x, 8 mm
 //! deep, the blade normal to the curved surface) on the default `chest-wall` (12.8k tets), assessed against the built-in plan. The opening width from
-//! ray casts must agree with the gap between the split vertices' copies.
+//! ray casts must agree with the gap between the split vertices' copies, and the plan's target
+//! (the incision open to half its depth) is hidden before the cut and seen after it.
 
 use cutlab_assessor::metrics::{assess, value_of};
 use cutlab_assessor::{AttemptData, CutSample, ExpertPlan, SurfaceMesh};
@@ -13,6 +14,18 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
     let scene = Scene::load("chest-wall", BuildOptions { min_tets: None }).expect("scene");
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
+    let plan = ExpertPlan::chest_wall().expect("plan");
+    // the settled tissue, not cut: the incision's target is hidden
+    let uncut = AttemptData {
+        surface: Some(surface(&sim)),
+        ..AttemptData::default()
+    };
+    let before = assess(&plan, &uncut).expect("assess the uncut tissue");
+    assert_eq!(
+        value_of(&before, "target_visible_fraction"),
+        Some(0.0),
+        "{before:?}"
+    );
     let depth = 0.008;
     let steps = 1500;
     let mut cutter = cut::Cutter::default();
@@ -28,23 +41,19 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
                     tip_m: [tip.x, tip.y, tip.z],
                     edge_dir: [outward.x, outward.y, outward.z],
                     depth_m: depth,
+                    stroke: None,
                 });
             }
         }
         sim.step().expect("step");
     }
     assert!(sim.settle(StaticSettings::default()).converged);
-    let x = &sim.state.positions;
     let widest_gap = cut::wound_gaps(&sim)
         .into_iter()
         .map(|(_, gap)| gap)
         .fold(0.0, f64::max);
-    data.surface = Some(SurfaceMesh {
-        vertices_m: x.iter().map(|p| [p.x, p.y, p.z]).collect(),
-        triangles: sim.model.mesh.topology().boundary.clone(),
-    });
+    data.surface = Some(surface(&sim));
 
-    let plan = ExpertPlan::chest_wall().expect("plan");
     let m = assess(&plan, &data).expect("assess");
     let get = |k: &str| value_of(&m, k).unwrap_or_else(|| panic!("{k} missing: {m:?}"));
     let width = get("opening_width_m");
@@ -64,13 +73,25 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
         get("opening_area_m2") > 0.3 * width * 0.06,
         "open along most of the line"
     );
-    assert_eq!(
-        get("target_visible_fraction"),
-        0.0,
-        "an 8 mm cut in a 15 mm wall does not show the heart"
-    );
+    // the incision lies open to half its depth along its middle: the target is seen
+    let visible = get("target_visible_fraction");
+    println!("target visible {:.0} %", visible * 100.0);
+    assert!(visible > 0.5, "{visible}");
     assert!(get("lateral_max_m") < 5e-4);
     assert!(get("fraction_cut_in_tolerance") > 0.98);
     assert!(get("entry_error_m") < 1e-3 && get("exit_error_m") < 1e-3);
     assert!(get("direction_error_deg") < 1.0);
+}
+
+/// The boundary of `sim`'s mesh at its current positions.
+fn surface(sim: &cutlab_sim::solver::Simulation) -> SurfaceMesh {
+    SurfaceMesh {
+        vertices_m: sim
+            .state
+            .positions
+            .iter()
+            .map(|p| [p.x, p.y, p.z])
+            .collect(),
+        triangles: sim.model.mesh.topology().boundary.clone(),
+    }
 }

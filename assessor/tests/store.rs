@@ -3,7 +3,7 @@
 //! one).
 
 use cutlab_assessor::metrics::{METRICS, MetricValue};
-use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds};
+use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds, cusum};
 use cutlab_assessor::store::{AttemptStatus, BUILTIN_EXERCISE, NewExercise, Role, ThresholdSource};
 use cutlab_assessor::store::{DbLocation, test_postgres};
 use cutlab_assessor::{AssessError, Better, ExpertPlan, Store, on_db};
@@ -295,7 +295,11 @@ async fn attempts_scores_and_proficiency(store: Store) {
         .await
         .expect("cusum");
     assert_eq!(chart.len(), 3);
-    assert!((chart[2].1.value - p.cusum).abs() < 1e-12);
+    // proficient at the third: the CUSUM restarts from 0 after it, its third point ends the
+    // learning phase
+    assert_eq!(p.cusum, 0.0);
+    let learning = cusum(&[false, true, true], &CusumParams::default()).expect("chart");
+    assert!((chart[2].1.value - learning[2].value).abs() < 1e-12);
     let metrics = store.attempt_metrics(ids[0]).await.expect("metrics");
     let lat = metrics
         .iter()
@@ -593,6 +597,7 @@ fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData
                 tip_m: p,
                 edge_dir: [0.0, 0.0, 1.0],
                 depth_m: depth,
+                stroke: None,
             });
         }
     }

@@ -173,12 +173,14 @@ impl Control {
         self.away_since_nanos.store(PRESENT, Ordering::Release);
     }
 
-    /// A page went away; when it was the last, the absence starts counting.
-    pub fn leave(&self) {
-        if self.pages.fetch_sub(1, Ordering::AcqRel) == 1 {
+    /// A page went away; when it was the last (true), the absence starts counting.
+    pub fn leave(&self) -> bool {
+        let last = self.pages.fetch_sub(1, Ordering::AcqRel) == 1;
+        if last {
             let now = u64::try_from(self.epoch.elapsed().as_nanos()).unwrap_or(PRESENT - 1);
             self.away_since_nanos.store(now, Ordering::Release);
         }
+        last
     }
 
     /// No page has been connected for longer than the absence allowed.

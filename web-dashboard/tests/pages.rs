@@ -973,3 +973,73 @@ async fn the_station_offers_its_devices_and_refuses_others() {
     );
     assert!(state.station().running().is_empty(), "nothing started");
 }
+
+#[tokio::test]
+async fn a_lapse_after_proficiency_reads_as_a_lapse_beside_the_cusum() {
+    use cutlab_dashboard::assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
+    use cutlab_dashboard::assessor::store::Role;
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let ex = e.store.ensure_builtins().await.unwrap();
+    let t = e.store.thresholds(ex.id).await.unwrap();
+    let cara = e
+        .store
+        .create_user("cara", Role::Trainee, None)
+        .await
+        .unwrap();
+    let cohort = e
+        .store
+        .cohort_by_name(cutlab_dashboard::DEMO_COHORT)
+        .await
+        .unwrap();
+    e.store.join_cohort(cohort.id, cara.id).await.unwrap();
+    // two passes (proficient), then failures until the CUSUM after them is unacceptable
+    let p = CusumParams::default();
+    let mut outcomes = vec![true, true];
+    while !matches!(
+        Course::of(&outcomes, &p).unwrap().status,
+        ProficiencyStatus::Lapsed { .. }
+    ) {
+        outcomes.push(false);
+        assert!(outcomes.len() < 20);
+    }
+    let mut rng = cutlab_sim::rng::Rng::new(5);
+    for &pass in &outcomes {
+        let skill = if pass { 0.3 } else { 1.8 };
+        let metrics = cutlab_dashboard::seed::synthetic_metrics(&t, skill, &mut rng);
+        let a = e
+            .store
+            .start_attempt(cara.id, ex.id, None, false)
+            .await
+            .unwrap();
+        let out = e.store.finish_attempt(a.id, &metrics).await.unwrap();
+        assert_eq!(out.verdict.pass, pass);
+    }
+    let lapse = outcomes.len();
+    // the store's standing, which the curriculum's progression reads, agrees
+    let record = e.store.proficiency(cara.id, ex.id).await.unwrap();
+    assert!(!record.state.proficient && record.lapsed(), "{record:?}");
+    let page =
+        body_text(send(&e.app, get(&format!("/trainees/{}", cara.id), Some(&kim))).await).await;
+    let main = &page[page.find("<main>").unwrap()..];
+    assert!(
+        main.contains(&format!(
+            "proficiency lapsed: unacceptable failure rate since attempt {lapse} — retrain"
+        )),
+        "{main}"
+    );
+    assert!(!main.contains("proficient since"), "{main}");
+    // the CUSUM counts afresh after the lapse: its line does not contradict the standing
+    assert!(
+        main.contains(&format!("CUSUM after attempt {lapse}: 0.00"))
+            && main.contains(&format!("counted afresh from 0 after attempt {lapse}")),
+        "{main}"
+    );
+    let grid = body_text(send(&e.app, get("/cohorts", Some(&kim))).await).await;
+    assert!(
+        grid.contains(&format!(
+            "unacceptable failure rate since attempt {lapse}: retrain"
+        )),
+        "{grid}"
+    );
+}

@@ -5,7 +5,12 @@
 //! - visible fraction: target point `p` is visible when the segment from the viewpoint `e` to
 //!   `p` meets no surface triangle before `p - eps (p - e)/|p - e|`, `eps` = [`VISIBILITY_EPS_M`]
 //!   (and neither do two rays to points 20 um beside `p`, see [`visible_fraction`]); the
-//!   fraction of the plan's target points that are visible.
+//!   fraction of the plan's target points that are visible. The target is what the planned
+//!   incision lays open ([`ExpertPlan::target_m`]); a target deeper below the planned line
+//!   than the planned depth ([`depth_below_plan`], beyond [`TARGET_DEPTH_SLACK_M`]) is behind
+//!   tissue an incision as planned leaves whole, so the metric would be 0 for every attempt
+//!   that keeps to the plan (the heart behind the 15 mm chest wall, under an 8 mm incision):
+//!   it is missing then, with the reason, rather than a 0 that measures the plan.
 //! - opening width: at [`OPENING_STATIONS`] stations along the planned line, rays are cast along
 //!   `-n` (the plan's normal) from above the surface on a row across the line (perpendicular
 //!   to it and to `n`, every [`OPENING_STEP_M`] up to `max(3 x corridor, 10 mm)` to each
@@ -28,12 +33,16 @@ use crate::error::{AssessError, Result};
 use crate::geom;
 use crate::input::SurfaceMesh;
 use crate::metrics::Values;
+use crate::metrics::incision::depth_below_plan;
 use crate::plan::ExpertPlan;
 
 /// A target point closer than this to the first hit counts as visible (m).
 pub const VISIBILITY_EPS_M: f64 = 1e-4;
 /// The sideways offset of the two extra rays per target (m).
 pub const VISIBILITY_JITTER_M: f64 = 2e-5;
+/// How far below the planned depth a target may lie and still count as laid open by the
+/// planned incision (m).
+pub const TARGET_DEPTH_SLACK_M: f64 = 1e-4;
 /// Stations along the planned line for the opening width.
 pub const OPENING_STATIONS: usize = 41;
 /// Spacing of the rays across the line (m).
@@ -189,12 +198,29 @@ pub(crate) fn assess(plan: &ExpertPlan, surface: Option<&SurfaceMesh>, values: &
     };
     match trimesh(surface) {
         Ok(mesh) => {
-            match visible_fraction(&mesh, plan.viewpoint_m, &plan.target_m) {
-                Some(f) => values.set("target_visible_fraction", f),
-                None => values.missing(
+            let deepest_m = plan
+                .target_m
+                .iter()
+                .map(|&t| depth_below_plan(plan, t))
+                .fold(f64::NEG_INFINITY, f64::max);
+            if deepest_m > plan.depth_m + TARGET_DEPTH_SLACK_M {
+                values.missing(
                     &["target_visible_fraction"],
-                    "the plan has no target points",
-                ),
+                    &format!(
+                        "the plan's target lies {:.1} mm below its line, beyond its {:.1} mm \
+                         incision: an incision as planned cannot lay it open",
+                        deepest_m * 1e3,
+                        plan.depth_m * 1e3
+                    ),
+                );
+            } else {
+                match visible_fraction(&mesh, plan.viewpoint_m, &plan.target_m) {
+                    Some(f) => values.set("target_visible_fraction", f),
+                    None => values.missing(
+                        &["target_visible_fraction"],
+                        "the plan has no target points",
+                    ),
+                }
             }
             let (width, area, _) = opening(plan, &mesh);
             values.set("opening_width_m", width);
@@ -252,6 +278,60 @@ mod tests {
         assert_eq!(
             visible_fraction(&closed, p.viewpoint_m, &p.target_m),
             Some(0.0)
+        );
+    }
+
+    /// [`plan`] with its targets moved to `depth_mm` below the surface.
+    fn plan_with_targets_at(depth_mm: f64) -> ExpertPlan {
+        let mut p = plan();
+        for t in &mut p.target_m {
+            t[2] = -depth_mm * 1e-3;
+        }
+        p
+    }
+
+    fn visibility(plan: &ExpertPlan, surface: SurfaceMesh) -> crate::metrics::MetricValue {
+        let data = crate::input::AttemptData {
+            surface: Some(surface),
+            ..Default::default()
+        };
+        let values = crate::metrics::assess(plan, &data).unwrap();
+        values
+            .into_iter()
+            .find(|v| v.key == "target_visible_fraction")
+            .unwrap()
+    }
+
+    #[test]
+    fn a_cut_lays_its_target_open_and_a_target_beyond_its_depth_is_not_measured() {
+        // the target 4 mm down, within the planned 8 mm: seen through the slot (half of its
+        // points lie under it), hidden under the intact surface
+        let within = plan_with_targets_at(4.0);
+        let cut = visibility(&within, slotted(true));
+        assert!(cut.value.is_some_and(|v| v > 0.0), "{cut:?}");
+        let mut uncut = slotted(true);
+        let b = uncut.vertices_m.len() as u32;
+        uncut.vertices_m.extend([
+            [0.0, -0.003, 0.0],
+            [0.07, -0.003, 0.0],
+            [0.07, 0.003, 0.0],
+            [0.0, 0.003, 0.0],
+        ]);
+        uncut
+            .triangles
+            .extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        assert_eq!(visibility(&within, uncut).value, Some(0.0));
+        // 25 mm down, behind tissue an 8 mm incision leaves whole: 0 for every attempt that
+        // keeps to the plan, so not a measure of the attempt: missing, with the reason
+        let beyond = visibility(&plan_with_targets_at(25.0), slotted(true));
+        assert!(beyond.value.is_none(), "{beyond:?}");
+        assert!(
+            beyond
+                .missing
+                .as_deref()
+                .unwrap()
+                .contains("beyond its 8.0 mm incision"),
+            "{beyond:?}"
         );
     }
 

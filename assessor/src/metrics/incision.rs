@@ -7,8 +7,14 @@
 //! trainee actually cut on the surface; the surface crossing is that line.) Everything lateral
 //! is measured seen from above: points are projected along the plan's unit normal `n` onto a
 //! plane, `P(x) = x - (x . n) n`, so the tip's depth below the surface does not count as
-//! lateral error. Consecutive cut samples more than [`STROKE_GAP_M`] apart (blade lifted and
-//! put back) start a new stroke; the trace's segments join samples within a stroke only.
+//! lateral error. The trace's segments join consecutive samples of one stroke only: a new
+//! stroke starts where the blade left the tissue and entered it again, as the recorder saw
+//! it ([`CutSample::stroke`]; the simulation cuts along the blade's whole sweep within a
+//! stroke, however far the blade moved between two samples), or, for samples without a
+//! recorded stroke, where consecutive samples are more than [`STROKE_GAP_M`] apart (blade
+//! lifted and put back). Entry, exit, length and the fraction in tolerance all rest on these
+//! strokes, so a cut whose ends are on the plan's is as long as the plan's unless the blade
+//! left the tissue on the way.
 //!
 //! - entry / exit error: `|P(first trace point) - P(entry)|`, `|P(last) - P(exit)|`;
 //! - length error: the incision's length minus the plan's length (signed). The length is
@@ -27,7 +33,10 @@
 //! - depth error: the samples' mean `depth_m` (the recorder's penetration below the surface
 //!   along `n`, see [`CutSample::depth_m`]) minus the planned depth (signed), and its RMS.
 //! - approach error: the angle between the tip's displacement over the last 5 mm of travel
-//!   before the first cut and the plan's approach direction (deg).
+//!   before the first cut and the plan's approach direction (deg). Not measured with a device
+//!   whose blade enters the tissue along an orientation the station fixes
+//!   ([`device_sets_approach`]: the station page's pointer pushes the tip in along the blade
+//!   it holds, so every attempt would show the same angle, the station's).
 
 use std::ops::Range;
 
@@ -39,7 +48,8 @@ use crate::input::{CutSample, PoseSample};
 use crate::metrics::Values;
 use crate::plan::ExpertPlan;
 
-/// Consecutive cut samples further apart than this belong to different strokes (m).
+/// Consecutive cut samples without a recorded stroke ([`CutSample::stroke`]) further apart
+/// than this belong to different strokes (m).
 pub const STROKE_GAP_M: f64 = 0.003;
 /// The length of approach the approach direction is taken over (m).
 pub const APPROACH_LENGTH_M: f64 = 0.005;
@@ -72,13 +82,28 @@ pub fn trace_point(c: &CutSample) -> [f64; 3] {
     }
 }
 
-/// The trace's strokes: ranges of the (projected) trace points, split where consecutive
-/// samples are more than `gap` apart.
-fn strokes(tips: &[Point3<f64>], gap: f64) -> Vec<Range<usize>> {
+/// Whether the consecutive cut samples `a` then `b`, whose projected trace points are `pa`
+/// and `pb`, belong to one stroke: the same recorded stroke when both have one, else no more
+/// than [`STROKE_GAP_M`] apart.
+pub(crate) fn same_stroke(
+    a: &CutSample,
+    b: &CutSample,
+    pa: &Point3<f64>,
+    pb: &Point3<f64>,
+) -> bool {
+    match (a.stroke, b.stroke) {
+        (Some(x), Some(y)) => x == y,
+        _ => nalgebra::distance(pa, pb) <= STROKE_GAP_M,
+    }
+}
+
+/// The trace's strokes: ranges of `cuts` (in time order) and their projected trace points
+/// `tips`, split between consecutive samples not of one stroke ([`same_stroke`]).
+fn strokes(cuts: &[CutSample], tips: &[Point3<f64>]) -> Vec<Range<usize>> {
     let mut out: Vec<Range<usize>> = Vec::new();
     for (i, p) in tips.iter().enumerate() {
         match out.last_mut() {
-            Some(s) if nalgebra::distance(p, &tips[i - 1]) <= gap => s.end = i + 1,
+            Some(s) if same_stroke(&cuts[i - 1], &cuts[i], &tips[i - 1], p) => s.end = i + 1,
             _ => out.push(i..i + 1),
         }
     }
@@ -156,7 +181,7 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
         geom::project(plan.exit_m.into(), &n),
     );
     let (first, last) = (tips[0], tips[tips.len() - 1]);
-    let strokes = strokes(&tips, STROKE_GAP_M);
+    let strokes = strokes(&cuts, &tips);
     let on_line: Vec<geom::OnLine> = tips
         .iter()
         .map(|&p| geom::closest_on_polyline(p, &line))
@@ -208,6 +233,23 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     })
 }
 
+/// Devices whose blade enters the tissue along an orientation the station fixes, not one the
+/// trainee chooses: the station page's `pointer` (a mouse, a pen or a touch: the point under
+/// it on the tissue, pushed in along the blade the station holds pointing into the tissue at
+/// the plan's entry). The approach angle of an attempt made with one is the station's.
+pub const FIXED_APPROACH_DEVICES: &[&str] = &["pointer"];
+
+/// Whether `device` (as a recording names it; `recording of D` is D's hand played again)
+/// sets how the blade enters the tissue, so the trainee cannot: one of
+/// [`FIXED_APPROACH_DEVICES`].
+pub fn device_sets_approach(device: &str) -> bool {
+    let mut d = device.trim();
+    while let Some(rest) = d.strip_prefix("recording of ") {
+        d = rest.trim();
+    }
+    FIXED_APPROACH_DEVICES.contains(&d)
+}
+
 /// The angle (deg) between the tip's displacement over the last [`APPROACH_LENGTH_M`] of
 /// travel up to time `t_first_cut` and the plan's approach direction; `None` without poses,
 /// with non-finite ones, or if the tip barely moved.
@@ -241,6 +283,7 @@ pub(crate) fn assess(
     plan: &ExpertPlan,
     cuts: &[CutSample],
     poses: &[PoseSample],
+    device: Option<&str>,
     values: &mut Values,
 ) {
     const KEYS: [&str; 10] = [
@@ -278,6 +321,16 @@ pub(crate) fn assess(
         }
         Err(e) => values.missing(&KEYS, &e.to_string()),
     }
+    if let Some(d) = device.filter(|d| device_sets_approach(d)) {
+        values.not_measured(
+            &["approach_error_deg"],
+            &format!(
+                "the {d} pushes the blade in along the orientation the station fixes, so the \
+                 approach is the station's, not the trainee's"
+            ),
+        );
+        return;
+    }
     let first_cut = cuts
         .iter()
         .map(|c| c.t_s)
@@ -308,6 +361,7 @@ mod tests {
                 tip_m: [x as f64 * 1e-3, y, -depth],
                 edge_dir: [0.0, 0.0, 1.0],
                 depth_m: depth,
+                stroke: None,
             })
             .collect()
     }
@@ -346,6 +400,7 @@ mod tests {
                     tip_m: [x, x * tan, -0.006],
                     edge_dir: [0.0, 0.0, 1.0],
                     depth_m: 0.006,
+                    stroke: None,
                 }
             })
             .collect();
@@ -400,6 +455,59 @@ mod tests {
     }
 
     #[test]
+    fn a_cut_whose_ends_are_on_the_plans_is_as_long_as_the_plan_unless_the_blade_left() {
+        // from 0.3 mm past the entry to 0.4 mm short of the exit, every 1 mm, but the hand
+        // skips 5 mm after 27 mm (a pointer whose clock was anchored again after a stalled page):
+        // the blade stayed in the tissue, one stroke, and the simulation cut the skipped stretch
+        let mut c: Vec<CutSample> = cuts(0, 60, 0.0, 0.008)
+            .into_iter()
+            .filter(|s| !(0.0275..0.0315).contains(&s.tip_m[0]))
+            .collect();
+        c[0].tip_m[0] = 0.0003;
+        c.last_mut().unwrap().tip_m[0] = 0.0596;
+        for s in &mut c {
+            s.stroke = Some(0);
+        }
+        let m = incision(&straight_plan(), &c).unwrap();
+        assert!(m.entry_error_m < 5e-4 && m.exit_error_m < 5e-4, "{m:?}");
+        assert!(m.length_error_m.abs() <= 1e-3, "{}", m.length_error_m);
+        assert!(m.fraction_cut_in_tolerance > 0.99, "{m:?}");
+        // the same samples without their strokes: the 5 mm skip reads as a lifted blade, the
+        // length 5 mm short although the ends are on the plan's (what the recorder gave before
+        // it recorded strokes)
+        let mut unknown = c.clone();
+        for s in &mut unknown {
+            s.stroke = None;
+        }
+        let m = incision(&straight_plan(), &unknown).unwrap();
+        assert!(m.length_error_m < -4e-3, "{}", m.length_error_m);
+        // the blade did leave the tissue there: two strokes, the gap not cut
+        let mut lifted = c.clone();
+        for s in &mut lifted {
+            s.stroke = Some(u32::from(s.tip_m[0] > 0.03));
+        }
+        let m = incision(&straight_plan(), &lifted).unwrap();
+        let short = 0.005 + 0.0003 + 0.0004;
+        assert!(
+            (m.length_error_m + short).abs() < 1e-9,
+            "{}",
+            m.length_error_m
+        );
+        // a stroke recorded as one is one even where consecutive samples are far apart, and
+        // a recorded change of stroke splits samples however close
+        let mut close = cuts(0, 60, 0.0, 0.008);
+        for s in &mut close {
+            s.stroke = Some(u32::from(s.tip_m[0] > 0.0295));
+        }
+        let m = incision(&straight_plan(), &close).unwrap();
+        assert!(
+            (m.length_error_m + 0.001).abs() < 1e-12,
+            "{}",
+            m.length_error_m
+        );
+    }
+
+    #[test]
     fn the_trace_is_where_a_tilted_blade_crosses_the_surface() {
         // tip 8 mm deep, blade tilted 45 degrees in y: it crosses the surface 8 mm beside the tip
         let e = [
@@ -413,6 +521,7 @@ mod tests {
                 tip_m: [i as f64 * 1e-3, -0.008 * e[1], -0.008 * e[2]],
                 edge_dir: e,
                 depth_m: 0.008,
+                stroke: None,
             })
             .collect();
         let m = incision(&straight_plan(), &c).unwrap();

@@ -3,7 +3,11 @@
 //! Each group ([`incision`], [`path`], [`safety`], [`field`]) checks its own input; a group
 //! whose input is unusable (too few samples, NaN or infinite values, no surface) reports its
 //! metrics as missing (`value: None`, with the reason) instead of failing the whole
-//! assessment or panicking. Only an invalid plan is an error.
+//! assessment or panicking. Only an invalid plan is an error. A metric the attempt's device
+//! cannot measure (the approach angle with the station's pointer, whose blade enters the
+//! tissue along an orientation the station fixes) is missing with a reason beginning
+//! [`NOT_MEASURED_WITH_DEVICE`]: it measures neither for nor against the trainee
+//! ([`crate::proficiency`] leaves it out of the verdict and the score).
 
 pub mod field;
 pub mod incision;
@@ -96,6 +100,22 @@ impl MetricValue {
         }
     }
 }
+
+impl MetricValue {
+    /// Whether the value is missing because the attempt's device cannot measure the metric
+    /// (its reason begins [`NOT_MEASURED_WITH_DEVICE`]), not because of what the trainee did.
+    pub fn not_measured(&self) -> bool {
+        self.value.is_none()
+            && self
+                .missing
+                .as_deref()
+                .is_some_and(|m| m.starts_with(NOT_MEASURED_WITH_DEVICE))
+    }
+}
+
+/// How the reason of a metric the attempt's device cannot measure begins (stored with the
+/// attempt's results, so it holds for attempts scored before as after).
+pub const NOT_MEASURED_WITH_DEVICE: &str = "not measured with this device";
 
 /// One attempt's metrics, in catalogue order (what [`assess`] returns).
 pub type MetricSet = Vec<MetricValue>;
@@ -360,6 +380,10 @@ impl Values {
             self.0.push((k, None, Some(why.to_owned())));
         }
     }
+    /// `keys` are not measured with the attempt's device, for the reason `why`.
+    pub(crate) fn not_measured(&mut self, keys: &[&'static str], why: &str) {
+        self.missing(keys, &format!("{NOT_MEASURED_WITH_DEVICE}: {why}"));
+    }
 }
 
 /// Every metric of [`METRICS`] for one attempt, in catalogue order. Errors only on an invalid
@@ -367,7 +391,13 @@ impl Values {
 pub fn assess(plan: &ExpertPlan, data: &AttemptData) -> Result<MetricSet> {
     plan.check()?;
     let mut values = Values::default();
-    incision::assess(plan, &data.cuts, &data.poses, &mut values);
+    incision::assess(
+        plan,
+        &data.cuts,
+        &data.poses,
+        data.device.as_deref(),
+        &mut values,
+    );
     path::assess(&data.poses, &path::PathParams::default(), &mut values);
     safety::assess(plan, &data.forces, &data.cuts, &mut values);
     field::assess(plan, data.surface.as_ref(), &mut values);
@@ -386,6 +416,15 @@ pub fn assess(plan: &ExpertPlan, data: &AttemptData) -> Result<MetricSet> {
 /// The value of `key` in a list of metric values, if present and finite.
 pub fn value_of(values: &[MetricValue], key: &str) -> Option<f64> {
     values.iter().find(|v| v.key == key).and_then(|v| v.value)
+}
+
+/// Whether `key` is among `values` and not measured with the attempt's device
+/// ([`MetricValue::not_measured`]).
+pub fn not_measured(values: &[MetricValue], key: &str) -> bool {
+    values
+        .iter()
+        .find(|v| v.key == key)
+        .is_some_and(MetricValue::not_measured)
 }
 
 #[cfg(test)]
@@ -409,6 +448,60 @@ mod tests {
                 assert!(v.value.is_none() && v.missing.is_some(), "{v:?}");
             }
         }
+    }
+
+    #[test]
+    fn the_approach_is_not_measured_with_a_device_that_fixes_it() {
+        let plan = ExpertPlan::chest_wall().unwrap();
+        let entry = plan.entry_m;
+        let mut data = AttemptData::default();
+        // the tip comes down 10 mm straight onto the entry, then cuts along the line
+        for i in 0..=20 {
+            data.poses.push(crate::input::PoseSample {
+                t_s: f64::from(i) * 0.05,
+                tip_m: [entry[0], entry[1], entry[2] + 0.01 - f64::from(i) * 5e-4],
+                quat_wxyz: [1.0, 0.0, 0.0, 0.0],
+                blade_engaged: true,
+            });
+        }
+        for i in 0..=60 {
+            let x = entry[0] + f64::from(i) * 1e-3;
+            data.cuts.push(crate::input::CutSample {
+                t_s: 1.0 + f64::from(i) * 0.05,
+                tip_m: [x, 0.0, -0.008],
+                edge_dir: [0.0, 0.0, 1.0],
+                depth_m: 0.008,
+                stroke: Some(0),
+            });
+        }
+        let approach = |device: Option<&str>| {
+            let data = AttemptData {
+                device: device.map(str::to_owned),
+                ..data.clone()
+            };
+            let out = assess(&plan, &data).unwrap();
+            out.into_iter()
+                .find(|v| v.key == "approach_error_deg")
+                .unwrap()
+        };
+        for device in [None, Some("expert"), Some("csv:hand.csv")] {
+            let a = approach(device);
+            assert!(
+                a.value.unwrap() < 1.0 && !a.not_measured(),
+                "{device:?}: {a:?}"
+            );
+        }
+        for device in ["pointer", "recording of pointer"] {
+            let a = approach(Some(device));
+            assert!(a.value.is_none() && a.not_measured(), "{device}: {a:?}");
+            assert!(
+                a.missing.as_deref().unwrap().contains("the station fixes"),
+                "{a:?}"
+            );
+        }
+        // a value missing for another reason is not "not measured"
+        let none = assess(&plan, &AttemptData::default()).unwrap();
+        assert!(!not_measured(&none, "approach_error_deg"));
     }
 
     #[test]

@@ -1,5 +1,10 @@
 //! Path metrics from the tool poses: how the hand moved, independently of what it cut.
 //!
+//! They are taken over the task's window ([`task_window`]): from the first pose with the
+//! blade engaged to the last one, so the reach to the entry, the hand waiting above it and
+//! the lift after the cut are not counted as the task's time, path or movements (all poses
+//! when the blade never engaged).
+//!
 //! The tip positions are resampled to a uniform `resample_hz` (linear interpolation on the
 //! time column, so any input rate works, uneven ones too), each coordinate is low-pass
 //! filtered with the zero-phase Butterworth of [`smoothness::lowpass_zero_phase`]
@@ -226,7 +231,19 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     })
 }
 
+/// The poses from the first with the blade engaged to the last (all of them when fewer than
+/// two are engaged): the task, without the reach before it and the lift after it.
+pub fn task_window(poses: &[PoseSample]) -> &[PoseSample] {
+    let first = poses.iter().position(|p| p.blade_engaged);
+    let last = poses.iter().rposition(|p| p.blade_engaged);
+    match (first, last) {
+        (Some(a), Some(b)) if b > a => &poses[a..=b],
+        _ => poses,
+    }
+}
+
 pub(crate) fn assess(poses: &[PoseSample], p: &PathParams, values: &mut Values) {
+    let poses = task_window(poses);
     const KEYS: [&str; 10] = [
         "time_s",
         "path_length_m",
@@ -354,6 +371,56 @@ mod tests {
             "each reach is smoother than the whole"
         );
         assert!(m.per_movement[0].start_s > 1.0 && m.per_movement[0].end_s < 2.0);
+    }
+
+    #[test]
+    fn a_reach_and_a_lift_around_the_cut_are_not_the_task() {
+        // a reach of 50 mm in 0.6 s, a still 0.4 s, the stroke of 60 mm in 4 s with the blade
+        // engaged, a still 0.4 s, a lift of 50 mm in 0.6 s; minimum-jerk each
+        let mut poses = Vec::new();
+        let mut t0 = 0.0;
+        let mut x = 0.0;
+        for (duration, d, engaged) in [
+            (0.6, 0.05, false),
+            (0.4, 0.0, false),
+            (4.0, 0.06, true),
+            (0.4, 0.0, false),
+            (0.6, 0.05, false),
+        ] {
+            let n = (duration * 1000.0) as usize;
+            for i in 1..=n {
+                let tau = i as f64 / n as f64;
+                let mut p = pose(t0 + tau * duration, [x + min_jerk(tau, d), 0.0, 0.0], 0.0);
+                p.blade_engaged = engaged;
+                poses.push(p);
+            }
+            t0 += duration;
+            x += d;
+        }
+        let mut values = Values::default();
+        assess(&poses, &PathParams::default(), &mut values);
+        let get = |k: &str| {
+            values
+                .0
+                .iter()
+                .find(|(key, _, _)| *key == k)
+                .and_then(|(_, v, _)| *v)
+                .expect(k)
+        };
+        assert_eq!(get("movements"), 1.0, "the stroke alone");
+        assert!(
+            (get("path_length_m") - 0.06).abs() < 1e-3,
+            "{}",
+            get("path_length_m")
+        );
+        assert!(get("time_s") <= 4.0 + 1e-9, "{}", get("time_s"));
+        // the whole of it has three movements
+        assert_eq!(
+            path(&poses, &PathParams::default())
+                .expect("path")
+                .movements,
+            3
+        );
     }
 
     #[test]

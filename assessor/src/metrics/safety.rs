@@ -19,7 +19,7 @@ use crate::error::{AssessError, Result};
 use crate::geom;
 use crate::input::{CutSample, ForceSample};
 use crate::metrics::Values;
-use crate::metrics::incision::{STROKE_GAP_M, trace_point};
+use crate::metrics::incision::{same_stroke, trace_point};
 use crate::plan::ExpertPlan;
 
 /// The force metrics of one attempt.
@@ -101,10 +101,10 @@ pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, O
             geom::project(trace_point(&w[0]).into(), &n),
             geom::project(trace_point(&w[1]).into(), &n),
         );
-        let len = nalgebra::distance(&a, &b);
-        if len > STROKE_GAP_M {
+        if !same_stroke(&w[0], &w[1], &a, &b) {
             continue;
         }
+        let len = nalgebra::distance(&a, &b);
         let pieces = (len / 1e-4).ceil().max(1.0) as usize;
         let piece = len / pieces as f64;
         let out = (0..pieces)
@@ -203,6 +203,7 @@ mod tests {
             tip_m: [x_mm as f64 * 1e-3, y_mm * 1e-3, -0.008],
             edge_dir: [0.0, 0.0, 1.0],
             depth_m: 0.008,
+            stroke: None,
         };
         // 10 mm at y = 7 mm (outside the 5 mm corridor), then 20 mm on the line
         let mut cuts: Vec<CutSample> = (10..=20).map(|x| at(x, 7.0, x as f64)).collect();

@@ -5,9 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::{BeginWrite, Store, now_ns};
 use crate::error::{AssessError, Result};
 use crate::metrics::{self, Better, MetricValue};
-use crate::proficiency::{
-    CusumParams, CusumPoint, ProficiencyState, REQUIRED_CONSECUTIVE_PASSES, Verdict, cusum,
-};
+use crate::proficiency::{Course, CusumParams, CusumPoint, ProficiencyState, Verdict};
 
 /// Where an attempt stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -161,10 +159,19 @@ pub struct ProficiencyRecord {
     pub trainee_id: i64,
     pub exercise_id: i64,
     pub state: ProficiencyState,
-    /// The attempt that completed the consecutive passes.
+    /// The attempt that first completed the consecutive passes (kept after a lapse).
     pub proficient_attempt_id: Option<i64>,
-    /// The last CUSUM value (default parameters).
+    /// The CUSUM now (default parameters), restarted from 0 as the standing changed
+    /// ([`Course`]).
     pub cusum: f64,
+}
+
+impl ProficiencyRecord {
+    /// The trainee was proficient and no longer is: the CUSUM after it signalled an
+    /// unacceptable failure rate ([`Course`]); they retrain until the consecutive passes again.
+    pub fn lapsed(&self) -> bool {
+        !self.state.proficient && self.proficient_attempt_id.is_some()
+    }
 }
 
 /// What scoring an attempt gave.
@@ -500,7 +507,8 @@ impl Store {
     }
 
     /// The CUSUM chart of a trainee's scored attempts at an exercise, oldest first, with
-    /// the attempt ids.
+    /// the attempt ids: restarted from 0 after each attempt that changed the standing
+    /// ([`Course`]; the point of such an attempt ends the phase before it).
     pub async fn cusum_chart(
         &self,
         trainee_id: i64,
@@ -515,35 +523,29 @@ impl Store {
         Ok(history
             .iter()
             .map(|h| h.0)
-            .zip(cusum(&passes, params)?)
+            .zip(Course::of(&passes, params)?.cusum)
             .collect())
     }
 }
 
+/// The proficiency of a trainee whose scored attempts at an exercise, oldest first, are
+/// `history` (`(attempt id, passed)`): [`Course`] with the default CUSUM parameters.
 pub(super) fn proficiency_of(
     trainee_id: i64,
     exercise_id: i64,
     history: &[(i64, bool)],
 ) -> Result<ProficiencyRecord> {
-    let mut state = ProficiencyState::default();
-    let mut proficient_attempt_id = None;
-    for &(id, pass) in history {
-        state.update(pass);
-        if proficient_attempt_id.is_none()
-            && state.consecutive_passes >= REQUIRED_CONSECUTIVE_PASSES
-        {
-            proficient_attempt_id = Some(id);
-        }
-    }
     let passes: Vec<bool> = history.iter().map(|h| h.1).collect();
-    let cusum = cusum(&passes, &CusumParams::default())?
-        .last()
-        .map_or(0.0, |p| p.value);
+    let course = Course::of(&passes, &CusumParams::default())?;
+    let proficient_attempt_id = course
+        .first_proficient
+        .and_then(|n| history.get(n as usize - 1))
+        .map(|h| h.0);
     Ok(ProficiencyRecord {
         trainee_id,
         exercise_id,
-        state,
+        state: course.state,
         proficient_attempt_id,
-        cusum,
+        cusum: course.current.value,
     })
 }

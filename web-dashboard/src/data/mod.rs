@@ -9,7 +9,7 @@ pub mod progress;
 pub mod running;
 pub mod trace;
 
-use cutlab_assessor::proficiency::ProficiencyState;
+use cutlab_assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
 use cutlab_assessor::store::User;
 use serde::Serialize;
 
@@ -47,8 +47,11 @@ pub enum Standing {
     InProgress,
     /// Passed at least once, not yet proficient.
     Passed,
-    /// Reached the consecutive passes.
+    /// Reached the consecutive passes, and no lapse since.
     Proficient,
+    /// Was proficient; the CUSUM after it signalled an unacceptable failure rate: to retrain
+    /// (not proficient, for the curriculum either).
+    Lapsed,
 }
 
 impl Standing {
@@ -58,48 +61,55 @@ impl Standing {
             Standing::InProgress => "in progress",
             Standing::Passed => "passed",
             Standing::Proficient => "proficient",
+            Standing::Lapsed => "proficiency lapsed",
         }
     }
 }
 
-/// Proficiency over a trainee's scored attempts at one exercise, oldest first.
+/// Proficiency over a trainee's scored attempts at one exercise, oldest first (the
+/// assessor's [`Course`]: the rule is in `cutlab_assessor::proficiency`).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct ProficiencySummary {
     pub attempts: u32,
     pub passes: u32,
     pub consecutive_passes: u32,
+    /// Proficient now (not lapsed).
     pub proficient: bool,
-    /// The number of scored attempts it took to become proficient.
+    /// The number of scored attempts it took to become proficient (the first time).
     pub trials_to_proficiency: Option<u32>,
     pub standing: Standing,
+    /// Proficient since, or lapsed since, which attempt.
+    pub status: ProficiencyStatus,
 }
 
 impl ProficiencySummary {
+    /// Of the pass/fail outcomes of the scored attempts, oldest first (`any_attempt`: the
+    /// trainee has attempts, scored or not).
     pub fn of(passes: impl IntoIterator<Item = bool>, any_attempt: bool) -> Self {
-        let mut s = ProficiencyState::default();
-        let mut trials = None;
-        for p in passes {
-            s.update(p);
-            if trials.is_none() && s.proficient {
-                trials = Some(s.attempts);
-            }
-        }
-        let standing = if s.proficient {
-            Standing::Proficient
-        } else if s.passes > 0 {
-            Standing::Passed
-        } else if any_attempt || s.attempts > 0 {
-            Standing::InProgress
-        } else {
-            Standing::NotStarted
+        let passes: Vec<bool> = passes.into_iter().collect();
+        // the default parameters are valid: the course of any sequence
+        let course = Course::of(&passes, &CusumParams::default()).unwrap_or_default();
+        Self::of_course(&course, any_attempt)
+    }
+
+    /// Of a trainee's course through the exercise.
+    pub fn of_course(c: &Course, any_attempt: bool) -> Self {
+        let s = c.state;
+        let standing = match c.status {
+            ProficiencyStatus::Proficient { .. } => Standing::Proficient,
+            ProficiencyStatus::Lapsed { .. } => Standing::Lapsed,
+            ProficiencyStatus::Learning if s.passes > 0 => Standing::Passed,
+            ProficiencyStatus::Learning if any_attempt || s.attempts > 0 => Standing::InProgress,
+            ProficiencyStatus::Learning => Standing::NotStarted,
         };
         Self {
             attempts: s.attempts,
             passes: s.passes,
             consecutive_passes: s.consecutive_passes,
             proficient: s.proficient,
-            trials_to_proficiency: trials,
+            trials_to_proficiency: c.first_proficient,
             standing,
+            status: c.status,
         }
     }
 }
@@ -125,6 +135,44 @@ mod tests {
         assert_eq!(
             ProficiencySummary::of([], false).standing,
             Standing::NotStarted
+        );
+    }
+
+    #[test]
+    fn a_lapse_after_proficiency_is_not_proficient() {
+        // proficient at the 2nd; the failures after it reach h1 (4 in a row): lapsed
+        let mut passes = vec![true, true];
+        let mut lapsed = None;
+        for _ in 0..20 {
+            if lapsed.is_some() {
+                break;
+            }
+            passes.push(false);
+            let s = ProficiencySummary::of(passes.clone(), true);
+            if s.standing == Standing::Lapsed {
+                lapsed = Some(s);
+            } else {
+                assert_eq!(s.standing, Standing::Proficient, "{passes:?}");
+            }
+        }
+        let s = lapsed.expect("a lapse within 20 failures");
+        assert!(!s.proficient);
+        assert_eq!(s.trials_to_proficiency, Some(2), "the first time is kept");
+        assert_eq!(
+            s.status,
+            ProficiencyStatus::Lapsed {
+                since: passes.len() as u32
+            }
+        );
+        // two passes again: proficient since the second of them
+        passes.extend([true, true]);
+        let s = ProficiencySummary::of(passes.clone(), true);
+        assert_eq!(s.standing, Standing::Proficient);
+        assert_eq!(
+            s.status,
+            ProficiencyStatus::Proficient {
+                since: passes.len() as u32
+            }
         );
     }
 }

@@ -5,7 +5,7 @@
 use std::collections::{BTreeMap, HashMap};
 
 use cutlab_assessor::metrics::{self, Better};
-use cutlab_assessor::proficiency::{CusumParams, CusumSignal, cusum};
+use cutlab_assessor::proficiency::{Course, CusumParams, CusumPoint, CusumSignal, Thresholds};
 use cutlab_assessor::store::{AttemptStatus, User};
 use serde::Serialize;
 
@@ -126,13 +126,21 @@ pub struct SeriesPoint {
     pub passed: Option<bool>,
 }
 
+/// The CUSUM of failures over the scored attempts, restarted from 0 after each attempt that
+/// changed the standing (proficient, lapsed: see `cutlab_assessor::proficiency::Course`).
 #[derive(Debug, Serialize)]
 pub struct CusumChart {
     pub params: CusumParams,
     /// The acceptable limit is at `-h0`, the unacceptable one at `h1`.
     pub h0: f64,
     pub h1: f64,
+    /// Per scored attempt, the value after it in its phase (at an attempt that changed the
+    /// standing: the phase it ended).
     pub points: Vec<CusumPointView>,
+    /// The attempts (`n`) after which the chart restarted from 0.
+    pub restarts: Vec<u32>,
+    /// The CUSUM now: after the last attempt, 0 when the standing changed at it.
+    pub current: CusumPoint,
 }
 
 #[derive(Debug, Serialize)]
@@ -260,76 +268,15 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
             })
             .collect();
         let scored: Vec<&AttemptPoint> = points.iter().filter(|p| p.n.is_some()).collect();
-        let proficiency =
-            ProficiencySummary::of(scored.iter().map(|p| p.passed.unwrap_or(false)), true);
-        standings.insert(e.id, proficiency.standing);
-        let thresholds = store.thresholds(e.id).await?;
-        let mut series: BTreeMap<String, MetricSeries> = BTreeMap::new();
-        for t in &thresholds.metrics {
-            let def = metrics::metric(&t.key);
-            let band = Band {
-                mean: t.mean,
-                sd: t.sd,
-                k: thresholds.k,
-                low: t.mean - thresholds.k * t.sd,
-                high: t.mean + thresholds.k * t.sd,
-                lower_limit: t.lower,
-                upper_limit: t.upper,
-                n_experts: t.n_experts,
-            };
-            series.insert(
-                t.key.clone(),
-                MetricSeries {
-                    key: t.key.clone(),
-                    unit: def.map_or("", |d| d.unit).to_owned(),
-                    better: Some(t.better),
-                    description: def.map_or("", |d| d.description).to_owned(),
-                    band: Some(band),
-                    points: Vec::new(),
-                },
-            );
-        }
-        for p in &scored {
-            let n = p.n.unwrap_or(0);
-            for (metric, value, unit, passed) in by_attempt.get(&p.id).into_iter().flatten() {
-                let s = series.entry(metric.clone()).or_insert_with(|| {
-                    let def = metrics::metric(metric);
-                    MetricSeries {
-                        key: metric.clone(),
-                        unit: unit.clone(),
-                        better: def.map(|d| d.better),
-                        description: def.map_or("", |d| d.description).to_owned(),
-                        band: None,
-                        points: Vec::new(),
-                    }
-                });
-                s.points.push(SeriesPoint {
-                    n,
-                    attempt_id: p.id,
-                    value: *value,
-                    passed: *passed,
-                });
-            }
-        }
-        // thresholded metrics first, in catalogue order, then the rest in catalogue order
-        let mut metric_list: Vec<MetricSeries> = series
-            .into_values()
-            .filter(|s| s.band.is_some() || s.points.iter().any(|p| p.value.is_some()))
-            .collect();
-        metric_list.sort_by_key(|s| (s.band.is_none(), metrics::catalogue_rank(&s.key)));
         let params = CusumParams::default();
         let passes: Vec<bool> = scored.iter().map(|p| p.passed.unwrap_or(false)).collect();
-        let chart = cusum(&passes, &params)?;
-        let cusum_points = scored
-            .iter()
-            .zip(chart)
-            .map(|(p, c)| CusumPointView {
-                n: p.n.unwrap_or(0),
-                attempt_id: p.id,
-                value: c.value,
-                signal: c.signal,
-            })
-            .collect();
+        // the standing and the CUSUM from one course, so they agree
+        let course = Course::of(&passes, &params)?;
+        let proficiency = ProficiencySummary::of_course(&course, true);
+        standings.insert(e.id, proficiency.standing);
+        let thresholds = store.thresholds(e.id).await?;
+        let metric_list = metric_series(&thresholds, &scored, &by_attempt);
+        let cusum = cusum_chart(&scored, course, params);
         out.push(ExerciseProgress {
             exercise: ExerciseRef {
                 id: e.id,
@@ -338,14 +285,110 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
             attempts: points,
             proficiency,
             metrics: metric_list,
-            cusum: CusumChart {
-                params,
-                h0: params.h0(),
-                h1: params.h1(),
-                points: cusum_points,
-            },
+            cusum,
         });
     }
+    let curricula = curricula_progress(state, &exercises, &standings).await?;
+    Ok(Progress {
+        trainee: UserRef::from(trainee),
+        exercises: out,
+        curricula,
+    })
+}
+
+/// Per metric with a threshold or a value, its series over the `scored` attempts (their
+/// stored values `by_attempt`): the thresholded first, each group in catalogue order.
+fn metric_series(
+    thresholds: &Thresholds,
+    scored: &[&AttemptPoint],
+    by_attempt: &HashMap<i64, Vec<StoredValue>>,
+) -> Vec<MetricSeries> {
+    let mut series: BTreeMap<String, MetricSeries> = BTreeMap::new();
+    for t in &thresholds.metrics {
+        let def = metrics::metric(&t.key);
+        let band = Band {
+            mean: t.mean,
+            sd: t.sd,
+            k: thresholds.k,
+            low: t.mean - thresholds.k * t.sd,
+            high: t.mean + thresholds.k * t.sd,
+            lower_limit: t.lower,
+            upper_limit: t.upper,
+            n_experts: t.n_experts,
+        };
+        series.insert(
+            t.key.clone(),
+            MetricSeries {
+                key: t.key.clone(),
+                unit: def.map_or("", |d| d.unit).to_owned(),
+                better: Some(t.better),
+                description: def.map_or("", |d| d.description).to_owned(),
+                band: Some(band),
+                points: Vec::new(),
+            },
+        );
+    }
+    for p in scored {
+        let n = p.n.unwrap_or(0);
+        for (metric, value, unit, passed) in by_attempt.get(&p.id).into_iter().flatten() {
+            let s = series.entry(metric.clone()).or_insert_with(|| {
+                let def = metrics::metric(metric);
+                MetricSeries {
+                    key: metric.clone(),
+                    unit: unit.clone(),
+                    better: def.map(|d| d.better),
+                    description: def.map_or("", |d| d.description).to_owned(),
+                    band: None,
+                    points: Vec::new(),
+                }
+            });
+            s.points.push(SeriesPoint {
+                n,
+                attempt_id: p.id,
+                value: *value,
+                passed: *passed,
+            });
+        }
+    }
+    // thresholded metrics first, in catalogue order, then the rest in catalogue order
+    let mut metric_list: Vec<MetricSeries> = series
+        .into_values()
+        .filter(|s| s.band.is_some() || s.points.iter().any(|p| p.value.is_some()))
+        .collect();
+    metric_list.sort_by_key(|s| (s.band.is_none(), metrics::catalogue_rank(&s.key)));
+    metric_list
+}
+
+/// The CUSUM chart of the `scored` attempts, from their `course`.
+fn cusum_chart(scored: &[&AttemptPoint], course: Course, params: CusumParams) -> CusumChart {
+    let points = scored
+        .iter()
+        .zip(&course.cusum)
+        .map(|(p, c)| CusumPointView {
+            n: p.n.unwrap_or(0),
+            attempt_id: p.id,
+            value: c.value,
+            signal: c.signal,
+        })
+        .collect();
+    CusumChart {
+        params,
+        h0: params.h0(),
+        h1: params.h1(),
+        points,
+        restarts: course.restarts,
+        current: course.current,
+    }
+}
+
+/// Every curriculum's modules with the trainee's standing in each (`standings` by exercise
+/// id; an exercise not there is not started).
+async fn curricula_progress(
+    state: &AppState,
+    exercises: &[cutlab_assessor::store::Exercise],
+    standings: &HashMap<i64, Standing>,
+) -> Result<Vec<CurriculumProgress>, AppError> {
+    let store = state.store();
     let names: HashMap<i64, &str> = exercises.iter().map(|e| (e.id, e.name.as_str())).collect();
     let mut curricula = Vec::new();
     for c in store.list_curricula().await? {
@@ -379,11 +422,7 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
             modules,
         });
     }
-    Ok(Progress {
-        trainee: UserRef::from(trainee),
-        exercises: out,
-        curricula,
-    })
+    Ok(curricula)
 }
 
 /// A module is proficient when every exercise is, not started when none is started.

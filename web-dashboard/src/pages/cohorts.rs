@@ -11,6 +11,7 @@ use crate::AppState;
 use crate::auth::CurrentUser;
 use crate::data::overview::overview;
 use crate::error::PageResult;
+use cutlab_assessor::proficiency::ProficiencyStatus;
 
 pub fn router() -> Router<AppState> {
     Router::new().route("/cohorts", get(cohorts))
@@ -40,6 +41,7 @@ async fn cohorts(State(state): State<AppState>, user: CurrentUser) -> PageResult
                                             strong { (c.proficiency.standing.as_str()) } br;
                                             (c.attempts) " attempts, " (c.proficiency.passes) " passed"
                                             @if let Some(t) = c.proficiency.trials_to_proficiency { br; "proficient after " (t) }
+                                            @if let ProficiencyStatus::Lapsed { since } = c.proficiency.status { br; strong class="fail" { "unacceptable failure rate since attempt " (since) ": retrain" } }
                                             @if c.last_score.is_some() { br; span class="muted" { "last score " (num(c.last_score, 2)) } }
                                         }
                                     }

@@ -15,13 +15,14 @@ use crate::AppState;
 use crate::access::visible_user;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
+use crate::data::ProficiencySummary;
 use crate::data::label;
 use crate::data::progress::{
     CusumChart, ExerciseProgress, MetricSeries, Progress, cached_progress,
 };
 use crate::error::PageResult;
 use crate::extract::Id;
-use cutlab_assessor::proficiency::{CusumSignal, REQUIRED_CONSECUTIVE_PASSES};
+use cutlab_assessor::proficiency::{CusumSignal, ProficiencyStatus, REQUIRED_CONSECUTIVE_PASSES};
 
 pub fn router() -> Router<AppState> {
     Router::new().route("/trainees/{id}", get(trainee))
@@ -127,14 +128,7 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
             label: String::new(),
         })
         .layer(Layer::Line {
-            points: std::iter::once((0.0, Some(0.0)))
-                .chain(
-                    e.cusum
-                        .points
-                        .iter()
-                        .map(|p| (f64::from(p.n), Some(p.value))),
-                )
-                .collect(),
+            points: cusum_line(&e.cusum),
             class: "series",
         });
     cusum.y_include = vec![e.cusum.h1, -e.cusum.h0];
@@ -142,9 +136,9 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
         h2 { (e.exercise.name) }
         p {
             (pr.attempts) " scored attempts, " (pr.passes) " passed, " (pr.consecutive_passes) " consecutive; "
-            @if let Some(t) = pr.trials_to_proficiency { strong class="pass" { "proficient after " (t) " attempts" } } @else { strong { (pr.standing.as_str()) } }
+            (standing_words(pr))
         }
-        (cusum_status(&e.cusum))
+        (cusum_status(&e.cusum, pr.status))
         (summary_table(&e.metrics))
         details class="score-charts" {
             summary { "Score and CUSUM charts" }
@@ -211,21 +205,61 @@ fn summary_table(metrics: &[MetricSeries]) -> Markup {
     }
 }
 
-/// Where the CUSUM stands after the last scored attempt.
-fn cusum_status(c: &CusumChart) -> Markup {
+/// The trainee's standing in words: proficient since attempt N, lapsed since attempt M (the
+/// CUSUM after proficiency reached its unacceptable limit), or the standing while learning.
+fn standing_words(pr: &ProficiencySummary) -> Markup {
+    html! {
+        @match pr.status {
+            ProficiencyStatus::Proficient { since } => {
+                strong class="pass" { "proficient since attempt " (since) }
+                @if let Some(t) = pr.trials_to_proficiency.filter(|&t| t != since) {
+                    " (first after " (t) " attempts)"
+                }
+            }
+            ProficiencyStatus::Lapsed { since } => {
+                strong class="fail" { "proficiency lapsed: unacceptable failure rate since attempt " (since) " — retrain" }
+                @if let Some(t) = pr.trials_to_proficiency { " (proficient after " (t) " attempts before)" }
+            }
+            ProficiencyStatus::Learning => strong { (pr.standing.as_str()) },
+        }
+    }
+}
+
+/// Where the CUSUM stands after the last scored attempt, in the phase it counts (since the
+/// last change of standing, which restarts it from 0).
+fn cusum_status(c: &CusumChart, status: ProficiencyStatus) -> Markup {
+    let restarted = match status {
+        ProficiencyStatus::Proficient { since } => Some((since, "the trainee became proficient")),
+        ProficiencyStatus::Lapsed { since } => Some((since, "the proficiency lapsed")),
+        ProficiencyStatus::Learning => None,
+    };
     html! {
         @if let Some(last) = c.points.last() {
             p {
-                "CUSUM after attempt " (last.n) ": " (num(Some(last.value), 2)) ", "
-                @match last.signal {
+                "CUSUM after attempt " (last.n) ": " (num(Some(c.current.value), 2)) ", "
+                @match c.current.signal {
                     CusumSignal::Acceptable => strong class="pass" { "acceptable failure rate" },
                     CusumSignal::Unacceptable => strong class="fail" { "unacceptable failure rate" },
                     CusumSignal::None => span { "no signal yet" },
                 }
+                @if let Some((n, why)) = restarted { ", counted afresh from 0 after attempt " (n) ", when " (why) }
                 " (acceptable at −h0 = −" (num(Some(c.h0), 2)) ", unacceptable at h1 = " (num(Some(c.h1), 2)) ")."
             }
         }
     }
+}
+
+/// The CUSUM chart's line: from 0 before the first attempt, down to 0 again after each
+/// attempt that restarted it.
+fn cusum_line(c: &CusumChart) -> Vec<(f64, Option<f64>)> {
+    let mut line = vec![(0.0, Some(0.0))];
+    for p in &c.points {
+        line.push((f64::from(p.n), Some(p.value)));
+        if c.restarts.contains(&p.n) {
+            line.push((f64::from(p.n), Some(0.0)));
+        }
+    }
+    line
 }
 
 /// What the CUSUM chart's lines mean.
@@ -237,8 +271,10 @@ fn cusum_explanation(c: &CusumChart) -> Markup {
             "The CUSUM line rises by " (num(Some(1.0 - s), 2)) " with each failed attempt and falls by "
             (num(Some(s), 2)) " with each pass. Reaching the green line −h0 means the trainee's failure rate is acceptable (at most "
             (pct(c.params.p0)) "): proficient by CUSUM; reaching the red line h1 means it is unacceptable (" (pct(c.params.p1))
-            " or more) and their technique needs review. (The standing above counts "
-            (REQUIRED_CONSECUTIVE_PASSES) " consecutive passes.)"
+            " or more) and their technique needs review. The standing above counts "
+            (REQUIRED_CONSECUTIVE_PASSES) " consecutive passes; the line starts again from 0 after the attempt that completes them "
+            "(the failures while learning are behind the trainee), and once proficient, reaching h1 means the proficiency has lapsed: "
+            "the trainee retrains until " (REQUIRED_CONSECUTIVE_PASSES) " consecutive passes again, when the line restarts once more."
         }
     }
 }

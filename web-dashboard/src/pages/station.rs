@@ -215,6 +215,11 @@ async fn station(
         return Ok(Redirect::to(&format!("/attempts/{id}")).into_response());
     };
     let driver = r.trainee == user.user().name;
+    // the written task: the exercise's description (in exam mode all the page says of it)
+    let description = match state.store().exercise_by_name(&r.exercise).await {
+        Ok(e) => e.description,
+        Err(_) => r.exercise.clone(),
+    };
     let title = if driver {
         format!("Station: {}", r.exercise)
     } else {
@@ -224,6 +229,10 @@ async fn station(
         &title,
         Some(&user),
         html! {
+            p id="task" class="brief" {
+                strong { "Task: " } (description)
+                @if !r.guided { " " span class="muted" { "Exam: the plan is not shown. The white ticks on the tissue's edges are 10 mm apart (long ones every 50 mm and at the middle)." } }
+            }
             div class="station" {
                 canvas id="tissue" width="960" height="600" data-config=(config_json(&r, driver)) {}
                 div class="hud" {
@@ -232,8 +241,11 @@ async fn station(
                     div id="force-warning" class="fail" hidden { "Too much force: over the limit the score uses" }
                     div { "Time " span id="elapsed" { "0.0 s" } }
                     div { "Blade " span id="blade" { "free" } }
-                    div { "Blade depth " span id="depth" { "–" } @if r.guided { " (planned " (format!("{:.1}", r.plan.depth_m * 1e3)) " mm)" } }
-                    @if driver && r.pointer.is_some() { div class="muted" { "Wheel down or ↓: deeper; wheel up or ↑: shallower." } }
+                    div { "Blade depth " span id="blade-depth" { "–" } " (planned " (format!("{:.1}", r.plan.depth_m * 1e3)) " mm)" }
+                    div { "Set depth " span id="depth" { "–" } }
+                    canvas id="depth-gauge" width="120" height="150" title="The cut from the side: the surface at the top, the planned depth dashed green, the set depth dotted grey, the blade red below the surface" {}
+                    @if driver && r.pointer.is_some() { div class="muted" { "Wheel down or ↓: deeper; wheel up or ↑: shallower (0.5 mm a step)." } }
+                    div class="scale" { span id="scale-bar" {} " 10 mm" }
                     div { "Mode " span id="mode" { (if r.guided { "guided" } else { "exam" }) } }
                     @if driver { button id="stop" type="button" { "Stop" } }
                     @else { p class="muted" { "Live view (read only)." } }
@@ -372,26 +384,19 @@ async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
     };
     tokio::pin!(sender);
     tokio::pin!(receiver);
-    let dropped = tokio::select! {
-        () = &mut sender => {
-            // the session ended; what the page still sends does not matter
-            0
-        }
-        dropped = &mut receiver => {
-            // the page went away: the session waits for it (the blade pauses) and ends only if
-            // none comes back within the absence allowed
-            if driver && r.ending.borrow().is_none() {
-                tracing::warn!(
-                    "station attempt {}: the trainee's page went away; waiting {:.0} s for it",
-                    r.attempt,
-                    r.control.absence().as_secs_f64()
-                );
-            }
-            dropped
-        }
+    let (dropped, went_away) = tokio::select! {
+        // the session ended; what the page still sends does not matter
+        () = &mut sender => (0, false),
+        dropped = &mut receiver => (dropped, true),
     };
-    if driver {
-        r.control.leave();
+    // the trainee's last page went away: the session waits for one (the blade pauses) and
+    // ends only if none comes back within the absence allowed
+    if driver && r.control.leave() && went_away && r.ending.borrow().is_none() {
+        tracing::warn!(
+            "station attempt {}: the trainee's page went away; waiting {:.0} s for it",
+            r.attempt,
+            r.control.absence().as_secs_f64()
+        );
     }
     if dropped > 0 {
         tracing::info!(

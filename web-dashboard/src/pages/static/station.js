@@ -8,7 +8,7 @@
   if (!canvas) return;
   const config = JSON.parse(canvas.dataset.config);
   const KIND_TOPOLOGY = 1, KIND_FRAME = 2, FRAME_HEADER_BYTES = 64;
-  const BLADE_LENGTH_M = 0.015;
+  const BLADE_LENGTH_M = 0.015, BLADE_WIDTH_M = 0.003;
   const status = (text) => { document.getElementById("status").textContent = text; };
 
   // ---- small vector and matrix helpers (column-major 4x4, as WebGL wants) ----
@@ -173,7 +173,44 @@
       tip: f32(24, 3), rotation: f32(36, 4), force: f32(52, 3),
       xyz: new Float32Array(view.buffer, FRAME_HEADER_BYTES, 3 * vertices),
     };
+    // the tissue's rest surface: the first frame's, before anything touched it (a page that
+    // joins a running attempt takes the first frame it gets). Depths are measured from it, as
+    // the score measures them: the pointer's point and the blade's depth below the surface
+    if (!rest && mesh.triangles && latest.xyz.length === 3 * mesh.vertices) {
+      rest = { xyz: Float32Array.from(latest.xyz), triangles: mesh.triangles.slice() };
+    }
     fresh = true;
+  }
+
+  // ---- the rest surface: where the pointer points, how deep the blade is ----
+  let rest = null;
+  // the nearest crossing of the ray `origin + t dir` (t > 0) with the rest surface
+  // (Möller–Trumbore): { point, normal, t } or null
+  function castRest(origin, dir) {
+    if (!rest) return null;
+    const xyz = rest.xyz, tris = rest.triangles;
+    let best = Infinity, normal = null;
+    for (let i = 0; i < tris.length; i += 3) {
+      const a = 3 * tris[i], b = 3 * tris[i + 1], c = 3 * tris[i + 2];
+      const p0 = [xyz[a], xyz[a + 1], xyz[a + 2]];
+      const e1 = [xyz[b] - p0[0], xyz[b + 1] - p0[1], xyz[b + 2] - p0[2]];
+      const e2 = [xyz[c] - p0[0], xyz[c + 1] - p0[1], xyz[c + 2] - p0[2]];
+      const p = cross(dir, e2), det = dot(e1, p);
+      if (Math.abs(det) < 1e-14) continue;
+      const tv = sub(origin, p0), uu = dot(tv, p) / det;
+      if (uu < 0 || uu > 1) continue;
+      const q = cross(tv, e1), vv = dot(dir, q) / det;
+      if (vv < 0 || uu + vv > 1) continue;
+      const d = dot(e2, q) / det;
+      if (d > 0 && d < best) { best = d; normal = cross(e1, e2); }
+    }
+    return best < Infinity ? { point: add(origin, scale(dir, best)), normal: unit(normal), t: best } : null;
+  }
+  // the rest surface above `point` along `up`: { point, depth } (depth below it in m, negative
+  // above it), or null off the tissue
+  function surfaceAbove(point) {
+    const reach = 0.2, hit = castRest(add(point, scale(up, reach)), scale(up, -1));
+    return hit ? { point: hit.point, depth: reach - hit.t } : null;
   }
 
   function draw() {
@@ -230,20 +267,102 @@
       strip([line[0]], gl.POINTS, [0.16, 0.78, 0.35], 10);
       strip([line[line.length - 1]], gl.POINTS, [0.95, 0.75, 0.2], 10);
     }
-    const edge = rotate(latest.rotation, [0, 0, 1]);
-    gl.disable(gl.DEPTH_TEST); // the blade is always seen, also inside the tissue
-    strip([latest.tip, add(latest.tip, scale(edge, BLADE_LENGTH_M))], gl.LINES, latest.engaged ? [0.95, 0.95, 1.0] : [0.6, 0.62, 0.66]);
-    strip([latest.tip], gl.POINTS, latest.mode === 2 ? [1, 0.3, 0.2] : [0.9, 0.9, 0.95], 6);
+    if (!config.plan && rest) strip(ruler(), gl.LINES, [0.95, 0.95, 0.95]);
+    drawBlade(strip);
     stats.draws += 1;
     stats.work_ms += performance.now() - started;
   }
   requestAnimationFrame(draw);
 
+  // the blade in 3D: a steel blade (its cutting edge along the tool's x, its back behind),
+  // the part below the intact surface red, its shadow on the surface straight above the tip,
+  // and the handle above; drawn over the tissue so it is seen inside the cut too
+  function drawBlade(strip) {
+    const tip = latest.tip, axis = rotate(latest.rotation, [0, 0, 1]);
+    const back = scale(rotate(latest.rotation, [1, 0, 0]), -BLADE_WIDTH_M);
+    const at = (along, behind) => add(add(tip, scale(axis, along * BLADE_LENGTH_M)), scale(back, behind));
+    const above = surfaceAbove(tip);
+    gl.enable(gl.DEPTH_TEST);
+    if (above) { // the shadow: a dark spot on the surface, where the blade enters
+      const lift = add(above.point, scale(up, 0.0003));
+      strip([lift, add(lift, back)], gl.LINES, [0.08, 0.06, 0.06]);
+      strip([lift], gl.POINTS, [0.08, 0.06, 0.06], 9);
+    }
+    gl.disable(gl.DEPTH_TEST);
+    const steel = latest.engaged ? [0.86, 0.88, 0.92] : [0.55, 0.58, 0.62];
+    strip([at(0, 0), at(1, 0), at(1, 1), at(0, 0), at(1, 1), at(0.3, 1)], gl.TRIANGLES, steel);
+    strip([at(1, 0.5), at(4, 0.5)], gl.LINES, [0.3, 0.32, 0.36]);
+    if (above && above.depth > 0) { // the buried part of the edge
+      strip([tip, add(tip, scale(axis, Math.min(above.depth / Math.max(1e-6, dot(axis, up)), 4 * BLADE_LENGTH_M)))], gl.LINES, [1, 0.25, 0.2]);
+    }
+    strip([tip], gl.POINTS, latest.mode === 2 ? [1, 0.3, 0.2] : [0.9, 0.9, 0.95], 6);
+  }
+
+  // exam mode's landmarks: a ruler on the tissue, ticks every 10 mm along its two near
+  // edges (long ones every 50 mm and at the middle), so a length and a place can be judged
+  // without the plan
+  let rulerPoints = null;
+  function ruler() {
+    if (rulerPoints) return rulerPoints;
+    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (let i = 0; i < rest.xyz.length; i += 3) for (let k = 0; k < 3; k++) {
+      lo[k] = Math.min(lo[k], rest.xyz[i + k]); hi[k] = Math.max(hi[k], rest.xyz[i + k]);
+    }
+    const axes = [0, 1, 2].filter((k) => Math.abs(up[k]) < 0.5), mid = scale(add(lo, hi), 0.5);
+    rulerPoints = [];
+    for (const [along, across] of [[axes[0], axes[1]], [axes[1], axes[0]]]) {
+      for (let k = -40; k <= 40; k++) {
+        const p = mid.slice(); p[along] = mid[along] + k * 0.01; p[across] = lo[across] + 0.003;
+        if (p[along] < lo[along] || p[along] > hi[along]) continue;
+        const s = surfaceAbove(p);
+        if (!s) continue;
+        const foot = add(s.point, scale(up, 0.0003)), inward = [0, 0, 0];
+        inward[across] = k === 0 || k % 5 === 0 ? 0.008 : 0.004;
+        rulerPoints.push(foot, add(foot, inward));
+      }
+    }
+    return rulerPoints;
+  }
+
+  // the scale bar: 10 mm at the middle of the view, in CSS pixels
+  function scaleBar() {
+    const bar = document.getElementById("scale-bar");
+    if (!bar || !camera) return;
+    const f = unit(sub(camera.target, camera.eye)), side = unit(cross(f, camera.up));
+    const a = window.cutlabStation.project(camera.target), b = window.cutlabStation.project(add(camera.target, scale(side, 0.01)));
+    bar.style.width = Math.max(4, Math.round(Math.hypot(b[0] - a[0], b[1] - a[1]))) + "px";
+  }
+
+  // the depth gauge: the cut seen from the side (the view looks down the blade): the
+  // surface, the planned depth (green, dashed), the depth the wheel set (grey), the blade
+  // (steel above the surface, red below it, to its tip)
+  const gaugeCanvas = document.getElementById("depth-gauge");
+  function gauge(depth) {
+    if (!gaugeCanvas) return;
+    const g = gaugeCanvas.getContext("2d"), w = gaugeCanvas.width, h = gaugeCanvas.height;
+    const top = 14, mm = (h - top - 6) / 20, y = (m) => top + m * 1e3 * mm;
+    g.clearRect(0, 0, w, h);
+    g.fillStyle = "#e9b8ac"; g.fillRect(0, top, w, h - top);
+    g.fillStyle = "#1f262b"; g.font = "10px sans-serif";
+    for (let k = 0; k <= 20; k += 5) { g.fillRect(0, y(k * 1e-3), k % 10 ? 4 : 8, 1); if (k) g.fillText(k + "", 10, y(k * 1e-3) + 4); }
+    g.fillText("mm", 10, 10);
+    const line = (m, colour, dash) => { g.setLineDash(dash); g.strokeStyle = colour; g.lineWidth = 2; g.beginPath(); g.moveTo(28, y(m)); g.lineTo(w, y(m)); g.stroke(); g.setLineDash([]); };
+    if (config.plan) line(config.plan.depth_m, "#17803d", [5, 3]);
+    if (config.pointer && config.driver) line(depth_set(), "#6b7378", [2, 3]);
+    if (depth === null) return;
+    const x = 0.65 * w, tip = y(Math.max(-top / mm * 1e-3, Math.min(0.02, depth)));
+    g.fillStyle = "#c9ced6"; g.fillRect(x - 3, 0, 6, Math.min(tip, top));
+    if (depth > 0) { g.fillStyle = "#d4351c"; g.fillRect(x - 3, top, 6, tip - top); }
+  }
+  // the depth the wheel set (the pointer's; read by the gauge)
+  let depth_set = () => 0;
+
   const MODES = ["free", "touching", "cutting"];
   let cutSeen = false, releasedAt = null;
   // the force as a person can read it: smoothed over about 150 ms (the servo's force jumps
   // between ticks), the warning held for a second after the limit the score uses was passed
-  let forceShown = 0, overUntil = 0;
+  let forceShown = 0, overUntil = 0, scaled = false;
+  window.addEventListener("resize", () => { scaled = false; });
   function hud(f) {
     const force = norm(f.force), now = performance.now();
     forceShown += (force - forceShown) * 0.25;
@@ -255,6 +374,12 @@
     document.getElementById("force-warning").hidden = now >= overUntil;
     document.getElementById("elapsed").textContent = (f.tick * 1e-3).toFixed(1) + " s";
     document.getElementById("blade").textContent = (f.engaged ? "engaged, " : "") + MODES[f.mode];
+    // the blade's depth below the intact surface, where the tip is now
+    const above = surfaceAbove(f.tip);
+    document.getElementById("blade-depth").textContent = !above ? "off the tissue"
+      : above.depth > 0.00005 ? (above.depth * 1e3).toFixed(1) + " mm below the surface" : "at or above the surface";
+    gauge(above ? above.depth : null);
+    if (!scaled) { scaled = true; scaleBar(); }
     cutSeen = cutSeen || f.mode === 2;
   }
 
@@ -288,6 +413,8 @@
   function onText(m) {
     if (m.type !== "ended") return;
     ended = true;
+    const stopButton = document.getElementById("stop");
+    if (stopButton) stopButton.hidden = true;
     const debrief = document.getElementById("debrief");
     const link = `/attempts/${m.attempt}`;
     status(m.scored ? `Ended: score ${m.score.toFixed(2)}, ${m.passed ? "PASS" : "FAIL"}.` : `Ended, not scored: ${m.why}`);
@@ -331,10 +458,11 @@
   if (!config.driver) return;
   function stop() { if (socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify({ type: "stop" })); }
   document.getElementById("stop").addEventListener("click", stop);
-  if (!config.pointer) { document.getElementById("depth").textContent = "the device's"; return; }
+  if (!config.pointer) { document.getElementById("depth").textContent = "by the device"; return; }
 
   // ---- the trainee's input: the point under the pointer on the tissue, depth, button ----
   let hit = null, engaged = false, depth = config.start_depth_m ?? 0.004, lastSent = 0;
+  depth_set = () => depth;
   document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   function ray(event) {
     const r = canvas.getBoundingClientRect();
@@ -343,25 +471,12 @@
     const t = Math.tan(0.35), aspect = r.width / r.height;
     return { origin: camera.eye, dir: unit(add(f, add(scale(s, x * t * aspect), scale(u, y * t)))) };
   }
-  function pick(event) { // the nearest triangle the ray meets (Möller–Trumbore)
-    if (!camera || !mesh.xyz || !mesh.triangles) return null;
-    const { origin, dir } = ray(event), xyz = mesh.xyz, tris = mesh.triangles;
-    let best = Infinity, normal = null;
-    for (let i = 0; i < tris.length; i += 3) {
-      const a = 3 * tris[i], b = 3 * tris[i + 1], c = 3 * tris[i + 2];
-      const p0 = [xyz[a], xyz[a + 1], xyz[a + 2]];
-      const e1 = [xyz[b] - p0[0], xyz[b + 1] - p0[1], xyz[b + 2] - p0[2]];
-      const e2 = [xyz[c] - p0[0], xyz[c + 1] - p0[1], xyz[c + 2] - p0[2]];
-      const p = cross(dir, e2), det = dot(e1, p);
-      if (Math.abs(det) < 1e-14) continue;
-      const tv = sub(origin, p0), uu = dot(tv, p) / det;
-      if (uu < 0 || uu > 1) continue;
-      const q = cross(tv, e1), vv = dot(dir, q) / det;
-      if (vv < 0 || uu + vv > 1) continue;
-      const d = dot(e2, q) / det;
-      if (d > 0 && d < best) { best = d; normal = cross(e1, e2); }
-    }
-    return best < Infinity ? { point: add(origin, scale(dir, best)), normal: unit(normal) } : null;
+  // the point under the pointer on the tissue's rest surface (not the pressed or cut one:
+  // the depth is below the intact surface, as the score measures it)
+  function pick(event) {
+    if (!camera) return null;
+    const { origin, dir } = ray(event);
+    return castRest(origin, dir);
   }
   function send(t_ms) {
     if (!hit || socket.readyState !== WebSocket.OPEN || !(t_ms > lastSent)) return;
