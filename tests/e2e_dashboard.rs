@@ -870,8 +870,10 @@ async fn interrupted(
     let mut again = vec![
         Gesture::Release,
         Gesture::Move { x, y, ms: 16 },
-        Gesture::Wait { ms: 300 },
+        Gesture::Wait { ms: hand.settle_ms },
         Gesture::Press,
+        // as at the start: the blade goes in before the hand moves on
+        Gesture::Wait { ms: hand.settle_ms },
     ];
     again.extend_from_slice(&stroke[at60..]);
     c.perform_actions(as_actions(&again)).await?;

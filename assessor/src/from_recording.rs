@@ -49,10 +49,23 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
             cutting: s.render.mode == Mode::Cutting,
         })
         .collect();
+    let mut cuts = cut_samples(&samples, period_s, plan);
+    // the depth below the tissue as it lay, not below the plan's idealised surface (the
+    // pre-tensioned tissue settles away from it)
+    let first_touch = samples.values().find(|s| s.render.mode != Mode::Free);
+    if let Some(mesh) = untouched_surface(rec, first_touch.map(|s| s.tick))
+        .and_then(|s| crate::metrics::field::trimesh(&s).ok())
+    {
+        for c in &mut cuts {
+            if let Some(d) = depth_below_surface(&mesh, plan.normal, c.tip_m) {
+                c.depth_m = d;
+            }
+        }
+    }
     Ok(AttemptData {
         poses,
         forces,
-        cuts: cut_samples(&samples, period_s, plan),
+        cuts,
         surface: last_surface(rec),
         device: Some(meta.provenance.device.clone()),
     })
@@ -111,7 +124,40 @@ pub fn assess_recording(
 
 /// The boundary of the last keyframe's mesh at its deformed positions.
 fn last_surface(rec: &Recording) -> Option<SurfaceMesh> {
-    let k = rec.keyframes.last()?;
+    surface_of(rec.keyframes.last()?)
+}
+
+/// The tissue as it lay before the tool first touched it (at tick `first_touch`): the
+/// boundary of the last keyframe before that tick, or of the first keyframe when none is
+/// earlier or the tool never touched.
+fn untouched_surface(rec: &Recording, first_touch: Option<u64>) -> Option<SurfaceMesh> {
+    let before = first_touch.and_then(|t| rec.keyframes.iter().rev().find(|k| k.tick < t));
+    surface_of(before.or(rec.keyframes.first())?)
+}
+
+/// The depth of `tip` below `surface` along the outward normal `n`: `(q - tip) . n` with `q`
+/// the outermost surface point on the line through the tip along `n` (negative above the
+/// surface); `None` off the surface.
+pub fn depth_below_surface(
+    surface: &parry3d_f64::shape::TriMesh,
+    n: [f64; 3],
+    tip: [f64; 3],
+) -> Option<f64> {
+    use parry3d_f64::math::Vector as PVec;
+    use parry3d_f64::query::{Ray, RayCast};
+    const REACH_M: f64 = 0.2;
+    let n = nalgebra::Vector3::from(n).try_normalize(1e-12)?;
+    let origin = nalgebra::Point3::from(tip) + n * REACH_M;
+    let ray = Ray::new(
+        PVec::new(origin.x, origin.y, origin.z),
+        PVec::new(-n.x, -n.y, -n.z),
+    );
+    let toi = surface.cast_local_ray(&ray, 2.0 * REACH_M, false)?;
+    Some(REACH_M - toi)
+}
+
+/// The boundary of keyframe `k`'s mesh at its positions.
+fn surface_of(k: &cutlab_recorder::channels::KeyframeMsg) -> Option<SurfaceMesh> {
     let rest = k
         .rest_positions_m
         .iter()
@@ -300,5 +346,34 @@ mod tests {
             m.length_error_m < -STROKE_GAP_M && m.length_error_m > -0.006,
             "{m:?}"
         );
+    }
+
+    #[test]
+    fn the_depth_is_below_the_tissue_as_it_lay_not_the_plan() {
+        // the tissue settled 1.5 mm below the plan's surface z = 0
+        let z = -0.0015;
+        let surface = SurfaceMesh {
+            vertices_m: vec![
+                [-0.1, -0.1, z],
+                [0.1, -0.1, z],
+                [0.1, 0.1, z],
+                [-0.1, 0.1, z],
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+        };
+        let mesh = crate::metrics::field::trimesh(&surface).expect("mesh");
+        let d = |tip| depth_below_surface(&mesh, [0.0, 0.0, 1.0], tip).expect("over the tissue");
+        assert!((d([0.01, 0.0, z - 0.008]) - 0.008).abs() < 1e-12);
+        assert!(
+            (d([0.0, 0.02, z + 0.002]) + 0.002).abs() < 1e-12,
+            "above it: negative"
+        );
+        assert_eq!(
+            depth_below_surface(&mesh, [0.0, 0.0, 1.0], [0.5, 0.0, 0.0]),
+            None
+        );
+        // the plan's surface would say 9.5 mm
+        let plan = ExpertPlan::chest_wall().expect("plan");
+        assert!(depth_below_plan(&plan, [0.0, 0.0, z - 0.008]) > 0.009);
     }
 }
