@@ -371,9 +371,14 @@ impl ForceRenderer {
             self.desired = Vector3::zeros();
         }
         if faults != 0 && self.gain == 0.0 {
-            // Faded out: forget the held force and leave the tissue.
+            // Faded out: forget the held force. A blade that was cutting when the device or
+            // the simulation went stale stays in its cut (its pose is held; it cuts on when
+            // they come back, without entering the tissue again); else the tool leaves it.
             self.desired = Vector3::zeros();
-            self.mode = Mode::Free;
+            let held = faults & !(fault::DEVICE_STALE | fault::SIM_STALLED) == 0;
+            if !(held && self.mode == Mode::Cutting) {
+                self.mode = Mode::Free;
+            }
         }
         RenderOutput {
             force_newtons: force,
@@ -582,6 +587,48 @@ mod tests {
             (out.force_newtons.norm(), out.faults),
             (0.0, fault::DEVICE_LOST)
         );
+    }
+
+    #[test]
+    fn a_cutting_blade_held_through_a_stall_cuts_on_when_it_ends() {
+        // in: the blade pressed 10 mm into a plane of 500 N/m (5 N > the 1 N threshold)
+        let cutting = |r: &mut ForceRenderer, from: u64| {
+            (from..from + 100)
+                .map(|t| r.update(t, at(-0.010, BUTTON_BLADE), &plane(t, 500.0)).mode)
+                .last()
+        };
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        assert_eq!(cutting(&mut r, 0), Some(Mode::Cutting));
+        // the page stalls (the device stale, the pose held): the force fades, the blade stays
+        // in its cut; when the samples come back it cuts on at once, without a new entry
+        let stale = Err(DeviceFault::Stale {
+            age_nanos: 600_000_000,
+        });
+        for t in 100..700 {
+            let out = r.update(t, stale, &plane(t, 500.0));
+            assert_eq!(out.mode, Mode::Cutting, "tick {t}");
+        }
+        assert_eq!(r.update(699, stale, &plane(699, 500.0)).gain, 0.0);
+        let back = r.update(700, at(-0.010, BUTTON_BLADE), &plane(700, 500.0));
+        assert_eq!(back.mode, Mode::Cutting);
+        // the simulation stalls (its contact model old): the same
+        let frozen = plane(700, 500.0);
+        let out = (701..800)
+            .map(|t| r.update(t, at(-0.010, BUTTON_BLADE), &frozen))
+            .last()
+            .expect("ticks");
+        assert_eq!((out.mode, out.gain), (Mode::Cutting, 0.0));
+        assert_eq!(
+            r.update(800, at(-0.010, BUTTON_BLADE), &plane(800, 500.0))
+                .mode,
+            Mode::Cutting
+        );
+        // a lost device is not held: the blade leaves the tissue once the force has faded
+        let out = (801..810)
+            .map(|t| r.update(t, Err(DeviceFault::Disconnected), &plane(t, 500.0)))
+            .last()
+            .expect("ticks");
+        assert_eq!(out.mode, Mode::Free);
     }
 
     #[test]
