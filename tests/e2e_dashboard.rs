@@ -628,11 +628,11 @@ async fn people(
     result.expect("the people's attempts")
 }
 
-/// The planned line on the page (CSS px) and pixels to a millimetre along it, once the page
-/// shows the tissue and has its rest surface.
+/// The planned line on the page (CSS px), its length (mm) and pixels to a millimetre along
+/// it, once the page shows the tissue and has its rest surface.
 async fn line_on_page(
     c: &fantoccini::Client,
-) -> Result<(Vec<[f64; 2]>, f64), fantoccini::error::CmdError> {
+) -> Result<(Vec<[f64; 2]>, f64, f64), fantoccini::error::CmdError> {
     until(
         c,
         "window.cutlabStation && window.cutlabStation.stats().frames > 5",
@@ -658,7 +658,7 @@ async fn line_on_page(
         .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
         .sum();
     let mm = v["mm"].as_f64().expect("the plan's length");
-    Ok((px, along / mm))
+    Ok((px, mm, along / mm))
 }
 
 /// The hand's gestures as WebDriver pointer actions.
@@ -706,7 +706,7 @@ async fn attempt(
     c.find(Locator::Id("start")).await?.click().await?;
     c.wait().for_element(Locator::Id("tissue")).await?;
     let url = c.current_url().await?.to_string();
-    let (line, px_per_mm) = line_on_page(c).await?;
+    let (line, length_mm, px_per_mm) = line_on_page(c).await?;
     let mut hand = match trial {
         Trial::Sloppy => Hand::sloppy(px_per_mm, seed),
         _ => Hand::steady(px_per_mm, seed),
@@ -721,11 +721,6 @@ async fn attempt(
         Gesture::Wait { ms: 400 },
     ];
     g.extend(hand.reach(rest, line[0], 0.8));
-    let length_mm = line
-        .windows(2)
-        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-        .sum::<f64>()
-        / px_per_mm;
     // a careful person's pace: about 12 mm a second
     let stroke_s = length_mm / 12.0;
     match trial {

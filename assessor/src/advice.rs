@@ -54,8 +54,10 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
         )),
         _ => {}
     }
-    // an attempt at something else than the task is told the task, not its details
-    if fix.is_empty() {
+    // an attempt at something else than the task is told the task, not its details, and its
+    // motion says nothing of how the task was done
+    let done = fix.is_empty();
+    if done {
         let mut failed: Vec<(f64, String)> = results
             .iter()
             .filter(|m| decides(m.key) && m.passed == Some(false))
@@ -68,9 +70,6 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
     let praise = fix
         .is_empty()
         .then(|| "Within every limit: the line, its depth and the force were right.".to_owned());
-    // the motion of an attempt that did not do the task says nothing of how it was done
-    let done = !matches!(fraction.map(|m| m.value), Some(None))
-        && !matches!(fraction.map(|m| m.value), Some(Some(f)) if f < TASK_DONE_MIN_FRACTION);
     let feedback = results
         .iter()
         .filter(|m| done && !decides(m.key))

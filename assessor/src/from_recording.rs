@@ -231,13 +231,7 @@ mod tests {
     use cutlab_recorder::haptics::render::RenderOutput;
     use cutlab_recorder::haptics::{HapticDevice, Vector3};
 
-    /// A 60 mm plan along x on flat tissue (the surface z = 0), 8 mm deep.
-    fn plan() -> ExpertPlan {
-        ExpertPlan::from_json(
-            r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#,
-        )
-        .unwrap()
-    }
+    use crate::metrics::incision::tests::straight_plan as plan;
 
     /// The servo samples of a pointer attempt along [`plan`], played by the station's pointer
     /// device at 1 kHz: the page sends a sample every 8 ms, each arriving 5 ms after it was

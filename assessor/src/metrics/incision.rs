@@ -343,10 +343,11 @@ pub(crate) fn assess(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn straight_plan() -> ExpertPlan {
+    /// A 60 mm plan along x on flat tissue (the surface z = 0), 8 mm deep.
+    pub(crate) fn straight_plan() -> ExpertPlan {
         ExpertPlan::from_json(
             r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#,
         )

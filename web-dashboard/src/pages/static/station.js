@@ -86,7 +86,7 @@
     precision highp float; uniform vec3 tint; out vec4 color;
     void main() { color = vec4(tint, 1.0); }`);
   const mesh = { vao: gl.createVertexArray(), positions: gl.createBuffer(), normals: gl.createBuffer(),
-    indices: gl.createBuffer(), count: 0, vertices: 0, capacity: 0, triangles: null, xyz: null };
+    indices: gl.createBuffer(), count: 0, vertices: 0, capacity: 0, triangles: null };
   const overlay = { vao: gl.createVertexArray(), buffer: gl.createBuffer() };
   gl.bindVertexArray(mesh.vao);
   for (const [buffer, name] of [[mesh.positions, "position"], [mesh.normals, "normal"]]) {
@@ -135,11 +135,16 @@
   // ---- the camera: the exercise's viewpoint, or above the tissue along its up ----
   const up = config.up || [0, 0, 1];
   let camera = null;
-  function frameCamera(xyz) {
-    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  // the box around the points `xyz` (x, y, z, x, ...): [lo, hi]
+  function bounds(xyz) {
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
     for (let i = 0; i < xyz.length; i += 3) for (let k = 0; k < 3; k++) {
       lo[k] = Math.min(lo[k], xyz[i + k]); hi[k] = Math.max(hi[k], xyz[i + k]);
     }
+    return [lo, hi];
+  }
+  function frameCamera(xyz) {
+    const [lo, hi] = bounds(xyz);
     const size = norm(sub(hi, lo));
     let target = scale(add(lo, hi), 0.5), eye;
     if (config.plan) { // frame the incision
@@ -212,6 +217,12 @@
     const reach = 0.2, hit = castRest(add(point, scale(up, reach)), scale(up, -1));
     return hit ? { point: hit.point, depth: reach - hit.t } : null;
   }
+  // the rest surface above the latest frame's blade tip (cast once a frame, read by the HUD
+  // and the drawing)
+  function bladeAbove() {
+    if (!("above" in latest)) latest.above = surfaceAbove(latest.tip);
+    return latest.above;
+  }
 
   function draw() {
     requestAnimationFrame(draw);
@@ -237,7 +248,6 @@
       gl.bufferSubData(gl.ARRAY_BUFFER, 0, latest.xyz);
       gl.bindBuffer(gl.ARRAY_BUFFER, mesh.normals);
       gl.bufferSubData(gl.ARRAY_BUFFER, 0, vertexNormals(latest.xyz, mesh.triangles, mesh.vertices));
-      mesh.xyz = latest.xyz;
       fresh = false;
       stats.frames += 1;
       if (Number.isFinite(latest.echo)) stats.latencies.push(performance.now() - latest.echo);
@@ -281,7 +291,7 @@
     const tip = latest.tip, axis = rotate(latest.rotation, [0, 0, 1]);
     const back = scale(rotate(latest.rotation, [1, 0, 0]), -BLADE_WIDTH_M);
     const at = (along, behind) => add(add(tip, scale(axis, along * BLADE_LENGTH_M)), scale(back, behind));
-    const above = surfaceAbove(tip);
+    const above = bladeAbove();
     gl.enable(gl.DEPTH_TEST);
     if (above) { // the shadow: a dark spot on the surface, where the blade enters
       const lift = add(above.point, scale(up, 0.0003));
@@ -304,10 +314,7 @@
   let rulerPoints = null;
   function ruler() {
     if (rulerPoints) return rulerPoints;
-    let lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-    for (let i = 0; i < rest.xyz.length; i += 3) for (let k = 0; k < 3; k++) {
-      lo[k] = Math.min(lo[k], rest.xyz[i + k]); hi[k] = Math.max(hi[k], rest.xyz[i + k]);
-    }
+    const [lo, hi] = bounds(rest.xyz);
     const axes = [0, 1, 2].filter((k) => Math.abs(up[k]) < 0.5), mid = scale(add(lo, hi), 0.5);
     rulerPoints = [];
     for (const [along, across] of [[axes[0], axes[1]], [axes[1], axes[0]]]) {
@@ -348,14 +355,14 @@
     g.fillText("mm", 10, 10);
     const line = (m, colour, dash) => { g.setLineDash(dash); g.strokeStyle = colour; g.lineWidth = 2; g.beginPath(); g.moveTo(28, y(m)); g.lineTo(w, y(m)); g.stroke(); g.setLineDash([]); };
     if (config.plan) line(config.plan.depth_m, "#17803d", [5, 3]);
-    if (config.pointer && config.driver) line(depth_set(), "#6b7378", [2, 3]);
+    if (config.pointer && config.driver) line(depth, "#6b7378", [2, 3]);
     if (depth === null) return;
     const x = 0.65 * w, tip = y(Math.max(-top / mm * 1e-3, Math.min(0.02, depth)));
     g.fillStyle = "#c9ced6"; g.fillRect(x - 3, 0, 6, Math.min(tip, top));
     if (depth > 0) { g.fillStyle = "#d4351c"; g.fillRect(x - 3, top, 6, tip - top); }
   }
-  // the depth the wheel set (the pointer's; read by the gauge)
-  let depth_set = () => 0;
+  // the depth the wheel, the keys or the pen set (the pointer's)
+  let depth = config.start_depth_m ?? 0.004;
 
   const MODES = ["free", "touching", "cutting"];
   let cutSeen = false, releasedAt = null;
@@ -375,7 +382,7 @@
     document.getElementById("elapsed").textContent = (f.tick * 1e-3).toFixed(1) + " s";
     document.getElementById("blade").textContent = (f.engaged ? "engaged, " : "") + MODES[f.mode];
     // the blade's depth below the intact surface, where the tip is now
-    const above = surfaceAbove(f.tip);
+    const above = bladeAbove();
     document.getElementById("blade-depth").textContent = !above ? "off the tissue"
       : above.depth > 0.00005 ? (above.depth * 1e3).toFixed(1) + " mm below the surface" : "at or above the surface";
     gauge(above ? above.depth : null);
@@ -461,8 +468,7 @@
   if (!config.pointer) { document.getElementById("depth").textContent = "by the device"; return; }
 
   // ---- the trainee's input: the point under the pointer on the tissue, depth, button ----
-  let hit = null, engaged = false, depth = config.start_depth_m ?? 0.004, lastSent = 0;
-  depth_set = () => depth;
+  let hit = null, engaged = false, lastSent = 0;
   document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   function ray(event) {
     const r = canvas.getBoundingClientRect();
