@@ -1,7 +1,8 @@
 //! The demo's training history, simulated: a curriculum of two exercises on the chest wall,
-//! expert attempts that set their thresholds, and two trainees whose scripted attempts improve
-//! from novice towards expert. Every attempt is a real session (synthetic trainee, 1 kHz servo
-//! loop on the virtual clock, cutting simulation, recording), scored from its recording and
+//! expert attempts that set their thresholds (a synthetic expert's with a stylus, and a
+//! steady person's hand model at the station's pointer, for that device class's), and two
+//! trainees whose scripted attempts improve from novice towards expert. Every attempt is a
+//! real session (synthetic trainee or hand model, 1 kHz servo loop on the virtual clock, cutting simulation, recording), scored from its recording and
 //! stored, so instructors can replay each one in the dashboard.
 
 use std::path::{Path, PathBuf};
@@ -13,6 +14,7 @@ use cutlab_assessor::store::{
 };
 use cutlab_assessor::{AssessError, ExpertPlan};
 use cutlab_dashboard::seed_demo_accounts;
+use cutlab_haptics::device::HandKind;
 use cutlab_haptics::servo::Clock;
 use cutlab_recorder::RerunTarget;
 
@@ -25,8 +27,11 @@ pub const DEMO_CURRICULUM: &str = "demo-curriculum";
 pub const AXIAL_EXERCISE: &str = "chest-wall-axial-incision";
 /// Resolution of the attempts' chest wall (the sessions of a novice take 20 s of wall time).
 const MIN_TETS: usize = 3000;
-/// Expert attempts per exercise.
+/// Expert attempts per exercise with a stylus (the synthetic expert).
 const EXPERTS: u64 = 6;
+/// Expert attempts per exercise with the station's pointer (a steady person's hand model),
+/// which set the pointer's thresholds.
+const POINTER_EXPERTS: u64 = 4;
 
 /// One scripted attempt.
 #[derive(Debug, Clone)]
@@ -37,12 +42,18 @@ struct Attempt {
     level: f64,
     seed: u64,
     expert: bool,
+    /// A person's hand on the station's pointer instead of a synthetic trainee at `level`.
+    hand: Option<HandKind>,
 }
 
 impl Attempt {
-    /// Simulated seconds: the novice needs about 12 s for the 60 mm incision, the expert 4 s.
+    /// Simulated seconds: the novice needs about 12 s for the 60 mm incision, the expert 4 s;
+    /// a person at the pointer about 10 s, and the session ends when the hand is done.
     fn duration_s(&self) -> f64 {
-        15.0 - 9.0 * self.level
+        match self.hand {
+            Some(_) => 20.0,
+            None => 15.0 - 9.0 * self.level,
+        }
     }
 }
 
@@ -102,13 +113,18 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
     let experts: Vec<Attempt> = exercises
         .iter()
         .flat_map(|&exercise| {
-            (1..=EXPERTS).map(move |k| Attempt {
+            let expert = move |seed: u64, hand: Option<HandKind>| Attempt {
                 exercise,
                 trainee: "dr-kim",
                 level: 1.0,
-                seed: 100 + k,
+                seed,
                 expert: true,
-            })
+                hand,
+            };
+            let stylus = (1..=EXPERTS).map(move |k| expert(100 + k, None));
+            let pointer =
+                (1..=POINTER_EXPERTS).map(move |k| expert(150 + k, Some(HandKind::Steady)));
+            stylus.chain(pointer)
         })
         .collect();
     run_lanes(
@@ -129,7 +145,8 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
                 .await
                 .with_context(|| format!("thresholds of {name} from its expert attempts"))?;
             println!(
-                "  {name}: thresholds of {} metrics from {EXPERTS} expert attempts",
+                "  {name}: thresholds of {} metrics from {EXPERTS} expert attempts with a \
+                 stylus and {POINTER_EXPERTS} at the pointer, and for each device class",
                 t.metrics.len()
             );
         }
@@ -151,6 +168,7 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
             level,
             seed: 200 + k as u64,
             expert: false,
+            hand: None,
         })
         .collect();
     let ben: Vec<Attempt> = [0.0, 0.15, 0.3, 0.45]
@@ -162,6 +180,7 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
             level,
             seed: 300 + k as u64,
             expert: false,
+            hand: None,
         })
         .collect();
     run_lanes(db, dir, "trainee attempts", &[ana, ben])?;
@@ -276,20 +295,24 @@ fn run_lanes(
     Ok(())
 }
 
-/// One attempt: a recorded session of a synthetic trainee at the attempt's level, scored.
+/// One attempt: a recorded session of a synthetic trainee at the attempt's level (or a
+/// person's hand on the pointer), scored.
 fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
     let out: PathBuf = dir
         .join(a.exercise)
         .join(format!("{}-{}", a.trainee, a.seed));
-    let skill = cutlab_haptics::device::Skill::at_level(a.level).context("skill level")?;
+    let device = match a.hand {
+        Some(kind) => DeviceArg::PointerHand(kind),
+        None => DeviceArg::Trainee {
+            name: format!("level:{}", a.level),
+            skill: cutlab_haptics::device::Skill::at_level(a.level).context("skill level")?,
+        },
+    };
     session::run(&session::Options {
         scene: BUILTIN_SCENE.into(),
         min_tets: Some(MIN_TETS),
         time_step: Default::default(),
-        device: DeviceArg::Trainee {
-            name: format!("level:{}", a.level),
-            skill,
-        },
+        device,
         igtl: Default::default(),
         clock: Clock::Virtual,
         duration_s: a.duration_s(),

@@ -179,7 +179,8 @@ enum Command {
         #[arg(long, default_value = "scene")]
         time_step_ms: TimeStep,
         /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
-        /// 0 novice to 1 expert), csv:PATH (trajectory file), recording:PATH (the hand of a
+        /// 0 novice to 1 expert), pointer:steady | pointer:sloppy (a person's hand model on
+        /// the station's pointer), csv:PATH (trajectory file), recording:PATH (the hand of a
         /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
         #[arg(long, default_value = "expert")]
         device: session::DeviceArg,

@@ -9,7 +9,8 @@ use anyhow::{Context, bail};
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::{DbLocation, ExpertPlan};
 use cutlab_haptics::device::{
-    CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, SyntheticTrainee,
+    CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, PointerHand,
+    SyntheticTrainee,
 };
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
@@ -96,7 +97,8 @@ struct OpenAttempt {
 }
 
 impl OpenAttempt {
-    fn start(a: &AttemptArgs, recording: &Path, quiet: bool) -> anyhow::Result<Self> {
+    /// Starts the attempt made with `device` (as the user named it).
+    fn start(a: &AttemptArgs, device: &str, recording: &Path, quiet: bool) -> anyhow::Result<Self> {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
@@ -115,6 +117,7 @@ impl OpenAttempt {
             let attempt = store
                 .start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert)
                 .await?;
+            store.set_attempt_setup(attempt.id, None, device).await?;
             anyhow::Ok((store, attempt.id, recordings))
         })?;
         say!(
@@ -189,7 +192,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     }
     // Devices that need no scene first: a bad file or a busy port is reported at once.
     let mut device: Option<Box<dyn HapticDevice>> = match &o.device {
-        DeviceArg::Trainee { .. } => None,
+        DeviceArg::Trainee { .. } | DeviceArg::PointerHand(_) => None,
         DeviceArg::Csv(path) => Some(Box::new(
             CsvDevice::open(path).context("reading the trajectory")?,
         )),
@@ -288,6 +291,10 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         )?;
         device = Some(Box::new(trainee.expecting_cut_of(&config.render)));
     }
+    if let DeviceArg::PointerHand(kind) = &o.device {
+        let plan = plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+        device = Some(Box::new(PointerHand::new(*kind, plan, o.seed)?));
+    }
     let device = device.context("no device")?;
     let device_name = device.name().to_owned();
     let tets = scene.model.mesh.tet_count();
@@ -349,7 +356,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let attempt = o
         .attempt
         .as_ref()
-        .map(|a| OpenAttempt::start(a, &mcap_path, o.quiet))
+        .map(|a| OpenAttempt::start(a, &o.device.to_string(), &mcap_path, o.quiet))
         .transpose()?;
     let recorded = match record::run_recorded(
         session,

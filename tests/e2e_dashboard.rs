@@ -531,7 +531,7 @@ async fn station(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) 
     result.expect("the station flow")
 }
 
-/// What a person at the station does in one attempt (see [`cutlab_bench::hand`]).
+/// What a person at the station does in one attempt (see [`cutlab_haptics::hand`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Trial {
     /// A steady stroke along the planned line at the planned depth.
@@ -662,8 +662,8 @@ async fn line_on_page(
 }
 
 /// The hand's gestures as WebDriver pointer actions.
-fn as_actions(gestures: &[cutlab_bench::hand::Gesture]) -> MouseActions {
-    use cutlab_bench::hand::Gesture;
+fn as_actions(gestures: &[cutlab_haptics::hand::Gesture]) -> MouseActions {
+    use cutlab_haptics::hand::Gesture;
     let mut a = MouseActions::new("mouse".into());
     for g in gestures {
         a = match *g {
@@ -693,7 +693,7 @@ async fn attempt(
     seed: u64,
     shots: &Path,
 ) -> Result<String, fantoccini::error::CmdError> {
-    use cutlab_bench::hand::{Gesture, Hand};
+    use cutlab_haptics::hand::{Gesture, Hand};
     c.goto(&format!("{base}/station")).await?;
     c.find(Locator::Css("option[value='chest-wall-incision']"))
         .await?
@@ -822,12 +822,12 @@ ws.onopen = () => {
 async fn interrupted(
     c: &fantoccini::Client,
     url: &str,
-    hand: &mut cutlab_bench::hand::Hand,
-    reach: Vec<cutlab_bench::hand::Gesture>,
+    hand: &mut cutlab_haptics::hand::Hand,
+    reach: Vec<cutlab_haptics::hand::Gesture>,
     line: &[[f64; 2]],
     stroke_s: f64,
 ) -> Result<(), fantoccini::error::CmdError> {
-    use cutlab_bench::hand::Gesture;
+    use cutlab_haptics::hand::Gesture;
     let stroke = hand.stroke(line, stroke_s, 1.0);
     let moves: Vec<usize> = (0..stroke.len())
         .filter(|&i| matches!(stroke[i], Gesture::Move { .. }))

@@ -216,6 +216,14 @@ impl crate::store::Store {
         let a = self.get_attempt(attempt_id).await?;
         let plan = self.exercise_plan(a.exercise_id).await?;
         let (values, note) = assess_recording(rec, &plan)?;
+        // an attempt assessed from a file takes the device its recording names (whose class
+        // picks the thresholds)
+        if a.device.is_none()
+            && let Ok(meta) = rec.meta()
+        {
+            self.set_attempt_setup(attempt_id, a.mode.as_deref(), &meta.provenance.device)
+                .await?;
+        }
         let outcome = self
             .finish_attempt_noted(attempt_id, &values, note.as_deref())
             .await?;

@@ -4,12 +4,14 @@
 //! - [`plan`]: expert plans (TOML/JSON);
 //! - [`metrics`]: incision, path, safety and field metrics, [`metrics::assess`];
 //! - [`proficiency`]: thresholds from experts, pass/fail, score, CUSUM;
+//! - [`device_class`]: the pointer or a stylus, whose thresholds are kept apart;
 //! - [`store`]: the SQLite database (sqlx);
 //! - [`xapi`]: xAPI statements of a trainee's attempts.
 //!
 //! SI units inside (metres, seconds, newtons); millimetres only for display.
 
 pub mod advice;
+pub mod device_class;
 pub mod error;
 pub mod from_recording;
 mod geom;
@@ -19,6 +21,7 @@ pub mod plan;
 pub mod proficiency;
 pub mod recordings;
 
+pub use device_class::DeviceClass;
 pub use error::{AssessError, Result};
 pub use from_recording::attempt_data;
 pub use input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};

@@ -412,6 +412,89 @@ async fn thresholds_from_expert_attempts(store: Store) {
     );
 }
 
+on_both!(thresholds_are_kept_per_device_class);
+async fn thresholds_are_kept_per_device_class(store: Store) {
+    use cutlab_assessor::DeviceClass;
+    let ex = exercise_with_one_threshold(&store).await;
+    let expert = store
+        .create_user("expert", Role::Instructor, None)
+        .await
+        .expect("user");
+    let trainee = store
+        .create_user("trainee", Role::Trainee, None)
+        .await
+        .expect("user");
+    let attempt = |who: i64, expert: bool, device: Option<&'static str>, lateral_mm: f64| {
+        let store = &store;
+        async move {
+            let a = store
+                .start_attempt(who, ex, None, expert)
+                .await
+                .expect("start");
+            if let Some(d) = device {
+                store
+                    .set_attempt_setup(a.id, Some("guided"), d)
+                    .await
+                    .expect("setup");
+            }
+            let metrics = values(&[
+                ("lateral_mean_m", lateral_mm * 1e-3),
+                ("fraction_cut_in_tolerance", 1.0),
+            ]);
+            store.finish_attempt(a.id, &metrics).await.expect("finish")
+        }
+    };
+    // experts with a stylus (an unrecorded device is one) keep within 1-2 mm of the line,
+    // experts at the pointer within 3-4 mm
+    for (k, lateral) in [1.0, 1.5, 2.0, 1.2].into_iter().enumerate() {
+        attempt(expert.id, true, [None, Some("igtl:18944")][k % 2], lateral).await;
+    }
+    for lateral in [3.0, 3.5, 4.0, 3.2] {
+        attempt(expert.id, true, Some("pointer:steady"), lateral).await;
+    }
+    let pooled = store.thresholds_from_experts(ex).await.expect("thresholds");
+    let upper = |t: &Thresholds| {
+        let m = t.metrics.iter().find(|m| m.key == "lateral_mean_m");
+        (
+            m.expect("lateral").upper.expect("upper"),
+            m.expect("lateral").n_experts,
+        )
+    };
+    let pointer = store
+        .thresholds_for(ex, DeviceClass::Pointer)
+        .await
+        .expect("pointer");
+    let stylus = store
+        .thresholds_for(ex, DeviceClass::Stylus)
+        .await
+        .expect("stylus");
+    assert_eq!(
+        (upper(&pooled).1, upper(&pointer).1, upper(&stylus).1),
+        (8, 4, 4)
+    );
+    assert!(
+        upper(&stylus).0 < 3.0e-3 && upper(&pointer).0 > 4.0e-3,
+        "{stylus:?} {pointer:?}"
+    );
+    assert_eq!(
+        upper(&store.thresholds(ex).await.expect("pooled")),
+        upper(&pooled)
+    );
+    // the same 3.5 mm passes at the pointer and fails with a stylus
+    let at_pointer = attempt(trainee.id, false, Some("pointer"), 3.5).await;
+    let with_stylus = attempt(trainee.id, false, Some("igtl:18944"), 3.5).await;
+    assert!(at_pointer.verdict.pass && !with_stylus.verdict.pass);
+    // thresholds set by hand are every class's
+    store
+        .set_thresholds(ex, &stylus, ThresholdSource::Default)
+        .await
+        .expect("by hand");
+    for class in DeviceClass::ALL {
+        let t = store.thresholds_for(ex, class).await.expect("stored");
+        assert_eq!(upper(&t), upper(&stylus), "{class:?}");
+    }
+}
+
 on_both!(xapi_of_a_trainee);
 async fn xapi_of_a_trainee(store: Store) {
     let ex = exercise_with_one_threshold(&store).await;
@@ -817,6 +900,8 @@ async fn a_hub_refuses_forged_and_impossible_attempts(hub: Store) {
         recording_sha256: Some(cutlab_assessor::recordings::sha256_hex(key)),
         rrd_sha256: None,
         metrics: values(&[("lateral_mean_m", 0.001)]),
+        mode: Some("exam".into()),
+        device: Some("pointer".into()),
     };
     let up = good(b"one");
     let taken = hub
@@ -824,6 +909,12 @@ async fn a_hub_refuses_forged_and_impossible_attempts(hub: Store) {
         .await
         .expect("taken");
     assert!(taken.created);
+    // how it was made comes with it
+    let kept = hub.attempt_by_uuid(&up.uuid).await.expect("kept");
+    assert_eq!(
+        (kept.mode.as_deref(), kept.device.as_deref()),
+        (Some("exam"), Some("pointer"))
+    );
     // another station claiming the id; a second attempt scored by the same recording
     assert!(matches!(
         hub.import_attempt(&up, "or-2", &up.metrics).await,
@@ -869,6 +960,13 @@ async fn a_hub_refuses_forged_and_impossible_attempts(hub: Store) {
         ("a control character", |u| u.trainee = "sam\u{1b}[2J".into()),
         ("a long name", |u| u.trainee = "x".repeat(2_000_000)),
         ("a long note", |u| u.note = Some("n".repeat(10_000))),
+        ("an unknown mode", |u| u.mode = Some("kiosk".into())),
+        ("a device with a control character", |u| {
+            u.device = Some("pointer\u{0}".into())
+        }),
+        ("a long device name", |u| {
+            u.device = Some("d".repeat(10_000))
+        }),
     ];
     for (what, change) in cases {
         let mut u = good(what.as_bytes());

@@ -3,8 +3,7 @@
 //! asserted. The side-by-side comparison with Rapier is `benches/peer`
 //! (`cargo bench -p cutlab-bench --bench peer`).
 //!
-//! Shared by the benchmarks and the station's end-to-end tests: [`hand`] (a person's hand on a
-//! pointer: minimum-jerk submovements, noise, tremor, 60 Hz). Shared by the benchmarks: `plot` (log-log SVG plots, drawn by hand), `stroke` (a scripted
+//! Shared by the benchmarks: `plot` (log-log SVG plots, drawn by hand), `stroke` (a scripted
 //! tool pressing along a line), [`progress`] (the bar; the demo's seeding uses it too) and
 //! `cutlab_sim::stats` (median, p99). `load` is the dashboard's load client (hyper), which
 //! the dashboard library itself does not carry.
@@ -12,7 +11,6 @@
 mod accuracy;
 pub mod browser;
 mod dashboard;
-pub mod hand;
 mod hub;
 mod load;
 mod perf;

@@ -28,6 +28,7 @@
 pub mod collision;
 pub mod device;
 pub mod error;
+pub mod hand;
 pub mod pose;
 pub mod render;
 pub mod servo;

@@ -13,10 +13,11 @@ use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
+use cutlab_assessor::DeviceClass;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
     CsvDevice, DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan,
-    PointerDevice, PointerFeed, PointerOptions, SyntheticTrainee,
+    PointerDevice, PointerFeed, PointerHand, PointerOptions, SyntheticTrainee,
 };
 use cutlab_haptics::render::RenderSettings;
 use cutlab_haptics::servo::{Clock, PeriodStats};
@@ -325,6 +326,7 @@ fn device_of(
         DeviceSpec::Trainee { name, skill } => {
             Box::new(SyntheticTrainee::new(name, plan.clone(), *skill, 0)?.expecting_cut_of(render))
         }
+        DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, plan, 0)?),
         DeviceSpec::Csv(path) => Box::new(CsvDevice::open(path)?),
         DeviceSpec::Recording(path) => Box::new(cutlab_recorder::device::RecordedHand::new(
             &cutlab_recorder::Recording::open(path)?,
@@ -355,8 +357,13 @@ pub async fn start(
     let (min_tets, time_step) = (settings.min_tets, settings.time_step);
     // the limit the attempt is scored with (one source for the score and the page's force
     // bar): the exercise's peak-force threshold, else its plan's force limit
+    let class = match &input {
+        Input::Pointer => DeviceClass::Pointer,
+        Input::Spec(spec) => DeviceClass::of(Some(&spec.to_string())),
+        Input::Device(_) => DeviceClass::Stylus,
+    };
     let force_limit_newtons = store
-        .thresholds(exercise.id)
+        .thresholds_for(exercise.id, class)
         .await?
         .metrics
         .iter()
@@ -425,7 +432,9 @@ pub async fn start(
         .await?
         .id;
     let mode = if guided { "guided" } else { "exam" };
-    store.set_attempt_setup(attempt, mode, &device_name).await?;
+    store
+        .set_attempt_setup(attempt, Some(mode), &device_name)
+        .await?;
 
     let step_s = session.sim.settings.time_step_s;
     let keyframe_every_steps = ((settings.keyframe_every_s / step_s).round() as u64).max(1);

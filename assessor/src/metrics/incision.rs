@@ -233,21 +233,14 @@ pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics
     })
 }
 
-/// Devices whose blade enters the tissue along an orientation the station fixes, not one the
-/// trainee chooses: the station page's `pointer` (a mouse, a pen or a touch: the point under
-/// it on the tissue, pushed in along the blade the station holds pointing into the tissue at
-/// the plan's entry). The approach angle of an attempt made with one is the station's.
-pub const FIXED_APPROACH_DEVICES: &[&str] = &["pointer"];
-
 /// Whether `device` (as a recording names it; `recording of D` is D's hand played again)
-/// sets how the blade enters the tissue, so the trainee cannot: one of
-/// [`FIXED_APPROACH_DEVICES`].
+/// sets how the blade enters the tissue, so the trainee cannot: the station page's pointer
+/// ([`crate::DeviceClass::Pointer`]: a mouse, a pen or a touch, or the hand model on it; the
+/// point under it on the tissue, pushed in along the blade the station holds pointing into
+/// the tissue at the plan's entry). The approach angle of an attempt made with one is the
+/// station's.
 pub fn device_sets_approach(device: &str) -> bool {
-    let mut d = device.trim();
-    while let Some(rest) = d.strip_prefix("recording of ") {
-        d = rest.trim();
-    }
-    FIXED_APPROACH_DEVICES.contains(&d)
+    crate::DeviceClass::of(Some(device)) == crate::DeviceClass::Pointer
 }
 
 /// The angle (deg) between the tip's displacement over the last [`APPROACH_LENGTH_M`] of

@@ -293,8 +293,10 @@ impl Store {
         self.get_attempt(id).await
     }
 
-    /// Records how a station attempt is made: `mode` (`guided` or `exam`) and `device`.
-    pub async fn set_attempt_setup(&self, id: i64, mode: &str, device: &str) -> Result<()> {
+    /// Records how an attempt is made: the station's `mode` (`guided` or `exam`; `None` for a
+    /// session from the command line) and its `device` (whose class picks its thresholds,
+    /// [`crate::DeviceClass::of`]).
+    pub async fn set_attempt_setup(&self, id: i64, mode: Option<&str>, device: &str) -> Result<()> {
         crate::on_db!(&self.db, pool => sqlx::query("UPDATE attempts SET mode = $1, device = $2 WHERE id = $3")
             .bind(mode)
             .bind(device)
@@ -408,7 +410,7 @@ impl Store {
         note: Option<&str>,
     ) -> Result<Outcome> {
         let a = self.get_attempt(attempt_id).await?;
-        let thresholds = self.thresholds(a.exercise_id).await?;
+        let thresholds = self.attempt_thresholds(&a).await?;
         let verdict = thresholds.verdict(metrics);
         let record = crate::on_db!(&self.db, pool => {
             let mut tx = pool.begin_write().await?;

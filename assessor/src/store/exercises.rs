@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::{BeginWrite, Store, conflict, now_ns};
+use crate::device_class::DeviceClass;
 use crate::error::{AssessError, Result};
 use crate::metrics::{Better, MetricValue};
 use crate::plan::ExpertPlan;
@@ -66,6 +67,24 @@ impl ThresholdSource {
 }
 
 type ThresholdRow = (String, String, f64, f64, i64, Option<f64>, Option<f64>);
+
+/// A stored threshold row.
+fn threshold((key, better, mean, sd, n, lower, upper): ThresholdRow) -> Result<Threshold> {
+    let better = Better::parse(&better).ok_or_else(|| {
+        AssessError::InvalidInput(format!(
+            "stored threshold of {key}: unknown direction {better:?}"
+        ))
+    })?;
+    Ok(Threshold {
+        key,
+        better,
+        mean,
+        sd,
+        n_experts: usize::try_from(n).unwrap_or(0),
+        lower,
+        upper,
+    })
+}
 type ExerciseRow = (i64, String, String, String, i64, f64, i64, bool);
 const EXERCISE_SELECT: &str = "SELECT id, name, scene, description, plan_id, threshold_k, created_ns, exam_only FROM exercises";
 
@@ -281,26 +300,44 @@ impl Store {
         self.get_plan(e.plan_id).await
     }
 
-    /// The exercise's current thresholds.
+    /// The exercise's current thresholds for any device: pooled over its experts or set by
+    /// hand (what the exercise's pages show).
     pub async fn thresholds(&self, exercise_id: i64) -> Result<Thresholds> {
+        self.thresholds_of(exercise_id, None).await
+    }
+
+    /// The thresholds an attempt made with a device of `class` is judged by: the class's own
+    /// (derived from experts with such a device) where it has them, metric by metric, the
+    /// exercise's ([`Store::thresholds`]) otherwise.
+    pub async fn thresholds_for(&self, exercise_id: i64, class: DeviceClass) -> Result<Thresholds> {
+        self.thresholds_of(exercise_id, Some(class)).await
+    }
+
+    /// The thresholds for `attempt`'s device class.
+    pub async fn attempt_thresholds(&self, attempt: &super::Attempt) -> Result<Thresholds> {
+        let class = DeviceClass::of(attempt.device.as_deref());
+        self.thresholds_for(attempt.exercise_id, class).await
+    }
+
+    async fn thresholds_of(
+        &self,
+        exercise_id: i64,
+        class: Option<DeviceClass>,
+    ) -> Result<Thresholds> {
         let e = self.get_exercise(exercise_id).await?;
         let rows: Vec<ThresholdRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT metric, better, mean, sd, n_experts, lower_limit, upper_limit FROM metric_thresholds WHERE exercise_id = $1 ORDER BY metric").bind(exercise_id).fetch_all(pool).await)?;
-        let mut metrics = Vec::with_capacity(rows.len());
-        for (key, better, mean, sd, n, lower, upper) in rows {
-            let better = Better::parse(&better).ok_or_else(|| {
-                AssessError::InvalidInput(format!(
-                    "stored threshold of {key}: unknown direction {better:?}"
-                ))
-            })?;
-            metrics.push(Threshold {
-                key,
-                better,
-                mean,
-                sd,
-                n_experts: usize::try_from(n).unwrap_or(0),
-                lower,
-                upper,
-            });
+        let mut metrics = rows
+            .into_iter()
+            .map(threshold)
+            .collect::<Result<Vec<_>>>()?;
+        if let Some(class) = class {
+            let rows: Vec<ThresholdRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT metric, better, mean, sd, n_experts, lower_limit, upper_limit FROM class_thresholds WHERE exercise_id = $1 AND device_class = $2 ORDER BY metric").bind(exercise_id).bind(class.as_str()).fetch_all(pool).await)?;
+            for t in rows.into_iter().map(threshold) {
+                let t = t?;
+                metrics.retain(|m| m.key != t.key);
+                metrics.push(t);
+            }
+            metrics.sort_by(|a, b| a.key.cmp(&b.key));
         }
         // a peak-force limit derived from expert attempts (a scripted hand's, whose spread is
         // a robot's) is the plan's force limit, a safety limit; one set by hand stays
@@ -333,6 +370,10 @@ impl Store {
                 .bind(exercise_id)
                 .execute(&mut *tx)
                 .await?;
+            sqlx::query("DELETE FROM class_thresholds WHERE exercise_id = $1")
+                .bind(exercise_id)
+                .execute(&mut *tx)
+                .await?;
             write_thresholds!(tx, exercise_id, &thresholds.metrics, source);
             tx.commit().await?;
         });
@@ -340,16 +381,20 @@ impl Store {
     }
 
     /// Derives the exercise's thresholds from its complete expert attempts (`mean +/- k SD`
-    /// after outlier removal, `k` of the exercise), stores them and returns them. Errors when
-    /// no metric has at least 2 expert values.
+    /// after outlier removal, `k` of the exercise): pooled over all of them, and for each
+    /// device class with at least 2 expert attempts, over theirs ([`Store::thresholds_for`]).
+    /// Stores them (replacing every threshold of the exercise) and returns the pooled ones.
+    /// Errors when no metric has at least 2 expert values.
     pub async fn thresholds_from_experts(&self, exercise_id: i64) -> Result<Thresholds> {
         let e = self.get_exercise(exercise_id).await?;
-        let ids: Vec<i64> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT id FROM attempts WHERE exercise_id = $1 AND expert = TRUE AND status = 'complete' ORDER BY id").bind(exercise_id).fetch_all(pool).await)?;
-        let mut attempts: Vec<Vec<MetricValue>> = Vec::with_capacity(ids.len());
-        for id in ids {
-            attempts.push(self.attempt_metric_values(id).await?);
+        let rows: Vec<(i64, Option<String>)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, device FROM attempts WHERE exercise_id = $1 AND expert = TRUE AND status = 'complete' ORDER BY id").bind(exercise_id).fetch_all(pool).await)?;
+        let mut attempts: Vec<(DeviceClass, Vec<MetricValue>)> = Vec::with_capacity(rows.len());
+        for (id, device) in rows {
+            let class = DeviceClass::of(device.as_deref());
+            attempts.push((class, self.attempt_metric_values(id).await?));
         }
-        let t = Thresholds::from_experts(&attempts, e.threshold_k)?;
+        let pooled: Vec<Vec<MetricValue>> = attempts.iter().map(|(_, m)| m.clone()).collect();
+        let t = Thresholds::from_experts(&pooled, e.threshold_k)?;
         if t.metrics.is_empty() {
             return Err(AssessError::InvalidInput(format!(
                 "exercise {:?}: {} complete expert attempts, need at least 2 with metric values",
@@ -359,6 +404,44 @@ impl Store {
         }
         self.set_thresholds(exercise_id, &t, ThresholdSource::Experts)
             .await?;
+        for class in DeviceClass::ALL {
+            let theirs: Vec<Vec<MetricValue>> = attempts
+                .iter()
+                .filter(|(c, _)| *c == class)
+                .map(|(_, m)| m.clone())
+                .collect();
+            if theirs.len() >= 2 {
+                let t = Thresholds::from_experts(&theirs, e.threshold_k)?;
+                self.write_class_thresholds(exercise_id, class, &t).await?;
+            }
+        }
         Ok(t)
+    }
+
+    async fn write_class_thresholds(
+        &self,
+        exercise_id: i64,
+        class: DeviceClass,
+        thresholds: &Thresholds,
+    ) -> Result<()> {
+        crate::on_db!(&self.db, pool => {
+            let mut tx = pool.begin_write().await?;
+            for t in &thresholds.metrics {
+                sqlx::query("INSERT INTO class_thresholds (exercise_id, device_class, metric, better, mean, sd, n_experts, lower_limit, upper_limit) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)")
+                    .bind(exercise_id)
+                    .bind(class.as_str())
+                    .bind(&t.key)
+                    .bind(t.better.as_str())
+                    .bind(t.mean)
+                    .bind(t.sd)
+                    .bind(i64::try_from(t.n_experts).unwrap_or(i64::MAX))
+                    .bind(t.lower)
+                    .bind(t.upper)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await?;
+        });
+        Ok(())
     }
 }

@@ -55,6 +55,13 @@ pub struct AttemptUpload {
     pub recording_sha256: Option<String>,
     pub rrd_sha256: Option<String>,
     pub metrics: Vec<MetricValue>,
+    /// The station's mode (`guided` or `exam`), if recorded.
+    #[serde(default)]
+    pub mode: Option<String>,
+    /// The device the attempt was made with, if recorded (its class picks the thresholds the
+    /// hub scores it by).
+    #[serde(default)]
+    pub device: Option<String>,
 }
 
 /// The earliest time an attempt may have started: 2020-01-01 (cutlab did not exist).
@@ -65,6 +72,8 @@ pub const MAX_ATTEMPT_NS: i64 = 24 * 3600 * 1_000_000_000;
 pub const CLOCK_SKEW_NS: i64 = 10 * 60 * 1_000_000_000;
 /// The longest note an upload may carry, in characters.
 const MAX_NOTE_CHARS: usize = 4000;
+/// The longest device name an upload may carry, in characters.
+const MAX_DEVICE_CHARS: usize = 200;
 
 impl AttemptUpload {
     /// Refuses what a hub must never store: a malformed id or key, a running attempt, times
@@ -102,6 +111,20 @@ impl AttemptUpload {
             .is_some_and(|n| n.chars().count() > MAX_NOTE_CHARS)
         {
             return bad(format!("a note longer than {MAX_NOTE_CHARS} characters"));
+        }
+        if self
+            .mode
+            .as_deref()
+            .is_some_and(|m| !matches!(m, "guided" | "exam"))
+        {
+            return bad("the mode is guided or exam".into());
+        }
+        if self.device.as_deref().is_some_and(|d| {
+            d.is_empty() || d.chars().count() > MAX_DEVICE_CHARS || d.chars().any(char::is_control)
+        }) {
+            return bad(format!(
+                "the device's name: 1 to {MAX_DEVICE_CHARS} printable characters"
+            ));
         }
         if self.expert {
             // an expert's reference attempt sets the exercise's thresholds: recorded on the
@@ -283,6 +306,8 @@ impl Store {
             recording_sha256: a.recording_sha256,
             rrd_sha256: a.rrd_sha256,
             metrics,
+            mode: a.mode,
+            device: a.device,
         })
     }
 
@@ -343,7 +368,14 @@ impl Store {
             )));
         }
         let verdict = match up.status {
-            AttemptStatus::Complete => Some(self.thresholds(exercise.id).await?.verdict(metrics)),
+            AttemptStatus::Complete => {
+                let class = crate::DeviceClass::of(up.device.as_deref());
+                Some(
+                    self.thresholds_for(exercise.id, class)
+                        .await?
+                        .verdict(metrics),
+                )
+            }
             _ => None,
         };
         let id = self
@@ -404,8 +436,8 @@ impl Store {
                 }
             }
             let id: Option<i64> = sqlx::query_scalar(
-                "INSERT INTO attempts (trainee_id, exercise_id, started_ns, ended_ns, status, expert, note, recording_sha256, rrd_sha256, uuid, station) \
-                 VALUES ($1, $2, $3, $4, $5, FALSE, $6, $7, $8, $9, $10) ON CONFLICT (uuid) DO NOTHING RETURNING id")
+                "INSERT INTO attempts (trainee_id, exercise_id, started_ns, ended_ns, status, expert, note, recording_sha256, rrd_sha256, uuid, station, mode, device) \
+                 VALUES ($1, $2, $3, $4, $5, FALSE, $6, $7, $8, $9, $10, $11, $12) ON CONFLICT (uuid) DO NOTHING RETURNING id")
                 .bind(trainee_id)
                 .bind(exercise_id)
                 .bind(up.started_ns)
@@ -416,6 +448,8 @@ impl Store {
                 .bind(&up.rrd_sha256)
                 .bind(&up.uuid)
                 .bind(station)
+                .bind(&up.mode)
+                .bind(&up.device)
                 .fetch_optional(&mut *tx)
                 .await?;
             if let (Some(id), Some(verdict)) = (id, verdict) {

@@ -3,12 +3,14 @@
 mod csv;
 pub mod igtl;
 pub mod pointer;
+mod pointer_hand;
 mod spec;
 mod trainee;
 
 pub use csv::CsvDevice;
 pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
+pub use pointer_hand::{HandKind, PointerHand, STEADY_PACE_M_PER_S};
 pub use spec::DeviceSpec;
 pub use trainee::{Plan, Skill, SyntheticTrainee};
 

@@ -6,7 +6,8 @@ use std::path::PathBuf;
 use super::Skill;
 
 /// A device as a user names it: `expert`, `intermediate`, `novice`, `level:L` (a synthetic
-/// trainee), `csv:PATH` (a trajectory file), `recording:PATH` (a recorded session's hand) or
+/// trainee), `pointer:steady` or `pointer:sloppy` (a person's hand model on the station's
+/// pointer, [`super::PointerHand`]), `csv:PATH` (a trajectory file), `recording:PATH` (a recorded session's hand) or
 /// `igtl:PORT` (an OpenIGTLink tracker or haptic bridge listening on that port).
 #[derive(Debug, Clone, PartialEq)]
 pub enum DeviceSpec {
@@ -17,6 +18,8 @@ pub enum DeviceSpec {
         /// Its hand.
         skill: Skill,
     },
+    /// A person's hand model on the station's pointer.
+    PointerHand(super::HandKind),
     /// A trajectory file (see [`super::CsvDevice`]).
     Csv(PathBuf),
     /// An OpenIGTLink tracker or haptic bridge connecting to this port.
@@ -49,6 +52,11 @@ impl std::str::FromStr for DeviceSpec {
                 skill,
             });
         }
+        if let Some(kind) = s.strip_prefix("pointer:") {
+            return super::HandKind::parse(kind)
+                .map(DeviceSpec::PointerHand)
+                .ok_or_else(|| format!("pointer: needs a hand, steady or sloppy, got {kind:?}"));
+        }
         if let Some(path) = s.strip_prefix("csv:") {
             if path.is_empty() {
                 return Err("csv: needs a file path, e.g. csv:stroke.csv".into());
@@ -71,7 +79,7 @@ impl std::str::FromStr for DeviceSpec {
                 .map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
         }
         Err(format!(
-            "unknown device {s:?} (expected expert, intermediate, novice, level:L, csv:PATH, recording:PATH or igtl:PORT)"
+            "unknown device {s:?} (expected expert, intermediate, novice, level:L, pointer:steady, pointer:sloppy, csv:PATH, recording:PATH or igtl:PORT)"
         ))
     }
 }
@@ -81,6 +89,7 @@ impl std::fmt::Display for DeviceSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             DeviceSpec::Trainee { name, .. } => f.write_str(name),
+            DeviceSpec::PointerHand(kind) => write!(f, "pointer:{}", kind.as_str()),
             DeviceSpec::Csv(path) => write!(f, "csv:{}", path.display()),
             DeviceSpec::Igtl(port) => write!(f, "igtl:{port}"),
             DeviceSpec::Recording(path) => write!(f, "recording:{}", path.display()),
@@ -98,6 +107,8 @@ mod tests {
             "expert",
             "novice",
             "level:0.25",
+            "pointer:steady",
+            "pointer:sloppy",
             "csv:a.csv",
             "igtl:18944",
             "recording:r.mcap",
@@ -116,7 +127,14 @@ mod tests {
                 "{bad}"
             );
         }
-        for bad in ["igtl:70000", "csv:", "recording:", "mouse"] {
+        for bad in [
+            "igtl:70000",
+            "csv:",
+            "recording:",
+            "mouse",
+            "pointer:",
+            "pointer:shaky",
+        ] {
             assert!(bad.parse::<DeviceSpec>().is_err(), "{bad}");
         }
     }

@@ -78,7 +78,7 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
     let store = state.store();
     let trainee = UserRef::from(&store.get_user(a.trainee_id).await?);
     let e = store.get_exercise(a.exercise_id).await?;
-    let thresholds = store.thresholds(a.exercise_id).await?;
+    let thresholds = store.attempt_thresholds(&a).await?;
     let stored = store.attempt_metrics(a.id).await?;
     let mut rows: Vec<MetricRow> = stored
         .into_iter()

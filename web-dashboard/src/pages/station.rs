@@ -117,6 +117,12 @@ async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<
 fn device_label(d: &DeviceSpec) -> String {
     match d {
         DeviceSpec::Trainee { name, .. } => format!("a synthetic trainee ({name}) cuts, you watch"),
+        DeviceSpec::PointerHand(kind) => {
+            format!(
+                "a {} person's hand model on the pointer cuts, you watch",
+                kind.as_str()
+            )
+        }
         DeviceSpec::Csv(path) => format!("the trajectory {}", path.display()),
         DeviceSpec::Recording(path) => format!("the hand recorded in {}", path.display()),
         DeviceSpec::Igtl(port) => {

@@ -1,4 +1,5 @@
-//! A person's hand on a pointer: what the station's end-to-end tests and benchmarks feed the
+//! A person's hand on a pointer: what the station's end-to-end tests and the `pointer:steady`
+//! device ([`crate::device::PointerHand`]) feed the
 //! page instead of a robot's perfect line.
 //!
 //! The model, in the page's pixels (any 2D frame works):
@@ -19,29 +20,41 @@
 //!
 //! The gestures are deterministic given the seed.
 
-use cutlab_sim::rng::Rng;
+use crate::pose::Rng;
 
 /// One step of what the hand does, in order.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Gesture {
     /// The pointer moves to `(x, y)` over `ms` milliseconds (one sample).
-    Move { x: f64, y: f64, ms: u64 },
+    Move {
+        /// Where to, px.
+        x: f64,
+        /// See `x`.
+        y: f64,
+        /// How long the move takes, ms.
+        ms: u64,
+    },
     /// The button goes down (the blade engages).
     Press,
     /// The button comes up.
     Release,
     /// The hand holds still for `ms` milliseconds.
-    Wait { ms: u64 },
+    Wait {
+        /// How long, ms.
+        ms: u64,
+    },
 }
 
 /// A hand: its noise, its tremor and how often its pointer is sampled.
 #[derive(Debug, Clone)]
 pub struct Hand {
+    /// How often the pointer reports, Hz.
     pub rate_hz: f64,
     /// The tremor's amplitude, px.
     pub tremor_px: f64,
     /// The drift's SD when still, px, and its growth with speed, px per px/s.
     pub drift_px: f64,
+    /// See `drift_px`.
     pub drift_per_px_s: f64,
     /// The drift's time constant, s.
     pub drift_tau_s: f64,
