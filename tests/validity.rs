@@ -3,6 +3,10 @@
 //! `cutlab` binary. The experts' attempts set the thresholds; then every novice must score
 //! below every expert, and every novice must fail the expert-derived thresholds.
 //!
+//! At the station's pointer (issue 41): four people's steady hands (`pointer:steady`, the
+//! hand model through the pointer device) set the pointer's thresholds; other steady hands
+//! pass them and sloppy ones fail.
+//!
 //! The sessions run on the built-in `chest-wall` scene at 3,000 tets on the virtual clock,
 //! two at a time.
 
@@ -34,6 +38,7 @@ fn record(db: &Path, dir: &Path, skill: &str, seed: u64) -> PathBuf {
     let out = dir.join(format!("{skill}-{seed}"));
     // the expert finishes the 60 mm incision in about 4 s, the novice (slower, hesitating)
     // in about 12 s
+    // (a person's hand at the pointer is done in 7-12 s, when the session ends)
     let duration = if skill == "expert" { "6" } else { "15" };
     let seed = seed.to_string();
     let out_arg = out.to_str().expect("utf-8 path");
@@ -60,7 +65,17 @@ fn record(db: &Path, dir: &Path, skill: &str, seed: u64) -> PathBuf {
 
 /// Records the sessions of `skill` for every seed, two at a time.
 fn record_all(db: &Path, dir: &Path, skill: &str) -> Vec<PathBuf> {
-    let seeds: Vec<u64> = SEEDS.collect();
+    record_seeds(db, dir, skill, SEEDS)
+}
+
+/// Records the sessions of `skill` for `seeds`, two at a time.
+fn record_seeds(
+    db: &Path,
+    dir: &Path,
+    skill: &str,
+    seeds: impl IntoIterator<Item = u64>,
+) -> Vec<PathBuf> {
+    let seeds: Vec<u64> = seeds.into_iter().collect();
     let mut files = Vec::new();
     for pair in seeds.chunks(2) {
         let handles: Vec<_> = pair
@@ -150,6 +165,38 @@ fn every_novice_scores_below_every_expert_and_fails_the_expert_thresholds() {
     assert!(
         novice.iter().all(|n| !n.1),
         "every novice fails the expert-derived thresholds"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn steady_hands_at_the_pointer_pass_the_thresholds_people_set_and_sloppy_ones_fail() {
+    let dir = std::env::temp_dir().join(format!("cutlab-validity-pointer-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let db = dir.join("validity.db");
+    let experts = record_seeds(&db, &dir, "pointer:steady", 1..=4);
+    for (k, file) in experts.iter().enumerate() {
+        assess(&db, file, &format!("expert-{k}"), true);
+    }
+    cutlab(&db, &["exercise", "thresholds"]);
+    let steady: Vec<(f64, bool)> = record_seeds(&db, &dir, "pointer:steady", 11..=13)
+        .iter()
+        .enumerate()
+        .map(|(k, f)| assess(&db, f, &format!("steady-{k}"), false))
+        .collect();
+    let sloppy: Vec<(f64, bool)> = record_seeds(&db, &dir, "pointer:sloppy", 11..=13)
+        .iter()
+        .enumerate()
+        .map(|(k, f)| assess(&db, f, &format!("sloppy-{k}"), false))
+        .collect();
+    eprintln!("steady {steady:.3?}, sloppy {sloppy:.3?}");
+    assert!(
+        steady.iter().all(|s| s.1),
+        "every steady hand passes: {steady:?}"
+    );
+    assert!(
+        sloppy.iter().all(|s| !s.1),
+        "every sloppy hand fails: {sloppy:?}"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

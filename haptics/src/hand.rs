@@ -109,6 +109,24 @@ impl Hand {
         h
     }
 
+    /// This hand made one person's among many, drawn from its seed: tremor and drift scaled
+    /// by factors in [0.6, 1.5], the reaction pause 250-450 ms. Returns the person's pace as a
+    /// factor in [0.75, 1.25] of the population's (people cut at their own speed).
+    pub fn one_of_many(&mut self) -> f64 {
+        let mut factor = |lo: f64, hi: f64| lo + (hi - lo) * self.rng.uniform();
+        let (tremor, drift, settle, pace) = (
+            factor(0.6, 1.5),
+            factor(0.6, 1.5),
+            factor(250.0, 450.0),
+            factor(0.75, 1.25),
+        );
+        self.tremor_px *= tremor;
+        self.drift_px *= drift;
+        self.drift_per_px_s *= drift;
+        self.settle_ms = settle.round() as u64;
+        pace
+    }
+
     fn sample_ms(&self) -> u64 {
         (1000.0 / self.rate_hz).round() as u64
     }
@@ -328,6 +346,27 @@ mod tests {
             g.iter().any(|g| matches!(g, Gesture::Wait { .. })),
             "a pause between"
         );
+    }
+
+    #[test]
+    fn people_differ_from_one_another_within_bounds() {
+        let people: Vec<(Hand, f64)> = (0..20)
+            .map(|seed| {
+                let mut h = Hand::steady(8.0, seed);
+                let pace = h.one_of_many();
+                (h, pace)
+            })
+            .collect();
+        let base = Hand::steady(8.0, 0);
+        for (h, pace) in &people {
+            assert!((0.75..=1.25).contains(pace));
+            assert!(h.tremor_px >= 0.6 * base.tremor_px && h.tremor_px <= 1.5 * base.tremor_px);
+            assert!((250..=450).contains(&h.settle_ms));
+        }
+        let paces: Vec<f64> = people.iter().map(|p| p.1).collect();
+        let spread = paces.iter().cloned().fold(f64::MIN, f64::max)
+            - paces.iter().cloned().fold(f64::MAX, f64::min);
+        assert!(spread > 0.25, "twenty people, one pace: {paces:?}");
     }
 
     #[test]
