@@ -269,6 +269,7 @@ impl SurfaceCollider {
                 plane_normal: h.normal,
                 stiffness_newtons_per_m: self.stiffness_at(sim, h),
                 cut_entry: None,
+                wound: None,
             },
             _ => ContactModel {
                 published: true,

@@ -48,7 +48,26 @@ pub struct ContactModel {
     /// there, as they are now (they move with the tissue, which springs back from the press
     /// once the blade is in). Lifting the tip above this plane ends the cut.
     pub cut_entry: Option<(Point3, Vector3)>,
+    /// The wound of the last cut that ended: where its blade's tip last cut, and its entry
+    /// (point and outward normal, as [`Self::cut_entry`]). A blade engaged again within
+    /// [`WOUND_REACH_M`] of that tip and below the entry's plane is put back into its wound:
+    /// it cuts on at once (after a reload, a release and a press again, or a lift that did not
+    /// leave the wound), rather than having to enter the tissue anew (inside a wound the
+    /// nearest surface is its wall, which takes millimetres of travel to cut into).
+    pub wound: Option<Wound>,
 }
+
+/// See [`ContactModel::wound`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wound {
+    /// Where the blade's tip last cut, m.
+    pub end_m: Point3,
+    /// The cut's entry point and its outward normal, as they are now.
+    pub entry: (Point3, Vector3),
+}
+
+/// How near the end of its wound an engaged blade must be to cut on in it, m.
+pub const WOUND_REACH_M: f64 = 0.003;
 
 impl Default for ContactModel {
     fn default() -> Self {
@@ -61,11 +80,20 @@ impl Default for ContactModel {
             plane_normal: Vector3::z(),
             stiffness_newtons_per_m: 0.0,
             cut_entry: None,
+            wound: None,
         }
     }
 }
 
 impl ContactModel {
+    /// The tip is near the end of the last cut's wound and below its entry's plane.
+    fn back_in_wound(&self, tip: &Point3) -> bool {
+        self.wound.is_some_and(|w| {
+            let (p0, n0) = w.entry;
+            (tip - w.end_m).norm() <= WOUND_REACH_M && (tip - p0).dot(&n0) < 0.0
+        })
+    }
+
     fn is_finite(&self) -> bool {
         self.plane_point
             .iter()
@@ -75,6 +103,14 @@ impl ContactModel {
             && self
                 .cut_entry
                 .is_none_or(|(p, n)| p.iter().chain(n.iter()).all(|c| c.is_finite()))
+            && self.wound.is_none_or(|w| {
+                let (p, n) = w.entry;
+                w.end_m
+                    .iter()
+                    .chain(p.iter())
+                    .chain(n.iter())
+                    .all(|c| c.is_finite())
+            })
     }
 }
 
@@ -414,6 +450,12 @@ impl ForceRenderer {
                 -self.velocity / speed
                     * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
             }
+            Mode::Free | Mode::Touching if pose.blade_engaged() && c.back_in_wound(&tip) => {
+                self.mode = Mode::Cutting;
+                self.cut_plane = c.wound.map_or((c.plane_point, n), |w| w.entry);
+                self.proxy = tip;
+                Vector3::zeros()
+            }
             Mode::Free | Mode::Touching => {
                 let point = if c.at_heel {
                     pose.blade_heel(self.blade_length_m)
@@ -475,6 +517,7 @@ mod tests {
             plane_normal: Vector3::z(),
             stiffness_newtons_per_m: k,
             cut_entry: None,
+            wound: None,
         }
     }
 
@@ -810,5 +853,41 @@ mod tests {
             .expect("ticks");
         assert_eq!(hard.mode, Mode::Touching);
         assert!(hard.force_newtons.z > 3.0);
+    }
+
+    #[test]
+    fn a_blade_put_back_into_its_wound_cuts_on_at_once() {
+        // the last cut ended 6 mm down; the wall of its wound is the nearest surface
+        let wall = |t: u64| ContactModel {
+            plane_normal: -Vector3::x(),
+            plane_point: Point3::new(0.001, 0.0, -0.006),
+            wound: Some(Wound {
+                end_m: Point3::new(0.0, 0.0, -0.006),
+                entry: (Point3::new(-0.03, 0.0, 0.0), Vector3::z()),
+            }),
+            ..plane(t, 500.0)
+        };
+        let mode = |z: f64, buttons: u32| {
+            let mut r = ForceRenderer::new(RenderSettings::default());
+            r.update(0, at(z, buttons), &wall(0)).mode
+        };
+        // pressed again where it stopped (a reload, a release): it cuts on
+        assert_eq!(mode(-0.006, BUTTON_BLADE), Mode::Cutting);
+        assert_eq!(mode(-0.0045, BUTTON_BLADE), Mode::Cutting);
+        // not without the button, nor far from where the wound ends, nor above its entry
+        assert_ne!(mode(-0.006, 0), Mode::Cutting);
+        assert_ne!(mode(-0.0095, BUTTON_BLADE), Mode::Cutting);
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let above = ContactModel {
+            wound: Some(Wound {
+                end_m: Point3::new(0.0, 0.0, -0.001),
+                entry: (Point3::new(-0.03, 0.0, 0.0), Vector3::z()),
+            }),
+            ..plane(0, 500.0)
+        };
+        assert_ne!(
+            r.update(0, at(0.0005, BUTTON_BLADE), &above).mode,
+            Mode::Cutting
+        );
     }
 }

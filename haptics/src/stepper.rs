@@ -13,7 +13,7 @@ use cutlab_sim::model::State;
 use cutlab_sim::solver::{ResumeState, Simulation};
 
 use crate::collision::{SurfaceCollider, SurfaceHit};
-use crate::render::{ContactModel, Mode};
+use crate::render::{ContactModel, Mode, WOUND_REACH_M, Wound};
 use crate::servo::ServoSample;
 use crate::session::{Session, SessionConfig};
 use crate::{HapticsError, Point3};
@@ -65,6 +65,9 @@ pub struct SessionStepper {
     /// Where the blade went in, while it cuts (the contact the renderer started the cut on).
     cut_entry: Option<SurfaceHit>,
     last_cut_tip: Option<Point3>,
+    /// The last cut that ended: where its tip last cut and where it went in
+    /// ([`crate::render::ContactModel::wound`]).
+    wound: Option<(Point3, SurfaceHit)>,
     /// What the steps did so far.
     pub stats: StepperStats,
     /// Steps taken.
@@ -99,6 +102,10 @@ pub struct StepperResume {
     pub cut_entry: Option<SurfaceHit>,
     /// Where the blade's tip last cut in this stroke.
     pub last_cut_tip: Option<Point3>,
+    /// The last cut that ended: where its tip last cut and where it went in (absent in
+    /// recordings made before it was kept).
+    #[serde(default)]
+    pub wound: Option<(Point3, SurfaceHit)>,
     /// What the steps did so far.
     pub stats: StepperStats,
 }
@@ -120,6 +127,7 @@ impl SessionStepper {
             last_hit: None,
             cut_entry: None,
             last_cut_tip: None,
+            wound: None,
             stats: StepperStats::default(),
             steps: 0,
             rebuild_every_steps: config.collider_rebuild_every_steps,
@@ -143,6 +151,7 @@ impl SessionStepper {
             last_hit: self.last_hit,
             cut_entry: self.cut_entry,
             last_cut_tip: self.last_cut_tip,
+            wound: self.wound,
             stats: self.stats,
         })
     }
@@ -167,7 +176,13 @@ impl SessionStepper {
                     .chain(&h.weights)
                     .all(|c| c.is_finite())
         };
-        if !r.last_hit.as_ref().is_none_or(on_mesh) || !r.cut_entry.as_ref().is_none_or(on_mesh) {
+        if !r.last_hit.as_ref().is_none_or(on_mesh)
+            || !r.cut_entry.as_ref().is_none_or(on_mesh)
+            || !r
+                .wound
+                .as_ref()
+                .is_none_or(|(end, h)| on_mesh(h) && end.iter().all(|c| c.is_finite()))
+        {
             return Err(invalid(
                 "the last contact or the cut's entry is not on the mesh".into(),
             ));
@@ -190,6 +205,7 @@ impl SessionStepper {
         self.last_hit = r.last_hit;
         self.cut_entry = r.cut_entry;
         self.last_cut_tip = r.last_cut_tip;
+        self.wound = r.wound;
         self.stats = r.stats;
         self.steps = r.steps;
         self.collider_fresh = true;
@@ -228,14 +244,21 @@ impl SessionStepper {
         }
 
         // Cutting while the renderer says the blade is in the tissue; it went in where the
-        // contact model it rendered from was.
+        // contact model it rendered from was, or, put back into the last cut's wound, where
+        // that cut went in.
+        let tip = sample.pose.tip_in_world;
         if render.mode == Mode::Cutting {
-            self.cut_entry = self.cut_entry.or(self.last_hit);
-        } else {
-            self.cut_entry = None;
+            let back_in_wound = self
+                .wound
+                .filter(|(end, _)| (tip - end).norm() <= WOUND_REACH_M)
+                .map(|(_, entry)| entry);
+            self.cut_entry = self.cut_entry.or(back_in_wound).or(self.last_hit);
+        } else if let Some(entry) = self.cut_entry.take()
+            && let Some(end) = self.last_cut_tip
+        {
+            self.wound = Some((end, entry));
         }
         let mut made = None;
-        let tip = sample.pose.tip_in_world;
         let moved_enough = self
             .last_cut_tip
             .is_none_or(|p| (tip - p).norm() >= self.cut_step_m);
@@ -315,6 +338,14 @@ impl SessionStepper {
         contact.cut_entry = self
             .cut_entry
             .and_then(|h| h.moved(&self.sim.state.positions));
+        // (the entry's normal as it went in: the cut splits the entry's triangle, whose
+        // normal can turn as the wound opens)
+        contact.wound = self.wound.and_then(|(end_m, h)| {
+            h.moved(&self.sim.state.positions).map(|(p, _)| Wound {
+                end_m,
+                entry: (p, h.normal),
+            })
+        });
         self.last_hit = hit.map(|(_, h)| h);
         if sample.tick.is_multiple_of(100) {
             tracing::debug!(

@@ -52,6 +52,7 @@ fn a_servo_tick_does_not_allocate() {
                 plane_normal: Vector3::z(),
                 stiffness_newtons_per_m: 300.0,
                 cut_entry: None,
+                wound: None,
             });
         }
         out

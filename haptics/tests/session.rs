@@ -363,3 +363,36 @@ fn an_expert_cuts_the_chest_wall_in_one_stroke_along_the_whole_line() {
         );
     }
 }
+
+/// A person's hand on the station's pointer (the hand model through the pointer device): one
+/// press, one stroke, and the blade stays in its cut the whole way.
+#[test]
+fn a_person_at_the_pointer_cuts_the_chest_wall_in_one_stroke_along_the_whole_line() {
+    use cutlab_haptics::Vector3;
+    use cutlab_haptics::device::{HandKind, PointerHand};
+    let scene = Scene::load("chest-wall", BuildOptions::default()).expect("chest wall");
+    for seed in [1, 2, 3] {
+        let session = Session::new(&scene).expect("session");
+        let plan = session
+            .plan_across(&Vector3::z(), &Vector3::x(), 0.06, 0.008)
+            .expect("plan");
+        let hand = PointerHand::new(HandKind::Steady, &plan, seed).expect("hand");
+        let mut config = SessionConfig {
+            clock: Clock::Virtual,
+            duration_s: 15.0,
+            ..SessionConfig::default()
+        };
+        config.render = config.render.with_scene_cut(&scene.spec);
+        let r = session.run(Box::new(hand), &config).expect("run");
+        let what = format!(
+            "seed {seed}: {} entries, cut {:.1} mm, max force {:.2} N",
+            r.servo.blade_entries,
+            r.stats.cut_length_m * 1e3,
+            r.servo.max_force_newtons
+        );
+        eprintln!("{what}");
+        assert_eq!(r.servo.blade_entries, 1, "{what}");
+        assert!(r.stats.cut_length_m >= 0.06, "{what}");
+        assert_eq!(r.stats.failed_cuts, 0, "{what}");
+    }
+}
