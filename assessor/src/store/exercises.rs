@@ -103,12 +103,13 @@ fn exercise(
     }
 }
 
-/// Inserts `thresholds` of `exercise_id` from `source` in the write transaction `tx` (of
-/// either engine).
+/// Inserts `thresholds` of `exercise_id` in the write transaction `tx` (of either engine):
+/// into `metric_thresholds` with their `source`, or with `class:` into `class_thresholds`
+/// for that device class.
 macro_rules! write_thresholds {
-    ($tx:expr, $exercise_id:expr, $thresholds:expr, $source:expr) => {
+    (@rows $tx:expr, $sql:expr, $exercise_id:expr, $thresholds:expr, $last:expr) => {
             for t in $thresholds {
-                sqlx::query("INSERT INTO metric_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, source) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)")
+                sqlx::query($sql)
                     .bind($exercise_id)
                     .bind(&t.key)
                     .bind(t.better.as_str())
@@ -117,10 +118,16 @@ macro_rules! write_thresholds {
                     .bind(i64::try_from(t.n_experts).unwrap_or(i64::MAX))
                     .bind(t.lower)
                     .bind(t.upper)
-                    .bind($source.as_str())
+                    .bind($last)
                     .execute(&mut *$tx)
                     .await?;
             }
+    };
+    ($tx:expr, $exercise_id:expr, $thresholds:expr, class: $class:expr) => {
+        write_thresholds!(@rows $tx, "INSERT INTO class_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, device_class) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)", $exercise_id, $thresholds, $class.as_str())
+    };
+    ($tx:expr, $exercise_id:expr, $thresholds:expr, $source:expr) => {
+        write_thresholds!(@rows $tx, "INSERT INTO metric_thresholds (exercise_id, metric, better, mean, sd, n_experts, lower_limit, upper_limit, source) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)", $exercise_id, $thresholds, $source.as_str())
     };
 }
 
@@ -426,20 +433,7 @@ impl Store {
     ) -> Result<()> {
         crate::on_db!(&self.db, pool => {
             let mut tx = pool.begin_write().await?;
-            for t in &thresholds.metrics {
-                sqlx::query("INSERT INTO class_thresholds (exercise_id, device_class, metric, better, mean, sd, n_experts, lower_limit, upper_limit) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)")
-                    .bind(exercise_id)
-                    .bind(class.as_str())
-                    .bind(&t.key)
-                    .bind(t.better.as_str())
-                    .bind(t.mean)
-                    .bind(t.sd)
-                    .bind(i64::try_from(t.n_experts).unwrap_or(i64::MAX))
-                    .bind(t.lower)
-                    .bind(t.upper)
-                    .execute(&mut *tx)
-                    .await?;
-            }
+            write_thresholds!(tx, exercise_id, &thresholds.metrics, class: class);
             tx.commit().await?;
         });
         Ok(())
