@@ -166,3 +166,53 @@ fn the_peer_engine_is_a_bench_only_dependency() {
         assert!(rapier.is_empty(), "{krate} depends on {rapier:?}");
     }
 }
+
+#[test]
+fn no_crate_re_exports_another() {
+    // A crate that uses another declares it (issue 43): a re-exported crate (`pub use
+    // cutlab_haptics as haptics`) let the assessor use the haptics crate without saying so.
+    fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for entry in std::fs::read_dir(dir).expect("source folder").flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                rust_files(&path, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path);
+            }
+        }
+    }
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for krate in [
+        "sim",
+        "haptics",
+        "recorder",
+        "assessor",
+        "station",
+        "web-dashboard",
+        "bench",
+        ".",
+    ] {
+        rust_files(&root.join(krate).join("src"), &mut files);
+    }
+    assert!(files.len() > 50, "the sources are found: {}", files.len());
+    let mut found = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).expect("source");
+        for line in text.lines() {
+            let words: Vec<&str> = line
+                .trim()
+                .trim_end_matches(';')
+                .split_whitespace()
+                .collect();
+            let whole_crate = match words.as_slice() {
+                ["pub", "use", path] | ["pub", "use", path, "as", _] => !path.contains("::"),
+                _ => false,
+            };
+            if whole_crate && words[2].starts_with("cutlab_") {
+                found.push(format!("{}: {}", file.display(), line.trim()));
+            }
+        }
+    }
+    assert!(found.is_empty(), "crates re-exported: {found:#?}");
+}

@@ -4,9 +4,9 @@
 
 use std::collections::BTreeMap;
 
+use cutlab_haptics::render::Mode;
+use cutlab_haptics::servo::ServoSample;
 use cutlab_recorder::Recording;
-use cutlab_recorder::haptics::render::Mode;
-use cutlab_recorder::haptics::servo::ServoSample;
 use cutlab_sim::TetMesh;
 
 use crate::AssessError;
@@ -235,9 +235,9 @@ impl crate::store::Store {
 mod tests {
     use super::*;
     use crate::metrics::incision::{STROKE_GAP_M, incision, trace_point};
-    use cutlab_recorder::haptics::device::{PointerDevice, PointerOptions, PointerSample};
-    use cutlab_recorder::haptics::render::RenderOutput;
-    use cutlab_recorder::haptics::{HapticDevice, Vector3};
+    use cutlab_haptics::device::{PointerDevice, PointerOptions, PointerSample};
+    use cutlab_haptics::render::RenderOutput;
+    use cutlab_haptics::{HapticDevice, Vector3};
 
     use crate::metrics::incision::tests::straight_plan as plan;
 

@@ -37,8 +37,6 @@ pub mod step_choice;
 pub mod stepper;
 pub mod tap;
 
-pub use cutlab_sim as sim;
-pub use cutlab_sim::scene;
 pub use device::{DeviceFault, DeviceLimits, HapticDevice};
 pub use error::HapticsError;
 pub use pose::ToolPose;

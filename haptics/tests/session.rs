@@ -1,9 +1,9 @@
 //! Whole sessions: servo thread + simulation thread on a small block.
 
 use cutlab_haptics::device::{HapticDevice, Skill, SyntheticTrainee};
-use cutlab_haptics::scene::{BuildOptions, Scene};
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::{Session, SessionConfig};
+use cutlab_sim::scene::{BuildOptions, Scene};
 
 fn block() -> Scene {
     Scene::load(

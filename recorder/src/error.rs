@@ -27,7 +27,7 @@ pub enum RecorderError {
     #[error("scene {name}: {source}")]
     Scene {
         name: String,
-        source: Box<cutlab_haptics::sim::scene::SceneError>,
+        source: Box<cutlab_sim::scene::SceneError>,
     },
     #[error("rerun: {0}")]
     Rerun(#[from] crate::rerun_log::RerunLogError),

@@ -29,7 +29,6 @@ pub mod rerun_log;
 pub mod scan;
 pub mod writer;
 
-pub use cutlab_haptics as haptics;
 pub use device::RecordedHand;
 pub use error::RecorderError;
 pub use reader::Recording;

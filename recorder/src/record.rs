@@ -154,7 +154,7 @@ fn json<T: serde::Serialize>(v: &T) -> Result<Vec<u8>, RecorderError> {
 /// whole recording in a moment, for the tests and benchmarks that need one (a hub that
 /// scores what it takes, say).
 pub fn record_expert(
-    scene: &cutlab_haptics::sim::scene::Scene,
+    scene: &cutlab_sim::scene::Scene,
     scene_name: &str,
     duration_s: f64,
     seed: u64,

@@ -35,9 +35,9 @@ use std::time::Duration;
 use cutlab_haptics::device::Plan;
 use cutlab_haptics::render::{Mode, fault};
 use cutlab_haptics::servo::ServoSample;
-use cutlab_haptics::sim::cut::{Blade, CutEvent};
 use cutlab_haptics::tap::{Keyframe, SurfaceSnapshot};
 use cutlab_haptics::{Point3, SimRecord, Vector3};
+use cutlab_sim::cut::{Blade, CutEvent};
 use rerun::{RecordingStream, RecordingStreamBuilder, RecordingStreamError};
 
 /// Name of the sequence timeline of servo ticks.

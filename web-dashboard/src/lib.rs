@@ -36,7 +36,6 @@ use std::time::Duration;
 use axum::Router;
 use cutlab_assessor::store::Store;
 
-pub use cutlab_assessor as assessor;
 pub use error::AppError;
 pub use seed::{DEMO_ACCOUNTS, DEMO_COHORT, DemoAccount, seed_demo, seed_demo_accounts};
 

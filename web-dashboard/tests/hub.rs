@@ -7,9 +7,9 @@ mod common;
 use axum::body::Body;
 use axum::http::{Method, Request, StatusCode, header};
 use common::*;
+use cutlab_assessor::recordings::{RecordingStore, sha256_hex};
+use cutlab_assessor::store::{AttemptStatus, BUILTIN_EXERCISE, Role, Store};
 use cutlab_dashboard::Config;
-use cutlab_dashboard::assessor::recordings::{RecordingStore, sha256_hex};
-use cutlab_dashboard::assessor::store::{AttemptStatus, BUILTIN_EXERCISE, Role, Store};
 use cutlab_station::sync::{Hub, SyncError, SyncReport, sync, sync_new};
 
 fn put(path: &str, token: Option<&str>, body: Vec<u8>) -> Request<Body> {
@@ -23,7 +23,7 @@ fn put(path: &str, token: Option<&str>, body: Vec<u8>) -> Request<Body> {
 /// An attempt upload by `ana` at the built-in exercise, ended `ended_ago_s` ago after a
 /// minute, with recording `key`.
 fn attempt_json(uuid: &str, status: &str, key: &str, ended_ago_s: i64) -> Vec<u8> {
-    let ended = cutlab_dashboard::assessor::store::now_ns() - ended_ago_s * 1_000_000_000;
+    let ended = cutlab_assessor::store::now_ns() - ended_ago_s * 1_000_000_000;
     serde_json::to_vec(&serde_json::json!({
         "uuid": uuid, "trainee": "ana", "exercise": BUILTIN_EXERCISE,
         "started_ns": ended - 60_000_000_000, "ended_ns": ended,
@@ -231,12 +231,12 @@ async fn the_upload_calls_refuse_what_they_must() {
     assert_eq!(r.status(), StatusCode::OK);
 
     // attempts: malformed JSON, an id not the path's, a recording the hub lacks
-    let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let uuid = cutlab_assessor::store::new_uuid().unwrap();
     let apath = format!("/api/hub/attempts/{uuid}");
     let r = send(&e.app, put(&apath, Some(&token), b"{not json".to_vec())).await;
     assert_eq!(r.status(), StatusCode::UNPROCESSABLE_ENTITY);
     let upload = |uuid: &str, key: &str| attempt_json(uuid, "incomplete", key, 0);
-    let other = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let other = cutlab_assessor::store::new_uuid().unwrap();
     let r = send(&e.app, put(&apath, Some(&token), upload(&other, &key))).await;
     assert_eq!(r.status(), StatusCode::BAD_REQUEST);
     let r = send(&e.app, put(&apath, Some(&token), upload(&uuid, &wrong))).await;
@@ -565,7 +565,7 @@ async fn a_day_old_attempt_survives_the_hubs_restart_and_a_retry_gets_what_the_h
     .await;
     assert_eq!(r.status(), StatusCode::CREATED);
     // recorded a day before it reached the hub (a day offline)
-    let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let uuid = cutlab_assessor::store::new_uuid().unwrap();
     let path = format!("/api/hub/attempts/{uuid}");
     let body = attempt_json(&uuid, "complete", &key, 86_400);
     let r = send(&e.app, put(&path, Some(&token), body.clone())).await;
@@ -595,7 +595,7 @@ async fn a_day_old_attempt_survives_the_hubs_restart_and_a_retry_gets_what_the_h
 
     // an older hub's import left between its insert and its scoring, a day ago: the
     // sweep leaves it, the station's retry ends it
-    let legacy = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let legacy = cutlab_assessor::store::new_uuid().unwrap();
     let ana = e.store.user_by_name("ana").await.unwrap();
     on_db!(e.store.db(), pool => sqlx::query("INSERT INTO attempts (trainee_id, exercise_id, started_ns, status, expert, uuid, station) VALUES ($1, $2, $3, 'running', FALSE, $4, 'or-1')")
         .bind(ana.id)
@@ -641,7 +641,7 @@ async fn a_station_cannot_take_anothers_attempt_or_recording() {
     )
     .await;
     assert_eq!(r.status(), StatusCode::CREATED);
-    let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let uuid = cutlab_assessor::store::new_uuid().unwrap();
     let body = attempt_json(&uuid, "complete", &key, 60);
     let path = format!("/api/hub/attempts/{uuid}");
     assert_eq!(
@@ -665,7 +665,7 @@ async fn a_station_cannot_take_anothers_attempt_or_recording() {
     // the first station's recording, known by its key only: the same answer as a key
     // no one sent, so existence is not told either
     let answer_for = |key: String| {
-        let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+        let uuid = cutlab_assessor::store::new_uuid().unwrap();
         let path = format!("/api/hub/attempts/{uuid}");
         (path, attempt_json(&uuid, "incomplete", &key, 60))
     };
@@ -718,11 +718,11 @@ async fn a_hub_scores_what_it_takes_and_refuses_forgeries() {
         }
     };
     // complete with bytes that are no recording; complete without any; times impossible
-    let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let uuid = cutlab_assessor::store::new_uuid().unwrap();
     let (status, text) = refused(attempt_json(&uuid, "complete", &fake_key, 60), uuid).await;
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
     assert!(text.contains("not a readable recording"), "{text}");
-    let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let uuid = cutlab_assessor::store::new_uuid().unwrap();
     let mut v: serde_json::Value =
         serde_json::from_slice(&attempt_json(&uuid, "complete", &fake_key, 60)).unwrap();
     v["recording_sha256"] = serde_json::Value::Null;
@@ -746,7 +746,7 @@ async fn a_hub_scores_what_it_takes_and_refuses_forgeries() {
         .count();
     assert_eq!(imported, 0, "nothing taken");
     // a body over the attempt limit is refused before it is parsed
-    let uuid = cutlab_dashboard::assessor::store::new_uuid().unwrap();
+    let uuid = cutlab_assessor::store::new_uuid().unwrap();
     let (status, _) = refused(vec![b' '; 300 << 10], uuid).await;
     assert_eq!(status, StatusCode::PAYLOAD_TOO_LARGE);
 }

@@ -5,7 +5,7 @@ mod common;
 
 use axum::http::{StatusCode, header};
 use common::*;
-use cutlab_dashboard::assessor::store::Store;
+use cutlab_assessor::store::Store;
 
 #[tokio::test]
 async fn the_instructor_sees_the_cohort_grid_progress_charts_and_attempts() {
@@ -250,7 +250,7 @@ async fn supervision_shows_running_attempts_live() {
     e.store
         .create_user(
             "dr-other",
-            cutlab_dashboard::assessor::store::Role::Instructor,
+            cutlab_assessor::store::Role::Instructor,
             Some("pw"),
         )
         .await
@@ -266,7 +266,7 @@ async fn supervision_shows_running_attempts_live() {
 async fn instructors_create_and_edit_exercises_and_curricula() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
-    let plan = cutlab_dashboard::assessor::plan::CHEST_WALL_PLAN_TOML;
+    let plan = cutlab_assessor::plan::CHEST_WALL_PLAN_TOML;
     let r = send(
         &e.app,
         post_form(
@@ -827,7 +827,7 @@ async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
     assert_eq!(r.status(), StatusCode::SEE_OTHER, "{}", body_text(r).await);
     let new = e.store.exercise_by_name("shallow-cut").await.unwrap();
     let plan = e.store.get_plan(new.plan_id).await.unwrap();
-    let builtin = cutlab_dashboard::assessor::ExpertPlan::chest_wall().unwrap();
+    let builtin = cutlab_assessor::ExpertPlan::chest_wall().unwrap();
     assert_eq!((plan.depth_m, plan.force_limit_n), (0.005, 0.9));
     assert_eq!(
         (plan.entry_m, plan.incision_m.len(), plan.tolerance_m),
@@ -954,10 +954,7 @@ async fn the_station_offers_its_devices_and_refuses_others() {
             "/station/start",
             Some(&ana.cookie),
             &[
-                (
-                    "exercise",
-                    cutlab_dashboard::assessor::store::BUILTIN_EXERCISE,
-                ),
+                ("exercise", cutlab_assessor::store::BUILTIN_EXERCISE),
                 ("mode", "guided"),
                 ("device", "igtl:1"),
                 ("csrf", &ana.csrf),
@@ -976,8 +973,8 @@ async fn the_station_offers_its_devices_and_refuses_others() {
 
 #[tokio::test]
 async fn a_lapse_after_proficiency_reads_as_a_lapse_beside_the_cusum() {
-    use cutlab_dashboard::assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
-    use cutlab_dashboard::assessor::store::Role;
+    use cutlab_assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
+    use cutlab_assessor::store::Role;
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let ex = e.store.ensure_builtins().await.unwrap();

@@ -424,7 +424,7 @@ async fn an_instructor_sees_only_their_cohorts() {
     e.store
         .create_user(
             "dr-other",
-            cutlab_dashboard::assessor::store::Role::Instructor,
+            cutlab_assessor::store::Role::Instructor,
             Some("pw-other"),
         )
         .await
@@ -540,7 +540,7 @@ async fn downloads_serve_only_the_stored_recording() {
 /// file is gone; a changed object is refused.
 #[tokio::test]
 async fn recordings_are_served_from_the_store_in_ranges_and_checked() {
-    use cutlab_dashboard::assessor::recordings::RecordingStore;
+    use cutlab_assessor::recordings::RecordingStore;
     let dir = tempfile::tempdir().unwrap();
     let store_dir = dir.path().join("store");
     let recordings = RecordingStore::open(store_dir.to_str().unwrap()).unwrap();

@@ -2,9 +2,9 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use cutlab_haptics::render::{Mode, RenderOutput};
-use cutlab_haptics::sim::cut::{Blade, CutEvent};
 use cutlab_haptics::tap::{Keyframe, SurfaceSnapshot};
 use cutlab_haptics::{Point3, Rotation, SimRecord, StateHash, ToolPose, Vector3};
+use cutlab_sim::cut::{Blade, CutEvent};
 use rerun::external::re_log_encoding::DecoderApp;
 use rerun::log::{Chunk, LogMsg};
 

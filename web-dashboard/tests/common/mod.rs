@@ -7,8 +7,8 @@
 use axum::Router;
 use axum::body::Body;
 use axum::http::{Method, Request, Response, StatusCode, header};
-pub use cutlab_dashboard::assessor::on_db;
-use cutlab_dashboard::assessor::store::{DbLocation, Store, TEST_POSTGRES_ENV, scratch_postgres};
+pub use cutlab_assessor::on_db;
+use cutlab_assessor::store::{DbLocation, Store, TEST_POSTGRES_ENV, scratch_postgres};
 use cutlab_dashboard::{AppState, Config, app, seed_demo};
 use http_body_util::BodyExt;
 use tower::ServiceExt;
