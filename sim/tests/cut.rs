@@ -85,6 +85,7 @@ fn single_tet_one_three_gives_four_tets_in_two_pieces() {
                 pattern,
                 snap: 0.0,
                 snap_distance_m: None,
+                ..CutOptions::default()
             },
         )
         .expect("cut");
@@ -117,6 +118,7 @@ fn single_tet_two_two_gives_six_tets_in_two_pieces() {
                 pattern,
                 snap: 0.0,
                 snap_distance_m: None,
+                ..CutOptions::default()
             },
         )
         .expect("cut");

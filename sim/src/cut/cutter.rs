@@ -143,17 +143,27 @@ impl Cutter {
         if self.trail.len() < 2 {
             return Ok(CutEvent::default());
         }
-        let mut corners: Vec<_> = self.trail.iter().map(|b| b.tip).collect();
-        corners.extend(self.trail.iter().rev().map(Blade::heel));
         // a snapping distance left open is derived from the first mesh cut and then kept in
         // the options, so that it does not shrink as the cuts refine the mesh
         if self.options.snap_distance_m.is_none() {
             self.options.snap_distance_m =
                 Some(self.options.snap * sim.model.median_edge_length().unwrap_or(0.0));
         }
-        match CutPolygon::new(&corners) {
-            Some(polygon) => cut_remembering(sim, &polygon, &self.options, &mut self.stroke),
-            None => Ok(CutEvent::default()),
+        // where the blade turns, the oldest poses are left out until the swept surface
+        // departs from the polygon's plane by no more than the snapping distance
+        let flat_enough = self.options.snap_distance_m.unwrap_or(0.0);
+        let mut first = 0;
+        loop {
+            let mut corners: Vec<_> = self.trail.iter().skip(first).map(|b| b.tip).collect();
+            corners.extend(self.trail.iter().skip(first).rev().map(Blade::heel));
+            let Some(polygon) = CutPolygon::new(&corners) else {
+                return Ok(CutEvent::default());
+            };
+            if polygon.flatness_m > flat_enough && self.trail.len() - first > 2 {
+                first += 1;
+                continue;
+            }
+            return cut_remembering(sim, &polygon, &self.options, &mut self.stroke);
         }
     }
 }

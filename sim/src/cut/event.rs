@@ -60,6 +60,10 @@ pub struct CutEvent {
     pub min_child_volume_fraction: f64,
     /// Edges split beyond the blade's reach because no vertex could move (fallback).
     pub forced_splits: usize,
+    /// Small free pieces the cut would have carved out and left attached instead (see
+    /// [`super::CutOptions::fragment_volume_m3`]).
+    #[serde(default)]
+    pub fragments_reattached: usize,
 }
 
 impl Default for CutEvent {
@@ -77,6 +81,7 @@ impl Default for CutEvent {
             cut_faces: 0,
             min_child_volume_fraction: 1.0,
             forced_splits: 0,
+            fragments_reattached: 0,
         }
     }
 }

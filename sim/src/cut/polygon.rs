@@ -64,6 +64,9 @@ pub struct CutPolygon {
     corners_2d: Vec<[f64; 2]>,
     /// Length scale (longest side) for tolerances.
     pub scale: f64,
+    /// How far the corners given lay from the plane, m: how far the swept surface the
+    /// polygon stands for departs from it.
+    pub flatness_m: f64,
 }
 
 impl CutPolygon {
@@ -96,6 +99,10 @@ impl CutPolygon {
             .iter()
             .map(|p| p - normal * (normal.dot(&p.coords) - offset))
             .collect();
+        let flatness_m = corners
+            .iter()
+            .map(|p| (normal.dot(&p.coords) - offset).abs())
+            .fold(0.0, f64::max);
         let u = (projected[1] - projected[0]).normalize();
         let v = normal.cross(&u);
         let corners_2d = projected
@@ -110,6 +117,7 @@ impl CutPolygon {
             v,
             corners_2d,
             scale,
+            flatness_m,
         })
     }
 

@@ -25,8 +25,10 @@
 //! stay exact on curved surfaces too.
 //!
 //! Within a stroke, vertices of the cut made by earlier steps ([`super::StrokeVertices`]) that
-//! drifted off the plane by less than [`near_fraction`] of their shortest edge count as on it,
-//! so that the opening wound is not cut again.
+//! drifted off the plane by less than [`near_fraction`] of their shortest edge (or the
+//! snapping distance), plus [`STROKE_FLATNESS_REACH`] times the swept surface's departure from
+//! the plane, count as on it, so that neither the opening wound nor the part of a turning
+//! stroke already cut is cut again.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -49,6 +51,12 @@ pub const MIN_EDGE_FRACTION: f64 = 0.05;
 pub fn near_fraction(snap: f64) -> f64 {
     snap.max(MIN_EDGE_FRACTION)
 }
+
+/// A vertex of the stroke's cut also counts as on the plane within this many times the
+/// polygon's [`CutPolygon::flatness_m`]: where the blade turns, the planes of successive steps
+/// differ, and the stroke's earlier cut lies off this step's plane by a few times the swept
+/// surface's departure from it (see `docs/design/cutting.md`, "Strokes that turn").
+pub const STROKE_FLATNESS_REACH: f64 = 5.0;
 
 /// An edge crossing the plane outside C but within this fraction of its length of C is split
 /// (the cut reaches a little past B) instead of moving a vertex.
@@ -387,6 +395,7 @@ impl Resolver<'_> {
                     && self.plane.signed_distance(&self.x[v as usize]).abs()
                         <= (near_fraction(self.snap) * self.shortest_edge(v))
                             .max(self.snap_distance_m)
+                            + STROKE_FLATNESS_REACH * self.plane.flatness_m
                 {
                     on_plane.insert(v);
                 }
