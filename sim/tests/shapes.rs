@@ -2,7 +2,7 @@
 //! tissue is the body or a piece a closed stroke cut free, the mesh is valid, and the mass and
 //! the rest volume are conserved.
 
-use cutlab_sim::cut::{self, Blade, Cutter, FRAGMENT_VOLUME_M3};
+use cutlab_sim::cut::{self, Blade, Cutter, FRAGMENT_VOLUME_M3, Specimen};
 use cutlab_sim::mesh::{Piece, pieces};
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::{Simulation, StaticSettings};
@@ -76,27 +76,44 @@ fn zigzag(amplitude_m: f64, period_m: f64, length_m: f64, spacing_m: f64) -> Vec
     })
 }
 
-/// Cuts along `path` as a session does (a cut per pose), `steps` simulation steps after each;
-/// returns the fragments the cuts reattached.
+/// What a stroke did beyond its cuts.
+#[derive(Debug, Default)]
+struct Stroke {
+    /// Fragments the cuts reattached.
+    reattached: usize,
+    /// Pieces the cuts freed.
+    specimens: Vec<Specimen>,
+}
+
+/// Cuts along `path` as a session does (a cut per pose), `steps` simulation steps after each.
 fn stroke(
     sim: &mut Simulation,
     tissue: Tissue,
     path: &[(f64, f64)],
     depth_m: f64,
     steps: usize,
-) -> usize {
+) -> Stroke {
     let mut cutter = Cutter::default();
-    let mut reattached = 0;
+    let mut out = Stroke::default();
     for &p in path {
         let event = cutter
             .advance(sim, tissue.blade(p, depth_m))
             .expect("the cut applies");
-        reattached += event.fragments_reattached;
+        out.reattached += event.fragments_reattached;
+        out.specimens.extend(event.specimens);
         for _ in 0..steps {
             sim.step().expect("the simulation runs on after the cut");
         }
     }
-    reattached
+    out
+}
+
+/// The held pieces that are not one of `specimens`: the tissue.
+fn body<'p>(pieces: &'p [Piece], specimens: &[Specimen]) -> Vec<&'p Piece> {
+    pieces
+        .iter()
+        .filter(|p| p.held && !specimens.iter().any(|s| s.tets == p.tets))
+        .collect()
 }
 
 /// The mesh is valid, the mass and rest volume are as before; returns its pieces.
@@ -165,10 +182,35 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
     let r = 0.02;
     let mut sim = tissue.simulation();
     let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
-    stroke(&mut sim, tissue, &arc(r, 0.0, 1.08 * TAU, 0.0005), 0.004, 5);
+    let mut cutter = Cutter::default();
+    let mut freed: Vec<Specimen> = Vec::new();
+    let mut jump = 0.0f64;
+    let (mut before_lift, mut lifted_to) = (Vec::new(), Vec::new());
+    for p in arc(r, 0.0, 1.08 * TAU, 0.0005) {
+        let before = sim.state.positions.clone();
+        let event = cutter
+            .advance(&mut sim, tissue.blade(p, 0.004))
+            .expect("the cut applies");
+        for _ in 0..5 {
+            sim.step().expect("the simulation runs on after the cut");
+        }
+        if !event.specimens.is_empty() {
+            (before_lift, lifted_to) = (before.clone(), sim.state.positions.clone());
+            // how far the sheet moved over the cut that freed the disc and the steps after it
+            let lifted: Vec<u32> = event.specimens[0].vertices.clone();
+            jump = (0..before.len() as u32)
+                .filter(|v| lifted.binary_search(v).is_err())
+                .map(|v| (sim.state.positions[v as usize] - before[v as usize]).norm())
+                .fold(0.0, f64::max);
+        }
+        freed.extend(event.specimens);
+    }
     let pieces = checked_pieces(&sim, mass0, volume0);
     assert_eq!(pieces.len(), 2, "{}", describe(&pieces));
-    let disc = pieces.iter().find(|p| !p.held).expect("a piece cut free");
+    assert_eq!(freed.len(), 1, "one disc freed");
+    assert_eq!(body(&pieces, &freed).len(), 1, "{}", describe(&pieces));
+    let disc = &freed[0];
+    assert!(pieces.iter().any(|p| p.tets == disc.tets));
     let circle_area = PI * r * r;
     let disc_area = disc.volume_m3 / 0.002;
     assert!(
@@ -177,27 +219,58 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
         disc_area * 1e6,
         circle_area * 1e6
     );
-    // the hole matches the disc: the wound's rim on the sheet lies where the disc's does
+    // its two faces and its rim
+    let surface = 2.0 * circle_area + TAU * r * 0.002;
+    assert!(
+        (disc.surface_m2 / surface - 1.0).abs() < 0.05,
+        "surface {:.0} mm2 vs {:.0} mm2",
+        disc.surface_m2 * 1e6,
+        surface * 1e6
+    );
+    // lifted 30 mm out of the wound along the blade, and held there
     let rest = sim.model.mesh.positions();
+    assert!(!lifted_to.is_empty());
+    for &v in &disc.vertices {
+        let p = sim.state.positions[v as usize];
+        assert_eq!(
+            p, lifted_to[v as usize],
+            "vertex {v} held where it was lifted to"
+        );
+        assert!(sim.model.held[v as usize]);
+        if let Some(q) = before_lift.get(v as usize) {
+            let lift = p - q;
+            assert!(
+                (lift - Vector3::new(0.0, 0.0, 0.03)).norm() < 1e-3,
+                "vertex {v} lifted by {lift:?}"
+            );
+        }
+    }
+    assert!(
+        jump < 0.5e-3,
+        "the sheet moved {:.2} mm as the disc went",
+        jump * 1e3
+    );
+    // the hole matches the disc: the wound's rim on the sheet lies where the disc's does
     let radius_of = |v: u32| {
         let p = rest[v as usize];
         ((p.x - 0.05).powi(2) + (p.y - 0.05).powi(2)).sqrt()
     };
-    let disc_vertices: std::collections::BTreeSet<u32> = disc
-        .tets
+    let disc_rim = disc
+        .vertices
         .iter()
-        .flat_map(|&t| sim.model.mesh.tets()[t as usize])
-        .collect();
-    let rim: Vec<f64> = disc_vertices.iter().map(|&v| radius_of(v)).collect();
-    let disc_rim = rim.iter().copied().fold(0.0, f64::max);
-    let pairs = sim.model.mesh.coincident_vertices(1e-12);
-    let hole_rim: Vec<f64> = pairs
+        .map(|&v| radius_of(v))
+        .fold(0.0, f64::max);
+    let in_disc = |v: &u32| disc.vertices.binary_search(v).is_ok();
+    let hole_rim: Vec<f64> = sim
+        .model
+        .mesh
+        .coincident_vertices(1e-12)
         .iter()
-        .filter(|[a, b]| disc_vertices.contains(a) != disc_vertices.contains(b))
+        .filter(|[a, b]| in_disc(a) != in_disc(b))
         .map(|[a, _]| radius_of(*a))
         .collect();
     assert!(
-        !hole_rim.is_empty(),
+        hole_rim.len() > 50,
         "the disc's rim was split from the sheet's"
     );
     for h in &hole_rim {
@@ -223,11 +296,12 @@ fn zig_zags_and_s_curves_on_the_chest_wall_leave_one_piece() {
         .into_iter()
         .map(|(x, y)| (x, y - 0.02))
         .collect();
-    let reattached = stroke(&mut sim, tissue, &teeth, 0.006, 3);
+    let done = stroke(&mut sim, tissue, &teeth, 0.006, 3);
     let pieces = checked_pieces(&sim, mass0, volume0);
     assert_eq!(pieces.len(), 1, "after the zig-zag: {}", describe(&pieces));
     // the rule was needed and is reported: the zig-zag's corners carve slivers
-    assert!(reattached > 0);
+    assert!(done.reattached > 0);
+    assert!(done.specimens.is_empty());
 }
 
 #[test]
@@ -373,7 +447,7 @@ mod random_strokes {
             let mut sim = c.tissue.simulation();
             let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
             let path = c.shape.path(c.spacing_m);
-            stroke(&mut sim, c.tissue, &path, c.depth_m, c.steps);
+            let mut specimens = stroke(&mut sim, c.tissue, &path, c.depth_m, c.steps).specimens;
             let second: Vec<(f64, f64)> = match c.second {
                 Second::None => Vec::new(),
                 Second::Across => {
@@ -383,21 +457,15 @@ mod random_strokes {
                 Second::Along { offset_m } => path.iter().map(|&(x, y)| (x, y + offset_m)).collect(),
             };
             if !second.is_empty() {
-                stroke(&mut sim, c.tissue, &second, c.depth_m, c.steps);
+                specimens.extend(stroke(&mut sim, c.tissue, &second, c.depth_m, c.steps).specimens);
             }
             let pieces = checked_pieces(&sim, mass0, volume0);
-            let body = pieces.iter().filter(|p| p.held).count();
-            prop_assert_eq!(body, 1, "{}", describe(&pieces));
+            prop_assert_eq!(body(&pieces, &specimens).len(), 1, "{}", describe(&pieces));
             let may_free = matches!(c.shape, Shape::Closed { .. }) || !second.is_empty();
-            for p in pieces.iter().filter(|p| !p.held) {
-                prop_assert!(
-                    may_free && p.volume_m3 >= FRAGMENT_VOLUME_M3,
-                    "a free piece of {} tets, {:.2} mm3: {}",
-                    p.tets.len(),
-                    p.volume_m3 * 1e9,
-                    describe(&pieces)
-                );
-            }
+            prop_assert!(may_free || specimens.is_empty(), "{}", describe(&pieces));
+            prop_assert!(specimens.iter().all(|s| s.volume_m3 >= FRAGMENT_VOLUME_M3));
+            let free: Vec<&Piece> = pieces.iter().filter(|p| !p.held).collect();
+            prop_assert!(free.is_empty(), "pieces left free: {}", describe(&pieces));
         }
     }
 }

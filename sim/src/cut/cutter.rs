@@ -18,6 +18,9 @@ pub struct Cutter {
     pub options: CutOptions,
     /// Length of tip path behind the blade that each step cuts along, metres.
     pub window_m: f64,
+    /// How far a piece the stroke frees is lifted out of the wound, along the blade towards
+    /// its handle, m (see [`super::Specimen`]).
+    pub specimen_lift_m: f64,
     trail: VecDeque<Blade>,
     stroke: StrokeVertices,
 }
@@ -62,6 +65,7 @@ impl Cutter {
         Self {
             options,
             window_m: 0.01,
+            specimen_lift_m: 0.03,
             trail: VecDeque::new(),
             stroke: StrokeVertices::default(),
         }
@@ -163,7 +167,8 @@ impl Cutter {
                 first += 1;
                 continue;
             }
-            return cut_remembering(sim, &polygon, &self.options, &mut self.stroke);
+            let lift_m = blade.edge_direction.normalize() * self.specimen_lift_m;
+            return cut_remembering(sim, &polygon, &self.options, &mut self.stroke, lift_m);
         }
     }
 }

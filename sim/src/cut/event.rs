@@ -64,6 +64,9 @@ pub struct CutEvent {
     /// [`super::CutOptions::fragment_volume_m3`]).
     #[serde(default)]
     pub fragments_reattached: usize,
+    /// Pieces the cut freed from the tissue, lifted out of the wound.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub specimens: Vec<super::Specimen>,
 }
 
 impl Default for CutEvent {
@@ -82,6 +85,7 @@ impl Default for CutEvent {
             min_child_volume_fraction: 1.0,
             forced_splits: 0,
             fragments_reattached: 0,
+            specimens: Vec::new(),
         }
     }
 }
@@ -92,5 +96,6 @@ impl CutEvent {
         self.tets_removed.is_empty()
             && self.vertices_moved.is_empty()
             && self.vertices_split.is_empty()
+            && self.specimens.is_empty()
     }
 }

@@ -14,6 +14,7 @@ mod pattern;
 mod polygon;
 mod resolve;
 mod separate;
+mod specimen;
 
 use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
@@ -22,6 +23,7 @@ pub use cutter::{Cutter, CutterResume, CutterResumeError};
 pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
+pub use specimen::Specimen;
 
 use crate::mesh::{
     PARALLEL_MIN_TETS, TET_EDGES, TET_FACES, TetMesh, dihedral_angles, edge_key, sorted_pair,
@@ -265,16 +267,25 @@ pub fn cut(
     polygon: &CutPolygon,
     options: &CutOptions,
 ) -> Result<CutEvent, CutError> {
-    cut_remembering(sim, polygon, options, &mut StrokeVertices::default())
+    cut_remembering(
+        sim,
+        polygon,
+        options,
+        &mut StrokeVertices::default(),
+        Vector3::zeros(),
+    )
 }
 
 /// [`cut`] as one step of a stroke: vertices of the stroke's cut (`stroke`) that drifted a
-/// little off the plane count as on it, and `stroke` learns this step's cut vertices.
+/// little off the plane count as on it, and `stroke` learns this step's cut vertices. A piece
+/// the cut frees is moved by `lift_m` and held there (a [`Specimen`]; [`cut`] leaves it where
+/// it is).
 pub fn cut_remembering(
     sim: &mut Simulation,
     polygon: &CutPolygon,
     options: &CutOptions,
     stroke: &mut StrokeVertices,
+    lift_m: Vector3,
 ) -> Result<CutEvent, CutError> {
     let mesh = &sim.model.mesh;
     let n = mesh.vertex_count();
@@ -617,6 +628,19 @@ pub fn cut_remembering(
         .collect();
     for &(v, _, _) in &class.moved {
         dirty.extend_from_slice(new_mesh.topology().vertex_tets.row(v as usize));
+    }
+    // a piece the cut freed is lifted out of the wound and held there
+    if !splits.is_empty() {
+        let min_volume_m3 = options.fragment_volume_m3.max(f64::MIN_POSITIVE);
+        event.specimens = specimen::freed(&new_mesh, &held, min_volume_m3, lift_m);
+        for s in &event.specimens {
+            for &v in &s.vertices {
+                held[v as usize] = true;
+                x[v as usize] += lift_m;
+                vel[v as usize] = Vector3::zeros();
+            }
+            dirty.extend_from_slice(&s.tets);
+        }
     }
     dirty.sort_unstable();
     dirty.dedup();
