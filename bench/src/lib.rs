@@ -9,6 +9,7 @@
 //! the dashboard library itself does not carry.
 
 mod accuracy;
+mod cuts;
 pub mod browser;
 mod dashboard;
 mod hub;

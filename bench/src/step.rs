@@ -134,8 +134,15 @@ pub fn step(
         bar.inc(1);
     }
     bar.finish_and_clear();
+    // the cut-heavy strokes, unless the run is narrowed to one size or integrator
+    let strokes = if only_tets.is_empty() && only_integrator.is_none() {
+        crate::cuts::strokes()?
+    } else {
+        Vec::new()
+    };
     if json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        let both = serde_json::json!({ "steps": rows, "strokes": strokes });
+        println!("{}", serde_json::to_string_pretty(&both)?);
         return Ok(());
     }
     println!(
@@ -160,6 +167,9 @@ pub fn step(
             r.realtime_factor,
             r.settle_ms
         );
+    }
+    if !strokes.is_empty() {
+        crate::cuts::print(&strokes);
     }
     Ok(())
 }

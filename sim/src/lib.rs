@@ -54,6 +54,7 @@
 #![warn(missing_docs)]
 
 pub mod cut;
+pub mod cut_stress;
 pub mod error;
 pub mod fem;
 pub mod generate;

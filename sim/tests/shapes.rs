@@ -2,79 +2,13 @@
 //! tissue is the body or a piece a closed stroke cut free, the mesh is valid, and the mass and
 //! the rest volume are conserved.
 
-use cutlab_sim::cut::{self, Blade, Cutter, FRAGMENT_VOLUME_M3, Specimen};
+use cutlab_sim::cut::{self, Cutter, FRAGMENT_VOLUME_M3, Specimen};
+use cutlab_sim::cut_stress::{Tissue, arc, graph, zigzag};
 use cutlab_sim::mesh::{Piece, pieces};
 use cutlab_sim::scene::{BuildOptions, Scene};
-use cutlab_sim::solver::{Simulation, StaticSettings};
+use cutlab_sim::solver::Simulation;
 use cutlab_sim::{Point3, Vector3};
 use std::f64::consts::{PI, TAU};
-
-/// Where the strokes are drawn.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Tissue {
-    /// The built-in `sheet`: 100 x 100 x 2 mm, its top at z = 2 mm; paths from its centre.
-    Sheet,
-    /// The built-in `chest-wall`: a slab of 150 mm radius, 15 mm thick; paths from its top.
-    ChestWall,
-}
-
-impl Tissue {
-    fn simulation(self) -> Simulation {
-        let name = match self {
-            Tissue::Sheet => "sheet",
-            Tissue::ChestWall => "chest-wall",
-        };
-        let mut sim = Scene::load(name, BuildOptions::default())
-            .expect("built-in scene")
-            .simulation();
-        sim.settle(StaticSettings::default());
-        sim
-    }
-
-    /// The blade at `(x, y)` from the path's centre, its tip `depth_m` below the surface and
-    /// its edge standing 10 mm above it.
-    fn blade(self, (x, y): (f64, f64), depth_m: f64) -> Blade {
-        match self {
-            Tissue::Sheet => cut::blade(
-                Point3::new(0.05 + x, 0.05 + y, 0.002 - depth_m),
-                Vector3::z(),
-                depth_m + 0.01,
-            ),
-            Tissue::ChestWall => Blade::normal_to_curved_slab(x, y, 0.15, depth_m, 0.01),
-        }
-    }
-}
-
-/// Points every `spacing_m` along a circle of radius `r_m` about the centre, from angle
-/// `from` over `sweep` radians.
-fn arc(r_m: f64, from: f64, sweep: f64, spacing_m: f64) -> Vec<(f64, f64)> {
-    let n = ((r_m * sweep.abs()) / spacing_m).ceil().max(1.0) as usize;
-    (0..=n)
-        .map(|k| {
-            let a = from + sweep * k as f64 / n as f64;
-            (r_m * a.cos(), r_m * a.sin())
-        })
-        .collect()
-}
-
-/// Points every `spacing_m` (along x) of `y = f(x)` for x across `length_m` centred on 0.
-fn graph(length_m: f64, spacing_m: f64, f: impl Fn(f64) -> f64) -> Vec<(f64, f64)> {
-    let n = (length_m / spacing_m).ceil() as usize;
-    (0..=n)
-        .map(|k| {
-            let x = -length_m / 2.0 + length_m * k as f64 / n as f64;
-            (x, f(x))
-        })
-        .collect()
-}
-
-/// A zig-zag of `amplitude_m` peak to peak, a tooth every `period_m`, along x.
-fn zigzag(amplitude_m: f64, period_m: f64, length_m: f64, spacing_m: f64) -> Vec<(f64, f64)> {
-    graph(length_m, spacing_m, |x| {
-        let phase = (x / period_m).rem_euclid(1.0);
-        amplitude_m * (2.0 * phase).min(2.0 - 2.0 * phase) - amplitude_m / 2.0
-    })
-}
 
 /// What a stroke did beyond its cuts.
 #[derive(Debug, Default)]
@@ -85,7 +19,8 @@ struct Stroke {
     specimens: Vec<Specimen>,
 }
 
-/// Cuts along `path` as a session does (a cut per pose), `steps` simulation steps after each.
+/// Cuts along `path` as a session does, `steps` simulation steps after each; every cut and
+/// step must succeed.
 fn stroke(
     sim: &mut Simulation,
     tissue: Tissue,
@@ -93,19 +28,16 @@ fn stroke(
     depth_m: f64,
     steps: usize,
 ) -> Stroke {
-    let mut cutter = Cutter::default();
-    let mut out = Stroke::default();
-    for &p in path {
-        let event = cutter
-            .advance(sim, tissue.blade(p, depth_m))
-            .expect("the cut applies");
-        out.reattached += event.fragments_reattached;
-        out.specimens.extend(event.specimens);
-        for _ in 0..steps {
-            sim.step().expect("the simulation runs on after the cut");
-        }
+    let r = cutlab_sim::cut_stress::stroke(sim, tissue, path, depth_m, steps, |_| true);
+    assert_eq!(
+        (r.failed_cuts, r.failed_steps),
+        (0, 0),
+        "every cut and step applies"
+    );
+    Stroke {
+        reattached: r.fragments_reattached,
+        specimens: r.specimens,
     }
-    out
 }
 
 /// The held pieces that are not one of `specimens`: the tissue.
@@ -164,7 +96,7 @@ fn describe(pieces: &[Piece]) -> String {
 fn a_semicircle_across_the_chest_wall_leaves_one_piece() {
     // the reproducer: radius 20 mm, 6 mm deep, a cut every 0.5 mm (13 fragments before)
     let tissue = Tissue::ChestWall;
-    let mut sim = tissue.simulation();
+    let mut sim = tissue.simulation(None).expect("built-in scene");
     let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
     stroke(&mut sim, tissue, &arc(0.02, 0.0, PI, 0.0005), 0.006, 5);
     let pieces = checked_pieces(&sim, mass0, volume0);
@@ -180,7 +112,7 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
     // the reproducer: radius 20 mm, 1.08 times round, the tip 4 mm below the 2 mm sheet's top
     let tissue = Tissue::Sheet;
     let r = 0.02;
-    let mut sim = tissue.simulation();
+    let mut sim = tissue.simulation(None).expect("built-in scene");
     let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
     let mut cutter = Cutter::default();
     let mut freed: Vec<Specimen> = Vec::new();
@@ -286,7 +218,7 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
 #[test]
 fn zig_zags_and_s_curves_on_the_chest_wall_leave_one_piece() {
     let tissue = Tissue::ChestWall;
-    let mut sim = tissue.simulation();
+    let mut sim = tissue.simulation(None).expect("built-in scene");
     let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
     let s_curve = graph(0.06, 0.0005, |x| 0.01 * (x / 0.03 * TAU).sin());
     stroke(&mut sim, tissue, &s_curve, 0.006, 3);
@@ -444,7 +376,7 @@ mod random_strokes {
         /// closed stroke cut free that is larger than a fragment.
         #[test]
         fn every_piece_is_the_body_or_a_specimen(c in case()) {
-            let mut sim = c.tissue.simulation();
+            let mut sim = c.tissue.simulation(None).expect("built-in scene");
             let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
             let path = c.shape.path(c.spacing_m);
             let mut specimens = stroke(&mut sim, c.tissue, &path, c.depth_m, c.steps).specimens;

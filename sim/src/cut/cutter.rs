@@ -5,6 +5,10 @@
 //! blade has crossed over several steps are therefore cut whole once the blade has passed
 //! them, while those at the blade's front are resolved by vertex movement; re-cutting the
 //! part already cut changes nothing (its vertices lie on the plane and are already split).
+//! Where the blade turns, the oldest poses of the window are left out until the swept
+//! surface departs from its plane by no more than the snapping distance, and the stroke's
+//! earlier cut counts as on the plane within a few times that departure (see
+//! `docs/design/cutting.md`, "Strokes that turn").
 
 use std::collections::VecDeque;
 
