@@ -427,6 +427,12 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     );
     say!(
         o.quiet,
+        "  pieces cut free: {} specimen(s) lifted out; {} fragment(s) left attached",
+        r.stats.specimens,
+        r.stats.fragments_reattached
+    );
+    say!(
+        o.quiet,
         "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}",
         r.servo.max_force_newtons,
         r.servo.non_finite_count,

@@ -35,6 +35,12 @@ pub struct StepperStats {
     pub rejected_steps: u64,
     /// Conjugate-gradient iterations of the implicit solver over all steps.
     pub cg_iterations: u64,
+    /// Small free pieces the cuts left attached (see `cutlab_sim::cut::CutOptions`).
+    #[serde(default)]
+    pub fragments_reattached: u64,
+    /// Pieces the cuts freed, lifted out of the wound (`cutlab_sim::cut::Specimen`).
+    #[serde(default)]
+    pub specimens: u64,
 }
 
 /// What one step did.
@@ -276,6 +282,8 @@ impl SessionStepper {
                 Ok(ev) if !ev.is_empty() => {
                     self.stats.cut_steps += 1;
                     self.stats.tets_split += ev.tets_removed.len() as u64;
+                    self.stats.fragments_reattached += ev.fragments_reattached as u64;
+                    self.stats.specimens += ev.specimens.len() as u64;
                     if let Err(e) = self.collider.rebuild(&self.sim) {
                         tracing::error!("rebuilding the surface after a cut failed: {e}");
                     }

@@ -170,6 +170,13 @@ impl Recording {
             .ok_or_else(|| RecorderError::NotCutlab("no cutlab.session metadata".into()))
     }
 
+    /// The pieces the session's cuts freed, with the step and tick that freed each, in order.
+    pub fn specimens(&self) -> impl Iterator<Item = (u64, u64, &cutlab_sim::cut::Specimen)> {
+        self.topology
+            .iter()
+            .flat_map(|t| t.event.specimens.iter().map(move |s| (t.step, t.tick, s)))
+    }
+
     /// An attachment's bytes by name.
     pub fn attachment(&self, name: &str) -> Option<&[u8]> {
         self.attachments

@@ -769,3 +769,117 @@ fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
     );
     assert_eq!(seek.final_hash, replayed.final_hash);
 }
+
+/// A trajectory file (`csv:` device) that presses the blade through the middle of the `sheet`
+/// (its top at z = 2 mm) and traces a circle of radius 20 mm 1.08 times round at 7 mm/s, the
+/// cutting edge (tool +z) upright and its cutting direction (tool +x) along the circle; then
+/// lifts. Written as a person's script would be: a row every 20 ms.
+fn circle_through_the_sheet(path: &Path) -> f64 {
+    let (cx, cy, r, turns) = (0.05, 0.05, 0.02, 1.08);
+    let mut rows = vec!["t_s, x_m, y_m, z_m, qw, qx, qy, qz, button".to_string()];
+    let mut t = 0.0;
+    let mut row = |t: &mut f64, a: f64, z: f64, button: u8| {
+        // world_from_tool: a turn about z taking tool +x to the circle's tangent
+        let half = (a + std::f64::consts::FRAC_PI_2) / 2.0;
+        let (x, y) = (cx + r * a.cos(), cy + r * a.sin());
+        rows.push(format!(
+            "{t:.3}, {x:.6}, {y:.6}, {z:.6}, {:.9}, 0, 0, {:.9}, {button}",
+            half.cos(),
+            half.sin()
+        ));
+        *t += 0.02;
+    };
+    for k in 0..=50 {
+        row(
+            &mut t,
+            0.0,
+            0.012 - 0.014 * k as f64 / 50.0,
+            u8::from(k > 0),
+        );
+    }
+    let samples = (turns * std::f64::consts::TAU * r / 0.007 / 0.02) as usize;
+    for k in 1..=samples {
+        let a = turns * std::f64::consts::TAU * k as f64 / samples as f64;
+        row(&mut t, a, -0.002, 1);
+    }
+    let end = turns * std::f64::consts::TAU;
+    for k in 1..=25 {
+        row(
+            &mut t,
+            end,
+            -0.002 + 0.02 * k as f64 / 25.0,
+            u8::from(k < 3),
+        );
+    }
+    std::fs::write(path, rows.join("\n") + "\n").expect("trajectory written");
+    t
+}
+
+#[test]
+fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_exact() {
+    let dir = temp_dir("circle");
+    let trajectory = dir.path().join("circle.csv");
+    let duration_s = circle_through_the_sheet(&trajectory) + 0.5;
+    let scene = Scene::load("sheet", BuildOptions::default()).expect("scene");
+    let session = Session::new(&scene).expect("session");
+    let device =
+        Box::new(cutlab_haptics::device::CsvDevice::open(&trajectory).expect("a valid trajectory"));
+    let config = SessionConfig {
+        duration_s,
+        ..SessionConfig::default()
+    };
+    let path = dir.path().join("session.mcap");
+    let provenance = Provenance {
+        scene: "sheet".into(),
+        min_tets: None,
+        seed: 0,
+        trainee: "t".into(),
+        exercise: "e".into(),
+        device: format!("csv:{}", trajectory.display()),
+    };
+    let settings = RecordSettings {
+        tap: TapSettings {
+            keyframe_every_steps: 5000,
+            surface_every_steps: 0,
+            ..TapSettings::default()
+        },
+        writer: WriterOptions::default(),
+    };
+    let r = record::run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        None,
+        &scene.spec,
+        &path,
+        settings,
+        None,
+    )
+    .expect("recorded session");
+    let report = r.report.expect("session ran");
+    assert_eq!(report.stats.specimens, 1, "{:?}", report.stats);
+    // the whole sheet and the disc, no fragment
+    let sim = &report.simulation;
+    let pieces = cutlab_sim::mesh::pieces(&sim.model.mesh, &sim.model.held);
+    assert_eq!(pieces.len(), 2, "{pieces:?}");
+
+    let rec = Recording::open(&path).expect("readable");
+    let specimens: Vec<_> = rec.specimens().collect();
+    assert_eq!(specimens.len(), 1);
+    let (step, tick, disc) = specimens[0];
+    assert!(
+        step > 0 && tick >= step,
+        "freed at step {step}, tick {tick}"
+    );
+    let area = disc.volume_m3 / 0.002;
+    assert!(
+        (area / (std::f64::consts::PI * 0.02 * 0.02) - 1.0).abs() < 0.05,
+        "disc of {:.0} mm2",
+        area * 1e6
+    );
+    assert!(pieces.iter().any(|p| p.tets == disc.tets));
+    let replayed = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
+    assert!(replayed.verified(), "{:?}", replayed.first_divergence);
+    assert_eq!(replayed.cuts_replayed, report.stats.cut_steps);
+}
