@@ -9,8 +9,8 @@
 //! the dashboard library itself does not carry.
 
 mod accuracy;
-mod cuts;
 pub mod browser;
+mod cuts;
 mod dashboard;
 mod hub;
 mod load;

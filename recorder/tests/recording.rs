@@ -48,6 +48,18 @@ impl RecordObserver for Collect {
     }
 }
 
+/// Recording settings: a keyframe and a surface every so many steps (0: no surfaces).
+fn record_settings(keyframe_every_steps: u64, surface_every_steps: u64) -> RecordSettings {
+    RecordSettings {
+        tap: TapSettings {
+            keyframe_every_steps,
+            surface_every_steps,
+            ..TapSettings::default()
+        },
+        writer: WriterOptions::default(),
+    }
+}
+
 struct Recorded {
     path: PathBuf,
     seen: Seen,
@@ -89,14 +101,7 @@ fn recorded() -> &'static Recorded {
             exercise: "e".into(),
             device: "expert".into(),
         };
-        let settings = RecordSettings {
-            tap: TapSettings {
-                keyframe_every_steps: 1000,
-                surface_every_steps: 100,
-                ..TapSettings::default()
-            },
-            writer: WriterOptions::default(),
-        };
+        let settings = record_settings(1000, 100);
         let r = record::run_recorded(
             session,
             device,
@@ -720,14 +725,7 @@ fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
         exercise: "e".into(),
         device: "expert".into(),
     };
-    let settings = RecordSettings {
-        tap: TapSettings {
-            keyframe_every_steps: 500,
-            surface_every_steps: 0,
-            ..TapSettings::default()
-        },
-        writer: WriterOptions::default(),
-    };
+    let settings = record_settings(500, 0);
     let r = record::run_recorded(
         session,
         device,
@@ -837,14 +835,7 @@ fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_
         exercise: "e".into(),
         device: format!("csv:{}", trajectory.display()),
     };
-    let settings = RecordSettings {
-        tap: TapSettings {
-            keyframe_every_steps: 5000,
-            surface_every_steps: 0,
-            ..TapSettings::default()
-        },
-        writer: WriterOptions::default(),
-    };
+    let settings = record_settings(5000, 0);
     let r = record::run_recorded(
         session,
         device,

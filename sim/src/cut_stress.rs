@@ -241,16 +241,7 @@ pub fn run_cut(case: &CutStressCase) -> Result<CutStressResult, SceneError> {
     };
     let mut check = |sim: &Simulation| {
         result.steps += 1;
-        let finite = sim
-            .state
-            .positions
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite()))
-            && sim
-                .state
-                .velocities
-                .iter()
-                .all(|v| v.iter().all(|c| c.is_finite()));
+        let finite = sim.state.is_finite();
         result.non_finite |= !finite;
         result.max_speed_m_per_s = result.max_speed_m_per_s.max(sim.state.max_speed());
         finite

@@ -208,16 +208,7 @@ pub fn run(
             Ok(_) => {}
             Err(_) => rejected += 1,
         }
-        let finite = sim
-            .state
-            .positions
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite()))
-            && sim
-                .state
-                .velocities
-                .iter()
-                .all(|v| v.iter().all(|c| c.is_finite()));
+        let finite = sim.state.is_finite();
         if !finite {
             result.outcome = Outcome::NonFiniteLeak;
             return Ok(result);

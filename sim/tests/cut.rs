@@ -1,5 +1,9 @@
 //! Cutting against known answers and invariants.
 
+mod common;
+
+use common::check_invariants;
+
 use cutlab_sim::cut::{self, CutOptions, CutPolygon, PatternChoice};
 use cutlab_sim::generate::{GridCells, boxed};
 use cutlab_sim::model::{Material, Model};
@@ -145,43 +149,6 @@ fn slab() -> (TetMesh, Vec<u32>) {
     )
     .expect("slab");
     (g.mesh, g.rim)
-}
-
-fn check_invariants(sim: &Simulation, mass0: f64, volume0: f64) {
-    let mesh = &sim.model.mesh;
-    let report = mesh.validate();
-    // Shape-degenerate tets (normalised volume < 1e-8) can appear after many crossing cuts of
-    // the same region; every tet must still have positive volume in the rest configuration.
-    let structural = cutlab_sim::mesh::ValidationReport {
-        degenerate_tets: Vec::new(),
-        ..report.clone()
-    };
-    assert!(structural.is_ok(), "{report}");
-    for t in 0..mesh.tet_count() {
-        assert!(
-            mesh.tet_volume(t) > 0.0,
-            "tet {t} has volume {}",
-            mesh.tet_volume(t)
-        );
-    }
-    let bad = mesh.topology().boundary_non_manifold_edges();
-    assert!(bad.is_empty(), "non-manifold surface edges {bad:?}");
-    let mass = sim.model.total_mass();
-    assert!(
-        (mass - mass0).abs() <= 1e-12 * mass0,
-        "mass {mass} vs {mass0}"
-    );
-    let volume = mesh.volume();
-    assert!(
-        (volume - volume0).abs() <= 1e-9 * volume0,
-        "volume {volume} vs {volume0}"
-    );
-    assert!(
-        sim.state
-            .positions
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite()))
-    );
 }
 
 #[test]

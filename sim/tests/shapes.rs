@@ -2,6 +2,9 @@
 //! tissue is the body or a piece a closed stroke cut free, the mesh is valid, and the mass and
 //! the rest volume are conserved.
 
+mod common;
+
+use common::check_invariants;
 use cutlab_sim::cut::{self, Cutter, FRAGMENT_VOLUME_M3, Specimen};
 use cutlab_sim::cut_stress::{Tissue, arc, graph, zigzag};
 use cutlab_sim::mesh::{Piece, pieces};
@@ -48,33 +51,10 @@ fn body<'p>(pieces: &'p [Piece], specimens: &[Specimen]) -> Vec<&'p Piece> {
         .collect()
 }
 
-/// The mesh is valid, the mass and rest volume are as before; returns its pieces.
+/// The invariants of `common::check_invariants`; returns the mesh's pieces.
 fn checked_pieces(sim: &Simulation, mass0: f64, volume0: f64) -> Vec<Piece> {
-    let mesh = &sim.model.mesh;
-    let report = mesh.validate();
-    let structural = cutlab_sim::mesh::ValidationReport {
-        degenerate_tets: Vec::new(),
-        ..report.clone()
-    };
-    assert!(structural.is_ok(), "{report}");
-    assert!((0..mesh.tet_count()).all(|t| mesh.tet_volume(t) > 0.0));
-    let mass = sim.model.total_mass();
-    assert!(
-        (mass - mass0).abs() <= 1e-12 * mass0,
-        "mass {mass} vs {mass0}"
-    );
-    let volume = mesh.volume();
-    assert!(
-        (volume - volume0).abs() <= 1e-9 * volume0,
-        "volume {volume} vs {volume0}"
-    );
-    assert!(
-        sim.state
-            .positions
-            .iter()
-            .all(|p| p.iter().all(|c| c.is_finite()))
-    );
-    pieces(mesh, &sim.model.held)
+    check_invariants(sim, mass0, volume0);
+    pieces(&sim.model.mesh, &sim.model.held)
 }
 
 fn describe(pieces: &[Piece]) -> String {

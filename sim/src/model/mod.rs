@@ -145,6 +145,17 @@ impl State {
         self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max)
     }
 
+    /// True when every position and velocity is finite.
+    pub fn is_finite(&self) -> bool {
+        self.positions
+            .iter()
+            .all(|p| p.iter().all(|c| c.is_finite()))
+            && self
+                .velocities
+                .iter()
+                .all(|v| v.iter().all(|c| c.is_finite()))
+    }
+
     /// The particles whose position or velocity is not finite, ascending.
     pub fn non_finite_particles(&self) -> Vec<u32> {
         let finite = |c: &[f64]| c.iter().all(|c| c.is_finite());
