@@ -10,7 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::mesh::{TET_FACES, TetMesh, pieces, sorted_triple};
+use crate::mesh::{TET_FACES, TetMesh, has_free_piece, pieces, sorted_triple};
 use crate::{Point3, Vector3};
 
 /// A piece a cut freed.
@@ -36,6 +36,9 @@ pub(super) fn freed(
     min_volume_m3: f64,
     lift_m: Vector3,
 ) -> Vec<Specimen> {
+    if !has_free_piece(mesh, held) {
+        return Vec::new();
+    }
     let all = pieces(mesh, held);
     if all.len() < 2 || !all.iter().any(|p| p.held) {
         return Vec::new();
