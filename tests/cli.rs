@@ -518,9 +518,12 @@ fn bench_step_narrows_to_one_size_and_integrator() {
         "implicit-euler",
     ]);
     assert!(ok, "{err}");
-    let rows: Vec<serde_json::Value> = serde_json::from_str(&out).expect("json");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("json");
+    let rows = v["steps"].as_array().expect("the step rows");
     // the springs and the finite elements, both by implicit Euler, at the one size asked for
     assert_eq!(rows.len(), 2, "{out}");
+    // narrowed to one size: no cut-heavy strokes
+    assert_eq!(v["strokes"].as_array().map(Vec::len), Some(0), "{out}");
     assert!(
         rows.iter()
             .all(|r| r["requested_tets"] == 1000 && r["integrator"] == "implicit-euler"),
