@@ -139,7 +139,15 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
         disc.surface_m2 * 1e6,
         surface * 1e6
     );
-    // lifted 30 mm out of the wound along the blade, and held there
+    // lifted 30 mm out of the wound along the blade and aside by its width and as much
+    // again (the hole stays in view from above), and held there
+    let [ax, ay, az] = disc.lift_m;
+    assert!((az - 0.03).abs() < 1e-9, "lifted by {:?}", disc.lift_m);
+    assert!(
+        (ax.hypot(ay) - (r + 0.03)).abs() < 0.002,
+        "aside by {:?}",
+        disc.lift_m
+    );
     let rest = sim.model.mesh.positions();
     assert!(!lifted_to.is_empty());
     for &v in &disc.vertices {
@@ -152,8 +160,8 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
         if let Some(q) = before_lift.get(v as usize) {
             let lift = p - q;
             assert!(
-                (lift - Vector3::new(0.0, 0.0, 0.03)).norm() < 1e-3,
-                "vertex {v} lifted by {lift:?}"
+                (lift - Vector3::from(disc.lift_m)).norm() < 1e-3,
+                "vertex {v} moved by {lift:?}"
             );
         }
     }

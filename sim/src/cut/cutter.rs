@@ -23,7 +23,8 @@ pub struct Cutter {
     /// Length of tip path behind the blade that each step cuts along, metres.
     pub window_m: f64,
     /// How far a piece the stroke frees is lifted out of the wound, along the blade towards
-    /// its handle, m (see [`super::Specimen`]).
+    /// its handle, m; it also moves aside by its width and this much (see
+    /// [`super::Specimen`]).
     pub specimen_lift_m: f64,
     trail: VecDeque<Blade>,
     stroke: StrokeVertices,

@@ -629,14 +629,15 @@ pub fn cut_remembering(
     for &(v, _, _) in &class.moved {
         dirty.extend_from_slice(new_mesh.topology().vertex_tets.row(v as usize));
     }
-    // a piece the cut freed is lifted out of the wound and held there
+    // a piece the cut freed is lifted out of the wound, aside, and held there
     if !splits.is_empty() {
         let min_volume_m3 = options.fragment_volume_m3.max(f64::MIN_POSITIVE);
         event.specimens = specimen::freed(&new_mesh, &held, min_volume_m3, lift_m);
         for s in &event.specimens {
+            let moved = Vector3::from(s.lift_m);
             for &v in &s.vertices {
                 held[v as usize] = true;
-                x[v as usize] += lift_m;
+                x[v as usize] += moved;
                 vel[v as usize] = Vector3::zeros();
             }
             dirty.extend_from_slice(&s.tets);

@@ -3,7 +3,8 @@
 //! When a cut leaves a piece that holds no held vertex apart from the held tissue, and the
 //! piece is larger than a fragment ([`super::CutOptions::fragment_volume_m3`]), the piece is
 //! taken out of the wound as a surgeon's forceps would: its particles are moved by the lift
-//! given to the cut and held there. Nothing joins it to the tissue (the cut split every vertex
+//! given to the cut and aside by the piece's width and as much again (so that the wound stays
+//! in view from above), and held there. Nothing joins it to the tissue (the cut split every vertex
 //! between them), so the tissue feels nothing of it; it stays in the mesh, with its mass, so
 //! the vertex and tetrahedron ids of the recording and the replay are kept, and the cut's
 //! event lists it (its tetrahedra, vertices, volume and surface) for whoever reads its shape.
@@ -29,7 +30,8 @@ pub struct Specimen {
 }
 
 /// The pieces of `mesh` no vertex of which is `held`, of at least `min_volume_m3`, while
-/// another piece is held (a free-floating body frees nothing); each to be lifted by `lift_m`.
+/// another piece is held (a free-floating body frees nothing); each to be lifted by `lift_m`
+/// and moved aside (see [`aside`]).
 pub(super) fn freed(
     mesh: &TetMesh,
     held: &[bool],
@@ -40,28 +42,70 @@ pub(super) fn freed(
         return Vec::new();
     }
     let all = pieces(mesh, held);
-    if all.len() < 2 || !all.iter().any(|p| p.held) {
+    let Some(body) = all.iter().find(|p| p.held) else {
         return Vec::new();
-    }
-    all.into_iter()
+    };
+    let body_centre = centroid(mesh, &vertices_of(mesh, &body.tets));
+    all.iter()
         .filter(|p| !p.held && p.volume_m3 >= min_volume_m3)
         .map(|p| {
-            let mut vertices: Vec<u32> = p
-                .tets
-                .iter()
-                .flat_map(|&t| mesh.tets()[t as usize])
-                .collect();
-            vertices.sort_unstable();
-            vertices.dedup();
+            let vertices = vertices_of(mesh, &p.tets);
             Specimen {
                 surface_m2: surface_m2(mesh, &p.tets),
-                tets: p.tets,
+                lift_m: aside(mesh, &vertices, body_centre, lift_m).into(),
+                tets: p.tets.clone(),
                 vertices,
                 volume_m3: p.volume_m3,
-                lift_m: lift_m.into(),
             }
         })
         .collect()
+}
+
+/// The vertices of `tets`, ascending.
+fn vertices_of(mesh: &TetMesh, tets: &[u32]) -> Vec<u32> {
+    let mut vertices: Vec<u32> = tets.iter().flat_map(|&t| mesh.tets()[t as usize]).collect();
+    vertices.sort_unstable();
+    vertices.dedup();
+    vertices
+}
+
+/// The mean rest position of `vertices`.
+fn centroid(mesh: &TetMesh, vertices: &[u32]) -> Point3 {
+    let sum: Vector3 = vertices
+        .iter()
+        .map(|&v| mesh.positions()[v as usize].coords)
+        .sum();
+    Point3::from(sum / vertices.len().max(1) as f64)
+}
+
+/// Where a specimen of `vertices` goes: `lift_m` out of the wound, and as far again plus its
+/// own width aside (across the lift, away from the tissue's centre `body_centre`, or along
+/// any direction across the lift when it lies over that centre), so that the wound stays in
+/// view from above. Nothing when `lift_m` is zero.
+fn aside(mesh: &TetMesh, vertices: &[u32], body_centre: Point3, lift_m: Vector3) -> Vector3 {
+    let lift = lift_m.norm();
+    if !(lift > 0.0) {
+        return Vector3::zeros();
+    }
+    let up = lift_m / lift;
+    let across = |d: Vector3| d - up * up.dot(&d);
+    let centre = centroid(mesh, vertices);
+    let width = vertices
+        .iter()
+        .map(|&v| across(mesh.positions()[v as usize] - centre).norm())
+        .fold(0.0, f64::max);
+    let away = across(centre - body_centre);
+    let side = if away.norm() > 1e-3 * (width + lift) {
+        away.normalize()
+    } else {
+        let any = if up.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
+        across(any).normalize()
+    };
+    lift_m + side * (width + lift)
 }
 
 /// The area at rest of the faces of `tets` that no other of them shares, m^2.
@@ -124,7 +168,19 @@ mod tests {
         assert!((s.volume_m3 - 1.0 / 6.0).abs() < 1e-15);
         // three right triangles of 1/2 and the slanted one of sqrt(3)/2
         assert!((s.surface_m2 - (1.5 + 3f64.sqrt() / 2.0)).abs() < 1e-12);
-        assert_eq!(s.lift_m, [0.0, 0.0, 0.03]);
+        // out along the lift and aside, away from the held tetrahedron: its centre is at
+        // (0.25, 0.25), the free one's at (5.25, 0.25), which reaches sqrt(0.75^2 + 0.25^2)
+        // from its centre across the lift
+        let width = (0.75f64.powi(2) + 0.25f64.powi(2)).sqrt();
+        let expected = [width + 0.03, 0.0, 0.03];
+        assert!(
+            s.lift_m
+                .iter()
+                .zip(expected)
+                .all(|(a, b)| (a - b).abs() < 1e-12),
+            "{:?}",
+            s.lift_m
+        );
         // smaller than asked: none; nothing held: none (a free-floating body frees nothing)
         assert!(super::freed(&mesh, &held, 0.2, lift).is_empty());
         assert!(super::freed(&mesh, &[false; 8], 0.1, lift).is_empty());
