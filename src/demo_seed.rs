@@ -20,6 +20,7 @@ use cutlab_recorder::RerunTarget;
 
 use crate::localise_choice::Localise;
 use crate::session::{self, AttemptArgs, DeviceArg};
+use cutlab_station::attempt_run::RunSettings;
 
 /// The demo's curriculum (created last: its presence means the history is complete).
 pub const DEMO_CURRICULUM: &str = "demo-curriculum";
@@ -308,19 +309,20 @@ fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
             skill: cutlab_haptics::device::Skill::at_level(a.level).context("skill level")?,
         },
     };
-    session::run(&session::Options {
+    let o = session::Options {
         scene: BUILTIN_SCENE.into(),
-        min_tets: Some(MIN_TETS),
-        time_step: Default::default(),
         device,
-        igtl: Default::default(),
-        clock: Clock::Virtual,
-        duration_s: a.duration_s(),
-        seed: a.seed,
+        run: RunSettings {
+            min_tets: Some(MIN_TETS),
+            clock: Clock::Virtual,
+            duration_s: a.duration_s(),
+            realtime_priority: false,
+            keyframe_every_s: 1.0,
+            surface_hz: 10.0,
+            seed: a.seed,
+            ..RunSettings::default()
+        },
         out,
-        realtime_priority: false,
-        keyframe_every_s: 1.0,
-        surface_hz: 10.0,
         // the dashboard's replay review opens the .rrd in the rerun viewer
         rerun: Some(RerunTarget::File(PathBuf::from("session.rrd"))),
         attempt: Some(AttemptArgs {
@@ -332,8 +334,16 @@ fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
             expert: a.expert,
         }),
         localise: Localise::Off,
-        quiet: true,
-    })
+    };
+    let run = session::run_session(&o, None)?;
+    if let Some((id, Err(e))) = &run.result.attempt {
+        anyhow::bail!("finishing attempt {id}: {e}");
+    }
+    run.result.observer.map_err(anyhow::Error::msg)?;
+    match run.result.recorded {
+        Ok(r) => r.report.map(|_| ()).context("running the session"),
+        Err(e) => Err(anyhow::Error::new(e).context("recording the session")),
+    }
 }
 
 #[cfg(test)]

@@ -42,22 +42,6 @@ pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<Reru
     }
 }
 
-/// A rerun sink for a recording's session, with its planned incision logged and the 3D view
-/// framed on it.
-pub fn rerun_sink(
-    target: &RerunTarget,
-    period_nanos: u64,
-    blade_length_m: f64,
-    plan: Option<&cutlab_haptics::device::Plan>,
-) -> anyhow::Result<Box<dyn RecordObserver>> {
-    let mut sink = RerunSink::new(target, "cutlab", period_nanos, blade_length_m)
-        .context("starting the rerun logger")?;
-    if let Some(plan) = plan {
-        sink.log_plan(plan).context("logging the plan to rerun")?;
-    }
-    Ok(Box::new(sink))
-}
-
 pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
     let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
     if json {
@@ -237,12 +221,14 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
         Some(target) => {
             let plan = rec.plan()?.map(|p| p.to_plan());
             let meta = rec.meta()?;
-            Some(rerun_sink(
+            let sink = RerunSink::of_session(
                 target,
                 meta.period_nanos,
                 meta.blade_length_m,
                 plan.as_ref(),
-            )?)
+            )
+            .context("starting the rerun logger")?;
+            Some(Box::new(sink) as Box<dyn RecordObserver>)
         }
         None => None,
     };

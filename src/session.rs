@@ -1,41 +1,31 @@
 //! `cutlab session`: one training session: a device drives the scalpel through the 1 kHz
 //! servo loop while the simulation runs at its fixed step; prints a summary and writes the
 //! final tissue, `summary.json` and `steps.csv` (the servo tick each simulation step consumed).
+//! The run itself is the one every attempt takes ([`cutlab_station::attempt_run`]); this
+//! module adds the localisation choice, the printing and the files.
 
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use cutlab_assessor::recordings::RecordingStore;
-use cutlab_assessor::{DbLocation, ExpertPlan};
-use cutlab_haptics::device::{
-    CsvDevice, DeviceSpec, ForceOutput, HapticDevice, IgtlDevice, IgtlOptions, PointerHand,
-    SyntheticTrainee,
-};
+use cutlab_assessor::{DbLocation, Store};
+use cutlab_haptics::device::{DeviceSpec, HapticDevice};
 use cutlab_haptics::servo::Clock;
-use cutlab_haptics::tap::TapSettings;
-use cutlab_haptics::{Session, SessionConfig, TimeStep};
-use cutlab_recorder::record::{self, Provenance, RecordSettings};
-use cutlab_recorder::{RecordedHand, Recording, RerunTarget, WriterOptions};
+use cutlab_haptics::{SessionReport, StepChoice};
+use cutlab_recorder::RerunTarget;
+use cutlab_recorder::record::RecordedSession;
+use cutlab_recorder::writer::RecordObserver;
 use cutlab_sim::Vector3;
 use cutlab_sim::io::PointData;
-use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::LocalisationSettings;
 use cutlab_sim::stats::Summary;
-
-use cutlab_assessor::Store;
 use cutlab_station::attempt::{self, Finished};
+use cutlab_station::attempt_run::{
+    self, AttemptSpec, AttemptStore, PlanSource, Prepared, RunResult, RunSettings,
+};
+use cutlab_station::sync::Hub;
 
 use crate::localise_choice::{self, Localise};
-
-/// `println!` unless `quiet`.
-macro_rules! say {
-    ($quiet:expr, $($arg:tt)*) => {
-        if !$quiet {
-            println!($($arg)*);
-        }
-    };
-}
 
 /// What `--device` names (parsed by [`DeviceSpec`]).
 pub type DeviceArg = DeviceSpec;
@@ -44,29 +34,16 @@ pub type DeviceArg = DeviceSpec;
 #[derive(Debug)]
 pub struct Options {
     pub scene: String,
-    pub min_tets: Option<usize>,
-    /// The simulation step.
-    pub time_step: TimeStep,
     pub device: DeviceArg,
-    /// How an OpenIGTLink device sends the force back.
-    pub igtl: IgtlOptions,
-    pub clock: Clock,
-    pub duration_s: f64,
-    pub seed: u64,
+    /// How the session runs (step, clock, duration, seed, keyframes, surface rate).
+    pub run: RunSettings,
     pub out: PathBuf,
-    pub realtime_priority: bool,
-    /// Keyframe interval, s.
-    pub keyframe_every_s: f64,
-    /// Surface recording rate, Hz (0: never).
-    pub surface_hz: f64,
     /// Also log to rerun (a relative `.rrd` path is in `out`).
     pub rerun: Option<RerunTarget>,
     /// Store the session as an attempt and score it.
     pub attempt: Option<AttemptArgs>,
     /// Whether to simulate only near the scalpel (the default localisation thresholds).
     pub localise: Localise,
-    /// Print nothing (the demo's seeding runs many sessions).
-    pub quiet: bool,
 }
 
 /// The attempt a session is (`--trainee`, `--exercise`, `--db`).
@@ -76,346 +53,226 @@ pub struct AttemptArgs {
     /// The recording store (`--recordings`) the attempt's recordings are put into.
     pub recordings: Option<String>,
     /// The hub the attempt is sent to once it ends (`--hub`).
-    pub hub: Option<cutlab_station::sync::Hub>,
+    pub hub: Option<Hub>,
     pub exercise: String,
     pub trainee: String,
     /// An expert's reference attempt (its metrics set the exercise's thresholds).
     pub expert: bool,
 }
 
-/// The open attempt of a session, and the runtime its database needs.
-struct OpenAttempt {
-    rt: tokio::runtime::Runtime,
-    store: Store,
-    id: i64,
-    quiet: bool,
-    /// Where the recordings go once the attempt ends (besides `--out`).
-    recordings: Option<RecordingStore>,
-    hub: Option<cutlab_station::sync::Hub>,
-    /// The attempt's lock, let go once it has ended.
-    lock: attempt::AttemptLock,
+/// A session that ran: what it was and how it went, for the caller to print or keep.
+#[derive(Debug)]
+pub struct SessionRun {
+    pub scene: String,
+    pub tets: usize,
+    /// The scene file's notes (what its reader let pass).
+    pub notes: Vec<String>,
+    pub step_choice: Option<StepChoice>,
+    pub localisation: localise_choice::Choice,
+    pub device: String,
+    pub mcap: PathBuf,
+    /// The push and the depth at which the blade goes in (N, mm).
+    pub cut_threshold_newtons: f64,
+    pub cut_depth_mm: f64,
+    pub result: RunResult,
 }
 
-impl OpenAttempt {
-    /// Starts the attempt made with `device` (as the user named it).
-    fn start(a: &AttemptArgs, device: &str, recording: &Path, quiet: bool) -> anyhow::Result<Self> {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .context("starting the async runtime")?;
-        // held until the attempt has ended, so that no sweep takes it for a dead one
-        let lock = attempt::AttemptLock::hold(recording)?;
-        let (store, id, recordings) = rt.block_on(async {
-            let store = Store::open(&a.db)
-                .await
-                .with_context(|| format!("opening the database {}", a.db))?;
-            store.ensure_builtins().await?;
-            // before the attempt starts: a store that does not answer stops the session here
-            let recordings = RecordingStore::connect_if(a.recordings.as_deref())
-                .await
-                .context("opening the recording store")?;
-            let attempt = store
-                .start_recorded_attempt(&a.exercise, &a.trainee, recording, a.expert)
-                .await?;
-            store.set_attempt_setup(attempt.id, None, device).await?;
-            anyhow::Ok((store, attempt.id, recordings))
-        })?;
-        say!(
-            quiet,
-            "attempt {id} of {} at {} (running; database {})",
-            a.trainee,
-            a.exercise,
-            a.db
-        );
-        Ok(Self {
-            rt,
-            store,
-            id,
-            quiet,
-            recordings,
-            hub: a.hub.clone(),
-            lock,
-        })
-    }
-
-    /// Scores the attempt from its recording, or marks it incomplete when the session failed.
-    fn finish(self, outcome: Result<&Path, String>) -> anyhow::Result<()> {
-        let Self {
-            rt,
-            store,
-            id,
-            quiet,
-            recordings,
-            hub,
-            lock,
-        } = self;
-        rt.block_on(async {
-            // the path the station's attempts take too
-            let result =
-                match attempt::finish_attempt(&store, id, outcome, recordings.as_ref()).await {
-                    Ok(Finished::Scored(o, values)) if !quiet => {
-                        crate::assess_cli::print_outcome(&o, &values, false)
-                    }
-                    Ok(Finished::Scored(..)) => Ok(()),
-                    Ok(Finished::Incomplete(why)) => {
-                        say!(quiet, "attempt {id} marked incomplete: {why}");
-                        Ok(())
-                    }
-                    Err(e) => Err(anyhow::Error::new(e).context(format!("finishing attempt {id}"))),
-                };
-            drop(lock);
-            if let Some(hub) = &hub {
-                // a hub that is down leaves the attempt queued, not the session failed
-                match cutlab_station::sync::sync_new(&store, hub, recordings.as_ref()).await {
-                    Ok(r) => say!(
-                        quiet,
-                        "sent to the hub {}: {} attempt(s), {} left queued",
-                        hub.url(),
-                        r.uploaded + r.already,
-                        r.refused.len()
-                    ),
-                    Err(e) => eprintln!("warning: {e}"),
-                }
-            }
-            store.close().await;
-            result
-        })
-    }
-}
-
+/// `cutlab session`: runs the session, prints what it did, writes its files.
 pub fn run(o: &Options) -> anyhow::Result<()> {
-    if !(o.duration_s > 0.0 && o.duration_s <= 86_400.0) {
-        bail!(
-            "--duration must be between 0 and 86400 seconds, got {}",
-            o.duration_s
+    // a device that needs no scene first: a bad file or a busy port is said at once
+    let device = attempt_run::open_device(&o.device, &o.run.igtl)?;
+    if let (DeviceSpec::Igtl(_), Some(d)) = (&o.device, &device) {
+        println!(
+            "OpenIGTLink device {} listening (TRANSFORM in, mm; {:?} {:?} out, N)",
+            d.name(),
+            o.run.igtl.force_output,
+            o.run.igtl.force_device_name
         );
     }
-    // Devices that need no scene first: a bad file or a busy port is reported at once.
-    let mut device: Option<Box<dyn HapticDevice>> = match &o.device {
-        DeviceArg::Trainee { .. } | DeviceArg::PointerHand(_) => None,
-        DeviceArg::Csv(path) => Some(Box::new(
-            CsvDevice::open(path).context("reading the trajectory")?,
-        )),
-        DeviceArg::Recording(path) => {
-            let recording = Recording::open(path)
-                .with_context(|| format!("reading the recording {}", path.display()))?;
-            Some(Box::new(RecordedHand::new(&recording).with_context(
-                || format!("playing the hand of {}", path.display()),
-            )?))
-        }
-        DeviceArg::Igtl(port) => {
-            let d =
-                IgtlDevice::listen_with(SocketAddr::from(([0, 0, 0, 0], *port)), o.igtl.clone())?;
-            say!(
-                o.quiet,
-                "OpenIGTLink device listening on {} (TRANSFORM in, mm; {} {:?} out, N)",
-                d.address(),
-                match d.force_output() {
-                    ForceOutput::Point => "POINT",
-                    ForceOutput::Transform => "TRANSFORM",
-                },
-                o.igtl.force_device_name
-            );
-            Some(Box::new(d))
+    let s = run_session(o, device)?;
+    for note in &s.notes {
+        println!("note: {note}");
+    }
+    if let Some(choice) = &s.step_choice {
+        println!("simulation step: {choice}");
+    }
+    let on = if s.localisation.localise { "on" } else { "off" };
+    println!("localisation: {on} ({})", s.localisation.why);
+    let report = match &s.result.recorded {
+        Ok(recorded) => recorded.report.as_ref().map(|r| (recorded, r)),
+        Err(e) => {
+            print_attempt(o, &s)?;
+            bail!("recording {}: {e}", s.mcap.display());
         }
     };
-    let scene = Scene::load(
-        &o.scene,
-        BuildOptions {
-            min_tets: o.min_tets,
-        },
-    )
-    .with_context(|| format!("loading scene {:?}", o.scene))?;
-    for note in &scene.read_notes {
-        say!(o.quiet, "note: {note}");
+    let (recorded, r) = match report {
+        Ok(both) => both,
+        Err(e) => {
+            print_attempt(o, &s)?;
+            bail!("running the session: {e}");
+        }
+    };
+    if let Err(e) = &s.result.observer {
+        bail!("{e}");
     }
-    let (scene, mut session, choice) =
-        Session::at_time_step(scene, o.time_step).context("preparing the session")?;
-    if let Some(choice) = choice {
-        say!(o.quiet, "simulation step: {choice}");
+    print_report(o, &s, recorded, r);
+    write_outputs(o, &s, r)?;
+    print_attempt(o, &s)
+}
+
+/// The session of `o` with `device` (else the one `o` names, made for the plan): the scene
+/// prepared, localised as `o` says, recorded into `o.out` (and to rerun), as an attempt when
+/// `o` says, scored and sent to the hub. Prints nothing.
+pub fn run_session(
+    o: &Options,
+    device: Option<Box<dyn HapticDevice>>,
+) -> anyhow::Result<SessionRun> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let db = match &o.attempt {
+        Some(a) => Some(rt.block_on(open_store(a))?),
+        None => None,
+    };
+    let exercise = match (&db, &o.attempt) {
+        (Some((store, _)), Some(a)) => {
+            Some(rt.block_on(attempt::exercise_named(store, &a.exercise))?)
+        }
+        _ => None,
+    };
+    let source = exercise
+        .as_ref()
+        .map_or(PlanSource::AcrossScene, |(_, plan)| {
+            PlanSource::Exercise(plan)
+        });
+    let prepared = Prepared::new(&o.scene, &o.run, source);
+    if let Some((e, _)) = &exercise {
+        // the scene as given or as it names itself
+        let built = prepared.as_ref().ok().map(|p| p.scene.spec.name.as_str());
+        if e.scene != o.scene && built != Some(e.scene.as_str()) {
+            bail!(
+                "exercise {} is on the scene {}, not {}: pass --scene {}",
+                e.name,
+                e.scene,
+                o.scene,
+                e.scene
+            );
+        }
     }
-    let scene_settings = session.sim.settings.localisation;
-    let localisation = localise_choice::choose(
-        o.localise,
-        &scene.spec.name,
+    let mut prepared = prepared.with_context(|| format!("preparing scene {:?}", o.scene))?;
+    let localisation = localise(&mut prepared, o.localise);
+    let device = match device {
+        Some(d) => d,
+        None => prepared.device(&o.device)?,
+    };
+    let mcap = attempt_run::create_dir(&o.out)?;
+    let observer = match &o.rerun {
+        Some(RerunTarget::File(rrd)) => {
+            Some(prepared.rerun_sink(&RerunTarget::File(o.out.join(rrd)))?)
+        }
+        Some(target) => Some(prepared.rerun_sink(target)?),
+        None => None,
+    }
+    .map(|sink| Box::new(sink) as Box<dyn RecordObserver>);
+    let scene = &prepared.scene;
+    let (name, tets, notes) = (
+        scene.spec.name.clone(),
         scene.model.mesh.tet_count(),
+        scene.read_notes.iter().map(ToString::to_string).collect(),
+    );
+    let (cut_threshold_newtons, cut_depth_mm) = (
+        prepared.config.render.cut_threshold_newtons,
+        scene.spec.cut_depth_mm,
+    );
+    let step_choice = prepared.step_choice.clone();
+    let device_name = device.name().to_owned();
+    let who = o.attempt.as_ref().map(|a| AttemptSpec {
+        exercise: a.exercise.clone(),
+        trainee: a.trainee.clone(),
+        expert: a.expert,
+        mode: None,
+        device: o.device.to_string(),
+    });
+    let at = db.as_ref().map(|(store, recordings)| AttemptStore {
+        store,
+        recordings: recordings.as_ref(),
+        hub: o.attempt.as_ref().and_then(|a| a.hub.as_ref()),
+    });
+    let result = attempt_run::run_blocking(
+        &rt,
+        prepared,
+        device,
+        at.as_ref().zip(who.as_ref()),
+        &mcap,
+        observer,
+    );
+    if let Some((store, _)) = db {
+        rt.block_on(store.close());
+    }
+    Ok(SessionRun {
+        scene: name,
+        tets,
+        notes,
+        step_choice,
+        localisation,
+        device: device_name,
+        mcap,
+        cut_threshold_newtons,
+        cut_depth_mm,
+        result: result?,
+    })
+}
+
+/// Localises the prepared session as `setting` says: `on` with the default thresholds, `auto`
+/// where it was measured to pay (keeping the scene's own thresholds when it has them).
+fn localise(prepared: &mut Prepared, setting: Localise) -> localise_choice::Choice {
+    let scene_settings = prepared.session.sim.settings.localisation;
+    let choice = localise_choice::choose(
+        setting,
+        &prepared.scene.spec.name,
+        prepared.scene.model.mesh.tet_count(),
         scene_settings.is_some(),
     );
-    say!(
-        o.quiet,
-        "localisation: {} ({})",
-        if localisation.localise { "on" } else { "off" },
-        localisation.why
-    );
-    // `on` with the default thresholds; `auto` keeps the scene's own when it has them
-    session.sim.settings.localisation = match (localisation.localise, o.localise) {
+    prepared.session.sim.settings.localisation = match (choice.localise, setting) {
         (false, _) => None,
         (true, Localise::Auto) => scene_settings.or(Some(LocalisationSettings::default())),
         (true, _) => Some(LocalisationSettings::default()),
     };
-    // The planned incision (what a synthetic trainee follows; recorded with every session):
-    // the exercise's expert plan when the session is an attempt, else 60 mm across the
-    // tissue in the scene's `incision` directions.
-    let expert_plan = o
-        .attempt
-        .as_ref()
-        .map(|a| exercise_plan(a, &o.scene, &scene.spec.name))
-        .transpose()?;
-    let plan = match &expert_plan {
-        Some(p) => attempt::plan_on_tissue(&session, p)
-            .map_err(anyhow::Error::new)
-            .context("projecting the exercise's plan onto the tissue"),
-        None => {
-            // the scene's incision directions were checked when it was built
-            let (up, along) = scene.spec.incision.unit().map_err(anyhow::Error::msg)?;
-            let (lo, hi) = scene.model.mesh.bounding_box();
-            let depth_m = (0.4 * (hi - lo).dot(&up.abs())).min(0.008);
-            session
-                .plan_across(&up, &along, 0.06, depth_m)
-                .context("planning the incision across the tissue")
-        }
-    };
-    let mut config = SessionConfig {
-        clock: o.clock,
-        duration_s: o.duration_s,
-        realtime_priority: o.realtime_priority,
-        ..SessionConfig::default()
-    };
-    config.render = config.render.with_scene_cut(&scene.spec);
-    if let DeviceArg::Trainee { name, skill } = &o.device {
-        let trainee = SyntheticTrainee::new(
-            name,
-            plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?.clone(),
-            *skill,
-            o.seed,
-        )?;
-        device = Some(Box::new(trainee.expecting_cut_of(&config.render)));
-    }
-    if let DeviceArg::PointerHand(kind) = &o.device {
-        let plan = plan.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
-        device = Some(Box::new(PointerHand::new(*kind, plan, o.seed)?));
-    }
-    let device = device.context("no device")?;
-    let device_name = device.name().to_owned();
-    let tets = scene.model.mesh.tet_count();
-    if !(o.keyframe_every_s > 0.0
-        && o.keyframe_every_s.is_finite()
-        && o.surface_hz >= 0.0
-        && o.surface_hz.is_finite())
-    {
-        bail!("--keyframe-every must be positive and --surface-hz non-negative");
-    }
-    let step_s = session.sim.settings.time_step_s;
-    let keyframe_every_steps = ((o.keyframe_every_s / step_s).round() as u64).max(1);
-    // the surface BVH is built again at every keyframe, so that a replay can resume at each
-    config.collider_rebuild_every_steps = keyframe_every_steps;
-    let settings = RecordSettings {
-        tap: TapSettings {
-            keyframe_every_steps,
-            surface_every_steps: if o.surface_hz > 0.0 {
-                ((1.0 / (o.surface_hz * step_s)).round() as u64).max(1)
-            } else {
-                0
-            },
-            ..TapSettings::default()
-        },
-        writer: WriterOptions::default(),
-    };
-    std::fs::create_dir_all(&o.out).with_context(|| format!("creating {}", o.out.display()))?;
-    let mcap_path = o.out.join("session.mcap");
-    let (trainee, exercise) = o
-        .attempt
-        .as_ref()
-        .map_or((String::new(), String::new()), |a| {
-            (a.trainee.clone(), a.exercise.clone())
-        });
-    let provenance = Provenance {
-        scene: o.scene.clone(),
-        min_tets: o.min_tets,
-        seed: o.seed,
-        trainee,
-        exercise,
-        device: device_name.clone(),
-    };
-    let observer = match &o.rerun {
-        Some(target) => {
-            let target = match target {
-                RerunTarget::File(rrd) => RerunTarget::File(o.out.join(rrd)),
-                other => other.clone(),
-            };
+    choice
+}
 
-            Some(crate::recording::rerun_sink(
-                &target,
-                config.period_nanos,
-                config.blade_length_m,
-                plan.as_ref().ok(),
-            )?)
-        }
-        None => None,
-    };
-    let attempt = o
-        .attempt
-        .as_ref()
-        .map(|a| OpenAttempt::start(a, &o.device.to_string(), &mcap_path, o.quiet))
-        .transpose()?;
-    let recorded = match record::run_recorded(
-        session,
-        device,
-        &config,
-        &provenance,
-        plan.as_ref().ok(),
-        &scene.spec,
-        &mcap_path,
-        settings,
-        observer,
-    ) {
-        Ok(r) => r,
-        Err(e) => {
-            if let Some(a) = attempt {
-                a.finish(Err(format!("recording failed: {e}")))?;
-            }
-            return Err(anyhow::Error::new(e).context(format!("recording {}", mcap_path.display())));
-        }
-    };
-    if let Some(observer) = recorded.observer {
-        observer.finish().context("finishing the rerun log")?;
-    }
-    let r = match recorded.report {
-        Ok(r) => r,
-        Err(e) => {
-            if let Some(a) = attempt {
-                a.finish(Err(format!("the session failed: {e}")))?;
-            }
-            return Err(anyhow::Error::new(e).context("running the session"));
-        }
-    };
+/// The attempt's database (its built-in exercises there) and recording store: a store that
+/// does not answer stops the session before it starts.
+async fn open_store(a: &AttemptArgs) -> anyhow::Result<(Store, Option<RecordingStore>)> {
+    let store = Store::open(&a.db)
+        .await
+        .with_context(|| format!("opening the database {}", a.db))?;
+    store.ensure_builtins().await?;
+    let recordings = RecordingStore::connect_if(a.recordings.as_deref())
+        .await
+        .context("opening the recording store")?;
+    Ok((store, recordings))
+}
 
-    let clock = if o.clock == Clock::Live {
-        "live"
+/// What the session did, printed.
+fn print_report(o: &Options, s: &SessionRun, recorded: &RecordedSession, r: &SessionReport) {
+    let clock = clock_name(o.run.clock);
+    let mode = if s.localisation.localise {
+        "localised"
     } else {
-        "virtual"
+        "whole body"
     };
-    say!(
-        o.quiet,
-        "session: scene {} ({tets} tets), device {device_name} (seed {}), {clock} clock, {:.1} s, {}",
-        scene.spec.name,
-        o.seed,
-        o.duration_s,
-        if localisation.localise {
-            "localised"
-        } else {
-            "whole body"
-        }
+    println!(
+        "session: scene {} ({} tets), device {} (seed {}), {clock} clock, {:.1} s, {mode}",
+        s.scene, s.tets, s.device, o.run.seed, o.run.duration_s
     );
     let max_lag = r.largest_skip_ahead_ticks();
-    say!(
-        o.quiet,
+    println!(
         "  ticks {}, sim steps {} (largest skip ahead of the step's own tick: {max_lag} ticks)",
-        r.servo.ticks,
-        r.sim_steps
+        r.servo.ticks, r.sim_steps
     );
-    say!(
-        o.quiet,
+    println!(
         "  cut length {:.1} mm ({} cutting steps, {} tets split, {} unresolved, {} failed); {} tets now; the blade went in {} time(s)",
         r.stats.cut_length_m * 1e3,
         r.stats.cut_steps,
@@ -425,14 +282,11 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         r.simulation.model.mesh.tet_count(),
         r.servo.blade_entries
     );
-    say!(
-        o.quiet,
+    println!(
         "  pieces cut free: {} specimen(s) lifted out; {} fragment(s) left attached",
-        r.stats.specimens,
-        r.stats.fragments_reattached
+        r.stats.specimens, r.stats.fragments_reattached
     );
-    say!(
-        o.quiet,
+    println!(
         "  max force {:.2} N; non-finite values {}; fault ticks {} (faded out {}); dropped samples {}; rejected sim steps {}",
         r.servo.max_force_newtons,
         r.servo.non_finite_count,
@@ -442,18 +296,42 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         r.stats.rejected_steps
     );
     if r.servo.blade_entries == 0 {
-        say!(
-            o.quiet,
+        println!(
             "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`), and the tip never pressed {:.1} mm in (`cut_depth_mm`), with the blade engaged",
-            r.servo.max_force_newtons,
-            config.render.cut_threshold_newtons,
-            scene.spec.cut_depth_mm
+            r.servo.max_force_newtons, s.cut_threshold_newtons, s.cut_depth_mm
         );
     }
+    print_servo(o, r);
+    let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
+    let st = Summary::of(&steps_us);
+    println!(
+        "  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}",
+        st.median,
+        st.p99,
+        st.max,
+        r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64
+    );
+    println!(
+        "  speed: {:.2} simulated s per wall s ({:.2} s wall)",
+        r.speed(),
+        r.wall_s
+    );
+    let w = &recorded.write;
+    println!(
+        "  recording {}: {} messages, {:.1} MB of payload, writer busy {:.2} s; dropped tick records {}",
+        s.mcap.display(),
+        w.messages.values().sum::<u64>(),
+        w.payload_bytes as f64 * 1e-6,
+        w.busy_s,
+        r.servo.dropped_records
+    );
+}
+
+/// The servo's periods and priority (live clock), and its work per tick.
+fn print_servo(o: &Options, r: &SessionReport) {
     let p = r.servo.period_stats(r.period_nanos);
-    if o.clock == Clock::Live {
-        say!(
-            o.quiet,
+    if o.run.clock == Clock::Live {
+        println!(
             "  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline",
             p.mean_us,
             p.p50_us,
@@ -464,47 +342,28 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
             p.max_lateness_us
         );
         match &r.servo.realtime_priority {
-            Some(Ok(())) => say!(o.quiet, "  servo thread at real-time priority (SCHED_FIFO)"),
-            Some(Err(e)) => say!(
-                o.quiet,
-                "  real-time priority not permitted ({e}); normal priority"
-            ),
-            None => say!(o.quiet, "  real-time priority not requested"),
+            Some(Ok(())) => println!("  servo thread at real-time priority (SCHED_FIFO)"),
+            Some(Err(e)) => println!("  real-time priority not permitted ({e}); normal priority"),
+            None => println!("  real-time priority not requested"),
         }
     }
-    say!(
-        o.quiet,
+    println!(
         "  servo work per tick: mean {:.1} us, max {:.1} us",
-        p.mean_work_us,
-        p.max_work_us
+        p.mean_work_us, p.max_work_us
     );
-    let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
-    let s = Summary::of(&steps_us);
-    say!(
-        o.quiet,
-        "  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}",
-        s.median,
-        s.p99,
-        s.max,
-        r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64
-    );
-    say!(
-        o.quiet,
-        "  speed: {:.2} simulated s per wall s ({:.2} s wall)",
-        r.speed(),
-        r.wall_s
-    );
+}
 
-    let w = &recorded.write;
-    say!(
-        o.quiet,
-        "  recording {}: {} messages, {:.1} MB of payload, writer busy {:.2} s; dropped tick records {}",
-        mcap_path.display(),
-        w.messages.values().sum::<u64>(),
-        w.payload_bytes as f64 * 1e-6,
-        w.busy_s,
-        r.servo.dropped_records
-    );
+fn clock_name(clock: Clock) -> &'static str {
+    if clock == Clock::Live {
+        "live"
+    } else {
+        "virtual"
+    }
+}
+
+/// `final.vtu` (the deformed tissue with its displacement), `summary.json` and `steps.csv`
+/// (which servo tick each simulation step consumed: what a replay feeds back) in `o.out`.
+fn write_outputs(o: &Options, s: &SessionRun, r: &SessionReport) -> anyhow::Result<()> {
     let sim = &r.simulation;
     let deformed = cutlab_sim::TetMesh::new(
         sim.state.positions.clone(),
@@ -525,19 +384,20 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
         &[("displacement", PointData::Vector(&displacement))],
     )
     .with_context(|| format!("writing {}", path.display()))?;
+    let p = r.servo.period_stats(r.period_nanos);
+    let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
     let summary = serde_json::json!({
-        "scene": scene.spec.name, "tets": tets, "device": device_name, "seed": o.seed, "clock": clock,
-        "localised": localisation.localise, "localisation": localisation.why,
-        "duration_s": o.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
+        "scene": s.scene, "tets": s.tets, "device": s.device, "seed": o.run.seed, "clock": clock_name(o.run.clock),
+        "localised": s.localisation.localise, "localisation": s.localisation.why,
+        "duration_s": o.run.duration_s, "ticks": r.servo.ticks, "sim_steps": r.sim_steps,
         "cut_length_mm": r.stats.cut_length_m * 1e3, "blade_entries": r.servo.blade_entries, "tets_split": r.stats.tets_split, "max_force_newtons": r.servo.max_force_newtons,
         "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,
         "period_us": { "mean": p.mean_us, "p50": p.p50_us, "p99": p.p99_us, "p99_deviation": p.p99_deviation_us,
                        "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },
-        "sim_step_us": s, "cg_iterations_per_step": r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
+        "sim_step_us": Summary::of(&steps_us), "cg_iterations_per_step": r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
         "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
     });
     write_json(&o.out.join("summary.json"), &summary)?;
-    // which servo tick each simulation step consumed (what a replay feeds back)
     let mut steps = String::with_capacity(16 * r.tick_of_step.len() + 16);
     steps.push_str("step,tick\n");
     for (n, t) in r.tick_of_step.iter().enumerate() {
@@ -546,41 +406,38 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     let steps_path = o.out.join("steps.csv");
     std::fs::write(&steps_path, steps)
         .with_context(|| format!("writing {}", steps_path.display()))?;
-    say!(
-        o.quiet,
-        "wrote {}, summary.json and steps.csv",
-        path.display()
-    );
-    if let Some(a) = attempt {
-        a.finish(Ok(&mcap_path))?;
-    }
+    println!("wrote {}, summary.json and steps.csv", path.display());
     Ok(())
 }
 
-/// The expert plan of the attempt's exercise, whose scene must be the session's.
-fn exercise_plan(a: &AttemptArgs, scene_arg: &str, scene_name: &str) -> anyhow::Result<ExpertPlan> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    rt.block_on(async {
-        let store = Store::open(&a.db)
-            .await
-            .with_context(|| format!("opening the database {}", a.db))?;
-        store.ensure_builtins().await?;
-        let e = store.exercise_by_name(&a.exercise).await?;
-        let plan = store.exercise_plan(e.id).await?;
-        store.close().await;
-        if e.scene != scene_arg && e.scene != scene_name {
-            bail!(
-                "exercise {} is on the scene {}, not {scene_arg}: pass --scene {}",
-                e.name,
-                e.scene,
-                e.scene
-            );
+/// How the attempt ended (scored, with its outcome; or incomplete) and what the hub took.
+fn print_attempt(o: &Options, s: &SessionRun) -> anyhow::Result<()> {
+    let (Some(a), Some((id, finished))) = (&o.attempt, &s.result.attempt) else {
+        return Ok(());
+    };
+    println!(
+        "attempt {id} of {} at {} (database {})",
+        a.trainee, a.exercise, a.db
+    );
+    match finished {
+        Ok(Finished::Scored(outcome, values)) => {
+            crate::assess_cli::print_outcome(outcome, values, false)?;
         }
-        Ok(plan)
-    })
+        Ok(Finished::Incomplete(why)) => println!("attempt {id} marked incomplete: {why}"),
+        Err(e) => bail!("finishing attempt {id}: {e}"),
+    }
+    match (&s.result.sync, &a.hub) {
+        (Some(Ok(r)), Some(hub)) => println!(
+            "sent to the hub {}: {} attempt(s), {} left queued",
+            hub.url(),
+            r.uploaded + r.already,
+            r.refused.len()
+        ),
+        // a hub that is down leaves the attempt queued, not the session failed
+        (Some(Err(e)), _) => eprintln!("warning: {e}"),
+        _ => {}
+    }
+    Ok(())
 }
 
 fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {

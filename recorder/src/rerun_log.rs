@@ -309,6 +309,21 @@ impl RerunSink {
         send_review_blueprint(&self.rec, Some(eye))
     }
 
+    /// A session's log (application `cutlab`) with its plan logged and the view framed on it,
+    /// when it has one: what `cutlab session`, the station and `cutlab replay` open.
+    pub fn of_session(
+        target: &RerunTarget,
+        period_nanos: u64,
+        blade_length_m: f64,
+        plan: Option<&Plan>,
+    ) -> Result<Self, RerunLogError> {
+        let mut sink = Self::new(target, "cutlab", period_nanos, blade_length_m)?;
+        if let Some(plan) = plan {
+            sink.log_plan(plan)?;
+        }
+        Ok(sink)
+    }
+
     /// The planned incision, as a static line strip (metres, world frame), and the 3D view
     /// framed on it ([`plan_view`]).
     pub fn log_plan(&mut self, plan: &Plan) -> Result<(), RerunLogError> {

@@ -19,6 +19,9 @@ pub enum StationError {
     /// The exercise's plan does not fit its scene.
     #[error("the exercise's plan: {0}")]
     Plan(String),
+    /// Settings that make no session (a duration, a rate), or a log that cannot start.
+    #[error("{0}")]
+    Settings(String),
     /// The device asked for is not one this station has.
     #[error("{0}")]
     NoSuchDevice(String),

@@ -4,7 +4,9 @@
 //!
 //! - [`run`]: starts an exercise's session with the station's device; the attempt is scored
 //!   (or marked incomplete) the moment it ends.
-//! - [`attempt`]: a session as an attempt, the one path shared with `cutlab session --trainee`.
+//! - [`attempt_run`]: one attempt run (scene, plan, device, recorded session, score, sync),
+//!   the path `cutlab session`, the station, the demo's seeding and the benches share.
+//! - [`attempt`]: a session as an attempt: the plan on the tissue, the attempt scored.
 //! - [`set`]: the sessions a server runs (a limit, one per trainee).
 //! - [`view`]: the latest frame of a running session (surface positions, topology, tool,
 //!   force), published by the recorder thread, latest wins.
@@ -14,6 +16,7 @@
 //! only `cutlab-dashboard` and the CLI depend on it.
 
 pub mod attempt;
+pub mod attempt_run;
 pub mod error;
 pub mod protocol;
 pub mod run;

@@ -13,24 +13,24 @@ use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use cutlab_assessor::DeviceClass;
-use cutlab_assessor::store::Store;
+use cutlab_assessor::recordings::RecordingStore;
+use cutlab_assessor::store::{Exercise, Store};
+use cutlab_assessor::{DeviceClass, ExpertPlan};
 use cutlab_haptics::device::{
-    CsvDevice, DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan,
-    PointerDevice, PointerFeed, PointerHand, PointerOptions, SyntheticTrainee,
+    DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlOptions, Plan, PointerDevice,
+    PointerFeed, PointerOptions,
 };
-use cutlab_haptics::render::RenderSettings;
 use cutlab_haptics::servo::{Clock, PeriodStats};
-use cutlab_haptics::tap::TapSettings;
-use cutlab_haptics::{Session, SessionConfig, TimeStep, ToolPose, Vector3};
-use cutlab_recorder::record::{self, Provenance, RecordSettings};
+use cutlab_haptics::{TimeStep, ToolPose, Vector3};
+use cutlab_recorder::RerunTarget;
+use cutlab_recorder::record::Provenance;
 use cutlab_recorder::writer::RecordObserver;
-use cutlab_recorder::{RerunSink, RerunTarget, WriterOptions};
-use cutlab_sim::scene::{BuildOptions, Scene, Viewpoint};
+use cutlab_sim::scene::Viewpoint;
 use tokio::sync::watch;
 
 use crate::StationError;
 use crate::attempt::{self, Finished};
+use crate::attempt_run::{self, AttemptSpec, OpenAttempt, PlanSource, Prepared, RunSettings};
 use crate::view::{EchoSource, ViewFeed, ViewPublisher};
 
 /// How a station runs its sessions.
@@ -68,6 +68,8 @@ pub struct StationSettings {
     /// How long a session goes on without its page (a reload, a lost network, a hidden tab
     /// that sends nothing) before it ends incomplete, s. Shorter gaps pause the blade.
     pub absence_s: f64,
+    /// The seed of a synthetic trainee's or a scripted hand's variation.
+    pub seed: u64,
 }
 
 impl StationSettings {
@@ -87,6 +89,22 @@ impl StationSettings {
             recordings: None,
             hub: None,
             absence_s: 30.0,
+            seed: 0,
+        }
+    }
+
+    /// How each of the station's sessions runs (the surface recorded at least `view_hz`).
+    pub fn run_settings(&self) -> RunSettings {
+        RunSettings {
+            min_tets: self.min_tets,
+            time_step: self.time_step,
+            clock: self.clock,
+            duration_s: self.duration_s,
+            realtime_priority: true,
+            keyframe_every_s: self.keyframe_every_s,
+            surface_hz: self.view_hz,
+            seed: self.seed,
+            igtl: self.igtl.clone(),
         }
     }
 
@@ -305,6 +323,17 @@ pub enum Input {
     Device(DeviceFactory),
 }
 
+impl Input {
+    /// The class of device its attempt's thresholds are for.
+    fn class(&self) -> DeviceClass {
+        match self {
+            Input::Pointer => DeviceClass::Pointer,
+            Input::Spec(spec) => DeviceClass::of(Some(&spec.to_string())),
+            Input::Device(_) => DeviceClass::Stylus,
+        }
+    }
+}
+
 impl std::fmt::Debug for Input {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
@@ -313,33 +342,6 @@ impl std::fmt::Debug for Input {
             Input::Device(_) => "Device",
         })
     }
-}
-
-/// The device `spec` names, for a session along `plan` rendered with `render`.
-fn device_of(
-    spec: &DeviceSpec,
-    plan: &Plan,
-    render: &RenderSettings,
-    igtl: &IgtlOptions,
-) -> Result<Box<dyn HapticDevice>, StationError> {
-    Ok(match spec {
-        DeviceSpec::Trainee { name, skill } => {
-            Box::new(SyntheticTrainee::new(name, plan.clone(), *skill, 0)?.expecting_cut_of(render))
-        }
-        DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, plan, 0)?),
-        DeviceSpec::Csv(path) => Box::new(CsvDevice::open(path)?),
-        DeviceSpec::Recording(path) => Box::new(cutlab_recorder::device::RecordedHand::new(
-            &cutlab_recorder::Recording::open(path)?,
-        )?),
-        DeviceSpec::Igtl(port) => {
-            let d = IgtlDevice::listen_with(
-                std::net::SocketAddr::from(([0, 0, 0, 0], *port)),
-                igtl.clone(),
-            )?;
-            tracing::info!("station: OpenIGTLink device listening on {}", d.address());
-            Box::new(d)
-        }
-    })
 }
 
 /// Starts `request`'s session driven by `input`, publishing its frames to the returned feed.
@@ -352,45 +354,21 @@ pub async fn start(
     input: Input,
 ) -> Result<Running, StationError> {
     let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
-    let scene_name = exercise.scene.clone();
     let guided = request.guided && !exercise.exam_only;
-    let (min_tets, time_step) = (settings.min_tets, settings.time_step);
-    // the limit the attempt is scored with (one source for the score and the page's force
-    // bar): the exercise's peak-force threshold, else its plan's force limit
-    let class = match &input {
-        Input::Pointer => DeviceClass::Pointer,
-        Input::Spec(spec) => DeviceClass::of(Some(&spec.to_string())),
-        Input::Device(_) => DeviceClass::Stylus,
-    };
-    let force_limit_newtons = store
-        .thresholds_for(exercise.id, class)
-        .await?
-        .metrics
-        .iter()
-        .find(|t| t.key == "peak_force_n")
-        .and_then(|t| t.upper)
-        .unwrap_or(expert_plan.force_limit_n);
+    let force_limit_newtons = force_limit(&store, &exercise, &expert_plan, input.class()).await?;
     // building and settling the tissue takes a while: off the async threads
-    let (scene, session, plan) = tokio::task::spawn_blocking(move || {
-        let scene = Scene::load(&scene_name, BuildOptions { min_tets })?;
-        let (scene, session, choice) = Session::at_time_step(scene, time_step)?;
-        if let Some(choice) = choice {
-            tracing::info!("station: simulation step {choice}");
-        }
-        let plan = attempt::plan_on_tissue(&session, &expert_plan)?;
-        Ok::<_, StationError>((scene, session, plan))
+    let (scene, run) = (exercise.scene.clone(), settings.run_settings());
+    let prepared = tokio::task::spawn_blocking(move || {
+        Prepared::new(&scene, &run, PlanSource::Exercise(&expert_plan))
     })
     .await
     .map_err(|e| StationError::Plan(format!("preparing the session: {e}")))??;
-
-    let mut config = SessionConfig {
-        clock: settings.clock,
-        duration_s: settings.duration_s,
-        ..SessionConfig::default()
-    };
-    config.render = config.render.with_scene_cut(&scene.spec);
+    if let Some(choice) = &prepared.step_choice {
+        tracing::info!("station: simulation step {choice}");
+    }
+    let plan = prepared.plan()?.clone();
     // what the attempt records it was made with (a programme's own device: its name)
-    let device_name = match &input {
+    let named = match &input {
         Input::Pointer => Some(POINTER.to_owned()),
         Input::Spec(spec) => Some(spec.to_string()),
         Input::Device(_) => None,
@@ -404,72 +382,34 @@ pub async fn start(
             let (device, feed) = PointerDevice::new(options)?;
             (Box::new(device), Some(feed))
         }
-        Input::Spec(spec) => (
-            device_of(&spec, &plan, &config.render, &settings.igtl)?,
-            None,
-        ),
+        Input::Spec(spec) => (prepared.device(&spec)?, None),
         Input::Device(make) => (make(&plan)?, None),
     };
-    let device_name = device_name.unwrap_or_else(|| device.name().to_owned());
-    let echo = pointer
-        .clone()
-        .map(|feed| Arc::new(feed) as Arc<dyn EchoSource>);
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
     let dir = settings
         .recordings_dir
         .join(format!("station-{}-{nanos}", request.trainee));
-    std::fs::create_dir_all(&dir).map_err(|source| StationError::Io {
-        what: format!("creating {}", dir.display()),
-        source,
-    })?;
-    let mcap = dir.join("session.mcap");
-    // held by the session's thread until the attempt has ended
-    let attempt_lock = attempt::AttemptLock::hold(&mcap)?;
-    let attempt = store
-        .start_recorded_attempt(&request.exercise, &request.trainee, &mcap, false)
-        .await?
-        .id;
-    let mode = if guided { "guided" } else { "exam" };
-    store
-        .set_attempt_setup(attempt, Some(mode), &device_name)
-        .await?;
-
-    let step_s = session.sim.settings.time_step_s;
-    let keyframe_every_steps = ((settings.keyframe_every_s / step_s).round() as u64).max(1);
-    config.collider_rebuild_every_steps = keyframe_every_steps;
-    let record_settings = RecordSettings {
-        tap: TapSettings {
-            keyframe_every_steps,
-            // at least `view_hz` (60 Hz at 1 ms: every 16th step, 62.5 Hz)
-            surface_every_steps: ((1.0 / (settings.view_hz * step_s)).floor() as u64).max(1),
-            ..TapSettings::default()
-        },
-        writer: WriterOptions::default(),
-    };
-    let provenance = Provenance {
-        scene: exercise.scene.clone(),
-        min_tets: None,
-        seed: 0,
-        trainee: request.trainee.clone(),
+    let mcap = attempt_run::create_dir(&dir)?;
+    let who = AttemptSpec {
         exercise: request.exercise.clone(),
-        device: device.name().to_owned(),
+        trainee: request.trainee.clone(),
+        expert: false,
+        mode: Some(if guided { "guided" } else { "exam" }.to_owned()),
+        device: named.unwrap_or_else(|| device.name().to_owned()),
     };
+    let open = OpenAttempt::start(&store, &who, &mcap).await?;
+    let attempt = open.id;
+    let provenance = prepared.provenance(&request.trainee, &request.exercise, device.name());
+    let echo = pointer
+        .clone()
+        .map(|feed| Arc::new(feed) as Arc<dyn EchoSource>);
     let (publisher, feed) = ViewPublisher::new(echo);
     let mut observers: Vec<Box<dyn RecordObserver>> = vec![Box::new(publisher)];
     if settings.rrd {
-        let mut rerun = RerunSink::new(
-            &RerunTarget::File(dir.join("session.rrd")),
-            "cutlab",
-            config.period_nanos,
-            config.blade_length_m,
-        )
-        .map_err(|e| StationError::Plan(format!("starting the rerun log: {e}")))?;
-        rerun
-            .log_plan(&plan)
-            .map_err(|e| StationError::Plan(format!("logging the plan: {e}")))?;
-        observers.push(Box::new(rerun));
+        let target = RerunTarget::File(dir.join("session.rrd"));
+        observers.push(Box::new(prepared.rerun_sink(&target)?));
     }
     let control = Arc::new(Control::new(Duration::from_secs_f64(settings.absence_s)));
     let device = Box::new(StationDevice {
@@ -477,93 +417,27 @@ pub async fn start(
         control: control.clone(),
     });
     let (ending_tx, ending) = watch::channel(None);
-    let runtime = tokio::runtime::Handle::current();
-    let thread_control = control.clone();
-    let thread_pointer = pointer.clone();
-    let thread_plan = plan.clone();
-    let spec = scene.spec.clone();
-    let tets = scene.model.mesh.tet_count();
     let figures = Arc::new(OnceLock::new());
-    let thread_figures = figures.clone();
-    let recordings = settings.recordings.clone();
-    let hub = settings.hub.clone();
+    let viewpoint = prepared.scene.viewpoint.clone();
+    let thread = SessionThread {
+        prepared,
+        device,
+        provenance,
+        mcap,
+        observers,
+        open,
+        store,
+        control: control.clone(),
+        pointer: pointer.clone(),
+        figures: figures.clone(),
+        ending: ending_tx,
+        recordings: settings.recordings.clone(),
+        hub: settings.hub.clone(),
+        runtime: tokio::runtime::Handle::current(),
+    };
     std::thread::Builder::new()
         .name("cutlab-station".into())
-        .spawn(move || {
-            let recorded = record::run_recorded(
-                session,
-                device,
-                &config,
-                &provenance,
-                Some(&thread_plan),
-                &spec,
-                &mcap,
-                record_settings,
-                Some(Box::new(observers)),
-            );
-            let outcome = match recorded {
-                Ok(r) => {
-                    if let Ok(report) = &r.report {
-                        let _ = thread_figures.set(SessionFigures {
-                            servo: report.servo.period_stats(report.period_nanos),
-                            speed: report.speed(),
-                            sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
-                            tets,
-                            time_step_s: step_s,
-                        });
-                    }
-                    if let Some(o) = r.observer
-                        && let Err(e) = o.finish()
-                    {
-                        tracing::warn!("attempt {attempt}: finishing the view and rerun log: {e}");
-                    }
-                    // a pointer that faulted (a stalled or broken page) ended the session as a
-                    // lost device does: the attempt is not scored
-                    let fault = thread_pointer.as_ref().and_then(PointerFeed::fault);
-                    match r.report {
-                        Ok(_) if thread_control.lost() => Err(format!(
-                            "the station's page went away and did not come back within {:.0} s",
-                            thread_control.absence().as_secs_f64()
-                        )),
-                        Ok(_) if let Some(fault) = fault => {
-                            Err(format!("the station's pointer failed: {fault}"))
-                        }
-                        Ok(_) => Ok(mcap.as_path()),
-                        Err(e) => Err(format!("the session failed: {e}")),
-                    }
-                }
-                Err(e) => Err(format!("recording failed: {e}")),
-            };
-            let ending = match runtime.block_on(attempt::finish_attempt(
-                &store,
-                attempt,
-                outcome,
-                recordings.as_ref(),
-            )) {
-                Ok(Finished::Scored(o, _)) => Ending::Scored {
-                    attempt,
-                    score: o.verdict.score,
-                    passed: o.verdict.pass,
-                },
-                Ok(Finished::Incomplete(why)) => Ending::Incomplete { attempt, why },
-                Err(e) => Ending::Incomplete {
-                    attempt,
-                    why: e.to_string(),
-                },
-            };
-            drop(attempt_lock);
-            tracing::info!("station attempt {attempt} ended: {ending:?}");
-            let _ = ending_tx.send(Some(ending));
-            if let Some(hub) = hub {
-                // the queue to the hub in the background; a hub that is down only waits
-                runtime.spawn(async move {
-                    match crate::sync::sync_new(&store, &hub, recordings.as_ref()).await {
-                        Ok(r) => tracing::info!("sent to the hub {}: {r:?}", hub.url()),
-                        Err(e) => tracing::warn!("{e}"),
-                    }
-                });
-            }
-        })
+        .spawn(move || thread.run())
         .map_err(|source| StationError::Io {
             what: "starting the station's session thread".into(),
             source,
@@ -575,11 +449,119 @@ pub async fn start(
         guided,
         plan,
         force_limit_newtons,
-        viewpoint: scene.viewpoint,
+        viewpoint,
         feed,
         pointer,
         control,
         ending,
         figures,
     })
+}
+
+/// The limit the attempt is scored with (one source for the score and the page's force bar):
+/// the exercise's peak-force threshold for the `class` of device, else its plan's force
+/// limit.
+async fn force_limit(
+    store: &Store,
+    exercise: &Exercise,
+    plan: &ExpertPlan,
+    class: DeviceClass,
+) -> Result<f64, StationError> {
+    Ok(store
+        .thresholds_for(exercise.id, class)
+        .await?
+        .metrics
+        .iter()
+        .find(|t| t.key == "peak_force_n")
+        .and_then(|t| t.upper)
+        .unwrap_or(plan.force_limit_n))
+}
+
+/// A station session's own thread: records the session, then ends its attempt, says how it
+/// ended and queues it to the hub.
+struct SessionThread {
+    prepared: Prepared,
+    device: Box<dyn HapticDevice>,
+    provenance: Provenance,
+    mcap: PathBuf,
+    observers: Vec<Box<dyn RecordObserver>>,
+    open: OpenAttempt,
+    store: Store,
+    control: Arc<Control>,
+    pointer: Option<PointerFeed>,
+    figures: Arc<OnceLock<SessionFigures>>,
+    ending: watch::Sender<Option<Ending>>,
+    recordings: Option<RecordingStore>,
+    hub: Option<crate::sync::Hub>,
+    runtime: tokio::runtime::Handle,
+}
+
+impl SessionThread {
+    fn run(self) {
+        let attempt = self.open.id;
+        let tets = self.prepared.scene.model.mesh.tet_count();
+        let time_step_s = self.prepared.time_step_s();
+        let mut recorded = self.prepared.record(
+            self.device,
+            &self.provenance,
+            &self.mcap,
+            Some(Box::new(self.observers)),
+        );
+        if let Ok(r) = &recorded {
+            if let Ok(report) = &r.report {
+                let _ = self.figures.set(SessionFigures {
+                    servo: report.servo.period_stats(report.period_nanos),
+                    speed: report.speed(),
+                    sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
+                    tets,
+                    time_step_s,
+                });
+            }
+        }
+        if let Err(e) = attempt_run::finish_observer(&mut recorded) {
+            tracing::warn!("attempt {attempt}: {e}");
+        }
+        // a page that went away, or a pointer that faulted (a stalled or broken page), ends the
+        // session as a lost device does: the attempt is not scored
+        let fault = self.pointer.as_ref().and_then(PointerFeed::fault);
+        let outcome = match attempt_run::outcome_of(&recorded) {
+            Ok(_) if self.control.lost() => Err(format!(
+                "the station's page went away and did not come back within {:.0} s",
+                self.control.absence().as_secs_f64()
+            )),
+            Ok(_) if let Some(fault) = fault => {
+                Err(format!("the station's pointer failed: {fault}"))
+            }
+            other => other,
+        };
+        let finished = self.runtime.block_on(self.open.finish(
+            &self.store,
+            outcome,
+            self.recordings.as_ref(),
+        ));
+        let ending = match finished {
+            Ok(Finished::Scored(o, _)) => Ending::Scored {
+                attempt,
+                score: o.verdict.score,
+                passed: o.verdict.pass,
+            },
+            Ok(Finished::Incomplete(why)) => Ending::Incomplete { attempt, why },
+            Err(e) => Ending::Incomplete {
+                attempt,
+                why: e.to_string(),
+            },
+        };
+        tracing::info!("station attempt {attempt} ended: {ending:?}");
+        let _ = self.ending.send(Some(ending));
+        if let Some(hub) = self.hub {
+            let (store, recordings) = (self.store, self.recordings);
+            // the queue to the hub in the background; a hub that is down only waits
+            self.runtime.spawn(async move {
+                match crate::sync::sync_new(&store, &hub, recordings.as_ref()).await {
+                    Ok(r) => tracing::info!("sent to the hub {}: {r:?}", hub.url()),
+                    Err(e) => tracing::warn!("{e}"),
+                }
+            });
+        }
+    }
 }

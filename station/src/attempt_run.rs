@@ -1,0 +1,515 @@
+//! One attempt run, the path `cutlab session`, the station, the demo's seeding and the benches
+//! share: the scene built and what the hand follows planned on its tissue ([`Prepared::new`]),
+//! the device made for that plan ([`Prepared::device`]), the attempt opened in the store
+//! ([`OpenAttempt::start`]), the session recorded ([`Prepared::record`]), the attempt scored or
+//! marked incomplete ([`OpenAttempt::finish`]) and sent to a hub ([`crate::sync::sync_new`]).
+//! [`run_blocking`] strings them together on the caller's thread; the station runs the same
+//! stages, the recording on a thread of its own. Printing is the caller's.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use cutlab_assessor::ExpertPlan;
+use cutlab_assessor::recordings::RecordingStore;
+use cutlab_assessor::store::Store;
+use cutlab_haptics::device::{
+    CsvDevice, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan, PointerHand,
+    SyntheticTrainee,
+};
+use cutlab_haptics::servo::Clock;
+use cutlab_haptics::tap::TapSettings;
+use cutlab_haptics::{Session, SessionConfig, StepChoice, TimeStep};
+use cutlab_recorder::record::{self, Provenance, RecordSettings, RecordedSession};
+use cutlab_recorder::writer::RecordObserver;
+use cutlab_recorder::{RecordedHand, Recording, RerunSink, RerunTarget, WriterOptions};
+use cutlab_sim::scene::{BuildOptions, Scene};
+
+use crate::StationError;
+use crate::attempt::{self, AttemptLock, Finished};
+use crate::sync::{Hub, SyncReport};
+
+/// How an attempt's session runs, whoever starts it.
+#[derive(Debug, Clone)]
+pub struct RunSettings {
+    /// The scene's resolution when it is generated: at least this many tetrahedra (`None`:
+    /// the scene's own).
+    pub min_tets: Option<usize>,
+    /// The simulation step (the scene's, a fixed one, or the smallest that keeps real time
+    /// here, measured when the run is prepared).
+    pub time_step: TimeStep,
+    /// The live clock for a person; the virtual clock for tests, benchmarks and the demo.
+    pub clock: Clock,
+    /// The longest session, s.
+    pub duration_s: f64,
+    /// Whether the servo thread asks for real-time priority (live clock only).
+    pub realtime_priority: bool,
+    /// A keyframe every this many seconds (a replay resumes at each).
+    pub keyframe_every_s: f64,
+    /// The recorded surface at least this often, Hz (0: never).
+    pub surface_hz: f64,
+    /// The seed of a synthetic trainee's or a scripted hand's variation.
+    pub seed: u64,
+    /// How an OpenIGTLink device sends the force back.
+    pub igtl: IgtlOptions,
+}
+
+impl Default for RunSettings {
+    fn default() -> Self {
+        Self {
+            min_tets: None,
+            time_step: TimeStep::Scene,
+            clock: Clock::Live,
+            duration_s: 60.0,
+            realtime_priority: true,
+            keyframe_every_s: 1.0,
+            surface_hz: 0.0,
+            seed: 0,
+            igtl: IgtlOptions::default(),
+        }
+    }
+}
+
+impl RunSettings {
+    /// Whether the settings make a session: a duration of at most a day, a positive keyframe
+    /// interval, a surface rate that is not negative.
+    pub fn check(&self) -> Result<(), StationError> {
+        let bad = |what: String| Err(StationError::Settings(what));
+        if !(self.duration_s > 0.0 && self.duration_s <= 86_400.0) {
+            return bad(format!(
+                "the duration must be between 0 and 86400 seconds, got {}",
+                self.duration_s
+            ));
+        }
+        if !(self.keyframe_every_s > 0.0 && self.keyframe_every_s.is_finite()) {
+            return bad(format!(
+                "the keyframe interval must be positive, got {} s",
+                self.keyframe_every_s
+            ));
+        }
+        if !(self.surface_hz >= 0.0 && self.surface_hz.is_finite()) {
+            return bad(format!(
+                "the surface rate must not be negative, got {} Hz",
+                self.surface_hz
+            ));
+        }
+        Ok(())
+    }
+
+    /// The recording's settings at the simulation step `step_s`: a keyframe every
+    /// `keyframe_every_s` (to the nearest step), the surface at least `surface_hz` often.
+    pub fn record_settings(&self, step_s: f64) -> RecordSettings {
+        RecordSettings {
+            tap: TapSettings {
+                keyframe_every_steps: self.keyframe_every_steps(step_s),
+                surface_every_steps: surface_every_steps(self.surface_hz, step_s),
+                ..TapSettings::default()
+            },
+            writer: WriterOptions::default(),
+        }
+    }
+
+    fn keyframe_every_steps(&self, step_s: f64) -> u64 {
+        ((self.keyframe_every_s / step_s).round() as u64).max(1)
+    }
+}
+
+/// The surface recorded every this many steps of `step_s`, so at least `hz` often (0: never).
+/// A ratio within 1e-9 of a whole number is that number (10 Hz at 1 ms: every 100th step).
+fn surface_every_steps(hz: f64, step_s: f64) -> u64 {
+    if hz > 0.0 {
+        ((1.0 / (hz * step_s) * (1.0 + 1e-9)).floor() as u64).max(1)
+    } else {
+        0
+    }
+}
+
+/// What the hand follows, planned on the tissue once the scene is built.
+#[derive(Debug, Clone, Copy)]
+pub enum PlanSource<'a> {
+    /// An exercise's expert plan, projected onto the tissue.
+    Exercise(&'a ExpertPlan),
+    /// 60 mm across the tissue's top in the scene's `incision` directions, at most 8 mm deep.
+    AcrossScene,
+}
+
+/// A session ready to run: its scene built and settled, its step chosen, what the hand
+/// follows planned on its tissue, and how it runs and is recorded.
+pub struct Prepared {
+    pub scene: Scene,
+    /// The scene as given (a built-in name or a file), as a replay loads it again.
+    pub scene_arg: String,
+    pub session: Session,
+    /// What choosing the step measured (`TimeStep::Auto`).
+    pub step_choice: Option<StepChoice>,
+    /// What the hand follows, or why nothing can be planned on this tissue (a device that
+    /// follows no plan runs all the same).
+    plan: Result<Plan, String>,
+    pub config: SessionConfig,
+    pub settings: RunSettings,
+}
+
+impl std::fmt::Debug for Prepared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Prepared")
+            .field("scene", &self.scene.spec.name)
+            .field("plan", &self.plan)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Prepared {
+    /// Builds `scene` (a built-in name or a file) and settles it; plans what the hand follows
+    /// from `plan`. An exercise's plan that does not fit the tissue is an error; the scene's own
+    /// incision that does not is kept as the reason (see [`Self::plan`]). Takes a while: call
+    /// it off async threads.
+    pub fn new(
+        scene: &str,
+        settings: &RunSettings,
+        plan: PlanSource<'_>,
+    ) -> Result<Self, StationError> {
+        settings.check()?;
+        let min_tets = settings.min_tets;
+        let built = Scene::load(scene, BuildOptions { min_tets })?;
+        let (built, session, step_choice) = Session::at_time_step(built, settings.time_step)?;
+        let plan = match plan {
+            PlanSource::Exercise(p) => Ok(attempt::plan_on_tissue(&session, p)?),
+            PlanSource::AcrossScene => across(&built, &session),
+        };
+        let step_s = session.sim.settings.time_step_s;
+        let mut config = SessionConfig {
+            clock: settings.clock,
+            duration_s: settings.duration_s,
+            realtime_priority: settings.realtime_priority,
+            // the surface BVH is built again at every keyframe, so a replay can resume at each
+            collider_rebuild_every_steps: settings.keyframe_every_steps(step_s),
+            ..SessionConfig::default()
+        };
+        config.render = config.render.with_scene_cut(&built.spec);
+        Ok(Self {
+            scene: built,
+            scene_arg: scene.to_owned(),
+            session,
+            step_choice,
+            plan,
+            config,
+            settings: settings.clone(),
+        })
+    }
+
+    /// What the hand follows.
+    pub fn plan(&self) -> Result<&Plan, StationError> {
+        self.plan
+            .as_ref()
+            .map_err(|why| StationError::Plan(why.clone()))
+    }
+
+    /// The simulation step, s.
+    pub fn time_step_s(&self) -> f64 {
+        self.session.sim.settings.time_step_s
+    }
+
+    /// The device `spec` names: one that follows the plan is made for it (with the run's
+    /// seed); a file, a recording or a port is opened ([`open_device`]).
+    pub fn device(&self, spec: &DeviceSpec) -> Result<Box<dyn HapticDevice>, StationError> {
+        let seed = self.settings.seed;
+        Ok(match spec {
+            DeviceSpec::Trainee { name, skill } => Box::new(
+                SyntheticTrainee::new(name, self.plan()?.clone(), *skill, seed)?
+                    .expecting_cut_of(&self.config.render),
+            ),
+            DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, self.plan()?, seed)?),
+            DeviceSpec::Csv(_) | DeviceSpec::Recording(_) | DeviceSpec::Igtl(_) => {
+                open_device(spec, &self.settings.igtl)?
+                    .ok_or_else(|| StationError::NoSuchDevice(format!("{spec} follows no plan")))?
+            }
+        })
+    }
+
+    /// Who did what, as the recording says it (a replay builds the same scene from it).
+    pub fn provenance(&self, trainee: &str, exercise: &str, device: &str) -> Provenance {
+        Provenance {
+            scene: self.scene_arg.clone(),
+            min_tets: self.settings.min_tets,
+            seed: self.settings.seed,
+            trainee: trainee.to_owned(),
+            exercise: exercise.to_owned(),
+            device: device.to_owned(),
+        }
+    }
+
+    /// A rerun log of the session at `target`, with the plan logged and the view framed on it.
+    pub fn rerun_sink(&self, target: &RerunTarget) -> Result<RerunSink, StationError> {
+        RerunSink::of_session(
+            target,
+            self.config.period_nanos,
+            self.config.blade_length_m,
+            self.plan.as_ref().ok(),
+        )
+        .map_err(|e| StationError::Settings(format!("starting the rerun log: {e}")))
+    }
+
+    /// Runs the session with `device`, recorded to `mcap` (and to `observer`).
+    pub fn record(
+        self,
+        device: Box<dyn HapticDevice>,
+        provenance: &Provenance,
+        mcap: &Path,
+        observer: Option<Box<dyn RecordObserver>>,
+    ) -> Result<RecordedSession, StationError> {
+        let settings = self.settings.record_settings(self.time_step_s());
+        Ok(record::run_recorded(
+            self.session,
+            device,
+            &self.config,
+            provenance,
+            self.plan.as_ref().ok(),
+            &self.scene.spec,
+            mcap,
+            settings,
+            observer,
+        )?)
+    }
+}
+
+/// 60 mm across the tissue's top in the scene's `incision` directions, at most 8 mm deep.
+fn across(scene: &Scene, session: &Session) -> Result<Plan, String> {
+    // the scene's incision directions were checked when it was built
+    let (up, along) = scene.spec.incision.unit().map_err(|e| e.to_string())?;
+    let (lo, hi) = scene.model.mesh.bounding_box();
+    let depth_m = (0.4 * (hi - lo).dot(&up.abs())).min(0.008);
+    session
+        .plan_across(&up, &along, 0.06, depth_m)
+        .map_err(|e| format!("planning the incision across the tissue: {e}"))
+}
+
+/// The device `spec` names when it needs no plan (a trajectory file, a recorded hand, an
+/// OpenIGTLink port), opened now so that a bad file or a busy port is said before the scene
+/// is built; `None` for a device that follows the plan.
+pub fn open_device(
+    spec: &DeviceSpec,
+    igtl: &IgtlOptions,
+) -> Result<Option<Box<dyn HapticDevice>>, StationError> {
+    Ok(Some(match spec {
+        DeviceSpec::Trainee { .. } | DeviceSpec::PointerHand(_) => return Ok(None),
+        DeviceSpec::Csv(path) => Box::new(CsvDevice::open(path)?),
+        DeviceSpec::Recording(path) => {
+            let recording = Recording::open(path).map_err(|e| {
+                StationError::Settings(format!("reading the recording {}: {e}", path.display()))
+            })?;
+            Box::new(RecordedHand::new(&recording)?)
+        }
+        DeviceSpec::Igtl(port) => {
+            let d = IgtlDevice::listen_with(SocketAddr::from(([0, 0, 0, 0], *port)), igtl.clone())?;
+            tracing::info!(
+                "OpenIGTLink device listening on {} (TRANSFORM in, mm; force out as {:?} {:?}, N)",
+                d.address(),
+                igtl.force_output,
+                igtl.force_device_name
+            );
+            Box::new(d)
+        }
+    }))
+}
+
+/// Whose attempt a run is, at which exercise.
+#[derive(Debug, Clone)]
+pub struct AttemptSpec {
+    pub exercise: String,
+    pub trainee: String,
+    /// An expert's reference attempt (its metrics set the exercise's thresholds).
+    pub expert: bool,
+    /// Guided or exam, when the run says (the station's).
+    pub mode: Option<String>,
+    /// The device as its user named it.
+    pub device: String,
+}
+
+/// An attempt in the store while its session runs, its lock held (no sweep takes it for a
+/// dead station's).
+#[derive(Debug)]
+pub struct OpenAttempt {
+    pub id: i64,
+    lock: AttemptLock,
+}
+
+impl OpenAttempt {
+    /// Starts `who`'s attempt, recorded at `mcap`.
+    pub async fn start(
+        store: &Store,
+        who: &AttemptSpec,
+        mcap: &Path,
+    ) -> Result<Self, StationError> {
+        // held until the attempt has ended
+        let lock = AttemptLock::hold(mcap)?;
+        let id = store
+            .start_recorded_attempt(&who.exercise, &who.trainee, mcap, who.expert)
+            .await?
+            .id;
+        store
+            .set_attempt_setup(id, who.mode.as_deref(), &who.device)
+            .await?;
+        Ok(Self { id, lock })
+    }
+
+    /// Scores the attempt from the recording at `outcome`'s path, or marks it incomplete with
+    /// `outcome`'s reason; keeps its recordings in `recordings`; lets go of the lock.
+    pub async fn finish(
+        self,
+        store: &Store,
+        outcome: Result<&Path, String>,
+        recordings: Option<&RecordingStore>,
+    ) -> Result<Finished, StationError> {
+        let finished = attempt::finish_attempt(store, self.id, outcome, recordings).await;
+        drop(self.lock);
+        finished
+    }
+}
+
+/// How a recorded session ended, for its attempt: the recording to score, or why not.
+pub fn outcome_of(recorded: &Result<RecordedSession, StationError>) -> Result<&Path, String> {
+    match recorded {
+        Ok(r) => match &r.report {
+            Ok(_) => Ok(r.path.as_path()),
+            Err(e) => Err(format!("the session failed: {e}")),
+        },
+        Err(e) => Err(format!("recording failed: {e}")),
+    }
+}
+
+/// The store an attempt run keeps its attempt in, and where its recordings and the attempt go
+/// once it ends.
+#[derive(Debug)]
+pub struct AttemptStore<'a> {
+    pub store: &'a Store,
+    pub recordings: Option<&'a RecordingStore>,
+    pub hub: Option<&'a Hub>,
+}
+
+/// What [`run_blocking`] did.
+#[derive(Debug)]
+pub struct RunResult {
+    /// The recorded session, or why it could not be recorded.
+    pub recorded: Result<RecordedSession, StationError>,
+    /// The attempt's id and how it ended (an attempt run).
+    pub attempt: Option<(i64, Result<Finished, StationError>)>,
+    /// What was sent to the hub, or why nothing was.
+    pub sync: Option<Result<SyncReport, String>>,
+    /// Whether the observer (a rerun log) was finished, before the attempt was scored.
+    pub observer: Result<(), String>,
+}
+
+/// One attempt run on this thread (`rt` runs the store's steps): `prepared` recorded to
+/// `mcap` with `device` and `observer`; as `who`'s attempt in `store` when given, scored when
+/// it ends and sent to the hub. An attempt that cannot be opened is the error; everything
+/// after it is in the result (the attempt is ended whatever happens to its session).
+pub fn run_blocking(
+    rt: &tokio::runtime::Runtime,
+    prepared: Prepared,
+    device: Box<dyn HapticDevice>,
+    who: Option<(&AttemptStore<'_>, &AttemptSpec)>,
+    mcap: &Path,
+    observer: Option<Box<dyn RecordObserver>>,
+) -> Result<RunResult, StationError> {
+    let (trainee, exercise) = who.map_or(("", ""), |(_, w)| (&*w.trainee, &*w.exercise));
+    let provenance = prepared.provenance(trainee, exercise, device.name());
+    let open = match who {
+        Some((at, w)) => Some(rt.block_on(OpenAttempt::start(at.store, w, mcap))?),
+        None => None,
+    };
+    let mut recorded = prepared.record(device, &provenance, mcap, observer);
+    let observer = finish_observer(&mut recorded);
+    let (Some(open), Some((at, _))) = (open, who) else {
+        return Ok(RunResult {
+            recorded,
+            attempt: None,
+            sync: None,
+            observer,
+        });
+    };
+    let id = open.id;
+    let outcome = outcome_of(&recorded);
+    let (finished, sync) = rt.block_on(async {
+        let finished = open.finish(at.store, outcome, at.recordings).await;
+        let sync = match at.hub {
+            // a hub that is down leaves the attempt queued, not the run failed
+            Some(hub) => Some(
+                crate::sync::sync_new(at.store, hub, at.recordings)
+                    .await
+                    .map_err(|e| e.to_string()),
+            ),
+            None => None,
+        };
+        (finished, sync)
+    });
+    Ok(RunResult {
+        recorded,
+        attempt: Some((id, finished)),
+        sync,
+        observer,
+    })
+}
+
+/// Finishes the recorded session's observer (flushes a rerun log, ends a view).
+pub fn finish_observer(recorded: &mut Result<RecordedSession, StationError>) -> Result<(), String> {
+    match recorded.as_mut().ok().and_then(|r| r.observer.take()) {
+        Some(o) => o
+            .finish()
+            .map_err(|e| format!("finishing the view and rerun log: {e}")),
+        None => Ok(()),
+    }
+}
+
+/// The folder a run records into, made if need be.
+pub fn create_dir(dir: &Path) -> Result<PathBuf, StationError> {
+    std::fs::create_dir_all(dir).map_err(|source| StationError::Io {
+        what: format!("creating {}", dir.display()),
+        source,
+    })?;
+    Ok(dir.join("session.mcap"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_surface_is_recorded_at_least_as_often_as_asked() {
+        // 60 Hz at 1 ms: every 16th step (62.5 Hz), not the nearest (17th, 58.8 Hz)
+        assert_eq!(surface_every_steps(60.0, 0.001), 16);
+        // a whole ratio stays whole despite rounding: 10 Hz at 1 ms, 30 Hz at 1/300 s
+        assert_eq!(surface_every_steps(10.0, 0.001), 100);
+        assert_eq!(surface_every_steps(30.0, 1.0 / 300.0), 10);
+        assert_eq!(surface_every_steps(0.0, 0.001), 0);
+        // faster than the step: every step
+        assert_eq!(surface_every_steps(5000.0, 0.001), 1);
+    }
+
+    #[test]
+    fn settings_that_make_no_session_are_refused() {
+        let ok = RunSettings::default();
+        assert!(ok.check().is_ok());
+        for bad in [
+            RunSettings {
+                duration_s: 0.0,
+                ..ok.clone()
+            },
+            RunSettings {
+                duration_s: f64::NAN,
+                ..ok.clone()
+            },
+            RunSettings {
+                keyframe_every_s: 0.0,
+                ..ok.clone()
+            },
+            RunSettings {
+                surface_hz: -1.0,
+                ..ok.clone()
+            },
+        ] {
+            assert!(
+                matches!(bad.check(), Err(StationError::Settings(_))),
+                "{bad:?}"
+            );
+        }
+    }
+}
