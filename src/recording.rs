@@ -219,7 +219,7 @@ pub fn replay(file: &Path, a: ReplayArgs) -> anyhow::Result<()> {
     }
     let observer = match &a.rerun {
         Some(target) => {
-            let plan = rec.plan()?.map(|p| p.to_plan());
+            let plan = rec.plan()?;
             let meta = rec.meta()?;
             let sink = RerunSink::of_session(
                 target,

@@ -79,6 +79,7 @@ pub struct SessionRun {
 
 /// `cutlab session`: runs the session, prints what it did, writes its files.
 pub fn run(o: &Options) -> anyhow::Result<()> {
+    o.run.check()?;
     // a device that needs no scene first: a bad file or a busy port is said at once
     let device = attempt_run::open_device(&o.device, &o.run.igtl)?;
     if let (DeviceSpec::Igtl(_), Some(d)) = (&o.device, &device) {

@@ -174,7 +174,10 @@ fn bad_session_arguments_give_a_clear_error() {
         ),
         (&["session", "--device", "igtl:99999"], "port number"),
         (&["session", "--clock", "sundial"], "unknown clock"),
-        (&["session", "--duration=-1"], "--duration must be"),
+        (
+            &["session", "--duration=-1"],
+            "duration must be between 0 and 86400",
+        ),
         (
             &["session", "--time-step-ms", "20", "--min-tets", "500"],
             "outside 0.1-10 ms",

@@ -32,7 +32,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use cutlab_haptics::device::Plan;
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::render::{Mode, fault};
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::tap::{Keyframe, SurfaceSnapshot};
