@@ -74,7 +74,7 @@ pub fn run(
         ..SessionConfig::default()
     };
     let make =
-        || -> anyhow::Result<(Session, cutlab_haptics::device::Plan, Box<SyntheticTrainee>)> {
+        || -> anyhow::Result<(Session, cutlab_haptics::plan::Plan, Box<SyntheticTrainee>)> {
             let mut session = Session::new(&scene)?;
             if localise {
                 session.sim.settings.localisation = Some(LocalisationSettings::default());

@@ -20,7 +20,7 @@
 //!
 //! The gestures are deterministic given the seed.
 
-use crate::pose::Rng;
+use cutlab_sim::rng::Rng;
 
 /// One step of what the hand does, in order.
 #[derive(Debug, Clone, Copy, PartialEq)]

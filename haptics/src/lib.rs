@@ -29,6 +29,7 @@ pub mod collision;
 pub mod device;
 pub mod error;
 pub mod hand;
+pub mod plan;
 pub mod pose;
 pub mod render;
 pub mod servo;

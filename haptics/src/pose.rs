@@ -1,8 +1,4 @@
-//! The tool's pose (and the seeded random number generator, re-exported from `cutlab_sim`).
-
-/// The seeded generator, defined in `cutlab_sim::rng` (the synthetic trainee uses it as
-/// `pose::Rng`).
-pub use cutlab_sim::rng::Rng;
+//! The tool's pose.
 
 use crate::{Point3, Rotation, Vector3};
 

@@ -23,7 +23,8 @@ use cutlab_sim::scene::Scene;
 use cutlab_sim::solver::{Simulation, StaticSettings};
 
 use crate::collision::SurfaceCollider;
-use crate::device::{HapticDevice, Plan};
+use crate::device::HapticDevice;
+use crate::plan::Plan;
 use crate::render::{ContactModel, ForceRenderer, RenderSettings, fault};
 use crate::servo::{self, Clock, ServoConfig, ServoEvent, ServoLinks, ServoReport, ServoSample};
 use crate::stepper::{SessionStepper, StepperStats};

@@ -3,7 +3,8 @@
 //! run under an allocator that counts every allocation made while forbidden.
 
 use assert_no_alloc::{AllocDisabler, assert_no_alloc, reset_violation_count, violation_count};
-use cutlab_haptics::device::{HapticDevice, IgtlDevice, Plan, Skill, SyntheticTrainee};
+use cutlab_haptics::device::{HapticDevice, IgtlDevice, Skill, SyntheticTrainee};
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::render::{ContactModel, ForceRenderer, RenderSettings};
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::{Point3, Vector3};

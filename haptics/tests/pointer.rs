@@ -4,8 +4,9 @@ use cutlab_haptics::device::pointer::{
     PointerCounters, PointerFault, PointerOrientation, PushError, scalpel_down,
 };
 use cutlab_haptics::device::{
-    DeviceFault, HapticDevice, Plan, PointerDevice, PointerFeed, PointerOptions, PointerSample,
+    DeviceFault, HapticDevice, PointerDevice, PointerFeed, PointerOptions, PointerSample,
 };
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::{Point3, Rotation, ToolPose, Vector3};
 use proptest::prelude::*;
 use std::sync::atomic::Ordering;

@@ -373,42 +373,6 @@ impl SessionMeta {
     }
 }
 
-/// The planned incision, as attached (`plan.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PlanMsg {
-    pub line_m: Vec<[f64; 3]>,
-    pub normals: Vec<[f64; 3]>,
-    pub depth_m: f64,
-    pub approach_height_m: f64,
-    /// The exercise's viewpoint; absent in recordings made before it was recorded.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub viewpoint_m: Option<[f64; 3]>,
-}
-
-impl From<&cutlab_haptics::device::Plan> for PlanMsg {
-    fn from(p: &cutlab_haptics::device::Plan) -> Self {
-        Self {
-            line_m: p.line_m.iter().map(|q| q.coords.into()).collect(),
-            normals: p.normals.iter().map(|&n| n.into()).collect(),
-            depth_m: p.depth_m,
-            approach_height_m: p.approach_height_m,
-            viewpoint_m: p.viewpoint_m.map(|v| v.coords.into()),
-        }
-    }
-}
-
-impl PlanMsg {
-    pub fn to_plan(&self) -> cutlab_haptics::device::Plan {
-        cutlab_haptics::device::Plan {
-            line_m: self.line_m.iter().map(|&q| Point3::from(q)).collect(),
-            normals: self.normals.iter().map(|&n| Vector3::from(n)).collect(),
-            depth_m: self.depth_m,
-            approach_height_m: self.approach_height_m,
-            viewpoint_m: self.viewpoint_m.map(Point3::from),
-        }
-    }
-}
-
 /// Protobuf pose of a tick.
 pub fn pose_message(pose: &ToolPose, log_time_nanos: u64) -> foxglove::messages::PoseInFrame {
     use foxglove::messages::{Pose, PoseInFrame, Quaternion, Vector3 as FVector3};
@@ -495,39 +459,5 @@ pub fn surface_message(
             }],
             ..Default::default()
         }],
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The plan's viewpoint goes through `plan.json`; a plan recorded before it was kept reads
-    /// back without one.
-    #[test]
-    fn the_plan_keeps_its_viewpoint_and_old_plans_still_read() {
-        let plan = cutlab_haptics::device::Plan {
-            line_m: vec![Point3::new(-0.03, 0.0, 0.0), Point3::new(0.03, 0.0, 0.0)],
-            normals: vec![Vector3::z(); 2],
-            depth_m: 0.008,
-            approach_height_m: 0.015,
-            viewpoint_m: Some(Point3::new(0.0, 0.01, 0.15)),
-        };
-        let json = serde_json::to_string(&PlanMsg::from(&plan)).expect("json");
-        let back: PlanMsg = serde_json::from_str(&json).expect("read back");
-        assert_eq!(back.to_plan(), plan);
-        let old = r#"{"line_m":[[0,0,0],[0.06,0,0]],"normals":[[0,0,1],[0,0,1]],
-            "depth_m":0.008,"approach_height_m":0.015}"#;
-        let old: PlanMsg = serde_json::from_str(old).expect("an old plan");
-        assert_eq!(old.to_plan().viewpoint_m, None);
-        let unplaced = PlanMsg::from(&cutlab_haptics::device::Plan {
-            viewpoint_m: None,
-            ..plan
-        });
-        assert!(
-            !serde_json::to_string(&unplaced)
-                .expect("json")
-                .contains("viewpoint")
-        );
     }
 }

@@ -11,6 +11,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::{Point3, Rotation};
 use foxglove::Decode;
@@ -18,7 +19,7 @@ use mcap::records::Record;
 
 use crate::RecorderError;
 use crate::channels::{
-    self, KeyframeMsg, PlanMsg, SessionMeta, SimStepMsg, StateHashMsg, ToolStateMsg, TopologyMsg,
+    self, KeyframeMsg, SessionMeta, SimStepMsg, StateHashMsg, ToolStateMsg, TopologyMsg,
 };
 use crate::scan::{Announced, Damage, for_each_record};
 
@@ -185,8 +186,8 @@ impl Recording {
             .map(|a| a.2.as_slice())
     }
 
-    /// The planned incision, if attached.
-    pub fn plan(&self) -> Result<Option<PlanMsg>, RecorderError> {
+    /// What the hand followed, if attached.
+    pub fn plan(&self) -> Result<Option<Plan>, RecorderError> {
         self.attachment(channels::PLAN_ATTACHMENT)
             .map(|b| {
                 serde_json::from_slice(b)

@@ -5,13 +5,14 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use cutlab_haptics::device::{HapticDevice, Plan};
+use cutlab_haptics::device::HapticDevice;
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::tap::{self, TapSettings};
 use cutlab_haptics::{HapticsError, Session, SessionConfig, SessionReport, StateHash};
 
 use crate::RecorderError;
 pub use crate::channels::Provenance;
-use crate::channels::{self, Hex, PlanMsg, SessionMeta};
+use crate::channels::{self, Hex, SessionMeta};
 use crate::writer::{self, McapSink, RecordObserver, WriteStats, WriterOptions};
 
 /// How much to record.
@@ -62,11 +63,7 @@ pub fn run_recorded(
         json(scene_spec)?,
     )];
     if let Some(plan) = plan {
-        attachments.push((
-            channels::PLAN_ATTACHMENT,
-            "application/json",
-            json(&PlanMsg::from(plan))?,
-        ));
+        attachments.push((channels::PLAN_ATTACHMENT, "application/json", json(plan)?));
     }
     let sink = McapSink::create(path, &meta, &attachments, settings.writer)?;
     let (tap, feed) = tap::tap(settings.tap);

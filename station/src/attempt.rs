@@ -8,7 +8,7 @@ use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Outcome, Store};
 use cutlab_assessor::{AssessError, ExpertPlan, MetricSet};
 use cutlab_haptics::Session;
-use cutlab_haptics::device::Plan;
+use cutlab_haptics::plan::Plan;
 use cutlab_recorder::Recording;
 use cutlab_sim::{Point3, Vector3};
 

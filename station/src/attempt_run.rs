@@ -13,9 +13,9 @@ use cutlab_assessor::ExpertPlan;
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
-    CsvDevice, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, Plan, PointerHand,
-    SyntheticTrainee,
+    CsvDevice, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, PointerHand, SyntheticTrainee,
 };
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
 use cutlab_haptics::{Session, SessionConfig, StepChoice, TimeStep};

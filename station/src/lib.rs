@@ -24,7 +24,6 @@ pub mod set;
 pub mod sync;
 pub mod view;
 
-pub use cutlab_haptics::device::DeviceSpec;
 pub use error::StationError;
 pub use run::{
     Control, Ending, Input, POINTER, Running, SessionFigures, StartRequest, StationSettings,

@@ -17,9 +17,10 @@ use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Store};
 use cutlab_assessor::{DeviceClass, ExpertPlan};
 use cutlab_haptics::device::{
-    DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlOptions, Plan, PointerDevice,
-    PointerFeed, PointerOptions,
+    DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlOptions, PointerDevice, PointerFeed,
+    PointerOptions,
 };
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::{Clock, PeriodStats};
 use cutlab_haptics::{TimeStep, ToolPose, Vector3};
 use cutlab_recorder::RerunTarget;

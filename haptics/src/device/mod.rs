@@ -12,7 +12,7 @@ pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
 pub use pointer_hand::{HandKind, PointerHand, STEADY_PACE_M_PER_S};
 pub use spec::DeviceSpec;
-pub use trainee::{Plan, Skill, SyntheticTrainee};
+pub use trainee::{Skill, SyntheticTrainee};
 
 use crate::{ToolPose, Vector3};
 

@@ -18,8 +18,9 @@
 //! plane (the page picks on the tissue itself: the two agree on and near the line).
 
 use super::pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
-use super::{DeviceFault, HapticDevice, Plan};
+use super::{DeviceFault, HapticDevice};
 use crate::hand::{Gesture, Hand};
+use crate::plan::Plan;
 use crate::{HapticsError, Point3, ToolPose, Vector3};
 
 /// A careful person's cutting pace along the line, m/s.

@@ -14,64 +14,11 @@
 //! first part of the stroke it comes back up to the planned depth.
 
 use super::{DeviceFault, HapticDevice};
-use crate::pose::{BUTTON_BLADE, Rng};
+use crate::plan::Plan;
+use cutlab_sim::rng::Rng;
+
+use crate::pose::BUTTON_BLADE;
 use crate::{HapticsError, Point3, Rotation, ToolPose, Vector3};
-
-/// An expert plan: the incision line on the tissue surface and how to cut it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Plan {
-    /// Points of the planned line on the surface, entry first, exit last (at least two).
-    pub line_m: Vec<Point3>,
-    /// Outward surface normal at each point of `line_m` (unit).
-    pub normals: Vec<Vector3>,
-    /// Depth of the blade's tip below the surface while cutting, m.
-    pub depth_m: f64,
-    /// Height above the entry point where the hand starts and ends, m.
-    pub approach_height_m: f64,
-    /// Where the exercise views the surgical field from (the expert plan's eye), m; a review
-    /// of the cut looks from there. `None` when the plan names none.
-    pub viewpoint_m: Option<Point3>,
-}
-
-impl Plan {
-    /// Checks the plan's numbers.
-    pub fn check(&self) -> Result<(), HapticsError> {
-        let bad = |m: &str| Err(HapticsError::Config(format!("plan: {m}")));
-        if self.line_m.len() < 2 || self.line_m.len() != self.normals.len() {
-            return bad("needs at least two line points, each with a normal");
-        }
-        if !self.line_m.iter().all(|p| p.iter().all(|c| c.is_finite()))
-            || !self
-                .normals
-                .iter()
-                .all(|n| n.iter().all(|c| c.is_finite()) && (n.norm() - 1.0).abs() < 1e-6)
-        {
-            return bad("line points must be finite and normals unit vectors");
-        }
-        if !(self.depth_m >= 0.0
-            && self.depth_m < 0.1
-            && self.approach_height_m > 0.0
-            && self.approach_height_m < 1.0)
-        {
-            return bad("depth must be in [0, 0.1) m and approach height in (0, 1) m");
-        }
-        if self.length_m() < 1e-4 {
-            return bad("the line is shorter than 0.1 mm");
-        }
-        if self
-            .viewpoint_m
-            .is_some_and(|v| !v.iter().all(|c| c.is_finite()))
-        {
-            return bad("the viewpoint must be finite");
-        }
-        Ok(())
-    }
-
-    /// Length of the planned line, m.
-    pub fn length_m(&self) -> f64 {
-        self.line_m.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
-    }
-}
 
 /// Skill parameters of a synthetic trainee.
 #[derive(Debug, Clone, Copy, PartialEq)]

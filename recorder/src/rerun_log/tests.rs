@@ -161,7 +161,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
         0.015,
     )
     .expect("sink");
-    sink.log_plan(&cutlab_haptics::device::Plan {
+    sink.log_plan(&cutlab_haptics::plan::Plan {
         line_m: vec![Point3::new(0.0, 0.05, 0.0), Point3::new(0.1, 0.05, 0.0)],
         normals: vec![Vector3::z(); 2],
         depth_m: 0.005,
@@ -536,7 +536,7 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
     )
     .expect("sink");
     // a 100 mm incision along x on a surface facing +y, seen from a viewpoint above and behind
-    let plan = cutlab_haptics::device::Plan {
+    let plan = cutlab_haptics::plan::Plan {
         line_m: vec![Point3::new(0.0, 0.0, 0.0), Point3::new(0.1, 0.0, 0.0)],
         normals: vec![Vector3::y(); 2],
         depth_m: 0.005,
@@ -558,7 +558,7 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
     assert!(up.dot(&view).abs() < 1e-12 && up.dot(&Vector3::x()).abs() < 1e-12);
     assert!((view.cross(&up) - Vector3::x()).norm() < 1e-12, "{up}");
     // a far viewpoint gives its direction only; a short incision is seen from 5 cm
-    let far = plan_view(&cutlab_haptics::device::Plan {
+    let far = plan_view(&cutlab_haptics::plan::Plan {
         viewpoint_m: Some(Point3::new(0.05, 3.0, 0.0)),
         ..plan.clone()
     })
@@ -567,7 +567,7 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
         (far.position_m - Point3::new(0.05, 0.12, 0.0)).norm() < 1e-12,
         "{far:?}"
     );
-    let short = plan_view(&cutlab_haptics::device::Plan {
+    let short = plan_view(&cutlab_haptics::plan::Plan {
         line_m: vec![Point3::new(0.0, 0.0, 0.0), Point3::new(0.01, 0.0, 0.0)],
         ..plan.clone()
     })
@@ -577,7 +577,7 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
         "{short:?}"
     );
     // without a viewpoint: along the mean normal, at the framing distance
-    let unplaced = cutlab_haptics::device::Plan {
+    let unplaced = cutlab_haptics::plan::Plan {
         viewpoint_m: None,
         ..plan.clone()
     };
@@ -586,12 +586,12 @@ fn the_review_view_looks_from_the_exercise_viewpoint() {
         (normal_eye.position_m - Point3::new(0.05, 0.12, 0.0)).norm() < 1e-12,
         "{normal_eye:?}"
     );
-    let flat = cutlab_haptics::device::Plan {
+    let flat = cutlab_haptics::plan::Plan {
         normals: vec![Vector3::zeros(); 2],
         ..unplaced
     };
     assert_eq!(plan_view(&flat), None);
-    let on_the_line = cutlab_haptics::device::Plan {
+    let on_the_line = cutlab_haptics::plan::Plan {
         viewpoint_m: Some(middle),
         ..plan.clone()
     };

@@ -22,7 +22,7 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::HeaderMap;
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
-use cutlab_station::DeviceSpec;
+use cutlab_haptics::device::DeviceSpec;
 use cutlab_station::protocol::{self, ClientMessage};
 use cutlab_station::{Ending, Running, StartRequest, StationError};
 use maud::{Markup, html};
@@ -174,13 +174,8 @@ async fn start(
 
 /// What the page's script needs, in the canvas's `data-config`.
 fn config_json(r: &Running, driver: bool) -> String {
-    let plan = r.guided.then(|| {
-        serde_json::json!({
-            "line_m": r.plan.line_m.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
-            "normals": r.plan.normals.iter().map(|n| [n.x, n.y, n.z]).collect::<Vec<_>>(),
-            "depth_m": r.plan.depth_m,
-        })
-    });
+    // the plan as recorded (its serde form), shown in guided mode only
+    let plan = r.guided.then_some(&r.plan);
     let viewpoint = r.viewpoint.as_ref().map(|v| {
         serde_json::json!({
             "eye_m": v.eye_mm.map(|c| c * 1e-3),

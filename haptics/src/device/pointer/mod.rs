@@ -62,7 +62,8 @@ pub use sample::{
 
 use std::sync::Arc;
 
-use super::{DeviceFault, HapticDevice, Plan};
+use super::{DeviceFault, HapticDevice};
+use crate::plan::Plan;
 use crate::{HapticsError, Point3, Rotation, ToolPose, Vector3};
 use feed::Shared;
 use timeline::{Keyed, Timeline};
