@@ -54,11 +54,14 @@ impl Better {
     }
 }
 
-/// A metric's definition.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// A metric's definition: its key and SI unit (what is stored), which way it improves,
+/// whether it is scored, and how people see it (its label, the unit it is shown in).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Metric {
     /// Stable key (`snake_case`, SI unit suffix).
     pub key: &'static str,
+    /// What people call it ("Entry error").
+    pub label: &'static str,
     /// SI unit (`m`, `s`, `N`, `rad`, `deg`, `m^2`, `1` for ratios and counts).
     pub unit: &'static str,
     /// Which way it improves.
@@ -67,6 +70,43 @@ pub struct Metric {
     pub scored: bool,
     /// One line for reports.
     pub description: &'static str,
+    /// The unit it is shown in and the factor from the SI value, where it is not the SI
+    /// unit's own ([`display_unit`]): a fraction shown in %.
+    #[serde(skip)]
+    shown: Option<(&'static str, f64)>,
+}
+
+impl Metric {
+    const fn labelled(self, label: &'static str) -> Self {
+        Self { label, ..self }
+    }
+
+    const fn shown_in(self, unit: &'static str, factor: f64) -> Self {
+        Self {
+            shown: Some((unit, factor)),
+            ..self
+        }
+    }
+
+    /// The factor from the stored SI value to the shown one, and the unit shown (empty for
+    /// counts and scores): 1000 and "mm" for metres.
+    pub fn display(&self) -> (f64, &'static str) {
+        match self.shown {
+            Some((unit, factor)) => (factor, unit),
+            None => display_unit(self.unit),
+        }
+    }
+}
+
+/// How a stored SI unit is shown: the factor and the display unit (metres as millimetres).
+pub fn display_unit(unit: &str) -> (f64, &str) {
+    match unit {
+        "m" => (1e3, "mm"),
+        "m^2" => (1e6, "mm²"),
+        "deg" => (1.0, "°"),
+        "1" => (1.0, ""),
+        other => (1.0, other),
+    }
 }
 
 /// One metric's value for one attempt. `value` is `None` when the metric could not be
@@ -129,77 +169,89 @@ pub const METRICS: &[Metric] = &[
         Better::LowerIsBetter,
         true,
         "distance of the cut's start from the planned entry (seen along the normal)",
-    ),
+    )
+    .labelled("Entry error"),
     m(
         "exit_error_m",
         "m",
         Better::LowerIsBetter,
         true,
         "distance of the cut's end from the planned exit",
-    ),
+    )
+    .labelled("Exit error"),
     m(
         "length_error_m",
         "m",
         Better::TwoSided,
         true,
         "cut length minus planned length (signed)",
-    ),
+    )
+    .labelled("Length error"),
     m(
         "lateral_mean_m",
         "m",
         Better::LowerIsBetter,
         true,
         "mean distance of the cut from the planned line",
-    ),
+    )
+    .labelled("Lateral deviation (mean)"),
     m(
         "lateral_rms_m",
         "m",
         Better::LowerIsBetter,
         false,
         "RMS distance of the cut from the planned line",
-    ),
+    )
+    .labelled("Lateral deviation (RMS)"),
     m(
         "lateral_max_m",
         "m",
         Better::LowerIsBetter,
         true,
         "largest distance of the cut from the planned line",
-    ),
+    )
+    .labelled("Lateral deviation (max)"),
     m(
         "fraction_cut_in_tolerance",
         "1",
         Better::HigherIsBetter,
         true,
         "fraction of the planned line cut within the tolerance",
-    ),
+    )
+    .labelled("Cut within tolerance")
+    .shown_in("%", 100.0),
     m(
         "direction_error_deg",
         "deg",
         Better::LowerIsBetter,
         true,
         "angle between the cut's overall direction and the plan's",
-    ),
+    )
+    .labelled("Direction error"),
     m(
         "depth_error_m",
         "m",
         Better::TwoSided,
         true,
         "mean cut depth minus planned depth (signed)",
-    ),
+    )
+    .labelled("Depth error (mean)"),
     m(
         "depth_rms_error_m",
         "m",
         Better::LowerIsBetter,
         false,
         "RMS of cut depth minus planned depth",
-    ),
+    )
+    .labelled("Depth error (RMS)"),
     m(
         "approach_error_deg",
         "deg",
         Better::LowerIsBetter,
         false,
         "angle between the tip's motion entering the tissue and the planned approach",
-    ),
+    )
+    .labelled("Approach angle error"),
     // path
     m(
         "time_s",
@@ -207,70 +259,80 @@ pub const METRICS: &[Metric] = &[
         Better::LowerIsBetter,
         true,
         "task time: from the tip's first movement to its last",
-    ),
+    )
+    .labelled("Task time"),
     m(
         "path_length_m",
         "m",
         Better::LowerIsBetter,
         true,
         "distance travelled by the tip (filtered)",
-    ),
+    )
+    .labelled("Path length"),
     m(
         "economy_of_motion",
         "1",
         Better::HigherIsBetter,
         false,
         "straight distance start to end over path length",
-    ),
+    )
+    .labelled("Economy of motion"),
     m(
         "idle_time_s",
         "s",
         Better::LowerIsBetter,
         false,
         "time with the tip (nearly) still",
-    ),
+    )
+    .labelled("Idle time"),
     m(
         "movements",
         "1",
         Better::LowerIsBetter,
         true,
         "number of movements (speed threshold crossings)",
-    ),
+    )
+    .labelled("Movements"),
     m(
         "angular_path_rad",
         "rad",
         Better::LowerIsBetter,
         false,
         "total rotation of the tool",
-    ),
+    )
+    .labelled("Tool rotation"),
     m(
         "ldlj",
         "1",
         Better::HigherIsBetter,
         true,
         "log dimensionless jerk of the whole speed profile",
-    ),
+    )
+    .labelled("Smoothness (LDLJ)"),
     m(
         "sparc",
         "1",
         Better::HigherIsBetter,
         false,
         "spectral arc length of the whole speed profile",
-    ),
+    )
+    .labelled("Smoothness (SPARC)"),
     m(
         "ldlj_per_movement",
         "1",
         Better::HigherIsBetter,
         false,
         "mean log dimensionless jerk per movement",
-    ),
+    )
+    .labelled("Smoothness per movement (LDLJ)"),
     m(
         "sparc_per_movement",
         "1",
         Better::HigherIsBetter,
         false,
         "mean spectral arc length per movement",
-    ),
+    )
+    .labelled("Smoothness per movement (SPARC)"),
     // safety
     m(
         "peak_force_n",
@@ -278,42 +340,48 @@ pub const METRICS: &[Metric] = &[
         Better::LowerIsBetter,
         true,
         "largest force",
-    ),
+    )
+    .labelled("Peak force"),
     m(
         "mean_force_n",
         "N",
         Better::LowerIsBetter,
         false,
         "mean force while touching",
-    ),
+    )
+    .labelled("Mean force"),
     m(
         "time_above_force_limit_s",
         "s",
         Better::LowerIsBetter,
         false,
         "time above the plan's force limit",
-    ),
+    )
+    .labelled("Time above force limit"),
     m(
         "excessive_force_events",
         "1",
         Better::LowerIsBetter,
         false,
         "times the force rose above the limit",
-    ),
+    )
+    .labelled("Excessive force events"),
     m(
         "cut_outside_corridor_m",
         "m",
         Better::LowerIsBetter,
         true,
         "length of cut beyond the corridor",
-    ),
+    )
+    .labelled("Cut outside corridor"),
     m(
         "cut_area_outside_corridor_m2",
         "m^2",
         Better::LowerIsBetter,
         false,
         "cut area (length x depth) beyond the corridor",
-    ),
+    )
+    .labelled("Cut area outside corridor"),
     // field
     m(
         "target_visible_fraction",
@@ -321,21 +389,25 @@ pub const METRICS: &[Metric] = &[
         Better::HigherIsBetter,
         false,
         "fraction of the target seen from the viewpoint",
-    ),
+    )
+    .labelled("Target visible")
+    .shown_in("%", 100.0),
     m(
         "opening_width_m",
         "m",
         Better::HigherIsBetter,
         false,
         "widest gap between the wound's lips",
-    ),
+    )
+    .labelled("Opening width"),
     m(
         "opening_area_m2",
         "m^2",
         Better::HigherIsBetter,
         false,
         "area of the wound's opening seen along the normal",
-    ),
+    )
+    .labelled("Opening area"),
 ];
 
 const fn m(
@@ -347,10 +419,12 @@ const fn m(
 ) -> Metric {
     Metric {
         key,
+        label: key,
         unit,
         better,
         scored,
         description,
+        shown: None,
     }
 }
 
