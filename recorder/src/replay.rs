@@ -179,6 +179,19 @@ impl ReplayReport {
         }
     }
 
+    /// Adds a stretch replayed on its own (in order after the ones added before).
+    fn absorb(&mut self, part: ReplayReport) {
+        self.steps += part.steps;
+        self.keyframes_checked += part.keyframes_checked;
+        self.keyframes_matched += part.keyframes_matched;
+        self.cuts_recorded += part.cuts_recorded;
+        self.cuts_replayed += part.cuts_replayed;
+        self.divergences += part.divergences;
+        self.first_divergence = self.first_divergence.take().or(part.first_divergence);
+        self.simulated_s += part.simulated_s;
+        self.final_hash = part.final_hash;
+    }
+
     /// Every keyframe matched and every cut was the same.
     pub fn verified(&self) -> bool {
         self.first_divergence.is_none() && self.keyframes_checked > 0
@@ -392,6 +405,40 @@ impl<'a> Checks<'a> {
         out
     }
 
+    /// Where a replay of the window starts: at the last resumable keyframe before it (restored
+    /// into `stepper` and checked: `None` if it differs), or at the settled scene when there is
+    /// none or `resimulate` says so.
+    fn start(
+        &self,
+        rec: &Recording,
+        stepper: &mut SessionStepper,
+        window: Window,
+        resimulate: bool,
+        report: &mut ReplayReport,
+    ) -> Result<Option<Start>, RecorderError> {
+        let seek_to = self.keyframes.values().rev().find(|k| {
+            k.resume.is_some() && k.tick < window.from_tick && (k.step as usize) < rec.steps.len()
+        });
+        let Some(k) = seek_to.filter(|_| !resimulate) else {
+            return Ok(Some(Start {
+                step: 0,
+                previous_tick: None,
+            }));
+        };
+        if !self.resume(stepper, k, report)? {
+            return Ok(None);
+        }
+        report.resumed_at = Some(ResumedAt {
+            step: k.step,
+            tick: k.tick,
+            session_s: (k.tick + 1) as f64 * window.period_nanos as f64 * 1e-9,
+        });
+        Ok(Some(Start {
+            step: k.step as usize + 1,
+            previous_tick: Some(k.tick),
+        }))
+    }
+
     /// Restores `stepper` to keyframe `k` and checks the restored state against its hashes
     /// (a difference is counted into `report`: false).
     fn resume(
@@ -456,164 +503,223 @@ pub fn replay(rec: &Recording, mut options: ReplayOptions) -> Result<ReplayRepor
     }
     let started = Instant::now();
     let mut stepper = stepper_for(meta)?;
-    let period = meta.period_nanos.max(1);
     let samples = rec.samples();
     let checks = Checks::of(rec);
     let mut report = ReplayReport::empty(stepper.state_hash());
+    let window = Window::of(&options, meta.period_nanos.max(1));
+    let start = if settled_as_recorded(&stepper, meta, &mut report) {
+        checks.start(rec, &mut stepper, window, options.resimulate, &mut report)?
+    } else {
+        None
+    };
+    if let Some(start) = start {
+        let jobs = match options.jobs {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            j => j,
+        };
+        let at_once =
+            options.observer.is_none() && matches!(options.speed, None | Some(Speed::Max));
+        if jobs > 1 && at_once {
+            let end_step = rec
+                .steps
+                .iter()
+                .position(|s| s.tick > window.to_tick)
+                .unwrap_or(rec.steps.len());
+            let (threads, parts) = replay_in_parallel(
+                rec,
+                meta,
+                &checks,
+                &samples,
+                stepper,
+                start.step..end_step,
+                jobs,
+                options.keep_going,
+            )?;
+            report.jobs = threads;
+            parts.into_iter().for_each(|part| report.absorb(part));
+        } else {
+            let run = InOrder {
+                rec,
+                meta,
+                checks: &checks,
+                samples: &samples,
+                window,
+            };
+            run.replay(&mut stepper, &mut options, start, &mut report)?;
+        }
+    }
+    report.wall_s = started.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+/// Whether the scene settled as the recorded one did (the same hashes before the first
+/// step); a difference is counted into `report`.
+fn settled_as_recorded(
+    stepper: &SessionStepper,
+    meta: &SessionMeta,
+    report: &mut ReplayReport,
+) -> bool {
     let initial = StateHash {
         state: meta.initial_state_hash.0,
         topology: meta.initial_topology_hash.0,
     };
-    if stepper.state_hash() != initial {
-        diverge(
-            &mut report,
-            Divergence {
-                step: 0,
-                tick: 0,
-                what: format!(
-                    "the settled scene {:?} differs from the recorded one before the first step (hashes {:016x}/{:016x}, recorded {:016x}/{:016x}): a different scene file or cutlab build",
-                    meta.provenance.scene,
-                    stepper.state_hash().state,
-                    stepper.state_hash().topology,
-                    initial.state,
-                    initial.topology
-                ),
-                max_position_difference_m: None,
-            },
-        );
-        report.wall_s = started.elapsed().as_secs_f64();
-        return Ok(report);
+    let now = stepper.state_hash();
+    if now == initial {
+        return true;
     }
+    diverge(
+        report,
+        Divergence {
+            step: 0,
+            tick: 0,
+            what: format!(
+                "the settled scene {:?} differs from the recorded one before the first step (hashes {:016x}/{:016x}, recorded {:016x}/{:016x}): a different scene file or cutlab build",
+                meta.provenance.scene, now.state, now.topology, initial.state, initial.topology
+            ),
+            max_position_difference_m: None,
+        },
+    );
+    false
+}
 
-    let from_tick = options
-        .from_s
-        .map_or(0, |s| (s.max(0.0) * 1e9 / period as f64) as u64);
-    let to_tick = options.to_s.map_or(u64::MAX, |s| {
-        (s.max(0.0) * 1e9 / period as f64).ceil() as u64
-    });
-    let mut play_started: Option<(Instant, u64)> = None;
-    let mut previous_tick: Option<u64> = None;
-    let mut first_step = 0;
-    let seek_to =
-        checks.keyframes.values().rev().find(|k| {
-            k.resume.is_some() && k.tick < from_tick && (k.step as usize) < rec.steps.len()
-        });
-    if let (Some(k), false) = (seek_to, options.resimulate) {
-        if !checks.resume(&mut stepper, k, &mut report)? {
-            report.wall_s = started.elapsed().as_secs_f64();
-            return Ok(report);
+/// The ticks a replay plays (`from_s` to `to_s`), and the servo period.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    from_tick: u64,
+    to_tick: u64,
+    period_nanos: u64,
+}
+
+impl Window {
+    fn of(options: &ReplayOptions, period_nanos: u64) -> Self {
+        let period = period_nanos as f64;
+        Self {
+            from_tick: options
+                .from_s
+                .map_or(0, |s| (s.max(0.0) * 1e9 / period) as u64),
+            to_tick: options
+                .to_s
+                .map_or(u64::MAX, |s| (s.max(0.0) * 1e9 / period).ceil() as u64),
+            period_nanos,
         }
-        report.resumed_at = Some(ResumedAt {
-            step: k.step,
-            tick: k.tick,
-            session_s: (k.tick + 1) as f64 * period as f64 * 1e-9,
-        });
-        first_step = k.step as usize + 1;
-        previous_tick = Some(k.tick);
     }
-    let start_tick = previous_tick.map_or(0, |t| t + 1);
-    let jobs = match options.jobs {
-        0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
-        j => j,
-    };
-    if jobs > 1 && options.observer.is_none() && matches!(options.speed, None | Some(Speed::Max)) {
-        let end_step = rec
-            .steps
-            .iter()
-            .position(|s| s.tick > to_tick)
-            .unwrap_or(rec.steps.len());
-        let (threads, parts) = replay_in_parallel(
-            rec,
-            meta,
-            &checks,
-            &samples,
-            stepper,
-            first_step..end_step,
-            jobs,
-            options.keep_going,
-        )?;
-        report.jobs = threads;
-        for part in parts {
-            report.steps += part.steps;
-            report.keyframes_checked += part.keyframes_checked;
-            report.keyframes_matched += part.keyframes_matched;
-            report.cuts_recorded += part.cuts_recorded;
-            report.cuts_replayed += part.cuts_replayed;
-            report.divergences += part.divergences;
-            report.first_divergence = report.first_divergence.or(part.first_divergence);
-            report.simulated_s += part.simulated_s;
-            report.final_hash = part.final_hash;
-        }
-        report.wall_s = started.elapsed().as_secs_f64();
-        return Ok(report);
-    }
-    for (n, step) in rec.steps.iter().enumerate().skip(first_step) {
-        in_order(n, step)?;
-        if step.tick > to_tick {
-            break;
-        }
-        let sample = sample_of(&samples, step)?;
-        let playing = step.tick >= from_tick;
-        // a window's first step shows the tissue too, whatever the surface rate
-        let first_played = playing && play_started.is_none();
-        if playing {
-            let (t0, tick0) = *play_started.get_or_insert((Instant::now(), step.tick));
-            if let Some(Speed::Factor(f)) = options.speed {
-                let due =
-                    Duration::from_secs_f64((step.tick - tick0) as f64 * period as f64 * 1e-9 / f);
-                if let Some(wait) = (t0 + due).checked_duration_since(Instant::now()) {
-                    std::thread::sleep(wait);
+}
+
+/// Where a replay starts: the first step re-simulated and the tick before it (`None`: the
+/// settled scene).
+#[derive(Debug, Clone, Copy)]
+struct Start {
+    step: usize,
+    previous_tick: Option<u64>,
+}
+
+/// A replay on one thread, step after step: what an observer (a rerun log, a viewer) or a
+/// pace needs.
+struct InOrder<'a> {
+    rec: &'a Recording,
+    meta: &'a SessionMeta,
+    checks: &'a Checks<'a>,
+    samples: &'a BTreeMap<u64, ServoSample>,
+    window: Window,
+}
+
+impl InOrder<'_> {
+    /// Re-simulates the recorded steps from `start` to the window's end (or the first
+    /// divergence unless `keep_going`) on `stepper`, pacing them and showing the window's
+    /// ticks and steps to the observer, counting into `report`.
+    fn replay(
+        &self,
+        stepper: &mut SessionStepper,
+        options: &mut ReplayOptions,
+        start: Start,
+        report: &mut ReplayReport,
+    ) -> Result<(), RecorderError> {
+        let (window, period) = (self.window, self.window.period_nanos as f64);
+        let start_tick = start.previous_tick.map_or(0, |t| t + 1);
+        let mut previous_tick = start.previous_tick;
+        let mut play_started: Option<(Instant, u64)> = None;
+        for (n, step) in self.rec.steps.iter().enumerate().skip(start.step) {
+            in_order(n, step)?;
+            if step.tick > window.to_tick {
+                break;
+            }
+            let sample = sample_of(self.samples, step)?;
+            let playing = step.tick >= window.from_tick;
+            // a window's first step shows the tissue too, whatever the surface rate
+            let first_played = playing && play_started.is_none();
+            if playing {
+                let (t0, tick0) = *play_started.get_or_insert((Instant::now(), step.tick));
+                if let Some(Speed::Factor(f)) = options.speed {
+                    let due =
+                        Duration::from_secs_f64((step.tick - tick0) as f64 * period * 1e-9 / f);
+                    if let Some(wait) = (t0 + due).checked_duration_since(Instant::now()) {
+                        std::thread::sleep(wait);
+                    }
+                }
+                if let Some(o) = options.observer.as_mut() {
+                    let first = previous_tick
+                        .map_or(step.tick, |t| t + 1)
+                        .max(window.from_tick);
+                    for (_, s) in self.samples.range(first..=step.tick) {
+                        o.on_tick(s)?;
+                    }
                 }
             }
-            if let Some(o) = options.observer.as_mut() {
-                let first = previous_tick.map_or(step.tick, |t| t + 1).max(from_tick);
-                for (_, s) in samples.range(first..=step.tick) {
-                    o.on_tick(s)?;
-                }
+            previous_tick = Some(step.tick);
+            let out = self.checks.step(stepper, step, sample, report);
+            if playing && let Some(o) = options.observer.as_mut() {
+                self.observe(o.as_mut(), stepper, step, out, first_played)?;
+            }
+            report.simulated_s = (step.tick + 1 - start_tick) as f64 * period * 1e-9;
+            if report.first_divergence.is_some() && !options.keep_going {
+                break;
             }
         }
-        previous_tick = Some(step.tick);
+        if let Some(o) = options.observer.take() {
+            o.finish()?;
+        }
+        report.final_hash = stepper.state_hash();
+        Ok(())
+    }
 
-        let out = checks.step(&mut stepper, step, sample, &mut report);
-        if playing && let Some(o) = options.observer.as_mut() {
-            o.on_sim(&SimRecord::Step {
+    /// Shows the observer what step `step` did: the step, its cut, the surface when it is
+    /// due (and on the window's first step), the keyframe where the recording has one.
+    fn observe(
+        &self,
+        o: &mut dyn RecordObserver,
+        stepper: &SessionStepper,
+        step: &SimStepMsg,
+        out: StepOutput,
+        first_played: bool,
+    ) -> Result<(), RecorderError> {
+        o.on_sim(&SimRecord::Step {
+            step: step.step,
+            tick: step.tick,
+            rejected: out.rejected,
+        })?;
+        if let Some((blade, event)) = out.cut {
+            o.on_sim(&SimRecord::Cut {
                 step: step.step,
                 tick: step.tick,
-                rejected: out.rejected,
+                blade,
+                event: Box::new(event),
             })?;
-            if let Some((blade, event)) = out.cut {
-                o.on_sim(&SimRecord::Cut {
-                    step: step.step,
-                    tick: step.tick,
-                    blade,
-                    event: Box::new(event),
-                })?;
-            }
-            if first_played || surface_due(step.step, meta.surface_every_steps) {
-                o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(
-                    &stepper.collider,
-                    &stepper.sim.state.positions,
-                    step.step,
-                    step.tick,
-                ))))?;
-            }
-            if checks.hashes.contains_key(&step.step) {
-                o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(
-                    &stepper, step.step, step.tick,
-                ))))?;
-            }
         }
-        report.simulated_s = (step.tick + 1 - start_tick) as f64 * period as f64 * 1e-9;
-        if report.first_divergence.is_some() && !options.keep_going {
-            break;
+        if first_played || surface_due(step.step, self.meta.surface_every_steps) {
+            o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(
+                &stepper.collider,
+                &stepper.sim.state.positions,
+                step.step,
+                step.tick,
+            ))))?;
         }
+        if self.checks.hashes.contains_key(&step.step) {
+            o.on_sim(&SimRecord::Keyframe(Box::new(Keyframe::of(
+                stepper, step.step, step.tick,
+            ))))?;
+        }
+        Ok(())
     }
-    if let Some(o) = options.observer.take() {
-        o.finish()?;
-    }
-    report.final_hash = stepper.state_hash();
-    report.wall_s = started.elapsed().as_secs_f64();
-    Ok(report)
 }
 
 /// Replays the steps `range` in stretches that begin at the settled scene or `stepper`'s
