@@ -508,16 +508,16 @@ impl SessionThread {
             &self.mcap,
             Some(Box::new(self.observers)),
         );
-        if let Ok(r) = &recorded {
-            if let Ok(report) = &r.report {
-                let _ = self.figures.set(SessionFigures {
-                    servo: report.servo.period_stats(report.period_nanos),
-                    speed: report.speed(),
-                    sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
-                    tets,
-                    time_step_s,
-                });
-            }
+        if let Ok(r) = &recorded
+            && let Ok(report) = &r.report
+        {
+            let _ = self.figures.set(SessionFigures {
+                servo: report.servo.period_stats(report.period_nanos),
+                speed: report.speed(),
+                sim_steps_per_s: report.sim_steps as f64 / report.wall_s.max(1e-9),
+                tets,
+                time_step_s,
+            });
         }
         if let Err(e) = attempt_run::finish_observer(&mut recorded) {
             tracing::warn!("attempt {attempt}: {e}");
