@@ -10,7 +10,7 @@ use anyhow::{Context, bail};
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::{DbLocation, Store};
 use cutlab_haptics::device::{DeviceSpec, HapticDevice};
-use cutlab_haptics::servo::Clock;
+use cutlab_haptics::servo::{Clock, PeriodStats};
 use cutlab_haptics::{SessionReport, StepChoice};
 use cutlab_recorder::RerunTarget;
 use cutlab_recorder::record::RecordedSession;
@@ -116,8 +116,9 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     if let Err(e) = &s.result.observer {
         bail!("{e}");
     }
-    print_report(o, &s, recorded, r);
-    write_outputs(o, &s, r)?;
+    let f = Figures::of(r);
+    print_report(o, &s, recorded, r, &f);
+    write_outputs(o, &s, r, &f)?;
     print_attempt(o, &s)
 }
 
@@ -167,7 +168,7 @@ pub fn run_session(
         Some(d) => d,
         None => prepared.device(&o.device)?,
     };
-    let mcap = attempt_run::create_dir(&o.out)?;
+    let mcap = attempt_run::session_mcap(&o.out)?;
     let observer = match &o.rerun {
         Some(RerunTarget::File(rrd)) => {
             Some(prepared.rerun_sink(&RerunTarget::File(o.out.join(rrd)))?)
@@ -256,8 +257,33 @@ async fn open_store(a: &AttemptArgs) -> anyhow::Result<(Store, Option<RecordingS
     Ok((store, recordings))
 }
 
+/// What a session's summary states of its timing, worked out once for the printout and the
+/// file: the servo's periods, the simulation step's times (us), CG iterations per step.
+struct Figures {
+    period: PeriodStats,
+    step_us: Summary,
+    cg_per_step: f64,
+}
+
+impl Figures {
+    fn of(r: &SessionReport) -> Self {
+        let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
+        Self {
+            period: r.servo.period_stats(r.period_nanos),
+            step_us: Summary::of(&steps_us),
+            cg_per_step: r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64,
+        }
+    }
+}
+
 /// What the session did, printed.
-fn print_report(o: &Options, s: &SessionRun, recorded: &RecordedSession, r: &SessionReport) {
+fn print_report(
+    o: &Options,
+    s: &SessionRun,
+    recorded: &RecordedSession,
+    r: &SessionReport,
+    f: &Figures,
+) {
     let clock = clock_name(o.run.clock);
     let mode = if s.localisation.localise {
         "localised"
@@ -302,15 +328,11 @@ fn print_report(o: &Options, s: &SessionRun, recorded: &RecordedSession, r: &Ses
             r.servo.max_force_newtons, s.cut_threshold_newtons, s.cut_depth_mm
         );
     }
-    print_servo(o, r);
-    let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
-    let st = Summary::of(&steps_us);
+    print_servo(o, r, &f.period);
+    let st = &f.step_us;
     println!(
         "  sim step (contact, cut, step, refit): median {:.0} us, p99 {:.0} us, max {:.0} us; CG iterations per step {:.1}",
-        st.median,
-        st.p99,
-        st.max,
-        r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64
+        st.median, st.p99, st.max, f.cg_per_step
     );
     println!(
         "  speed: {:.2} simulated s per wall s ({:.2} s wall)",
@@ -329,8 +351,7 @@ fn print_report(o: &Options, s: &SessionRun, recorded: &RecordedSession, r: &Ses
 }
 
 /// The servo's periods and priority (live clock), and its work per tick.
-fn print_servo(o: &Options, r: &SessionReport) {
-    let p = r.servo.period_stats(r.period_nanos);
+fn print_servo(o: &Options, r: &SessionReport, p: &PeriodStats) {
     if o.run.clock == Clock::Live {
         println!(
             "  servo period: mean {:.1} us, p50 {:.1} us, p99 {:.1} us; deviation from 1 ms p99 {:.1} us, max {:.1} us; missed deadlines {}; latest tick start {:.1} us after its deadline",
@@ -364,7 +385,12 @@ fn clock_name(clock: Clock) -> &'static str {
 
 /// `final.vtu` (the deformed tissue with its displacement), `summary.json` and `steps.csv`
 /// (which servo tick each simulation step consumed: what a replay feeds back) in `o.out`.
-fn write_outputs(o: &Options, s: &SessionRun, r: &SessionReport) -> anyhow::Result<()> {
+fn write_outputs(
+    o: &Options,
+    s: &SessionRun,
+    r: &SessionReport,
+    f: &Figures,
+) -> anyhow::Result<()> {
     let sim = &r.simulation;
     let deformed = cutlab_sim::TetMesh::new(
         sim.state.positions.clone(),
@@ -385,8 +411,7 @@ fn write_outputs(o: &Options, s: &SessionRun, r: &SessionReport) -> anyhow::Resu
         &[("displacement", PointData::Vector(&displacement))],
     )
     .with_context(|| format!("writing {}", path.display()))?;
-    let p = r.servo.period_stats(r.period_nanos);
-    let steps_us: Vec<f64> = r.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();
+    let p = &f.period;
     let summary = serde_json::json!({
         "scene": s.scene, "tets": s.tets, "device": s.device, "seed": o.run.seed, "clock": clock_name(o.run.clock),
         "localised": s.localisation.localise, "localisation": s.localisation.why,
@@ -395,7 +420,7 @@ fn write_outputs(o: &Options, s: &SessionRun, r: &SessionReport) -> anyhow::Resu
         "non_finite": r.servo.non_finite_count, "fault_ticks": r.servo.fault_ticks, "dropped_samples": r.servo.dropped_samples,
         "period_us": { "mean": p.mean_us, "p50": p.p50_us, "p99": p.p99_us, "p99_deviation": p.p99_deviation_us,
                        "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },
-        "sim_step_us": Summary::of(&steps_us), "cg_iterations_per_step": r.stats.cg_iterations as f64 / r.sim_steps.max(1) as f64, "speed": r.speed(), "wall_s": r.wall_s,
+        "sim_step_us": f.step_us, "cg_iterations_per_step": f.cg_per_step, "speed": r.speed(), "wall_s": r.wall_s,
         "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
     });
     write_json(&o.out.join("summary.json"), &summary)?;

@@ -459,8 +459,8 @@ pub fn finish_observer(recorded: &mut Result<RecordedSession, StationError>) -> 
     }
 }
 
-/// The folder a run records into, made if need be.
-pub fn create_dir(dir: &Path) -> Result<PathBuf, StationError> {
+/// The recording's path in `dir` (`session.mcap`), the folder made if need be.
+pub fn session_mcap(dir: &Path) -> Result<PathBuf, StationError> {
     std::fs::create_dir_all(dir).map_err(|source| StationError::Io {
         what: format!("creating {}", dir.display()),
         source,

@@ -392,7 +392,7 @@ pub async fn start(
     let dir = settings
         .recordings_dir
         .join(format!("station-{}-{nanos}", request.trainee));
-    let mcap = attempt_run::create_dir(&dir)?;
+    let mcap = attempt_run::session_mcap(&dir)?;
     let who = AttemptSpec {
         exercise: request.exercise.clone(),
         trainee: request.trainee.clone(),
