@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Subcommand;
 use cutlab_assessor::store::{DbLocation, NewExercise, Role, Store, default_db};
-use cutlab_assessor::{ExpertPlan, proficiency};
+use cutlab_assessor::{ExercisePlan, proficiency};
 
 /// The assessment commands, flattened into the top-level command enum.
 #[derive(Debug, Subcommand)]
@@ -272,7 +272,7 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                     exam_only,
                 },
         } => {
-            let plan = ExpertPlan::load(&plan)?;
+            let plan = ExercisePlan::load(&plan)?;
             let e = store
                 .create_exercise(&NewExercise {
                     name: &name,
@@ -285,12 +285,12 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                 })
                 .await?;
             println!(
-                "added exercise {} (id {}, scene {}, plan {:.1} mm long, {:.1} mm deep); thresholds come from expert attempts",
+                "added exercise {} (id {}, scene {}, {} plan {:.1} mm deep); thresholds come from expert attempts",
                 e.name,
                 e.id,
                 e.scene,
-                plan.length_m() * 1e3,
-                plan.depth_m * 1e3
+                plan.kind().as_str(),
+                plan.kind_plan().depth_m() * 1e3
             );
         }
         AssessCommand::Exercise {

@@ -9,10 +9,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use cutlab_assessor::proficiency::DEFAULT_K;
-use cutlab_assessor::store::{
-    BUILTIN_EXERCISE, BUILTIN_SCENE, DbLocation, NewExercise, Store, default_thresholds,
-};
-use cutlab_assessor::{AssessError, ExpertPlan};
+use cutlab_assessor::store::{BUILTIN_EXERCISE, BUILTIN_SCENE, DbLocation, NewExercise, Store};
+use cutlab_assessor::{AssessError, ExercisePlan, IncisionPlan};
 use cutlab_dashboard::seed_demo_accounts;
 use cutlab_haptics::device::HandKind;
 use cutlab_haptics::servo::Clock;
@@ -61,14 +59,14 @@ impl Attempt {
 /// The axial exercise's plan: 40 mm along the top of the wall (y, 5 mm off the middle), 5 mm
 /// deep, with the built-in plan's viewpoint and tolerances, and as target what it lays open
 /// (as many points as the built-in plan's, half its depth below its middle third).
-pub fn axial_plan() -> Result<ExpertPlan, AssessError> {
-    let base = ExpertPlan::chest_wall()?;
+pub fn axial_plan() -> Result<IncisionPlan, AssessError> {
+    let base = IncisionPlan::chest_wall()?;
     let targets = base.target_m.len();
     // on the curved surface z = sqrt(R^2 - x^2) - R, R = 150 mm
     let (x, r) = (0.005f64, 0.15f64);
     let z = (r * r - x * x).sqrt() - r;
     let (entry_m, exit_m) = ([x, -0.02, z], [x, 0.02, z]);
-    let mut plan = ExpertPlan {
+    let mut plan = IncisionPlan {
         name: "chest-wall axial incision".into(),
         entry_m,
         exit_m,
@@ -238,13 +236,13 @@ async fn ensure_axial_exercise(store: &Store) -> anyhow::Result<()> {
     match store.exercise_by_name(AXIAL_EXERCISE).await {
         Ok(_) => Ok(()),
         Err(AssessError::NotFound(_)) => {
-            let plan = axial_plan()?;
+            let plan = ExercisePlan::from(axial_plan()?);
             let new = NewExercise {
                 name: AXIAL_EXERCISE,
                 scene: BUILTIN_SCENE,
                 description: "A 40 mm incision 5 mm deep along y, 5 mm off the middle of the chest wall",
                 plan: &plan,
-                thresholds: &default_thresholds(),
+                thresholds: &plan.kind_plan().default_thresholds(),
                 threshold_k: DEFAULT_K,
                 exam_only: false,
             };
@@ -354,7 +352,7 @@ mod tests {
     fn the_axial_plan_is_valid_and_shorter_than_the_transverse_one() {
         let (axial, transverse) = (
             axial_plan().expect("axial plan"),
-            ExpertPlan::chest_wall().expect("built-in plan"),
+            IncisionPlan::chest_wall().expect("built-in plan"),
         );
         assert!(
             (axial.length_m() - 0.04).abs() < 1e-12 && axial.length_m() < transverse.length_m()

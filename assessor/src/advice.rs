@@ -258,12 +258,12 @@ mod tests {
     #[test]
     fn what_the_device_cannot_measure_is_not_something_to_fix() {
         // the approach with the station's pointer: no value, no verdict (left out of it)
-        let plan = crate::ExpertPlan::chest_wall().unwrap();
+        let plan = crate::IncisionPlan::chest_wall().unwrap();
         let data = crate::AttemptData {
             device: Some("pointer".into()),
             ..Default::default()
         };
-        let values = crate::metrics::assess(&plan, &data).unwrap();
+        let values = crate::ExerciseKind::assess(&plan, &data).unwrap();
         let approach = values
             .iter()
             .find(|v| v.key == "approach_error_deg")

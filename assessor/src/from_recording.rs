@@ -10,9 +10,9 @@ use cutlab_recorder::Recording;
 use cutlab_sim::TetMesh;
 
 use crate::AssessError;
+use crate::exercise::{ExercisePlan, HandLine};
 use crate::input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};
-use crate::metrics::incision::depth_below_plan;
-use crate::plan::ExpertPlan;
+use crate::metrics::incision::depth_below_line;
 
 /// How the note of an attempt scored from a recording that is not whole begins.
 pub const DAMAGED_RECORDING_NOTE: &str = "Scored from a damaged recording";
@@ -20,7 +20,8 @@ pub const DAMAGED_RECORDING_NOTE: &str = "Scored from a damaged recording";
 /// The data `plan` is assessed on, from `rec`: the poses and forces of every tick, the cut's
 /// trace ([`cut_samples`]), the last keyframe's surface and the device named in the session
 /// metadata.
-pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, AssessError> {
+pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData, AssessError> {
+    let hand = plan.kind_plan().hand_line();
     let meta = rec
         .meta()
         .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
@@ -49,7 +50,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
             cutting: s.render.mode == Mode::Cutting,
         })
         .collect();
-    let mut cuts = cut_samples(&samples, period_s, plan);
+    let mut cuts = cut_samples(&samples, period_s, &hand);
     // the depth below the tissue as it lay, not below the plan's idealised surface (the
     // pre-tensioned tissue settles away from it)
     let first_touch = samples.values().find(|s| s.render.mode != Mode::Free);
@@ -57,7 +58,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
         .and_then(|s| crate::metrics::field::trimesh(&s).ok())
     {
         for c in &mut cuts {
-            if let Some(d) = depth_below_surface(&mesh, plan.normal, c.tip_m) {
+            if let Some(d) = depth_below_surface(&mesh, hand.normal, c.tip_m) {
                 c.depth_m = d;
             }
         }
@@ -74,7 +75,8 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
 /// The cut's trace in recorded servo `samples` (by tick, `period_s` apart): the blade at every
 /// tick the renderer had it in the tissue (mode `Cutting`: the blade path; the topology events
 /// only mark where the mesh changed, a few per centimetre on a coarse mesh). A sample's depth
-/// is its blade tip's depth below the planned surface ([`depth_below_plan`]).
+/// is its blade tip's depth below the planned surface through the line the hand follows
+/// ([`depth_below_line`]).
 ///
 /// Each sample carries its stroke ([`CutSample::stroke`]): a new one begins at a `Cutting`
 /// tick whose recorded predecessor was not cutting (the blade left the tissue and entered it
@@ -84,7 +86,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExpertPlan) -> Result<AttemptData, A
 pub fn cut_samples(
     samples: &BTreeMap<u64, ServoSample>,
     period_s: f64,
-    plan: &ExpertPlan,
+    hand: &HandLine,
 ) -> Vec<CutSample> {
     let mut cuts = Vec::new();
     let (mut stroke, mut cutting) = (None::<u32>, false);
@@ -101,7 +103,7 @@ pub fn cut_samples(
             t_s: s.tick as f64 * period_s,
             tip_m,
             edge_dir: s.pose.edge_direction().into(),
-            depth_m: depth_below_plan(plan, tip_m),
+            depth_m: depth_below_line(&hand.line_m, hand.normal, tip_m),
             stroke,
         });
     }
@@ -112,10 +114,10 @@ pub fn cut_samples(
 /// is not whole (damaged, cut short: scored on what is readable, never silently).
 pub fn assess_recording(
     rec: &Recording,
-    plan: &ExpertPlan,
+    plan: &ExercisePlan,
 ) -> Result<(crate::MetricSet, Option<String>), AssessError> {
     let data = attempt_data(rec, plan)?;
-    let values = crate::metrics::assess(plan, &data)?;
+    let values = plan.assess(&data)?;
     let note = rec
         .shortfall()
         .map(|why| format!("{DAMAGED_RECORDING_NOTE}: {why}"));
@@ -234,7 +236,8 @@ impl crate::store::Store {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::metrics::incision::{STROKE_GAP_M, incision, trace_point};
+    use crate::exercise::{ExerciseKind, IncisionPlan};
+    use crate::metrics::incision::{STROKE_GAP_M, depth_below_plan, incision, trace_point};
     use cutlab_haptics::device::{PointerDevice, PointerOptions, PointerSample};
     use cutlab_haptics::render::RenderOutput;
     use cutlab_haptics::{HapticDevice, Vector3};
@@ -301,7 +304,7 @@ mod tests {
     #[test]
     fn a_pointer_that_skips_forward_cuts_one_stroke_the_plans_length() {
         let plan = plan();
-        let cuts = cut_samples(&pointer_attempt(false), 1e-3, &plan);
+        let cuts = cut_samples(&pointer_attempt(false), 1e-3, &plan.hand_line());
         // the cause: after the stall the device's clock is anchored again and the blade skips
         // forward, further than the distance that used to end a stroke, while still cutting
         let skip = widest_step(&cuts);
@@ -333,7 +336,7 @@ mod tests {
     #[test]
     fn a_pointer_whose_button_was_let_go_cuts_two_strokes_and_not_the_gap() {
         let plan = plan();
-        let cuts = cut_samples(&pointer_attempt(true), 1e-3, &plan);
+        let cuts = cut_samples(&pointer_attempt(true), 1e-3, &plan.hand_line());
         let strokes: Vec<u32> = cuts.iter().filter_map(|c| c.stroke).collect();
         assert_eq!(strokes.len(), cuts.len());
         assert_eq!(
@@ -375,7 +378,7 @@ mod tests {
             None
         );
         // the plan's surface would say 9.5 mm
-        let plan = ExpertPlan::chest_wall().expect("plan");
+        let plan = IncisionPlan::chest_wall().expect("plan");
         assert!(depth_below_plan(&plan, [0.0, 0.0, z - 0.008]) > 0.009);
     }
 }

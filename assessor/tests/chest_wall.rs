@@ -3,8 +3,8 @@
 //! ray casts must agree with the gap between the split vertices' copies, and the plan's target
 //! (the incision open to half its depth) is hidden before the cut and seen after it.
 
-use cutlab_assessor::metrics::{assess, value_of};
-use cutlab_assessor::{AttemptData, CutSample, ExpertPlan, SurfaceMesh};
+use cutlab_assessor::metrics::value_of;
+use cutlab_assessor::{AttemptData, CutSample, ExercisePlan, SurfaceMesh};
 use cutlab_sim::cut;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;
@@ -14,13 +14,13 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
     let scene = Scene::load("chest-wall", BuildOptions { min_tets: None }).expect("scene");
     let mut sim = scene.simulation();
     assert!(sim.settle(StaticSettings::default()).converged);
-    let plan = ExpertPlan::chest_wall().expect("plan");
+    let plan = ExercisePlan::chest_wall().expect("plan");
     // the settled tissue, not cut: the incision's target is hidden
     let uncut = AttemptData {
         surface: Some(surface(&sim)),
         ..AttemptData::default()
     };
-    let before = assess(&plan, &uncut).expect("assess the uncut tissue");
+    let before = plan.assess(&uncut).expect("assess the uncut tissue");
     assert_eq!(
         value_of(&before, "target_visible_fraction"),
         Some(0.0),
@@ -54,7 +54,7 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
         .fold(0.0, f64::max);
     data.surface = Some(surface(&sim));
 
-    let m = assess(&plan, &data).expect("assess");
+    let m = plan.assess(&data).expect("assess");
     let get = |k: &str| value_of(&m, k).unwrap_or_else(|| panic!("{k} missing: {m:?}"));
     let width = get("opening_width_m");
     println!(

@@ -6,7 +6,7 @@ use cutlab_assessor::metrics::{METRICS, MetricValue};
 use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds, cusum};
 use cutlab_assessor::store::{AttemptStatus, BUILTIN_EXERCISE, NewExercise, Role, ThresholdSource};
 use cutlab_assessor::store::{DbLocation, test_postgres};
-use cutlab_assessor::{AssessError, Better, ExpertPlan, Store, on_db};
+use cutlab_assessor::{AssessError, Better, ExercisePlan, IncisionPlan, Store, on_db};
 
 /// A fresh SQLite database in a temporary folder (kept alive by the returned guard).
 async fn sqlite_store() -> (Store, tempfile::TempDir) {
@@ -70,7 +70,7 @@ fn values(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
 }
 
 async fn exercise_with_one_threshold(store: &Store) -> i64 {
-    let plan = ExpertPlan::chest_wall().expect("plan");
+    let plan = ExercisePlan::chest_wall().expect("plan");
     let t = [Threshold::fixed(
         "lateral_mean_m",
         Better::LowerIsBetter,
@@ -238,7 +238,7 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
     assert_eq!(a.name, BUILTIN_EXERCISE);
     assert_eq!(a.scene, "chest-wall");
     let plan = store.exercise_plan(a.id).await.expect("plan");
-    assert_eq!(plan, ExpertPlan::chest_wall().expect("plan"));
+    assert_eq!(plan, ExercisePlan::chest_wall().expect("plan"));
     assert!(
         !store
             .thresholds(a.id)
@@ -1014,7 +1014,7 @@ async fn a_peak_force_band_from_experts_gives_way_to_the_plans_limit(store: Stor
             .find(|m| m.key == "peak_force_n")
             .and_then(|m| m.upper)
     };
-    let plan_limit = ExpertPlan::chest_wall().expect("plan").force_limit_n;
+    let plan_limit = IncisionPlan::chest_wall().expect("plan").force_limit_n;
     let t = store.thresholds(ex).await.expect("stored");
     assert_eq!(limit(&t), Some(plan_limit), "the plan's safety limit");
     // one set by hand stays

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Outcome, Store};
-use cutlab_assessor::{AssessError, ExpertPlan, MetricSet};
+use cutlab_assessor::{AssessError, ExercisePlan, MetricSet};
 use cutlab_haptics::Session;
 use cutlab_haptics::plan::Plan;
 use cutlab_recorder::Recording;
@@ -18,23 +18,24 @@ use crate::StationError;
 pub async fn exercise_named(
     store: &Store,
     name: &str,
-) -> Result<(Exercise, ExpertPlan), StationError> {
+) -> Result<(Exercise, ExercisePlan), StationError> {
     let e = store.exercise_by_name(name).await?;
     let plan = store.exercise_plan(e.id).await?;
     Ok((e, plan))
 }
 
-/// The expert plan's incision projected onto the session's tissue (33 points evenly spaced
-/// along it), at the plan's depth, with its viewpoint: what a synthetic trainee follows, the
-/// station shows and a review of the recording looks from.
-pub fn plan_on_tissue(session: &Session, plan: &ExpertPlan) -> Result<Plan, StationError> {
-    let line: Vec<Point3> = plan.incision_m.iter().map(|&c| Point3::from(c)).collect();
+/// What the exercise's hand follows projected onto the session's tissue (33 points evenly
+/// spaced along it), at the plan's depth, with its viewpoint: what a synthetic trainee
+/// follows, the station shows and a review of the recording looks from.
+pub fn plan_on_tissue(session: &Session, plan: &ExercisePlan) -> Result<Plan, StationError> {
+    let hand = plan.kind_plan().hand_line();
+    let line: Vec<Point3> = hand.line_m.iter().map(|&c| Point3::from(c)).collect();
     let on_tissue = Plan {
-        viewpoint_m: Some(Point3::from(plan.viewpoint_m)),
+        viewpoint_m: Some(Point3::from(hand.viewpoint_m)),
         ..session.plan_along(
             &resample(&line, 33),
-            &Vector3::from(plan.normal),
-            plan.depth_m,
+            &Vector3::from(hand.normal),
+            hand.depth_m,
         )?
     };
     on_tissue.check()?;

@@ -9,7 +9,7 @@
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use cutlab_assessor::ExpertPlan;
+use cutlab_assessor::ExercisePlan;
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
@@ -127,7 +127,7 @@ fn surface_every_steps(hz: f64, step_s: f64) -> u64 {
 #[derive(Debug, Clone, Copy)]
 pub enum PlanSource<'a> {
     /// An exercise's expert plan, projected onto the tissue.
-    Exercise(&'a ExpertPlan),
+    Exercise(&'a ExercisePlan),
     /// 60 mm across the tissue's top in the scene's `incision` directions, at most 8 mm deep.
     AcrossScene,
 }

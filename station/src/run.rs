@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Store};
-use cutlab_assessor::{DeviceClass, ExpertPlan};
+use cutlab_assessor::{DeviceClass, ExercisePlan};
 use cutlab_haptics::device::{
     DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlOptions, PointerDevice, PointerFeed,
     PointerOptions,
@@ -465,7 +465,7 @@ pub async fn start(
 async fn force_limit(
     store: &Store,
     exercise: &Exercise,
-    plan: &ExpertPlan,
+    plan: &ExercisePlan,
     class: DeviceClass,
 ) -> Result<f64, StationError> {
     Ok(store
@@ -475,7 +475,7 @@ async fn force_limit(
         .iter()
         .find(|t| t.key == "peak_force_n")
         .and_then(|t| t.upper)
-        .unwrap_or(plan.force_limit_n))
+        .unwrap_or(plan.kind_plan().force_limit_n()))
 }
 
 /// A station session's own thread: records the session, then ends its attempt, says how it

@@ -419,15 +419,16 @@ async fn a_page_gone_past_the_absence_ends_its_attempt_incomplete() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit() {
-    use cutlab_assessor::ExpertPlan;
+    use cutlab_assessor::IncisionPlan;
     use cutlab_assessor::store::NewExercise;
     let dir_guard = temp_dir("exam-only");
     let dir = dir_guard.path();
     let store = store(dir).await;
-    let plan = ExpertPlan {
+    let plan = IncisionPlan {
         force_limit_n: 1.75,
-        ..ExpertPlan::chest_wall().expect("the built-in plan")
-    };
+        ..IncisionPlan::chest_wall().expect("the built-in plan")
+    }
+    .into();
     store
         .create_exercise(&NewExercise {
             name: "chest-wall-exam",

@@ -21,7 +21,7 @@
 use axum::extract::State;
 use axum::routing::get;
 use axum::{Json, Router};
-use cutlab_assessor::ExpertPlan;
+use cutlab_assessor::ExercisePlan;
 use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Curriculum, Exercise, Module, User};
 use serde::Serialize;
@@ -121,7 +121,7 @@ struct ExerciseView {
     exercise: Exercise,
     thresholds: Thresholds,
     #[serde(skip_serializing_if = "Option::is_none")]
-    plan: Option<ExpertPlan>,
+    plan: Option<ExercisePlan>,
 }
 
 async fn exercises(

@@ -266,7 +266,7 @@ async fn supervision_shows_running_attempts_live() {
 async fn instructors_create_and_edit_exercises_and_curricula() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
-    let plan = cutlab_assessor::plan::CHEST_WALL_PLAN_TOML;
+    let plan = cutlab_assessor::exercise::CHEST_WALL_PLAN_TOML;
     let r = send(
         &e.app,
         post_form(
@@ -826,8 +826,14 @@ async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
     let r = send(&e.app, post_form("/exercises", Some(&kim.cookie), &pairs)).await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER, "{}", body_text(r).await);
     let new = e.store.exercise_by_name("shallow-cut").await.unwrap();
-    let plan = e.store.get_plan(new.plan_id).await.unwrap();
-    let builtin = cutlab_assessor::ExpertPlan::chest_wall().unwrap();
+    let plan = e
+        .store
+        .get_plan(new.plan_id)
+        .await
+        .unwrap()
+        .into_incision()
+        .unwrap();
+    let builtin = cutlab_assessor::IncisionPlan::chest_wall().unwrap();
     assert_eq!((plan.depth_m, plan.force_limit_n), (0.005, 0.9));
     assert_eq!(
         (plan.entry_m, plan.incision_m.len(), plan.tolerance_m),
@@ -875,7 +881,13 @@ async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     let edited = e.store.get_exercise(new.id).await.unwrap();
     assert_ne!(edited.plan_id, new.plan_id);
-    let plan = e.store.get_plan(edited.plan_id).await.unwrap();
+    let plan = e
+        .store
+        .get_plan(edited.plan_id)
+        .await
+        .unwrap()
+        .into_incision()
+        .unwrap();
     assert_eq!(plan.exit_m[0], 0.045);
     assert_eq!(
         plan.incision_m,

@@ -6,7 +6,7 @@
 //!   `p` meets no surface triangle before `p - eps (p - e)/|p - e|`, `eps` = [`VISIBILITY_EPS_M`]
 //!   (and neither do two rays to points 20 um beside `p`, see [`visible_fraction`]); the
 //!   fraction of the plan's target points that are visible. The target is what the planned
-//!   incision lays open ([`ExpertPlan::target_m`]); a target deeper below the planned line
+//!   incision lays open ([`IncisionPlan::target_m`]); a target deeper below the planned line
 //!   than the planned depth ([`depth_below_plan`], beyond [`TARGET_DEPTH_SLACK_M`]) is behind
 //!   tissue an incision as planned leaves whole, so the metric would be 0 for every attempt
 //!   that keeps to the plan (the heart behind the 15 mm chest wall, under an 8 mm incision):
@@ -30,11 +30,11 @@ use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh;
 
 use crate::error::{AssessError, Result};
+use crate::exercise::IncisionPlan;
 use crate::geom;
 use crate::input::SurfaceMesh;
 use crate::metrics::Values;
 use crate::metrics::incision::depth_below_plan;
-use crate::plan::ExpertPlan;
 
 /// A target point closer than this to the first hit counts as visible (m).
 pub const VISIBILITY_EPS_M: f64 = 1e-4;
@@ -129,7 +129,7 @@ pub fn visible_fraction(mesh: &TriMesh, eye: [f64; 3], targets: &[[f64; 3]]) -> 
 
 /// The opening's width (widest station, m), area (m^2) and the per-station widths
 /// `(arc length along the plan, width)`.
-pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>) {
+pub fn opening(plan: &IncisionPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>) {
     let n = Vector3::from(plan.normal);
     let line = plan.line();
     let length = geom::polyline_length(&line);
@@ -186,7 +186,7 @@ pub fn opening(plan: &ExpertPlan, mesh: &TriMesh) -> (f64, f64, Vec<(f64, f64)>)
     (width, area, widths)
 }
 
-pub(crate) fn assess(plan: &ExpertPlan, surface: Option<&SurfaceMesh>, values: &mut Values) {
+pub(crate) fn assess(plan: &IncisionPlan, surface: Option<&SurfaceMesh>, values: &mut Values) {
     const KEYS: [&str; 3] = [
         "target_visible_fraction",
         "opening_width_m",
@@ -256,8 +256,8 @@ mod tests {
         s
     }
 
-    fn plan() -> ExpertPlan {
-        ExpertPlan::from_json(
+    fn plan() -> IncisionPlan {
+        IncisionPlan::from_json(
             r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0.03,0,0.1],
                 "target_m":[[0.03,0,-0.025],[0.04,0,-0.025],[0.0,0,-0.025],[0.06,0,-0.025]]}"#,
         )
@@ -282,7 +282,7 @@ mod tests {
     }
 
     /// [`plan`] with its targets moved to `depth_mm` below the surface.
-    fn plan_with_targets_at(depth_mm: f64) -> ExpertPlan {
+    fn plan_with_targets_at(depth_mm: f64) -> IncisionPlan {
         let mut p = plan();
         for t in &mut p.target_m {
             t[2] = -depth_mm * 1e-3;
@@ -290,12 +290,12 @@ mod tests {
         p
     }
 
-    fn visibility(plan: &ExpertPlan, surface: SurfaceMesh) -> crate::metrics::MetricValue {
+    fn visibility(plan: &IncisionPlan, surface: SurfaceMesh) -> crate::metrics::MetricValue {
         let data = crate::input::AttemptData {
             surface: Some(surface),
             ..Default::default()
         };
-        let values = crate::metrics::assess(plan, &data).unwrap();
+        let values = crate::ExerciseKind::assess(plan, &data).unwrap();
         values
             .into_iter()
             .find(|v| v.key == "target_visible_fraction")

@@ -43,10 +43,10 @@ use std::ops::Range;
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{AssessError, Result};
+use crate::exercise::IncisionPlan;
 use crate::geom;
 use crate::input::{CutSample, PoseSample};
 use crate::metrics::Values;
-use crate::plan::ExpertPlan;
 
 /// Consecutive cut samples without a recorded stroke ([`CutSample::stroke`]) further apart
 /// than this belong to different strokes (m).
@@ -131,12 +131,18 @@ fn distance_to_strokes(p: Point3<f64>, tips: &[Point3<f64>], strokes: &[Range<us
 /// the planned line's point nearest to the tip seen from above: an approximation of
 /// [`CutSample::depth_m`] for recorders without the deformed surface (exact for a line on a
 /// flat surface).
-pub fn depth_below_plan(plan: &ExpertPlan, tip: [f64; 3]) -> f64 {
-    let n = Vector3::from(plan.normal);
+pub fn depth_below_plan(plan: &IncisionPlan, tip: [f64; 3]) -> f64 {
+    depth_below_line(&plan.incision_m, plan.normal, tip)
+}
+
+/// The depth of `tip` below the surface through the line `line_m` (at least one point), along
+/// the unit `normal`: as [`depth_below_plan`].
+pub fn depth_below_line(line_m: &[[f64; 3]], normal: [f64; 3], tip: [f64; 3]) -> f64 {
+    let n = Vector3::from(normal);
     let tip = Point3::from(tip);
     let p = geom::project(tip, &n);
-    let mut best = (f64::INFINITY, Point3::from(plan.incision_m[0]));
-    for w in plan.incision_m.windows(2) {
+    let mut best = (f64::INFINITY, Point3::from(line_m[0]));
+    for w in line_m.windows(2) {
         let (a, b) = (Point3::from(w[0]), Point3::from(w[1]));
         // the nearest point seen from above, then the same parameter on the 3D segment
         let (q, t) = geom::closest_on_segment(p, geom::project(a, &n), geom::project(b, &n));
@@ -149,7 +155,7 @@ pub fn depth_below_plan(plan: &ExpertPlan, tip: [f64; 3]) -> f64 {
 }
 
 /// The incision metrics of `cuts` (at least 2, finite tips) against `plan`.
-pub fn incision(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<IncisionMetrics> {
+pub fn incision(plan: &IncisionPlan, cuts: &[CutSample]) -> Result<IncisionMetrics> {
     if cuts.len() < 2 {
         return Err(AssessError::InvalidInput(format!(
             "{} cut samples: no incision to measure",
@@ -247,7 +253,7 @@ pub fn device_sets_approach(device: &str) -> bool {
 /// travel up to time `t_first_cut` and the plan's approach direction; `None` without poses,
 /// with non-finite ones, or if the tip barely moved.
 pub fn approach_error_deg(
-    plan: &ExpertPlan,
+    plan: &IncisionPlan,
     poses: &[PoseSample],
     t_first_cut: f64,
 ) -> Option<f64> {
@@ -273,7 +279,7 @@ pub fn approach_error_deg(
 }
 
 pub(crate) fn assess(
-    plan: &ExpertPlan,
+    plan: &IncisionPlan,
     cuts: &[CutSample],
     poses: &[PoseSample],
     device: Option<&str>,
@@ -340,8 +346,8 @@ pub(crate) mod tests {
     use super::*;
 
     /// A 60 mm plan along x on flat tissue (the surface z = 0), 8 mm deep.
-    pub(crate) fn straight_plan() -> ExpertPlan {
-        ExpertPlan::from_json(
+    pub(crate) fn straight_plan() -> IncisionPlan {
+        IncisionPlan::from_json(
             r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1]}"#,
         )
         .unwrap()
@@ -535,7 +541,7 @@ pub(crate) mod tests {
     fn depth_below_the_planned_line() {
         let plan = straight_plan();
         assert!((depth_below_plan(&plan, [0.02, 0.003, -0.008]) - 0.008).abs() < 1e-15);
-        let curved = ExpertPlan::chest_wall().unwrap();
+        let curved = IncisionPlan::chest_wall().unwrap();
         // at x = 30 mm the surface is 3.031 mm below the apex
         assert!((depth_below_plan(&curved, [0.03, 0.0, -0.011031]) - 0.008).abs() < 1e-9);
         assert!((depth_below_plan(&curved, [0.0, 0.001, -0.008]) - 0.008).abs() < 1e-12);

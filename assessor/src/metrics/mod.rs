@@ -1,4 +1,5 @@
-//! The metrics: pure functions of an [`AttemptData`] and an [`ExpertPlan`].
+//! The metrics: pure functions of an [`crate::AttemptData`] and an exercise's plan; each
+//! kind of exercise ([`crate::exercise`]) picks its metrics from [`METRICS`].
 //!
 //! Each group ([`incision`], [`path`], [`safety`], [`field`]) checks its own input; a group
 //! whose input is unusable (too few samples, NaN or infinite values, no surface) reports its
@@ -16,10 +17,6 @@ pub mod safety;
 pub mod smoothness;
 
 use serde::{Deserialize, Serialize};
-
-use crate::error::Result;
-use crate::input::AttemptData;
-use crate::plan::ExpertPlan;
 
 /// Which way a metric improves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -460,31 +457,20 @@ impl Values {
     }
 }
 
-/// Every metric of [`METRICS`] for one attempt, in catalogue order. Errors only on an invalid
-/// plan; unusable inputs give missing metrics.
-pub fn assess(plan: &ExpertPlan, data: &AttemptData) -> Result<MetricSet> {
-    plan.check()?;
-    let mut values = Values::default();
-    incision::assess(
-        plan,
-        &data.cuts,
-        &data.poses,
-        data.device.as_deref(),
-        &mut values,
-    );
-    path::assess(&data.poses, &path::PathParams::default(), &mut values);
-    safety::assess(plan, &data.forces, &data.cuts, &mut values);
-    field::assess(plan, data.surface.as_ref(), &mut values);
-    Ok(METRICS
-        .iter()
-        .map(|metric| {
-            let found = values.0.iter().find(|(k, _, _)| *k == metric.key);
-            match found {
-                Some((_, v, why)) => MetricValue::of(metric, *v, why.clone()),
-                None => MetricValue::of(metric, None, Some("not computed".into())),
-            }
-        })
-        .collect())
+impl Values {
+    /// The values of `metrics`, in their order; a metric no group set is missing.
+    pub(crate) fn collect(self, metrics: &[Metric]) -> MetricSet {
+        metrics
+            .iter()
+            .map(|metric| {
+                let found = self.0.iter().find(|(k, _, _)| *k == metric.key);
+                match found {
+                    Some((_, v, why)) => MetricValue::of(metric, *v, why.clone()),
+                    None => MetricValue::of(metric, None, Some("not computed".into())),
+                }
+            })
+            .collect()
+    }
 }
 
 /// The value of `key` in a list of metric values, if present and finite.
@@ -504,6 +490,8 @@ pub fn not_measured(values: &[MetricValue], key: &str) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::exercise::{ExerciseKind, IncisionPlan};
+    use crate::input::AttemptData;
 
     #[test]
     fn keys_are_unique_and_empty_data_gives_missing_metrics_not_errors() {
@@ -511,8 +499,8 @@ mod tests {
         keys.sort_unstable();
         keys.dedup();
         assert_eq!(keys.len(), METRICS.len());
-        let plan = ExpertPlan::chest_wall().unwrap();
-        let out = assess(&plan, &AttemptData::default()).unwrap();
+        let plan = IncisionPlan::chest_wall().unwrap();
+        let out = plan.assess(&AttemptData::default()).unwrap();
         assert_eq!(out.len(), METRICS.len());
         // no cuts: nothing cut outside the corridor (a true zero); everything else is missing
         for v in &out {
@@ -526,7 +514,7 @@ mod tests {
 
     #[test]
     fn the_approach_is_not_measured_with_a_device_that_fixes_it() {
-        let plan = ExpertPlan::chest_wall().unwrap();
+        let plan = IncisionPlan::chest_wall().unwrap();
         let entry = plan.entry_m;
         let mut data = AttemptData::default();
         // the tip comes down 10 mm straight onto the entry, then cuts along the line
@@ -553,7 +541,7 @@ mod tests {
                 device: device.map(str::to_owned),
                 ..data.clone()
             };
-            let out = assess(&plan, &data).unwrap();
+            let out = plan.assess(&data).unwrap();
             out.into_iter()
                 .find(|v| v.key == "approach_error_deg")
                 .unwrap()
@@ -574,13 +562,13 @@ mod tests {
             );
         }
         // a value missing for another reason is not "not measured"
-        let none = assess(&plan, &AttemptData::default()).unwrap();
+        let none = plan.assess(&AttemptData::default()).unwrap();
         assert!(!not_measured(&none, "approach_error_deg"));
     }
 
     #[test]
     fn nan_samples_are_quarantined() {
-        let plan = ExpertPlan::chest_wall().unwrap();
+        let plan = IncisionPlan::chest_wall().unwrap();
         let mut data = AttemptData::default();
         for i in 0..200 {
             let t = i as f64 * 0.01;
@@ -592,7 +580,7 @@ mod tests {
             });
         }
         data.poses[50].tip_m[0] = f64::NAN;
-        let out = assess(&plan, &data).unwrap();
+        let out = plan.assess(&data).unwrap();
         let time = out.iter().find(|v| v.key == "time_s").unwrap();
         assert!(time.value.is_none());
         assert!(

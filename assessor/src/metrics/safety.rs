@@ -16,11 +16,11 @@
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{AssessError, Result};
+use crate::exercise::IncisionPlan;
 use crate::geom;
 use crate::input::{CutSample, ForceSample};
 use crate::metrics::Values;
 use crate::metrics::incision::{same_stroke, trace_point};
-use crate::plan::ExpertPlan;
 
 /// The force metrics of one attempt.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -78,7 +78,7 @@ pub fn forces(forces: &[ForceSample], limit_n: f64) -> Result<ForceMetrics> {
 
 /// The cut outside the plan's corridor: `(length m, area m^2)`; the area is `None` when a
 /// depth is not finite. No cuts: nothing outside.
-pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, Option<f64>)> {
+pub fn outside_corridor(plan: &IncisionPlan, cuts: &[CutSample]) -> Result<(f64, Option<f64>)> {
     if let Some(i) = cuts
         .iter()
         .position(|c| !c.t_s.is_finite() || !geom::finite(&c.tip_m))
@@ -128,7 +128,7 @@ pub fn outside_corridor(plan: &ExpertPlan, cuts: &[CutSample]) -> Result<(f64, O
 }
 
 pub(crate) fn assess(
-    plan: &ExpertPlan,
+    plan: &IncisionPlan,
     f: &[ForceSample],
     cuts: &[CutSample],
     values: &mut Values,
@@ -172,8 +172,8 @@ pub(crate) fn assess(
 mod tests {
     use super::*;
 
-    fn straight_plan() -> ExpertPlan {
-        ExpertPlan::from_json(r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1],"force_limit_n":2.5,"corridor_half_width_m":0.005}"#).unwrap()
+    fn straight_plan() -> IncisionPlan {
+        IncisionPlan::from_json(r#"{"entry_m":[0,0,0],"exit_m":[0.06,0,0],"depth_m":0.008,"viewpoint_m":[0,0,0.1],"force_limit_n":2.5,"corridor_half_width_m":0.005}"#).unwrap()
     }
 
     #[test]

@@ -426,7 +426,7 @@ impl Store {
     }
 
     /// Computes the attempt's metrics from `data` against its exercise's plan
-    /// ([`metrics::assess`]) and scores it ([`Store::finish_attempt`]).
+    /// ([`crate::ExercisePlan::assess`]) and scores it ([`Store::finish_attempt`]).
     pub async fn score_attempt(
         &self,
         attempt_id: i64,
@@ -434,7 +434,7 @@ impl Store {
     ) -> Result<Outcome> {
         let a = self.get_attempt(attempt_id).await?;
         let plan = self.exercise_plan(a.exercise_id).await?;
-        let values = metrics::assess(&plan, data)?;
+        let values = plan.assess(data)?;
         self.finish_attempt(attempt_id, &values).await
     }
 

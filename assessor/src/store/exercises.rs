@@ -5,8 +5,8 @@ use serde::{Deserialize, Serialize};
 use super::{BeginWrite, Store, conflict, now_ns};
 use crate::device_class::DeviceClass;
 use crate::error::{AssessError, Result};
+use crate::exercise::ExercisePlan;
 use crate::metrics::{Better, MetricValue};
-use crate::plan::ExpertPlan;
 use crate::proficiency::{Threshold, Thresholds};
 
 /// An exercise.
@@ -30,7 +30,7 @@ pub struct NewExercise<'a> {
     pub name: &'a str,
     pub scene: &'a str,
     pub description: &'a str,
-    pub plan: &'a ExpertPlan,
+    pub plan: &'a ExercisePlan,
     /// Hand-set thresholds until expert attempts replace them (may be empty).
     pub thresholds: &'a [Threshold],
     pub threshold_k: f64,
@@ -131,37 +131,47 @@ macro_rules! write_thresholds {
     };
 }
 
+/// Inserts `plan` (an [`ExercisePlan`]) into `expert_plans` on `$conn` (a pool or a write
+/// transaction of either engine); its value is the new plan's id.
+macro_rules! insert_plan {
+    ($conn:expr, $plan:expr) => {{
+        let kind = $plan.kind_plan();
+        let id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
+            .bind(kind.name())
+            .bind(kind.scene())
+            .bind(kind.depth_m())
+            .bind(kind.tolerance_m())
+            .bind($plan.to_json()?)
+            .bind(now_ns())
+            .fetch_one($conn)
+            .await?;
+        id
+    }};
+}
+
 impl Store {
     /// Stores a plan (checked first); returns its id.
-    pub async fn create_plan(&self, plan: &ExpertPlan) -> Result<i64> {
+    pub async fn create_plan(&self, plan: &ExercisePlan) -> Result<i64> {
         plan.check()?;
-        let id = crate::on_db!(&self.db, pool => sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
-            .bind(&plan.name)
-            .bind(&plan.scene)
-            .bind(plan.depth_m)
-            .bind(plan.tolerance_m)
-            .bind(serde_json::to_string(plan)?)
-            .bind(now_ns())
-            .fetch_one(pool).await)?;
-        Ok(id)
+        Ok(crate::on_db!(&self.db, pool => insert_plan!(pool, plan)))
     }
 
     /// The plan with `id`.
-    pub async fn get_plan(&self, id: i64) -> Result<ExpertPlan> {
+    pub async fn get_plan(&self, id: i64) -> Result<ExercisePlan> {
         let json: Option<String> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = $1")
                 .bind(id)
                 .fetch_optional(pool).await)?;
-        ExpertPlan::from_json(
+        ExercisePlan::from_json(
             &json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?,
         )
     }
 
     /// All stored plans `(id, plan)`, oldest first.
-    pub async fn list_plans(&self) -> Result<Vec<(i64, ExpertPlan)>> {
+    pub async fn list_plans(&self) -> Result<Vec<(i64, ExercisePlan)>> {
         let rows: Vec<(i64, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, plan_json FROM expert_plans ORDER BY id")
                 .fetch_all(pool).await)?;
         rows.into_iter()
-            .map(|(id, json)| Ok((id, ExpertPlan::from_json(&json)?)))
+            .map(|(id, json)| Ok((id, ExercisePlan::from_json(&json)?)))
             .collect()
     }
 
@@ -181,15 +191,7 @@ impl Store {
         }
         let id = crate::on_db!(&self.db, pool => {
             let mut tx = pool.begin_write().await?;
-            let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
-                .bind(&new.plan.name)
-                .bind(&new.plan.scene)
-                .bind(new.plan.depth_m)
-                .bind(new.plan.tolerance_m)
-                .bind(serde_json::to_string(new.plan)?)
-                .bind(now_ns())
-                .fetch_one(&mut *tx)
-                .await?;
+            let plan_id = insert_plan!(&mut *tx, new.plan);
             let name = new.name.trim().to_owned();
             let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns, exam_only) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id")
                 .bind(&name)
@@ -244,7 +246,7 @@ impl Store {
         &self,
         id: i64,
         edit: &ExerciseEdit<'_>,
-        plan: Option<&ExpertPlan>,
+        plan: Option<&ExercisePlan>,
     ) -> Result<Exercise> {
         let ExerciseEdit {
             scene,
@@ -281,15 +283,7 @@ impl Store {
                 return Err(AssessError::NotFound(format!("exercise {id}")));
             }
             if let Some(p) = plan {
-                let plan_id: i64 = sqlx::query_scalar("INSERT INTO expert_plans (name, scene, depth_m, tolerance_m, plan_json, created_ns) VALUES ($1, $2, $3, $4, $5, $6) RETURNING id")
-                    .bind(&p.name)
-                    .bind(&p.scene)
-                    .bind(p.depth_m)
-                    .bind(p.tolerance_m)
-                    .bind(serde_json::to_string(p)?)
-                    .bind(now_ns())
-                    .fetch_one(&mut *tx)
-                    .await?;
+                let plan_id = insert_plan!(&mut *tx, p);
                 sqlx::query("UPDATE exercises SET plan_id = $1 WHERE id = $2")
                     .bind(plan_id)
                     .bind(id)
@@ -302,7 +296,7 @@ impl Store {
     }
 
     /// The exercise's expert plan.
-    pub async fn exercise_plan(&self, exercise_id: i64) -> Result<ExpertPlan> {
+    pub async fn exercise_plan(&self, exercise_id: i64) -> Result<ExercisePlan> {
         let e = self.get_exercise(exercise_id).await?;
         self.get_plan(e.plan_id).await
     }
@@ -348,7 +342,7 @@ impl Store {
         }
         // a peak-force limit derived from expert attempts (a scripted hand's, whose spread is
         // a robot's) is the plan's force limit, a safety limit; one set by hand stays
-        let force_limit_n = self.get_plan(e.plan_id).await?.force_limit_n;
+        let force_limit_n = self.get_plan(e.plan_id).await?.kind_plan().force_limit_n();
         if let Some(t) = metrics
             .iter_mut()
             .find(|t| t.key == "peak_force_n" && t.n_experts > 0)

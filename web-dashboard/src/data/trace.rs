@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use cutlab_assessor::store::Attempt;
-use cutlab_assessor::{ExpertPlan, attempt_data};
+use cutlab_assessor::{ExercisePlan, attempt_data};
 use cutlab_recorder::Recording;
 use serde::Serialize;
 
@@ -120,14 +120,10 @@ enum TraceError {
     Attempt(#[from] cutlab_assessor::AssessError),
 }
 
-fn read_trace(mcap: &std::path::Path, plan: &ExpertPlan) -> Result<AttemptTrace, TraceError> {
+fn read_trace(mcap: &std::path::Path, plan: &ExercisePlan) -> Result<AttemptTrace, TraceError> {
     let rec = Recording::open(mcap)?;
     let data = attempt_data(&rec, plan)?;
-    let line: Vec<[f64; 3]> = if plan.incision_m.len() >= 2 {
-        plan.incision_m.clone()
-    } else {
-        vec![plan.entry_m, plan.exit_m]
-    };
+    let drawing = plan.kind_plan().drawing();
     let cut: Vec<[f64; 2]> = data.cuts.iter().map(|c| xy_mm(c.tip_m)).collect();
     let path: Vec<[f64; 2]> = data.poses.iter().map(|p| xy_mm(p.tip_m)).collect();
     let force: Vec<[f64; 2]> = data
@@ -141,11 +137,11 @@ fn read_trace(mcap: &std::path::Path, plan: &ExpertPlan) -> Result<AttemptTrace,
         })
         .collect();
     Ok(AttemptTrace {
-        planned_mm: line.into_iter().map(xy_mm).collect(),
+        planned_mm: drawing.lines_m.into_iter().flatten().map(xy_mm).collect(),
         cut_mm: thin(&cut),
         path_mm: thin(&path),
         force: thin(&force),
-        force_limit_n: plan.force_limit_n,
-        tolerance_mm: plan.tolerance_m * 1e3,
+        force_limit_n: drawing.force_limit_n,
+        tolerance_mm: drawing.tolerance_m * 1e3,
     })
 }

@@ -12,7 +12,7 @@ use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
-use cutlab_assessor::ExpertPlan;
+use cutlab_assessor::ExercisePlan;
 use cutlab_assessor::metrics::{Better, METRICS};
 use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
 use cutlab_assessor::store::{ExerciseEdit, NewExercise, ThresholdSource};
@@ -51,24 +51,19 @@ pub fn router() -> Router<AppState> {
 async fn example_plan(_user: CurrentUser) -> Response {
     (
         [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
-        cutlab_assessor::plan::CHEST_WALL_PLAN_TOML,
+        cutlab_assessor::exercise::CHEST_WALL_PLAN_TOML,
     )
         .into_response()
 }
 
 /// A plan from TOML or JSON (JSON when it starts with `{`).
-pub fn parse_plan(text: &str) -> Result<ExpertPlan, AppError> {
+pub fn parse_plan(text: &str) -> Result<ExercisePlan, AppError> {
     if text.len() > MAX_PLAN_BYTES {
         return Err(AppError::BadRequest(format!(
             "a plan has at most {MAX_PLAN_BYTES} bytes"
         )));
     }
-    let t = text.trim();
-    Ok(if t.starts_with('{') {
-        ExpertPlan::from_json(t)?
-    } else {
-        ExpertPlan::from_toml(t)?
-    })
+    Ok(ExercisePlan::parse(text)?)
 }
 
 fn name_ok(what: &str, s: &str) -> Result<String, AppError> {
@@ -102,7 +97,7 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
             .find(|e| e.id == id)
             .map_or("?", |e| e.name.as_str())
     };
-    let sample_plan = ExpertPlan::chest_wall()?;
+    let sample_plan = ExercisePlan::chest_wall()?;
     Ok(page(
         "Curriculum",
         Some(&user),
@@ -150,7 +145,7 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
                     (exercise_fields(true, "chest-wall", "", DEFAULT_K, false))
                     (plan_form::plan_fields(&sample_plan))
                     (plan_form::plan_text(MAX_PLAN_BYTES))
-                    (plan_form::plan_reference())
+                    (plan_form::plan_reference(&sample_plan))
                     p class="muted" { "The new exercise starts with the built-in provisional thresholds; edit them on its page." }
                     button type="submit" { "Create exercise" }
                 }
@@ -218,13 +213,13 @@ async fn create_exercise(
     let name = name_ok("name", &f.name)?;
     let scene = name_ok("scene", &f.scene)?;
     let k = positive("k", &f.threshold_k)?;
-    let plan = plan_form::plan_from_form(&f.plan, &f.rest, &ExpertPlan::chest_wall()?)?
+    let plan = plan_form::plan_from_form(&f.plan, &f.rest, &ExercisePlan::chest_wall()?)?
         .ok_or_else(|| {
             AppError::BadRequest(
                 "an exercise needs an expert plan: its fields or its text (TOML or JSON)".into(),
             )
         })?;
-    let thresholds = cutlab_assessor::store::default_thresholds();
+    let thresholds = plan.kind_plan().default_thresholds();
     let e = state
         .store()
         .create_exercise(&NewExercise {
@@ -314,7 +309,7 @@ async fn exercise(
                 summary { "The plan as stored (JSON)" }
                 pre { (plan_json) }
             }
-            (plan_form::plan_reference())
+            (plan_form::plan_reference(&plan))
         },
     ))
 }

@@ -1,11 +1,10 @@
-//! Expert plans: what the optimal incision looks like, read from TOML or JSON.
-
-use std::path::Path;
+//! The incision's plan: what the optimal incision looks like, read from TOML or JSON.
 
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{AssessError, Result};
+use crate::exercise::ExercisePlan;
 use crate::geom;
 
 /// The plan an attempt is measured against (SI units: metres).
@@ -15,7 +14,7 @@ use crate::geom;
 /// projecting along `normal` onto a plane (see [`crate::metrics::incision`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ExpertPlan {
+pub struct IncisionPlan {
     /// A name for reports.
     #[serde(default)]
     pub name: String,
@@ -42,7 +41,7 @@ pub struct ExpertPlan {
     /// (then the visibility metric is missing). What the planned incision lays open: no deeper
     /// below the planned line than `depth_m` (a target beyond it, tissue the planned cut does
     /// not reach, could only be seen after cutting deeper than planned, so the visibility
-    /// metric is missing then too); [`ExpertPlan::mid_depth_targets`] are such points.
+    /// metric is missing then too); [`IncisionPlan::mid_depth_targets`] are such points.
     #[serde(default)]
     pub target_m: Vec<[f64; 3]>,
     /// Where the target is seen from (m).
@@ -72,55 +71,17 @@ fn default_force_limit() -> f64 {
 }
 
 /// The built-in `chest-wall-incision` plan (TOML, embedded).
-pub const CHEST_WALL_PLAN_TOML: &str = include_str!("../examples/plan.toml");
+pub const CHEST_WALL_PLAN_TOML: &str = include_str!("../../../examples/plan.toml");
 
-impl ExpertPlan {
-    /// Parses TOML.
+impl IncisionPlan {
+    /// Parses TOML (an untagged plan or one of kind `incision`).
     pub fn from_toml(text: &str) -> Result<Self> {
-        let plan: Self = toml::from_str(text).map_err(|e| AssessError::Parse {
-            what: "expert plan (TOML)".into(),
-            message: e.to_string(),
-        })?;
-        plan.normalised()
+        ExercisePlan::from_toml(text)?.into_incision()
     }
 
-    /// Parses JSON.
+    /// Parses JSON (an untagged plan or one of kind `incision`).
     pub fn from_json(text: &str) -> Result<Self> {
-        let plan: Self = serde_json::from_str(text).map_err(|e| AssessError::Parse {
-            what: "expert plan (JSON)".into(),
-            message: e.to_string(),
-        })?;
-        plan.normalised()
-    }
-
-    /// Reads a `.toml` or `.json` file (by extension; anything else is tried as TOML, then JSON).
-    pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
-            path: path.display().to_string(),
-            error: source,
-        })?;
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .unwrap_or("")
-            .to_ascii_lowercase();
-        let at = |e: AssessError| match e {
-            AssessError::Parse { what, message } => AssessError::Parse {
-                what: format!("{} ({what})", path.display()),
-                message,
-            },
-            AssessError::InvalidPlan(m) => {
-                AssessError::InvalidPlan(format!("{}: {m}", path.display()))
-            }
-            e => e,
-        };
-        match ext.as_str() {
-            "json" => Self::from_json(&text).map_err(at),
-            "toml" => Self::from_toml(&text).map_err(at),
-            _ => Self::from_toml(&text)
-                .or_else(|_| Self::from_json(&text))
-                .map_err(at),
-        }
+        ExercisePlan::from_json(text)?.into_incision()
     }
 
     /// The built-in plan of `chest-wall-incision`.
@@ -245,7 +206,7 @@ mod tests {
 
     #[test]
     fn the_builtin_plan_parses_and_is_60_mm_long() {
-        let plan = ExpertPlan::chest_wall().unwrap();
+        let plan = IncisionPlan::chest_wall().unwrap();
         assert!(
             (plan.length_m() - 0.060).abs() < 1e-3,
             "{}",
@@ -260,7 +221,7 @@ mod tests {
     #[test]
     fn the_builtin_target_is_what_its_incision_lays_open() {
         // the points in plan.toml are the rule's: the middle third, half the depth down
-        let plan = ExpertPlan::chest_wall().unwrap();
+        let plan = IncisionPlan::chest_wall().unwrap();
         let rule = plan.mid_depth_targets(plan.target_m.len());
         assert_eq!(rule.len(), plan.target_m.len());
         for (a, b) in plan.target_m.iter().zip(&rule) {
@@ -279,10 +240,10 @@ mod tests {
     fn json_round_trip_and_defaults() {
         let text =
             r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
-        let plan = ExpertPlan::from_json(text).unwrap();
+        let plan = IncisionPlan::from_json(text).unwrap();
         assert_eq!(plan.incision_m.len(), 2);
         assert!((plan.tolerance_m - 0.002).abs() < 1e-15);
-        let back = ExpertPlan::from_json(&serde_json::to_string(&plan).unwrap()).unwrap();
+        let back = IncisionPlan::from_json(&serde_json::to_string(&plan).unwrap()).unwrap();
         assert_eq!(back, plan);
     }
 
@@ -290,27 +251,27 @@ mod tests {
     fn degenerate_and_nan_plans_are_rejected_with_a_reason() {
         let ok =
             r#"{"entry_m":[0,0,0],"exit_m":[0.05,0,0],"depth_m":0.005,"viewpoint_m":[0,0,0.1]}"#;
-        assert!(ExpertPlan::from_json(ok).is_ok());
+        assert!(IncisionPlan::from_json(ok).is_ok());
         let short = ok.replace("0.05,0,0", "0.0001,0,0");
         assert!(
-            ExpertPlan::from_json(&short)
+            IncisionPlan::from_json(&short)
                 .unwrap_err()
                 .to_string()
                 .contains("shorter than 1 mm")
         );
         let no_depth = ok.replace("\"depth_m\":0.005", "\"depth_m\":0");
         assert!(
-            ExpertPlan::from_json(&no_depth)
+            IncisionPlan::from_json(&no_depth)
                 .unwrap_err()
                 .to_string()
                 .contains("depth_m")
         );
-        let mut plan = ExpertPlan::from_json(ok).unwrap();
+        let mut plan = IncisionPlan::from_json(ok).unwrap();
         plan.exit_m[1] = f64::NAN;
         assert!(plan.check().unwrap_err().to_string().contains("not finite"));
         let typo = ok.replace("depth_m", "depht_m");
         assert!(matches!(
-            ExpertPlan::from_json(&typo),
+            IncisionPlan::from_json(&typo),
             Err(AssessError::Parse { .. })
         ));
     }
