@@ -11,7 +11,7 @@ use cutlab_sim::TetMesh;
 
 use crate::AssessError;
 use crate::exercise::{ExercisePlan, HandLine};
-use crate::input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};
+use crate::input::{AttemptData, CutSample, ForceSample, FreedPiece, PoseSample, SurfaceMesh};
 use crate::metrics::incision::depth_below_line;
 
 /// How the note of an attempt scored from a recording that is not whole begins.
@@ -63,10 +63,19 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
             }
         }
     }
+    let freed = rec
+        .specimens()
+        .map(|(_, tick, s)| FreedPiece {
+            t_s: t_s(tick),
+            volume_m3: s.volume_m3,
+            surface_m2: s.surface_m2,
+        })
+        .collect();
     Ok(AttemptData {
         poses,
         forces,
         cuts,
+        freed,
         surface: last_surface(rec),
         device: Some(meta.provenance.device.clone()),
     })

@@ -53,6 +53,17 @@ pub struct CutSample {
     pub stroke: Option<u32>,
 }
 
+/// A piece of tissue a cut freed (a specimen), when it was freed and its size at rest.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FreedPiece {
+    /// Time since the start of the session (s).
+    pub t_s: f64,
+    /// Its volume at rest (m^3).
+    pub volume_m3: f64,
+    /// Its surface at rest, the outer surface and the cut's (m^2).
+    pub surface_m2: f64,
+}
+
 /// The tissue's boundary surface (deformed, after the cut), for the field-of-view metrics.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceMesh {
@@ -71,6 +82,9 @@ pub struct AttemptData {
     pub forces: Vec<ForceSample>,
     /// The cuts in time order.
     pub cuts: Vec<CutSample>,
+    /// The pieces the cuts freed, in time order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub freed: Vec<FreedPiece>,
     /// The deformed tissue surface at the end of the attempt, if recorded.
     #[serde(default)]
     pub surface: Option<SurfaceMesh>,

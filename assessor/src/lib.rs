@@ -25,7 +25,7 @@ pub use device_class::DeviceClass;
 pub use error::{AssessError, Result};
 pub use exercise::{ExerciseKind, ExercisePlan, IncisionPlan, Kind};
 pub use from_recording::attempt_data;
-pub use input::{AttemptData, CutSample, ForceSample, PoseSample, SurfaceMesh};
+pub use input::{AttemptData, CutSample, ForceSample, FreedPiece, PoseSample, SurfaceMesh};
 pub use metrics::{Better, Metric, MetricSet, MetricValue};
 pub use proficiency::{CusumParams, Threshold, Thresholds, Verdict};
 pub mod store;

@@ -1,7 +1,7 @@
 //! Proficiency: thresholds from expert attempts, pass/fail, the normalised score, the
 //! consecutive-pass rule and CUSUM.
 //!
-//! **Thresholds.** For each scored metric (see [`crate::metrics::METRICS`]) the experts'
+//! **Thresholds.** For each scored metric (see [`crate::metrics::all`]) the experts'
 //! finite values `x_i` are taken; outliers with `|z_i| = |x_i - mean| / sd > 1.96` are removed
 //! (one pass, on the mean and sample SD of all values); of the rest the mean `mu` and sample
 //! SD `sigma` give the limits: `mu + k sigma` above for lower-is-better metrics, `mu - k sigma`
@@ -56,7 +56,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{AssessError, Result};
-use crate::metrics::{Better, METRICS, MetricValue};
+use crate::metrics::{Better, MetricValue};
 
 /// Metrics that are feedback only: they have an expert reference (and limits, shown) but do
 /// not decide pass/fail or the score, until thresholds come from people. A person's time,
@@ -262,7 +262,7 @@ impl Thresholds {
             return Err(AssessError::InvalidInput(format!("k = {k}: must be > 0")));
         }
         let mut metrics = Vec::new();
-        for m in METRICS.iter().filter(|m| m.scored) {
+        for m in crate::metrics::all().filter(|m| m.scored) {
             let x: Vec<f64> = attempts
                 .iter()
                 .filter_map(|a| crate::metrics::value_of(a, m.key))

@@ -247,7 +247,35 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
             .metrics
             .is_empty()
     );
-    assert_eq!(store.list_exercises().await.expect("list").len(), 1);
+    // and pattern cutting, a pattern plan with its own thresholds
+    let names: Vec<String> = store
+        .list_exercises()
+        .await
+        .expect("list")
+        .into_iter()
+        .map(|e| e.name)
+        .collect();
+    assert_eq!(
+        names,
+        [BUILTIN_EXERCISE, "pattern-cutting"]
+            .map(String::from)
+            .to_vec()
+    );
+    let pattern = store
+        .exercise_by_name("pattern-cutting")
+        .await
+        .expect("pattern");
+    let plan = store.exercise_plan(pattern.id).await.expect("plan");
+    assert_eq!(plan.kind(), cutlab_assessor::Kind::Pattern);
+    let keys: Vec<String> = store
+        .thresholds(pattern.id)
+        .await
+        .expect("thresholds")
+        .metrics
+        .into_iter()
+        .map(|t| t.key)
+        .collect();
+    assert!(keys.contains(&"completion_time_s".to_owned()), "{keys:?}");
 }
 
 on_both!(attempts_scores_and_proficiency);
@@ -620,7 +648,7 @@ async fn open_creates_and_migrates_a_file() {
     store.ensure_builtins().await.expect("builtins");
     store.close().await;
     let again = Store::open(&path).await.expect("reopen");
-    assert_eq!(again.list_exercises().await.expect("list").len(), 1);
+    assert_eq!(again.list_exercises().await.expect("list").len(), 2);
     again.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }

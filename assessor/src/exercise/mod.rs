@@ -11,6 +11,7 @@
 //! a variant in [`Kind`] and [`ExercisePlan`], and its arm in the matches of this file.
 
 pub mod incision;
+pub mod pattern;
 
 use std::path::Path;
 
@@ -22,6 +23,7 @@ use crate::metrics::{Metric, MetricSet};
 use crate::proficiency::Threshold;
 
 pub use incision::{CHEST_WALL_PLAN_TOML, IncisionPlan};
+pub use pattern::{PATTERN_PLAN_TOML, PatternPlan};
 
 /// The kinds of exercise.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -29,16 +31,19 @@ pub use incision::{CHEST_WALL_PLAN_TOML, IncisionPlan};
 pub enum Kind {
     /// A line cut to a depth, measured against the planned line (`chest-wall-incision`).
     Incision,
+    /// A marked circle cut out of a held sheet, scored by the MISTELS rule (`pattern-cutting`).
+    Pattern,
 }
 
 impl Kind {
     /// Every kind, in the order forms offer them.
-    pub const ALL: [Kind; 1] = [Kind::Incision];
+    pub const ALL: [Kind; 2] = [Kind::Incision, Kind::Pattern];
 
     /// The tag in plans and forms.
     pub fn as_str(self) -> &'static str {
         match self {
             Kind::Incision => "incision",
+            Kind::Pattern => "pattern",
         }
     }
 
@@ -133,6 +138,7 @@ pub trait ExerciseKind {
 #[derive(Debug, Clone, PartialEq)]
 pub enum ExercisePlan {
     Incision(IncisionPlan),
+    Pattern(PatternPlan),
 }
 
 impl From<IncisionPlan> for ExercisePlan {
@@ -146,6 +152,7 @@ impl ExercisePlan {
     pub fn kind_plan(&self) -> &dyn ExerciseKind {
         match self {
             ExercisePlan::Incision(p) => p,
+            ExercisePlan::Pattern(p) => p,
         }
     }
 
@@ -153,6 +160,7 @@ impl ExercisePlan {
     pub fn kind(&self) -> Kind {
         match self {
             ExercisePlan::Incision(_) => Kind::Incision,
+            ExercisePlan::Pattern(_) => Kind::Pattern,
         }
     }
 
@@ -160,6 +168,7 @@ impl ExercisePlan {
     pub fn as_incision(&self) -> Option<&IncisionPlan> {
         match self {
             ExercisePlan::Incision(p) => Some(p),
+            _ => None,
         }
     }
 
@@ -167,6 +176,10 @@ impl ExercisePlan {
     pub fn into_incision(self) -> Result<IncisionPlan> {
         match self {
             ExercisePlan::Incision(p) => Ok(p),
+            other => Err(AssessError::InvalidPlan(format!(
+                "kind: {}, not an incision",
+                other.kind().as_str()
+            ))),
         }
     }
 
@@ -195,11 +208,15 @@ impl ExercisePlan {
             })?,
             Some(_) => return Err(parse("kind: must be text".into())),
         };
+        let read = |e: serde_json::Error| parse(format!("{} plan: {e}", kind.as_str()));
         match kind {
             Kind::Incision => {
-                let plan: IncisionPlan =
-                    serde_json::from_value(value).map_err(|e| parse(e.to_string()))?;
+                let plan: IncisionPlan = serde_json::from_value(value).map_err(read)?;
                 Ok(plan.normalised()?.into())
+            }
+            Kind::Pattern => {
+                let plan: PatternPlan = serde_json::from_value(value).map_err(read)?;
+                Ok(ExercisePlan::Pattern(plan.normalised()?))
             }
         }
     }
@@ -282,6 +299,7 @@ impl Serialize for ExercisePlan {
     fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         let inner = match self {
             ExercisePlan::Incision(p) => serde_json::to_value(p),
+            ExercisePlan::Pattern(p) => serde_json::to_value(p),
         };
         let mut value = inner.map_err(serde::ser::Error::custom)?;
         if let Some(map) = value.as_object_mut() {

@@ -13,6 +13,7 @@
 pub mod field;
 pub mod incision;
 pub mod path;
+pub mod pattern;
 pub mod safety;
 pub mod smoothness;
 
@@ -425,17 +426,20 @@ const fn m(
     }
 }
 
-/// The definition of a metric key.
-pub fn metric(key: &str) -> Option<&'static Metric> {
-    METRICS.iter().find(|m| m.key == key)
+/// Every metric of every kind of exercise, in report order: [`METRICS`] (the incision's and
+/// those every motion has), then [`pattern::METRICS`].
+pub fn all() -> impl Iterator<Item = &'static Metric> {
+    METRICS.iter().chain(pattern::METRICS)
 }
 
-/// Where a metric key stands in [`METRICS`] (unknown keys last): the order reports list them.
+/// The definition of a metric key.
+pub fn metric(key: &str) -> Option<&'static Metric> {
+    all().find(|m| m.key == key)
+}
+
+/// Where a metric key stands in [`all`] (unknown keys last): the order reports list them.
 pub fn catalogue_rank(key: &str) -> usize {
-    METRICS
-        .iter()
-        .position(|m| m.key == key)
-        .unwrap_or(usize::MAX)
+    all().position(|m| m.key == key).unwrap_or(usize::MAX)
 }
 
 /// Values keyed as in [`METRICS`], built by the groups.
@@ -495,10 +499,10 @@ mod tests {
 
     #[test]
     fn keys_are_unique_and_empty_data_gives_missing_metrics_not_errors() {
-        let mut keys: Vec<_> = METRICS.iter().map(|m| m.key).collect();
+        let mut keys: Vec<_> = all().map(|m| m.key).collect();
         keys.sort_unstable();
         keys.dedup();
-        assert_eq!(keys.len(), METRICS.len());
+        assert_eq!(keys.len(), all().count());
         let plan = IncisionPlan::chest_wall().unwrap();
         let out = plan.assess(&AttemptData::default()).unwrap();
         assert_eq!(out.len(), METRICS.len());

@@ -1,8 +1,9 @@
-//! The built-in exercise, always present so `cutlab assess` works on a fresh database.
+//! The built-in exercises, always present so `cutlab assess` works on a fresh database:
+//! `chest-wall-incision` and `pattern-cutting`.
 
 use super::{Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
-use crate::exercise::ExercisePlan;
+use crate::exercise::{ExercisePlan, PatternPlan};
 use crate::proficiency::DEFAULT_K;
 
 /// The built-in exercise's name.
@@ -10,29 +11,57 @@ pub const BUILTIN_EXERCISE: &str = "chest-wall-incision";
 /// Its scene.
 pub const BUILTIN_SCENE: &str = "chest-wall";
 
+/// The built-in pattern cutting exercise's name.
+pub const PATTERN_EXERCISE: &str = "pattern-cutting";
+
 impl Store {
-    /// Inserts the built-in exercise `chest-wall-incision` if missing (safe when several
-    /// processes do it at once); returns it.
+    /// Inserts the built-in exercises if missing (safe when several processes do it at once);
+    /// returns `chest-wall-incision`.
     pub async fn ensure_builtins(&self) -> Result<Exercise> {
-        match self.exercise_by_name(BUILTIN_EXERCISE).await {
+        let incision = self
+            .ensure_exercise(
+                BUILTIN_EXERCISE,
+                BUILTIN_SCENE,
+                "A 60 mm incision 8 mm deep along x across the top of the chest wall",
+                &ExercisePlan::chest_wall()?,
+            )
+            .await?;
+        self.ensure_exercise(
+            PATTERN_EXERCISE,
+            "sheet",
+            "FLS pattern cutting: cut the marked 40 mm circle out of the held sheet, along the mark",
+            &ExercisePlan::Pattern(PatternPlan::builtin()?),
+        )
+        .await?;
+        Ok(incision)
+    }
+
+    /// Inserts exercise `name` with `plan` and its kind's default thresholds if missing.
+    async fn ensure_exercise(
+        &self,
+        name: &str,
+        scene: &str,
+        description: &str,
+        plan: &ExercisePlan,
+    ) -> Result<Exercise> {
+        match self.exercise_by_name(name).await {
             Ok(e) => return Ok(e),
             Err(AssessError::NotFound(_)) => {}
             Err(e) => return Err(e),
         }
-        let plan = ExercisePlan::chest_wall()?;
         let thresholds = plan.kind_plan().default_thresholds();
         let new = NewExercise {
-            name: BUILTIN_EXERCISE,
-            scene: BUILTIN_SCENE,
-            description: "A 60 mm incision 8 mm deep along x across the top of the chest wall",
-            plan: &plan,
+            name,
+            scene,
+            description,
+            plan,
             thresholds: &thresholds,
             threshold_k: DEFAULT_K,
             exam_only: false,
         };
         match self.create_exercise(&new).await {
             Ok(e) => Ok(e),
-            Err(AssessError::Conflict(_)) => self.exercise_by_name(BUILTIN_EXERCISE).await,
+            Err(AssessError::Conflict(_)) => self.exercise_by_name(name).await,
             Err(e) => Err(e),
         }
     }

@@ -135,7 +135,7 @@ impl AttemptUpload {
         if self.status == AttemptStatus::Complete && self.recording_sha256.is_none() {
             return bad("a complete attempt comes with its recording (the hub scores it)".into());
         }
-        if self.metrics.len() > crate::metrics::METRICS.len() {
+        if self.metrics.len() > crate::metrics::all().count() {
             return bad(format!(
                 "{} metrics: more than there are",
                 self.metrics.len()

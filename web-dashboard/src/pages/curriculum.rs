@@ -13,7 +13,7 @@ use axum::http::header;
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
 use cutlab_assessor::ExercisePlan;
-use cutlab_assessor::metrics::{Better, METRICS};
+use cutlab_assessor::metrics::{self, Better};
 use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
 use cutlab_assessor::store::{ExerciseEdit, NewExercise, ThresholdSource};
 use maud::{Markup, html};
@@ -339,7 +339,7 @@ fn thresholds_table(t: &Thresholds, editable: bool) -> Markup {
                                 label class="visually-hidden" for=(format!("key_{i}")) { "Metric (" (row) ")" }
                                 select id=(format!("key_{i}")) name=(format!("key_{i}")) {
                                     option value="" { "–" }
-                                    @for d in METRICS.iter().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (metric_name(d.key)) } }
+                                    @for d in metrics::all().filter(|d| d.scored) { option value=(d.key) selected[m.is_some_and(|m| m.key == d.key)] { (metric_name(d.key)) } }
                                 }
                             }
                             td {
