@@ -308,7 +308,7 @@ fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
         },
     };
     let o = session::Options {
-        scene: BUILTIN_SCENE.into(),
+        scene: Some(BUILTIN_SCENE.into()),
         device,
         run: RunSettings {
             min_tets: Some(MIN_TETS),

@@ -166,9 +166,10 @@ enum Command {
     /// Run one training session: a device drives the scalpel through the 1 kHz servo loop
     /// while the simulation runs; prints a summary and writes DIR/final.vtu.
     Session {
-        /// A built-in scene (chest-wall, sheet, bar, body-wall) or a scene/mesh file.
-        #[arg(long, default_value = "chest-wall")]
-        scene: String,
+        /// A built-in scene (chest-wall, sheet, bar, body-wall) or a scene/mesh file; by
+        /// default the exercise's (with `--exercise`), else chest-wall.
+        #[arg(long)]
+        scene: Option<String>,
         /// Resolution of a generated mesh: at least this many tetrahedra.
         #[arg(long)]
         min_tets: Option<usize>,

@@ -30,10 +30,14 @@ use crate::localise_choice::{self, Localise};
 /// What `--device` names (parsed by [`DeviceSpec`]).
 pub type DeviceArg = DeviceSpec;
 
+/// The scene of a session that names neither a scene nor an exercise.
+pub const DEFAULT_SCENE: &str = "chest-wall";
+
 /// Options of `cutlab session`.
 #[derive(Debug)]
 pub struct Options {
-    pub scene: String,
+    /// The scene; `None`: the exercise's (with `attempt`), else `chest-wall`.
+    pub scene: Option<String>,
     pub device: DeviceArg,
     /// How the session runs (step, clock, duration, seed, keyframes, surface rate).
     pub run: RunSettings,
@@ -148,21 +152,25 @@ pub fn run_session(
         .map_or(PlanSource::AcrossScene, |(_, plan)| {
             PlanSource::Exercise(plan)
         });
-    let prepared = Prepared::new(&o.scene, &o.run, source);
+    let scene = match (&o.scene, &exercise) {
+        (Some(s), _) => s.clone(),
+        (None, Some((e, _))) => e.scene.clone(),
+        (None, None) => DEFAULT_SCENE.into(),
+    };
+    let prepared = Prepared::new(&scene, &o.run, source);
     if let Some((e, _)) = &exercise {
         // the scene as given or as it names itself
         let built = prepared.as_ref().ok().map(|p| p.scene.spec.name.as_str());
-        if e.scene != o.scene && built != Some(e.scene.as_str()) {
+        if e.scene != scene && built != Some(e.scene.as_str()) {
             bail!(
-                "exercise {} is on the scene {}, not {}: pass --scene {}",
+                "exercise {} is on the scene {}, not {scene}: pass --scene {} or none",
                 e.name,
                 e.scene,
-                o.scene,
                 e.scene
             );
         }
     }
-    let mut prepared = prepared.with_context(|| format!("preparing scene {:?}", o.scene))?;
+    let mut prepared = prepared.with_context(|| format!("preparing scene {scene:?}"))?;
     let localisation = localise(&mut prepared, o.localise);
     let device = match device {
         Some(d) => d,

@@ -15,6 +15,8 @@ use std::process::Command;
 
 const SEEDS: std::ops::RangeInclusive<u64> = 1..=10;
 const MIN_TETS: &str = "3000";
+/// Seeds per level of the pattern cutting run (each session cuts the sheet at its own size).
+const PATTERN_SEEDS: u64 = 4;
 
 fn cutlab(db: &Path, args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
@@ -33,39 +35,55 @@ fn cutlab(db: &Path, args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// The exercise a validity run records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Exercise {
+    /// No exercise: the default scene's own incision, scored as `chest-wall-incision`.
+    Incision,
+    /// `pattern-cutting` on the sheet at its own size, recorded as an attempt of `trainee`.
+    Pattern,
+}
+
+impl Exercise {
+    /// The session's arguments besides the device, seed and output.
+    fn args(self, skill: &str, seed: u64) -> Vec<String> {
+        let strings = |a: &[&str]| a.iter().map(|s| (*s).to_owned()).collect::<Vec<_>>();
+        match self {
+            // the expert finishes the 60 mm incision in about 4 s, the novice (slower,
+            // hesitating) in about 12 s (a person's hand at the pointer is done in 7-12 s,
+            // when the session ends)
+            Exercise::Incision => {
+                let duration = if skill == "expert" { "6" } else { "15" };
+                strings(&["--min-tets", MIN_TETS, "--duration", duration])
+            }
+            // the expert cuts the circle free in about 8 s; a novice has not in 30 s
+            Exercise::Pattern => {
+                let duration = if skill == "expert" { "12" } else { "30" };
+                let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
+                let mut a = strings(&["--exercise", "pattern-cutting", "--duration", duration]);
+                a.extend(["--trainee".to_owned(), trainee]);
+                a
+            }
+        }
+    }
+}
+
 /// Records a scripted session of `skill` with `seed` into `dir/skill-seed/session.mcap`.
-fn record(db: &Path, dir: &Path, skill: &str, seed: u64) -> PathBuf {
+fn record(db: &Path, dir: &Path, skill: &str, seed: u64, exercise: Exercise) -> PathBuf {
     let out = dir.join(format!("{skill}-{seed}"));
-    // the expert finishes the 60 mm incision in about 4 s, the novice (slower, hesitating)
-    // in about 12 s
-    // (a person's hand at the pointer is done in 7-12 s, when the session ends)
-    let duration = if skill == "expert" { "6" } else { "15" };
-    let seed = seed.to_string();
+    let seed_arg = seed.to_string();
     let out_arg = out.to_str().expect("utf-8 path");
-    cutlab(
-        db,
-        &[
-            "session",
-            "--device",
-            skill,
-            "--seed",
-            &seed,
-            "--min-tets",
-            MIN_TETS,
-            "--duration",
-            duration,
-            "--surface-hz",
-            "0",
-            "--out",
-            out_arg,
-        ],
-    );
+    let mut args = vec!["session", "--device", skill, "--seed", &seed_arg];
+    let more = exercise.args(skill, seed);
+    args.extend(more.iter().map(String::as_str));
+    args.extend(["--surface-hz", "0", "--out", out_arg]);
+    cutlab(db, &args);
     out.join("session.mcap")
 }
 
 /// Records the sessions of `skill` for every seed, two at a time.
 fn record_all(db: &Path, dir: &Path, skill: &str) -> Vec<PathBuf> {
-    record_seeds(db, dir, skill, SEEDS)
+    record_seeds(db, dir, skill, SEEDS, Exercise::Incision)
 }
 
 /// Records the sessions of `skill` for `seeds`, two at a time.
@@ -74,6 +92,7 @@ fn record_seeds(
     dir: &Path,
     skill: &str,
     seeds: impl IntoIterator<Item = u64>,
+    exercise: Exercise,
 ) -> Vec<PathBuf> {
     let seeds: Vec<u64> = seeds.into_iter().collect();
     let mut files = Vec::new();
@@ -82,7 +101,7 @@ fn record_seeds(
             .iter()
             .map(|&seed| {
                 let (db, dir, skill) = (db.to_owned(), dir.to_owned(), skill.to_owned());
-                std::thread::spawn(move || record(&db, &dir, &skill, seed))
+                std::thread::spawn(move || record(&db, &dir, &skill, seed, exercise))
             })
             .collect();
         files.extend(
@@ -94,11 +113,19 @@ fn record_seeds(
     files
 }
 
-/// Scores `file` for `trainee`; returns (score, passed).
-fn assess(db: &Path, file: &Path, trainee: &str, expert: bool) -> (f64, bool) {
+/// Scores `file` for `trainee` at `exercise`; returns the report (`score`, `pass`, `metrics`).
+fn assess_at(
+    db: &Path,
+    file: &Path,
+    exercise: &str,
+    trainee: &str,
+    expert: bool,
+) -> serde_json::Value {
     let mut args = vec![
         "assess",
         file.to_str().expect("utf-8 path"),
+        "--exercise",
+        exercise,
         "--trainee",
         trainee,
         "--json",
@@ -106,7 +133,12 @@ fn assess(db: &Path, file: &Path, trainee: &str, expert: bool) -> (f64, bool) {
     if expert {
         args.push("--expert");
     }
-    let v: serde_json::Value = serde_json::from_str(&cutlab(db, &args)).expect("assess --json");
+    serde_json::from_str(&cutlab(db, &args)).expect("assess --json")
+}
+
+/// Scores `file` for `trainee` at the built-in incision; returns (score, passed).
+fn assess(db: &Path, file: &Path, trainee: &str, expert: bool) -> (f64, bool) {
+    let v = assess_at(db, file, "chest-wall-incision", trainee, expert);
     (
         v["score"].as_f64().expect("score"),
         v["pass"].as_bool().expect("pass"),
@@ -174,21 +206,23 @@ fn steady_hands_at_the_pointer_pass_the_thresholds_people_set_and_sloppy_ones_fa
     let dir = std::env::temp_dir().join(format!("cutlab-validity-pointer-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let db = dir.join("validity.db");
-    let experts = record_seeds(&db, &dir, "pointer:steady", 1..=4);
+    let experts = record_seeds(&db, &dir, "pointer:steady", 1..=4, Exercise::Incision);
     for (k, file) in experts.iter().enumerate() {
         assess(&db, file, &format!("expert-{k}"), true);
     }
     cutlab(&db, &["exercise", "thresholds"]);
-    let steady: Vec<(f64, bool)> = record_seeds(&db, &dir, "pointer:steady", 11..=13)
-        .iter()
-        .enumerate()
-        .map(|(k, f)| assess(&db, f, &format!("steady-{k}"), false))
-        .collect();
-    let sloppy: Vec<(f64, bool)> = record_seeds(&db, &dir, "pointer:sloppy", 11..=13)
-        .iter()
-        .enumerate()
-        .map(|(k, f)| assess(&db, f, &format!("sloppy-{k}"), false))
-        .collect();
+    let steady: Vec<(f64, bool)> =
+        record_seeds(&db, &dir, "pointer:steady", 11..=13, Exercise::Incision)
+            .iter()
+            .enumerate()
+            .map(|(k, f)| assess(&db, f, &format!("steady-{k}"), false))
+            .collect();
+    let sloppy: Vec<(f64, bool)> =
+        record_seeds(&db, &dir, "pointer:sloppy", 11..=13, Exercise::Incision)
+            .iter()
+            .enumerate()
+            .map(|(k, f)| assess(&db, f, &format!("sloppy-{k}"), false))
+            .collect();
     eprintln!("steady {steady:.3?}, sloppy {sloppy:.3?}");
     assert!(
         steady.iter().all(|s| s.1),
@@ -198,5 +232,60 @@ fn steady_hands_at_the_pointer_pass_the_thresholds_people_set_and_sloppy_ones_fa
         sloppy.iter().all(|s| !s.1),
         "every sloppy hand fails: {sloppy:?}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Pattern cutting (FLS): every synthetic expert cuts the circle free within FLS's 98 s and
+/// 2 mm and passes; every novice fails; the MISTELS scores order expert > intermediate >
+/// novice on average, and every expert's is above every novice's.
+#[test]
+fn pattern_cutting_experts_pass_fls_and_novices_fail() {
+    let dir = std::env::temp_dir().join(format!("cutlab-validity-pattern-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let db = dir.join("validity.db");
+    let seeds = 1..=PATTERN_SEEDS;
+    let score = |skill: &str| -> Vec<(f64, bool, f64)> {
+        record_seeds(&db, &dir, skill, seeds.clone(), Exercise::Pattern)
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let v = assess_at(&db, f, "pattern-cutting", &format!("{skill}-{k}"), false);
+                let mistels = v["metrics"]
+                    .as_array()
+                    .expect("metrics")
+                    .iter()
+                    .find(|m| m["key"] == "mistels_score")
+                    .and_then(|m| m["value"].as_f64())
+                    .expect("a MISTELS score");
+                (
+                    v["score"].as_f64().expect("score"),
+                    v["pass"].as_bool().expect("pass"),
+                    mistels,
+                )
+            })
+            .collect()
+    };
+    let (expert, intermediate, novice) = (score("expert"), score("intermediate"), score("novice"));
+    eprintln!(
+        "(score, pass, MISTELS): expert {expert:.2?}\nintermediate {intermediate:.2?}\nnovice {novice:.2?}"
+    );
+    assert!(
+        expert.iter().all(|e| e.1 && e.2 > 200.0),
+        "every expert passes: {expert:?}"
+    );
+    assert!(
+        novice.iter().all(|n| !n.1),
+        "every novice fails: {novice:?}"
+    );
+    let mean = |v: &[(f64, bool, f64)]| v.iter().map(|x| x.2).sum::<f64>() / v.len() as f64;
+    assert!(
+        mean(&expert) > mean(&intermediate) && mean(&intermediate) > mean(&novice),
+        "MISTELS means {:.1} > {:.1} > {:.1}",
+        mean(&expert),
+        mean(&intermediate),
+        mean(&novice)
+    );
+    let worst_expert = expert.iter().map(|e| e.2).fold(f64::INFINITY, f64::min);
+    assert!(novice.iter().all(|n| n.2 < worst_expert));
     let _ = std::fs::remove_dir_all(&dir);
 }
