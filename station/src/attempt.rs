@@ -42,6 +42,31 @@ pub fn plan_on_tissue(session: &Session, plan: &ExercisePlan) -> Result<Plan, St
     Ok(on_tissue)
 }
 
+/// The lines marked on the exercise's tissue ([`cutlab_assessor::exercise::Drawing::marks_m`])
+/// laid on the session's surface, lifted 0.5 mm off it so they are drawn over it: seen in
+/// every mode, guided or exam.
+pub fn marks_on_tissue(
+    session: &Session,
+    plan: &ExercisePlan,
+) -> Result<Vec<Vec<Point3>>, StationError> {
+    let drawing = plan.kind_plan().drawing();
+    let up = Vector3::from(drawing.normal);
+    drawing
+        .marks_m
+        .iter()
+        .map(|mark| {
+            let points: Vec<Point3> = mark.iter().map(|&c| Point3::from(c)).collect();
+            let on = session.plan_along(&points, &up, 0.0)?;
+            Ok(on
+                .line_m
+                .iter()
+                .zip(&on.normals)
+                .map(|(p, n)| p + n * 5e-4)
+                .collect())
+        })
+        .collect()
+}
+
 /// How a session's attempt ended.
 #[derive(Debug)]
 pub enum Finished {

@@ -144,6 +144,8 @@ pub struct Prepared {
     /// What the hand follows, or why nothing can be planned on this tissue (a device that
     /// follows no plan runs all the same).
     plan: Result<Plan, String>,
+    /// The lines marked on the tissue (the exercise's), laid on it.
+    pub marks: Vec<Vec<cutlab_sim::Point3>>,
     pub config: SessionConfig,
     pub settings: RunSettings,
 }
@@ -171,9 +173,12 @@ impl Prepared {
         let min_tets = settings.min_tets;
         let built = Scene::load(scene, BuildOptions { min_tets })?;
         let (built, session, step_choice) = Session::at_time_step(built, settings.time_step)?;
-        let plan = match plan {
-            PlanSource::Exercise(p) => Ok(attempt::plan_on_tissue(&session, p)?),
-            PlanSource::AcrossScene => across(&built, &session),
+        let (plan, marks) = match plan {
+            PlanSource::Exercise(p) => (
+                Ok(attempt::plan_on_tissue(&session, p)?),
+                attempt::marks_on_tissue(&session, p)?,
+            ),
+            PlanSource::AcrossScene => (across(&built, &session), Vec::new()),
         };
         let step_s = session.sim.settings.time_step_s;
         let mut config = SessionConfig {
@@ -191,6 +196,7 @@ impl Prepared {
             session,
             step_choice,
             plan,
+            marks,
             config,
             settings: settings.clone(),
         })

@@ -279,6 +279,8 @@ pub struct Running {
     pub guided: bool,
     /// The planned incision on the tissue (shown in guided mode).
     pub plan: Plan,
+    /// Lines marked on the tissue (shown in every mode).
+    pub marks: Vec<Vec<cutlab_sim::Point3>>,
     /// The force the tissue should not be loaded beyond, the exercise's (N).
     pub force_limit_newtons: f64,
     /// Where the exercise is seen from, if its scene says.
@@ -420,6 +422,7 @@ pub async fn start(
     let (ending_tx, ending) = watch::channel(None);
     let figures = Arc::new(OnceLock::new());
     let viewpoint = prepared.scene.viewpoint.clone();
+    let marks = prepared.marks.clone();
     let thread = SessionThread {
         prepared,
         device,
@@ -449,6 +452,7 @@ pub async fn start(
         trainee: request.trainee,
         guided,
         plan,
+        marks,
         force_limit_newtons,
         viewpoint,
         feed,

@@ -467,3 +467,57 @@ async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit()
     ending(&guided).await;
     store.close().await;
 }
+
+/// Pattern cutting at the station in exam mode: the marked circle is laid on the sheet and
+/// shown (the plan is not); the expert cuts the piece free and passes; the attempt's metrics
+/// are the pattern kind's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pattern_cutting_shows_its_mark_in_exam_mode_and_scores_the_freed_piece() {
+    let dir_guard = temp_dir("pattern");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
+    let settings = settings(dir, 12.0);
+    let running = run::start(
+        store.clone(),
+        &settings,
+        StartRequest {
+            exercise: cutlab_assessor::store::PATTERN_EXERCISE.into(),
+            trainee: "ana".into(),
+            guided: false,
+        },
+        Input::Device(expert()),
+    )
+    .await
+    .expect("started");
+    assert!(!running.guided);
+    // the mark: one closed circle of radius 20 mm about the sheet's centre, on its top
+    assert_eq!(running.marks.len(), 1);
+    let mark = &running.marks[0];
+    assert!(mark.len() > 300, "{} points", mark.len());
+    for p in mark {
+        let r = (p.x - 0.05).hypot(p.y - 0.05);
+        assert!((r - 0.02).abs() < 5e-4, "{p:?}: radius {r}");
+        assert!(
+            (p.z - 0.0025).abs() < 5e-4,
+            "{p:?}: on the top, lifted 0.5 mm"
+        );
+    }
+    let Ending::Scored {
+        attempt, passed, ..
+    } = ending(&running).await
+    else {
+        panic!("scored");
+    };
+    assert!(passed, "the expert passes");
+    let metrics = store.attempt_metrics(attempt).await.expect("metrics");
+    let value = |key: &str| {
+        metrics
+            .iter()
+            .find(|m| m.metric == key)
+            .and_then(|m| m.value)
+    };
+    assert_eq!(value("piece_freed"), Some(1.0));
+    assert!(value("mistels_score").is_some_and(|s| s > 250.0));
+    assert!(value("entry_error_m").is_none(), "no incision metrics");
+    store.close().await;
+}

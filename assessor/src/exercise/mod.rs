@@ -72,6 +72,11 @@ pub struct HandLine {
 pub struct Drawing {
     /// The planned lines (m), each open.
     pub lines_m: Vec<Vec<[f64; 3]>>,
+    /// Lines marked on the tissue itself (m), seen in every mode (a pattern's circle), along
+    /// the plan's normal.
+    pub marks_m: Vec<Vec<[f64; 3]>>,
+    /// The plan's outward normal (unit).
+    pub normal: [f64; 3],
     /// How far from a line still counts as on it (m): the band drawn around it.
     pub tolerance_m: f64,
     /// The force the plan counts as excessive (N).

@@ -377,6 +377,8 @@ impl ExerciseKind for PatternPlan {
     fn drawing(&self) -> Drawing {
         Drawing {
             lines_m: vec![self.circle_points(1.0)],
+            marks_m: vec![self.circle_points(1.0)],
+            normal: self.normal,
             tolerance_m: self.tolerance_m,
             force_limit_n: self.force_limit_n,
         }

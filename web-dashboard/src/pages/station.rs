@@ -192,6 +192,8 @@ fn config_json(r: &Running, driver: bool) -> String {
         "guided": r.guided,
         "force_limit_n": r.force_limit_newtons,
         "plan": plan,
+        // lines marked on the tissue (a pattern's circle), in exam mode too
+        "marks": r.marks.iter().map(|m| m.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>()).collect::<Vec<_>>(),
         // the depth the blade starts at, in exam mode too (the depth is part of the task
         // the page states; the line is not shown)
         "start_depth_m": r.plan.depth_m,

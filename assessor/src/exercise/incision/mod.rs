@@ -255,6 +255,8 @@ impl ExerciseKind for IncisionPlan {
     fn drawing(&self) -> Drawing {
         Drawing {
             lines_m: vec![self.incision_m.clone()],
+            marks_m: Vec::new(),
+            normal: self.normal,
             tolerance_m: self.tolerance_m,
             force_limit_n: self.force_limit_n,
         }

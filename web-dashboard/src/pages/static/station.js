@@ -277,6 +277,8 @@
       strip([line[0]], gl.POINTS, [0.16, 0.78, 0.35], 10);
       strip([line[line.length - 1]], gl.POINTS, [0.95, 0.75, 0.2], 10);
     }
+    // the marks on the tissue (a pattern's circle, in ink), whatever the mode
+    for (const mark of config.marks || []) strip(mark, gl.LINE_STRIP, [0.12, 0.16, 0.55]);
     if (!config.plan && rest) strip(ruler(), gl.LINES, [0.95, 0.95, 0.95]);
     drawBlade(strip);
     stats.draws += 1;
