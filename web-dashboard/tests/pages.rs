@@ -1052,3 +1052,46 @@ async fn a_lapse_after_proficiency_reads_as_a_lapse_beside_the_cusum() {
         "{grid}"
     );
 }
+
+/// The pattern cutting exercise's page offers its kind's fields (the circle, not an
+/// incision's entry and exit) and documents its keys; a changed radius is saved.
+#[tokio::test]
+async fn a_pattern_exercise_is_edited_through_its_own_fields() {
+    let e = env().await;
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let ex = e
+        .store
+        .exercise_by_name(cutlab_assessor::store::PATTERN_EXERCISE)
+        .await
+        .unwrap();
+    let path = format!("/exercises/{}", ex.id);
+    let page = body_text(send(&e.app, get(&path, Some(&kim))).await).await;
+    for key in ["centre_x_mm", "radius_mm", "cutoff_s", "viewpoint_z_mm"] {
+        assert!(page.contains(&format!("name=\"{key}\"")), "{key}");
+    }
+    assert!(!page.contains("name=\"entry_x_mm\""));
+    assert!(page.contains("<code>radius_m</code>") && page.contains("Expert plan (pattern)"));
+    for c in controls(&page) {
+        let id = attr(c, "id").unwrap_or_else(|| panic!("no id on {c}"));
+        assert_eq!(
+            page.matches(&format!(" for=\"{id}\"")).count(),
+            1,
+            "one label for {id}"
+        );
+    }
+    let form = form_values(&page, &path);
+    let pairs: Vec<(&str, &str)> = form
+        .iter()
+        .map(|(k, v)| (k.as_str(), if k == "radius_mm" { "25" } else { v.as_str() }))
+        .collect();
+    let r = send(&e.app, post_form(&path, Some(&kim.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER, "{}", body_text(r).await);
+    let edited = e.store.get_exercise(ex.id).await.unwrap();
+    let cutlab_assessor::ExercisePlan::Pattern(plan) =
+        e.store.get_plan(edited.plan_id).await.unwrap()
+    else {
+        panic!("still a pattern plan");
+    };
+    assert_eq!(plan.radius_m, 0.025);
+    assert_eq!(plan.centre_m, [0.05, 0.05, 0.002], "the rest kept");
+}
