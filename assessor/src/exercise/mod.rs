@@ -95,12 +95,44 @@ pub struct FormField {
     pub group: Option<&'static str>,
 }
 
+impl FormField {
+    /// A length shown in mm.
+    pub(crate) const fn mm(
+        name: &'static str,
+        label: &'static str,
+        group: Option<&'static str>,
+    ) -> Self {
+        Self {
+            name,
+            label,
+            unit: "mm",
+            factor: 1e3,
+            group,
+        }
+    }
+}
+
+/// Hand-set thresholds from `(key, better, reference, limit)` rows ([`Threshold::fixed`]).
+pub(crate) fn fixed_thresholds(
+    rows: &[(&str, crate::metrics::Better, f64, f64)],
+) -> Vec<Threshold> {
+    rows.iter()
+        .map(|&(key, better, reference, limit)| Threshold::fixed(key, better, reference, limit))
+        .collect()
+}
+
 /// One key of a plan's text form (TOML / JSON): its unit and meaning, for the form's help.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PlanKey {
     pub key: &'static str,
     pub unit: &'static str,
     pub meaning: &'static str,
+}
+
+impl PlanKey {
+    pub(crate) const fn new(key: &'static str, unit: &'static str, meaning: &'static str) -> Self {
+        Self { key, unit, meaning }
+    }
 }
 
 /// The questions every kind of exercise answers about its plan.

@@ -180,30 +180,20 @@ const DEFAULT_THRESHOLDS: [(&str, Better, f64, f64); 3] = [
     ),
 ];
 
-const fn mm(name: &'static str, label: &'static str, group: Option<&'static str>) -> FormField {
-    FormField {
-        name,
-        label,
-        unit: "mm",
-        factor: 1e3,
-        group,
-    }
-}
-
 const CENTRE: Option<&str> = Some("Centre of the marked circle, on the surface");
 const VIEWPOINT: Option<&str> = Some("Viewpoint: the eye the field is seen from");
 
 /// The form's fields, in the order of [`PatternPlan::slot`].
 const FIELDS: [FormField; 11] = [
-    mm("centre_x_mm", "x", CENTRE),
-    mm("centre_y_mm", "y", CENTRE),
-    mm("centre_z_mm", "z", CENTRE),
-    mm("viewpoint_x_mm", "x", VIEWPOINT),
-    mm("viewpoint_y_mm", "y", VIEWPOINT),
-    mm("viewpoint_z_mm", "z", VIEWPOINT),
-    mm("radius_mm", "Radius of the marked circle", None),
-    mm("depth_mm", "Depth of the blade below the surface", None),
-    mm("tolerance_mm", "Tolerance: the whole cut within", None),
+    FormField::mm("centre_x_mm", "x", CENTRE),
+    FormField::mm("centre_y_mm", "y", CENTRE),
+    FormField::mm("centre_z_mm", "z", CENTRE),
+    FormField::mm("viewpoint_x_mm", "x", VIEWPOINT),
+    FormField::mm("viewpoint_y_mm", "y", VIEWPOINT),
+    FormField::mm("viewpoint_z_mm", "z", VIEWPOINT),
+    FormField::mm("radius_mm", "Radius of the marked circle", None),
+    FormField::mm("depth_mm", "Depth of the blade below the surface", None),
+    FormField::mm("tolerance_mm", "Tolerance: the whole cut within", None),
     FormField {
         name: "cutoff_s",
         label: "Cutoff time (MISTELS)",
@@ -220,59 +210,55 @@ const FIELDS: [FormField; 11] = [
     },
 ];
 
-const fn key(key: &'static str, unit: &'static str, meaning: &'static str) -> PlanKey {
-    PlanKey { key, unit, meaning }
-}
-
 const KEYS: [PlanKey; 12] = [
-    key("name", "text", "a name for reports (optional)"),
-    key(
+    PlanKey::new("name", "text", "a name for reports (optional)"),
+    PlanKey::new(
         "scene",
         "text",
         "the scene the plan is for, e.g. sheet (optional)",
     ),
-    key(
+    PlanKey::new(
         "centre_m",
         "[x, y, z] m",
         "the marked circle's centre, on the surface (required)",
     ),
-    key(
+    PlanKey::new(
         "radius_m",
         "m",
         "the marked circle's radius, at least 0.002 (required)",
     ),
-    key(
+    PlanKey::new(
         "normal",
         "[x, y, z]",
         "the surface's outward normal (default [0, 0, 1])",
     ),
-    key(
+    PlanKey::new(
         "depth_m",
         "m",
         "how deep the blade's tip goes below the surface, > 0 (required)",
     ),
-    key(
+    PlanKey::new(
         "viewpoint_m",
         "[x, y, z] m",
         "where the field is seen from (required)",
     ),
-    key(
+    PlanKey::new(
         "start_deg",
         "deg",
         "where the hand starts round the circle (default -90)",
     ),
-    key(
+    PlanKey::new(
         "tolerance_m",
         "m",
         "how far from the mark the whole cut must stay (default 0.002)",
     ),
-    key(
+    PlanKey::new(
         "mark_width_m",
         "m",
         "the width of the marked line (default 0.001)",
     ),
-    key("cutoff_s", "s", "the MISTELS cutoff time (default 300)"),
-    key(
+    PlanKey::new("cutoff_s", "s", "the MISTELS cutoff time (default 300)"),
+    PlanKey::new(
         "force_limit_n",
         "N",
         "forces above it count as excessive (default 2.5)",
@@ -342,10 +328,7 @@ impl ExerciseKind for PatternPlan {
     }
 
     fn default_thresholds(&self) -> Vec<Threshold> {
-        DEFAULT_THRESHOLDS
-            .iter()
-            .map(|&(key, better, reference, limit)| Threshold::fixed(key, better, reference, limit))
-            .collect()
+        super::fixed_thresholds(&DEFAULT_THRESHOLDS)
     }
 
     fn form_fields(&self) -> &'static [FormField] {

@@ -34,34 +34,24 @@ const DEFAULT_THRESHOLDS: [(&str, Better, f64, f64); 12] = {
     ]
 };
 
-const fn mm(name: &'static str, label: &'static str, group: Option<&'static str>) -> FormField {
-    FormField {
-        name,
-        label,
-        unit: "mm",
-        factor: 1e3,
-        group,
-    }
-}
-
 const ENTRY: Option<&str> = Some("Entry: where the incision starts, on the surface");
 const EXIT: Option<&str> = Some("Exit: where it ends");
 const VIEWPOINT: Option<&str> = Some("Viewpoint: the eye the target is seen from");
 
 /// The form's fields, in the order of [`IncisionPlan::field`]'s slots.
 const FIELDS: [FormField; 13] = [
-    mm("entry_x_mm", "x", ENTRY),
-    mm("entry_y_mm", "y", ENTRY),
-    mm("entry_z_mm", "z", ENTRY),
-    mm("exit_x_mm", "x", EXIT),
-    mm("exit_y_mm", "y", EXIT),
-    mm("exit_z_mm", "z", EXIT),
-    mm("viewpoint_x_mm", "x", VIEWPOINT),
-    mm("viewpoint_y_mm", "y", VIEWPOINT),
-    mm("viewpoint_z_mm", "z", VIEWPOINT),
-    mm("depth_mm", "Depth below the surface", None),
-    mm("tolerance_mm", "Tolerance: on the line within", None),
-    mm(
+    FormField::mm("entry_x_mm", "x", ENTRY),
+    FormField::mm("entry_y_mm", "y", ENTRY),
+    FormField::mm("entry_z_mm", "z", ENTRY),
+    FormField::mm("exit_x_mm", "x", EXIT),
+    FormField::mm("exit_y_mm", "y", EXIT),
+    FormField::mm("exit_z_mm", "z", EXIT),
+    FormField::mm("viewpoint_x_mm", "x", VIEWPOINT),
+    FormField::mm("viewpoint_y_mm", "y", VIEWPOINT),
+    FormField::mm("viewpoint_z_mm", "z", VIEWPOINT),
+    FormField::mm("depth_mm", "Depth below the surface", None),
+    FormField::mm("tolerance_mm", "Tolerance: on the line within", None),
+    FormField::mm(
         "corridor_mm",
         "Corridor half-width: cuts beyond it damage tissue",
         None,
@@ -75,69 +65,65 @@ const FIELDS: [FormField; 13] = [
     },
 ];
 
-const fn key(key: &'static str, unit: &'static str, meaning: &'static str) -> PlanKey {
-    PlanKey { key, unit, meaning }
-}
-
 /// The keys of the plan's text form.
 const KEYS: [PlanKey; 13] = [
-    key("name", "text", "a name for reports (optional)"),
-    key(
+    PlanKey::new("name", "text", "a name for reports (optional)"),
+    PlanKey::new(
         "scene",
         "text",
         "the scene the plan is for, e.g. chest-wall (informative, optional)",
     ),
-    key(
+    PlanKey::new(
         "entry_m",
         "[x, y, z] m",
         "where the incision starts, on the surface (required)",
     ),
-    key(
+    PlanKey::new(
         "exit_m",
         "[x, y, z] m",
         "where it ends, on the surface (required)",
     ),
-    key(
+    PlanKey::new(
         "incision_m",
         "list of [x, y, z] m",
         "the planned line on the surface from entry to exit, at least 2 points (default: the straight segment)",
     ),
-    key(
+    PlanKey::new(
         "depth_m",
         "m",
         "the planned depth below the surface, > 0 (required)",
     ),
-    key(
+    PlanKey::new(
         "normal",
         "[x, y, z]",
         "the surface's outward normal at the incision; depth is measured along −normal (default [0, 0, 1])",
     ),
-    key(
+    PlanKey::new(
         "approach_dir",
         "[x, y, z]",
         "the direction the blade moves entering the tissue (default −normal)",
     ),
-    key(
+    PlanKey::new(
         "target_m",
         "list of [x, y, z] m",
         "points on the target that must become visible through the opening (may be empty: then visibility is not measured)",
     ),
-    key(
+    PlanKey::new(
         "viewpoint_m",
         "[x, y, z] m",
         "where the target is seen from (required)",
     ),
-    key(
+    PlanKey::new(
         "tolerance_m",
         "m",
         "how far from the planned line still counts as on it (default 0.002)",
     ),
-    key(
+    PlanKey::new(
         "corridor_half_width_m",
         "m",
         "half the width of the corridor cuts may stay in without damage (default 0.005)",
     ),
-    key(
+    PlanKey::new(
         "force_limit_n",
         "N",
         "forces above it count as excessive: time above it, events (default 2.5); the pass limit on the peak force is the exercise's threshold",
@@ -215,10 +201,7 @@ impl ExerciseKind for IncisionPlan {
     }
 
     fn default_thresholds(&self) -> Vec<Threshold> {
-        DEFAULT_THRESHOLDS
-            .iter()
-            .map(|&(key, better, reference, limit)| Threshold::fixed(key, better, reference, limit))
-            .collect()
+        super::fixed_thresholds(&DEFAULT_THRESHOLDS)
     }
 
     fn form_fields(&self) -> &'static [FormField] {
