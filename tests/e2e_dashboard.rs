@@ -874,3 +874,134 @@ async fn interrupted(
     c.perform_actions(as_actions(&again)).await?;
     Ok(())
 }
+
+/// Pattern cutting (FLS) at the station in exam mode, by a person's steady hand at 60 Hz:
+/// the marked circle is on the sheet though the plan is not shown; the hand goes round the
+/// mark and a little further; the piece is cut free and lifted away; the attempt passes.
+/// Screenshots: `station-pattern-exam-mid-cut.png`, `station-pattern-freed.png`,
+/// `station-pattern-debrief.png`.
+#[test]
+fn pattern_cutting_in_exam_mode_frees_the_piece_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-pattern-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts()));
+    assert!(
+        summary.starts_with("Score") && summary.contains("(pass)"),
+        "the careful circle passes: {summary}"
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+async fn pattern(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) -> String {
+    let base = format!("http://127.0.0.1:{port}");
+    let c = chromium(driver, &tmp.join("profile-pattern")).await;
+    let result = async {
+        login(&c, &base, "ana", "trainee-demo").await?;
+        c.goto(&format!("{base}/station")).await?;
+        c.find(Locator::Css("option[value='pattern-cutting']"))
+            .await?
+            .click()
+            .await?;
+        c.find(Locator::Css("input[value=exam]"))
+            .await?
+            .click()
+            .await?;
+        c.find(Locator::Id("start")).await?.click().await?;
+        c.wait().for_element(Locator::Id("tissue")).await?;
+        pattern_cut(&c, shots).await?;
+        c.wait()
+            .at_most(Duration::from_secs(240))
+            .for_element(Locator::Id("debrief-summary"))
+            .await?;
+        let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
+        c.execute(
+            "document.getElementById('debrief').scrollIntoView()",
+            vec![],
+        )
+        .await?;
+        std::fs::write(
+            shots.join("station-pattern-debrief.png"),
+            c.screenshot().await?,
+        )
+        .expect("screenshot");
+        Ok::<_, fantoccini::error::CmdError>(summary)
+    }
+    .await;
+    let _ = c.close().await;
+    result.expect("the pattern attempt")
+}
+
+/// The hand round the mark on the page: a reach, the circle and 8 % more at about 12 mm a
+/// second, a lift.
+async fn pattern_cut(
+    c: &fantoccini::Client,
+    shots: &Path,
+) -> Result<(), fantoccini::error::CmdError> {
+    use cutlab_haptics::hand::{Gesture, Hand};
+    until(
+        c,
+        "window.cutlabStation && window.cutlabStation.stats().frames > 5",
+        Duration::from_secs(120),
+    )
+    .await?;
+    let v = c
+        .execute(
+            "const s = window.cutlabStation, m = s.config.marks[0]; \
+             let mm = 0; for (let i = 1; i < m.length; i++) mm += Math.hypot(m[i][0] - m[i-1][0], m[i][1] - m[i-1][1]) * 1e3; \
+             return { plan: s.config.plan, px: m.map(p => s.project(p)), mm }",
+            vec![],
+        )
+        .await?;
+    assert!(v["plan"].is_null(), "exam mode: no plan on the page");
+    let mark: Vec<[f64; 2]> = v["px"]
+        .as_array()
+        .expect("the mark on the page")
+        .iter()
+        .map(|p| [p[0].as_f64().expect("x"), p[1].as_f64().expect("y")])
+        .collect();
+    let along: f64 = mark
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    let mm = v["mm"].as_f64().expect("the mark's length");
+    let mut hand = Hand::steady(along / mm, 7);
+    let mut line = mark.clone();
+    line.extend_from_slice(&mark[1..mark.len() * 8 / 100]);
+    let rest = [mark[0][0] - 140.0, mark[0][1] + 170.0];
+    let mut g = vec![
+        Gesture::Move {
+            x: rest[0],
+            y: rest[1],
+            ms: 16,
+        },
+        Gesture::Wait { ms: 400 },
+    ];
+    g.extend(hand.reach(rest, line[0], 0.8));
+    let stroke_s = 1.08 * mm / 12.0;
+    g.extend(hand.stroke(&line, stroke_s, 1.0));
+    let half = g.len() - (stroke_s * 30.0) as usize;
+    c.perform_actions(as_actions(&g[..half])).await?;
+    std::fs::write(
+        shots.join("station-pattern-exam-mid-cut.png"),
+        c.screenshot().await?,
+    )
+    .expect("screenshot");
+    c.perform_actions(as_actions(&g[half..])).await?;
+    let end = line[line.len() - 1];
+    c.perform_actions(as_actions(&hand.withdraw(end, [60.0, -120.0], 0.5)))
+        .await?;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    std::fs::write(
+        shots.join("station-pattern-freed.png"),
+        c.screenshot().await?,
+    )
+    .expect("screenshot");
+    c.release_actions().await
+}

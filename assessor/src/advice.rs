@@ -67,9 +67,15 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
         fix.extend(failed.into_iter().map(|f| f.1));
     }
     fix.truncate(MAX_FIXES);
-    let praise = fix
-        .is_empty()
-        .then(|| "Within every limit: the line, its depth and the force were right.".to_owned());
+    let praise = fix.is_empty().then(|| {
+        // what the exercise's limits were on, in its own words
+        let what = if results.iter().any(|m| m.key == "piece_freed") {
+            "the piece is free, in time and on the mark"
+        } else {
+            "the line, its depth and the force were right"
+        };
+        format!("Within every limit: {what}.")
+    });
     let feedback = results
         .iter()
         .filter(|m| done && !decides(m.key))
@@ -104,6 +110,10 @@ fn severity(m: &MetricResult<'_>) -> f64 {
 /// A failed deciding metric in plain words.
 fn words(m: &MetricResult<'_>) -> Option<String> {
     let Some(v) = m.value else {
+        // a piece not cut free has no completion time: `piece_freed` says what to do
+        if m.key == "completion_time_s" {
+            return None;
+        }
         return Some(format!("{}: could not be measured.", m.key));
     };
     let mm = v * 1e3;
@@ -139,6 +149,18 @@ fn words(m: &MetricResult<'_>) -> Option<String> {
         ),
         "cut_outside_corridor_m" => {
             format!("Keep inside the safe corridor: {mm:.1} mm of the cut ran outside it.")
+        }
+        "piece_freed" => {
+            "Cut the piece free: go all the way round the mark, back past where you started."
+                .to_owned()
+        }
+        "completion_time_s" => format!(
+            "Work faster: the piece was free after {v:.0} s, the limit is {} s.",
+            m.upper
+                .map_or("the exercise's".to_owned(), |u| format!("{u:.0}"))
+        ),
+        "pattern_max_deviation_m" => {
+            format!("Stay on the mark all the way round: the cut strayed up to {mm:.1} mm from it.")
         }
         key => format!("{key}: {v:.4} is beyond its limit."),
     })
@@ -354,5 +376,53 @@ mod tests {
             Some(0.002),
         )]);
         assert!(good.fix.is_empty() && good.praise.is_some());
+    }
+
+    /// A pattern not cut free is told to close the circle (not that its time could not be
+    /// measured); a slow, wandering one is told both, in words.
+    #[test]
+    fn a_pattern_attempt_is_told_what_to_fix_in_words() {
+        let open = advice(&[
+            r("piece_freed", Some(0.0), Some(false), 1.0, Some(0.5), None),
+            r(
+                "completion_time_s",
+                None,
+                Some(false),
+                60.0,
+                None,
+                Some(98.0),
+            ),
+        ]);
+        assert_eq!(open.fix.len(), 1, "{open:?}");
+        assert!(open.fix[0].contains("Cut the piece free"), "{open:?}");
+        let slow = advice(&[
+            r("piece_freed", Some(1.0), Some(true), 1.0, Some(0.5), None),
+            r(
+                "completion_time_s",
+                Some(120.0),
+                Some(false),
+                60.0,
+                None,
+                Some(98.0),
+            ),
+            r(
+                "pattern_max_deviation_m",
+                Some(0.0031),
+                Some(false),
+                0.0005,
+                None,
+                Some(0.002),
+            ),
+        ]);
+        assert!(
+            slow.fix
+                .iter()
+                .any(|f| f.contains("120 s, the limit is 98 s")),
+            "{slow:?}"
+        );
+        assert!(
+            slow.fix.iter().any(|f| f.contains("up to 3.1 mm")),
+            "{slow:?}"
+        );
     }
 }

@@ -180,7 +180,7 @@ pub(crate) fn comment_form(user: &CurrentUser, attempt_id: i64, replay: bool) ->
 /// planned line (dashed blue, drawn last so it shows over a cut that follows it), with a
 /// legend.
 fn top_view(t: &AttemptTrace) -> Chart {
-    let mut c = Chart::new("Incision, top view", "x (mm)", "y (mm)")
+    let mut c = Chart::new("The cut, top view", "x (mm)", "y (mm)")
         .layer(Layer::Line {
             points: t.path_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
             class: "series-2",
