@@ -190,14 +190,26 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             print_outcome(&outcome, &values, json)?;
         }
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
-        AssessCommand::User {
-            command:
-                UserCommand::Add {
-                    name,
-                    role,
-                    password_stdin,
-                    password,
-                },
+        AssessCommand::User { command } => user(store, command).await?,
+        AssessCommand::Cohort { command } => cohort(store, command).await?,
+        AssessCommand::Exercise { command } => exercise(store, command).await?,
+        AssessCommand::Export {
+            command: ExportCommand::Xapi { trainee },
+        } => {
+            let statements = store.xapi_statements(&trainee).await?;
+            println!("{}", serde_json::to_string_pretty(&statements)?);
+        }
+    }
+    Ok(())
+}
+
+async fn user(store: &Store, command: UserCommand) -> anyhow::Result<()> {
+    match command {
+        UserCommand::Add {
+            name,
+            role,
+            password_stdin,
+            password,
         } => {
             let role: Role = role.parse()?;
             let password = if password_stdin {
@@ -221,18 +233,20 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                 if u.has_password { "" } else { ", no password" }
             );
         }
-        AssessCommand::User {
-            command: UserCommand::List,
-        } => {
+        UserCommand::List => {
             for u in store.list_users(None).await? {
                 // names from before names were checked may hold control characters
                 let name = cutlab_assessor::store::printable(&u.name);
                 println!("{:>4}  {:<11} {name}", u.id, u.role.as_str());
             }
         }
-        AssessCommand::Cohort {
-            command: CohortCommand::Add { name, instructor },
-        } => {
+    }
+    Ok(())
+}
+
+async fn cohort(store: &Store, command: CohortCommand) -> anyhow::Result<()> {
+    match command {
+        CohortCommand::Add { name, instructor } => {
             let instructor = match instructor {
                 Some(n) => Some(store.user_by_name(&n).await?.id),
                 None => None,
@@ -240,17 +254,13 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             let c = store.create_cohort(&name, instructor).await?;
             println!("added cohort {} (id {})", c.name, c.id);
         }
-        AssessCommand::Cohort {
-            command: CohortCommand::Join { cohort, user },
-        } => {
+        CohortCommand::Join { cohort, user } => {
             let c = store.cohort_by_name(&cohort).await?;
             let u = store.user_by_name(&user).await?;
             store.join_cohort(c.id, u.id).await?;
             println!("{} is in cohort {}", u.name, c.name);
         }
-        AssessCommand::Cohort {
-            command: CohortCommand::List,
-        } => {
+        CohortCommand::List => {
             for c in store.list_cohorts().await? {
                 let members: Vec<String> = store
                     .cohort_members(c.id)
@@ -261,16 +271,19 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                 println!("{}: {}", c.name, members.join(", "));
             }
         }
-        AssessCommand::Exercise {
-            command:
-                ExerciseCommand::Add {
-                    name,
-                    scene,
-                    plan,
-                    description,
-                    k,
-                    exam_only,
-                },
+    }
+    Ok(())
+}
+
+async fn exercise(store: &Store, command: ExerciseCommand) -> anyhow::Result<()> {
+    match command {
+        ExerciseCommand::Add {
+            name,
+            scene,
+            plan,
+            description,
+            k,
+            exam_only,
         } => {
             let plan = ExercisePlan::load(&plan)?;
             let e = store
@@ -293,9 +306,7 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                 plan.kind_plan().depth_m() * 1e3
             );
         }
-        AssessCommand::Exercise {
-            command: ExerciseCommand::List,
-        } => {
+        ExerciseCommand::List => {
             for e in store.list_exercises().await? {
                 let t = store.thresholds(e.id).await?;
                 println!(
@@ -307,45 +318,41 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
                 );
             }
         }
-        AssessCommand::Exercise {
-            command: ExerciseCommand::Thresholds { name, json },
-        } => {
+        ExerciseCommand::Thresholds { name, json } => {
             let e = store.exercise_by_name(&name).await?;
             let t = store.thresholds_from_experts(e.id).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&t)?);
             } else {
-                println!(
-                    "{}: thresholds from expert attempts, mean +/- {} SD",
-                    e.name, e.threshold_k
-                );
-                println!(
-                    "{:<28} {:>12} {:>12} {:>4} {:>12} {:>12}",
-                    "metric", "mean", "sd", "n", "lower", "upper"
-                );
-                let limit =
-                    |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.4}"));
-                for m in &t.metrics {
-                    println!(
-                        "{:<28} {:>12.4} {:>12.4} {:>4} {:>12} {:>12}",
-                        m.key,
-                        m.mean,
-                        m.sd,
-                        m.n_experts,
-                        limit(m.lower),
-                        limit(m.upper)
-                    );
-                }
+                print_thresholds(&e, &t);
             }
-        }
-        AssessCommand::Export {
-            command: ExportCommand::Xapi { trainee },
-        } => {
-            let statements = store.xapi_statements(&trainee).await?;
-            println!("{}", serde_json::to_string_pretty(&statements)?);
         }
     }
     Ok(())
+}
+
+/// The thresholds `t` of exercise `e` as a table.
+fn print_thresholds(e: &cutlab_assessor::store::Exercise, t: &cutlab_assessor::Thresholds) {
+    println!(
+        "{}: thresholds from expert attempts, mean +/- {} SD",
+        e.name, e.threshold_k
+    );
+    println!(
+        "{:<28} {:>12} {:>12} {:>4} {:>12} {:>12}",
+        "metric", "mean", "sd", "n", "lower", "upper"
+    );
+    let limit = |v: Option<f64>| v.map_or_else(|| "-".to_owned(), |v| format!("{v:.4}"));
+    for m in &t.metrics {
+        println!(
+            "{:<28} {:>12.4} {:>12.4} {:>4} {:>12} {:>12}",
+            m.key,
+            m.mean,
+            m.sd,
+            m.n_experts,
+            limit(m.lower),
+            limit(m.upper)
+        );
+    }
 }
 
 /// The report of a scored attempt: every metric with its verdict, the score, pass/fail and

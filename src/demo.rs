@@ -57,8 +57,14 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
         moved_mm
     );
 
-    // The incision: 60 mm across the top of the wall in 1.5 s, the blade 8 mm deep and normal
-    // to the surface, cutting at every 1 ms step; then 0.5 s for the wound to open.
+    incise(&mut sim)?;
+    wound(&mut sim, pretension_percent)?;
+    write_final(out, &sim)
+}
+
+/// The incision: 60 mm across the top of the wall in 1.5 s, the blade 8 mm deep and normal
+/// to the surface, cutting at every 1 ms step; then 0.5 s for the wound to open.
+fn incise(sim: &mut cutlab_sim::solver::Simulation) -> anyhow::Result<()> {
     let blade_at = |x: f64| cut::Blade::normal_to_curved_slab(x, 0.0003, 0.15, 0.008, 0.005);
     let dt = sim.settings.time_step_s;
     let stroke_steps = 1500;
@@ -72,12 +78,12 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
         if k <= stroke_steps {
             let x = -0.03 + 0.06 * k as f64 / stroke_steps as f64;
             let tc = Instant::now();
-            let ev = match cutter.advance(&mut sim, blade_at(x)) {
+            let ev = match cutter.advance(sim, blade_at(x)) {
                 Ok(ev) => ev,
                 Err(cut::CutError::Unresolved(_)) => {
                     skipped += 1;
                     cut_us.push(tc.elapsed().as_secs_f64() * 1e6);
-                    continue_sim(&mut sim, &mut step_us)?;
+                    continue_sim(sim, &mut step_us)?;
                     continue;
                 }
                 Err(e) => return Err(e).context("cutting"),
@@ -89,7 +95,7 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
             removed += ev.tets_removed.len();
             added += ev.tets_added.len();
         }
-        continue_sim(&mut sim, &mut step_us)?;
+        continue_sim(sim, &mut step_us)?;
     }
     let c = Summary::of(&cut_us);
     let s = Summary::of(&step_us);
@@ -109,13 +115,17 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
         c.median, c.p99, c.max, s.median, s.p99
     );
 
-    // The wound at rest: gap between the two copies of each split vertex, along the cut.
+    Ok(())
+}
+
+/// The wound at rest: the gap between the two copies of each split vertex, along the cut.
+fn wound(sim: &mut cutlab_sim::solver::Simulation, pretension_percent: f64) -> anyhow::Result<()> {
     let settle = sim.settle(StaticSettings::default());
     anyhow::ensure!(
         settle.converged,
         "settling after the cut did not converge: {settle:?}"
     );
-    let gaps: Vec<(f64, f64)> = cut::wound_gaps(&sim)
+    let gaps: Vec<(f64, f64)> = cut::wound_gaps(sim)
         .into_iter()
         .map(|(p, gap)| (p.x, gap))
         .collect();
@@ -147,6 +157,11 @@ pub fn run(out: &Path, min_tets: Option<usize>, scene_name: &str) -> anyhow::Res
         xlo * 1e3,
         xhi * 1e3
     );
+    Ok(())
+}
+
+/// Writes the deformed mesh and its displacement to `out/final.vtu`.
+fn write_final(out: &Path, sim: &cutlab_sim::solver::Simulation) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let deformed = cutlab_sim::TetMesh::new(
         sim.state.positions.clone(),

@@ -165,69 +165,7 @@ enum Command {
     },
     /// Run one training session: a device drives the scalpel through the 1 kHz servo loop
     /// while the simulation runs; prints a summary and writes DIR/final.vtu.
-    Session {
-        /// A built-in scene (chest-wall, sheet, bar, body-wall) or a scene/mesh file; by
-        /// default the exercise's (with `--exercise`), else chest-wall.
-        #[arg(long)]
-        scene: Option<String>,
-        /// Resolution of a generated mesh: at least this many tetrahedra.
-        #[arg(long)]
-        min_tets: Option<usize>,
-        /// The simulation step: ms (0.1-10, a whole number of servo periods), `scene` (the
-        /// scene's own), or `auto` (the smallest of 1, 2, 4, 5, 10 ms whose loaded step takes at
-        /// most 70 % of it on this machine, measured at the start): longer steps keep a big
-        /// mesh in real time at some cost in accuracy.
-        #[arg(long, default_value = "scene")]
-        time_step_ms: TimeStep,
-        /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
-        /// 0 novice to 1 expert), pointer:steady | pointer:sloppy (a person's hand model on
-        /// the station's pointer), csv:PATH (trajectory file), recording:PATH (the hand of a
-        /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
-        #[arg(long, default_value = "expert")]
-        device: session::DeviceArg,
-        #[command(flatten)]
-        igtl: IgtlArgs,
-        /// live (real time) or virtual (as fast as possible, same ticks).
-        #[arg(long, default_value = "virtual", value_parser = parse_clock)]
-        clock: cutlab_haptics::servo::Clock,
-        /// Session length in seconds.
-        #[arg(long, default_value_t = 10.0)]
-        duration: f64,
-        /// Seed of the synthetic trainee.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Directory for final.vtu and summary.json.
-        #[arg(long, default_value = "out/session")]
-        out: PathBuf,
-        /// Do not ask for real-time priority for the servo thread.
-        #[arg(long)]
-        no_realtime: bool,
-        /// A keyframe of the full simulation state every this many seconds.
-        #[arg(long, default_value_t = 1.0)]
-        keyframe_every: f64,
-        /// The tissue surface is recorded this many times per second (0: never).
-        #[arg(long, default_value_t = 10.0)]
-        surface_hz: f64,
-        /// Also write DIR/session.rrd for the rerun viewer.
-        #[arg(long, conflicts_with = "rerun")]
-        rrd: bool,
-        /// Stream to a rerun viewer: spawn (start one) or connect[=URL].
-        #[arg(long)]
-        rerun: Option<recording::RerunArg>,
-        /// The trainee at the station: the attempt is stored as running when the session
-        /// starts, then scored against `--exercise` (or marked incomplete if it fails).
-        #[arg(long)]
-        trainee: Option<String>,
-        /// The exercise attempted (with --trainee).
-        #[arg(long, default_value = cutlab_assessor::store::BUILTIN_EXERCISE, requires = "trainee")]
-        exercise: String,
-        /// Simulate only near the scalpel and the disturbance it causes (default thresholds;
-        /// the recording keeps them, so the replay is localised too): `auto` where
-        /// `cutlab bench perf` measured it to pay on this scene and size (docs/bench/perf.md),
-        /// `on` (also plain `--localise`), `off`.
-        #[arg(long, value_enum, default_value_t = Localise::Auto, num_args = 0..=1, default_missing_value = "on")]
-        localise: Localise,
-    },
+    Session(Box<SessionArgs>),
     /// Session recordings (MCAP): what is in one, and salvaging one cut short.
     Recording {
         #[command(subcommand)]
@@ -392,6 +330,112 @@ fn stdout_errors_end_quietly() {
     }));
 }
 
+/// `cutlab session`'s arguments.
+#[derive(Debug, clap::Args)]
+struct SessionArgs {
+    /// A built-in scene (chest-wall, sheet, bar, body-wall) or a scene/mesh file; by
+    /// default the exercise's (with `--exercise`), else chest-wall.
+    #[arg(long)]
+    scene: Option<String>,
+    /// Resolution of a generated mesh: at least this many tetrahedra.
+    #[arg(long)]
+    min_tets: Option<usize>,
+    /// The simulation step: ms (0.1-10, a whole number of servo periods), `scene` (the
+    /// scene's own), or `auto` (the smallest of 1, 2, 4, 5, 10 ms whose loaded step takes at
+    /// most 70 % of it on this machine, measured at the start): longer steps keep a big
+    /// mesh in real time at some cost in accuracy.
+    #[arg(long, default_value = "scene")]
+    time_step_ms: TimeStep,
+    /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
+    /// 0 novice to 1 expert), pointer:steady | pointer:sloppy (a person's hand model on
+    /// the station's pointer), csv:PATH (trajectory file), recording:PATH (the hand of a
+    /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
+    #[arg(long, default_value = "expert")]
+    device: session::DeviceArg,
+    #[command(flatten)]
+    igtl: IgtlArgs,
+    /// live (real time) or virtual (as fast as possible, same ticks).
+    #[arg(long, default_value = "virtual", value_parser = parse_clock)]
+    clock: cutlab_haptics::servo::Clock,
+    /// Session length in seconds.
+    #[arg(long, default_value_t = 10.0)]
+    duration: f64,
+    /// Seed of the synthetic trainee.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Directory for final.vtu and summary.json.
+    #[arg(long, default_value = "out/session")]
+    out: PathBuf,
+    /// Do not ask for real-time priority for the servo thread.
+    #[arg(long)]
+    no_realtime: bool,
+    /// A keyframe of the full simulation state every this many seconds.
+    #[arg(long, default_value_t = 1.0)]
+    keyframe_every: f64,
+    /// The tissue surface is recorded this many times per second (0: never).
+    #[arg(long, default_value_t = 10.0)]
+    surface_hz: f64,
+    /// Also write DIR/session.rrd for the rerun viewer.
+    #[arg(long, conflicts_with = "rerun")]
+    rrd: bool,
+    /// Stream to a rerun viewer: spawn (start one) or connect[=URL].
+    #[arg(long)]
+    rerun: Option<recording::RerunArg>,
+    /// The trainee at the station: the attempt is stored as running when the session
+    /// starts, then scored against `--exercise` (or marked incomplete if it fails).
+    #[arg(long)]
+    trainee: Option<String>,
+    /// The exercise attempted (with --trainee).
+    #[arg(long, default_value = cutlab_assessor::store::BUILTIN_EXERCISE, requires = "trainee")]
+    exercise: String,
+    /// Simulate only near the scalpel and the disturbance it causes (default thresholds;
+    /// the recording keeps them, so the replay is localised too): `auto` where
+    /// `cutlab bench perf` measured it to pay on this scene and size (docs/bench/perf.md),
+    /// `on` (also plain `--localise`), `off`.
+    #[arg(long, value_enum, default_value_t = Localise::Auto, num_args = 0..=1, default_missing_value = "on")]
+    localise: Localise,
+}
+
+impl SessionArgs {
+    /// The session's options; an attempt in the database `db` when a trainee is named.
+    fn options(
+        self,
+        db: cutlab_assessor::DbLocation,
+        recordings: Option<String>,
+        hub: Option<cutlab_station::sync::Hub>,
+    ) -> session::Options {
+        session::Options {
+            scene: self.scene,
+            device: self.device,
+            run: cutlab_station::attempt_run::RunSettings {
+                min_tets: self.min_tets,
+                time_step: self.time_step_ms,
+                clock: self.clock,
+                duration_s: self.duration,
+                realtime_priority: !self.no_realtime,
+                keyframe_every_s: self.keyframe_every,
+                surface_hz: self.surface_hz,
+                seed: self.seed,
+                igtl: self.igtl.options(),
+            },
+            out: self.out,
+            rerun: recording::rerun_target(
+                self.rrd.then_some(std::path::Path::new("session.rrd")),
+                self.rerun.as_ref(),
+            ),
+            attempt: self.trainee.map(|trainee| session::AttemptArgs {
+                db,
+                recordings,
+                hub,
+                exercise: self.exercise,
+                trainee,
+                expert: false,
+            }),
+            localise: self.localise,
+        }
+    }
+}
+
 fn run() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -414,16 +458,13 @@ fn run() -> anyhow::Result<()> {
             demo::run(&out, min_tets, &scene)?;
             match addr {
                 Some(addr) => serve::run(serve::Options {
-                    db: &cutlab_assessor::default_db(cli.db.as_ref()),
-                    addr: &addr,
                     demo: Some(&out.join("attempts")),
-                    station_devices: Vec::new(),
-                    station_time_step: TimeStep::Scene,
-                    station_absence_s: 30.0,
-                    igtl: Default::default(),
-                    recordings: recordings.clone(),
-                    hub: hub.clone(),
-                    kiosk: None,
+                    ..serve::Options::dashboard(
+                        &cutlab_assessor::default_db(cli.db.as_ref()),
+                        &addr,
+                        recordings,
+                        hub,
+                    )
                 }),
                 None => Ok(()),
             }
@@ -440,16 +481,12 @@ fn run() -> anyhow::Result<()> {
             // beside an SQLite file; in the working directory for a server
             let demo_attempts = beside_db(&db, "demo-attempts");
             serve::run(serve::Options {
-                db: &db,
-                addr: &addr,
                 demo: demo.then_some(demo_attempts.as_path()),
                 station_devices,
                 station_time_step: station_time_step_ms,
                 station_absence_s: absence_s,
                 igtl: igtl.options(),
-                recordings: recordings.clone(),
-                hub: hub.clone(),
-                kiosk: None,
+                ..serve::Options::dashboard(&db, &addr, recordings, hub)
             })
         }
         Command::Station {
@@ -463,19 +500,15 @@ fn run() -> anyhow::Result<()> {
         } => {
             let db = cutlab_assessor::default_db(cli.db.as_ref());
             serve::run(serve::Options {
-                db: &db,
-                addr: &addr,
-                demo: None,
                 station_devices: device,
                 station_time_step: time_step_ms,
                 station_absence_s: absence_s,
                 igtl: igtl.options(),
-                recordings: recordings.clone(),
-                hub: hub.clone(),
                 kiosk: Some(serve::Kiosk {
                     trainee,
                     open_browser: !no_browser,
                 }),
+                ..serve::Options::dashboard(&db, &addr, recordings, hub)
             })
         }
         Command::Scene {
@@ -486,53 +519,11 @@ fn run() -> anyhow::Result<()> {
                     json,
                 },
         } => scene_info::run(&scene, min_tets, json),
-        Command::Session {
-            scene,
-            min_tets,
-            time_step_ms,
-            device,
-            igtl,
-            clock,
-            duration,
-            seed,
-            out,
-            no_realtime,
-            keyframe_every,
-            surface_hz,
-            rrd,
-            rerun,
-            trainee,
-            exercise,
-            localise,
-        } => session::run(&session::Options {
-            scene,
-            device,
-            run: cutlab_station::attempt_run::RunSettings {
-                min_tets,
-                time_step: time_step_ms,
-                clock,
-                duration_s: duration,
-                realtime_priority: !no_realtime,
-                keyframe_every_s: keyframe_every,
-                surface_hz,
-                seed,
-                igtl: igtl.options(),
-            },
-            out,
-            rerun: recording::rerun_target(
-                rrd.then_some(std::path::Path::new("session.rrd")),
-                rerun.as_ref(),
-            ),
-            attempt: trainee.map(|trainee| session::AttemptArgs {
-                db: cutlab_assessor::default_db(cli.db.as_ref()),
-                recordings: recordings.clone(),
-                hub: hub.clone(),
-                exercise,
-                trainee,
-                expert: false,
-            }),
-            localise,
-        }),
+        Command::Session(args) => session::run(&args.options(
+            cutlab_assessor::default_db(cli.db.as_ref()),
+            recordings.clone(),
+            hub.clone(),
+        )),
         Command::Recording {
             command: RecordingCommand::Info { file, json },
         } => recording::info(&file, json),
@@ -571,13 +562,7 @@ fn run() -> anyhow::Result<()> {
         Command::Scene {
             command: SceneCommand::List,
         } => {
-            for (name, _) in cutlab_sim::scene::BUILTIN {
-                let spec = cutlab_sim::scene::builtin_spec(name);
-                println!(
-                    "{name:12} {}",
-                    spec.map(|s| s.description).unwrap_or_default()
-                );
-            }
+            scene_info::list();
             Ok(())
         }
         Command::Sync => hub_cli::sync(

@@ -101,3 +101,14 @@ pub fn run(scene: &str, min_tets: Option<usize>, json: bool) -> anyhow::Result<(
     }
     Ok(())
 }
+
+/// Prints the built-in scenes, one a line with its description.
+pub fn list() {
+    for (name, _) in cutlab_sim::scene::BUILTIN {
+        let spec = cutlab_sim::scene::builtin_spec(name);
+        println!(
+            "{name:12} {}",
+            spec.map(|s| s.description).unwrap_or_default()
+        );
+    }
+}

@@ -34,6 +34,30 @@ pub struct Options<'a> {
     pub kiosk: Option<Kiosk>,
 }
 
+impl<'a> Options<'a> {
+    /// The dashboard on `db` at `addr` with the station's defaults (its pointer only, the
+    /// scene's step, 30 s of absence), no demo and no kiosk.
+    pub fn dashboard(
+        db: &'a DbLocation,
+        addr: &'a str,
+        recordings: Option<String>,
+        hub: Option<cutlab_station::sync::Hub>,
+    ) -> Self {
+        Self {
+            db,
+            addr,
+            demo: None,
+            station_devices: Vec::new(),
+            station_time_step: TimeStep::Scene,
+            station_absence_s: 30.0,
+            igtl: IgtlOptions::default(),
+            recordings,
+            hub,
+            kiosk: None,
+        }
+    }
+}
+
 /// `cutlab station`: one trainee at this PC.
 #[derive(Debug)]
 pub struct Kiosk {
