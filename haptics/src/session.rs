@@ -270,15 +270,14 @@ impl Session {
         self.run_recorded(device, config, None)
     }
 
-    /// [`Self::run`], handing every tick and every simulation record to `tap` (a recorder).
-    pub fn run_recorded(
-        self,
-        device: Box<dyn HapticDevice>,
+    /// `config` checked against this session's step: the force rendering within the device's
+    /// `limits`, the simulation step in servo ticks and the session's ticks.
+    fn checked(
+        &self,
         config: &SessionConfig,
-        tap: Option<RecordTap>,
-    ) -> Result<SessionReport, HapticsError> {
+        limits: crate::device::DeviceLimits,
+    ) -> Result<(RenderSettings, u64, u64), HapticsError> {
         let mut render = config.render;
-        let limits = device.limits();
         render.limits.max_force_newtons = render
             .limits
             .max_force_newtons
@@ -320,6 +319,17 @@ impl Session {
             )));
         }
         let ticks = (config.duration_s * 1e9 / config.period_nanos as f64).round() as u64;
+        Ok((render, ticks_per_step, ticks))
+    }
+
+    /// [`Self::run`], handing every tick and every simulation record to `tap` (a recorder).
+    pub fn run_recorded(
+        self,
+        device: Box<dyn HapticDevice>,
+        config: &SessionConfig,
+        tap: Option<RecordTap>,
+    ) -> Result<SessionReport, HapticsError> {
+        let (render, ticks_per_step, ticks) = self.checked(config, device.limits())?;
 
         let (contact_in, contact_out) = triple_buffer::triple_buffer(&ContactModel::default());
         let (mut samples_in, mut samples_out) = rtrb::RingBuffer::new(config.queue_capacity);

@@ -218,12 +218,11 @@ impl SessionStepper {
         Ok(())
     }
 
-    /// One simulation step driven by `sample`.
-    pub fn step(&mut self, sample: &ServoSample) -> StepOutput {
+    /// The tool's reaction on the tissue, spread over the contact patch around the touched
+    /// point (weights `(1 - r / R)^2` over the surface particles within `R`); the scalpel is
+    /// where a localised simulation stays awake.
+    fn push_on_tissue(&mut self, sample: &ServoSample) {
         let render = sample.render;
-
-        // The tool's reaction on the tissue, spread over the contact patch around the
-        // touched point (weights (1 - r / R)^2 over the surface particles within R).
         self.sim.clear_external_forces();
         // the scalpel is where a localised simulation stays awake
         self.sim.set_focus(&[sample.pose.tip_in_world]);
@@ -248,7 +247,12 @@ impl SessionStepper {
                 }
             }
         }
+    }
 
+    /// One simulation step driven by `sample`.
+    pub fn step(&mut self, sample: &ServoSample) -> StepOutput {
+        let render = sample.render;
+        self.push_on_tissue(sample);
         // Cutting while the renderer says the blade is in the tissue; it went in where the
         // contact model it rendered from was, or, put back into the last cut's wound, where
         // that cut went in.
