@@ -881,6 +881,8 @@ async fn interrupted(
 /// Screenshots: `station-pattern-exam-mid-cut.png`, `station-pattern-freed.png`,
 /// `station-pattern-debrief.png`.
 #[test]
+#[ignore = "flaky under load: the pressed blade sometimes only dents the held sheet and never \
+            cuts (issue 44); run with --ignored"]
 fn pattern_cutting_in_exam_mode_frees_the_piece_in_headless_chromium() {
     let _one = ONE_AT_A_TIME
         .lock()
