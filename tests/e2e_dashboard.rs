@@ -653,12 +653,16 @@ async fn line_on_page(
         .iter()
         .map(|p| [p[0].as_f64().expect("x"), p[1].as_f64().expect("y")])
         .collect();
-    let along: f64 = px
-        .windows(2)
-        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-        .sum();
+    let along = length_px(&px);
     let mm = v["mm"].as_f64().expect("the plan's length");
     Ok((px, mm, along / mm))
+}
+
+/// The length of a polyline on the page (CSS px).
+fn length_px(line: &[[f64; 2]]) -> f64 {
+    line.windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum()
 }
 
 /// The hand's gestures as WebDriver pointer actions.
@@ -968,10 +972,7 @@ async fn pattern_cut(
         .iter()
         .map(|p| [p[0].as_f64().expect("x"), p[1].as_f64().expect("y")])
         .collect();
-    let along: f64 = mark
-        .windows(2)
-        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
-        .sum();
+    let along = length_px(&mark);
     let mm = v["mm"].as_f64().expect("the mark's length");
     let mut hand = Hand::steady(along / mm, 7);
     let mut line = mark.clone();

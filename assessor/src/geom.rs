@@ -15,6 +15,16 @@ pub(crate) fn unit(a: Vector3<f64>) -> Option<Vector3<f64>> {
     (n > 1e-12 && n.is_finite()).then(|| a * (1.0 / n))
 }
 
+/// Two unit vectors `(u, v)` spanning the plane normal to `normal` (`+z` when it has no
+/// direction), with `u x v` along it: `u` is `n x x` (`n x y` when `n` is along `x`).
+pub(crate) fn plane_basis(normal: [f64; 3]) -> (Vector3<f64>, Vector3<f64>) {
+    let n = unit(normal.into()).unwrap_or_else(Vector3::z);
+    let u = unit(n.cross(&Vector3::x()))
+        .or_else(|| unit(n.cross(&Vector3::y())))
+        .unwrap_or_else(Vector3::x);
+    (u, n.cross(&u))
+}
+
 /// Whether every number of `a` is finite.
 pub(crate) fn finite(a: &[f64]) -> bool {
     a.iter().all(|x| x.is_finite())

@@ -4,7 +4,7 @@
 //! 98 s with the whole cut within 2 mm of the mark (the default thresholds), on two
 //! consecutive attempts (the store's rule for every exercise).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use super::{Drawing, ExerciseKind, ExercisePlan, FormField, HandLine, PlanKey};
@@ -152,11 +152,7 @@ impl PatternPlan {
     /// Points every degree round the marked circle, from `start_deg`, `turns` times round,
     /// counter-clockwise seen from outside.
     pub fn circle_points(&self, turns: f64) -> Vec<[f64; 3]> {
-        let n = geom::unit(self.normal.into()).unwrap_or_else(Vector3::z);
-        let u = geom::unit(n.cross(&Vector3::x()))
-            .or_else(|| geom::unit(n.cross(&Vector3::y())))
-            .unwrap_or_else(Vector3::x);
-        let v = n.cross(&u);
+        let (u, v) = geom::plane_basis(self.normal);
         let (c, start) = (Point3::from(self.centre_m), self.start_deg.to_radians());
         let steps = (turns * 360.0).ceil().max(1.0) as usize;
         (0..=steps)

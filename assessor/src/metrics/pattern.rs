@@ -21,7 +21,7 @@
 //!   of the circle's area that deviates), floored at 0; 0 when no piece was cut free (the
 //!   task not completed by the cutoff scores 0).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 
 use super::{Better, Metric, Values, m};
 use crate::geom;
@@ -95,11 +95,7 @@ pub struct Circle {
 
 /// `(r, θ)` of each finite trace point about the circle's centre, seen along its normal.
 fn polar(circle: &Circle, data: &AttemptData) -> Vec<(f64, f64)> {
-    let n = geom::unit(circle.normal.into()).unwrap_or_else(Vector3::z);
-    let u = geom::unit(n.cross(&Vector3::x()))
-        .or_else(|| geom::unit(n.cross(&Vector3::y())))
-        .unwrap_or_else(Vector3::x);
-    let v = n.cross(&u);
+    let (u, v) = geom::plane_basis(circle.normal);
     let c = Point3::from(circle.centre_m);
     data.cuts
         .iter()
