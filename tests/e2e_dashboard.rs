@@ -716,15 +716,7 @@ async fn attempt(
         _ => Hand::steady(px_per_mm, seed),
     };
     let rest = [line[0][0] - 140.0, line[0][1] + 170.0];
-    let mut g = vec![
-        Gesture::Move {
-            x: rest[0],
-            y: rest[1],
-            ms: 16,
-        },
-        Gesture::Wait { ms: 400 },
-    ];
-    g.extend(hand.reach(rest, line[0], 0.8));
+    let mut g = hand.approach(rest, line[0]);
     // a careful person's pace: about 12 mm a second
     let stroke_s = length_mm / 12.0;
     match trial {
@@ -950,7 +942,7 @@ async fn pattern_cut(
     c: &fantoccini::Client,
     shots: &Path,
 ) -> Result<(), fantoccini::error::CmdError> {
-    use cutlab_haptics::hand::{Gesture, Hand};
+    use cutlab_haptics::hand::Hand;
     until(
         c,
         "window.cutlabStation && window.cutlabStation.stats().frames > 5",
@@ -978,15 +970,7 @@ async fn pattern_cut(
     let mut line = mark.clone();
     line.extend_from_slice(&mark[1..mark.len() * 8 / 100]);
     let rest = [mark[0][0] - 140.0, mark[0][1] + 170.0];
-    let mut g = vec![
-        Gesture::Move {
-            x: rest[0],
-            y: rest[1],
-            ms: 16,
-        },
-        Gesture::Wait { ms: 400 },
-    ];
-    g.extend(hand.reach(rest, line[0], 0.8));
+    let mut g = hand.approach(rest, line[0]);
     let stroke_s = 1.08 * mm / 12.0;
     g.extend(hand.stroke(&line, stroke_s, 1.0));
     let half = g.len() - (stroke_s * 30.0) as usize;

@@ -170,6 +170,21 @@ impl Hand {
         out
     }
 
+    /// The hand put down at `rest`, a pause of 400 ms, then a reach of 0.8 s onto `to`: how
+    /// an attempt begins.
+    pub fn approach(&mut self, rest: [f64; 2], to: [f64; 2]) -> Vec<Gesture> {
+        let mut out = vec![
+            Gesture::Move {
+                x: rest[0],
+                y: rest[1],
+                ms: 16,
+            },
+            Gesture::Wait { ms: 400 },
+        ];
+        out.extend(self.reach(rest, to, 0.8));
+        out
+    }
+
     /// A reach from `from` to `to` over `duration_s`: a primary submovement that stops short,
     /// a pause, and a correction onto the target.
     pub fn reach(&mut self, from: [f64; 2], to: [f64; 2], duration_s: f64) -> Vec<Gesture> {

@@ -111,15 +111,7 @@ fn gestures(kind: HandKind, plan: &Plan, seed: u64) -> Vec<Gesture> {
         };
     let rest = [REST_M[0] * 1e3, REST_M[1] * 1e3];
     let line = [[0.0, 0.0], [length_mm, 0.0]];
-    let mut g = vec![
-        Gesture::Move {
-            x: rest[0],
-            y: rest[1],
-            ms: 16,
-        },
-        Gesture::Wait { ms: 400 },
-    ];
-    g.extend(hand.reach(rest, line[0], 0.8));
+    let mut g = hand.approach(rest, line[0]);
     g.extend(hand.stroke(&line, plan.length_m() / pace, 1.0));
     let end = g
         .iter()
