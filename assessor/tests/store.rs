@@ -4,8 +4,9 @@
 
 use cutlab_assessor::metrics::{METRICS, MetricValue};
 use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds, cusum};
-use cutlab_assessor::store::{AttemptStatus, BUILTIN_EXERCISE, NewExercise, Role, ThresholdSource};
+use cutlab_assessor::store::{Access, AttemptStatus, BUILTIN_EXERCISE, CUTTING_BASICS};
 use cutlab_assessor::store::{DbLocation, test_postgres};
+use cutlab_assessor::store::{NewExercise, PATTERN_EXERCISE, Role, ThresholdSource};
 use cutlab_assessor::{AssessError, Better, ExercisePlan, IncisionPlan, Store, on_db};
 
 /// A fresh SQLite database in a temporary folder (kept alive by the returned guard).
@@ -229,6 +230,145 @@ async fn cohorts_and_curricula(store: Store) {
     // the two built-in plans and the other exercise's
     assert_eq!(store.list_plans().await.expect("plans").len(), 3);
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
+}
+
+on_both!(progression_opens_each_exercise_after_the_one_before);
+/// In a curriculum with progression an exercise opens when the one before it is proficient
+/// (two passes in a row), or when an instructor opens it early (recorded); the built-in
+/// `cutting-basics` orders the built-in exercises that way.
+async fn progression_opens_each_exercise_after_the_one_before(store: Store) {
+    let builtin = store.ensure_builtins().await.expect("builtins");
+    let basics = store
+        .curriculum_by_name(CUTTING_BASICS)
+        .await
+        .expect("basics");
+    assert!(basics.progression);
+    let order: Vec<i64> = store
+        .curriculum_modules(basics.id)
+        .await
+        .expect("modules")
+        .into_iter()
+        .flat_map(|m| m.exercise_ids)
+        .collect();
+    let pattern = store
+        .exercise_by_name(PATTERN_EXERCISE)
+        .await
+        .expect("pattern");
+    assert_eq!(order, [builtin.id, pattern.id]);
+    store.ensure_builtins().await.expect("again: nothing added");
+    assert_eq!(
+        store.curriculum_modules(basics.id).await.expect("m").len(),
+        2
+    );
+
+    // a course of our own: one-metric, then pattern cutting
+    let first = exercise_with_one_threshold(&store).await;
+    let course = store
+        .create_curriculum("a-course", "")
+        .await
+        .expect("course");
+    store
+        .add_module(course.id, "one", &[first])
+        .await
+        .expect("module");
+    store
+        .add_module(course.id, "two", &[pattern.id])
+        .await
+        .expect("module");
+    let t = store
+        .create_user("t", Role::Trainee, None)
+        .await
+        .expect("t");
+    let access = |e: i64| {
+        let store = store.clone();
+        async move { store.exercise_access(t.id, e).await.expect("access") }
+    };
+    // without progression nothing is locked but cutting-basics' second
+    assert_eq!(access(first).await, Access::Open);
+    assert!(!access(pattern.id).await.is_open());
+    store
+        .set_progression(course.id, true)
+        .await
+        .expect("progression");
+    match access(pattern.id).await {
+        Access::Locked { curriculum, after } => {
+            assert_eq!(curriculum, "a-course");
+            assert_eq!(after, "one-metric");
+        }
+        other => panic!("locked: {other:?}"),
+    }
+    assert_eq!(store.next_exercise(t.id).await.expect("next"), Some(first));
+    // fail, pass: not yet; pass again: proficient in one-metric (cutting-basics still locks)
+    for (k, lateral) in [0.005, 0.001, 0.0005].into_iter().enumerate() {
+        let a = store
+            .start_attempt(t.id, first, None, false)
+            .await
+            .expect("start");
+        store
+            .finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)]))
+            .await
+            .expect("finish");
+        assert!(!access(pattern.id).await.is_open(), "after attempt {k}");
+    }
+    match access(pattern.id).await {
+        Access::Locked { curriculum, after } => {
+            assert_eq!(
+                (curriculum.as_str(), after.as_str()),
+                (CUTTING_BASICS, BUILTIN_EXERCISE)
+            );
+        }
+        other => panic!("still locked by cutting-basics: {other:?}"),
+    }
+    store.set_progression(basics.id, false).await.expect("off");
+    assert_eq!(
+        access(pattern.id).await,
+        Access::Earned {
+            after: "one-metric".into()
+        }
+    );
+    assert_eq!(
+        store.next_exercise(t.id).await.expect("next"),
+        Some(pattern.id)
+    );
+
+    // another trainee: opened early by an instructor, not by a trainee
+    let u = store
+        .create_user("u", Role::Trainee, None)
+        .await
+        .expect("u");
+    let kim = store
+        .create_user("dr-kim", Role::Instructor, None)
+        .await
+        .expect("kim");
+    let refused = store.open_early(u.id, pattern.id, t.id, "").await;
+    assert!(
+        matches!(refused, Err(AssessError::InvalidInput(_))),
+        "{refused:?}"
+    );
+    assert!(
+        !store
+            .exercise_access(u.id, pattern.id)
+            .await
+            .expect("a")
+            .is_open()
+    );
+    let o = store
+        .open_early(u.id, pattern.id, kim.id, "repeat of last year")
+        .await
+        .expect("opened");
+    assert_eq!(
+        (o.opened_by.as_str(), o.reason.as_str()),
+        ("dr-kim", "repeat of last year")
+    );
+    assert_eq!(
+        store.exercise_access(u.id, pattern.id).await.expect("a"),
+        Access::OpenedEarly(o.clone())
+    );
+    let again = store
+        .open_early(u.id, pattern.id, kim.id, "twice")
+        .await
+        .expect("again");
+    assert_eq!(again, o, "the first opening stays");
 }
 
 on_both!(the_builtin_exercise_is_there_once);

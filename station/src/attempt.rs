@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use cutlab_assessor::recordings::RecordingStore;
-use cutlab_assessor::store::{Exercise, Outcome, Store};
+use cutlab_assessor::store::{Exercise, Outcome, Role, Store};
 use cutlab_assessor::{AssessError, ExercisePlan, MetricSet};
 use cutlab_haptics::Session;
 use cutlab_haptics::plan::Plan;
@@ -22,6 +22,24 @@ pub async fn exercise_named(
     let e = store.exercise_by_name(name).await?;
     let plan = store.exercise_plan(e.id).await?;
     Ok((e, plan))
+}
+
+/// Refuses `trainee`'s session of `exercise` while it is locked to them in a curriculum with
+/// progression ([`Store::exercise_access`]); instructors and admins are never held back.
+pub async fn check_open(
+    store: &Store,
+    trainee: &str,
+    exercise: &Exercise,
+) -> Result<(), StationError> {
+    let user = store.trainee_named(trainee).await?;
+    if user.role != Role::Trainee {
+        return Ok(());
+    }
+    let access = store.exercise_access(user.id, exercise.id).await?;
+    match access.locked_message(&exercise.name) {
+        Some(why) => Err(StationError::Locked(why)),
+        None => Ok(()),
+    }
 }
 
 /// What the exercise's hand follows projected onto the session's tissue (33 points evenly

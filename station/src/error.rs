@@ -25,6 +25,9 @@ pub enum StationError {
     /// The device asked for is not one this station has.
     #[error("{0}")]
     NoSuchDevice(String),
+    /// The trainee has not reached the exercise in a curriculum with progression.
+    #[error("{0}")]
+    Locked(String),
     /// The station takes no more sessions now (one per trainee, a limit per server).
     #[error("{0}")]
     Busy(String),

@@ -357,6 +357,7 @@ pub async fn start(
     input: Input,
 ) -> Result<Running, StationError> {
     let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
+    attempt::check_open(&store, &request.trainee, &exercise).await?;
     let guided = request.guided && !exercise.exam_only;
     let force_limit_newtons = force_limit(&store, &exercise, &expert_plan, input.class()).await?;
     // building and settling the tissue takes a while: off the async threads

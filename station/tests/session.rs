@@ -477,18 +477,42 @@ async fn pattern_cutting_shows_its_mark_in_exam_mode_and_scores_the_freed_piece(
     let dir = dir_guard.path();
     let store = store(dir).await;
     let settings = settings(dir, 12.0);
-    let running = run::start(
-        store.clone(),
-        &settings,
-        StartRequest {
-            exercise: cutlab_assessor::store::PATTERN_EXERCISE.into(),
-            trainee: "ana".into(),
-            guided: false,
-        },
-        Input::Device(expert()),
-    )
-    .await
-    .expect("started");
+    let request = || StartRequest {
+        exercise: cutlab_assessor::store::PATTERN_EXERCISE.into(),
+        trainee: "ana".into(),
+        guided: false,
+    };
+    // second in cutting-basics: locked until the incision is proficient
+    let refused = run::start(store.clone(), &settings, request(), Input::Device(expert())).await;
+    match refused {
+        Err(cutlab_station::StationError::Locked(why)) => {
+            assert!(
+                why.contains(EXERCISE) && why.contains("instructor"),
+                "{why}"
+            );
+        }
+        other => panic!("locked: {:?}", other.map(|r| r.attempt)),
+    }
+    // until an instructor opens it early
+    let kim = store
+        .create_user("dr-kim", Role::Instructor, None)
+        .await
+        .expect("kim");
+    let (ana, pattern) = (
+        store.user_by_name("ana").await.expect("ana"),
+        store
+            .exercise_by_name(cutlab_assessor::store::PATTERN_EXERCISE)
+            .await
+            .expect("pattern"),
+    );
+    let opening = store
+        .open_early(ana.id, pattern.id, kim.id, "FLS course next week")
+        .await
+        .expect("opened");
+    assert_eq!(opening.opened_by, "dr-kim");
+    let running = run::start(store.clone(), &settings, request(), Input::Device(expert()))
+        .await
+        .expect("started");
     assert!(!running.guided);
     // the mark: one closed circle of radius 20 mm about the sheet's centre, on its top
     assert_eq!(running.marks.len(), 1);

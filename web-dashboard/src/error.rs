@@ -16,6 +16,9 @@ pub enum AppError {
     /// Logged in, but the role does not allow it.
     #[error("forbidden: {0}")]
     Forbidden(&'static str),
+    /// An exercise the trainee has not reached in a curriculum with progression, with why.
+    #[error("{0}")]
+    Locked(String),
     /// A form without the session's CSRF token.
     #[error("missing or wrong CSRF token")]
     Csrf,
@@ -50,7 +53,7 @@ impl AppError {
     pub fn status(&self) -> StatusCode {
         match self {
             AppError::NotFound => StatusCode::NOT_FOUND,
-            AppError::Forbidden(_) | AppError::Csrf => StatusCode::FORBIDDEN,
+            AppError::Forbidden(_) | AppError::Locked(_) | AppError::Csrf => StatusCode::FORBIDDEN,
             AppError::Unauthorized | AppError::StationToken => StatusCode::UNAUTHORIZED,
             AppError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             AppError::TooManyRequests => StatusCode::TOO_MANY_REQUESTS,

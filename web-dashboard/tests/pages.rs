@@ -983,6 +983,89 @@ async fn the_station_offers_its_devices_and_refuses_others() {
     assert!(state.station().running().is_empty(), "nothing started");
 }
 
+/// cutting-basics with progression: pattern cutting is locked to ben (not proficient in the
+/// incision) at the station's picker and its start (403, saying why) until dr-kim opens it
+/// early, which his progress page records; ana, proficient, is offered it next.
+#[tokio::test]
+async fn a_locked_exercise_opens_by_proficiency_or_an_instructor() {
+    use cutlab_assessor::store::{BUILTIN_EXERCISE, PATTERN_EXERCISE};
+    let e = env().await;
+    let (ben, ana) = (
+        login(&e.app, "ben", "trainee-demo").await,
+        login(&e.app, "ana", "trainee-demo").await,
+    );
+    let option = |page: &str| {
+        let at = page
+            .find("<option value=\"pattern-cutting\"")
+            .expect("offered");
+        page[at..at + page[at..].find("</option>").expect("closed")].to_owned()
+    };
+    let picker = body_text(send(&e.app, get("/station", Some(&ben))).await).await;
+    assert!(option(&picker).contains("disabled") && option(&picker).contains("(locked)"));
+    assert!(
+        picker.contains(&format!("{BUILTIN_EXERCISE} (next)")),
+        "{picker}"
+    );
+    let start = |s: &Session| {
+        post_form(
+            "/station/start",
+            Some(&s.cookie),
+            &[
+                ("exercise", PATTERN_EXERCISE),
+                ("mode", "exam"),
+                ("csrf", &s.csrf),
+            ],
+        )
+    };
+    let r = send(&e.app, start(&ben)).await;
+    assert_eq!(r.status(), StatusCode::FORBIDDEN);
+    let why = body_text(r).await;
+    assert!(
+        why.contains("locked") && why.contains(BUILTIN_EXERCISE),
+        "{why}"
+    );
+    let picker = body_text(send(&e.app, get("/station", Some(&ana))).await).await;
+    assert!(option(&picker).contains("(next)"), "{picker}");
+    assert!(!option(&picker).contains("disabled"));
+
+    let ben_id = user_id(&e.store, "ben").await;
+    let progress = format!("/trainees/{ben_id}");
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let page = body_text(send(&e.app, get(&progress, Some(&kim))).await).await;
+    assert!(
+        page.contains("locked until proficient in chest-wall-incision"),
+        "{page}"
+    );
+    assert!(page.contains("id=\"open-early\""), "{page}");
+    let open = |s: &Session| {
+        post_form(
+            &format!("{progress}/open"),
+            Some(&s.cookie),
+            &[
+                ("exercise", PATTERN_EXERCISE),
+                ("reason", "repeats the year"),
+                ("csrf", &s.csrf),
+            ],
+        )
+    };
+    assert_eq!(
+        send(&e.app, open(&ben)).await.status(),
+        StatusCode::FORBIDDEN
+    );
+    assert!(send(&e.app, open(&kim)).await.status().is_redirection());
+    let page = body_text(send(&e.app, get(&progress, Some(&ben))).await).await;
+    assert!(
+        page.contains("opened early by dr-kim") && page.contains("repeats the year"),
+        "{page}"
+    );
+    assert!(
+        !page.contains("id=\"open-early\""),
+        "no form for the trainee"
+    );
+    let picker = body_text(send(&e.app, get("/station", Some(&ben))).await).await;
+    assert!(!option(&picker).contains("disabled"), "{picker}");
+}
+
 #[tokio::test]
 async fn a_lapse_after_proficiency_reads_as_a_lapse_beside_the_cusum() {
     use cutlab_assessor::proficiency::{Course, CusumParams, ProficiencyStatus};

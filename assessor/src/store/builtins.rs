@@ -1,7 +1,8 @@
 //! The built-in exercises, always present so `cutlab assess` works on a fresh database:
-//! `chest-wall-incision` and `pattern-cutting`.
+//! `chest-wall-incision` and `pattern-cutting`, and the curriculum that orders them,
+//! `cutting-basics` (with progression).
 
-use super::{Exercise, NewExercise, Store};
+use super::{CUTTING_BASICS, Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
 use crate::exercise::{ExercisePlan, PatternPlan};
 use crate::proficiency::DEFAULT_K;
@@ -26,14 +27,37 @@ impl Store {
                 &ExercisePlan::chest_wall()?,
             )
             .await?;
-        self.ensure_exercise(
-            PATTERN_EXERCISE,
-            "sheet",
-            "FLS pattern cutting: cut the marked 40 mm circle out of the held sheet, along the mark",
-            &ExercisePlan::Pattern(PatternPlan::builtin()?),
-        )
-        .await?;
+        let pattern = self
+            .ensure_exercise(
+                PATTERN_EXERCISE,
+                "sheet",
+                "FLS pattern cutting: cut the marked 40 mm circle out of the held sheet, along the mark",
+                &ExercisePlan::Pattern(PatternPlan::builtin()?),
+            )
+            .await?;
+        self.ensure_cutting_basics(&[("Incision", &incision), ("Pattern cutting", &pattern)])
+            .await?;
         Ok(incision)
+    }
+
+    /// Makes the `cutting-basics` curriculum, one module per exercise in order, with
+    /// progression, unless it exists (an instructor's edits to it stay).
+    async fn ensure_cutting_basics(&self, modules: &[(&str, &Exercise)]) -> Result<()> {
+        let made = self
+            .create_curriculum(
+                CUTTING_BASICS,
+                "The cutting exercises in order, each opening when the one before is proficient",
+            )
+            .await;
+        let c = match made {
+            Ok(c) => c,
+            Err(AssessError::Conflict(_)) => return Ok(()),
+            Err(e) => return Err(e),
+        };
+        for (name, e) in modules {
+            self.add_module(c.id, name, &[e.id]).await?;
+        }
+        self.set_progression(c.id, true).await
     }
 
     /// Inserts exercise `name` with `plan` and its kind's default thresholds if missing.

@@ -11,6 +11,20 @@ pub struct Curriculum {
     pub id: i64,
     pub name: String,
     pub description: String,
+    /// Proficiency-based progression: each exercise opens when the one before it is proficient
+    /// (see [`Store::exercise_access`]).
+    pub progression: bool,
+}
+
+type CurriculumRow = (i64, String, String, bool);
+
+fn curriculum((id, name, description, progression): CurriculumRow) -> Curriculum {
+    Curriculum {
+        id,
+        name,
+        description,
+        progression,
+    }
 }
 
 /// A module of a curriculum, with its exercises in order.
@@ -38,44 +52,44 @@ impl Store {
             id,
             name: name.into(),
             description: description.into(),
+            progression: false,
         })
     }
 
     pub async fn get_curriculum(&self, id: i64) -> Result<Curriculum> {
-        let row: Option<(i64, String, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description FROM curricula WHERE id = $1")
+        let row: Option<CurriculumRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description, progression FROM curricula WHERE id = $1")
                 .bind(id)
                 .fetch_optional(pool).await)?;
-        row.map(|(id, name, description)| Curriculum {
-            id,
-            name,
-            description,
-        })
-        .ok_or_else(|| AssessError::NotFound(format!("curriculum {id}")))
+        row.map(curriculum)
+            .ok_or_else(|| AssessError::NotFound(format!("curriculum {id}")))
     }
 
     pub async fn curriculum_by_name(&self, name: &str) -> Result<Curriculum> {
-        let row: Option<(i64, String, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description FROM curricula WHERE name = $1")
+        let row: Option<CurriculumRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description, progression FROM curricula WHERE name = $1")
                 .bind(name)
                 .fetch_optional(pool).await)?;
-        row.map(|(id, name, description)| Curriculum {
-            id,
-            name,
-            description,
-        })
-        .ok_or_else(|| AssessError::NotFound(format!("curriculum {name:?}")))
+        row.map(curriculum)
+            .ok_or_else(|| AssessError::NotFound(format!("curriculum {name:?}")))
     }
 
     pub async fn list_curricula(&self) -> Result<Vec<Curriculum>> {
-        let rows: Vec<(i64, String, String)> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description FROM curricula ORDER BY name")
+        let rows: Vec<CurriculumRow> = crate::on_db!(&self.db, pool => sqlx::query_as("SELECT id, name, description, progression FROM curricula ORDER BY name")
                 .fetch_all(pool).await)?;
-        Ok(rows
-            .into_iter()
-            .map(|(id, name, description)| Curriculum {
-                id,
-                name,
-                description,
-            })
-            .collect())
+        Ok(rows.into_iter().map(curriculum).collect())
+    }
+
+    /// Turns proficiency-based progression on or off for a curriculum.
+    pub async fn set_progression(&self, curriculum_id: i64, progression: bool) -> Result<()> {
+        let done = crate::on_db!(&self.db, pool => sqlx::query(
+            "UPDATE curricula SET progression = $1 WHERE id = $2",
+        )
+        .bind(progression)
+        .bind(curriculum_id)
+        .execute(pool).await.map(|r| r.rows_affected()))?;
+        if done == 0 {
+            return Err(AssessError::NotFound(format!("curriculum {curriculum_id}")));
+        }
+        Ok(())
     }
 
     /// Appends a module with `exercise_ids` (in that order) to a curriculum.

@@ -16,6 +16,7 @@ mod db;
 mod exercises;
 mod hub;
 mod names;
+mod progression;
 mod users;
 
 use std::path::PathBuf;
@@ -35,6 +36,7 @@ pub use db::{Db, DbLocation, TEST_POSTGRES_ENV, scratch_postgres, test_postgres}
 pub use exercises::{Exercise, ExerciseEdit, NewExercise, ThresholdSource};
 pub use hub::{AttemptUpload, Imported, StationToken, is_uuid, new_uuid};
 pub use names::{MAX_NAME_CHARS, check_name, printable, skeleton};
+pub use progression::{Access, CUTTING_BASICS, Opening, reached_proficiency};
 pub use users::{Role, User};
 
 use crate::error::{AssessError, Result};

@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, HashMap};
 
 use cutlab_assessor::metrics::{self, Better};
 use cutlab_assessor::proficiency::{Course, CusumParams, CusumPoint, CusumSignal, Thresholds};
-use cutlab_assessor::store::{AttemptStatus, User};
+use cutlab_assessor::store::{Access, AttemptStatus, User};
 use serde::Serialize;
 
 use super::{ExerciseRef, ProficiencySummary, Standing, UserRef};
@@ -155,6 +155,8 @@ pub struct CusumPointView {
 pub struct CurriculumProgress {
     pub id: i64,
     pub name: String,
+    /// Each exercise opens when the one before it is proficient.
+    pub progression: bool,
     pub modules: Vec<ModuleProgress>,
 }
 
@@ -164,7 +166,17 @@ pub struct ModuleProgress {
     pub position: i64,
     pub name: String,
     pub standing: Standing,
-    pub exercises: Vec<(ExerciseRef, Standing)>,
+    pub exercises: Vec<ModuleExercise>,
+}
+
+/// An exercise of a module, where the trainee stands in it and (with progression) whether
+/// it is open to them.
+#[derive(Debug, Serialize)]
+pub struct ModuleExercise {
+    pub exercise: ExerciseRef,
+    pub standing: Standing,
+    /// `None` in a curriculum without progression.
+    pub access: Option<Access>,
 }
 
 /// A trainee's progress as cached (see [`crate::cache`]), with its page body and JSON made
@@ -250,7 +262,7 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
         let points: Vec<AttemptPoint> = mine
             .iter()
             .map(|a| {
-                let scored = a.scored && a.status == AttemptStatus::Complete;
+                let scored = a.counted_pass().is_some();
                 let this = scored.then(|| {
                     n += 1;
                     n
@@ -288,7 +300,7 @@ pub async fn progress(state: &AppState, trainee: &User) -> Result<Progress, AppE
             cusum,
         });
     }
-    let curricula = curricula_progress(state, &exercises, &standings).await?;
+    let curricula = curricula_progress(state, trainee.id, &exercises, &standings).await?;
     Ok(Progress {
         trainee: UserRef::from(trainee),
         exercises: out,
@@ -385,6 +397,7 @@ fn cusum_chart(scored: &[&AttemptPoint], course: Course, params: CusumParams) ->
 /// id; an exercise not there is not started).
 async fn curricula_progress(
     state: &AppState,
+    trainee_id: i64,
     exercises: &[cutlab_assessor::store::Exercise],
     standings: &HashMap<i64, Standing>,
 ) -> Result<Vec<CurriculumProgress>, AppError> {
@@ -394,20 +407,22 @@ async fn curricula_progress(
     for c in store.list_curricula().await? {
         let mut modules = Vec::new();
         for m in store.curriculum_modules(c.id).await? {
-            let ex: Vec<(ExerciseRef, Standing)> = m
-                .exercise_ids
-                .iter()
-                .map(|id| {
-                    (
-                        ExerciseRef {
-                            id: *id,
-                            name: names.get(id).copied().unwrap_or("?").to_owned(),
-                        },
-                        standings.get(id).copied().unwrap_or(Standing::NotStarted),
-                    )
-                })
-                .collect();
-            let standing = module_standing(ex.iter().map(|e| e.1));
+            let mut ex = Vec::with_capacity(m.exercise_ids.len());
+            for &id in &m.exercise_ids {
+                let access = match c.progression {
+                    true => Some(store.exercise_access(trainee_id, id).await?),
+                    false => None,
+                };
+                ex.push(ModuleExercise {
+                    exercise: ExerciseRef {
+                        id,
+                        name: names.get(&id).copied().unwrap_or("?").to_owned(),
+                    },
+                    standing: standings.get(&id).copied().unwrap_or(Standing::NotStarted),
+                    access,
+                });
+            }
+            let standing = module_standing(ex.iter().map(|e| e.standing));
             modules.push(ModuleProgress {
                 id: m.id,
                 position: m.position,
@@ -419,6 +434,7 @@ async fn curricula_progress(
         curricula.push(CurriculumProgress {
             id: c.id,
             name: c.name,
+            progression: c.progression,
             modules,
         });
     }

@@ -7,25 +7,31 @@ use axum::Router;
 use axum::body::Bytes;
 use axum::extract::State;
 use axum::response::Html;
-use axum::routing::get;
+use axum::response::Redirect;
+use axum::routing::{get, post};
+use cutlab_assessor::store::{Access, iso8601};
 use maud::{Markup, html};
+use serde::Deserialize;
 
 use super::layout::{limits, num, page_around, verdict, when};
 use crate::AppState;
 use crate::access::visible_user;
 use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
+use crate::data::ExerciseRef;
 use crate::data::ProficiencySummary;
 use crate::data::label;
 use crate::data::progress::{
     CusumChart, ExerciseProgress, MetricSeries, Progress, cached_progress,
 };
-use crate::error::PageResult;
-use crate::extract::Id;
+use crate::error::{AppError, PageResult};
+use crate::extract::{Form, Id};
 use cutlab_assessor::proficiency::{CusumSignal, ProficiencyStatus, REQUIRED_CONSECUTIVE_PASSES};
 
 pub fn router() -> Router<AppState> {
-    Router::new().route("/trainees/{id}", get(trainee))
+    Router::new()
+        .route("/trainees/{id}", get(trainee))
+        .route("/trainees/{id}/open", post(open_early))
 }
 
 async fn trainee(
@@ -38,11 +44,98 @@ async fn trainee(
     let body = c
         .html
         .get_or_init(|| Bytes::from(body(&c.data).into_string()));
+    // the instructor's form is the viewer's (its CSRF token), not the cached page's
+    let opener = if user.is_staff() {
+        open_early_form(&c.data, &user).into_string()
+    } else {
+        String::new()
+    };
     Ok(page_around(
         &format!("Progress of {}", c.data.trainee.name),
         Some(&user),
-        body,
+        &[body.as_ref(), opener.as_bytes()].concat(),
     ))
+}
+
+/// The instructor's form to open a locked exercise to the trainee before its turn.
+fn open_early_form(p: &Progress, user: &CurrentUser) -> Markup {
+    let mut locked: Vec<&ExerciseRef> = p
+        .curricula
+        .iter()
+        .flat_map(|c| c.modules.iter().flat_map(|m| &m.exercises))
+        .filter(|x| x.access.as_ref().is_some_and(|a| !a.is_open()))
+        .map(|x| &x.exercise)
+        .collect();
+    locked.dedup_by_key(|e| e.id);
+    html! {
+        @if !locked.is_empty() {
+            form class="open-early" method="post" action=(format!("/trainees/{}/open", p.trainee.id)) {
+                input type="hidden" name="csrf" value=(user.csrf());
+                label for="open-exercise" { "Open early" } " "
+                select id="open-exercise" name="exercise" {
+                    @for e in &locked { option value=(e.name) { (e.name) } }
+                }
+                " "
+                input id="open-reason" name="reason" placeholder="why (recorded)" maxlength="500";
+                " "
+                button id="open-early" type="submit" { "Open to " (p.trainee.name) }
+            }
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+struct OpenForm {
+    /// The exercise's name.
+    exercise: String,
+    #[serde(default)]
+    reason: String,
+}
+
+/// `POST /trainees/{id}/open`: an instructor opens an exercise to the trainee early.
+async fn open_early(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    Form(f): Form<OpenForm>,
+) -> PageResult<Redirect> {
+    user.require_staff()?;
+    let trainee = visible_user(&state, &user, id).await?;
+    let reason: String = f.reason.trim().chars().take(500).collect();
+    let store = state.store();
+    let exercise = match store.exercise_by_name(&f.exercise).await {
+        Err(cutlab_assessor::AssessError::NotFound(_)) => {
+            return Err(AppError::BadRequest(format!(
+                "no exercise named {:?}",
+                f.exercise
+            )));
+        }
+        other => other?,
+    };
+    store
+        .open_early(trainee.id, exercise.id, user.id(), &reason)
+        .await?;
+    state.caches().progress.remove(&trainee.id);
+    Ok(Redirect::to(&format!("/trainees/{id}")))
+}
+
+/// How an exercise of a curriculum with progression stands for the trainee.
+fn access_words(a: &Access) -> String {
+    match a {
+        Access::Open => "open".into(),
+        Access::Earned { after } => format!("open: proficient in {after}"),
+        Access::OpenedEarly(o) => format!(
+            "opened early by {} on {}{}",
+            o.opened_by,
+            &iso8601(o.opened_ns)[..10],
+            if o.reason.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", o.reason)
+            }
+        ),
+        Access::Locked { after, .. } => format!("locked until proficient in {after}"),
+    }
 }
 
 fn body(p: &Progress) -> Markup {
@@ -53,6 +146,10 @@ fn body(p: &Progress) -> Markup {
         @if p.curricula.is_empty() { p class="muted" { "No curriculum defined." } }
         @for c in &p.curricula {
             h3 { (c.name) }
+            @if c.progression {
+                p class="muted" { "Each exercise opens when the one before it is proficient ("
+                    (REQUIRED_CONSECUTIVE_PASSES) " passes in a row), or when an instructor opens it early." }
+            }
             table {
                 thead { tr { th { "#" } th { "Module" } th { "State" } th { "Exercises" } } }
                 tbody {
@@ -61,7 +158,14 @@ fn body(p: &Progress) -> Markup {
                             td class="num" { (m.position) }
                             td { (m.name) }
                             td class=(format!("state-{}", m.standing.as_str().replace(' ', "-"))) { (m.standing.as_str()) }
-                            td { @for (e, s) in &m.exercises { (e.name) " (" (s.as_str()) ")" br; } }
+                            td { @for x in &m.exercises {
+                                span class=(if x.access.as_ref().is_some_and(|a| !a.is_open()) { "locked" } else { "" }) {
+                                    (x.exercise.name) " (" (x.standing.as_str())
+                                    @if let Some(a) = &x.access { "; " (access_words(a)) }
+                                    ")"
+                                }
+                                br;
+                            } }
                         }
                     }
                 }

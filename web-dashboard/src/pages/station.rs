@@ -22,6 +22,7 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::HeaderMap;
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
+use cutlab_assessor::store::{Exercise, Role};
 use cutlab_haptics::device::DeviceSpec;
 use cutlab_station::protocol::{self, ClientMessage};
 use cutlab_station::{Ending, Running, StartRequest, StationError};
@@ -53,6 +54,7 @@ fn station_error(e: StationError) -> AppError {
     match e {
         StationError::Busy(m) => AppError::Conflict(m),
         StationError::NoSuchDevice(m) => AppError::BadRequest(m),
+        StationError::Locked(m) => AppError::Locked(m),
         StationError::Assess(cutlab_assessor::AssessError::NotFound(_)) => {
             AppError::BadRequest("no such exercise".into())
         }
@@ -62,7 +64,7 @@ fn station_error(e: StationError) -> AppError {
 
 /// `/station`: the exercises, the mode, Start.
 async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<Markup> {
-    let exercises = state.store().list_exercises().await?;
+    let exercises = picker_exercises(&state, &user).await?;
     let devices = &state.station_settings().devices;
     let running = state
         .station()
@@ -82,13 +84,18 @@ async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<
                 p {
                     label for="exercise" { "Exercise" } " "
                     select id="exercise" name="exercise" {
-                        @for e in &exercises { option value=(e.name) { (e.name) } }
+                        @for (i, (e, locked)) in exercises.iter().enumerate() {
+                            option value=(e.name) selected[i == 0] disabled[locked.is_some()] {
+                                (e.name) @if locked.is_some() { " (locked)" } @else if i == 0 { " (next)" }
+                            }
+                        }
                     }
                 }
-                @for e in &exercises {
+                @for (e, locked) in &exercises {
                     p class="muted brief" {
                         strong { (e.name) ": " } (e.description)
                         @if e.exam_only { " " em class="exam-only" { "(exam only: the plan is never shown)" } }
+                        @if let Some(why) = locked { " " em class="locked" { "(" (why) ")" } }
                     }
                 }
                 fieldset {
@@ -111,6 +118,30 @@ async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<
             }
         },
     ))
+}
+
+/// The exercises the picker offers `user`: the next in their curriculum first, then the
+/// others open to them, then the locked ones, each with why it is locked.
+async fn picker_exercises(
+    state: &AppState,
+    user: &CurrentUser,
+) -> Result<Vec<(Exercise, Option<String>)>, AppError> {
+    let store = state.store();
+    let exercises = store.list_exercises().await?;
+    if user.role() != Role::Trainee {
+        return Ok(exercises.into_iter().map(|e| (e, None)).collect());
+    }
+    let next = store.next_exercise(user.id()).await?;
+    let mut out = Vec::with_capacity(exercises.len());
+    for e in exercises {
+        let locked = store
+            .exercise_access(user.id(), e.id)
+            .await?
+            .locked_message(&e.name);
+        out.push((e, locked));
+    }
+    out.sort_by_key(|(e, locked)| (Some(e.id) != next, locked.is_some()));
+    Ok(out)
 }
 
 /// How the picker names a station's device.
