@@ -194,24 +194,43 @@ impl Store {
 }
 
 /// Applies `migrator`'s migrations. Another process migrating the same database at the same
-/// moment is tolerated (retried).
+/// moment is tolerated: any failure is retried 5 times, a busy database for up to about 30 s
+/// (SQLite answers "database is locked" at once, without its busy timeout, when a migration's
+/// transaction must wait for another process's; a fresh database's migrations take seconds
+/// on a busy machine).
 async fn migrate<'a, A>(migrator: &sqlx::migrate::Migrator, pool: A) -> Result<()>
 where
     A: sqlx::Acquire<'a> + Copy,
     <A::Connection as std::ops::Deref>::Target: sqlx::migrate::Migrate,
 {
-    let mut tries = 0;
+    const PATIENCE: Duration = Duration::from_secs(30);
+    let started = std::time::Instant::now();
+    let mut tries = 0u64;
     loop {
         match migrator.run(pool).await {
             Ok(()) => return Ok(()),
-            Err(e) if tries < 5 => {
+            Err(e) if (tries < 5 || busy(&e)) && started.elapsed() < PATIENCE => {
                 tracing::debug!("migration attempt {tries} failed ({e}); retrying");
                 tries += 1;
-                tokio::time::sleep(Duration::from_millis(100 * tries)).await;
+                tokio::time::sleep(Duration::from_millis((100 * tries).min(1000))).await;
             }
             Err(e) => return Err(e.into()),
         }
     }
+}
+
+/// Whether a migration failed because another connection held the database (SQLite's
+/// `SQLITE_BUSY` and `SQLITE_LOCKED`, extended codes included).
+fn busy(e: &sqlx::migrate::MigrateError) -> bool {
+    use sqlx::migrate::MigrateError;
+    let (MigrateError::Execute(sqlx::Error::Database(d))
+    | MigrateError::ExecuteMigration(sqlx::Error::Database(d), _)) = e
+    else {
+        return false;
+    };
+    d.code()
+        .and_then(|c| c.parse::<u32>().ok())
+        .is_some_and(|c| matches!(c & 0xff, 5 | 6))
 }
 
 #[cfg(test)]
