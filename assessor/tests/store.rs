@@ -90,6 +90,18 @@ async fn exercise_with_one_threshold(store: &Store) -> i64 {
     store.create_exercise(&new).await.expect("exercise").id
 }
 
+/// A scored attempt of `trainee` at `exercise` with the one metric `lateral_mean_m`.
+async fn scored_attempt(store: &Store, trainee: i64, exercise: i64, lateral: f64) {
+    let a = store
+        .start_attempt(trainee, exercise, None, false)
+        .await
+        .expect("start");
+    store
+        .finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)]))
+        .await
+        .expect("finish");
+}
+
 on_both!(users_and_passwords);
 async fn users_and_passwords(store: Store) {
     let alice = store
@@ -300,14 +312,7 @@ async fn progression_opens_each_exercise_after_the_one_before(store: Store) {
     assert_eq!(store.next_exercise(t.id).await.expect("next"), Some(first));
     // fail, pass: not yet; pass again: proficient in one-metric (cutting-basics still locks)
     for (k, lateral) in [0.005, 0.001, 0.0005].into_iter().enumerate() {
-        let a = store
-            .start_attempt(t.id, first, None, false)
-            .await
-            .expect("start");
-        store
-            .finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)]))
-            .await
-            .expect("finish");
+        scored_attempt(&store, t.id, first, lateral).await;
         assert!(!access(pattern.id).await.is_open(), "after attempt {k}");
     }
     match access(pattern.id).await {
@@ -672,14 +677,7 @@ async fn xapi_of_a_trainee(store: Store) {
         .await
         .expect("user");
     for lateral in [0.001, 0.001] {
-        let a = store
-            .start_attempt(t.id, ex, None, false)
-            .await
-            .expect("start");
-        store
-            .finish_attempt(a.id, &values(&[("lateral_mean_m", lateral)]))
-            .await
-            .expect("finish");
+        scored_attempt(&store, t.id, ex, lateral).await;
     }
     let s = store.xapi_statements("trainee").await.expect("xapi");
     let verbs: Vec<&str> = s
