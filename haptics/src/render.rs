@@ -425,6 +425,16 @@ impl ForceRenderer {
         }
     }
 
+    /// Forgets the first touch once the tip is at or above it (a blade lifted out).
+    fn forget_touch_below(&mut self, tip: &Point3) {
+        if self
+            .touched
+            .is_some_and(|(p0, n0)| (tip - p0).dot(&n0) >= 0.0)
+        {
+            self.touched = None;
+        }
+    }
+
     fn desired_force(&mut self, pose: &ToolPose, c: &ContactModel) -> Vector3 {
         let s = &self.settings;
         let tip = pose.tip_in_world;
@@ -440,6 +450,7 @@ impl ForceRenderer {
                 if !pose.blade_engaged() || (tip - p0).dot(&n0) > 0.0 {
                     self.mode = Mode::Free;
                     self.proxy = tip;
+                    self.forget_touch_below(&tip);
                     return Vector3::zeros();
                 }
                 self.proxy = tip;
@@ -466,9 +477,19 @@ impl ForceRenderer {
                 if depth >= 0.0 {
                     self.mode = Mode::Free;
                     self.proxy = tip;
+                    self.forget_touch_below(&tip);
                     return Vector3::zeros();
                 }
-                if self.mode == Mode::Free || c.at_heel {
+                // a new touch counts how far the tip presses in afresh, unless the engaged
+                // blade never rose above where it first touched: the tissue sank away from it
+                // or sprang off it, or it left its cut as the tissue under it sank (a thin
+                // sheet riding on the tip); then it still counts from that first touch
+                let kept = self.mode == Mode::Free
+                    && pose.blade_engaged()
+                    && self
+                        .touched
+                        .is_some_and(|(p0, n0)| (tip - p0).dot(&n0) < 0.0);
+                if (self.mode == Mode::Free && !kept) || c.at_heel {
                     self.touched = None;
                 }
                 self.mode = Mode::Touching;
@@ -753,6 +774,42 @@ mod tests {
             press(&mut r, 0, 3.0 * d).0.mode,
             Mode::Touching,
             "the blade not engaged: a press, however deep, does not cut"
+        );
+    }
+
+    #[test]
+    fn an_engaged_blade_the_tissue_sank_from_goes_back_in_at_once() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        // pressed 4.5 mm into a surface at 0: in
+        let out = r.update(0, at(-0.0045, BUTTON_BLADE), &plane(0, 500.0));
+        assert_eq!(out.mode, Mode::Cutting);
+        // the tissue under the entry sinks below the tip: the blade reads as lifted out
+        let sunk = ContactModel {
+            cut_entry: Some((Point3::new(0.0, 0.0, -0.006), Vector3::z())),
+            plane_point: Point3::new(0.0, 0.0, -0.006),
+            ..plane(1, 20.0)
+        };
+        assert_eq!(
+            r.update(1, at(-0.0045, BUTTON_BLADE), &sunk).mode,
+            Mode::Free
+        );
+        // it rides back up under the tip (0.5 mm above it, a soft push): the tip is still
+        // 4.5 mm below where it first touched, so it goes back in at once
+        let riding = ContactModel {
+            plane_point: Point3::new(0.0, 0.0, -0.004),
+            ..plane(2, 20.0)
+        };
+        assert_eq!(
+            r.update(2, at(-0.0045, BUTTON_BLADE), &riding).mode,
+            Mode::Cutting
+        );
+        // lifted above the first touch and pressed again there: counted afresh
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        r.update(0, at(-0.0045, BUTTON_BLADE), &plane(0, 500.0));
+        r.update(1, at(0.001, BUTTON_BLADE), &sunk);
+        assert_eq!(
+            r.update(2, at(-0.0045, BUTTON_BLADE), &riding).mode,
+            Mode::Touching
         );
     }
 
