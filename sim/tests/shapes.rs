@@ -203,6 +203,61 @@ fn a_closed_circle_through_the_sheet_frees_one_disc_of_its_area() {
     }
 }
 
+/// A hand's circle: `turns` times round from `from` (rad), its radius drifting by `drift_m`
+/// over a turn and wobbling by `wobble_m` with `lobes` lobes a turn, a point every 0.5 mm.
+fn hand_circle(from: f64, turns: f64, drift_m: f64, wobble_m: f64, lobes: f64) -> Vec<(f64, f64)> {
+    let (r0, spacing_m) = (0.02, 0.0005);
+    let n = (r0 * turns * TAU / spacing_m).ceil() as usize;
+    (0..=n)
+        .map(|k| {
+            let a = turns * TAU * k as f64 / n as f64;
+            let r = r0 + drift_m * a / TAU + wobble_m * (lobes * a).sin();
+            (r * (from + a).cos(), r * (from + a).sin())
+        })
+        .collect()
+}
+
+#[test]
+fn a_hands_closed_circle_through_the_sheet_frees_its_disc() {
+    // a circle as a hand draws it: the radius drifts a few tenths of a millimetre and wobbles,
+    // so the stroke's end passes beside its start, and turning planes carve slivers along the
+    // way; a sliver left attached must join one side of the wound, not bridge the two (the
+    // synthetic expert's seed 1 at pattern cutting left its disc held by one)
+    let tissue = Tissue::Sheet;
+    // (start, turns, drift, wobble, lobes): the first two kept their disc when every face
+    // round a sliver was left uncut; the others freed it either way
+    for (k, (from, turns, drift_m, wobble_m, lobes)) in [
+        (-1.27149, 1.08575, 1.185e-4, 2.650e-4, 1.0),
+        (1.41302, 1.07889, -4.326e-4, 2.488e-4, 8.0),
+        (2.90823, 1.10143, -4.865e-4, 5.747e-4, 8.0),
+        (2.23721, 1.04824, -1.139e-4, 3.801e-4, 8.0),
+        (-0.88052, 1.08181, 5.415e-4, 5.734e-4, 1.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut sim = tissue.simulation(None).expect("built-in scene");
+        let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
+        let path = hand_circle(from, turns, drift_m, wobble_m, lobes);
+        let s = stroke(&mut sim, tissue, &path, 0.004, 3);
+        let pieces = checked_pieces(&sim, mass0, volume0);
+        let case = format!("case {k}: drift {drift_m:.5} wobble {wobble_m:.5} x{lobes:.0}");
+        assert_eq!(
+            s.specimens.len(),
+            1,
+            "{case}: {} ({} reattached)",
+            describe(&pieces),
+            s.reattached
+        );
+        assert_eq!(
+            body(&pieces, &s.specimens).len(),
+            1,
+            "{case}: {}",
+            describe(&pieces)
+        );
+    }
+}
+
 #[test]
 fn zig_zags_and_s_curves_on_the_chest_wall_leave_one_piece() {
     let tissue = Tissue::ChestWall;

@@ -4,9 +4,10 @@
 //! earlier cut at small angles; between the two surfaces a few tetrahedra can end up with no
 //! uncut face to the rest of the tissue. Such a piece is a numerical sliver, not a specimen:
 //! it is smaller than [`super::CutOptions::fragment_volume_m3`] and holds no held vertex. The
-//! rule: the step that would free it leaves the faces it would have cut around that piece
-//! uncut, so the piece stays with the tissue across them (the cut passes beside it, its
-//! earlier wound still separating it from the other side). The event counts the pieces so
+//! rule: the step that would free it leaves uncut the faces it would have cut around that
+//! piece on one side of its plane, so the piece stays with the tissue across them (the cut
+//! passes beside it, its earlier wound still separating it from the other side; uncutting
+//! the faces of both sides would bridge the wound). The event counts the pieces so
 //! reattached.
 //!
 //! Pieces are found by a flood over tetrahedra sharing a vertex, from the tetrahedra the

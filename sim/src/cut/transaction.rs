@@ -419,17 +419,52 @@ impl<'a> PendingCut<'a> {
         }
         let around: BTreeSet<[u32; 3]> = fragments
             .iter()
-            .flatten()
-            .flat_map(|&t| {
-                let tet = tets[t as usize].map(original);
-                TET_FACES.map(|f| sorted_triple(f.map(|k| tet[k])))
-            })
+            .flat_map(|piece| self.faces_to_one_side(piece, original))
             .collect();
         let kept: BTreeSet<[u32; 3]> = self.cut_faces.difference(&around).copied().collect();
         if kept.len() < self.cut_faces.len() {
             self.event.fragments_reattached += fragments.len();
         }
         Some(kept)
+    }
+
+    /// The cut faces round a fragment that face one side of the cut's plane: those whose
+    /// outward normals point along `n`, or those pointing against it, whichever have the
+    /// larger area projected on the plane. Left uncut, they join the fragment to the tissue
+    /// on that side only; the cut faces facing the other side (the stroke's earlier wound,
+    /// counted as on the plane) still separate it from there. Leaving every face round it
+    /// uncut would join the two sides through it: a bridge across the wound.
+    fn faces_to_one_side(&self, piece: &[u32], original: &impl Fn(u32) -> u32) -> Vec<[u32; 3]> {
+        let n = self.polygon.normal;
+        let (mut along, mut against) = (Vec::new(), Vec::new());
+        let (mut area_along, mut area_against) = (0.0, 0.0);
+        for &t in piece {
+            let tet = self.tets[t as usize].map(original);
+            for (k, f) in TET_FACES.iter().enumerate() {
+                let face = sorted_triple(f.map(|i| tet[i]));
+                if !self.cut_faces.contains(&face) {
+                    continue;
+                }
+                let [a, b, c] = f.map(|i| self.x[tet[i] as usize]);
+                let mut normal = (b - a).cross(&(c - a));
+                if normal.dot(&(self.x[tet[k] as usize] - a)) > 0.0 {
+                    normal = -normal; // outward: away from the tet's fourth vertex
+                }
+                let projected = normal.dot(&n);
+                if projected >= 0.0 {
+                    area_along += projected;
+                    along.push(face);
+                } else {
+                    area_against -= projected;
+                    against.push(face);
+                }
+            }
+        }
+        if area_along >= area_against {
+            along
+        } else {
+            against
+        }
     }
 
     /// The cut faces without those holding one of the `pinched` edges (between copies or
