@@ -772,6 +772,28 @@ async fn concurrent_writers_on_one_sqlite_file() {
     assert_eq!(mode, "wal");
 }
 
+/// Stores opening one fresh SQLite file at the same moment: each opens it, none is told the
+/// database is locked. (Two `cutlab session` processes of the validity test were, once, on a
+/// loaded machine, when the second connected while the first switched the new file to WAL;
+/// in one process it has not been seen, so this guards the retry rather than reproducing it.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn many_open_one_fresh_sqlite_file_at_once() {
+    for round in 0..5 {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let at = DbLocation::Sqlite(dir.path().join("fresh.db"));
+        let opens: Vec<_> = (0..6)
+            .map(|_| {
+                let at = at.clone();
+                tokio::spawn(async move { Store::open(&at).await.map(|_| ()) })
+            })
+            .collect();
+        for o in opens {
+            let opened = o.await.expect("task");
+            assert!(opened.is_ok(), "round {round}: {opened:?}");
+        }
+    }
+}
+
 #[tokio::test]
 async fn concurrent_writers_on_one_postgres_database() {
     if let Some(at) = postgres_location().await {

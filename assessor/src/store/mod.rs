@@ -158,10 +158,24 @@ impl Store {
             .synchronous(SqliteSynchronous::Normal)
             .busy_timeout(Duration::from_secs(30))
             .foreign_keys(true);
-        let pool = SqlitePoolOptions::new()
-            .max_connections(4)
-            .connect_with(options)
-            .await?;
+        let started = std::time::Instant::now();
+        let pool = loop {
+            match SqlitePoolOptions::new()
+                .max_connections(4)
+                .connect_with(options.clone())
+                .await
+            {
+                // a fresh file another process is creating: switching it to WAL needs the
+                // whole database, and SQLite answers "locked" at once rather than waiting
+                Err(sqlx::Error::Database(d))
+                    if is_busy(d.code().as_deref()) && started.elapsed() < MIGRATION_PATIENCE =>
+                {
+                    tracing::debug!("opening the database: {d}; retrying");
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                }
+                other => break other?,
+            }
+        };
         Self::from_pool(pool).await
     }
 
@@ -203,13 +217,12 @@ where
     A: sqlx::Acquire<'a> + Copy,
     <A::Connection as std::ops::Deref>::Target: sqlx::migrate::Migrate,
 {
-    const PATIENCE: Duration = Duration::from_secs(30);
     let started = std::time::Instant::now();
     let mut tries = 0u64;
     loop {
         match migrator.run(pool).await {
             Ok(()) => return Ok(()),
-            Err(e) if (tries < 5 || busy(&e)) && started.elapsed() < PATIENCE => {
+            Err(e) if (tries < 5 || busy(&e)) && started.elapsed() < MIGRATION_PATIENCE => {
                 tracing::debug!("migration attempt {tries} failed ({e}); retrying");
                 tries += 1;
                 tokio::time::sleep(Duration::from_millis((100 * tries).min(1000))).await;
@@ -228,8 +241,15 @@ fn busy(e: &sqlx::migrate::MigrateError) -> bool {
     else {
         return false;
     };
-    d.code()
-        .and_then(|c| c.parse::<u32>().ok())
+    is_busy(d.code().as_deref())
+}
+
+/// How long opening and migrating a database waits for another process that holds it.
+const MIGRATION_PATIENCE: Duration = Duration::from_secs(30);
+
+/// Whether an SQLite error code is `SQLITE_BUSY` or `SQLITE_LOCKED` (extended codes included).
+fn is_busy(code: Option<&str>) -> bool {
+    code.and_then(|c| c.parse::<u32>().ok())
         .is_some_and(|c| matches!(c & 0xff, 5 | 6))
 }
 
