@@ -877,8 +877,6 @@ async fn interrupted(
 /// Screenshots: `station-pattern-exam-mid-cut.png`, `station-pattern-freed.png`,
 /// `station-pattern-debrief.png`.
 #[test]
-#[ignore = "the pointer's pressed blade sometimes only dents the held sheet and never enters \
-            it (issue 44: not the sheet's cut depth alone); run with --ignored"]
 fn pattern_cutting_in_exam_mode_frees_the_piece_in_headless_chromium() {
     let _one = ONE_AT_A_TIME
         .lock()

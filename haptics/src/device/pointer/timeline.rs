@@ -115,7 +115,8 @@ impl Timeline {
     }
 
     /// The pose at the cursor: linear between the samples around it (tip), spherical
-    /// (orientation), the buttons of the earlier one; exact at a sample's time.
+    /// (orientation), the buttons held in either (see [`interpolate`]); exact at a sample's
+    /// time.
     pub fn pose(&mut self) -> Option<ToolPose> {
         // samples before the one at or before the cursor are never needed again
         while self.samples.len() >= 2 && self.samples[1].t_ms <= self.cursor_ms {
@@ -133,8 +134,13 @@ impl Timeline {
     }
 }
 
-/// `a` to `b` at `u` in [0, 1): tip linear, orientation spherical (the shorter way), buttons
-/// of `a`.
+/// `a` to `b` at `u` in [0, 1): tip linear, orientation spherical (the shorter way), the
+/// buttons held in either. A press moves the tip from the surface to the set depth between
+/// the last sample before it and the first after: the blade is engaged all the way down, so
+/// the tissue it presses is counted as pressed by the blade from where it first touched (with
+/// the earlier sample's buttons the tip sank into a thin sheet disengaged, and the engaged
+/// blade's press was counted from the sagging surface: it never went in). A release likewise
+/// keeps the blade engaged until the tip is out.
 pub(crate) fn interpolate(a: &ToolPose, b: &ToolPose, u: f64) -> ToolPose {
     let tip: Point3 = a.tip_in_world + (b.tip_in_world - a.tip_in_world) * u;
     let rotation = if u == 0.0 || a.world_from_tool == b.world_from_tool {
@@ -147,7 +153,11 @@ pub(crate) fn interpolate(a: &ToolPose, b: &ToolPose, u: f64) -> ToolPose {
     ToolPose {
         tip_in_world: tip,
         world_from_tool: rotation,
-        buttons: a.buttons,
+        buttons: if u == 0.0 {
+            a.buttons
+        } else {
+            a.buttons | b.buttons
+        },
     }
 }
 
@@ -183,7 +193,7 @@ mod tests {
     }
 
     #[test]
-    fn slerp_takes_the_short_way_and_buttons_hold() {
+    fn slerp_takes_the_short_way_and_a_held_button_holds() {
         let a = ToolPose {
             buttons: BUTTON_BLADE,
             ..ToolPose::default()
@@ -200,6 +210,10 @@ mod tests {
         assert_eq!(mid.tip_in_world, Point3::new(0.5, 0.0, 0.0));
         assert_eq!(mid.buttons, BUTTON_BLADE);
         assert_eq!(interpolate(&a, &b, 0.0), a);
+        // pressed: engaged on the way down from the sample before the press
+        let down = interpolate(&b, &a, 0.25);
+        assert_eq!(down.buttons, BUTTON_BLADE);
+        assert_eq!(interpolate(&b, &a, 0.0).buttons, 0);
     }
 
     #[test]
