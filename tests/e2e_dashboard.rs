@@ -887,10 +887,37 @@ fn pattern_cutting_in_exam_mode_frees_the_piece_in_headless_chromium() {
     let tmp = std::env::temp_dir().join(format!("cutlab-e2e-pattern-{}", std::process::id()));
     let (_server, port) = demo_server(&tmp);
     let driver = chromedriver();
-    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts()));
+    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts(), false));
     assert!(
         summary.starts_with("Score") && summary.contains("(pass)"),
         "the careful circle passes: {summary}"
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// Pattern cutting as ordinary browser life interrupts it: half way round the circle the
+/// trainee switches to another tab for 2 s, then the page is reloaded; the hand lets go, and
+/// presses again where it was, in the wound, and goes on round. The attempt survives, the
+/// piece is cut free and the careful circle still passes. Screenshot:
+/// `station-pattern-reloaded-freed.png`.
+#[test]
+#[ignore = "the attempt survives, but the piece is not cut free: the stroke after the reload \
+            starts 2.8 mm past where the first ended and passes 0.3 mm beside the first \
+            stroke's start, and neither gap is cut (issue 42); run with --ignored"]
+fn pattern_cutting_survives_a_tab_switch_and_a_reload_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-pattern-re-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts(), true));
+    assert!(
+        summary.starts_with("Score") && summary.contains("(pass)"),
+        "the interrupted careful circle passes: {summary}"
     );
     let _ = std::fs::remove_dir_all(&tmp);
 }
@@ -920,7 +947,13 @@ async fn open_early(
     Ok(())
 }
 
-async fn pattern(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) -> String {
+async fn pattern(
+    port: u16,
+    driver: &browser::Driver,
+    tmp: &Path,
+    shots: &Path,
+    interrupt: bool,
+) -> String {
     let base = format!("http://127.0.0.1:{port}");
     let c = chromium(driver, &tmp.join("profile-pattern")).await;
     let result = async {
@@ -946,7 +979,7 @@ async fn pattern(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) 
             .await?;
         c.find(Locator::Id("start")).await?.click().await?;
         c.wait().for_element(Locator::Id("tissue")).await?;
-        pattern_cut(&c, shots).await?;
+        pattern_cut(&c, shots, interrupt).await?;
         c.wait()
             .at_most(Duration::from_secs(240))
             .for_element(Locator::Id("debrief-summary"))
@@ -970,12 +1003,75 @@ async fn pattern(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) 
 }
 
 /// The hand round the mark on the page: a reach, the circle and 8 % more at about 12 mm a
-/// second, a lift.
+/// second, a lift; with `interrupt`, a 2 s switch to another tab and a reload half way round.
 async fn pattern_cut(
     c: &fantoccini::Client,
     shots: &Path,
+    interrupt: bool,
 ) -> Result<(), fantoccini::error::CmdError> {
-    use cutlab_haptics::hand::Hand;
+    use cutlab_haptics::hand::{Gesture, Hand};
+    let (mark, mm) = mark_on_page(c).await?;
+    let along = length_px(&mark);
+    let mut hand = Hand::steady(along / mm, 7);
+    let mut line = mark.clone();
+    line.extend_from_slice(&mark[1..mark.len() * 8 / 100]);
+    let rest = [mark[0][0] - 140.0, mark[0][1] + 170.0];
+    let mut g = hand.approach(rest, line[0]);
+    let stroke_s = 1.08 * mm / 12.0;
+    g.extend(hand.stroke(&line, stroke_s, 1.0));
+    let half = g.len() - (stroke_s * 30.0) as usize;
+    c.perform_actions(as_actions(&g[..half])).await?;
+    let shot = if interrupt {
+        "station-pattern-reloaded-freed.png"
+    } else {
+        std::fs::write(
+            shots.join("station-pattern-exam-mid-cut.png"),
+            c.screenshot().await?,
+        )
+        .expect("screenshot");
+        "station-pattern-freed.png"
+    };
+    let mut rest_of_it = g[half..].to_vec();
+    if interrupt {
+        let mine = c.window().await?;
+        let other = c.new_window(true).await?;
+        c.switch_to_window(other.handle).await?;
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        c.close_window().await?;
+        c.switch_to_window(mine).await?;
+        let url = c.current_url().await?;
+        c.goto(url.as_str()).await?;
+        mark_on_page(c).await?;
+        let Some(&Gesture::Move { x, y, .. }) = rest_of_it
+            .iter()
+            .find(|m| matches!(m, Gesture::Move { .. }))
+        else {
+            unreachable!("the circle goes on")
+        };
+        let mut again = vec![
+            Gesture::Release,
+            Gesture::Move { x, y, ms: 16 },
+            Gesture::Wait { ms: hand.settle_ms },
+            Gesture::Press,
+            Gesture::Wait { ms: hand.settle_ms },
+        ];
+        again.append(&mut rest_of_it);
+        rest_of_it = again;
+    }
+    c.perform_actions(as_actions(&rest_of_it)).await?;
+    let end = line[line.len() - 1];
+    c.perform_actions(as_actions(&hand.withdraw(end, [60.0, -120.0], 0.5)))
+        .await?;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    std::fs::write(shots.join(shot), c.screenshot().await?).expect("screenshot");
+    c.release_actions().await
+}
+
+/// The marked circle on the page (CSS px) and its length (mm), once the page shows the tissue;
+/// exam mode: no plan on the page.
+async fn mark_on_page(
+    c: &fantoccini::Client,
+) -> Result<(Vec<[f64; 2]>, f64), fantoccini::error::CmdError> {
     until(
         c,
         "window.cutlabStation && window.cutlabStation.stats().frames > 5",
@@ -997,31 +1093,6 @@ async fn pattern_cut(
         .iter()
         .map(|p| [p[0].as_f64().expect("x"), p[1].as_f64().expect("y")])
         .collect();
-    let along = length_px(&mark);
     let mm = v["mm"].as_f64().expect("the mark's length");
-    let mut hand = Hand::steady(along / mm, 7);
-    let mut line = mark.clone();
-    line.extend_from_slice(&mark[1..mark.len() * 8 / 100]);
-    let rest = [mark[0][0] - 140.0, mark[0][1] + 170.0];
-    let mut g = hand.approach(rest, line[0]);
-    let stroke_s = 1.08 * mm / 12.0;
-    g.extend(hand.stroke(&line, stroke_s, 1.0));
-    let half = g.len() - (stroke_s * 30.0) as usize;
-    c.perform_actions(as_actions(&g[..half])).await?;
-    std::fs::write(
-        shots.join("station-pattern-exam-mid-cut.png"),
-        c.screenshot().await?,
-    )
-    .expect("screenshot");
-    c.perform_actions(as_actions(&g[half..])).await?;
-    let end = line[line.len() - 1];
-    c.perform_actions(as_actions(&hand.withdraw(end, [60.0, -120.0], 0.5)))
-        .await?;
-    tokio::time::sleep(Duration::from_secs(2)).await;
-    std::fs::write(
-        shots.join("station-pattern-freed.png"),
-        c.screenshot().await?,
-    )
-    .expect("screenshot");
-    c.release_actions().await
+    Ok((mark, mm))
 }
