@@ -844,31 +844,47 @@ async fn interrupted(
         "{flood}"
     );
     // another tab for 2 s: the page is hidden, its samples stop, the blade pauses
-    let mine = c.window().await?;
-    let other = c.new_window(true).await?;
-    c.switch_to_window(other.handle).await?;
-    tokio::time::sleep(Duration::from_secs(2)).await;
-    c.close_window().await?;
-    c.switch_to_window(mine).await?;
+    another_tab_for_2_s(c).await?;
     c.perform_actions(as_actions(&stroke[at30..at60])).await?;
     // a reload mid-cut: the page comes back to the same attempt; the hand lets go, and
     // presses again where it was
     c.goto(url).await?;
     line_on_page(c).await?;
-    let Gesture::Move { x, y, .. } = stroke[at60] else {
-        unreachable!("a move")
+    c.perform_actions(as_actions(&press_again(hand, &stroke[at60..])))
+        .await?;
+    Ok(())
+}
+
+/// Another tab for 2 s, then back: the station's page is hidden meanwhile.
+async fn another_tab_for_2_s(c: &fantoccini::Client) -> Result<(), fantoccini::error::CmdError> {
+    let mine = c.window().await?;
+    let other = c.new_window(true).await?;
+    c.switch_to_window(other.handle).await?;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    c.close_window().await?;
+    c.switch_to_window(mine).await
+}
+
+/// The hand after a reload: it lets go, presses again at the first move of `rest` (where it
+/// was) and, as at the start, waits for the blade to go in before it moves on through `rest`.
+fn press_again(
+    hand: &cutlab_haptics::hand::Hand,
+    rest: &[cutlab_haptics::hand::Gesture],
+) -> Vec<cutlab_haptics::hand::Gesture> {
+    use cutlab_haptics::hand::Gesture;
+    let Some(&Gesture::Move { x, y, .. }) = rest.iter().find(|m| matches!(m, Gesture::Move { .. }))
+    else {
+        unreachable!("the hand moves on after a reload")
     };
     let mut again = vec![
         Gesture::Release,
         Gesture::Move { x, y, ms: 16 },
         Gesture::Wait { ms: hand.settle_ms },
         Gesture::Press,
-        // as at the start: the blade goes in before the hand moves on
         Gesture::Wait { ms: hand.settle_ms },
     ];
-    again.extend_from_slice(&stroke[at60..]);
-    c.perform_actions(as_actions(&again)).await?;
-    Ok(())
+    again.extend_from_slice(rest);
+    again
 }
 
 /// Pattern cutting (FLS) at the station in exam mode, by a person's steady hand at 60 Hz:
@@ -878,21 +894,34 @@ async fn interrupted(
 /// `station-pattern-debrief.png`.
 #[test]
 fn pattern_cutting_in_exam_mode_frees_the_piece_in_headless_chromium() {
-    let _one = ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    if !browser_present() {
+    let Some(summary) = pattern_at_the_station("pattern", false) else {
         return;
-    }
-    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-pattern-{}", std::process::id()));
-    let (_server, port) = demo_server(&tmp);
-    let driver = chromedriver();
-    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts(), false));
+    };
     assert!(
         summary.starts_with("Score") && summary.contains("(pass)"),
         "the careful circle passes: {summary}"
     );
-    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// A demo server and Chromium for one pattern cutting attempt (see [`pattern`]), in a
+/// temporary folder named after `tag`; the debrief's summary line (`None` without a browser).
+/// The folder (the station's recording) is removed only when the attempt passed, for a
+/// failure to be looked into.
+fn pattern_at_the_station(tag: &str, interrupt: bool) -> Option<String> {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return None;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-{tag}-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts(), interrupt));
+    if summary.contains("(pass)") {
+        let _ = std::fs::remove_dir_all(&tmp);
+    }
+    Some(summary)
 }
 
 /// Pattern cutting as ordinary browser life interrupts it: half way round the circle the
@@ -905,21 +934,13 @@ fn pattern_cutting_in_exam_mode_frees_the_piece_in_headless_chromium() {
             starts 2.8 mm past where the first ended and passes 0.3 mm beside the first \
             stroke's start, and neither gap is cut (issue 42); run with --ignored"]
 fn pattern_cutting_survives_a_tab_switch_and_a_reload_in_headless_chromium() {
-    let _one = ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    if !browser_present() {
+    let Some(summary) = pattern_at_the_station("pattern-reloaded", true) else {
         return;
-    }
-    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-pattern-re-{}", std::process::id()));
-    let (_server, port) = demo_server(&tmp);
-    let driver = chromedriver();
-    let summary = runtime().block_on(pattern(port, &driver, &tmp, &artefacts(), true));
+    };
     assert!(
         summary.starts_with("Score") && summary.contains("(pass)"),
         "the interrupted careful circle passes: {summary}"
     );
-    let _ = std::fs::remove_dir_all(&tmp);
 }
 
 /// As an instructor: from the cohorts, `trainee`'s progress page, and there `exercise`
@@ -1009,7 +1030,7 @@ async fn pattern_cut(
     shots: &Path,
     interrupt: bool,
 ) -> Result<(), fantoccini::error::CmdError> {
-    use cutlab_haptics::hand::{Gesture, Hand};
+    use cutlab_haptics::hand::Hand;
     let (mark, mm) = mark_on_page(c).await?;
     let along = length_px(&mark);
     let mut hand = Hand::steady(along / mm, 7);
@@ -1031,33 +1052,15 @@ async fn pattern_cut(
         .expect("screenshot");
         "station-pattern-freed.png"
     };
-    let mut rest_of_it = g[half..].to_vec();
-    if interrupt {
-        let mine = c.window().await?;
-        let other = c.new_window(true).await?;
-        c.switch_to_window(other.handle).await?;
-        tokio::time::sleep(Duration::from_secs(2)).await;
-        c.close_window().await?;
-        c.switch_to_window(mine).await?;
+    let rest_of_it = if interrupt {
+        another_tab_for_2_s(c).await?;
         let url = c.current_url().await?;
         c.goto(url.as_str()).await?;
         mark_on_page(c).await?;
-        let Some(&Gesture::Move { x, y, .. }) = rest_of_it
-            .iter()
-            .find(|m| matches!(m, Gesture::Move { .. }))
-        else {
-            unreachable!("the circle goes on")
-        };
-        let mut again = vec![
-            Gesture::Release,
-            Gesture::Move { x, y, ms: 16 },
-            Gesture::Wait { ms: hand.settle_ms },
-            Gesture::Press,
-            Gesture::Wait { ms: hand.settle_ms },
-        ];
-        again.append(&mut rest_of_it);
-        rest_of_it = again;
-    }
+        press_again(&hand, &g[half..])
+    } else {
+        g[half..].to_vec()
+    };
     c.perform_actions(as_actions(&rest_of_it)).await?;
     let end = line[line.len() - 1];
     c.perform_actions(as_actions(&hand.withdraw(end, [60.0, -120.0], 0.5)))

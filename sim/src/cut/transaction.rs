@@ -281,8 +281,8 @@ impl<'a> PendingCut<'a> {
 
     /// Separate the two sides: split vertices of the cut surface by star components. A cut
     /// face that would only pinch the surface (an edge of it on the outer surface whose ends
-    /// both stay whole) is given up, and the split redone; so are the cut faces around a
-    /// fragment the split would carve out (see the `fragment` module).
+    /// both stay whole) is given up, and the split redone; so are the cut faces on one side of
+    /// a fragment the split would carve out (see the `fragment` module).
     pub(super) fn separate(&mut self) {
         self.base_vertices = self.x.len();
         for _ in 0..64 {
@@ -388,8 +388,9 @@ impl<'a> PendingCut<'a> {
         original_of
     }
 
-    /// The cut faces without those around the fragments the round's split would carve out
-    /// (the pieces of the tets around `local`), or `None` when it carves out none.
+    /// The cut faces without those on one side of each fragment the round's split would carve
+    /// out (the pieces of the tets around `local`; see [`Self::faces_to_one_side`]), or `None`
+    /// when it carves out none.
     fn without_fragments(
         &mut self,
         local: &BTreeSet<u32>,
