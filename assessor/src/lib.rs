@@ -13,6 +13,7 @@
 pub mod advice;
 pub mod device_class;
 pub mod error;
+pub mod evidence;
 pub mod exercise;
 pub mod from_recording;
 mod geom;
