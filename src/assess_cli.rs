@@ -1,4 +1,5 @@
-//! The assessment commands: `motion-metrics`, `user`, `cohort`, `exercise`, `export xapi`.
+//! The assessment commands: `motion-metrics`, `user`, `cohort`, `exercise`, `evidence`,
+//! `export xapi`.
 //! The database ones open `--db PATH`, else `$CUTLAB_DB`, else `./cutlab.db` (created and
 //! migrated on first use, with the built-in exercise).
 
@@ -7,6 +8,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Subcommand;
+use cutlab_assessor::evidence::Experience;
 use cutlab_assessor::store::{DbLocation, NewExercise, Role, Store, default_db};
 use cutlab_assessor::{ExercisePlan, proficiency};
 
@@ -56,6 +58,9 @@ pub enum AssessCommand {
         #[command(subcommand)]
         command: ExerciseCommand,
     },
+    /// The validity evidence of an exercise's scores: experience groups, Mann-Whitney U and
+    /// AUC per metric, test-retest ICC, learning curves, the contrasting-groups pass mark.
+    Evidence(crate::evidence_cli::EvidenceArgs),
     /// Exports for other systems.
     Export {
         #[command(subcommand)]
@@ -78,6 +83,17 @@ pub enum UserCommand {
         /// The password (visible in the process list: prefer --password-stdin).
         #[arg(long)]
         password: Option<String>,
+        /// novice | intermediate | expert: the group the evidence report puts them in.
+        #[arg(long)]
+        experience: Option<String>,
+    },
+    /// Records a user's surgical experience (novice, intermediate, expert, or none).
+    Experience {
+        #[arg(long)]
+        name: String,
+        /// novice | intermediate | expert | none
+        #[arg(long)]
+        level: String,
     },
     /// Lists the users.
     List,
@@ -192,6 +208,7 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
         AssessCommand::User { command } => user(store, command).await?,
         AssessCommand::Cohort { command } => cohort(store, command).await?,
+        AssessCommand::Evidence(args) => crate::evidence_cli::run(store, args).await?,
         AssessCommand::Exercise { command } => exercise(store, command).await?,
         AssessCommand::Export {
             command: ExportCommand::Xapi { trainee },
@@ -210,8 +227,10 @@ async fn user(store: &Store, command: UserCommand) -> anyhow::Result<()> {
             role,
             password_stdin,
             password,
+            experience,
         } => {
             let role: Role = role.parse()?;
+            let experience: Option<Experience> = experience.map(|e| e.parse()).transpose()?;
             let password = if password_stdin {
                 let mut line = String::new();
                 std::io::stdin()
@@ -225,6 +244,9 @@ async fn user(store: &Store, command: UserCommand) -> anyhow::Result<()> {
                 password
             };
             let u = store.create_user(&name, role, password.as_deref()).await?;
+            if experience.is_some() {
+                store.set_experience(u.id, experience).await?;
+            }
             println!(
                 "added {} {} (id {}){}",
                 u.role,
@@ -233,11 +255,30 @@ async fn user(store: &Store, command: UserCommand) -> anyhow::Result<()> {
                 if u.has_password { "" } else { ", no password" }
             );
         }
+        UserCommand::Experience { name, level } => {
+            let level: Option<Experience> = match level.as_str() {
+                "none" => None,
+                l => Some(l.parse()?),
+            };
+            let u = store.user_by_name(&name).await?;
+            store.set_experience(u.id, level).await?;
+            println!(
+                "{} is {}",
+                u.name,
+                level.map_or("of no recorded experience", Experience::as_str)
+            );
+        }
         UserCommand::List => {
             for u in store.list_users(None).await? {
                 // names from before names were checked may hold control characters
                 let name = cutlab_assessor::store::printable(&u.name);
-                println!("{:>4}  {:<11} {name}", u.id, u.role.as_str());
+                let level = store.experience(u.id).await?;
+                println!(
+                    "{:>4}  {:<11} {:<13} {name}",
+                    u.id,
+                    u.role.as_str(),
+                    level.map_or("-", Experience::as_str)
+                );
             }
         }
     }

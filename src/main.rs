@@ -3,6 +3,7 @@
 mod assess_cli;
 mod demo;
 mod demo_seed;
+mod evidence_cli;
 mod hub_cli;
 mod localise_choice;
 mod motion_metrics;

@@ -424,6 +424,80 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
     assert!(keys.contains(&"completion_time_s".to_owned()), "{keys:?}");
 }
 
+on_both!(evidence_groups_and_an_adopted_pass_mark);
+async fn evidence_groups_and_an_adopted_pass_mark(store: Store) {
+    use cutlab_assessor::evidence::{Experience, Finding};
+    let ex = exercise_with_one_threshold(&store).await;
+    let mut ids = Vec::new();
+    // two experts cut 0.3-0.6 mm off the line, two novices 2-5 mm, a third person has no
+    // recorded level
+    for (name, level, laterals) in [
+        ("e1", Some(Experience::Expert), [0.0003, 0.0004, 0.0005]),
+        ("e2", Some(Experience::Expert), [0.0004, 0.0005, 0.0006]),
+        ("n1", Some(Experience::Novice), [0.005, 0.004, 0.003]),
+        ("n2", Some(Experience::Novice), [0.004, 0.003, 0.002]),
+        ("x", None, [0.001, 0.001, 0.001]),
+    ] {
+        let u = store
+            .create_user(name, Role::Trainee, None)
+            .await
+            .expect("user");
+        store.set_experience(u.id, level).await.expect("level");
+        assert_eq!(store.experience(u.id).await.expect("read"), level);
+        for l in laterals {
+            scored_attempt(&store, u.id, ex, l).await;
+        }
+        ids.push(u.id);
+    }
+    assert!(matches!(
+        store.set_experience(9999, None).await,
+        Err(AssessError::NotFound(_))
+    ));
+    let attempts = store.evidence_attempts(ex).await.expect("attempts");
+    assert_eq!(attempts.len(), 15);
+    assert!(
+        attempts
+            .iter()
+            .all(|a| a.score.is_some() && !a.metrics.is_empty())
+    );
+    let r = store.evidence(ex, true).await.expect("report");
+    assert_eq!(
+        (r.higher, r.lower),
+        (Some(Experience::Expert), Some(Experience::Novice))
+    );
+    assert_eq!((r.attempts_without_level, r.trainees_without_level), (3, 1));
+    assert_eq!(r.score.finding, Finding::Discriminates, "{:?}", r.score);
+    let lateral = r
+        .metrics
+        .iter()
+        .find(|m| m.key == "lateral_mean_m")
+        .expect("metric");
+    assert_eq!(lateral.comparison.expect("compared").auc, 1.0);
+    // adopting: recorded with who; the newest is the exercise's
+    assert_eq!(store.pass_mark(ex).await.expect("none yet"), None);
+    let instructor = store
+        .create_user("dr", Role::Instructor, None)
+        .await
+        .expect("user");
+    let mark = store
+        .adopt_pass_mark(ex, &r.pass_mark, instructor.id)
+        .await
+        .expect("adopt");
+    let cut = r.pass_mark.cut.expect("cut");
+    assert_eq!((mark.score, mark.adopted_by.as_str()), (cut.cut, "dr"));
+    assert_eq!((mark.n_higher, mark.n_lower), (6, 6));
+    assert_eq!(store.pass_mark(ex).await.expect("read"), Some(mark));
+    // a report without a cut cannot be adopted
+    let mut none = r.pass_mark.clone();
+    none.cut = None;
+    none.why_not = Some("test".into());
+    let e = store
+        .adopt_pass_mark(ex, &none, instructor.id)
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("no pass mark to adopt"), "{e}");
+}
+
 on_both!(attempts_scores_and_proficiency);
 async fn attempts_scores_and_proficiency(store: Store) {
     let ex = exercise_with_one_threshold(&store).await;

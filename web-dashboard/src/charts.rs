@@ -47,6 +47,9 @@ pub struct Chart {
     pub legend: Vec<(&'static str, String)>,
     /// Ticks on the x axis at whole numbers only (attempt numbers).
     pub integer_x: bool,
+    /// Named positions on the x axis (groups), shown instead of numbers; the x range spans
+    /// them with half a step each side.
+    pub categories: Vec<(f64, String)>,
 }
 
 const MARGIN_L: f64 = 58.0;
@@ -71,7 +74,14 @@ impl Chart {
             equal_aspect: false,
             legend: Vec::new(),
             integer_x: false,
+            categories: Vec::new(),
         }
+    }
+
+    /// Names the x positions `x` (groups) and ticks the axis with them only.
+    pub fn category(mut self, x: f64, name: impl Into<String>) -> Self {
+        self.categories.push((x, name.into()));
+        self
     }
 
     /// Ticks the x axis at whole numbers only (for counts such as attempt numbers).
@@ -111,7 +121,18 @@ impl Chart {
                 Layer::HLine { y, .. } => ys.push(*y),
             }
         }
-        (span(&xs), span(&ys))
+        let x = if self.categories.is_empty() {
+            span(&xs)
+        } else {
+            let c: Vec<f64> = self.categories.iter().map(|c| c.0).collect();
+            let (lo, hi) = c
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+                    (a.min(*x), b.max(*x))
+                });
+            (lo - 0.5, hi + 0.5)
+        };
+        (x, span(&ys))
     }
 
     /// The SVG element.
@@ -144,8 +165,13 @@ impl Chart {
                     line class="grid" x1=(fmt(MARGIN_L)) x2=(fmt(MARGIN_L + pw)) y1=(fmt(py(t))) y2=(fmt(py(t))) {}
                     text class="tick" x=(fmt(MARGIN_L - 4.0)) y=(fmt(py(t) + 4.0)) text-anchor="end" { (tick_label(t)) }
                 }
-                @for t in ticks(x0, x1, self.integer_x) {
-                    text class="tick" x=(fmt(px(t))) y=(fmt(MARGIN_T + ph + 14.0)) text-anchor="middle" { (tick_label(t)) }
+                @if self.categories.is_empty() {
+                    @for t in ticks(x0, x1, self.integer_x) {
+                        text class="tick" x=(fmt(px(t))) y=(fmt(MARGIN_T + ph + 14.0)) text-anchor="middle" { (tick_label(t)) }
+                    }
+                }
+                @for (x, name) in &self.categories {
+                    text class="tick" x=(fmt(px(*x))) y=(fmt(MARGIN_T + ph + 14.0)) text-anchor="middle" { (name) }
                 }
                 text class="axis-label" x=(fmt(MARGIN_L + pw / 2.0)) y=(fmt(self.height - 6.0)) text-anchor="middle" { (self.x_label) }
                 text class="axis-label" transform=(format!("translate(12 {}) rotate(-90)", fmt(MARGIN_T + ph / 2.0))) text-anchor="middle" { (self.y_label) }

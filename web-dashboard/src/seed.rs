@@ -3,6 +3,7 @@
 //! scored through the store (`finish_attempt`) like real ones, from metric values drawn
 //! around the exercise's thresholds by a seeded generator; they have no recording.
 
+use cutlab_assessor::evidence::Experience;
 use cutlab_assessor::metrics::{self, MetricValue};
 use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Cohort, Role, Store, User};
@@ -16,6 +17,8 @@ pub struct DemoAccount {
     pub name: &'static str,
     pub password: &'static str,
     pub role: Role,
+    /// The surgical experience recorded for the evidence report's groups.
+    pub experience: Option<Experience>,
 }
 
 /// The demo accounts (also in the README).
@@ -24,21 +27,25 @@ pub const DEMO_ACCOUNTS: [DemoAccount; 4] = [
         name: "admin",
         password: "admin-demo",
         role: Role::Admin,
+        experience: None,
     },
     DemoAccount {
         name: "dr-kim",
         password: "instructor-demo",
         role: Role::Instructor,
+        experience: Some(Experience::Expert),
     },
     DemoAccount {
         name: "ana",
         password: "trainee-demo",
         role: Role::Trainee,
+        experience: Some(Experience::Novice),
     },
     DemoAccount {
         name: "ben",
         password: "trainee-demo",
         role: Role::Trainee,
+        experience: Some(Experience::Novice),
     },
 ];
 
@@ -46,18 +53,25 @@ pub const DEMO_ACCOUNTS: [DemoAccount; 4] = [
 pub const DEMO_COHORT: &str = "demo-cohort";
 
 /// The user `a.name`, created with its role and password when missing; a password is set
-/// when the account has none. An existing account's password is never changed.
+/// when the account has none, its experience when none is recorded. An existing account's
+/// password and experience are never changed.
 async fn ensure_account(store: &Store, a: &DemoAccount) -> Result<User, AssessError> {
-    match store.user_by_name(a.name).await {
+    let u = match store.user_by_name(a.name).await {
         Ok(u) => {
             if !u.has_password {
                 store.set_password(u.id, a.password).await?;
             }
-            store.get_user(u.id).await
+            store.get_user(u.id).await?
         }
-        Err(AssessError::NotFound(_)) => store.create_user(a.name, a.role, Some(a.password)).await,
-        Err(e) => Err(e),
+        Err(AssessError::NotFound(_)) => {
+            store.create_user(a.name, a.role, Some(a.password)).await?
+        }
+        Err(e) => return Err(e),
+    };
+    if a.experience.is_some() && store.experience(u.id).await?.is_none() {
+        store.set_experience(u.id, a.experience).await?;
     }
+    Ok(u)
 }
 
 async fn ensure_cohort(store: &Store, name: &str, instructor: i64) -> Result<Cohort, AssessError> {
@@ -151,7 +165,7 @@ pub async fn seed_demo_accounts(store: &Store) -> Result<Vec<User>, AssessError>
 
 /// Makes a fresh (or any) database usable at once: [`seed_demo_accounts`] and, for a demo
 /// trainee without attempts, synthetic scored attempts (ana improves to proficiency, ben is
-/// still learning). `cutlab demo` simulates its attempts instead. Safe to run again.
+/// still learning), and the instructor's at an expert's level. `cutlab demo` simulates its attempts instead. Safe to run again.
 pub async fn seed_demo(store: &Store) -> Result<Vec<DemoAccount>, AssessError> {
     let exercise = store.ensure_builtins().await?;
     let users = seed_demo_accounts(store).await?;
@@ -161,6 +175,11 @@ pub async fn seed_demo(store: &Store) -> Result<Vec<DemoAccount>, AssessError> {
             synthetic_attempts(store, u.id, exercise.id, n, s0, s1, &mut rng).await?;
         }
     }
+    // the instructor's own attempts, at an expert's level: the evidence page's expert group
+    let expert = &users[1];
+    if store.list_attempts(Some(expert.id), None).await?.is_empty() {
+        synthetic_attempts(store, expert.id, exercise.id, 6, 0.35, 0.2, &mut rng).await?;
+    }
     Ok(DEMO_ACCOUNTS.to_vec())
 }
 
@@ -169,6 +188,7 @@ pub const LOAD_INSTRUCTOR: DemoAccount = DemoAccount {
     name: "load-instructor",
     password: "load-demo",
     role: Role::Instructor,
+    experience: None,
 };
 
 /// `trainees` trainees (`load-0000`...) in cohort `load-cohort` led by [`LOAD_INSTRUCTOR`],

@@ -1178,3 +1178,154 @@ async fn a_pattern_exercise_is_edited_through_its_own_fields() {
     assert_eq!(plan.radius_m, 0.025);
     assert_eq!(plan.centre_m, [0.05, 0.05, 0.002], "the rest kept");
 }
+
+#[tokio::test]
+async fn the_evidence_page_compares_groups_and_an_instructor_adopts_its_pass_mark() {
+    let e = env().await;
+    let exercise = e
+        .store
+        .exercise_by_name(cutlab_assessor::store::BUILTIN_EXERCISE)
+        .await
+        .unwrap()
+        .id;
+    let path = format!("/exercises/{exercise}/evidence");
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let r = send(&e.app, get(&path, Some(&kim))).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    let page = body_text(r).await;
+    // the demo: dr-kim's attempts at an expert's level, ana's and ben's as novices
+    assert!(
+        page.contains("<strong>expert</strong>: 1 people, 6 attempts"),
+        "{page}"
+    );
+    assert!(
+        page.contains("<strong>novice</strong>: 2 people, 13 attempts"),
+        "{page}"
+    );
+    assert!(
+        page.contains("id=\"contrasting-cut\"") && page.contains("AUC"),
+        "{page}"
+    );
+    assert!(page.matches("<svg").count() >= 3, "score, metrics, curves");
+    assert!(page.contains("id=\"reliability\"") && page.contains("ICC(2,1)"));
+    assert!(page.contains("No pass mark adopted"));
+    // the exercise page links it for staff
+    let ex_page =
+        body_text(send(&e.app, get(&format!("/exercises/{exercise}"), Some(&kim))).await).await;
+    assert!(ex_page.contains("id=\"evidence-link\""));
+    // a trainee: as if it did not exist, to read or to adopt
+    let ana = login(&e.app, "ana", "trainee-demo").await;
+    assert_eq!(
+        send(&e.app, get(&path, Some(&ana))).await.status(),
+        StatusCode::NOT_FOUND
+    );
+    let adopt = format!("{path}/adopt");
+    let r = send(
+        &e.app,
+        post_form(&adopt, Some(&ana.cookie), &[("csrf", &ana.csrf)]),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    let ana_ex =
+        body_text(send(&e.app, get(&format!("/exercises/{exercise}"), Some(&ana))).await).await;
+    assert!(!ana_ex.contains("evidence-link"));
+    assert_eq!(e.store.pass_mark(exercise).await.unwrap(), None);
+    // the instructor adopts it: recorded with who
+    let r = send(
+        &e.app,
+        post_form(&adopt, Some(&kim.cookie), &[("csrf", &kim.csrf)]),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    let mark = e.store.pass_mark(exercise).await.unwrap().unwrap();
+    assert_eq!(mark.adopted_by, "dr-kim");
+    let report = e.store.evidence(exercise, true).await.unwrap();
+    assert_eq!(Some(mark.score), report.pass_mark.cut.map(|c| c.cut));
+    let page = body_text(send(&e.app, get(&path, Some(&kim))).await).await;
+    assert!(page.contains("id=\"adopted-pass-mark\"") && page.contains("by dr-kim"));
+    // without the CSRF token: refused, nothing recorded
+    let before = count(&e.store, "pass_marks").await;
+    let r = send(&e.app, post_form(&adopt, Some(&kim.cookie), &[])).await;
+    assert_ne!(r.status(), StatusCode::SEE_OTHER);
+    assert_eq!(count(&e.store, "pass_marks").await, before);
+    // the reference attempts left out: the page says so
+    let page = body_text(
+        send(
+            &e.app,
+            get(&format!("{path}?reference=exclude"), Some(&kim)),
+        )
+        .await,
+    )
+    .await;
+    assert!(page.contains("Reference attempts are left out"));
+}
+
+#[tokio::test]
+async fn an_administrator_records_a_trainees_experience() {
+    let e = env().await;
+    let ben = user_id(&e.store, "ben").await;
+    let path = format!("/trainees/{ben}/experience");
+    let admin = login(&e.app, "admin", "admin-demo").await;
+    let page = body_text(send(&e.app, get(&format!("/trainees/{ben}"), Some(&admin))).await).await;
+    assert!(page.contains("id=\"set-experience\""), "{page}");
+    let r = send(
+        &e.app,
+        post_form(
+            &path,
+            Some(&admin.cookie),
+            &[("csrf", &admin.csrf), ("level", "intermediate")],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    use cutlab_assessor::evidence::Experience;
+    assert_eq!(
+        e.store.experience(ben).await.unwrap(),
+        Some(Experience::Intermediate)
+    );
+    // a bad level: 400, unchanged
+    let r = send(
+        &e.app,
+        post_form(
+            &path,
+            Some(&admin.cookie),
+            &[("csrf", &admin.csrf), ("level", "surgeon")],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::BAD_REQUEST);
+    assert_eq!(
+        e.store.experience(ben).await.unwrap(),
+        Some(Experience::Intermediate)
+    );
+    // an instructor sees the level but does not set it
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let page = body_text(send(&e.app, get(&format!("/trainees/{ben}"), Some(&kim))).await).await;
+    assert!(page.contains("Experience: intermediate") && !page.contains("set-experience"));
+    let r = send(
+        &e.app,
+        post_form(
+            &path,
+            Some(&kim.cookie),
+            &[("csrf", &kim.csrf), ("level", "expert")],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::FORBIDDEN);
+    assert_eq!(
+        e.store.experience(ben).await.unwrap(),
+        Some(Experience::Intermediate)
+    );
+    // none clears it
+    let r = send(
+        &e.app,
+        post_form(
+            &path,
+            Some(&admin.cookie),
+            &[("csrf", &admin.csrf), ("level", "none")],
+        ),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::SEE_OTHER);
+    assert_eq!(e.store.experience(ben).await.unwrap(), None);
+}

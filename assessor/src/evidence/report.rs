@@ -11,6 +11,9 @@ use crate::metrics::{self, Better};
 /// The key the overall score is reported under, beside the metrics' keys.
 pub const SCORE_KEY: &str = "score";
 
+/// How near its plateau a learning curve's overall score (on [-1, 1]) must stay.
+const PLATEAU_BAND: f64 = 0.1;
+
 /// One complete attempt as the report sees it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EvidenceAttempt {
@@ -161,7 +164,7 @@ pub struct LearningCurve {
     pub trainee: String,
     pub experience: Option<Experience>,
     pub scores: Vec<f64>,
-    /// The fitted plateau (four or more attempts).
+    /// Where the curve levels off (four or more attempts).
     pub plateau: Option<Plateau>,
 }
 
@@ -475,7 +478,7 @@ fn learning(used: &[&EvidenceAttempt]) -> Vec<LearningCurve> {
                 trainee_id: attempts[0].trainee_id,
                 trainee: attempts[0].trainee.clone(),
                 experience: attempts[0].experience,
-                plateau: stats::plateau(&scores),
+                plateau: stats::plateau(&scores, PLATEAU_BAND),
                 scores,
             }
         })
@@ -606,7 +609,7 @@ mod tests {
         // reliability: each trainee's last two attempts are close, trainees differ widely
         assert_eq!(r.reliability.trainees, 4);
         assert!(r.reliability.icc.unwrap() > 0.9, "{:?}", r.reliability);
-        // learning curves of 5 linear attempts each: plateau fitted
+        // learning curves of 5 attempts rising 0.04 each: level within 0.1 from the second
         assert_eq!(r.learning.len(), 4);
         assert!(
             r.learning

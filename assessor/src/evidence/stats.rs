@@ -249,63 +249,40 @@ pub fn contrasting_groups(pass: &[f64], fail: &[f64]) -> Option<CutScore> {
     })
 }
 
-/// A learning curve fitted by `y_n = P - B exp(-(n - 1) / τ)` (attempt `n` from 1).
+/// Where a learning curve levels off.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Plateau {
-    /// `P`: the score the curve levels off at.
+    /// The median of the last three scores: the level the trainee is at now.
     pub plateau: f64,
-    /// `B`: how far below it the first attempt started (negative: scores fell).
-    pub gain: f64,
-    /// `τ` in attempts.
-    pub tau_attempts: f64,
-    /// The attempt by which 90 % of the gain is made: `1 + τ ln 10`.
-    pub attempts_to_90: f64,
-    /// The root mean square residual of the fit.
-    pub rms_residual: f64,
+    /// The attempt (from 1) from which every later score lies within the band of the
+    /// plateau.
+    pub reached_at: usize,
+    /// Whether that run holds at least [`PLATEAU_RUN`] attempts: the curve has levelled off.
+    pub levelled: bool,
 }
 
-/// The least-squares fit of [`Plateau`] to `scores` (at least four): for a given `τ` the
-/// fit is linear in `P` and `B`; `τ` is searched (golden section on `ln τ`, 0.2 to 200
-/// attempts) for the smallest residual.
-pub fn plateau(scores: &[f64]) -> Option<Plateau> {
+/// Attempts in a row within the band that make a plateau.
+pub const PLATEAU_RUN: usize = 3;
+
+/// The plateau of `scores` (in attempt order, at least four): the median of the last
+/// [`PLATEAU_RUN`]; reached at the first attempt from which every score lies within `band`
+/// of it; levelled when that run is at least [`PLATEAU_RUN`] attempts long. An empirical
+/// rule (no curve is fitted), after the moving-window plateaus of surgical learning-curve
+/// studies.
+pub fn plateau(scores: &[f64], band: f64) -> Option<Plateau> {
     if scores.len() < 4 || scores.iter().any(|x| !x.is_finite()) {
         return None;
     }
-    let fit = |tau: f64| -> (f64, f64, f64) {
-        let e: Vec<f64> = (0..scores.len())
-            .map(|i| (-(i as f64) / tau).exp())
-            .collect();
-        let n = scores.len() as f64;
-        let (me, my) = (e.iter().sum::<f64>() / n, scores.iter().sum::<f64>() / n);
-        let sxx: f64 = e.iter().map(|x| (x - me).powi(2)).sum();
-        let sxy: f64 = e.iter().zip(scores).map(|(x, y)| (x - me) * (y - my)).sum();
-        let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-        let p = my - slope * me;
-        let sse: f64 = e
-            .iter()
-            .zip(scores)
-            .map(|(x, y)| (y - (p + slope * x)).powi(2))
-            .sum();
-        (p, -slope, sse)
-    };
-    let (mut lo, mut hi) = (0.2f64.ln(), 200f64.ln());
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    for _ in 0..100 {
-        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-        if fit(x1.exp()).2 <= fit(x2.exp()).2 {
-            hi = x2;
-        } else {
-            lo = x1;
-        }
-    }
-    let tau = (0.5 * (lo + hi)).exp();
-    let (p, b, sse) = fit(tau);
+    let level = median(&scores[scores.len() - PLATEAU_RUN..])?;
+    let run = scores
+        .iter()
+        .rev()
+        .take_while(|s| (*s - level).abs() <= band)
+        .count();
     Some(Plateau {
-        plateau: p,
-        gain: b,
-        tau_attempts: tau,
-        attempts_to_90: 1.0 + tau * 10f64.ln(),
-        rms_residual: (sse / scores.len() as f64).sqrt(),
+        plateau: level,
+        reached_at: scores.len() - run + 1,
+        levelled: run >= PLATEAU_RUN,
     })
 }
 
@@ -455,16 +432,18 @@ mod tests {
     }
 
     #[test]
-    fn plateau_of_an_exact_exponential_curve() {
-        let y: Vec<f64> = (0..10)
-            .map(|i| 0.8 - 0.6 * (-(i as f64) / 2.0).exp())
-            .collect();
-        let p = plateau(&y).unwrap();
-        assert!(close(p.plateau, 0.8, 1e-6), "{p:?}");
-        assert!(close(p.gain, 0.6, 1e-6) && close(p.tau_attempts, 2.0, 1e-4));
-        assert!(close(p.attempts_to_90, 1.0 + 2.0 * 10f64.ln(), 1e-3));
-        assert!(p.rms_residual < 1e-8);
-        assert!(plateau(&[0.1, 0.2, 0.3]).is_none());
+    fn plateaus_by_hand() {
+        // the last three 0.97 0.97 1.00: median 0.97; within 0.1 of it from attempt 5 on
+        let p = plateau(&[0.04, -0.28, 0.60, 0.73, 0.97, 0.97, 1.0], 0.1).unwrap();
+        assert_eq!((p.plateau, p.reached_at, p.levelled), (0.97, 5, true));
+        // still climbing: the median of -0.57 0.15 0.03 is 0.03; only the last is within 0.1
+        let p = plateau(&[-0.39, -0.57, 0.15, 0.03], 0.1).unwrap();
+        assert_eq!((p.plateau, p.reached_at, p.levelled), (0.03, 4, false));
+        // level from the first attempt
+        let p = plateau(&[1.0, 1.0, 0.99, 0.99], 0.1).unwrap();
+        assert_eq!((p.reached_at, p.levelled), (1, true));
+        assert!(plateau(&[0.1, 0.2, 0.3], 0.1).is_none());
+        assert!(plateau(&[0.1, 0.2, 0.3, f64::NAN], 0.1).is_none());
     }
 
     #[test]

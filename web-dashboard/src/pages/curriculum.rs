@@ -283,6 +283,9 @@ async fn exercise(
         Some(&user),
         html! {
             p { "Scene " code { (e.scene) } " · k = " (num(Some(e.threshold_k), 2)) } p { (e.description) }
+            @if user.is_staff() {
+                p { a id="evidence-link" href=(format!("/exercises/{id}/evidence")) { "Validity evidence of its scores" } " (experience groups, AUC, reliability, the contrasting-groups pass mark)" }
+            }
             h2 { "Thresholds" }
             @if user.is_staff() {
                 form method="post" action=(format!("/exercises/{id}/thresholds")) {

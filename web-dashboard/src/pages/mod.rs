@@ -4,6 +4,7 @@
 pub mod attempt;
 pub mod cohorts;
 pub mod curriculum;
+pub mod evidence;
 pub mod layout;
 pub mod progress;
 pub mod station;
@@ -37,6 +38,7 @@ pub fn router() -> Router<AppState> {
         .merge(supervision::router())
         .merge(station::router())
         .merge(curriculum::router())
+        .merge(evidence::router())
         .layer(axum::middleware::map_response(
             |mut r: Response| async move {
                 r.headers_mut().insert(

@@ -9,7 +9,8 @@ use axum::extract::State;
 use axum::response::Html;
 use axum::response::Redirect;
 use axum::routing::{get, post};
-use cutlab_assessor::store::{Access, iso8601};
+use cutlab_assessor::evidence::Experience;
+use cutlab_assessor::store::{Access, Role, iso8601};
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -32,6 +33,7 @@ pub fn router() -> Router<AppState> {
     Router::new()
         .route("/trainees/{id}", get(trainee))
         .route("/trainees/{id}/open", post(open_early))
+        .route("/trainees/{id}/experience", post(set_experience))
 }
 
 async fn trainee(
@@ -46,7 +48,10 @@ async fn trainee(
         .get_or_init(|| Bytes::from(body(&c.data).into_string()));
     // the instructor's form is the viewer's (its CSRF token), not the cached page's
     let opener = if user.is_staff() {
-        open_early_form(&c.data, &user).into_string()
+        let level = state.store().experience(trainee.id).await?;
+        let forms =
+            html! { (experience_form(&trainee, level, &user)) (open_early_form(&c.data, &user)) };
+        forms.into_string()
     } else {
         String::new()
     };
@@ -82,6 +87,59 @@ fn open_early_form(p: &Progress, user: &CurrentUser) -> Markup {
             }
         }
     }
+}
+
+/// The trainee's recorded experience (the evidence report's groups); an administrator
+/// sets it.
+fn experience_form(
+    trainee: &cutlab_assessor::store::User,
+    level: Option<Experience>,
+    user: &CurrentUser,
+) -> Markup {
+    let shown = level.map_or("not recorded", Experience::as_str);
+    html! {
+        @if user.role() == Role::Admin {
+            form class="experience" method="post" action=(format!("/trainees/{}/experience", trainee.id)) {
+                input type="hidden" name="csrf" value=(user.csrf());
+                label for="experience" { "Experience" } " "
+                select id="experience" name="level" {
+                    option value="none" selected[level.is_none()] { "not recorded" }
+                    @for e in Experience::ALL { option value=(e.as_str()) selected[level == Some(e)] { (e.as_str()) } }
+                }
+                " "
+                button id="set-experience" type="submit" { "Record" }
+            }
+        } @else {
+            p class="experience" { "Experience: " (shown) }
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+struct ExperienceForm {
+    level: String,
+}
+
+/// `POST /trainees/{id}/experience`: an administrator records the trainee's experience.
+async fn set_experience(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    Form(f): Form<ExperienceForm>,
+) -> PageResult<Redirect> {
+    if user.role() != Role::Admin {
+        return Err(AppError::Forbidden("administrators only"));
+    }
+    let trainee = visible_user(&state, &user, id).await?;
+    let level = match f.level.as_str() {
+        "none" => None,
+        l => Some(
+            l.parse::<Experience>()
+                .map_err(|e| AppError::BadRequest(e.to_string()))?,
+        ),
+    };
+    state.store().set_experience(trainee.id, level).await?;
+    Ok(Redirect::to(&format!("/trainees/{id}")))
 }
 
 #[derive(Debug, Deserialize)]
