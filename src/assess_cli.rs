@@ -1,5 +1,5 @@
 //! The assessment commands: `motion-metrics`, `user`, `cohort`, `exercise`, `evidence`,
-//! `export xapi`.
+//! `import kinematics`, `export xapi`.
 //! The database ones open `--db PATH`, else `$CUTLAB_DB`, else `./cutlab.db` (created and
 //! migrated on first use, with the built-in exercise).
 
@@ -61,10 +61,29 @@ pub enum AssessCommand {
     /// The validity evidence of an exercise's scores: experience groups, Mann-Whitney U and
     /// AUC per metric, test-retest ICC, learning curves, the contrasting-groups pass mark.
     Evidence(crate::evidence_cli::EvidenceArgs),
+    /// Imports from other systems.
+    Import {
+        #[command(subcommand)]
+        command: ImportCommand,
+    },
     /// Exports for other systems.
     Export {
         #[command(subcommand)]
         command: ExportCommand,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ImportCommand {
+    /// The evidence report on kinematic data with raters' ratings: DIR/ratings.csv
+    /// (trial,subject,experience,rating) and DIR/trials/TRIAL/TOOL.csv (the motion-metrics
+    /// layout). Nothing is written to the database.
+    Kinematics {
+        /// The folder.
+        dir: PathBuf,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -166,6 +185,9 @@ pub enum ExportCommand {
 pub fn run(db: Option<&DbLocation>, command: AssessCommand) -> anyhow::Result<()> {
     match command {
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json),
+        AssessCommand::Import {
+            command: ImportCommand::Kinematics { dir, json },
+        } => crate::kinematics::run(&dir, json),
         command => {
             let location = default_db(db);
             let rt = tokio::runtime::Builder::new_current_thread()
@@ -206,6 +228,9 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
             print_outcome(&outcome, &values, json)?;
         }
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
+        AssessCommand::Import {
+            command: ImportCommand::Kinematics { dir, json },
+        } => crate::kinematics::run(&dir, json)?,
         AssessCommand::User { command } => user(store, command).await?,
         AssessCommand::Cohort { command } => cohort(store, command).await?,
         AssessCommand::Evidence(args) => crate::evidence_cli::run(store, args).await?,

@@ -107,7 +107,7 @@ pub fn text(r: &Report) -> String {
     }
     let _ = writeln!(
         s,
-        "  {:<34} {:>10} {:>10} {:>8} {:>7} {:>17} {:>6}  finding",
+        "  {:<46} {:>10} {:>10} {:>8} {:>7} {:>17} {:>6}  finding",
         "measure", "med. high", "med. low", "p", "AUC", "95 % interval", "ICC"
     );
     for m in std::iter::once(&r.score).chain(&r.metrics) {
@@ -120,9 +120,21 @@ pub fn text(r: &Report) -> String {
             r.not_discriminating.join(", ")
         );
     }
+    concurrent(&mut s, r);
     reliability_and_pass_mark(&mut s, r);
     learning(&mut s, r);
     s
+}
+
+fn concurrent(s: &mut String, r: &Report) {
+    if r.concurrent.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "\nConcurrent validity: Spearman's rho with the rating");
+    for c in &r.concurrent {
+        let rho = c.rho.map_or("-".into(), |v| format!("{v:+.2}"));
+        let _ = writeln!(s, "  {:<46} {rho:>6}  (n = {})", c.label, c.n);
+    }
 }
 
 fn measure_row(m: &Measure) -> String {
@@ -147,7 +159,7 @@ fn measure_row(m: &Measure) -> String {
             f,
         ) => {
             format!(
-                "{label:<34} {:>10.3} {:>10.3} {p:>8.4} {auc:>7.2} {:>17} {icc:>6}  {}",
+                "{label:<46} {:>10.3} {:>10.3} {p:>8.4} {auc:>7.2} {:>17} {icc:>6}  {}",
                 median_higher * factor,
                 median_lower * factor,
                 format!("{auc_low:.2}-{auc_high:.2}"),
@@ -155,7 +167,7 @@ fn measure_row(m: &Measure) -> String {
             )
         }
         (None, _) => format!(
-            "{label:<34} {:>61} {icc:>6}  {}: {}",
+            "{label:<46} {:>61} {icc:>6}  {}: {}",
             "",
             Finding::NotComputed.words(),
             m.why_not.as_deref().unwrap_or("")
@@ -182,11 +194,12 @@ fn reliability_and_pass_mark(s: &mut String, r: &Report) {
     let _ = match (p.cut, p.higher, p.lower) {
         (Some(c), Some(h), Some(l)) => writeln!(
             s,
-            "\nPass mark (contrasting groups, {h} {} against {l} {}): overall score {:+.3}\n  \
+            "\nPass mark (contrasting groups, {h} {} against {l} {}): {} {:+.3}\n  \
              false pass {:.0} % observed, {:.1} % normal; false fail {:.0} % observed, {:.1} % \
              normal",
             p.n_higher,
             p.n_lower,
+            r.score.label.to_lowercase(),
             c.cut,
             100.0 * c.false_pass,
             100.0 * c.false_pass_normal,
@@ -205,7 +218,7 @@ fn learning(s: &mut String, r: &Report) {
     if r.learning.is_empty() {
         return;
     }
-    let _ = writeln!(s, "\nLearning curves (overall score):");
+    let _ = writeln!(s, "\nLearning curves ({}):", r.score.label.to_lowercase());
     for c in &r.learning {
         let level = c.experience.map_or("-", |e| e.as_str());
         let scores: Vec<String> = c.scores.iter().map(|v| format!("{v:+.2}")).collect();

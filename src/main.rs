@@ -5,6 +5,7 @@ mod demo;
 mod demo_seed;
 mod evidence_cli;
 mod hub_cli;
+mod kinematics;
 mod localise_choice;
 mod motion_metrics;
 mod recording;

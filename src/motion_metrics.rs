@@ -2,7 +2,7 @@
 //!
 //! The CSV has 8 columns `t_s, x_m, y_m, z_m, qw, qx, qy, qz` (time in seconds, tip position
 //! in metres, unit quaternion), any sampling rate (even uneven: the metrics resample on the
-//! time column). A first line that is not numeric is a header; empty lines and lines starting
+//! time column), the time increasing from row to row. A first line that is not numeric is a header; empty lines and lines starting
 //! with `#` are skipped. A malformed row is an error naming its line.
 
 use std::path::Path;
@@ -48,10 +48,10 @@ pub fn parse_poses(text: &str, name: &str) -> anyhow::Result<Vec<PoseSample>> {
             }
         }
         if let Some(prev) = poses.last().map(|p: &PoseSample| p.t_s)
-            && v[0] < prev
+            && v[0] <= prev
         {
             bail!(
-                "{name}:{line_no}: time {} s goes back (previous row {prev} s)",
+                "{name}:{line_no}: time {} s does not increase (previous row {prev} s)",
                 v[0]
             );
         }

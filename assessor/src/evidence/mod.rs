@@ -12,8 +12,8 @@ pub mod report;
 pub mod stats;
 
 pub use report::{
-    Comparison, EvidenceAttempt, EvidenceOptions, Finding, Group, GroupValues, LearningCurve,
-    Measure, PassMarkFinding, Reliability, Report, SCORE_KEY,
+    Comparison, Concurrent, EvidenceAttempt, EvidenceOptions, Finding, Group, GroupValues,
+    LearningCurve, Measure, PassMarkFinding, Reliability, Report, SCORE_KEY,
 };
 
 use serde::{Deserialize, Serialize};

@@ -11,9 +11,6 @@ use crate::metrics::{self, Better};
 /// The key the overall score is reported under, beside the metrics' keys.
 pub const SCORE_KEY: &str = "score";
 
-/// How near its plateau a learning curve's overall score (on [-1, 1]) must stay.
-const PLATEAU_BAND: f64 = 0.1;
-
 /// One complete attempt as the report sees it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EvidenceAttempt {
@@ -27,8 +24,11 @@ pub struct EvidenceAttempt {
     pub reference: bool,
     /// The overall score in [-1, 1].
     pub score: Option<f64>,
-    /// The metric values the attempt has (SI units), by key.
+    /// The metric values the attempt has (SI units), by key; `KEY@TOOL` is the catalogue
+    /// metric `KEY` of one tool of several.
     pub metrics: Vec<(String, f64)>,
+    /// An expert rater's rating of the attempt (e.g. a GRS), where there is one.
+    pub rating: Option<f64>,
 }
 
 impl EvidenceAttempt {
@@ -57,11 +57,18 @@ pub struct EvidenceOptions {
     /// from it is what improves. A two-sided metric without one is measured from the more
     /// experienced group's median.
     pub two_sided_reference: BTreeMap<String, f64>,
+    /// What the attempts' `score` is ("Overall score"; "Rating" for imported trials).
+    pub score_label: String,
+    /// How near its plateau a learning curve's score must stay (0.1 on the overall score's
+    /// [-1, 1]).
+    pub plateau_band: f64,
 }
 
 impl Default for EvidenceOptions {
     fn default() -> Self {
         Self {
+            score_label: "Overall score".into(),
+            plateau_band: 0.1,
             include_reference: true,
             resamples: 2000,
             seed: 45,
@@ -180,6 +187,18 @@ pub struct PassMarkFinding {
     pub why_not: Option<String>,
 }
 
+/// How a metric agrees with the raters' ratings across attempts (concurrent validity).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Concurrent {
+    pub key: String,
+    pub label: String,
+    /// Attempts with both the metric and a rating.
+    pub n: usize,
+    /// Spearman's rho of the metric with the rating (its sign: as the metric's direction
+    /// says, a metric that improves with skill correlates positively when higher is better).
+    pub rho: Option<f64>,
+}
+
 /// The validity evidence of one exercise.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Report {
@@ -196,6 +215,8 @@ pub struct Report {
     pub reliability: Reliability,
     pub learning: Vec<LearningCurve>,
     pub pass_mark: PassMarkFinding,
+    /// Each metric against the ratings (empty without ratings).
+    pub concurrent: Vec<Concurrent>,
     /// Attempts and people left out of the groups: no experience level recorded.
     pub attempts_without_level: usize,
     pub trainees_without_level: usize,
@@ -223,21 +244,16 @@ impl Report {
         let score = contrast.measure(
             &used,
             SCORE_KEY,
-            "Overall score",
+            &options.score_label,
             "1",
             Better::HigherIsBetter,
         );
-        let metrics: Vec<Measure> = metric_keys(&used)
-            .into_iter()
+        let keys = metric_keys(&used);
+        let metrics: Vec<Measure> = keys
+            .iter()
             .map(|key| {
-                let def = metrics::metric(&key);
-                contrast.measure(
-                    &used,
-                    &key,
-                    def.map_or(key.as_str(), |d| d.label),
-                    def.map_or("1", |d| d.unit),
-                    def.map_or(Better::TwoSided, |d| d.better),
-                )
+                let (label, unit, better) = definition(key);
+                contrast.measure(&used, key, &label, unit, better)
             })
             .collect();
         let not_discriminating = metrics
@@ -254,13 +270,14 @@ impl Report {
             include_reference: options.include_reference,
             pass_mark: pass_mark(&score, higher, lower),
             reliability: reliability(&used),
-            learning: learning(&used),
+            learning: learning(&used, options.plateau_band),
             groups,
             higher,
             lower,
             score,
             metrics,
             not_discriminating,
+            concurrent: concurrent(&used, &keys),
             attempts_without_level: no_level.len(),
             trainees_without_level: no_level_people.len(),
         }
@@ -288,19 +305,55 @@ fn groups(used: &[&EvidenceAttempt]) -> Vec<Group> {
         .collect()
 }
 
-/// The metric keys the attempts have, in the catalogue's order.
+/// The metric keys the attempts have, in the catalogue's order (a tool's after another's).
 fn metric_keys(used: &[&EvidenceAttempt]) -> Vec<String> {
     let mut keys: Vec<String> = used
         .iter()
         .flat_map(|a| a.metrics.iter().map(|(k, _)| k.clone()))
         .collect();
+    let base = |k: &str| k.split_once('@').map_or(k, |(b, _)| b).to_owned();
     keys.sort_by(|a, b| {
-        metrics::catalogue_rank(a)
-            .cmp(&metrics::catalogue_rank(b))
+        let (ba, bb) = (base(a), base(b));
+        metrics::catalogue_rank(&ba)
+            .cmp(&metrics::catalogue_rank(&bb))
             .then(a.cmp(b))
     });
     keys.dedup();
     keys
+}
+
+/// A key's label, SI unit and direction from the catalogue; `KEY@TOOL` as `KEY`'s, the
+/// tool named; an unknown key as itself, two-sided.
+fn definition(key: &str) -> (String, &'static str, Better) {
+    let (base, tool) = key
+        .split_once('@')
+        .map_or((key, None), |(b, t)| (b, Some(t)));
+    match (metrics::metric(base), tool) {
+        (Some(d), None) => (d.label.to_owned(), d.unit, d.better),
+        (Some(d), Some(t)) => (format!("{} · {t}", d.label), d.unit, d.better),
+        (None, _) => (key.to_owned(), "1", Better::TwoSided),
+    }
+}
+
+/// Spearman's rho of each metric with the ratings, where at least three attempts have both.
+fn concurrent(used: &[&EvidenceAttempt], keys: &[String]) -> Vec<Concurrent> {
+    if used.iter().all(|a| a.rating.is_none()) {
+        return Vec::new();
+    }
+    keys.iter()
+        .map(|key| {
+            let (x, y): (Vec<f64>, Vec<f64>) = used
+                .iter()
+                .filter_map(|a| Some((a.value(key)?, a.rating.filter(|r| r.is_finite())?)))
+                .unzip();
+            Concurrent {
+                key: key.clone(),
+                label: definition(key).0,
+                n: x.len(),
+                rho: stats::spearman(&x, &y),
+            }
+        })
+        .collect()
 }
 
 struct Contrast<'a> {
@@ -469,7 +522,7 @@ fn reliability(used: &[&EvidenceAttempt]) -> Reliability {
     }
 }
 
-fn learning(used: &[&EvidenceAttempt]) -> Vec<LearningCurve> {
+fn learning(used: &[&EvidenceAttempt], band: f64) -> Vec<LearningCurve> {
     let mut curves: Vec<LearningCurve> = by_trainee(used)
         .into_iter()
         .map(|attempts| {
@@ -478,7 +531,7 @@ fn learning(used: &[&EvidenceAttempt]) -> Vec<LearningCurve> {
                 trainee_id: attempts[0].trainee_id,
                 trainee: attempts[0].trainee.clone(),
                 experience: attempts[0].experience,
-                plateau: stats::plateau(&scores, PLATEAU_BAND),
+                plateau: stats::plateau(&scores, band),
                 scores,
             }
         })

@@ -95,6 +95,25 @@ pub struct PathMetrics {
     pub peak_speed_m_s: f64,
 }
 
+impl PathMetrics {
+    /// The metrics under their catalogue keys ([`super::METRICS`]); `None` where not
+    /// measured (the tool did not move).
+    pub fn keyed(&self) -> [(&'static str, Option<f64>); 10] {
+        [
+            ("time_s", Some(self.time_s)),
+            ("path_length_m", Some(self.path_length_m)),
+            ("economy_of_motion", self.economy_of_motion),
+            ("idle_time_s", Some(self.idle_time_s)),
+            ("movements", Some(self.movements as f64)),
+            ("angular_path_rad", Some(self.angular_path_rad)),
+            ("ldlj", self.ldlj),
+            ("sparc", self.sparc),
+            ("ldlj_per_movement", self.ldlj_per_movement),
+            ("sparc_per_movement", self.sparc_per_movement),
+        ]
+    }
+}
+
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
     (n > 0).then(|| s / n as f64)
@@ -258,18 +277,7 @@ pub(crate) fn assess(poses: &[PoseSample], p: &PathParams, values: &mut Values) 
     ];
     match path(poses, p) {
         Ok(m) => {
-            values.set("time_s", m.time_s);
-            values.set("path_length_m", m.path_length_m);
-            values.set("idle_time_s", m.idle_time_s);
-            values.set("movements", m.movements as f64);
-            values.set("angular_path_rad", m.angular_path_rad);
-            for (key, v) in [
-                ("economy_of_motion", m.economy_of_motion),
-                ("ldlj", m.ldlj),
-                ("sparc", m.sparc),
-                ("ldlj_per_movement", m.ldlj_per_movement),
-                ("sparc_per_movement", m.sparc_per_movement),
-            ] {
+            for (key, v) in m.keyed() {
                 match v {
                     Some(v) => values.set(key, v),
                     None => values.missing(&[key], "no movement"),

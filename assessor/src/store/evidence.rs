@@ -95,6 +95,7 @@ impl Store {
                         reference,
                         score,
                         metrics: by_attempt.remove(&id).unwrap_or_default(),
+                        rating: None,
                     })
                 },
             )

@@ -153,7 +153,7 @@ fn comparison_words(m: &Measure) -> Markup {
         @match &m.comparison {
             Some(c) => {
                 "AUC " strong { (num(Some(c.auc), 2)) } " (95 % " (num(Some(c.auc_low), 2)) "–" (num(Some(c.auc_high), 2)) "), "
-                "Mann-Whitney U = " (num(Some(c.u), 1)) ", p = " (p_value(c.p)) (if c.exact_p { " (exact)" } else { "" })
+                "Mann-Whitney U = " (num(Some(c.u), 1)) ", p " (p_value(c.p)) (if c.exact_p { " (exact)" } else { "" })
                 ": " strong { (m.finding.words()) } "."
             }
             None => { "Not computed: " (m.why_not.as_deref().unwrap_or("")) "." }
@@ -161,11 +161,12 @@ fn comparison_words(m: &Measure) -> Markup {
     }
 }
 
+/// `< 0.001` or `= 0.012`.
 fn p_value(p: f64) -> String {
     if p < 0.001 {
         "< 0.001".into()
     } else {
-        format!("{p:.3}")
+        format!("= {p:.3}")
     }
 }
 
@@ -273,7 +274,7 @@ fn metric_row(m: &Measure) -> Markup {
                 Some(c) => {
                     td class="num" { (num(Some(c.median_higher * l.factor), 3)) }
                     td class="num" { (num(Some(c.median_lower * l.factor), 3)) }
-                    td class="num" { (p_value(c.p)) }
+                    td class="num" { (p_value(c.p).trim_start_matches("= ")) }
                     td class="num" { (num(Some(c.auc), 2)) " (" (num(Some(c.auc_low), 2)) "–" (num(Some(c.auc_high), 2)) ")" }
                 }
                 None => { td colspan="4" class="muted" { (m.why_not.as_deref().unwrap_or("")) } }
