@@ -13,7 +13,7 @@ OSATS, 6-30) and its six items. This script writes
     OUT/trials/TRIAL/psm-right.csv  the right tool tip
 
 The subject is the trial name's surgeon letter (Knot_Tying_B001: B). Needle passing is
-cutlab's held-out task (docs/evidence.md): the script refuses it unless --held-out is given,
+cutlab's held-out task (docs/guide/evidence.md): the script refuses it unless --held-out is given,
 so nothing is developed or tuned on it by accident.
 
 Usage: jigsaws_to_cutlab.py KINEMATICS_DIR META_FILE OUT [--held-out]

@@ -1,7 +1,7 @@
 //! `cutlab import kinematics DIR`: the evidence report on kinematic data recorded anywhere,
 //! with raters' ratings (JIGSAWS, converted by `scripts/jigsaws_to_cutlab.py`).
 //!
-//! The layout (docs/evidence.md):
+//! The layout (docs/guide/evidence.md):
 //!
 //! - `DIR/ratings.csv`: a header, then `trial,subject,experience,rating` per trial
 //!   (experience `novice`, `intermediate` or `expert`; the rating a number, e.g. a GRS);

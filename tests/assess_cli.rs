@@ -235,3 +235,287 @@ fn users_cohorts_exercises_and_xapi_on_a_fresh_database() {
         std::fs::remove_file(format!("{db}{suffix}")).ok();
     }
 }
+
+/// A JIGSAWS-layout folder: three experts and three novices, two trials each, two tools; an
+/// expert's trial is a short smooth reach and rated high, a novice's a slow one with pauses
+/// and a tremor, rated low.
+fn kinematics_fixture(name: &str) -> PathBuf {
+    let dir = temp(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut ratings = String::from("trial,subject,experience,rating\n");
+    for (s, subject) in ["A", "B", "C", "D", "E", "F"].iter().enumerate() {
+        let expert = s < 3;
+        for k in 0..2 {
+            let trial = format!("Task_{subject}00{}", k + 1);
+            let folder = dir.join("trials").join(&trial);
+            std::fs::create_dir_all(&folder).expect("trial folder");
+            let (duration, tremor) = if expert {
+                (2.0 + 0.1 * s as f64, 0.0)
+            } else {
+                (6.0 + 0.5 * s as f64, 0.002)
+            };
+            for (tool, sign) in [("left", 1.0), ("right", -1.0)] {
+                let mut csv = String::from("t_s,x_m,y_m,z_m,qw,qx,qy,qz\n");
+                let n = (duration * 30.0) as usize;
+                for i in 0..=n {
+                    let t = i as f64 / 30.0;
+                    let u = t / duration;
+                    // a minimum-jerk reach, a novice's stalling half way
+                    let u = if expert {
+                        u
+                    } else {
+                        u.min(0.5) + (u - 0.7).max(0.0) * (0.5 / 0.3)
+                    };
+                    let x = 0.08 * (10.0 * u.powi(3) - 15.0 * u.powi(4) + 6.0 * u.powi(5));
+                    let wobble = tremor * (2.0 * std::f64::consts::PI * 9.0 * t).sin();
+                    csv += &format!("{t},{},{wobble},0.01,1,0,0,0\n", sign * x);
+                }
+                std::fs::write(folder.join(format!("{tool}.csv")), csv).expect("write poses");
+            }
+            let level = if expert { "expert" } else { "novice" };
+            let rating = if expert { 28 - s - k } else { 16 - s - k };
+            ratings += &format!("{trial},{subject},{level},{rating}\n");
+        }
+    }
+    std::fs::write(dir.join("ratings.csv"), ratings).expect("write ratings");
+    dir
+}
+
+#[test]
+fn import_kinematics_reports_groups_and_the_ratings_agreement() {
+    let dir = kinematics_fixture("kinematics-ok");
+    let (ok, out, err) = cutlab(
+        &["import", "kinematics", dir.to_str().unwrap(), "--json"],
+        None,
+    );
+    assert!(ok, "{err}");
+    let r: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert_eq!(
+        (r["higher"].as_str(), r["lower"].as_str()),
+        (Some("expert"), Some("novice"))
+    );
+    assert_eq!(r["groups"].as_array().unwrap().len(), 2);
+    let measure = |key: &str| {
+        r["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m["key"] == key)
+            .unwrap_or_else(|| panic!("{key}"))
+            .clone()
+    };
+    for key in ["time_s@left", "time_s@right", "idle_time_s@left"] {
+        let m = measure(key);
+        assert_eq!(m["finding"], "discriminates", "{m}");
+        assert_eq!(m["comparison"]["auc"], 1.0, "{m}");
+    }
+    assert_eq!(r["score"]["label"], "Rating");
+    let rho = r["concurrent"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["key"] == "time_s@left")
+        .unwrap()["rho"]
+        .as_f64()
+        .unwrap();
+    assert!(rho < -0.7, "task time against the rating: {rho}");
+    // the text report says the same for people
+    let (ok, text, err) = cutlab(&["import", "kinematics", dir.to_str().unwrap()], None);
+    assert!(ok, "{err}");
+    assert!(
+        text.contains("Construct validity: expert against novice")
+            && text.contains("Task time · left (s)"),
+        "{text}"
+    );
+    assert!(
+        text.contains("Concurrent validity") && text.contains("Pass mark (contrasting groups"),
+        "{text}"
+    );
+}
+
+#[test]
+fn import_kinematics_refuses_bad_input_clearly() {
+    let dir = kinematics_fixture("kinematics-bad");
+    let run = || cutlab(&["import", "kinematics", dir.to_str().unwrap()], None);
+    let ratings = std::fs::read_to_string(dir.join("ratings.csv")).unwrap();
+    // a rating for a trial that is not there
+    std::fs::write(
+        dir.join("ratings.csv"),
+        format!("{ratings}Task_Z001,Z,novice,8\n"),
+    )
+    .unwrap();
+    let (ok, _, err) = run();
+    assert!(
+        !ok && err.contains("Task_Z001") && err.contains("cannot be read"),
+        "{err}"
+    );
+    // a trial nobody rated
+    std::fs::write(
+        dir.join("ratings.csv"),
+        ratings
+            .lines()
+            .filter(|l| !l.starts_with("Task_F002"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+    )
+    .unwrap();
+    let (ok, _, err) = run();
+    assert!(
+        !ok && err.contains("Task_F002") && err.contains("no row in ratings.csv"),
+        "{err}"
+    );
+    std::fs::write(dir.join("ratings.csv"), &ratings).unwrap();
+    // NaN in a pose, then a time that does not increase: the file and line named
+    let poses = dir.join("trials/Task_A001/left.csv");
+    let good = std::fs::read_to_string(&poses).unwrap();
+    let mut lines: Vec<String> = good.lines().map(str::to_owned).collect();
+    lines[3] = "0.1,NaN,0,0.01,1,0,0,0".into();
+    std::fs::write(&poses, lines.join("\n")).unwrap();
+    let (ok, _, err) = run();
+    assert!(
+        !ok && err.contains("left.csv:4: x_m is not finite"),
+        "{err}"
+    );
+    let mut lines: Vec<String> = good.lines().map(str::to_owned).collect();
+    lines[3] = lines[2].clone();
+    std::fs::write(&poses, lines.join("\n")).unwrap();
+    let (ok, _, err) = run();
+    assert!(
+        !ok && err.contains("left.csv:4: time") && err.contains("does not increase"),
+        "{err}"
+    );
+    std::fs::write(&poses, &good).unwrap();
+    // one novice trial only: the report says what it cannot compute
+    let one_novice: String = ratings
+        .lines()
+        .filter(|l| !(l.contains(",novice,") && !l.starts_with("Task_D001")))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    for t in [
+        "Task_D002",
+        "Task_E001",
+        "Task_E002",
+        "Task_F001",
+        "Task_F002",
+    ] {
+        std::fs::remove_dir_all(dir.join("trials").join(t)).unwrap();
+    }
+    std::fs::write(dir.join("ratings.csv"), one_novice).unwrap();
+    let (ok, text, err) = run();
+    assert!(ok, "{err}");
+    assert!(
+        text.contains("the novice group has 1 value: needs at least 2"),
+        "{text}"
+    );
+    assert!(
+        text.contains("Pass mark (contrasting groups): not computed"),
+        "{text}"
+    );
+}
+
+#[test]
+fn evidence_of_an_exercise_and_experience_levels_from_the_command_line() {
+    let db = temp("evidence.db");
+    let _ = std::fs::remove_file(&db);
+    let db = db.to_str().unwrap();
+    let (ok, out, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "user",
+            "add",
+            "--name",
+            "kim",
+            "--role",
+            "instructor",
+            "--experience",
+            "expert",
+        ],
+        None,
+    );
+    assert!(ok, "{err}");
+    assert!(out.contains("added instructor kim"));
+    let (ok, _, err) = cutlab(
+        &[
+            "--db", db, "user", "add", "--name", "al", "--role", "trainee",
+        ],
+        None,
+    );
+    assert!(ok, "{err}");
+    let (ok, out, _) = cutlab(
+        &[
+            "--db",
+            db,
+            "user",
+            "experience",
+            "--name",
+            "al",
+            "--level",
+            "novice",
+        ],
+        None,
+    );
+    assert!(ok && out.contains("al is novice"), "{out}");
+    let (ok, out, _) = cutlab(&["--db", db, "user", "list"], None);
+    assert!(
+        ok && out.contains("expert") && out.contains("novice"),
+        "{out}"
+    );
+    let (ok, _, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "user",
+            "experience",
+            "--name",
+            "al",
+            "--level",
+            "surgeon",
+        ],
+        None,
+    );
+    assert!(!ok && err.contains("unknown experience level"), "{err}");
+    // no attempts yet: the report says what it cannot compute; there is no pass mark to adopt
+    let (ok, out, err) = cutlab(
+        &["--db", db, "evidence", "--exercise", "chest-wall-incision"],
+        None,
+    );
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("not computed: needs attempts by people of two experience levels"),
+        "{out}"
+    );
+    let (ok, _, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "evidence",
+            "--exercise",
+            "chest-wall-incision",
+            "--adopt",
+            "--by",
+            "kim",
+        ],
+        None,
+    );
+    assert!(!ok && err.contains("no pass mark to adopt"), "{err}");
+    let (ok, _, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "evidence",
+            "--exercise",
+            "chest-wall-incision",
+            "--adopt",
+            "--by",
+            "al",
+        ],
+        None,
+    );
+    assert!(
+        !ok && err.contains("only an instructor or an administrator"),
+        "{err}"
+    );
+    let (ok, _, err) = cutlab(&["--db", db, "evidence", "--exercise", "nope"], None);
+    assert!(!ok && err.contains("nope"), "{err}");
+}

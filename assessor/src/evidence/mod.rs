@@ -6,7 +6,7 @@
 //!
 //! [`Report::build`] is pure: it takes the attempts ([`EvidenceAttempt`], from
 //! [`crate::Store::evidence_attempts`] or imported kinematics) and says, for each figure it
-//! cannot compute, why. The definitions are in `docs/evidence.md`.
+//! cannot compute, why. The definitions are in `docs/guide/evidence.md`.
 
 pub mod report;
 pub mod stats;

@@ -92,7 +92,7 @@ fn groups_section(r: &Report, id: i64) -> Markup {
             "recorded experience (set by an administrator on the trainee's page); the most and the "
             "least experienced groups are compared. AUC: the chance that an attempt of the more "
             "experienced group is the better one (0.5: a coin toss), with its bootstrap 95 % interval. "
-            "Definitions: docs/evidence.md."
+            "Definitions: docs/guide/evidence.md."
         }
         @if r.groups.is_empty() {
             p { "No complete attempts by people with a recorded experience level yet." }
