@@ -494,7 +494,7 @@ async fn evidence_groups_and_an_adopted_pass_mark(store: Store) {
     let e = store
         .adopt_pass_mark(ex, &none, instructor.id)
         .await
-        .unwrap_err();
+        .expect_err("no cut");
     assert!(e.to_string().contains("no pass mark to adopt"), "{e}");
 }
 

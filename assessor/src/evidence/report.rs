@@ -599,6 +599,7 @@ mod tests {
                 ("time_s".into(), time_s),
                 ("peak_force_n".into(), 1.0 + 0.01 * id as f64),
             ],
+            rating: None,
         }
     }
 
@@ -709,6 +710,37 @@ mod tests {
         // nothing at all
         let r = Report::build("x", &[], &EvidenceOptions::default());
         assert!(r.groups.is_empty() && r.reliability.icc.is_none() && r.learning.is_empty());
+    }
+
+    #[test]
+    fn ratings_give_each_metrics_agreement_and_a_tool_is_named() {
+        let mut v = cohort();
+        for a in v.iter_mut() {
+            a.rating = a.score.map(|s| 10.0 + 10.0 * s);
+            a.metrics.push(("time_s@left".into(), a.metrics[0].1));
+        }
+        let r = Report::build("x", &v, &EvidenceOptions::default());
+        let rho = |key: &str| {
+            r.concurrent
+                .iter()
+                .find(|c| c.key == key)
+                .and_then(|c| c.rho)
+        };
+        // the time falls as the score (the rating) rises across the groups (not within the
+        // experts: trainee 2 scores higher and takes longer than trainee 1)
+        assert!(rho("time_s").unwrap() < -0.7, "{:?}", r.concurrent);
+        assert_eq!(rho("time_s@left"), rho("time_s"));
+        let left = r.metrics.iter().find(|m| m.key == "time_s@left").unwrap();
+        assert_eq!(
+            (left.label.as_str(), left.better),
+            ("Task time · left", Better::LowerIsBetter)
+        );
+        // without ratings, no agreement is reported
+        assert!(
+            Report::build("x", &cohort(), &EvidenceOptions::default())
+                .concurrent
+                .is_empty()
+        );
     }
 
     #[test]
