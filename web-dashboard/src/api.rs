@@ -15,6 +15,7 @@
 //! | `GET /api/exercises` | exercises with their thresholds |
 //! | `GET /api/exercises/{id}` | an exercise with its expert plan and thresholds |
 //! | `GET /api/curricula` | curricula with their modules |
+//! | `GET /api/exercises/{id}/evidence` | instructors/admins: the exercise's validity evidence (`?reference=exclude` leaves the reference attempts out) and its adopted pass mark; trainees: 404 |
 //!
 //! Times are nanoseconds since the Unix epoch (UTC); values are SI (m, s, N).
 
@@ -49,7 +50,31 @@ pub fn router() -> Router<AppState> {
         .route("/exercises", get(exercises))
         .route("/exercises/{id}", get(exercise))
         .route("/curricula", get(curricula))
+        .route("/exercises/{id}/evidence", get(evidence))
         .fallback(|| async { ApiError(AppError::NotFound) })
+}
+
+/// An exercise's validity evidence with its adopted pass mark.
+#[derive(Debug, Serialize)]
+struct Evidence {
+    report: cutlab_assessor::evidence::Report,
+    pass_mark: Option<cutlab_assessor::store::PassMark>,
+}
+
+async fn evidence(
+    State(state): State<AppState>,
+    user: CurrentUser,
+    Id(id): Id,
+    axum::extract::RawQuery(query): axum::extract::RawQuery,
+) -> ApiResult<Evidence> {
+    if !user.is_staff() {
+        return Err(ApiError(AppError::NotFound));
+    }
+    let include = crate::pages::evidence::include_reference(query.as_deref());
+    Ok(Json(Evidence {
+        report: state.store().evidence(id, include).await?,
+        pass_mark: state.store().pass_mark(id).await?,
+    }))
 }
 
 async fn me(user: CurrentUser) -> Json<User> {

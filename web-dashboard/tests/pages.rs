@@ -1248,6 +1248,16 @@ async fn the_evidence_page_compares_groups_and_an_instructor_adopts_its_pass_mar
     let r = send(&e.app, post_form(&adopt, Some(&kim.cookie), &[])).await;
     assert_ne!(r.status(), StatusCode::SEE_OTHER);
     assert_eq!(count(&e.store, "pass_marks").await, before);
+    // the same as JSON for staff; 404 for a trainee
+    let api = format!("/api/exercises/{exercise}/evidence");
+    let json: serde_json::Value =
+        serde_json::from_str(&body_text(send(&e.app, get(&api, Some(&kim))).await).await).unwrap();
+    assert_eq!(json["report"]["higher"], "expert");
+    assert_eq!(json["pass_mark"]["adopted_by"], "dr-kim");
+    assert_eq!(
+        send(&e.app, get(&api, Some(&ana))).await.status(),
+        StatusCode::NOT_FOUND
+    );
     // the reference attempts left out: the page says so
     let page = body_text(
         send(
@@ -1262,70 +1272,37 @@ async fn the_evidence_page_compares_groups_and_an_instructor_adopts_its_pass_mar
 
 #[tokio::test]
 async fn an_administrator_records_a_trainees_experience() {
+    use cutlab_assessor::evidence::Experience;
     let e = env().await;
     let ben = user_id(&e.store, "ben").await;
     let path = format!("/trainees/{ben}/experience");
+    let record = |who: &Session, level: &str| {
+        post_form(
+            &path,
+            Some(&who.cookie),
+            &[("csrf", &who.csrf), ("level", level)],
+        )
+    };
     let admin = login(&e.app, "admin", "admin-demo").await;
     let page = body_text(send(&e.app, get(&format!("/trainees/{ben}"), Some(&admin))).await).await;
     assert!(page.contains("id=\"set-experience\""), "{page}");
-    let r = send(
-        &e.app,
-        post_form(
-            &path,
-            Some(&admin.cookie),
-            &[("csrf", &admin.csrf), ("level", "intermediate")],
-        ),
-    )
-    .await;
+    let r = send(&e.app, record(&admin, "intermediate")).await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
-    use cutlab_assessor::evidence::Experience;
-    assert_eq!(
-        e.store.experience(ben).await.unwrap(),
-        Some(Experience::Intermediate)
-    );
+    let intermediate = Some(Experience::Intermediate);
+    assert_eq!(e.store.experience(ben).await.unwrap(), intermediate);
     // a bad level: 400, unchanged
-    let r = send(
-        &e.app,
-        post_form(
-            &path,
-            Some(&admin.cookie),
-            &[("csrf", &admin.csrf), ("level", "surgeon")],
-        ),
-    )
-    .await;
+    let r = send(&e.app, record(&admin, "surgeon")).await;
     assert_eq!(r.status(), StatusCode::BAD_REQUEST);
-    assert_eq!(
-        e.store.experience(ben).await.unwrap(),
-        Some(Experience::Intermediate)
-    );
+    assert_eq!(e.store.experience(ben).await.unwrap(), intermediate);
     // an instructor sees the level but does not set it
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let page = body_text(send(&e.app, get(&format!("/trainees/{ben}"), Some(&kim))).await).await;
     assert!(page.contains("Experience: intermediate") && !page.contains("set-experience"));
-    let r = send(
-        &e.app,
-        post_form(
-            &path,
-            Some(&kim.cookie),
-            &[("csrf", &kim.csrf), ("level", "expert")],
-        ),
-    )
-    .await;
+    let r = send(&e.app, record(&kim, "expert")).await;
     assert_eq!(r.status(), StatusCode::FORBIDDEN);
-    assert_eq!(
-        e.store.experience(ben).await.unwrap(),
-        Some(Experience::Intermediate)
-    );
+    assert_eq!(e.store.experience(ben).await.unwrap(), intermediate);
     // none clears it
-    let r = send(
-        &e.app,
-        post_form(
-            &path,
-            Some(&admin.cookie),
-            &[("csrf", &admin.csrf), ("level", "none")],
-        ),
-    )
-    .await;
+    let r = send(&e.app, record(&admin, "none")).await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER);
     assert_eq!(e.store.experience(ben).await.unwrap(), None);
 }

@@ -30,7 +30,7 @@ pub fn router() -> Router<AppState> {
 }
 
 /// `?reference=exclude` leaves the reference attempts out.
-fn include_reference(query: Option<&str>) -> bool {
+pub(crate) fn include_reference(query: Option<&str>) -> bool {
     !query.is_some_and(|q| q.split('&').any(|p| p == "reference=exclude"))
 }
 
