@@ -84,6 +84,10 @@ pub enum ImportCommand {
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
+        /// Instead of the report: how well composites of the metrics predict the ratings of
+        /// subjects they were not fitted on (leave one subject out).
+        #[arg(long)]
+        predict: bool,
     },
 }
 
@@ -186,8 +190,8 @@ pub fn run(db: Option<&DbLocation>, command: AssessCommand) -> anyhow::Result<()
     match command {
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json),
         AssessCommand::Import {
-            command: ImportCommand::Kinematics { dir, json },
-        } => crate::kinematics::run(&dir, json),
+            command: ImportCommand::Kinematics { dir, json, predict },
+        } => crate::kinematics::run(&dir, json, predict),
         command => {
             let location = default_db(db);
             let rt = tokio::runtime::Builder::new_current_thread()
@@ -229,8 +233,8 @@ async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()>
         }
         AssessCommand::MotionMetrics { poses, json } => crate::motion_metrics::run(&poses, json)?,
         AssessCommand::Import {
-            command: ImportCommand::Kinematics { dir, json },
-        } => crate::kinematics::run(&dir, json)?,
+            command: ImportCommand::Kinematics { dir, json, predict },
+        } => crate::kinematics::run(&dir, json, predict)?,
         AssessCommand::User { command } => user(store, command).await?,
         AssessCommand::Cohort { command } => cohort(store, command).await?,
         AssessCommand::Evidence(args) => crate::evidence_cli::run(store, args).await?,

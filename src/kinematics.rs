@@ -16,6 +16,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use cutlab_assessor::evidence::predict::{Composite, Prediction, leave_one_subject_out};
 use cutlab_assessor::evidence::{EvidenceAttempt, EvidenceOptions, Experience, Report};
 use cutlab_assessor::metrics::path::{PathParams, path};
 
@@ -165,9 +166,59 @@ fn trial_metrics(folder: &Path, trial: &str) -> anyhow::Result<Vec<(String, f64)
     Ok(out)
 }
 
+/// The metric families whose composites `--predict` tries: each a name and which `KEY@TOOL`
+/// keys it takes.
+const FAMILIES: [(&str, fn(&str) -> bool); 2] = [
+    ("task time", |k| k.starts_with("time_s@")),
+    ("path metrics of each tool", |_| true),
+];
+
+/// Leave-one-subject-out predictions of the ratings, per family and composite.
+pub fn predictions(attempts: &[EvidenceAttempt]) -> Vec<Prediction> {
+    let mut keys: Vec<String> = attempts
+        .iter()
+        .flat_map(|a| a.metrics.iter().map(|(k, _)| k.clone()))
+        .collect();
+    keys.sort();
+    keys.dedup();
+    FAMILIES
+        .iter()
+        .flat_map(|(name, take)| {
+            let keys: Vec<String> = keys.iter().filter(|k| take(k)).cloned().collect();
+            [Composite::MeanZ, Composite::Ridge]
+                .map(|c| leave_one_subject_out(attempts, name, &keys, c))
+        })
+        .collect()
+}
+
 /// `cutlab import kinematics DIR`.
-pub fn run(dir: &Path, json: bool) -> anyhow::Result<()> {
+pub fn run(dir: &Path, json: bool, predict: bool) -> anyhow::Result<()> {
     let attempts = load(dir)?;
+    if predict {
+        let p = predictions(&attempts);
+        if json {
+            println!("{}", serde_json::to_string_pretty(&p)?);
+        } else {
+            println!(
+                "Leave one subject out: Spearman's rho of the out-of-fold predictions with the rating"
+            );
+            for p in &p {
+                let rho = p.rho.map_or("-".into(), |r| format!("{r:+.2}"));
+                println!(
+                    "  {:<28} {:<7} {:>3} metrics  {rho:>6}  ({} trials, {} subjects)",
+                    p.family,
+                    match p.composite {
+                        Composite::MeanZ => "mean-z",
+                        Composite::Ridge => "ridge",
+                    },
+                    p.metrics,
+                    p.n,
+                    p.subjects
+                );
+            }
+        }
+        return Ok(());
+    }
     let ratings: Vec<f64> = attempts.iter().filter_map(|a| a.rating).collect();
     let span = ratings.iter().fold(f64::NEG_INFINITY, |a, b| a.max(*b))
         - ratings.iter().fold(f64::INFINITY, |a, b| a.min(*b));

@@ -319,6 +319,31 @@ fn import_kinematics_reports_groups_and_the_ratings_agreement() {
         .as_f64()
         .unwrap();
     assert!(rho < -0.7, "task time against the rating: {rho}");
+    // leave one subject out: the task time predicts the unseen subjects' ratings
+    let (ok, out, err) = cutlab(
+        &[
+            "import",
+            "kinematics",
+            dir.to_str().unwrap(),
+            "--predict",
+            "--json",
+        ],
+        None,
+    );
+    assert!(ok, "{err}");
+    let p: serde_json::Value = serde_json::from_str(&out).expect("json");
+    let time = p
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["family"] == "task time")
+        .unwrap();
+    assert_eq!(
+        (time["subjects"].as_u64(), time["n"].as_u64()),
+        (Some(6), Some(12))
+    );
+    // (a subject's two trials take the same time but are rated 1 apart: ties, so not 1)
+    assert!(time["rho"].as_f64().unwrap() > 0.6, "{time}");
     // the text report says the same for people
     let (ok, text, err) = cutlab(&["import", "kinematics", dir.to_str().unwrap()], None);
     assert!(ok, "{err}");

@@ -8,6 +8,7 @@
 //! [`crate::Store::evidence_attempts`] or imported kinematics) and says, for each figure it
 //! cannot compute, why. The definitions are in `docs/guide/evidence.md`.
 
+pub mod predict;
 pub mod report;
 pub mod stats;
 

@@ -324,7 +324,7 @@ fn metric_keys(used: &[&EvidenceAttempt]) -> Vec<String> {
 
 /// A key's label, SI unit and direction from the catalogue; `KEY@TOOL` as `KEY`'s, the
 /// tool named; an unknown key as itself, two-sided.
-fn definition(key: &str) -> (String, &'static str, Better) {
+pub(crate) fn definition(key: &str) -> (String, &'static str, Better) {
     let (base, tool) = key
         .split_once('@')
         .map_or((key, None), |(b, t)| (b, Some(t)));
