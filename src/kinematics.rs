@@ -8,7 +8,8 @@
 //! - `DIR/trials/TRIAL/TOOL.csv`: each tool's poses in the `motion-metrics` layout
 //!   (`t_s, x_m, y_m, z_m, qw, qx, qy, qz`, the time increasing).
 //!
-//! Every tool's path metrics (`KEY@TOOL`) are computed; the trials become attempts of their
+//! Every tool's path metrics, depth path and speed entropy (`KEY@TOOL`) are computed, and
+//! with two tools the bimanual measures; the trials become attempts of their
 //! subject (in the order of their names), the rating their score. Nothing is written to the
 //! database: the trials have no plan or recording to be attempts of an exercise.
 
@@ -18,6 +19,7 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use cutlab_assessor::evidence::predict::{Composite, Prediction, leave_one_subject_out};
 use cutlab_assessor::evidence::{EvidenceAttempt, EvidenceOptions, Experience, Report};
+use cutlab_assessor::metrics::motion;
 use cutlab_assessor::metrics::path::{PathParams, path};
 
 use crate::motion_metrics::parse_poses;
@@ -147,6 +149,7 @@ fn trial_metrics(folder: &Path, trial: &str) -> anyhow::Result<Vec<(String, f64)
         bail!("{}: no tool's poses (TOOL.csv)", folder.display());
     }
     let mut out = Vec::new();
+    let mut tools = Vec::new();
     for file in files {
         let tool = file
             .file_stem()
@@ -157,10 +160,27 @@ fn trial_metrics(folder: &Path, trial: &str) -> anyhow::Result<Vec<(String, f64)
         let poses = parse_poses(&text, &file.display().to_string())?;
         let m =
             path(&poses, &PathParams::default()).with_context(|| format!("{}", file.display()))?;
+        let extra = [
+            ("depth_path_m", Some(motion::depth_path_m(&poses))),
+            ("speed_apen", motion::speed_apen(&poses)),
+        ];
         out.extend(
             m.keyed()
                 .into_iter()
+                .chain(extra)
                 .filter_map(|(k, v)| Some((format!("{k}@{tool}"), v?))),
+        );
+        tools.push(poses);
+    }
+    if let [a, b] = &tools[..] {
+        let (ratio, corr) = motion::bimanual(a, b);
+        let both = [
+            ("bimanual_path_ratio", ratio),
+            ("bimanual_speed_correlation", corr),
+        ];
+        out.extend(
+            both.into_iter()
+                .filter_map(|(k, v)| Some((k.to_owned(), v?))),
         );
     }
     Ok(out)
@@ -168,9 +188,19 @@ fn trial_metrics(folder: &Path, trial: &str) -> anyhow::Result<Vec<(String, f64)
 
 /// The metric families whose composites `--predict` tries: each a name and which `KEY@TOOL`
 /// keys it takes.
-const FAMILIES: [(&str, fn(&str) -> bool); 2] = [
+/// Which `KEY@TOOL` keys a family takes.
+type Takes = fn(&str) -> bool;
+
+const FAMILIES: [(&str, Takes); 4] = [
     ("task time", |k| k.starts_with("time_s@")),
-    ("path metrics of each tool", |_| true),
+    ("path metrics of each tool", |k| {
+        k.contains('@')
+            && !motion::METRICS
+                .iter()
+                .any(|m| k.starts_with(&format!("{}@", m.key)))
+    }),
+    ("+ depth path, speed entropy", |k| k.contains('@')),
+    ("+ bimanual", |_| true),
 ];
 
 /// Leave-one-subject-out predictions of the ratings, per family and composite.

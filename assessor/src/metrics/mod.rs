@@ -12,6 +12,7 @@
 
 pub mod field;
 pub mod incision;
+pub mod motion;
 pub mod path;
 pub mod pattern;
 pub mod safety;
@@ -427,9 +428,13 @@ const fn m(
 }
 
 /// Every metric of every kind of exercise, in report order: [`METRICS`] (the incision's and
-/// those every motion has), then [`pattern::METRICS`].
+/// those every motion has), then [`pattern::METRICS`], then the motion measures of imported
+/// kinematics ([`motion::METRICS`]).
 pub fn all() -> impl Iterator<Item = &'static Metric> {
-    METRICS.iter().chain(pattern::METRICS)
+    METRICS
+        .iter()
+        .chain(pattern::METRICS)
+        .chain(motion::METRICS)
 }
 
 /// The definition of a metric key.
