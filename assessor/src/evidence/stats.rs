@@ -306,19 +306,27 @@ pub fn ranks(v: &[f64]) -> Vec<f64> {
     r
 }
 
-/// Spearman's rho: Pearson's correlation of the ranks (ties at their mean rank); `None`
-/// below three pairs, for unequal lengths or no spread.
-pub fn spearman(x: &[f64], y: &[f64]) -> Option<f64> {
+/// Pearson's correlation; `None` below three pairs, for unequal lengths, a non-finite value
+/// or no spread.
+pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
     if x.len() != y.len() || x.len() < 3 || x.iter().chain(y).any(|v| !v.is_finite()) {
         return None;
     }
-    let (rx, ry) = (ranks(x), ranks(y));
     let n = x.len() as f64;
-    let (mx, my) = (rx.iter().sum::<f64>() / n, ry.iter().sum::<f64>() / n);
-    let sxy: f64 = rx.iter().zip(&ry).map(|(a, b)| (a - mx) * (b - my)).sum();
-    let sxx: f64 = rx.iter().map(|a| (a - mx).powi(2)).sum();
-    let syy: f64 = ry.iter().map(|b| (b - my).powi(2)).sum();
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let sxx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
+    let syy: f64 = y.iter().map(|b| (b - my).powi(2)).sum();
     (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
+}
+
+/// Spearman's rho: Pearson's correlation of the ranks (ties at their mean rank); `None`
+/// below three pairs, for unequal lengths or no spread.
+pub fn spearman(x: &[f64], y: &[f64]) -> Option<f64> {
+    if x.len() != y.len() || x.iter().chain(y).any(|v| !v.is_finite()) {
+        return None;
+    }
+    pearson(&ranks(x), &ranks(y))
 }
 
 #[cfg(test)]

@@ -126,19 +126,7 @@ pub fn bimanual(a: &[PoseSample], b: &[PoseSample]) -> (Option<f64>, Option<f64>
     let (t0, t1) = (fa.t_s.max(fb.t_s), la.t_s.min(lb.t_s));
     let (va, vb) = (speed(a, t0, t1), speed(b, t0, t1));
     let n = va.len().min(vb.len());
-    (ratio, pearson(&va[..n], &vb[..n]))
-}
-
-fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
-    if x.len() < 3 {
-        return None;
-    }
-    let n = x.len() as f64;
-    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    let sxx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
-    let syy: f64 = y.iter().map(|b| (b - my).powi(2)).sum();
-    (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
+    (ratio, crate::evidence::stats::pearson(&va[..n], &vb[..n]))
 }
 
 #[cfg(test)]
