@@ -34,6 +34,9 @@ pub enum AssessError {
     #[error("{path}: {error}")]
     Io { path: String, error: std::io::Error },
     /// JSON (de)serialisation of stored values.
+    #[error("background task: {0}")]
+    Task(String),
+
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
 }

@@ -102,8 +102,8 @@ impl Store {
             .collect()
     }
 
-    /// The evidence report of an exercise; two-sided metrics are measured from the
-    /// thresholds' expert means.
+    /// The evidence report of an exercise (built on a blocking thread); two-sided metrics are
+    /// measured from the thresholds' expert means.
     pub async fn evidence(&self, exercise_id: i64, include_reference: bool) -> Result<Report> {
         let exercise = self.get_exercise(exercise_id).await?;
         let thresholds = self.thresholds(exercise_id).await?;
@@ -118,7 +118,10 @@ impl Store {
             ..EvidenceOptions::default()
         };
         let attempts = self.evidence_attempts(exercise_id).await?;
-        Ok(Report::build(&exercise.name, &attempts, &options))
+        // the bootstrap takes a while on many attempts: off the async threads
+        tokio::task::spawn_blocking(move || Report::build(&exercise.name, &attempts, &options))
+            .await
+            .map_err(|e| AssessError::Task(format!("building the evidence report: {e}")))
     }
 
     /// Adopts the contrasting-groups pass mark of `finding` for the exercise, recorded with
