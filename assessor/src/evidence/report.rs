@@ -415,13 +415,7 @@ impl Contrast<'_> {
                 Some("needs attempts by people of two experience levels".into()),
             );
         };
-        let of = |level| {
-            groups
-                .iter()
-                .find(|g| g.level == level)
-                .map_or(&[][..], |g| g.values.as_slice())
-        };
-        let (vh, vl) = (of(h), of(l));
+        let (vh, vl) = (values_of(groups, Some(h)), values_of(groups, Some(l)));
         for (level, v) in [(h, vh), (l, vl)] {
             if v.len() < 2 {
                 return (
@@ -472,6 +466,14 @@ impl Contrast<'_> {
         };
         (Some(comparison), None)
     }
+}
+
+/// The values of the group at `level` (none when it has no values or `level` is `None`).
+fn values_of(groups: &[GroupValues], level: Option<Experience>) -> &[f64] {
+    groups
+        .iter()
+        .find(|g| Some(g.level) == level)
+        .map_or(&[][..], |g| g.values.as_slice())
 }
 
 /// Each trainee's attempts in order (`used` is sorted by trainee, then time).
@@ -545,14 +547,10 @@ fn pass_mark(
     higher: Option<Experience>,
     lower: Option<Experience>,
 ) -> PassMarkFinding {
-    let of = |level: Option<Experience>| {
-        score
-            .groups
-            .iter()
-            .find(|g| Some(g.level) == level)
-            .map_or(&[][..], |g| g.values.as_slice())
-    };
-    let (vh, vl) = (of(higher), of(lower));
+    let (vh, vl) = (
+        values_of(&score.groups, higher),
+        values_of(&score.groups, lower),
+    );
     let cut = stats::contrasting_groups(vh, vl);
     let why_not = match (higher, cut) {
         (_, Some(_)) => None,

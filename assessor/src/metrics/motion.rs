@@ -107,15 +107,9 @@ pub fn speed_apen(poses: &[PoseSample]) -> Option<f64> {
 /// their speeds over their common time. `None` for what cannot be measured (a tool that did
 /// not move, no common time, no speed spread).
 pub fn bimanual(a: &[PoseSample], b: &[PoseSample]) -> (Option<f64>, Option<f64>) {
-    let path = |p: &[PoseSample]| -> f64 {
-        p.windows(2)
-            .map(|w| {
-                (0..3)
-                    .map(|k| (w[1].tip_m[k] - w[0].tip_m[k]).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .sum()
+    let path = |p: &[PoseSample]| {
+        let tips: Vec<nalgebra::Point3<f64>> = p.iter().map(|s| s.tip_m.into()).collect();
+        crate::geom::polyline_length(&tips)
     };
     let (pa, pb) = (path(a), path(b));
     let ratio = (pa.max(pb) > 0.0).then(|| pa.min(pb) / pa.max(pb));
