@@ -228,8 +228,23 @@ async fn browse(port: u16, driver: &browser::Driver, attempt: i64, profile: &Pat
             }
             tokio::time::sleep(Duration::from_millis(500)).await;
         }
-        tokio::time::sleep(Duration::from_secs(3)).await;
+        // the viewer plays from the start as the file loads (at 1x, slower on a loaded
+        // machine): the incision is whole once the time cursor reaches the recording's end
         c.enter_parent_frame().await?;
+        let deadline = Instant::now() + Duration::from_secs(120);
+        while c
+            .execute("const h = document.getElementById('replay').contentWindow._handle, id = h && h.get_active_recording_id(); if (!id) return false; const r = h.get_timeline_time_range(id, 'sim_time'); return !!r && h.get_time_for_timeline(id, 'sim_time') >= r.max", vec![])
+            .await?
+            .as_bool()
+            != Some(true)
+        {
+            if Instant::now() > deadline {
+                std::fs::write(shots.join("replay-end-timeout.png"), c.screenshot().await?).expect("screenshot");
+                panic!("the viewer never played to the recording's end");
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
         let shot = c.screenshot().await?;
         std::fs::write(shots.join("replay.png"), &shot).expect("screenshot");
         let frame = c
