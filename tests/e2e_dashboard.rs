@@ -945,9 +945,6 @@ fn pattern_at_the_station(tag: &str, interrupt: bool) -> Option<String> {
 /// piece is cut free and the careful circle still passes. Screenshot:
 /// `station-pattern-reloaded-freed.png`.
 #[test]
-#[ignore = "the attempt survives, but the piece is not cut free: the stroke after the reload \
-            starts 2.8 mm past where the first ended and passes 0.3 mm beside the first \
-            stroke's start, and neither gap is cut (issue 42); run with --ignored"]
 fn pattern_cutting_survives_a_tab_switch_and_a_reload_in_headless_chromium() {
     let Some(summary) = pattern_at_the_station("pattern-reloaded", true) else {
         return;
