@@ -522,8 +522,9 @@ fn a_gap_between_strokes_holds_the_disc_until_a_stroke_crosses_it() {
     let pieces = checked_pieces(&sim, mass0, volume0);
     assert!(freed.is_empty(), "{}", describe(&pieces));
     assert_eq!(pieces.len(), 1, "{}", describe(&pieces));
-    // (one from 190 to 220 degrees still leaves a tetrahedron whole at 205: see
-    // docs/design/cutting.md, "Strokes that rejoin")
+    // (the disc, held by the bridge alone, has moved towards it: a stroke on the mark from
+    // 190 to 220 degrees passes inside the bridge; docs/design/cutting.md, "Strokes that
+    // rejoin")
     let freed = strokes_of_one_cutter(&mut sim, &[arc(r, deg(185.0), deg(40.0), 0.0005)]);
     let pieces = checked_pieces(&sim, mass0, volume0);
     assert_eq!(freed.len(), 1, "{}", describe(&pieces));
