@@ -7,6 +7,10 @@
 //! hand model through the pointer device) set the pointer's thresholds; other steady hands
 //! pass them and sloppy ones fail.
 //!
+//! Pattern cutting (issue 44): experts pass FLS's rule, novices fail, the MISTELS scores in
+//! the order of skill; the curved incision on the CT's body wall: experts pass, novices fail,
+//! the scores in the order of skill.
+//!
 //! The sessions run on the built-in `chest-wall` scene at 3,000 tets on the virtual clock,
 //! two at a time.
 
@@ -17,6 +21,8 @@ const SEEDS: std::ops::RangeInclusive<u64> = 1..=10;
 const MIN_TETS: &str = "3000";
 /// Seeds per level of the pattern cutting run (each session cuts the sheet at its own size).
 const PATTERN_SEEDS: u64 = 4;
+/// Seeds per level of the body wall's run (53,000 tets: 20-45 s a session here).
+const BODY_WALL_SEEDS: u64 = 3;
 
 fn cutlab(db: &Path, args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
@@ -42,6 +48,8 @@ enum Exercise {
     Incision,
     /// `pattern-cutting` on the sheet at its own size, recorded as an attempt of `trainee`.
     Pattern,
+    /// `body-wall-incision` on the CT's body wall at a 4 ms step (the station's `auto` here).
+    BodyWall,
 }
 
 impl Exercise {
@@ -62,6 +70,20 @@ impl Exercise {
                 let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
                 let mut a = strings(&["--exercise", "pattern-cutting", "--duration", duration]);
                 a.extend(["--trainee".to_owned(), trainee]);
+                a
+            }
+            // the expert cuts the 100 mm arc in about 6 s, the intermediate in 9, the novice
+            // in 16
+            Exercise::BodyWall => {
+                let duration = match skill {
+                    "expert" => "10",
+                    "intermediate" => "16",
+                    _ => "25",
+                };
+                let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
+                let mut a = strings(&["--exercise", "body-wall-incision", "--duration", duration]);
+                a.extend(strings(&["--time-step-ms", "4", "--trainee"]));
+                a.push(trainee);
                 a
             }
         }
@@ -287,5 +309,55 @@ fn pattern_cutting_experts_pass_fls_and_novices_fail() {
     );
     let worst_expert = expert.iter().map(|e| e.2).fold(f64::INFINITY, f64::min);
     assert!(novice.iter().all(|n| n.2 < worst_expert));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The curved incision on a patient (the CT's body wall): every expert passes, every novice
+/// fails, the mean scores go expert > intermediate > novice and every novice scores below
+/// every expert.
+#[test]
+fn body_wall_experts_pass_the_curved_incision_and_novices_fail() {
+    let dir =
+        std::env::temp_dir().join(format!("cutlab-validity-body-wall-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let db = dir.join("validity.db");
+    let score = |skill: &str| -> Vec<(f64, bool)> {
+        record_seeds(&db, &dir, skill, 1..=BODY_WALL_SEEDS, Exercise::BodyWall)
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let v = assess_at(&db, f, "body-wall-incision", &format!("{skill}-{k}"), false);
+                (
+                    v["score"].as_f64().expect("score"),
+                    v["pass"].as_bool().expect("pass"),
+                )
+            })
+            .collect()
+    };
+    let (expert, intermediate, novice) = (score("expert"), score("intermediate"), score("novice"));
+    eprintln!(
+        "(score, pass): expert {expert:.2?}\nintermediate {intermediate:.2?}\nnovice {novice:.2?}"
+    );
+    assert!(
+        expert.iter().all(|e| e.1),
+        "every expert passes: {expert:?}"
+    );
+    assert!(
+        novice.iter().all(|n| !n.1),
+        "every novice fails: {novice:?}"
+    );
+    let mean = |v: &[(f64, bool)]| v.iter().map(|x| x.0).sum::<f64>() / v.len() as f64;
+    assert!(
+        mean(&expert) > mean(&intermediate) && mean(&intermediate) > mean(&novice),
+        "mean scores {:.2} > {:.2} > {:.2}",
+        mean(&expert),
+        mean(&intermediate),
+        mean(&novice)
+    );
+    let worst_expert = expert.iter().map(|e| e.0).fold(f64::INFINITY, f64::min);
+    assert!(
+        novice.iter().all(|n| n.0 < worst_expert),
+        "{novice:?} below {worst_expert}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -22,7 +22,7 @@ use crate::input::AttemptData;
 use crate::metrics::{Metric, MetricSet};
 use crate::proficiency::Threshold;
 
-pub use incision::{CHEST_WALL_PLAN_TOML, IncisionPlan};
+pub use incision::{BODY_WALL_PLAN_TOML, CHEST_WALL_PLAN_TOML, IncisionPlan};
 pub use pattern::{PATTERN_PLAN_TOML, PatternPlan};
 
 /// The kinds of exercise.
@@ -223,6 +223,11 @@ impl ExercisePlan {
     /// The built-in plan of `chest-wall-incision`.
     pub fn chest_wall() -> Result<Self> {
         IncisionPlan::chest_wall().map(Self::from)
+    }
+
+    /// The built-in plan of `body-wall-incision`.
+    pub fn body_wall() -> Result<Self> {
+        IncisionPlan::body_wall().map(Self::from)
     }
 
     /// Parses a plan from a JSON value: its `kind` (default `incision`) picks the type, which

@@ -1,6 +1,6 @@
 //! The built-in exercises, always present so `cutlab assess` works on a fresh database:
-//! `chest-wall-incision` and `pattern-cutting`, and the curriculum that orders them,
-//! `cutting-basics` (with progression).
+//! `chest-wall-incision`, `pattern-cutting` and `body-wall-incision`, and the curriculum that
+//! orders them, `cutting-basics` (with progression).
 
 use super::{CUTTING_BASICS, Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
@@ -14,6 +14,9 @@ pub const BUILTIN_SCENE: &str = "chest-wall";
 
 /// The built-in pattern cutting exercise's name.
 pub const PATTERN_EXERCISE: &str = "pattern-cutting";
+
+/// The built-in curved incision on the CT's body wall: its name.
+pub const BODY_WALL_EXERCISE: &str = "body-wall-incision";
 
 impl Store {
     /// Inserts the built-in exercises if missing (safe when several processes do it at once);
@@ -35,8 +38,20 @@ impl Store {
                 &ExercisePlan::Pattern(PatternPlan::builtin()?),
             )
             .await?;
-        self.ensure_cutting_basics(&[("Incision", &incision), ("Pattern cutting", &pattern)])
+        let body_wall = self
+            .ensure_exercise(
+                BODY_WALL_EXERCISE,
+                "body-wall",
+                "A curved transverse incision of 100 mm on a patient's abdominal wall (from a CT), 8 mm deep into the fat",
+                &ExercisePlan::body_wall()?,
+            )
             .await?;
+        self.ensure_cutting_basics(&[
+            ("Incision", &incision),
+            ("Pattern cutting", &pattern),
+            ("Curved incision on a patient", &body_wall),
+        ])
+        .await?;
         Ok(incision)
     }
 

@@ -4,7 +4,7 @@
 
 mod plan;
 
-pub use plan::{CHEST_WALL_PLAN_TOML, IncisionPlan};
+pub use plan::{BODY_WALL_PLAN_TOML, CHEST_WALL_PLAN_TOML, IncisionPlan};
 
 use super::{Drawing, ExerciseKind, ExercisePlan, FormField, HandLine, PlanKey};
 use crate::error::Result;

@@ -73,6 +73,10 @@ fn default_force_limit() -> f64 {
 /// The built-in `chest-wall-incision` plan (TOML, embedded).
 pub const CHEST_WALL_PLAN_TOML: &str = include_str!("../../../examples/plan.toml");
 
+/// The built-in `body-wall-incision` plan (TOML, embedded): a curved 100 mm incision on the
+/// CT's body wall.
+pub const BODY_WALL_PLAN_TOML: &str = include_str!("../../../examples/body-wall-plan.toml");
+
 impl IncisionPlan {
     /// Parses TOML (an untagged plan or one of kind `incision`).
     pub fn from_toml(text: &str) -> Result<Self> {
@@ -87,6 +91,11 @@ impl IncisionPlan {
     /// The built-in plan of `chest-wall-incision`.
     pub fn chest_wall() -> Result<Self> {
         Self::from_toml(CHEST_WALL_PLAN_TOML)
+    }
+
+    /// The built-in plan of `body-wall-incision`.
+    pub fn body_wall() -> Result<Self> {
+        Self::from_toml(BODY_WALL_PLAN_TOML)
     }
 
     /// Fills the defaults that depend on other fields (the polyline, the approach), normalises
