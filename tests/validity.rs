@@ -21,7 +21,7 @@ const SEEDS: std::ops::RangeInclusive<u64> = 1..=10;
 const MIN_TETS: &str = "3000";
 /// Seeds per level of the pattern cutting run (each session cuts the sheet at its own size).
 const PATTERN_SEEDS: u64 = 4;
-/// Seeds per level of the body wall's run (53,000 tets: 20-45 s a session here).
+/// Seeds per level of the body wall's run (53,000 tets: 10-25 s a session here).
 const BODY_WALL_SEEDS: u64 = 3;
 
 fn cutlab(db: &Path, args: &[&str]) -> String {
@@ -48,7 +48,7 @@ enum Exercise {
     Incision,
     /// `pattern-cutting` on the sheet at its own size, recorded as an attempt of `trainee`.
     Pattern,
-    /// `body-wall-incision` on the CT's body wall at a 4 ms step (the station's `auto` here).
+    /// `body-wall-incision` on the CT's body wall at its scene's 10 ms step.
     BodyWall,
 }
 
@@ -82,8 +82,7 @@ impl Exercise {
                 };
                 let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
                 let mut a = strings(&["--exercise", "body-wall-incision", "--duration", duration]);
-                a.extend(strings(&["--time-step-ms", "4", "--trainee"]));
-                a.push(trainee);
+                a.extend(["--trainee".to_owned(), trainee]);
                 a
             }
         }

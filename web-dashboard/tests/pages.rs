@@ -184,7 +184,10 @@ async fn the_api_carries_the_same_data() {
         .position(|x| x["name"] == cutlab_assessor::store::BUILTIN_EXERCISE)
         .unwrap();
     assert_eq!(ana["cells"][column]["attempts"], 8);
-    assert_eq!(ana["cells"][column]["proficiency"]["standing"], "proficient");
+    assert_eq!(
+        ana["cells"][column]["proficiency"]["standing"],
+        "proficient"
+    );
     let id = ana["trainee"]["id"].as_i64().unwrap();
     let p: serde_json::Value = serde_json::from_str(
         &body_text(
