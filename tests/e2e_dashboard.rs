@@ -1111,3 +1111,89 @@ async fn mark_on_page(
     let mm = v["mm"].as_f64().expect("the mark's length");
     Ok((mark, mm))
 }
+
+/// The curved incision on a patient at the station: dr-kim opens `body-wall-incision` to ana
+/// early, she starts it in guided mode and follows the curved plan on the CT's body wall with
+/// a steady hand at a careful pace, and passes. Screenshots: `station-body-wall-mid-cut.png`,
+/// `station-body-wall-debrief.png`.
+#[test]
+fn a_curved_incision_on_the_body_wall_passes_at_the_station_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-body-wall-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let summary = runtime().block_on(body_wall(port, &driver, &tmp, &artefacts()));
+    assert!(
+        summary.starts_with("Score") && summary.contains("(pass)"),
+        "the careful curved incision passes: {summary}"
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+async fn body_wall(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path) -> String {
+    use cutlab_haptics::hand::{Gesture, Hand};
+    let base = format!("http://127.0.0.1:{port}");
+    let c = chromium(driver, &tmp.join("profile-body-wall")).await;
+    let result = async {
+        login(&c, &base, "dr-kim", "instructor-demo").await?;
+        open_early(&c, &base, "ana", "body-wall-incision").await?;
+        c.delete_all_cookies().await?;
+        login(&c, &base, "ana", "trainee-demo").await?;
+        c.goto(&format!("{base}/station")).await?;
+        c.find(Locator::Css("option[value='body-wall-incision']"))
+            .await?
+            .click()
+            .await?;
+        c.find(Locator::Css("input[value=guided]"))
+            .await?
+            .click()
+            .await?;
+        c.find(Locator::Id("start")).await?.click().await?;
+        c.wait().for_element(Locator::Id("tissue")).await?;
+        let (line, length_mm, px_per_mm) = line_on_page(&c).await?;
+        let mut hand = Hand::steady(px_per_mm, 44);
+        let rest = [line[0][0] - 140.0, line[0][1] + 170.0];
+        let mut g = hand.approach(rest, line[0]);
+        let stroke_s = length_mm / 12.0;
+        g.extend(hand.stroke(&line, stroke_s, 1.0));
+        let end = g.iter().rev().find_map(|g| match *g {
+            Gesture::Move { x, y, .. } => Some([x, y]),
+            _ => None,
+        });
+        let half = g.len() - (stroke_s * 30.0) as usize;
+        c.perform_actions(as_actions(&g[..half])).await?;
+        std::fs::write(
+            shots.join("station-body-wall-mid-cut.png"),
+            c.screenshot().await?,
+        )
+        .expect("screenshot");
+        c.perform_actions(as_actions(&g[half..])).await?;
+        let away = hand.withdraw(end.unwrap_or(line[0]), [60.0, -120.0], 0.5);
+        c.perform_actions(as_actions(&away)).await?;
+        c.wait()
+            .at_most(Duration::from_secs(240))
+            .for_element(Locator::Id("debrief-summary"))
+            .await?;
+        let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
+        c.execute(
+            "document.getElementById('debrief').scrollIntoView()",
+            vec![],
+        )
+        .await?;
+        std::fs::write(
+            shots.join("station-body-wall-debrief.png"),
+            c.screenshot().await?,
+        )
+        .expect("screenshot");
+        c.release_actions().await?;
+        Ok::<_, fantoccini::error::CmdError>(summary)
+    }
+    .await;
+    let _ = c.close().await;
+    result.expect("the body wall attempt")
+}
