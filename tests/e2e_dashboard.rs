@@ -1000,35 +1000,9 @@ async fn pattern(
         )
         .expect("screenshot");
         c.delete_all_cookies().await?;
-        login(&c, &base, "ana", "trainee-demo").await?;
-        c.goto(&format!("{base}/station")).await?;
-        c.find(Locator::Css("option[value='pattern-cutting']"))
-            .await?
-            .click()
-            .await?;
-        c.find(Locator::Css("input[value=exam]"))
-            .await?
-            .click()
-            .await?;
-        c.find(Locator::Id("start")).await?.click().await?;
-        c.wait().for_element(Locator::Id("tissue")).await?;
+        start_as_ana(&c, &base, "pattern-cutting", "exam").await?;
         pattern_cut(&c, shots, interrupt).await?;
-        c.wait()
-            .at_most(Duration::from_secs(240))
-            .for_element(Locator::Id("debrief-summary"))
-            .await?;
-        let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
-        c.execute(
-            "document.getElementById('debrief').scrollIntoView()",
-            vec![],
-        )
-        .await?;
-        std::fs::write(
-            shots.join("station-pattern-debrief.png"),
-            c.screenshot().await?,
-        )
-        .expect("screenshot");
-        Ok::<_, fantoccini::error::CmdError>(summary)
+        debrief(&c, &shots.join("station-pattern-debrief.png")).await
     }
     .await;
     let _ = c.close().await;
@@ -1143,18 +1117,7 @@ async fn body_wall(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path
         login(&c, &base, "dr-kim", "instructor-demo").await?;
         open_early(&c, &base, "ana", "body-wall-incision").await?;
         c.delete_all_cookies().await?;
-        login(&c, &base, "ana", "trainee-demo").await?;
-        c.goto(&format!("{base}/station")).await?;
-        c.find(Locator::Css("option[value='body-wall-incision']"))
-            .await?
-            .click()
-            .await?;
-        c.find(Locator::Css("input[value=guided]"))
-            .await?
-            .click()
-            .await?;
-        c.find(Locator::Id("start")).await?.click().await?;
-        c.wait().for_element(Locator::Id("tissue")).await?;
+        start_as_ana(&c, &base, "body-wall-incision", "guided").await?;
         let (line, length_mm, px_per_mm) = line_on_page(&c).await?;
         let mut hand = Hand::steady(px_per_mm, 44);
         let rest = [line[0][0] - 140.0, line[0][1] + 170.0];
@@ -1175,25 +1138,53 @@ async fn body_wall(port: u16, driver: &browser::Driver, tmp: &Path, shots: &Path
         c.perform_actions(as_actions(&g[half..])).await?;
         let away = hand.withdraw(end.unwrap_or(line[0]), [60.0, -120.0], 0.5);
         c.perform_actions(as_actions(&away)).await?;
-        c.wait()
-            .at_most(Duration::from_secs(240))
-            .for_element(Locator::Id("debrief-summary"))
-            .await?;
-        let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
-        c.execute(
-            "document.getElementById('debrief').scrollIntoView()",
-            vec![],
-        )
-        .await?;
-        std::fs::write(
-            shots.join("station-body-wall-debrief.png"),
-            c.screenshot().await?,
-        )
-        .expect("screenshot");
+        let summary = debrief(&c, &shots.join("station-body-wall-debrief.png")).await?;
         c.release_actions().await?;
         Ok::<_, fantoccini::error::CmdError>(summary)
     }
     .await;
     let _ = c.close().await;
     result.expect("the body wall attempt")
+}
+
+/// Logs ana in and starts `exercise` at the station in `mode` (`guided` or `exam`), once the
+/// page shows the tissue.
+async fn start_as_ana(
+    c: &fantoccini::Client,
+    base: &str,
+    exercise: &str,
+    mode: &str,
+) -> Result<(), fantoccini::error::CmdError> {
+    login(c, base, "ana", "trainee-demo").await?;
+    c.goto(&format!("{base}/station")).await?;
+    c.find(Locator::Css(&format!("option[value='{exercise}']")))
+        .await?
+        .click()
+        .await?;
+    c.find(Locator::Css(&format!("input[value={mode}]")))
+        .await?
+        .click()
+        .await?;
+    c.find(Locator::Id("start")).await?.click().await?;
+    c.wait().for_element(Locator::Id("tissue")).await?;
+    Ok(())
+}
+
+/// Waits for the debrief, screenshots it to `shot`, and returns its summary line.
+async fn debrief(
+    c: &fantoccini::Client,
+    shot: &Path,
+) -> Result<String, fantoccini::error::CmdError> {
+    c.wait()
+        .at_most(Duration::from_secs(240))
+        .for_element(Locator::Id("debrief-summary"))
+        .await?;
+    let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
+    c.execute(
+        "document.getElementById('debrief').scrollIntoView()",
+        vec![],
+    )
+    .await?;
+    std::fs::write(shot, c.screenshot().await?).expect("screenshot");
+    Ok(summary)
 }

@@ -9,8 +9,9 @@
 //! surface departs from its plane by no more than the snapping distance, and the stroke's
 //! earlier cut counts as on the plane within a few times that departure (see
 //! `docs/design/cutting.md`, "Strokes that turn"). A stroke that starts where the last one
-//! ended (within [`Cutter::rejoin_m`] of its last pose) continues it: the blade lifted and
-//! pressed again where it was goes on cutting the same incision ("Strokes that rejoin").
+//! ended (its tip within [`Cutter::rejoin_m`] of the edge's last pose, at any depth along
+//! it) continues it: the blade lifted and pressed again where it was goes on cutting the
+//! same incision ("Strokes that rejoin").
 
 use std::collections::VecDeque;
 
@@ -28,8 +29,8 @@ pub struct Cutter {
     /// its handle, m; it also moves aside by its width and this much (see
     /// [`super::Specimen`]).
     pub specimen_lift_m: f64,
-    /// A stroke that starts within this distance of the last pose of the stroke before
-    /// continues that one, m.
+    /// A stroke whose first tip lies within this distance of the cutting edge's last pose in
+    /// the stroke before (at any depth along the edge) continues that one, m.
     pub rejoin_m: f64,
     trail: VecDeque<Blade>,
     stroke: StrokeVertices,
@@ -99,7 +100,7 @@ impl Cutter {
     }
 
     /// Ends the current stroke (the blade left the tissue): the next pose starts a new one,
-    /// or continues this one if it is within [`Self::rejoin_m`] of this one's last.
+    /// or continues this one if its tip is within [`Self::rejoin_m`] of this one's last edge.
     pub fn end_stroke(&mut self) {
         if self.trail.is_empty() {
             return;
@@ -185,7 +186,7 @@ impl Cutter {
             && self.trail.is_empty()
             && trail
                 .back()
-                .is_some_and(|b| (blade.tip - b.tip).norm() <= self.rejoin_m)
+                .is_some_and(|b| b.distance_to_edge(&blade.tip) <= self.rejoin_m)
         {
             (self.trail, self.stroke) = (trail, stroke);
         }
