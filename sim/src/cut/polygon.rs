@@ -37,13 +37,6 @@ impl Blade {
         self.tip + self.edge_direction * self.depth_m
     }
 
-    /// How far `p` is from the cutting edge (the segment from the tip to the heel), m.
-    pub fn distance_to_edge(&self, p: &Point3) -> f64 {
-        let edge = self.heel() - self.tip;
-        let along = (p - self.tip).dot(&edge) / edge.norm_squared().max(f64::MIN_POSITIVE);
-        (p - (self.tip + edge * along.clamp(0.0, 1.0))).norm()
-    }
-
     /// True when every number is finite and the depth positive.
     pub fn is_finite(&self) -> bool {
         self.tip
