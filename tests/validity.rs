@@ -67,10 +67,7 @@ impl Exercise {
             // the expert cuts the circle free in about 8 s; a novice has not in 30 s
             Exercise::Pattern => {
                 let duration = if skill == "expert" { "12" } else { "30" };
-                let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
-                let mut a = strings(&["--exercise", "pattern-cutting", "--duration", duration]);
-                a.extend(["--trainee".to_owned(), trainee]);
-                a
+                attempt_args("pattern-cutting", duration, skill, seed)
             }
             // the expert cuts the 100 mm arc in about 6 s, the intermediate in 9, the novice
             // in 16
@@ -80,13 +77,25 @@ impl Exercise {
                     "intermediate" => "16",
                     _ => "25",
                 };
-                let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
-                let mut a = strings(&["--exercise", "body-wall-incision", "--duration", duration]);
-                a.extend(["--trainee".to_owned(), trainee]);
-                a
+                attempt_args("body-wall-incision", duration, skill, seed)
             }
         }
     }
+}
+
+/// A session of `exercise` for `duration` s, stored as an attempt of its own trainee.
+fn attempt_args(exercise: &str, duration: &str, skill: &str, seed: u64) -> Vec<String> {
+    let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
+    [
+        "--exercise",
+        exercise,
+        "--duration",
+        duration,
+        "--trainee",
+        &trainee,
+    ]
+    .map(str::to_owned)
+    .to_vec()
 }
 
 /// Records a scripted session of `skill` with `seed` into `dir/skill-seed/session.mcap`.
