@@ -9,7 +9,7 @@
 //!
 //! Pattern cutting (issue 44): experts pass FLS's rule, novices fail, the MISTELS scores in
 //! the order of skill; the curved incision on the CT's body wall: experts pass, novices fail,
-//! the scores in the order of skill.
+//! the scores in the order of skill; elliptical excision of a skin lesion likewise.
 //!
 //! The sessions run on the built-in `chest-wall` scene at 3,000 tets on the virtual clock,
 //! two at a time.
@@ -23,6 +23,8 @@ const MIN_TETS: &str = "3000";
 const PATTERN_SEEDS: u64 = 4;
 /// Seeds per level of the body wall's run (53,000 tets: 10-25 s a session here).
 const BODY_WALL_SEEDS: u64 = 3;
+/// Seeds per level of the elliptical excision's run (18,000 tets at 4 ms: 4-18 s a session).
+const EXCISION_SEEDS: u64 = 10;
 
 fn cutlab(db: &Path, args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
@@ -50,6 +52,8 @@ enum Exercise {
     Pattern,
     /// `body-wall-incision` on the CT's body wall at its scene's 10 ms step.
     BodyWall,
+    /// `elliptical-excision` on the skin block at its scene's 4 ms step.
+    Excision,
 }
 
 impl Exercise {
@@ -78,6 +82,16 @@ impl Exercise {
                     _ => "25",
                 };
                 attempt_args("body-wall-incision", duration, skill, seed)
+            }
+            // the expert incises the 90 mm outline in about 5 s after a 1.3 s approach, the
+            // intermediate in 6-8 s, the novice in 13
+            Exercise::Excision => {
+                let duration = match skill {
+                    "expert" => "12",
+                    "intermediate" => "16",
+                    _ => "25",
+                };
+                attempt_args("elliptical-excision", duration, skill, seed)
             }
         }
     }
@@ -325,16 +339,28 @@ fn pattern_cutting_experts_pass_fls_and_novices_fail() {
 /// every expert.
 #[test]
 fn body_wall_experts_pass_the_curved_incision_and_novices_fail() {
-    let dir =
-        std::env::temp_dir().join(format!("cutlab-validity-body-wall-{}", std::process::id()));
+    levels_in_order(Exercise::BodyWall, "body-wall-incision", BODY_WALL_SEEDS);
+}
+
+/// Elliptical excision of a skin lesion, ten seeds a level: the same as the body wall's.
+#[test]
+fn excision_experts_pass_and_novices_fail() {
+    levels_in_order(Exercise::Excision, "elliptical-excision", EXCISION_SEEDS);
+}
+
+/// Records `seeds` attempts of `exercise` per level and scores them at `name`: every expert
+/// passes, every novice fails, the mean scores go expert > intermediate > novice and every
+/// novice scores below every expert.
+fn levels_in_order(exercise: Exercise, name: &str, seeds: u64) {
+    let dir = std::env::temp_dir().join(format!("cutlab-validity-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let db = dir.join("validity.db");
     let score = |skill: &str| -> Vec<(f64, bool)> {
-        record_seeds(&db, &dir, skill, 1..=BODY_WALL_SEEDS, Exercise::BodyWall)
+        record_seeds(&db, &dir, skill, 1..=seeds, exercise)
             .iter()
             .enumerate()
             .map(|(k, f)| {
-                let v = assess_at(&db, f, "body-wall-incision", &format!("{skill}-{k}"), false);
+                let v = assess_at(&db, f, name, &format!("{skill}-{k}"), false);
                 (
                     v["score"].as_f64().expect("score"),
                     v["pass"].as_bool().expect("pass"),
@@ -344,7 +370,7 @@ fn body_wall_experts_pass_the_curved_incision_and_novices_fail() {
     };
     let (expert, intermediate, novice) = (score("expert"), score("intermediate"), score("novice"));
     eprintln!(
-        "(score, pass): expert {expert:.2?}\nintermediate {intermediate:.2?}\nnovice {novice:.2?}"
+        "{name} (score, pass): expert {expert:.2?}\nintermediate {intermediate:.2?}\nnovice {novice:.2?}"
     );
     assert!(
         expert.iter().all(|e| e.1),

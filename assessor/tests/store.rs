@@ -5,6 +5,7 @@
 use cutlab_assessor::metrics::{METRICS, MetricValue};
 use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds, cusum};
 use cutlab_assessor::store::CUTTING_BASICS;
+use cutlab_assessor::store::EXCISION_EXERCISE;
 use cutlab_assessor::store::{Access, AttemptStatus, BODY_WALL_EXERCISE, BUILTIN_EXERCISE};
 use cutlab_assessor::store::{DbLocation, test_postgres};
 use cutlab_assessor::store::{NewExercise, PATTERN_EXERCISE, Role, ThresholdSource};
@@ -240,8 +241,8 @@ async fn cohorts_and_curricula(store: Store) {
         store.get_curriculum(cur.id).await.expect("get").name,
         "basic incisions"
     );
-    // the three built-in plans and the other exercise's
-    assert_eq!(store.list_plans().await.expect("plans").len(), 4);
+    // the four built-in plans and the other exercise's
+    assert_eq!(store.list_plans().await.expect("plans").len(), 5);
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
 }
 
@@ -271,11 +272,15 @@ async fn progression_opens_each_exercise_after_the_one_before(store: Store) {
         .exercise_by_name(BODY_WALL_EXERCISE)
         .await
         .expect("body wall");
-    assert_eq!(order, [builtin.id, pattern.id, body_wall.id]);
+    let excision = store
+        .exercise_by_name(EXCISION_EXERCISE)
+        .await
+        .expect("excision");
+    assert_eq!(order, [builtin.id, pattern.id, excision.id, body_wall.id]);
     store.ensure_builtins().await.expect("again: nothing added");
     assert_eq!(
         store.curriculum_modules(basics.id).await.expect("m").len(),
-        3
+        4
     );
 
     // a course of our own: one-metric, then pattern cutting
@@ -408,9 +413,14 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
         .collect();
     assert_eq!(
         names,
-        [BODY_WALL_EXERCISE, BUILTIN_EXERCISE, "pattern-cutting"]
-            .map(String::from)
-            .to_vec()
+        [
+            BODY_WALL_EXERCISE,
+            BUILTIN_EXERCISE,
+            EXCISION_EXERCISE,
+            "pattern-cutting"
+        ]
+        .map(String::from)
+        .to_vec()
     );
     let pattern = store
         .exercise_by_name("pattern-cutting")
@@ -888,7 +898,7 @@ async fn open_creates_and_migrates_a_file() {
     store.ensure_builtins().await.expect("builtins");
     store.close().await;
     let again = Store::open(&path).await.expect("reopen");
-    assert_eq!(again.list_exercises().await.expect("list").len(), 3);
+    assert_eq!(again.list_exercises().await.expect("list").len(), 4);
     again.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -62,6 +62,8 @@ impl SurfaceHit {
 pub struct SurfaceCollider {
     /// Simulation vertex id of each collider vertex.
     vertex_ids: Vec<u32>,
+    /// The region of each collider vertex (see [`Self::vertex_regions`]).
+    vertex_regions: Vec<u32>,
     mesh: TriMesh,
     /// Collider positions, reused by every refit.
     scratch: Vec<PVec>,
@@ -77,6 +79,7 @@ impl SurfaceCollider {
     pub fn build(sim: &Simulation) -> Result<Self, HapticsError> {
         let mut me = Self {
             vertex_ids: Vec::new(),
+            vertex_regions: Vec::new(),
             mesh: TriMesh::new(vec![PVec::ZERO; 3], vec![[0, 1, 2]])
                 .map_err(|e| HapticsError::Surface(e.to_string()))?,
             scratch: Vec::new(),
@@ -111,6 +114,11 @@ impl SurfaceCollider {
             }
             triangles.push(t);
         }
+        self.vertex_regions = self
+            .vertex_ids
+            .iter()
+            .map(|&v| most_common_region(mesh, v))
+            .collect();
         let x = &sim.state.positions;
         let vertices: Vec<PVec> = self
             .vertex_ids
@@ -146,6 +154,12 @@ impl SurfaceCollider {
     /// The simulation particles on the surface.
     pub fn vertex_ids(&self) -> &[u32] {
         &self.vertex_ids
+    }
+
+    /// The region of each surface vertex, in the order of [`Self::vertex_ids`]: the most
+    /// common among its tetrahedra (the smallest id of a tie), what the station colours it by.
+    pub fn vertex_regions(&self) -> &[u32] {
+        &self.vertex_regions
     }
 
     /// The surface triangles, over [`Self::vertex_ids`] (outward by the right-hand rule).
@@ -279,6 +293,24 @@ impl SurfaceCollider {
         };
         (model, hit)
     }
+}
+
+/// The most common region among the tetrahedra of vertex `v` (the smallest id of a tie; 0
+/// for a vertex of none).
+fn most_common_region(mesh: &cutlab_sim::TetMesh, v: u32) -> u32 {
+    let regions = mesh.regions();
+    let mut counts: Vec<(u32, u32)> = Vec::new();
+    for &t in mesh.topology().tets_of_vertex(v) {
+        let r = regions[t as usize];
+        match counts.iter_mut().find(|(id, _)| *id == r) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((r, 1)),
+        }
+    }
+    counts
+        .into_iter()
+        .max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0)))
+        .map_or(0, |(id, _)| id)
 }
 
 #[cfg(test)]

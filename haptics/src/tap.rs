@@ -106,6 +106,8 @@ pub struct SurfaceSnapshot {
     pub vertices: Vec<Point3>,
     /// The triangles, over `vertices`.
     pub triangles: Vec<[u32; 3]>,
+    /// The region of each vertex ([`SurfaceCollider::vertex_regions`]).
+    pub regions: Vec<u32>,
 }
 
 impl SurfaceSnapshot {
@@ -120,6 +122,7 @@ impl SurfaceSnapshot {
                 .map(|&v| positions[v as usize])
                 .collect(),
             triangles: collider.triangles().to_vec(),
+            regions: collider.vertex_regions().to_vec(),
         }
     }
 }

@@ -137,6 +137,94 @@ pub fn curved_slab(
     })
 }
 
+/// One layer of a [`layered_block`], listed from the top down.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Layer {
+    /// Its thickness (m).
+    pub thickness: f64,
+    /// The region id its tetrahedra get.
+    pub region: u32,
+}
+
+/// A disc set into the top of a [`layered_block`] (a lesion in the skin): the tetrahedra whose
+/// centroids lie within `radius` of the vertical axis through `centre` and less than `depth`
+/// below the top get `region`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inclusion {
+    /// The disc's centre on the top face, `(x, y)` (m).
+    pub centre: [f64; 2],
+    /// Its radius (m).
+    pub radius: f64,
+    /// How far below the top it reaches (m).
+    pub depth: f64,
+    /// The region id its tetrahedra get.
+    pub region: u32,
+}
+
+/// The cells through each layer of a [`layered_block`] of cells `cell` across: the nearest
+/// whole number to `thickness / cell`, at least one, so the layers' interfaces lie on grid
+/// planes and no tetrahedron straddles two.
+pub fn layer_cells(layers: &[Layer], cell: f64) -> Vec<usize> {
+    layers
+        .iter()
+        .map(|l| ((l.thickness / cell).round() as usize).max(1))
+        .collect()
+}
+
+/// A block of layered tissue: `size = [x, y]` (m) centred on the origin, its top face at
+/// `z = 0` and its layers below it, top first, each its own region; cells `cell` (m) across,
+/// and [`layer_cells`] through each layer. The [`Inclusion`]s then take the tetrahedra of
+/// their discs.
+pub fn layered_block(
+    size: [f64; 2],
+    cell: f64,
+    layers: &[Layer],
+    inclusions: &[Inclusion],
+) -> Result<GeneratedMesh, MeshError> {
+    let through = layer_cells(layers, cell);
+    // the grid planes' heights, from the bottom up, and each cell row's layer
+    let mut top = -layers.iter().map(|l| l.thickness).sum::<f64>();
+    let (mut z, mut row_layer) = (vec![top], Vec::new());
+    for (l, (layer, &n)) in layers.iter().zip(&through).enumerate().rev() {
+        for i in 1..=n {
+            z.push(top + layer.thickness * i as f64 / n as f64);
+            row_layer.push(l);
+        }
+        top += layer.thickness;
+    }
+    let nz = row_layer.len();
+    let cells = GridCells {
+        nx: ((size[0] / cell).round() as usize).max(1),
+        ny: ((size[1] / cell).round() as usize).max(1),
+        nz,
+    };
+    let g = grid(cells, |u, v, w| {
+        let k = ((w * nz as f64).round() as usize).min(nz);
+        Point3::new((u - 0.5) * size[0], (v - 0.5) * size[1], z[k])
+    })?;
+    let (positions, tets) = (g.mesh.positions().to_vec(), g.mesh.tets().to_vec());
+    let regions = tets
+        .iter()
+        .map(|tet| {
+            let c = tet.iter().fold(Point3::origin(), |c, &v| {
+                c + positions[v as usize].coords / 4.0
+            });
+            let inside = |d: &Inclusion| {
+                (c.x - d.centre[0]).hypot(c.y - d.centre[1]) < d.radius && -c.z < d.depth
+            };
+            match inclusions.iter().rev().find(|d| inside(d)) {
+                Some(d) => d.region,
+                None => {
+                    let row = z.partition_point(|&h| h <= c.z).clamp(1, nz) - 1;
+                    layers[row_layer[row]].region
+                }
+            }
+        })
+        .collect();
+    let mesh = TetMesh::new(positions, tets, regions)?;
+    Ok(GeneratedMesh { mesh, ..g })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -192,5 +280,63 @@ mod tests {
         assert!(c.tet_count() >= 10_000 && c.tet_count() < 14_000, "{c:?}");
         let c = GridCells::for_tet_count([0.12, 0.08, 0.015], 200_000);
         assert!(c.tet_count() >= 200_000, "{c:?}");
+    }
+    /// Each layer's tetrahedra lie between its planes and fill its volume; the disc takes the
+    /// top layer's tetrahedra under it and none elsewhere.
+    #[test]
+    fn a_layered_block_keeps_each_layer_between_its_planes() {
+        let layers = [
+            Layer {
+                thickness: 0.002,
+                region: 1,
+            },
+            Layer {
+                thickness: 0.009,
+                region: 2,
+            },
+            Layer {
+                thickness: 0.006,
+                region: 4,
+            },
+        ];
+        let disc = Inclusion {
+            centre: [0.0, 0.0],
+            radius: 0.004,
+            depth: 0.002,
+            region: 5,
+        };
+        let g = layered_block([0.04, 0.03], 0.003, &layers, &[disc]).unwrap();
+        let mesh = &g.mesh;
+        assert!(mesh.validate().is_ok(), "{}", mesh.validate());
+        assert_eq!(layer_cells(&layers, 0.003), vec![1, 3, 2]);
+        let (lo, hi) = mesh.bounding_box();
+        assert!((hi.z - 0.0).abs() < 1e-15 && (lo.z + 0.017).abs() < 1e-15);
+        assert!((hi.x - 0.02).abs() < 1e-15 && (lo.y + 0.015).abs() < 1e-15);
+        let mut volume = std::collections::BTreeMap::<u32, f64>::new();
+        for (t, tet) in mesh.tets().iter().enumerate() {
+            let p = tet.map(|v| mesh.positions()[v as usize]);
+            let (zmin, zmax) = p
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), q| (a.min(q.z), b.max(q.z)));
+            let (top, bottom) = match mesh.regions()[t] {
+                1 | 5 => (0.0, -0.002),
+                2 => (-0.002, -0.011),
+                _ => (-0.011, -0.017),
+            };
+            assert!(zmax <= top + 1e-15 && zmin >= bottom - 1e-15, "tet {t}");
+            *volume.entry(mesh.regions()[t]).or_default() +=
+                crate::mesh::tet_signed_volume(&p[0], &p[1], &p[2], &p[3]);
+        }
+        let area = 0.04 * 0.03;
+        assert!((volume[&2] - area * 0.009).abs() < 1e-12);
+        assert!((volume[&4] - area * 0.006).abs() < 1e-12);
+        let disc_volume = std::f64::consts::PI * 0.004f64.powi(2) * 0.002;
+        // the disc's tetrahedra by centroid: its area within a cell's rim
+        assert!(
+            (volume[&5] / disc_volume - 1.0).abs() < 0.5,
+            "{}",
+            volume[&5]
+        );
+        assert!((volume[&1] + volume[&5] - area * 0.002).abs() < 1e-12);
     }
 }

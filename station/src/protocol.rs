@@ -6,7 +6,7 @@
 //!
 //! | kind | layout |
 //! |---|---|
-//! | [`KIND_TOPOLOGY`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles` |
+//! | [`KIND_TOPOLOGY`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles, u32 × vertices regions` |
 //! | [`KIND_FRAME`] | `u8 kind, u8 mode, u8 engaged, u8 faults, u32 vertices, u64 tick, f64 echo_ms, f32 × 3 tip_m, f32 × 4 world_from_tool (w, x, y, z), f32 × 3 force_newtons, f32 × 3 × vertices positions_m` |
 //!
 //! A topology message comes first and again whenever the surface's triangles change (after a
@@ -37,7 +37,8 @@ pub const MAX_WIRE_MESSAGE_BYTES: usize = 1 << 20;
 
 /// A topology message for `topology`.
 pub fn encode_topology(topology: &Topology) -> Vec<u8> {
-    let mut out = Vec::with_capacity(12 + 12 * topology.triangles.len());
+    let mut out =
+        Vec::with_capacity(12 + 12 * topology.triangles.len() + 4 * topology.vertex_count);
     out.extend([KIND_TOPOLOGY, 0, 0, 0]);
     out.extend(u32_of(topology.vertex_count).to_le_bytes());
     out.extend(u32_of(topology.triangles.len()).to_le_bytes());
@@ -45,6 +46,11 @@ pub fn encode_topology(topology: &Topology) -> Vec<u8> {
         for v in t {
             out.extend(v.to_le_bytes());
         }
+    }
+    // one region per vertex (0 where the surface does not say)
+    for v in 0..topology.vertex_count {
+        let region = topology.regions.get(v).copied().unwrap_or(0);
+        out.extend(region.to_le_bytes());
     }
     out
 }
@@ -141,19 +147,20 @@ mod tests {
     }
 
     #[test]
-    fn a_topology_lists_its_triangles() {
+    fn a_topology_lists_its_triangles_and_regions() {
         let t = Topology {
             vertex_count: 4,
             triangles: vec![[0, 1, 2], [2, 1, 3]],
+            regions: vec![1, 1, 2, 5],
         };
         let b = encode_topology(&t);
-        assert_eq!(b.len(), 12 + 24);
+        assert_eq!(b.len(), 12 + 24 + 16);
         assert_eq!(b[0], KIND_TOPOLOGY);
         let words: Vec<u32> = b[4..]
             .chunks(4)
             .map(|c| u32::from_le_bytes(c.try_into().expect("4")))
             .collect();
-        assert_eq!(words, [4, 2, 0, 1, 2, 2, 1, 3]);
+        assert_eq!(words, [4, 2, 0, 1, 2, 2, 1, 3, 1, 1, 2, 5]);
     }
 
     #[test]

@@ -281,6 +281,8 @@ pub struct Running {
     pub plan: Plan,
     /// Lines marked on the tissue (shown in every mode).
     pub marks: Vec<Vec<cutlab_sim::Point3>>,
+    /// The colour of each region the scene gives one (linear RGB, 0 to 1).
+    pub region_colours: Vec<(u32, [f64; 3])>,
     /// The force the tissue should not be loaded beyond, the exercise's (N).
     pub force_limit_newtons: f64,
     /// Where the exercise is seen from, if its scene says.
@@ -424,6 +426,13 @@ pub async fn start(
     let figures = Arc::new(OnceLock::new());
     let viewpoint = prepared.scene.viewpoint.clone();
     let marks = prepared.marks.clone();
+    let region_colours = prepared
+        .scene
+        .spec
+        .materials
+        .iter()
+        .filter_map(|m| m.colour_rgb.map(|c| (m.region, c)))
+        .collect();
     let thread = SessionThread {
         prepared,
         device,
@@ -454,6 +463,7 @@ pub async fn start(
         guided,
         plan,
         marks,
+        region_colours,
         force_limit_newtons,
         viewpoint,
         feed,

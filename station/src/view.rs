@@ -10,16 +10,18 @@ use std::sync::Arc;
 
 use cutlab_haptics::render::Mode;
 use cutlab_haptics::servo::ServoSample;
-use cutlab_haptics::tap::SimRecord;
+use cutlab_haptics::tap::{SimRecord, SurfaceSnapshot};
 use cutlab_recorder::RecorderError;
 use cutlab_recorder::writer::RecordObserver;
 use tokio::sync::watch;
 
-/// The surface's triangles over its vertex list.
+/// The surface's triangles over its vertex list, and each vertex's region (the page colours
+/// the tissue by it).
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Topology {
     pub vertex_count: usize,
     pub triangles: Vec<[u32; 3]>,
+    pub regions: Vec<u32>,
 }
 
 /// One frame of the view.
@@ -95,7 +97,8 @@ impl ViewPublisher {
         )
     }
 
-    fn publish(&mut self, vertices: &[cutlab_sim::Point3], triangles: &[[u32; 3]]) {
+    fn publish(&mut self, surface: &SurfaceSnapshot) {
+        let (vertices, triangles) = (&surface.vertices, &surface.triangles);
         let Some(s) = &self.last_tick else {
             return;
         };
@@ -124,11 +127,13 @@ impl ViewPublisher {
         };
         self.slot.send_modify(|state| {
             if state.topology.vertex_count != vertices.len()
-                || state.topology.triangles != triangles
+                || state.topology.triangles != *triangles
+                || state.topology.regions != surface.regions
             {
                 state.topology = Arc::new(Topology {
                     vertex_count: vertices.len(),
-                    triangles: triangles.to_vec(),
+                    triangles: triangles.clone(),
+                    regions: surface.regions.clone(),
                 });
             }
             state.frame = Some(Arc::new(frame));
@@ -148,7 +153,7 @@ impl RecordObserver for ViewPublisher {
 
     fn on_sim(&mut self, record: &SimRecord) -> Result<(), RecorderError> {
         if let SimRecord::Surface(s) = record {
-            self.publish(&s.vertices, &s.triangles);
+            self.publish(s);
         }
         Ok(())
     }
@@ -162,7 +167,6 @@ impl RecordObserver for ViewPublisher {
 #[cfg(test)]
 mod tests {
     use cutlab_haptics::render::RenderOutput;
-    use cutlab_haptics::tap::SurfaceSnapshot;
     use cutlab_haptics::{Point3, ToolPose, Vector3};
 
     use super::*;
@@ -194,6 +198,7 @@ mod tests {
                 Point3::new(0.0, 1.0, 0.0),
             ],
             triangles,
+            regions: vec![0, 0, 1],
         }))
     }
 

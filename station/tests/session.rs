@@ -118,6 +118,7 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
         let Some(frame) = state.frame else { continue };
         let topology = protocol::encode_topology(&state.topology);
         assert_eq!(topology[0], KIND_TOPOLOGY);
+        assert_eq!(state.topology.regions.len(), state.topology.vertex_count);
         assert_eq!(frame.positions_m.len(), 3 * state.topology.vertex_count);
         let bytes = protocol::encode_frame(&frame);
         assert_eq!(bytes[0], KIND_FRAME);

@@ -10,6 +10,7 @@
 //! A new kind: a module beside [`incision`] with its plan type and an [`ExerciseKind`] impl,
 //! a variant in [`Kind`] and [`ExercisePlan`], and its arm in the matches of this file.
 
+pub mod excision;
 pub mod incision;
 pub mod pattern;
 
@@ -22,6 +23,7 @@ use crate::input::AttemptData;
 use crate::metrics::{Metric, MetricSet};
 use crate::proficiency::Threshold;
 
+pub use excision::{EXCISION_PLAN_TOML, ExcisionPlan};
 pub use incision::{BODY_WALL_PLAN_TOML, CHEST_WALL_PLAN_TOML, IncisionPlan};
 pub use pattern::{PATTERN_PLAN_TOML, PatternPlan};
 
@@ -33,17 +35,20 @@ pub enum Kind {
     Incision,
     /// A marked circle cut out of a held sheet, scored by the MISTELS rule (`pattern-cutting`).
     Pattern,
+    /// An outline incised round a skin lesion into the fat (`elliptical-excision`).
+    Excision,
 }
 
 impl Kind {
     /// Every kind, in the order forms offer them.
-    pub const ALL: [Kind; 2] = [Kind::Incision, Kind::Pattern];
+    pub const ALL: [Kind; 3] = [Kind::Incision, Kind::Pattern, Kind::Excision];
 
     /// The tag in plans and forms.
     pub fn as_str(self) -> &'static str {
         match self {
             Kind::Incision => "incision",
             Kind::Pattern => "pattern",
+            Kind::Excision => "excision",
         }
     }
 
@@ -176,6 +181,7 @@ pub trait ExerciseKind {
 pub enum ExercisePlan {
     Incision(IncisionPlan),
     Pattern(PatternPlan),
+    Excision(ExcisionPlan),
 }
 
 impl From<IncisionPlan> for ExercisePlan {
@@ -190,6 +196,7 @@ impl ExercisePlan {
         match self {
             ExercisePlan::Incision(p) => p,
             ExercisePlan::Pattern(p) => p,
+            ExercisePlan::Excision(p) => p,
         }
     }
 
@@ -198,6 +205,7 @@ impl ExercisePlan {
         match self {
             ExercisePlan::Incision(_) => Kind::Incision,
             ExercisePlan::Pattern(_) => Kind::Pattern,
+            ExercisePlan::Excision(_) => Kind::Excision,
         }
     }
 
@@ -259,6 +267,10 @@ impl ExercisePlan {
             Kind::Pattern => {
                 let plan: PatternPlan = serde_json::from_value(value).map_err(read)?;
                 Ok(ExercisePlan::Pattern(plan.normalised()?))
+            }
+            Kind::Excision => {
+                let plan: ExcisionPlan = serde_json::from_value(value).map_err(read)?;
+                Ok(ExercisePlan::Excision(plan.normalised()?))
             }
         }
     }
@@ -342,6 +354,7 @@ impl Serialize for ExercisePlan {
         let inner = match self {
             ExercisePlan::Incision(p) => serde_json::to_value(p),
             ExercisePlan::Pattern(p) => serde_json::to_value(p),
+            ExercisePlan::Excision(p) => serde_json::to_value(p),
         };
         let mut value = inner.map_err(serde::ser::Error::custom)?;
         if let Some(map) = value.as_object_mut() {

@@ -10,6 +10,7 @@
 //! [`NOT_MEASURED_WITH_DEVICE`]: it measures neither for nor against the trainee
 //! ([`crate::proficiency`] leaves it out of the verdict and the score).
 
+pub mod excision;
 pub mod field;
 pub mod incision;
 pub mod motion;
@@ -428,12 +429,13 @@ const fn m(
 }
 
 /// Every metric of every kind of exercise, in report order: [`METRICS`] (the incision's and
-/// those every motion has), then [`pattern::METRICS`], then the motion measures of imported
+/// those every motion has), then [`pattern::METRICS`], [`excision::METRICS`], then the motion measures of imported
 /// kinematics ([`motion::METRICS`]).
 pub fn all() -> impl Iterator<Item = &'static Metric> {
     METRICS
         .iter()
         .chain(pattern::METRICS)
+        .chain(excision::METRICS)
         .chain(motion::METRICS)
 }
 

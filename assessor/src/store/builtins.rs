@@ -1,10 +1,10 @@
 //! The built-in exercises, always present so `cutlab assess` works on a fresh database:
-//! `chest-wall-incision`, `pattern-cutting` and `body-wall-incision`, and the curriculum that
-//! orders them, `cutting-basics` (with progression).
+//! `chest-wall-incision`, `pattern-cutting`, `elliptical-excision` and `body-wall-incision`,
+//! and the curriculum that orders them, `cutting-basics` (with progression).
 
 use super::{CUTTING_BASICS, Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
-use crate::exercise::{ExercisePlan, PatternPlan};
+use crate::exercise::{ExcisionPlan, ExercisePlan, PatternPlan};
 use crate::proficiency::DEFAULT_K;
 
 /// The built-in exercise's name.
@@ -14,6 +14,9 @@ pub const BUILTIN_SCENE: &str = "chest-wall";
 
 /// The built-in pattern cutting exercise's name.
 pub const PATTERN_EXERCISE: &str = "pattern-cutting";
+
+/// The built-in elliptical excision of a skin lesion: its name.
+pub const EXCISION_EXERCISE: &str = "elliptical-excision";
 
 /// The built-in curved incision on the CT's body wall: its name.
 pub const BODY_WALL_EXERCISE: &str = "body-wall-incision";
@@ -38,6 +41,14 @@ impl Store {
                 &ExercisePlan::Pattern(PatternPlan::builtin()?),
             )
             .await?;
+        let excision = self
+            .ensure_exercise(
+                EXCISION_EXERCISE,
+                "skin-block",
+                "Elliptical excision: incise a fusiform outline round the 8 mm pigmented lesion, 2 mm from its edge, 3.5 times as long as wide along the tension lines, into the fat",
+                &ExercisePlan::Excision(ExcisionPlan::builtin()?),
+            )
+            .await?;
         let body_wall = self
             .ensure_exercise(
                 BODY_WALL_EXERCISE,
@@ -49,6 +60,7 @@ impl Store {
         self.ensure_cutting_basics(&[
             ("Incision", &incision),
             ("Pattern cutting", &pattern),
+            ("Elliptical excision", &excision),
             ("Curved incision on a patient", &body_wall),
         ])
         .await?;

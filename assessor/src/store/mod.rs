@@ -29,7 +29,9 @@ use sqlx::{ConnectOptions, Connection};
 use sqlx::{PgPool, SqlitePool};
 
 pub use attempts::{Attempt, AttemptStatus, Outcome, ProficiencyRecord, StoredMetric};
-pub use builtins::{BODY_WALL_EXERCISE, BUILTIN_EXERCISE, BUILTIN_SCENE, PATTERN_EXERCISE};
+pub use builtins::{
+    BODY_WALL_EXERCISE, BUILTIN_EXERCISE, BUILTIN_SCENE, EXCISION_EXERCISE, PATTERN_EXERCISE,
+};
 pub use cohorts::Cohort;
 pub use curricula::{Curriculum, Module};
 pub(crate) use db::BeginWrite;

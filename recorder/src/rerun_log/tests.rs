@@ -81,6 +81,7 @@ fn surface(step: u64, h: f64, split: bool) -> SurfaceSnapshot {
     SurfaceSnapshot {
         step,
         tick: step,
+        regions: vec![0; vertices.len()],
         vertices,
         triangles,
     }

@@ -227,6 +227,15 @@ fn build_mesh(
             let g = generate::boxed(Point3::origin(), size, cells).map_err(mesh_err)?;
             Ok((g.mesh, Some(g.rim)))
         }
+        MeshSource::LayeredBox {
+            size_mm,
+            cell_mm,
+            layers,
+            inclusions,
+        } => layered_box(size_mm, *cell_mm, layers, inclusions)
+            .map_err(invalid)?
+            .map_err(mesh_err)
+            .map(|g| (g.mesh, Some(g.rim))),
         MeshSource::File { path, unit_m } => {
             let path = base_dir.join(path);
             if !(*unit_m > 0.0 && unit_m.is_finite()) {
@@ -278,6 +287,70 @@ fn build_mesh(
             Ok((mesh_labels(&volume, &opts).map_err(seg_err)?, None))
         }
     }
+}
+
+/// The layered box of a scene, or what is wrong with its numbers.
+fn layered_box(
+    size_mm: &[f64; 2],
+    cell_mm: f64,
+    layers: &[super::spec::LayerSpec],
+    inclusions: &[super::spec::InclusionSpec],
+) -> Result<Result<generate::GeneratedMesh, crate::MeshError>, String> {
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    if !size_mm.iter().all(|&s| positive(s)) || !positive(cell_mm) {
+        return Err(format!(
+            "size_mm and cell_mm must be positive, got {size_mm:?} and {cell_mm} mm"
+        ));
+    }
+    if layers.is_empty() {
+        return Err("a layered box needs at least one layer".into());
+    }
+    if let Some(l) = layers.iter().find(|l| !positive(l.thickness_mm)) {
+        return Err(format!(
+            "layer {:?}: thickness_mm must be positive, got {}",
+            l.name, l.thickness_mm
+        ));
+    }
+    if let Some(d) = inclusions.iter().find(|d| {
+        !d.centre_mm.iter().all(|c| c.is_finite())
+            || !positive(d.radius_mm)
+            || !positive(d.depth_mm)
+    }) {
+        return Err(format!(
+            "inclusion {:?}: needs a finite centre_mm and positive radius_mm and depth_mm",
+            d.name
+        ));
+    }
+    let layers: Vec<generate::Layer> = layers
+        .iter()
+        .map(|l| generate::Layer {
+            thickness: l.thickness_mm * MM,
+            region: l.region,
+        })
+        .collect();
+    let cell = cell_mm * MM;
+    let through: usize = generate::layer_cells(&layers, cell).iter().sum();
+    let across = size_mm.map(|s| (s / cell_mm).round().max(1.0));
+    if 6.0 * across[0] * across[1] * through as f64 > 50e6 {
+        return Err(format!(
+            "cell_mm {cell_mm} makes more than 50,000,000 tetrahedra"
+        ));
+    }
+    let discs: Vec<generate::Inclusion> = inclusions
+        .iter()
+        .map(|d| generate::Inclusion {
+            centre: d.centre_mm.map(|c| c * MM),
+            radius: d.radius_mm * MM,
+            depth: d.depth_mm * MM,
+            region: d.region,
+        })
+        .collect();
+    Ok(generate::layered_block(
+        size_mm.map(|s| s * MM),
+        cell,
+        &layers,
+        &discs,
+    ))
 }
 
 /// A `[[held]]` selection that selects nothing sensible.

@@ -7,8 +7,8 @@ mod spec;
 
 pub use build::{BuildOptions, HeldError, Scene, TIME_STEP_RANGE_S};
 pub use spec::{
-    ForceModelSpec, HeldSelection, IncisionDirections, IncisionError, MaskFile, MeshSource,
-    RegionMaterial, SceneSpec, Target, Viewpoint,
+    ForceModelSpec, HeldSelection, IncisionDirections, IncisionError, InclusionSpec, LayerSpec,
+    MaskFile, MeshSource, RegionMaterial, SceneSpec, Target, Viewpoint,
 };
 
 use std::path::{Path, PathBuf};
@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use crate::ReadError;
 
 /// Built-in scenes: name and TOML text.
-pub const BUILTIN: [(&str, &str); 5] = [
+pub const BUILTIN: [(&str, &str); 6] = [
     ("chest-wall", include_str!("../../scenes/chest-wall.toml")),
     (
         "chest-wall-fem",
@@ -25,6 +25,7 @@ pub const BUILTIN: [(&str, &str); 5] = [
     ("sheet", include_str!("../../scenes/sheet.toml")),
     ("bar", include_str!("../../scenes/bar.toml")),
     ("body-wall", include_str!("../../scenes/body-wall.toml")),
+    ("skin-block", include_str!("../../scenes/skin-block.toml")),
 ];
 
 /// Why a scene could not be loaded or built.

@@ -85,6 +85,22 @@ pub enum MeshSource {
         /// The fewest tetrahedra the mesh may have (the resolution).
         min_tets: usize,
     },
+    /// A block of layered tissue (skin over fat over muscle), each layer its own region,
+    /// centred on the origin with its top face at z = 0 (see
+    /// [`crate::generate::layered_block`]); `min_tets` does not apply (`cell_mm` sets the
+    /// resolution).
+    LayeredBox {
+        /// Its extent along x and y, in mm.
+        size_mm: [f64; 2],
+        /// The cells' size across, in mm; each layer is as many cells through as its thickness
+        /// holds (at least one), so interfaces lie on cell faces.
+        cell_mm: f64,
+        /// The layers, from the top down.
+        layers: Vec<LayerSpec>,
+        /// Discs set into the top (a lesion), each its own region.
+        #[serde(default)]
+        inclusions: Vec<InclusionSpec>,
+    },
     /// A mesh file (.msh, .node/.ele, .vtk, .vtu); relative paths are relative to the scene
     /// file. `unit_m` is the length of one file unit in metres (0.001 for millimetres).
     File {
@@ -115,6 +131,36 @@ fn one() -> f64 {
     1.0
 }
 
+/// One layer of a layered box.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayerSpec {
+    /// What the layer is (`skin`, `fat`...), for listings.
+    #[serde(default)]
+    pub name: String,
+    /// Its thickness, in mm.
+    pub thickness_mm: f64,
+    /// The region id its tetrahedra get.
+    pub region: u32,
+}
+
+/// A disc set into the top of a layered box.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InclusionSpec {
+    /// What it is (`lesion`), for listings.
+    #[serde(default)]
+    pub name: String,
+    /// Its centre on the top face, `[x, y]` in mm.
+    pub centre_mm: [f64; 2],
+    /// Its radius, in mm.
+    pub radius_mm: f64,
+    /// How far below the top it reaches, in mm.
+    pub depth_mm: f64,
+    /// The region id its tetrahedra get.
+    pub region: u32,
+}
+
 /// A binary mask file and the region id its voxels get.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -131,6 +177,13 @@ pub struct MaskFile {
 pub struct RegionMaterial {
     /// The region id of the mesh it applies to.
     pub region: u32,
+    /// What the region is (`skin`, `fat`...), for listings.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub name: String,
+    /// The colour the station shows the region's surface in (linear RGB, each 0 to 1);
+    /// unset, the tissue's default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour_rgb: Option<[f64; 3]>,
     /// See [`Material::density_kg_per_m3`].
     pub density_kg_per_m3: f64,
     /// See [`Material::stiffness`].

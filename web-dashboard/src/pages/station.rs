@@ -225,6 +225,8 @@ fn config_json(r: &Running, driver: bool) -> String {
         "plan": plan,
         // lines marked on the tissue (a pattern's circle), in exam mode too
         "marks": r.marks.iter().map(|m| m.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>()).collect::<Vec<_>>(),
+        // the colour of each region of the tissue the scene gives one: [region, r, g, b]
+        "region_colours": r.region_colours.iter().map(|(id, c)| [f64::from(*id), c[0], c[1], c[2]]).collect::<Vec<_>>(),
         // the depth the blade starts at, in exam mode too (the depth is part of the task
         // the page states; the line is not shown)
         "start_depth_m": r.plan.depth_m,

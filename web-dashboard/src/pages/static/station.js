@@ -59,26 +59,30 @@
     if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
     return p;
   }
-  // the tissue: lit from the eye, both sides; the inside of the wound (back faces) darker red
+  // the tissue: lit from the eye, both sides, each vertex in its region's colour (the
+  // scene's: skin, fat, muscle in the wound); the inside of the wound (back faces) darker red
   const tissue = program(`#version 300 es
-    in vec3 position; in vec3 normal;
+    in vec3 position; in vec3 normal; in vec3 colour;
     uniform mat4 view, projection;
-    out vec3 v_normal; out vec3 v_eye;
+    out vec3 v_normal; out vec3 v_eye; out vec3 v_colour;
     void main() {
       vec4 p = view * vec4(position, 1.0);
-      v_eye = -p.xyz; v_normal = mat3(view) * normal;
+      v_eye = -p.xyz; v_normal = mat3(view) * normal; v_colour = colour;
       gl_Position = projection * p;
     }`, `#version 300 es
     precision highp float;
-    in vec3 v_normal; in vec3 v_eye; out vec4 color;
+    in vec3 v_normal; in vec3 v_eye; in vec3 v_colour; out vec4 color;
     void main() {
       vec3 n = normalize(v_normal); if (!gl_FrontFacing) n = -n;
       vec3 l = normalize(v_eye);
       float diffuse = max(dot(n, l), 0.0);
       float spec = pow(max(dot(reflect(-l, n), l), 0.0), 24.0) * 0.25;
-      vec3 base = gl_FrontFacing ? vec3(0.88, 0.62, 0.56) : vec3(0.62, 0.16, 0.14);
+      vec3 base = gl_FrontFacing ? v_colour : v_colour * vec3(0.7, 0.26, 0.25);
       color = vec4(base * (0.3 + 0.7 * diffuse) + spec, 1.0);
     }`);
+  // each region's colour (linear RGB), the tissue's own where the scene gives none
+  const TISSUE = [0.88, 0.62, 0.56];
+  const palette = new Map((config.region_colours || []).map(([id, r, g, b]) => [id, [r, g, b]]));
   const lines = program(`#version 300 es
     in vec3 position; uniform mat4 view, projection; uniform float point_size;
     void main() { gl_Position = projection * view * vec4(position, 1.0); gl_PointSize = point_size; }`,
@@ -86,10 +90,10 @@
     precision highp float; uniform vec3 tint; out vec4 color;
     void main() { color = vec4(tint, 1.0); }`);
   const mesh = { vao: gl.createVertexArray(), positions: gl.createBuffer(), normals: gl.createBuffer(),
-    indices: gl.createBuffer(), count: 0, vertices: 0, capacity: 0, triangles: null };
+    colours: gl.createBuffer(), indices: gl.createBuffer(), count: 0, vertices: 0, capacity: 0, triangles: null };
   const overlay = { vao: gl.createVertexArray(), buffer: gl.createBuffer() };
   gl.bindVertexArray(mesh.vao);
-  for (const [buffer, name] of [[mesh.positions, "position"], [mesh.normals, "normal"]]) {
+  for (const [buffer, name] of [[mesh.positions, "position"], [mesh.normals, "normal"], [mesh.colours, "colour"]]) {
     gl.bindBuffer(gl.ARRAY_BUFFER, buffer);
     const at = gl.getAttribLocation(tissue, name);
     gl.enableVertexAttribArray(at);
@@ -112,11 +116,17 @@
     gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, mesh.triangles, gl.DYNAMIC_DRAW);
     if (vertices > mesh.capacity) { // headroom for the vertices the next cuts add
       mesh.capacity = Math.ceil(vertices * 1.5);
-      for (const b of [mesh.positions, mesh.normals]) {
+      for (const b of [mesh.positions, mesh.normals, mesh.colours]) {
         gl.bindBuffer(gl.ARRAY_BUFFER, b);
         gl.bufferData(gl.ARRAY_BUFFER, 12 * mesh.capacity, gl.DYNAMIC_DRAW);
       }
     }
+    // each vertex's region after the triangles (absent in an older server's message)
+    const at = 12 + 12 * triangles, colours = new Float32Array(3 * vertices);
+    const regions = view.byteLength >= at + 4 * vertices ? new Uint32Array(view.buffer, at, vertices) : null;
+    for (let v = 0; v < vertices; v++) colours.set(palette.get(regions ? regions[v] : -1) || TISSUE, 3 * v);
+    gl.bindBuffer(gl.ARRAY_BUFFER, mesh.colours);
+    gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
     gl.bindVertexArray(null);
   }
 
