@@ -335,7 +335,7 @@ fn stdout_errors_end_quietly() {
 /// `cutlab session`'s arguments.
 #[derive(Debug, clap::Args)]
 struct SessionArgs {
-    /// A built-in scene (chest-wall, sheet, bar, body-wall) or a scene/mesh file; by
+    /// A built-in scene (chest-wall, sheet, bar, body-wall, skin-block) or a scene/mesh file; by
     /// default the exercise's (with `--exercise`), else chest-wall.
     #[arg(long)]
     scene: Option<String>,

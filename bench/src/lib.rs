@@ -12,6 +12,7 @@ mod accuracy;
 pub mod browser;
 mod cuts;
 mod dashboard;
+mod exercises;
 mod hub;
 mod load;
 mod perf;
@@ -111,6 +112,17 @@ pub enum BenchCommand {
         #[arg(long, default_value = "out/bench-recorder")]
         out: PathBuf,
     },
+    /// Each built-in exercise's session at its scene's default step by the synthetic expert
+    /// and novice (virtual clock, recorded): simulated seconds per wall second and the step's
+    /// median and p99.
+    Exercises {
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+        /// Directory for the sessions' recordings.
+        #[arg(long, default_value = "out/bench-exercises")]
+        out: PathBuf,
+    },
     /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
     /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
     Stability {
@@ -200,6 +212,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Stability { quick, json } => stability::run(quick, json),
         BenchCommand::Perf { quick, json, out } => perf::run(quick, json, &out),
         BenchCommand::Skip { quick, json, out } => skip::run(quick, json, &out),
+        BenchCommand::Exercises { json, out } => exercises::run(json, &out),
         BenchCommand::Hub {
             out,
             stations,

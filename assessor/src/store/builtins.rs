@@ -21,50 +21,65 @@ pub const EXCISION_EXERCISE: &str = "elliptical-excision";
 /// The built-in curved incision on the CT's body wall: its name.
 pub const BODY_WALL_EXERCISE: &str = "body-wall-incision";
 
+/// A built-in exercise: its name, scene, description, plan and its module's title in
+/// `cutting-basics`.
+#[derive(Debug, Clone)]
+pub struct Builtin {
+    pub name: &'static str,
+    pub scene: &'static str,
+    pub description: &'static str,
+    pub plan: ExercisePlan,
+    pub module: &'static str,
+}
+
+/// The built-in exercises, in the order of `cutting-basics`.
+pub fn builtins() -> Result<Vec<Builtin>> {
+    Ok(vec![
+        Builtin {
+            name: BUILTIN_EXERCISE,
+            scene: BUILTIN_SCENE,
+            description: "A 60 mm incision 8 mm deep along x across the top of the chest wall",
+            plan: ExercisePlan::chest_wall()?,
+            module: "Incision",
+        },
+        Builtin {
+            name: PATTERN_EXERCISE,
+            scene: "sheet",
+            description: "FLS pattern cutting: cut the marked 40 mm circle out of the held sheet, along the mark",
+            plan: ExercisePlan::Pattern(PatternPlan::builtin()?),
+            module: "Pattern cutting",
+        },
+        Builtin {
+            name: EXCISION_EXERCISE,
+            scene: "skin-block",
+            description: "Elliptical excision: incise a fusiform outline round the 8 mm pigmented lesion, 2 mm from its edge, 3.5 times as long as wide along the tension lines, into the fat",
+            plan: ExercisePlan::Excision(ExcisionPlan::builtin()?),
+            module: "Elliptical excision",
+        },
+        Builtin {
+            name: BODY_WALL_EXERCISE,
+            scene: "body-wall",
+            description: "A curved transverse incision of 100 mm on a patient's abdominal wall (from a CT), 8 mm deep into the fat",
+            plan: ExercisePlan::body_wall()?,
+            module: "Curved incision on a patient",
+        },
+    ])
+}
+
 impl Store {
     /// Inserts the built-in exercises if missing (safe when several processes do it at once);
     /// returns `chest-wall-incision`.
     pub async fn ensure_builtins(&self) -> Result<Exercise> {
-        let incision = self
-            .ensure_exercise(
-                BUILTIN_EXERCISE,
-                BUILTIN_SCENE,
-                "A 60 mm incision 8 mm deep along x across the top of the chest wall",
-                &ExercisePlan::chest_wall()?,
-            )
-            .await?;
-        let pattern = self
-            .ensure_exercise(
-                PATTERN_EXERCISE,
-                "sheet",
-                "FLS pattern cutting: cut the marked 40 mm circle out of the held sheet, along the mark",
-                &ExercisePlan::Pattern(PatternPlan::builtin()?),
-            )
-            .await?;
-        let excision = self
-            .ensure_exercise(
-                EXCISION_EXERCISE,
-                "skin-block",
-                "Elliptical excision: incise a fusiform outline round the 8 mm pigmented lesion, 2 mm from its edge, 3.5 times as long as wide along the tension lines, into the fat",
-                &ExercisePlan::Excision(ExcisionPlan::builtin()?),
-            )
-            .await?;
-        let body_wall = self
-            .ensure_exercise(
-                BODY_WALL_EXERCISE,
-                "body-wall",
-                "A curved transverse incision of 100 mm on a patient's abdominal wall (from a CT), 8 mm deep into the fat",
-                &ExercisePlan::body_wall()?,
-            )
-            .await?;
-        self.ensure_cutting_basics(&[
-            ("Incision", &incision),
-            ("Pattern cutting", &pattern),
-            ("Elliptical excision", &excision),
-            ("Curved incision on a patient", &body_wall),
-        ])
-        .await?;
-        Ok(incision)
+        let mut made = Vec::new();
+        for b in builtins()? {
+            let e = self
+                .ensure_exercise(b.name, b.scene, b.description, &b.plan)
+                .await?;
+            made.push((b.module, e));
+        }
+        let modules: Vec<(&str, &Exercise)> = made.iter().map(|(m, e)| (*m, e)).collect();
+        self.ensure_cutting_basics(&modules).await?;
+        Ok(made.swap_remove(0).1)
     }
 
     /// Makes the `cutting-basics` curriculum, one module per exercise in order, with

@@ -30,7 +30,8 @@ use sqlx::{PgPool, SqlitePool};
 
 pub use attempts::{Attempt, AttemptStatus, Outcome, ProficiencyRecord, StoredMetric};
 pub use builtins::{
-    BODY_WALL_EXERCISE, BUILTIN_EXERCISE, BUILTIN_SCENE, EXCISION_EXERCISE, PATTERN_EXERCISE,
+    BODY_WALL_EXERCISE, BUILTIN_EXERCISE, BUILTIN_SCENE, Builtin, EXCISION_EXERCISE,
+    PATTERN_EXERCISE, builtins,
 };
 pub use cohorts::Cohort;
 pub use curricula::{Curriculum, Module};
