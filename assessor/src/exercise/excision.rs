@@ -456,16 +456,11 @@ impl ExerciseKind for ExcisionPlan {
     }
 
     fn field(&self, i: usize) -> f64 {
-        self.clone().slot(i).map_or(f64::NAN, |v| *v)
+        super::slot_value(self, i, Self::slot)
     }
 
     fn with_fields(&self, changed: &[(usize, f64)]) -> Result<ExercisePlan> {
-        let mut plan = self.clone();
-        for &(i, v) in changed {
-            if let Some(slot) = plan.slot(i) {
-                *slot = v;
-            }
-        }
+        let plan = super::with_slots(self, changed, Self::slot);
         Ok(ExercisePlan::Excision(plan.normalised()?))
     }
 

@@ -117,6 +117,25 @@ impl FormField {
     }
 }
 
+/// A plan's number that form field `i` edits, reached through the plan's `slot`.
+pub(crate) type Slot<P> = fn(&mut P, usize) -> Option<&mut f64>;
+
+/// The value of form field `i` of `plan` (NaN for no such field).
+pub(crate) fn slot_value<P: Clone>(plan: &P, i: usize, slot: Slot<P>) -> f64 {
+    slot(&mut plan.clone(), i).map_or(f64::NAN, |v| *v)
+}
+
+/// `plan` with the form's `changed` fields `(i, SI value)` written through `slot`.
+pub(crate) fn with_slots<P: Clone>(plan: &P, changed: &[(usize, f64)], slot: Slot<P>) -> P {
+    let mut plan = plan.clone();
+    for &(i, v) in changed {
+        if let Some(s) = slot(&mut plan, i) {
+            *s = v;
+        }
+    }
+    plan
+}
+
 /// Hand-set thresholds from `(key, better, reference, limit)` rows ([`Threshold::fixed`]).
 pub(crate) fn fixed_thresholds(
     rows: &[(&str, crate::metrics::Better, f64, f64)],

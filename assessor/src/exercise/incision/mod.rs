@@ -209,18 +209,13 @@ impl ExerciseKind for IncisionPlan {
     }
 
     fn field(&self, i: usize) -> f64 {
-        self.clone().slot(i).map_or(f64::NAN, |v| *v)
+        super::slot_value(self, i, Self::slot)
     }
 
     /// Changing the entry or the exit replaces the planned line by the straight one between
     /// them ([`ExerciseKind::form_note`]).
     fn with_fields(&self, changed: &[(usize, f64)]) -> Result<ExercisePlan> {
-        let mut plan = self.clone();
-        for &(i, v) in changed {
-            if let Some(slot) = plan.slot(i) {
-                *slot = v;
-            }
-        }
+        let mut plan = super::with_slots(self, changed, Self::slot);
         if plan.entry_m != self.entry_m || plan.exit_m != self.exit_m {
             plan.incision_m.clear();
         }
