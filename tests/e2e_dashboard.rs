@@ -1115,7 +1115,7 @@ fn a_curved_incision_on_the_body_wall_passes_at_the_station_in_headless_chromium
 
 /// Elliptical excision at the station: dr-kim opens `elliptical-excision` to ana early, she
 /// follows the planned outline round the lesion in guided mode with a steady hand, and
-/// passes; the wound shows the skin over the yellow fat. Screenshots:
+/// passes. Screenshots (the block, the brown lesion inside its drawn edge, the outline):
 /// `station-excision-mid-cut.png`, `station-excision-done.png`, `station-excision-debrief.png`.
 #[test]
 fn an_elliptical_excision_passes_at_the_station_in_headless_chromium() {
