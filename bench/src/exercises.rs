@@ -8,7 +8,7 @@ use cutlab_assessor::store::builtins;
 use cutlab_haptics::device::DeviceSpec;
 use cutlab_haptics::servo::Clock;
 use cutlab_sim::stats::Summary;
-use cutlab_station::attempt_run::{PlanSource, Prepared, RunSettings};
+use cutlab_station::attempt_run::{PlanSource, Prepared, RunSettings, run_blocking};
 use serde::Serialize;
 
 /// The levels measured and their sessions' lengths (s): the novice is slower.
@@ -32,10 +32,14 @@ struct ExerciseRow {
 /// Runs the benchmark and prints its table (or JSON).
 pub fn run(json: bool, out: &std::path::Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
     let mut rows = Vec::new();
     for b in builtins()? {
         for (level, duration_s) in LEVELS {
-            rows.push(session(&b, level, duration_s, out)?);
+            rows.push(session(&rt, &b, level, duration_s, out)?);
         }
     }
     if json {
@@ -64,7 +68,10 @@ pub fn run(json: bool, out: &std::path::Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The exercise's session by `level`, through the attempt run every session takes (no
+/// attempt stored).
 fn session(
+    rt: &tokio::runtime::Runtime,
     b: &cutlab_assessor::store::Builtin,
     level: &'static str,
     duration_s: f64,
@@ -83,10 +90,10 @@ fn session(
     let device = prepared.device(&spec)?;
     let tets = prepared.session.sim.model.mesh.tet_count();
     let time_step_ms = prepared.time_step_s() * 1e3;
-    let provenance = prepared.provenance("bench", b.name, level);
     let mcap = out.join(format!("{}-{level}.mcap", b.name));
-    let recorded = prepared.record(device, &provenance, &mcap, None)?;
-    let report = recorded
+    let run = run_blocking(rt, prepared, device, None, &mcap, None)?;
+    let report = run
+        .recorded?
         .report
         .with_context(|| format!("the {level} session of {}", b.name))?;
     let steps: Vec<f64> = report.step_nanos.iter().map(|&n| n as f64 * 1e-3).collect();

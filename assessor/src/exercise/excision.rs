@@ -114,9 +114,7 @@ impl ExcisionPlan {
     /// Normalises the normal and checks the plan.
     pub fn normalised(mut self) -> Result<Self> {
         self.check()?;
-        self.normal = geom::unit(self.normal.into())
-            .ok_or_else(|| AssessError::InvalidPlan("normal: zero".into()))?
-            .into();
+        self.normal = super::unit_normal(self.normal)?;
         Ok(self)
     }
 

@@ -117,6 +117,13 @@ impl FormField {
     }
 }
 
+/// The unit vector of a plan's `normal`, or an error naming it.
+pub(crate) fn unit_normal(normal: [f64; 3]) -> Result<[f64; 3]> {
+    crate::geom::unit(normal.into())
+        .map(Into::into)
+        .ok_or_else(|| AssessError::InvalidPlan("normal: zero".into()))
+}
+
 /// A plan's number that form field `i` edits, reached through the plan's `slot`.
 pub(crate) type Slot<P> = fn(&mut P, usize) -> Option<&mut f64>;
 

@@ -94,9 +94,7 @@ impl PatternPlan {
     /// Normalises the normal and checks the plan.
     pub fn normalised(mut self) -> Result<Self> {
         self.check()?;
-        self.normal = geom::unit(self.normal.into())
-            .ok_or_else(|| AssessError::InvalidPlan("normal: zero".into()))?
-            .into();
+        self.normal = super::unit_normal(self.normal)?;
         Ok(self)
     }
 
