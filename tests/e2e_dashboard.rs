@@ -945,10 +945,6 @@ fn pattern_at_the_station(tag: &str, interrupt: bool) -> Option<String> {
 /// piece is cut free and the careful circle still passes. Screenshot:
 /// `station-pattern-reloaded-freed.png`.
 #[test]
-#[ignore = "the attempt survives, but the piece is not cut free: the blade pressed again where \
-            it left starts a new stroke, and the last element before the lift and the first \
-            after stay whole (issue 42; rejoining strokes was tried and not kept, see \
-            docs/design/cutting.md); run with --ignored"]
 fn pattern_cutting_survives_a_tab_switch_and_a_reload_in_headless_chromium() {
     let Some(summary) = pattern_at_the_station("pattern-reloaded", true) else {
         return;

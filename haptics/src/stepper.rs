@@ -298,7 +298,7 @@ impl SessionStepper {
                 Err(e) => {
                     self.stats.failed_cuts += 1;
                     tracing::warn!("cut failed at tick {}: {e}; stroke ended", sample.tick);
-                    self.cutter.end_stroke();
+                    self.cutter.abandon_stroke();
                 }
             }
         } else if render.mode != Mode::Cutting && self.cutter.in_stroke() {

@@ -298,3 +298,72 @@ fn a_resume_state_is_checked_against_its_mesh() {
         .resume(mesh, state, &r)
         .expect("the captured state itself");
 }
+
+#[test]
+fn a_run_resumed_while_the_blade_is_lifted_rejoins_the_stroke_bit_for_bit() {
+    // the blade cuts, is lifted for 40 steps and pressed again where it was: captured while
+    // it is out, the resumed run continues the same stroke as the original
+    let blade_at = |k: usize| {
+        let x =
+            -0.02 + 0.04 * k.min(399) as f64 / 800.0 + 0.04 * k.saturating_sub(440) as f64 / 800.0;
+        Blade::normal_to_curved_slab(x, 0.0, 0.15, 0.008, 0.005)
+    };
+    let run = |sim: &mut Simulation, cutter: &mut Cutter, k: usize| {
+        if (100..400).contains(&k) || k >= 440 {
+            cutter.advance(sim, blade_at(k)).expect("cut");
+        } else if k == 400 {
+            cutter.end_stroke();
+        }
+        sim.step().expect("step");
+    };
+    let mut sim = settled_wall();
+    let mut cutter = Cutter::default();
+    let mut original = Vec::new();
+    let mut captured = None;
+    for k in 0..600 {
+        run(&mut sim, &mut cutter, k);
+        if k == 420 {
+            let c: CutterResume = serde_json::from_str(
+                &serde_json::to_string(&cutter.resume_state()).expect("encode"),
+            )
+            .expect("decode");
+            assert!(
+                c.trail.is_empty() && c.ended.is_some(),
+                "captured with the blade out"
+            );
+            captured = Some((
+                sim.model.mesh.clone(),
+                sim.state.clone(),
+                sim.resume_state(),
+                c,
+            ));
+        }
+        original.push((sim.state.bit_hash(), sim.model.mesh.tets().to_vec()));
+    }
+    let (mesh, state, r, c) = captured.expect("captured");
+    let mut resumed = settled_wall();
+    resumed.resume(mesh, state, &r).expect("resume");
+    let mut cutter = Cutter::default();
+    cutter
+        .resume(&c, resumed.model.vertex_count())
+        .expect("cutter");
+    for k in 421..600 {
+        run(&mut resumed, &mut cutter, k);
+        assert!(
+            resumed.state.bit_hash() == original[k].0
+                && resumed.model.mesh.tets() == &original[k].1[..],
+            "resumed with the blade out, the run differs at step {k}"
+        );
+    }
+    // an ended stroke naming a vertex the mesh does not have is refused
+    let mut bad = cutter.resume_state();
+    bad.ended = Some(cutlab_sim::cut::EndedStroke {
+        trail: Vec::new(),
+        stroke: vec![u32::MAX],
+    });
+    assert!(
+        Cutter::default()
+            .resume(&bad, resumed.model.vertex_count())
+            .is_err()
+    );
+}

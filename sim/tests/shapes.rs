@@ -444,3 +444,97 @@ mod random_strokes {
         }
     }
 }
+
+/// Cuts along each of `strokes` in turn with one cutter, the blade lifted between them (three
+/// 1 ms steps after each cut); returns the pieces freed.
+fn strokes_of_one_cutter(sim: &mut Simulation, strokes: &[Vec<(f64, f64)>]) -> Vec<Specimen> {
+    pressed_strokes(sim, strokes, 0.004)
+}
+
+/// [`strokes_of_one_cutter`], each stroke's first pose with its tip `first_depth_m` below the
+/// surface (the blade pressed in), the others 4 mm.
+fn pressed_strokes(
+    sim: &mut Simulation,
+    strokes: &[Vec<(f64, f64)>],
+    first_depth_m: f64,
+) -> Vec<Specimen> {
+    let tissue = Tissue::Sheet;
+    let mut cutter = Cutter::default();
+    let mut freed = Vec::new();
+    for path in strokes {
+        for (k, &p) in path.iter().enumerate() {
+            let depth_m = if k == 0 { first_depth_m } else { 0.004 };
+            let event = cutter
+                .advance(sim, tissue.blade(p, depth_m))
+                .expect("the cut applies");
+            freed.extend(event.specimens);
+            for _ in 0..3 {
+                sim.step().expect("the simulation runs on after the cut");
+            }
+        }
+        cutter.end_stroke();
+        for _ in 0..20 {
+            sim.step()
+                .expect("the simulation runs on with the blade out");
+        }
+    }
+    freed
+}
+
+#[test]
+fn a_circle_cut_in_two_strokes_frees_its_disc_where_the_blade_was_pressed_again() {
+    // the blade lifted after 200 degrees (a reload of the station's page) and pressed again
+    // where it was, 0.3 mm on, or 1 mm on, its first pose at the depth it left or with its
+    // tip only at the surface: before, the wound's last element before the lift and the
+    // first after stayed whole, a bridge that held the disc
+    let r = 0.02;
+    let deg = |d: f64| d * PI / 180.0;
+    for (on_m, first_depth_m) in [(0.0003, 0.004), (0.001, 0.004), (0.0003, 0.0)] {
+        let tissue = Tissue::Sheet;
+        let mut sim = tissue.simulation(None).expect("built-in scene");
+        let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
+        let resume = deg(200.0) + on_m / r;
+        let freed = pressed_strokes(
+            &mut sim,
+            &[
+                arc(r, 0.0, deg(200.0), 0.0005),
+                arc(r, resume, deg(370.0) - resume, 0.0005),
+            ],
+            first_depth_m,
+        );
+        let pieces = checked_pieces(&sim, mass0, volume0);
+        let case = format!("{} mm on, from {} mm deep", on_m * 1e3, first_depth_m * 1e3);
+        assert_eq!(freed.len(), 1, "{case}: {}", describe(&pieces));
+        assert_eq!(body(&pieces, &freed).len(), 1, "{}", describe(&pieces));
+    }
+}
+
+#[test]
+fn a_gap_between_strokes_holds_the_disc_until_a_stroke_crosses_it() {
+    // pressed again 3 mm on, the blade has not cut the tissue between: the disc stays held
+    // there, until a third stroke along the mark, across the gap and 5 mm past it at each
+    // end, frees it
+    let r = 0.02;
+    let deg = |d: f64| d * PI / 180.0;
+    let tissue = Tissue::Sheet;
+    let mut sim = tissue.simulation(None).expect("built-in scene");
+    let (mass0, volume0) = (sim.model.total_mass(), sim.model.mesh.volume());
+    let resume = deg(200.0) + 0.003 / r;
+    let freed = strokes_of_one_cutter(
+        &mut sim,
+        &[
+            arc(r, 0.0, deg(200.0), 0.0005),
+            arc(r, resume, deg(370.0) - resume, 0.0005),
+        ],
+    );
+    let pieces = checked_pieces(&sim, mass0, volume0);
+    assert!(freed.is_empty(), "{}", describe(&pieces));
+    assert_eq!(pieces.len(), 1, "{}", describe(&pieces));
+    // (the disc, held by the bridge alone, has moved towards it: a stroke on the mark from
+    // 190 to 220 degrees passes inside the bridge; docs/design/cutting.md, "Strokes that
+    // rejoin")
+    let freed = strokes_of_one_cutter(&mut sim, &[arc(r, deg(185.0), deg(40.0), 0.0005)]);
+    let pieces = checked_pieces(&sim, mass0, volume0);
+    assert_eq!(freed.len(), 1, "{}", describe(&pieces));
+    assert_eq!(body(&pieces, &freed).len(), 1, "{}", describe(&pieces));
+}

@@ -8,7 +8,10 @@
 //! Where the blade turns, the oldest poses of the window are left out until the swept
 //! surface departs from its plane by no more than the snapping distance, and the stroke's
 //! earlier cut counts as on the plane within a few times that departure (see
-//! `docs/design/cutting.md`, "Strokes that turn").
+//! `docs/design/cutting.md`, "Strokes that turn"). A stroke that starts where the last one
+//! ended (its tip within [`Cutter::rejoin_m`] of the edge's last pose, at any depth along
+//! it) continues it: the blade lifted and pressed again where it was goes on cutting the
+//! same incision ("Strokes that rejoin").
 
 use std::collections::VecDeque;
 
@@ -26,8 +29,13 @@ pub struct Cutter {
     /// its handle, m; it also moves aside by its width and this much (see
     /// [`super::Specimen`]).
     pub specimen_lift_m: f64,
+    /// A stroke whose first tip lies within this distance of the cutting edge's last pose in
+    /// the stroke before (at any depth along the edge) continues that one, m.
+    pub rejoin_m: f64,
     trail: VecDeque<Blade>,
     stroke: StrokeVertices,
+    /// The stroke [`Self::end_stroke`] ended, until the next stroke's first pose.
+    ended: Option<(VecDeque<Blade>, StrokeVertices)>,
 }
 
 /// A [`Cutter`]'s state between two steps (see [`Cutter::resume_state`]).
@@ -40,6 +48,19 @@ pub struct CutterResume {
     /// The snapping distance derived from the mesh first cut (see
     /// [`CutOptions::snap_distance_m`]), once derived.
     pub snap_distance_m: Option<f64>,
+    /// The stroke that ended before this one began (its poses and vertices, as `trail` and
+    /// `stroke`): the next stroke continues it if it starts where it ended.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ended: Option<EndedStroke>,
+}
+
+/// A stroke the blade has left (see [`CutterResume::ended`]).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct EndedStroke {
+    /// The blade's poses behind its last, oldest first.
+    pub trail: Vec<Blade>,
+    /// The vertices the stroke cut, ascending.
+    pub stroke: Vec<u32>,
 }
 
 /// A [`CutterResume`] that does not fit the mesh (or is not finite).
@@ -71,15 +92,29 @@ impl Cutter {
             options,
             window_m: 0.01,
             specimen_lift_m: 0.03,
+            rejoin_m: 0.0015,
             trail: VecDeque::new(),
             stroke: StrokeVertices::default(),
+            ended: None,
         }
     }
 
-    /// Ends the current stroke: the next pose starts a new one.
+    /// Ends the current stroke (the blade left the tissue): the next pose starts a new one,
+    /// or continues this one if its tip is within [`Self::rejoin_m`] of this one's last edge.
     pub fn end_stroke(&mut self) {
+        if self.trail.is_empty() {
+            return;
+        }
+        let trail = std::mem::take(&mut self.trail);
+        let stroke = std::mem::take(&mut self.stroke);
+        self.ended = Some((trail, stroke));
+    }
+
+    /// Ends the current stroke for good (a cut failed): the next pose starts a new one.
+    pub fn abandon_stroke(&mut self) {
         self.trail.clear();
         self.stroke.clear();
+        self.ended = None;
     }
 
     /// What the next [`Self::advance`] depends on: the trail of poses, the stroke's vertices
@@ -89,6 +124,10 @@ impl Cutter {
             trail: self.trail.iter().copied().collect(),
             stroke: self.stroke.members(),
             snap_distance_m: self.options.snap_distance_m,
+            ended: self.ended.as_ref().map(|(trail, stroke)| EndedStroke {
+                trail: trail.iter().copied().collect(),
+                stroke: stroke.members(),
+            }),
         }
     }
 
@@ -99,12 +138,22 @@ impl Cutter {
         r: &CutterResume,
         vertex_count: usize,
     ) -> Result<(), CutterResumeError> {
-        if !r.trail.iter().all(Blade::is_finite)
+        let ended = r.ended.as_ref();
+        let trails = || {
+            r.trail
+                .iter()
+                .chain(ended.into_iter().flat_map(|e| &e.trail))
+        };
+        if !trails().all(Blade::is_finite)
             || !r.snap_distance_m.is_none_or(|d| d.is_finite() && d >= 0.0)
         {
             return Err(CutterResumeError::NotFinite);
         }
-        if let Some(&vertex) = r.stroke.iter().find(|&&v| v as usize >= vertex_count) {
+        let strokes = r
+            .stroke
+            .iter()
+            .chain(ended.into_iter().flat_map(|e| &e.stroke));
+        if let Some(&vertex) = strokes.into_iter().find(|&&v| v as usize >= vertex_count) {
             return Err(CutterResumeError::StrokeVertex {
                 vertex,
                 vertex_count,
@@ -112,6 +161,12 @@ impl Cutter {
         }
         self.trail = r.trail.iter().copied().collect();
         self.stroke = StrokeVertices::from_members(&r.stroke);
+        self.ended = ended.map(|e| {
+            (
+                e.trail.iter().copied().collect(),
+                StrokeVertices::from_members(&e.stroke),
+            )
+        });
         self.options.snap_distance_m = r.snap_distance_m;
         Ok(())
     }
@@ -125,6 +180,15 @@ impl Cutter {
     pub fn advance(&mut self, sim: &mut Simulation, blade: Blade) -> Result<CutEvent, CutError> {
         if !blade.is_finite() {
             return Err(CutError::NonFiniteBlade);
+        }
+        // a stroke's first pose where the last stroke ended continues that stroke
+        if let Some((trail, stroke)) = self.ended.take()
+            && self.trail.is_empty()
+            && trail
+                .back()
+                .is_some_and(|b| b.distance_to_edge(&blade.tip) <= self.rejoin_m)
+        {
+            (self.trail, self.stroke) = (trail, stroke);
         }
         // poses closer than a 32nd of the window to the one before the newest replace the
         // newest, so a hand that trembles at 1 kHz keeps the swept polygon to a few dozen

@@ -37,6 +37,13 @@ impl Blade {
         self.tip + self.edge_direction * self.depth_m
     }
 
+    /// How far `p` is from the cutting edge (the segment from the tip to the heel), m.
+    pub fn distance_to_edge(&self, p: &Point3) -> f64 {
+        let edge = self.heel() - self.tip;
+        let along = (p - self.tip).dot(&edge) / edge.norm_squared().max(f64::MIN_POSITIVE);
+        (p - (self.tip + edge * along.clamp(0.0, 1.0))).norm()
+    }
+
     /// True when every number is finite and the depth positive.
     pub fn is_finite(&self) -> bool {
         self.tip
@@ -147,14 +154,6 @@ impl CutPolygon {
             || (0..n).any(|i| {
                 segment_distance_2d(q, self.corners_2d[i], self.corners_2d[(i + 1) % n]) <= tol
             })
-    }
-
-    /// True when the projection of `p` onto the plane lies within `tol` of side `i` (from
-    /// corner `i` to the next).
-    pub fn near_side(&self, p: &Point3, i: usize, tol: f64) -> bool {
-        let n = self.corners_2d.len();
-        let q = [self.u.dot(&p.coords), self.v.dot(&p.coords)];
-        segment_distance_2d(q, self.corners_2d[i % n], self.corners_2d[(i + 1) % n]) <= tol
     }
 
     /// Axis-aligned bounds of the polygon.

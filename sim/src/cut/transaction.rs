@@ -18,13 +18,12 @@ use crate::solver::Simulation;
 use crate::{Point3, Vector3};
 
 /// A face whose three vertices lie on the step's plane joins the cut when its centroid
-/// projects inside C or within this many snapping distances ahead of C's front (the side
-/// along the blade's last pose). The resolution moves vertices onto the plane up to
-/// [`resolve::FORCE_REACH`] of an edge's length past the front, so a face it made flat can
-/// sit just ahead of C; left uncut where the next step's plane turns away, such faces held a
-/// pattern disc to the sheet by a column of vertices (see `docs/design/cutting.md`, "Strokes
-/// that rejoin").
-const FACE_REACH_SNAPS: f64 = 2.0;
+/// projects within this many snapping distances of C. The resolution moves vertices onto the
+/// plane up to [`resolve::FORCE_REACH`] of an edge's length past C's boundary, so a face it
+/// made flat can sit just outside C; left uncut where the next step's plane turns away, such
+/// faces held a pattern disc to the sheet by a column of vertices (see
+/// `docs/design/cutting.md`, "Strokes that turn", rule 4).
+const FACE_REACH_SNAPS: f64 = 4.0;
 
 /// A cut under way: working copies of the simulation's state and mesh, which the stages
 /// change while the simulation is only read, and the event they record. Taken through
@@ -236,11 +235,8 @@ impl<'a> PendingCut<'a> {
                         / 3.0,
                 );
                 let reach_m = self.options.snap_distance_m.unwrap_or(0.0) * FACE_REACH_SNAPS;
-                // a cutter's polygon lists the tips, then the heels backwards: the blade's
-                // last pose is the side from the last tip to the last heel
-                let front = self.polygon.corners.len() / 2 - 1;
                 let p = self.polygon;
-                if p.contains_projection(&c, 1e-9 * p.scale) || p.near_side(&c, front, reach_m) {
+                if p.contains_projection(&c, 1e-9 * p.scale + reach_m) {
                     self.cut_faces
                         .insert(sorted_triple([face[0], face[1], face[2]]));
                 }
