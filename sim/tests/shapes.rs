@@ -538,3 +538,17 @@ fn a_gap_between_strokes_holds_the_disc_until_a_stroke_crosses_it() {
     assert_eq!(freed.len(), 1, "{}", describe(&pieces));
     assert_eq!(body(&pieces, &freed).len(), 1, "{}", describe(&pieces));
 }
+
+/// The stress sweep's strokes at the scenes' 1 ms step (what `cutlab bench step` and
+/// `cutlab bench stability` cut, 50 steps between cuts): each leaves the body alone, and the
+/// closed circle through the sheet the body and its disc.
+#[test]
+fn the_stress_sweeps_strokes_leave_the_body_and_only_the_circles_disc() {
+    for case in cutlab_sim::cut_stress::cut_sweep(true) {
+        let r = cutlab_sim::cut_stress::run_cut(&case).expect("built-in scene");
+        let closed = case.shape == cutlab_sim::cut_stress::StrokeShape::Circle;
+        let specimens = usize::from(closed && case.tissue == Tissue::Sheet);
+        assert!(!r.non_finite && r.failed_cuts == 0, "{case:?}: {r:?}");
+        assert_eq!((r.specimens, r.pieces), (specimens, 1 + specimens), "{case:?}: {r:?}");
+    }
+}

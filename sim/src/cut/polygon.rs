@@ -156,6 +156,14 @@ impl CutPolygon {
             })
     }
 
+    /// True when the projection of `p` onto the plane lies within `tol` of side `i` (from
+    /// corner `i` to the next).
+    pub fn near_side(&self, p: &Point3, i: usize, tol: f64) -> bool {
+        let n = self.corners_2d.len();
+        let q = [self.u.dot(&p.coords), self.v.dot(&p.coords)];
+        segment_distance_2d(q, self.corners_2d[i % n], self.corners_2d[(i + 1) % n]) <= tol
+    }
+
     /// Axis-aligned bounds of the polygon.
     pub fn bounds(&self) -> (Point3, Point3) {
         crate::mesh::bounding_box(&self.corners)

@@ -18,11 +18,12 @@ use crate::solver::Simulation;
 use crate::{Point3, Vector3};
 
 /// A face whose three vertices lie on the step's plane joins the cut when its centroid
-/// projects within this many snapping distances of C. The resolution moves vertices onto the
-/// plane up to [`resolve::FORCE_REACH`] of an edge's length past C's boundary, so a face it
-/// made flat can sit just outside C; left uncut where the next step's plane turns away, such
-/// faces held a pattern disc to the sheet by a column of vertices (see
-/// `docs/design/cutting.md`, "Strokes that turn", rule 4).
+/// projects within this many snapping distances of the sides of C along the blade's first and
+/// last poses (besides inside C). The resolution moves vertices onto the plane up to
+/// [`resolve::FORCE_REACH`] of an edge's length past C's boundary, so a face it made flat can
+/// sit just outside C; left uncut where the window shortened on a turn, such faces held a
+/// pattern disc to the sheet by a column of vertices (see `docs/design/cutting.md`, "Strokes
+/// that turn", rule 4).
 const FACE_REACH_SNAPS: f64 = 4.0;
 
 /// A cut under way: working copies of the simulation's state and mesh, which the stages
@@ -234,15 +235,27 @@ impl<'a> PendingCut<'a> {
                         + x[face[2] as usize].coords)
                         / 3.0,
                 );
-                let reach_m = self.options.snap_distance_m.unwrap_or(0.0) * FACE_REACH_SNAPS;
-                let p = self.polygon;
-                if p.contains_projection(&c, 1e-9 * p.scale + reach_m) {
+                if self.on_cut_face(&c) {
                     self.cut_faces
                         .insert(sorted_triple([face[0], face[1], face[2]]));
                 }
             }
         }
         Ok(splits)
+    }
+
+    /// True when a face on the plane with centroid `c` is a cut face: its centroid projects
+    /// inside C, or within [`FACE_REACH_SNAPS`] snapping distances of the side along the
+    /// blade's first or last pose (a cutter's polygon lists the tips, then the heels
+    /// backwards, so those are the side from the last tip to the last heel and the one from
+    /// the first heel to the first tip).
+    fn on_cut_face(&self, c: &Point3) -> bool {
+        let p = self.polygon;
+        let reach_m = self.options.snap_distance_m.unwrap_or(0.0) * FACE_REACH_SNAPS;
+        let n = p.corners.len();
+        p.contains_projection(c, 1e-9 * p.scale)
+            || p.near_side(c, n / 2 - 1, reach_m)
+            || p.near_side(c, n - 1, reach_m)
     }
 
     /// Children with conforming diagonals (chosen as [`CutOptions::pattern`] says): each split
