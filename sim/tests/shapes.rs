@@ -549,6 +549,10 @@ fn the_stress_sweeps_strokes_leave_the_body_and_only_the_circles_disc() {
         let closed = case.shape == cutlab_sim::cut_stress::StrokeShape::Circle;
         let specimens = usize::from(closed && case.tissue == Tissue::Sheet);
         assert!(!r.non_finite && r.failed_cuts == 0, "{case:?}: {r:?}");
-        assert_eq!((r.specimens, r.pieces), (specimens, 1 + specimens), "{case:?}: {r:?}");
+        assert_eq!(
+            (r.specimens, r.pieces),
+            (specimens, 1 + specimens),
+            "{case:?}: {r:?}"
+        );
     }
 }
