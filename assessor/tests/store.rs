@@ -246,6 +246,65 @@ async fn cohorts_and_curricula(store: Store) {
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
 }
 
+on_both!(an_older_databases_cutting_basics_gains_the_new_exercises_once);
+/// A database whose `cutting-basics` an older cutlab made, with only the incision, keeps its
+/// module and its settings; the built-in exercises new to it join the end, once.
+async fn an_older_databases_cutting_basics_gains_the_new_exercises_once(store: Store) {
+    let plan = ExercisePlan::chest_wall().expect("plan");
+    let t = [Threshold::fixed(
+        "lateral_mean_m",
+        Better::LowerIsBetter,
+        0.0005,
+        0.002,
+    )];
+    let old = NewExercise {
+        name: BUILTIN_EXERCISE,
+        scene: "chest-wall",
+        description: "the incision as an older cutlab made it",
+        plan: &plan,
+        thresholds: &t,
+        threshold_k: 2.0,
+        exam_only: false,
+    };
+    let incision = store.create_exercise(&old).await.expect("exercise").id;
+    let basics = store
+        .create_curriculum(CUTTING_BASICS, "an older one")
+        .await
+        .expect("basics");
+    store
+        .add_module(basics.id, "Straight incision", &[incision])
+        .await
+        .expect("module");
+
+    assert_eq!(
+        store.ensure_builtins().await.expect("builtins").id,
+        incision
+    );
+    let names = |modules: Vec<cutlab_assessor::store::Module>| -> Vec<String> {
+        modules.into_iter().map(|m| m.name).collect()
+    };
+    let expected = [
+        "Straight incision",
+        "Pattern cutting",
+        "Elliptical excision",
+        "Curved incision on a patient",
+    ];
+    let modules = store.curriculum_modules(basics.id).await.expect("modules");
+    assert_eq!(modules[0].exercise_ids, [incision]);
+    assert_eq!(names(modules), expected);
+    store.ensure_builtins().await.expect("again: nothing added");
+    let modules = store.curriculum_modules(basics.id).await.expect("modules");
+    assert_eq!(names(modules), expected);
+    let kept = store
+        .curriculum_by_name(CUTTING_BASICS)
+        .await
+        .expect("basics");
+    assert_eq!(
+        (kept.description.as_str(), kept.progression),
+        ("an older one", false)
+    );
+}
+
 on_both!(progression_opens_each_exercise_after_the_one_before);
 /// In a curriculum with progression an exercise opens when the one before it is proficient
 /// (two passes in a row), or when an instructor opens it early (recorded); the built-in

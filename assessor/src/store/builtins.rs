@@ -2,6 +2,8 @@
 //! `chest-wall-incision`, `pattern-cutting`, `elliptical-excision` and `body-wall-incision`,
 //! and the curriculum that orders them, `cutting-basics` (with progression).
 
+use std::collections::BTreeSet;
+
 use super::{CUTTING_BASICS, Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
 use crate::exercise::{ExcisionPlan, ExercisePlan, PatternPlan};
@@ -72,19 +74,24 @@ impl Store {
     pub async fn ensure_builtins(&self) -> Result<Exercise> {
         let mut made = Vec::new();
         for b in builtins()? {
-            let e = self
+            let (e, created) = self
                 .ensure_exercise(b.name, b.scene, b.description, &b.plan)
                 .await?;
-            made.push((b.module, e));
+            made.push(BuiltinModule {
+                title: b.module,
+                exercise: e,
+                created,
+            });
         }
-        let modules: Vec<(&str, &Exercise)> = made.iter().map(|(m, e)| (*m, e)).collect();
-        self.ensure_cutting_basics(&modules).await?;
-        Ok(made.swap_remove(0).1)
+        self.ensure_cutting_basics(&made).await?;
+        Ok(made.swap_remove(0).exercise)
     }
 
     /// Makes the `cutting-basics` curriculum, one module per exercise in order, with
-    /// progression, unless it exists (an instructor's edits to it stay).
-    async fn ensure_cutting_basics(&self, modules: &[(&str, &Exercise)]) -> Result<()> {
+    /// progression, unless it exists. One that exists keeps an instructor's edits; a built-in
+    /// exercise this call created (one a newer cutlab brings to an older database) joins its
+    /// end as a module of its own, unless a module holds it already.
+    async fn ensure_cutting_basics(&self, modules: &[BuiltinModule]) -> Result<()> {
         let made = self
             .create_curriculum(
                 CUTTING_BASICS,
@@ -93,25 +100,47 @@ impl Store {
             .await;
         let c = match made {
             Ok(c) => c,
-            Err(AssessError::Conflict(_)) => return Ok(()),
+            Err(AssessError::Conflict(_)) => return self.append_new_builtins(modules).await,
             Err(e) => return Err(e),
         };
-        for (name, e) in modules {
-            self.add_module(c.id, name, &[e.id]).await?;
+        for m in modules {
+            self.add_module(c.id, m.title, &[m.exercise.id]).await?;
         }
         self.set_progression(c.id, true).await
     }
 
-    /// Inserts exercise `name` with `plan` and its kind's default thresholds if missing.
+    /// Appends to an existing `cutting-basics` a module for each of `modules` created by this
+    /// call that no module holds.
+    async fn append_new_builtins(&self, modules: &[BuiltinModule]) -> Result<()> {
+        if !modules.iter().any(|m| m.created) {
+            return Ok(());
+        }
+        let c = self.curriculum_by_name(CUTTING_BASICS).await?;
+        let held: BTreeSet<i64> = self
+            .curriculum_modules(c.id)
+            .await?
+            .into_iter()
+            .flat_map(|m| m.exercise_ids)
+            .collect();
+        for m in modules.iter().filter(|m| m.created) {
+            if !held.contains(&m.exercise.id) {
+                self.add_module(c.id, m.title, &[m.exercise.id]).await?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Inserts exercise `name` with `plan` and its kind's default thresholds if missing;
+    /// returns it and whether this call created it.
     async fn ensure_exercise(
         &self,
         name: &str,
         scene: &str,
         description: &str,
         plan: &ExercisePlan,
-    ) -> Result<Exercise> {
+    ) -> Result<(Exercise, bool)> {
         match self.exercise_by_name(name).await {
-            Ok(e) => return Ok(e),
+            Ok(e) => return Ok((e, false)),
             Err(AssessError::NotFound(_)) => {}
             Err(e) => return Err(e),
         }
@@ -126,9 +155,17 @@ impl Store {
             exam_only: false,
         };
         match self.create_exercise(&new).await {
-            Ok(e) => Ok(e),
-            Err(AssessError::Conflict(_)) => self.exercise_by_name(name).await,
+            Ok(e) => Ok((e, true)),
+            Err(AssessError::Conflict(_)) => Ok((self.exercise_by_name(name).await?, false)),
             Err(e) => Err(e),
         }
     }
+}
+
+/// A built-in exercise as [`Store::ensure_builtins`] found or made it, with its module's
+/// title in `cutting-basics`.
+struct BuiltinModule {
+    title: &'static str,
+    exercise: Exercise,
+    created: bool,
 }
