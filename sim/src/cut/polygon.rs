@@ -210,4 +210,24 @@ mod tests {
             .is_none()
         );
     }
+
+    #[test]
+    fn near_side_measures_from_one_side_only() {
+        let c = CutPolygon::new(&[
+            Point3::new(0.0, 0.0, 1.0),
+            Point3::new(1.0, 0.0, 1.0),
+            Point3::new(1.0, 1.0, 1.0),
+            Point3::new(0.0, 1.0, 1.0),
+        ])
+        .unwrap();
+        // side 1 runs from (1, 0) to (1, 1): 0.05 past it is near, 0.05 past side 3 is not
+        let past_side_1 = Point3::new(1.05, 0.5, 4.0);
+        assert!(c.near_side(&past_side_1, 1, 0.1));
+        assert!(!c.near_side(&past_side_1, 1, 0.01));
+        assert!(!c.near_side(&past_side_1, 3, 0.1));
+        assert!(c.near_side(&Point3::new(-0.05, 0.5, 1.0), 3, 0.1));
+        // beyond a corner the distance is to the corner
+        assert!(!c.near_side(&Point3::new(1.08, 1.08, 1.0), 1, 0.1));
+        assert!(c.near_side(&Point3::new(1.05, 1.05, 1.0), 1, 0.1));
+    }
 }
