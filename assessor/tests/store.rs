@@ -73,6 +73,11 @@ fn values(pairs: &[(&str, f64)]) -> Vec<MetricValue> {
 }
 
 async fn exercise_with_one_threshold(store: &Store) -> i64 {
+    exercise_named(store, "one-metric", "").await
+}
+
+/// A chest-wall incision exercise called `name` with the one threshold `lateral_mean_m`.
+async fn exercise_named(store: &Store, name: &str, description: &str) -> i64 {
     let plan = ExercisePlan::chest_wall().expect("plan");
     let t = [Threshold::fixed(
         "lateral_mean_m",
@@ -81,9 +86,9 @@ async fn exercise_with_one_threshold(store: &Store) -> i64 {
         0.002,
     )];
     let new = NewExercise {
-        name: "one-metric",
+        name,
         scene: "chest-wall",
-        description: "",
+        description,
         plan: &plan,
         thresholds: &t,
         threshold_k: 2.0,
@@ -250,23 +255,12 @@ on_both!(an_older_databases_cutting_basics_gains_the_new_exercises_once);
 /// A database whose `cutting-basics` an older cutlab made, with only the incision, keeps its
 /// module and its settings; the built-in exercises new to it join the end, once.
 async fn an_older_databases_cutting_basics_gains_the_new_exercises_once(store: Store) {
-    let plan = ExercisePlan::chest_wall().expect("plan");
-    let t = [Threshold::fixed(
-        "lateral_mean_m",
-        Better::LowerIsBetter,
-        0.0005,
-        0.002,
-    )];
-    let old = NewExercise {
-        name: BUILTIN_EXERCISE,
-        scene: "chest-wall",
-        description: "the incision as an older cutlab made it",
-        plan: &plan,
-        thresholds: &t,
-        threshold_k: 2.0,
-        exam_only: false,
-    };
-    let incision = store.create_exercise(&old).await.expect("exercise").id;
+    let incision = exercise_named(
+        &store,
+        BUILTIN_EXERCISE,
+        "the incision as an older cutlab made it",
+    )
+    .await;
     let basics = store
         .create_curriculum(CUTTING_BASICS, "an older one")
         .await
@@ -316,13 +310,10 @@ async fn progression_opens_each_exercise_after_the_one_before(store: Store) {
         .await
         .expect("basics");
     assert!(basics.progression);
-    let order: Vec<i64> = store
-        .curriculum_modules(basics.id)
+    let order = store
+        .curriculum_exercise_ids(basics.id)
         .await
-        .expect("modules")
-        .into_iter()
-        .flat_map(|m| m.exercise_ids)
-        .collect();
+        .expect("modules");
     let pattern = store
         .exercise_by_name(PATTERN_EXERCISE)
         .await

@@ -6,7 +6,7 @@ mod common;
 
 use common::check_invariants;
 use cutlab_sim::cut::{self, Cutter, FRAGMENT_VOLUME_M3, Specimen};
-use cutlab_sim::cut_stress::{Tissue, arc, graph, zigzag};
+use cutlab_sim::cut_stress::{StrokeShape, Tissue, arc, cut_sweep, graph, run_cut, zigzag};
 use cutlab_sim::mesh::{Piece, pieces};
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::Simulation;
@@ -544,9 +544,9 @@ fn a_gap_between_strokes_holds_the_disc_until_a_stroke_crosses_it() {
 /// closed circle through the sheet the body and its disc.
 #[test]
 fn the_stress_sweeps_strokes_leave_the_body_and_only_the_circles_disc() {
-    for case in cutlab_sim::cut_stress::cut_sweep(true) {
-        let r = cutlab_sim::cut_stress::run_cut(&case).expect("built-in scene");
-        let closed = case.shape == cutlab_sim::cut_stress::StrokeShape::Circle;
+    for case in cut_sweep(true) {
+        let r = run_cut(&case).expect("built-in scene");
+        let closed = case.shape == StrokeShape::Circle;
         let specimens = usize::from(closed && case.tissue == Tissue::Sheet);
         assert!(!r.non_finite && r.failed_cuts == 0, "{case:?}: {r:?}");
         assert_eq!(

@@ -117,10 +117,9 @@ impl Store {
         }
         let c = self.curriculum_by_name(CUTTING_BASICS).await?;
         let held: BTreeSet<i64> = self
-            .curriculum_modules(c.id)
+            .curriculum_exercise_ids(c.id)
             .await?
             .into_iter()
-            .flat_map(|m| m.exercise_ids)
             .collect();
         for m in modules.iter().filter(|m| m.created) {
             if !held.contains(&m.exercise.id) {

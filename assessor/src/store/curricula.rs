@@ -147,6 +147,12 @@ impl Store {
         })
     }
 
+    /// The exercises of a curriculum's modules, in the modules' order and each module's.
+    pub async fn curriculum_exercise_ids(&self, curriculum_id: i64) -> Result<Vec<i64>> {
+        let modules = self.curriculum_modules(curriculum_id).await?;
+        Ok(modules.into_iter().flat_map(|m| m.exercise_ids).collect())
+    }
+
     /// A curriculum's modules in order, each with its exercises in order.
     pub async fn curriculum_modules(&self, curriculum_id: i64) -> Result<Vec<Module>> {
         let rows: Vec<(i64, i64, String)> = crate::on_db!(&self.db, pool => sqlx::query_as(

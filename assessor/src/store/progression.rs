@@ -85,12 +85,7 @@ impl Store {
             if !c.progression {
                 continue;
             }
-            let order: Vec<i64> = self
-                .curriculum_modules(c.id)
-                .await?
-                .into_iter()
-                .flat_map(|m| m.exercise_ids)
-                .collect();
+            let order = self.curriculum_exercise_ids(c.id).await?;
             let Some(before) = order
                 .iter()
                 .position(|&e| e == exercise_id)

@@ -187,15 +187,20 @@ fn segment_distance_2d(q: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
 mod tests {
     use super::*;
 
-    #[test]
-    fn square_contains_its_inside_only() {
-        let c = CutPolygon::new(&[
+    /// The unit square in the plane z = 1.
+    fn unit_square() -> CutPolygon {
+        CutPolygon::new(&[
             Point3::new(0.0, 0.0, 1.0),
             Point3::new(1.0, 0.0, 1.0),
             Point3::new(1.0, 1.0, 1.0),
             Point3::new(0.0, 1.0, 1.0),
         ])
-        .unwrap();
+        .unwrap()
+    }
+
+    #[test]
+    fn square_contains_its_inside_only() {
+        let c = unit_square();
         assert!((c.normal.z.abs() - 1.0).abs() < 1e-15);
         assert!(c.contains_projection(&Point3::new(0.5, 0.5, 7.0), 0.0));
         assert!(!c.contains_projection(&Point3::new(1.5, 0.5, 1.0), 0.0));
@@ -213,13 +218,7 @@ mod tests {
 
     #[test]
     fn near_side_measures_from_one_side_only() {
-        let c = CutPolygon::new(&[
-            Point3::new(0.0, 0.0, 1.0),
-            Point3::new(1.0, 0.0, 1.0),
-            Point3::new(1.0, 1.0, 1.0),
-            Point3::new(0.0, 1.0, 1.0),
-        ])
-        .unwrap();
+        let c = unit_square();
         // side 1 runs from (1, 0) to (1, 1): 0.05 past it is near, 0.05 past side 3 is not
         let past_side_1 = Point3::new(1.05, 0.5, 4.0);
         assert!(c.near_side(&past_side_1, 1, 0.1));
