@@ -30,7 +30,11 @@
 //! - closed: of the trace points within [`NEAR_OUTLINE_M`] of the planned outline, the largest
 //!   step between consecutive `s` round the whole outline (`P` when none is near) is the
 //!   outline's widest gap; closed when it is at most [`CLOSED_GAP_M`];
-//! - time: from the first cut to the last.
+//! - time: from the first cut to the last;
+//! - specimen: 1 when a cut freed a piece of tissue ([`crate::input::FreedPiece`], the first
+//!   such), else 0, and then its volume at rest. An incision into the fat leaves the specimen
+//!   attached at its base (undermining it is not part of the exercise), so neither is scored;
+//!   a freed specimen's margins at the skin are the outline's own (above).
 
 use nalgebra::{Point3, Vector3};
 
@@ -156,6 +160,22 @@ pub const METRICS: &[Metric] = &[
         "from the first cut to the last",
     )
     .labelled("Cutting time"),
+    m(
+        "excision_specimen_freed",
+        "1",
+        Better::HigherIsBetter,
+        false,
+        "1 when the cuts freed the specimen, else 0 (undermining is not asked for)",
+    )
+    .labelled("Specimen freed"),
+    m(
+        "excision_specimen_volume_m3",
+        "m^3",
+        Better::HigherIsBetter,
+        false,
+        "the freed specimen's volume at rest",
+    )
+    .labelled("Specimen volume"),
 ];
 
 /// What an excision is measured against: the lesion (centre on the surface, unit normal,
@@ -240,6 +260,7 @@ fn trace(e: &Excision, data: &AttemptData) -> (Vec<TracePoint>, f64) {
 /// The elliptical excision metrics of `data` against `e`.
 pub(crate) fn assess(e: &Excision, data: &AttemptData, values: &mut Values) {
     let (points, perimeter) = trace(e, data);
+    specimen(data, values);
     let finite_t: Vec<f64> = data
         .cuts
         .iter()
@@ -279,6 +300,19 @@ pub(crate) fn assess(e: &Excision, data: &AttemptData, values: &mut Values) {
         "outline_closed",
         if gap <= CLOSED_GAP_M { 1.0 } else { 0.0 },
     );
+}
+
+/// Whether a cut freed the specimen, and its volume.
+fn specimen(data: &AttemptData, values: &mut Values) {
+    let freed = data.freed.first();
+    values.set(
+        "excision_specimen_freed",
+        if freed.is_some() { 1.0 } else { 0.0 },
+    );
+    match freed {
+        Some(p) => values.set("excision_specimen_volume_m3", p.volume_m3),
+        None => values.missing(&["excision_specimen_volume_m3"], "no specimen was freed"),
+    }
 }
 
 fn margins(e: &Excision, points: &[TracePoint], values: &mut Values) {
@@ -594,5 +628,33 @@ mod tests {
         assert_eq!(get(&far, "outline_closed"), 0.0);
         let none = run(&circle, &AttemptData::default());
         assert_eq!(get(&none, "outline_closed"), 0.0);
+    }
+
+    /// The specimen: not freed by an incision alone (its volume missing, not zero); freed, its
+    /// volume is the first freed piece's.
+    #[test]
+    fn the_specimen_is_reported_when_a_cut_frees_it() {
+        let circle: Vec<[f64; 2]> = (0..360)
+            .map(|k| {
+                let a = (k as f64).to_radians();
+                [(R + 0.002) * a.cos(), (R + 0.002) * a.sin()]
+            })
+            .collect();
+        let mut data = cut_round(&circle, 0.0, |_, _| 0.005);
+        let attached = run(&circle, &data);
+        assert_eq!(get(&attached, "excision_specimen_freed"), 0.0);
+        assert!(
+            attached
+                .iter()
+                .any(|(k, v)| *k == "excision_specimen_volume_m3" && v.is_none())
+        );
+        data.freed.push(crate::input::FreedPiece {
+            t_s: 3.0,
+            volume_m3: 1.2e-6,
+            surface_m2: 6e-4,
+        });
+        let freed = run(&circle, &data);
+        assert_eq!(get(&freed, "excision_specimen_freed"), 1.0);
+        assert_eq!(get(&freed, "excision_specimen_volume_m3"), 1.2e-6);
     }
 }

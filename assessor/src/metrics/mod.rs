@@ -103,6 +103,7 @@ pub fn display_unit(unit: &str) -> (f64, &str) {
     match unit {
         "m" => (1e3, "mm"),
         "m^2" => (1e6, "mm²"),
+        "m^3" => (1e9, "mm³"),
         "deg" => (1.0, "°"),
         "1" => (1.0, ""),
         other => (1.0, other),
