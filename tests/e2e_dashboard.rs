@@ -1100,7 +1100,7 @@ async fn mark_on_page(
 /// `station-body-wall-debrief.png`.
 #[test]
 fn a_curved_incision_on_the_body_wall_passes_at_the_station_in_headless_chromium() {
-    let Some(summary) = guided_at_the_station("body-wall-incision", "body-wall") else {
+    let Some(summary) = guided_at_the_station("body-wall-incision", "body-wall", false) else {
         return;
     };
     assert!(
@@ -1115,7 +1115,7 @@ fn a_curved_incision_on_the_body_wall_passes_at_the_station_in_headless_chromium
 /// `station-excision-mid-cut.png`, `station-excision-done.png`, `station-excision-debrief.png`.
 #[test]
 fn an_elliptical_excision_passes_at_the_station_in_headless_chromium() {
-    let Some(summary) = guided_at_the_station("elliptical-excision", "excision") else {
+    let Some(summary) = guided_at_the_station("elliptical-excision", "excision", false) else {
         return;
     };
     assert!(
@@ -1124,10 +1124,28 @@ fn an_elliptical_excision_passes_at_the_station_in_headless_chromium() {
     );
 }
 
+/// Elliptical excision as ordinary life interrupts it: half way round the outline the trainee
+/// switches to another tab for 2 s, then holds the blade still in the wound for 3 s (a stall:
+/// no samples), then the page is reloaded; the hand lets go, presses again where it was and
+/// goes on round. The attempt survives and the careful outline still passes. Screenshots:
+/// `station-excision-reloaded-mid-cut.png`, `station-excision-reloaded-done.png`,
+/// `station-excision-reloaded-debrief.png`.
+#[test]
+fn an_elliptical_excision_survives_a_tab_switch_a_stall_and_a_reload_in_headless_chromium() {
+    let Some(summary) = guided_at_the_station("elliptical-excision", "excision-reloaded", true)
+    else {
+        return;
+    };
+    assert!(
+        summary.starts_with("Score") && summary.contains("(pass)"),
+        "the interrupted careful excision passes: {summary}"
+    );
+}
+
 /// Ana's guided attempt at `exercise`, opened early by dr-kim, her steady hand along the plan
-/// at 12 mm/s; screenshots `station-{shot}-*.png`. Returns the debrief's summary (`None`
-/// without a browser).
-fn guided_at_the_station(exercise: &str, shot: &str) -> Option<String> {
+/// at 12 mm/s (with `interrupt`, a tab switch, a stall and a reload half way); screenshots
+/// `station-{shot}-*.png`. Returns the debrief's summary (`None` without a browser).
+fn guided_at_the_station(exercise: &str, shot: &str, interrupt: bool) -> Option<String> {
     let _one = ONE_AT_A_TIME
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -1137,19 +1155,31 @@ fn guided_at_the_station(exercise: &str, shot: &str) -> Option<String> {
     let tmp = std::env::temp_dir().join(format!("cutlab-e2e-{shot}-{}", std::process::id()));
     let (_server, port) = demo_server(&tmp);
     let driver = chromedriver();
-    let summary = runtime().block_on(guided(port, &driver, &tmp, exercise, shot));
+    let run = Guided {
+        exercise,
+        shot,
+        interrupt,
+    };
+    let summary = runtime().block_on(guided(port, &driver, &tmp, run));
     let _ = std::fs::remove_dir_all(&tmp);
     Some(summary)
 }
 
-async fn guided(
-    port: u16,
-    driver: &browser::Driver,
-    tmp: &Path,
-    exercise: &str,
-    shot: &str,
-) -> String {
+/// What [`guided`] runs: the exercise, the screenshots' tag, whether life interrupts it.
+#[derive(Clone, Copy)]
+struct Guided<'a> {
+    exercise: &'a str,
+    shot: &'a str,
+    interrupt: bool,
+}
+
+async fn guided(port: u16, driver: &browser::Driver, tmp: &Path, run: Guided<'_>) -> String {
     use cutlab_haptics::hand::{Gesture, Hand};
+    let Guided {
+        exercise,
+        shot,
+        interrupt,
+    } = run;
     let (base, shots) = (format!("http://127.0.0.1:{port}"), artefacts());
     let c = chromium(driver, &tmp.join(format!("profile-{shot}"))).await;
     let result = async {
@@ -1171,7 +1201,18 @@ async fn guided(
         c.perform_actions(as_actions(&g[..half])).await?;
         let mid = shots.join(format!("station-{shot}-mid-cut.png"));
         std::fs::write(mid, c.screenshot().await?).expect("screenshot");
-        c.perform_actions(as_actions(&g[half..])).await?;
+        let rest_of_it = if interrupt {
+            another_tab_for_2_s(&c).await?;
+            // the hand holds still with the blade in: no samples for 3 s
+            tokio::time::sleep(Duration::from_secs(3)).await;
+            let url = c.current_url().await?;
+            c.goto(url.as_str()).await?;
+            line_on_page(&c).await?;
+            press_again(&hand, &g[half..])
+        } else {
+            g[half..].to_vec()
+        };
+        c.perform_actions(as_actions(&rest_of_it)).await?;
         let away = hand.withdraw(end.unwrap_or(line[0]), [60.0, -120.0], 0.5);
         c.perform_actions(as_actions(&away)).await?;
         let done = shots.join(format!("station-{shot}-done.png"));
