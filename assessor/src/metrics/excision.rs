@@ -535,6 +535,16 @@ mod tests {
         }
     }
 
+    /// A circle 2 mm outside the lesion's edge, one point a degree.
+    fn circle_2_mm_out() -> Vec<[f64; 2]> {
+        (0..360)
+            .map(|k| {
+                let a = (k as f64).to_radians();
+                [(R + 0.002) * a.cos(), (R + 0.002) * a.sin()]
+            })
+            .collect()
+    }
+
     fn run(outline: &[[f64; 2]], data: &AttemptData) -> Vec<(&'static str, Option<f64>)> {
         let mut values = Values::default();
         assess(&excision(outline), data, &mut values);
@@ -585,12 +595,7 @@ mod tests {
     /// on one side counts those sectors out of the fat; an outline a quarter short is open.
     #[test]
     fn shape_depth_and_closure_fail_where_they_should() {
-        let circle: Vec<[f64; 2]> = (0..360)
-            .map(|k| {
-                let a = (k as f64).to_radians();
-                [(R + 0.002) * a.cos(), (R + 0.002) * a.sin()]
-            })
-            .collect();
+        let circle = circle_2_mm_out();
         let round = run(&circle, &cut_round(&circle, 0.0, |_, _| 0.005));
         assert!((get(&round, "length_to_width") - 1.0).abs() < 1e-3);
         assert!((get(&round, "excision_ratio_error") - 2.0).abs() < 1e-3);
@@ -634,12 +639,7 @@ mod tests {
     /// volume is the first freed piece's.
     #[test]
     fn the_specimen_is_reported_when_a_cut_frees_it() {
-        let circle: Vec<[f64; 2]> = (0..360)
-            .map(|k| {
-                let a = (k as f64).to_radians();
-                [(R + 0.002) * a.cos(), (R + 0.002) * a.sin()]
-            })
-            .collect();
+        let circle = circle_2_mm_out();
         let mut data = cut_round(&circle, 0.0, |_, _| 0.005);
         let attached = run(&circle, &data);
         assert_eq!(get(&attached, "excision_specimen_freed"), 0.0);
