@@ -49,6 +49,7 @@ mod tests {
             let ok = match (m.unit, l.unit) {
                 ("m", "mm") => l.factor == 1e3,
                 ("m^2", "mm²") => l.factor == 1e6,
+                ("m^3", "mm³") => l.factor == 1e9,
                 ("1", "%") => l.factor == 100.0,
                 ("deg", "°") | ("1", "") => l.factor == 1.0,
                 (si, shown) => si == shown && l.factor == 1.0,
