@@ -16,7 +16,7 @@ use crate::collision::{SurfaceCollider, SurfaceHit};
 use crate::render::{ContactModel, Mode, WOUND_REACH_M, Wound};
 use crate::servo::ServoSample;
 use crate::session::{Session, SessionConfig};
-use crate::{HapticsError, Point3};
+use crate::{HapticsError, Point3, Vector3};
 
 /// What the stepper counted.
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
@@ -347,13 +347,11 @@ impl SessionStepper {
             self.collider
                 .contact_model(&self.sim, &probes, self.reach_m, sample.tick, pressed);
         contact.at_heel = contact.valid && hit.as_ref().is_some_and(|(probe, _)| *probe == 1);
-        contact.cut_entry = self
-            .cut_entry
-            .and_then(|h| h.moved(&self.sim.state.positions));
+        contact.cut_entry = self.cut_entry.and_then(|h| self.entry_now(&h));
         // (the entry's normal as it went in: the cut splits the entry's triangle, whose
         // normal can turn as the wound opens)
         contact.wound = self.wound.and_then(|(end_m, h)| {
-            h.moved(&self.sim.state.positions).map(|(p, _)| Wound {
+            self.entry_now(&h).map(|(p, _)| Wound {
                 end_m,
                 entry: (p, h.normal),
             })
@@ -375,6 +373,22 @@ impl SessionStepper {
             cut: made,
             rejected,
         }
+    }
+
+    /// Where a cut's entry `h` is now and its normal, or None once the entry is no longer on
+    /// the tissue the blade is in: a piece cut free (a pattern's disc) is lifted away and
+    /// held, and a point on it would put the entry's plane wherever the piece went. Without
+    /// an entry the renderer keeps the plane the blade went in by (before, a blade cutting on
+    /// past the freed disc left its cut and went back into it on every other tick).
+    fn entry_now(&self, h: &SurfaceHit) -> Option<(Point3, Vector3)> {
+        let held = &self.sim.model.held;
+        if h.vertices
+            .iter()
+            .any(|&v| held.get(v as usize).is_none_or(|&held| held))
+        {
+            return None;
+        }
+        h.moved(&self.sim.state.positions)
     }
 
     /// Hash of the simulation state's bits (positions and velocities) and of its topology
