@@ -379,7 +379,9 @@ impl SessionStepper {
     /// the tissue the blade is in: a piece cut free (a pattern's disc) is lifted away and
     /// held, and a point on it would put the entry's plane wherever the piece went. Without
     /// an entry the renderer keeps the plane the blade went in by (before, a blade cutting on
-    /// past the freed disc left its cut and went back into it on every other tick).
+    /// past the freed disc left its cut and went back into it on every other tick). Any held
+    /// particle counts: the entry's triangle is the one hit before the cut split it, so its
+    /// particles may lie on both sides (asking for all of them held missed the disc).
     fn entry_now(&self, h: &SurfaceHit) -> Option<(Point3, Vector3)> {
         let held = &self.sim.model.held;
         if h.vertices
