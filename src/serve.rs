@@ -32,6 +32,10 @@ pub struct Options<'a> {
     pub hub: Option<cutlab_station::sync::Hub>,
     /// A kiosk for one trainee (`cutlab station`).
     pub kiosk: Option<Kiosk>,
+    /// Session cookies marked `Secure` (`--secure-cookies`).
+    pub secure_cookies: bool,
+    /// The dashboard's public address (`--public-url`).
+    pub public_url: Option<cutlab_dashboard::PublicUrl>,
 }
 
 impl<'a> Options<'a> {
@@ -54,6 +58,8 @@ impl<'a> Options<'a> {
             recordings,
             hub,
             kiosk: None,
+            secure_cookies: false,
+            public_url: None,
         }
     }
 }
@@ -128,6 +134,8 @@ pub fn run(o: Options<'_>) -> anyhow::Result<()> {
                 ..cutlab_station::StationSettings::new(station_dir)
             },
             recordings,
+            secure_cookies: o.secure_cookies,
+            public_url: o.public_url.clone(),
             ..Config::default()
         };
         let state = AppState::new(store, config)?;

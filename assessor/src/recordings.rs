@@ -92,6 +92,7 @@ impl RecordingStore {
         })?;
         let fs = object_store::local::LocalFileSystem::new_with_prefix(dir)
             .map_err(store_error(location))?;
+        sweep_staged(&FsPath::new(dir).join("sha256"));
         Ok(Self {
             store: Arc::new(fs),
             prefix: Path::default(),
@@ -209,6 +210,48 @@ impl RecordingStore {
     }
 }
 
+/// How old a folder store's staged file must be to be taken for one a killed process left.
+const STAGED_LEFT_AFTER: std::time::Duration = std::time::Duration::from_secs(600);
+
+/// Whether `name` is a staged file of a folder store: the object's key, `#` and a number
+/// (how `object_store` writes a file before it renames it into place).
+fn is_staged(name: &str) -> bool {
+    name.split_once('#').is_some_and(|(key, n)| {
+        is_sha256_hex(key) && !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit())
+    })
+}
+
+/// Removes from the folder `objects` the staged files a process killed mid-write left
+/// (older than [`STAGED_LEFT_AFTER`]): never renamed into place, and never looked at again
+/// (a retry stages a file of its own). Logged; a failure to remove one is only logged.
+fn sweep_staged(objects: &FsPath) {
+    let Ok(entries) = std::fs::read_dir(objects) else {
+        return;
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let old = entry
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age >= STAGED_LEFT_AFTER);
+        if old && name.to_str().is_some_and(is_staged) {
+            match std::fs::remove_file(entry.path()) {
+                Ok(()) => removed += 1,
+                Err(e) => tracing::warn!("removing {}: {e}", entry.path().display()),
+            }
+        }
+    }
+    if removed > 0 {
+        tracing::info!(
+            "{}: removed {removed} files a killed upload left half-written",
+            objects.display()
+        );
+    }
+}
+
 impl crate::Store {
     /// Puts attempt `attempt_id`'s recording (its recorded path) and the `.rrd` beside it, if
     /// there is one, into `recordings` and records their keys. The files stay where they are.
@@ -237,6 +280,35 @@ impl crate::Store {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_killed_writes_staged_file_goes_when_the_store_opens_again() {
+        let dir = tempfile::tempdir().expect("folder");
+        let at = dir.path().join("recordings");
+        let objects = at.join("sha256");
+        std::fs::create_dir_all(&objects).expect("objects");
+        let sha = sha256_hex(b"x");
+        let left = objects.join(format!("{sha}#1"));
+        let fresh = objects.join(format!("{sha}#2"));
+        let other = objects.join("notes.txt#1");
+        for f in [&left, &fresh, &other] {
+            std::fs::write(f, b"").expect("file");
+        }
+        let old = std::time::SystemTime::now() - 2 * STAGED_LEFT_AFTER;
+        for f in [&left, &other] {
+            std::fs::File::options()
+                .write(true)
+                .open(f)
+                .and_then(|f| f.set_modified(old))
+                .expect("age");
+        }
+        RecordingStore::open(at.to_str().expect("utf-8")).expect("store");
+        assert!(!left.exists(), "the killed write's file is gone");
+        assert!(fresh.exists(), "a write that may be under way stays");
+        assert!(other.exists(), "what the store did not write stays");
+        assert!(is_staged(&format!("{sha}#12")) && !is_staged(&format!("{sha}#")));
+        assert!(!is_staged(&sha) && !is_staged(&format!("{sha}#1a")));
+    }
 
     #[test]
     fn keys_are_sha256_hex_only() {

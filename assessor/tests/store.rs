@@ -1312,7 +1312,14 @@ async fn a_hub_refuses_forged_and_impossible_attempts(hub: Store) {
         .expect("instructor");
     let mut u = good(b"look-alike");
     u.trainee = "DR-KIM".into();
-    assert!(hub.import_attempt(&u, "or-1", &u.metrics).await.is_err());
+    let err = hub
+        .import_attempt(&u, "or-1", &u.metrics)
+        .await
+        .expect_err("a look-alike");
+    assert!(
+        matches!(err, AssessError::InvalidInput(_)),
+        "422 on the hub: {err}"
+    );
     assert!(hub.user_by_name("DR-KIM").await.is_err());
     assert_eq!(hub.list_attempts(None, None).await.expect("list").len(), 1);
 }

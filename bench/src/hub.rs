@@ -64,7 +64,7 @@ struct Report {
 }
 
 /// The hostile clients of phase 3 and the honest stations' uploads meanwhile.
-#[derive(Debug, serde::Serialize)]
+#[derive(Debug, Default, serde::Serialize)]
 struct SlowReport {
     /// Recording uploads by hostile stations whose bodies crawled (a byte every 200 ms) or
     /// stalled, how many the hub cut off (408), the last after how many seconds.
@@ -76,6 +76,17 @@ struct SlowReport {
     unfinished_headers: usize,
     unfinished_refused: usize,
     unfinished_closed: usize,
+    /// Logins whose bodies crawled (ten bytes every 500 ms), how many the hub cut off (408),
+    /// the last after how many seconds.
+    crawling_logins: usize,
+    crawling_logins_cut: usize,
+    crawling_login_cut_after_s: f64,
+    /// Connections from eight addresses that sent no byte at all: refused at once past a cap
+    /// (503), or closed by the header timeout, the last after how many seconds.
+    idle_sockets: usize,
+    idle_refused: usize,
+    idle_closed: usize,
+    idle_closed_after_s: f64,
     /// The honest stations' attempts meanwhile (each station from its own clients), and
     /// the time of one attempt's upload.
     honest_attempts: usize,
@@ -337,25 +348,26 @@ async fn status_within(
         .and_then(|c| c.parse().ok())
 }
 
-/// A hostile station's recording upload from 127.0.0.2: 100 MiB announced, then a byte every
-/// 200 ms (`crawl`) or one byte and nothing; the hub's status and when it came.
-async fn slow_body(
+/// A request from `from` whose head is `head` and whose body crawls: `sends` chunks of
+/// `chunk` bytes, one every `every`, then nothing; the hub's status and when it came.
+async fn crawling_request(
     port: u16,
-    token: String,
-    crawl: bool,
+    from: &str,
+    head: String,
+    (sends, chunk, every): (usize, usize, Duration),
     t0: Instant,
 ) -> anyhow::Result<(Option<u16>, f64)> {
     use tokio::io::AsyncWriteExt;
-    let mut s = connect_from("127.0.0.2", port).await?;
-    let key = cutlab_assessor::recordings::sha256_hex(b"never sent whole");
-    s.write_all(format!("PUT /api/hub/recordings/{key} HTTP/1.1\r\nHost: hub\r\nAuthorization: Bearer {token}\r\nContent-Length: {}\r\n\r\n", 100u64 << 20).as_bytes()).await?;
+    let mut s = connect_from(from, port).await?;
+    s.write_all(head.as_bytes()).await?;
     let (mut read, mut write) = s.split();
     let writing = async {
-        for _ in 0..if crawl { 3000 } else { 1 } {
-            if write.write_all(b"x").await.is_err() {
+        let bytes = vec![b'x'; chunk];
+        for _ in 0..sends {
+            if write.write_all(&bytes).await.is_err() {
                 break;
             }
-            tokio::time::sleep(Duration::from_millis(200)).await;
+            tokio::time::sleep(every).await;
         }
         std::future::pending::<()>().await
     };
@@ -364,6 +376,51 @@ async fn slow_body(
         () = writing => None,
     };
     Ok((status, t0.elapsed().as_secs_f64()))
+}
+
+/// A hostile station's recording upload from 127.0.0.2: 100 MiB announced, then a byte every
+/// 200 ms (`crawl`) or one byte and nothing.
+async fn slow_body(
+    port: u16,
+    token: String,
+    crawl: bool,
+    t0: Instant,
+) -> anyhow::Result<(Option<u16>, f64)> {
+    let key = cutlab_assessor::recordings::sha256_hex(b"never sent whole");
+    let head = format!(
+        "PUT /api/hub/recordings/{key} HTTP/1.1\r\nHost: hub\r\nAuthorization: Bearer {token}\r\nContent-Length: {}\r\n\r\n",
+        100u64 << 20
+    );
+    let sends = if crawl { 3000 } else { 1 };
+    crawling_request(
+        port,
+        "127.0.0.2",
+        head,
+        (sends, 1, Duration::from_millis(200)),
+        t0,
+    )
+    .await
+}
+
+/// A login from 127.0.0.4 whose body crawls: 100,000 bytes announced, ten every 500 ms.
+async fn crawling_login(port: u16, t0: Instant) -> anyhow::Result<(Option<u16>, f64)> {
+    let head = "POST /login HTTP/1.1\r\nHost: hub\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: 100000\r\n\r\n".to_owned();
+    crawling_request(
+        port,
+        "127.0.0.4",
+        head,
+        (1000, 10, Duration::from_millis(500)),
+        t0,
+    )
+    .await
+}
+
+/// A connection from `from` that sends nothing at all: `true` if the hub refused it at once
+/// (503), else when it closed it, s after `t0`.
+async fn idle_socket(port: u16, from: String, t0: Instant) -> anyhow::Result<(bool, f64)> {
+    let mut s = connect_from(&from, port).await?;
+    let status = status_within(&mut s, Duration::from_secs(60)).await;
+    Ok((status == Some(503), t0.elapsed().as_secs_f64()))
 }
 
 /// A connection from 127.0.0.3 that sends part of a request's headers and no more: `true`
@@ -378,8 +435,96 @@ async fn unfinished_headers(port: u16) -> anyhow::Result<bool> {
     Ok(status_within(&mut s, Duration::from_secs(60)).await == Some(503))
 }
 
-/// Phase 3: four hostile stations' slow uploads and 300 unfinished requests from other
-/// addresses, while every station ends and sends five attempts of `kib` KiB.
+/// Results of hostile clients' connections: (status or refused, seconds after the start).
+type Outcomes<T> = tokio::task::JoinSet<anyhow::Result<(T, f64)>>;
+
+/// The hostile clients of phase 3, under way.
+struct Hostile {
+    slow: Outcomes<Option<u16>>,
+    logins: Outcomes<Option<u16>>,
+    unfinished: tokio::task::JoinSet<anyhow::Result<bool>>,
+    idle: Outcomes<bool>,
+}
+
+/// Idle sockets, from each of [`IDLE_ADDRESSES`] addresses.
+const IDLE_PER_ADDRESS: usize = 50;
+const IDLE_ADDRESSES: usize = 8;
+const CRAWLING_LOGINS: usize = 50;
+const UNFINISHED: usize = 300;
+
+impl Hostile {
+    /// Four hostile stations' slow uploads (127.0.0.2), 300 unfinished requests (127.0.0.3),
+    /// 50 logins whose bodies crawl (127.0.0.4) and 400 sockets that send nothing from eight
+    /// addresses (127.0.0.10-17).
+    async fn start(hub_store: &Store, port: u16, t0: Instant) -> anyhow::Result<Self> {
+        let mut slow = tokio::task::JoinSet::new();
+        for k in 0..4 {
+            let token = hub_store
+                .create_station_token(&format!("bench-hostile-{k}"))
+                .await?;
+            slow.spawn(slow_body(port, token, k != 3, t0));
+        }
+        let mut unfinished = tokio::task::JoinSet::new();
+        for _ in 0..UNFINISHED {
+            unfinished.spawn(unfinished_headers(port));
+        }
+        let mut logins = tokio::task::JoinSet::new();
+        for _ in 0..CRAWLING_LOGINS {
+            logins.spawn(crawling_login(port, t0));
+        }
+        let mut idle = tokio::task::JoinSet::new();
+        for a in 0..IDLE_ADDRESSES {
+            for _ in 0..IDLE_PER_ADDRESS {
+                idle.spawn(idle_socket(port, format!("127.0.0.{}", 10 + a), t0));
+            }
+        }
+        Ok(Self {
+            slow,
+            logins,
+            unfinished,
+            idle,
+        })
+    }
+
+    /// Waits for every hostile connection's end and counts how each ended into `r`.
+    async fn finish(mut self, r: &mut SlowReport) -> anyhow::Result<()> {
+        (r.slow_bodies_cut, r.slow_cut_after_s) = cut_off(&mut self.slow).await?;
+        (r.crawling_logins_cut, r.crawling_login_cut_after_s) = cut_off(&mut self.logins).await?;
+        while let Some(done) = self.unfinished.join_next().await {
+            if done?? {
+                r.unfinished_refused += 1;
+            } else {
+                r.unfinished_closed += 1;
+            }
+        }
+        while let Some(done) = self.idle.join_next().await {
+            let (refused, at_s) = done??;
+            if refused {
+                r.idle_refused += 1;
+            } else {
+                r.idle_closed += 1;
+                r.idle_closed_after_s = r.idle_closed_after_s.max(at_s);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How many of `set` the hub cut off (408), and the last after how many seconds.
+async fn cut_off(set: &mut Outcomes<Option<u16>>) -> anyhow::Result<(usize, f64)> {
+    let (mut cut, mut after_s) = (0, 0.0_f64);
+    while let Some(done) = set.join_next().await {
+        let (status, at_s) = done??;
+        if status == Some(408) {
+            cut += 1;
+            after_s = after_s.max(at_s);
+        }
+    }
+    Ok((cut, after_s))
+}
+
+/// Phase 3: the [`Hostile`] clients, while every station ends and sends five attempts of
+/// `kib` KiB.
 async fn slow_clients(
     stations: &mut Vec<Station>,
     hub_store: &Store,
@@ -387,17 +532,7 @@ async fn slow_clients(
     kib: usize,
 ) -> anyhow::Result<SlowReport> {
     let t0 = Instant::now();
-    let mut slow = tokio::task::JoinSet::new();
-    for k in 0..4 {
-        let token = hub_store
-            .create_station_token(&format!("bench-hostile-{k}"))
-            .await?;
-        slow.spawn(slow_body(port, token, k != 3, t0));
-    }
-    let mut unfinished = tokio::task::JoinSet::new();
-    for _ in 0..300 {
-        unfinished.spawn(unfinished_headers(port));
-    }
+    let hostile = Hostile::start(hub_store, port, t0).await?;
     tokio::time::sleep(Duration::from_millis(500)).await;
     let mut honest = tokio::task::JoinSet::new();
     for mut s in std::mem::take(stations) {
@@ -429,35 +564,20 @@ async fn slow_clients(
         honest_ms.extend(ms);
         stations.push(s);
     }
-    let (mut cut, mut cut_after_s) = (0, 0.0_f64);
-    while let Some(done) = slow.join_next().await {
-        let (status, at_s) = done??;
-        if status == Some(408) {
-            cut += 1;
-            cut_after_s = cut_after_s.max(at_s);
-        }
-    }
-    let (mut refused, mut closed) = (0, 0);
-    while let Some(done) = unfinished.join_next().await {
-        if done?? {
-            refused += 1;
-        } else {
-            closed += 1;
-        }
-    }
-    let honest = Summary::of(&honest_ms);
-    Ok(SlowReport {
+    let summary = Summary::of(&honest_ms);
+    let mut report = SlowReport {
         slow_bodies: 4,
-        slow_bodies_cut: cut,
-        slow_cut_after_s: cut_after_s,
-        unfinished_headers: 300,
-        unfinished_refused: refused,
-        unfinished_closed: closed,
+        unfinished_headers: UNFINISHED,
+        crawling_logins: CRAWLING_LOGINS,
+        idle_sockets: IDLE_ADDRESSES * IDLE_PER_ADDRESS,
         honest_attempts: honest_ms.len(),
-        honest_p50_ms: honest.median,
-        honest_p99_ms: honest.p99,
-        honest_max_ms: honest.max,
-    })
+        honest_p50_ms: summary.median,
+        honest_p99_ms: summary.p99,
+        honest_max_ms: summary.max,
+        ..SlowReport::default()
+    };
+    hostile.finish(&mut report).await?;
+    Ok(report)
 }
 
 /// A real recording of a short session (the synthetic expert on the chest wall, 0.5 s).
@@ -540,13 +660,20 @@ pub fn run(o: &Options<'_>) -> anyhow::Result<()> {
     );
     let w = &report.slow;
     println!(
-        "hostile clients: {} slow uploads, {} cut off (the last after {:.1} s); {} unfinished requests, {} refused at once, {} closed; meanwhile {} honest attempts, upload p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; lost: {}",
+        "hostile clients: {} slow uploads, {} cut off (the last after {:.1} s); {} unfinished requests, {} refused at once, {} closed; {} crawling logins, {} cut off (the last after {:.1} s); {} idle sockets from {IDLE_ADDRESSES} addresses, {} refused at once, {} closed (the last after {:.1} s); meanwhile {} honest attempts, upload p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms; lost: {}",
         w.slow_bodies,
         w.slow_bodies_cut,
         w.slow_cut_after_s,
         w.unfinished_headers,
         w.unfinished_refused,
         w.unfinished_closed,
+        w.crawling_logins,
+        w.crawling_logins_cut,
+        w.crawling_login_cut_after_s,
+        w.idle_sockets,
+        w.idle_refused,
+        w.idle_closed,
+        w.idle_closed_after_s,
         w.honest_attempts,
         w.honest_p50_ms,
         w.honest_p99_ms,

@@ -9,11 +9,11 @@
 //! | `GET /api/cohorts` | instructors/admins: per cohort the trainees x exercises grid (attempts, standing, trials to proficiency, last score); trainees: 403 |
 //! | `GET /api/trainees` | the trainees the caller may see |
 //! | `GET /api/trainees/{id}/progress` | per exercise: attempts, proficiency, learning curves per metric with the expert band and limits, CUSUM with `h0`/`h1`; curriculum modules' state |
-//! | `GET /api/attempts/{id}` | the attempt, every metric with threshold and verdict, the peak-force pass limits (`peak_force_limits_n`, drawn on the force chart), comments, sign-off, which recordings exist |
-//! | `GET /api/attempts/{id}/trace` | from the recording: planned line and cut (top view, mm), tip path, force over time; 404 without a readable recording |
+//! | `GET /api/attempts/{id}` | the attempt, every metric with threshold and verdict, the peak-force pass limits (`peak_force_limits_n`, drawn on the force chart) and the plan's force limit (`force_limit_n`, drawn without them), comments, sign-off, which recordings exist |
+//! | `GET /api/attempts/{id}/trace` | from the recording: planned line (not to a trainee on an exam-only exercise) and cut (top view, mm), tip path, force over time; 404 without a readable recording |
 //! | `GET /api/running` | attempts in progress with elapsed time and recording size |
 //! | `GET /api/exercises` | exercises with their thresholds |
-//! | `GET /api/exercises/{id}` | an exercise with its expert plan and thresholds |
+//! | `GET /api/exercises/{id}` | an exercise with its expert plan and thresholds (trainees: no plan for an exam-only exercise) |
 //! | `GET /api/curricula` | curricula with their modules |
 //! | `GET /api/exercises/{id}/evidence` | instructors/admins: the exercise's validity evidence (`?reference=exclude` leaves the reference attempts out) and its adopted pass mark; trainees: 404 |
 //!
@@ -34,7 +34,7 @@ use crate::data::attempt::{AttemptDetail, detail};
 use crate::data::overview::{CohortOverview, overview};
 use crate::data::progress::cached_progress;
 use crate::data::running::{RunningAttempt, running};
-use crate::data::trace::{AttemptTrace, trace};
+use crate::data::trace::{AttemptTrace, trace_for};
 use crate::error::{ApiError, ApiResult, AppError};
 use crate::extract::Id;
 
@@ -130,7 +130,11 @@ async fn attempt_trace(
     Id(id): Id,
 ) -> Result<Json<std::sync::Arc<AttemptTrace>>, ApiError> {
     let a = visible_attempt(&state, &user, id).await?;
-    Ok(Json(trace(&state, &a).await?.ok_or(AppError::NotFound)?))
+    Ok(Json(
+        trace_for(&state, &user, &a)
+            .await?
+            .ok_or(AppError::NotFound)?,
+    ))
 }
 
 async fn running_attempts(
@@ -167,16 +171,21 @@ async fn exercises(
 
 async fn exercise(
     State(state): State<AppState>,
-    _user: CurrentUser,
+    user: CurrentUser,
     Id(id): Id,
 ) -> ApiResult<ExerciseView> {
     let e = state.store().get_exercise(id).await?;
-    let plan = state.store().get_plan(e.plan_id).await?;
+    // the station never shows a trainee an exam-only exercise's plan: nor does the API
+    let plan = if e.exam_only && !user.is_staff() {
+        None
+    } else {
+        Some(state.store().get_plan(e.plan_id).await?)
+    };
     let thresholds = state.store().thresholds(id).await?;
     Ok(Json(ExerciseView {
         exercise: e,
         thresholds,
-        plan: Some(plan),
+        plan,
     }))
 }
 

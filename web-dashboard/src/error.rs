@@ -34,6 +34,9 @@ pub enum AppError {
     /// Too many failed logins.
     #[error("too many failed logins; try again in a minute")]
     TooManyRequests,
+    /// A request whose body stalled or came too slowly, with which ([`crate::pace`]).
+    #[error("{0}")]
+    TimedOut(String),
     /// Input that cannot be used, with a message for the user.
     #[error("{0}")]
     BadRequest(String),
@@ -57,6 +60,7 @@ impl AppError {
             AppError::Unauthorized | AppError::StationToken => StatusCode::UNAUTHORIZED,
             AppError::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             AppError::TooManyRequests => StatusCode::TOO_MANY_REQUESTS,
+            AppError::TimedOut(_) => StatusCode::REQUEST_TIMEOUT,
             AppError::BadRequest(_) => StatusCode::BAD_REQUEST,
             AppError::Malformed { status, .. } => *status,
             AppError::Conflict(_) => StatusCode::CONFLICT,

@@ -7,7 +7,7 @@
 //!
 //! | Call | Answer |
 //! |---|---|
-//! | `PUT /api/hub/recordings/{sha256}` | the body (up to [`MAX_UPLOAD_BYTES`]; a larger `Content-Length` is refused before a byte is read) is stored in the hub's recording store under its SHA-256, which must be the key in the path (else 422, nothing stored); 201 (200 if this station had sent it before). A body that stalls or comes too slowly ([`crate::serve::Limits`]) is cut off (408), as is one whose token is revoked meanwhile (401) |
+//! | `PUT /api/hub/recordings/{sha256}` | the body (up to [`MAX_UPLOAD_BYTES`]; a larger `Content-Length` is refused before a byte is read) is stored in the hub's recording store under its SHA-256, which must be the key in the path (else 422, nothing stored); 201 (200 if this station had sent it before). A body that stalls or comes too slowly (the pace every body is held to, [`crate::pace`]) is cut off (408), as is one whose token is revoked meanwhile (401) |
 //! | `PUT /api/hub/attempts/{uuid}` | an [`AttemptUpload`] whose `uuid` is the path's: the attempt taken once (201; 200 with the attempt as the hub holds it for a retry; 409 if another station sent that id); its recordings must be ones this station uploaded (else 422, the same answer whether another station's exists or not); a complete attempt is scored by the hub from its recording |
 //!
 //! What a hostile station cannot do, and why: docs/decisions.md ("The hub and a hostile
@@ -246,8 +246,8 @@ async fn put_recording(
 }
 
 /// Reads a recording's body, hashing it as it comes (SHA-256, hex): cut off past
-/// [`MAX_UPLOAD_BYTES`] (413), when it stalls or comes too slowly ([`crate::serve::Limits`],
-/// 408), or when the station's token is revoked meanwhile (401).
+/// [`MAX_UPLOAD_BYTES`] (413), when the station's token is revoked meanwhile (401), or when it
+/// stalls or comes too slowly (the server's pace on every body, [`crate::pace`]: 408).
 async fn read_upload<'a>(
     state: &'a AppState,
     station: &StationToken,
@@ -255,30 +255,14 @@ async fn read_upload<'a>(
     declared: Option<u64>,
     budget: &mut Option<tokio::sync::SemaphorePermit<'a>>,
 ) -> Result<(Bytes, String), ApiError> {
-    let limits = state.config().limits;
-    let started = Instant::now();
-    let mut checked = started;
+    let mut checked = Instant::now();
     let capacity = declared.map_or(0, |n| usize::try_from(n).unwrap_or(0).min(MIB));
     let mut bytes = bytes::BytesMut::with_capacity(capacity);
     let mut hash = Sha256::new();
     let mut stream = body.into_data_stream();
-    let timeout = |what: String| with_status(StatusCode::REQUEST_TIMEOUT, what);
-    loop {
-        let chunk = match tokio::time::timeout(limits.upload_stall, stream.next()).await {
-            Err(_) => {
-                return Err(timeout(format!(
-                    "no byte of the recording for {:.1} s: cut off",
-                    limits.upload_stall.as_secs_f64()
-                )));
-            }
-            Ok(None) => break,
-            Ok(Some(Err(e))) => {
-                return Err(ApiError(AppError::BadRequest(format!(
-                    "the recording's body: {e}"
-                ))));
-            }
-            Ok(Some(Ok(chunk))) => chunk,
-        };
+    while let Some(chunk) = stream.next().await {
+        let chunk =
+            chunk.map_err(|e| AppError::BadRequest(format!("the recording's body: {e}")))?;
         if bytes.len() + chunk.len() > MAX_UPLOAD_BYTES {
             return Err(with_status(
                 StatusCode::PAYLOAD_TOO_LARGE,
@@ -292,15 +276,6 @@ async fn read_upload<'a>(
         }
         hash.update(&chunk);
         bytes.extend_from_slice(&chunk);
-        let elapsed = started.elapsed();
-        let rate = limits.upload_min_bytes_per_s;
-        if elapsed > limits.upload_rate_grace && (bytes.len() as f64) < rate * elapsed.as_secs_f64()
-        {
-            return Err(timeout(format!(
-                "the recording came slower than {:.0} KiB/s: cut off",
-                rate / 1024.0
-            )));
-        }
         if checked.elapsed() > TOKEN_RECHECK {
             checked = Instant::now();
             if !state.store().station_token_valid(station.id).await? {

@@ -9,8 +9,10 @@
 //! Security: argon2id passwords (the store's); a session cookie `cutlab_session` (HttpOnly,
 //! SameSite=Strict, a random 256-bit token of which the database keeps the SHA-256, 12 h);
 //! a per-session CSRF token checked on every state-changing request before any handler;
-//! login rate-limited (5 failures a minute per user name, 100 per IP address, then 429: one
-//! address behind a clinic's NAT does not lock every user out);
+//! login rate-limited (5 failures a minute per user name and address, 100 per address, then
+//! 429, each guess counted before its password is checked: one address behind a clinic's NAT
+//! does not lock every user out, and a stranger cannot lock a user out from everywhere; an
+//! unknown name costs the time of a known one);
 //! roles on every route: a trainee sees only their own data, an instructor the members of
 //! the cohorts they lead, an administrator everything; anything else is a 404, so ids leak
 //! nothing. See [`api`] for the JSON API.
@@ -24,6 +26,8 @@ pub mod data;
 pub mod error;
 pub mod extract;
 pub mod hub;
+pub mod origin;
+pub mod pace;
 pub mod pages;
 pub mod recordings;
 pub mod seed;
@@ -37,6 +41,7 @@ use axum::Router;
 use cutlab_assessor::store::Store;
 
 pub use error::AppError;
+pub use origin::PublicUrl;
 pub use seed::{DEMO_ACCOUNTS, DEMO_COHORT, DemoAccount, seed_demo, seed_demo_accounts};
 
 /// Settings of a dashboard.
@@ -44,7 +49,11 @@ pub use seed::{DEMO_ACCOUNTS, DEMO_COHORT, DemoAccount, seed_demo, seed_demo_acc
 pub struct Config {
     /// Mark cookies `Secure` (when served over HTTPS, e.g. behind a proxy).
     pub secure_cookies: bool,
-    /// Failed logins per user name within `login_window`; beyond, that user waits (429).
+    /// Where people reach the dashboard, for the links it hands out ([`origin`]); else each
+    /// request's own address.
+    pub public_url: Option<PublicUrl>,
+    /// Failed logins per user name from one address within `login_window`; beyond, that
+    /// user waits at that address (429).
     pub login_failures: usize,
     /// Failed logins per client IP address (any user names) within `login_window`; beyond,
     /// that address waits. Much higher than `login_failures`: a clinic's users share one
@@ -67,6 +76,7 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             secure_cookies: false,
+            public_url: None,
             login_failures: 5,
             login_failures_per_ip: 100,
             login_window: Duration::from_secs(60),
@@ -86,7 +96,7 @@ pub struct AppState(Arc<Inner>);
 struct Inner {
     store: Store,
     config: Config,
-    /// Failed logins per user name.
+    /// Failed logins per user name and address.
     limiter: auth::rate_limit::RateLimiter,
     /// Failed logins per client IP address.
     ip_limiter: auth::rate_limit::RateLimiter,
@@ -203,16 +213,21 @@ pub fn app(state: AppState) -> Router {
             state.clone(),
             auth::session_layer,
         ))
+        // outermost: the session layer's own read of a form is held to the pace too
+        .layer(axum::middleware::from_fn_with_state(
+            state.clone(),
+            pace::pace_bodies,
+        ))
         .with_state(state)
 }
 
 /// Serves the dashboard on `listener` until the future `shutdown` completes, within the
-/// configured [`serve::Limits`].
+/// configured [`serve::Limits`] (fitted to the process's open-file limit).
 pub async fn serve(
     listener: tokio::net::TcpListener,
     state: AppState,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let limits = state.config().limits;
+    let limits = serve::fit_to_open_files(state.config().limits);
     serve::serve_with_limits(listener, app(state), limits, shutdown).await
 }

@@ -149,7 +149,11 @@ async fn granted_rrd(
     Path((id, grant)): Path<(i64, String)>,
     headers: HeaderMap,
 ) -> Result<Response, AppError> {
-    if !state.grants().check(id, &grant) {
+    let Some(g) = state.grants().check(id, &grant) else {
+        return Err(AppError::NotFound);
+    };
+    // the grant ends with the login it was issued in
+    if !crate::auth::sessions::alive_by_prefix(&state, g.user_id, &g.session_ref).await? {
         return Err(AppError::NotFound);
     }
     let a = state.store().get_attempt(id).await?;
@@ -314,17 +318,6 @@ async fn send_object(
     Ok(ranged(Body::from(body), len, part.as_ref(), download_name))
 }
 
-/// The host the browser used, if it is a plain host[:port] (for the viewer's absolute URL).
-fn request_origin(headers: &HeaderMap, https: bool) -> Option<String> {
-    let host = headers.get(header::HOST)?.to_str().ok()?;
-    let ok = !host.is_empty()
-        && host.len() <= 255
-        && host
-            .bytes()
-            .all(|c| c.is_ascii_alphanumeric() || b".-:[]".contains(&c));
-    ok.then(|| format!("{}://{host}", if https { "https" } else { "http" }))
-}
-
 /// The viewer's URL opening attempt `id`'s `.rrd` through `grant`.
 pub fn viewer_url(origin: &str, id: i64, grant: &str) -> String {
     let rrd = format!("{origin}/attempts/{id}/grant/{grant}/recording.rrd");
@@ -364,7 +357,7 @@ async fn replay_page(
     let a = visible_attempt(&state, &user, id).await?;
     let notes = debrief::comments(&state, id).await?;
     let has_rrd = crate::data::attempt::RecordingFiles::of(&state, &a).rrd;
-    let origin = request_origin(&headers, state.config().secure_cookies);
+    let origin = crate::origin::request_origin(&headers, state.config());
     let body = html! {
         p { a href=(format!("/attempts/{id}")) { "Back to attempt " (id) } " · " a href=(format!("/attempts/{id}/recording.rrd")) { "Download .rrd" } }
         @if !state.viewer().available() {
@@ -375,7 +368,7 @@ async fn replay_page(
             @if let Some(at) = at_ns {
                 p id="moment-hint" class="moment-hint" { "Note at " strong { (debrief::moment_label(at)) } ": the viewer opens there, paused (timeline " code { (TIMELINE_SIM_TIME) } ", +" (format!("{:.3}", at as f64 / 1e9)) " s)." }
             }
-            iframe id="replay" class="replay" title="rerun viewer" data-timeline=(TIMELINE_SIM_TIME) data-at-ns=[at_ns] src=(viewer_url(&origin, id, &state.grants().issue(id, user.id()))) {}
+            iframe id="replay" class="replay" title="rerun viewer" data-timeline=(TIMELINE_SIM_TIME) data-at-ns=[at_ns] src=(viewer_url(&origin, id, &state.grants().issue(id, user.id(), &user.0.token_hash))) {}
             script src="/static/replay.js" {}
         } @else {
             p class="fail" { "Cannot tell the viewer where this server is (no usable Host header)." }

@@ -1,9 +1,15 @@
 //! The server loop: [`axum::serve`]'s, with the limits a server on a hospital network needs
-//! against a client that opens connections and never finishes them ([`Limits`]): request
-//! headers must arrive within a time (also between the requests of a kept-alive connection,
-//! so an idle connection is closed then), and the connections held at once are capped, per
-//! client address and in all, a connection past a cap answered at once with a 503 and
-//! closed. Why these and not others: docs/decisions.md ("The hub and a hostile station").
+//! against a client that opens connections and never finishes them ([`Limits`]). Every
+//! connection has a deadline from accept: its first request's headers (the first byte
+//! included) and each later one's on a kept-alive connection must arrive within
+//! [`Limits::header_timeout`] (hyper's own `header_read_timeout`, which runs from the
+//! connection's start and between its requests); request bodies must keep coming
+//! ([`Limits::body`], on every route: [`crate::pace`]), and answers must be read
+//! ([`Limits::write_stall`]). The connections held at once are
+//! capped, per client address and in all; once half the places are taken an address may hold
+//! only [`Limits::max_connections_per_ip_when_busy`], so a few hostile addresses cannot take
+//! every place. A connection past a cap is answered at once with a 503 and closed. Why these
+//! and not others: docs/decisions.md ("The hub and a hostile station", "The server's doors").
 
 use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
@@ -15,43 +21,78 @@ use axum::Router;
 use axum::body::Body;
 use axum::extract::ConnectInfo;
 use hyper::body::Incoming;
-use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
-use hyper_util::server::conn::auto::Builder;
+use hyper::server::conn::http1;
+use hyper_util::rt::{TokioIo, TokioTimer};
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpStream;
 use tokio::sync::watch;
 use tokio_util::sync::CancellationToken;
 use tower::Service;
 
+use crate::pace::BodyPace;
+
 /// What a served dashboard allows its clients.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Limits {
-    /// Time to send a request's headers, and the longest a kept-alive connection may wait
-    /// for its next request.
+    /// Time from accept to a request's last header byte, and the longest a kept-alive
+    /// connection may wait for its next request.
     pub header_timeout: Duration,
-    /// Connections held at once, all clients together.
+    /// How fast every request body must come.
+    pub body: BodyPace,
+    /// The longest a write to a client may wait (a client that stops reading its answer,
+    /// or an event stream, is closed then).
+    pub write_stall: Duration,
+    /// Connections held at once, all clients together (lowered to what the process's open
+    /// file limit allows when served, see [`fit_to_open_files`]).
     pub max_connections: usize,
-    /// Connections held at once from one address.
+    /// Connections held at once from one address while fewer than half of
+    /// `max_connections` are held.
     pub max_connections_per_ip: usize,
-    /// The longest a hub upload's body may go without a byte.
-    pub upload_stall: Duration,
-    /// The slowest a hub upload's body may come on average, once `upload_rate_grace` has
-    /// passed, bytes per second.
-    pub upload_min_bytes_per_s: f64,
-    pub upload_rate_grace: Duration,
+    /// Connections held at once from one address once half of `max_connections` are held.
+    pub max_connections_per_ip_when_busy: usize,
 }
 
 impl Default for Limits {
     fn default() -> Self {
         Self {
             header_timeout: Duration::from_secs(10),
+            body: BodyPace {
+                stall: Duration::from_secs(10),
+                // a LAN sends a station's 11 MB recording in well under a second
+                min_bytes_per_s: 64.0 * 1024.0,
+                grace: Duration::from_secs(15),
+            },
+            write_stall: Duration::from_secs(30),
             max_connections: 1024,
+            // a clinic's NAT: a dozen browsers of six connections each
             max_connections_per_ip: 128,
-            upload_stall: Duration::from_secs(10),
-            // a LAN sends a station's 11 MB recording in well under a second
-            upload_min_bytes_per_s: 64.0 * 1024.0,
-            upload_rate_grace: Duration::from_secs(15),
+            max_connections_per_ip_when_busy: 16,
         }
+    }
+}
+
+/// `limits` with `max_connections` lowered so that the connections, and the files the
+/// server needs besides (its database, recordings, the viewer), fit under the process's
+/// limit of open files, after raising that soft limit as far as the hard one allows.
+pub fn fit_to_open_files(limits: Limits) -> Limits {
+    /// Files kept for the database, recordings being written and read, and the runtime.
+    const RESERVE: u64 = 128;
+    let open_files = match rlimit::increase_nofile_limit(u64::MAX) {
+        Ok(n) => n,
+        Err(e) => {
+            tracing::warn!("reading the open file limit: {e}");
+            return limits;
+        }
+    };
+    let fit = usize::try_from(open_files.saturating_sub(RESERVE).max(32)).unwrap_or(usize::MAX);
+    if fit < limits.max_connections {
+        tracing::warn!(
+            "{open_files} open files allowed: at most {fit} connections at once (raise `ulimit -n` for more)"
+        );
+    }
+    Limits {
+        max_connections: limits.max_connections.min(fit),
+        ..limits
     }
 }
 
@@ -75,7 +116,12 @@ impl Slot {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         let from_ip = h.per_ip.get(&ip).copied().unwrap_or(0);
-        if h.total >= limits.max_connections || from_ip >= limits.max_connections_per_ip {
+        let per_ip = if 2 * h.total >= limits.max_connections {
+            limits.max_connections_per_ip_when_busy
+        } else {
+            limits.max_connections_per_ip
+        };
+        if h.total >= limits.max_connections || from_ip >= per_ip {
             return None;
         }
         h.total += 1;
@@ -192,18 +238,23 @@ impl Connection {
             req.extensions_mut().insert(ConnectInfo(addr));
             router.clone().call(req)
         });
-        let mut builder = Builder::new(TokioExecutor::new());
+        // HTTP/1 only: browsers speak HTTP/2 over TLS alone, which a proxy in front ends; and
+        // the version sniffing of hyper-util's auto builder waits for a first byte with no
+        // deadline (an idle socket held for ever)
+        let mut builder = http1::Builder::new();
         builder
-            .http1()
             .timer(TokioTimer::new())
             .header_read_timeout(self.limits.header_timeout)
             .max_buf_size(64 << 10);
-        builder
-            .http2()
-            .timer(TokioTimer::new())
-            .keep_alive_interval(self.limits.header_timeout)
-            .enable_connect_protocol();
-        let mut conn = pin!(builder.serve_connection_with_upgrades(TokioIo::new(stream), service));
+        // a write that waits past `write_stall` fails: a client that never reads its answer
+        // (nor its event stream, nor its socket's frames) holds nothing for long
+        let mut io = tokio_io_timeout::TimeoutStream::new(stream);
+        io.set_write_timeout(Some(self.limits.write_stall));
+        let mut conn = pin!(
+            builder
+                .serve_connection(TokioIo::new(Box::pin(io)), service)
+                .with_upgrades()
+        );
         let mut stopping = false;
         loop {
             tokio::select! {

@@ -314,9 +314,9 @@ async fn a_station_server_sends_its_queue_once_the_hub_is_back() {
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
+use cutlab_dashboard::pace::BodyPace;
 use cutlab_dashboard::serve::Limits;
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
-use tokio::net::TcpStream;
+use tokio::io::AsyncWriteExt;
 
 /// [`hub_env`] with `limits`, served on a loopback port.
 async fn served_hub(limits: Limits) -> (Env, SocketAddr, RecordingStore, tempfile::TempDir) {
@@ -327,44 +327,8 @@ async fn served_hub(limits: Limits) -> (Env, SocketAddr, RecordingStore, tempfil
         limits,
         ..Default::default()
     };
-    let (e, state) = env_with(config).await;
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    tokio::spawn(cutlab_dashboard::serve(
-        listener,
-        state,
-        std::future::pending(),
-    ));
+    let (e, _state, addr) = served(config).await;
     (e, addr, recordings, store_dir)
-}
-
-/// A connection to `to` from the loopback address `from` (`127.0.0.x`: another client).
-async fn connect_from(from: &str, to: SocketAddr) -> TcpStream {
-    let socket = tokio::net::TcpSocket::new_v4().unwrap();
-    socket.bind(format!("{from}:0").parse().unwrap()).unwrap();
-    socket.connect(to).await.unwrap()
-}
-
-/// The status the server answers on `stream` within `within`: `Some(code)`, `None` if it
-/// closed the connection without one; panics if it is still open and silent.
-async fn answer<R: tokio::io::AsyncRead + Unpin>(stream: &mut R, within: Duration) -> Option<u16> {
-    let mut got = Vec::new();
-    let read = tokio::time::timeout(within, async {
-        let mut buf = [0u8; 1024];
-        loop {
-            match stream.read(&mut buf).await {
-                Ok(0) | Err(_) => return,
-                Ok(n) => got.extend_from_slice(&buf[..n]),
-            }
-            if got.windows(2).any(|w| w == b"\r\n") {
-                return;
-            }
-        }
-    })
-    .await;
-    assert!(read.is_ok(), "no answer and not closed within {within:?}");
-    let line = String::from_utf8_lossy(&got);
-    line.split(' ').nth(1).and_then(|c| c.parse().ok())
 }
 
 /// A `PUT` of a recording's headers (`Content-Length: declared`), no body yet.
@@ -373,26 +337,6 @@ fn recording_headers(key: &str, token: &str, declared: u64) -> Vec<u8> {
         "PUT /api/hub/recordings/{key} HTTP/1.1\r\nHost: hub\r\nAuthorization: Bearer {token}\r\nContent-Length: {declared}\r\n\r\n"
     )
     .into_bytes()
-}
-
-/// Sends `sends` chunks of `chunk` bytes on `s`, one every `every`, then nothing, until the
-/// server answers (its status; `None`: closed without one) or 10 s pass (a panic).
-async fn crawl(s: &mut TcpStream, sends: usize, chunk: usize, every: Duration) -> Option<u16> {
-    let (mut read, mut write) = s.split();
-    let writing = async {
-        let bytes = vec![b'x'; chunk];
-        for _ in 0..sends {
-            if write.write_all(&bytes).await.is_err() {
-                break;
-            }
-            tokio::time::sleep(every).await;
-        }
-        std::future::pending::<()>().await
-    };
-    tokio::select! {
-        status = answer(&mut read, Duration::from_secs(10)) => status,
-        () = writing => None,
-    }
 }
 
 /// An honest upload of `body` on a new connection from `from`: its status and time.
@@ -411,8 +355,11 @@ async fn honest_upload(from: &str, to: SocketAddr, token: &str, body: &[u8]) -> 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn uploads_that_stall_or_crawl_are_cut_and_free_their_slots() {
     let limits = Limits {
-        upload_stall: Duration::from_secs(1),
-        upload_rate_grace: Duration::from_secs(2),
+        body: BodyPace {
+            stall: Duration::from_secs(1),
+            grace: Duration::from_secs(2),
+            ..Limits::default().body
+        },
         ..Limits::default()
     };
     let (e, addr, _recordings, _guard) = served_hub(limits).await;

@@ -28,6 +28,7 @@ fn cohort((id, name, instructor_id, created_ns): CohortRow) -> Cohort {
 impl Store {
     /// Adds a cohort (unique name), optionally led by an instructor.
     pub async fn create_cohort(&self, name: &str, instructor_id: Option<i64>) -> Result<Cohort> {
+        let name = super::text::label("a cohort's name", name, super::text::MAX_LABEL_CHARS)?;
         if let Some(i) = instructor_id {
             self.get_user(i).await?;
         }

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{BeginWrite, Store, conflict, now_ns};
+use super::{BeginWrite, Store, conflict, now_ns, text};
 use crate::error::{AssessError, Result};
 
 /// A curriculum.
@@ -40,6 +40,12 @@ pub struct Module {
 
 impl Store {
     pub async fn create_curriculum(&self, name: &str, description: &str) -> Result<Curriculum> {
+        let name = text::label("a curriculum's name", name, text::MAX_LABEL_CHARS)?;
+        let description = text::text(
+            "a curriculum's description",
+            description,
+            text::MAX_DESCRIPTION_CHARS,
+        )?;
         let id: i64 = crate::on_db!(&self.db, pool => sqlx::query_scalar(
             "INSERT INTO curricula (name, description, created_ns) VALUES ($1, $2, $3) RETURNING id",
         )
@@ -99,6 +105,7 @@ impl Store {
         name: &str,
         exercise_ids: &[i64],
     ) -> Result<Module> {
+        let name = text::label("a module's name", name, text::MAX_LABEL_CHARS)?;
         for &e in exercise_ids {
             self.get_exercise(e).await?;
         }

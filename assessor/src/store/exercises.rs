@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{BeginWrite, Store, conflict, now_ns};
+use super::{BeginWrite, Store, conflict, now_ns, text};
 use crate::device_class::DeviceClass;
 use crate::error::{AssessError, Result};
 use crate::exercise::ExercisePlan;
@@ -178,11 +178,13 @@ impl Store {
     /// Adds an exercise with its plan and hand-set thresholds (one transaction).
     pub async fn create_exercise(&self, new: &NewExercise<'_>) -> Result<Exercise> {
         new.plan.check()?;
-        if new.name.trim().is_empty() || new.scene.trim().is_empty() {
-            return Err(AssessError::InvalidInput(
-                "an exercise needs a name and a scene".into(),
-            ));
-        }
+        let name = text::label("an exercise's name", new.name, text::MAX_LABEL_CHARS)?;
+        let scene = text::label("an exercise's scene", new.scene, text::MAX_LABEL_CHARS)?;
+        let description = text::text(
+            "an exercise's description",
+            new.description,
+            text::MAX_DESCRIPTION_CHARS,
+        )?;
         if !(new.threshold_k > 0.0) {
             return Err(AssessError::InvalidInput(format!(
                 "threshold k = {}: must be > 0",
@@ -192,11 +194,10 @@ impl Store {
         let id = crate::on_db!(&self.db, pool => {
             let mut tx = pool.begin_write().await?;
             let plan_id = insert_plan!(&mut *tx, new.plan);
-            let name = new.name.trim().to_owned();
             let id: i64 = sqlx::query_scalar("INSERT INTO exercises (name, scene, description, plan_id, threshold_k, created_ns, exam_only) VALUES ($1, $2, $3, $4, $5, $6, $7) RETURNING id")
-                .bind(&name)
-                .bind(new.scene)
-                .bind(new.description)
+                .bind(name)
+                .bind(scene)
+                .bind(description)
                 .bind(plan_id)
                 .bind(new.threshold_k)
                 .bind(now_ns())
@@ -254,11 +255,12 @@ impl Store {
             threshold_k,
             exam_only,
         } = *edit;
-        if scene.trim().is_empty() {
-            return Err(AssessError::InvalidInput(
-                "an exercise needs a scene".into(),
-            ));
-        }
+        let scene = text::label("an exercise's scene", scene, text::MAX_LABEL_CHARS)?;
+        let description = text::text(
+            "an exercise's description",
+            description,
+            text::MAX_DESCRIPTION_CHARS,
+        )?;
         if !(threshold_k > 0.0) || !threshold_k.is_finite() {
             return Err(AssessError::InvalidInput(format!(
                 "threshold k = {threshold_k}: must be > 0"
@@ -272,7 +274,7 @@ impl Store {
             let done = sqlx::query(
                 "UPDATE exercises SET scene = $1, description = $2, threshold_k = $3, exam_only = $4 WHERE id = $5",
             )
-            .bind(scene.trim())
+            .bind(scene)
             .bind(description)
             .bind(threshold_k)
             .bind(exam_only)

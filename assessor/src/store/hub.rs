@@ -70,8 +70,6 @@ const EARLIEST_NS: i64 = 1_577_836_800 * 1_000_000_000;
 pub const MAX_ATTEMPT_NS: i64 = 24 * 3600 * 1_000_000_000;
 /// How far ahead of the hub's clock a station's may be.
 pub const CLOCK_SKEW_NS: i64 = 10 * 60 * 1_000_000_000;
-/// The longest note an upload may carry, in characters.
-const MAX_NOTE_CHARS: usize = 4000;
 /// The longest device name an upload may carry, in characters.
 const MAX_DEVICE_CHARS: usize = 200;
 
@@ -105,12 +103,8 @@ impl AttemptUpload {
         if self.exercise.trim().is_empty() || self.exercise.len() > 200 {
             return bad(format!("the exercise's name {:?}", short(&self.exercise)));
         }
-        if self
-            .note
-            .as_ref()
-            .is_some_and(|n| n.chars().count() > MAX_NOTE_CHARS)
-        {
-            return bad(format!("a note longer than {MAX_NOTE_CHARS} characters"));
+        if let Some(note) = &self.note {
+            super::text::text("the attempt's note", note, super::text::MAX_NOTE_CHARS)?;
         }
         if self
             .mode
@@ -516,12 +510,7 @@ impl Store {
 
     /// A new station token `name`: the token, shown once (the hub keeps its hash).
     pub async fn create_station_token(&self, name: &str) -> Result<String> {
-        let name = name.trim();
-        if name.is_empty() || name.len() > 100 {
-            return Err(AssessError::InvalidInput(
-                "a station's name: 1 to 100 characters".into(),
-            ));
-        }
+        let name = super::text::label("a station's name", name, 100)?;
         let mut b = [0u8; 32];
         getrandom::fill(&mut b)
             .map_err(|e| AssessError::InvalidInput(format!("no randomness for a token: {e}")))?;

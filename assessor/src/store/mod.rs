@@ -18,6 +18,7 @@ mod exercises;
 mod hub;
 mod names;
 mod progression;
+pub mod text;
 mod users;
 
 use std::path::PathBuf;

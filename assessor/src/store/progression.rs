@@ -74,6 +74,9 @@ pub fn reached_proficiency(attempts: &[Attempt]) -> bool {
     Course::of(&passes, &CusumParams::default()).is_ok_and(|c| c.first_proficient.is_some())
 }
 
+/// The longest reason for opening an exercise early, in characters.
+pub const MAX_REASON_CHARS: usize = 500;
+
 impl Store {
     /// Whether `trainee_id` may start `exercise_id` (see the module documentation).
     pub async fn exercise_access(&self, trainee_id: i64, exercise_id: i64) -> Result<Access> {
@@ -154,6 +157,7 @@ impl Store {
         instructor_id: i64,
         reason: &str,
     ) -> Result<Opening> {
+        let reason = super::text::text("the reason", reason, MAX_REASON_CHARS)?;
         self.get_exercise(exercise_id).await?;
         let instructor = self.get_user(instructor_id).await?;
         if instructor.role == super::Role::Trainee {

@@ -109,7 +109,8 @@ impl Store {
             .iter()
             .find(|n| n.as_str() != name && super::names::skeleton(n) == key)
         {
-            Some(other) => Err(AssessError::Conflict(format!(
+            // not a name this server takes (as a control character is not), whoever asks
+            Some(other) => Err(AssessError::InvalidInput(format!(
                 "the user name {name:?} looks like the existing {other:?}"
             ))),
             None => Ok(()),
@@ -159,26 +160,61 @@ impl Store {
     }
 
     /// The user if `name` exists, has a password and `password` matches it; `None` otherwise
-    /// (unknown user, no password or a wrong one alike).
+    /// (unknown user, no password or a wrong one alike). Every answer costs one argon2
+    /// verification, an unknown name's against a hash of nobody's ([`DECOY_HASH`]), so the
+    /// time does not tell which names exist; the verifications run on blocking threads, at
+    /// most [`VERIFYING_AT_ONCE`] at a time (each takes argon2's 19 MiB).
     pub async fn verify_password(&self, name: &str, password: &str) -> Result<Option<User>> {
         let row: Option<UserRow> = crate::on_db!(&self.db, pool => sqlx::query_as(
             "SELECT id, name, role, password_hash, created_ns FROM users WHERE name = $1",
         )
         .bind(name)
         .fetch_optional(pool).await)?;
-        let Some(row) = row else { return Ok(None) };
-        let Some(hash) = row.3.clone() else {
-            return Ok(None);
-        };
-        let parsed = PasswordHash::new(&hash)
-            .map_err(|e| AssessError::Password(format!("stored hash of {name:?}: {e}")))?;
-        if Argon2::default()
-            .verify_password(password.as_bytes(), &parsed)
-            .is_ok()
-        {
-            Ok(Some(user(row)?))
-        } else {
-            Ok(None)
+        let stored = row.as_ref().and_then(|r| r.3.clone());
+        let known = stored.is_some();
+        let password = password.to_owned();
+        let who = name.to_owned();
+        let _turn = VERIFYING
+            .acquire()
+            .await
+            .map_err(|e| AssessError::Password(e.to_string()))?;
+        let matches = tokio::task::spawn_blocking(move || {
+            let hash = match stored {
+                Some(h) => h,
+                None => decoy_hash()?.to_owned(),
+            };
+            let parsed = PasswordHash::new(&hash)
+                .map_err(|e| AssessError::Password(format!("stored hash of {who:?}: {e}")))?;
+            Ok::<_, AssessError>(
+                Argon2::default()
+                    .verify_password(password.as_bytes(), &parsed)
+                    .is_ok(),
+            )
+        })
+        .await
+        .map_err(|e| AssessError::Password(format!("verifying a password: {e}")))??;
+        match row {
+            Some(row) if known && matches => Ok(Some(user(row)?)),
+            _ => Ok(None),
         }
     }
+}
+
+/// Password verifications at once (see [`Store::verify_password`]).
+pub const VERIFYING_AT_ONCE: usize = 4;
+static VERIFYING: tokio::sync::Semaphore = tokio::sync::Semaphore::const_new(VERIFYING_AT_ONCE);
+
+/// A hash of a random password nobody knows, made once: what an unknown name's password is
+/// checked against, at the cost of a real one.
+static DECOY_HASH: std::sync::OnceLock<std::result::Result<String, String>> =
+    std::sync::OnceLock::new();
+
+fn decoy_hash() -> Result<&'static str> {
+    let made = DECOY_HASH.get_or_init(|| {
+        let mut secret = [0u8; 32];
+        getrandom::fill(&mut secret).map_err(|e| e.to_string())?;
+        hash_password(&crate::recordings::hex(&secret)).map_err(|e| e.to_string())
+    });
+    made.as_deref()
+        .map_err(|e| AssessError::Password(format!("the decoy hash: {e}")))
 }

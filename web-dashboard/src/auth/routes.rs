@@ -93,21 +93,24 @@ async fn login(
         return Err(AppError::Csrf);
     }
     let name = form.username.trim();
-    // two limits: per user name (low: guessing one account's password) and per address
-    // (high: the users of a clinic share its NAT's address)
-    let user_key = [format!("user:{}", name.to_lowercase())];
-    let ip_key = [format!("ip:{ip}")];
-    if state.limiter().blocked(&user_key) || state.ip_limiter().blocked(&ip_key) {
+    // two limits: per user name and address (low: guessing one account's password; a
+    // stranger elsewhere cannot lock its owner out) and per address (high: the users of a
+    // clinic share its NAT's address). Each login takes its place before the check.
+    let user_key = format!("user:{}@{ip}", name.to_lowercase());
+    let ip_key = format!("ip:{ip}");
+    let Some(user_place) = state.limiter().take(&user_key) else {
         return Err(AppError::TooManyRequests);
-    }
+    };
+    let Some(ip_place) = state.ip_limiter().take(&ip_key) else {
+        state.limiter().give_back(&user_key, user_place);
+        return Err(AppError::TooManyRequests);
+    };
     let user = if name.is_empty() || name.len() > MAX_FIELD || form.password.len() > MAX_FIELD {
         None
     } else {
         state.store().verify_password(name, &form.password).await?
     };
     let Some(user) = user else {
-        state.limiter().fail(&user_key);
-        state.ip_limiter().fail(&ip_key);
         tracing::info!("failed login for {name:?}");
         return login_page(
             &state,
@@ -115,7 +118,8 @@ async fn login(
             Some("Unknown user or wrong password."),
         );
     };
-    state.limiter().clear(&user_key[0]);
+    state.limiter().clear(&user_key);
+    state.ip_limiter().give_back(&ip_key, ip_place);
     let token = sessions::create(&state, &user).await?;
     tracing::info!("{} ({}) logged in", user.name, user.role);
     let cookie = super::session_cookie(Some(&token), state.config().secure_cookies);

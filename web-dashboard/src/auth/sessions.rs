@@ -83,3 +83,54 @@ pub async fn delete(state: &AppState, token_hash: &str) -> Result<(), AppError> 
         .execute(pool).await.map(|_| ()))?;
     Ok(())
 }
+
+/// Whether the session whose token hashes to `token_hash` is still live (not logged out,
+/// not expired).
+pub async fn alive(state: &AppState, token_hash: &str) -> Result<bool, AppError> {
+    if state
+        .caches()
+        .sessions
+        .get(&token_hash.to_owned())
+        .is_some()
+    {
+        return Ok(true);
+    }
+    let found: Option<i64> = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query_scalar(
+        "SELECT user_id FROM login_sessions WHERE token_sha256 = $1 AND expires_ns > $2",
+    )
+    .bind(token_hash)
+    .bind(now_ns())
+    .fetch_optional(pool).await)?;
+    Ok(found.is_some())
+}
+
+/// Whether `user_id` has a live session whose token's hash starts with `prefix` (what a
+/// replay grant names, [`super::grants`]).
+pub async fn alive_by_prefix(
+    state: &AppState,
+    user_id: i64,
+    prefix: &str,
+) -> Result<bool, AppError> {
+    let hashes: Vec<String> = cutlab_assessor::on_db!(state.store().db(), pool => sqlx::query_scalar(
+        "SELECT token_sha256 FROM login_sessions WHERE user_id = $1 AND expires_ns > $2",
+    )
+    .bind(user_id)
+    .bind(now_ns())
+    .fetch_all(pool).await)?;
+    Ok(!prefix.is_empty() && hashes.iter().any(|h| h.starts_with(prefix)))
+}
+
+/// How often a long-lived answer (an event stream, a station's socket) looks whether its
+/// session still lives.
+pub const ALIVE_EVERY: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Completes once the session of `token_hash` has ended (logged out or expired): what a
+/// stream of that session ends with. A database that cannot answer ends nothing.
+pub async fn ended(state: &AppState, token_hash: &str) {
+    loop {
+        tokio::time::sleep(ALIVE_EVERY).await;
+        if let Ok(false) = alive(state, token_hash).await {
+            return;
+        }
+    }
+}

@@ -15,7 +15,7 @@ use axum::routing::{get, post};
 use cutlab_assessor::ExercisePlan;
 use cutlab_assessor::metrics::{self, Better};
 use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
-use cutlab_assessor::store::{ExerciseEdit, NewExercise, ThresholdSource};
+use cutlab_assessor::store::{ExerciseEdit, NewExercise, ThresholdSource, text};
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -30,7 +30,7 @@ use crate::extract::{Form, Id};
 const MAX_PLAN_BYTES: usize = 64 * 1024;
 /// The most thresholds one exercise takes.
 const MAX_THRESHOLDS: usize = 100;
-const MAX_NAME: usize = 200;
+const MAX_NAME: usize = text::MAX_LABEL_CHARS;
 
 pub fn router() -> Router<AppState> {
     Router::new()
@@ -66,14 +66,9 @@ pub fn parse_plan(text: &str) -> Result<ExercisePlan, AppError> {
     Ok(ExercisePlan::parse(text)?)
 }
 
+/// A name typed in a form, by the store's one text policy ([`text::label`]).
 fn name_ok(what: &str, s: &str) -> Result<String, AppError> {
-    let s = s.trim();
-    if s.is_empty() || s.chars().count() > MAX_NAME || s.chars().any(char::is_control) {
-        return Err(AppError::BadRequest(format!(
-            "{what}: 1 to {MAX_NAME} printable characters"
-        )));
-    }
-    Ok(s.to_owned())
+    Ok(text::label(what, s, MAX_NAME)?.to_owned())
 }
 
 fn positive(what: &str, s: &str) -> Result<f64, AppError> {
@@ -135,7 +130,7 @@ async fn curriculum(State(state): State<AppState>, user: CurrentUser) -> PageRes
                         label for="curriculum-name" { "Name" } " "
                         input type="text" id="curriculum-name" name="name" required maxlength=(MAX_NAME); " "
                         label for="curriculum-description" { "Description" } " "
-                        input type="text" id="curriculum-description" name="description" maxlength="2000" size="50"; " "
+                        input type="text" id="curriculum-description" name="description" maxlength=(text::MAX_DESCRIPTION_CHARS) size="50"; " "
                         button type="submit" { "Create" }
                     }
                 }
@@ -175,7 +170,7 @@ fn exercise_fields(
         }
         p {
             label for="exercise-description" { "Description" } " "
-            input type="text" id="exercise-description" name="description" value=(description) maxlength="2000" size="80";
+            input type="text" id="exercise-description" name="description" value=(description) maxlength=(text::MAX_DESCRIPTION_CHARS) size="80";
         }
         p {
             input type="checkbox" id="exercise-exam-only" name="exam_only" value="on" checked[exam_only];

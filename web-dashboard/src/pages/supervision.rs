@@ -1,6 +1,7 @@
 //! `/supervision`: attempts in progress, live. The table is rendered on the server, then
 //! kept current by server-sent events (`/supervision/events`, one `running` event with the
-//! JSON list every second; our `static/supervision.js` redraws the rows).
+//! JSON list every second; our `static/supervision.js` redraws the rows). The stream ends
+//! with its login session (a logout elsewhere, an expiry).
 
 use std::convert::Infallible;
 use std::time::Duration;
@@ -14,7 +15,7 @@ use maud::{Markup, html};
 
 use super::layout::{page, when};
 use crate::AppState;
-use crate::auth::CurrentUser;
+use crate::auth::{CurrentUser, sessions};
 use crate::data::running::{RunningAttempt, running};
 use crate::error::PageResult;
 
@@ -66,6 +67,9 @@ async fn events(
         futures_util::stream::unfold((state, user, true), |(state, user, first)| async move {
             if !first {
                 tokio::time::sleep(PERIOD).await;
+                if let Ok(false) = sessions::alive(&state, &user.0.token_hash).await {
+                    return None;
+                }
             }
             let event = match running(&state, &user).await {
                 Ok(list) => Event::default()

@@ -226,3 +226,89 @@ pub async fn real_recordings(dir: &std::path::Path, n: usize) -> Vec<std::path::
     .await
     .unwrap()
 }
+
+// ---- a client on a real socket (the server's limits act only there) ----
+
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+/// [`env_with`] `config`, served on a loopback port: the environment, the state and where.
+pub async fn served(config: Config) -> (Env, AppState, SocketAddr) {
+    let (e, state) = env_with(config).await;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(cutlab_dashboard::serve(
+        listener,
+        state.clone(),
+        std::future::pending(),
+    ));
+    (e, state, addr)
+}
+
+/// A connection to `to` from the loopback address `from` (`127.0.0.x`: another client).
+pub async fn connect_from(from: &str, to: SocketAddr) -> TcpStream {
+    let socket = tokio::net::TcpSocket::new_v4().unwrap();
+    socket.bind(format!("{from}:0").parse().unwrap()).unwrap();
+    socket.connect(to).await.unwrap()
+}
+
+/// The status the server answers on `stream` within `within`: `Some(code)`, `None` if it
+/// closed the connection without one; panics if it is still open and silent.
+pub async fn answer<R: tokio::io::AsyncRead + Unpin>(
+    stream: &mut R,
+    within: Duration,
+) -> Option<u16> {
+    let mut got = Vec::new();
+    let read = tokio::time::timeout(within, async {
+        let mut buf = [0u8; 1024];
+        loop {
+            match stream.read(&mut buf).await {
+                Ok(0) | Err(_) => return,
+                Ok(n) => got.extend_from_slice(&buf[..n]),
+            }
+            if got.windows(2).any(|w| w == b"\r\n") {
+                return;
+            }
+        }
+    })
+    .await;
+    assert!(read.is_ok(), "no answer and not closed within {within:?}");
+    let line = String::from_utf8_lossy(&got);
+    line.split(' ').nth(1).and_then(|c| c.parse().ok())
+}
+
+/// Sends `sends` chunks of `chunk` bytes on `s`, one every `every`, then nothing, until the
+/// server answers (its status; `None`: closed without one) or 10 s pass (a panic).
+pub async fn crawl(s: &mut TcpStream, sends: usize, chunk: usize, every: Duration) -> Option<u16> {
+    let (mut read, mut write) = s.split();
+    let writing = async {
+        let bytes = vec![b'x'; chunk];
+        for _ in 0..sends {
+            if write.write_all(&bytes).await.is_err() {
+                break;
+            }
+            tokio::time::sleep(every).await;
+        }
+        std::future::pending::<()>().await
+    };
+    tokio::select! {
+        status = answer(&mut read, Duration::from_secs(10)) => status,
+        () = writing => None,
+    }
+}
+
+/// One whole request on a new connection from `from`, read to its end (the server closes
+/// it: `Connection: close`): the answer's status line, headers and body as text.
+pub async fn exchange(from: &str, to: SocketAddr, request: &str) -> String {
+    let mut s = connect_from(from, to).await;
+    s.write_all(request.as_bytes()).await.unwrap();
+    let mut got = Vec::new();
+    tokio::time::timeout(Duration::from_secs(30), s.read_to_end(&mut got))
+        .await
+        .expect("an answer within 30 s")
+        .unwrap();
+    String::from_utf8_lossy(&got).into_owned()
+}
