@@ -137,6 +137,15 @@ enum Command {
         absence_s: f64,
         #[command(flatten)]
         igtl: IgtlArgs,
+        /// Mark the session cookies `Secure`: for a dashboard reached over HTTPS (a proxy in
+        /// front that ends TLS). Also $CUTLAB_SECURE_COOKIES=1.
+        #[arg(long, env = "CUTLAB_SECURE_COOKIES")]
+        secure_cookies: bool,
+        /// The address people reach this dashboard at (`https://cutlab.example.org`), from
+        /// which the links it hands out are built; else from each request's own address and
+        /// scheme. Also $CUTLAB_PUBLIC_URL.
+        #[arg(long, env = "CUTLAB_PUBLIC_URL")]
+        public_url: Option<cutlab_dashboard::PublicUrl>,
     },
     /// The trainee station on this PC for one trainee: serves the dashboard on this machine
     /// and opens the station page in the browser, logged in through a one-time link (a new
@@ -349,8 +358,8 @@ struct SessionArgs {
     #[arg(long, default_value = "scene")]
     time_step_ms: TimeStep,
     /// expert | intermediate | novice (synthetic trainee), level:L (a trainee between them,
-    /// 0 novice to 1 expert), pointer:steady | pointer:sloppy (a person's hand model on
-    /// the station's pointer), csv:PATH (trajectory file), recording:PATH (the hand of a
+    /// 0 novice to 1 expert), pointer:steady | pointer:sloppy | pointer:lagging (a person's
+    /// hand model on the station's pointer; lagging: on a page held back to 7 Hz), csv:PATH (trajectory file), recording:PATH (the hand of a
     /// recorded session, played back) or igtl:PORT (OpenIGTLink server).
     #[arg(long, default_value = "expert")]
     device: session::DeviceArg,
@@ -478,6 +487,8 @@ fn run() -> anyhow::Result<()> {
             station_time_step_ms,
             absence_s,
             igtl,
+            secure_cookies,
+            public_url,
         } => {
             let db = cutlab_assessor::default_db(cli.db.as_ref());
             // beside an SQLite file; in the working directory for a server
@@ -488,6 +499,8 @@ fn run() -> anyhow::Result<()> {
                 station_time_step: station_time_step_ms,
                 station_absence_s: absence_s,
                 igtl: igtl.options(),
+                secure_cookies,
+                public_url,
                 ..serve::Options::dashboard(&db, &addr, recordings, hub)
             })
         }

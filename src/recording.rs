@@ -44,6 +44,7 @@ pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<Reru
 
 pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
     let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
+    let pace = cutlab_assessor::from_recording::input_pace(&rec);
     if json {
         let channels: Vec<_> = rec
             .channels
@@ -57,6 +58,7 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
             })),
             "whole": rec.is_whole(), "announced_steps": rec.announced_steps(), "steps": rec.steps.len(),
             "duration_s": rec.duration_s(),
+            "input_hz": pace.map(|p| p.input_hz),
             "channels": channels, "session": rec.meta, "session_end": rec.end,
             "attachments": rec.attachments.iter().map(|a| serde_json::json!({ "name": a.0, "media_type": a.1, "bytes": a.2.len() })).collect::<Vec<_>>(),
         });
@@ -106,6 +108,18 @@ pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
             m.clock,
             m.period_nanos / 1000,
             m.time_step_nanos / 1000
+        );
+    }
+    if let Some(p) = pace {
+        println!(
+            "  input: the hand reached the simulation {:.0} times a second while it moved ({:.1} s){}",
+            p.input_hz,
+            p.moving_s,
+            if p.lagged() {
+                ": the station lagged"
+            } else {
+                ""
+            }
         );
     }
     println!(

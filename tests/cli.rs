@@ -789,3 +789,21 @@ fn an_attempt_keeps_its_recordings_in_the_store_beside_the_database() {
         .expect("in the store");
     assert_eq!(kept, bytes);
 }
+
+#[test]
+fn names_with_control_or_reordering_characters_are_refused_on_the_command_line() {
+    let dir = tempfile::tempdir().expect("dir");
+    let db = dir.path().join("t.db");
+    let db = db.to_str().expect("utf8");
+    let long = "x".repeat(100_000);
+    for bad in ["spring\u{1b}[2J", "rtl\u{202e}txt", long.as_str()] {
+        let (ok, _, err) = cutlab(&["--db", db, "cohort", "add", "--name", bad]);
+        assert!(!ok, "{bad:.20} was taken");
+        assert!(
+            err.contains("a cohort's name") && err.len() < 500,
+            "one clear line: {err}"
+        );
+    }
+    let (ok, out, err) = cutlab(&["--db", db, "cohort", "add", "--name", "spring 2027"]);
+    assert!(ok, "{out}{err}");
+}

@@ -769,6 +769,22 @@ async fn attempt(
             // the mid-cut screenshot: the HUD with the blade in the tissue
             let half = g.len() - (stroke_s * 30.0) as usize;
             c.perform_actions(as_actions(&g[..half])).await?;
+            // the gauge's grey line is the depth set (8 mm planned, 5 mm after six steps
+            // up), wherever the blade is (issue 63: it followed the blade)
+            let drawn = c
+                .execute("return window.cutlabStation.gauge()", vec![])
+                .await?;
+            let set = if trial == Trial::Shallow {
+                0.005
+            } else {
+                0.008
+            };
+            assert!(
+                drawn["set_m"]
+                    .as_f64()
+                    .is_some_and(|m| (m - set).abs() < 1e-9),
+                "{trial:?}: the set-depth line at {set} m, drawn {drawn}"
+            );
             if trial == Trial::Skilled {
                 std::fs::write(
                     shots.join("station-human-mid-cut.png"),
@@ -1026,6 +1042,7 @@ async fn pattern_cut(
 ) -> Result<(), fantoccini::error::CmdError> {
     use cutlab_haptics::hand::Hand;
     let (mark, mm) = mark_on_page(c).await?;
+    let uncut_vertices = vertices(c, "vertices").await?;
     let along = length_px(&mark);
     let mut hand = Hand::steady(along / mm, 7);
     let mut line = mark.clone();
@@ -1051,6 +1068,17 @@ async fn pattern_cut(
         let url = c.current_url().await?;
         c.goto(url.as_str()).await?;
         mark_on_page(c).await?;
+        // the page that joined the cut attempt points on and measures from the session's
+        // first surface, not from the cut one it first saw
+        let (now, rest) = (
+            vertices(c, "vertices").await?,
+            vertices(c, "restVertices").await?,
+        );
+        assert!(
+            rest == uncut_vertices && now > rest,
+            "after the reload: the rest surface has {rest} vertices, the uncut one had \
+             {uncut_vertices}, the cut one has {now}"
+        );
         press_again(&hand, &g[half..])
     } else {
         g[half..].to_vec()
@@ -1062,6 +1090,14 @@ async fn pattern_cut(
     tokio::time::sleep(Duration::from_secs(2)).await;
     std::fs::write(shots.join(shot), c.screenshot().await?).expect("screenshot");
     c.release_actions().await
+}
+
+/// `window.cutlabStation[what]()`: a vertex count of the page's surfaces.
+async fn vertices(c: &fantoccini::Client, what: &str) -> Result<u64, fantoccini::error::CmdError> {
+    let v = c
+        .execute(&format!("return window.cutlabStation.{what}()"), vec![])
+        .await?;
+    Ok(v.as_u64().unwrap_or(0))
 }
 
 /// The marked circle on the page (CSS px) and its length (mm), once the page shows the tissue;
@@ -1264,11 +1300,18 @@ async fn debrief(
         .for_element(Locator::Id("debrief-summary"))
         .await?;
     let summary = c.find(Locator::Id("debrief-summary")).await?.text().await?;
-    c.execute(
-        "document.getElementById('debrief').scrollIntoView()",
-        vec![],
-    )
-    .await?;
+    // the attempt's charts below the summary (the top view, the force), once they have come
+    let charts = c
+        .wait()
+        .at_most(Duration::from_secs(60))
+        .for_element(Locator::Css("#debrief-attempt .charts"))
+        .await;
+    let shown = if charts.is_ok() {
+        "document.querySelector('#debrief-attempt .charts').scrollIntoView()"
+    } else {
+        "document.getElementById('debrief').scrollIntoView()"
+    };
+    c.execute(shown, vec![]).await?;
     std::fs::write(shot, c.screenshot().await?).expect("screenshot");
     Ok(summary)
 }

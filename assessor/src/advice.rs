@@ -114,7 +114,11 @@ fn words(m: &MetricResult<'_>) -> Option<String> {
         if m.key == "completion_time_s" {
             return None;
         }
-        return Some(format!("{}: could not be measured.", m.key));
+        // the catalogue's name, never the stored key, reaches the trainee
+        let name = crate::metrics::metric(m.key).map_or(m.key, |d| d.label);
+        return Some(format!(
+            "{name}: could not be measured from this attempt's cut, so it cannot pass."
+        ));
     };
     let mm = v * 1e3;
     Some(match m.key {
@@ -162,7 +166,14 @@ fn words(m: &MetricResult<'_>) -> Option<String> {
         "pattern_max_deviation_m" => {
             format!("Stay on the mark all the way round: the cut strayed up to {mm:.1} mm from it.")
         }
-        key => format!("{key}: {v:.4} is beyond its limit."),
+        key => match crate::metrics::metric(key) {
+            Some(d) => {
+                let (factor, unit) = d.display();
+                let shown = format!("{:.2} {unit}", v * factor);
+                format!("{}: {} is beyond its limit.", d.label, shown.trim_end())
+            }
+            None => format!("{key}: {v:.4} is beyond its limit."),
+        },
     })
 }
 
@@ -217,6 +228,34 @@ mod tests {
             lower,
             upper,
         }
+    }
+
+    #[test]
+    fn a_metric_that_could_not_be_measured_is_named_as_people_read_it() {
+        let a = advice(&[
+            r(
+                "fraction_cut_in_tolerance",
+                Some(0.9),
+                Some(true),
+                0.95,
+                Some(0.8),
+                None,
+            ),
+            r(
+                "pattern_max_deviation_m",
+                None,
+                Some(false),
+                0.001,
+                None,
+                Some(0.002),
+            ),
+        ]);
+        assert_eq!(a.fix.len(), 1);
+        assert!(!a.fix[0].contains('_'), "{}", a.fix[0]);
+        let label = crate::metrics::metric("pattern_max_deviation_m")
+            .unwrap()
+            .label;
+        assert!(a.fix[0].starts_with(label), "{}", a.fix[0]);
     }
 
     #[test]

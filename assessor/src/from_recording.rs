@@ -29,18 +29,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
     // every tick with both its pose and its tool state, in tick order
     let samples = rec.samples();
     let t_s = |tick: u64| tick as f64 * period_s;
-    let poses = samples
-        .values()
-        .map(|s| {
-            let q = s.pose.world_from_tool.quaternion();
-            PoseSample {
-                t_s: t_s(s.tick),
-                tip_m: s.pose.tip_in_world.coords.into(),
-                quat_wxyz: [q.w, q.i, q.j, q.k],
-                blade_engaged: s.pose.blade_engaged(),
-            }
-        })
-        .collect();
+    let poses = poses_of(&samples, period_s);
     let forces = samples
         .values()
         .map(|s| ForceSample {
@@ -81,6 +70,28 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
     })
 }
 
+/// The tool's pose at every recorded servo sample (by tick, `period_s` apart).
+pub fn poses_of(samples: &BTreeMap<u64, ServoSample>, period_s: f64) -> Vec<PoseSample> {
+    samples
+        .values()
+        .map(|s| {
+            let q = s.pose.world_from_tool.quaternion();
+            PoseSample {
+                t_s: s.tick as f64 * period_s,
+                tip_m: s.pose.tip_in_world.coords.into(),
+                quat_wxyz: [q.w, q.i, q.j, q.k],
+                blade_engaged: s.pose.blade_engaged(),
+            }
+        })
+        .collect()
+}
+
+/// How often the hand reached the simulation in `rec` ([`crate::pace::input_pace`]).
+pub fn input_pace(rec: &Recording) -> Option<crate::pace::InputPace> {
+    let period_s = rec.meta().ok()?.period_nanos as f64 * 1e-9;
+    crate::pace::input_pace(&poses_of(&rec.samples(), period_s))
+}
+
 /// The cut's trace in recorded servo `samples` (by tick, `period_s` apart): the blade at every
 /// tick the renderer had it in the tissue (mode `Cutting`: the blade path; the topology events
 /// only mark where the mesh changed, a few per centimetre on a coarse mesh). A sample's depth
@@ -119,19 +130,42 @@ pub fn cut_samples(
     cuts
 }
 
+/// The note of an attempt whose tool never touched the tissue: kept and shown, not scored
+/// (it is not an attempt at the task, and its in-limit zeros would read as a best).
+pub const UNTOUCHED_NOTE: &str =
+    "the tool never touched the tissue: not an attempt at the task, so not scored";
+
+/// Whether the tool pressed on or cut the tissue at any tick of `rec`.
+pub fn touched_tissue(rec: &Recording) -> bool {
+    rec.samples().values().any(|s| s.render.mode != Mode::Free)
+}
+
 /// `rec`'s metrics against `plan`, and what the attempt's note must say of a recording that
-/// is not whole (damaged, cut short: scored on what is readable, never silently).
+/// is not whole (damaged, cut short: scored on what is readable, never silently) and of a
+/// station that lagged behind the hand (its paced metrics set aside: [`crate::pace`]).
 pub fn assess_recording(
     rec: &Recording,
     plan: &ExercisePlan,
 ) -> Result<(crate::MetricSet, Option<String>), AssessError> {
     let data = attempt_data(rec, plan)?;
-    let values = plan.assess(&data)?;
-    let note = rec
+    let mut values = plan.assess(&data)?;
+    let damaged = rec
         .shortfall()
         .map(|why| format!("{DAMAGED_RECORDING_NOTE}: {why}"));
+    let lagged = crate::pace::input_pace(&data.poses).filter(crate::pace::InputPace::lagged);
+    if let Some(pace) = &lagged {
+        crate::pace::set_aside(&mut values, &format!("{:.0} Hz", pace.input_hz));
+    }
+    let lagged = lagged.map(|p| format!("{LAGGED_NOTE}: {}.", p.words()));
+    let note = match (damaged, lagged) {
+        (Some(d), Some(l)) => Some(format!("{d}. {l}")),
+        (d, l) => d.or(l),
+    };
     Ok((values, note))
 }
+
+/// How the note of an attempt at a station that lagged behind the hand begins.
+pub const LAGGED_NOTE: &str = "The station lagged";
 
 /// The boundary of the last keyframe's mesh at its deformed positions.
 fn last_surface(rec: &Recording) -> Option<SurfaceMesh> {
@@ -257,9 +291,10 @@ mod tests {
     /// device at 1 kHz: the page sends a sample every 8 ms, each arriving 5 ms after it was
     /// taken; the cursor rests on the entry, then with the button held (8 mm deep) crosses to
     /// the exit at 40 mm/s (page times 1100 to 2600 ms), then rests on the exit. Once, from
-    /// page time 1800 ms, the page stalls for 160 ms (a busy browser): the samples of the stall
-    /// arrive together at its end. With `lift`, the button is up from 1400 to 1500 ms. The
-    /// renderer's mode is emulated: cutting while the blade is engaged and below the surface.
+    /// page time 1800 ms, the page stalls for 400 ms (a busy browser): the samples of the stall
+    /// arrive together at its end, more than the device's largest lag, so it skips forward.
+    /// With `lift`, the button is up from 1400 to 1500 ms. The renderer's mode is emulated:
+    /// cutting while the blade is engaged and below the surface.
     fn pointer_attempt(lift: bool) -> BTreeMap<u64, ServoSample> {
         let (mut device, feed) = PointerDevice::new(PointerOptions::default()).unwrap();
         let pages: Vec<(f64, PointerSample)> = (0..=250)
@@ -270,8 +305,8 @@ mod tests {
                     && !(lift && (1400.0..1500.0).contains(&p_ms));
                 let depth = if engaged { 0.008 } else { 0.0 };
                 let sample = PointerSample::new(p_ms, [x, 0.0, 0.0], depth, engaged);
-                let sent_ms = if (1800.0..1960.0).contains(&p_ms) {
-                    1960.0
+                let sent_ms = if (1800.0..2200.0).contains(&p_ms) {
+                    2200.0
                 } else {
                     p_ms
                 };

@@ -19,13 +19,14 @@ pub mod from_recording;
 mod geom;
 pub mod input;
 pub mod metrics;
+pub mod pace;
 pub mod proficiency;
 pub mod recordings;
 
 pub use device_class::DeviceClass;
 pub use error::{AssessError, Result};
 pub use exercise::{ExerciseKind, ExercisePlan, IncisionPlan, Kind};
-pub use from_recording::attempt_data;
+pub use from_recording::{UNTOUCHED_NOTE, attempt_data, touched_tissue};
 pub use input::{AttemptData, CutSample, ForceSample, FreedPiece, PoseSample, SurfaceMesh};
 pub use metrics::{Better, Metric, MetricSet, MetricValue};
 pub use proficiency::{CusumParams, Threshold, Thresholds, Verdict};

@@ -14,7 +14,8 @@
 //! | `world/proxy` | `Points3D` (the force renderer's proxy) | ~30 Hz of ticks |
 //! | `world/tissue` | `Mesh3D` (f32, vertex normals) | each `SimRecord::Surface` |
 //! | `world/plan` | `LineStrips3D` (static) | [`RerunSink::log_plan`] |
-//! | `events` | `TextLog` | cuts, keyframes (with their hashes), rejected steps, fault changes |
+//! | `events` | `TextLog` | what happened to the hand's device (fault changes): the review's Events view |
+//! | `engine/events` | `TextLog` | the engine's own lines: cuts, keyframes (with their hashes), rejected steps (in the file, not in the review's layout: they mean nothing to an instructor) |
 //!
 //! Every log carries [`review_blueprint`], the layout a review opens in (a large 3D view of
 //! the tissue above the force plot and the events), and the tissue is there from the first
@@ -70,6 +71,7 @@ pub mod paths {
     pub const TISSUE: &str = "world/tissue";
     pub const PLAN: &str = "world/plan";
     pub const EVENTS: &str = "events";
+    pub const ENGINE_EVENTS: &str = "engine/events";
 }
 
 /// Where a session's rerun log goes.
@@ -555,8 +557,10 @@ impl RerunSink {
         level: &str,
     ) -> Result<(), RerunLogError> {
         self.set_time(tick, Some(step));
-        self.rec
-            .log(paths::EVENTS, &rerun::TextLog::new(text).with_level(level))?;
+        self.rec.log(
+            paths::ENGINE_EVENTS,
+            &rerun::TextLog::new(text).with_level(level),
+        )?;
         Ok(())
     }
 }

@@ -95,7 +95,8 @@ pub enum Finished {
 }
 
 /// Ends attempt `id`: scores it from the recording at `outcome`'s path, or marks it incomplete
-/// with `outcome`'s reason. A recording that cannot be read marks the attempt incomplete; a
+/// with `outcome`'s reason (or [`cutlab_assessor::UNTOUCHED_NOTE`] when the tool never touched
+/// the tissue). A recording that cannot be read marks the attempt incomplete; a
 /// recording that cannot be scored marks it failed; both are errors too.
 pub async fn finish_attempt(
     store: &Store,
@@ -147,6 +148,13 @@ async fn end_attempt(
             return Err(e.into());
         }
     };
+    // Start, then Stop, and nothing between: visible as such, never a scored fail
+    if !cutlab_assessor::touched_tissue(&rec) {
+        store
+            .mark_incomplete(id, Some(cutlab_assessor::UNTOUCHED_NOTE))
+            .await?;
+        return Ok(Finished::Incomplete(cutlab_assessor::UNTOUCHED_NOTE.into()));
+    }
     match store.score_recording(id, &rec).await {
         Ok((outcome, values)) => Ok(Finished::Scored(Box::new(outcome), values)),
         Err(e) => {

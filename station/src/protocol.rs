@@ -8,8 +8,11 @@
 //! |---|---|
 //! | [`KIND_TOPOLOGY`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles, u32 × vertices regions` |
 //! | [`KIND_FRAME`] | `u8 kind, u8 mode, u8 engaged, u8 faults, u32 vertices, u64 tick, f64 echo_ms, f32 × 3 tip_m, f32 × 4 world_from_tool (w, x, y, z), f32 × 3 force_newtons, f32 × 3 × vertices positions_m` |
+//! | [`KIND_REST`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles, f32 × 3 × vertices positions_m` |
 //!
-//! A topology message comes first and again whenever the surface's triangles change (after a
+//! The rest message comes first on every connection: the session's first surface, from which
+//! the page measures depths and on which it points, however late it joined. A topology
+//! message comes next and again whenever the surface's triangles change (after a
 //! cut); the frames that follow carry one position per vertex of the last topology. `echo_ms`
 //! is the page's own time stamp of the newest pointer sample the frame's tick consumed (NaN
 //! when none), so the page measures the latency from its input to the frame that shows it.
@@ -20,12 +23,14 @@
 use cutlab_haptics::device::PointerSample;
 use serde::Deserialize;
 
-use crate::view::{Topology, ViewFrame};
+use crate::view::{RestSurface, Topology, ViewFrame};
 
 /// The kind byte of a topology message.
 pub const KIND_TOPOLOGY: u8 = 1;
 /// The kind byte of a frame.
 pub const KIND_FRAME: u8 = 2;
+/// The kind byte of the rest surface's message.
+pub const KIND_REST: u8 = 3;
 /// Bytes of a frame before its positions.
 pub const FRAME_HEADER_BYTES: usize = 4 + 4 + 8 + 8 + 12 + 16 + 12;
 /// The longest text message the server reads from a page.
@@ -51,6 +56,21 @@ pub fn encode_topology(topology: &Topology) -> Vec<u8> {
     for v in 0..topology.vertex_count {
         let region = topology.regions.get(v).copied().unwrap_or(0);
         out.extend(region.to_le_bytes());
+    }
+    out
+}
+
+/// The rest surface's message for `rest`.
+pub fn encode_rest(rest: &RestSurface) -> Vec<u8> {
+    let mut out = Vec::with_capacity(12 + 12 * rest.triangles.len() + 4 * rest.positions_m.len());
+    out.extend([KIND_REST, 0, 0, 0]);
+    out.extend(u32_of(rest.positions_m.len() / 3).to_le_bytes());
+    out.extend(u32_of(rest.triangles.len()).to_le_bytes());
+    for v in rest.triangles.iter().flatten() {
+        out.extend(v.to_le_bytes());
+    }
+    for x in &rest.positions_m {
+        out.extend(x.to_le_bytes());
     }
     out
 }
@@ -161,6 +181,25 @@ mod tests {
             .map(|c| u32::from_le_bytes(c.try_into().expect("4")))
             .collect();
         assert_eq!(words, [4, 2, 0, 1, 2, 2, 1, 3, 1, 1, 2, 5]);
+    }
+
+    #[test]
+    fn the_rest_surface_lists_its_triangles_then_its_positions() {
+        let rest = RestSurface {
+            triangles: vec![[0, 1, 2]],
+            positions_m: vec![0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0],
+        };
+        let b = encode_rest(&rest);
+        assert_eq!(b.len(), 12 + 12 + 36);
+        assert_eq!(&b[..4], &[KIND_REST, 0, 0, 0]);
+        let words: Vec<u32> = b[4..24]
+            .chunks(4)
+            .map(|c| u32::from_le_bytes(c.try_into().expect("4")))
+            .collect();
+        assert_eq!(words, [3, 1, 0, 1, 2]);
+        assert_eq!(f32_at(&b, 24), 0.0);
+        assert_eq!(f32_at(&b, 28), 0.5);
+        assert_eq!(f32_at(&b, b.len() - 4), 4.0);
     }
 
     #[test]

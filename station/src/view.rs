@@ -24,6 +24,16 @@ pub struct Topology {
     pub regions: Vec<u32>,
 }
 
+/// The tissue's surface before anything touched it: the session's first surface, kept for
+/// the whole session. The page measures depths from it and points on it, so a page that joins
+/// a running attempt (a reload) measures as the one that saw it begin.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RestSurface {
+    pub triangles: Vec<[u32; 3]>,
+    /// `x, y, z` of each vertex, m.
+    pub positions_m: Vec<f32>,
+}
+
 /// One frame of the view.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewFrame {
@@ -45,6 +55,8 @@ pub struct ViewFrame {
 /// What the slot holds: the frame and the topology its positions belong to.
 #[derive(Debug, Clone, Default)]
 pub struct ViewState {
+    /// The session's first surface (`None` until the session has one).
+    pub rest: Option<Arc<RestSurface>>,
     pub topology: Arc<Topology>,
     pub frame: Option<Arc<ViewFrame>>,
     /// The session has ended (no frame follows).
@@ -99,6 +111,14 @@ impl ViewPublisher {
 
     fn publish(&mut self, surface: &SurfaceSnapshot) {
         let (vertices, triangles) = (&surface.vertices, &surface.triangles);
+        if self.slot.borrow().rest.is_none() {
+            let rest = RestSurface {
+                triangles: triangles.clone(),
+                positions_m: flat_f32(vertices),
+            };
+            self.slot
+                .send_modify(|state| state.rest = Some(Arc::new(rest)));
+        }
         let Some(s) = &self.last_tick else {
             return;
         };
@@ -120,10 +140,7 @@ impl ViewPublisher {
             tip_m: f32x3(s.pose.tip_in_world.coords.into()),
             world_from_tool_wxyz: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
             force_newtons: f32x3(s.render.force_newtons.into()),
-            positions_m: vertices
-                .iter()
-                .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-                .collect(),
+            positions_m: flat_f32(vertices),
         };
         self.slot.send_modify(|state| {
             if state.topology.vertex_count != vertices.len()
@@ -139,6 +156,13 @@ impl ViewPublisher {
             state.frame = Some(Arc::new(frame));
         });
     }
+}
+
+fn flat_f32(points: &[cutlab_haptics::Point3]) -> Vec<f32> {
+    points
+        .iter()
+        .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect()
 }
 
 fn f32x3(v: [f64; 3]) -> [f32; 3] {
@@ -212,9 +236,12 @@ mod tests {
     #[test]
     fn the_newest_frame_wins_and_topology_changes_are_new() {
         let (mut p, mut feed) = ViewPublisher::new(Some(Arc::new(Echo)));
-        // no frame before the first tick
+        // no frame before the first tick, but the rest surface
         p.on_sim(&surface(0, vec![[0, 1, 2]])).expect("sim");
         assert!(feed.borrow().frame.is_none());
+        let rest = feed.borrow().rest.clone().expect("the rest surface");
+        assert_eq!(rest.triangles, vec![[0, 1, 2]]);
+        assert_eq!(rest.positions_m.len(), 9);
         for tick in 0..10 {
             p.on_tick(&sample(tick)).expect("tick");
         }
@@ -232,6 +259,8 @@ mod tests {
         assert_eq!(frame.force_newtons, [0.0, 0.0, 0.5]);
         assert!(!Arc::ptr_eq(&first, &state.topology));
         assert_eq!(state.topology.triangles, vec![[0, 2, 1]]);
+        // the rest surface stays the first one through every change
+        assert!(Arc::ptr_eq(&rest, state.rest.as_ref().expect("rest")));
         Box::new(p).finish().expect("finish");
         assert!(feed.borrow().ended);
     }

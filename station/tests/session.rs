@@ -110,12 +110,26 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
     let mut frames = 0;
     let mut cut_seen = false;
     let mut last_tick = None;
+    let mut rest: Option<std::sync::Arc<cutlab_station::view::RestSurface>> = None;
     while let Ok(()) = feed.changed().await {
         let state = feed.borrow_and_update().clone();
         if state.ended {
             break;
         }
         let Some(frame) = state.frame else { continue };
+        // the rest surface comes with the first frame and stays the session's first surface
+        // (the cut changes the topology, not it)
+        let now_rest = state.rest.clone().expect("a rest surface with every frame");
+        let first = rest.get_or_insert_with(|| {
+            assert_eq!(
+                now_rest.positions_m.len(),
+                3 * state.topology.vertex_count,
+                "the rest surface is the first surface"
+            );
+            now_rest.clone()
+        });
+        assert!(std::sync::Arc::ptr_eq(first, &now_rest));
+        assert_eq!(protocol::encode_rest(&now_rest)[0], protocol::KIND_REST);
         let topology = protocol::encode_topology(&state.topology);
         assert_eq!(topology[0], KIND_TOPOLOGY);
         assert_eq!(state.topology.regions.len(), state.topology.vertex_count);
@@ -248,9 +262,13 @@ async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
     assert!(matches!(set.check_room("ana"), Err(StationError::Busy(m)) if m.contains("already")));
     assert!(matches!(set.check_room("ben"), Err(StationError::Busy(m)) if m.contains("at most 1")));
     running.control.stop();
-    let Ending::Scored { attempt, .. } = ending(&running).await else {
-        panic!("a stopped session is scored")
+    // stopped before the hand reached the tissue: kept, not scored (issue 63)
+    let Ending::Incomplete { attempt, why } = ending(&running).await else {
+        panic!("a session stopped before any contact is not scored")
     };
+    assert_eq!(why, cutlab_assessor::UNTOUCHED_NOTE);
+    let a = store.get_attempt(attempt).await.expect("attempt");
+    assert!(a.status == AttemptStatus::Incomplete && !a.scored, "{a:?}");
     let rec_path = store
         .get_attempt(attempt)
         .await

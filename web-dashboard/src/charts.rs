@@ -28,6 +28,8 @@ pub enum Layer {
         class: &'static str,
         label: String,
     },
+    /// A short text just right of a point (a line's name at its last point).
+    Text { x: f64, y: f64, text: String },
 }
 
 /// A chart: title, axis labels and layers; ranges from the data unless given.
@@ -101,7 +103,7 @@ impl Chart {
         self
     }
 
-    fn ranges(&self) -> ((f64, f64), (f64, f64)) {
+    pub(crate) fn ranges(&self) -> ((f64, f64), (f64, f64)) {
         let (mut xs, mut ys): (Vec<f64>, Vec<f64>) = (Vec::new(), self.y_include.clone());
         for l in &self.layers {
             match l {
@@ -119,6 +121,7 @@ impl Chart {
                 }
                 Layer::HBand { low, high, .. } => ys.extend([*low, *high]),
                 Layer::HLine { y, .. } => ys.push(*y),
+                Layer::Text { .. } => {}
             }
         }
         let x = if self.categories.is_empty() {
@@ -192,6 +195,9 @@ impl Chart {
                         Layer::HLine { y, class, label } => {
                             line class=(class) x1=(fmt(MARGIN_L)) x2=(fmt(MARGIN_L + pw)) y1=(fmt(clamp_y(*y))) y2=(fmt(clamp_y(*y))) {}
                             text class=(format!("{class}-label")) x=(fmt(MARGIN_L + pw + 4.0)) y=(fmt(clamp_y(*y) + 4.0)) { (label) }
+                        }
+                        Layer::Text { x, y, text } => {
+                            text class="end-label" x=(fmt(px(*x) + 4.0)) y=(fmt(clamp_y(*y) + 3.0)) { (text) }
                         }
                         Layer::Line { points, class } => {
                             @for run in runs(points) {

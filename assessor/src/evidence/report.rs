@@ -129,9 +129,12 @@ impl Finding {
     /// Plain words for reports.
     pub fn words(self) -> &'static str {
         match self {
-            Finding::Discriminates => "discriminates",
-            Finding::Reversed => "reversed: the less experienced do better",
-            Finding::DoesNotDiscriminate => "does not discriminate",
+            // the rule is the AUC's interval, not the p value beside it: said with the word
+            Finding::Discriminates => "discriminates (AUC interval above 0.5)",
+            Finding::Reversed => {
+                "reversed: the less experienced do better (AUC interval below 0.5)"
+            }
+            Finding::DoesNotDiscriminate => "does not discriminate (AUC interval holds 0.5)",
             Finding::NotComputed => "not computed",
         }
     }

@@ -144,13 +144,14 @@ impl MetricValue {
 
 impl MetricValue {
     /// Whether the value is missing because the attempt's device cannot measure the metric
-    /// (its reason begins [`NOT_MEASURED_WITH_DEVICE`]), not because of what the trainee did.
+    /// (its reason begins [`NOT_MEASURED_WITH_DEVICE`]) or the station lagged behind the hand
+    /// ([`crate::pace::STATION_LAGGED`]), not because of what the trainee did.
     pub fn not_measured(&self) -> bool {
         self.value.is_none()
-            && self
-                .missing
-                .as_deref()
-                .is_some_and(|m| m.starts_with(NOT_MEASURED_WITH_DEVICE))
+            && self.missing.as_deref().is_some_and(|m| {
+                m.starts_with(NOT_MEASURED_WITH_DEVICE)
+                    || m.starts_with(crate::pace::STATION_LAGGED)
+            })
     }
 }
 

@@ -16,8 +16,12 @@
 //! - path length: `sum |x[k+1] - x[k]|` over the filtered samples;
 //! - economy of motion: `|x_last - x_first| / path length` (1 for a straight line);
 //! - idle time: total length of the intervals whose mean speed is below `idle_speed_m_s`;
-//! - movements: the runs where `v` exceeds `max(movement_floor_m_s, movement_fraction * peak v)`
-//!   lasting at least `min_movement_s` (each is one upward threshold crossing);
+//! - movements: the runs where `v` exceeds
+//!   `max(movement_fraction * peak v, min(movement_floor_m_s, mean v / 2))` lasting at least
+//!   `min_movement_s` and going at least `min_movement_m` from where they began (a dip below
+//!   the threshold shorter than `min_movement_s` does not end a run). The floor gives way to a stroke slower than it (a stroke at
+//!   3 mm/s is a movement, not none); the distance keeps a hand's noise, its drift and what
+//!   the filter leaves of its tremor, from counting when it holds still;
 //! - angular path: `sum 2 acos |q_i . q_(i+1)|` over the raw unit quaternions (rad);
 //! - smoothness: LDLJ and SPARC ([`smoothness`]) of the whole speed profile, and their mean
 //!   over the movements (each movement's own speed profile).
@@ -41,10 +45,13 @@ pub struct PathParams {
     pub idle_speed_m_s: f64,
     /// Movement threshold as a fraction of the peak speed ...
     pub movement_fraction: f64,
-    /// ... but at least this (m/s).
+    /// ... but at least this (m/s), or half the mean speed `path length / duration` where
+    /// that is lower (a slow stroke).
     pub movement_floor_m_s: f64,
     /// Shorter runs above the threshold are not movements (s).
     pub min_movement_s: f64,
+    /// Nor runs that end nearer than this to where they began (m).
+    pub min_movement_m: f64,
     /// SPARC: zero padding level, cut-off (Hz), amplitude threshold.
     pub sparc_padlevel: u32,
     pub sparc_fc_hz: f64,
@@ -60,6 +67,7 @@ impl Default for PathParams {
             movement_fraction: 0.1,
             movement_floor_m_s: 0.005,
             min_movement_s: 0.1,
+            min_movement_m: 0.001,
             sparc_padlevel: 4,
             sparc_fc_hz: 10.0,
             sparc_amp_th: 0.05,
@@ -184,24 +192,32 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     };
 
     let peak = speed.iter().copied().fold(0.0, f64::max);
-    let threshold = p.movement_floor_m_s.max(p.movement_fraction * peak);
-    let mut runs = Vec::new();
+    let mean_speed = path_length_m / ((n - 1) as f64 * dt);
+    let floor = p.movement_floor_m_s.min(0.5 * mean_speed);
+    let threshold = floor.max(p.movement_fraction * peak);
+    let min_len = (p.min_movement_s * fs).round() as usize;
+    let mut runs: Vec<(usize, usize)> = Vec::new();
     let mut start = None;
     for k in 0..=n {
         let above = k < n && speed[k] > threshold;
         match (above, start) {
             (true, None) => start = Some(k),
             (false, Some(s)) => {
-                runs.push((s, k - 1));
+                // a dip shorter than a movement does not end one
+                match runs.last_mut() {
+                    Some(last) if s - last.1 <= min_len => last.1 = k - 1,
+                    _ => runs.push((s, k - 1)),
+                }
                 start = None;
             }
             _ => {}
         }
     }
-    let min_len = (p.min_movement_s * fs).round() as usize;
     let per_movement: Vec<Movement> = runs
         .into_iter()
-        .filter(|(s, e)| e - s >= min_len)
+        .filter(|&(s, e)| {
+            e - s >= min_len && nalgebra::distance(&pos(s), &pos(e)) >= p.min_movement_m
+        })
         .map(|(s, e)| {
             let v = &speed[s..=e];
             Movement {
@@ -379,6 +395,43 @@ mod tests {
             "each reach is smoother than the whole"
         );
         assert!(m.per_movement[0].start_s > 1.0 && m.per_movement[0].end_s < 2.0);
+    }
+
+    /// The poses of `gestures` of a hand at 1 px to the millimetre.
+    fn hand_poses(gestures: &[cutlab_haptics::hand::Gesture]) -> Vec<PoseSample> {
+        use cutlab_haptics::hand::Gesture;
+        let (mut t_ms, mut out) = (0u64, Vec::new());
+        for g in gestures {
+            match *g {
+                Gesture::Move { x, y, ms } => {
+                    t_ms += ms;
+                    out.push(pose(t_ms as f64 * 1e-3, [x * 1e-3, y * 1e-3, 0.0], 0.0));
+                }
+                Gesture::Wait { ms } => t_ms += ms,
+                Gesture::Press | Gesture::Release => {}
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_slow_stroke_is_one_movement_and_a_still_hand_none() {
+        use cutlab_haptics::hand::Hand;
+        // 60 mm in 30 s (2 mm/s on average, 3.75 mm/s at most: below the 5 mm/s floor) by a
+        // steady hand, its tremor and drift on it
+        for seed in 0..5 {
+            let slow = Hand::steady(1.0, seed).stroke(&[[0.0, 0.0], [60.0, 0.0]], 30.0, 1.0);
+            let m = path(&hand_poses(&slow), &PathParams::default()).expect("path");
+            assert_eq!(m.movements, 1, "seed {seed}: {:?}", m.per_movement);
+        }
+        // a hand that holds still for 5 s (a stroke of 0.01 mm), steady or shaky: no movement
+        for seed in 0..5 {
+            for mut hand in [Hand::steady(1.0, seed), Hand::sloppy(1.0, seed)] {
+                let still = hand.stroke(&[[0.0, 0.0], [0.01, 0.0]], 5.0, 1.0);
+                let m = path(&hand_poses(&still), &PathParams::default()).expect("path");
+                assert_eq!(m.movements, 0, "seed {seed}: {:?}", m.per_movement);
+            }
+        }
     }
 
     #[test]

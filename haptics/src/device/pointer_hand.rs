@@ -5,7 +5,8 @@
 //! plunging to the set depth when the button goes down), on the virtual clock as well as the
 //! live one.
 //!
-//! What the hand does (`pointer:steady` or `pointer:sloppy`), in the plan's frame on the
+//! What the hand does (`pointer:steady`, `pointer:sloppy` or `pointer:lagging`, a steady hand
+//! on a page a slow machine holds back to 7 samples a second), in the plan's frame on the
 //! surface (millimetres along the planned line and across it): it waits at rest 15 mm before
 //! the entry and 20 mm to the side, reaches for the entry (a primary movement that stops
 //! short, a correction), presses, strokes along the line at a careful person's 12 mm/s (one
@@ -39,7 +40,14 @@ pub enum HandKind {
     Steady,
     /// [`Hand::sloppy`], twice as fast.
     Sloppy,
+    /// [`Hand::steady`] on a page a slow machine holds back: its samples reach the station
+    /// [`LAGGING_PAGE_HZ`] times a second, and the person, who sees the tissue answer late,
+    /// cuts at half the pace.
+    Lagging,
 }
+
+/// How often a lagging page's samples reach the station, Hz (a slow machine's in issue 63).
+pub const LAGGING_PAGE_HZ: f64 = 7.0;
 
 impl HandKind {
     /// `steady` or `sloppy`.
@@ -47,6 +55,7 @@ impl HandKind {
         match s {
             "steady" => Some(Self::Steady),
             "sloppy" => Some(Self::Sloppy),
+            "lagging" => Some(Self::Lagging),
             _ => None,
         }
     }
@@ -56,6 +65,7 @@ impl HandKind {
         match self {
             Self::Steady => "steady",
             Self::Sloppy => "sloppy",
+            Self::Lagging => "lagging",
         }
     }
 }
@@ -76,7 +86,15 @@ impl PointerHand {
     /// The `kind` of hand cutting along `plan`, its noise seeded by `seed`.
     pub fn new(kind: HandKind, plan: &Plan, seed: u64) -> Result<Self, HapticsError> {
         let (pointer, feed) = PointerDevice::new(PointerOptions::above_entry(plan)?)?;
-        let samples = page_samples(&gestures(kind, plan, seed), &SurfaceFrame::new(plan)?);
+        let frame_ms = match kind {
+            HandKind::Lagging => 1000.0 / LAGGING_PAGE_HZ,
+            HandKind::Steady | HandKind::Sloppy => 1000.0 / 60.0,
+        };
+        let samples = page_samples(
+            &gestures(kind, plan, seed),
+            &SurfaceFrame::new(plan)?,
+            frame_ms,
+        );
         Ok(Self {
             name: format!("pointer:{}", kind.as_str()),
             pointer,
@@ -102,12 +120,18 @@ fn gestures(kind: HandKind, plan: &Plan, seed: u64) -> Vec<Gesture> {
     let mut hand = match kind {
         HandKind::Steady => Hand::steady(1.0, seed),
         HandKind::Sloppy => Hand::sloppy(1.0, seed),
+        HandKind::Lagging => {
+            let mut h = Hand::steady(1.0, seed);
+            h.rate_hz = LAGGING_PAGE_HZ;
+            h
+        }
     };
     let length_mm = plan.length_m() * 1e3;
     let pace = hand.one_of_many()
         * match kind {
             HandKind::Steady => STEADY_PACE_M_PER_S,
             HandKind::Sloppy => 2.0 * STEADY_PACE_M_PER_S,
+            HandKind::Lagging => 0.5 * STEADY_PACE_M_PER_S,
         };
     let rest = [REST_M[0] * 1e3, REST_M[1] * 1e3];
     let line = [[0.0, 0.0], [length_mm, 0.0]];
@@ -164,10 +188,13 @@ impl<'a> SurfaceFrame<'a> {
     }
 }
 
-/// The page's samples for `gestures`: one per move, one every frame while the hand holds
-/// still (the heartbeat), one at each press and release.
-fn page_samples(gestures: &[Gesture], frame: &SurfaceFrame<'_>) -> Vec<PointerSample> {
-    const FRAME_MS: f64 = 1000.0 / 60.0;
+/// The page's samples for `gestures`: one per move, one every frame (`frame_ms`) while the
+/// hand holds still (the heartbeat), one at each press and release.
+fn page_samples(
+    gestures: &[Gesture],
+    frame: &SurfaceFrame<'_>,
+    frame_ms: f64,
+) -> Vec<PointerSample> {
     let (mut t_ms, mut at, mut engaged) = (0.0, [0.0, 0.0], false);
     let mut out = Vec::new();
     let mut sample = |t_ms: f64, at: [f64; 2], engaged: bool| {
@@ -184,8 +211,8 @@ fn page_samples(gestures: &[Gesture], frame: &SurfaceFrame<'_>) -> Vec<PointerSa
             }
             Gesture::Wait { ms } => {
                 let end = t_ms + ms as f64;
-                while t_ms + FRAME_MS <= end {
-                    t_ms += FRAME_MS;
+                while t_ms + frame_ms <= end {
+                    t_ms += frame_ms;
                     sample(t_ms, at, engaged);
                 }
                 t_ms = end;

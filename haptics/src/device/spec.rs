@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use super::Skill;
 
 /// A device as a user names it: `expert`, `intermediate`, `novice`, `level:L` (a synthetic
-/// trainee), `pointer:steady` or `pointer:sloppy` (a person's hand model on the station's
+/// trainee), `pointer:steady`, `pointer:sloppy` or `pointer:lagging` (a person's hand model on the station's
 /// pointer, [`super::PointerHand`]), `csv:PATH` (a trajectory file), `recording:PATH` (a recorded session's hand) or
 /// `igtl:PORT` (an OpenIGTLink tracker or haptic bridge listening on that port).
 #[derive(Debug, Clone, PartialEq)]
@@ -55,7 +55,9 @@ impl std::str::FromStr for DeviceSpec {
         if let Some(kind) = s.strip_prefix("pointer:") {
             return super::HandKind::parse(kind)
                 .map(DeviceSpec::PointerHand)
-                .ok_or_else(|| format!("pointer: needs a hand, steady or sloppy, got {kind:?}"));
+                .ok_or_else(|| {
+                    format!("pointer: needs a hand, steady, sloppy or lagging, got {kind:?}")
+                });
         }
         if let Some(path) = s.strip_prefix("csv:") {
             if path.is_empty() {
@@ -79,7 +81,7 @@ impl std::str::FromStr for DeviceSpec {
                 .map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
         }
         Err(format!(
-            "unknown device {s:?} (expected expert, intermediate, novice, level:L, pointer:steady, pointer:sloppy, csv:PATH, recording:PATH or igtl:PORT)"
+            "unknown device {s:?} (expected expert, intermediate, novice, level:L, pointer:steady, pointer:sloppy, pointer:lagging, csv:PATH, recording:PATH or igtl:PORT)"
         ))
     }
 }
@@ -109,6 +111,7 @@ mod tests {
             "level:0.25",
             "pointer:steady",
             "pointer:sloppy",
+            "pointer:lagging",
             "csv:a.csv",
             "igtl:18944",
             "recording:r.mcap",

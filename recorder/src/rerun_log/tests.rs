@@ -172,7 +172,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
     .expect("plan");
 
     let mut surfaces = 0;
-    let mut events = 0;
+    let mut engine_events = 0;
     for tick in 0..TICKS {
         sink.on_tick(&sample(tick)).expect("tick");
         let step = tick; // lock-step: one simulation step per tick
@@ -209,7 +209,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
                 event: Box::new(event),
             })
             .expect("cut");
-            events += 1;
+            engine_events += 1;
         }
         if tick % 1000 == 999 {
             let keyframe = Keyframe {
@@ -228,11 +228,11 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
             };
             sink.on_sim(&SimRecord::Keyframe(Box::new(keyframe)))
                 .expect("keyframe");
-            events += 1;
+            engine_events += 1;
         }
     }
-    events += 1; // the rejected step
-    events += 2; // the fault and its clearing
+    engine_events += 1; // the rejected step
+    let events = 2; // the fault and its clearing: the review's Events view
     assert_eq!(sink.ticks_logged(), TICKS);
     sink.finish().expect("finish");
 
@@ -305,6 +305,11 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
             .any(|t| t == TIMELINE_STEP)
     );
     assert_eq!(decoded.rows.get(paths::EVENTS).copied(), Some(events));
+    // the engine's lines apart, out of the instructor's view (issue 63)
+    assert_eq!(
+        decoded.rows.get(paths::ENGINE_EVENTS).copied(),
+        Some(engine_events)
+    );
     // The static axes, then ~30 Hz of transforms (every 33rd tick).
     let transforms = TICKS.div_ceil(33) as usize;
     assert_eq!(

@@ -18,6 +18,8 @@ pub struct AttemptDetail {
     /// The exercise's pass limits on the peak force (its `peak_force_n` threshold), in N:
     /// the force limit the attempt is scored with; `None` without such a threshold.
     pub peak_force_limits_n: Option<PassLimits>,
+    /// The plan's force limit (its safety limit), N.
+    pub force_limit_n: Option<f64>,
     pub comments: Vec<Comment>,
     pub signoff: Option<SignOff>,
     pub recordings: RecordingFiles,
@@ -109,6 +111,10 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
             upper: t.upper,
         })
         .filter(|l| l.lower.is_some() || l.upper.is_some());
+    // the plan's own force limit, the safety limit the station's force bar shows (the chart
+    // draws it when no pass limit is set on the peak force)
+    let limit_n = store.get_plan(e.plan_id).await?.kind_plan().force_limit_n();
+    let force_limit_n = (limit_n.is_finite() && limit_n > 0.0).then_some(limit_n);
     let recordings = RecordingFiles::of(state, &a);
     Ok(AttemptDetail {
         comments: debrief::comments(state, a.id).await?,
@@ -120,6 +126,7 @@ pub async fn detail(state: &AppState, a: Attempt) -> Result<AttemptDetail, AppEr
         },
         metrics: rows,
         peak_force_limits_n,
+        force_limit_n,
         recordings,
         attempt: a,
     })

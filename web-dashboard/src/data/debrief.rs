@@ -9,7 +9,7 @@ use crate::AppState;
 use crate::error::AppError;
 
 /// The longest comment kept.
-pub const MAX_COMMENT_CHARS: usize = 4000;
+pub const MAX_COMMENT_CHARS: usize = cutlab_assessor::store::text::MAX_NOTE_CHARS;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Comment {
@@ -94,8 +94,8 @@ pub async fn comments(state: &AppState, attempt_id: i64) -> Result<Vec<Comment>,
         .collect())
 }
 
-/// Adds a comment (trimmed, not empty, at most [`MAX_COMMENT_CHARS`]), pinned to the moment
-/// `at_ns` of the attempt if given (see [`parse_moment`]).
+/// Adds a comment (trimmed, not empty, at most [`MAX_COMMENT_CHARS`], by the store's one text
+/// policy), pinned to the moment `at_ns` of the attempt if given (see [`parse_moment`]).
 pub async fn add_comment(
     state: &AppState,
     attempt_id: i64,
@@ -103,14 +103,9 @@ pub async fn add_comment(
     body: &str,
     at_ns: Option<i64>,
 ) -> Result<(), AppError> {
-    let body = body.trim();
+    let body = cutlab_assessor::store::text::text("a comment", body, MAX_COMMENT_CHARS)?;
     if body.is_empty() {
         return Err(AppError::BadRequest("an empty comment".into()));
-    }
-    if body.chars().count() > MAX_COMMENT_CHARS {
-        return Err(AppError::BadRequest(format!(
-            "a comment has at most {MAX_COMMENT_CHARS} characters"
-        )));
     }
     if at_ns.is_some_and(|t| !(0..=MAX_MOMENT_NS).contains(&t)) {
         return Err(AppError::BadRequest(

@@ -35,6 +35,38 @@ pub fn label<'a>(key: &'a str, si_unit: &'a str) -> Label<'a> {
     Label { name, unit, factor }
 }
 
+/// How an attempt was made, in words (the attempts tables, the attempt's page): the station's
+/// mode, or, for an attempt run without the station (`cutlab session`, the demo's seeding),
+/// that it was scripted.
+pub fn mode_words(mode: Option<&str>) -> &str {
+    match mode {
+        Some(m) => m,
+        None => "scripted, no station",
+    }
+}
+
+/// The device an attempt was made with, in words: the stored name (`level:0.4`, `expert`,
+/// `pointer:steady`) says what it is in the CLI's terms, which an instructor need not know.
+pub fn device_words(device: &str) -> String {
+    let d = device.trim();
+    if let Some(level) = d.strip_prefix("level:") {
+        return format!("synthetic trainee, skill {level} (0 novice, 1 expert)");
+    }
+    if let Some(hand) = d.strip_prefix("pointer:") {
+        return format!("hand model on the pointer ({hand})");
+    }
+    if let Some(what) = d.strip_prefix("recording of ") {
+        return format!("replayed recording of {}", device_words(what));
+    }
+    match d {
+        "expert" | "intermediate" | "novice" => format!("synthetic {d}"),
+        "pointer" => "pointer (station page)".to_owned(),
+        _ if d.starts_with("csv:") => "trajectory file".to_owned(),
+        _ if d.starts_with("igtl:") => "tracked device (OpenIGTLink)".to_owned(),
+        _ => d.to_owned(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,6 +100,27 @@ mod tests {
             metrics::all().count(),
             "two metrics with one name"
         );
+    }
+
+    #[test]
+    fn devices_and_modes_are_said_in_words() {
+        assert_eq!(
+            device_words("level:1"),
+            "synthetic trainee, skill 1 (0 novice, 1 expert)"
+        );
+        assert_eq!(device_words("expert"), "synthetic expert");
+        assert_eq!(
+            device_words("pointer:steady"),
+            "hand model on the pointer (steady)"
+        );
+        assert_eq!(
+            device_words("recording of pointer"),
+            "replayed recording of pointer (station page)"
+        );
+        assert_eq!(device_words("igtl:18944"), "tracked device (OpenIGTLink)");
+        assert_eq!(device_words("haptic arm 2"), "haptic arm 2");
+        assert_eq!(mode_words(None), "scripted, no station");
+        assert_eq!(mode_words(Some("exam")), "exam");
     }
 
     #[test]

@@ -13,7 +13,7 @@ use cutlab_assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
 use cutlab_assessor::store::User;
 use serde::Serialize;
 
-pub use labels::{Label, label};
+pub use labels::{Label, device_words, label, mode_words};
 
 /// A user, by id and name.
 #[derive(Debug, Clone, Serialize)]

@@ -19,8 +19,8 @@ use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
 use crate::data::attempt::{AttemptDetail, PassLimits, detail};
 use crate::data::debrief::{self, Comment, moment_label};
-use crate::data::label;
-use crate::data::trace::{AttemptTrace, trace};
+use crate::data::trace::{AttemptTrace, trace_for};
+use crate::data::{device_words, label, mode_words};
 use crate::error::PageResult;
 use crate::extract::{Form, Id};
 use crate::recordings::replay_url;
@@ -38,7 +38,7 @@ async fn attempt(
     Id(id): Id,
 ) -> PageResult<Markup> {
     let a = visible_attempt(&state, &user, id).await?;
-    let t = trace(&state, &a).await?;
+    let t = trace_for(&state, &user, &a).await?;
     let d = detail(&state, a).await?;
     Ok(page(
         &format!("Attempt {id}"),
@@ -83,7 +83,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             "Trainee " a href=(format!("/trainees/{}", d.trainee.id)) { (d.trainee.name) }
             " · exercise " (d.exercise.name) " · started " (when(a.started_ns)) " UTC · " (a.status.as_str())
             @if let Some(s) = a.score { " · score " (num(Some(s), 2)) } " · " (verdict(a.passed))
-            @if let Some(mode) = &a.mode { " · " span class="setup" { (mode) @if let Some(device) = &a.device { ", " (device) } } }
+            " · " span class="setup" { (mode_words(a.mode.as_deref())) @if let Some(device) = &a.device { ", " (device_words(device)) } }
             @if let Some(station) = &a.station { " · " span class="station" { "uploaded by station " (station) } }
         }
         @if let Some(n) = &a.note {
@@ -99,11 +99,17 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             } @else { span class="muted" { "no .rrd (replay review needs " code { "cutlab session --rrd" } ")" } }
         }
         @if let Some(t) = t {
-            div class="charts" { (top_view(t).render()) (force_chart(t, d.peak_force_limits_n).render()) }
+            div class="charts" { (top_view(t).render()) (force_chart(t, d.peak_force_limits_n, d.force_limit_n).render()) }
         } @else {
             p class="muted" { "No readable recording: no incision or force plot." }
         }
         @if a.scored { (fix_next(d)) }
+        @else if a.note.as_deref() == Some(cutlab_assessor::UNTOUCHED_NOTE) {
+            section id="fix-next" {
+                h2 { "What to fix next" }
+                p { "Nothing was cut: the tool never touched the tissue, so this attempt is kept but not scored. Start, press the blade into the tissue where the incision begins and draw it along the line before you stop." }
+            }
+        }
         h2 { "Metrics" }
         table class="metrics" {
             thead { tr { th { "Metric" } th { "Value" } th { "Unit" } th { "Expert" } th { "Pass limits" } th { "Verdict" } th { "What" } } }
@@ -180,7 +186,7 @@ pub(crate) fn comment_form(user: &CurrentUser, attempt_id: i64, replay: bool) ->
 /// planned line (dashed blue, drawn last so it shows over a cut that follows it), with a
 /// legend.
 fn top_view(t: &AttemptTrace) -> Chart {
-    let mut c = Chart::new("The cut, top view", "x (mm)", "y (mm)")
+    let mut c = Chart::new("The cut, top view", "along the plan (mm)", "across (mm)")
         .layer(Layer::Line {
             points: t.path_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
             class: "series-2",
@@ -188,23 +194,35 @@ fn top_view(t: &AttemptTrace) -> Chart {
         .layer(Layer::Line {
             points: t.cut_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
             class: "cut",
-        })
-        .layer(Layer::Line {
-            points: t.planned_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
-            class: "plan",
-        })
-        .legend("plan", "planned")
-        .legend("cut", "cut")
-        .legend("series-2", "tip path");
+        });
+    // no plan for a trainee's exam-only exercise ([`trace_for`])
+    if !t.planned_mm.is_empty() {
+        c = c
+            .layer(Layer::Line {
+                points: t.planned_mm.iter().map(|p| (p[0], Some(p[1]))).collect(),
+                class: "plan",
+            })
+            .legend("plan", "planned");
+    }
+    let mut c = c.legend("cut", "cut").legend("series-2", "tip path");
     c.equal_aspect = true;
     c.height = 300.0;
     c
 }
 
 /// The force over time with the pass limits the exercise scores the peak force with (its
-/// `peak_force_n` threshold); no limit line without one.
-fn force_chart(t: &AttemptTrace, limits: Option<PassLimits>) -> Chart {
+/// `peak_force_n` threshold), or without one the plan's own force limit `safety_n`.
+fn force_chart(t: &AttemptTrace, limits: Option<PassLimits>, safety_n: Option<f64>) -> Chart {
     let mut c = Chart::new("Force on the hand", "time (s)", "|F| (N)");
+    if limits.is_none()
+        && let Some(y) = safety_n
+    {
+        c = c.layer(Layer::HLine {
+            y,
+            class: "limit",
+            label: format!("force limit {} N", num_short(y)),
+        });
+    }
     let limits = limits.map_or([None, None], |l| [l.lower, l.upper]);
     for (limit, sign) in limits.into_iter().zip(["≥", "≤"]) {
         if let Some(y) = limit.filter(|y| y.is_finite()) {
@@ -219,7 +237,9 @@ fn force_chart(t: &AttemptTrace, limits: Option<PassLimits>) -> Chart {
         points: t.force.iter().map(|p| (p[0], Some(p[1]))).collect(),
         class: "series",
     });
-    c.y_include = vec![0.0];
+    // from no force up, the limits and at least 1 N in view: a chart of an attempt that
+    // never pressed reads 0 N, not a line in the middle of -1..1
+    c.y_include = vec![0.0, 1.0];
     c.height = 300.0;
     c
 }
@@ -303,6 +323,7 @@ mod tests {
                 lower: None,
                 upper: Some(0.9),
             }),
+            Some(2.5),
         );
         assert_eq!(hlines(&c), vec![(0.9, "limit", "pass ≤ 0.9 N")]);
         let svg = c.render().into_string();
@@ -317,15 +338,27 @@ mod tests {
                 lower: Some(0.2),
                 upper: Some(3.0),
             }),
+            Some(2.5),
         );
         assert_eq!(
             hlines(&c),
             vec![(0.2, "limit", "pass ≥ 0.2 N"), (3.0, "limit", "pass ≤ 3 N")]
         );
-        // no threshold on the peak force: no limit line at all
-        let c = force_chart(&t, None);
+        // no threshold on the peak force: the plan's force limit, named as such
+        let c = force_chart(&t, None, Some(2.5));
+        assert_eq!(hlines(&c), vec![(2.5, "limit", "force limit 2.5 N")]);
+        // and without either, no line at all
+        let c = force_chart(&t, None, None);
         assert!(hlines(&c).is_empty());
         assert!(!c.render().into_string().contains("class=\"limit\""));
+        // an attempt that never pressed: the chart runs from 0 N up, not -1..1
+        let still = AttemptTrace {
+            force: vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]],
+            ..trace()
+        };
+        let c = force_chart(&still, None, None);
+        let (_, (lo, hi)) = c.ranges();
+        assert!(lo > -0.1 && lo <= 0.0 && hi >= 1.0, "{lo}..{hi}");
     }
 
     #[test]

@@ -85,6 +85,16 @@ fn level_class(level: Experience) -> &'static str {
     }
 }
 
+/// A learning curve's line class by its trainee's experience.
+fn curve_class(level: Option<Experience>) -> &'static str {
+    match level {
+        Some(Experience::Novice) => "lc-novice",
+        Some(Experience::Intermediate) => "lc-intermediate",
+        Some(Experience::Expert) => "lc-expert",
+        None => "lc-unknown",
+    }
+}
+
 fn groups_section(r: &Report, id: i64) -> Markup {
     html! {
         p class="explain" {
@@ -92,6 +102,8 @@ fn groups_section(r: &Report, id: i64) -> Markup {
             "recorded experience (set by an administrator on the trainee's page); the most and the "
             "least experienced groups are compared. AUC: the chance that an attempt of the more "
             "experienced group is the better one (0.5: a coin toss), with its bootstrap 95 % interval. "
+            "A measure discriminates when that interval lies above 0.5 (reversed when below); the "
+            "Mann-Whitney p value is shown beside it, but the interval decides. "
             "Definitions: docs/guide/evidence.md."
         }
         @if r.groups.is_empty() {
@@ -99,11 +111,11 @@ fn groups_section(r: &Report, id: i64) -> Markup {
         }
         ul {
             @for g in &r.groups {
-                li { strong { (g.level) } ": " (g.trainees) " people, " (g.attempts) " attempts"
+                li { strong { (g.level) } ": " (people(g.trainees)) ", " (count(g.attempts, "attempt", "attempts"))
                     @if g.reference_attempts > 0 { " (" (g.reference_attempts) " of them reference attempts)" } }
             }
             @if r.attempts_without_level > 0 {
-                li class="muted" { "Left out: " (r.attempts_without_level) " attempts by " (r.trainees_without_level) " people with no experience level recorded" }
+                li class="muted" { "Left out: " (count(r.attempts_without_level, "attempt", "attempts")) " by " (people(r.trainees_without_level)) " with no experience level recorded" }
             }
         }
         p {
@@ -159,6 +171,16 @@ fn comparison_words(m: &Measure) -> Markup {
             None => { "Not computed: " (m.why_not.as_deref().unwrap_or("")) "." }
         }
     }
+}
+
+/// `1 person`, `3 people`.
+fn people(n: usize) -> String {
+    count(n, "person", "people")
+}
+
+/// `n` and the noun in the number it takes.
+fn count(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
 }
 
 /// `< 0.001` or `= 0.012`.
@@ -245,7 +267,7 @@ fn metrics_section(r: &Report) -> Markup {
             p { "Every metric compared discriminates or is reversed (below)." }
         }
         table class="evidence" {
-            thead { tr { th { "Metric" } th { "Median, " (r.higher.map_or("higher", |l| l.as_str())) } th { "Median, " (r.lower.map_or("lower", |l| l.as_str())) } th { "p" } th { "AUC (95 %)" } th { "ICC" } th { "Finding" } } }
+            thead { tr { th { "Metric" } th { "Median, " (r.higher.map_or("higher", |l| l.as_str())) } th { "Median, " (r.lower.map_or("lower", |l| l.as_str())) } th { "AUC (95 %): decides" } th { "p" } th { "ICC" } th { "Finding" } } }
             tbody {
                 @for m in &r.metrics { (metric_row(m)) }
             }
@@ -274,8 +296,8 @@ fn metric_row(m: &Measure) -> Markup {
                 Some(c) => {
                     td class="num" { (num(Some(c.median_higher * l.factor), 3)) }
                     td class="num" { (num(Some(c.median_lower * l.factor), 3)) }
-                    td class="num" { (p_value(c.p).trim_start_matches("= ")) }
                     td class="num" { (num(Some(c.auc), 2)) " (" (num(Some(c.auc_low), 2)) "–" (num(Some(c.auc_high), 2)) ")" }
+                    td class="num" { (p_value(c.p).trim_start_matches("= ")) }
                 }
                 None => { td colspan="4" class="muted" { (m.why_not.as_deref().unwrap_or("")) } }
             }
@@ -301,16 +323,33 @@ fn reliability_section(r: &Report) -> Markup {
 
 fn learning_section(curves: &[&LearningCurve], hidden: usize) -> Markup {
     let mut chart = Chart::new("Overall score by attempt", "attempt", "score").integer_x();
+    // each trainee's line in the colour of their experience, named at its last attempt
     for c in curves {
+        let points: Vec<(f64, Option<f64>)> = c
+            .scores
+            .iter()
+            .enumerate()
+            .map(|(i, s)| ((i + 1) as f64, Some(*s)))
+            .collect();
+        if let Some(&(x, Some(y))) = points.last() {
+            chart = chart.layer(Layer::Text {
+                x,
+                y,
+                text: c.trainee.clone(),
+            });
+        }
         chart = chart.layer(Layer::Line {
-            points: c
-                .scores
-                .iter()
-                .enumerate()
-                .map(|(i, s)| ((i + 1) as f64, Some(*s)))
-                .collect(),
-            class: "series",
+            points,
+            class: curve_class(c.experience),
         });
+    }
+    for level in Experience::ALL {
+        if curves.iter().any(|c| c.experience == Some(level)) {
+            chart = chart.legend(curve_class(Some(level)), level.as_str());
+        }
+    }
+    if curves.iter().any(|c| c.experience.is_none()) {
+        chart = chart.legend(curve_class(None), "no level recorded");
     }
     html! {
         h2 { "Learning curves" }

@@ -21,10 +21,10 @@ use crate::auth::CurrentUser;
 use crate::charts::{Chart, Layer};
 use crate::data::ExerciseRef;
 use crate::data::ProficiencySummary;
-use crate::data::label;
 use crate::data::progress::{
     CusumChart, ExerciseProgress, MetricSeries, Progress, cached_progress,
 };
+use crate::data::{device_words, label, mode_words};
 use crate::error::{AppError, PageResult};
 use crate::extract::{Form, Id};
 use cutlab_assessor::proficiency::{CusumSignal, ProficiencyStatus, REQUIRED_CONSECUTIVE_PASSES};
@@ -159,7 +159,7 @@ async fn open_early(
 ) -> PageResult<Redirect> {
     user.require_staff()?;
     let trainee = visible_user(&state, &user, id).await?;
-    let reason: String = f.reason.trim().chars().take(500).collect();
+    let reason = f.reason.trim();
     let store = state.store();
     let exercise = match store.exercise_by_name(&f.exercise).await {
         Err(cutlab_assessor::AssessError::NotFound(_)) => {
@@ -171,7 +171,7 @@ async fn open_early(
         other => other?,
     };
     store
-        .open_early(trainee.id, exercise.id, user.id(), &reason)
+        .open_early(trainee.id, exercise.id, user.id(), reason)
         .await?;
     state.caches().progress.remove(&trainee.id);
     Ok(Redirect::to(&format!("/trainees/{id}")))
@@ -325,8 +325,8 @@ fn exercise_section(e: &ExerciseProgress) -> Markup {
                         td class="num" { @if let Some(n) = a.n { (n) } }
                         td { a href=(format!("/attempts/{}", a.id)) { "attempt " (a.id) } }
                         td { (when(a.started_ns)) }
-                        td { (a.mode.as_deref().unwrap_or("")) }
-                        td { (a.device.as_deref().unwrap_or("")) }
+                        td { (mode_words(a.mode.as_deref())) }
+                        td { (a.device.as_deref().map(device_words).unwrap_or_default()) }
                         td { (a.status.as_str()) }
                         td class="num" { (num(a.score, 2)) }
                         td { (verdict(a.passed)) }

@@ -32,7 +32,7 @@ use serde::Deserialize;
 use super::layout::page;
 use crate::AppState;
 use crate::access::visible_attempt;
-use crate::auth::CurrentUser;
+use crate::auth::{CurrentUser, sessions};
 use crate::error::{AppError, PageResult};
 use crate::extract::{Form, Id};
 
@@ -323,17 +323,22 @@ async fn socket(
     visible_attempt(&state, &user, id).await?;
     let r = state.station().get(id).ok_or(AppError::NotFound)?;
     let driver = r.trainee == user.user().name;
+    let session = user.0.token_hash.clone();
     Ok(upgrade
         .max_message_size(protocol::MAX_WIRE_MESSAGE_BYTES)
         .max_frame_size(protocol::MAX_WIRE_MESSAGE_BYTES)
-        .on_upgrade(move |ws| serve(ws, r, driver)))
+        .on_upgrade(move |ws| async move {
+            serve(ws, r, driver, sessions::ended(&state, &session)).await;
+        }))
 }
 
 /// How often the server looks for a new frame when none was announced (the end of a session
 /// is announced on its own channel).
 const IDLE: Duration = Duration::from_millis(250);
 
-async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
+/// Serves one viewer's socket until the session ends, the page goes away or `logged_out`
+/// completes (then as a page that went away: the blade pauses for its absence).
+async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool, logged_out: impl Future<Output = ()>) {
     if driver {
         r.control.attach();
     }
@@ -342,9 +347,16 @@ async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
     let mut ending = r.ending.clone();
     let sender = async {
         use futures_util::SinkExt;
-        let mut topology = None;
+        let (mut topology, mut rest_sent) = (None, false);
         loop {
             let state = feed.borrow_and_update().clone();
+            if let Some(rest) = state.rest.as_ref().filter(|_| !rest_sent) {
+                let bytes = protocol::encode_rest(rest);
+                if tx.send(Message::Binary(bytes.into())).await.is_err() {
+                    return;
+                }
+                rest_sent = true;
+            }
             if let Some(frame) = &state.frame {
                 if !topology
                     .as_ref()
@@ -424,6 +436,7 @@ async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool) {
         // the session ended; what the page still sends does not matter
         () = &mut sender => (0, false),
         dropped = &mut receiver => (dropped, true),
+        () = logged_out => (0, true),
     };
     // the trainee's last page went away: the session waits for one (the blade pauses) and
     // ends only if none comes back within the absence allowed

@@ -14,11 +14,14 @@
 //!   (orientation), the earlier sample's button; exactly a sample's pose at its time. Before
 //!   the first sample: [`PointerOptions::rest_pose`], above the tissue, blade not engaged.
 //! - Clocks: the first sample anchors the page clock to the session clock (its page time plays
-//!   `delay` later). The two clocks drift and the network is uneven, so the anchoring is done
-//!   again when samples arrive after the buffer ran dry (the cursor wanted to pass the newest
-//!   sample: the page stalled, or its clock runs slower) and when the newest sample is more
-//!   than [`PointerOptions::max_lag_s`] ahead of the cursor (its clock runs faster). The cursor
-//!   never moves back: an anchoring holds the pose a little longer, or skips forward.
+//!   `delay` later). The two clocks drift and the network is uneven: when samples arrive after
+//!   the buffer ran dry (the page sent a burst, or stalled briefly, or its clock runs slower)
+//!   play goes on from the held pose and the latency grows by the gap, then drains at 5 %
+//!   faster play while more than `delay` is buffered; only when the newest sample is more than
+//!   [`PointerOptions::max_lag_s`] ahead of the cursor does the cursor skip forward. The
+//!   cursor never moves back. (Skipping forward at every burst moved the blade a burst's way
+//!   in one tick, and the cutting resistance, which follows the blade's speed, flipped between
+//!   0 and its full value.)
 //! - When samples stop the pose is held; after [`PointerOptions::timeout_s`] without a usable
 //!   sample the device pauses: each tick reads as [`DeviceFault::Stale`] (the servo holds the
 //!   last pose and fades the force; the cut stroke ends), counted in
@@ -135,7 +138,7 @@ impl Default for PointerOptions {
             delay_s: 0.03,
             timeout_s: 0.5,
             absence_s: 30.0,
-            max_lag_s: 0.1,
+            max_lag_s: 0.3,
             queue_capacity: 256,
             orientation: PointerOrientation::default(),
             rest_pose: ToolPose {

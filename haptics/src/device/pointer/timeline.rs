@@ -39,7 +39,25 @@ pub(crate) struct Timeline {
     cursor_ms: f64,
     /// At the last tick the cursor wanted to be past the newest sample.
     dry: bool,
+    /// The session time of the last tick, ms.
+    last_time_ms: Option<f64>,
+    /// The session time of the last tick samples arrived at, ms.
+    last_arrival_ms: Option<f64>,
+    /// How much the cursor keeps buffered: the delay, or the last gap between arrivals and
+    /// the delay when that is more (a page that sends seldom or in bursts), shrinking back
+    /// at [`CATCH_UP`] per ms, ms.
+    target_ms: f64,
+    /// Latency beyond the target at the last arrival, still to drain, ms.
+    excess_ms: f64,
 }
+
+/// How much faster than the page the cursor plays while it drains latency beyond the
+/// buffer's target (grown when the buffer ran dry and play went on from the held pose), and
+/// how fast the target shrinks back to the delay: 0.05 drains 50 ms a second, and moves the
+/// blade 5 % faster than the hand meanwhile.
+pub(crate) const CATCH_UP: f64 = 0.05;
+/// Latency beyond the buffer's target that starts a drain, ms.
+const DRAIN_FROM_MS: f64 = 10.0;
 
 impl Timeline {
     pub fn new(capacity: usize, delay_ms: f64, max_lag_ms: f64) -> Self {
@@ -52,6 +70,10 @@ impl Timeline {
             offset_ms: None,
             cursor_ms: f64::NEG_INFINITY,
             dry: false,
+            last_time_ms: None,
+            last_arrival_ms: None,
+            target_ms: delay_ms,
+            excess_ms: 0.0,
         }
     }
 
@@ -62,6 +84,10 @@ impl Timeline {
         self.offset_ms = None;
         self.cursor_ms = f64::NEG_INFINITY;
         self.dry = false;
+        self.last_time_ms = None;
+        self.last_arrival_ms = None;
+        self.target_ms = self.delay_ms;
+        self.excess_ms = 0.0;
     }
 
     /// The newest sample's page time, ms.
@@ -80,12 +106,17 @@ impl Timeline {
 
     /// Moves the cursor to session time `time_ms` (`arrived`: samples were taken this tick).
     ///
-    /// The page clock is anchored so the newest sample plays `delay_ms` from now: at the first
-    /// sample; again when samples arrive after the cursor ran past the newest one (the page
-    /// stalled or its clock runs slow: the pose was held, and latency is restored to the
-    /// delay); and when the newest sample is more than `max_lag_ms` ahead of the cursor (the
-    /// page's clock runs fast). The cursor never moves back, so an anchoring only ever holds
-    /// the pose a little longer or skips forward.
+    /// The page clock is anchored so the newest sample plays `delay_ms` from now at the first
+    /// sample, and again when the newest sample is more than `max_lag_ms` ahead of the cursor
+    /// (the page's clock runs fast, or it sent a long stall's worth at once): the cursor
+    /// skips forward. Otherwise play is continuous: the cursor keeps a buffer of the delay, or
+    /// of the last gap between arrivals and the delay when that is more (a page that sends
+    /// seldom or in bursts), so it does not run dry between arrivals; when it does run dry
+    /// (a longer gap than the last), play goes on from the held pose when samples come again,
+    /// the latency grown by the gap; and while more than the buffer's target is buffered the
+    /// cursor plays [`CATCH_UP`] faster than the page. (Skipping forward at each burst moved
+    /// the blade a burst's way in one tick, and the cutting resistance, a function of its
+    /// speed, flipped between 0 and its full value.) The cursor never moves back.
     pub fn advance(&mut self, time_ms: f64, arrived: bool) -> Advance {
         let mut out = Advance {
             reanchored: false,
@@ -94,15 +125,42 @@ impl Timeline {
         let Some(newest_ms) = self.newest_ms() else {
             return out;
         };
+        let dt_ms = self.last_time_ms.map_or(0.0, |l| (time_ms - l).max(0.0));
+        self.last_time_ms = Some(time_ms);
+        self.target_ms = (self.target_ms - CATCH_UP * dt_ms).max(self.delay_ms);
+        if arrived {
+            if let Some(last) = self.last_arrival_ms {
+                self.target_ms = self.target_ms.max(time_ms - last + self.delay_ms);
+            }
+            self.last_arrival_ms = Some(time_ms);
+        }
         let offset_ms = match self.offset_ms {
             None => newest_ms - time_ms,
             Some(offset_ms) => {
                 let natural_ms = time_ms + offset_ms - self.delay_ms;
-                if arrived && (self.dry || newest_ms - natural_ms > self.max_lag_ms) {
+                let buffered_ms = newest_ms - natural_ms;
+                if arrived && buffered_ms > self.max_lag_ms {
                     out.reanchored = true;
                     newest_ms - time_ms
+                } else if arrived && self.dry {
+                    out.reanchored = true;
+                    self.cursor_ms - time_ms + self.delay_ms
                 } else {
-                    offset_ms
+                    // more than the target buffered when samples came: a little faster until
+                    // that much is drained (measured at arrivals only, so the rate changes
+                    // once a drain, not at every arrival)
+                    if arrived {
+                        let excess_ms = buffered_ms - self.target_ms;
+                        // a drain starts only past a few ms (a page's jitter is not one)
+                        self.excess_ms = if excess_ms > DRAIN_FROM_MS {
+                            excess_ms
+                        } else {
+                            self.excess_ms.min(excess_ms.max(0.0))
+                        };
+                    }
+                    let step_ms = (CATCH_UP * dt_ms).min(self.excess_ms);
+                    self.excess_ms -= step_ms;
+                    offset_ms + step_ms
                 }
             }
         };
@@ -236,13 +294,82 @@ mod tests {
         let a = line.advance(45.0, false);
         assert!(a.held);
         assert_eq!(line.pose().map(|p| p.tip_in_world.x), Some(1.0));
-        // a late sample re-anchors; the cursor does not go back to before 1010
+        // a late sample re-anchors; play goes on from the held pose, not skipping forward
         line.push(at(1020.0, 2.0));
         let a = line.advance(46.0, true);
         assert!(a.reanchored && !a.held);
         assert_eq!(line.pose().map(|p| p.tip_in_world.x), Some(1.0));
-        // then plays on 30 ms behind the newest
-        line.advance(46.0 + 25.0, false);
+        // 5 ms later, 5 ms on (less than the delay buffered: no catch-up)
+        line.advance(51.0, false);
         assert_eq!(line.pose().map(|p| p.tip_in_world.x), Some(1.5));
+    }
+
+    /// A page a slow machine holds back to 7 samples a second: once settled, the cursor plays
+    /// at the page's own pace at every tick, never held and never hurried (each hold or
+    /// catch-up would bend the tool's course between the hand's samples).
+    #[test]
+    fn a_seldom_page_plays_at_one_pace() {
+        let mut line = Timeline::new(64, 30.0, 300.0);
+        let gap = 1000.0 / 7.0;
+        let (mut next, mut last) = (0.0f64, None::<f64>);
+        let mut steps = Vec::new();
+        for tick in 0..10_000u32 {
+            let now = f64::from(tick);
+            let arrived = next <= now;
+            if arrived {
+                line.push(at(1000.0 + next, next));
+                next += gap;
+            }
+            line.advance(now, arrived);
+            if let Some(l) = last
+                && tick > 3000
+            {
+                steps.push(line.cursor_ms - l);
+            }
+            last = Some(line.cursor_ms);
+        }
+        let (lo, hi) = steps
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(a, b), s| (a.min(*s), b.max(*s)));
+        assert!(hi - lo < 1e-9, "the cursor's step per tick: {lo}..{hi} ms");
+    }
+
+    /// A page whose samples (every 16 ms) arrive in bursts of six every 96 ms: the blade moves
+    /// on at every tick without jumps, and the latency settles under the burst's length.
+    #[test]
+    fn samples_in_bursts_play_smoothly() {
+        let mut line = Timeline::new(64, 30.0, 300.0);
+        let (mut last_x, mut biggest_step) = (None::<f64>, 0.0f64);
+        let speed = 0.01; // per ms: 10 m/s in x units of the test
+        for tick in 0..3000u32 {
+            let now = f64::from(tick);
+            // a burst at every 96 ms holds the samples the page took since the last one
+            let arrived = tick % 96 == 0;
+            if arrived {
+                let from = (now - 96.0).max(0.0);
+                let mut t = (from / 16.0).ceil() * 16.0;
+                while t <= now {
+                    if line.newest_ms().is_none_or(|n| 1000.0 + t > n) {
+                        line.push(at(1000.0 + t, speed * t));
+                    }
+                    t += 16.0;
+                }
+            }
+            line.advance(now, arrived);
+            let x = line.pose().map_or(0.0, |p| p.tip_in_world.x);
+            if let Some(l) = last_x
+                && tick > 200
+            {
+                biggest_step = biggest_step.max(x - l);
+            }
+            last_x = Some(x);
+        }
+        // one tick's step at the page's speed, 5 % faster while catching up: never a skip
+        assert!(
+            biggest_step <= speed * (1.0 + CATCH_UP) + 1e-9,
+            "the largest step in a tick: {biggest_step}"
+        );
+        let lag_ms = 1000.0 + 2999.0 - line.cursor_ms;
+        assert!(lag_ms < 96.0 + 30.0 + 16.0, "the latency: {lag_ms} ms");
     }
 }

@@ -7,7 +7,7 @@
   const canvas = document.getElementById("tissue");
   if (!canvas) return;
   const config = JSON.parse(canvas.dataset.config);
-  const KIND_TOPOLOGY = 1, KIND_FRAME = 2, FRAME_HEADER_BYTES = 64;
+  const KIND_TOPOLOGY = 1, KIND_FRAME = 2, KIND_REST = 3, FRAME_HEADER_BYTES = 64;
   const BLADE_LENGTH_M = 0.015, BLADE_WIDTH_M = 0.003;
   const status = (text) => { document.getElementById("status").textContent = text; };
 
@@ -130,14 +130,18 @@
     gl.bindVertexArray(null);
   }
 
+  // area-weighted vertex normals (scalar arithmetic: no arrays made per triangle, which the
+  // garbage collector made the page's largest cost)
   function vertexNormals(xyz, tris, n) {
     const out = new Float32Array(3 * n);
     for (let t = 0; t < tris.length; t += 3) {
       const a = 3 * tris[t], b = 3 * tris[t + 1], c = 3 * tris[t + 2];
-      const e1 = [xyz[b] - xyz[a], xyz[b + 1] - xyz[a + 1], xyz[b + 2] - xyz[a + 2]];
-      const e2 = [xyz[c] - xyz[a], xyz[c + 1] - xyz[a + 1], xyz[c + 2] - xyz[a + 2]];
-      const f = cross(e1, e2); // area-weighted
-      for (const v of [a, b, c]) { out[v] += f[0]; out[v + 1] += f[1]; out[v + 2] += f[2]; }
+      const ux = xyz[b] - xyz[a], uy = xyz[b + 1] - xyz[a + 1], uz = xyz[b + 2] - xyz[a + 2];
+      const vx = xyz[c] - xyz[a], vy = xyz[c + 1] - xyz[a + 1], vz = xyz[c + 2] - xyz[a + 2];
+      const fx = uy * vz - uz * vy, fy = uz * vx - ux * vz, fz = ux * vy - uy * vx;
+      out[a] += fx; out[a + 1] += fy; out[a + 2] += fz;
+      out[b] += fx; out[b + 1] += fy; out[b + 2] += fz;
+      out[c] += fx; out[c + 1] += fy; out[c + 2] += fz;
     }
     return out;
   }
@@ -153,6 +157,18 @@
     }
     return [lo, hi];
   }
+  // the plan's line from its start to its end, across the view direction `f` (unit); null
+  // without a plan or for a line that (nearly) closes on itself (an excision's outline, a
+  // pattern's circle), whose start and end say nothing of its direction
+  function lineAlong(f) {
+    const line = config.plan && config.plan.line_m;
+    if (!line || line.length < 2) return null;
+    const d = sub(line[line.length - 1], line[0]);
+    const reach = Math.max(...line.map((p) => norm(sub(p, line[0]))));
+    if (norm(d) < 0.5 * reach) return null;
+    const across = sub(d, scale(f, dot(d, f)));
+    return norm(across) > 1e-6 ? unit(across) : null;
+  }
   function frameCamera(xyz) {
     const [lo, hi] = bounds(xyz);
     const size = norm(sub(hi, lo));
@@ -167,7 +183,12 @@
       const side = unit(cross(up, Math.abs(up[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0]));
       eye = add(target, add(scale(up, 0.55 * size), scale(side, -0.35 * size)));
     }
-    const viewUp = Math.abs(dot(unit(sub(target, eye)), up)) > 0.99 ? cross(up, [1, 0, 0]) : up;
+    const f = unit(sub(target, eye));
+    let viewUp = Math.abs(dot(f, up)) > 0.99 ? cross(up, [1, 0, 0]) : up;
+    // the planned line runs left to right on the screen, as in the debrief's top view and
+    // the replay (a closed line, a pattern's circle, keeps the view's up)
+    const along = lineAlong(f);
+    if (along) viewUp = cross(along, f);
     camera = { eye, target, up: viewUp, near: 0.01 * size, far: 10 * size };
   }
   function matrices() {
@@ -188,38 +209,54 @@
       tip: f32(24, 3), rotation: f32(36, 4), force: f32(52, 3),
       xyz: new Float32Array(view.buffer, FRAME_HEADER_BYTES, 3 * vertices),
     };
-    // the tissue's rest surface: the first frame's, before anything touched it (a page that
-    // joins a running attempt takes the first frame it gets). Depths are measured from it, as
-    // the score measures them: the pointer's point and the blade's depth below the surface
-    if (!rest && mesh.triangles && latest.xyz.length === 3 * mesh.vertices) {
-      rest = { xyz: Float32Array.from(latest.xyz), triangles: mesh.triangles.slice() };
-    }
     fresh = true;
+  }
+  // the tissue's rest surface, the session's first, before anything touched it: the server
+  // sends it first on every connection, so a page that joins a running attempt (a reload)
+  // measures as the one that saw it begin. Depths are measured from it, as the score
+  // measures them: the pointer's point and the blade's depth below the surface
+  function takeRest(view) {
+    const vertices = view.getUint32(4, true), triangles = view.getUint32(8, true);
+    const triangles_at = 12, xyz_at = 12 + 12 * triangles;
+    if (view.byteLength < xyz_at + 12 * vertices) return;
+    rest = {
+      triangles: new Uint32Array(view.buffer, triangles_at, 3 * triangles).slice(),
+      xyz: new Float32Array(view.buffer, xyz_at, 3 * vertices).slice(),
+    };
   }
 
   // ---- the rest surface: where the pointer points, how deep the blade is ----
   let rest = null;
   // the nearest crossing of the ray `origin + t dir` (t > 0) with the rest surface
-  // (Möller–Trumbore): { point, normal, t } or null
+  // (Möller–Trumbore, in scalars: it runs for every pointer event and every frame):
+  // { point, normal, t } or null
   function castRest(origin, dir) {
     if (!rest) return null;
     const xyz = rest.xyz, tris = rest.triangles;
-    let best = Infinity, normal = null;
+    const [ox, oy, oz] = origin, [dx, dy, dz] = dir;
+    let best = Infinity, hit = -1;
     for (let i = 0; i < tris.length; i += 3) {
       const a = 3 * tris[i], b = 3 * tris[i + 1], c = 3 * tris[i + 2];
-      const p0 = [xyz[a], xyz[a + 1], xyz[a + 2]];
-      const e1 = [xyz[b] - p0[0], xyz[b + 1] - p0[1], xyz[b + 2] - p0[2]];
-      const e2 = [xyz[c] - p0[0], xyz[c + 1] - p0[1], xyz[c + 2] - p0[2]];
-      const p = cross(dir, e2), det = dot(e1, p);
+      const ax = xyz[a], ay = xyz[a + 1], az = xyz[a + 2];
+      const e1x = xyz[b] - ax, e1y = xyz[b + 1] - ay, e1z = xyz[b + 2] - az;
+      const e2x = xyz[c] - ax, e2y = xyz[c + 1] - ay, e2z = xyz[c + 2] - az;
+      const px = dy * e2z - dz * e2y, py = dz * e2x - dx * e2z, pz = dx * e2y - dy * e2x;
+      const det = e1x * px + e1y * py + e1z * pz;
       if (Math.abs(det) < 1e-14) continue;
-      const tv = sub(origin, p0), uu = dot(tv, p) / det;
+      const tx = ox - ax, ty = oy - ay, tz = oz - az;
+      const uu = (tx * px + ty * py + tz * pz) / det;
       if (uu < 0 || uu > 1) continue;
-      const q = cross(tv, e1), vv = dot(dir, q) / det;
+      const qx = ty * e1z - tz * e1y, qy = tz * e1x - tx * e1z, qz = tx * e1y - ty * e1x;
+      const vv = (dx * qx + dy * qy + dz * qz) / det;
       if (vv < 0 || uu + vv > 1) continue;
-      const d = dot(e2, q) / det;
-      if (d > 0 && d < best) { best = d; normal = cross(e1, e2); }
+      const d = (e2x * qx + e2y * qy + e2z * qz) / det;
+      if (d > 0 && d < best) { best = d; hit = i; }
     }
-    return best < Infinity ? { point: add(origin, scale(dir, best)), normal: unit(normal), t: best } : null;
+    if (hit < 0) return null;
+    const a = 3 * tris[hit], b = 3 * tris[hit + 1], c = 3 * tris[hit + 2];
+    const e1 = [xyz[b] - xyz[a], xyz[b + 1] - xyz[a + 1], xyz[b + 2] - xyz[a + 2]];
+    const e2 = [xyz[c] - xyz[a], xyz[c + 1] - xyz[a + 1], xyz[c + 2] - xyz[a + 2]];
+    return { point: add(origin, scale(dir, best)), normal: unit(cross(e1, e2)), t: best };
   }
   // the rest surface above `point` along `up`: { point, depth } (depth below it in m, negative
   // above it), or null off the tissue
@@ -234,11 +271,20 @@
     return latest.above;
   }
 
+  // a program's uniform locations, looked up once
+  const uniforms = new Map();
+  function uniform(program, name) {
+    if (!uniforms.has(program)) uniforms.set(program, new Map());
+    const m = uniforms.get(program);
+    if (!m.has(name)) m.set(name, gl.getUniformLocation(program, name));
+    return m.get(name);
+  }
+
   function draw() {
     requestAnimationFrame(draw);
     stats.rafs += 1;
     if (!latest || !mesh.triangles || latest.xyz.length !== 3 * mesh.vertices) return;
-    if (!camera) frameCamera(latest.xyz);
+    if (!camera) frameCamera(rest ? rest.xyz : latest.xyz);
     // the drawing buffer: the screen's pixels on a GPU, half the CSS pixels each way on a
     // software renderer (a quarter of the work; the browser scales the picture up)
     const density = software ? 0.5 : Math.min(2, window.devicePixelRatio || 1);
@@ -264,20 +310,20 @@
       hud(latest);
     }
     gl.useProgram(tissue);
-    gl.uniformMatrix4fv(gl.getUniformLocation(tissue, "view"), false, view);
-    gl.uniformMatrix4fv(gl.getUniformLocation(tissue, "projection"), false, projection);
+    gl.uniformMatrix4fv(uniform(tissue, "view"), false, view);
+    gl.uniformMatrix4fv(uniform(tissue, "projection"), false, projection);
     gl.bindVertexArray(mesh.vao);
     gl.drawElements(gl.TRIANGLES, mesh.count, gl.UNSIGNED_INT, 0);
     // overlays: the plan (guided), the blade
     gl.useProgram(lines);
-    gl.uniformMatrix4fv(gl.getUniformLocation(lines, "view"), false, view);
-    gl.uniformMatrix4fv(gl.getUniformLocation(lines, "projection"), false, projection);
+    gl.uniformMatrix4fv(uniform(lines, "view"), false, view);
+    gl.uniformMatrix4fv(uniform(lines, "projection"), false, projection);
     gl.bindVertexArray(overlay.vao);
     const strip = (points, mode, tint, size) => {
       gl.bindBuffer(gl.ARRAY_BUFFER, overlay.buffer);
       gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(points.flat()), gl.STREAM_DRAW);
-      gl.uniform3fv(gl.getUniformLocation(lines, "tint"), tint);
-      gl.uniform1f(gl.getUniformLocation(lines, "point_size"), size || 1);
+      gl.uniform3fv(uniform(lines, "tint"), tint);
+      gl.uniform1f(uniform(lines, "point_size"), size || 1);
       gl.drawArrays(mode, 0, points.length);
     };
     if (config.plan) {
@@ -356,22 +402,41 @@
   // surface, the planned depth (green, dashed), the depth the wheel set (grey), the blade
   // (steel above the surface, red below it, to its tip)
   const gaugeCanvas = document.getElementById("depth-gauge");
-  function gauge(depth) {
+  // what the gauge drew last (the depths of its grey line and of the blade): for the tests
+  let gaugeDrawn = null;
+  // `bladeDepth`: the blade's, now; the grey line is the depth the trainee set (`depth`, below:
+  // a parameter of the same name once hid it, and the set-depth line followed the blade)
+  // the gauge's still part (the tissue, the millimetre ticks and their numbers, the planned
+  // depth), drawn once: text on a software-rendered canvas is dear
+  let gaugeBackground = null, gaugeKey = null;
+  function gauge(bladeDepth) {
     if (!gaugeCanvas) return;
     const g = gaugeCanvas.getContext("2d"), w = gaugeCanvas.width, h = gaugeCanvas.height;
     const top = 14, mm = (h - top - 6) / 20, y = (m) => top + m * 1e3 * mm;
+    const line = (g, m, colour, dash) => { g.setLineDash(dash); g.strokeStyle = colour; g.lineWidth = 2; g.beginPath(); g.moveTo(28, y(m)); g.lineTo(w, y(m)); g.stroke(); g.setLineDash([]); };
+    const setShown = config.pointer && config.driver ? depth : null;
+    gaugeDrawn = { set_m: setShown, blade_m: bladeDepth };
+    // nothing a person could see changed (a hundredth of a millimetre): the picture stays
+    const key = `${setShown}|${bladeDepth === null ? "-" : Math.round(bladeDepth * 1e5)}`;
+    if (key === gaugeKey) return;
+    gaugeKey = key;
+    if (!gaugeBackground) {
+      gaugeBackground = document.createElement("canvas");
+      gaugeBackground.width = w; gaugeBackground.height = h;
+      const b = gaugeBackground.getContext("2d");
+      b.fillStyle = "#e9b8ac"; b.fillRect(0, top, w, h - top);
+      b.fillStyle = "#1f262b"; b.font = "10px sans-serif";
+      for (let k = 0; k <= 20; k += 5) { b.fillRect(0, y(k * 1e-3), k % 10 ? 4 : 8, 1); if (k) b.fillText(k + "", 10, y(k * 1e-3) + 4); }
+      b.fillText("mm", 10, 10);
+      if (config.plan) line(b, config.plan.depth_m, "#17803d", [5, 3]);
+    }
     g.clearRect(0, 0, w, h);
-    g.fillStyle = "#e9b8ac"; g.fillRect(0, top, w, h - top);
-    g.fillStyle = "#1f262b"; g.font = "10px sans-serif";
-    for (let k = 0; k <= 20; k += 5) { g.fillRect(0, y(k * 1e-3), k % 10 ? 4 : 8, 1); if (k) g.fillText(k + "", 10, y(k * 1e-3) + 4); }
-    g.fillText("mm", 10, 10);
-    const line = (m, colour, dash) => { g.setLineDash(dash); g.strokeStyle = colour; g.lineWidth = 2; g.beginPath(); g.moveTo(28, y(m)); g.lineTo(w, y(m)); g.stroke(); g.setLineDash([]); };
-    if (config.plan) line(config.plan.depth_m, "#17803d", [5, 3]);
-    if (config.pointer && config.driver) line(depth, "#6b7378", [2, 3]);
-    if (depth === null) return;
-    const x = 0.65 * w, tip = y(Math.max(-top / mm * 1e-3, Math.min(0.02, depth)));
+    g.drawImage(gaugeBackground, 0, 0);
+    if (setShown !== null) line(g, setShown, "#6b7378", [2, 3]);
+    if (bladeDepth === null) return;
+    const x = 0.65 * w, tip = y(Math.max(-top / mm * 1e-3, Math.min(0.02, bladeDepth)));
     g.fillStyle = "#c9ced6"; g.fillRect(x - 3, 0, 6, Math.min(tip, top));
-    if (depth > 0) { g.fillStyle = "#d4351c"; g.fillRect(x - 3, top, 6, tip - top); }
+    if (bladeDepth > 0) { g.fillStyle = "#d4351c"; g.fillRect(x - 3, top, 6, tip - top); }
   }
   // the depth the wheel, the keys or the pen set (the pointer's)
   let depth = config.start_depth_m ?? 0.004;
@@ -382,21 +447,31 @@
   // between ticks), the warning held for a second after the limit the score uses was passed
   let forceShown = 0, overUntil = 0, scaled = false;
   window.addEventListener("resize", () => { scaled = false; });
+  // the HUD's elements, written only when what they show changes (a write of the same text
+  // still makes the browser restyle the page)
+  const shown = new Map();
+  function show(id, what, value) {
+    const key = id + "." + what;
+    if (shown.get(key) === value) return;
+    shown.set(key, value);
+    const e = document.getElementById(id);
+    if (!e) return;
+    if (what === "width") e.style.width = value; else e[what] = value;
+  }
   function hud(f) {
     const force = norm(f.force), now = performance.now();
     forceShown += (force - forceShown) * 0.25;
     if (force > forceLimit) overUntil = now + 1000;
-    document.getElementById("force-value").textContent = forceShown.toFixed(2) + " N";
-    const bar = document.getElementById("force-bar");
-    bar.style.width = Math.min(100, 100 * forceShown / forceLimit).toFixed(0) + "%";
-    bar.className = now < overUntil ? "over" : forceShown > 0.7 * forceLimit ? "near" : "";
-    document.getElementById("force-warning").hidden = now >= overUntil;
-    document.getElementById("elapsed").textContent = (f.tick * 1e-3).toFixed(1) + " s";
-    document.getElementById("blade").textContent = (f.engaged ? "engaged, " : "") + MODES[f.mode];
+    show("force-value", "textContent", forceShown.toFixed(2) + " N");
+    show("force-bar", "width", Math.min(100, 100 * forceShown / forceLimit).toFixed(0) + "%");
+    show("force-bar", "className", now < overUntil ? "over" : forceShown > 0.7 * forceLimit ? "near" : "");
+    show("force-warning", "hidden", now >= overUntil);
+    show("elapsed", "textContent", (f.tick * 1e-3).toFixed(1) + " s");
+    show("blade", "textContent", (f.engaged ? "engaged, " : "") + MODES[f.mode]);
     // the blade's depth below the intact surface, where the tip is now
     const above = bladeAbove();
-    document.getElementById("blade-depth").textContent = !above ? "off the tissue"
-      : above.depth > 0.00005 ? (above.depth * 1e3).toFixed(1) + " mm below the surface" : "at or above the surface";
+    show("blade-depth", "textContent", !above ? "off the tissue"
+      : above.depth > 0.00005 ? (above.depth * 1e3).toFixed(1) + " mm below the surface" : "at or above the surface");
     gauge(above ? above.depth : null);
     if (!scaled) { scaled = true; scaleBar(); }
     cutSeen = cutSeen || f.mode === 2;
@@ -416,7 +491,8 @@
       stats.messages += 1;
       const view = new DataView(event.data);
       const kind = view.getUint8(0);
-      if (kind === KIND_TOPOLOGY) setTopology(view);
+      if (kind === KIND_REST) takeRest(view);
+      else if (kind === KIND_TOPOLOGY) setTopology(view);
       else if (kind === KIND_FRAME) takeFrame(view);
     };
     socket.onclose = () => {
@@ -452,6 +528,8 @@
   }
 
   window.cutlabStation = {
+    // the depths the gauge drew last, m: `set_m` (the grey line), `blade_m`
+    gauge() { return gaugeDrawn; },
     // the figures `cutlab bench station` reads
     stats() {
       const s = (performance.now() - stats.since) / 1000;
@@ -461,8 +539,9 @@
     // starts the figures afresh (a benchmark's measured window)
     reset() { Object.assign(stats, { frames: 0, draws: 0, rafs: 0, messages: 0, work_ms: 0, since: performance.now(), latencies: [], bytes: 0 }); },
     config,
-    // the surface's vertex count now
+    // the surface's vertex count now, and the rest surface's (the session's first)
     vertices() { return mesh.vertices || 0; },
+    restVertices() { return rest ? rest.xyz.length / 3 : 0; },
     // where a world point (m) is on the page, in CSS pixels of the viewport (for tests)
     project(point) {
       if (!camera) return null;
@@ -528,11 +607,14 @@
     else return;
     document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   });
-  // the pose must keep arriving while the hand holds still: a sample every frame; and the
-  // blade lifted out for 1.5 s after a cut ends the session
+  // the pose must keep arriving while the hand holds still: a sample 100 ms after the last
+  // one (not every frame: a repeat of the last point between two moves stopped the blade for
+  // a few ms, and its resistance with it, at every frame); and the blade lifted out for 1.5 s
+  // after a cut ends the session
   (function heartbeat() {
     requestAnimationFrame(heartbeat);
-    send(performance.now());
+    const now = performance.now();
+    if (now - lastSent > 100) send(now);
     if (cutSeen && !engaged && releasedAt !== null && performance.now() - releasedAt > 1500 && !ended) { stop(); releasedAt = null; }
   })();
 })();
