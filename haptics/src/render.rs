@@ -268,6 +268,13 @@ pub struct RenderOutput {
     pub gain: f64,
 }
 
+/// The time constant of the velocity the cutting resistance follows, s: a hand's stroke
+/// (tens of ms and longer), not the steps its input arrives in. A pointer moves in whole
+/// pixels (0.2 mm on the tissue, every 50 ms at 4 mm/s) and a page's samples come in
+/// bursts; a resistance that followed the 5 ms velocity flipped between 0 and its full
+/// value with each step, on the chart and in a device's hand alike.
+pub const CUT_VELOCITY_TIME_S: f64 = 0.05;
+
 /// The force renderer's state.
 #[derive(Debug, Clone)]
 pub struct ForceRenderer {
@@ -278,7 +285,10 @@ pub struct ForceRenderer {
     mode: Mode,
     proxy: Point3,
     last_pose: Option<ToolPose>,
+    /// The tip's velocity, low-passed over about 5 ms: the damping's.
     velocity: Vector3,
+    /// The tip's velocity low-passed over [`CUT_VELOCITY_TIME_S`]: the cutting resistance's.
+    cut_velocity: Vector3,
     /// The surface where the tip first touched it in the current contact (point, normal).
     touched: Option<(Point3, Vector3)>,
     /// Plane where the current cut began, as the contact model showed it then (until the
@@ -301,6 +311,7 @@ impl ForceRenderer {
             proxy: Point3::origin(),
             last_pose: None,
             velocity: Vector3::zeros(),
+            cut_velocity: Vector3::zeros(),
             touched: None,
             cut_plane: (Point3::origin(), Vector3::z()),
             desired: Vector3::zeros(),
@@ -365,6 +376,8 @@ impl ForceRenderer {
             if let Some(last) = self.last_pose {
                 let v = (p.tip_in_world - last.tip_in_world) / s.period_s;
                 self.velocity += (v - self.velocity) * 0.2;
+                let a = 1.0 - (-s.period_s / CUT_VELOCITY_TIME_S).exp();
+                self.cut_velocity += (v - self.cut_velocity) * a;
             }
             self.last_pose = Some(p);
             if faults == 0 {
@@ -454,11 +467,11 @@ impl ForceRenderer {
                     return Vector3::zeros();
                 }
                 self.proxy = tip;
-                let speed = self.velocity.norm();
+                let speed = self.cut_velocity.norm();
                 if speed < 1e-9 {
                     return Vector3::zeros();
                 }
-                -self.velocity / speed
+                -self.cut_velocity / speed
                     * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
             }
             Mode::Free | Mode::Touching if pose.blade_engaged() && c.back_in_wound(&tip) => {
@@ -946,5 +959,41 @@ mod tests {
             r.update(0, at(0.0005, BUTTON_BLADE), &above).mode,
             Mode::Cutting
         );
+    }
+
+    #[test]
+    fn a_blade_moving_in_pixel_steps_meets_a_steady_resistance() {
+        // a pointer's stroke at 4 mm/s: a 0.2 mm pixel every 50 ms, each step played over a
+        // 60 Hz frame (16.7 ms), still between them
+        let wall = |t: u64| ContactModel {
+            wound: Some(Wound {
+                end_m: Point3::new(0.0, 0.0, -0.006),
+                entry: (Point3::new(-0.03, 0.0, 0.0), Vector3::z()),
+            }),
+            ..plane(t, 500.0)
+        };
+        let x = |t: u64| {
+            let (step, into) = (t / 50, (t % 50) as f64 / 16.7);
+            0.0002 * (step as f64 + into.min(1.0))
+        };
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        let forces: Vec<f64> = (0..2000)
+            .map(|t| {
+                let pose = Ok(ToolPose {
+                    tip_in_world: Point3::new(x(t), 0.0, -0.006),
+                    buttons: BUTTON_BLADE,
+                    ..ToolPose::default()
+                });
+                let out = r.update(t, pose, &wall(t));
+                assert_eq!(out.mode, Mode::Cutting, "tick {t}");
+                out.force_newtons.norm()
+            })
+            .collect();
+        // after the stroke's first 0.3 s: the resistance of 4 mm/s (0.8 tanh 0.8 = 0.53 N),
+        // give or take the steps; it followed each step from 0 to 0.8 N before
+        let (lo, hi) = forces[300..]
+            .iter()
+            .fold((f64::MAX, 0.0_f64), |(lo, hi), &f| (lo.min(f), hi.max(f)));
+        assert!(lo > 0.35 && hi < 0.75, "resistance {lo:.3}..{hi:.3} N");
     }
 }
