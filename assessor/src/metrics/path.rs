@@ -16,12 +16,16 @@
 //! - path length: `sum |x[k+1] - x[k]|` over the filtered samples;
 //! - economy of motion: `|x_last - x_first| / path length` (1 for a straight line);
 //! - idle time: total length of the intervals whose mean speed is below `idle_speed_m_s`;
-//! - movements: the runs where `v` exceeds
-//!   `max(movement_fraction * peak v, min(movement_floor_m_s, mean v / 2))` lasting at least
-//!   `min_movement_s` and going at least `min_movement_m` from where they began (a dip below
-//!   the threshold shorter than `min_movement_s` does not end a run). The floor gives way to a stroke slower than it (a stroke at
-//!   3 mm/s is a movement, not none); the distance keeps a hand's noise, its drift and what
-//!   the filter leaves of its tremor, from counting when it holds still;
+//! - movements: the strokes, runs where the speed across the blade's axis
+//!   `v_across = |v - (v . a) a|` (`a` the tool's z axis, resampled like the tip) exceeds
+//!   `max(movement_fraction * peak v_across, min(movement_floor_m_s, mean v / 2))`, lasting at
+//!   least `min_movement_s` and going at least `min_movement_m` from where they began (a dip
+//!   below the threshold shorter than `min_movement_s` does not end a run). Pressing the blade
+//!   in and lifting it out run along its axis and are not strokes: a pointer's press (8 mm in
+//!   one 60 Hz frame) had set the peak, and a 4 mm/s stroke under its tenth counted as none.
+//!   The floor gives way to a stroke slower than it (a stroke at 3 mm/s is a movement, not
+//!   none); the distance keeps a hand's noise, its drift and what the filter leaves of its
+//!   tremor, from counting when it holds still;
 //! - angular path: `sum 2 acos |q_i . q_(i+1)|` over the raw unit quaternions (rad);
 //! - smoothness: LDLJ and SPARC ([`smoothness`]) of the whole speed profile, and their mean
 //!   over the movements (each movement's own speed profile).
@@ -192,14 +196,16 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     };
 
     let peak = speed.iter().copied().fold(0.0, f64::max);
+    let across = speed_across_axis(&poses, &vel, fs);
+    let peak_across = across.iter().copied().fold(0.0, f64::max);
     let mean_speed = path_length_m / ((n - 1) as f64 * dt);
     let floor = p.movement_floor_m_s.min(0.5 * mean_speed);
-    let threshold = floor.max(p.movement_fraction * peak);
+    let threshold = floor.max(p.movement_fraction * peak_across);
     let min_len = (p.min_movement_s * fs).round() as usize;
     let mut runs: Vec<(usize, usize)> = Vec::new();
     let mut start = None;
     for k in 0..=n {
-        let above = k < n && speed[k] > threshold;
+        let above = k < n && across[k] > threshold;
         match (above, start) {
             (true, None) => start = Some(k),
             (false, Some(s)) => {
@@ -264,6 +270,36 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
         per_movement,
         peak_speed_m_s: peak,
     })
+}
+
+/// `|v - (v . a) a|` at each resampled instant: the tip's velocity `vel` (per coordinate)
+/// without its part along the tool's z axis `a` (the blade's), the axis resampled at `fs`
+/// from `poses`' unit quaternions like the tip.
+fn speed_across_axis(poses: &[PoseSample], vel: &[Vec<f64>], fs: f64) -> Vec<f64> {
+    let t: Vec<f64> = poses.iter().map(|s| s.t_s).collect();
+    let axis_of = |q: &[f64; 4]| {
+        let [w, x, y, z] = *q;
+        let l2 = q.iter().map(|c| c * c).sum::<f64>();
+        Vector3::new(
+            2.0 * (x * z + w * y),
+            2.0 * (y * z - w * x),
+            w * w - x * x - y * y + z * z,
+        ) / l2
+    };
+    let axes: Vec<Vector3<f64>> = poses.iter().map(|s| axis_of(&s.quat_wxyz)).collect();
+    let a: Vec<Vec<f64>> = (0..3)
+        .map(|c| smoothness::resample(&t, &axes.iter().map(|v| v[c]).collect::<Vec<_>>(), fs))
+        .collect();
+    (0..vel[0].len())
+        .map(|k| {
+            let v = Vector3::new(vel[0][k], vel[1][k], vel[2][k]);
+            let axis = Vector3::new(a[0][k], a[1][k], a[2][k]);
+            match axis.try_normalize(1e-9) {
+                Some(u) => (v - u * v.dot(&u)).norm(),
+                None => v.norm(),
+            }
+        })
+        .collect()
 }
 
 /// The poses from the first with the blade engaged to the last (all of them when fewer than
@@ -432,6 +468,38 @@ mod tests {
                 assert_eq!(m.movements, 0, "seed {seed}: {:?}", m.per_movement);
             }
         }
+    }
+
+    #[test]
+    fn a_pointers_press_and_lift_along_the_blade_are_not_strokes() {
+        // a pointer's stroke: the blade pressed 8 mm in along its axis in one 60 Hz frame, 60
+        // mm at 4 mm/s in 0.2 mm pixels every 50 ms, lifted out in one frame; engaged throughout
+        let frame = 1.0 / 60.0;
+        let mut poses = Vec::new();
+        let mut push = |t: f64, x: f64, z: f64| {
+            let mut p = pose(t, [x, 0.0, z], 0.0);
+            p.blade_engaged = true;
+            poses.push(p);
+        };
+        push(0.0, 0.0, 0.0);
+        push(frame, 0.0, -0.008);
+        let stroke_s = 15.0;
+        let frames = (stroke_s / frame) as usize;
+        for i in 1..=frames {
+            let t = i as f64 * frame;
+            push(frame + t, 0.0002 * (t / 0.05).floor(), -0.008);
+        }
+        let end = frame + frames as f64 * frame;
+        let x_end = 0.0002 * ((frames as f64 * frame) / 0.05).floor();
+        push(end + frame, x_end, 0.0);
+        push(end + 2.0 * frame, x_end, 0.0);
+        let m = path(&poses, &PathParams::default()).expect("path");
+        assert_eq!(m.movements, 1, "{:?}", m.per_movement);
+        assert!(
+            m.peak_speed_m_s > 0.1,
+            "the press is in the speed: {}",
+            m.peak_speed_m_s
+        );
     }
 
     #[test]
