@@ -786,6 +786,26 @@ async fn attempt(
                 "{trial:?}: the set-depth line at {set} m, drawn {drawn}"
             );
             if trial == Trial::Skilled {
+                // the axes marker turns as the view does: the plan's direction drawn with
+                // its arrows runs as the line on the screen, left to right (issue 63)
+                let seen = c
+                    .execute(
+                        "const s = window.cutlabStation, a = s.axes(), l = s.config.plan.line_m;
+                         const d = [0, 1, 2].map((k) => l[l.length - 1][k] - l[0][k]);
+                         const m = ['x', 'y', 'z'].reduce((o, n, k) => [o[0] + d[k] * a[n][0], o[1] + d[k] * a[n][1]], [0, 0]);
+                         const p0 = s.project(l[0]), p1 = s.project(l[l.length - 1]);
+                         return [m, [p1[0] - p0[0], p1[1] - p0[1]]];",
+                        vec![],
+                    )
+                    .await?;
+                let v = |i: usize, k: usize| seen[i][k].as_f64().unwrap_or(f64::NAN);
+                let (m, on_screen) = ([v(0, 0), v(0, 1)], [v(1, 0), v(1, 1)]);
+                let cos = (m[0] * on_screen[0] + m[1] * on_screen[1])
+                    / (m[0].hypot(m[1]) * on_screen[0].hypot(on_screen[1]));
+                assert!(
+                    m[0] > 0.0 && cos > 0.9,
+                    "the axes marker draws the plan {m:?}, the screen shows it {on_screen:?}"
+                );
                 std::fs::write(
                     shots.join("station-human-mid-cut.png"),
                     c.screenshot().await?,

@@ -389,6 +389,26 @@
     return rulerPoints;
   }
 
+  // the axes marker: the world's x (red), y (green) and z (blue) as this view shows them,
+  // the colours and axes the replay draws at the world's origin
+  let axesDrawn = null;
+  function axesMarker() {
+    const marker = document.getElementById("axes");
+    if (!marker || !camera) return;
+    const c = marker.getContext("2d"), mid = marker.width / 2, reach = 0.36 * marker.width;
+    const f = unit(sub(camera.target, camera.eye)), side = unit(cross(f, camera.up)), upOnScreen = cross(side, f);
+    c.clearRect(0, 0, marker.width, marker.height);
+    c.lineWidth = 2; c.font = "11px sans-serif"; c.textAlign = "center"; c.textBaseline = "middle";
+    axesDrawn = {};
+    [["x", [1, 0, 0], "#dc3c3c"], ["y", [0, 1, 0], "#2e9a2e"], ["z", [0, 0, 1], "#3c5adc"]].forEach(([name, e, colour]) => {
+      const x = mid + reach * dot(e, side), y = mid - reach * dot(e, upOnScreen);
+      axesDrawn[name] = [x - mid, y - mid];
+      c.strokeStyle = colour; c.fillStyle = colour;
+      c.beginPath(); c.moveTo(mid, mid); c.lineTo(x, y); c.stroke();
+      c.fillText(name, mid + (x - mid) * 1.3, mid + (y - mid) * 1.3);
+    });
+  }
+
   // the scale bar: 10 mm at the middle of the view, in CSS pixels
   function scaleBar() {
     const bar = document.getElementById("scale-bar");
@@ -473,7 +493,7 @@
     show("blade-depth", "textContent", !above ? "off the tissue"
       : above.depth > 0.00005 ? (above.depth * 1e3).toFixed(1) + " mm below the surface" : "at or above the surface");
     gauge(above ? above.depth : null);
-    if (!scaled) { scaled = true; scaleBar(); }
+    if (!scaled) { scaled = true; scaleBar(); axesMarker(); }
     cutSeen = cutSeen || f.mode === 2;
   }
 
@@ -530,6 +550,8 @@
   window.cutlabStation = {
     // the depths the gauge drew last, m: `set_m` (the grey line), `blade_m`
     gauge() { return gaugeDrawn; },
+    // the axes marker's arrows as drawn, canvas pixels from its middle (y down): { x, y, z }
+    axes() { return axesDrawn; },
     // the figures `cutlab bench station` reads
     stats() {
       const s = (performance.now() - stats.since) / 1000;
