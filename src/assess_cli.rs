@@ -165,6 +165,14 @@ pub enum ExerciseCommand {
     },
     /// Lists the exercises.
     List,
+    /// Shows an exercise: its scene, mode and plan (`--json`: the plan's fields as a plan file
+    /// holds them, `incision_m`, `depth_m`, `target_m`, `viewpoint_m`...).
+    Show {
+        /// The exercise.
+        name: String,
+        #[arg(long)]
+        json: bool,
+    },
     /// Sets an exercise's thresholds from its complete expert attempts (mean +/- k SD after
     /// removing outliers with |z| > 1.96) and prints them (`--json` for machines).
     Thresholds {
@@ -388,6 +396,11 @@ async fn exercise(store: &Store, command: ExerciseCommand) -> anyhow::Result<()>
                 );
             }
         }
+        ExerciseCommand::Show { name, json } => {
+            let e = store.exercise_by_name(&name).await?;
+            let plan = store.get_plan(e.plan_id).await?;
+            print_exercise(&e, &plan, json)?;
+        }
         ExerciseCommand::Thresholds { name, json } => {
             let e = store.exercise_by_name(&name).await?;
             let t = store.thresholds_from_experts(e.id).await?;
@@ -398,6 +411,44 @@ async fn exercise(store: &Store, command: ExerciseCommand) -> anyhow::Result<()>
             }
         }
     }
+    Ok(())
+}
+
+/// Exercise `e` and its `plan`: a few lines, or (`json`) one object with the plan as a plan
+/// file holds it.
+fn print_exercise(
+    e: &cutlab_assessor::store::Exercise,
+    plan: &ExercisePlan,
+    json: bool,
+) -> anyhow::Result<()> {
+    let plan_value: serde_json::Value = serde_json::from_str(&plan.to_json()?)?;
+    if json {
+        let v = serde_json::json!({
+            "id": e.id,
+            "name": e.name,
+            "scene": e.scene,
+            "description": e.description,
+            "exam_only": e.exam_only,
+            "threshold_k": e.threshold_k,
+            "kind": plan.kind().as_str(),
+            "plan": plan_value,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("{} (id {}): {}", e.name, e.id, e.description);
+    println!(
+        "scene {}, {} plan, {}, thresholds mean +/- {} SD",
+        e.scene,
+        plan.kind().as_str(),
+        if e.exam_only {
+            "exam only"
+        } else {
+            "guided or exam"
+        },
+        e.threshold_k
+    );
+    println!("{}", serde_json::to_string_pretty(&plan_value)?);
     Ok(())
 }
 

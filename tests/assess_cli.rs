@@ -203,6 +203,40 @@ fn users_cohorts_exercises_and_xapi_on_a_fresh_database() {
         ok && out.contains("chest-wall-incision") && out.contains("copy"),
         "the built-in is always there: {out}"
     );
+    // the exercise and its plan, for a planning tool
+    let (ok, out, err) = cutlab(
+        &[
+            "--db",
+            db,
+            "exercise",
+            "show",
+            "chest-wall-incision",
+            "--json",
+        ],
+        None,
+    );
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert_eq!(v["scene"], "chest-wall", "{v}");
+    assert!(
+        v["plan"]["depth_m"].as_f64().is_some_and(|d| d > 0.0),
+        "{v}"
+    );
+    assert_eq!(
+        v["plan"]["viewpoint_m"].as_array().map(Vec::len),
+        Some(3),
+        "{v}"
+    );
+    let (ok, out, err) = cutlab(&["--db", db, "exercise", "show", "copy"], None);
+    assert!(
+        ok && out.contains("scene chest-wall") && out.contains("depth_m"),
+        "{out}{err}"
+    );
+    let (ok, _, err) = cutlab(&["--db", db, "exercise", "show", "nobody"], None);
+    assert!(
+        !ok && err.contains("\"nobody\"") && err.contains("not found"),
+        "{err}"
+    );
     let bad_plan = temp("bad-plan.toml");
     std::fs::write(
         &bad_plan,
