@@ -9,7 +9,6 @@
 //! | `force/x`, `force/y`, `force/z`, `force/norm` | `Scalars` (N) | every tick, sent in columns |
 //! | `contact/mode` | `Scalars` (0 free, 1 touching, 2 cutting) | every tick, in columns |
 //! | `contact/penetration` | `Scalars` (m, tip to proxy: 0 when free or cutting) | every tick, in columns |
-//! | `world/axes` | `TransformAxes3D` (static: the world's x, y, z at its origin, 20 mm) | once |
 //! | `world/scalpel` | `Transform3D` (tip, `world_from_tool`) | ~30 Hz of ticks |
 //! | `world/scalpel/blade` | `LineStrips3D` (static, in the tool frame: the tip along +z) | once |
 //! | `world/proxy` | `Points3D` (the force renderer's proxy) | ~30 Hz of ticks |
@@ -44,8 +43,6 @@ use rerun::{RecordingStream, RecordingStreamBuilder, RecordingStreamError};
 
 /// Name of the sequence timeline of servo ticks.
 pub const TIMELINE_TICK: &str = "tick";
-/// The length of the world's axes drawn at its origin ([`paths::WORLD_AXES`]), m.
-pub const WORLD_AXIS_LENGTH_M: f32 = 0.02;
 /// Name of the duration timeline (`tick * period`).
 pub const TIMELINE_SIM_TIME: &str = "sim_time";
 /// Name of the sequence timeline of simulation steps (simulation records only).
@@ -68,7 +65,6 @@ pub mod paths {
     pub const FORCE_NORM: &str = "force/norm";
     pub const CONTACT_MODE: &str = "contact/mode";
     pub const CONTACT_PENETRATION: &str = "contact/penetration";
-    pub const WORLD_AXES: &str = "world/axes";
     pub const SCALPEL: &str = "world/scalpel";
     pub const BLADE: &str = "world/scalpel/blade";
     pub const PROXY: &str = "world/proxy";
@@ -289,11 +285,6 @@ impl RerunSink {
                 .with_colors([Color::from_rgb(200, 200, 210)]),
         )?;
         rec.log_static(paths::SCALPEL, &TransformAxes3D::new(0.5 * l))?;
-        // the world's axes (x red, y green, z blue), as the station's marker shows them
-        rec.log_static(
-            paths::WORLD_AXES,
-            &TransformAxes3D::new(WORLD_AXIS_LENGTH_M),
-        )?;
         Ok(())
     }
 

@@ -282,7 +282,7 @@ async fn station(
                     canvas id="depth-gauge" width="120" height="150" title="The cut from the side: the surface at the top, the planned depth dashed green, the set depth dotted grey, the blade red below the surface" {}
                     @if driver && r.pointer.is_some() { div class="muted" { "Wheel down or ↓: deeper; wheel up or ↑: shallower (0.5 mm a step)." } }
                     div class="scale" { span id="scale-bar" {} " 10 mm" }
-                    canvas id="axes" width="64" height="64" title="The world's axes as this view shows them: x red, y green, z blue, as the replay draws them" {}
+                    canvas id="axes" width="64" height="64" title="The world's axes as this view shows them: x red, y green, z blue (the frame of the recording and the replay)" {}
                     div { "Mode " span id="mode" { (if r.guided { "guided" } else { "exam" }) } }
                     @if driver { button id="stop" type="button" { "Stop" } }
                     @else { p class="muted" { "Live view (read only)." } }

@@ -389,8 +389,8 @@
     return rulerPoints;
   }
 
-  // the axes marker: the world's x (red), y (green) and z (blue) as this view shows them,
-  // the colours and axes the replay draws at the world's origin
+  // the axes marker: the world's x (red), y (green) and z (blue) as this view shows them (the
+  // frame the recording and the replay are in; the debrief's top view is in the plan's)
   let axesDrawn = null;
   function axesMarker() {
     const marker = document.getElementById("axes");
