@@ -30,7 +30,7 @@
 //! - smoothness: LDLJ and SPARC ([`smoothness`]) of the whole speed profile, and their mean
 //!   over the movements (each movement's own speed profile).
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::error::{AssessError, Result};
 use crate::geom;
@@ -196,7 +196,7 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     };
 
     let peak = speed.iter().copied().fold(0.0, f64::max);
-    let across = speed_across_axis(&poses, &vel, fs);
+    let across = speed_across_axis(&t, &poses, &vel, fs);
     let peak_across = across.iter().copied().fold(0.0, f64::max);
     let mean_speed = path_length_m / ((n - 1) as f64 * dt);
     let floor = p.movement_floor_m_s.min(0.5 * mean_speed);
@@ -274,21 +274,17 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
 
 /// `|v - (v . a) a|` at each resampled instant: the tip's velocity `vel` (per coordinate)
 /// without its part along the tool's z axis `a` (the blade's), the axis resampled at `fs`
-/// from `poses`' unit quaternions like the tip.
-fn speed_across_axis(poses: &[PoseSample], vel: &[Vec<f64>], fs: f64) -> Vec<f64> {
-    let t: Vec<f64> = poses.iter().map(|s| s.t_s).collect();
-    let axis_of = |q: &[f64; 4]| {
-        let [w, x, y, z] = *q;
-        let l2 = q.iter().map(|c| c * c).sum::<f64>();
-        Vector3::new(
-            2.0 * (x * z + w * y),
-            2.0 * (y * z - w * x),
-            w * w - x * x - y * y + z * z,
-        ) / l2
-    };
-    let axes: Vec<Vector3<f64>> = poses.iter().map(|s| axis_of(&s.quat_wxyz)).collect();
+/// from `poses`' quaternions (times `t`) like the tip.
+fn speed_across_axis(t: &[f64], poses: &[PoseSample], vel: &[Vec<f64>], fs: f64) -> Vec<f64> {
+    let axes: Vec<Vector3<f64>> = poses
+        .iter()
+        .map(|s| {
+            let [w, x, y, z] = s.quat_wxyz;
+            UnitQuaternion::from_quaternion(Quaternion::new(w, x, y, z)) * Vector3::z()
+        })
+        .collect();
     let a: Vec<Vec<f64>> = (0..3)
-        .map(|c| smoothness::resample(&t, &axes.iter().map(|v| v[c]).collect::<Vec<_>>(), fs))
+        .map(|c| smoothness::resample(t, &axes.iter().map(|v| v[c]).collect::<Vec<_>>(), fs))
         .collect();
     (0..vel[0].len())
         .map(|k| {

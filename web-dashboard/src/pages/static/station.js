@@ -19,8 +19,13 @@
   const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
   const norm = (a) => Math.hypot(a[0], a[1], a[2]);
   const unit = (a) => { const n = norm(a) || 1; return scale(a, 1 / n); };
+  // a view's basis: forward `f`, right `s` and up `u` on the screen (unit vectors)
+  function basis(eye, target, up) {
+    const f = unit(sub(target, eye)), s = unit(cross(f, up));
+    return { f, s, u: cross(s, f) };
+  }
   function lookAt(eye, target, up) {
-    const f = unit(sub(target, eye)), s = unit(cross(f, up)), u = cross(s, f);
+    const { f, s, u } = basis(eye, target, up);
     return [s[0], u[0], -f[0], 0, s[1], u[1], -f[1], 0, s[2], u[2], -f[2], 0,
       -dot(s, eye), -dot(u, eye), dot(f, eye), 1];
   }
@@ -396,7 +401,7 @@
     const marker = document.getElementById("axes");
     if (!marker || !camera) return;
     const c = marker.getContext("2d"), mid = marker.width / 2, reach = 0.36 * marker.width;
-    const f = unit(sub(camera.target, camera.eye)), side = unit(cross(f, camera.up)), upOnScreen = cross(side, f);
+    const { s: side, u: upOnScreen } = basis(camera.eye, camera.target, camera.up);
     c.clearRect(0, 0, marker.width, marker.height);
     c.lineWidth = 2; c.font = "11px sans-serif"; c.textAlign = "center"; c.textBaseline = "middle";
     axesDrawn = {};
@@ -413,7 +418,7 @@
   function scaleBar() {
     const bar = document.getElementById("scale-bar");
     if (!bar || !camera) return;
-    const f = unit(sub(camera.target, camera.eye)), side = unit(cross(f, camera.up));
+    const { s: side } = basis(camera.eye, camera.target, camera.up);
     const a = window.cutlabStation.project(camera.target), b = window.cutlabStation.project(add(camera.target, scale(side, 0.01)));
     bar.style.width = Math.max(4, Math.round(Math.hypot(b[0] - a[0], b[1] - a[1]))) + "px";
   }
@@ -586,7 +591,7 @@
   function ray(event) {
     const r = canvas.getBoundingClientRect();
     const x = 2 * (event.clientX - r.left) / r.width - 1, y = 1 - 2 * (event.clientY - r.top) / r.height;
-    const f = unit(sub(camera.target, camera.eye)), s = unit(cross(f, camera.up)), u = cross(s, f);
+    const { f, s, u } = basis(camera.eye, camera.target, camera.up);
     const t = Math.tan(0.35), aspect = r.width / r.height;
     return { origin: camera.eye, dir: unit(add(f, add(scale(s, x * t * aspect), scale(u, y * t)))) };
   }
