@@ -6,6 +6,9 @@
 //! Only the attempt's stored recording path (and the `.rrd` beside it) is ever served: the
 //! routes take an attempt id, never a path.
 
+use std::io::Write as _;
+use std::sync::OnceLock;
+
 use axum::Router;
 use axum::body::{Body, Bytes};
 use axum::extract::{RawQuery, State};
@@ -28,17 +31,49 @@ use crate::pages::{attempt, layout};
 /// rerun's web viewer files, read once.
 #[derive(Debug)]
 pub struct Viewer {
-    files: Option<ViewerFiles>,
+    files: Option<Vec<ViewerFile>>,
 }
 
+/// One file of the viewer, and its gzip form once a browser has asked for it.
 #[derive(Debug)]
-struct ViewerFiles {
-    index_html: Bytes,
-    viewer_js: Bytes,
-    viewer_wasm: Bytes,
-    favicon: Bytes,
-    touch_icon: Bytes,
-    sw_js: Bytes,
+struct ViewerFile {
+    name: &'static str,
+    mime: &'static str,
+    bytes: Bytes,
+    /// Compressed on the first request that accepts gzip, then kept: the 42 MB wasm goes out
+    /// as about 14 MB (docs/decisions.md, "The replay viewer goes out compressed").
+    gzip: OnceLock<Bytes>,
+}
+
+impl ViewerFile {
+    fn new(name: &'static str, mime: &'static str, bytes: Bytes) -> Self {
+        Self {
+            name,
+            mime,
+            bytes,
+            gzip: OnceLock::new(),
+        }
+    }
+
+    /// Worth compressing: the script and the wasm (the rest are small or compressed already).
+    fn compresses(&self) -> bool {
+        self.bytes.len() > 16 * 1024 && !self.mime.starts_with("image/")
+    }
+
+    /// The gzip form, compressed by the first caller (others wait for it).
+    fn gzipped(&self) -> Bytes {
+        self.gzip
+            .get_or_init(|| {
+                let mut gz = flate2::write::GzEncoder::new(
+                    Vec::with_capacity(self.bytes.len() / 3),
+                    flate2::Compression::default(),
+                );
+                // writing to a Vec cannot fail
+                let _ = gz.write_all(&self.bytes);
+                Bytes::from(gz.finish().unwrap_or_default())
+            })
+            .clone()
+    }
 }
 
 impl Viewer {
@@ -46,14 +81,26 @@ impl Viewer {
     pub fn load() -> Self {
         match WebViewerData::load(None) {
             Ok(d) => Self {
-                files: Some(ViewerFiles {
-                    index_html: Bytes::from(offline_index(d.index_html())),
-                    viewer_js: Bytes::copy_from_slice(d.viewer_js()),
-                    viewer_wasm: Bytes::copy_from_slice(d.viewer_wasm()),
-                    favicon: Bytes::copy_from_slice(d.favicon()),
-                    touch_icon: Bytes::copy_from_slice(d.apple_touch_icon()),
-                    sw_js: Bytes::copy_from_slice(d.sw_js()),
-                }),
+                files: Some(vec![
+                    ViewerFile::new(
+                        "index.html",
+                        "text/html; charset=utf-8",
+                        Bytes::from(offline_index(d.index_html())),
+                    ),
+                    ViewerFile::new("re_viewer.js", "text/javascript", copy(d.viewer_js())),
+                    ViewerFile::new(
+                        "re_viewer_bg.wasm",
+                        "application/wasm",
+                        copy(d.viewer_wasm()),
+                    ),
+                    ViewerFile::new("favicon.ico", "image/x-icon", copy(d.favicon())),
+                    ViewerFile::new(
+                        "apple-touch-icon.png",
+                        "image/png",
+                        copy(d.apple_touch_icon()),
+                    ),
+                    ViewerFile::new("sw.js", "text/javascript", copy(d.sw_js())),
+                ]),
             },
             Err(e) => {
                 tracing::error!("rerun web viewer unavailable: {e}");
@@ -65,6 +112,14 @@ impl Viewer {
     pub fn available(&self) -> bool {
         self.files.is_some()
     }
+
+    fn file(&self, name: &str) -> Option<&ViewerFile> {
+        self.files.as_ref()?.iter().find(|f| f.name == name)
+    }
+}
+
+fn copy(bytes: &[u8]) -> Bytes {
+    Bytes::copy_from_slice(bytes)
 }
 
 /// How the viewer's `index.html` hands its app to the page: rerun 0.36 passes `start()`'s
@@ -384,37 +439,70 @@ async fn replay_page(
 async fn viewer_index(
     State(state): State<AppState>,
     _user: CurrentUser,
+    headers: HeaderMap,
 ) -> Result<Response, AppError> {
-    serve_viewer_file(&state, "index.html")
+    serve_viewer_file(&state, "index.html", &headers).await
 }
 
 async fn viewer_file(
     State(state): State<AppState>,
     _user: CurrentUser,
     Path(file): Path<String>,
+    headers: HeaderMap,
 ) -> Result<Response, AppError> {
-    serve_viewer_file(&state, &file)
+    serve_viewer_file(&state, &file, &headers).await
 }
 
-fn serve_viewer_file(state: &AppState, name: &str) -> Result<Response, AppError> {
-    let files = state.viewer().files.as_ref().ok_or(AppError::NotFound)?;
-    let (mime, bytes) = match name {
-        "index.html" => ("text/html; charset=utf-8", &files.index_html),
-        "re_viewer.js" => ("text/javascript", &files.viewer_js),
-        "re_viewer_bg.wasm" => ("application/wasm", &files.viewer_wasm),
-        "favicon.ico" => ("image/x-icon", &files.favicon),
-        "apple-touch-icon.png" => ("image/png", &files.touch_icon),
-        "sw.js" => ("text/javascript", &files.sw_js),
-        _ => return Err(AppError::NotFound),
-    };
-    Ok((
-        [
-            (header::CONTENT_TYPE, mime),
-            (header::CACHE_CONTROL, "private, max-age=3600"),
-        ],
-        bytes.clone(),
-    )
-        .into_response())
+async fn serve_viewer_file(
+    state: &AppState,
+    name: &str,
+    request: &HeaderMap,
+) -> Result<Response, AppError> {
+    let file = state.viewer().file(name).ok_or(AppError::NotFound)?;
+    let mut headers = HeaderMap::new();
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(file.mime));
+    headers.insert(
+        header::CACHE_CONTROL,
+        HeaderValue::from_static("private, max-age=3600"),
+    );
+    if !file.compresses() {
+        return Ok((headers, file.bytes.clone()).into_response());
+    }
+    headers.insert(header::VARY, HeaderValue::from_static("accept-encoding"));
+    if !accepts_gzip(request) {
+        return Ok((headers, file.bytes.clone()).into_response());
+    }
+    let (state, name) = (state.clone(), file.name);
+    let body = tokio::task::spawn_blocking(move || {
+        state
+            .viewer()
+            .file(name)
+            .map(ViewerFile::gzipped)
+            .unwrap_or_default()
+    })
+    .await
+    .map_err(|e| AppError::Internal(format!("compressing the viewer: {e}")))?;
+    headers.insert(header::CONTENT_ENCODING, HeaderValue::from_static("gzip"));
+    Ok((headers, body).into_response())
+}
+
+/// Whether a request's `Accept-Encoding` takes gzip (with a non-zero weight).
+fn accepts_gzip(request: &HeaderMap) -> bool {
+    request
+        .get_all(header::ACCEPT_ENCODING)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|coding| {
+            let mut parts = coding.split(';').map(str::trim);
+            let name = parts.next().unwrap_or_default();
+            let zero = parts.any(|p| {
+                p.strip_prefix("q=")
+                    .and_then(|q| q.parse::<f64>().ok())
+                    .is_some_and(|q| q <= 0.0)
+            });
+            (name.eq_ignore_ascii_case("gzip") || name == "*") && !zero
+        })
 }
 
 #[cfg(test)]
@@ -453,15 +541,52 @@ mod tests {
     #[test]
     fn the_embedded_viewer_is_there_and_offline() {
         let v = Viewer::load();
-        let files = v.files.expect("re_web_viewer_server ships the viewer");
-        assert!(files.viewer_wasm.len() > 1_000_000 && files.viewer_wasm.starts_with(b"\0asm"));
-        let index = String::from_utf8_lossy(&files.index_html);
+        assert!(v.available(), "re_web_viewer_server ships the viewer");
+        let wasm = &v.file("re_viewer_bg.wasm").expect("the wasm").bytes;
+        assert!(wasm.len() > 1_000_000 && wasm.starts_with(b"\0asm"));
+        let index = String::from_utf8_lossy(&v.file("index.html").expect("index").bytes);
         assert!(index.contains("re_viewer.js") && !index.contains("fonts.googleapis.com"));
         // the viewer's handle reaches the page (the replay page moves its time cursor)
         assert!(
             index.contains(APP_STARTED.1) && !index.contains(APP_STARTED.0),
             "rerun's index.html changed: the replay page cannot reach the viewer's WebHandle"
         );
+    }
+
+    #[test]
+    fn the_wasm_goes_out_compressed_to_a_browser_that_takes_gzip() {
+        let v = Viewer::load();
+        let wasm = v.file("re_viewer_bg.wasm").expect("the wasm");
+        assert!(wasm.compresses() && !v.file("favicon.ico").expect("icon").compresses());
+        let gz = wasm.gzipped();
+        assert!(
+            gz.len() < wasm.bytes.len() / 2,
+            "{} of {}",
+            gz.len(),
+            wasm.bytes.len()
+        );
+        let mut back = Vec::new();
+        std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&gz[..]), &mut back)
+            .expect("gunzip");
+        assert!(back == wasm.bytes, "the gzip form holds the same wasm");
+    }
+
+    #[test]
+    fn gzip_is_sent_only_where_the_browser_takes_it() {
+        let accepts = |v: &[&str]| {
+            let mut h = HeaderMap::new();
+            for v in v {
+                h.append(header::ACCEPT_ENCODING, HeaderValue::from_str(v).unwrap());
+            }
+            accepts_gzip(&h)
+        };
+        assert!(accepts(&["gzip, deflate, br, zstd"]));
+        assert!(accepts(&["br", "GZIP;q=0.5"]));
+        assert!(accepts(&["*"]));
+        assert!(!accepts(&[]));
+        assert!(!accepts(&["br, deflate"]));
+        assert!(!accepts(&["gzip;q=0, br"]));
+        assert!(!accepts(&["x-gzip-ish"]));
     }
 
     #[test]

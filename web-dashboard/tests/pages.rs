@@ -394,6 +394,25 @@ async fn the_replay_viewer_is_served_by_the_dashboard() {
     let r = send(&e.app, get("/viewer/re_viewer_bg.wasm", Some(&ana))).await;
     assert_eq!(r.status(), StatusCode::OK);
     assert_eq!(r.headers()[header::CONTENT_TYPE], "application/wasm");
+    assert!(r.headers().get(header::CONTENT_ENCODING).is_none());
+    // a browser that takes gzip gets the wasm compressed (issue 63: 42 MB to a remote reviewer)
+    let mut req = get("/viewer/re_viewer_bg.wasm", Some(&ana));
+    req.headers_mut().insert(
+        header::ACCEPT_ENCODING,
+        "gzip, deflate, br".parse().unwrap(),
+    );
+    let r = send(&e.app, req).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    assert_eq!(r.headers()[header::CONTENT_ENCODING], "gzip");
+    assert_eq!(r.headers()[header::VARY], "accept-encoding");
+    let gz = axum::body::to_bytes(r.into_body(), usize::MAX)
+        .await
+        .unwrap();
+    assert!(
+        gz.starts_with(&[0x1f, 0x8b]) && gz.len() < 30_000_000,
+        "{}",
+        gz.len()
+    );
     let r = send(&e.app, get("/viewer/", Some(&ana))).await;
     let index = body_text(r).await;
     assert!(index.contains("re_viewer.js") && !index.contains("googleapis"));
