@@ -1,6 +1,6 @@
 //! The demo's training history, simulated: a curriculum of two exercises on the chest wall,
-//! expert attempts that set their thresholds (a synthetic expert's with a stylus, and a
-//! steady person's hand model at the station's pointer, for that device class's), and two
+//! expert attempts that set their thresholds (a steady person's hand model on a stylus and at
+//! the station's pointer, one device class's each), and two
 //! trainees whose scripted attempts improve from novice towards expert. Every attempt is a
 //! real session (synthetic trainee or hand model, 1 kHz servo loop on the virtual clock, cutting simulation, recording), scored from its recording and
 //! stored, so instructors can replay each one in the dashboard.
@@ -26,7 +26,8 @@ pub const DEMO_CURRICULUM: &str = "demo-curriculum";
 pub const AXIAL_EXERCISE: &str = "chest-wall-axial-incision";
 /// Resolution of the attempts' chest wall (the sessions of a novice take 20 s of wall time).
 const MIN_TETS: usize = 3000;
-/// Expert attempts per exercise with a stylus (the synthetic expert).
+/// Expert attempts per exercise with a stylus (a steady person's hand model), which set the
+/// stylus class's thresholds.
 const EXPERTS: u64 = 6;
 /// Expert attempts per exercise with the station's pointer (a steady person's hand model),
 /// which set the pointer's thresholds.
@@ -41,8 +42,9 @@ struct Attempt {
     level: f64,
     seed: u64,
     expert: bool,
-    /// A person's hand on the station's pointer instead of a synthetic trainee at `level`.
-    hand: Option<HandKind>,
+    /// A person's hand model (on the station's pointer or a stylus) instead of a synthetic
+    /// trainee at `level`.
+    hand: Option<DeviceArg>,
 }
 
 impl Attempt {
@@ -112,17 +114,18 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
     let experts: Vec<Attempt> = exercises
         .iter()
         .flat_map(|&exercise| {
-            let expert = move |seed: u64, hand: Option<HandKind>| Attempt {
+            let expert = move |seed: u64, hand: DeviceArg| Attempt {
                 exercise,
                 trainee: "dr-kim",
                 level: 1.0,
                 seed,
                 expert: true,
-                hand,
+                hand: Some(hand),
             };
-            let stylus = (1..=EXPERTS).map(move |k| expert(100 + k, None));
-            let pointer =
-                (1..=POINTER_EXPERTS).map(move |k| expert(150 + k, Some(HandKind::Steady)));
+            let stylus = (1..=EXPERTS)
+                .map(move |k| expert(100 + k, DeviceArg::StylusHand(HandKind::Steady)));
+            let pointer = (1..=POINTER_EXPERTS)
+                .map(move |k| expert(150 + k, DeviceArg::PointerHand(HandKind::Steady)));
             stylus.chain(pointer)
         })
         .collect();
@@ -152,9 +155,8 @@ pub fn run(db: &DbLocation, dir: &Path) -> anyhow::Result<bool> {
         store.close().await;
         anyhow::Ok(())
     })?;
-    // ana improves from novice to expert level (her best attempts pass; two passes in a row,
-    // proficiency, are still ahead of her) and becomes proficient at the second exercise; ben
-    // is still learning
+    // ana improves from novice to expert level (proficient at her last attempts) and becomes
+    // proficient at the second exercise; ben is still learning
     let ana = [0.1, 0.35, 0.6, 0.8, 0.95, 1.0, 1.0]
         .iter()
         .map(|&level| (BUILTIN_EXERCISE, level))
@@ -295,13 +297,13 @@ fn run_lanes(
 }
 
 /// One attempt: a recorded session of a synthetic trainee at the attempt's level (or a
-/// person's hand on the pointer), scored.
+/// person's hand model), scored.
 fn simulate(db: &DbLocation, dir: &Path, a: &Attempt) -> anyhow::Result<()> {
     let out: PathBuf = dir
         .join(a.exercise)
         .join(format!("{}-{}", a.trainee, a.seed));
-    let device = match a.hand {
-        Some(kind) => DeviceArg::PointerHand(kind),
+    let device = match &a.hand {
+        Some(hand) => hand.clone(),
         None => DeviceArg::Trainee {
             name: format!("level:{}", a.level),
             skill: cutlab_haptics::device::Skill::at_level(a.level).context("skill level")?,

@@ -287,6 +287,27 @@ impl Thresholds {
         Ok(Self { k, metrics })
     }
 
+    /// The thresholds with the plan's tolerance (m) as the floor of every band of a distance
+    /// from the plan ([`crate::metrics::Metric::from_plan`]): an error within the tolerance
+    /// passes whatever the experts' spread, as the plan says it counts as on the plan. Experts
+    /// who all cut within 9 um of each other (a scripted hand) would otherwise fail a person
+    /// who follows the plan within its own tolerance. A limit already wider stays.
+    pub fn within_plan_tolerance(mut self, tolerance_m: f64) -> Self {
+        if !(tolerance_m > 0.0 && tolerance_m.is_finite()) {
+            return self;
+        }
+        for t in &mut self.metrics {
+            if !crate::metrics::metric(&t.key).is_some_and(|m| m.from_plan) {
+                continue;
+            }
+            t.upper = t.upper.map(|u| u.max(tolerance_m));
+            if t.better == Better::TwoSided {
+                t.lower = t.lower.map(|l| l.min(-tolerance_m));
+            }
+        }
+        self
+    }
+
     /// The verdict on one attempt's metric values.
     pub fn verdict(&self, attempt: &[MetricValue]) -> Verdict {
         let done = task_done(attempt);
@@ -753,6 +774,56 @@ mod tests {
             "metrics without expert values get no threshold"
         );
         assert!(Thresholds::from_experts(&experts, 0.0).is_err());
+    }
+
+    /// Issue 63: experts who all cut 1.4 mm deep within micrometres of each other made a band
+    /// of +-1.1 mm that a person following the plan within its 2 mm tolerance failed.
+    #[test]
+    fn the_plans_tolerance_is_the_floor_of_the_bands_of_errors_from_the_plan() {
+        let experts: Vec<Vec<MetricValue>> = (0..6)
+            .map(|i| {
+                let e = i as f64 * 1e-6;
+                attempt(&[
+                    ("depth_error_m", 1.4e-3 + e),
+                    ("lateral_mean_m", 2e-4 + e),
+                    ("time_s", 4.0 + e),
+                ])
+            })
+            .collect();
+        let narrow = Thresholds::from_experts(&experts, 2.0).unwrap();
+        let wide = narrow.clone().within_plan_tolerance(2e-3);
+        let limits = |t: &Thresholds, key: &str| {
+            let m = t.metrics.iter().find(|m| m.key == key).unwrap();
+            (m.lower, m.upper)
+        };
+        // a person 1.9 mm shallow, 1.5 mm off the line: out by the experts' spread alone
+        let person = attempt(&[
+            ("depth_error_m", -1.9e-3),
+            ("lateral_mean_m", 1.5e-3),
+            ("time_s", 4.5),
+        ]);
+        assert!(!narrow.verdict(&person).pass);
+        assert_eq!(limits(&wide, "depth_error_m").0, Some(-2e-3));
+        assert_eq!(
+            limits(&wide, "depth_error_m").1,
+            limits(&narrow, "depth_error_m").1,
+            "a limit already beyond the tolerance stays"
+        );
+        assert_eq!(limits(&wide, "lateral_mean_m").1, Some(2e-3));
+        assert_eq!(
+            limits(&wide, "time_s"),
+            limits(&narrow, "time_s"),
+            "the time is no distance from the plan"
+        );
+        let v = wide.verdict(&person);
+        assert!(v.pass, "{v:?}");
+        // beyond the tolerance still fails
+        let off = attempt(&[
+            ("depth_error_m", -2.1e-3),
+            ("lateral_mean_m", 1.5e-3),
+            ("time_s", 4.5),
+        ]);
+        assert!(!wide.verdict(&off).pass);
     }
 
     #[test]

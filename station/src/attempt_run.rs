@@ -13,7 +13,8 @@ use cutlab_assessor::ExercisePlan;
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
-    CsvDevice, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, PointerHand, SyntheticTrainee,
+    CsvDevice, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, PointerHand, StylusHand,
+    SyntheticTrainee,
 };
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::Clock;
@@ -224,6 +225,7 @@ impl Prepared {
                     .expecting_cut_of(&self.config.render),
             ),
             DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, self.plan()?, seed)?),
+            DeviceSpec::StylusHand(kind) => Box::new(StylusHand::new(*kind, self.plan()?, seed)?),
             DeviceSpec::Csv(_) | DeviceSpec::Recording(_) | DeviceSpec::Igtl(_) => {
                 open_device(spec, &self.settings.igtl)?
                     .ok_or_else(|| StationError::NoSuchDevice(format!("{spec} follows no plan")))?
@@ -296,7 +298,9 @@ pub fn open_device(
     igtl: &IgtlOptions,
 ) -> Result<Option<Box<dyn HapticDevice>>, StationError> {
     Ok(Some(match spec {
-        DeviceSpec::Trainee { .. } | DeviceSpec::PointerHand(_) => return Ok(None),
+        DeviceSpec::Trainee { .. } | DeviceSpec::PointerHand(_) | DeviceSpec::StylusHand(_) => {
+            return Ok(None);
+        }
         DeviceSpec::Csv(path) => Box::new(CsvDevice::open(path)?),
         DeviceSpec::Recording(path) => {
             let recording = Recording::open(path).map_err(|e| {

@@ -78,7 +78,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "how far the margin beside the lesion is from the planned margin",
     )
-    .labelled("Margin error"),
+    .labelled("Margin error")
+    .distance_from_plan(),
     m(
         "length_to_width",
         "1",

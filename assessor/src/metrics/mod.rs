@@ -74,11 +74,23 @@ pub struct Metric {
     /// unit's own ([`display_unit`]): a fraction shown in %.
     #[serde(skip)]
     shown: Option<(&'static str, f64)>,
+    /// A distance from the plan (m), which the plan's tolerance allows whatever the experts'
+    /// spread ([`crate::proficiency::Thresholds::within_plan_tolerance`]).
+    #[serde(skip)]
+    pub from_plan: bool,
 }
 
 impl Metric {
     const fn labelled(self, label: &'static str) -> Self {
         Self { label, ..self }
+    }
+
+    /// Marks a distance from the plan (see [`Metric::from_plan`]).
+    pub(crate) const fn distance_from_plan(self) -> Self {
+        Self {
+            from_plan: true,
+            ..self
+        }
     }
 
     const fn shown_in(self, unit: &'static str, factor: f64) -> Self {
@@ -172,7 +184,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "distance of the cut's start from the planned entry (seen along the normal)",
     )
-    .labelled("Entry error"),
+    .labelled("Entry error")
+    .distance_from_plan(),
     m(
         "exit_error_m",
         "m",
@@ -180,7 +193,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "distance of the cut's end from the planned exit",
     )
-    .labelled("Exit error"),
+    .labelled("Exit error")
+    .distance_from_plan(),
     m(
         "length_error_m",
         "m",
@@ -188,7 +202,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "cut length minus planned length (signed)",
     )
-    .labelled("Length error"),
+    .labelled("Length error")
+    .distance_from_plan(),
     m(
         "lateral_mean_m",
         "m",
@@ -196,7 +211,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "mean distance of the cut from the planned line",
     )
-    .labelled("Lateral deviation (mean)"),
+    .labelled("Lateral deviation (mean)")
+    .distance_from_plan(),
     m(
         "lateral_rms_m",
         "m",
@@ -212,7 +228,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "largest distance of the cut from the planned line",
     )
-    .labelled("Lateral deviation (max)"),
+    .labelled("Lateral deviation (max)")
+    .distance_from_plan(),
     m(
         "fraction_cut_in_tolerance",
         "1",
@@ -237,7 +254,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "mean cut depth minus planned depth (signed)",
     )
-    .labelled("Depth error (mean)"),
+    .labelled("Depth error (mean)")
+    .distance_from_plan(),
     m(
         "depth_rms_error_m",
         "m",
@@ -427,6 +445,7 @@ const fn m(
         scored,
         description,
         shown: None,
+        from_plan: false,
     }
 }
 

@@ -63,7 +63,8 @@ pub const METRICS: &[Metric] = &[
         true,
         "largest distance of the cut from the marked line",
     )
-    .labelled("Deviation from the mark (max)"),
+    .labelled("Deviation from the mark (max)")
+    .distance_from_plan(),
     m(
         "pattern_mean_deviation_m",
         "m",

@@ -396,8 +396,14 @@ impl Store {
             let class = DeviceClass::of(device.as_deref());
             attempts.push((class, self.attempt_metric_values(id).await?));
         }
+        let tolerance_m = self
+            .exercise_plan(exercise_id)
+            .await?
+            .kind_plan()
+            .tolerance_m();
         let pooled: Vec<Vec<MetricValue>> = attempts.iter().map(|(_, m)| m.clone()).collect();
-        let t = Thresholds::from_experts(&pooled, e.threshold_k)?;
+        let t =
+            Thresholds::from_experts(&pooled, e.threshold_k)?.within_plan_tolerance(tolerance_m);
         if t.metrics.is_empty() {
             return Err(AssessError::InvalidInput(format!(
                 "exercise {:?}: {} complete expert attempts, need at least 2 with metric values",
@@ -414,7 +420,8 @@ impl Store {
                 .map(|(_, m)| m.clone())
                 .collect();
             if theirs.len() >= 2 {
-                let t = Thresholds::from_experts(&theirs, e.threshold_k)?;
+                let t = Thresholds::from_experts(&theirs, e.threshold_k)?
+                    .within_plan_tolerance(tolerance_m);
                 self.write_class_thresholds(exercise_id, class, &t).await?;
             }
         }

@@ -18,6 +18,7 @@
 
 use std::path::Path;
 
+use super::track::PoseTrack;
 use super::{DeviceFault, HapticDevice};
 use crate::pose::BUTTON_BLADE;
 use crate::{HapticsError, Point3, Rotation, ToolPose, Vector3};
@@ -33,9 +34,7 @@ const MAX_BYTES: u64 = 256 << 20;
 #[derive(Debug, Clone)]
 pub struct CsvDevice {
     name: String,
-    times_s: Vec<f64>,
-    poses: Vec<ToolPose>,
-    cursor: usize,
+    track: PoseTrack,
 }
 
 impl CsvDevice {
@@ -172,68 +171,28 @@ impl CsvDevice {
         let name = format!("csv:{}", path.display());
         Ok(Self {
             name,
-            times_s,
-            poses,
-            cursor: 0,
+            track: PoseTrack::new(times_s, poses),
         })
     }
 
     /// Number of samples.
     pub fn len(&self) -> usize {
-        self.poses.len()
+        self.track.len()
     }
 
     /// Whether the trajectory has no poses.
     pub fn is_empty(&self) -> bool {
-        self.poses.is_empty()
+        self.track.is_empty()
     }
 
     /// Time of the last sample, s.
     pub fn duration_s(&self) -> f64 {
-        self.times_s.last().copied().unwrap_or(0.0)
+        self.track.duration_s()
     }
 
     /// The interpolated pose at `time_s` (moves the cursor; O(1) for increasing times).
     pub fn pose_at(&mut self, time_s: f64) -> ToolPose {
-        let n = self.poses.len();
-        if time_s <= self.times_s[0] {
-            self.cursor = 0;
-            return self.poses[0];
-        }
-        if time_s >= self.times_s[n - 1] {
-            return self.poses[n - 1];
-        }
-        if self.times_s[self.cursor] > time_s {
-            self.cursor = 0;
-        }
-        while self.cursor + 1 < n && self.times_s[self.cursor + 1] <= time_s {
-            self.cursor += 1;
-        }
-        let (a, b) = (self.poses[self.cursor], self.poses[self.cursor + 1]);
-        let u = (time_s - self.times_s[self.cursor])
-            / (self.times_s[self.cursor + 1] - self.times_s[self.cursor]);
-        let mut tip = a.tip_in_world + (b.tip_in_world - a.tip_in_world) * u;
-        if !tip.iter().all(|c| c.is_finite()) {
-            // a step between two finite samples that overflows (coordinates of opposite
-            // signs near f64::MAX): the convex form, else the nearer sample
-            tip = Point3::from(a.tip_in_world.coords * (1.0 - u) + b.tip_in_world.coords * u);
-            if !tip.iter().all(|c| c.is_finite()) {
-                tip = if u < 0.5 {
-                    a.tip_in_world
-                } else {
-                    b.tip_in_world
-                };
-            }
-        }
-        let rotation = a
-            .world_from_tool
-            .try_slerp(&b.world_from_tool, u, 1e-9)
-            .unwrap_or(a.world_from_tool);
-        ToolPose {
-            tip_in_world: tip,
-            world_from_tool: rotation,
-            buttons: a.buttons,
-        }
+        self.track.pose_at(time_s)
     }
 }
 

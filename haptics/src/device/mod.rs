@@ -5,6 +5,8 @@ pub mod igtl;
 pub mod pointer;
 mod pointer_hand;
 mod spec;
+mod stylus_hand;
+mod track;
 mod trainee;
 
 pub use csv::CsvDevice;
@@ -12,6 +14,8 @@ pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
 pub use pointer_hand::{HandKind, PointerHand, STEADY_PACE_M_PER_S};
 pub use spec::DeviceSpec;
+pub use stylus_hand::StylusHand;
+pub use track::PoseTrack;
 pub use trainee::{Skill, SyntheticTrainee};
 
 use crate::{ToolPose, Vector3};

@@ -116,7 +116,7 @@ impl PointerHand {
 }
 
 /// The gestures, in millimetres of the plan's frame.
-fn gestures(kind: HandKind, plan: &Plan, seed: u64) -> Vec<Gesture> {
+pub(super) fn gestures(kind: HandKind, plan: &Plan, seed: u64) -> Vec<Gesture> {
     let mut hand = match kind {
         HandKind::Steady => Hand::steady(1.0, seed),
         HandKind::Sloppy => Hand::sloppy(1.0, seed),
@@ -153,14 +153,14 @@ fn gestures(kind: HandKind, plan: &Plan, seed: u64) -> Vec<Gesture> {
 }
 
 /// The plan's frame on the surface: millimetres along the line and across it to the world.
-struct SurfaceFrame<'a> {
-    plan: &'a Plan,
+pub(super) struct SurfaceFrame<'a> {
+    pub(super) plan: &'a Plan,
     /// The arc length at each point of the line, m.
     arc_m: Vec<f64>,
 }
 
 impl<'a> SurfaceFrame<'a> {
-    fn new(plan: &'a Plan) -> Result<Self, HapticsError> {
+    pub(super) fn new(plan: &'a Plan) -> Result<Self, HapticsError> {
         plan.check()?;
         let mut arc_m = vec![0.0];
         for w in plan.line_m.windows(2) {
@@ -171,7 +171,12 @@ impl<'a> SurfaceFrame<'a> {
 
     /// The surface point `along_mm` along the line (extrapolated past its ends) and
     /// `across_mm` across it (to the left of the cut, seen from outside).
-    fn point(&self, along_mm: f64, across_mm: f64) -> Point3 {
+    pub(super) fn point(&self, along_mm: f64, across_mm: f64) -> Point3 {
+        self.at(along_mm, across_mm).0
+    }
+
+    /// [`Self::point`], with the surface's normal there and the line's direction.
+    pub(super) fn at(&self, along_mm: f64, across_mm: f64) -> (Point3, Vector3, Vector3) {
         let s = along_mm * 1e-3;
         let line = &self.plan.line_m;
         let i = self.arc_m[1..line.len() - 1].partition_point(|&a| a < s);
@@ -184,47 +189,66 @@ impl<'a> SurfaceFrame<'a> {
             .cross(&tangent)
             .try_normalize(1e-12)
             .unwrap_or_else(Vector3::y);
-        line[i] + (line[i + 1] - line[i]) * t + across * (across_mm * 1e-3)
+        let point = line[i] + (line[i + 1] - line[i]) * t + across * (across_mm * 1e-3);
+        let normal = normal.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+        (point, normal, tangent)
     }
 }
 
-/// The page's samples for `gestures`: one per move, one every frame (`frame_ms`) while the
+/// One moment of the hand: when (ms from the start), where on the surface (mm along the
+/// line and across it) and whether the button is down.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct HandSample {
+    pub(super) t_ms: f64,
+    pub(super) at: [f64; 2],
+    pub(super) engaged: bool,
+}
+
+/// The hand's samples for `gestures`: one per move, one every frame (`frame_ms`) while the
 /// hand holds still (the heartbeat), one at each press and release.
-fn page_samples(
-    gestures: &[Gesture],
-    frame: &SurfaceFrame<'_>,
-    frame_ms: f64,
-) -> Vec<PointerSample> {
+pub(super) fn hand_samples(gestures: &[Gesture], frame_ms: f64) -> Vec<HandSample> {
     let (mut t_ms, mut at, mut engaged) = (0.0, [0.0, 0.0], false);
     let mut out = Vec::new();
-    let mut sample = |t_ms: f64, at: [f64; 2], engaged: bool| {
-        let p = frame.point(at[0], at[1]);
-        let depth = if engaged { frame.plan.depth_m } else { 0.0 };
-        out.push(PointerSample::new(t_ms, [p.x, p.y, p.z], depth, engaged));
-    };
     for g in gestures {
         match *g {
             Gesture::Move { x, y, ms } => {
                 t_ms += ms as f64;
                 at = [x, y];
-                sample(t_ms, at, engaged);
+                out.push(HandSample { t_ms, at, engaged });
             }
             Gesture::Wait { ms } => {
                 let end = t_ms + ms as f64;
                 while t_ms + frame_ms <= end {
                     t_ms += frame_ms;
-                    sample(t_ms, at, engaged);
+                    out.push(HandSample { t_ms, at, engaged });
                 }
                 t_ms = end;
             }
             Gesture::Press | Gesture::Release => {
                 engaged = matches!(g, Gesture::Press);
                 t_ms += 1.0;
-                sample(t_ms, at, engaged);
+                out.push(HandSample { t_ms, at, engaged });
             }
         }
     }
     out
+}
+
+/// The page's samples for `gestures` ([`hand_samples`] on the surface, the blade at the
+/// plan's depth while the button is down).
+fn page_samples(
+    gestures: &[Gesture],
+    frame: &SurfaceFrame<'_>,
+    frame_ms: f64,
+) -> Vec<PointerSample> {
+    hand_samples(gestures, frame_ms)
+        .into_iter()
+        .map(|s| {
+            let p = frame.point(s.at[0], s.at[1]);
+            let depth = if s.engaged { frame.plan.depth_m } else { 0.0 };
+            PointerSample::new(s.t_ms, [p.x, p.y, p.z], depth, s.engaged)
+        })
+        .collect()
 }
 
 impl HapticDevice for PointerHand {

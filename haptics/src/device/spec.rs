@@ -7,7 +7,8 @@ use super::Skill;
 
 /// A device as a user names it: `expert`, `intermediate`, `novice`, `level:L` (a synthetic
 /// trainee), `pointer:steady`, `pointer:sloppy` or `pointer:lagging` (a person's hand model on the station's
-/// pointer, [`super::PointerHand`]), `csv:PATH` (a trajectory file), `recording:PATH` (a recorded session's hand) or
+/// pointer, [`super::PointerHand`]), `stylus:steady` or `stylus:sloppy` (the same on a 3D stylus,
+/// [`super::StylusHand`]), `csv:PATH` (a trajectory file), `recording:PATH` (a recorded session's hand) or
 /// `igtl:PORT` (an OpenIGTLink tracker or haptic bridge listening on that port).
 #[derive(Debug, Clone, PartialEq)]
 pub enum DeviceSpec {
@@ -20,6 +21,8 @@ pub enum DeviceSpec {
     },
     /// A person's hand model on the station's pointer.
     PointerHand(super::HandKind),
+    /// A person's hand model on a 3D stylus ([`super::StylusHand`]).
+    StylusHand(super::HandKind),
     /// A trajectory file (see [`super::CsvDevice`]).
     Csv(PathBuf),
     /// An OpenIGTLink tracker or haptic bridge connecting to this port.
@@ -59,6 +62,12 @@ impl std::str::FromStr for DeviceSpec {
                     format!("pointer: needs a hand, steady, sloppy or lagging, got {kind:?}")
                 });
         }
+        if let Some(kind) = s.strip_prefix("stylus:") {
+            return super::HandKind::parse(kind)
+                .filter(|k| *k != super::HandKind::Lagging)
+                .map(DeviceSpec::StylusHand)
+                .ok_or_else(|| format!("stylus: needs a hand, steady or sloppy, got {kind:?}"));
+        }
         if let Some(path) = s.strip_prefix("csv:") {
             if path.is_empty() {
                 return Err("csv: needs a file path, e.g. csv:stroke.csv".into());
@@ -81,7 +90,7 @@ impl std::str::FromStr for DeviceSpec {
                 .map_err(|_| format!("igtl: needs a port number 0-65535, got {port:?}"));
         }
         Err(format!(
-            "unknown device {s:?} (expected expert, intermediate, novice, level:L, pointer:steady, pointer:sloppy, pointer:lagging, csv:PATH, recording:PATH or igtl:PORT)"
+            "unknown device {s:?} (expected expert, intermediate, novice, level:L, pointer:steady, pointer:sloppy, pointer:lagging, stylus:steady, stylus:sloppy, csv:PATH, recording:PATH or igtl:PORT)"
         ))
     }
 }
@@ -92,6 +101,7 @@ impl std::fmt::Display for DeviceSpec {
         match self {
             DeviceSpec::Trainee { name, .. } => f.write_str(name),
             DeviceSpec::PointerHand(kind) => write!(f, "pointer:{}", kind.as_str()),
+            DeviceSpec::StylusHand(kind) => write!(f, "stylus:{}", kind.as_str()),
             DeviceSpec::Csv(path) => write!(f, "csv:{}", path.display()),
             DeviceSpec::Igtl(port) => write!(f, "igtl:{port}"),
             DeviceSpec::Recording(path) => write!(f, "recording:{}", path.display()),
@@ -112,6 +122,8 @@ mod tests {
             "pointer:steady",
             "pointer:sloppy",
             "pointer:lagging",
+            "stylus:steady",
+            "stylus:sloppy",
             "csv:a.csv",
             "igtl:18944",
             "recording:r.mcap",
@@ -137,6 +149,8 @@ mod tests {
             "mouse",
             "pointer:",
             "pointer:shaky",
+            "stylus:lagging",
+            "stylus:",
         ] {
             assert!(bad.parse::<DeviceSpec>().is_err(), "{bad}");
         }

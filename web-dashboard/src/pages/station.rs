@@ -154,6 +154,12 @@ fn device_label(d: &DeviceSpec) -> String {
                 kind.as_str()
             )
         }
+        DeviceSpec::StylusHand(kind) => {
+            format!(
+                "a {} person's hand model on a stylus cuts, you watch",
+                kind.as_str()
+            )
+        }
         DeviceSpec::Csv(path) => format!("the trajectory {}", path.display()),
         DeviceSpec::Recording(path) => format!("the hand recorded in {}", path.display()),
         DeviceSpec::Igtl(port) => {
