@@ -284,6 +284,7 @@ impl SurfaceCollider {
                 stiffness_newtons_per_m: self.stiffness_at(sim, h),
                 cut_entry: None,
                 wound: None,
+                blade_stop: None,
             },
             _ => ContactModel {
                 published: true,

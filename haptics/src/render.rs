@@ -55,6 +55,11 @@ pub struct ContactModel {
     /// leave the wound), rather than having to enter the tissue anew (inside a wound the
     /// nearest surface is its wall, which takes millimetres of travel to cut into).
     pub wound: Option<Wound>,
+    /// While the blade cuts and its edge meets tissue a scalpel does not cut (a rib): where
+    /// its tip stopped and the edge's unit direction from the tip towards the heel
+    /// (`cutlab_sim::cut::Cutter::stop`). The tip is pushed back to it as from a hard
+    /// surface, at the renderer's largest stiffness.
+    pub blade_stop: Option<(Point3, Vector3)>,
 }
 
 /// See [`ContactModel::wound`].
@@ -81,6 +86,7 @@ impl Default for ContactModel {
             stiffness_newtons_per_m: 0.0,
             cut_entry: None,
             wound: None,
+            blade_stop: None,
         }
     }
 }
@@ -102,7 +108,9 @@ impl ContactModel {
             && self.stiffness_newtons_per_m.is_finite()
             && self
                 .cut_entry
-                .is_none_or(|(p, n)| p.iter().chain(n.iter()).all(|c| c.is_finite()))
+                .into_iter()
+                .chain(self.blade_stop)
+                .all(|(p, n)| p.iter().chain(n.iter()).all(|c| c.is_finite()))
             && self.wound.is_none_or(|w| {
                 let (p, n) = w.entry;
                 w.end_m
@@ -467,11 +475,15 @@ impl ForceRenderer {
                     return Vector3::zeros();
                 }
                 self.proxy = tip;
+                // bone under the blade pushes the tip back to where it stopped
+                let bone = c.blade_stop.map_or(Vector3::zeros(), |(stop, edge)| {
+                    edge * ((stop - tip).dot(&edge).max(0.0) * s.max_stiffness_newtons_per_m)
+                });
                 let speed = self.cut_velocity.norm();
                 if speed < 1e-9 {
-                    return Vector3::zeros();
+                    return bone;
                 }
-                -self.cut_velocity / speed
+                bone - self.cut_velocity / speed
                     * (s.cut_resistance_newtons * (speed / s.cut_resistance_speed_m_per_s).tanh())
             }
             Mode::Free | Mode::Touching if pose.blade_engaged() && c.back_in_wound(&tip) => {
@@ -552,6 +564,7 @@ mod tests {
             stiffness_newtons_per_m: k,
             cut_entry: None,
             wound: None,
+            blade_stop: None,
         }
     }
 
@@ -747,6 +760,36 @@ mod tests {
         // lifting out ends the cut
         let out = r.update(400, at(0.001, BUTTON_BLADE), &plane(400, 500.0));
         assert_eq!(out.mode, Mode::Free);
+    }
+
+    /// Issue 62: the blade stops on a rib and the hand feels it: the tip pressed 1 mm past
+    /// where it stopped is pushed back at the renderer's largest stiffness (2 N, besides the
+    /// fading cutting resistance of the press); above the stop nothing is added.
+    #[test]
+    fn a_blade_pressed_past_where_it_stopped_on_bone_is_pushed_back() {
+        let mut r = ForceRenderer::new(RenderSettings::default());
+        for t in 0..100 {
+            r.update(t, at(-0.004, BUTTON_BLADE), &plane(t, 500.0));
+        }
+        let on_rib = |t: u64| ContactModel {
+            blade_stop: Some((Point3::new(0.0, 0.0, -0.005), Vector3::z())),
+            ..plane(t, 500.0)
+        };
+        let above = (100..600)
+            .map(|t| r.update(t, at(-0.0045, BUTTON_BLADE), &on_rib(t)))
+            .last()
+            .expect("ticks");
+        assert_eq!(above.mode, Mode::Cutting);
+        assert!(above.force_newtons.norm() < 0.01, "{above:?}");
+        let out = (600..1100)
+            .map(|t| r.update(t, at(-0.006, BUTTON_BLADE), &on_rib(t)))
+            .last()
+            .expect("ticks");
+        assert_eq!(out.mode, Mode::Cutting);
+        assert!(
+            (out.force_newtons - Vector3::new(0.0, 0.0, 2.0)).norm() < 0.02,
+            "{out:?}"
+        );
     }
 
     #[test]

@@ -41,6 +41,10 @@ pub struct StepperStats {
     /// Pieces the cuts freed, lifted out of the wound (`cutlab_sim::cut::Specimen`).
     #[serde(default)]
     pub specimens: u64,
+    /// Steps whose blade stopped on tissue a scalpel does not cut (a rib, a cartilage:
+    /// `cutlab_sim::cut::Cutter::stop`).
+    #[serde(default)]
+    pub blade_stops: u64,
 }
 
 /// What one step did.
@@ -282,7 +286,9 @@ impl SessionStepper {
                 edge_direction: sample.pose.edge_direction(),
                 depth_m: self.blade_length_m,
             };
-            match self.cutter.advance(&mut self.sim, blade) {
+            let advanced = self.cutter.advance(&mut self.sim, blade);
+            self.stats.blade_stops += u64::from(self.cutter.stop().is_some());
+            match advanced {
                 Ok(ev) if !ev.is_empty() => {
                     self.stats.cut_steps += 1;
                     self.stats.tets_split += ev.tets_removed.len() as u64;
@@ -348,6 +354,11 @@ impl SessionStepper {
                 .contact_model(&self.sim, &probes, self.reach_m, sample.tick, pressed);
         contact.at_heel = contact.valid && hit.as_ref().is_some_and(|(probe, _)| *probe == 1);
         contact.cut_entry = self.cut_entry.and_then(|h| self.entry_now(&h));
+        contact.blade_stop = self
+            .cutter
+            .stop()
+            .filter(|_| render.mode == Mode::Cutting && self.cutter.in_stroke())
+            .map(|s| (s.blade.tip, s.blade.edge_direction.normalize()));
         // (the entry's normal as it went in: the cut splits the entry's triangle, whose
         // normal can turn as the wound opens)
         contact.wound = self.wound.and_then(|(end_m, h)| {

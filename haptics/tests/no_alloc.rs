@@ -54,6 +54,7 @@ fn a_servo_tick_does_not_allocate() {
                 stiffness_newtons_per_m: 300.0,
                 cut_entry: None,
                 wound: None,
+                blade_stop: None,
             });
         }
         out

@@ -161,6 +161,23 @@ pub struct Inclusion {
     pub region: u32,
 }
 
+/// An axis-aligned bar set into a [`layered_block`] (a rib, a costal cartilage).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bar {
+    /// Its corner of least x, y and z (m).
+    pub min: [f64; 3],
+    /// Its corner of greatest x, y and z (m).
+    pub max: [f64; 3],
+    /// The region id its tetrahedra get.
+    pub region: u32,
+}
+
+impl Bar {
+    fn contains(&self, p: &Point3) -> bool {
+        (0..3).all(|i| (self.min[i]..=self.max[i]).contains(&p[i]))
+    }
+}
+
 /// The cells through each layer of a [`layered_block`] of cells `cell` across: the nearest
 /// whole number to `thickness / cell`, at least one, so the layers' interfaces lie on grid
 /// planes and no tetrahedron straddles two.
@@ -174,12 +191,13 @@ pub fn layer_cells(layers: &[Layer], cell: f64) -> Vec<usize> {
 /// A block of layered tissue: `size = [x, y]` (m) centred on the origin, its top face at
 /// `z = 0` and its layers below it, top first, each its own region; cells `cell` (m) across,
 /// and [`layer_cells`] through each layer. The [`Inclusion`]s then take the tetrahedra of
-/// their discs.
+/// their discs, and the [`Bar`]s those whose centroids they hold.
 pub fn layered_block(
     size: [f64; 2],
     cell: f64,
     layers: &[Layer],
     inclusions: &[Inclusion],
+    bars: &[Bar],
 ) -> Result<GeneratedMesh, MeshError> {
     let through = layer_cells(layers, cell);
     // the grid planes' heights, from the bottom up, and each cell row's layer
@@ -212,6 +230,9 @@ pub fn layered_block(
             let inside = |d: &Inclusion| {
                 (c.x - d.centre[0]).hypot(c.y - d.centre[1]) < d.radius && -c.z < d.depth
             };
+            if let Some(b) = bars.iter().rev().find(|b| b.contains(&c)) {
+                return b.region;
+            }
             match inclusions.iter().rev().find(|d| inside(d)) {
                 Some(d) => d.region,
                 None => {
@@ -305,7 +326,7 @@ mod tests {
             depth: 0.002,
             region: 5,
         };
-        let g = layered_block([0.04, 0.03], 0.003, &layers, &[disc]).unwrap();
+        let g = layered_block([0.04, 0.03], 0.003, &layers, &[disc], &[]).unwrap();
         let mesh = &g.mesh;
         assert!(mesh.validate().is_ok(), "{}", mesh.validate());
         assert_eq!(layer_cells(&layers, 0.003), vec![1, 3, 2]);

@@ -15,7 +15,10 @@
 
 use std::collections::VecDeque;
 
-use super::{Blade, CutError, CutEvent, CutOptions, CutPolygon, StrokeVertices, cut_remembering};
+use super::{
+    Blade, BladeStop, CutError, CutEvent, CutOptions, CutPolygon, STOP_MARGIN_M, StrokeVertices,
+    cut_remembering, stop_on_uncuttable,
+};
 use crate::solver::Simulation;
 
 /// Cuts a simulation along the path of a blade, pose by pose.
@@ -36,6 +39,8 @@ pub struct Cutter {
     stroke: StrokeVertices,
     /// The stroke [`Self::end_stroke`] ended, until the next stroke's first pose.
     ended: Option<(VecDeque<Blade>, StrokeVertices)>,
+    /// Where the last pose stopped on uncuttable tissue.
+    stop: Option<BladeStop>,
 }
 
 /// A [`Cutter`]'s state between two steps (see [`Cutter::resume_state`]).
@@ -96,6 +101,7 @@ impl Cutter {
             trail: VecDeque::new(),
             stroke: StrokeVertices::default(),
             ended: None,
+            stop: None,
         }
     }
 
@@ -176,11 +182,33 @@ impl Cutter {
         !self.trail.is_empty()
     }
 
-    /// Moves the blade to `blade`, cutting along its trailing swept surface.
+    /// Where the blade last stopped on uncuttable tissue (see [`Self::advance`]); `None` once
+    /// a pose meets none.
+    pub fn stop(&self) -> Option<&BladeStop> {
+        self.stop.as_ref()
+    }
+
+    /// `blade` drawn back to stop above the model's uncuttable tissue (kept in [`Self::stop`]).
+    fn stopped(&mut self, sim: &Simulation, blade: Blade) -> Blade {
+        let margin_m = STOP_MARGIN_M + self.options.snap_distance_m.unwrap_or(0.0);
+        self.stop = stop_on_uncuttable(
+            &sim.model.mesh,
+            &sim.state.positions,
+            &sim.model.uncuttable_regions,
+            &blade,
+            margin_m,
+        );
+        self.stop.map_or(blade, |s| s.blade)
+    }
+
+    /// Moves the blade to `blade`, cutting along its trailing swept surface. Where its edge
+    /// meets uncuttable tissue (bone, cartilage) the blade is drawn back along its edge to
+    /// stop above it ([`stop_on_uncuttable`]): the swept surface never crosses that tissue.
     pub fn advance(&mut self, sim: &mut Simulation, blade: Blade) -> Result<CutEvent, CutError> {
         if !blade.is_finite() {
             return Err(CutError::NonFiniteBlade);
         }
+        let blade = self.stopped(sim, blade);
         // a stroke's first pose where the last stroke ended continues that stroke
         if let Some((trail, stroke)) = self.ended.take()
             && self.trail.is_empty()

@@ -15,6 +15,7 @@ mod polygon;
 mod resolve;
 mod separate;
 mod specimen;
+mod stop;
 mod transaction;
 
 use std::collections::BTreeMap;
@@ -24,6 +25,7 @@ pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
 pub use specimen::Specimen;
+pub use stop::{BladeStop, STOP_MARGIN_M, stop_on_uncuttable};
 
 use crate::mesh::{PARALLEL_MIN_TETS, TET_EDGES, TetMesh, dihedral_angles, tet_signed_volume};
 use crate::model::ModelError;

@@ -101,6 +101,9 @@ pub struct Resolver<'a> {
     pub inside_tolerance: f64,
     /// Vertices of the cut made by earlier steps of the stroke.
     pub stroke: &'a super::StrokeVertices,
+    /// Regions a scalpel does not cut: an edge of one of their tetrahedra is never split
+    /// beyond the blade (the [`super::Cutter`] stops the blade itself above them).
+    pub uncuttable: &'a [u32],
 }
 
 impl Resolver<'_> {
@@ -168,6 +171,17 @@ impl Resolver<'_> {
         let p = a + (b - a) * cr.t;
         self.plane
             .contains_projection(&p, FORCE_REACH * (b - a).norm())
+    }
+
+    /// Whether edge `e` may be split beyond the blade: no tetrahedron around it is of an
+    /// uncuttable region.
+    fn splittable(&self, e: [u32; 2]) -> bool {
+        self.uncuttable.is_empty()
+            || !self
+                .mesh
+                .topology()
+                .tets_of_edge(e)
+                .any(|t| self.uncuttable.contains(&self.mesh.regions()[t as usize]))
     }
 
     /// True when `v` lies nearer the plane than the snapping distance.
@@ -476,7 +490,9 @@ impl Resolver<'_> {
                 {
                     continue;
                 }
-                if let Some(e) = edge.filter(|e| self.within_reach(&c.crossings[e])) {
+                if let Some(e) =
+                    edge.filter(|e| self.within_reach(&c.crossings[e]) && self.splittable(*e))
+                {
                     // the crossing lies just past B: split it (the cut reaches a little
                     // further) rather than pull a vertex across half an element
                     if forced.insert(e) {
@@ -522,7 +538,7 @@ impl Resolver<'_> {
                         changed = true;
                         continue;
                     }
-                    if forced.insert(e) {
+                    if self.splittable(e) && forced.insert(e) {
                         touched.extend(topo.vertex_tets.row(e[0] as usize));
                         touched.extend(topo.vertex_tets.row(e[1] as usize));
                         changed = true;

@@ -38,6 +38,8 @@ pub(super) struct PendingCut<'a> {
     options: &'a CutOptions,
     /// Vertices of the cut made by earlier steps of the stroke.
     stroke: &'a StrokeVertices,
+    /// Regions whose tetrahedra are never split (`Model::uncuttable_regions`).
+    uncuttable: &'a [u32],
     /// The tetrahedra taking part, ascending: the candidates, widened by [`Self::resolve`].
     cand: Vec<u32>,
     /// Current positions (working copy).
@@ -98,6 +100,7 @@ impl<'a> PendingCut<'a> {
             polygon,
             options,
             stroke,
+            uncuttable: &sim.model.uncuttable_regions,
             cand,
             x: sim.state.positions.clone(),
             x_ref: mesh.positions().to_vec(),
@@ -137,6 +140,7 @@ impl<'a> PendingCut<'a> {
                 snap_distance_m: self.options.snap_distance_m.unwrap_or(0.0),
                 inside_tolerance: 1e-9 * self.polygon.scale,
                 stroke: self.stroke,
+                uncuttable: self.uncuttable,
             }
             .resolve();
             moved_all.extend_from_slice(&class.moved);

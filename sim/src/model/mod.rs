@@ -88,6 +88,9 @@ pub struct Model {
     /// (see [`Model::with_fem`]); the springs are still derived (for the cutter's events), but
     /// the solvers then ignore them.
     pub fem: Option<FemModel>,
+    /// The regions a scalpel does not cut (bone, cartilage), ascending: a [`crate::cut::Cutter`]
+    /// stops the blade where it meets one of their tetrahedra.
+    pub uncuttable_regions: Vec<u32>,
 }
 
 /// What the spring solvers read of a model: lumped masses, held flags, springs and gravity.
@@ -231,7 +234,25 @@ impl Model {
             springs,
             gravity,
             fem: None,
+            uncuttable_regions: Vec::new(),
         })
+    }
+
+    /// The model with `regions` uncuttable (see [`Self::uncuttable_regions`]).
+    pub fn with_uncuttable_regions(mut self, regions: &[u32]) -> Self {
+        self.uncuttable_regions = regions.to_vec();
+        self.uncuttable_regions.sort_unstable();
+        self.uncuttable_regions.dedup();
+        self
+    }
+
+    /// Whether tetrahedron `t` is of an uncuttable region.
+    pub fn uncuttable(&self, t: usize) -> bool {
+        !self.uncuttable_regions.is_empty()
+            && self
+                .uncuttable_regions
+                .binary_search(&self.mesh.regions()[t])
+                .is_ok()
     }
 
     /// Switches the model to co-rotational finite elements with the given materials per region

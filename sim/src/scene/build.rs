@@ -143,7 +143,15 @@ impl Scene {
             scene: spec.name.clone(),
             source,
         };
-        let mut model = Model::new(mesh, &materials, &held, gravity).map_err(model_error)?;
+        let uncuttable: Vec<u32> = spec
+            .materials
+            .iter()
+            .filter(|m| !m.cuttable)
+            .map(|m| m.region)
+            .collect();
+        let mut model = Model::new(mesh, &materials, &held, gravity)
+            .map_err(model_error)?
+            .with_uncuttable_regions(&uncuttable);
         if spec.force_model == ForceModelSpec::CorotationalFem {
             let fem: Vec<(u32, FemMaterial)> = if spec.materials.is_empty() {
                 materials
@@ -232,7 +240,8 @@ fn build_mesh(
             cell_mm,
             layers,
             inclusions,
-        } => layered_box(size_mm, *cell_mm, layers, inclusions)
+            bars,
+        } => layered_box(size_mm, *cell_mm, layers, inclusions, bars)
             .map_err(invalid)?
             .map_err(mesh_err)
             .map(|g| (g.mesh, Some(g.rim))),
@@ -295,6 +304,7 @@ fn layered_box(
     cell_mm: f64,
     layers: &[super::spec::LayerSpec],
     inclusions: &[super::spec::InclusionSpec],
+    bars: &[super::spec::BarSpec],
 ) -> Result<Result<generate::GeneratedMesh, crate::MeshError>, String> {
     let positive = |v: f64| v > 0.0 && v.is_finite();
     if !size_mm.iter().all(|&s| positive(s)) || !positive(cell_mm) {
@@ -345,11 +355,30 @@ fn layered_box(
             region: d.region,
         })
         .collect();
+    if let Some(b) = bars.iter().find(|b| {
+        !(0..3).all(|i| {
+            b.min_mm[i].is_finite() && b.max_mm[i].is_finite() && b.min_mm[i] < b.max_mm[i]
+        })
+    }) {
+        return Err(format!(
+            "bar {:?}: min_mm must be below max_mm on every axis, all finite",
+            b.name
+        ));
+    }
+    let bars: Vec<generate::Bar> = bars
+        .iter()
+        .map(|b| generate::Bar {
+            min: b.min_mm.map(|c| c * MM),
+            max: b.max_mm.map(|c| c * MM),
+            region: b.region,
+        })
+        .collect();
     Ok(generate::layered_block(
         size_mm.map(|s| s * MM),
         cell,
         &layers,
         &discs,
+        &bars,
     ))
 }
 

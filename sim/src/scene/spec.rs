@@ -100,6 +100,12 @@ pub enum MeshSource {
         /// Discs set into the top (a lesion), each its own region.
         #[serde(default)]
         inclusions: Vec<InclusionSpec>,
+        /// Axis-aligned bars set into the block (ribs, costal cartilage), each its own region;
+        /// they take the tetrahedra whose centroids lie inside, after the discs. Faces on the
+        /// grid's planes (the layers' interfaces, multiples of `cell_mm` from the sides) make
+        /// clean bars.
+        #[serde(default)]
+        bars: Vec<BarSpec>,
     },
     /// A mesh file (.msh, .node/.ele, .vtk, .vtu); relative paths are relative to the scene
     /// file. `unit_m` is the length of one file unit in metres (0.001 for millimetres).
@@ -161,6 +167,21 @@ pub struct InclusionSpec {
     pub region: u32,
 }
 
+/// An axis-aligned bar set into a layered box.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BarSpec {
+    /// What it is (`rib 4`, `4th costal cartilage`), for listings.
+    #[serde(default)]
+    pub name: String,
+    /// Its corner of least x, y and z, in mm (the block's top is z = 0).
+    pub min_mm: [f64; 3],
+    /// Its corner of greatest x, y and z, in mm.
+    pub max_mm: [f64; 3],
+    /// The region id its tetrahedra get.
+    pub region: u32,
+}
+
 /// A binary mask file and the region id its voxels get.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -196,6 +217,18 @@ pub struct RegionMaterial {
     /// (default: [`crate::fem::FemMaterial::CHEST_WALL`]).
     #[serde(default)]
     pub fem: Option<crate::fem::FemMaterial>,
+    /// Whether a scalpel cuts it (default true): bone and cartilage are not, the blade stops
+    /// on them ([`crate::model::Model::uncuttable_regions`]).
+    #[serde(default = "yes", skip_serializing_if = "is_true")]
+    pub cuttable: bool,
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
 }
 
 impl RegionMaterial {
