@@ -11,6 +11,7 @@
 //! ([`crate::proficiency`] leaves it out of the verdict and the score).
 
 pub mod excision;
+pub mod exposure;
 pub mod field;
 pub mod incision;
 pub mod motion;
