@@ -8,6 +8,7 @@ mod hub_cli;
 mod kinematics;
 mod localise_choice;
 mod motion_metrics;
+mod plan_cli;
 mod recording;
 mod scene_info;
 mod serve;
@@ -227,6 +228,11 @@ enum Command {
     Scene {
         #[command(subcommand)]
         command: SceneCommand,
+    },
+    /// Planning: candidate incisions cut in the simulation and compared by their field.
+    Plan {
+        #[command(subcommand)]
+        command: plan_cli::PlanCommand,
     },
     /// Send this station's queue (ended attempts and their recordings) to its hub (--hub).
     Sync,
@@ -580,6 +586,7 @@ fn run() -> anyhow::Result<()> {
             scene_info::list();
             Ok(())
         }
+        Command::Plan { command } => plan_cli::run(cli.db.as_ref(), command),
         Command::Sync => hub_cli::sync(
             &cutlab_assessor::default_db(cli.db.as_ref()),
             hub,

@@ -20,6 +20,7 @@ mod geom;
 pub mod input;
 pub mod metrics;
 pub mod pace;
+pub mod planning;
 pub mod proficiency;
 pub mod recordings;
 

@@ -57,6 +57,8 @@ pub struct Exposure {
     pub visible_fraction: f64,
     /// The widest straight instrument that reaches a visible point (m); 0 when none is seen.
     pub working_width_m: f64,
+    /// The area-weighted centre of what is seen (m); none when nothing is.
+    pub visible_centroid_m: Option<Point3<f64>>,
 }
 
 /// One sample of the target's surface: where, its patch's area, and whether it faces the eye.
@@ -164,12 +166,21 @@ pub fn exposure(
     n_theta: usize,
 ) -> Exposure {
     let samples = facing_samples(target, eye, n_theta.max(2));
-    let region_area_m2: f64 = samples.iter().map(|s| s.area_m2).sum();
+    // (folded from +0: an empty sum of floats is -0)
+    let region_area_m2 = samples.iter().fold(0.0, |a, s| a + s.area_m2);
     let visible: Vec<&Sample> = samples
         .iter()
         .filter(|s| seen(tissue, eye, &s.at))
         .collect();
-    let visible_area_m2: f64 = visible.iter().map(|s| s.area_m2).sum();
+    let visible_area_m2 = visible.iter().fold(0.0, |a, s| a + s.area_m2);
+    let visible_centroid_m = (visible_area_m2 > 0.0).then(|| {
+        Point3::from(
+            visible
+                .iter()
+                .fold(Vector3::zeros(), |a, s| a + s.at.coords * s.area_m2)
+                / visible_area_m2,
+        )
+    });
     let stride = visible.len().div_ceil(WIDTH_SAMPLES).max(1);
     let working_width_m = 2.0
         * visible
@@ -186,6 +197,7 @@ pub fn exposure(
             0.0
         },
         working_width_m,
+        visible_centroid_m,
     }
 }
 

@@ -221,6 +221,9 @@ pub struct RegionMaterial {
     /// on them ([`crate::model::Model::uncuttable_regions`]).
     #[serde(default = "yes", skip_serializing_if = "is_true")]
     pub cuttable: bool,
+    /// A structure to spare (default false): cutting it is damage (an artery, a nerve).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub spare: bool,
 }
 
 fn yes() -> bool {

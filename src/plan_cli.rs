@@ -1,0 +1,111 @@
+//! `cutlab plan field`: a candidate incision cut in the simulation and the field it gives
+//! (`cutlab_assessor::planning`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Subcommand;
+use cutlab_assessor::planning::{CandidateIncision, FieldReport, field_of};
+use cutlab_assessor::store::{DbLocation, Store, default_db};
+use cutlab_sim::scene::{BuildOptions, Scene};
+
+#[derive(Debug, Subcommand)]
+pub enum PlanCommand {
+    /// Cut a candidate incision in the simulation with a scripted stroke, let the wound open,
+    /// and print the field: what of the scene's target the viewpoint sees through the opening,
+    /// the working width, the incision's length, the approach angle, what was damaged.
+    Field {
+        /// The exercise whose scene to cut (from the database, `--db`).
+        #[arg(long, conflicts_with = "scene")]
+        exercise: Option<String>,
+        /// A built-in scene or a scene file, instead of an exercise's.
+        #[arg(long)]
+        scene: Option<String>,
+        /// The candidate: JSON `{"incision_m": [[x, y, z], ...], "depth_m": d}` (metres, the
+        /// line on the skin).
+        #[arg(long)]
+        incision: PathBuf,
+        /// How long the wound opens under the tissue's tension before the field is measured, s.
+        #[arg(long, default_value_t = 0.5)]
+        open_s: f64,
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs a planning command; `db` is the global `--db`.
+pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> {
+    let PlanCommand::Field {
+        exercise,
+        scene,
+        incision,
+        open_s,
+        json,
+    } = command;
+    if !(open_s.is_finite() && (0.0..=10.0).contains(&open_s)) {
+        anyhow::bail!("--open-s: from 0 to 10 s, got {open_s}");
+    }
+    let candidate = read_candidate(&incision)?;
+    candidate
+        .check()
+        .with_context(|| format!("the candidate {}", incision.display()))?;
+    let scene_name = match (exercise, scene) {
+        (Some(e), _) => scene_of_exercise(db, &e)?,
+        (None, Some(s)) => s,
+        (None, None) => anyhow::bail!("give the exercise (--exercise) or the scene (--scene)"),
+    };
+    let scene = Scene::load(&scene_name, BuildOptions::default())
+        .with_context(|| format!("building the scene {scene_name}"))?;
+    let report = field_of(&scene, &candidate, open_s)
+        .with_context(|| format!("the candidate {}", incision.display()))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_report(&scene_name, &report);
+    }
+    Ok(())
+}
+
+fn read_candidate(path: &Path) -> anyhow::Result<CandidateIncision> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading the candidate {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("the candidate {}", path.display()))
+}
+
+fn scene_of_exercise(db: Option<&DbLocation>, name: &str) -> anyhow::Result<String> {
+    let location = default_db(db);
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    rt.block_on(async {
+        let store = Store::open(&location)
+            .await
+            .with_context(|| format!("opening the database {location}"))?;
+        store.ensure_builtins().await?;
+        let e = store.exercise_by_name(name).await;
+        store.close().await;
+        Ok(e?.scene)
+    })
+}
+
+fn print_report(scene: &str, r: &FieldReport) {
+    println!("field of the candidate on {scene} ({}):", r.target);
+    println!(
+        "  target seen        {:.1} mm^2 ({:.1} % of what faces the viewpoint)",
+        r.target_visible_area_m2 * 1e6,
+        r.target_visible_fraction * 100.0
+    );
+    println!("  working width      {:.1} mm", r.working_width_m * 1e3);
+    println!("  incision length    {:.1} mm", r.incision_length_m * 1e3);
+    match r.approach_angle_deg {
+        Some(a) => println!("  approach angle     {a:.1} deg from straight in"),
+        None => println!("  approach angle     - (nothing seen)"),
+    }
+    if r.damaged.is_empty() {
+        println!("  damaged            nothing");
+    } else {
+        println!("  damaged            {}", r.damaged.join(", "));
+    }
+}

@@ -1,0 +1,117 @@
+//! `cutlab plan field` (issue 62): candidate incisions on the thorax compared by their field,
+//! and refused with the field named when they are not incisions.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn temp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("cutlab-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir.join(name)
+}
+
+/// Runs `plan field` on a candidate file holding `json`: (success, stdout, stderr).
+fn plan(name: &str, json: &str, more: &[&str]) -> (bool, String, String) {
+    let file = temp(&format!("{name}.json"));
+    std::fs::write(&file, json).expect("candidate");
+    let db = temp("plan.db");
+    let mut args = vec![
+        "--db",
+        db.to_str().expect("utf-8"),
+        "plan",
+        "field",
+        "--incision",
+        file.to_str().expect("utf-8"),
+    ];
+    args.extend_from_slice(more);
+    let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+        .args(&args)
+        .output()
+        .expect("cutlab runs");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The field of a straight candidate from `x0` to `x1` mm at `y` mm on the thorax's skin.
+fn field(name: &str, x0: f64, x1: f64, y: f64) -> serde_json::Value {
+    let json = format!(
+        r#"{{"incision_m": [[{}, {}, 0.0], [{}, {}, 0.0]], "depth_m": 0.045}}"#,
+        x0 * 1e-3,
+        y * 1e-3,
+        x1 * 1e-3,
+        y * 1e-3
+    );
+    let (ok, out, err) = plan(name, &json, &["--scene", "thorax", "--json"]);
+    assert!(ok, "{err}");
+    serde_json::from_str(&out).expect("a report")
+}
+
+#[test]
+fn candidates_are_compared_by_what_they_show_and_what_they_damage() {
+    let area = |v: &serde_json::Value| v["target_visible_area_m2"].as_f64().expect("area");
+    // through the 4th intercostal space (y -10 to 5 mm), 50 mm and 20 mm long
+    let long = field("long", -20.0, 30.0, -2.5);
+    let short = field("short", 0.0, 20.0, -2.5);
+    assert!(area(&long) > 1e-5, "{long}");
+    assert!(area(&short) < area(&long), "{short} {long}");
+    assert_eq!(long["damaged"], serde_json::json!([]));
+    assert!((long["incision_length_m"].as_f64().expect("length") - 0.05).abs() < 1e-9);
+    assert!(
+        long["approach_angle_deg"]
+            .as_f64()
+            .is_some_and(|a| a < 20.0)
+    );
+    // the same length over the 4th rib: the blade stops on the bone, nothing shows
+    let rib = field("rib", -20.0, 30.0, 11.5);
+    assert_eq!(area(&rib), 0.0);
+    assert_eq!(rib["damaged"], serde_json::json!(["rib"]));
+    // medially in the space, across the internal thoracic artery
+    let medial = field("medial", -40.0, 0.0, -2.5);
+    assert_eq!(
+        medial["damaged"],
+        serde_json::json!(["internal thoracic artery"])
+    );
+}
+
+#[test]
+fn what_is_not_an_incision_is_refused_naming_the_field() {
+    let line = r#"[[0.0, -0.0025, 0.0], [0.02, -0.0025, 0.0]]"#;
+    for (name, json, says) in [
+        (
+            "one-point",
+            r#"{"incision_m": [[0, 0, 0]], "depth_m": 0.01}"#.to_owned(),
+            "incision_m",
+        ),
+        (
+            "shallow",
+            format!(r#"{{"incision_m": {line}, "depth_m": 0}}"#),
+            "depth_m",
+        ),
+        (
+            "off",
+            r#"{"incision_m": [[0, 0, 0.05], [0.02, 0, 0.05]], "depth_m": 0.01}"#.to_owned(),
+            "off the tissue",
+        ),
+        (
+            "unknown",
+            format!(r#"{{"incision_m": {line}, "depth_m": 0.01, "retract": 1}}"#),
+            "unknown field",
+        ),
+        (
+            "huge",
+            r#"{"incision_m": [[0, 0, 0], [1e400, 0, 0]], "depth_m": 0.01}"#.to_owned(),
+            "candidate",
+        ),
+    ] {
+        let (ok, _, err) = plan(name, &json, &["--scene", "thorax"]);
+        assert!(!ok && err.contains(says), "{name}: {err}");
+    }
+    let json = format!(r#"{{"incision_m": {line}, "depth_m": 0.01}}"#);
+    let (ok, _, err) = plan("no-exercise", &json, &["--exercise", "no-such-exercise"]);
+    assert!(!ok && err.contains("no-such-exercise"), "{err}");
+    let (ok, _, err) = plan("no-scene", &json, &[]);
+    assert!(!ok && err.contains("--scene"), "{err}");
+}
