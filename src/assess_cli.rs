@@ -200,23 +200,30 @@ pub fn run(db: Option<&DbLocation>, command: AssessCommand) -> anyhow::Result<()
         AssessCommand::Import {
             command: ImportCommand::Kinematics { dir, json, predict },
         } => crate::kinematics::run(&dir, json, predict),
-        command => {
-            let location = default_db(db);
-            let rt = tokio::runtime::Builder::new_current_thread()
-                .enable_all()
-                .build()
-                .context("starting the async runtime")?;
-            rt.block_on(async {
-                let store = Store::open(&location)
-                    .await
-                    .with_context(|| format!("opening the database {location}"))?;
-                store.ensure_builtins().await?;
-                let result = with_store(&store, command).await;
-                store.close().await;
-                result
-            })
-        }
+        command => on_store(db, async |store| with_store(store, command).await),
     }
+}
+
+/// Runs `f` on the database `db` (else the default one): opened, its built-in exercises made
+/// sure of, closed after.
+pub fn on_store<T>(
+    db: Option<&DbLocation>,
+    f: impl AsyncFnOnce(&Store) -> anyhow::Result<T>,
+) -> anyhow::Result<T> {
+    let location = default_db(db);
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    rt.block_on(async {
+        let store = Store::open(&location)
+            .await
+            .with_context(|| format!("opening the database {location}"))?;
+        store.ensure_builtins().await?;
+        let result = f(&store).await;
+        store.close().await;
+        result
+    })
 }
 
 async fn with_store(store: &Store, command: AssessCommand) -> anyhow::Result<()> {

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Subcommand;
 use cutlab_assessor::planning::{CandidateIncision, FieldReport, field_of};
-use cutlab_assessor::store::{DbLocation, Store, default_db};
+use cutlab_assessor::store::DbLocation;
 use cutlab_sim::scene::{BuildOptions, Scene};
 
 #[derive(Debug, Subcommand)]
@@ -74,19 +74,8 @@ fn read_candidate(path: &Path) -> anyhow::Result<CandidateIncision> {
 }
 
 fn scene_of_exercise(db: Option<&DbLocation>, name: &str) -> anyhow::Result<String> {
-    let location = default_db(db);
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
-    rt.block_on(async {
-        let store = Store::open(&location)
-            .await
-            .with_context(|| format!("opening the database {location}"))?;
-        store.ensure_builtins().await?;
-        let e = store.exercise_by_name(name).await;
-        store.close().await;
-        Ok(e?.scene)
+    crate::assess_cli::on_store(db, async |store| {
+        Ok(store.exercise_by_name(name).await?.scene)
     })
 }
 

@@ -26,6 +26,18 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// A 60 mm line along x on the plane z = 0, `depth_m` deep: the devices' tests' plan.
+    #[cfg(test)]
+    pub(crate) fn flat_across_x(depth_m: f64) -> Self {
+        Self {
+            line_m: vec![Point3::new(-0.03, 0.0, 0.0), Point3::new(0.03, 0.0, 0.0)],
+            normals: vec![Vector3::z(); 2],
+            depth_m,
+            approach_height_m: 0.015,
+            viewpoint_m: None,
+        }
+    }
+
     /// Checks the plan's numbers.
     pub fn check(&self) -> Result<(), HapticsError> {
         let bad = |m: &str| Err(HapticsError::Config(format!("plan: {m}")));

@@ -13,7 +13,7 @@
 //!   `e - p`. For a sphere of radius `r` seen from `D` away its area is the cap
 //!   `2 pi r^2 (1 - r / D)`.
 //! - **Visible**: a facing sample whose segment from the eye meets no triangle of the tissue's
-//!   surface before it (less [`super::field::VISIBILITY_EPS_M`]). The visible area is the sum of
+//!   surface before it ([`super::field::seen`]). The visible area is the sum of
 //!   the visible samples' patches; the visible fraction is that over the region's area.
 //! - **Working width**: the widest straight instrument that reaches a visible point from the
 //!   eye's side: at a visible sample `p`, a cylinder of radius `r` along `e - p` is clear when
@@ -26,7 +26,7 @@ use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh;
 
-use super::field::VISIBILITY_EPS_M;
+use super::field::seen;
 
 /// Rays on an instrument's surface per test of a radius.
 pub const RING_RAYS: usize = 12;
@@ -102,16 +102,6 @@ fn ray(from: &Point3<f64>, along: &Vector3<f64>) -> Ray {
         PVec::new(from.x, from.y, from.z),
         PVec::new(along.x, along.y, along.z),
     )
-}
-
-/// Whether the segment from `eye` to `p` passes `tissue` (stopping `VISIBILITY_EPS_M` short).
-fn seen(tissue: &TriMesh, eye: &Point3<f64>, p: &Point3<f64>) -> bool {
-    let d = p - eye;
-    let len = d.norm();
-    len <= VISIBILITY_EPS_M
-        || tissue
-            .cast_local_ray(&ray(eye, &d), 1.0 - VISIBILITY_EPS_M / len, false)
-            .is_none()
 }
 
 /// Whether a cylinder of radius `r` from `p` towards `eye` (as far as the eye) is clear.

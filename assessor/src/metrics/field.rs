@@ -84,6 +84,21 @@ pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
         .map_err(|e| AssessError::InvalidInput(format!("surface: {e}")))
 }
 
+/// Whether the segment from `eye` to `p` passes `mesh` (stopping [`VISIBILITY_EPS_M`] short
+/// of `p`).
+pub fn seen(mesh: &TriMesh, eye: &Point3<f64>, p: &Point3<f64>) -> bool {
+    let d = p - eye;
+    let len = d.norm();
+    len <= VISIBILITY_EPS_M
+        || mesh
+            .cast_local_ray(
+                &Ray::new(to_parry(eye.coords), to_parry(d)),
+                1.0 - VISIBILITY_EPS_M / len,
+                false,
+            )
+            .is_none()
+}
+
 /// The fraction of `targets` visible from `eye` past `mesh`; `None` without targets.
 ///
 /// A ray that runs exactly along mesh edges (targets and viewpoint on a grid plane of the
@@ -95,16 +110,7 @@ pub fn visible_fraction(mesh: &TriMesh, eye: [f64; 3], targets: &[[f64; 3]]) -> 
         return None;
     }
     let eye = Point3::from(eye);
-    let clear = |p: Point3<f64>| {
-        let d = p - eye;
-        let len = d.norm();
-        if len <= VISIBILITY_EPS_M {
-            return true;
-        }
-        let ray = Ray::new(to_parry(eye.coords), to_parry(d));
-        mesh.cast_local_ray(&ray, 1.0 - VISIBILITY_EPS_M / len, false)
-            .is_none()
-    };
+    let clear = |p: Point3<f64>| seen(mesh, &eye, &p);
     let visible = targets
         .iter()
         .map(|&p| Point3::from(p))

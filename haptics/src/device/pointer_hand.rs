@@ -288,13 +288,7 @@ mod tests {
     use super::*;
 
     fn plan() -> Plan {
-        Plan {
-            line_m: vec![Point3::new(-0.03, 0.0, 0.0), Point3::new(0.03, 0.0, 0.0)],
-            normals: vec![Vector3::z(); 2],
-            depth_m: 0.006,
-            approach_height_m: 0.015,
-            viewpoint_m: None,
-        }
+        Plan::flat_across_x(0.006)
     }
 
     fn play(kind: HandKind, seed: u64) -> Vec<ToolPose> {

@@ -16,11 +16,12 @@
 
 use super::pointer_hand::{HandSample, SurfaceFrame, gestures, hand_samples};
 use super::track::PoseTrack;
+use super::trainee::blade_frame;
 use super::{DeviceFault, HandKind, HapticDevice};
 use crate::hand::minimum_jerk;
 use crate::plan::Plan;
 use crate::pose::BUTTON_BLADE;
-use crate::{HapticsError, Rotation, ToolPose, Vector3};
+use crate::{HapticsError, ToolPose, Vector3};
 
 /// How high above the surface the tip hovers between gestures, m.
 pub const HOVER_M: f64 = 0.003;
@@ -68,7 +69,7 @@ fn stylus_poses(samples: &[HandSample], frame: &SurfaceFrame<'_>) -> (Vec<f64>, 
         let (p, normal, tangent) = frame.at(at[0], at[1]);
         ToolPose {
             tip_in_world: p + normal * height_m,
-            world_from_tool: orientation(normal, tangent),
+            world_from_tool: blade_frame(normal, tangent),
             buttons: if engaged { BUTTON_BLADE } else { 0 },
         }
     };
@@ -103,17 +104,6 @@ fn stylus_poses(samples: &[HandSample], frame: &SurfaceFrame<'_>) -> (Vec<f64>, 
     (times_s, poses)
 }
 
-/// +z along the surface's normal, +x along the cut.
-fn orientation(normal: Vector3, tangent: Vector3) -> Rotation {
-    let z = normal;
-    let x = (tangent - z * tangent.dot(&z))
-        .try_normalize(1e-12)
-        .unwrap_or_else(|| z.cross(&Vector3::y()).normalize());
-    let y = z.cross(&x);
-    let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
-    Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m))
-}
-
 impl HapticDevice for StylusHand {
     fn name(&self) -> &str {
         &self.name
@@ -135,16 +125,9 @@ impl HapticDevice for StylusHand {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Point3;
 
     fn plan() -> Plan {
-        Plan {
-            line_m: vec![Point3::new(-0.03, 0.0, 0.0), Point3::new(0.03, 0.0, 0.0)],
-            normals: vec![Vector3::z(); 2],
-            depth_m: 0.006,
-            approach_height_m: 0.015,
-            viewpoint_m: None,
-        }
+        Plan::flat_across_x(0.006)
     }
 
     fn play(kind: HandKind, seed: u64) -> Vec<ToolPose> {

@@ -292,13 +292,7 @@ impl SyntheticTrainee {
     fn orientation(&self, normal: Vector3, tangent: Vector3) -> Rotation {
         let tilt =
             Rotation::from_axis_angle(&nalgebra::Unit::new_normalize(tangent), self.tilt_rad);
-        let z = tilt * normal;
-        let x = (tangent - z * tangent.dot(&z))
-            .try_normalize(1e-12)
-            .unwrap_or_else(|| z.cross(&Vector3::y()).normalize());
-        let y = z.cross(&x);
-        let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
-        Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m))
+        blade_frame(tilt * normal, tangent)
     }
 
     /// The pose for the current state.
@@ -441,18 +435,24 @@ impl HapticDevice for SyntheticTrainee {
     }
 }
 
+/// The tool frame with +z along `axis` (unit) and +x along `tangent` made perpendicular to it:
+/// a blade held along the surface normal, cutting along the line.
+pub(crate) fn blade_frame(axis: Vector3, tangent: Vector3) -> Rotation {
+    let z = axis;
+    let x = (tangent - z * tangent.dot(&z))
+        .try_normalize(1e-12)
+        .unwrap_or_else(|| z.cross(&Vector3::y()).normalize());
+    let y = z.cross(&x);
+    let m = nalgebra::Matrix3::from_columns(&[x, y, z]);
+    Rotation::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn flat_plan() -> Plan {
-        Plan {
-            line_m: vec![Point3::new(-0.03, 0.0, 0.0), Point3::new(0.03, 0.0, 0.0)],
-            normals: vec![Vector3::z(); 2],
-            depth_m: 0.005,
-            approach_height_m: 0.015,
-            viewpoint_m: None,
-        }
+        Plan::flat_across_x(0.005)
     }
 
     #[test]
