@@ -18,7 +18,9 @@ use cutlab_sim::cut::{self, Cutter};
 use cutlab_sim::scene::Scene;
 
 use crate::error::{AssessError, Result};
+use crate::input::SurfaceMesh;
 use crate::metrics::exposure::{Ellipsoid, exposure};
+use crate::metrics::field::trimesh;
 
 /// How far above the skin the blade's edge reaches, m.
 pub const ABOVE_M: f64 = 0.02;
@@ -104,15 +106,17 @@ impl CandidateIncision {
     }
 }
 
+/// The tissue's surface as it is now.
 fn surface(sim: &cutlab_sim::solver::Simulation) -> Result<TriMesh> {
-    let vertices: Vec<PVec> = sim
-        .state
-        .positions
-        .iter()
-        .map(|p| PVec::new(p.x, p.y, p.z))
-        .collect();
-    TriMesh::new(vertices, sim.model.mesh.topology().boundary.clone())
-        .map_err(|e| AssessError::InvalidInput(format!("the tissue's surface: {e}")))
+    trimesh(&SurfaceMesh {
+        vertices_m: sim
+            .state
+            .positions
+            .iter()
+            .map(|p| [p.x, p.y, p.z])
+            .collect(),
+        triangles: sim.model.mesh.topology().boundary.clone(),
+    })
 }
 
 /// Cuts `candidate` in `scene` and measures the field after `open_s` seconds of opening.
@@ -140,7 +144,8 @@ pub fn field_of(scene: &Scene, candidate: &CandidateIncision, open_s: f64) -> Re
             )));
         }
     }
-    let damaged = stroke(&mut sim, scene, candidate, &up)?;
+    let stations = candidate.stations();
+    let damaged = stroke(&mut sim, scene, &stations, candidate.depth_m, &up)?;
     let steps = (open_s.max(0.0) / sim.settings.time_step_s).round() as usize;
     for _ in 0..steps {
         sim.step()
@@ -152,7 +157,7 @@ pub fn field_of(scene: &Scene, candidate: &CandidateIncision, open_s: f64) -> Re
     };
     let eye = Point3::from(view.eye_mm) * 1e-3;
     let seen = exposure(&surface(&sim)?, &heart, &eye, TARGET_SAMPLES);
-    let middle = candidate.stations()[candidate.stations().len() / 2];
+    let middle = stations[stations.len() / 2];
     let approach_angle_deg = seen.visible_centroid_m.map(|c| {
         let to = c - middle;
         (to.dot(&-up) / to.norm())
@@ -171,11 +176,13 @@ pub fn field_of(scene: &Scene, candidate: &CandidateIncision, open_s: f64) -> Re
     })
 }
 
-/// The scripted stroke; returns the names of what it damaged.
+/// The scripted stroke through `stations`, the tip `depth_m` below them; returns the names of
+/// what it damaged.
 fn stroke(
     sim: &mut cutlab_sim::solver::Simulation,
     scene: &Scene,
-    candidate: &CandidateIncision,
+    stations: &[Point3<f64>],
+    depth_m: f64,
     up: &Vector3<f64>,
 ) -> Result<Vec<String>> {
     let mut hit: Vec<u32> = Vec::new();
@@ -187,8 +194,8 @@ fn stroke(
         .filter(|m| m.spare)
         .map(|m| m.region)
         .collect();
-    for p in candidate.stations() {
-        let blade = cut::blade(p - up * candidate.depth_m, *up, candidate.depth_m + ABOVE_M);
+    for p in stations {
+        let blade = cut::blade(p - up * depth_m, *up, depth_m + ABOVE_M);
         let regions = sim.model.mesh.regions().to_vec();
         match cutter.advance(sim, blade) {
             Ok(event) => hit.extend(

@@ -53,11 +53,6 @@ impl StylusHand {
             track: PoseTrack::new(times_s, poses),
         })
     }
-
-    /// The hand's samples: times (s) and poses.
-    pub fn track(&self) -> &PoseTrack {
-        &self.track
-    }
 }
 
 /// The stylus's poses for the hand's samples: each sample at the surface point it aims at,

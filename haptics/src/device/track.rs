@@ -40,11 +40,6 @@ impl PoseTrack {
         self.times_s.last().copied().unwrap_or(0.0)
     }
 
-    /// The samples: times (s) and poses.
-    pub fn samples(&self) -> impl Iterator<Item = (f64, &ToolPose)> {
-        self.times_s.iter().copied().zip(&self.poses)
-    }
-
     /// The interpolated pose at `time_s` (moves the cursor; O(1) for increasing times).
     pub fn pose_at(&mut self, time_s: f64) -> ToolPose {
         let n = self.poses.len();

@@ -191,13 +191,7 @@ impl Cutter {
     /// `blade` drawn back to stop above the model's uncuttable tissue (kept in [`Self::stop`]).
     fn stopped(&mut self, sim: &Simulation, blade: Blade) -> Blade {
         let margin_m = STOP_MARGIN_M + self.options.snap_distance_m.unwrap_or(0.0);
-        self.stop = stop_on_uncuttable(
-            &sim.model.mesh,
-            &sim.state.positions,
-            &sim.model.uncuttable_regions,
-            &blade,
-            margin_m,
-        );
+        self.stop = stop_on_uncuttable(&sim.model, &sim.state.positions, &blade, margin_m);
         self.stop.map_or(blade, |s| s.blade)
     }
 

@@ -37,6 +37,7 @@ use crate::mesh::{
     TET_EDGES, TET_FACES, TetMesh, edge_key, face_key, tet_signed_volume, tet_volume_gradients,
     triangle_normal,
 };
+use crate::model::Model;
 use crate::{Point3, Vector3};
 
 /// A moved vertex keeps every tetrahedron around it at no less than this fraction of its
@@ -101,9 +102,9 @@ pub struct Resolver<'a> {
     pub inside_tolerance: f64,
     /// Vertices of the cut made by earlier steps of the stroke.
     pub stroke: &'a super::StrokeVertices,
-    /// Regions a scalpel does not cut: an edge of one of their tetrahedra is never split
-    /// beyond the blade (the [`super::Cutter`] stops the blade itself above them).
-    pub uncuttable: &'a [u32],
+    /// The model, for its uncuttable tetrahedra ([`Model::uncuttable`]): an edge of one is
+    /// never split beyond the blade (the [`super::Cutter`] stops the blade itself above them).
+    pub model: &'a Model,
 }
 
 impl Resolver<'_> {
@@ -176,12 +177,12 @@ impl Resolver<'_> {
     /// Whether edge `e` may be split beyond the blade: no tetrahedron around it is of an
     /// uncuttable region.
     fn splittable(&self, e: [u32; 2]) -> bool {
-        self.uncuttable.is_empty()
+        self.model.uncuttable_regions.is_empty()
             || !self
                 .mesh
                 .topology()
                 .tets_of_edge(e)
-                .any(|t| self.uncuttable.contains(&self.mesh.regions()[t as usize]))
+                .any(|t| self.model.uncuttable(t as usize))
     }
 
     /// True when `v` lies nearer the plane than the snapping distance.

@@ -11,7 +11,7 @@
 //! margin, so that its swept surface never crosses them: their tetrahedra are never split.
 
 use super::polygon::Blade;
-use crate::mesh::TetMesh;
+use crate::model::Model;
 use crate::{Point3, Vector3};
 
 /// How far above an uncuttable surface the stopped tip stays, m, besides the cutter's
@@ -25,30 +25,27 @@ pub struct BladeStop {
     pub blade: Blade,
     /// The region it met.
     pub region: u32,
-    /// How far the tip was drawn back, m.
-    pub drawn_back_m: f64,
 }
 
-/// The blade stopped on the first uncuttable tetrahedron its edge meets from the heel, in the
-/// current positions `x`; `None` if it meets none. `margin_m` is kept between the tip and the
-/// tissue (the tip never goes above the heel).
+/// The blade stopped on the first of `model`'s uncuttable tetrahedra its edge meets from the
+/// heel, in the current positions `x`; `None` if it meets none. `margin_m` is kept between the
+/// tip and the tissue (the tip never goes above the heel).
 pub fn stop_on_uncuttable(
-    mesh: &TetMesh,
+    model: &Model,
     x: &[Point3],
-    uncuttable_regions: &[u32],
     blade: &Blade,
     margin_m: f64,
 ) -> Option<BladeStop> {
-    if uncuttable_regions.is_empty() || !(blade.depth_m > 0.0) {
+    if model.uncuttable_regions.is_empty() || !(blade.depth_m > 0.0) {
         return None;
     }
+    let mesh = &model.mesh;
     let heel = blade.heel();
     let along = blade.tip - heel;
     let (lo, hi) = (heel.inf(&blade.tip), heel.sup(&blade.tip));
     let mut first: Option<(f64, u32)> = None;
     for (t, tet) in mesh.tets().iter().enumerate() {
-        let region = mesh.regions()[t];
-        if !uncuttable_regions.contains(&region) {
+        if !model.uncuttable(t) {
             continue;
         }
         let p = tet.map(|v| x[v as usize]);
@@ -61,13 +58,12 @@ pub fn stop_on_uncuttable(
         if let Some(s) = entry(&p, &heel, &along)
             && first.is_none_or(|(f, _)| s < f)
         {
-            first = Some((s, region));
+            first = Some((s, mesh.regions()[t]));
         }
     }
     let (s, region) = first?;
     let length = along.norm();
     let depth_m = (length * s - margin_m).clamp(0.0, blade.depth_m);
-    let drawn_back_m = blade.depth_m - depth_m;
     let direction = -along / length.max(f64::MIN_POSITIVE);
     Some(BladeStop {
         blade: Blade {
@@ -76,7 +72,6 @@ pub fn stop_on_uncuttable(
             depth_m,
         },
         region,
-        drawn_back_m,
     })
 }
 
@@ -110,16 +105,21 @@ fn entry(p: &[Point3; 4], heel: &Point3, along: &Vector3) -> Option<f64> {
 mod tests {
     use super::*;
     use crate::mesh::TetMesh;
+    use crate::model::Material;
 
-    /// A unit tetrahedron of region 7 with its top face at z = 0 (below it, down to z = -1).
-    fn bone() -> TetMesh {
+    /// A unit tetrahedron of region 7 with its top face at z = 0 (below it, down to z = -1),
+    /// the regions `uncuttable`.
+    fn bone(uncuttable: &[u32]) -> Model {
         let positions = vec![
             Point3::new(0.0, 0.0, 0.0),
             Point3::new(1.0, 0.0, 0.0),
             Point3::new(0.0, 1.0, 0.0),
             Point3::new(0.0, 0.0, -1.0),
         ];
-        TetMesh::new(positions, vec![[0, 1, 3, 2]], vec![7]).expect("a tetrahedron")
+        let mesh = TetMesh::new(positions, vec![[0, 1, 3, 2]], vec![7]).expect("a tetrahedron");
+        Model::new(mesh, &[(7, Material::default())], &[], Vector3::zeros())
+            .expect("a model")
+            .with_uncuttable_regions(uncuttable)
     }
 
     fn blade(x: f64, y: f64, tip_z: f64) -> Blade {
@@ -132,9 +132,10 @@ mod tests {
 
     #[test]
     fn a_blade_over_bone_stops_its_margin_above_it() {
-        let mesh = bone();
+        let model = bone(&[7]);
+        let x = model.mesh.positions();
         let b = blade(0.2, 0.2, -0.5);
-        let stop = stop_on_uncuttable(&mesh, mesh.positions(), &[7], &b, 0.1).expect("a stop");
+        let stop = stop_on_uncuttable(&model, x, &b, 0.1).expect("a stop");
         assert_eq!(stop.region, 7);
         assert!(
             (stop.blade.tip - Point3::new(0.2, 0.2, 0.1)).norm() < 1e-12,
@@ -144,29 +145,27 @@ mod tests {
             (stop.blade.heel() - b.heel()).norm() < 1e-12,
             "the heel stays"
         );
-        assert!((stop.drawn_back_m - 0.6).abs() < 1e-12);
+        // drawn back 0.6 of its 2
+        assert!((stop.blade.depth_m - 1.4).abs() < 1e-12);
         // beside the bone, above it, or with the region cuttable: no stop
-        for (b, regions) in [
-            (blade(0.8, 0.8, -0.5), &[7][..]),
-            (blade(0.2, 0.2, 0.3), &[7]),
-            (blade(0.2, 0.2, -0.5), &[3]),
+        for (b, model) in [
+            (blade(0.8, 0.8, -0.5), bone(&[7])),
+            (blade(0.2, 0.2, 0.3), bone(&[7])),
+            (blade(0.2, 0.2, -0.5), bone(&[3])),
         ] {
-            assert_eq!(
-                stop_on_uncuttable(&mesh, mesh.positions(), regions, &b, 0.1),
-                None
-            );
+            assert_eq!(stop_on_uncuttable(&model, x, &b, 0.1), None);
         }
     }
 
     #[test]
     fn a_blade_whose_heel_is_in_bone_is_drawn_back_to_nothing() {
-        let mesh = bone();
+        let model = bone(&[7]);
         let b = Blade {
             tip: Point3::new(0.1, 0.1, -0.9),
             edge_direction: Vector3::z(),
             depth_m: 0.5,
         };
-        let stop = stop_on_uncuttable(&mesh, mesh.positions(), &[7], &b, 0.1).expect("a stop");
+        let stop = stop_on_uncuttable(&model, model.mesh.positions(), &b, 0.1).expect("a stop");
         assert_eq!(stop.blade.depth_m, 0.0);
         assert!((stop.blade.tip - b.heel()).norm() < 1e-12);
     }

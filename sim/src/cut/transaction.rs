@@ -14,6 +14,7 @@ use super::{
 use crate::mesh::{
     TET_EDGES, TET_FACES, TetMesh, edge_key, sorted_pair, sorted_triple, tet_signed_volume,
 };
+use crate::model::Model;
 use crate::solver::Simulation;
 use crate::{Point3, Vector3};
 
@@ -38,8 +39,8 @@ pub(super) struct PendingCut<'a> {
     options: &'a CutOptions,
     /// Vertices of the cut made by earlier steps of the stroke.
     stroke: &'a StrokeVertices,
-    /// Regions whose tetrahedra are never split (`Model::uncuttable_regions`).
-    uncuttable: &'a [u32],
+    /// The simulation's model (its uncuttable tetrahedra are never split).
+    model: &'a Model,
     /// The tetrahedra taking part, ascending: the candidates, widened by [`Self::resolve`].
     cand: Vec<u32>,
     /// Current positions (working copy).
@@ -100,7 +101,7 @@ impl<'a> PendingCut<'a> {
             polygon,
             options,
             stroke,
-            uncuttable: &sim.model.uncuttable_regions,
+            model: &sim.model,
             cand,
             x: sim.state.positions.clone(),
             x_ref: mesh.positions().to_vec(),
@@ -140,7 +141,7 @@ impl<'a> PendingCut<'a> {
                 snap_distance_m: self.options.snap_distance_m.unwrap_or(0.0),
                 inside_tolerance: 1e-9 * self.polygon.scale,
                 stroke: self.stroke,
-                uncuttable: self.uncuttable,
+                model: self.model,
             }
             .resolve();
             moved_all.extend_from_slice(&class.moved);
