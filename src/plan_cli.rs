@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Subcommand;
-use cutlab_assessor::planning::{CandidateIncision, FieldReport, field_of};
+use cutlab_assessor::planning::{CandidateIncision, FieldReport, Opening, View, field_of};
 use cutlab_assessor::store::DbLocation;
 use cutlab_sim::scene::{BuildOptions, Scene};
 
@@ -28,6 +28,10 @@ pub enum PlanCommand {
         /// How long the wound opens under the tissue's tension before the field is measured, s.
         #[arg(long, default_value_t = 0.5)]
         open_s: f64,
+        /// Then set a retractor in the wound and spread its middle to this width, mm; the
+        /// field is reported unretracted and retracted.
+        #[arg(long)]
+        retract_mm: Option<f64>,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -41,10 +45,16 @@ pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> 
         scene,
         incision,
         open_s,
+        retract_mm,
         json,
     } = command;
     if !(open_s.is_finite() && (0.0..=10.0).contains(&open_s)) {
         anyhow::bail!("--open-s: from 0 to 10 s, got {open_s}");
+    }
+    if let Some(w) = retract_mm
+        && !(w.is_finite() && (0.0..=200.0).contains(&w))
+    {
+        anyhow::bail!("--retract-mm: from 0 to 200 mm, got {w}");
     }
     let candidate = read_candidate(&incision)?;
     candidate
@@ -57,7 +67,11 @@ pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> 
     };
     let scene = Scene::load(&scene_name, BuildOptions::default())
         .with_context(|| format!("building the scene {scene_name}"))?;
-    let report = field_of(&scene, &candidate, open_s)
+    let opening = Opening {
+        open_s,
+        retract_m: retract_mm.map(|w| w * 1e-3),
+    };
+    let report = field_of(&scene, &candidate, opening)
         .with_context(|| format!("the candidate {}", incision.display()))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -81,20 +95,28 @@ fn scene_of_exercise(db: Option<&DbLocation>, name: &str) -> anyhow::Result<Stri
 
 fn print_report(scene: &str, r: &FieldReport) {
     println!("field of the candidate on {scene} ({}):", r.target);
-    println!(
-        "  target seen        {:.1} mm^2 ({:.1} % of what faces the viewpoint)",
-        r.target_visible_area_m2 * 1e6,
-        r.target_visible_fraction * 100.0
-    );
-    println!("  working width      {:.1} mm", r.working_width_m * 1e3);
+    print_view(&r.unretracted);
     println!("  incision length    {:.1} mm", r.incision_length_m * 1e3);
-    match r.approach_angle_deg {
-        Some(a) => println!("  approach angle     {a:.1} deg from straight in"),
-        None => println!("  approach angle     - (nothing seen)"),
-    }
     if r.damaged.is_empty() {
         println!("  damaged            nothing");
     } else {
         println!("  damaged            {}", r.damaged.join(", "));
+    }
+    if let (Some(w), Some(v)) = (r.retractor_width_m, &r.retracted) {
+        println!("retracted to {:.1} mm:", w * 1e3);
+        print_view(v);
+    }
+}
+
+fn print_view(v: &View) {
+    println!(
+        "  target seen        {:.1} mm^2 ({:.1} % of what faces the viewpoint)",
+        v.target_visible_area_m2 * 1e6,
+        v.target_visible_fraction * 100.0
+    );
+    println!("  working width      {:.1} mm", v.working_width_m * 1e3);
+    match v.approach_angle_deg {
+        Some(a) => println!("  approach angle     {a:.1} deg from straight in"),
+        None => println!("  approach angle     - (nothing seen)"),
     }
 }

@@ -37,6 +37,11 @@ fn plan(name: &str, json: &str, more: &[&str]) -> (bool, String, String) {
 
 /// The field of a straight candidate from `x0` to `x1` mm at `y` mm on the thorax's skin.
 fn field(name: &str, x0: f64, x1: f64, y: f64) -> serde_json::Value {
+    field_with(name, x0, x1, y, &[])
+}
+
+/// [`field`] with more arguments to `plan field`.
+fn field_with(name: &str, x0: f64, x1: f64, y: f64, more: &[&str]) -> serde_json::Value {
     let json = format!(
         r#"{{"incision_m": [[{}, {}, 0.0], [{}, {}, 0.0]], "depth_m": 0.045}}"#,
         x0 * 1e-3,
@@ -44,7 +49,8 @@ fn field(name: &str, x0: f64, x1: f64, y: f64) -> serde_json::Value {
         x1 * 1e-3,
         y * 1e-3
     );
-    let (ok, out, err) = plan(name, &json, &["--scene", "thorax", "--json"]);
+    let args = [&["--scene", "thorax", "--json"], more].concat();
+    let (ok, out, err) = plan(name, &json, &args);
     assert!(ok, "{err}");
     serde_json::from_str(&out).expect("a report")
 }
@@ -74,6 +80,38 @@ fn candidates_are_compared_by_what_they_show_and_what_they_damage() {
         medial["damaged"],
         serde_json::json!(["internal thoracic artery"])
     );
+}
+
+/// A retractor opens the slit an unretracted intercostal incision is: the wider it spreads,
+/// the more shows, up to the ribs bounding the space; a longer incision retracted the same
+/// shows more than a shorter one.
+#[test]
+fn a_retractor_opens_the_field_up_to_the_ribs() {
+    let retracted = |v: &serde_json::Value, key: &str| v["retracted"][key].as_f64().expect(key);
+    let narrow = field_with("r10", -20.0, 30.0, -2.5, &["--retract-mm", "10"]);
+    let wide = field_with("r20", -20.0, 30.0, -2.5, &["--retract-mm", "20"]);
+    let short = field_with("r20-short", 0.0, 20.0, -2.5, &["--retract-mm", "20"]);
+    let area = |v: &serde_json::Value| retracted(v, "target_visible_area_m2");
+    assert!(
+        area(&narrow)
+            > 3.0
+                * narrow["target_visible_area_m2"]
+                    .as_f64()
+                    .expect("unretracted"),
+        "{narrow}"
+    );
+    assert!(area(&wide) > area(&narrow), "{wide} {narrow}");
+    assert!(area(&short) < area(&wide), "{short} {wide}");
+    assert_eq!(wide["retractor_width_m"].as_f64(), Some(0.02));
+    // the instrument that passes is bounded by the 15 mm space, less the clearance to the ribs
+    let width = retracted(&wide, "working_width_m");
+    assert!(width > 0.005 && width < 0.015, "{width}");
+    let (ok, _, err) = plan(
+        "r-bad",
+        r#"{"incision_m": [[0, 0, 0], [0.02, 0, 0]], "depth_m": 0.045}"#,
+        &["--scene", "thorax", "--retract-mm", "NaN"],
+    );
+    assert!(!ok && err.contains("--retract-mm"), "{err}");
 }
 
 #[test]

@@ -15,6 +15,7 @@ use parry3d_f64::shape::TriMesh;
 use serde::{Deserialize, Serialize};
 
 use cutlab_sim::cut::{self, Cutter};
+use cutlab_sim::retractor::Retractor;
 use cutlab_sim::scene::Scene;
 
 use crate::error::{AssessError, Result};
@@ -41,26 +42,61 @@ pub struct CandidateIncision {
     pub depth_m: f64,
 }
 
-/// The field a candidate gives.
+/// What the viewpoint sees of the target through the opening, at one moment.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FieldReport {
-    /// The target the figures are of (the scene's first).
-    pub target: String,
+pub struct View {
     /// The target's area seen from the viewpoint through the opening, m^2.
     pub target_visible_area_m2: f64,
     /// That over the target's area facing the viewpoint.
     pub target_visible_fraction: f64,
     /// The widest straight instrument that reaches the seen target, m.
     pub working_width_m: f64,
-    /// The incision's length on the skin, m.
-    pub incision_length_m: f64,
     /// The angle between the way into the body (`-up`) and the line from the incision's
     /// middle to the seen part of the target, degrees; none when nothing is seen.
     pub approach_angle_deg: Option<f64>,
+}
+
+/// The field a candidate gives.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FieldReport {
+    /// The target the figures are of (the scene's first).
+    pub target: String,
+    /// The field once the wound has opened under the tissue's own tension.
+    #[serde(flatten)]
+    pub unretracted: View,
+    /// The width a retractor spread the wound's middle to, m, when one was set.
+    pub retractor_width_m: Option<f64>,
+    /// The field with the retractor open.
+    pub retracted: Option<View>,
+    /// The incision's length on the skin, m.
+    pub incision_length_m: f64,
     /// What the stroke damaged: the regions it stopped on (bone) or split though marked
     /// `spare`, by name.
     pub damaged: Vec<String>,
 }
+
+/// How a candidate is cut and opened.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Opening {
+    /// How long the wound opens under the tissue's tension before the field is measured, s.
+    pub open_s: f64,
+    /// The width a retractor then spreads the wound's middle to, m (none: no retractor).
+    pub retract_m: Option<f64>,
+}
+
+impl Default for Opening {
+    fn default() -> Self {
+        Self {
+            open_s: 0.5,
+            retract_m: None,
+        }
+    }
+}
+
+/// How long the retractor takes to open, s.
+pub const RETRACT_RAMP_S: f64 = 0.3;
+/// How long the retracted wound settles before it is measured, s.
+pub const RETRACT_HOLD_S: f64 = 0.2;
 
 impl CandidateIncision {
     /// Checks the numbers, naming the field at fault.
@@ -119,9 +155,21 @@ fn surface(sim: &cutlab_sim::solver::Simulation) -> Result<TriMesh> {
     })
 }
 
-/// Cuts `candidate` in `scene` and measures the field after `open_s` seconds of opening.
-pub fn field_of(scene: &Scene, candidate: &CandidateIncision, open_s: f64) -> Result<FieldReport> {
+/// Cuts `candidate` in `scene`, lets the wound open and measures the field; with a
+/// retractor, spreads the wound and measures it again.
+pub fn field_of(
+    scene: &Scene,
+    candidate: &CandidateIncision,
+    opening: Opening,
+) -> Result<FieldReport> {
     candidate.check()?;
+    if let Some(w) = opening.retract_m
+        && !(w.is_finite() && (0.0..=0.2).contains(&w))
+    {
+        return Err(AssessError::InvalidInput(format!(
+            "retract_m: from 0 to 0.2 m, got {w}"
+        )));
+    }
     let target = scene.targets.first().ok_or_else(|| {
         AssessError::InvalidInput(format!("scene {:?} has no target", scene.spec.name))
     })?;
@@ -134,7 +182,56 @@ pub fn field_of(scene: &Scene, candidate: &CandidateIncision, open_s: f64) -> Re
         .unit()
         .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
     let mut sim = scene.simulation();
-    let skin = surface(&sim)?;
+    on_tissue(&surface(&sim)?, candidate)?;
+    let stations = candidate.stations();
+    let damaged = stroke(&mut sim, scene, &stations, candidate.depth_m, &up)?;
+    let dt_s = sim.settings.time_step_s;
+    let steps = |s: f64| (s.max(0.0) / dt_s).round() as usize;
+    for _ in 0..steps(opening.open_s) {
+        sim.step()
+            .map_err(|e| AssessError::InvalidInput(format!("the opening wound: {e}")))?;
+    }
+    let sight = Sight {
+        heart: Ellipsoid {
+            centre_m: Point3::from(target.centre_mm) * 1e-3,
+            radii_m: Vector3::from(target.radii_mm) * 1e-3,
+        },
+        eye: Point3::from(view.eye_mm) * 1e-3,
+        middle: stations[stations.len() / 2],
+        up,
+    };
+    let unretracted = sight.view(&sim)?;
+    let retracted = match opening.retract_m {
+        None => None,
+        Some(width_m) => {
+            let retractor = Retractor {
+                line_m: candidate
+                    .incision_m
+                    .iter()
+                    .map(|&p| Point3::from(p))
+                    .collect(),
+                up,
+                width_m,
+            };
+            let (ramp, hold) = (steps(RETRACT_RAMP_S), steps(RETRACT_HOLD_S));
+            retractor
+                .open(&mut sim, ramp, hold)
+                .map_err(|e| AssessError::InvalidInput(format!("the retracted wound: {e}")))?;
+            Some(sight.view(&sim)?)
+        }
+    };
+    Ok(FieldReport {
+        target: target.name.clone(),
+        unretracted,
+        retractor_width_m: opening.retract_m,
+        retracted,
+        incision_length_m: candidate.length_m(),
+        damaged,
+    })
+}
+
+/// Refuses a candidate whose points are off the tissue's surface.
+fn on_tissue(skin: &TriMesh, candidate: &CandidateIncision) -> Result<()> {
     for (i, p) in candidate.incision_m.iter().enumerate() {
         let at = PVec::new(p[0], p[1], p[2]);
         if skin.distance_to_local_point(at, true) > ON_TISSUE_M {
@@ -144,36 +241,35 @@ pub fn field_of(scene: &Scene, candidate: &CandidateIncision, open_s: f64) -> Re
             )));
         }
     }
-    let stations = candidate.stations();
-    let damaged = stroke(&mut sim, scene, &stations, candidate.depth_m, &up)?;
-    let steps = (open_s.max(0.0) / sim.settings.time_step_s).round() as usize;
-    for _ in 0..steps {
-        sim.step()
-            .map_err(|e| AssessError::InvalidInput(format!("the opening wound: {e}")))?;
+    Ok(())
+}
+
+/// The target, the eye, and where the approach is measured from.
+struct Sight {
+    heart: Ellipsoid,
+    eye: Point3<f64>,
+    middle: Point3<f64>,
+    up: Vector3<f64>,
+}
+
+impl Sight {
+    /// What the eye sees of the target through the tissue as it is now.
+    fn view(&self, sim: &cutlab_sim::solver::Simulation) -> Result<View> {
+        let seen = exposure(&surface(sim)?, &self.heart, &self.eye, TARGET_SAMPLES);
+        let approach_angle_deg = seen.visible_centroid_m.map(|c| {
+            let to = c - self.middle;
+            (to.dot(&-self.up) / to.norm())
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
+        });
+        Ok(View {
+            target_visible_area_m2: seen.visible_area_m2,
+            target_visible_fraction: seen.visible_fraction,
+            working_width_m: seen.working_width_m,
+            approach_angle_deg,
+        })
     }
-    let heart = Ellipsoid {
-        centre_m: Point3::from(target.centre_mm) * 1e-3,
-        radii_m: Vector3::from(target.radii_mm) * 1e-3,
-    };
-    let eye = Point3::from(view.eye_mm) * 1e-3;
-    let seen = exposure(&surface(&sim)?, &heart, &eye, TARGET_SAMPLES);
-    let middle = stations[stations.len() / 2];
-    let approach_angle_deg = seen.visible_centroid_m.map(|c| {
-        let to = c - middle;
-        (to.dot(&-up) / to.norm())
-            .clamp(-1.0, 1.0)
-            .acos()
-            .to_degrees()
-    });
-    Ok(FieldReport {
-        target: target.name.clone(),
-        target_visible_area_m2: seen.visible_area_m2,
-        target_visible_fraction: seen.visible_fraction,
-        working_width_m: seen.working_width_m,
-        incision_length_m: candidate.length_m(),
-        approach_angle_deg,
-        damaged,
-    })
 }
 
 /// The scripted stroke through `stations`, the tip `depth_m` below them; returns the names of

@@ -64,6 +64,7 @@ pub mod mesh;
 pub mod model;
 mod parallel;
 pub mod reference;
+pub mod retractor;
 pub mod rng;
 pub mod scene;
 pub mod segmentation;

@@ -110,3 +110,51 @@ fn a_blade_in_an_intercostal_space_cuts_through_the_pleura() {
     assert_eq!(stop, None);
     assert!(deepest < -0.0395, "through the pleura: {deepest}");
 }
+
+/// A retractor in an incision through the 4th space (y -10 to 5 mm) spreads the skin's edges
+/// to its width at the middle, carries nothing in the rib layer nearer the ribs than its
+/// clearance, and the body stays finite while it holds.
+#[test]
+fn a_retractor_spreads_the_wound_to_its_width_and_not_into_the_ribs() {
+    use cutlab_sim::retractor::{BONE_CLEARANCE_M, Retractor};
+    let scene = thorax();
+    let mut sim = scene.simulation();
+    let mut cutter = Cutter::default();
+    let y = -0.0025;
+    for k in 0..=50 {
+        let x = -0.020 + 0.001 * k as f64;
+        let blade = cut::blade(Point3::new(x, y, -0.045), Vector3::z(), 0.065);
+        let _ = cutter.advance(&mut sim, blade);
+        sim.step().expect("a step");
+    }
+    let retractor = Retractor {
+        line_m: vec![Point3::new(-0.020, y, 0.0), Point3::new(0.030, y, 0.0)],
+        up: Vector3::z(),
+        width_m: 0.020,
+    };
+    let grip = retractor.open(&mut sim, 60, 40).expect("it opens");
+    assert!(grip.vertices.len() > 20, "{} gripped", grip.vertices.len());
+    let rest = sim.model.mesh.positions().to_vec();
+    let skin_middle: Vec<f64> = grip
+        .vertices
+        .iter()
+        .map(|&v| sim.state.positions[v as usize])
+        .filter(|p| p.z > -0.003 && (p.x - 0.005).abs() < 0.003)
+        .map(|p| p.y - y)
+        .collect();
+    let gap = skin_middle.iter().fold(0.0f64, |a, &b| a.max(b))
+        - skin_middle.iter().fold(0.0f64, |a, &b| a.min(b));
+    assert!((gap - 0.020).abs() < 0.001, "the skin opened to {gap} m");
+    // the 4th space runs from y = -10 to 5 mm between the ribs' faces
+    for (i, &v) in grip.vertices.iter().enumerate() {
+        if rest[v as usize].z < -0.029 && rest[v as usize].z > -0.039 {
+            let to = grip.to_m[i].y;
+            assert!(
+                to < 0.005 - BONE_CLEARANCE_M + 1e-9 && to > -0.010 + BONE_CLEARANCE_M - 1e-9,
+                "particle {v} carried to y = {to} into a rib"
+            );
+        }
+    }
+    assert!(sim.state.is_finite());
+    assert!(grip.vertices.iter().all(|&v| sim.model.held[v as usize]));
+}

@@ -1,0 +1,193 @@
+//! A wound retractor: two blades set into an incision that spread its edges to a chosen
+//! width, as a surgeon opens a mini-thoracotomy to see through it (issue 62).
+//!
+//! The incision is a line on the skin (`line_m`, the polyline the blade was drawn along) with
+//! the blade along `up`. At arc length `s` of the line (length `L`) the retractor holds the
+//! wound's edges `w(s)` apart,
+//!
+//! `w(s) = W sqrt(1 - u^2)`, `u = 2 s / L - 1`,
+//!
+//! an ellipse as a ring retractor makes of a straight wound: the full width `W` at the middle,
+//! nothing at the ends, where the tissue is uncut. It grips the wound's faces: the particles
+//! the cut split, whose rest positions lie on the swept surface (within a quarter of the mesh's
+//! median edge of the line's vertical plane) and whose tetrahedra all lie on one side of it.
+//! Each is carried, held, from where it is to `±w(s)/2` from the plane along the side vector
+//! `up x along` (never inwards), over the ramp's steps. Tissue a scalpel does not cut (bone,
+//! cartilage) is not spread: a face particle is carried no nearer than [`BONE_CLEARANCE_M`] to
+//! an uncuttable particle beside it at its depth, so an intercostal incision opens to the ribs
+//! and no further (a rib spreader, which moves the bones, is not modelled).
+
+use crate::solver::{Simulation, StepError};
+use crate::{Point3, Vector3};
+
+/// How near a spread face particle comes to bone beside it, m.
+pub const BONE_CLEARANCE_M: f64 = 0.001;
+
+/// A retractor set into one incision.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Retractor {
+    /// The incision's line on the skin (m), at least two points.
+    pub line_m: Vec<Point3>,
+    /// The way out of the body (unit): the blade stood along it.
+    pub up: Vector3,
+    /// The width the retractor opens the wound's middle to, m.
+    pub width_m: f64,
+}
+
+/// The particles a [`Retractor`] holds and where it carries them.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Grip {
+    /// Held particles.
+    pub vertices: Vec<u32>,
+    /// Where each was when gripped (m).
+    pub from_m: Vec<Point3>,
+    /// Where the open retractor holds each (m).
+    pub to_m: Vec<Point3>,
+}
+
+/// Where a rest point lies against the line: arc length `s`, offset along the side vector,
+/// the side vector and the point of the line it is measured from.
+struct Station {
+    s_m: f64,
+    offset_m: f64,
+    side: Vector3,
+    foot: Point3,
+}
+
+impl Retractor {
+    /// The line's length, m.
+    pub fn length_m(&self) -> f64 {
+        self.line_m.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+    }
+
+    /// `p` against the nearest segment of the line, seen along `up`; `None` when it lies
+    /// beyond the line's ends.
+    fn station(&self, p: &Point3) -> Option<Station> {
+        let flat = |v: Vector3| v - self.up * self.up.dot(&v);
+        let mut best: Option<(f64, Station)> = None;
+        let mut s0 = 0.0;
+        for w in self.line_m.windows(2) {
+            let seg = flat(w[1] - w[0]);
+            let len = seg.norm();
+            if len < 1e-9 {
+                continue;
+            }
+            let along = seg / len;
+            let t = along.dot(&flat(p - w[0]));
+            if (0.0..=len).contains(&t) {
+                let side = self.up.cross(&along);
+                let foot = w[0] + along * t;
+                let offset_m = side.dot(&flat(p - w[0]));
+                if best.as_ref().is_none_or(|(d, _)| offset_m.abs() < *d) {
+                    let s_m = s0 + t;
+                    best = Some((
+                        offset_m.abs(),
+                        Station {
+                            s_m,
+                            offset_m,
+                            side,
+                            foot,
+                        },
+                    ));
+                }
+            }
+            s0 += len;
+        }
+        best.map(|(_, st)| st)
+    }
+
+    /// The half-width the retractor holds at arc length `s_m`.
+    fn half_width_m(&self, s_m: f64) -> f64 {
+        let u = 2.0 * s_m / self.length_m() - 1.0;
+        0.5 * self.width_m * (1.0 - u * u).max(0.0).sqrt()
+    }
+
+    /// Grips the wound's faces in `sim`'s current mesh and state.
+    pub fn grip(&self, sim: &Simulation) -> Grip {
+        let model = &sim.model;
+        let rest = model.mesh.positions();
+        let edge = model.median_edge_length().unwrap_or(0.005);
+        // per particle: bit 0 a tetrahedron on the negative side, bit 1 on the positive side,
+        // bit 2 an uncuttable one
+        let mut sides = vec![0u8; rest.len()];
+        for (t, tet) in model.mesh.tets().iter().enumerate() {
+            let c = tet
+                .iter()
+                .map(|&v| rest[v as usize].coords)
+                .sum::<Vector3>()
+                / 4.0;
+            let bit = match self.station(&Point3::from(c)) {
+                Some(st) if st.offset_m < 0.0 => 1,
+                Some(_) => 2,
+                None => 3,
+            } | if model.uncuttable(t) { 4 } else { 0 };
+            for &v in tet {
+                sides[v as usize] |= bit;
+            }
+        }
+        let bone: Vec<Point3> = (0..rest.len())
+            .filter(|&v| sides[v] & 4 != 0)
+            .map(|v| rest[v])
+            .collect();
+        let mut grip = Grip::default();
+        for (v, p) in rest.iter().enumerate() {
+            let one_side = matches!(sides[v], 1 | 2);
+            let Some(st) = self.station(p).filter(|st| st.offset_m.abs() < 0.25 * edge) else {
+                continue;
+            };
+            if !one_side {
+                continue;
+            }
+            let sign = if sides[v] == 1 { -1.0 } else { 1.0 };
+            let mut half = self.half_width_m(st.s_m);
+            for b in &bone {
+                let d = b - p;
+                let beside = (b - st.foot).dot(&st.side) * sign;
+                if beside > 0.0 && (d - st.side * d.dot(&st.side)).norm() < edge {
+                    half = half.min(beside - BONE_CLEARANCE_M);
+                }
+            }
+            let now = sim.state.positions[v];
+            let out = st.side.dot(&(now - st.foot)) * sign;
+            if half > out {
+                grip.vertices.push(v as u32);
+                grip.from_m.push(now);
+                grip.to_m.push(now + st.side * (sign * (half - out)));
+            }
+        }
+        grip
+    }
+
+    /// Grips the wound, opens the retractor over `ramp_steps` simulation steps (the gripped
+    /// particles held and carried linearly) and keeps it open for `hold_steps` more. The
+    /// particles stay held. Returns the grip.
+    pub fn open(
+        &self,
+        sim: &mut Simulation,
+        ramp_steps: usize,
+        hold_steps: usize,
+    ) -> Result<Grip, StepError> {
+        let grip = self.grip(sim);
+        sim.edit(|model, _| {
+            for &v in &grip.vertices {
+                model.held[v as usize] = true;
+                model.inv_mass[v as usize] = 0.0;
+            }
+        });
+        sim.wake(grip.vertices.iter().copied());
+        let ramp = ramp_steps.max(1);
+        for k in 1..=ramp {
+            let f = k as f64 / ramp as f64;
+            for (i, &v) in grip.vertices.iter().enumerate() {
+                sim.state.positions[v as usize] =
+                    grip.from_m[i] + (grip.to_m[i] - grip.from_m[i]) * f;
+                sim.state.velocities[v as usize] = Vector3::zeros();
+            }
+            sim.step()?;
+        }
+        for _ in 0..hold_steps {
+            sim.step()?;
+        }
+        Ok(grip)
+    }
+}
