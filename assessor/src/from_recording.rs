@@ -11,7 +11,9 @@ use cutlab_sim::TetMesh;
 
 use crate::AssessError;
 use crate::exercise::{ExercisePlan, HandLine};
-use crate::input::{AttemptData, CutSample, ForceSample, FreedPiece, PoseSample, SurfaceMesh};
+use crate::input::{
+    AttemptData, CutSample, DamageEvent, ForceSample, FreedPiece, PoseSample, SurfaceMesh,
+};
 use crate::metrics::incision::depth_below_line;
 
 /// How the note of an attempt scored from a recording that is not whole begins.
@@ -67,7 +69,29 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
         freed,
         surface: last_surface(rec),
         device: Some(meta.provenance.device.clone()),
+        damage: damage_of(rec, period_s),
     })
+}
+
+/// The harm the session recorded, each named by the recorded scene's name for its region.
+fn damage_of(rec: &Recording, period_s: f64) -> Vec<DamageEvent> {
+    let spec: Option<cutlab_sim::scene::SceneSpec> = rec
+        .attachment(cutlab_recorder::channels::SCENE_ATTACHMENT)
+        .and_then(|bytes| serde_json::from_slice(bytes).ok());
+    let name = |region: u32| {
+        spec.as_ref().map_or_else(
+            || format!("region {region}"),
+            |s| s.region_name(region),
+        )
+    };
+    rec.tissue_damage
+        .iter()
+        .map(|d| DamageEvent {
+            t_s: d.tick as f64 * period_s,
+            kind: d.kind,
+            structure: name(d.region),
+        })
+        .collect()
 }
 
 /// The tool's pose at every recorded servo sample (by tick, `period_s` apart).

@@ -93,4 +93,20 @@ pub struct AttemptData {
     /// the trainee choose ([`crate::metrics::incision::device_sets_approach`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub device: Option<String>,
+    /// Harm done to tissue that should not be cut, in time order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub damage: Vec<DamageEvent>,
+}
+
+/// Harm done to tissue that should not be cut, as the session recorded it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DamageEvent {
+    /// Time since the start of the session (s).
+    pub t_s: f64,
+    /// What happened: `blade-on-bone` (the blade came down on a rib or a cartilage) or
+    /// `spare-cut` (a structure to spare was cut).
+    pub kind: cutlab_haptics::damage::DamageKind,
+    /// What it happened to: the scene's name for the region (`rib`, `internal thoracic
+    /// artery`), else `region N`.
+    pub structure: String,
 }

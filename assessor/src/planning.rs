@@ -14,6 +14,7 @@ use parry3d_f64::query::PointQuery;
 use parry3d_f64::shape::TriMesh;
 use serde::{Deserialize, Serialize};
 
+use cutlab_haptics::damage::DamageWatch;
 use cutlab_sim::cut::{self, Cutter};
 use cutlab_sim::retractor::Retractor;
 use cutlab_sim::scene::Scene;
@@ -281,42 +282,22 @@ fn stroke(
     depth_m: f64,
     up: &Vector3<f64>,
 ) -> Result<Vec<String>> {
-    let mut hit: Vec<u32> = Vec::new();
+    let (mut watch, mut harm) = (DamageWatch::default(), Vec::new());
     let mut cutter = Cutter::default();
-    let spare: Vec<u32> = scene
-        .spec
-        .materials
-        .iter()
-        .filter(|m| m.spare)
-        .map(|m| m.region)
-        .collect();
     for p in stations {
         let blade = cut::blade(p - up * depth_m, *up, depth_m + ABOVE_M);
         let regions = sim.model.mesh.regions().to_vec();
         match cutter.advance(sim, blade) {
-            Ok(event) => hit.extend(
-                event
-                    .tets_removed
-                    .iter()
-                    .map(|&t| regions[t as usize])
-                    .filter(|r| spare.contains(r)),
-            ),
+            Ok(event) => watch.after_cut(&sim.model, &regions, &event, &mut harm),
             Err(cut::CutError::Unresolved(_)) => {}
             Err(e) => return Err(AssessError::InvalidInput(format!("cutting: {e}"))),
         }
-        hit.extend(cutter.stop().map(|s| s.region));
+        watch.blade_stop(cutter.stop().map(|s| s.region), &mut harm);
         sim.step()
             .map_err(|e| AssessError::InvalidInput(format!("the cut tissue: {e}")))?;
     }
+    let mut hit: Vec<u32> = harm.iter().map(|d| d.region).collect();
     hit.sort_unstable();
     hit.dedup();
-    let name = |r: u32| {
-        scene
-            .spec
-            .materials
-            .iter()
-            .find(|m| m.region == r && !m.name.is_empty())
-            .map_or_else(|| format!("region {r}"), |m| m.name.clone())
-    };
-    Ok(hit.into_iter().map(name).collect())
+    Ok(hit.into_iter().map(|r| scene.spec.region_name(r)).collect())
 }

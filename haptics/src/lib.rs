@@ -26,6 +26,7 @@
 #![warn(missing_docs)]
 
 pub mod collision;
+pub mod damage;
 pub mod device;
 pub mod error;
 pub mod hand;

@@ -537,7 +537,7 @@ impl SimWorker {
             out_ticks.push(sample.tick);
             out_nanos.push(began.elapsed().as_nanos() as u64);
             let last = n + 1 == steps as u64;
-            self.record(n, &sample, out.cut, out.rejected, last);
+            self.record(n, &sample, out, last);
             self.log_events();
         }
         if let Some(&tick) = out_ticks.last()
@@ -565,10 +565,15 @@ impl SimWorker {
         &mut self,
         n: u64,
         sample: &ServoSample,
-        cut: Option<(cutlab_sim::cut::Blade, cutlab_sim::cut::CutEvent)>,
-        rejected: bool,
+        out: crate::stepper::StepOutput,
         last: bool,
     ) {
+        let crate::stepper::StepOutput {
+            cut,
+            rejected,
+            damage,
+            ..
+        } = out;
         let Some((_, settings)) = &self.record else {
             return;
         };
@@ -585,6 +590,13 @@ impl SimWorker {
                 tick,
                 blade,
                 event: Box::new(event),
+            });
+        }
+        for damage in damage {
+            self.push(SimRecord::Damage {
+                step: n,
+                tick,
+                damage,
             });
         }
         let every = |k: u64| k > 0 && (n + 1).is_multiple_of(k);

@@ -13,6 +13,7 @@ use cutlab_sim::model::State;
 use cutlab_sim::solver::{ResumeState, Simulation};
 
 use crate::collision::{SurfaceCollider, SurfaceHit};
+use crate::damage::{DamageWatch, TissueDamage};
 use crate::render::{ContactModel, Mode, WOUND_REACH_M, Wound};
 use crate::servo::ServoSample;
 use crate::session::{Session, SessionConfig};
@@ -56,6 +57,8 @@ pub struct StepOutput {
     pub cut: Option<(Blade, CutEvent)>,
     /// The simulation rejected the step (non-finite state; the state was kept).
     pub rejected: bool,
+    /// The harm this step did (the blade on bone, a structure to spare cut).
+    pub damage: Vec<TissueDamage>,
 }
 
 /// The simulation, its surface collider and the cutter, stepped one servo sample at a time.
@@ -92,6 +95,8 @@ pub struct SessionStepper {
     rebuild_every_steps: u64,
     /// The last step built the BVH again (rather than refitting it).
     collider_fresh: bool,
+    /// What reports each harm once.
+    damage: DamageWatch,
 }
 
 /// What a [`SessionStepper`] carries from one step to the next beyond the simulation's state
@@ -118,6 +123,10 @@ pub struct StepperResume {
     pub wound: Option<(Point3, SurfaceHit)>,
     /// What the steps did so far.
     pub stats: StepperStats,
+    /// What reports each harm once (absent in recordings made before it was kept, and
+    /// where nothing was harmed).
+    #[serde(default, skip_serializing_if = "DamageWatch::is_clear")]
+    pub damage: DamageWatch,
 }
 
 impl SessionStepper {
@@ -142,6 +151,7 @@ impl SessionStepper {
             steps: 0,
             rebuild_every_steps: config.collider_rebuild_every_steps,
             collider_fresh: false,
+            damage: DamageWatch::default(),
         }
     }
 
@@ -163,6 +173,7 @@ impl SessionStepper {
             last_cut_tip: self.last_cut_tip,
             wound: self.wound,
             stats: self.stats,
+            damage: self.damage.clone(),
         })
     }
 
@@ -217,6 +228,7 @@ impl SessionStepper {
         self.last_cut_tip = r.last_cut_tip;
         self.wound = r.wound;
         self.stats = r.stats;
+        self.damage = r.damage.clone();
         self.steps = r.steps;
         self.collider_fresh = true;
         Ok(())
@@ -273,6 +285,7 @@ impl SessionStepper {
             self.wound = Some((end, entry));
         }
         let mut made = None;
+        let mut damage = Vec::new();
         let moved_enough = self
             .last_cut_tip
             .is_none_or(|p| (tip - p).norm() >= self.cut_step_m);
@@ -286,10 +299,18 @@ impl SessionStepper {
                 edge_direction: sample.pose.edge_direction(),
                 depth_m: self.blade_length_m,
             };
+            let regions_before = DamageWatch::watches_cuts(&self.sim.model)
+                .then(|| self.sim.model.mesh.regions().to_vec());
             let advanced = self.cutter.advance(&mut self.sim, blade);
-            self.stats.blade_stops += u64::from(self.cutter.stop().is_some());
+            let stop = self.cutter.stop().map(|s| s.region);
+            self.stats.blade_stops += u64::from(stop.is_some());
+            self.damage.blade_stop(stop, &mut damage);
             match advanced {
                 Ok(ev) if !ev.is_empty() => {
+                    if let Some(regions) = &regions_before {
+                        self.damage
+                            .after_cut(&self.sim.model, regions, &ev, &mut damage);
+                    }
                     self.stats.cut_steps += 1;
                     self.stats.tets_split += ev.tets_removed.len() as u64;
                     self.stats.fragments_reattached += ev.fragments_reattached as u64;
@@ -310,6 +331,9 @@ impl SessionStepper {
         } else if render.mode != Mode::Cutting && self.cutter.in_stroke() {
             self.cutter.end_stroke();
             self.last_cut_tip = None;
+        }
+        if render.mode != Mode::Cutting {
+            self.damage.blade_out();
         }
 
         let stepped = self.sim.step();
@@ -383,6 +407,7 @@ impl SessionStepper {
             contact,
             cut: made,
             rejected,
+            damage,
         }
     }
 

@@ -150,6 +150,15 @@ pub enum SimRecord {
         /// Everything the cut changed.
         event: Box<CutEvent>,
     },
+    /// Harm step `step` did to tissue that should not be cut.
+    Damage {
+        /// The step.
+        step: u64,
+        /// The tick that step consumed.
+        tick: u64,
+        /// What was harmed.
+        damage: crate::damage::TissueDamage,
+    },
     /// The full state at a step.
     Keyframe(Box<Keyframe>),
     /// The tissue surface at a step.

@@ -39,6 +39,7 @@ pub const TOPOLOGY: &str = "/sim/topology";
 pub const STATE_HASH: &str = "/sim/state_hash";
 pub const KEYFRAME: &str = "/sim/keyframe";
 pub const SURFACE: &str = "/tissue/surface";
+pub const DAMAGE: &str = "/sim/damage";
 
 /// Frame of every pose and surface: the tissue's world frame.
 pub const WORLD_FRAME: &str = "world";
@@ -50,7 +51,7 @@ pub const SCENE_ATTACHMENT: &str = "scene.json";
 pub const PLAN_ATTACHMENT: &str = "plan.json";
 
 /// The JSON-schema channels: topic, schema name, JSON schema.
-pub const JSON_CHANNELS: [(&str, &str, &str); 5] = [
+pub const JSON_CHANNELS: [(&str, &str, &str); 6] = [
     (
         TOOL_STATE,
         "cutlab.ToolState",
@@ -75,6 +76,11 @@ pub const JSON_CHANNELS: [(&str, &str, &str); 5] = [
         KEYFRAME,
         "cutlab.Keyframe",
         r#"{"type":"object","properties":{"step":{"type":"integer"},"tick":{"type":"integer"},"state_hash":{"type":"string"},"topology_hash":{"type":"string"},"positions_m":{"type":"array"},"velocities_m_per_s":{"type":"array"},"rest_positions_m":{"type":"array"},"tets":{"type":"array"},"regions":{"type":"array"}}}"#,
+    ),
+    (
+        DAMAGE,
+        "cutlab.TissueDamage",
+        r#"{"type":"object","properties":{"step":{"type":"integer"},"tick":{"type":"integer"},"kind":{"type":"string","enum":["blade-on-bone","spare-cut"]},"region":{"type":"integer"}}}"#,
     ),
 ];
 
@@ -187,6 +193,16 @@ impl From<&BladeMsg> for Blade {
             depth_m: b.depth_m,
         }
     }
+}
+
+/// `/sim/damage`: harm step `step` did to tissue it should not cut
+/// (`cutlab_haptics::damage`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TissueDamageMsg {
+    pub step: u64,
+    pub tick: u64,
+    pub kind: cutlab_haptics::damage::DamageKind,
+    pub region: u32,
 }
 
 /// `/sim/topology`: the cut step `step` made.

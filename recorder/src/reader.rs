@@ -51,6 +51,8 @@ pub struct Recording {
     pub topology: Vec<TopologyMsg>,
     pub hashes: Vec<StateHashMsg>,
     pub keyframes: Vec<KeyframeMsg>,
+    /// Harm done to tissue that should not be cut, in order.
+    pub tissue_damage: Vec<channels::TissueDamageMsg>,
     /// Surface snapshots (decoded only far enough to count them).
     pub surfaces: u64,
     /// First and last message log times, ns.
@@ -158,6 +160,7 @@ impl Recording {
             channels::TOPOLOGY => self.topology.push(parse(topic, log_time, data)?),
             channels::STATE_HASH => self.hashes.push(parse(topic, log_time, data)?),
             channels::KEYFRAME => self.keyframes.push(parse(topic, log_time, data)?),
+            channels::DAMAGE => self.tissue_damage.push(parse(topic, log_time, data)?),
             channels::SURFACE => self.surfaces += 1,
             _ => {}
         }

@@ -705,6 +705,13 @@ impl InOrder<'_> {
                 event: Box::new(event),
             })?;
         }
+        for damage in out.damage {
+            o.on_sim(&SimRecord::Damage {
+                step: step.step,
+                tick: step.tick,
+                damage,
+            })?;
+        }
         if first_played || surface_due(step.step, self.meta.surface_every_steps) {
             o.on_sim(&SimRecord::Surface(Box::new(SurfaceSnapshot::of(
                 &stepper.collider,

@@ -30,6 +30,7 @@
 //! Nothing here runs unless a sink is built: a recorder without `--rrd`/`--rerun` holds no
 //! [`RerunSink`] and pays nothing.
 
+use cutlab_haptics::damage::DamageKind;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -426,6 +427,14 @@ impl RerunSink {
                     rerun::TextLogLevel::INFO
                 };
                 self.log_event(*tick, *step, cut_text(*step, blade, event), level)?;
+            }
+            SimRecord::Damage { step, tick, damage } => {
+                let what = match damage.kind {
+                    DamageKind::BladeOnBone => "the blade came down on bone",
+                    DamageKind::SpareCut => "a structure to spare was cut",
+                };
+                let text = format!("step {step}: {what} (region {})", damage.region);
+                self.log_event(*tick, *step, text, rerun::TextLogLevel::WARN)?;
             }
             SimRecord::Keyframe(k) => {
                 self.log_event(k.tick, k.step, keyframe_text(k), rerun::TextLogLevel::DEBUG)?;

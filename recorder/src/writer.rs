@@ -63,6 +63,7 @@ struct Ids {
     state_hash: u16,
     keyframe: u16,
     surface: u16,
+    damage: u16,
 }
 
 /// An MCAP file being written.
@@ -185,12 +186,12 @@ impl<W: Write + Seek> McapSink<W> {
             protobuf_schema::<foxglove::messages::SceneUpdate>()?,
             channels::SURFACE,
         )?;
-        let mut json = [0u16; 5];
+        let mut json = [0u16; 6];
         for (slot, (topic, name, schema)) in json.iter_mut().zip(channels::JSON_CHANNELS) {
             let id = writer.add_schema(name, "jsonschema", schema.as_bytes())?;
             *slot = writer.add_channel(id, topic, "json", &no_meta)?;
         }
-        let [tool_state, step, topology, state_hash, keyframe] = json;
+        let [tool_state, step, topology, state_hash, keyframe, damage] = json;
         writer.write_metadata(&Metadata {
             name: channels::SESSION_METADATA.into(),
             metadata: meta.to_map()?,
@@ -215,6 +216,7 @@ impl<W: Write + Seek> McapSink<W> {
                 state_hash,
                 keyframe,
                 surface,
+                damage,
             },
             period_nanos: meta.period_nanos,
             sequence: 0,
@@ -316,6 +318,15 @@ impl<W: Write + Seek> McapSink<W> {
                     event: (**event).clone(),
                 };
                 self.write_json(self.ids.topology, channels::TOPOLOGY, *tick, &msg)?;
+            }
+            &SimRecord::Damage { step, tick, damage } => {
+                let msg = channels::TissueDamageMsg {
+                    step,
+                    tick,
+                    kind: damage.kind,
+                    region: damage.region,
+                };
+                self.write_json(self.ids.damage, channels::DAMAGE, tick, &msg)?;
             }
             SimRecord::Keyframe(k) => {
                 let hash = StateHashMsg {

@@ -91,6 +91,14 @@ pub struct Model {
     /// The regions a scalpel does not cut (bone, cartilage), ascending: a [`crate::cut::Cutter`]
     /// stops the blade where it meets one of their tetrahedra.
     pub uncuttable_regions: Vec<u32>,
+    /// The regions to spare (an artery beside the incision), ascending: cutting one of their
+    /// tetrahedra is damage ([`Self::spare`]).
+    pub spare_regions: Vec<u32>,
+}
+
+/// Whether `region` is in the ascending list `regions`.
+fn in_regions(regions: &[u32], region: u32) -> bool {
+    !regions.is_empty() && regions.binary_search(&region).is_ok()
 }
 
 /// What the spring solvers read of a model: lumped masses, held flags, springs and gravity.
@@ -235,6 +243,7 @@ impl Model {
             gravity,
             fem: None,
             uncuttable_regions: Vec::new(),
+            spare_regions: Vec::new(),
         })
     }
 
@@ -246,13 +255,22 @@ impl Model {
         self
     }
 
+    /// The model with `regions` to spare (see [`Self::spare_regions`]).
+    pub fn with_spare_regions(mut self, regions: &[u32]) -> Self {
+        self.spare_regions = regions.to_vec();
+        self.spare_regions.sort_unstable();
+        self.spare_regions.dedup();
+        self
+    }
+
     /// Whether tetrahedron `t` is of an uncuttable region.
     pub fn uncuttable(&self, t: usize) -> bool {
-        !self.uncuttable_regions.is_empty()
-            && self
-                .uncuttable_regions
-                .binary_search(&self.mesh.regions()[t])
-                .is_ok()
+        in_regions(&self.uncuttable_regions, self.mesh.regions()[t])
+    }
+
+    /// Whether region `region` is to be spared.
+    pub fn spare(&self, region: u32) -> bool {
+        in_regions(&self.spare_regions, region)
     }
 
     /// Switches the model to co-rotational finite elements with the given materials per region

@@ -149,9 +149,16 @@ impl Scene {
             .filter(|m| !m.cuttable)
             .map(|m| m.region)
             .collect();
+        let spare: Vec<u32> = spec
+            .materials
+            .iter()
+            .filter(|m| m.spare)
+            .map(|m| m.region)
+            .collect();
         let mut model = Model::new(mesh, &materials, &held, gravity)
             .map_err(model_error)?
-            .with_uncuttable_regions(&uncuttable);
+            .with_uncuttable_regions(&uncuttable)
+            .with_spare_regions(&spare);
         if spec.force_model == ForceModelSpec::CorotationalFem {
             let fem: Vec<(u32, FemMaterial)> = if spec.materials.is_empty() {
                 materials

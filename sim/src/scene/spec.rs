@@ -54,6 +54,16 @@ pub struct SceneSpec {
     pub force_model: ForceModelSpec,
 }
 
+impl SceneSpec {
+    /// What the scene calls region `region` (its material's `name`), else `region N`.
+    pub fn region_name(&self, region: u32) -> String {
+        self.materials
+            .iter()
+            .find(|m| m.region == region && !m.name.is_empty())
+            .map_or_else(|| format!("region {region}"), |m| m.name.clone())
+    }
+}
+
 /// The force model of a scene.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
