@@ -62,7 +62,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
             surface_m2: s.surface_m2,
         })
         .collect();
-    Ok(AttemptData {
+    let mut data = AttemptData {
         poses,
         forces,
         cuts,
@@ -70,7 +70,51 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
         surface: last_surface(rec),
         device: Some(meta.provenance.device.clone()),
         damage: damage_of(rec, period_s),
-    })
+        retracted_surface: None,
+    };
+    if let ExercisePlan::Field(p) = plan
+        && let Some(width_m) = p.retractor_width_m
+    {
+        match retracted(rec, &data, p.field().normal, width_m, period_s) {
+            Ok(surface) => data.retracted_surface = Some(surface),
+            Err(e) => tracing::warn!("the field is not measured: {e}"),
+        }
+    }
+    Ok(data)
+}
+
+/// The tissue's surface once a retractor `width_m` wide has spread the wound the attempt
+/// left: the session resumed at its last keyframe, which must come after the last cut.
+fn retracted(
+    rec: &Recording,
+    data: &AttemptData,
+    normal: nalgebra::Vector3<f64>,
+    width_m: f64,
+    period_s: f64,
+) -> Result<SurfaceMesh, String> {
+    let (a, b, _) =
+        crate::metrics::wound::incision_span(normal, data).ok_or("the attempt made no incision")?;
+    let (mut stepper, tick) =
+        cutlab_recorder::replay::stepper_at_last_keyframe(rec).map_err(|e| e.to_string())?;
+    let last_cut_s = data.cuts.last().map_or(0.0, |c| c.t_s);
+    if (tick as f64) * period_s < last_cut_s {
+        return Err("the recording's last keyframe comes before the end of the cut".into());
+    }
+    let sim = &mut stepper.sim;
+    let steps = |s: f64| (s / sim.settings.time_step_s).round() as usize;
+    let (ramp, hold) = (
+        steps(crate::planning::RETRACT_RAMP_S),
+        steps(crate::planning::RETRACT_HOLD_S),
+    );
+    let retractor = cutlab_sim::retractor::Retractor {
+        line_m: vec![a, b],
+        up: normal,
+        width_m,
+    };
+    retractor
+        .open(sim, ramp, hold)
+        .map_err(|e| format!("the retracted wound: {e}"))?;
+    Ok(SurfaceMesh::of(sim))
 }
 
 /// The harm the session recorded, each named by the recorded scene's name for its region.
@@ -79,10 +123,8 @@ fn damage_of(rec: &Recording, period_s: f64) -> Vec<DamageEvent> {
         .attachment(cutlab_recorder::channels::SCENE_ATTACHMENT)
         .and_then(|bytes| serde_json::from_slice(bytes).ok());
     let name = |region: u32| {
-        spec.as_ref().map_or_else(
-            || format!("region {region}"),
-            |s| s.region_name(region),
-        )
+        spec.as_ref()
+            .map_or_else(|| format!("region {region}"), |s| s.region_name(region))
     };
     rec.tissue_damage
         .iter()

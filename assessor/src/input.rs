@@ -73,6 +73,21 @@ pub struct SurfaceMesh {
     pub triangles: Vec<[u32; 3]>,
 }
 
+impl SurfaceMesh {
+    /// The boundary of `sim`'s tissue as it is now.
+    pub fn of(sim: &cutlab_sim::solver::Simulation) -> Self {
+        Self {
+            vertices_m: sim
+                .state
+                .positions
+                .iter()
+                .map(|p| [p.x, p.y, p.z])
+                .collect(),
+            triangles: sim.model.mesh.topology().boundary.clone(),
+        }
+    }
+}
+
 /// Everything one attempt is assessed on.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct AttemptData {
@@ -93,6 +108,10 @@ pub struct AttemptData {
     /// the trainee choose ([`crate::metrics::incision::device_sets_approach`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub device: Option<String>,
+    /// The tissue's surface after a retractor spread the wound at the end of the attempt,
+    /// where the exercise measures the field so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub retracted_surface: Option<SurfaceMesh>,
     /// Harm done to tissue that should not be cut, in time order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub damage: Vec<DamageEvent>,

@@ -145,15 +145,7 @@ impl CandidateIncision {
 
 /// The tissue's surface as it is now.
 fn surface(sim: &cutlab_sim::solver::Simulation) -> Result<TriMesh> {
-    trimesh(&SurfaceMesh {
-        vertices_m: sim
-            .state
-            .positions
-            .iter()
-            .map(|p| [p.x, p.y, p.z])
-            .collect(),
-        triangles: sim.model.mesh.topology().boundary.clone(),
-    })
+    trimesh(&SurfaceMesh::of(sim))
 }
 
 /// Cuts `candidate` in `scene`, lets the wound open and measures the field; with a

@@ -37,13 +37,14 @@ pub struct TissueDamage {
     pub region: u32,
 }
 
-/// What a session remembers between steps to report each harm once: a contact with bone when
-/// it begins (the blade held on a rib over many steps is one contact), a structure to spare
-/// the first time a cut goes through it.
+/// What a session remembers between steps to report each harm once: the blade on a bone once
+/// per stroke (held on a rib, or sliding along its edge on and off it, over many steps, is
+/// one contact until the blade leaves the tissue), a structure to spare the first time a cut
+/// goes through it.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DamageWatch {
-    /// The region the blade rests on since an earlier step, if any.
-    pub stopped_on: Option<u32>,
+    /// The regions the blade has come down on in this stroke, ascending.
+    pub touched: Vec<u32>,
     /// The regions to spare already cut, ascending.
     pub spared_cut: Vec<u32>,
 }
@@ -60,22 +61,23 @@ impl DamageWatch {
         !model.spare_regions.is_empty()
     }
 
-    /// The blade stopped on `stop` (or did not) at a cutting step; a new contact is harm.
+    /// The blade stopped on `stop` (or did not) at a cutting step; the first stop on a
+    /// region in this stroke is harm.
     pub fn blade_stop(&mut self, stop: Option<u32>, out: &mut Vec<TissueDamage>) {
         if let Some(region) = stop
-            && self.stopped_on != Some(region)
+            && let Err(at) = self.touched.binary_search(&region)
         {
+            self.touched.insert(at, region);
             out.push(TissueDamage {
                 kind: DamageKind::BladeOnBone,
                 region,
             });
         }
-        self.stopped_on = stop;
     }
 
-    /// The blade left the tissue: the next contact with bone is a new one.
+    /// The blade left the tissue: a stroke after it that comes down on bone is harm again.
     pub fn blade_out(&mut self) {
-        self.stopped_on = None;
+        self.touched.clear();
     }
 
     /// A cut on `model` split the tetrahedra `event.tets_removed` of the mesh whose regions
@@ -101,5 +103,29 @@ impl DamageWatch {
                 });
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A blade on and off the same rib within a stroke is one contact, again after it left
+    /// the tissue; a structure to spare (`after_cut`) is covered by `tests/plan_cli.rs`.
+    #[test]
+    fn each_harm_is_reported_once_per_stroke_or_once() {
+        let mut watch = DamageWatch::default();
+        let mut out = Vec::new();
+        for stop in [Some(6), None, Some(6), Some(7), Some(6)] {
+            watch.blade_stop(stop, &mut out);
+        }
+        let kinds: Vec<(DamageKind, u32)> = out.iter().map(|d| (d.kind, d.region)).collect();
+        assert_eq!(
+            kinds,
+            [(DamageKind::BladeOnBone, 6), (DamageKind::BladeOnBone, 7)]
+        );
+        watch.blade_out();
+        watch.blade_stop(Some(6), &mut out);
+        assert_eq!(out.len(), 3);
     }
 }

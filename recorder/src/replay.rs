@@ -242,6 +242,21 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
     Ok(SessionStepper::new(session, &config))
 }
 
+/// The session of `rec` as it was at its last keyframe that can be resumed, and that
+/// keyframe's tick: to go on from where the attempt ended (a retractor set in its wound).
+pub fn stepper_at_last_keyframe(rec: &Recording) -> Result<(SessionStepper, u64), RecorderError> {
+    let meta = rec.meta()?;
+    let k = rec
+        .keyframes
+        .iter()
+        .rev()
+        .find(|k| k.resume.is_some())
+        .ok_or_else(|| RecorderError::Replay("no keyframe can be resumed".into()))?;
+    let mut stepper = stepper_for(meta)?;
+    resume_at(&mut stepper, k)?;
+    Ok((stepper, k.tick))
+}
+
 /// Restores `stepper` to keyframe `k` (which must carry its resume state) and checks it
 /// against the keyframe's hashes.
 fn resume_at(stepper: &mut SessionStepper, k: &KeyframeMsg) -> Result<(), RecorderError> {

@@ -186,7 +186,7 @@ fn a_recording_reads_back_with_every_message_intact() {
         assert_eq!(samples.get(&s.tick), Some(s), "tick {}", s.tick);
     }
     // every simulation record
-    let (mut steps, mut cuts, mut keyframes, mut surfaces) = (0, 0, 0, 0);
+    let (mut steps, mut cuts, mut keyframes, mut surfaces, mut damages) = (0, 0, 0, 0, 0);
     let mut surface_steps = Vec::new();
     for record in &r.seen.sim {
         match record {
@@ -232,12 +232,19 @@ fn a_recording_reads_back_with_every_message_intact() {
                 surface_steps.push(s.step);
                 surfaces += 1;
             }
+            SimRecord::Damage { step, tick, damage } => {
+                let m = &rec.tissue_damage[damages];
+                assert_eq!((m.step, m.tick), (*step, *tick));
+                assert_eq!((m.kind, m.region), (damage.kind, damage.region));
+                damages += 1;
+            }
         }
     }
     // the tissue from the first step on, then one surface every 100 steps
     assert_eq!(surface_steps.first(), Some(&0));
     assert_eq!(surface_steps.get(1..4), Some(&[99, 199, 299][..]));
     assert_eq!(steps, r.steps);
+    assert_eq!(damages, rec.tissue_damage.len());
     assert_eq!(cuts as u64, r.cut_steps);
     assert_eq!(cuts, rec.topology.len());
     assert_eq!(keyframes, 30, "one keyframe a second");

@@ -9,8 +9,8 @@
 //!
 //! an ellipse as a ring retractor makes of a straight wound: the full width `W` at the middle,
 //! nothing at the ends, where the tissue is uncut. It grips the wound's faces: the particles
-//! the cut split, whose rest positions lie on the swept surface (within a quarter of the mesh's
-//! median edge of the line's vertical plane) and whose tetrahedra all lie on one side of it.
+//! of the boundary triangles that stand across the skin (the cut's faces) within
+//! [`FACE_BAND_M`] of the line's vertical plane, each on the side its face looks away from.
 //! Each is carried, held, from where it is to `±w(s)/2` from the plane along the side vector
 //! `up x along` (never inwards), over the ramp's steps. Tissue a scalpel does not cut (bone,
 //! cartilage) is not spread: a face particle is carried no nearer than [`BONE_CLEARANCE_M`] to
@@ -19,6 +19,10 @@
 
 use crate::solver::{Simulation, StepError};
 use crate::{Point3, Vector3};
+
+/// How far from the incision's plane a wound's face may lie and be gripped, m: a hand's
+/// cut wanders about its line.
+pub const FACE_BAND_M: f64 = 0.004;
 
 /// How near a spread face particle comes to bone beside it, m.
 pub const BONE_CLEARANCE_M: f64 = 0.001;
@@ -107,38 +111,32 @@ impl Retractor {
         let model = &sim.model;
         let rest = model.mesh.positions();
         let edge = model.median_edge_length().unwrap_or(0.005);
-        // per particle: bit 0 a tetrahedron on the negative side, bit 1 on the positive side,
-        // bit 2 an uncuttable one
-        let mut sides = vec![0u8; rest.len()];
+        let faces = self.face_normals(sim);
+        let mut on_bone = vec![false; rest.len()];
         for (t, tet) in model.mesh.tets().iter().enumerate() {
-            let c = tet
-                .iter()
-                .map(|&v| rest[v as usize].coords)
-                .sum::<Vector3>()
-                / 4.0;
-            let bit = match self.station(&Point3::from(c)) {
-                Some(st) if st.offset_m < 0.0 => 1,
-                Some(_) => 2,
-                None => 3,
-            } | if model.uncuttable(t) { 4 } else { 0 };
-            for &v in tet {
-                sides[v as usize] |= bit;
+            if model.uncuttable(t) {
+                tet.iter().for_each(|&v| on_bone[v as usize] = true);
             }
         }
         let bone: Vec<Point3> = (0..rest.len())
-            .filter(|&v| sides[v] & 4 != 0)
+            .filter(|&v| on_bone[v])
             .map(|v| rest[v])
             .collect();
         let mut grip = Grip::default();
         for (v, p) in rest.iter().enumerate() {
-            let one_side = matches!(sides[v], 1 | 2);
-            let Some(st) = self.station(p).filter(|st| st.offset_m.abs() < 0.25 * edge) else {
-                continue;
-            };
-            if !one_side {
+            let normal = faces[v];
+            if on_bone[v] || normal == Vector3::zeros() {
                 continue;
             }
-            let sign = if sides[v] == 1 { -1.0 } else { 1.0 };
+            let Some(st) = self.station(p).filter(|st| st.offset_m.abs() < FACE_BAND_M) else {
+                continue;
+            };
+            // a face looks into the wound: towards the other side
+            let looks = st.side.dot(&normal.normalize());
+            if looks.abs() < 0.5 {
+                continue;
+            }
+            let sign = -looks.signum();
             let mut half = self.half_width_m(st.s_m);
             for b in &bone {
                 let d = b - p;
@@ -156,6 +154,23 @@ impl Retractor {
             }
         }
         grip
+    }
+
+    /// Per particle, the area-weighted outward normal (at rest) of the boundary triangles
+    /// round it that stand across the skin (`|n . up| < 0.7`): the wound's faces, and the
+    /// body's own sides far from any incision; zero for the others.
+    fn face_normals(&self, sim: &Simulation) -> Vec<Vector3> {
+        let rest = sim.model.mesh.positions();
+        let mut normals = vec![Vector3::zeros(); rest.len()];
+        for tri in &sim.model.mesh.topology().boundary {
+            let [a, b, c] = tri.map(|v| rest[v as usize]);
+            let n = (b - a).cross(&(c - a));
+            let area = n.norm();
+            if area > 0.0 && (n / area).dot(&self.up).abs() < 0.7 {
+                tri.iter().for_each(|&v| normals[v as usize] += n);
+            }
+        }
+        normals
     }
 
     /// Grips the wound, opens the retractor over `ramp_steps` simulation steps (the gripped

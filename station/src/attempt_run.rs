@@ -191,6 +191,7 @@ impl Prepared {
             ..SessionConfig::default()
         };
         config.render = config.render.with_scene_cut(&built.spec);
+        config.blade_length_m = built.spec.blade_length_mm * 1e-3;
         Ok(Self {
             scene: built,
             scene_arg: scene.to_owned(),

@@ -11,6 +11,7 @@
 //! a variant in [`Kind`] and [`ExercisePlan`], and its arm in the matches of this file.
 
 pub mod excision;
+pub mod field;
 pub mod incision;
 pub mod pattern;
 
@@ -24,6 +25,7 @@ use crate::metrics::{Metric, MetricSet};
 use crate::proficiency::Threshold;
 
 pub use excision::{EXCISION_PLAN_TOML, ExcisionPlan};
+pub use field::{FIELD_PLAN_TOML, FieldPlan};
 pub use incision::{BODY_WALL_PLAN_TOML, CHEST_WALL_PLAN_TOML, IncisionPlan};
 pub use pattern::{PATTERN_PLAN_TOML, PatternPlan};
 
@@ -37,11 +39,14 @@ pub enum Kind {
     Pattern,
     /// An outline incised round a skin lesion into the fat (`elliptical-excision`).
     Excision,
+    /// An incision the trainee places to expose a structure behind a wall, scored by what
+    /// the opened wound shows (`mini-thoracotomy`).
+    Field,
 }
 
 impl Kind {
     /// Every kind, in the order forms offer them.
-    pub const ALL: [Kind; 3] = [Kind::Incision, Kind::Pattern, Kind::Excision];
+    pub const ALL: [Kind; 4] = [Kind::Incision, Kind::Pattern, Kind::Excision, Kind::Field];
 
     /// The tag in plans and forms.
     pub fn as_str(self) -> &'static str {
@@ -49,6 +54,7 @@ impl Kind {
             Kind::Incision => "incision",
             Kind::Pattern => "pattern",
             Kind::Excision => "excision",
+            Kind::Field => "field",
         }
     }
 
@@ -208,6 +214,7 @@ pub enum ExercisePlan {
     Incision(IncisionPlan),
     Pattern(PatternPlan),
     Excision(ExcisionPlan),
+    Field(FieldPlan),
 }
 
 impl From<IncisionPlan> for ExercisePlan {
@@ -223,6 +230,7 @@ impl ExercisePlan {
             ExercisePlan::Incision(p) => p,
             ExercisePlan::Pattern(p) => p,
             ExercisePlan::Excision(p) => p,
+            ExercisePlan::Field(p) => p,
         }
     }
 
@@ -232,6 +240,7 @@ impl ExercisePlan {
             ExercisePlan::Incision(_) => Kind::Incision,
             ExercisePlan::Pattern(_) => Kind::Pattern,
             ExercisePlan::Excision(_) => Kind::Excision,
+            ExercisePlan::Field(_) => Kind::Field,
         }
     }
 
@@ -297,6 +306,10 @@ impl ExercisePlan {
             Kind::Excision => {
                 let plan: ExcisionPlan = serde_json::from_value(value).map_err(read)?;
                 Ok(ExercisePlan::Excision(plan.normalised()?))
+            }
+            Kind::Field => {
+                let plan: FieldPlan = serde_json::from_value(value).map_err(read)?;
+                Ok(ExercisePlan::Field(plan.normalised()?))
             }
         }
     }
@@ -381,6 +394,7 @@ impl Serialize for ExercisePlan {
             ExercisePlan::Incision(p) => serde_json::to_value(p),
             ExercisePlan::Pattern(p) => serde_json::to_value(p),
             ExercisePlan::Excision(p) => serde_json::to_value(p),
+            ExercisePlan::Field(p) => serde_json::to_value(p),
         };
         let mut value = inner.map_err(serde::ser::Error::custom)?;
         if let Some(map) = value.as_object_mut() {

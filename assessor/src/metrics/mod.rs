@@ -19,6 +19,7 @@ pub mod path;
 pub mod pattern;
 pub mod safety;
 pub mod smoothness;
+pub mod wound;
 
 use serde::{Deserialize, Serialize};
 
@@ -458,6 +459,7 @@ pub fn all() -> impl Iterator<Item = &'static Metric> {
         .iter()
         .chain(pattern::METRICS)
         .chain(excision::METRICS)
+        .chain(wound::METRICS)
         .chain(motion::METRICS)
 }
 

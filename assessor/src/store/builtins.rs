@@ -1,12 +1,13 @@
 //! The built-in exercises, always present so `cutlab assess` works on a fresh database:
-//! `chest-wall-incision`, `pattern-cutting`, `elliptical-excision` and `body-wall-incision`,
+//! `chest-wall-incision`, `pattern-cutting`, `elliptical-excision`, `body-wall-incision` and
+//! `mini-thoracotomy`,
 //! and the curriculum that orders them, `cutting-basics` (with progression).
 
 use std::collections::BTreeSet;
 
 use super::{CUTTING_BASICS, Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
-use crate::exercise::{ExcisionPlan, ExercisePlan, PatternPlan};
+use crate::exercise::{ExcisionPlan, ExercisePlan, FieldPlan, PatternPlan};
 use crate::proficiency::DEFAULT_K;
 
 /// The built-in exercise's name.
@@ -22,6 +23,9 @@ pub const EXCISION_EXERCISE: &str = "elliptical-excision";
 
 /// The built-in curved incision on the CT's body wall: its name.
 pub const BODY_WALL_EXERCISE: &str = "body-wall-incision";
+
+/// The built-in mini-thoracotomy: expose the heart through an intercostal space.
+pub const FIELD_EXERCISE: &str = "mini-thoracotomy";
 
 /// A built-in exercise: its name, scene, description, plan and its module's title in
 /// `cutting-basics`.
@@ -64,6 +68,13 @@ pub fn builtins() -> Result<Vec<Builtin>> {
             description: "A curved transverse incision of 100 mm on a patient's abdominal wall (from a CT), 8 mm deep into the fat",
             plan: ExercisePlan::body_wall()?,
             module: "Curved incision on a patient",
+        },
+        Builtin {
+            name: FIELD_EXERCISE,
+            scene: "thorax",
+            description: "Mini-thoracotomy: expose the front of the heart through an intercostal space with the shortest incision that gives a working view; scored on what the opened wound shows, wherever it is",
+            plan: ExercisePlan::Field(FieldPlan::builtin()?),
+            module: "Surgical field: mini-thoracotomy",
         },
     ])
 }

@@ -32,7 +32,7 @@ use sqlx::{PgPool, SqlitePool};
 pub use attempts::{Attempt, AttemptStatus, Outcome, ProficiencyRecord, StoredMetric};
 pub use builtins::{
     BODY_WALL_EXERCISE, BUILTIN_EXERCISE, BUILTIN_SCENE, Builtin, EXCISION_EXERCISE,
-    PATTERN_EXERCISE, builtins,
+    FIELD_EXERCISE, PATTERN_EXERCISE, builtins,
 };
 pub use cohorts::Cohort;
 pub use curricula::{Curriculum, Module};

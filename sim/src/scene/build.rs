@@ -104,11 +104,13 @@ impl Scene {
                 spec.cut_threshold_newtons
             )));
         }
-        if !(spec.cut_depth_mm > 0.0 && spec.cut_depth_mm.is_finite()) {
-            return Err(invalid(format!(
-                "cut_depth_mm must be positive, got {}",
-                spec.cut_depth_mm
-            )));
+        for (name, value) in [
+            ("cut_depth_mm", spec.cut_depth_mm),
+            ("blade_length_mm", spec.blade_length_mm),
+        ] {
+            if !(value > 0.0 && value.is_finite()) {
+                return Err(invalid(format!("{name} must be positive, got {value}")));
+            }
         }
         let base_dir = match origin {
             SpecOrigin::File(p) => p.parent().map(Path::to_path_buf).unwrap_or_default(),

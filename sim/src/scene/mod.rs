@@ -189,6 +189,7 @@ pub fn find_spec(name_or_path: &str) -> Result<(SceneSpec, SpecOrigin), SceneErr
             incision: Default::default(),
             cut_threshold_newtons: 1.0,
             cut_depth_mm: 4.0,
+            blade_length_mm: 20.0,
             solver: Default::default(),
             force_model: Default::default(),
         };
@@ -266,12 +267,14 @@ mod tests {
             "cut_threshold_newtons = 0.0",
             "cut_depth_mm = 0.0",
             "cut_depth_mm = -3.0",
+            "blade_length_mm = 0.0",
         ] {
             let err = build(bad).expect_err(bad).to_string();
             assert!(
                 err.contains("incision")
                     || err.contains("cut_threshold_newtons")
-                    || err.contains("cut_depth_mm"),
+                    || err.contains("cut_depth_mm")
+                    || err.contains("blade_length_mm"),
                 "{bad}: {err}"
             );
         }

@@ -46,6 +46,10 @@ pub struct SceneSpec {
     /// or loosely held tissue yields instead of pushing back), mm (default 4 mm).
     #[serde(default = "default_cut_depth_mm")]
     pub cut_depth_mm: f64,
+    /// The scalpel's cutting edge from its tip, mm (default 20 mm): a wall thicker than
+    /// that (the thorax's 40 mm) needs a longer blade to be opened in one stroke.
+    #[serde(default = "default_blade_length_mm")]
+    pub blade_length_mm: f64,
     /// The solver settings (the `[solver]` table; defaults where absent).
     #[serde(default)]
     pub solver: SolverSettings,
@@ -308,6 +312,10 @@ fn default_cut_threshold_newtons() -> f64 {
 
 fn default_cut_depth_mm() -> f64 {
     4.0
+}
+
+fn default_blade_length_mm() -> f64 {
+    20.0
 }
 
 /// How a default incision crosses the tissue: a straight line through the middle of the
