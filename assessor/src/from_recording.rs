@@ -75,7 +75,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
     if let ExercisePlan::Field(p) = plan
         && let Some(width_m) = p.retractor_width_m
     {
-        match retracted(rec, &data, p.field().normal, width_m, period_s) {
+        match retracted(rec, &data, p.reference().normal, width_m, period_s) {
             Ok(surface) => data.retracted_surface = Some(surface),
             Err(e) => tracing::warn!("the field is not measured: {e}"),
         }

@@ -564,3 +564,62 @@ async fn pattern_cutting_shows_its_mark_in_exam_mode_and_scores_the_freed_piece(
     assert!(value("entry_error_m").is_none(), "no incision metrics");
     store.close().await;
 }
+
+/// The mini-thoracotomy in exam mode: the landmarks (the sternum's edge, four ribs) are on
+/// the skin, the plan's line is not; the expert's attempt is scored on what its retracted
+/// wound shows of the heart, without harm.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mini_thoracotomy_is_scored_on_its_retracted_field() {
+    let dir_guard = temp_dir("field");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
+    let settings = settings(dir, 10.0);
+    let name = cutlab_assessor::store::FIELD_EXERCISE;
+    let kim = store
+        .create_user("dr-kim", Role::Instructor, None)
+        .await
+        .expect("kim");
+    let ana = store
+        .create_user("ana", Role::Trainee, None)
+        .await
+        .expect("ana");
+    let field = store.exercise_by_name(name).await.expect("the exercise");
+    store
+        .open_early(ana.id, field.id, kim.id, "thoracic rotation")
+        .await
+        .expect("opened");
+    let request = StartRequest {
+        exercise: name.into(),
+        trainee: "ana".into(),
+        guided: false,
+    };
+    let running = run::start(store.clone(), &settings, request, Input::Device(expert()))
+        .await
+        .expect("started");
+    assert!(!running.guided);
+    assert_eq!(running.marks.len(), 5, "the sternum's edge and four ribs");
+    let Ending::Scored {
+        attempt, passed, ..
+    } = ending(&running).await
+    else {
+        panic!("scored");
+    };
+    let metrics = store.attempt_metrics(attempt).await.expect("metrics");
+    let value = |key: &str| {
+        metrics
+            .iter()
+            .find(|m| m.metric == key)
+            .and_then(|m| m.value)
+    };
+    assert!(passed, "the expert passes: {metrics:?}");
+    assert!(
+        value("field_of_expert").is_some_and(|f| f > 0.5),
+        "{metrics:?}"
+    );
+    assert!(value("field_working_width_m").is_some_and(|w| w > 0.005));
+    assert_eq!(value("wall_opened"), Some(1.0));
+    assert_eq!(value("bone_contacts"), Some(0.0));
+    assert_eq!(value("critical_damage"), Some(0.0));
+    assert!(value("lateral_mean_m").is_none(), "no distance to the line");
+    store.close().await;
+}

@@ -150,7 +150,7 @@ impl FieldPlan {
     }
 
     /// What the metrics measure against.
-    pub fn field(&self) -> Field {
+    pub fn reference(&self) -> Field {
         Field {
             target: Ellipsoid {
                 centre_m: self.target_centre_m.into(),
@@ -323,7 +323,7 @@ impl ExerciseKind for FieldPlan {
     fn assess(&self, data: &AttemptData) -> Result<MetricSet> {
         self.check()?;
         let mut values = Values::default();
-        wound::assess(&self.field(), data, &mut values);
+        wound::assess(&self.reference(), data, &mut values);
         Ok(values.collect(wound::METRICS))
     }
 
