@@ -5,9 +5,9 @@
 use cutlab_assessor::metrics::{METRICS, MetricValue};
 use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds, cusum};
 use cutlab_assessor::store::CUTTING_BASICS;
-use cutlab_assessor::store::EXCISION_EXERCISE;
 use cutlab_assessor::store::{Access, AttemptStatus, BODY_WALL_EXERCISE, BUILTIN_EXERCISE};
 use cutlab_assessor::store::{DbLocation, test_postgres};
+use cutlab_assessor::store::{EXCISION_EXERCISE, FIELD_EXERCISE};
 use cutlab_assessor::store::{NewExercise, PATTERN_EXERCISE, Role, ThresholdSource};
 use cutlab_assessor::{AssessError, Better, ExercisePlan, IncisionPlan, Store, on_db};
 
@@ -246,8 +246,8 @@ async fn cohorts_and_curricula(store: Store) {
         store.get_curriculum(cur.id).await.expect("get").name,
         "basic incisions"
     );
-    // the four built-in plans and the other exercise's
-    assert_eq!(store.list_plans().await.expect("plans").len(), 5);
+    // the five built-in plans and the other exercise's
+    assert_eq!(store.list_plans().await.expect("plans").len(), 6);
     assert!(store.add_module(cur.id, "bad", &[9999]).await.is_err());
 }
 
@@ -282,6 +282,7 @@ async fn an_older_databases_cutting_basics_gains_the_new_exercises_once(store: S
         "Pattern cutting",
         "Elliptical excision",
         "Curved incision on a patient",
+        "Surgical field: mini-thoracotomy",
     ];
     let modules = store.curriculum_modules(basics.id).await.expect("modules");
     assert_eq!(modules[0].exercise_ids, [incision]);
@@ -326,11 +327,15 @@ async fn progression_opens_each_exercise_after_the_one_before(store: Store) {
         .exercise_by_name(EXCISION_EXERCISE)
         .await
         .expect("excision");
-    assert_eq!(order, [builtin.id, pattern.id, excision.id, body_wall.id]);
+    let field = store.exercise_by_name(FIELD_EXERCISE).await.expect("field");
+    assert_eq!(
+        order,
+        [builtin.id, pattern.id, excision.id, body_wall.id, field.id]
+    );
     store.ensure_builtins().await.expect("again: nothing added");
     assert_eq!(
         store.curriculum_modules(basics.id).await.expect("m").len(),
-        4
+        5
     );
 
     // a course of our own: one-metric, then pattern cutting
@@ -467,6 +472,7 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
             BODY_WALL_EXERCISE,
             BUILTIN_EXERCISE,
             EXCISION_EXERCISE,
+            FIELD_EXERCISE,
             "pattern-cutting"
         ]
         .map(String::from)
@@ -948,7 +954,7 @@ async fn open_creates_and_migrates_a_file() {
     store.ensure_builtins().await.expect("builtins");
     store.close().await;
     let again = Store::open(&path).await.expect("reopen");
-    assert_eq!(again.list_exercises().await.expect("list").len(), 4);
+    assert_eq!(again.list_exercises().await.expect("list").len(), 5);
     again.close().await;
     std::fs::remove_dir_all(&dir).ok();
 }
