@@ -675,7 +675,8 @@ fn the_external_mcap_reader_reads_it_with_crc_checks() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
     let rec = Recording::open(&r.path).expect("readable");
     for (topic, n) in rec.counts() {
-        assert_eq!(v["counts"][&topic].as_u64(), Some(n), "{topic}");
+        // a channel without messages (no damage done) is not in the reader's counts
+        assert_eq!(v["counts"][&topic].as_u64().unwrap_or(0), n, "{topic}");
     }
     let first = rec.samples().into_values().next().expect("a tick");
     let x = v["first_pose_xyz"][0].as_f64().expect("x");
