@@ -62,7 +62,7 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
             surface_m2: s.surface_m2,
         })
         .collect();
-    let mut data = AttemptData {
+    Ok(AttemptData {
         poses,
         forces,
         cuts,
@@ -71,16 +71,24 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
         device: Some(meta.provenance.device.clone()),
         damage: damage_of(rec, period_s),
         retracted_surface: None,
+    })
+}
+
+/// For a field plan with a retractor, the surface of the attempt's wound retracted
+/// ([`AttemptData::retracted_surface`]): what scoring measures the field on. Kept out of
+/// [`attempt_data`], whose other readers (a review's trace) need no simulation.
+fn retract_for_scoring(rec: &Recording, plan: &ExercisePlan, data: &mut AttemptData) {
+    let ExercisePlan::Field(p) = plan else {
+        return;
     };
-    if let ExercisePlan::Field(p) = plan
-        && let Some(width_m) = p.retractor_width_m
-    {
-        match retracted(rec, &data, p.reference().normal, width_m, period_s) {
-            Ok(surface) => data.retracted_surface = Some(surface),
-            Err(e) => tracing::warn!("the field is not measured: {e}"),
-        }
+    let (Some(width_m), Ok(meta)) = (p.retractor_width_m, rec.meta()) else {
+        return;
+    };
+    let period_s = meta.period_nanos as f64 * 1e-9;
+    match retracted(rec, data, p.reference().normal, width_m, period_s) {
+        Ok(surface) => data.retracted_surface = Some(surface),
+        Err(e) => tracing::warn!("the field is not measured: {e}"),
     }
-    Ok(data)
 }
 
 /// The tissue's surface once a retractor `width_m` wide has spread the wound the attempt
@@ -101,18 +109,13 @@ fn retracted(
         return Err("the recording's last keyframe comes before the end of the cut".into());
     }
     let sim = &mut stepper.sim;
-    let steps = |s: f64| (s / sim.settings.time_step_s).round() as usize;
-    let (ramp, hold) = (
-        steps(crate::planning::RETRACT_RAMP_S),
-        steps(crate::planning::RETRACT_HOLD_S),
-    );
     let retractor = cutlab_sim::retractor::Retractor {
         line_m: vec![a, b],
         up: normal,
         width_m,
     };
     retractor
-        .open(sim, ramp, hold)
+        .open(sim)
         .map_err(|e| format!("the retracted wound: {e}"))?;
     Ok(SurfaceMesh::of(sim))
 }
@@ -213,7 +216,8 @@ pub fn assess_recording(
     rec: &Recording,
     plan: &ExercisePlan,
 ) -> Result<(crate::MetricSet, Option<String>), AssessError> {
-    let data = attempt_data(rec, plan)?;
+    let mut data = attempt_data(rec, plan)?;
+    retract_for_scoring(rec, plan, &mut data);
     let mut values = plan.assess(&data)?;
     let damaged = rec
         .shortfall()

@@ -85,20 +85,6 @@ pub struct Opening {
     pub retract_m: Option<f64>,
 }
 
-impl Default for Opening {
-    fn default() -> Self {
-        Self {
-            open_s: 0.5,
-            retract_m: None,
-        }
-    }
-}
-
-/// How long the retractor takes to open, s.
-pub const RETRACT_RAMP_S: f64 = 0.3;
-/// How long the retracted wound settles before it is measured, s.
-pub const RETRACT_HOLD_S: f64 = 0.2;
-
 impl CandidateIncision {
     /// Checks the numbers, naming the field at fault.
     pub fn check(&self) -> Result<()> {
@@ -124,10 +110,8 @@ impl CandidateIncision {
 
     /// The line's length, m.
     pub fn length_m(&self) -> f64 {
-        self.incision_m
-            .windows(2)
-            .map(|w| (Point3::from(w[1]) - Point3::from(w[0])).norm())
-            .sum()
+        let line: Vec<Point3<f64>> = self.incision_m.iter().map(|&p| p.into()).collect();
+        crate::geom::polyline_length(&line)
     }
 
     /// Points along the line every [`STEP_M`] (and its last point).
@@ -206,9 +190,8 @@ pub fn field_of(
                 up,
                 width_m,
             };
-            let (ramp, hold) = (steps(RETRACT_RAMP_S), steps(RETRACT_HOLD_S));
             retractor
-                .open(&mut sim, ramp, hold)
+                .open(&mut sim)
                 .map_err(|e| AssessError::InvalidInput(format!("the retracted wound: {e}")))?;
             Some(sight.view(&sim)?)
         }

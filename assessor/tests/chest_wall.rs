@@ -85,13 +85,5 @@ fn the_demo_incision_scores_well_and_its_opening_matches_the_vertex_gap() {
 
 /// The boundary of `sim`'s mesh at its current positions.
 fn surface(sim: &cutlab_sim::solver::Simulation) -> SurfaceMesh {
-    SurfaceMesh {
-        vertices_m: sim
-            .state
-            .positions
-            .iter()
-            .map(|p| [p.x, p.y, p.z])
-            .collect(),
-        triangles: sim.model.mesh.topology().boundary.clone(),
-    }
+    SurfaceMesh::of(sim)
 }

@@ -18,16 +18,6 @@ pub enum DamageKind {
     SpareCut,
 }
 
-impl DamageKind {
-    /// The tag recordings carry.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            DamageKind::BladeOnBone => "blade-on-bone",
-            DamageKind::SpareCut => "spare-cut",
-        }
-    }
-}
-
 /// One harm, on one region of the mesh.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct TissueDamage {

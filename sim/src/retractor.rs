@@ -24,6 +24,11 @@ use crate::{Point3, Vector3};
 /// cut wanders about its line.
 pub const FACE_BAND_M: f64 = 0.004;
 
+/// How long the retractor takes to open, s.
+pub const RAMP_S: f64 = 0.3;
+/// How long the opened retractor holds before the wound is looked at, s.
+pub const HOLD_S: f64 = 0.2;
+
 /// How near a spread face particle comes to bone beside it, m.
 pub const BONE_CLEARANCE_M: f64 = 0.001;
 
@@ -173,15 +178,12 @@ impl Retractor {
         normals
     }
 
-    /// Grips the wound, opens the retractor over `ramp_steps` simulation steps (the gripped
-    /// particles held and carried linearly) and keeps it open for `hold_steps` more. The
-    /// particles stay held. Returns the grip.
-    pub fn open(
-        &self,
-        sim: &mut Simulation,
-        ramp_steps: usize,
-        hold_steps: usize,
-    ) -> Result<Grip, StepError> {
+    /// Grips the wound, opens the retractor over [`RAMP_S`] (the gripped particles held and
+    /// carried linearly, step by step) and keeps it open for [`HOLD_S`] more. The particles
+    /// stay held. Returns the grip.
+    pub fn open(&self, sim: &mut Simulation) -> Result<Grip, StepError> {
+        let steps = |s: f64| (s / sim.settings.time_step_s).round() as usize;
+        let (ramp_steps, hold_steps) = (steps(RAMP_S), steps(HOLD_S));
         let grip = self.grip(sim);
         sim.edit(|model, _| {
             for &v in &grip.vertices {

@@ -132,7 +132,7 @@ fn a_retractor_spreads_the_wound_to_its_width_and_not_into_the_ribs() {
         up: Vector3::z(),
         width_m: 0.020,
     };
-    let grip = retractor.open(&mut sim, 60, 40).expect("it opens");
+    let grip = retractor.open(&mut sim).expect("it opens");
     assert!(grip.vertices.len() > 20, "{} gripped", grip.vertices.len());
     let rest = sim.model.mesh.positions().to_vec();
     let skin_middle: Vec<f64> = grip

@@ -143,10 +143,8 @@ impl FieldPlan {
 
     /// The expert's incision's length (m).
     pub fn length_m(&self) -> f64 {
-        self.incision_m
-            .windows(2)
-            .map(|w| nalgebra::distance(&Point3::from(w[0]), &Point3::from(w[1])))
-            .sum()
+        let line: Vec<Point3<f64>> = self.incision_m.iter().map(|&p| p.into()).collect();
+        geom::polyline_length(&line)
     }
 
     /// What the metrics measure against.
