@@ -61,7 +61,7 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
         let mut failed: Vec<(f64, String)> = results
             .iter()
             .filter(|m| decides(m.key) && m.passed == Some(false))
-            .filter_map(|m| Some((severity(m), words(m)?)))
+            .filter_map(|m| Some((severity(m), words(m, results)?)))
             .collect();
         failed.sort_by(|a, b| b.0.total_cmp(&a.0));
         fix.extend(failed.into_iter().map(|f| f.1));
@@ -69,8 +69,11 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
     fix.truncate(MAX_FIXES);
     let praise = fix.is_empty().then(|| {
         // what the exercise's limits were on, in its own words
-        let what = if results.iter().any(|m| m.key == "piece_freed") {
+        let has = |key: &str| results.iter().any(|m| m.key == key);
+        let what = if has("piece_freed") {
             "the piece is free, in time and on the mark"
+        } else if has("field_of_expert") {
+            "the opening shows the target, through a short incision and without harm"
         } else {
             "the line, its depth and the force were right"
         };
@@ -107,8 +110,9 @@ fn severity(m: &MetricResult<'_>) -> f64 {
     }
 }
 
-/// A failed deciding metric in plain words.
-fn words(m: &MetricResult<'_>) -> Option<String> {
+/// A failed deciding metric in plain words (`results`: the attempt's others, which some
+/// words draw on).
+fn words(m: &MetricResult<'_>, results: &[MetricResult<'_>]) -> Option<String> {
     let Some(v) = m.value else {
         // a piece not cut free has no completion time: `piece_freed` says what to do
         if m.key == "completion_time_s" {
@@ -120,6 +124,9 @@ fn words(m: &MetricResult<'_>) -> Option<String> {
             "{name}: could not be measured from this attempt's cut, so it cannot pass."
         ));
     };
+    if let Some(said) = field_words(m.key, v, m.upper, results) {
+        return Some(said);
+    }
     let mm = v * 1e3;
     Some(match m.key {
         "depth_error_m" if v > 0.0 => {
@@ -175,6 +182,81 @@ fn words(m: &MetricResult<'_>) -> Option<String> {
             None => format!("{key}: {v:.4} is beyond its limit."),
         },
     })
+}
+
+/// A failed metric of the `field` kind with value `v` and upper limit `upper`, in plain words:
+/// the field says what was wrong with the incision's place or length, from `results`.
+fn field_words(
+    key: &str,
+    v: f64,
+    upper: Option<f64>,
+    results: &[MetricResult<'_>],
+) -> Option<String> {
+    let value = |key: &str| results.iter().find(|m| m.key == key).and_then(|m| m.value);
+    Some(match key {
+        "field_of_expert" => {
+            let why = field_failure(results);
+            format!(
+                "{why}: the opening shows {:.0} % of the expert's view of the target.",
+                v * 100.0
+            )
+        }
+        "incision_length_m" => format!(
+            "Make the incision shorter: {:.0} mm, over the {} mm limit; the view it bought was              not worth the wound.",
+            v * 1e3,
+            upper.map_or("exercise's".to_owned(), |u| format!("{:.0}", u * 1e3))
+        ),
+        "wall_opened" => format!(
+            "Cut through the whole wall: the deepest cut was {:.0} mm, and the wall's innermost              layer was not opened, so nothing behind it shows.",
+            value("deepest_cut_m").unwrap_or(0.0) * 1e3
+        ),
+        "bone_contacts" => format!(
+            "Keep the blade off the ribs: it came down on bone {v:.0} times; cut in the middle              of the space."
+        ),
+        "critical_damage" => format!(
+            "Spare what must not be cut: {v:.0} critical harm(s), the artery beside the sternum              cut or the target itself touched."
+        ),
+        _ => return None,
+    })
+}
+
+/// Why an incision shows too little of the target: its place among the ribs, else its
+/// length against the experts', else that it shows too little.
+fn field_failure(results: &[MetricResult<'_>]) -> String {
+    use cutlab_haptics::landmarks::Placement;
+    let find = |key: &str| results.iter().find(|m| m.key == key);
+    let count = |k: i32| match k.abs() {
+        1 => "One space".to_owned(),
+        2 => "Two spaces".to_owned(),
+        n => format!("{n} spaces"),
+    };
+    match find("incision_space")
+        .and_then(|m| m.value)
+        .map(Placement::of)
+    {
+        Some(Placement::Space(k)) if k > 0 => return format!("{} too low", count(k)),
+        Some(Placement::Space(k)) if k < 0 => return format!("{} too high", count(k)),
+        Some(Placement::OnMark(k)) => {
+            let which = match k {
+                0 => "the rib below the expert's space".to_owned(),
+                -1 => "the rib above the expert's space".to_owned(),
+                k => format!("a rib {} spaces from the expert's", k.abs()),
+            };
+            return format!("On {which}, not in a space");
+        }
+        _ => {}
+    }
+    if let Some(length) = find("incision_length_m")
+        && let (Some(v), Some(mean)) = (length.value, length.mean)
+        && v < 0.8 * mean
+    {
+        return format!(
+            "Too short at {:.0} mm (the experts' {:.0} mm)",
+            v * 1e3,
+            mean * 1e3
+        );
+    }
+    "Expose more of the target".to_owned()
 }
 
 /// A feedback-only metric against the experts' reference, in plain words.
@@ -462,6 +544,64 @@ mod tests {
         assert!(
             slow.fix.iter().any(|f| f.contains("up to 3.1 mm")),
             "{slow:?}"
+        );
+    }
+
+    /// A field attempt is told where its incision went wrong: a space too low, on a rib, too
+    /// short, with the share of the expert's view it shows; a good one is praised for the
+    /// field, not for a line.
+    #[test]
+    fn a_field_attempt_is_told_where_its_incision_went_wrong() {
+        let field = |v: f64, space: Option<f64>, length: f64| {
+            vec![
+                r(
+                    "field_of_expert",
+                    Some(v),
+                    Some(v >= 0.5),
+                    1.0,
+                    Some(0.5),
+                    None,
+                ),
+                r("incision_space", space, None, 0.0, None, None),
+                r(
+                    "incision_length_m",
+                    Some(length),
+                    Some(true),
+                    0.05,
+                    None,
+                    Some(0.07),
+                ),
+            ]
+        };
+        let low = advice(&field(0.3, Some(1.05), 0.05));
+        assert_eq!(
+            low.fix,
+            ["One space too low: the opening shows 30 % of the expert's view of the target."]
+        );
+        let high = advice(&field(0.1, Some(-2.0), 0.05));
+        assert!(high.fix[0].starts_with("Two spaces too high"), "{high:?}");
+        let rib = advice(&field(0.2, Some(0.5), 0.05));
+        assert!(
+            rib.fix[0].starts_with("On the rib below the expert's space"),
+            "{rib:?}"
+        );
+        let short = advice(&field(0.4, Some(0.1), 0.025));
+        assert!(
+            short.fix[0].starts_with("Too short at 25 mm (the experts' 50 mm)"),
+            "{short:?}"
+        );
+        let unplaced = advice(&field(0.4, None, 0.05));
+        assert!(unplaced.fix[0].starts_with("Expose more"), "{unplaced:?}");
+        let good = advice(&field(0.9, Some(0.0), 0.05));
+        assert!(good.fix.is_empty());
+        assert!(good.praise.unwrap().contains("opening shows the target"));
+        let walled = advice(&[
+            r("wall_opened", Some(0.0), Some(false), 1.0, Some(0.5), None),
+            r("deepest_cut_m", Some(0.027), None, 0.045, None, None),
+        ]);
+        assert!(
+            walled.fix[0].contains("deepest cut was 27 mm"),
+            "{walled:?}"
         );
     }
 }

@@ -30,6 +30,7 @@ pub mod damage;
 pub mod device;
 pub mod error;
 pub mod hand;
+pub mod landmarks;
 pub mod plan;
 pub mod pose;
 pub mod render;

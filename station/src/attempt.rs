@@ -8,6 +8,7 @@ use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Outcome, Role, Store};
 use cutlab_assessor::{AssessError, ExercisePlan, MetricSet};
 use cutlab_haptics::Session;
+use cutlab_haptics::device::Planning;
 use cutlab_haptics::plan::Plan;
 use cutlab_recorder::Recording;
 use cutlab_sim::{Point3, Vector3};
@@ -48,13 +49,56 @@ pub async fn check_open(
 pub fn plan_on_tissue(session: &Session, plan: &ExercisePlan) -> Result<Plan, StationError> {
     let hand = plan.kind_plan().hand_line();
     let line: Vec<Point3> = hand.line_m.iter().map(|&c| Point3::from(c)).collect();
+    laid_on_tissue(
+        session,
+        &line,
+        &hand.normal.into(),
+        hand.depth_m,
+        hand.viewpoint_m,
+    )
+}
+
+/// The incision a synthetic trainee choosing with `planning` places (drawn with `seed`), for
+/// an exercise that leaves the choice to the trainee
+/// ([`cutlab_assessor::exercise::ExerciseKind::trainee_places_incision`]), laid on the
+/// session's tissue as [`plan_on_tissue`] lays the expert's; `None` for the other exercises.
+pub fn chosen_plan_on_tissue(
+    session: &Session,
+    plan: &ExercisePlan,
+    planning: &Planning,
+    seed: u64,
+) -> Result<Option<Plan>, StationError> {
+    let kind = plan.kind_plan();
+    if !kind.trainee_places_incision() {
+        return Ok(None);
+    }
+    let hand = kind.hand_line();
+    let points = |line: &[[f64; 3]]| line.iter().map(|&c| Point3::from(c)).collect::<Vec<_>>();
+    let marks: Vec<Vec<Point3>> = kind.drawing().marks_m.iter().map(|m| points(m)).collect();
+    let normal = Vector3::from(hand.normal);
+    let chosen = planning.choose(&points(&hand.line_m), &normal, hand.depth_m, &marks, seed);
+    laid_on_tissue(
+        session,
+        &chosen.line_m,
+        &normal,
+        chosen.depth_m,
+        hand.viewpoint_m,
+    )
+    .map(Some)
+}
+
+/// `line` laid on the session's tissue facing `normal` (33 points evenly spaced), `depth_m`
+/// deep, seen from `viewpoint_m`.
+fn laid_on_tissue(
+    session: &Session,
+    line: &[Point3],
+    normal: &Vector3,
+    depth_m: f64,
+    viewpoint_m: [f64; 3],
+) -> Result<Plan, StationError> {
     let on_tissue = Plan {
-        viewpoint_m: Some(Point3::from(hand.viewpoint_m)),
-        ..session.plan_along(
-            &resample(&line, 33),
-            &Vector3::from(hand.normal),
-            hand.depth_m,
-        )?
+        viewpoint_m: Some(Point3::from(viewpoint_m)),
+        ..session.plan_along(&resample(line, 33), normal, depth_m)?
     };
     on_tissue.check()?;
     Ok(on_tissue)

@@ -147,6 +147,8 @@ pub struct Prepared {
     plan: Result<Plan, String>,
     /// The lines marked on the tissue (the exercise's), laid on it.
     pub marks: Vec<Vec<cutlab_sim::Point3>>,
+    /// The exercise's plan, where a synthetic trainee chooses its own incision from it.
+    chooses_from: Option<ExercisePlan>,
     pub config: SessionConfig,
     pub settings: RunSettings,
 }
@@ -174,6 +176,10 @@ impl Prepared {
         let min_tets = settings.min_tets;
         let built = Scene::load(scene, BuildOptions { min_tets })?;
         let (built, session, step_choice) = Session::at_time_step(built, settings.time_step)?;
+        let chooses_from = match plan {
+            PlanSource::Exercise(p) if p.kind_plan().trainee_places_incision() => Some(p.clone()),
+            _ => None,
+        };
         let (plan, marks) = match plan {
             PlanSource::Exercise(p) => (
                 Ok(attempt::plan_on_tissue(&session, p)?),
@@ -199,6 +205,7 @@ impl Prepared {
             step_choice,
             plan,
             marks,
+            chooses_from,
             config,
             settings: settings.clone(),
         })
@@ -217,14 +224,27 @@ impl Prepared {
     }
 
     /// The device `spec` names: one that follows the plan is made for it (with the run's
-    /// seed); a file, a recording or a port is opened ([`open_device`]).
+    /// seed; a synthetic trainee places its own incision where the exercise leaves that to
+    /// the trainee); a file, a recording or a port is opened ([`open_device`]).
     pub fn device(&self, spec: &DeviceSpec) -> Result<Box<dyn HapticDevice>, StationError> {
         let seed = self.settings.seed;
         Ok(match spec {
-            DeviceSpec::Trainee { name, skill } => Box::new(
-                SyntheticTrainee::new(name, self.plan()?.clone(), *skill, seed)?
-                    .expecting_cut_of(&self.config.render),
-            ),
+            DeviceSpec::Trainee { name, skill } => {
+                let chosen = match &self.chooses_from {
+                    Some(p) => {
+                        attempt::chosen_plan_on_tissue(&self.session, p, &skill.planning, seed)?
+                    }
+                    None => None,
+                };
+                let plan = match chosen {
+                    Some(plan) => plan,
+                    None => self.plan()?.clone(),
+                };
+                Box::new(
+                    SyntheticTrainee::new(name, plan, *skill, seed)?
+                        .expecting_cut_of(&self.config.render),
+                )
+            }
             DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, self.plan()?, seed)?),
             DeviceSpec::StylusHand(kind) => Box::new(StylusHand::new(*kind, self.plan()?, seed)?),
             DeviceSpec::Csv(_) | DeviceSpec::Recording(_) | DeviceSpec::Igtl(_) => {

@@ -16,6 +16,7 @@ use crate::metrics::exposure::Ellipsoid;
 use crate::metrics::wound::{self, Field};
 use crate::metrics::{Better, Metric, MetricSet, Values};
 use crate::proficiency::Threshold;
+use cutlab_haptics::landmarks::Spaces;
 
 /// A field plan (SI units: metres, newtons).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -147,6 +148,14 @@ impl FieldPlan {
         geom::polyline_length(&line)
     }
 
+    /// The spaces between the landmarks parallel to the expert's incision (the ribs either
+    /// side of its intercostal space), if they frame it.
+    pub fn spaces(&self) -> Option<Spaces> {
+        let points = |line: &[[f64; 3]]| line.iter().map(|&p| p.into()).collect::<Vec<_>>();
+        let marks: Vec<Vec<Point3<f64>>> = self.landmarks_m.iter().map(|m| points(m)).collect();
+        Spaces::new(&points(&self.incision_m), &self.normal.into(), &marks)
+    }
+
     /// What the metrics measure against.
     pub fn reference(&self) -> Field {
         Field {
@@ -266,7 +275,7 @@ const KEYS: [PlanKey; 14] = [
     PlanKey::new(
         "landmarks_m",
         "list of lines of [x, y, z] m",
-        "lines a surgeon finds by touch, marked on the skin in every mode (optional)",
+        "lines a surgeon finds by touch, marked on the skin in every mode; those along the incision (ribs) listed head first count its space (optional)",
     ),
     PlanKey::new(
         "tolerance_m",
@@ -321,7 +330,15 @@ impl ExerciseKind for FieldPlan {
     fn assess(&self, data: &AttemptData) -> Result<MetricSet> {
         self.check()?;
         let mut values = Values::default();
-        wound::assess(&self.reference(), data, &mut values);
+        let middle = wound::assess(&self.reference(), data, &mut values);
+        match (self.spaces(), middle) {
+            (Some(spaces), Some(middle)) => values.set("incision_space", spaces.position(&middle)),
+            (None, _) => values.missing(
+                &["incision_space"],
+                "the plan marks no landmarks either side of its incision",
+            ),
+            (_, None) => values.missing(&["incision_space"], "nothing was cut on the skin"),
+        }
         Ok(values.collect(wound::METRICS))
     }
 
@@ -358,6 +375,10 @@ impl ExerciseKind for FieldPlan {
 
     fn keys(&self) -> &'static [PlanKey] {
         &KEYS
+    }
+
+    fn trainee_places_incision(&self) -> bool {
+        true
     }
 
     fn drawing(&self) -> Drawing {
@@ -401,5 +422,52 @@ mod tests {
         let mut bad = plan;
         bad.incision_m.truncate(1);
         assert!(bad.check().unwrap_err().to_string().contains("incision_m"));
+    }
+
+    /// The incision's space is counted from the built-in plan's ribs: the expert's line in
+    /// space 0, the 5th space (27.5 mm lower) at +1, the rib below at +0.5; without a cut, or
+    /// without landmarks, it is missing, not a number.
+    #[test]
+    fn the_incision_is_placed_among_the_ribs() {
+        use crate::input::CutSample;
+        let plan = FieldPlan::builtin().unwrap();
+        let at = |plan: &FieldPlan, y: f64| {
+            let cuts = (0..=50)
+                .map(|k| CutSample {
+                    t_s: f64::from(k) * 0.1,
+                    tip_m: [-0.02 + 0.001 * f64::from(k), y, -0.045],
+                    edge_dir: [0.0, 0.0, 1.0],
+                    depth_m: 0.045,
+                    stroke: Some(0),
+                })
+                .collect();
+            let data = AttemptData {
+                cuts,
+                ..AttemptData::default()
+            };
+            let set = plan.assess(&data).unwrap();
+            set.iter()
+                .find(|v| v.key == "incision_space")
+                .unwrap()
+                .value
+        };
+        let space = |y| at(&plan, y).unwrap();
+        assert!(space(-0.0025).abs() < 1e-9);
+        assert!((space(-0.030) - 1.0).abs() < 1e-9, "{}", space(-0.030));
+        assert!((space(-0.015) - 0.5).abs() < 1e-9);
+        assert!((space(0.0225) + 1.0).abs() < 1e-9, "{}", space(0.0225));
+        let bare = FieldPlan {
+            landmarks_m: Vec::new(),
+            ..plan.clone()
+        };
+        assert_eq!(at(&bare, -0.0025), None);
+        let none = plan.assess(&AttemptData::default()).unwrap();
+        assert_eq!(
+            none.iter()
+                .find(|v| v.key == "incision_space")
+                .unwrap()
+                .value,
+            None
+        );
     }
 }

@@ -206,6 +206,11 @@ pub trait ExerciseKind {
     fn keys(&self) -> &'static [PlanKey];
     /// What a review draws of the plan.
     fn drawing(&self) -> Drawing;
+    /// Whether the trainee chooses where to cut (the plan's line is one good choice, not the
+    /// task), as in the `field` kind; a synthetic trainee then places its own.
+    fn trainee_places_incision(&self) -> bool {
+        false
+    }
 }
 
 /// An exercise's plan, tagged by kind.

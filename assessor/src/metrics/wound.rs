@@ -70,6 +70,15 @@ pub const METRICS: &[Metric] = &[
     )
     .labelled("Incision length"),
     m(
+        "incision_space",
+        "1",
+        Better::TwoSided,
+        false,
+        "where the incision's middle lies among the landmarks beside the expert's, in spaces: \
+         0 the expert's space, +1 the next in the plan's order (lower), +-0.5 on the mark between",
+    )
+    .labelled("Space (from the expert's)"),
+    m(
         "wall_opened",
         "1",
         Better::HigherIsBetter,
@@ -121,8 +130,13 @@ pub struct Field {
     pub retracted: bool,
 }
 
-/// The field metrics of `data` against `field`.
-pub(crate) fn assess(field: &Field, data: &AttemptData, values: &mut Values) {
+/// The field metrics of `data` against `field`, but the incision's space (the plan's
+/// landmarks place it); returns the incision's middle on the skin, if it was cut.
+pub(crate) fn assess(
+    field: &Field,
+    data: &AttemptData,
+    values: &mut Values,
+) -> Option<Point3<f64>> {
     let middle = match incision_span(field.normal, data) {
         Some((a, b, length)) => {
             values.set("incision_length_m", length);
@@ -146,6 +160,7 @@ pub(crate) fn assess(field: &Field, data: &AttemptData, values: &mut Values) {
     );
     harm(field, data, values);
     seen(field, data, middle, values);
+    middle
 }
 
 /// The incision's ends on the skin and its length: the two points of the cut's trace

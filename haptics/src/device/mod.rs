@@ -1,5 +1,6 @@
 //! Haptic devices: where the tool's pose comes from and where the rendered force goes.
 
+mod choice;
 mod csv;
 pub mod igtl;
 pub mod pointer;
@@ -9,6 +10,7 @@ mod stylus_hand;
 mod track;
 mod trainee;
 
+pub use choice::{Choice, Planning};
 pub use csv::CsvDevice;
 pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};

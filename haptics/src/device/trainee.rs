@@ -13,7 +13,7 @@
 //! it presses on, slowly and at most [`MAX_PRESS_M`] deeper, until the blade gives; over the
 //! first part of the stroke it comes back up to the planned depth.
 
-use super::{DeviceFault, HapticDevice};
+use super::{DeviceFault, HapticDevice, Planning};
 use crate::plan::Plan;
 use cutlab_sim::rng::Rng;
 
@@ -43,6 +43,8 @@ pub struct Skill {
     pub overshoot_m: f64,
     /// Tilt of the blade away from the planned approach direction, rad (sign drawn per attempt).
     pub approach_angle_error_rad: f64,
+    /// How it chooses an incision where the exercise leaves the choice to the trainee.
+    pub planning: Planning,
 }
 
 impl Skill {
@@ -64,6 +66,7 @@ impl Skill {
                 hesitation_s: 0.0,
                 overshoot_m: 0.5e-3,
                 approach_angle_error_rad: 2.0 * deg,
+                planning: Planning::EXPERT,
             },
             "intermediate" => Self {
                 tremor_amplitude_m: 0.15e-3,
@@ -76,6 +79,7 @@ impl Skill {
                 hesitation_s: 0.3,
                 overshoot_m: 2.0e-3,
                 approach_angle_error_rad: 6.0 * deg,
+                planning: Planning::INTERMEDIATE,
             },
             "novice" => Self {
                 tremor_amplitude_m: 0.4e-3,
@@ -88,6 +92,7 @@ impl Skill {
                 hesitation_s: 0.6,
                 overshoot_m: 5.0e-3,
                 approach_angle_error_rad: 12.0 * deg,
+                planning: Planning::NOVICE,
             },
             _ => return None,
         })
@@ -118,6 +123,7 @@ impl Skill {
             hesitation_s: mix(a.hesitation_s, b.hesitation_s),
             overshoot_m: mix(a.overshoot_m, b.overshoot_m),
             approach_angle_error_rad: mix(a.approach_angle_error_rad, b.approach_angle_error_rad),
+            planning: Planning::mix(&a.planning, &b.planning, t),
         })
     }
 }
