@@ -1335,3 +1335,135 @@ async fn debrief(
     std::fs::write(shot, c.screenshot().await?).expect("screenshot");
     Ok(summary)
 }
+
+/// The mini-thoracotomy at the station in exam mode, as a surgeon places it: no line is drawn;
+/// ana finds the 4th intercostal space between the marks of the 4th and 5th ribs (the 3rd
+/// and 4th lines after the sternum's edge), starts 25 mm lateral of the sternum's edge (clear
+/// of the internal thoracic artery), checks with the keys that the depth goes past the 40 mm
+/// wall, and draws 50 mm along the space at 10 mm/s with a steady hand. Half way, the HUD
+/// names the layer the blade is in; the retracted field shows the heart, and the attempt
+/// passes. Screenshots: `station-thoracotomy-mid-cut.png`, `station-thoracotomy-done.png`,
+/// `station-thoracotomy-debrief.png`.
+#[test]
+fn a_mini_thoracotomy_placed_from_the_landmarks_passes_at_the_station_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-thoracotomy-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let (summary, layer) = runtime().block_on(thoracotomy(port, &driver, &tmp));
+    assert!(
+        layer.is_some_and(
+            |l| ["intercostal muscle", "parietal pleura", "pectoralis major"].contains(&l.as_str())
+        ),
+        "the HUD names a layer of the wall half way"
+    );
+    assert!(
+        summary.starts_with("Score") && summary.contains("(pass)"),
+        "an incision in the right space, placed from the landmarks, passes: {summary}"
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// The incision ana places from the landmarks on the page: 26 points 25 to 75 mm lateral of
+/// the sternum's edge, half way between the 4th and 5th ribs' marks (world, m).
+async fn incision_from_landmarks(
+    c: &fantoccini::Client,
+) -> Result<Vec<[f64; 3]>, fantoccini::error::CmdError> {
+    until(
+        c,
+        "window.cutlabStation && window.cutlabStation.stats().frames > 5",
+        Duration::from_secs(120),
+    )
+    .await?;
+    let v = c
+        .execute("return window.cutlabStation.config", vec![])
+        .await?;
+    assert!(v["plan"].is_null(), "exam mode: no plan on the page");
+    let marks: Vec<Vec<[f64; 3]>> = serde_json::from_value(v["marks"].clone()).expect("marks");
+    assert_eq!(
+        marks.len(),
+        5,
+        "the sternum's edge and ribs 3 to 6 are marked"
+    );
+    let mean = |m: &[[f64; 3]], k: usize| m.iter().map(|p| p[k]).sum::<f64>() / m.len() as f64;
+    let (sternum_x, y) = (
+        mean(&marks[0], 0),
+        0.5 * (mean(&marks[2], 1) + mean(&marks[3], 1)),
+    );
+    let z = mean(&marks[2], 2);
+    Ok((0..=25)
+        .map(|k| [sternum_x + 0.025 + 0.002 * f64::from(k), y, z])
+        .collect())
+}
+
+async fn thoracotomy(port: u16, driver: &browser::Driver, tmp: &Path) -> (String, Option<String>) {
+    use cutlab_haptics::hand::Hand;
+    use fantoccini::actions::{KeyAction, KeyActions};
+    let (base, shots) = (format!("http://127.0.0.1:{port}"), artefacts());
+    let c = chromium(driver, &tmp.join("profile-thoracotomy")).await;
+    let result = async {
+        login(&c, &base, "dr-kim", "instructor-demo").await?;
+        open_early(&c, &base, "ana", "mini-thoracotomy").await?;
+        c.delete_all_cookies().await?;
+        start_as_ana(&c, &base, "mini-thoracotomy", "exam").await?;
+        let world = incision_from_landmarks(&c).await?;
+        let px = c
+            .execute(
+                "return arguments[0].map(p => window.cutlabStation.project(p))",
+                vec![serde_json::json!(world)],
+            )
+            .await?;
+        let line: Vec<[f64; 2]> = serde_json::from_value(px).expect("the line on the page");
+        // deeper by three key presses and back: the depth goes past the wall
+        let key = |k: char, n: usize| {
+            (0..n).fold(KeyActions::new("keys".into()), |a, _| {
+                a.then(KeyAction::Down { value: k })
+                    .then(KeyAction::Up { value: k })
+            })
+        };
+        c.perform_actions(key('\u{E015}', 3)).await?;
+        let deep = c
+            .execute("return window.cutlabStation.gauge()", vec![])
+            .await?;
+        c.perform_actions(key('\u{E013}', 3)).await?;
+        let set = c.find(Locator::Id("depth")).await?.text().await?;
+        assert_eq!(
+            set, "45.0 mm",
+            "back at the planned depth (gauge before: {deep})"
+        );
+        let mut hand = Hand::steady(length_px(&line) / 50.0, 62);
+        let rest = [line[0][0] - 140.0, line[0][1] + 170.0];
+        let mut g = hand.approach(rest, line[0]);
+        let stroke_s = 50.0 / 10.0;
+        g.extend(hand.stroke(&line, stroke_s, 1.0));
+        let half = g.len() - (stroke_s * 30.0) as usize;
+        c.perform_actions(as_actions(&g[..half])).await?;
+        let layer = c
+            .execute("return window.cutlabStation.layer()", vec![])
+            .await?
+            .as_str()
+            .map(str::to_owned);
+        let mid = shots.join("station-thoracotomy-mid-cut.png");
+        std::fs::write(mid, c.screenshot().await?).expect("screenshot");
+        c.perform_actions(as_actions(&g[half..])).await?;
+        let away = hand.withdraw(line[line.len() - 1], [60.0, -120.0], 0.5);
+        c.perform_actions(as_actions(&away)).await?;
+        let done = shots.join("station-thoracotomy-done.png");
+        std::fs::write(done, c.screenshot().await?).expect("screenshot");
+        let summary = debrief(&c, &shots.join("station-thoracotomy-debrief.png")).await?;
+        c.release_actions().await?;
+        assert!(
+            deep["set_m"].as_f64().is_some_and(|m| m > 0.045),
+            "three steps deeper than 45 mm: {deep}"
+        );
+        Ok::<_, fantoccini::error::CmdError>((summary, layer))
+    }
+    .await;
+    let _ = c.close().await;
+    result.unwrap_or_else(|e| panic!("the mini-thoracotomy: {e}"))
+}

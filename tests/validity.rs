@@ -27,6 +27,9 @@ const PATTERN_SEEDS: u64 = 4;
 const BODY_WALL_SEEDS: u64 = 10;
 /// Seeds per level of the elliptical excision's run (18,000 tets at 4 ms: 4-18 s a session).
 const EXCISION_SEEDS: u64 = 10;
+/// Mini-thoracotomies a level (ten take about 7 minutes on 2 cores, the novices' most of
+/// it); the environment's `CUTLAB_FIELD_SEEDS` asks for another count.
+const FIELD_SEEDS: u64 = 10;
 
 fn cutlab(db: &Path, args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_cutlab"))
@@ -56,6 +59,8 @@ enum Exercise {
     BodyWall,
     /// `elliptical-excision` on the skin block at its scene's 4 ms step.
     Excision,
+    /// `mini-thoracotomy` on the thorax, the incision placed by the trainee.
+    Field,
 }
 
 impl Exercise {
@@ -94,6 +99,16 @@ impl Exercise {
                     _ => "25",
                 };
                 attempt_args("elliptical-excision", duration, skill, seed)
+            }
+            // the expert goes through the 40 mm wall and along its 50 mm in about 7 s, the
+            // intermediate in 10, the novice (pauses, pressing on a rib) in up to 16
+            Exercise::Field => {
+                let duration = match skill {
+                    "expert" => "12",
+                    "intermediate" => "16",
+                    _ => "25",
+                };
+                attempt_args("mini-thoracotomy", duration, skill, seed)
             }
         }
     }
@@ -428,6 +443,20 @@ fn body_wall_experts_pass_the_curved_incision_and_novices_fail() {
 #[test]
 fn excision_experts_pass_and_novices_fail() {
     levels_in_order(Exercise::Excision, "elliptical-excision", EXCISION_SEEDS);
+}
+
+/// The mini-thoracotomy, each trainee choosing where to cut (the expert the plan's space and
+/// length; the others sometimes a space off, on a rib, short or shallow), scored on what the
+/// retracted wound shows: the same as the body wall's, with `CUTLAB_FIELD_SEEDS` seeds a
+/// level (default [`FIELD_SEEDS`]).
+#[test]
+fn field_experts_expose_the_heart_and_novices_fail() {
+    let seeds = std::env::var("CUTLAB_FIELD_SEEDS").map_or(FIELD_SEEDS, |n| {
+        n.parse::<u64>()
+            .expect("CUTLAB_FIELD_SEEDS: a count of seeds")
+            .max(1)
+    });
+    levels_in_order(Exercise::Field, "mini-thoracotomy", seeds);
 }
 
 /// Records `seeds` attempts of `exercise` per level and scores them at `name`: every expert

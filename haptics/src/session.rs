@@ -544,8 +544,10 @@ impl SimWorker {
             && out_ticks.len() < steps
             && self.record.is_some()
         {
-            // ended early (the servo loop stopped): the state there is a keyframe too
+            // ended early (the servo loop stopped): the state there is a keyframe too, one
+            // that can be resumed
             let n = out_ticks.len() as u64 - 1;
+            self.stepper.rebuild_to_end();
             self.push(SimRecord::Keyframe(Box::new(Keyframe::of(
                 &self.stepper,
                 n,
@@ -610,6 +612,9 @@ impl SimWorker {
             self.push(SimRecord::Surface(Box::new(s)));
         }
         if every(settings.keyframe_every_steps.max(1)) || last {
+            if last {
+                self.stepper.rebuild_to_end();
+            }
             self.push(SimRecord::Keyframe(Box::new(Keyframe::of(
                 &self.stepper,
                 n,

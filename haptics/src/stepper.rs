@@ -177,6 +177,20 @@ impl SessionStepper {
         })
     }
 
+    /// Builds the surface's BVH again if the last step refitted it, so that the state here
+    /// can be resumed ([`Self::resume_state`]): for a session's last keyframe, which scoring
+    /// resumes (a field's retractor), and after which no step follows (one would go on from a
+    /// tree the steps between keyframes do not build).
+    pub fn rebuild_to_end(&mut self) {
+        if self.collider_fresh {
+            return;
+        }
+        match self.collider.rebuild(&self.sim) {
+            Ok(()) => self.collider_fresh = true,
+            Err(e) => tracing::error!("rebuilding the surface at the end failed: {e}"),
+        }
+    }
+
     /// Continues from a step captured by [`Self::resume_state`], with the simulation's state
     /// and mesh there. The stepper must have been made as the captured one was (scene and
     /// settings). Input that does not fit is an error and leaves the stepper unchanged.

@@ -882,3 +882,55 @@ fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_
     assert!(replayed.verified(), "{:?}", replayed.first_divergence);
     assert_eq!(replayed.cuts_replayed, report.stats.cut_steps);
 }
+
+/// A session's last keyframe can be resumed whenever the session ends (here 0.737 s, between
+/// two of its regular keyframes): scoring a field resumes it to set a retractor in the wound.
+#[test]
+fn the_last_keyframe_can_be_resumed_wherever_the_session_ends() {
+    let scene = Scene::load(
+        SCENE,
+        BuildOptions {
+            min_tets: Some(MIN_TETS),
+        },
+    )
+    .expect("scene");
+    let session = Session::new(&scene).expect("session");
+    let plan = session.plan_across_top(0.06, 0.008).expect("plan");
+    let preset = Skill::preset("expert").expect("preset");
+    let device =
+        Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 3).expect("trainee"));
+    let config = SessionConfig {
+        duration_s: 0.737,
+        collider_rebuild_every_steps: 100,
+        ..SessionConfig::default()
+    };
+    let dir = temp_dir("last-keyframe");
+    let path = dir.path().join("session.mcap");
+    let provenance = Provenance {
+        scene: SCENE.into(),
+        min_tets: Some(MIN_TETS),
+        seed: 3,
+        trainee: "t".into(),
+        exercise: "e".into(),
+        device: "expert".into(),
+    };
+    let r = record::run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        Some(&plan),
+        &scene.spec,
+        &path,
+        record_settings(100, 0),
+        None,
+    )
+    .expect("recorded session");
+    let steps = r.report.expect("session ran").sim_steps;
+    assert!(steps % 100 != 0, "{steps} steps end between keyframes");
+    let rec = Recording::open(&path).expect("read back");
+    let last = rec.keyframes.last().expect("a keyframe");
+    assert_eq!(last.step + 1, steps, "the last keyframe is the last step's");
+    let (stepper, tick) = replay::stepper_at_last_keyframe(&rec).expect("resumed");
+    assert_eq!((tick, stepper.steps()), (last.tick, steps));
+}

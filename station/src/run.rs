@@ -283,8 +283,12 @@ pub struct Running {
     pub marks: Vec<Vec<cutlab_sim::Point3>>,
     /// The colour of each region the scene gives one (linear RGB, 0 to 1).
     pub region_colours: Vec<(u32, [f64; 3])>,
+    /// The name of each region the scene names (its layers: skin, fat, muscle, ...).
+    pub region_names: Vec<(u32, String)>,
     /// The force the tissue should not be loaded beyond, the exercise's (N).
     pub force_limit_newtons: f64,
+    /// The blade's cutting edge, the scene's (m): how deep the page lets the pointer set it.
+    pub blade_length_m: f64,
     /// Where the exercise is seen from, if its scene says.
     pub viewpoint: Option<Viewpoint>,
     pub feed: ViewFeed,
@@ -426,6 +430,15 @@ pub async fn start(
     let figures = Arc::new(OnceLock::new());
     let viewpoint = prepared.scene.viewpoint.clone();
     let marks = prepared.marks.clone();
+    let blade_length_m = prepared.config.blade_length_m;
+    let region_names = prepared
+        .scene
+        .spec
+        .materials
+        .iter()
+        .filter(|m| !m.name.is_empty())
+        .map(|m| (m.region, m.name.clone()))
+        .collect();
     let region_colours = prepared
         .scene
         .spec
@@ -464,7 +477,9 @@ pub async fn start(
         plan,
         marks,
         region_colours,
+        region_names,
         force_limit_newtons,
+        blade_length_m,
         viewpoint,
         feed,
         pointer,

@@ -233,9 +233,14 @@ fn config_json(r: &Running, driver: bool) -> String {
         "marks": r.marks.iter().map(|m| m.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>()).collect::<Vec<_>>(),
         // the colour of each region of the tissue the scene gives one: [region, r, g, b]
         "region_colours": r.region_colours.iter().map(|(id, c)| [f64::from(*id), c[0], c[1], c[2]]).collect::<Vec<_>>(),
+        // the name of each region the scene names: [region, name] (the HUD's layer)
+        "region_names": r.region_names.iter().map(|(id, name)| serde_json::json!([id, name])).collect::<Vec<_>>(),
         // the depth the blade starts at, in exam mode too (the depth is part of the task
         // the page states; the line is not shown)
         "start_depth_m": r.plan.depth_m,
+        // the deepest the pointer's depth goes: the scene's blade (the thorax's reaches
+        // through a 40 mm wall)
+        "max_depth_m": r.blade_length_m,
         // how long the session waits for a page that lost its connection
         "absence_s": r.control.absence().as_secs_f64(),
         "viewpoint": viewpoint,
@@ -285,8 +290,9 @@ async fn station(
                     div { "Blade " span id="blade" { "free" } }
                     div { "Blade depth " span id="blade-depth" { "–" } " (planned " (format!("{:.1}", r.plan.depth_m * 1e3)) " mm)" }
                     div { "Set depth " span id="depth" { "–" } }
+                    @if !r.region_names.is_empty() { div { "Layer " span id="blade-layer" { "–" } } }
                     canvas id="depth-gauge" width="120" height="150" title="The cut from the side: the surface at the top, the planned depth dashed green, the set depth dotted grey, the blade red below the surface" {}
-                    @if driver && r.pointer.is_some() { div class="muted" { "Wheel down or ↓: deeper; wheel up or ↑: shallower (0.5 mm a step)." } }
+                    @if driver && r.pointer.is_some() { div class="muted" { (format!("Wheel down or ↓: deeper; wheel up or ↑: shallower ({:.1} mm a step, to {:.0} mm).", (r.blade_length_m / 40.0).max(0.0005) * 1e3, r.blade_length_m * 1e3)) } }
                     div class="scale" { span id="scale-bar" {} " 10 mm" }
                     canvas id="axes" width="64" height="64" title="The world's axes as this view shows them: x red, y green, z blue (the frame of the recording and the replay)" {}
                     div { "Mode " span id="mode" { (if r.guided { "guided" } else { "exam" }) } }

@@ -129,6 +129,7 @@
     // each vertex's region after the triangles (absent in an older server's message)
     const at = 12 + 12 * triangles, colours = new Float32Array(3 * vertices);
     const regions = view.byteLength >= at + 4 * vertices ? new Uint32Array(view.buffer, at, vertices) : null;
+    mesh.regions = regions ? regions.slice() : null;
     for (let v = 0; v < vertices; v++) colours.set(palette.get(regions ? regions[v] : -1) || TISSUE, 3 * v);
     gl.bindBuffer(gl.ARRAY_BUFFER, mesh.colours);
     gl.bufferSubData(gl.ARRAY_BUFFER, 0, colours);
@@ -271,6 +272,22 @@
   }
   // the rest surface above the latest frame's blade tip (cast once a frame, read by the HUD
   // and the drawing)
+  // the layer the blade is in: the region of the surface's vertex nearest its tip (the
+  // wound's faces lie against the blade), named as the scene names it; null off the tissue,
+  // at the surface, or where the scene names no layers
+  const regionNames = new Map((config.region_names || []).map(([id, name]) => [id, name]));
+  let layerShown = null;
+  function bladeLayer(f, above) {
+    if (!above || above.depth <= 0.0005 || !mesh.regions || regionNames.size === 0) return null;
+    const xyz = f.xyz, t = f.tip;
+    let best = 1e-4, region = null; // within 10 mm
+    for (let v = 0; v < mesh.vertices; v++) {
+      const dx = xyz[3 * v] - t[0], dy = xyz[3 * v + 1] - t[1], dz = xyz[3 * v + 2] - t[2];
+      const d = dx * dx + dy * dy + dz * dz;
+      if (d < best) { best = d; region = mesh.regions[v]; }
+    }
+    return region === null ? null : regionNames.get(region) ?? null;
+  }
   function bladeAbove() {
     if (!("above" in latest)) latest.above = surfaceAbove(latest.tip);
     return latest.above;
@@ -427,6 +444,8 @@
   // surface, the planned depth (green, dashed), the depth the wheel set (grey), the blade
   // (steel above the surface, red below it, to its tip)
   const gaugeCanvas = document.getElementById("depth-gauge");
+  // the gauge's range, mm: the deepest the blade is set to go (20 mm, or the scene's blade)
+  const GAUGE_MM = Math.max(20, Math.ceil((config.max_depth_m ?? 0.02) * 1e3 / 10) * 10);
   // what the gauge drew last (the depths of its grey line and of the blade): for the tests
   let gaugeDrawn = null;
   // `bladeDepth`: the blade's, now; the grey line is the depth the trainee set (`depth`, below:
@@ -437,7 +456,7 @@
   function gauge(bladeDepth) {
     if (!gaugeCanvas) return;
     const g = gaugeCanvas.getContext("2d"), w = gaugeCanvas.width, h = gaugeCanvas.height;
-    const top = 14, mm = (h - top - 6) / 20, y = (m) => top + m * 1e3 * mm;
+    const top = 14, mm = (h - top - 6) / GAUGE_MM, y = (m) => top + m * 1e3 * mm;
     const line = (g, m, colour, dash) => { g.setLineDash(dash); g.strokeStyle = colour; g.lineWidth = 2; g.beginPath(); g.moveTo(28, y(m)); g.lineTo(w, y(m)); g.stroke(); g.setLineDash([]); };
     const setShown = config.pointer && config.driver ? depth : null;
     gaugeDrawn = { set_m: setShown, blade_m: bladeDepth };
@@ -451,7 +470,8 @@
       const b = gaugeBackground.getContext("2d");
       b.fillStyle = "#e9b8ac"; b.fillRect(0, top, w, h - top);
       b.fillStyle = "#1f262b"; b.font = "10px sans-serif";
-      for (let k = 0; k <= 20; k += 5) { b.fillRect(0, y(k * 1e-3), k % 10 ? 4 : 8, 1); if (k) b.fillText(k + "", 10, y(k * 1e-3) + 4); }
+      const every = GAUGE_MM > 30 ? 10 : 5;
+      for (let k = 0; k <= GAUGE_MM; k += every) { b.fillRect(0, y(k * 1e-3), k % (2 * every) ? 4 : 8, 1); if (k) b.fillText(k + "", 10, y(k * 1e-3) + 4); }
       b.fillText("mm", 10, 10);
       if (config.plan) line(b, config.plan.depth_m, "#17803d", [5, 3]);
     }
@@ -459,12 +479,16 @@
     g.drawImage(gaugeBackground, 0, 0);
     if (setShown !== null) line(g, setShown, "#6b7378", [2, 3]);
     if (bladeDepth === null) return;
-    const x = 0.65 * w, tip = y(Math.max(-top / mm * 1e-3, Math.min(0.02, bladeDepth)));
+    const x = 0.65 * w, tip = y(Math.max(-top / mm * 1e-3, Math.min(GAUGE_MM * 1e-3, bladeDepth)));
     g.fillStyle = "#c9ced6"; g.fillRect(x - 3, 0, 6, Math.min(tip, top));
     if (bladeDepth > 0) { g.fillStyle = "#d4351c"; g.fillRect(x - 3, top, 6, tip - top); }
   }
-  // the depth the wheel, the keys or the pen set (the pointer's)
+  // the depth the wheel, the keys or the pen set (the pointer's), up to the scene's blade; a
+  // wheel's notch or a key sets 1/40 of that (0.5 mm of the 20 mm blade, 1.5 mm of the
+  // thorax's 60 mm), full pressure of a pen 0.6 of it
   let depth = config.start_depth_m ?? 0.004;
+  const DEPTH_MAX_M = config.max_depth_m ?? 0.02, DEPTH_STEP_M = Math.max(0.0005, DEPTH_MAX_M / 40);
+  const deeper = (by) => { depth = Math.max(0, Math.min(DEPTH_MAX_M, depth + by)); };
 
   const MODES = ["free", "touching", "cutting"];
   let cutSeen = false, releasedAt = null;
@@ -498,6 +522,8 @@
     show("blade-depth", "textContent", !above ? "off the tissue"
       : above.depth > 0.00005 ? (above.depth * 1e3).toFixed(1) + " mm below the surface" : "at or above the surface");
     gauge(above ? above.depth : null);
+    layerShown = bladeLayer(f, above);
+    show("blade-layer", "textContent", layerShown ?? "–");
     if (!scaled) { scaled = true; scaleBar(); axesMarker(); }
     cutSeen = cutSeen || f.mode === 2;
   }
@@ -555,6 +581,8 @@
   window.cutlabStation = {
     // the depths the gauge drew last, m: `set_m` (the grey line), `blade_m`
     gauge() { return gaugeDrawn; },
+    // the layer the HUD names the blade in (null: none)
+    layer() { return layerShown; },
     // the axes marker's arrows as drawn, canvas pixels from its middle (y down): { x, y, z }
     axes() { return axesDrawn; },
     // the figures `cutlab bench station` reads
@@ -610,7 +638,7 @@
   canvas.addEventListener("pointermove", (event) => {
     const events = event.getCoalescedEvents ? event.getCoalescedEvents() : [event];
     for (const e of events.length ? events : [event]) {
-      if (e.pointerType === "pen" && e.pressure > 0) depth = Math.min(0.02, e.pressure * 0.012);
+      if (e.pointerType === "pen" && e.pressure > 0) depth = Math.min(DEPTH_MAX_M, e.pressure * 0.6 * DEPTH_MAX_M);
       const h = pick(e);
       if (h) { hit = h; send(e.timeStamp); }
     }
@@ -625,12 +653,12 @@
   canvas.addEventListener("pointerup", (event) => { engaged = false; releasedAt = performance.now(); send(event.timeStamp); });
   canvas.addEventListener("wheel", (event) => {
     event.preventDefault();
-    depth = Math.max(0, Math.min(0.02, depth - Math.sign(event.deltaY) * 0.0005));
+    deeper(-Math.sign(event.deltaY) * DEPTH_STEP_M);
     document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   }, { passive: false });
   window.addEventListener("keydown", (event) => {
-    if (event.key === "ArrowUp") depth = Math.max(0, depth - 0.0005);
-    else if (event.key === "ArrowDown") depth = Math.min(0.02, depth + 0.0005);
+    if (event.key === "ArrowUp") deeper(-DEPTH_STEP_M);
+    else if (event.key === "ArrowDown") deeper(DEPTH_STEP_M);
     else return;
     document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   });
