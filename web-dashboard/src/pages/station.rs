@@ -263,10 +263,14 @@ async fn station(
     };
     let driver = r.trainee == user.user().name;
     // the written task: the exercise's description (in exam mode all the page says of it)
-    let description = match state.store().exercise_by_name(&r.exercise).await {
+    let mut description = match state.store().exercise_by_name(&r.exercise).await {
         Ok(e) => e.description,
         Err(_) => r.exercise.clone(),
     };
+    // a sentence, before the exam's note follows it
+    if !description.trim_end().ends_with(['.', '!', '?']) {
+        description = format!("{}.", description.trim_end());
+    }
     let title = if driver {
         format!("Station: {}", r.exercise)
     } else {
