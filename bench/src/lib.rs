@@ -10,6 +10,7 @@
 
 mod accuracy;
 pub mod browser;
+mod budget;
 mod cuts;
 mod dashboard;
 mod exercises;
@@ -123,6 +124,14 @@ pub enum BenchCommand {
         #[arg(long, default_value = "out/bench-exercises")]
         out: PathBuf,
     },
+    /// The implicit solver's tolerance against its error budget per built-in exercise's scene:
+    /// the integrator's error at the scene's step (against half of it), the solve's error and
+    /// CG iterations at each tolerance, and the loosest within a tenth of the integrator's.
+    Budget {
+        /// Machine-readable output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Sweeps of time step, stiffness, damping and mass ratio per model and integrator: where
     /// each stays stable, and whether failures are safe (an error, the state kept, no NaN).
     Stability {
@@ -213,6 +222,7 @@ pub fn run(command: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Perf { quick, json, out } => perf::run(quick, json, &out),
         BenchCommand::Skip { quick, json, out } => skip::run(quick, json, &out),
         BenchCommand::Exercises { json, out } => exercises::run(json, &out),
+        BenchCommand::Budget { json } => budget::run(json),
         BenchCommand::Hub {
             out,
             stations,

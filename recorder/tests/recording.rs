@@ -927,7 +927,10 @@ fn the_last_keyframe_can_be_resumed_wherever_the_session_ends() {
     )
     .expect("recorded session");
     let steps = r.report.expect("session ran").sim_steps;
-    assert!(steps % 100 != 0, "{steps} steps end between keyframes");
+    assert!(
+        !steps.is_multiple_of(100),
+        "{steps} steps end between keyframes"
+    );
     let rec = Recording::open(&path).expect("read back");
     let last = rec.keyframes.last().expect("a keyframe");
     assert_eq!(last.step + 1, steps, "the last keyframe is the last step's");
