@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use cutlab_haptics::device::{Skill, SyntheticTrainee};
+use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::ServoSample;
 use cutlab_haptics::tap::{SimRecord, TapSettings};
 use cutlab_haptics::{Session, SessionConfig};
@@ -60,6 +61,36 @@ fn record_settings(keyframe_every_steps: u64, surface_every_steps: u64) -> Recor
     }
 }
 
+/// The chest wall at [`MIN_TETS`], settled, and the expert (seed `seed`) following 60 mm
+/// across its top, 8 mm deep.
+fn expert_on_the_chest_wall(seed: u64) -> (Scene, Session, Plan, Box<SyntheticTrainee>) {
+    let scene = Scene::load(
+        SCENE,
+        BuildOptions {
+            min_tets: Some(MIN_TETS),
+        },
+    )
+    .expect("scene");
+    let session = Session::new(&scene).expect("session");
+    let plan = session.plan_across_top(0.06, 0.008).expect("plan");
+    let preset = Skill::preset("expert").expect("preset");
+    let device =
+        Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, seed).expect("trainee"));
+    (scene, session, plan, device)
+}
+
+/// Who recorded a session of [`expert_on_the_chest_wall`].
+fn provenance(seed: u64) -> Provenance {
+    Provenance {
+        scene: SCENE.into(),
+        min_tets: Some(MIN_TETS),
+        seed,
+        trainee: "t".into(),
+        exercise: "e".into(),
+        device: "expert".into(),
+    }
+}
+
 struct Recorded {
     path: PathBuf,
     seen: Seen,
@@ -74,18 +105,7 @@ struct Recorded {
 fn recorded() -> &'static Recorded {
     static ONCE: OnceLock<Recorded> = OnceLock::new();
     ONCE.get_or_init(|| {
-        let scene = Scene::load(
-            SCENE,
-            BuildOptions {
-                min_tets: Some(MIN_TETS),
-            },
-        )
-        .expect("scene");
-        let session = Session::new(&scene).expect("session");
-        let plan = session.plan_across_top(0.06, 0.008).expect("plan");
-        let preset = Skill::preset("expert").expect("preset");
-        let device =
-            Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
+        let (scene, session, plan, device) = expert_on_the_chest_wall(7);
         let config = SessionConfig {
             duration_s: DURATION_S,
             ..SessionConfig::default()
@@ -93,14 +113,7 @@ fn recorded() -> &'static Recorded {
         // one recording shared by the tests of this process (a static: never dropped)
         let path = temp_dir("shared").keep().join("session.mcap");
         let seen = Arc::new(Mutex::new(Seen::default()));
-        let provenance = Provenance {
-            scene: SCENE.into(),
-            min_tets: Some(MIN_TETS),
-            seed: 7,
-            trainee: "t".into(),
-            exercise: "e".into(),
-            device: "expert".into(),
-        };
+        let provenance = provenance(7);
         let settings = record_settings(1000, 100);
         let r = record::run_recorded(
             session,
@@ -706,33 +719,15 @@ fn the_external_mcap_reader_reads_it_with_crc_checks() {
 
 #[test]
 fn a_localised_session_with_cuts_replays_localised_and_bit_exact() {
-    let scene = Scene::load(
-        SCENE,
-        BuildOptions {
-            min_tets: Some(MIN_TETS),
-        },
-    )
-    .expect("scene");
-    let mut session = Session::new(&scene).expect("session");
+    let (scene, mut session, plan, device) = expert_on_the_chest_wall(7);
     session.sim.settings.localisation = Some(cutlab_sim::solver::LocalisationSettings::default());
-    let plan = session.plan_across_top(0.06, 0.008).expect("plan");
-    let preset = Skill::preset("expert").expect("preset");
-    let device =
-        Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 7).expect("trainee"));
     let config = SessionConfig {
         duration_s: 8.0,
         ..SessionConfig::default()
     };
     let dir = temp_dir("localised");
     let path = dir.path().join("session.mcap");
-    let provenance = Provenance {
-        scene: SCENE.into(),
-        min_tets: Some(MIN_TETS),
-        seed: 7,
-        trainee: "t".into(),
-        exercise: "e".into(),
-        device: "expert".into(),
-    };
+    let provenance = provenance(7);
     let settings = record_settings(500, 0);
     let r = record::run_recorded(
         session,
@@ -887,18 +882,7 @@ fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_
 /// two of its regular keyframes): scoring a field resumes it to set a retractor in the wound.
 #[test]
 fn the_last_keyframe_can_be_resumed_wherever_the_session_ends() {
-    let scene = Scene::load(
-        SCENE,
-        BuildOptions {
-            min_tets: Some(MIN_TETS),
-        },
-    )
-    .expect("scene");
-    let session = Session::new(&scene).expect("session");
-    let plan = session.plan_across_top(0.06, 0.008).expect("plan");
-    let preset = Skill::preset("expert").expect("preset");
-    let device =
-        Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 3).expect("trainee"));
+    let (scene, session, plan, device) = expert_on_the_chest_wall(3);
     let config = SessionConfig {
         duration_s: 0.737,
         collider_rebuild_every_steps: 100,
@@ -906,14 +890,7 @@ fn the_last_keyframe_can_be_resumed_wherever_the_session_ends() {
     };
     let dir = temp_dir("last-keyframe");
     let path = dir.path().join("session.mcap");
-    let provenance = Provenance {
-        scene: SCENE.into(),
-        min_tets: Some(MIN_TETS),
-        seed: 3,
-        trainee: "t".into(),
-        exercise: "e".into(),
-        device: "expert".into(),
-    };
+    let provenance = provenance(3);
     let r = record::run_recorded(
         session,
         device,
