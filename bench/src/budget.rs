@@ -69,6 +69,8 @@ pub struct ToleranceRow {
 
 /// What one run left.
 struct Run {
+    /// The positions once settled, before the first cut.
+    settled: Vec<Point3>,
     /// The positions after each cut's steps and at the end.
     positions: Vec<Vec<Point3>>,
     tets: Vec<[u32; 4]>,
@@ -136,11 +138,10 @@ fn scene_budget(b: &cutlab_assessor::store::Builtin) -> anyhow::Result<BudgetRow
         |dt: f64, tolerance: f64| run_once(&scene, dt, tolerance, &stations, &up, hand.depth_m);
     let reference = cut(h, REFERENCE_TOLERANCE)?;
     let half = cut(h / 2.0, REFERENCE_TOLERANCE)?;
-    let settled = cut(h, f64::NAN)?; // NaN: no cut, no step (the settled state)
     let scale = reference
         .positions
         .iter()
-        .map(|p| largest_change(&settled.positions[0], p))
+        .map(|p| largest_change(&reference.settled, p))
         .fold(0.0, f64::max);
     let error = |r: &Run| {
         (r.tets == reference.tets).then(|| {
@@ -205,8 +206,7 @@ fn largest_change(a: &[Point3], b: &[Point3]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Settles `scene` at step `dt` and CG tolerance `tolerance` and cuts through `stations`
-/// (`tolerance` NaN: only settles).
+/// Settles `scene` at step `dt` and cuts through `stations` with CG tolerance `tolerance`.
 fn run_once(
     scene: &Scene,
     dt: f64,
@@ -217,46 +217,41 @@ fn run_once(
 ) -> anyhow::Result<Run> {
     let mut sim = scene.clone().with_time_step(dt)?.simulation();
     sim.settle(StaticSettings::default());
-    let mut run = Run {
-        positions: Vec::new(),
-        tets: Vec::new(),
-        cg_per_step: 0.0,
-        step_us: 0.0,
+    let settled = sim.state.positions.clone();
+    sim.settings.cg_relative_tolerance = tolerance;
+    sim.settings.cg_max_iterations = 20_000;
+    let per_cut = ((CUT_STEP_M / SPEED_M_PER_S) / dt).round().max(1.0) as usize;
+    let relax = (RELAX_S / dt).round() as usize;
+    let mut cutter = Cutter::default();
+    let (mut cg, mut steps, mut busy) = (0usize, 0usize, 0.0);
+    let mut step = |sim: &mut cutlab_sim::solver::Simulation| -> anyhow::Result<()> {
+        let t = Instant::now();
+        cg += sim.step().context("a step")?.cg_iterations;
+        busy += t.elapsed().as_secs_f64();
+        steps += 1;
+        Ok(())
     };
-    if tolerance.is_finite() {
-        sim.settings.cg_relative_tolerance = tolerance;
-        sim.settings.cg_max_iterations = 20_000;
-        let per_cut = ((CUT_STEP_M / SPEED_M_PER_S) / dt).round().max(1.0) as usize;
-        let relax = (RELAX_S / dt).round() as usize;
-        let mut cutter = Cutter::default();
-        let (mut cg, mut steps, mut busy) = (0usize, 0usize, 0.0);
-        let mut step = |sim: &mut cutlab_sim::solver::Simulation| -> anyhow::Result<()> {
-            let t = Instant::now();
-            cg += sim.step().context("a step")?.cg_iterations;
-            busy += t.elapsed().as_secs_f64();
-            steps += 1;
-            Ok(())
-        };
-        for p in stations {
-            match cutter.advance(
-                &mut sim,
-                cut::blade(p - up * depth_m, *up, depth_m + ABOVE_M),
-            ) {
-                Ok(_) | Err(cut::CutError::Unresolved(_)) => {}
-                Err(e) => return Err(e).context("a cut"),
-            }
-            for _ in 0..per_cut {
-                step(&mut sim)?;
-            }
-            run.positions.push(sim.state.positions.clone());
+    let mut positions = Vec::new();
+    for p in stations {
+        let blade = cut::blade(p - up * depth_m, *up, depth_m + ABOVE_M);
+        match cutter.advance(&mut sim, blade) {
+            Ok(_) | Err(cut::CutError::Unresolved(_)) => {}
+            Err(e) => return Err(e).context("a cut"),
         }
-        for _ in 0..relax {
+        for _ in 0..per_cut {
             step(&mut sim)?;
         }
-        run.cg_per_step = cg as f64 / steps.max(1) as f64;
-        run.step_us = busy * 1e6 / steps.max(1) as f64;
+        positions.push(sim.state.positions.clone());
     }
-    run.positions.push(sim.state.positions.clone());
-    run.tets = sim.model.mesh.tets().to_vec();
-    Ok(run)
+    for _ in 0..relax {
+        step(&mut sim)?;
+    }
+    positions.push(sim.state.positions.clone());
+    Ok(Run {
+        settled,
+        positions,
+        tets: sim.model.mesh.tets().to_vec(),
+        cg_per_step: cg as f64 / steps.max(1) as f64,
+        step_us: busy * 1e6 / steps.max(1) as f64,
+    })
 }

@@ -124,19 +124,26 @@ impl Planning {
         } else {
             depth_m
         };
-        let Some(spaces) = spaces else {
-            return Choice::unchanged(line, depth_m).scaled(length_factor);
+        // about the expert's middle: moved to the space chosen, where the landmarks frame
+        // the line (else kept in place), and scaled to the length chosen
+        let middle = match (line.first(), line.last()) {
+            (Some(a), Some(b)) => Point3::from((a.coords + b.coords) * 0.5),
+            _ => Point3::origin(), // no line: nothing to move
         };
-        let (along, across) = spaces.axes();
-        let shift = across * (spaces.offset_m(position) + self.across_sd_m * n_across)
-            + along * (self.along_sd_m * n_along);
-        let middle = spaces.origin_m();
-        let line_m = line
-            .iter()
-            .map(|p| middle + shift + (p - middle) * length_factor)
-            .collect();
+        let (shift, position) = match spaces {
+            Some(spaces) => {
+                let (along, across) = spaces.axes();
+                let shift = across * (spaces.offset_m(position) + self.across_sd_m * n_across)
+                    + along * (self.along_sd_m * n_along);
+                (shift, position)
+            }
+            None => (Vector3::zeros(), 0.0),
+        };
         Choice {
-            line_m,
+            line_m: line
+                .iter()
+                .map(|p| middle + shift + (p - middle) * length_factor)
+                .collect(),
             depth_m,
             position,
         }
@@ -152,27 +159,6 @@ pub struct Choice {
     pub depth_m: f64,
     /// The space aimed at, in spaces from the expert's ([`Spaces::position`]).
     pub position: f64,
-}
-
-impl Choice {
-    fn unchanged(line: &[Point3], depth_m: f64) -> Self {
-        Self {
-            line_m: line.to_vec(),
-            depth_m,
-            position: 0.0,
-        }
-    }
-
-    /// The same line `factor` times as long about its middle.
-    fn scaled(mut self, factor: f64) -> Self {
-        if let (Some(a), Some(b)) = (self.line_m.first(), self.line_m.last()) {
-            let middle = Point3::from((a.coords + b.coords) * 0.5);
-            for p in &mut self.line_m {
-                *p = middle + (*p - middle) * factor;
-            }
-        }
-        self
-    }
 }
 
 #[cfg(test)]
