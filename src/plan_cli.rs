@@ -5,9 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Subcommand;
-use cutlab_assessor::planning::{CandidateIncision, FieldReport, Opening, View, field_of};
+use cutlab_assessor::planning::{
+    CandidateIncision, FieldReport, Opening, SkinMap, View, field_pictured,
+};
 use cutlab_assessor::store::DbLocation;
 use cutlab_sim::scene::{BuildOptions, Scene};
+
+/// Half the width a picture frames at the skin, m.
+const PICTURE_HALF_WIDTH_M: f64 = 0.04;
+/// A picture's pixels across and down.
+const PICTURE_PX: u32 = 320;
 
 #[derive(Debug, Subcommand)]
 pub enum PlanCommand {
@@ -32,6 +39,10 @@ pub enum PlanCommand {
         /// field is reported unretracted and retracted.
         #[arg(long)]
         retract_mm: Option<f64>,
+        /// Also write the field as the viewpoint sees it to this PNG file: the opened wound
+        /// (retracted, with `--retract-mm`) and the target through it, 80 mm across at the skin.
+        #[arg(long)]
+        picture: Option<PathBuf>,
         /// Machine-readable output.
         #[arg(long)]
         json: bool,
@@ -46,6 +57,7 @@ pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> 
         incision,
         open_s,
         retract_mm,
+        picture,
         json,
     } = command;
     if !(open_s.is_finite() && (0.0..=10.0).contains(&open_s)) {
@@ -71,8 +83,20 @@ pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> 
         open_s,
         retract_m: retract_mm.map(|w| w * 1e-3),
     };
-    let report = field_of(&scene, &candidate, opening)
+    let camera = match &picture {
+        None => None,
+        Some(_) => Some(
+            SkinMap::of(&scene)?
+                .camera(&scene, PICTURE_HALF_WIDTH_M, PICTURE_PX)
+                .with_context(|| format!("the scene {scene_name} has no viewpoint to picture"))?,
+        ),
+    };
+    let (report, pictures) = field_pictured(&scene, &candidate, opening, camera.as_ref())
         .with_context(|| format!("the candidate {}", incision.display()))?;
+    if let (Some(path), Some(last)) = (&picture, pictures.last()) {
+        std::fs::write(path, last.png()?)
+            .with_context(|| format!("writing the picture {}", path.display()))?;
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

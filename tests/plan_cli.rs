@@ -114,6 +114,58 @@ fn a_retractor_opens_the_field_up_to_the_ribs() {
     assert!(!ok && err.contains("--retract-mm"), "{err}");
 }
 
+/// The pixels of the target's colour in a PNG picture (red over green above 3: no muscle of
+/// the wall is that red).
+fn target_pixels(path: &std::path::Path) -> usize {
+    let bytes = std::fs::read(path).expect("the picture is written");
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .expect("a PNG");
+    let mut buf = vec![0; reader.output_buffer_size().expect("size")];
+    let info = reader.next_frame(&mut buf).expect("a frame");
+    assert_eq!(
+        (info.width, info.height, info.color_type),
+        (320, 320, png::ColorType::Rgb)
+    );
+    buf[..info.buffer_size()]
+        .chunks(3)
+        .filter(|p| p[0] > 40 && u32::from(p[0]) > 3 * u32::from(p[1]))
+        .count()
+}
+
+/// `--picture`: the heart shows through the opened wound, more once retracted, and not at all
+/// through an incision that leaves the pleura closed.
+#[test]
+fn the_picture_shows_the_heart_only_through_the_opened_wall() {
+    let line = "[[-0.02, -0.0025, 0.0], [0.03, -0.0025, 0.0]]";
+    let mut seen = Vec::new();
+    for (name, depth, more) in [
+        ("pic-open", 0.045, vec![]),
+        ("pic-retracted", 0.045, vec!["--retract-mm", "20"]),
+        ("pic-shallow", 0.01, vec!["--retract-mm", "20"]),
+    ] {
+        let png = temp(&format!("{name}.png"));
+        let args = [
+            &[
+                "--scene",
+                "thorax",
+                "--picture",
+                png.to_str().expect("utf-8"),
+            ],
+            &more[..],
+        ]
+        .concat();
+        let json = format!(r#"{{"incision_m": {line}, "depth_m": {depth}}}"#);
+        let (ok, _, err) = plan(name, &json, &args);
+        assert!(ok, "{err}");
+        seen.push(target_pixels(&png));
+    }
+    // 4 pixels a millimetre at the skin: the opened slit shows tens of mm^2, retracted hundreds
+    assert!(seen[0] > 200, "{seen:?}");
+    assert!(seen[1] > 5 * seen[0], "{seen:?}");
+    assert_eq!(seen[2], 0, "{seen:?}");
+}
+
 #[test]
 fn what_is_not_an_incision_is_refused_naming_the_field() {
     let line = r#"[[0.0, -0.0025, 0.0], [0.02, -0.0025, 0.0]]"#;

@@ -24,6 +24,10 @@ use crate::input::SurfaceMesh;
 use crate::metrics::exposure::{Ellipsoid, exposure};
 use crate::metrics::field::trimesh;
 
+pub mod picture;
+
+pub use picture::{Camera, Picture};
+
 /// How far above the skin the blade's edge reaches, m.
 pub const ABOVE_M: f64 = 0.02;
 /// A candidate's points must lie this near the tissue's surface, m.
@@ -127,6 +131,82 @@ impl CandidateIncision {
     }
 }
 
+/// A scene's skin at rest as a map: a point on it is named by its coordinates `(a, b)` along
+/// the scene's `along` and `side = up x along` (m), as a planner draws on the skin seen from
+/// above, and laid on the skin along `-up`.
+#[derive(Debug, Clone)]
+pub struct SkinMap {
+    skin: TriMesh,
+    up: Vector3<f64>,
+    along: Vector3<f64>,
+    side: Vector3<f64>,
+}
+
+/// How far above the scene's origin a map's rays start, m.
+const MAP_ABOVE_M: f64 = 1.0;
+
+impl SkinMap {
+    /// The map of `scene`'s tissue before anything touched it.
+    pub fn of(scene: &Scene) -> Result<Self> {
+        let (up, along) = scene
+            .spec
+            .incision
+            .unit()
+            .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
+        Ok(Self {
+            skin: surface(&scene.simulation())?,
+            up,
+            along,
+            side: up.cross(&along),
+        })
+    }
+
+    /// The skin's point over `(a_m, b_m)`; none off the tissue or for a non-finite input.
+    pub fn point(&self, a_m: f64, b_m: f64) -> Option<[f64; 3]> {
+        if !(a_m.is_finite() && b_m.is_finite()) {
+            return None;
+        }
+        let from = Point3::from(self.along * a_m + self.side * b_m + self.up * MAP_ABOVE_M);
+        let down = -self.up;
+        let ray = parry3d_f64::query::Ray::new(
+            PVec::new(from.x, from.y, from.z),
+            PVec::new(down.x, down.y, down.z),
+        );
+        let t = parry3d_f64::query::RayCast::cast_local_ray(
+            &self.skin,
+            &ray,
+            2.0 * MAP_ABOVE_M,
+            false,
+        )?;
+        Some((from + down * t).into())
+    }
+
+    /// `p`'s coordinates on the map, m.
+    pub fn across(&self, p: &[f64; 3]) -> [f64; 2] {
+        let p = Vector3::from(*p);
+        [p.dot(&self.along), p.dot(&self.side)]
+    }
+
+    /// The tissue's extent on the map: the least and the greatest `(a, b)`, m.
+    pub fn extent_m(&self) -> ([f64; 2], [f64; 2]) {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for v in self.skin.vertices() {
+            let ab = self.across(&[v.x, v.y, v.z]);
+            for k in 0..2 {
+                lo[k] = lo[k].min(ab[k]);
+                hi[k] = hi[k].max(ab[k]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// The camera of the scene's viewpoint (see [`Camera::of_scene`]).
+    pub fn camera(&self, scene: &Scene, half_width_m: f64, size_px: u32) -> Option<Camera> {
+        Camera::of_scene(scene, &self.skin, half_width_m, size_px)
+    }
+}
+
 /// The tissue's surface as it is now.
 fn surface(sim: &cutlab_sim::solver::Simulation) -> Result<TriMesh> {
     trimesh(&SurfaceMesh::of(sim))
@@ -139,6 +219,17 @@ pub fn field_of(
     candidate: &CandidateIncision,
     opening: Opening,
 ) -> Result<FieldReport> {
+    Ok(field_pictured(scene, candidate, opening, None)?.0)
+}
+
+/// [`field_of`], and the field as `camera` sees it at each measure (the opened wound, then
+/// the retracted one when a retractor was set); no pictures without a camera.
+pub fn field_pictured(
+    scene: &Scene,
+    candidate: &CandidateIncision,
+    opening: Opening,
+    camera: Option<&Camera>,
+) -> Result<(FieldReport, Vec<Picture>)> {
     candidate.check()?;
     if let Some(w) = opening.retract_m
         && !(w.is_finite() && (0.0..=0.2).contains(&w))
@@ -176,8 +267,10 @@ pub fn field_of(
         eye: Point3::from(view.eye_mm) * 1e-3,
         middle: stations[stations.len() / 2],
         up,
+        camera: camera.copied(),
     };
-    let unretracted = sight.view(&sim)?;
+    let mut pictures = Vec::new();
+    let unretracted = sight.view(scene, &sim, &mut pictures)?;
     let retracted = match opening.retract_m {
         None => None,
         Some(width_m) => {
@@ -193,17 +286,18 @@ pub fn field_of(
             retractor
                 .open(&mut sim)
                 .map_err(|e| AssessError::InvalidInput(format!("the retracted wound: {e}")))?;
-            Some(sight.view(&sim)?)
+            Some(sight.view(scene, &sim, &mut pictures)?)
         }
     };
-    Ok(FieldReport {
+    let report = FieldReport {
         target: target.name.clone(),
         unretracted,
         retractor_width_m: opening.retract_m,
         retracted,
         incision_length_m: candidate.length_m(),
         damaged,
-    })
+    };
+    Ok((report, pictures))
 }
 
 /// Refuses a candidate whose points are off the tissue's surface.
@@ -226,12 +320,24 @@ struct Sight {
     eye: Point3<f64>,
     middle: Point3<f64>,
     up: Vector3<f64>,
+    camera: Option<Camera>,
 }
 
 impl Sight {
-    /// What the eye sees of the target through the tissue as it is now.
-    fn view(&self, sim: &cutlab_sim::solver::Simulation) -> Result<View> {
-        let seen = exposure(&surface(sim)?, &self.heart, &self.eye, TARGET_SAMPLES);
+    /// What the eye sees of the target through the tissue as it is now; with a camera, its
+    /// picture is added to `pictures`.
+    fn view(
+        &self,
+        scene: &Scene,
+        sim: &cutlab_sim::solver::Simulation,
+        pictures: &mut Vec<Picture>,
+    ) -> Result<View> {
+        let tissue = surface(sim)?;
+        if let Some(camera) = &self.camera {
+            let colours = picture::triangle_colours(scene, sim);
+            pictures.push(picture::render(&tissue, &colours, &self.heart, camera));
+        }
+        let seen = exposure(&tissue, &self.heart, &self.eye, TARGET_SAMPLES);
         let approach_angle_deg = seen.visible_centroid_m.map(|c| {
             let to = c - self.middle;
             (to.dot(&-self.up) / to.norm())

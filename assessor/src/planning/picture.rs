@@ -1,0 +1,205 @@
+//! The field as a picture: the opened wound and the target behind it as the scene's viewpoint
+//! sees them, one ray per pixel through the tissue's current surface and onto the target.
+//!
+//! A pixel's ray from the eye `e` along `d` takes the nearest of the tissue's surface (each
+//! triangle in the colour of the region of its tetrahedron, so the wound's walls show their
+//! layers) and the target's ellipsoid `|(p - c) / r| = 1` (solved in closed form). It is
+//! lit from the eye: colour `k (A + (1 - A) |n . d|)` with [`AMBIENT`], and written as sRGB.
+//! Nothing hit is the background.
+
+use nalgebra::{Point3, Vector3};
+use parry3d_f64::math::Vector as PVec;
+use parry3d_f64::query::{Ray, RayCast};
+use parry3d_f64::shape::TriMesh;
+
+use cutlab_sim::scene::Scene;
+use cutlab_sim::solver::Simulation;
+
+use crate::error::{AssessError, Result};
+use crate::metrics::exposure::Ellipsoid;
+
+/// The share of a surface's colour it keeps when it turns away from the eye.
+pub const AMBIENT: f64 = 0.3;
+/// A region's colour when its scene gives none (linear RGB).
+pub const TISSUE_RGB: [f64; 3] = [0.80, 0.55, 0.50];
+/// The target's colour (linear RGB): a deep red, redder than any muscle of the wall (its
+/// red over green is more than 3 in every light, the muscles' under 2).
+pub const TARGET_RGB: [f64; 3] = [0.55, 0.02, 0.03];
+/// Where a ray meets nothing (linear RGB).
+pub const BACKGROUND_RGB: [f64; 3] = [0.02, 0.02, 0.025];
+
+/// An 8-bit sRGB image, rows top to bottom.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Picture {
+    /// Pixels across.
+    pub width_px: u32,
+    /// Pixels down.
+    pub height_px: u32,
+    /// `r, g, b` of each pixel, row by row.
+    pub rgb: Vec<u8>,
+}
+
+impl Picture {
+    /// The colour at column `x`, row `y`.
+    pub fn at(&self, x: u32, y: u32) -> [u8; 3] {
+        let i = 3 * (y as usize * self.width_px as usize + x as usize);
+        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
+    }
+
+    /// The picture as a PNG file's bytes.
+    pub fn png(&self) -> Result<Vec<u8>> {
+        let mut out = Vec::new();
+        let mut encoder = png::Encoder::new(&mut out, self.width_px, self.height_px);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let fail = |e: png::EncodingError| AssessError::InvalidInput(format!("the picture: {e}"));
+        let mut writer = encoder.write_header().map_err(fail)?;
+        writer.write_image_data(&self.rgb).map_err(fail)?;
+        writer.finish().map_err(fail)?;
+        Ok(out)
+    }
+}
+
+/// Where a picture is taken from and what it frames.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// The eye, m.
+    pub eye_m: Point3<f64>,
+    /// The point at the picture's centre, m.
+    pub look_at_m: Point3<f64>,
+    /// The direction shown upwards (need not be square to the view).
+    pub top: Vector3<f64>,
+    /// Half the picture's width at the distance of `look_at_m`, m.
+    pub half_width_m: f64,
+    /// Pixels across and down.
+    pub size_px: u32,
+}
+
+impl Camera {
+    /// The scene's viewpoint, framing `half_width_m` either side of the point where its line
+    /// of sight meets the skin (the point it looks at when the line misses the tissue), with
+    /// the scene's `along` as the picture's right where it can be.
+    pub fn of_scene(
+        scene: &Scene,
+        skin: &TriMesh,
+        half_width_m: f64,
+        size_px: u32,
+    ) -> Option<Self> {
+        let view = scene.viewpoint.as_ref()?;
+        let eye_m = Point3::from(view.eye_mm) * 1e-3;
+        let aim = Point3::from(view.look_at_mm) * 1e-3;
+        let (up, along) = scene.spec.incision.unit().ok()?;
+        let forward = (aim - eye_m).try_normalize(1e-12)?;
+        let look_at_m = skin
+            .cast_local_ray(&ray(&eye_m, &forward), 10.0, false)
+            .map_or(aim, |t| eye_m + forward * t);
+        let mut top = up.cross(&along);
+        if top.cross(&forward).norm() < 0.1 {
+            top = up;
+        }
+        Some(Self {
+            eye_m,
+            look_at_m,
+            top,
+            half_width_m,
+            size_px,
+        })
+    }
+}
+
+fn ray(from: &Point3<f64>, along: &Vector3<f64>) -> Ray {
+    Ray::new(
+        PVec::new(from.x, from.y, from.z),
+        PVec::new(along.x, along.y, along.z),
+    )
+}
+
+/// The colour of each of `sim`'s surface triangles: its region's, from `scene`.
+pub fn triangle_colours(scene: &Scene, sim: &Simulation) -> Vec<[f64; 3]> {
+    let mesh = &sim.model.mesh;
+    let topology = mesh.topology();
+    topology
+        .boundary
+        .iter()
+        .map(|&face| {
+            let region = topology
+                .tets_of_face(face)
+                .next()
+                .map(|t| mesh.regions()[t as usize]);
+            scene
+                .spec
+                .materials
+                .iter()
+                .find(|m| Some(m.region) == region)
+                .and_then(|m| m.colour_rgb)
+                .unwrap_or(TISSUE_RGB)
+        })
+        .collect()
+}
+
+/// Where a ray from `o` along unit `d` first meets `e`, and the outward normal there.
+fn hit_ellipsoid(e: &Ellipsoid, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+    let (oc, dr) = (
+        (o - e.centre_m).component_div(&e.radii_m),
+        d.component_div(&e.radii_m),
+    );
+    let (a, b, c) = (dr.dot(&dr), 2.0 * oc.dot(&dr), oc.dot(&oc) - 1.0);
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = (-b - disc.sqrt()) / (2.0 * a);
+    let normal = (o + d * t - e.centre_m)
+        .component_div(&e.radii_m.component_mul(&e.radii_m))
+        .try_normalize(1e-15)?;
+    (t > 0.0).then_some((t, normal))
+}
+
+fn srgb(linear: f64) -> u8 {
+    (linear.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8
+}
+
+/// `tissue` (its triangles coloured by `colours`) and `target` as `camera` sees them.
+pub fn render(
+    tissue: &TriMesh,
+    colours: &[[f64; 3]],
+    target: &Ellipsoid,
+    camera: &Camera,
+) -> Picture {
+    let n = camera.size_px.max(1);
+    let to = camera.look_at_m - camera.eye_m;
+    let forward = to.normalize();
+    let right = forward.cross(&camera.top).normalize();
+    let up = right.cross(&forward);
+    let half = camera.half_width_m / to.norm();
+    let mut rgb = Vec::with_capacity(3 * (n * n) as usize);
+    for row in 0..n {
+        let v = (1.0 - 2.0 * (f64::from(row) + 0.5) / f64::from(n)) * half;
+        for col in 0..n {
+            let u = (2.0 * (f64::from(col) + 0.5) / f64::from(n) - 1.0) * half;
+            let d = (forward + right * u + up * v).normalize();
+            let skin = tissue.cast_local_ray_and_get_normal(&ray(&camera.eye_m, &d), 10.0, false);
+            let heart = hit_ellipsoid(target, &camera.eye_m, &d);
+            let (colour, normal) = match (skin, heart) {
+                (Some(s), Some((t, n))) if t < s.time_of_impact => (TARGET_RGB, n),
+                (Some(s), _) => {
+                    let k = colours.get(s.subshape as usize).copied();
+                    let normal = Vector3::new(s.normal.x, s.normal.y, s.normal.z);
+                    (k.unwrap_or(TISSUE_RGB), normal)
+                }
+                (None, Some((_, n))) => (TARGET_RGB, n),
+                (None, None) => {
+                    rgb.extend(BACKGROUND_RGB.map(srgb));
+                    continue;
+                }
+            };
+            let light = AMBIENT + (1.0 - AMBIENT) * normal.dot(&d).abs().min(1.0);
+            rgb.extend(colour.map(|c| srgb(c * light)));
+        }
+    }
+    Picture {
+        width_px: n,
+        height_px: n,
+        rgb,
+    }
+}
