@@ -108,6 +108,8 @@ struct Inner {
     kiosk: auth::kiosk::KioskTicket,
     /// The hub's recording uploads under way.
     uploads: hub::Uploads,
+    /// The planning page's comparisons (one at a time).
+    planner: pages::planning::Planner,
 }
 
 /// The caches of the hot paths, valid until the database changes (see [`cache`]).
@@ -158,6 +160,7 @@ impl AppState {
             station,
             kiosk: Default::default(),
             uploads: Default::default(),
+            planner: Default::default(),
         })))
     }
     pub fn store(&self) -> &Store {
@@ -193,6 +196,9 @@ impl AppState {
     }
     pub(crate) fn uploads(&self) -> &hub::Uploads {
         &self.0.uploads
+    }
+    pub(crate) fn planner(&self) -> &pages::planning::Planner {
+        &self.0.planner
     }
     pub(crate) fn station_settings(&self) -> &cutlab_station::StationSettings {
         &self.0.config.station

@@ -1393,3 +1393,160 @@ async fn an_attempt_that_never_touched_the_tissue_is_shown_unscored_with_what_to
         "no praise for nothing"
     );
 }
+
+/// The candidates' fields of a planning form: `(letter, [x0, y0, x1, y1, depth])` in mm.
+fn planning_form<'a>(
+    csrf: &'a str,
+    rows: &[(char, [&'a str; 5])],
+    more: &[(&'a str, &'a str)],
+) -> Vec<(String, String)> {
+    let mut form = vec![("csrf".to_owned(), csrf.to_owned())];
+    for (letter, values) in rows {
+        let l = letter.to_ascii_lowercase();
+        for (key, v) in ["from_x", "from_y", "to_x", "to_y", "depth"]
+            .iter()
+            .zip(values)
+        {
+            form.push((format!("{l}_{key}"), (*v).to_owned()));
+        }
+    }
+    form.extend(more.iter().map(|(k, v)| ((*k).to_owned(), (*v).to_owned())));
+    form
+}
+
+/// The planning page (issue 62): an instructor draws candidates on a field exercise and
+/// compares what each exposes beside the expert's plan; a trainee, and an exercise of another
+/// kind, get 404; a candidate that is not an incision is refused, named.
+#[tokio::test]
+async fn an_instructor_compares_candidate_incisions_by_their_fields() {
+    let e = env().await;
+    let field = e
+        .store
+        .exercise_by_name("mini-thoracotomy")
+        .await
+        .unwrap()
+        .id;
+    let other = e
+        .store
+        .exercise_by_name(cutlab_assessor::store::BUILTIN_EXERCISE)
+        .await
+        .unwrap()
+        .id;
+    let path = format!("/exercises/{field}/planning");
+    let kim = login(&e.app, "dr-kim", "instructor-demo").await;
+    let page = body_text(send(&e.app, get(&path, Some(&kim))).await).await;
+    assert!(page.contains("id=\"skin-map\""), "{page}");
+    assert_eq!(
+        page.matches("class=\"landmark\"").count(),
+        5,
+        "the sternum's edge and four ribs"
+    );
+    assert!(
+        page.contains("class=\"expert\"") && page.contains("value=\"20.0\""),
+        "the retractor's 20 mm"
+    );
+    let ex_page =
+        body_text(send(&e.app, get(&format!("/exercises/{field}"), Some(&kim))).await).await;
+    assert!(ex_page.contains("id=\"planning-link\""));
+    let other_page =
+        body_text(send(&e.app, get(&format!("/exercises/{other}"), Some(&kim))).await).await;
+    assert!(!other_page.contains("planning-link"));
+    let r = send(
+        &e.app,
+        get(&format!("/exercises/{other}/planning"), Some(&kim)),
+    )
+    .await;
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+    let ana = login(&e.app, "ana", "trainee-demo").await;
+    assert_eq!(
+        send(&e.app, get(&path, Some(&ana))).await.status(),
+        StatusCode::NOT_FOUND
+    );
+    let space = ('A', ["-20", "-2.5", "30", "-2.5", "45"]);
+    let form = planning_form(&ana.csrf, &[space], &[]);
+    let pairs: Vec<(&str, &str)> = form.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let r = send(&e.app, post_form(&path, Some(&ana.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::NOT_FOUND);
+
+    // the 4th space against the 4th rib, retracted to 20 mm
+    let rib = ('B', ["-20", "11.5", "30", "11.5", "45"]);
+    let form = planning_form(&kim.csrf, &[space, rib], &[("retract_mm", "20")]);
+    let pairs: Vec<(&str, &str)> = form.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let r = send(&e.app, post_form(&path, Some(&kim.cookie), &pairs)).await;
+    assert_eq!(r.status(), StatusCode::OK);
+    let page = body_text(r).await;
+    let column = |id: &str| {
+        let at = page
+            .find(&format!("id=\"field-{id}\""))
+            .unwrap_or_else(|| panic!("{id}: {page}"));
+        page[at..page[at..]
+            .find("</section>")
+            .map_or(page.len(), |end| at + end)]
+            .to_owned()
+    };
+    let (expert, a, b) = (
+        column("expert-s-plan"),
+        column("candidate-a"),
+        column("candidate-b"),
+    );
+    assert_eq!(
+        page.matches("src=\"data:image/png;base64,").count(),
+        6,
+        "opened and retracted, three columns"
+    );
+    assert!(
+        a.contains("class=\"damaged\">nothing") && expert.contains("class=\"damaged\">nothing"),
+        "{a}"
+    );
+    assert!(b.contains("<strong>rib</strong>"), "{b}");
+    assert!(
+        b.contains("class=\"seen\">0 mm²"),
+        "nothing through the rib: {b}"
+    );
+    assert!(a.contains("% of the expert's"), "{a}");
+    assert!(
+        page.contains("id=\"planning-best\">Candidate A exposes the most"),
+        "{page}"
+    );
+    assert!(
+        page.contains("value=\"11.5\""),
+        "the form keeps what was sent"
+    );
+
+    // what is not an incision: 400 and the field named
+    for (rows, more, says) in [
+        (vec![], vec![], "at least one candidate"),
+        (
+            vec![('A', ["NaN", "0", "10", "0", "45"])],
+            vec![],
+            "Candidate A, start x",
+        ),
+        (
+            vec![('C', ["0", "0", "", "0", "45"])],
+            vec![],
+            "Candidate C: give its start, its end and its depth",
+        ),
+        (
+            vec![('A', ["500", "0", "10", "0", "45"])],
+            vec![],
+            "off the tissue",
+        ),
+        (
+            vec![('D', ["0", "-2.5", "20", "-2.5", "0"])],
+            vec![],
+            "depth_m",
+        ),
+        (
+            vec![space],
+            vec![("retract_mm", "-5")],
+            "The retractor's width",
+        ),
+    ] {
+        let form = planning_form(&kim.csrf, &rows, &more);
+        let pairs: Vec<(&str, &str)> = form.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+        let r = send(&e.app, post_form(&path, Some(&kim.cookie), &pairs)).await;
+        assert_eq!(r.status(), StatusCode::BAD_REQUEST, "{says}");
+        let text = body_text(r).await;
+        assert!(text.contains(says), "{says}: {text}");
+    }
+}

@@ -280,6 +280,9 @@ async fn exercise(
             p { "Scene " code { (e.scene) } " · k = " (num(Some(e.threshold_k), 2)) } p { (e.description) }
             @if user.is_staff() {
                 p { a id="evidence-link" href=(format!("/exercises/{id}/evidence")) { "Validity evidence of its scores" } " (experience groups, AUC, reliability, the contrasting-groups pass mark)" }
+                @if matches!(plan, ExercisePlan::Field(_)) {
+                    p { a id="planning-link" href=(format!("/exercises/{id}/planning")) { "Plan incisions on its scene" } " (draw candidates, compare what each exposes)" }
+                }
             }
             h2 { "Thresholds" }
             @if user.is_staff() {

@@ -6,6 +6,8 @@ pub mod cohorts;
 pub mod curriculum;
 pub mod evidence;
 pub mod layout;
+pub mod planning;
+mod planning_map;
 pub mod progress;
 pub mod station;
 pub mod supervision;
@@ -29,6 +31,10 @@ pub fn router() -> Router<AppState> {
             get(|| async { static_file("text/css", include_str!("static/style.css")) }),
         )
         .route(
+            "/static/planning.js",
+            get(|| async { static_file("text/javascript", include_str!("static/planning.js")) }),
+        )
+        .route(
             "/static/supervision.js",
             get(|| async { static_file("text/javascript", include_str!("static/supervision.js")) }),
         )
@@ -39,6 +45,7 @@ pub fn router() -> Router<AppState> {
         .merge(station::router())
         .merge(curriculum::router())
         .merge(evidence::router())
+        .merge(planning::router())
         .layer(axum::middleware::map_response(
             |mut r: Response| async move {
                 r.headers_mut().insert(
