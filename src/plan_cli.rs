@@ -11,8 +11,6 @@ use cutlab_assessor::planning::{
 use cutlab_assessor::store::DbLocation;
 use cutlab_sim::scene::{BuildOptions, Scene};
 
-/// Half the width a picture frames at the skin, m.
-const PICTURE_HALF_WIDTH_M: f64 = 0.04;
 /// A picture's pixels across and down.
 const PICTURE_PX: u32 = 320;
 
@@ -40,7 +38,7 @@ pub enum PlanCommand {
         #[arg(long)]
         retract_mm: Option<f64>,
         /// Also write the field as the viewpoint sees it to this PNG file: the opened wound
-        /// (retracted, with `--retract-mm`) and the target through it, 80 mm across at the skin.
+        /// (retracted, with `--retract-mm`) and the target through it, the whole skin framed.
         #[arg(long)]
         picture: Option<PathBuf>,
         /// Machine-readable output.
@@ -87,7 +85,7 @@ pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> 
         None => None,
         Some(_) => Some(
             SkinMap::of(&scene)?
-                .camera(&scene, PICTURE_HALF_WIDTH_M, PICTURE_PX)
+                .camera(&scene, PICTURE_PX)
                 .with_context(|| format!("the scene {scene_name} has no viewpoint to picture"))?,
         ),
     };

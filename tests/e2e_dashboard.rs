@@ -1462,3 +1462,183 @@ async fn thoracotomy(port: u16, driver: &browser::Driver, tmp: &Path) -> (String
     let _ = c.close().await;
     result.unwrap_or_else(|e| panic!("the mini-thoracotomy: {e}"))
 }
+
+/// The planning page as a surgeon uses it (issue 62): dr-kim opens the mini-thoracotomy's
+/// planning from the exercise's page and draws three candidates on the skin map with a
+/// human hand (reach, tremor, pauses): 50 mm in the 4th intercostal space half way between the
+/// 4th and 5th ribs' marks, 50 mm a space lower, and 20 mm in the 4th. Compared, the 4th
+/// space shows about what the expert's plan shows and damages nothing, the short one shows
+/// less. Screenshots: `planning-drawn.png`, `planning-compared.png`.
+#[test]
+fn candidate_incisions_are_drawn_and_compared_on_the_planning_page_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-planning-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let columns = runtime().block_on(planning(port, &driver, &tmp));
+    let seen = |name: &str| {
+        let (_, text) = columns
+            .iter()
+            .find(|(n, _)| n == name)
+            .unwrap_or_else(|| panic!("{name} compared: {columns:?}"));
+        text.clone()
+    };
+    let percent = |text: &str| -> f64 {
+        let before = text.split(" % of the expert's").next().expect("a share");
+        before
+            .rsplit(' ')
+            .next()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0)
+    };
+    let (a, b, c) = (
+        seen("Candidate A"),
+        seen("Candidate B"),
+        seen("Candidate C"),
+    );
+    assert!(
+        a.contains("Damaged\nnothing") || a.contains("Damaged nothing"),
+        "{a}"
+    );
+    assert!(
+        percent(&a) >= 70.0,
+        "the 4th space shows about the expert's view: {a}"
+    );
+    assert!(
+        percent(&c) < percent(&a),
+        "the short one shows less: {c} / {a}"
+    );
+    assert!(
+        percent(&b) < percent(&a),
+        "a space lower shows less: {b} / {a}"
+    );
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// The map's mm `(x, y)` as page pixels.
+async fn map_px(
+    c: &fantoccini::Client,
+    mm: &[[f64; 2]],
+) -> Result<Vec<[f64; 2]>, fantoccini::error::CmdError> {
+    let px = c
+        .execute(
+            "const svg = document.getElementById('skin-map'), m = svg.getScreenCTM();
+             return arguments[0].map(p => { const q = svg.createSVGPoint(); q.x = p[0]; q.y = -p[1];
+               const r = q.matrixTransform(m); return [r.x, r.y]; });",
+            vec![serde_json::json!(mm)],
+        )
+        .await?;
+    Ok(serde_json::from_value(px).expect("points on the page"))
+}
+
+/// The landmarks on the planning map: each line's mean `(x, y)`, mm.
+async fn map_landmarks(
+    c: &fantoccini::Client,
+) -> Result<Vec<[f64; 2]>, fantoccini::error::CmdError> {
+    let v = c
+        .execute(
+            "return [...document.querySelectorAll('#skin-map .landmark')].map(l =>
+               [...l.points].map(p => [p.x, -p.y]))",
+            vec![],
+        )
+        .await?;
+    let lines: Vec<Vec<[f64; 2]>> = serde_json::from_value(v).expect("landmarks");
+    Ok(lines
+        .iter()
+        .map(|l| {
+            let n = l.len() as f64;
+            [
+                l.iter().map(|p| p[0]).sum::<f64>() / n,
+                l.iter().map(|p| p[1]).sum::<f64>() / n,
+            ]
+        })
+        .collect())
+}
+
+/// Draws the candidates, compares them, and returns each column's heading and text.
+async fn planning(port: u16, driver: &browser::Driver, tmp: &Path) -> Vec<(String, String)> {
+    use cutlab_haptics::hand::Hand;
+    let (base, shots) = (format!("http://127.0.0.1:{port}"), artefacts());
+    let c = chromium(driver, &tmp.join("profile-planning")).await;
+    let result = async {
+        login(&c, &base, "dr-kim", "instructor-demo").await?;
+        c.goto(&format!("{base}/curriculum")).await?;
+        c.find(Locator::LinkText("mini-thoracotomy"))
+            .await?
+            .click()
+            .await?;
+        c.wait()
+            .for_element(Locator::Id("planning-link"))
+            .await?
+            .click()
+            .await?;
+        c.wait().for_element(Locator::Id("skin-map")).await?;
+        let marks = map_landmarks(&c).await?;
+        assert_eq!(marks.len(), 5, "the sternum's edge and four ribs");
+        let (sternum_x, space_4, space_5) = (
+            marks[0][0],
+            0.5 * (marks[2][1] + marks[3][1]),
+            0.5 * (marks[3][1] + marks[4][1]),
+        );
+        let lines = [
+            [[sternum_x + 25.0, space_4], [sternum_x + 75.0, space_4]],
+            [[sternum_x + 25.0, space_5], [sternum_x + 75.0, space_5]],
+            [[sternum_x + 40.0, space_4], [sternum_x + 60.0, space_4]],
+        ];
+        let mut hand = Hand::steady(4.0, 71);
+        let mut at = [40.0, 40.0];
+        for mm in lines {
+            let px = map_px(&c, &mm).await?;
+            let mut g = hand.reach(at, px[0], 0.7);
+            g.extend(hand.stroke(&px, 1.2, 1.0));
+            g.extend(hand.withdraw(px[1], [30.0, 40.0], 0.4));
+            c.perform_actions(as_actions(&g)).await?;
+            at = [px[1][0] + 30.0, px[1][1] + 40.0];
+        }
+        c.release_actions().await?;
+        let drawn = c
+            .execute(
+                "return ['a','b','c'].map(l => ['from_x','from_y','to_x','to_y','depth']
+                   .map(k => Number(document.getElementById(l + '_' + k).value)))",
+                vec![],
+            )
+            .await?;
+        let drawn: Vec<[f64; 5]> = serde_json::from_value(drawn).expect("the fields");
+        for (d, mm) in drawn.iter().zip(&lines) {
+            let off = (d[0] - mm[0][0]).abs().max((d[1] - mm[0][1]).abs());
+            assert!(
+                off < 3.0,
+                "the drawn start lands where the hand aimed: {d:?} {mm:?}"
+            );
+            assert_eq!(d[4], 45.0, "the expert's depth by default");
+        }
+        std::fs::write(shots.join("planning-drawn.png"), c.screenshot().await?)
+            .expect("screenshot");
+        c.find(Locator::Id("compare")).await?.click().await?;
+        c.wait()
+            .at_most(Duration::from_secs(120))
+            .for_element(Locator::Id("planning-best"))
+            .await?;
+        c.execute(
+            "document.getElementById('planning-best').scrollIntoView()",
+            vec![],
+        )
+        .await?;
+        std::fs::write(shots.join("planning-compared.png"), c.screenshot().await?)
+            .expect("screenshot");
+        let mut columns = Vec::new();
+        for s in c.find_all(Locator::Css(".field-column")).await? {
+            let name = s.find(Locator::Css("h3")).await?.text().await?;
+            columns.push((name, s.text().await?));
+        }
+        Ok::<_, fantoccini::error::CmdError>(columns)
+    }
+    .await;
+    let _ = c.close().await;
+    result.unwrap_or_else(|e| panic!("the planning page: {e}"))
+}

@@ -201,9 +201,14 @@ impl SkinMap {
         (lo, hi)
     }
 
-    /// The camera of the scene's viewpoint (see [`Camera::of_scene`]).
-    pub fn camera(&self, scene: &Scene, half_width_m: f64, size_px: u32) -> Option<Camera> {
-        Camera::of_scene(scene, &self.skin, half_width_m, size_px)
+    /// The scene's viewpoint looking at the skin over the map's middle and framing the whole
+    /// map with a tenth to spare, so that every candidate on it is pictured alike (see
+    /// [`Camera::of_scene`]).
+    pub fn camera(&self, scene: &Scene, size_px: u32) -> Option<Camera> {
+        let (lo, hi) = self.extent_m();
+        let middle = self.point(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))?;
+        let half_width_m = 0.55 * (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        Camera::of_scene(scene, middle.into(), half_width_m, size_px)
     }
 }
 

@@ -76,23 +76,18 @@ pub struct Camera {
 }
 
 impl Camera {
-    /// The scene's viewpoint, framing `half_width_m` either side of the point where its line
-    /// of sight meets the skin (the point it looks at when the line misses the tissue), with
-    /// the scene's `along` as the picture's right where it can be.
+    /// The scene's viewpoint looking at `look_at_m`, framing `half_width_m` either side of
+    /// it, with the scene's `along` as the picture's right where it can be; none without a
+    /// viewpoint.
     pub fn of_scene(
         scene: &Scene,
-        skin: &TriMesh,
+        look_at_m: Point3<f64>,
         half_width_m: f64,
         size_px: u32,
     ) -> Option<Self> {
-        let view = scene.viewpoint.as_ref()?;
-        let eye_m = Point3::from(view.eye_mm) * 1e-3;
-        let aim = Point3::from(view.look_at_mm) * 1e-3;
+        let eye_m = Point3::from(scene.viewpoint.as_ref()?.eye_mm) * 1e-3;
         let (up, along) = scene.spec.incision.unit().ok()?;
-        let forward = (aim - eye_m).try_normalize(1e-12)?;
-        let look_at_m = skin
-            .cast_local_ray(&ray(&eye_m, &forward), 10.0, false)
-            .map_or(aim, |t| eye_m + forward * t);
+        let forward = (look_at_m - eye_m).try_normalize(1e-12)?;
         let mut top = up.cross(&along);
         if top.cross(&forward).norm() < 0.1 {
             top = up;

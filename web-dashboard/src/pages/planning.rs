@@ -31,10 +31,8 @@ use crate::extract::{Form, Id};
 pub const LETTERS: [char; 4] = ['A', 'B', 'C', 'D'];
 /// How long the wound opens before the field is measured, s (as `cutlab plan field`).
 const OPEN_S: f64 = 0.5;
-/// Half the width of the skin a picture shows, m.
-const PICTURE_HALF_WIDTH_M: f64 = 0.04;
 /// A picture's pixels across and down.
-const PICTURE_PX: u32 = 320;
+const PICTURE_PX: u32 = 360;
 
 pub fn router() -> Router<AppState> {
     Router::new().route("/exercises/{id}/planning", get(planning_page).post(compare))
@@ -161,7 +159,7 @@ fn compare_blocking(
     let scene = load_scene(scene_name)?;
     let map = SkinMap::of(&scene)?;
     let camera = map
-        .camera(&scene, PICTURE_HALF_WIDTH_M, PICTURE_PX)
+        .camera(&scene, PICTURE_PX)
         .ok_or_else(|| AppError::BadRequest(format!("the scene {scene_name} has no viewpoint")))?;
     let mut named = vec![("Expert's plan".to_owned(), expert)];
     for d in drawn {
@@ -399,7 +397,7 @@ fn column(c: &Compared, expert_m2: Option<f64>, retracted: bool) -> Markup {
             h3 { (c.name) }
             @for (k, png) in c.pictures_png.iter().enumerate() {
                 figure {
-                    img src=(png_uri(png)) width="320" height="320" alt=(format!("{}: the field from the viewpoint{}", c.name, if k == 1 { ", retracted" } else { "" }));
+                    img src=(png_uri(png)) width="360" height="360" alt=(format!("{}: the field from the viewpoint{}", c.name, if k == 1 { ", retracted" } else { "" }));
                     figcaption { @if k == 0 { "Opened by the tissue's tension" } @else { "Retracted" } }
                 }
             }
