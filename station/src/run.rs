@@ -291,6 +291,9 @@ pub struct Running {
     pub blade_length_m: f64,
     /// Where the exercise is seen from, if its scene says.
     pub viewpoint: Option<Viewpoint>,
+    /// The structures behind the tissue the scene names (the heart), shown through an
+    /// opening.
+    pub targets: Vec<cutlab_sim::scene::Target>,
     pub feed: ViewFeed,
     /// Where the page's samples go, when the page drives the session.
     pub pointer: Option<PointerFeed>,
@@ -429,6 +432,7 @@ pub async fn start(
     let (ending_tx, ending) = watch::channel(None);
     let figures = Arc::new(OnceLock::new());
     let viewpoint = prepared.scene.viewpoint.clone();
+    let targets = prepared.scene.targets.clone();
     let marks = prepared.marks.clone();
     let blade_length_m = prepared.config.blade_length_m;
     let region_names = prepared
@@ -481,6 +485,7 @@ pub async fn start(
         force_limit_newtons,
         blade_length_m,
         viewpoint,
+        targets,
         feed,
         pointer,
         control,

@@ -244,6 +244,12 @@ fn config_json(r: &Running, driver: bool) -> String {
         // how long the session waits for a page that lost its connection
         "absence_s": r.control.absence().as_secs_f64(),
         "viewpoint": viewpoint,
+        // what lies behind the tissue (the heart): ellipsoids, drawn where an opening shows them
+        "targets": r.targets.iter().map(|t| serde_json::json!({
+            "name": t.name,
+            "centre_m": t.centre_mm.map(|c| c * 1e-3),
+            "radii_m": t.radii_mm.map(|c| c * 1e-3),
+        })).collect::<Vec<_>>(),
         "up": r.plan.normals.first().map(|n| [n.x, n.y, n.z]),
         "ws": format!("/station/{}/ws", r.attempt),
     })

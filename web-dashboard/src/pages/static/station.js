@@ -105,6 +105,38 @@
     gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
   }
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, mesh.indices);
+  // what lies behind the tissue (the heart): each an ellipsoid of 24 x 48 quads in deep red,
+  // drawn with the tissue's depth, so that it shows only where an opening lets it
+  const TARGET = [0.55, 0.02, 0.03];
+  const targets = (config.targets || []).map((t) => {
+    const n = 24, m = 48, xyz = [], normals = [], colours = [], tris = [];
+    for (let i = 0; i <= n; i++) {
+      const th = Math.PI * i / n;
+      for (let j = 0; j <= m; j++) {
+        const ph = 2 * Math.PI * j / m;
+        const s = [Math.sin(th) * Math.cos(ph), Math.sin(th) * Math.sin(ph), Math.cos(th)];
+        xyz.push(...s.map((c, k) => t.centre_m[k] + t.radii_m[k] * c));
+        normals.push(...unit(s.map((c, k) => c / t.radii_m[k])));
+        colours.push(...TARGET);
+        if (i < n && j < m) {
+          const a = i * (m + 1) + j, b = a + m + 1;
+          tris.push(a, b, a + 1, a + 1, b, b + 1);
+        }
+      }
+    }
+    const vao = gl.createVertexArray();
+    gl.bindVertexArray(vao);
+    for (const [data, name] of [[xyz, "position"], [normals, "normal"], [colours, "colour"]]) {
+      gl.bindBuffer(gl.ARRAY_BUFFER, gl.createBuffer());
+      gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(data), gl.STATIC_DRAW);
+      const at = gl.getAttribLocation(tissue, name);
+      gl.enableVertexAttribArray(at);
+      gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
+    }
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, gl.createBuffer());
+    gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(tris), gl.STATIC_DRAW);
+    return { vao, count: tris.length };
+  });
   gl.bindVertexArray(overlay.vao);
   gl.bindBuffer(gl.ARRAY_BUFFER, overlay.buffer);
   gl.enableVertexAttribArray(gl.getAttribLocation(lines, "position"));
@@ -336,6 +368,10 @@
     gl.uniformMatrix4fv(uniform(tissue, "projection"), false, projection);
     gl.bindVertexArray(mesh.vao);
     gl.drawElements(gl.TRIANGLES, mesh.count, gl.UNSIGNED_INT, 0);
+    for (const t of targets) {
+      gl.bindVertexArray(t.vao);
+      gl.drawElements(gl.TRIANGLES, t.count, gl.UNSIGNED_INT, 0);
+    }
     // overlays: the plan (guided), the blade
     gl.useProgram(lines);
     gl.uniformMatrix4fv(uniform(lines, "view"), false, view);
