@@ -114,6 +114,32 @@ fn a_retractor_opens_the_field_up_to_the_ribs() {
     assert!(!ok && err.contains("--retract-mm"), "{err}");
 }
 
+/// A blade that goes deeper than the wall behind its opening touches what lies there: the
+/// lung beside the heart when the candidate runs laterally, the heart itself in the middle;
+/// each is named among the damage.
+#[test]
+fn a_blade_too_deep_touches_the_lung_or_the_heart() {
+    let deep = |name: &str, x0: f64, x1: f64, depth_m: f64| {
+        let json = format!(
+            r#"{{"incision_m": [[{}, -0.0025, 0.0], [{}, -0.0025, 0.0]], "depth_m": {depth_m}}}"#,
+            x0 * 1e-3,
+            x1 * 1e-3
+        );
+        let (ok, out, err) = plan(name, &json, &["--scene", "thorax", "--json"]);
+        assert!(ok, "{err}");
+        serde_json::from_str::<serde_json::Value>(&out).expect("a report")["damaged"].clone()
+    };
+    assert_eq!(
+        deep("lateral", 20.0, 48.0, 0.052),
+        serde_json::json!(["lung"])
+    );
+    assert_eq!(
+        deep("middle", -20.0, 0.0, 0.056),
+        serde_json::json!(["heart"])
+    );
+    assert_eq!(deep("enough", 20.0, 48.0, 0.045), serde_json::json!([]));
+}
+
 /// The pixels of the target's colour in a PNG picture (red over green above 3: no muscle of
 /// the wall is that red).
 fn target_pixels(path: &std::path::Path) -> usize {

@@ -202,19 +202,19 @@ fn field_words(
             )
         }
         "incision_length_m" => format!(
-            "Make the incision shorter: {:.0} mm, over the {} mm limit; the view it bought was              not worth the wound.",
+            "Make the incision shorter: {:.0} mm, over the {} mm limit; the view it bought was not worth the wound.",
             v * 1e3,
             upper.map_or("exercise's".to_owned(), |u| format!("{:.0}", u * 1e3))
         ),
         "wall_opened" => format!(
-            "Cut through the whole wall: the deepest cut was {:.0} mm, and the wall's innermost              layer was not opened, so nothing behind it shows.",
+            "Cut through the whole wall: the deepest cut was {:.0} mm, and the wall's innermost layer was not opened, so nothing behind it shows.",
             value("deepest_cut_m").unwrap_or(0.0) * 1e3
         ),
         "bone_contacts" => format!(
-            "Keep the blade off the ribs: it came down on bone {v:.0} times; cut in the middle              of the space."
+            "Keep the blade off the ribs: it came down on bone {v:.0} times; cut in the middle of the space."
         ),
         "critical_damage" => format!(
-            "Spare what must not be cut: {v:.0} critical harm(s), the artery beside the sternum              cut or the target itself touched."
+            "Spare what must not be cut: {v:.0} critical harm(s), the artery beside the sternum cut, the lung or the target itself touched."
         ),
         _ => return None,
     })

@@ -52,12 +52,28 @@ pub struct FieldPlan {
     /// Lines a surgeon finds by touch, marked on the skin in every mode (m).
     #[serde(default)]
     pub landmarks_m: Vec<Vec<[f64; 3]>>,
+    /// Structures behind the wall not to touch (the lung): the blade's tip inside one is
+    /// critical harm.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub spare: Vec<SpareStructure>,
     /// How far from the expert's line guided mode draws its band (m), default 2 mm.
     #[serde(default = "default_tolerance")]
     pub tolerance_m: f64,
     /// The force counted as excessive (N), default 3 N.
     #[serde(default = "default_force_limit")]
     pub force_limit_n: f64,
+}
+
+/// A structure to spare behind the wall: an ellipsoid (m).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpareStructure {
+    /// What it is (`lung`).
+    pub name: String,
+    /// Its centre (m).
+    pub centre_m: [f64; 3],
+    /// Its semi-axes along x, y and z (m).
+    pub radii_m: [f64; 3],
 }
 
 fn default_normal() -> [f64; 3] {
@@ -104,6 +120,12 @@ impl FieldPlan {
         .concat();
         numbers.extend(self.incision_m.iter().flatten());
         numbers.extend(self.landmarks_m.iter().flatten().flatten());
+        numbers.extend(
+            self.spare
+                .iter()
+                .flat_map(|s| [s.centre_m, s.radii_m])
+                .flatten(),
+        );
         numbers.extend([
             self.depth_m,
             self.wall_m,
@@ -139,6 +161,13 @@ impl FieldPlan {
         if !self.target_radii_m.iter().all(|&r| r > 0.0) {
             return bad("target_radii_m: every semi-axis must be > 0");
         }
+        if let Some(s) = self
+            .spare
+            .iter()
+            .find(|s| !s.radii_m.iter().all(|&r| r > 0.0))
+        {
+            return bad(&format!("spare {:?}: every semi-axis must be > 0", s.name));
+        }
         Ok(())
     }
 
@@ -168,6 +197,14 @@ impl FieldPlan {
             wall_m: self.wall_m,
             reference_area_m2: self.reference_area_m2,
             retracted: self.retractor_width_m.is_some(),
+            spare: self
+                .spare
+                .iter()
+                .map(|s| Ellipsoid {
+                    centre_m: s.centre_m.into(),
+                    radii_m: s.radii_m.into(),
+                })
+                .collect(),
         }
     }
 

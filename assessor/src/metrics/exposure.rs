@@ -46,6 +46,16 @@ pub struct Ellipsoid {
     pub radii_m: Vector3<f64>,
 }
 
+impl Ellipsoid {
+    /// Whether `p` lies inside or on it: `|(p - c) / r| <= 1`.
+    pub fn contains(&self, p: &Point3<f64>) -> bool {
+        (p - self.centre_m)
+            .component_div(&self.radii_m)
+            .norm_squared()
+            <= 1.0
+    }
+}
+
 /// What the opening shows of a target.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Exposure {

@@ -12,7 +12,8 @@
 //!   trace, seen along the plan's normal `n` (a cut gone over twice is not longer);
 //! - the deepest cut below the surface, and whether it went through the wall (`>= wall_m`);
 //! - harm: the times the blade came down on bone, and the critical harm: each structure to
-//!   spare cut, and the target itself touched (a pose's tip inside its ellipsoid).
+//!   spare cut or touched (the lung), and the target itself touched (a pose's tip inside
+//!   its ellipsoid).
 
 use nalgebra::{Point3, Vector3};
 
@@ -107,13 +108,13 @@ pub const METRICS: &[Metric] = &[
         "1",
         Better::LowerIsBetter,
         true,
-        "structures to spare cut (an artery), and touches of the target itself",
+        "structures to spare cut (an artery) or touched (the lung), and touches of the target itself",
     )
     .labelled("Critical damage"),
 ];
 
 /// What the metrics measure against.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Field {
     /// The structure to expose.
     pub target: Ellipsoid,
@@ -128,6 +129,8 @@ pub struct Field {
     /// The field is measured with a retractor in the wound
     /// ([`AttemptData::retracted_surface`]).
     pub retracted: bool,
+    /// Structures behind the wall not to touch (the lung).
+    pub spare: Vec<Ellipsoid>,
 }
 
 /// The field metrics of `data` against `field`, but the incision's space (the plan's
@@ -201,14 +204,17 @@ fn span(points: &[Point3<f64>]) -> Option<(Point3<f64>, Point3<f64>, f64)> {
 fn harm(field: &Field, data: &AttemptData, values: &mut Values) {
     let count = |kind: DamageKind| data.damage.iter().filter(|d| d.kind == kind).count();
     values.set("bone_contacts", count(DamageKind::BladeOnBone) as f64);
-    let target = &field.target;
-    let touched = data.poses.iter().any(|p| {
-        let d = Point3::from(p.tip_m) - target.centre_m;
-        d.component_div(&target.radii_m).norm_squared() <= 1.0
-    });
+    let touched = std::iter::once(&field.target)
+        .chain(&field.spare)
+        .filter(|e| {
+            data.poses
+                .iter()
+                .any(|p| e.contains(&Point3::from(p.tip_m)))
+        })
+        .count();
     values.set(
         "critical_damage",
-        (count(DamageKind::SpareCut) + usize::from(touched)) as f64,
+        (count(DamageKind::SpareCut) + touched) as f64,
     );
 }
 
@@ -269,6 +275,10 @@ mod tests {
             wall_m: 0.04,
             reference_area_m2: 1e-4,
             retracted: false,
+            spare: vec![Ellipsoid {
+                centre_m: Point3::new(0.05, 0.0, -0.07),
+                radii_m: Vector3::new(0.02, 0.02, 0.02),
+            }],
         }
     }
 
@@ -346,8 +356,8 @@ mod tests {
         assert!(value(&narrow, "field_approach_deg").unwrap() < 5.0);
     }
 
-    /// Each bone contact counts; a structure to spare cut and the target touched are
-    /// critical.
+    /// Each bone contact counts; a structure to spare cut, one to spare touched (the lung)
+    /// and the target touched are critical.
     #[test]
     fn harm_is_counted_by_kind() {
         let event = |kind| DamageEvent {
@@ -376,5 +386,10 @@ mod tests {
         assert_eq!(value(&v, "field_area_m2"), None, "no surface: missing");
         data.poses.push(pose(-0.06));
         assert_eq!(value(&assessed(&data), "critical_damage"), Some(2.0));
+        // the lung beside it, touched twice: once more
+        let mut lung = pose(-0.06);
+        lung.tip_m[0] = 0.05;
+        data.poses.extend([lung, lung]);
+        assert_eq!(value(&assessed(&data), "critical_damage"), Some(3.0));
     }
 }

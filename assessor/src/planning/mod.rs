@@ -76,7 +76,8 @@ pub struct FieldReport {
     /// The incision's length on the skin, m.
     pub incision_length_m: f64,
     /// What the stroke damaged: the regions it stopped on (bone) or split though marked
-    /// `spare`, by name.
+    /// `spare`, and the structures behind the wall the blade's tip entered (the target,
+    /// one to spare: the lung), by name.
     pub damaged: Vec<String>,
 }
 
@@ -243,7 +244,7 @@ pub fn field_pictured(
             "retract_m: from 0 to 0.2 m, got {w}"
         )));
     }
-    let target = scene.targets.first().ok_or_else(|| {
+    let target = scene.targets.iter().find(|t| !t.spare).ok_or_else(|| {
         AssessError::InvalidInput(format!("scene {:?} has no target", scene.spec.name))
     })?;
     let view = scene.viewpoint.as_ref().ok_or_else(|| {
@@ -257,7 +258,13 @@ pub fn field_pictured(
     let mut sim = scene.simulation();
     on_tissue(&surface(&sim)?, candidate)?;
     let stations = candidate.stations();
-    let damaged = stroke(&mut sim, scene, &stations, candidate.depth_m, &up)?;
+    let mut damaged = stroke(&mut sim, scene, &stations, candidate.depth_m, &up)?;
+    for t in &scene.targets {
+        let inside = |p: &Point3<f64>| ellipsoid(t).contains(&(p - up * candidate.depth_m));
+        if stations.iter().any(inside) {
+            damaged.push(t.name.clone());
+        }
+    }
     let dt_s = sim.settings.time_step_s;
     let steps = |s: f64| (s.max(0.0) / dt_s).round() as usize;
     for _ in 0..steps(opening.open_s) {
@@ -265,10 +272,13 @@ pub fn field_pictured(
             .map_err(|e| AssessError::InvalidInput(format!("the opening wound: {e}")))?;
     }
     let sight = Sight {
-        heart: Ellipsoid {
-            centre_m: Point3::from(target.centre_mm) * 1e-3,
-            radii_m: Vector3::from(target.radii_mm) * 1e-3,
-        },
+        heart: ellipsoid(target),
+        spare: scene
+            .targets
+            .iter()
+            .filter(|t| t.spare)
+            .map(ellipsoid)
+            .collect(),
         eye: Point3::from(view.eye_mm) * 1e-3,
         middle: stations[stations.len() / 2],
         up,
@@ -319,9 +329,19 @@ fn on_tissue(skin: &TriMesh, candidate: &CandidateIncision) -> Result<()> {
     Ok(())
 }
 
-/// The target, the eye, and where the approach is measured from.
+/// A scene's target (in mm) as an ellipsoid in m.
+fn ellipsoid(t: &cutlab_sim::scene::Target) -> Ellipsoid {
+    Ellipsoid {
+        centre_m: Point3::from(t.centre_mm) * 1e-3,
+        radii_m: Vector3::from(t.radii_mm) * 1e-3,
+    }
+}
+
+/// The target, the structures to spare beside it, the eye, and where the approach is
+/// measured from.
 struct Sight {
     heart: Ellipsoid,
+    spare: Vec<Ellipsoid>,
     eye: Point3<f64>,
     middle: Point3<f64>,
     up: Vector3<f64>,
@@ -340,7 +360,13 @@ impl Sight {
         let tissue = surface(sim)?;
         if let Some(camera) = &self.camera {
             let colours = picture::triangle_colours(scene, sim);
-            pictures.push(picture::render(&tissue, &colours, &self.heart, camera));
+            let shown = picture::Shown {
+                tissue: &tissue,
+                colours: &colours,
+                target: &self.heart,
+                spare: &self.spare,
+            };
+            pictures.push(picture::render(&shown, camera));
         }
         let seen = exposure(&tissue, &self.heart, &self.eye, TARGET_SAMPLES);
         let approach_angle_deg = seen.visible_centroid_m.map(|c| {

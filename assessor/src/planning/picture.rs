@@ -25,6 +25,8 @@ pub const TISSUE_RGB: [f64; 3] = [0.80, 0.55, 0.50];
 /// The target's colour (linear RGB): a deep red, redder than any muscle of the wall (its
 /// red over green is more than 3 in every light, the muscles' under 2).
 pub const TARGET_RGB: [f64; 3] = [0.55, 0.02, 0.03];
+/// A structure to spare's colour (linear RGB): the lung's pink grey.
+pub const SPARE_RGB: [f64; 3] = [0.62, 0.42, 0.45];
 /// Where a ray meets nothing (linear RGB).
 pub const BACKGROUND_RGB: [f64; 3] = [0.02, 0.02, 0.025];
 
@@ -154,13 +156,47 @@ fn srgb(linear: f64) -> u8 {
     (linear.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8
 }
 
-/// `tissue` (its triangles coloured by `colours`) and `target` as `camera` sees them.
-pub fn render(
-    tissue: &TriMesh,
-    colours: &[[f64; 3]],
-    target: &Ellipsoid,
-    camera: &Camera,
-) -> Picture {
+/// What a picture shows: the tissue's surface, its triangles' colours, the target and the
+/// structures to spare behind it.
+#[derive(Debug, Clone, Copy)]
+pub struct Shown<'a> {
+    pub tissue: &'a TriMesh,
+    pub colours: &'a [[f64; 3]],
+    pub target: &'a Ellipsoid,
+    pub spare: &'a [Ellipsoid],
+}
+
+impl Shown<'_> {
+    /// The nearest thing along the ray from `eye` along unit `d`: its colour and normal.
+    fn hit(&self, eye: &Point3<f64>, d: &Vector3<f64>) -> Option<([f64; 3], Vector3<f64>)> {
+        let mut best: Option<(f64, [f64; 3], Vector3<f64>)> = None;
+        let mut take = |t: f64, colour: [f64; 3], n: Vector3<f64>| {
+            if best.is_none_or(|b| t < b.0) {
+                best = Some((t, colour, n));
+            }
+        };
+        if let Some(s) = self
+            .tissue
+            .cast_local_ray_and_get_normal(&ray(eye, d), 10.0, false)
+        {
+            let colour = self.colours.get(s.subshape as usize).copied();
+            let n = Vector3::new(s.normal.x, s.normal.y, s.normal.z);
+            take(s.time_of_impact, colour.unwrap_or(TISSUE_RGB), n);
+        }
+        if let Some((t, n)) = hit_ellipsoid(self.target, eye, d) {
+            take(t, TARGET_RGB, n);
+        }
+        for e in self.spare {
+            if let Some((t, n)) = hit_ellipsoid(e, eye, d) {
+                take(t, SPARE_RGB, n);
+            }
+        }
+        best.map(|(_, colour, n)| (colour, n))
+    }
+}
+
+/// What `shown` holds as `camera` sees it.
+pub fn render(shown: &Shown<'_>, camera: &Camera) -> Picture {
     let n = camera.size_px.max(1);
     let to = camera.look_at_m - camera.eye_m;
     let forward = to.normalize();
@@ -173,23 +209,14 @@ pub fn render(
         for col in 0..n {
             let u = (2.0 * (f64::from(col) + 0.5) / f64::from(n) - 1.0) * half;
             let d = (forward + right * u + up * v).normalize();
-            let skin = tissue.cast_local_ray_and_get_normal(&ray(&camera.eye_m, &d), 10.0, false);
-            let heart = hit_ellipsoid(target, &camera.eye_m, &d);
-            let (colour, normal) = match (skin, heart) {
-                (Some(s), Some((t, n))) if t < s.time_of_impact => (TARGET_RGB, n),
-                (Some(s), _) => {
-                    let k = colours.get(s.subshape as usize).copied();
-                    let normal = Vector3::new(s.normal.x, s.normal.y, s.normal.z);
-                    (k.unwrap_or(TISSUE_RGB), normal)
+            let pixel = match shown.hit(&camera.eye_m, &d) {
+                Some((colour, normal)) => {
+                    let light = AMBIENT + (1.0 - AMBIENT) * normal.dot(&d).abs().min(1.0);
+                    colour.map(|c| srgb(c * light))
                 }
-                (None, Some((_, n))) => (TARGET_RGB, n),
-                (None, None) => {
-                    rgb.extend(BACKGROUND_RGB.map(srgb));
-                    continue;
-                }
+                None => BACKGROUND_RGB.map(srgb),
             };
-            let light = AMBIENT + (1.0 - AMBIENT) * normal.dot(&d).abs().min(1.0);
-            rgb.extend(colour.map(|c| srgb(c * light)));
+            rgb.extend(pixel);
         }
     }
     Picture {

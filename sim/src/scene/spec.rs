@@ -304,6 +304,10 @@ pub struct Target {
     pub centre_mm: [f64; 3],
     /// Its semi-axes along x, y and z, in mm.
     pub radii_mm: [f64; 3],
+    /// A structure to spare rather than expose (the lung beside the heart): never the
+    /// target a field is measured on; the blade's tip inside it is critical harm.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub spare: bool,
 }
 
 fn default_cut_threshold_newtons() -> f64 {

@@ -249,6 +249,7 @@ fn config_json(r: &Running, driver: bool) -> String {
             "name": t.name,
             "centre_m": t.centre_mm.map(|c| c * 1e-3),
             "radii_m": t.radii_mm.map(|c| c * 1e-3),
+            "spare": t.spare,
         })).collect::<Vec<_>>(),
         "up": r.plan.normals.first().map(|n| [n.x, n.y, n.z]),
         "ws": format!("/station/{}/ws", r.attempt),

@@ -105,9 +105,10 @@
     gl.vertexAttribPointer(at, 3, gl.FLOAT, false, 0, 0);
   }
   gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, mesh.indices);
-  // what lies behind the tissue (the heart): each an ellipsoid of 24 x 48 quads in deep red,
-  // drawn with the tissue's depth, so that it shows only where an opening lets it
-  const TARGET = [0.55, 0.02, 0.03];
+  // what lies behind the tissue: each an ellipsoid of 24 x 48 quads, the target (the heart)
+  // deep red, a structure to spare (the lung) pink grey, drawn with the tissue's depth, so
+  // that it shows only where an opening lets it
+  const TARGET = [0.55, 0.02, 0.03], SPARE = [0.62, 0.42, 0.45];
   const targets = (config.targets || []).map((t) => {
     const n = 24, m = 48, xyz = [], normals = [], colours = [], tris = [];
     for (let i = 0; i <= n; i++) {
@@ -117,7 +118,7 @@
         const s = [Math.sin(th) * Math.cos(ph), Math.sin(th) * Math.sin(ph), Math.cos(th)];
         xyz.push(...s.map((c, k) => t.centre_m[k] + t.radii_m[k] * c));
         normals.push(...unit(s.map((c, k) => c / t.radii_m[k])));
-        colours.push(...TARGET);
+        colours.push(...(t.spare ? SPARE : TARGET));
         if (i < n && j < m) {
           const a = i * (m + 1) + j, b = a + m + 1;
           tris.push(a, b, a + 1, a + 1, b, b + 1);
