@@ -365,6 +365,7 @@ impl Sight {
                 colours: &colours,
                 target: &self.heart,
                 spare: &self.spare,
+                up: self.up,
             };
             pictures.push(picture::render(&shown, camera));
         }

@@ -164,6 +164,9 @@ pub struct Shown<'a> {
     pub colours: &'a [[f64; 3]],
     pub target: &'a Ellipsoid,
     pub spare: &'a [Ellipsoid],
+    /// The way out of the body: the target and the structures to spare are shown only
+    /// under the tissue, within its bounds across `up` (the lung reaches beyond a window).
+    pub up: Vector3<f64>,
 }
 
 impl Shown<'_> {
@@ -183,12 +186,16 @@ impl Shown<'_> {
             let n = Vector3::new(s.normal.x, s.normal.y, s.normal.z);
             take(s.time_of_impact, colour.unwrap_or(TISSUE_RGB), n);
         }
-        if let Some((t, n)) = hit_ellipsoid(self.target, eye, d) {
-            take(t, TARGET_RGB, n);
-        }
-        for e in self.spare {
-            if let Some((t, n)) = hit_ellipsoid(e, eye, d) {
-                take(t, SPARE_RGB, n);
+        let aabb = self.tissue.local_aabb();
+        let under = |t: f64| {
+            let p = eye + d * t;
+            (0..3).all(|k| self.up[k].abs() > 0.5 || (aabb.mins[k]..=aabb.maxs[k]).contains(&p[k]))
+        };
+        let behind = std::iter::once((self.target, TARGET_RGB))
+            .chain(self.spare.iter().map(|e| (e, SPARE_RGB)));
+        for (e, colour) in behind {
+            if let Some((t, n)) = hit_ellipsoid(e, eye, d).filter(|&(t, _)| under(t)) {
+                take(t, colour, n);
             }
         }
         best.map(|(_, colour, n)| (colour, n))

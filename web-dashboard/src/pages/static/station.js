@@ -69,15 +69,17 @@
   const tissue = program(`#version 300 es
     in vec3 position; in vec3 normal; in vec3 colour;
     uniform mat4 view, projection;
-    out vec3 v_normal; out vec3 v_eye; out vec3 v_colour;
+    out vec3 v_normal; out vec3 v_eye; out vec3 v_colour; out vec3 v_world;
     void main() {
       vec4 p = view * vec4(position, 1.0);
-      v_eye = -p.xyz; v_normal = mat3(view) * normal; v_colour = colour;
+      v_eye = -p.xyz; v_normal = mat3(view) * normal; v_colour = colour; v_world = position;
       gl_Position = projection * p;
     }`, `#version 300 es
     precision highp float;
-    in vec3 v_normal; in vec3 v_eye; in vec3 v_colour; out vec4 color;
+    in vec3 v_normal; in vec3 v_eye; in vec3 v_colour; in vec3 v_world; out vec4 color;
+    uniform vec3 clip_lo, clip_hi; // what is drawn: the tissue all, what lies behind it under it
     void main() {
+      if (any(lessThan(v_world, clip_lo)) || any(greaterThan(v_world, clip_hi))) discard;
       vec3 n = normalize(v_normal); if (!gl_FrontFacing) n = -n;
       vec3 l = normalize(v_eye);
       float diffuse = max(dot(n, l), 0.0);
@@ -368,7 +370,15 @@
     gl.uniformMatrix4fv(uniform(tissue, "view"), false, view);
     gl.uniformMatrix4fv(uniform(tissue, "projection"), false, projection);
     gl.bindVertexArray(mesh.vao);
+    gl.uniform3fv(uniform(tissue, "clip_lo"), [-1e9, -1e9, -1e9]);
+    gl.uniform3fv(uniform(tissue, "clip_hi"), [1e9, 1e9, 1e9]);
     gl.drawElements(gl.TRIANGLES, mesh.count, gl.UNSIGNED_INT, 0);
+    // what lies behind the tissue, only under it, 3 mm in from its rest bounds (the lung
+    // reaches beyond the window; the window's rim moves in a little as it is cut)
+    const [lo, hi] = bounds(rest ? rest.xyz : latest.xyz);
+    const under = (box, inset, far) => box.map((c, k) => (Math.abs(up[k]) > 0.5 ? far : c + inset));
+    gl.uniform3fv(uniform(tissue, "clip_lo"), under(lo, 0.003, -1e9));
+    gl.uniform3fv(uniform(tissue, "clip_hi"), under(hi, -0.003, 1e9));
     for (const t of targets) {
       gl.bindVertexArray(t.vao);
       gl.drawElements(gl.TRIANGLES, t.count, gl.UNSIGNED_INT, 0);
