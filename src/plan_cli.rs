@@ -85,7 +85,7 @@ pub fn run(db: Option<&DbLocation>, command: PlanCommand) -> anyhow::Result<()> 
         None => None,
         Some(_) => Some(
             SkinMap::of(&scene)?
-                .camera(&scene, PICTURE_PX)
+                .camera(&scene.spec, PICTURE_PX)
                 .with_context(|| format!("the scene {scene_name} has no viewpoint to picture"))?,
         ),
     };

@@ -1345,7 +1345,8 @@ async fn debrief(
 /// reloaded mid-cut, and she presses again where she was and goes on. The heart shows
 /// through the opening; the retracted field shows it, and the attempt passes. Screenshots:
 /// `station-thoracotomy-mid-cut.png`, `station-thoracotomy-reloaded.png`,
-/// `station-thoracotomy-done.png`, `station-thoracotomy-debrief.png`.
+/// `station-thoracotomy-done.png`, `station-thoracotomy-debrief.png`,
+/// `station-thoracotomy-field.png` (the debrief's picture of the field as scored).
 #[test]
 fn a_mini_thoracotomy_placed_from_the_landmarks_passes_at_the_station_in_headless_chromium() {
     let _one = ONE_AT_A_TIME
@@ -1471,6 +1472,24 @@ async fn thoracotomy(port: u16, driver: &browser::Driver, tmp: &Path) -> (String
         let done = shots.join("station-thoracotomy-done.png");
         std::fs::write(done, c.screenshot().await?).expect("screenshot");
         let summary = debrief(&c, &shots.join("station-thoracotomy-debrief.png")).await?;
+        // the debrief's picture of the field as scored: the retracted wound from the viewpoint
+        until(
+            &c,
+            "(() => { const i = document.querySelector('#field-picture img');
+               return i && i.complete && i.naturalWidth === 360; })()",
+            Duration::from_secs(90),
+        )
+        .await?;
+        c.execute(
+            "document.getElementById('field-picture').scrollIntoView()",
+            vec![],
+        )
+        .await?;
+        std::fs::write(
+            shots.join("station-thoracotomy-field.png"),
+            c.screenshot().await?,
+        )
+        .expect("screenshot");
         c.release_actions().await?;
         Ok::<_, fantoccini::error::CmdError>((summary, layer))
     }

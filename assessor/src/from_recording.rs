@@ -100,24 +100,74 @@ fn retracted(
     width_m: f64,
     period_s: f64,
 ) -> Result<SurfaceMesh, String> {
+    let sim = wound_at_the_end(rec, data, normal, Some(width_m), period_s)?;
+    Ok(SurfaceMesh::of(&sim))
+}
+
+/// The simulation of the attempt's wound at the end: the session resumed at its last
+/// keyframe (which must come after the last cut), spread by a retractor `width_m` wide
+/// along the incision when one is given.
+fn wound_at_the_end(
+    rec: &Recording,
+    data: &AttemptData,
+    normal: nalgebra::Vector3<f64>,
+    width_m: Option<f64>,
+    period_s: f64,
+) -> Result<cutlab_sim::solver::Simulation, String> {
     let (a, b, _) =
         crate::metrics::wound::incision_span(normal, data).ok_or("the attempt made no incision")?;
-    let (mut stepper, tick) =
+    let (stepper, tick) =
         cutlab_recorder::replay::stepper_at_last_keyframe(rec).map_err(|e| e.to_string())?;
     let last_cut_s = data.cuts.last().map_or(0.0, |c| c.t_s);
     if (tick as f64) * period_s < last_cut_s {
         return Err("the recording's last keyframe comes before the end of the cut".into());
     }
-    let sim = &mut stepper.sim;
-    let retractor = cutlab_sim::retractor::Retractor {
-        line_m: vec![a, b],
-        up: normal,
-        width_m,
+    let mut sim = stepper.sim;
+    if let Some(width_m) = width_m {
+        let retractor = cutlab_sim::retractor::Retractor {
+            line_m: vec![a, b],
+            up: normal,
+            width_m,
+        };
+        retractor
+            .open(&mut sim)
+            .map_err(|e| format!("the retracted wound: {e}"))?;
+    }
+    Ok(sim)
+}
+
+/// The field an attempt's wound gives, as the scene's viewpoint sees it (the debrief's
+/// picture of what was scored): the session resumed at its last keyframe, spread by the
+/// plan's retractor as scoring spreads it, and pictured with the whole skin framed
+/// ([`crate::planning::picture`]).
+pub fn field_picture(
+    rec: &Recording,
+    plan: &crate::exercise::field::FieldPlan,
+    size_px: u32,
+) -> Result<crate::planning::Picture, AssessError> {
+    let fail = |m: String| AssessError::InvalidInput(format!("the field's picture: {m}"));
+    let data = attempt_data(rec, &ExercisePlan::Field(plan.clone()))?;
+    let spec: cutlab_sim::scene::SceneSpec = rec
+        .attachment(cutlab_recorder::channels::SCENE_ATTACHMENT)
+        .and_then(|bytes| serde_json::from_slice(bytes).ok())
+        .ok_or_else(|| fail("the recording holds no scene".into()))?;
+    let period_s = rec.meta().map_err(|e| fail(e.to_string()))?.period_nanos as f64 * 1e-9;
+    let field = plan.reference();
+    let sim = wound_at_the_end(rec, &data, field.normal, plan.retractor_width_m, period_s)
+        .map_err(fail)?;
+    let camera = crate::planning::SkinMap::of_simulation(&spec, &sim)?
+        .camera(&spec, size_px)
+        .ok_or_else(|| fail("the scene has no viewpoint".into()))?;
+    let tissue = crate::metrics::field::trimesh(&SurfaceMesh::of(&sim))?;
+    let colours = crate::planning::picture::triangle_colours(&spec, &sim);
+    let shown = crate::planning::picture::Shown {
+        tissue: &tissue,
+        colours: &colours,
+        target: &field.target,
+        spare: &field.spare,
+        up: field.normal,
     };
-    retractor
-        .open(sim)
-        .map_err(|e| format!("the retracted wound: {e}"))?;
-    Ok(SurfaceMesh::of(sim))
+    Ok(crate::planning::picture::render(&shown, &camera))
 }
 
 /// The harm the session recorded, each named by the recorded scene's name for its region.

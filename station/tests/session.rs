@@ -621,5 +621,25 @@ async fn a_mini_thoracotomy_is_scored_on_its_retracted_field() {
     assert_eq!(value("bone_contacts"), Some(0.0));
     assert_eq!(value("critical_damage"), Some(0.0));
     assert!(value("lateral_mean_m").is_none(), "no distance to the line");
+    // the debrief's picture of that field: the heart's deep red through the retracted wound
+    let a = store.get_attempt(attempt).await.expect("the attempt");
+    let (mcap, _) = a.recording_files().expect("recorded");
+    let rec = cutlab_recorder::Recording::open(&mcap).expect("the recording");
+    let cutlab_assessor::ExercisePlan::Field(plan) =
+        store.exercise_plan(field.id).await.expect("the plan")
+    else {
+        panic!("a field plan");
+    };
+    let picture =
+        cutlab_assessor::from_recording::field_picture(&rec, &plan, 200).expect("a picture");
+    let heart = picture
+        .rgb
+        .chunks(3)
+        .filter(|p| p[0] > 40 && u32::from(p[0]) > 3 * u32::from(p[1]))
+        .count();
+    assert!(
+        heart > 100,
+        "the heart shows through the retracted wound: {heart} pixels"
+    );
     store.close().await;
 }

@@ -108,8 +108,10 @@ struct Inner {
     kiosk: auth::kiosk::KioskTicket,
     /// The hub's recording uploads under way.
     uploads: hub::Uploads,
-    /// The planning page's comparisons (one at a time).
+    /// The planning page's comparisons and the attempts' field pictures (one at a time).
     planner: pages::planning::Planner,
+    /// The attempts' field pictures (PNG).
+    field_pictures: data::trace::RecordingCache<Vec<u8>>,
 }
 
 /// The caches of the hot paths, valid until the database changes (see [`cache`]).
@@ -161,6 +163,7 @@ impl AppState {
             kiosk: Default::default(),
             uploads: Default::default(),
             planner: Default::default(),
+            field_pictures: Default::default(),
         })))
     }
     pub fn store(&self) -> &Store {
@@ -199,6 +202,9 @@ impl AppState {
     }
     pub(crate) fn planner(&self) -> &pages::planning::Planner {
         &self.0.planner
+    }
+    pub(crate) fn field_pictures(&self) -> &data::trace::RecordingCache<Vec<u8>> {
+        &self.0.field_pictures
     }
     pub(crate) fn station_settings(&self) -> &cutlab_station::StationSettings {
         &self.0.config.station

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use cutlab_haptics::damage::DamageWatch;
 use cutlab_sim::cut::{self, Cutter};
 use cutlab_sim::retractor::Retractor;
-use cutlab_sim::scene::Scene;
+use cutlab_sim::scene::{Scene, SceneSpec};
 
 use crate::error::{AssessError, Result};
 use crate::input::SurfaceMesh;
@@ -149,13 +149,17 @@ const MAP_ABOVE_M: f64 = 1.0;
 impl SkinMap {
     /// The map of `scene`'s tissue before anything touched it.
     pub fn of(scene: &Scene) -> Result<Self> {
+        Self::of_simulation(&scene.spec, &scene.simulation())
+    }
+
+    /// The map of `sim`'s tissue as it is now, in `scene`'s directions.
+    pub fn of_simulation(scene: &SceneSpec, sim: &cutlab_sim::solver::Simulation) -> Result<Self> {
         let (up, along) = scene
-            .spec
             .incision
             .unit()
             .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
         Ok(Self {
-            skin: surface(&scene.simulation())?,
+            skin: surface(sim)?,
             up,
             along,
             side: up.cross(&along),
@@ -202,12 +206,19 @@ impl SkinMap {
         (lo, hi)
     }
 
-    /// The scene's viewpoint looking at the skin over the map's middle and framing the whole
-    /// map with a tenth to spare, so that every candidate on it is pictured alike (see
-    /// [`Camera::of_scene`]).
-    pub fn camera(&self, scene: &Scene, size_px: u32) -> Option<Camera> {
+    /// The scene's viewpoint looking at the map's middle at the height of the skin's
+    /// outermost point (over an opened wound too) and framing the whole map with a tenth to
+    /// spare, so that every candidate on it is pictured alike (see [`Camera::of_scene`]).
+    pub fn camera(&self, scene: &SceneSpec, size_px: u32) -> Option<Camera> {
         let (lo, hi) = self.extent_m();
-        let middle = self.point(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]))?;
+        let top = self
+            .skin
+            .vertices()
+            .iter()
+            .map(|v| Vector3::new(v.x, v.y, v.z).dot(&self.up))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let middle =
+            self.along * 0.5 * (lo[0] + hi[0]) + self.side * 0.5 * (lo[1] + hi[1]) + self.up * top;
         let half_width_m = 0.55 * (hi[0] - lo[0]).max(hi[1] - lo[1]);
         Camera::of_scene(scene, middle.into(), half_width_m, size_px)
     }
@@ -359,7 +370,7 @@ impl Sight {
     ) -> Result<View> {
         let tissue = surface(sim)?;
         if let Some(camera) = &self.camera {
-            let colours = picture::triangle_colours(scene, sim);
+            let colours = picture::triangle_colours(&scene.spec, sim);
             let shown = picture::Shown {
                 tissue: &tissue,
                 colours: &colours,

@@ -12,7 +12,7 @@ use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh;
 
-use cutlab_sim::scene::Scene;
+use cutlab_sim::scene::SceneSpec;
 use cutlab_sim::solver::Simulation;
 
 use crate::error::{AssessError, Result};
@@ -82,13 +82,13 @@ impl Camera {
     /// it, with the scene's `along` as the picture's right where it can be; none without a
     /// viewpoint.
     pub fn of_scene(
-        scene: &Scene,
+        scene: &SceneSpec,
         look_at_m: Point3<f64>,
         half_width_m: f64,
         size_px: u32,
     ) -> Option<Self> {
         let eye_m = Point3::from(scene.viewpoint.as_ref()?.eye_mm) * 1e-3;
-        let (up, along) = scene.spec.incision.unit().ok()?;
+        let (up, along) = scene.incision.unit().ok()?;
         let forward = (look_at_m - eye_m).try_normalize(1e-12)?;
         let mut top = up.cross(&along);
         if top.cross(&forward).norm() < 0.1 {
@@ -112,7 +112,7 @@ fn ray(from: &Point3<f64>, along: &Vector3<f64>) -> Ray {
 }
 
 /// The colour of each of `sim`'s surface triangles: its region's, from `scene`.
-pub fn triangle_colours(scene: &Scene, sim: &Simulation) -> Vec<[f64; 3]> {
+pub fn triangle_colours(scene: &SceneSpec, sim: &Simulation) -> Vec<[f64; 3]> {
     let mesh = &sim.model.mesh;
     let topology = mesh.topology();
     topology
@@ -124,7 +124,6 @@ pub fn triangle_colours(scene: &Scene, sim: &Simulation) -> Vec<[f64; 3]> {
                 .next()
                 .map(|t| mesh.regions()[t as usize]);
             scene
-                .spec
                 .materials
                 .iter()
                 .find(|m| Some(m.region) == region)

@@ -3,6 +3,7 @@
 
 pub mod attempt;
 pub mod debrief;
+pub mod field_picture;
 pub mod labels;
 pub mod overview;
 pub mod progress;

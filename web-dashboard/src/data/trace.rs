@@ -19,7 +19,7 @@ use crate::error::AppError;
 
 /// Points kept per series (evenly thinned).
 const MAX_POINTS: usize = 1500;
-/// Traces kept in memory.
+/// Entries kept in memory by a [`RecordingCache`].
 const CACHE_ENTRIES: usize = 64;
 
 #[derive(Debug, Clone, Serialize)]
@@ -39,12 +39,22 @@ pub struct AttemptTrace {
     pub tolerance_mm: f64,
 }
 
-/// Cached traces by attempt id, with the recording's size they were read at.
-#[derive(Debug, Default)]
-pub struct TraceCache(Mutex<HashMap<i64, (u64, Arc<AttemptTrace>)>>);
+/// What was read from attempts' recordings, by attempt id, with the recording's size it was
+/// read at (a recording that grew is read again); at most [`CACHE_ENTRIES`].
+#[derive(Debug)]
+pub struct RecordingCache<T>(Mutex<HashMap<i64, (u64, Arc<T>)>>);
 
-impl TraceCache {
-    fn get(&self, id: i64, len: u64) -> Option<Arc<AttemptTrace>> {
+/// Cached traces.
+pub type TraceCache = RecordingCache<AttemptTrace>;
+
+impl<T> Default for RecordingCache<T> {
+    fn default() -> Self {
+        Self(Mutex::new(HashMap::new()))
+    }
+}
+
+impl<T> RecordingCache<T> {
+    pub(crate) fn get(&self, id: i64, len: u64) -> Option<Arc<T>> {
         let map = self
             .0
             .lock()
@@ -53,7 +63,7 @@ impl TraceCache {
             .filter(|(l, _)| *l == len)
             .map(|(_, t)| t.clone())
     }
-    fn put(&self, id: i64, len: u64, t: Arc<AttemptTrace>) {
+    pub(crate) fn put(&self, id: i64, len: u64, t: Arc<T>) {
         let mut map = self
             .0
             .lock()

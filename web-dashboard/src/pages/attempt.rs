@@ -30,6 +30,10 @@ pub fn router() -> Router<AppState> {
         .route("/attempts/{id}", get(attempt))
         .route("/attempts/{id}/comments", post(comment))
         .route("/attempts/{id}/signoff", post(sign_off))
+        .route(
+            "/attempts/{id}/field.png",
+            get(crate::data::field_picture::field_png),
+        )
 }
 
 async fn attempt(
@@ -100,6 +104,12 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
         }
         @if let Some(t) = t {
             div class="charts" { (top_view(t).render()) (force_chart(t, d.peak_force_limits_n, d.force_limit_n).render()) }
+            @if d.recordings.mcap && d.metrics.iter().any(|m| m.key == "field_of_expert" && m.value.is_some()) {
+                figure id="field-picture" class="field-picture" {
+                    img src=(format!("/attempts/{}/field.png", a.id)) width="360" height="360" alt="The field as scored: the wound at the end, seen from the viewpoint";
+                    figcaption { "The field as scored: the wound at the end, spread by the exercise's retractor, seen from the viewpoint; the target deep red where it shows." }
+                }
+            }
         } @else {
             p class="muted" { "No readable recording: no incision or force plot." }
         }

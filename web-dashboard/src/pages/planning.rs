@@ -49,6 +49,19 @@ impl Default for Planner {
     }
 }
 
+impl Planner {
+    /// Its turn, waited for up to 30 s (an attempt's field picture, which a page asks for
+    /// once and then keeps).
+    pub(crate) async fn wait(&self) -> Result<tokio::sync::SemaphorePermit<'_>, AppError> {
+        let busy =
+            || AppError::Unavailable("The planner is busy; try again in a few seconds.".into());
+        tokio::time::timeout(std::time::Duration::from_secs(30), self.0.acquire())
+            .await
+            .map_err(|_| busy())?
+            .map_err(|_| busy())
+    }
+}
+
 /// A candidate as the form gives it, mm on the skin map.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Drawn {
@@ -159,7 +172,7 @@ fn compare_blocking(
     let scene = load_scene(scene_name)?;
     let map = SkinMap::of(&scene)?;
     let camera = map
-        .camera(&scene, PICTURE_PX)
+        .camera(&scene.spec, PICTURE_PX)
         .ok_or_else(|| AppError::BadRequest(format!("the scene {scene_name} has no viewpoint")))?;
     let mut named = vec![("Expert's plan".to_owned(), expert)];
     for d in drawn {
