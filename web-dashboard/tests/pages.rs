@@ -1512,6 +1512,16 @@ async fn an_instructor_compares_candidate_incisions_by_their_fields() {
         page.contains("value=\"11.5\""),
         "the form keeps what was sent"
     );
+    // two comparisons at once: one is made, the other is told to come back (503), not queued
+    let form = planning_form(&kim.csrf, &[space], &[]);
+    let pairs: Vec<(&str, &str)> = form.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let (r1, r2) = tokio::join!(
+        send(&e.app, post_form(&path, Some(&kim.cookie), &pairs)),
+        send(&e.app, post_form(&path, Some(&kim.cookie), &pairs))
+    );
+    let mut statuses = [r1.status(), r2.status()];
+    statuses.sort();
+    assert_eq!(statuses, [StatusCode::OK, StatusCode::SERVICE_UNAVAILABLE]);
 
     // what is not an incision: 400 and the field named
     for (rows, more, says) in [
