@@ -159,14 +159,14 @@ pub fn field_picture(
         .camera(&spec, size_px)
         .ok_or_else(|| fail("the scene has no viewpoint".into()))?;
     let tissue = crate::metrics::field::trimesh(&SurfaceMesh::of(&sim))?;
-    let colours = crate::planning::picture::triangle_colours(&spec, &sim);
-    let shown = crate::planning::picture::Shown {
-        tissue: &tissue,
-        colours: &colours,
-        target: &field.target,
-        spare: &field.spare,
-        up: field.normal,
-    };
+    let shown = crate::planning::picture::Shown::new(
+        &spec,
+        &sim,
+        &tissue,
+        &field.target,
+        &field.spare,
+        field.normal,
+    );
     Ok(crate::planning::picture::render(&shown, &camera))
 }
 

@@ -111,7 +111,7 @@ struct Inner {
     /// The planning page's comparisons and the attempts' field pictures (one at a time).
     planner: pages::planning::Planner,
     /// The attempts' field pictures (PNG).
-    field_pictures: data::trace::RecordingCache<Vec<u8>>,
+    field_pictures: data::trace::RecordingCache<bytes::Bytes>,
 }
 
 /// The caches of the hot paths, valid until the database changes (see [`cache`]).
@@ -203,7 +203,7 @@ impl AppState {
     pub(crate) fn planner(&self) -> &pages::planning::Planner {
         &self.0.planner
     }
-    pub(crate) fn field_pictures(&self) -> &data::trace::RecordingCache<Vec<u8>> {
+    pub(crate) fn field_pictures(&self) -> &data::trace::RecordingCache<bytes::Bytes> {
         &self.0.field_pictures
     }
     pub(crate) fn station_settings(&self) -> &cutlab_station::StationSettings {

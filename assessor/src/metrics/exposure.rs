@@ -107,7 +107,8 @@ fn facing_samples(target: &Ellipsoid, eye: &Point3<f64>, n_theta: usize) -> Vec<
     out
 }
 
-fn ray(from: &Point3<f64>, along: &Vector3<f64>) -> Ray {
+/// The ray from `from` along `along`, in parry's types.
+pub(crate) fn ray(from: &Point3<f64>, along: &Vector3<f64>) -> Ray {
     Ray::new(
         PVec::new(from.x, from.y, from.z),
         PVec::new(along.x, along.y, along.z),

@@ -173,13 +173,9 @@ impl SkinMap {
         }
         let from = Point3::from(self.along * a_m + self.side * b_m + self.up * MAP_ABOVE_M);
         let down = -self.up;
-        let ray = parry3d_f64::query::Ray::new(
-            PVec::new(from.x, from.y, from.z),
-            PVec::new(down.x, down.y, down.z),
-        );
         let t = parry3d_f64::query::RayCast::cast_local_ray(
             &self.skin,
-            &ray,
+            &crate::metrics::exposure::ray(&from, &down),
             2.0 * MAP_ABOVE_M,
             false,
         )?;
@@ -370,14 +366,8 @@ impl Sight {
     ) -> Result<View> {
         let tissue = surface(sim)?;
         if let Some(camera) = &self.camera {
-            let colours = picture::triangle_colours(&scene.spec, sim);
-            let shown = picture::Shown {
-                tissue: &tissue,
-                colours: &colours,
-                target: &self.heart,
-                spare: &self.spare,
-                up: self.up,
-            };
+            let shown =
+                picture::Shown::new(&scene.spec, sim, &tissue, &self.heart, &self.spare, self.up);
             pictures.push(picture::render(&shown, camera));
         }
         let seen = exposure(&tissue, &self.heart, &self.eye, TARGET_SAMPLES);

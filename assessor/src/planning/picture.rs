@@ -8,15 +8,14 @@
 //! Nothing hit is the background.
 
 use nalgebra::{Point3, Vector3};
-use parry3d_f64::math::Vector as PVec;
-use parry3d_f64::query::{Ray, RayCast};
+use parry3d_f64::query::RayCast;
 use parry3d_f64::shape::TriMesh;
 
 use cutlab_sim::scene::SceneSpec;
 use cutlab_sim::solver::Simulation;
 
 use crate::error::{AssessError, Result};
-use crate::metrics::exposure::Ellipsoid;
+use crate::metrics::exposure::{Ellipsoid, ray};
 
 /// The share of a surface's colour it keeps when it turns away from the eye.
 pub const AMBIENT: f64 = 0.3;
@@ -42,12 +41,6 @@ pub struct Picture {
 }
 
 impl Picture {
-    /// The colour at column `x`, row `y`.
-    pub fn at(&self, x: u32, y: u32) -> [u8; 3] {
-        let i = 3 * (y as usize * self.width_px as usize + x as usize);
-        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
-    }
-
     /// The picture as a PNG file's bytes.
     pub fn png(&self) -> Result<Vec<u8>> {
         let mut out = Vec::new();
@@ -104,13 +97,6 @@ impl Camera {
     }
 }
 
-fn ray(from: &Point3<f64>, along: &Vector3<f64>) -> Ray {
-    Ray::new(
-        PVec::new(from.x, from.y, from.z),
-        PVec::new(along.x, along.y, along.z),
-    )
-}
-
 /// The colour of each of `sim`'s surface triangles: its region's, from `scene`.
 pub fn triangle_colours(scene: &SceneSpec, sim: &Simulation) -> Vec<[f64; 3]> {
     let mesh = &sim.model.mesh;
@@ -157,10 +143,10 @@ fn srgb(linear: f64) -> u8 {
 
 /// What a picture shows: the tissue's surface, its triangles' colours, the target and the
 /// structures to spare behind it.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Shown<'a> {
     pub tissue: &'a TriMesh,
-    pub colours: &'a [[f64; 3]],
+    pub colours: Vec<[f64; 3]>,
     pub target: &'a Ellipsoid,
     pub spare: &'a [Ellipsoid],
     /// The way out of the body: the target and the structures to spare are shown only
@@ -168,7 +154,26 @@ pub struct Shown<'a> {
     pub up: Vector3<f64>,
 }
 
-impl Shown<'_> {
+impl<'a> Shown<'a> {
+    /// `sim`'s tissue, whose surface is `tissue`, in `scene`'s region colours
+    /// ([`triangle_colours`]), with `target` and `spare` behind it.
+    pub fn new(
+        scene: &SceneSpec,
+        sim: &Simulation,
+        tissue: &'a TriMesh,
+        target: &'a Ellipsoid,
+        spare: &'a [Ellipsoid],
+        up: Vector3<f64>,
+    ) -> Self {
+        Self {
+            tissue,
+            colours: triangle_colours(scene, sim),
+            target,
+            spare,
+            up,
+        }
+    }
+
     /// The nearest thing along the ray from `eye` along unit `d`: its colour and normal.
     fn hit(&self, eye: &Point3<f64>, d: &Vector3<f64>) -> Option<([f64; 3], Vector3<f64>)> {
         let mut best: Option<(f64, [f64; 3], Vector3<f64>)> = None;

@@ -10,6 +10,7 @@ use std::sync::Arc;
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
+use bytes::Bytes;
 use cutlab_assessor::ExercisePlan;
 use cutlab_recorder::Recording;
 
@@ -42,6 +43,10 @@ pub async fn field_png(
         Some(png) => png,
         None => {
             let _permit = state.planner().wait().await?;
+            // another request may have drawn it while this one waited for its turn
+            if let Some(png) = state.field_pictures().get(id, len) {
+                return Ok(png_response(&png));
+            }
             let png = tokio::task::spawn_blocking(move || {
                 let rec = Recording::open(&mcap).map_err(|e| e.to_string())?;
                 cutlab_assessor::from_recording::field_picture(&rec, &plan, PICTURE_PX)
@@ -54,17 +59,22 @@ pub async fn field_png(
                 tracing::warn!("attempt {id}: no picture of its field: {e}");
                 AppError::NotFound
             })?;
-            let png = Arc::new(png);
+            let png = Arc::new(Bytes::from(png));
             state.field_pictures().put(id, len, png.clone());
             png
         }
     };
-    Ok((
+    Ok(png_response(&png))
+}
+
+/// A PNG's bytes as the answer (shared with the cache, not copied).
+fn png_response(png: &Bytes) -> Response {
+    (
         [
             (header::CONTENT_TYPE, "image/png"),
             (header::CACHE_CONTROL, "private, max-age=300"),
         ],
-        png.as_ref().clone(),
+        png.clone(),
     )
-        .into_response())
+        .into_response()
 }

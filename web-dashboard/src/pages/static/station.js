@@ -264,10 +264,13 @@
       triangles: new Uint32Array(view.buffer, triangles_at, 3 * triangles).slice(),
       xyz: new Float32Array(view.buffer, xyz_at, 3 * vertices).slice(),
     };
+    underTissue = null;
   }
 
   // ---- the rest surface: where the pointer points, how deep the blade is ----
   let rest = null;
+  // the box what lies behind the tissue is drawn in (from the rest surface, once)
+  let underTissue = null;
   // the nearest crossing of the ray `origin + t dir` (t > 0) with the rest surface
   // (Möller–Trumbore, in scalars: it runs for every pointer event and every frame):
   // { point, normal, t } or null
@@ -374,11 +377,14 @@
     gl.uniform3fv(uniform(tissue, "clip_hi"), [1e9, 1e9, 1e9]);
     gl.drawElements(gl.TRIANGLES, mesh.count, gl.UNSIGNED_INT, 0);
     // what lies behind the tissue, only under it, 3 mm in from its rest bounds (the lung
-    // reaches beyond the window; the window's rim moves in a little as it is cut)
-    const [lo, hi] = bounds(rest ? rest.xyz : latest.xyz);
-    const under = (box, inset, far) => box.map((c, k) => (Math.abs(up[k]) > 0.5 ? far : c + inset));
-    gl.uniform3fv(uniform(tissue, "clip_lo"), under(lo, 0.003, -1e9));
-    gl.uniform3fv(uniform(tissue, "clip_hi"), under(hi, -0.003, 1e9));
+    // reaches beyond the window: seen beside it, it would look like part of the patient)
+    if (!underTissue) {
+      const [lo, hi] = bounds(rest ? rest.xyz : latest.xyz);
+      const under = (box, inset, far) => box.map((c, k) => (Math.abs(up[k]) > 0.5 ? far : c + inset));
+      underTissue = [under(lo, 0.003, -1e9), under(hi, -0.003, 1e9)];
+    }
+    gl.uniform3fv(uniform(tissue, "clip_lo"), underTissue[0]);
+    gl.uniform3fv(uniform(tissue, "clip_hi"), underTissue[1]);
     for (const t of targets) {
       gl.bindVertexArray(t.vao);
       gl.drawElements(gl.TRIANGLES, t.count, gl.UNSIGNED_INT, 0);
