@@ -8,9 +8,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::Subcommand;
-use cutlab_assessor::evidence::Experience;
 use cutlab_assessor::store::{DbLocation, NewExercise, Role, Store, default_db};
-use cutlab_assessor::{ExercisePlan, proficiency};
+use cutlab_scoring::evidence::Experience;
+use cutlab_scoring::{ExercisePlan, proficiency};
 
 /// The assessment commands, flattened into the top-level command enum.
 #[derive(Debug, Subcommand)]
@@ -146,7 +146,7 @@ pub enum CohortCommand {
 #[derive(Debug, Subcommand)]
 pub enum ExerciseCommand {
     /// Adds an exercise: a scene and an expert plan file (TOML or JSON, see
-    /// assessor/examples/plan.toml). Thresholds come from expert attempts.
+    /// scoring/examples/plan.toml). Thresholds come from expert attempts.
     Add {
         #[arg(long)]
         name: String,
@@ -460,7 +460,7 @@ fn print_exercise(
 }
 
 /// The thresholds `t` of exercise `e` as a table.
-fn print_thresholds(e: &cutlab_assessor::store::Exercise, t: &cutlab_assessor::Thresholds) {
+fn print_thresholds(e: &cutlab_assessor::store::Exercise, t: &cutlab_scoring::Thresholds) {
     println!(
         "{}: thresholds from expert attempts, mean +/- {} SD",
         e.name, e.threshold_k
@@ -487,7 +487,7 @@ fn print_thresholds(e: &cutlab_assessor::store::Exercise, t: &cutlab_assessor::T
 /// proficiency (JSON: the same, with the overall normalised `score`).
 pub fn print_outcome(
     o: &cutlab_assessor::store::Outcome,
-    values: &[cutlab_assessor::MetricValue],
+    values: &[cutlab_scoring::MetricValue],
     json: bool,
 ) -> anyhow::Result<()> {
     let verdict = |key: &str| o.verdict.metrics.iter().find(|m| m.key == key);

@@ -8,13 +8,14 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use cutlab_assessor::proficiency::DEFAULT_K;
+use cutlab_assessor::AssessError;
 use cutlab_assessor::store::{BUILTIN_EXERCISE, BUILTIN_SCENE, DbLocation, NewExercise, Store};
-use cutlab_assessor::{AssessError, ExercisePlan, IncisionPlan};
 use cutlab_dashboard::seed_demo_accounts;
 use cutlab_haptics::device::HandKind;
 use cutlab_haptics::servo::Clock;
 use cutlab_recorder::RerunTarget;
+use cutlab_scoring::proficiency::DEFAULT_K;
+use cutlab_scoring::{ExercisePlan, IncisionPlan, ScoreError};
 
 use crate::localise_choice::Localise;
 use crate::session::{self, AttemptArgs, DeviceArg};
@@ -61,7 +62,7 @@ impl Attempt {
 /// The axial exercise's plan: 40 mm along the top of the wall (y, 5 mm off the middle), 5 mm
 /// deep, with the built-in plan's viewpoint and tolerances, and as target what it lays open
 /// (as many points as the built-in plan's, half its depth below its middle third).
-pub fn axial_plan() -> Result<IncisionPlan, AssessError> {
+pub fn axial_plan() -> Result<IncisionPlan, ScoreError> {
     let base = IncisionPlan::chest_wall()?;
     let targets = base.target_m.len();
     // on the curved surface z = sqrt(R^2 - x^2) - R, R = 150 mm
@@ -363,7 +364,7 @@ mod tests {
         // its own target: along its line, within its depth
         assert_eq!(axial.target_m.len(), transverse.target_m.len());
         for t in &axial.target_m {
-            let below = cutlab_assessor::metrics::incision::depth_below_plan(&axial, *t);
+            let below = cutlab_scoring::metrics::incision::depth_below_plan(&axial, *t);
             assert!(
                 (t[0] - 0.005).abs() < 1e-12 && below > 0.0 && below <= axial.depth_m,
                 "{t:?}: {below}"

@@ -7,9 +7,9 @@ use std::fmt::Write as _;
 
 use anyhow::Context;
 use clap::Args;
-use cutlab_assessor::evidence::{Comparison, Finding, Measure, Report};
-use cutlab_assessor::metrics::display_unit;
 use cutlab_assessor::store::{Store, iso8601};
+use cutlab_scoring::evidence::{Comparison, Finding, Measure, Report};
+use cutlab_scoring::metrics::display_unit;
 
 #[derive(Debug, Args)]
 pub struct EvidenceArgs {

@@ -17,10 +17,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use cutlab_assessor::evidence::predict::{Composite, Prediction, leave_one_subject_out};
-use cutlab_assessor::evidence::{EvidenceAttempt, EvidenceOptions, Experience, Report};
-use cutlab_assessor::metrics::motion;
-use cutlab_assessor::metrics::path::{PathParams, path};
+use cutlab_scoring::evidence::predict::{Composite, Prediction, leave_one_subject_out};
+use cutlab_scoring::evidence::{EvidenceAttempt, EvidenceOptions, Experience, Report};
+use cutlab_scoring::metrics::motion;
+use cutlab_scoring::metrics::path::{PathParams, path};
 
 use crate::motion_metrics::parse_poses;
 

@@ -8,8 +8,8 @@
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use cutlab_assessor::PoseSample;
-use cutlab_assessor::metrics::path::{PathParams, path};
+use cutlab_scoring::PoseSample;
+use cutlab_scoring::metrics::path::{PathParams, path};
 
 const COLUMNS: [&str; 8] = ["t_s", "x_m", "y_m", "z_m", "qw", "qx", "qy", "qz"];
 

@@ -1,14 +1,14 @@
 //! `cutlab plan field`: a candidate incision cut in the simulation and the field it gives
-//! (`cutlab_assessor::planning`).
+//! (`cutlab_scoring::planning`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::Subcommand;
-use cutlab_assessor::planning::{
+use cutlab_assessor::store::DbLocation;
+use cutlab_scoring::planning::{
     CandidateIncision, FieldReport, Opening, SkinMap, View, field_pictured,
 };
-use cutlab_assessor::store::DbLocation;
 use cutlab_sim::scene::{BuildOptions, Scene};
 
 /// A picture's pixels across and down.

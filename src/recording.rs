@@ -44,7 +44,7 @@ pub fn rerun_target(rrd: Option<&Path>, rerun: Option<&RerunArg>) -> Option<Reru
 
 pub fn info(file: &Path, json: bool) -> anyhow::Result<()> {
     let rec = Recording::open(file).with_context(|| format!("reading {}", file.display()))?;
-    let pace = cutlab_assessor::from_recording::input_pace(&rec);
+    let pace = cutlab_scoring::from_recording::input_pace(&rec);
     if json {
         let channels: Vec<_> = rec
             .channels

@@ -180,7 +180,7 @@ fn users_cohorts_exercises_and_xapi_on_a_fresh_database() {
     assert!(ok, "{err}");
     let (ok, out, _) = cutlab(&["--db", db, "cohort", "list"], None);
     assert!(ok && out.contains("spring: alice"), "{out}");
-    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/assessor/examples/plan.toml");
+    let plan = concat!(env!("CARGO_MANIFEST_DIR"), "/scoring/examples/plan.toml");
     let (ok, out, err) = cutlab(
         &[
             "--db",

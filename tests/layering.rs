@@ -1,19 +1,25 @@
 //! The layering of the workspace, checked over `cargo metadata`: the simulation and haptics
-//! crates stay free of async runtimes, databases, web frameworks and recording formats, no
-//! crate depends on a crate above it, only the command line depends on the benchmarks, and
-//! nothing on the peer engine of the benchmarks.
+//! crates stay free of async runtimes, databases, web frameworks and recording formats, the
+//! scoring crate of databases, object stores and servers, no crate depends on a crate above
+//! it, only the command line depends on the benchmarks, and nothing on the peer engine of the
+//! benchmarks.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::process::Command;
 
 use serde_json::Value;
 
-/// Every package id reachable from `root` through normal (non-dev, non-build) dependencies.
-fn closure(resolve: &BTreeMap<String, Vec<String>>, root: &str) -> BTreeSet<String> {
+/// Every package id reachable from `root` through normal (non-dev, non-build) dependencies,
+/// not entering the packages `skipped`.
+fn closure_without(
+    resolve: &BTreeMap<String, Vec<String>>,
+    root: &str,
+    skipped: &BTreeSet<String>,
+) -> BTreeSet<String> {
     let mut seen = BTreeSet::new();
     let mut stack = vec![root.to_owned()];
     while let Some(id) = stack.pop() {
-        if seen.insert(id.clone()) {
+        if !skipped.contains(&id) && seen.insert(id.clone()) {
             stack.extend(resolve.get(&id).into_iter().flatten().cloned());
         }
     }
@@ -60,13 +66,24 @@ fn metadata() -> (BTreeMap<String, Vec<String>>, BTreeMap<String, String>) {
 }
 
 fn reachable_names(crate_name: &str) -> BTreeSet<String> {
+    reachable_names_without(crate_name, &[])
+}
+
+/// The names of the packages `crate_name` reaches other than through the packages `skipped`.
+fn reachable_names_without(crate_name: &str, skipped: &[&str]) -> BTreeSet<String> {
     let (resolve, names) = metadata();
-    let root = names
-        .iter()
-        .find(|(_, n)| *n == crate_name)
-        .map(|(id, _)| id.clone())
+    let id_of = |name: &str| {
+        names
+            .iter()
+            .filter(|(_, n)| *n == name)
+            .map(|(id, _)| id.clone())
+            .collect::<Vec<_>>()
+    };
+    let root = id_of(crate_name)
+        .pop()
         .unwrap_or_else(|| panic!("{crate_name} is not in the workspace"));
-    closure(&resolve, &root)
+    let skipped: BTreeSet<String> = skipped.iter().flat_map(|s| id_of(s)).collect();
+    closure_without(&resolve, &root, &skipped)
         .into_iter()
         .map(|id| names[&id].clone())
         .collect()
@@ -91,12 +108,49 @@ fn sim_and_haptics_are_free_of_runtime_database_web_and_recording_crates() {
     }
 }
 
+/// What scoring must not need: a replay, a bench or another tool scores without a database,
+/// an object store, an async runtime or a server. (The recorder's rerun SDK brings tokio and
+/// hyper for its viewer connection: the check looks past rerun, not past the recorder.)
+const FORBIDDEN_IN_SCORING: [&str; 9] = [
+    "tokio",
+    "sqlx",
+    "object_store",
+    "argon2",
+    "axum",
+    "hyper",
+    "reqwest",
+    "cutlab-assessor",
+    "cutlab-station",
+];
+
+#[test]
+fn scoring_is_free_of_database_store_and_server_crates() {
+    let deps = reachable_names_without("cutlab-scoring", &["rerun"]);
+    assert!(
+        deps.contains("cutlab-sim") && deps.contains("parry3d-f64"),
+        "the check sees scoring's real dependencies: {deps:?}"
+    );
+    let bad: Vec<&str> = FORBIDDEN_IN_SCORING
+        .iter()
+        .copied()
+        .filter(|f| deps.contains(*f))
+        .collect();
+    assert!(
+        bad.is_empty(),
+        "cutlab-scoring depends (maybe indirectly) on {bad:?}"
+    );
+    // the check is not vacuous: the store brings them, and so does rerun
+    assert!(reachable_names("cutlab-assessor").contains("sqlx"));
+    assert!(reachable_names("cutlab-scoring").contains("tokio"));
+}
+
 #[test]
 fn no_crate_depends_on_a_crate_above_it() {
     let layers = [
         "cutlab-sim",
         "cutlab-haptics",
         "cutlab-recorder",
+        "cutlab-scoring",
         "cutlab-assessor",
         "cutlab-station",
         "cutlab-dashboard",
@@ -153,6 +207,7 @@ fn the_peer_engine_is_a_bench_only_dependency() {
         "cutlab-sim",
         "cutlab-haptics",
         "cutlab-recorder",
+        "cutlab-scoring",
         "cutlab-assessor",
         "cutlab-station",
         "cutlab-dashboard",
@@ -187,6 +242,7 @@ fn no_crate_re_exports_another() {
         "sim",
         "haptics",
         "recorder",
+        "scoring",
         "assessor",
         "station",
         "web-dashboard",

@@ -302,7 +302,7 @@ fn steady_hands_at_the_pointer_pass_the_thresholds_people_set_and_sloppy_ones_sc
             m["value"].is_null()
                 && m["missing"]
                     .as_str()
-                    .is_some_and(|w| w.starts_with(cutlab_assessor::pace::STATION_LAGGED)),
+                    .is_some_and(|w| w.starts_with(cutlab_scoring::pace::STATION_LAGGED)),
             "{key} set aside: {m}"
         );
     }
@@ -310,7 +310,7 @@ fn steady_hands_at_the_pointer_pass_the_thresholds_people_set_and_sloppy_ones_sc
     assert!(
         v["note"]
             .as_str()
-            .is_some_and(|n| n.starts_with(cutlab_assessor::from_recording::LAGGED_NOTE)),
+            .is_some_and(|n| n.starts_with(cutlab_scoring::from_recording::LAGGED_NOTE)),
         "the note says the station lagged: {v}"
     );
     assert_eq!(v["pass"], true, "the steady hand still passes: {v}");

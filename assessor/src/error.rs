@@ -1,4 +1,7 @@
-//! The crate's one error type.
+//! The crate's one error type: the store's own failures beside the scoring's, which keep
+//! their kind ([`From<ScoreError>`](AssessError#impl-From<ScoreError>-for-AssessError)).
+
+use cutlab_scoring::ScoreError;
 
 /// Everything that can go wrong in the assessor: bad plans and inputs, the database, files.
 #[derive(Debug, thiserror::Error)]
@@ -33,13 +36,27 @@ pub enum AssessError {
     /// Reading a file.
     #[error("{path}: {error}")]
     Io { path: String, error: std::io::Error },
-    /// JSON (de)serialisation of stored values.
+    /// A background task that failed or panicked.
     #[error("background task: {0}")]
     Task(String),
-
+    /// JSON (de)serialisation of stored values.
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
 }
 
 /// Results of this crate.
 pub type Result<T, E = AssessError> = std::result::Result<T, E>;
+
+/// A scoring error keeps its kind: a bad plan stays [`AssessError::InvalidPlan`], a file that
+/// does not parse [`AssessError::Parse`], and so on.
+impl From<ScoreError> for AssessError {
+    fn from(e: ScoreError) -> Self {
+        match e {
+            ScoreError::InvalidPlan(m) => Self::InvalidPlan(m),
+            ScoreError::Parse { what, message } => Self::Parse { what, message },
+            ScoreError::InvalidInput(m) => Self::InvalidInput(m),
+            ScoreError::Io { path, error } => Self::Io { path, error },
+            ScoreError::Json(e) => Self::Json(e),
+        }
+    }
+}

@@ -2,14 +2,15 @@
 //! on PostgreSQL (`name::postgres`, on the server `$CUTLAB_TEST_POSTGRES` names; CI starts
 //! one).
 
-use cutlab_assessor::metrics::{METRICS, MetricValue};
-use cutlab_assessor::proficiency::{CusumParams, Threshold, Thresholds, cusum};
 use cutlab_assessor::store::CUTTING_BASICS;
 use cutlab_assessor::store::{Access, AttemptStatus, BODY_WALL_EXERCISE, BUILTIN_EXERCISE};
 use cutlab_assessor::store::{DbLocation, test_postgres};
 use cutlab_assessor::store::{EXCISION_EXERCISE, FIELD_EXERCISE};
 use cutlab_assessor::store::{NewExercise, PATTERN_EXERCISE, Role, ThresholdSource};
-use cutlab_assessor::{AssessError, Better, ExercisePlan, IncisionPlan, Store, on_db};
+use cutlab_assessor::{AssessError, Store, on_db};
+use cutlab_scoring::metrics::{METRICS, MetricValue};
+use cutlab_scoring::proficiency::{CusumParams, Threshold, Thresholds, cusum};
+use cutlab_scoring::{Better, ExercisePlan, IncisionPlan};
 
 /// A fresh SQLite database in a temporary folder (kept alive by the returned guard).
 async fn sqlite_store() -> (Store, tempfile::TempDir) {
@@ -483,7 +484,7 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
         .await
         .expect("pattern");
     let plan = store.exercise_plan(pattern.id).await.expect("plan");
-    assert_eq!(plan.kind(), cutlab_assessor::Kind::Pattern);
+    assert_eq!(plan.kind(), cutlab_scoring::Kind::Pattern);
     let keys: Vec<String> = store
         .thresholds(pattern.id)
         .await
@@ -497,7 +498,7 @@ async fn the_builtin_exercise_is_there_once(store: Store) {
 
 on_both!(evidence_groups_and_an_adopted_pass_mark);
 async fn evidence_groups_and_an_adopted_pass_mark(store: Store) {
-    use cutlab_assessor::evidence::{Experience, Finding};
+    use cutlab_scoring::evidence::{Experience, Finding};
     let ex = exercise_with_one_threshold(&store).await;
     let mut ids = Vec::new();
     // two experts cut 0.3-0.6 mm off the line, two novices 2-5 mm, a third person has no
@@ -733,7 +734,7 @@ async fn thresholds_from_expert_attempts(store: Store) {
 
 on_both!(thresholds_are_kept_per_device_class);
 async fn thresholds_are_kept_per_device_class(store: Store) {
-    use cutlab_assessor::DeviceClass;
+    use cutlab_scoring::DeviceClass;
     let ex = exercise_with_one_threshold(&store).await;
     let expert = store
         .create_user("expert", Role::Instructor, None)
@@ -961,8 +962,8 @@ async fn open_creates_and_migrates_a_file() {
 
 /// A scripted attempt on the built-in plan: approach 20 mm straight down at the entry, cut
 /// along the line `offset` to the side at `depth` below the curved surface, withdraw.
-fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_assessor::AttemptData {
-    use cutlab_assessor::{AttemptData, CutSample, ForceSample, PoseSample};
+fn scripted(offset: f64, depth: f64, force: f64) -> cutlab_scoring::AttemptData {
+    use cutlab_scoring::{AttemptData, CutSample, ForceSample, PoseSample};
     let surface = |x: f64| (0.15f64 * 0.15 - x * x).sqrt() - 0.15;
     let mut d = AttemptData::default();
     let hz = 200.0;

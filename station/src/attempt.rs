@@ -4,13 +4,14 @@
 
 use std::path::Path;
 
+use cutlab_assessor::AssessError;
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Outcome, Role, Store};
-use cutlab_assessor::{AssessError, ExercisePlan, MetricSet};
 use cutlab_haptics::Session;
 use cutlab_haptics::device::Planning;
 use cutlab_haptics::plan::Plan;
 use cutlab_recorder::Recording;
+use cutlab_scoring::{ExercisePlan, MetricSet};
 use cutlab_sim::{Point3, Vector3};
 
 use crate::StationError;
@@ -60,7 +61,7 @@ pub fn plan_on_tissue(session: &Session, plan: &ExercisePlan) -> Result<Plan, St
 
 /// The incision a synthetic trainee choosing with `planning` places (drawn with `seed`), for
 /// an exercise that leaves the choice to the trainee
-/// ([`cutlab_assessor::exercise::ExerciseKind::trainee_places_incision`]), laid on the
+/// ([`cutlab_scoring::exercise::ExerciseKind::trainee_places_incision`]), laid on the
 /// session's tissue as [`plan_on_tissue`] lays the expert's; `None` for the other exercises.
 pub fn chosen_plan_on_tissue(
     session: &Session,
@@ -104,7 +105,7 @@ fn laid_on_tissue(
     Ok(on_tissue)
 }
 
-/// The lines marked on the exercise's tissue ([`cutlab_assessor::exercise::Drawing::marks_m`])
+/// The lines marked on the exercise's tissue ([`cutlab_scoring::exercise::Drawing::marks_m`])
 /// laid on the session's surface, lifted 0.5 mm off it so they are drawn over it: seen in
 /// every mode, guided or exam.
 pub fn marks_on_tissue(
@@ -139,7 +140,7 @@ pub enum Finished {
 }
 
 /// Ends attempt `id`: scores it from the recording at `outcome`'s path, or marks it incomplete
-/// with `outcome`'s reason (or [`cutlab_assessor::UNTOUCHED_NOTE`] when the tool never touched
+/// with `outcome`'s reason (or [`cutlab_scoring::UNTOUCHED_NOTE`] when the tool never touched
 /// the tissue). A recording that cannot be read marks the attempt incomplete; a
 /// recording that cannot be scored marks it failed; both are errors too.
 pub async fn finish_attempt(
@@ -193,11 +194,11 @@ async fn end_attempt(
         }
     };
     // Start, then Stop, and nothing between: visible as such, never a scored fail
-    if !cutlab_assessor::touched_tissue(&rec) {
+    if !cutlab_scoring::touched_tissue(&rec) {
         store
-            .mark_incomplete(id, Some(cutlab_assessor::UNTOUCHED_NOTE))
+            .mark_incomplete(id, Some(cutlab_scoring::UNTOUCHED_NOTE))
             .await?;
-        return Ok(Finished::Incomplete(cutlab_assessor::UNTOUCHED_NOTE.into()));
+        return Ok(Finished::Incomplete(cutlab_scoring::UNTOUCHED_NOTE.into()));
     }
     match store.score_recording(id, &rec).await {
         Ok((outcome, values)) => Ok(Finished::Scored(Box::new(outcome), values)),

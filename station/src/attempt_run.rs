@@ -9,7 +9,6 @@
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
-use cutlab_assessor::ExercisePlan;
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
@@ -23,6 +22,7 @@ use cutlab_haptics::{Session, SessionConfig, StepChoice, TimeStep};
 use cutlab_recorder::record::{self, Provenance, RecordSettings, RecordedSession};
 use cutlab_recorder::writer::RecordObserver;
 use cutlab_recorder::{RecordedHand, Recording, RerunSink, RerunTarget, WriterOptions};
+use cutlab_scoring::ExercisePlan;
 use cutlab_sim::scene::{BuildOptions, Scene};
 
 use crate::StationError;

@@ -15,7 +15,6 @@ use std::time::{Duration, Instant};
 
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::{Exercise, Store};
-use cutlab_assessor::{DeviceClass, ExercisePlan};
 use cutlab_haptics::device::{
     DeviceFault, DeviceLimits, DeviceSpec, HapticDevice, IgtlOptions, PointerDevice, PointerFeed,
     PointerOptions,
@@ -26,6 +25,7 @@ use cutlab_haptics::{TimeStep, ToolPose, Vector3};
 use cutlab_recorder::RerunTarget;
 use cutlab_recorder::record::Provenance;
 use cutlab_recorder::writer::RecordObserver;
+use cutlab_scoring::{DeviceClass, ExercisePlan};
 use cutlab_sim::scene::Viewpoint;
 use tokio::sync::watch;
 

@@ -266,7 +266,7 @@ async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
     let Ending::Incomplete { attempt, why } = ending(&running).await else {
         panic!("a session stopped before any contact is not scored")
     };
-    assert_eq!(why, cutlab_assessor::UNTOUCHED_NOTE);
+    assert_eq!(why, cutlab_scoring::UNTOUCHED_NOTE);
     let a = store.get_attempt(attempt).await.expect("attempt");
     assert!(a.status == AttemptStatus::Incomplete && !a.scored, "{a:?}");
     let rec_path = store
@@ -438,8 +438,8 @@ async fn a_page_gone_past_the_absence_ends_its_attempt_incomplete() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit() {
-    use cutlab_assessor::IncisionPlan;
     use cutlab_assessor::store::NewExercise;
+    use cutlab_scoring::IncisionPlan;
     let dir_guard = temp_dir("exam-only");
     let dir = dir_guard.path();
     let store = store(dir).await;
@@ -625,13 +625,13 @@ async fn a_mini_thoracotomy_is_scored_on_its_retracted_field() {
     let a = store.get_attempt(attempt).await.expect("the attempt");
     let (mcap, _) = a.recording_files().expect("recorded");
     let rec = cutlab_recorder::Recording::open(&mcap).expect("the recording");
-    let cutlab_assessor::ExercisePlan::Field(plan) =
+    let cutlab_scoring::ExercisePlan::Field(plan) =
         store.exercise_plan(field.id).await.expect("the plan")
     else {
         panic!("a field plan");
     };
     let picture =
-        cutlab_assessor::from_recording::field_picture(&rec, &plan, 200).expect("a picture");
+        cutlab_scoring::from_recording::field_picture(&rec, &plan, 200).expect("a picture");
     let heart = picture
         .rgb
         .chunks(3)

@@ -22,9 +22,9 @@
 use axum::extract::State;
 use axum::routing::get;
 use axum::{Json, Router};
-use cutlab_assessor::ExercisePlan;
-use cutlab_assessor::proficiency::Thresholds;
 use cutlab_assessor::store::{Curriculum, Exercise, Module, User};
+use cutlab_scoring::ExercisePlan;
+use cutlab_scoring::proficiency::Thresholds;
 use serde::Serialize;
 
 use crate::AppState;
@@ -57,7 +57,7 @@ pub fn router() -> Router<AppState> {
 /// An exercise's validity evidence with its adopted pass mark.
 #[derive(Debug, Serialize)]
 struct Evidence {
-    report: cutlab_assessor::evidence::Report,
+    report: cutlab_scoring::evidence::Report,
     pass_mark: Option<cutlab_assessor::store::PassMark>,
 }
 

@@ -6,6 +6,7 @@ use axum::Json;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use cutlab_assessor::AssessError;
+use cutlab_scoring::ScoreError;
 
 /// What can go wrong handling a request.
 #[derive(Debug, thiserror::Error)]
@@ -87,6 +88,14 @@ impl From<AssessError> for AppError {
             | AssessError::InvalidInput(_) => AppError::BadRequest(e.to_string()),
             other => AppError::Internal(other.to_string()),
         }
+    }
+}
+
+/// A plan, a form or an input that scoring refuses is the request's fault; a file it cannot
+/// read is the server's.
+impl From<ScoreError> for AppError {
+    fn from(e: ScoreError) -> Self {
+        AssessError::from(e).into()
     }
 }
 

@@ -23,9 +23,10 @@ use axum::extract::{DefaultBodyLimit, FromRequestParts, Path, State};
 use axum::http::request::Parts;
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::routing::put;
+use cutlab_assessor::AssessError;
 use cutlab_assessor::recordings::{RecordingStore, is_sha256_hex};
 use cutlab_assessor::store::{Attempt, AttemptStatus, AttemptUpload, StationToken, is_uuid};
-use cutlab_assessor::{AssessError, MetricValue};
+use cutlab_scoring::MetricValue;
 use futures_util::StreamExt;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -453,7 +454,7 @@ async fn rescore(
                 span_ns as f64 * 1e-9
             ));
         }
-        cutlab_assessor::from_recording::assess_recording(&rec, &plan)
+        cutlab_scoring::from_recording::assess_recording(&rec, &plan)
             .map_err(|e| format!("its recording cannot be scored: {e}"))
     })
     .await

@@ -3,11 +3,12 @@
 //! scored through the store (`finish_attempt`) like real ones, from metric values drawn
 //! around the exercise's thresholds by a seeded generator; they have no recording.
 
-use cutlab_assessor::evidence::Experience;
-use cutlab_assessor::metrics::{self, MetricValue};
-use cutlab_assessor::proficiency::Thresholds;
+use cutlab_assessor::AssessError;
 use cutlab_assessor::store::{Cohort, Role, Store, User};
-use cutlab_assessor::{AssessError, Better};
+use cutlab_scoring::Better;
+use cutlab_scoring::evidence::Experience;
+use cutlab_scoring::metrics::{self, MetricValue};
+use cutlab_scoring::proficiency::Thresholds;
 use cutlab_sim::rng::Rng;
 use serde::Serialize;
 

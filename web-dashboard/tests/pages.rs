@@ -280,7 +280,7 @@ async fn supervision_shows_running_attempts_live() {
 async fn instructors_create_and_edit_exercises_and_curricula() {
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
-    let plan = cutlab_assessor::exercise::CHEST_WALL_PLAN_TOML;
+    let plan = cutlab_scoring::exercise::CHEST_WALL_PLAN_TOML;
     let r = send(
         &e.app,
         post_form(
@@ -848,7 +848,7 @@ async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
             page.contains("<code>corridor_half_width_m</code>")
                 && page.contains("href=\"/plans/example.toml\"")
         );
-        assert!(!page.contains("assessor/examples"), "{path}");
+        assert!(!page.contains("scoring/examples"), "{path}");
     }
     let r = send(&e.app, get("/plans/example.toml", Some(&kim))).await;
     assert_eq!(r.status(), StatusCode::OK);
@@ -878,7 +878,7 @@ async fn curriculum_forms_are_labelled_and_the_plan_has_fields() {
         .unwrap()
         .into_incision()
         .unwrap();
-    let builtin = cutlab_assessor::IncisionPlan::chest_wall().unwrap();
+    let builtin = cutlab_scoring::IncisionPlan::chest_wall().unwrap();
     assert_eq!((plan.depth_m, plan.force_limit_n), (0.005, 0.9));
     assert_eq!(
         (plan.entry_m, plan.incision_m.len(), plan.tolerance_m),
@@ -1113,8 +1113,8 @@ async fn a_locked_exercise_opens_by_proficiency_or_an_instructor() {
 
 #[tokio::test]
 async fn a_lapse_after_proficiency_reads_as_a_lapse_beside_the_cusum() {
-    use cutlab_assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
     use cutlab_assessor::store::Role;
+    use cutlab_scoring::proficiency::{Course, CusumParams, ProficiencyStatus};
     let e = env().await;
     let kim = login(&e.app, "dr-kim", "instructor-demo").await;
     let ex = e.store.ensure_builtins().await.unwrap();
@@ -1215,7 +1215,7 @@ async fn a_pattern_exercise_is_edited_through_its_own_fields() {
     let r = send(&e.app, post_form(&path, Some(&kim.cookie), &pairs)).await;
     assert_eq!(r.status(), StatusCode::SEE_OTHER, "{}", body_text(r).await);
     let edited = e.store.get_exercise(ex.id).await.unwrap();
-    let cutlab_assessor::ExercisePlan::Pattern(plan) =
+    let cutlab_scoring::ExercisePlan::Pattern(plan) =
         e.store.get_plan(edited.plan_id).await.unwrap()
     else {
         panic!("still a pattern plan");
@@ -1331,7 +1331,7 @@ async fn the_evidence_page_compares_groups_and_an_instructor_adopts_its_pass_mar
 
 #[tokio::test]
 async fn an_administrator_records_a_trainees_experience() {
-    use cutlab_assessor::evidence::Experience;
+    use cutlab_scoring::evidence::Experience;
     let e = env().await;
     let ben = user_id(&e.store, "ben").await;
     let path = format!("/trainees/{ben}/experience");
@@ -1382,7 +1382,7 @@ async fn an_attempt_that_never_touched_the_tissue_is_shown_unscored_with_what_to
         .await
         .unwrap();
     e.store
-        .mark_incomplete(a.id, Some(cutlab_assessor::UNTOUCHED_NOTE))
+        .mark_incomplete(a.id, Some(cutlab_scoring::UNTOUCHED_NOTE))
         .await
         .unwrap();
     let page = body_text(send(&e.app, get(&format!("/attempts/{}", a.id), Some(&ana))).await).await;

@@ -4,8 +4,8 @@ use serde::{Deserialize, Serialize};
 
 use super::{BeginWrite, Store, now_ns};
 use crate::error::{AssessError, Result};
-use crate::metrics::{self, Better, MetricValue};
-use crate::proficiency::{Course, CusumParams, CusumPoint, ProficiencyState, Verdict};
+use cutlab_scoring::metrics::{self, Better, MetricValue};
+use cutlab_scoring::proficiency::{Course, CusumParams, CusumPoint, ProficiencyState, Verdict};
 
 /// Where an attempt stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -192,7 +192,7 @@ macro_rules! score_in_tx {
     ($tx:ident, $attempt_id:expr, $trainee_id:expr, $exercise_id:expr, $verdict:expr, $metrics:expr, $note:expr) => {{
         let (attempt_id, trainee_id, exercise_id): (i64, i64, i64) =
             ($attempt_id, $trainee_id, $exercise_id);
-        let verdict: &crate::proficiency::Verdict = $verdict;
+        let verdict: &cutlab_scoring::proficiency::Verdict = $verdict;
         let metrics: &[MetricValue] = $metrics;
         let note: Option<&str> = $note;
         // the trainee's proficiency row first, locked (PostgreSQL: a row lock until
@@ -295,7 +295,7 @@ impl Store {
 
     /// Records how an attempt is made: the station's `mode` (`guided` or `exam`; `None` for a
     /// session from the command line) and its `device` (whose class picks its thresholds,
-    /// [`crate::DeviceClass::of`]).
+    /// [`cutlab_scoring::DeviceClass::of`]).
     pub async fn set_attempt_setup(&self, id: i64, mode: Option<&str>, device: &str) -> Result<()> {
         crate::on_db!(&self.db, pool => sqlx::query("UPDATE attempts SET mode = $1, device = $2 WHERE id = $3")
             .bind(mode)
@@ -426,11 +426,11 @@ impl Store {
     }
 
     /// Computes the attempt's metrics from `data` against its exercise's plan
-    /// ([`crate::ExercisePlan::assess`]) and scores it ([`Store::finish_attempt`]).
+    /// ([`cutlab_scoring::ExercisePlan::assess`]) and scores it ([`Store::finish_attempt`]).
     pub async fn score_attempt(
         &self,
         attempt_id: i64,
-        data: &crate::input::AttemptData,
+        data: &cutlab_scoring::input::AttemptData,
     ) -> Result<Outcome> {
         let a = self.get_attempt(attempt_id).await?;
         let plan = self.exercise_plan(a.exercise_id).await?;

@@ -7,8 +7,8 @@ use std::collections::BTreeSet;
 
 use super::{CUTTING_BASICS, Exercise, NewExercise, Store};
 use crate::error::{AssessError, Result};
-use crate::exercise::{ExcisionPlan, ExercisePlan, FieldPlan, PatternPlan};
-use crate::proficiency::DEFAULT_K;
+use cutlab_scoring::exercise::{ExcisionPlan, ExercisePlan, FieldPlan, PatternPlan};
+use cutlab_scoring::proficiency::DEFAULT_K;
 
 /// The built-in exercise's name.
 pub const BUILTIN_EXERCISE: &str = "chest-wall-incision";

@@ -7,8 +7,10 @@ use serde::{Deserialize, Serialize};
 
 use super::{Store, now_ns};
 use crate::error::{AssessError, Result};
-use crate::evidence::{EvidenceAttempt, EvidenceOptions, Experience, PassMarkFinding, Report};
-use crate::metrics::Better;
+use cutlab_scoring::evidence::{
+    EvidenceAttempt, EvidenceOptions, Experience, PassMarkFinding, Report,
+};
+use cutlab_scoring::metrics::Better;
 
 /// A pass mark on an exercise's overall score, adopted by an instructor.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -46,7 +48,7 @@ type PassMarkRow = (
 );
 
 fn experience(s: Option<String>) -> Result<Option<Experience>> {
-    s.map(|s| s.parse()).transpose()
+    Ok(s.map(|s| s.parse()).transpose()?)
 }
 
 impl Store {

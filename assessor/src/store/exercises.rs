@@ -3,11 +3,11 @@
 use serde::{Deserialize, Serialize};
 
 use super::{BeginWrite, Store, conflict, now_ns, text};
-use crate::device_class::DeviceClass;
 use crate::error::{AssessError, Result};
-use crate::exercise::ExercisePlan;
-use crate::metrics::{Better, MetricValue};
-use crate::proficiency::{Threshold, Thresholds};
+use cutlab_scoring::device_class::DeviceClass;
+use cutlab_scoring::exercise::ExercisePlan;
+use cutlab_scoring::metrics::{Better, MetricValue};
+use cutlab_scoring::proficiency::{Threshold, Thresholds};
 
 /// An exercise.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -161,9 +161,9 @@ impl Store {
         let json: Option<String> = crate::on_db!(&self.db, pool => sqlx::query_scalar("SELECT plan_json FROM expert_plans WHERE id = $1")
                 .bind(id)
                 .fetch_optional(pool).await)?;
-        ExercisePlan::from_json(
-            &json.ok_or_else(|| AssessError::NotFound(format!("expert plan {id}")))?,
-        )
+        Ok(ExercisePlan::from_json(&json.ok_or_else(|| {
+            AssessError::NotFound(format!("expert plan {id}"))
+        })?)?)
     }
 
     /// All stored plans `(id, plan)`, oldest first.

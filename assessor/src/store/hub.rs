@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 use super::attempts::{ATTEMPT_COLUMNS, Attempt, AttemptRow, AttemptStatus, attempt, score_in_tx};
 use super::{BeginWrite, Role, Store, now_ns};
 use crate::error::{AssessError, Result};
-use crate::metrics::MetricValue;
 use crate::recordings::is_sha256_hex;
+use cutlab_scoring::metrics::MetricValue;
 
 /// A random (version 4) UUID, lowercase hex with hyphens.
 pub fn new_uuid() -> Result<String> {
@@ -129,7 +129,7 @@ impl AttemptUpload {
         if self.status == AttemptStatus::Complete && self.recording_sha256.is_none() {
             return bad("a complete attempt comes with its recording (the hub scores it)".into());
         }
-        if self.metrics.len() > crate::metrics::all().count() {
+        if self.metrics.len() > cutlab_scoring::metrics::all().count() {
             return bad(format!(
                 "{} metrics: more than there are",
                 self.metrics.len()
@@ -182,7 +182,7 @@ pub fn check_metric(m: &MetricValue) -> Result<()> {
             short(&m.key)
         )))
     };
-    let Some(def) = crate::metrics::metric(&m.key) else {
+    let Some(def) = cutlab_scoring::metrics::metric(&m.key) else {
         return bad("not a metric of this hub");
     };
     if m.unit != def.unit {
@@ -193,7 +193,10 @@ pub fn check_metric(m: &MetricValue) -> Result<()> {
     }
     let Some(v) = m.value else { return Ok(()) };
     let (limit, signed) = match def.unit {
-        "m" => (10.0, def.better == crate::metrics::Better::TwoSided),
+        "m" => (
+            10.0,
+            def.better == cutlab_scoring::metrics::Better::TwoSided,
+        ),
         "s" => (86_400.0, false),
         "N" => (1_000.0, false),
         "m^2" => (100.0, false),
@@ -363,7 +366,7 @@ impl Store {
         }
         let verdict = match up.status {
             AttemptStatus::Complete => {
-                let class = crate::DeviceClass::of(up.device.as_deref());
+                let class = cutlab_scoring::DeviceClass::of(up.device.as_deref());
                 Some(
                     self.thresholds_for(exercise.id, class)
                         .await?
@@ -403,7 +406,7 @@ impl Store {
         station: &str,
         trainee_id: i64,
         exercise_id: i64,
-        verdict: Option<&crate::proficiency::Verdict>,
+        verdict: Option<&cutlab_scoring::proficiency::Verdict>,
         metrics: &[MetricValue],
     ) -> Result<Option<i64>> {
         let note = match up.status {

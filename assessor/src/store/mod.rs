@@ -18,6 +18,7 @@ mod exercises;
 mod hub;
 mod names;
 mod progression;
+mod recorded;
 pub mod text;
 mod users;
 

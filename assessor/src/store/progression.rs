@@ -1,7 +1,7 @@
 //! Proficiency-based progression: in a curriculum with progression on, the exercises (its
 //! modules' in order) open one after the other. An exercise opens to a trainee when the one
 //! before it is proficient by its own rule (its thresholds, the consecutive passes of
-//! [`crate::proficiency`]; a later lapse does not lock it again), or when an instructor has
+//! [`cutlab_scoring::proficiency`]; a later lapse does not lock it again), or when an instructor has
 //! opened it early, which is recorded (who, when, why). The first exercise is always open; an
 //! exercise in no such curriculum too.
 //!
@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::{Attempt, Store, now_ns};
 use crate::error::{AssessError, Result};
-use crate::proficiency::{Course, CusumParams, REQUIRED_CONSECUTIVE_PASSES};
+use cutlab_scoring::proficiency::{Course, CusumParams, REQUIRED_CONSECUTIVE_PASSES};
 
 /// The built-in curriculum's name: the cutting exercises in order, with progression.
 pub const CUTTING_BASICS: &str = "cutting-basics";

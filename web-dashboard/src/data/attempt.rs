@@ -1,7 +1,7 @@
 //! One attempt: every metric with its threshold and verdict, the debriefing, its recordings.
 
-use cutlab_assessor::metrics;
 use cutlab_assessor::store::Attempt;
+use cutlab_scoring::metrics;
 use serde::Serialize;
 
 use super::debrief::{self, Comment, SignOff};

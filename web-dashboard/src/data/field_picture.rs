@@ -1,7 +1,7 @@
 //! `/attempts/{id}/field.png`: the field a field exercise's attempt scored on, as the scene's
 //! viewpoint sees it: the wound the trainee left, resumed from the recording's last keyframe
 //! and spread by the plan's retractor as scoring spreads it
-//! ([`cutlab_assessor::from_recording::field_picture`]). Rendered off the async threads, one
+//! ([`cutlab_scoring::from_recording::field_picture`]). Rendered off the async threads, one
 //! at a time with the planning page's comparisons ([`crate::pages::planning::Planner`]), and
 //! kept in a small cache by attempt.
 
@@ -11,8 +11,8 @@ use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
-use cutlab_assessor::ExercisePlan;
 use cutlab_recorder::Recording;
+use cutlab_scoring::ExercisePlan;
 
 use crate::AppState;
 use crate::access::visible_attempt;
@@ -49,7 +49,7 @@ pub async fn field_png(
             }
             let png = tokio::task::spawn_blocking(move || {
                 let rec = Recording::open(&mcap).map_err(|e| e.to_string())?;
-                cutlab_assessor::from_recording::field_picture(&rec, &plan, PICTURE_PX)
+                cutlab_scoring::from_recording::field_picture(&rec, &plan, PICTURE_PX)
                     .and_then(|p| p.png())
                     .map_err(|e| e.to_string())
             })

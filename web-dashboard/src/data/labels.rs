@@ -1,8 +1,8 @@
 //! How a metric is shown to people: its display name and display unit, from its stable SI
 //! key (`entry_error_m` → "Entry error", mm), as the assessor's catalogue defines them
-//! ([`METRICS`](cutlab_assessor::metrics::METRICS)); the JSON API keeps the keys and SI values.
+//! ([`METRICS`](cutlab_scoring::metrics::METRICS)); the JSON API keeps the keys and SI values.
 
-use cutlab_assessor::metrics::{display_unit, metric};
+use cutlab_scoring::metrics::{display_unit, metric};
 
 /// A metric as shown: a name, a unit (empty for counts and scores) and the factor from the
 /// stored SI value to the shown one.
@@ -25,7 +25,7 @@ impl Label<'_> {
 }
 
 /// How the metric `key`, stored in the SI unit `si_unit`, is shown: as the catalogue says
-/// ([`METRICS`](cutlab_assessor::metrics::METRICS)), else (a key the catalogue does not have) as itself in its SI unit's display
+/// ([`METRICS`](cutlab_scoring::metrics::METRICS)), else (a key the catalogue does not have) as itself in its SI unit's display
 /// unit.
 pub fn label<'a>(key: &'a str, si_unit: &'a str) -> Label<'a> {
     let (name, (factor, unit)) = match metric(key) {
@@ -70,7 +70,7 @@ pub fn device_words(device: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use cutlab_assessor::metrics;
+    use cutlab_scoring::metrics;
 
     #[test]
     fn every_catalogue_metric_has_a_name_in_a_unit_of_its_si_unit() {

@@ -10,8 +10,8 @@ pub mod progress;
 pub mod running;
 pub mod trace;
 
-use cutlab_assessor::proficiency::{Course, CusumParams, ProficiencyStatus};
 use cutlab_assessor::store::User;
+use cutlab_scoring::proficiency::{Course, CusumParams, ProficiencyStatus};
 use serde::Serialize;
 
 pub use labels::{Label, device_words, label, mode_words};
@@ -68,7 +68,7 @@ impl Standing {
 }
 
 /// Proficiency over a trainee's scored attempts at one exercise, oldest first (the
-/// assessor's [`Course`]: the rule is in `cutlab_assessor::proficiency`).
+/// assessor's [`Course`]: the rule is in `cutlab_scoring::proficiency`).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct ProficiencySummary {
     pub attempts: u32,

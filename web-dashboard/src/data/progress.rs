@@ -4,9 +4,9 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use cutlab_assessor::metrics::{self, Better};
-use cutlab_assessor::proficiency::{Course, CusumParams, CusumPoint, CusumSignal, Thresholds};
 use cutlab_assessor::store::{Access, AttemptStatus, User};
+use cutlab_scoring::metrics::{self, Better};
+use cutlab_scoring::proficiency::{Course, CusumParams, CusumPoint, CusumSignal, Thresholds};
 use serde::Serialize;
 
 use super::{ExerciseRef, ProficiencySummary, Standing, UserRef};
@@ -127,7 +127,7 @@ pub struct SeriesPoint {
 }
 
 /// The CUSUM of failures over the scored attempts, restarted from 0 after each attempt that
-/// changed the standing (proficient, lapsed: see `cutlab_assessor::proficiency::Course`).
+/// changed the standing (proficient, lapsed: see `cutlab_scoring::proficiency::Course`).
 #[derive(Debug, Serialize)]
 pub struct CusumChart {
     pub params: CusumParams,

@@ -6,10 +6,10 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use cutlab_assessor::exercise::Drawing;
 use cutlab_assessor::store::Attempt;
-use cutlab_assessor::{ExercisePlan, attempt_data};
 use cutlab_recorder::Recording;
+use cutlab_scoring::exercise::Drawing;
+use cutlab_scoring::{ExercisePlan, attempt_data};
 use nalgebra::Vector3;
 use serde::Serialize;
 
@@ -200,7 +200,7 @@ enum TraceError {
     #[error(transparent)]
     Recording(#[from] cutlab_recorder::RecorderError),
     #[error(transparent)]
-    Attempt(#[from] cutlab_assessor::AssessError),
+    Attempt(#[from] cutlab_scoring::ScoreError),
 }
 
 fn read_trace(mcap: &std::path::Path, plan: &ExercisePlan) -> Result<AttemptTrace, TraceError> {

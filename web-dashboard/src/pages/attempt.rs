@@ -6,9 +6,9 @@ use axum::Router;
 use axum::extract::State;
 use axum::response::Redirect;
 use axum::routing::{get, post};
-use cutlab_assessor::advice::{MetricResult, advice};
-use cutlab_assessor::from_recording::DAMAGED_RECORDING_NOTE;
-use cutlab_assessor::proficiency::decides;
+use cutlab_scoring::advice::{MetricResult, advice};
+use cutlab_scoring::from_recording::DAMAGED_RECORDING_NOTE;
+use cutlab_scoring::proficiency::decides;
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -114,7 +114,7 @@ fn body(user: &CurrentUser, d: &AttemptDetail, t: Option<&AttemptTrace>) -> Mark
             p class="muted" { "No readable recording: no incision or force plot." }
         }
         @if a.scored { (fix_next(d)) }
-        @else if a.note.as_deref() == Some(cutlab_assessor::UNTOUCHED_NOTE) {
+        @else if a.note.as_deref() == Some(cutlab_scoring::UNTOUCHED_NOTE) {
             section id="fix-next" {
                 h2 { "What to fix next" }
                 p { "Nothing was cut: the tool never touched the tissue, so this attempt is kept but not scored. Start, press the blade into the tissue where the incision begins and draw it along the line before you stop." }

@@ -11,7 +11,7 @@ use crate::AppState;
 use crate::auth::CurrentUser;
 use crate::data::overview::overview;
 use crate::error::PageResult;
-use cutlab_assessor::proficiency::ProficiencyStatus;
+use cutlab_scoring::proficiency::ProficiencyStatus;
 
 pub fn router() -> Router<AppState> {
     Router::new().route("/cohorts", get(cohorts))

@@ -12,10 +12,10 @@ use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Redirect, Response};
 use axum::routing::{get, post};
-use cutlab_assessor::ExercisePlan;
-use cutlab_assessor::metrics::{self, Better};
-use cutlab_assessor::proficiency::{DEFAULT_K, Threshold, Thresholds};
 use cutlab_assessor::store::{ExerciseEdit, NewExercise, ThresholdSource, text};
+use cutlab_scoring::ExercisePlan;
+use cutlab_scoring::metrics::{self, Better};
+use cutlab_scoring::proficiency::{DEFAULT_K, Threshold, Thresholds};
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -51,7 +51,7 @@ pub fn router() -> Router<AppState> {
 async fn example_plan(_user: CurrentUser) -> Response {
     (
         [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
-        cutlab_assessor::exercise::CHEST_WALL_PLAN_TOML,
+        cutlab_scoring::exercise::CHEST_WALL_PLAN_TOML,
     )
         .into_response()
 }
@@ -317,7 +317,7 @@ async fn exercise(
 
 /// A metric's display name with its SI unit (thresholds are edited in SI units).
 fn metric_name(key: &str) -> String {
-    let si = cutlab_assessor::metrics::metric(key).map_or("", |d| d.unit);
+    let si = cutlab_scoring::metrics::metric(key).map_or("", |d| d.unit);
     let name = label(key, si).name;
     if si.is_empty() || si == "1" {
         name.to_owned()
@@ -405,7 +405,7 @@ fn thresholds_from_form(fields: &[(String, String)], k: f64) -> Result<Threshold
                 "at most {MAX_THRESHOLDS} thresholds"
             )));
         }
-        let def = cutlab_assessor::metrics::metric(key)
+        let def = cutlab_scoring::metrics::metric(key)
             .filter(|d| d.scored)
             .ok_or_else(|| AppError::BadRequest(format!("{key:?} is not a scored metric")))?;
         if metrics.iter().any(|m| m.key == def.key) {

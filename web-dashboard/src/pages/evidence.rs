@@ -9,8 +9,8 @@ use axum::Router;
 use axum::extract::{RawQuery, State};
 use axum::response::Redirect;
 use axum::routing::{get, post};
-use cutlab_assessor::evidence::{Experience, Finding, LearningCurve, Measure, Report};
 use cutlab_assessor::store::PassMark;
+use cutlab_scoring::evidence::{Experience, Finding, LearningCurve, Measure, Report};
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -133,7 +133,7 @@ fn groups_section(r: &Report, id: i64) -> Markup {
 /// A strip chart of a measure's values per group (display units), with horizontal lines.
 fn strip_chart(m: &Measure, lines: Vec<Layer>) -> Markup {
     let l = label(&m.key, &m.unit);
-    let (name, factor) = if m.key == cutlab_assessor::evidence::SCORE_KEY {
+    let (name, factor) = if m.key == cutlab_scoring::evidence::SCORE_KEY {
         ("Overall score".to_owned(), 1.0)
     } else {
         (l.with_unit(), l.factor)

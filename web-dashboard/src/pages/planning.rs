@@ -15,9 +15,9 @@ use axum::Router;
 use axum::extract::State;
 use axum::routing::get;
 use base64::Engine;
-use cutlab_assessor::ExercisePlan;
-use cutlab_assessor::exercise::field::FieldPlan;
-use cutlab_assessor::planning::{self, CandidateIncision, FieldReport, Opening, SkinMap, View};
+use cutlab_scoring::ExercisePlan;
+use cutlab_scoring::exercise::field::FieldPlan;
+use cutlab_scoring::planning::{self, CandidateIncision, FieldReport, Opening, SkinMap, View};
 use cutlab_sim::scene::{BuildOptions, Scene};
 use maud::{Markup, html};
 

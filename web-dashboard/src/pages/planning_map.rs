@@ -3,8 +3,8 @@
 //! marked on the skin, the target's outline beneath it and the expert's line. The candidates'
 //! lines are drawn on it by `static/planning.js` from the form's fields.
 
-use cutlab_assessor::exercise::field::FieldPlan;
-use cutlab_assessor::planning::SkinMap;
+use cutlab_scoring::exercise::field::FieldPlan;
+use cutlab_scoring::planning::SkinMap;
 use maud::{Markup, html};
 
 /// Room around the tissue, mm.

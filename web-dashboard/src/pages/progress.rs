@@ -9,8 +9,8 @@ use axum::extract::State;
 use axum::response::Html;
 use axum::response::Redirect;
 use axum::routing::{get, post};
-use cutlab_assessor::evidence::Experience;
 use cutlab_assessor::store::{Access, Role, iso8601};
+use cutlab_scoring::evidence::Experience;
 use maud::{Markup, html};
 use serde::Deserialize;
 
@@ -27,7 +27,7 @@ use crate::data::progress::{
 use crate::data::{device_words, label, mode_words};
 use crate::error::{AppError, PageResult};
 use crate::extract::{Form, Id};
-use cutlab_assessor::proficiency::{CusumSignal, ProficiencyStatus, REQUIRED_CONSECUTIVE_PASSES};
+use cutlab_scoring::proficiency::{CusumSignal, ProficiencyStatus, REQUIRED_CONSECUTIVE_PASSES};
 
 pub fn router() -> Router<AppState> {
     Router::new()

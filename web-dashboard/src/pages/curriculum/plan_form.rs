@@ -11,8 +11,8 @@
 
 use std::collections::HashMap;
 
-use cutlab_assessor::exercise::FormField;
-use cutlab_assessor::{ExerciseKind, ExercisePlan};
+use cutlab_scoring::exercise::FormField;
+use cutlab_scoring::{ExerciseKind, ExercisePlan};
 use maud::{Markup, html};
 
 use crate::error::AppError;
@@ -100,7 +100,7 @@ pub fn plan_reference(plan: &ExercisePlan) -> Markup {
             table {
                 thead { tr { th { "Key" } th { "Unit" } th { "Meaning" } } }
                 tbody {
-                    tr { td { code { "kind" } } td { "text" } td { "the kind of exercise: " (cutlab_assessor::Kind::ALL.map(|k| k.as_str()).join(", ")) " (default incision)" } }
+                    tr { td { code { "kind" } } td { "text" } td { "the kind of exercise: " (cutlab_scoring::Kind::ALL.map(|k| k.as_str()).join(", ")) " (default incision)" } }
                     @for k in plan.kind_plan().keys() { tr { td { code { (k.key) } } td { (k.unit) } td { (k.meaning) } } }
                 }
             }

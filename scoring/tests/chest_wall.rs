@@ -3,8 +3,8 @@
 //! ray casts must agree with the gap between the split vertices' copies, and the plan's target
 //! (the incision open to half its depth) is hidden before the cut and seen after it.
 
-use cutlab_assessor::metrics::value_of;
-use cutlab_assessor::{AttemptData, CutSample, ExercisePlan, SurfaceMesh};
+use cutlab_scoring::metrics::value_of;
+use cutlab_scoring::{AttemptData, CutSample, ExercisePlan, SurfaceMesh};
 use cutlab_sim::cut;
 use cutlab_sim::scene::{BuildOptions, Scene};
 use cutlab_sim::solver::StaticSettings;

@@ -15,7 +15,7 @@
 
 use nalgebra::{Point3, Vector3};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::exercise::IncisionPlan;
 use crate::geom;
 use crate::input::{CutSample, ForceSample};
@@ -34,13 +34,13 @@ pub struct ForceMetrics {
 /// Force metrics of `forces` (at least 1, finite, sorted by time here) against `limit_n`.
 pub fn forces(forces: &[ForceSample], limit_n: f64) -> Result<ForceMetrics> {
     if forces.is_empty() {
-        return Err(AssessError::InvalidInput("no force samples".into()));
+        return Err(ScoreError::InvalidInput("no force samples".into()));
     }
     if let Some(i) = forces
         .iter()
         .position(|f| !f.t_s.is_finite() || !geom::finite(&f.force_newtons))
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "force sample {i}: a value is not finite"
         )));
     }
@@ -83,7 +83,7 @@ pub fn outside_corridor(plan: &IncisionPlan, cuts: &[CutSample]) -> Result<(f64,
         .iter()
         .position(|c| !c.t_s.is_finite() || !geom::finite(&c.tip_m))
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "cut sample {i}: time or tip not finite"
         )));
     }

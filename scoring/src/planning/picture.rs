@@ -14,7 +14,7 @@ use parry3d_f64::shape::TriMesh;
 use cutlab_sim::scene::SceneSpec;
 use cutlab_sim::solver::Simulation;
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::metrics::exposure::{Ellipsoid, ray};
 
 /// The share of a surface's colour it keeps when it turns away from the eye.
@@ -47,7 +47,7 @@ impl Picture {
         let mut encoder = png::Encoder::new(&mut out, self.width_px, self.height_px);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        let fail = |e: png::EncodingError| AssessError::InvalidInput(format!("the picture: {e}"));
+        let fail = |e: png::EncodingError| ScoreError::InvalidInput(format!("the picture: {e}"));
         let mut writer = encoder.write_header().map_err(fail)?;
         writer.write_image_data(&self.rgb).map_err(fail)?;
         writer.finish().map_err(fail)?;

@@ -9,7 +9,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::{Drawing, ExerciseKind, ExercisePlan, FormField, HandLine, PlanKey};
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::geom;
 use crate::input::AttemptData;
 use crate::metrics::exposure::Ellipsoid;
@@ -94,7 +94,7 @@ impl FieldPlan {
     pub fn builtin() -> Result<Self> {
         match ExercisePlan::from_toml(FIELD_PLAN_TOML)? {
             ExercisePlan::Field(p) => Ok(p),
-            other => Err(AssessError::InvalidPlan(format!(
+            other => Err(ScoreError::InvalidPlan(format!(
                 "the built-in field plan is of kind {}",
                 other.kind().as_str()
             ))),
@@ -110,7 +110,7 @@ impl FieldPlan {
 
     /// Rejects plans that cannot be assessed against, naming the field.
     pub fn check(&self) -> Result<()> {
-        let bad = |m: &str| Err(AssessError::InvalidPlan(m.into()));
+        let bad = |m: &str| Err(ScoreError::InvalidPlan(m.into()));
         let mut numbers: Vec<f64> = [
             self.normal,
             self.target_centre_m,

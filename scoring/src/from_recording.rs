@@ -9,7 +9,7 @@ use cutlab_haptics::servo::ServoSample;
 use cutlab_recorder::Recording;
 use cutlab_sim::TetMesh;
 
-use crate::AssessError;
+use crate::ScoreError;
 use crate::exercise::{ExercisePlan, HandLine};
 use crate::input::{
     AttemptData, CutSample, DamageEvent, ForceSample, FreedPiece, PoseSample, SurfaceMesh,
@@ -22,11 +22,11 @@ pub const DAMAGED_RECORDING_NOTE: &str = "Scored from a damaged recording";
 /// The data `plan` is assessed on, from `rec`: the poses and forces of every tick, the cut's
 /// trace ([`cut_samples`]), the last keyframe's surface and the device named in the session
 /// metadata.
-pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData, AssessError> {
+pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData, ScoreError> {
     let hand = plan.kind_plan().hand_line();
     let meta = rec
         .meta()
-        .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
+        .map_err(|e| ScoreError::InvalidInput(e.to_string()))?;
     let period_s = meta.period_nanos as f64 * 1e-9;
     // every tick with both its pose and its tool state, in tick order
     let samples = rec.samples();
@@ -144,8 +144,8 @@ pub fn field_picture(
     rec: &Recording,
     plan: &crate::exercise::field::FieldPlan,
     size_px: u32,
-) -> Result<crate::planning::Picture, AssessError> {
-    let fail = |m: String| AssessError::InvalidInput(format!("the field's picture: {m}"));
+) -> Result<crate::planning::Picture, ScoreError> {
+    let fail = |m: String| ScoreError::InvalidInput(format!("the field's picture: {m}"));
     let data = attempt_data(rec, &ExercisePlan::Field(plan.clone()))?;
     let spec: cutlab_sim::scene::SceneSpec = rec
         .attachment(cutlab_recorder::channels::SCENE_ATTACHMENT)
@@ -265,7 +265,7 @@ pub fn touched_tissue(rec: &Recording) -> bool {
 pub fn assess_recording(
     rec: &Recording,
     plan: &ExercisePlan,
-) -> Result<(crate::MetricSet, Option<String>), AssessError> {
+) -> Result<(crate::MetricSet, Option<String>), ScoreError> {
     let mut data = attempt_data(rec, plan)?;
     retract_for_scoring(rec, plan, &mut data);
     let mut values = plan.assess(&data)?;
@@ -339,61 +339,6 @@ fn surface_of(k: &cutlab_recorder::channels::KeyframeMsg) -> Option<SurfaceMesh>
         vertices_m: k.positions_m.clone(),
         triangles,
     })
-}
-
-impl crate::store::Store {
-    /// The user `name`; a new name becomes a trainee without a password (who cannot log in
-    /// until an administrator sets one).
-    pub async fn trainee_named(&self, name: &str) -> crate::Result<crate::store::User> {
-        match self.user_by_name(name).await {
-            Err(AssessError::NotFound(_)) => {
-                self.create_user(name, crate::store::Role::Trainee, None)
-                    .await
-            }
-            other => other,
-        }
-    }
-
-    /// Starts an attempt (status running) at exercise `exercise` by `trainee` (created when
-    /// new), recorded at `recording`.
-    pub async fn start_recorded_attempt(
-        &self,
-        exercise: &str,
-        trainee: &str,
-        recording: &std::path::Path,
-        expert: bool,
-    ) -> crate::Result<crate::store::Attempt> {
-        let e = self.exercise_by_name(exercise).await?;
-        let t = self.trainee_named(trainee).await?;
-        self.start_attempt(t.id, e.id, Some(&recording.display().to_string()), expert)
-            .await
-    }
-
-    /// Scores attempt `attempt_id` from its recording against its exercise's plan, stores the
-    /// metrics and the verdict, and updates the trainee's proficiency. A recording that is not
-    /// whole (damaged, cut short) is scored on what is readable, and the attempt's note says so
-    /// ([`DAMAGED_RECORDING_NOTE`]).
-    pub async fn score_recording(
-        &self,
-        attempt_id: i64,
-        rec: &Recording,
-    ) -> crate::Result<(crate::store::Outcome, crate::MetricSet)> {
-        let a = self.get_attempt(attempt_id).await?;
-        let plan = self.exercise_plan(a.exercise_id).await?;
-        let (values, note) = assess_recording(rec, &plan)?;
-        // an attempt assessed from a file takes the device its recording names (whose class
-        // picks the thresholds)
-        if a.device.is_none()
-            && let Ok(meta) = rec.meta()
-        {
-            self.set_attempt_setup(attempt_id, a.mode.as_deref(), &meta.provenance.device)
-                .await?;
-        }
-        let outcome = self
-            .finish_attempt_noted(attempt_id, &values, note.as_deref())
-            .await?;
-        Ok((outcome, values))
-    }
 }
 
 #[cfg(test)]

@@ -32,7 +32,7 @@
 
 use nalgebra::{Point3, Quaternion, UnitQuaternion, Vector3};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::geom;
 use crate::input::PoseSample;
 use crate::metrics::Values;
@@ -138,7 +138,7 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
         .iter()
         .position(|s| !s.t_s.is_finite() || !geom::finite(&s.tip_m) || !geom::finite(&s.quat_wxyz))
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "pose {i}: a value is not finite"
         )));
     }
@@ -146,7 +146,7 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
         .iter()
         .position(|s| s.quat_wxyz.iter().map(|c| c * c).sum::<f64>() < 1e-12)
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "pose {i}: zero quaternion"
         )));
     }
@@ -154,7 +154,7 @@ pub fn path(poses: &[PoseSample], p: &PathParams) -> Result<PathMetrics> {
     poses.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     poses.dedup_by(|b, a| b.t_s <= a.t_s);
     if poses.len() < 3 {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "{} poses with distinct times: need at least 3",
             poses.len()
         )));

@@ -42,7 +42,7 @@ use std::ops::Range;
 
 use nalgebra::{Point3, Vector3};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::exercise::IncisionPlan;
 use crate::geom;
 use crate::input::{CutSample, PoseSample};
@@ -157,7 +157,7 @@ pub fn depth_below_line(line_m: &[[f64; 3]], normal: [f64; 3], tip: [f64; 3]) ->
 /// The incision metrics of `cuts` (at least 2, finite tips) against `plan`.
 pub fn incision(plan: &IncisionPlan, cuts: &[CutSample]) -> Result<IncisionMetrics> {
     if cuts.len() < 2 {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "{} cut samples: no incision to measure",
             cuts.len()
         )));
@@ -166,7 +166,7 @@ pub fn incision(plan: &IncisionPlan, cuts: &[CutSample]) -> Result<IncisionMetri
         .iter()
         .position(|c| !geom::finite(&c.tip_m) || !c.t_s.is_finite())
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "cut sample {i}: time or tip not finite"
         )));
     }

@@ -19,7 +19,7 @@ use cutlab_sim::cut::{self, Cutter};
 use cutlab_sim::retractor::Retractor;
 use cutlab_sim::scene::{Scene, SceneSpec};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::input::SurfaceMesh;
 use crate::metrics::exposure::{Ellipsoid, exposure};
 use crate::metrics::field::trimesh;
@@ -93,7 +93,7 @@ pub struct Opening {
 impl CandidateIncision {
     /// Checks the numbers, naming the field at fault.
     pub fn check(&self) -> Result<()> {
-        let bad = |m: &str| Err(AssessError::InvalidInput(m.into()));
+        let bad = |m: &str| Err(ScoreError::InvalidInput(m.into()));
         if self.incision_m.len() < 2 {
             return bad("incision_m: needs at least two points");
         }
@@ -157,7 +157,7 @@ impl SkinMap {
         let (up, along) = scene
             .incision
             .unit()
-            .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
+            .map_err(|e| ScoreError::InvalidInput(e.to_string()))?;
         Ok(Self {
             skin: surface(sim)?,
             up,
@@ -247,21 +247,21 @@ pub fn field_pictured(
     if let Some(w) = opening.retract_m
         && !(w.is_finite() && (0.0..=0.2).contains(&w))
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "retract_m: from 0 to 0.2 m, got {w}"
         )));
     }
     let target = scene.targets.iter().find(|t| !t.spare).ok_or_else(|| {
-        AssessError::InvalidInput(format!("scene {:?} has no target", scene.spec.name))
+        ScoreError::InvalidInput(format!("scene {:?} has no target", scene.spec.name))
     })?;
     let view = scene.viewpoint.as_ref().ok_or_else(|| {
-        AssessError::InvalidInput(format!("scene {:?} has no viewpoint", scene.spec.name))
+        ScoreError::InvalidInput(format!("scene {:?} has no viewpoint", scene.spec.name))
     })?;
     let (up, _) = scene
         .spec
         .incision
         .unit()
-        .map_err(|e| AssessError::InvalidInput(e.to_string()))?;
+        .map_err(|e| ScoreError::InvalidInput(e.to_string()))?;
     let mut sim = scene.simulation();
     on_tissue(&surface(&sim)?, candidate)?;
     let stations = candidate.stations();
@@ -276,7 +276,7 @@ pub fn field_pictured(
     let steps = |s: f64| (s.max(0.0) / dt_s).round() as usize;
     for _ in 0..steps(opening.open_s) {
         sim.step()
-            .map_err(|e| AssessError::InvalidInput(format!("the opening wound: {e}")))?;
+            .map_err(|e| ScoreError::InvalidInput(format!("the opening wound: {e}")))?;
     }
     let sight = Sight {
         heart: ellipsoid(target),
@@ -307,7 +307,7 @@ pub fn field_pictured(
             };
             retractor
                 .open(&mut sim)
-                .map_err(|e| AssessError::InvalidInput(format!("the retracted wound: {e}")))?;
+                .map_err(|e| ScoreError::InvalidInput(format!("the retracted wound: {e}")))?;
             Some(sight.view(scene, &sim, &mut pictures)?)
         }
     };
@@ -327,7 +327,7 @@ fn on_tissue(skin: &TriMesh, candidate: &CandidateIncision) -> Result<()> {
     for (i, p) in candidate.incision_m.iter().enumerate() {
         let at = PVec::new(p[0], p[1], p[2]);
         if skin.distance_to_local_point(at, true) > ON_TISSUE_M {
-            return Err(AssessError::InvalidInput(format!(
+            return Err(ScoreError::InvalidInput(format!(
                 "incision_m[{i}]: {p:?} is more than {} mm off the tissue's surface",
                 ON_TISSUE_M * 1e3
             )));
@@ -404,11 +404,11 @@ fn stroke(
         match cutter.advance(sim, blade) {
             Ok(event) => watch.after_cut(&sim.model, &regions, &event, &mut harm),
             Err(cut::CutError::Unresolved(_)) => {}
-            Err(e) => return Err(AssessError::InvalidInput(format!("cutting: {e}"))),
+            Err(e) => return Err(ScoreError::InvalidInput(format!("cutting: {e}"))),
         }
         watch.blade_stop(cutter.stop().map(|s| s.region), &mut harm);
         sim.step()
-            .map_err(|e| AssessError::InvalidInput(format!("the cut tissue: {e}")))?;
+            .map_err(|e| ScoreError::InvalidInput(format!("the cut tissue: {e}")))?;
     }
     let mut hit: Vec<u32> = harm.iter().map(|d| d.region).collect();
     hit.sort_unstable();

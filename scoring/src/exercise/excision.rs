@@ -13,7 +13,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::{Drawing, ExerciseKind, ExercisePlan, FormField, HandLine, PlanKey};
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::geom;
 use crate::input::AttemptData;
 use crate::metrics::excision::{self, Excision};
@@ -104,7 +104,7 @@ impl ExcisionPlan {
     pub fn builtin() -> Result<Self> {
         match ExercisePlan::from_toml(EXCISION_PLAN_TOML)? {
             ExercisePlan::Excision(p) => Ok(p),
-            other => Err(AssessError::InvalidPlan(format!(
+            other => Err(ScoreError::InvalidPlan(format!(
                 "the built-in excision plan is of kind {}",
                 other.kind().as_str()
             ))),
@@ -120,7 +120,7 @@ impl ExcisionPlan {
 
     /// Rejects plans that cannot be assessed against, naming the field.
     pub fn check(&self) -> Result<()> {
-        let bad = |m: &str| Err(AssessError::InvalidPlan(m.into()));
+        let bad = |m: &str| Err(ScoreError::InvalidPlan(m.into()));
         let mut numbers: Vec<f64> = [
             self.lesion_centre_m,
             self.normal,

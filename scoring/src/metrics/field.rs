@@ -29,7 +29,7 @@ use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh;
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::exercise::IncisionPlan;
 use crate::geom;
 use crate::input::SurfaceMesh;
@@ -56,12 +56,12 @@ fn to_parry(v: Vector3<f64>) -> PVec {
 /// indices out of range.
 pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
     if surface.triangles.is_empty() {
-        return Err(AssessError::InvalidInput(
+        return Err(ScoreError::InvalidInput(
             "the surface has no triangles".into(),
         ));
     }
     if let Some(i) = surface.vertices_m.iter().position(|v| !geom::finite(v)) {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "surface vertex {i} is not finite"
         )));
     }
@@ -71,7 +71,7 @@ pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
         .iter()
         .position(|t| t.iter().any(|&v| v as usize >= n))
     {
-        return Err(AssessError::InvalidInput(format!(
+        return Err(ScoreError::InvalidInput(format!(
             "surface triangle {i} refers to a missing vertex"
         )));
     }
@@ -81,7 +81,7 @@ pub fn trimesh(surface: &SurfaceMesh) -> Result<TriMesh> {
         .map(|&v| PVec::from_array(v))
         .collect();
     TriMesh::new(vertices, surface.triangles.clone())
-        .map_err(|e| AssessError::InvalidInput(format!("surface: {e}")))
+        .map_err(|e| ScoreError::InvalidInput(format!("surface: {e}")))
 }
 
 /// Whether the segment from `eye` to `p` passes `mesh` (stopping [`VISIBILITY_EPS_M`] short

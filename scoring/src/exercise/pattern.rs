@@ -8,7 +8,7 @@ use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
 use super::{Drawing, ExerciseKind, ExercisePlan, FormField, HandLine, PlanKey};
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::geom;
 use crate::input::AttemptData;
 use crate::metrics::pattern::{self, Circle};
@@ -84,7 +84,7 @@ impl PatternPlan {
     pub fn builtin() -> Result<Self> {
         match ExercisePlan::from_toml(PATTERN_PLAN_TOML)? {
             ExercisePlan::Pattern(p) => Ok(p),
-            other => Err(AssessError::InvalidPlan(format!(
+            other => Err(ScoreError::InvalidPlan(format!(
                 "the built-in pattern plan is of kind {}",
                 other.kind().as_str()
             ))),
@@ -100,7 +100,7 @@ impl PatternPlan {
 
     /// Rejects plans that cannot be assessed against, naming the field.
     pub fn check(&self) -> Result<()> {
-        let bad = |m: &str| Err(AssessError::InvalidPlan(m.into()));
+        let bad = |m: &str| Err(ScoreError::InvalidPlan(m.into()));
         let mut numbers: Vec<f64> = [self.centre_m, self.normal, self.viewpoint_m].concat();
         numbers.extend([
             self.radius_m,

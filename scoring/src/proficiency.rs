@@ -55,7 +55,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::metrics::{Better, MetricValue};
 
 /// Metrics that are feedback only: they have an expert reference (and limits, shown) but do
@@ -259,7 +259,7 @@ impl Thresholds {
     /// Thresholds from expert attempts' metric values (`k` > 0).
     pub fn from_experts(attempts: &[Vec<MetricValue>], k: f64) -> Result<Self> {
         if !(k > 0.0) || !k.is_finite() {
-            return Err(AssessError::InvalidInput(format!("k = {k}: must be > 0")));
+            return Err(ScoreError::InvalidInput(format!("k = {k}: must be > 0")));
         }
         let mut metrics = Vec::new();
         for m in crate::metrics::all().filter(|m| m.scored) {
@@ -501,7 +501,7 @@ impl CusumParams {
         if ok {
             Ok(())
         } else {
-            Err(AssessError::InvalidInput(format!(
+            Err(ScoreError::InvalidInput(format!(
                 "CUSUM parameters {self:?}: need 0 < p0 < p1 < 1, 0 < alpha, beta < 1"
             )))
         }

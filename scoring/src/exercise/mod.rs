@@ -19,7 +19,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::input::AttemptData;
 use crate::metrics::{Metric, MetricSet};
 use crate::proficiency::Threshold;
@@ -127,7 +127,7 @@ impl FormField {
 pub(crate) fn unit_normal(normal: [f64; 3]) -> Result<[f64; 3]> {
     crate::geom::unit(normal.into())
         .map(Into::into)
-        .ok_or_else(|| AssessError::InvalidPlan("normal: zero".into()))
+        .ok_or_else(|| ScoreError::InvalidPlan("normal: zero".into()))
 }
 
 /// A plan's number that form field `i` edits, reached through the plan's `slot`.
@@ -261,7 +261,7 @@ impl ExercisePlan {
     pub fn into_incision(self) -> Result<IncisionPlan> {
         match self {
             ExercisePlan::Incision(p) => Ok(p),
-            other => Err(AssessError::InvalidPlan(format!(
+            other => Err(ScoreError::InvalidPlan(format!(
                 "kind: {}, not an incision",
                 other.kind().as_str()
             ))),
@@ -281,7 +281,7 @@ impl ExercisePlan {
     /// Parses a plan from a JSON value: its `kind` (default `incision`) picks the type, which
     /// then reads the other keys (unknown keys are errors).
     fn from_value(mut value: serde_json::Value, what: &str) -> Result<Self> {
-        let parse = |message: String| AssessError::Parse {
+        let parse = |message: String| ScoreError::Parse {
             what: what.into(),
             message,
         };
@@ -321,7 +321,7 @@ impl ExercisePlan {
 
     /// Parses JSON.
     pub fn from_json(text: &str) -> Result<Self> {
-        let value = serde_json::from_str(text).map_err(|e| AssessError::Parse {
+        let value = serde_json::from_str(text).map_err(|e| ScoreError::Parse {
             what: "expert plan (JSON)".into(),
             message: e.to_string(),
         })?;
@@ -330,7 +330,7 @@ impl ExercisePlan {
 
     /// Parses TOML.
     pub fn from_toml(text: &str) -> Result<Self> {
-        let value = toml::from_str(text).map_err(|e| AssessError::Parse {
+        let value = toml::from_str(text).map_err(|e| ScoreError::Parse {
             what: "expert plan (TOML)".into(),
             message: e.to_string(),
         })?;
@@ -348,7 +348,7 @@ impl ExercisePlan {
 
     /// Reads a `.toml` or `.json` file (by extension; anything else is tried as TOML, then JSON).
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| AssessError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| ScoreError::Io {
             path: path.display().to_string(),
             error: source,
         })?;
@@ -357,13 +357,13 @@ impl ExercisePlan {
             .and_then(|e| e.to_str())
             .unwrap_or("")
             .to_ascii_lowercase();
-        let at = |e: AssessError| match e {
-            AssessError::Parse { what, message } => AssessError::Parse {
+        let at = |e: ScoreError| match e {
+            ScoreError::Parse { what, message } => ScoreError::Parse {
                 what: format!("{} ({what})", path.display()),
                 message,
             },
-            AssessError::InvalidPlan(m) => {
-                AssessError::InvalidPlan(format!("{}: {m}", path.display()))
+            ScoreError::InvalidPlan(m) => {
+                ScoreError::InvalidPlan(format!("{}: {m}", path.display()))
             }
             e => e,
         };

@@ -4,9 +4,9 @@
 //! trainee's last two attempts), where do the learning curves level off, and where would a
 //! pass mark by the contrasting-groups method lie and how many would it misclassify.
 //!
-//! [`Report::build`] is pure: it takes the attempts ([`EvidenceAttempt`], from
-//! [`crate::Store::evidence_attempts`] or imported kinematics) and says, for each figure it
-//! cannot compute, why. The definitions are in `docs/guide/evidence.md`.
+//! [`Report::build`] is pure: it takes the attempts ([`EvidenceAttempt`], from the store's
+//! `evidence_attempts` or imported kinematics) and says, for each figure it cannot compute,
+//! why. The definitions are in `docs/guide/evidence.md`.
 
 pub mod predict;
 pub mod report;
@@ -19,7 +19,7 @@ pub use report::{
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 
 /// A person's surgical experience, recorded by an administrator: the groups the evidence
 /// contrasts. Ordered from the least experienced.
@@ -49,13 +49,13 @@ impl Experience {
 }
 
 impl std::str::FromStr for Experience {
-    type Err = AssessError;
+    type Err = ScoreError;
     fn from_str(s: &str) -> Result<Self> {
         Experience::ALL
             .into_iter()
             .find(|e| e.as_str() == s)
             .ok_or_else(|| {
-                AssessError::InvalidInput(format!(
+                ScoreError::InvalidInput(format!(
                     "unknown experience level {s:?} (novice, intermediate or expert)"
                 ))
             })

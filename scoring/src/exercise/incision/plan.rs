@@ -3,7 +3,7 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{AssessError, Result};
+use crate::error::{Result, ScoreError};
 use crate::exercise::ExercisePlan;
 use crate::geom;
 
@@ -106,12 +106,12 @@ impl IncisionPlan {
         }
         self.check()?;
         let normal = geom::unit(self.normal.into())
-            .ok_or_else(|| AssessError::InvalidPlan("zero normal".into()))?;
+            .ok_or_else(|| ScoreError::InvalidPlan("zero normal".into()))?;
         self.normal = normal.into();
         let approach = self.approach_dir.map_or(-normal, Vector3::from);
         self.approach_dir = Some(
             geom::unit(approach)
-                .ok_or_else(|| AssessError::InvalidPlan("zero approach direction".into()))?
+                .ok_or_else(|| ScoreError::InvalidPlan("zero approach direction".into()))?
                 .into(),
         );
         Ok(self)
@@ -121,7 +121,7 @@ impl IncisionPlan {
     /// points, a line shorter than 1 mm, a zero normal, non-positive depth, tolerance,
     /// corridor or force limit.
     pub fn check(&self) -> Result<()> {
-        let bad = |m: &str| Err(AssessError::InvalidPlan(m.into()));
+        let bad = |m: &str| Err(ScoreError::InvalidPlan(m.into()));
         let mut numbers: Vec<f64> = Vec::new();
         for v in [self.entry_m, self.exit_m, self.normal, self.viewpoint_m]
             .iter()
@@ -281,7 +281,7 @@ mod tests {
         let typo = ok.replace("depth_m", "depht_m");
         assert!(matches!(
             IncisionPlan::from_json(&typo),
-            Err(AssessError::Parse { .. })
+            Err(ScoreError::Parse { .. })
         ));
     }
 }
