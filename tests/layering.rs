@@ -272,3 +272,104 @@ fn no_crate_re_exports_another() {
     }
     assert!(found.is_empty(), "crates re-exported: {found:#?}");
 }
+
+/// The modules of `cutlab-scoring` each imports outside its tests and comments
+/// (`crate::<module>` paths), by module.
+fn scoring_module_imports() -> BTreeMap<String, BTreeSet<String>> {
+    fn walk(dir: &std::path::Path, root: &std::path::Path, out: &mut Vec<(String, String)>) {
+        for entry in std::fs::read_dir(dir).expect("scoring's sources").flatten() {
+            let path = entry.path();
+            if path.is_dir() {
+                walk(&path, root, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                let rel = path.strip_prefix(root).expect("under src");
+                let first = rel.components().next().expect("a path");
+                let module = first
+                    .as_os_str()
+                    .to_string_lossy()
+                    .trim_end_matches(".rs")
+                    .to_owned();
+                let text = std::fs::read_to_string(&path).expect("source");
+                let code = text
+                    .split("#[cfg(test)]\nmod tests")
+                    .next()
+                    .unwrap_or_default();
+                out.push((module, code.to_owned()));
+            }
+        }
+    }
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scoring/src");
+    let mut files = Vec::new();
+    walk(&root, &root, &mut files);
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (module, code) in files {
+        let entry = graph.entry(module.clone()).or_default();
+        for line in code.lines().filter(|l| !l.trim_start().starts_with("//")) {
+            for (i, _) in line.match_indices("crate::") {
+                let name: String = line[i + 7..]
+                    .chars()
+                    .take_while(|c| c.is_ascii_lowercase() || *c == '_')
+                    .collect();
+                if !name.is_empty() && name != module {
+                    entry.insert(name);
+                }
+            }
+        }
+    }
+    graph
+}
+
+/// A circle among `graph`'s nodes, if there is one.
+fn a_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        node: &str,
+        graph: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(at) = path.iter().position(|n| n == node) {
+            let mut circle = path[at..].to_vec();
+            circle.push(node.to_owned());
+            return Some(circle);
+        }
+        if done.contains(node) {
+            return None;
+        }
+        path.push(node.to_owned());
+        for next in graph.get(node).into_iter().flatten() {
+            if let Some(c) = visit(next, graph, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(node.to_owned());
+        None
+    }
+    let mut done = BTreeSet::new();
+    graph
+        .keys()
+        .find_map(|n| visit(n, graph, &mut Vec::new(), &mut done))
+}
+
+#[test]
+fn scorings_modules_import_each_other_in_no_circle() {
+    // metrics below the exercise kinds: a kind picks metrics, no metric knows a kind
+    let graph = scoring_module_imports();
+    assert!(
+        graph.get("exercise").is_some_and(|m| m.contains("metrics")),
+        "the check reads the imports: {graph:?}"
+    );
+    assert!(
+        !graph["metrics"].contains("exercise"),
+        "metrics import the exercise kinds: {:?}",
+        graph["metrics"]
+    );
+    assert_eq!(a_circle(&graph), None, "{graph:#?}");
+    // and the search finds one where there is one
+    let mut with_circle = graph.clone();
+    with_circle
+        .entry("metrics".into())
+        .or_default()
+        .insert("exercise".into());
+    assert!(a_circle(&with_circle).is_some());
+}

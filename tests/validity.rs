@@ -302,7 +302,7 @@ fn steady_hands_at_the_pointer_pass_the_thresholds_people_set_and_sloppy_ones_sc
             m["value"].is_null()
                 && m["missing"]
                     .as_str()
-                    .is_some_and(|w| w.starts_with(cutlab_scoring::pace::STATION_LAGGED)),
+                    .is_some_and(|w| w.starts_with(cutlab_scoring::metrics::STATION_LAGGED)),
             "{key} set aside: {m}"
         );
     }

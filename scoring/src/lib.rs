@@ -6,7 +6,7 @@
 //! - [`metrics`]: incision, path, safety and field metrics;
 //! - [`proficiency`]: thresholds from experts, pass/fail, score, CUSUM;
 //! - [`advice`]: the debrief's sentences;
-//! - [`evidence`]: the statistics of the validity evidence;
+//! - [`evidence`]: the validity evidence of an exercise's scores, by [`stats`];
 //! - [`planning`]: candidate incisions' fields compared, and pictured;
 //! - [`from_recording`]: an attempt's data read from its recording;
 //! - [`device_class`]: the pointer or a stylus, whose thresholds are kept apart.
@@ -20,11 +20,13 @@ pub mod evidence;
 pub mod exercise;
 pub mod from_recording;
 mod geom;
+pub mod incision_plan;
 pub mod input;
 pub mod metrics;
 pub mod pace;
 pub mod planning;
 pub mod proficiency;
+pub mod stats;
 
 pub use device_class::DeviceClass;
 pub use error::{Result, ScoreError};

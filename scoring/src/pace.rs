@@ -13,7 +13,7 @@
 use nalgebra::Vector3;
 
 use crate::input::PoseSample;
-use crate::metrics::MetricValue;
+use crate::metrics::{MetricValue, STATION_LAGGED};
 
 /// Below this many reports a second while moving the station lagged (a steady page sends
 /// 60; a busy one 30; the slow machine in issue 63 reached 7).
@@ -32,10 +32,6 @@ pub const PACED_METRICS: [&str; 9] = [
     "completion_time_s",
     "mistels_score",
 ];
-
-/// How a paced metric's reason begins when the station lagged (stored with the attempt's
-/// results: it measures neither for nor against the trainee).
-pub const STATION_LAGGED: &str = "not measured: the station lagged";
 
 /// The hand's pace as it reached the simulation over the task.
 #[derive(Debug, Clone, Copy, PartialEq)]

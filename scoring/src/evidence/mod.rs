@@ -10,7 +10,6 @@
 
 pub mod predict;
 pub mod report;
-pub mod stats;
 
 pub use report::{
     Comparison, Concurrent, EvidenceAttempt, EvidenceOptions, Finding, Group, GroupValues,

@@ -17,8 +17,8 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
 use super::report::{EvidenceAttempt, definition};
-use super::stats;
 use crate::metrics::Better;
+use crate::stats;
 
 /// How the metrics are combined.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::Experience;
-use super::stats::{self, CutScore, Plateau};
 use crate::metrics::{self, Better};
+use crate::stats::{self, CutScore, Plateau};
 
 /// The key the overall score is reported under, beside the metrics' keys.
 pub const SCORE_KEY: &str = "score";

@@ -30,8 +30,8 @@ use parry3d_f64::query::{Ray, RayCast};
 use parry3d_f64::shape::TriMesh;
 
 use crate::error::{Result, ScoreError};
-use crate::exercise::IncisionPlan;
 use crate::geom;
+use crate::incision_plan::IncisionPlan;
 use crate::input::SurfaceMesh;
 use crate::metrics::Values;
 use crate::metrics::incision::depth_below_plan;

@@ -43,8 +43,8 @@ use std::ops::Range;
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{Result, ScoreError};
-use crate::exercise::IncisionPlan;
 use crate::geom;
+use crate::incision_plan::IncisionPlan;
 use crate::input::{CutSample, PoseSample};
 use crate::metrics::Values;
 

@@ -159,15 +159,18 @@ impl MetricValue {
 impl MetricValue {
     /// Whether the value is missing because the attempt's device cannot measure the metric
     /// (its reason begins [`NOT_MEASURED_WITH_DEVICE`]) or the station lagged behind the hand
-    /// ([`crate::pace::STATION_LAGGED`]), not because of what the trainee did.
+    /// ([`STATION_LAGGED`]), not because of what the trainee did.
     pub fn not_measured(&self) -> bool {
         self.value.is_none()
             && self.missing.as_deref().is_some_and(|m| {
-                m.starts_with(NOT_MEASURED_WITH_DEVICE)
-                    || m.starts_with(crate::pace::STATION_LAGGED)
+                m.starts_with(NOT_MEASURED_WITH_DEVICE) || m.starts_with(STATION_LAGGED)
             })
     }
 }
+
+/// How a paced metric's reason begins when the station lagged (stored with the attempt's
+/// results: it measures neither for nor against the trainee).
+pub const STATION_LAGGED: &str = "not measured: the station lagged";
 
 /// How the reason of a metric the attempt's device cannot measure begins (stored with the
 /// attempt's results, so it holds for attempts scored before as after).

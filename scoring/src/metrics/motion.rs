@@ -99,7 +99,7 @@ pub fn approximate_entropy(x: &[f64], m: usize, r: f64) -> Option<f64> {
 pub fn speed_apen(poses: &[PoseSample]) -> Option<f64> {
     let (t0, t1) = (poses.first()?.t_s, poses.last()?.t_s);
     let v = speed(poses, t0, t1);
-    let (_, sd) = crate::evidence::stats::mean_sd(&v)?;
+    let (_, sd) = crate::stats::mean_sd(&v)?;
     approximate_entropy(&v, 2, 0.2 * sd)
 }
 
@@ -120,7 +120,7 @@ pub fn bimanual(a: &[PoseSample], b: &[PoseSample]) -> (Option<f64>, Option<f64>
     let (t0, t1) = (fa.t_s.max(fb.t_s), la.t_s.min(lb.t_s));
     let (va, vb) = (speed(a, t0, t1), speed(b, t0, t1));
     let n = va.len().min(vb.len());
-    (ratio, crate::evidence::stats::pearson(&va[..n], &vb[..n]))
+    (ratio, crate::stats::pearson(&va[..n], &vb[..n]))
 }
 
 #[cfg(test)]

@@ -16,8 +16,8 @@
 use nalgebra::{Point3, Vector3};
 
 use crate::error::{Result, ScoreError};
-use crate::exercise::IncisionPlan;
 use crate::geom;
+use crate::incision_plan::IncisionPlan;
 use crate::input::{CutSample, ForceSample};
 use crate::metrics::Values;
 use crate::metrics::incision::{same_stroke, trace_point};

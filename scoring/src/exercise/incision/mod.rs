@@ -4,7 +4,8 @@
 
 mod plan;
 
-pub use plan::{BODY_WALL_PLAN_TOML, CHEST_WALL_PLAN_TOML, IncisionPlan};
+pub use crate::incision_plan::IncisionPlan;
+pub use plan::{BODY_WALL_PLAN_TOML, CHEST_WALL_PLAN_TOML};
 
 use super::{Drawing, ExerciseKind, ExercisePlan, FormField, HandLine, PlanKey};
 use crate::error::Result;

@@ -1,5 +1,6 @@
-//! The statistics of validity evidence: Mann-Whitney U, the AUC with its bootstrap interval,
-//! ICC(2,1), the contrasting-groups cut score, a learning curve's plateau and Spearman's rho.
+//! Statistics of the validity evidence and the metrics: Mann-Whitney U, the AUC with its
+//! bootstrap interval, ICC(2,1), the contrasting-groups cut score, a learning curve's plateau,
+//! Spearman's rho, Pearson's r, the mean and standard deviation.
 //! Pure functions on plain slices; a sample too small for a statistic gives `None`.
 
 use cutlab_sim::rng::Rng;
