@@ -118,6 +118,23 @@ pub enum UserCommand {
         #[arg(long)]
         level: String,
     },
+    /// Opens an exercise to a trainee before they are proficient in the one before it in a
+    /// curriculum with progression (as an instructor does on the trainee's progress page);
+    /// a new name becomes a trainee.
+    Open {
+        /// The trainee.
+        #[arg(long)]
+        name: String,
+        /// The exercise opened.
+        #[arg(long)]
+        exercise: String,
+        /// The instructor or administrator who opens it.
+        #[arg(long)]
+        by: String,
+        /// Why, kept with the opening.
+        #[arg(long)]
+        reason: String,
+    },
     /// Lists the users.
     List,
 }
@@ -311,6 +328,18 @@ async fn user(store: &Store, command: UserCommand) -> anyhow::Result<()> {
                 u.name,
                 level.map_or("of no recorded experience", Experience::as_str)
             );
+        }
+        UserCommand::Open {
+            name,
+            exercise,
+            by,
+            reason,
+        } => {
+            let trainee = store.trainee_named(&name).await?;
+            let e = store.exercise_by_name(&exercise).await?;
+            let by = store.user_by_name(&by).await?;
+            store.open_early(trainee.id, e.id, by.id, &reason).await?;
+            println!("{} is open to {} ({reason})", e.name, trainee.name);
         }
         UserCommand::List => {
             for u in store.list_users(None).await? {

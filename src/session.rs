@@ -19,7 +19,7 @@ use cutlab_sim::Vector3;
 use cutlab_sim::io::PointData;
 use cutlab_sim::solver::LocalisationSettings;
 use cutlab_sim::stats::Summary;
-use cutlab_station::attempt::{self, Finished};
+use cutlab_station::attempt::Finished;
 use cutlab_station::attempt_run::{
     self, AttemptSpec, AttemptStore, PlanSource, Prepared, RunResult, RunSettings,
 };
@@ -141,24 +141,28 @@ pub fn run_session(
         Some(a) => Some(rt.block_on(open_store(a))?),
         None => None,
     };
-    let exercise = match (&db, &o.attempt) {
-        (Some((store, _)), Some(a)) => {
-            Some(rt.block_on(attempt::exercise_named(store, &a.exercise))?)
-        }
+    let who = o.attempt.as_ref().map(|a| AttemptSpec {
+        exercise: a.exercise.clone(),
+        trainee: a.trainee.clone(),
+        expert: a.expert,
+        mode: None,
+        device: o.device.to_string(),
+    });
+    // the curriculum's lock is checked before the scene is built (the station's words)
+    let admitted = match (&db, &who) {
+        (Some((store, _)), Some(w)) => Some(rt.block_on(w.admit(store))?),
         _ => None,
     };
-    let source = exercise
+    let source = admitted
         .as_ref()
-        .map_or(PlanSource::AcrossScene, |(_, plan)| {
-            PlanSource::Exercise(plan)
-        });
-    let scene = match (&o.scene, &exercise) {
+        .map_or(PlanSource::AcrossScene, |a| PlanSource::Exercise(&a.plan));
+    let scene = match (&o.scene, &admitted) {
         (Some(s), _) => s.clone(),
-        (None, Some((e, _))) => e.scene.clone(),
+        (None, Some(a)) => a.exercise.scene.clone(),
         (None, None) => DEFAULT_SCENE.into(),
     };
     let prepared = Prepared::new(&scene, &o.run, source);
-    if let Some((e, _)) = &exercise {
+    if let Some(e) = admitted.as_ref().map(|a| &a.exercise) {
         // the scene as given or as it names itself
         let built = prepared.as_ref().ok().map(|p| p.scene.spec.name.as_str());
         if e.scene != scene && built != Some(e.scene.as_str()) {
@@ -197,13 +201,6 @@ pub fn run_session(
     );
     let step_choice = prepared.step_choice.clone();
     let device_name = device.name().to_owned();
-    let who = o.attempt.as_ref().map(|a| AttemptSpec {
-        exercise: a.exercise.clone(),
-        trainee: a.trainee.clone(),
-        expert: a.expert,
-        mode: None,
-        device: o.device.to_string(),
-    });
     let at = db.as_ref().map(|(store, recordings)| AttemptStore {
         store,
         recordings: recordings.as_ref(),
@@ -213,7 +210,10 @@ pub fn run_session(
         &rt,
         prepared,
         device,
-        at.as_ref().zip(who.as_ref()),
+        at.as_ref()
+            .zip(who.as_ref())
+            .zip(admitted.as_ref())
+            .map(|((at, w), a)| (at, w, a)),
         &mcap,
         observer,
     );

@@ -807,3 +807,78 @@ fn names_with_control_or_reordering_characters_are_refused_on_the_command_line()
     let (ok, out, err) = cutlab(&["--db", db, "cohort", "add", "--name", "spring 2027"]);
     assert!(ok, "{out}{err}");
 }
+
+#[test]
+fn a_session_of_a_locked_exercise_is_refused_in_the_stations_words_until_opened() {
+    let dir = tempfile::tempdir().expect("folder");
+    let db = dir.path().join("locks.db");
+    let db = db.to_str().expect("utf8");
+    let out = dir.path().join("session");
+    let session = |trainee: &str| {
+        cutlab(&[
+            "--db",
+            db,
+            "session",
+            "--trainee",
+            trainee,
+            "--exercise",
+            "pattern-cutting",
+            "--duration",
+            "0.2",
+            "--surface-hz",
+            "0",
+            "--out",
+            out.to_str().expect("utf8"),
+        ])
+    };
+    // a new trainee has not reached proficiency in the chest wall, before it in cutting-basics
+    let (ok, _, err) = session("zed");
+    assert!(!ok, "a locked exercise ran");
+    assert!(
+        err.contains("pattern-cutting is locked in the cutting-basics curriculum")
+            && err.contains("an instructor can open it early"),
+        "{err}"
+    );
+    assert!(!out.join("session.mcap").exists(), "nothing is recorded");
+    // a trainee cannot open it, an instructor can
+    let open = |by: &str| {
+        cutlab(&[
+            "--db",
+            db,
+            "user",
+            "open",
+            "--name",
+            "zed",
+            "--exercise",
+            "pattern-cutting",
+            "--by",
+            by,
+            "--reason",
+            "ready early",
+        ])
+    };
+    let (ok, _, err) = open("zed");
+    assert!(
+        !ok && err.contains("only an instructor or an admin"),
+        "{err}"
+    );
+    let (ok, _, err) = cutlab(&[
+        "--db",
+        db,
+        "user",
+        "add",
+        "--name",
+        "dr-lee",
+        "--role",
+        "instructor",
+    ]);
+    assert!(ok, "{err}");
+    let (ok, said, err) = open("dr-lee");
+    assert!(
+        ok && said.contains("pattern-cutting is open to zed"),
+        "{err}"
+    );
+    let (ok, _, err) = session("zed");
+    assert!(ok, "{err}");
+    assert!(out.join("session.mcap").is_file());
+}

@@ -114,9 +114,14 @@ impl Exercise {
     }
 }
 
+/// The trainee whose attempt the session of `skill` with `seed` is.
+fn trainee_of(skill: &str, seed: u64) -> String {
+    format!("rec-{}-{seed}", skill.replace(':', "-"))
+}
+
 /// A session of `exercise` for `duration` s, stored as an attempt of its own trainee.
 fn attempt_args(exercise: &str, duration: &str, skill: &str, seed: u64) -> Vec<String> {
-    let trainee = format!("rec-{}-{seed}", skill.replace(':', "-"));
+    let trainee = trainee_of(skill, seed);
     [
         "--exercise",
         exercise,
@@ -136,10 +141,49 @@ fn record(db: &Path, dir: &Path, skill: &str, seed: u64, exercise: Exercise) -> 
     let out_arg = out.to_str().expect("utf-8 path");
     let mut args = vec!["session", "--device", skill, "--seed", &seed_arg];
     let more = exercise.args(skill, seed);
+    let named = more.iter().position(|a| a == "--exercise");
+    if let Some(name) = named.map(|i| more[i + 1].as_str()) {
+        open_for_study(db, &trainee_of(skill, seed), name);
+    }
     args.extend(more.iter().map(String::as_str));
     args.extend(["--surface-hz", "0", "--out", out_arg]);
     cutlab(db, &args);
     out.join("session.mcap")
+}
+
+/// Opens `exercise` to the synthetic `trainee`, as the study's instructor: a fresh trainee
+/// is held back in `cutting-basics` until proficient in the exercise before it, and
+/// `cutlab session` refuses them as the station does.
+fn open_for_study(db: &Path, trainee: &str, exercise: &str) {
+    // the instructor is added by the first session to need them (the others are refused)
+    let _ = Command::new(env!("CARGO_BIN_EXE_cutlab"))
+        .arg("--db")
+        .arg(db)
+        .args([
+            "user",
+            "add",
+            "--name",
+            "validity-study",
+            "--role",
+            "instructor",
+        ])
+        .env_remove("CUTLAB_DB")
+        .output();
+    cutlab(
+        db,
+        &[
+            "user",
+            "open",
+            "--name",
+            trainee,
+            "--exercise",
+            exercise,
+            "--by",
+            "validity-study",
+            "--reason",
+            "validity study",
+        ],
+    );
 }
 
 /// Records the sessions of `skill` for every seed, two at a time.

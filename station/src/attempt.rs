@@ -28,11 +28,7 @@ pub async fn exercise_named(
 
 /// Refuses `trainee`'s session of `exercise` while it is locked to them in a curriculum with
 /// progression ([`Store::exercise_access`]); instructors and admins are never held back.
-pub async fn check_open(
-    store: &Store,
-    trainee: &str,
-    exercise: &Exercise,
-) -> Result<(), StationError> {
+async fn check_open(store: &Store, trainee: &str, exercise: &Exercise) -> Result<(), StationError> {
     let user = store.trainee_named(trainee).await?;
     if user.role != Role::Trainee {
         return Ok(());
@@ -42,6 +38,31 @@ pub async fn check_open(
         Some(why) => Err(StationError::Locked(why)),
         None => Ok(()),
     }
+}
+
+/// An attempt let in: its exercise and plan (loaded once for the whole run), open to its
+/// trainee. Only [`admit`] makes one, so no attempt starts without the curriculum's lock
+/// checked.
+#[derive(Debug, Clone)]
+pub struct Admitted {
+    pub exercise: Exercise,
+    pub plan: ExercisePlan,
+}
+
+/// Lets `trainee`'s attempt at the exercise named `exercise` in, or says why not: an unknown
+/// exercise, or one locked to them ([`StationError::Locked`], in the words the station shows).
+/// An expert's reference attempt is not a trainee's progression and is never held back.
+pub async fn admit(
+    store: &Store,
+    exercise: &str,
+    trainee: &str,
+    expert: bool,
+) -> Result<Admitted, StationError> {
+    let (exercise, plan) = exercise_named(store, exercise).await?;
+    if !expert {
+        check_open(store, trainee, &exercise).await?;
+    }
+    Ok(Admitted { exercise, plan })
 }
 
 /// What the exercise's hand follows projected onto the session's tissue (33 points evenly
@@ -142,14 +163,16 @@ pub enum Finished {
 /// Ends attempt `id`: scores it from the recording at `outcome`'s path, or marks it incomplete
 /// with `outcome`'s reason (or [`cutlab_scoring::UNTOUCHED_NOTE`] when the tool never touched
 /// the tissue). A recording that cannot be read marks the attempt incomplete; a
-/// recording that cannot be scored marks it failed; both are errors too.
+/// recording that cannot be scored marks it failed; both are errors too. Scored against
+/// `plan` when the caller holds it, else the attempt's exercise's plan from the store.
 pub async fn finish_attempt(
     store: &Store,
     id: i64,
     outcome: Result<&Path, String>,
     recordings: Option<&RecordingStore>,
+    plan: Option<&ExercisePlan>,
 ) -> Result<Finished, StationError> {
-    let finished = end_attempt(store, id, outcome).await;
+    let finished = end_attempt(store, id, outcome, plan).await;
     if let Some(recordings) = recordings {
         keep(store, id, recordings).await;
     }
@@ -178,6 +201,7 @@ async fn end_attempt(
     store: &Store,
     id: i64,
     outcome: Result<&Path, String>,
+    plan: Option<&ExercisePlan>,
 ) -> Result<Finished, StationError> {
     let path = match outcome {
         Ok(path) => path,
@@ -200,7 +224,11 @@ async fn end_attempt(
             .await?;
         return Ok(Finished::Incomplete(cutlab_scoring::UNTOUCHED_NOTE.into()));
     }
-    match store.score_recording(id, &rec).await {
+    let scored = match plan {
+        Some(plan) => store.score_recording_against(id, &rec, plan).await,
+        None => store.score_recording(id, &rec).await,
+    };
+    match scored {
         Ok((outcome, values)) => Ok(Finished::Scored(Box::new(outcome), values)),
         Err(e) => {
             store.mark_failed(id, &e.to_string()).await?;
@@ -316,7 +344,7 @@ pub async fn end_abandoned(
                 )),
             },
         };
-        match finish_attempt(store, a.id, outcome, recordings).await {
+        match finish_attempt(store, a.id, outcome, recordings, None).await {
             Ok(finished) => ended.push((a.id, finished)),
             Err(e) => tracing::warn!("attempt {}: abandoned, but not ended: {e}", a.id),
         }

@@ -1,6 +1,7 @@
 //! One attempt run, the path `cutlab session`, the station, the demo's seeding and the benches
 //! share: the scene built and what the hand follows planned on its tissue ([`Prepared::new`]),
-//! the device made for that plan ([`Prepared::device`]), the attempt opened in the store
+//! the device made for that plan ([`Prepared::device`]), the attempt let in ([`attempt::admit`]:
+//! its exercise and plan loaded once, the curriculum's lock checked) and opened in the store
 //! ([`OpenAttempt::start`]), the session recorded ([`Prepared::record`]), the attempt scored or
 //! marked incomplete ([`OpenAttempt::finish`]) and sent to a hub ([`crate::sync::sync_new`]).
 //! [`run_blocking`] strings them together on the caller's thread; the station runs the same
@@ -26,7 +27,7 @@ use cutlab_scoring::ExercisePlan;
 use cutlab_sim::scene::{BuildOptions, Scene};
 
 use crate::StationError;
-use crate::attempt::{self, AttemptLock, Finished};
+use crate::attempt::{self, Admitted, AttemptLock, Finished};
 use crate::sync::{Hub, SyncReport};
 
 /// How an attempt's session runs, whoever starts it.
@@ -355,31 +356,51 @@ pub struct AttemptSpec {
     pub device: String,
 }
 
+impl AttemptSpec {
+    /// Lets the attempt in ([`attempt::admit`]): its exercise and plan, or why not.
+    pub async fn admit(&self, store: &Store) -> Result<Admitted, StationError> {
+        attempt::admit(store, &self.exercise, &self.trainee, self.expert).await
+    }
+}
+
 /// An attempt in the store while its session runs, its lock held (no sweep takes it for a
 /// dead station's).
 #[derive(Debug)]
 pub struct OpenAttempt {
     pub id: i64,
     lock: AttemptLock,
+    plan: ExercisePlan,
 }
 
 impl OpenAttempt {
-    /// Starts `who`'s attempt, recorded at `mcap`.
+    /// Starts `who`'s attempt, let in as `admitted`, recorded at `mcap`.
     pub async fn start(
         store: &Store,
         who: &AttemptSpec,
+        admitted: &Admitted,
         mcap: &Path,
     ) -> Result<Self, StationError> {
         // held until the attempt has ended
         let lock = AttemptLock::hold(mcap)?;
+        let trainee = store.trainee_named(&who.trainee).await?;
+        let recording = mcap.display().to_string();
         let id = store
-            .start_recorded_attempt(&who.exercise, &who.trainee, mcap, who.expert)
+            .start_attempt(
+                trainee.id,
+                admitted.exercise.id,
+                Some(&recording),
+                who.expert,
+            )
             .await?
             .id;
         store
             .set_attempt_setup(id, who.mode.as_deref(), &who.device)
             .await?;
-        Ok(Self { id, lock })
+        Ok(Self {
+            id,
+            lock,
+            plan: admitted.plan.clone(),
+        })
     }
 
     /// Scores the attempt from the recording at `outcome`'s path, or marks it incomplete with
@@ -390,7 +411,8 @@ impl OpenAttempt {
         outcome: Result<&Path, String>,
         recordings: Option<&RecordingStore>,
     ) -> Result<Finished, StationError> {
-        let finished = attempt::finish_attempt(store, self.id, outcome, recordings).await;
+        let finished =
+            attempt::finish_attempt(store, self.id, outcome, recordings, Some(&self.plan)).await;
         drop(self.lock);
         finished
     }
@@ -430,26 +452,28 @@ pub struct RunResult {
 }
 
 /// One attempt run on this thread (`rt` runs the store's steps): `prepared` recorded to
-/// `mcap` with `device` and `observer`; as `who`'s attempt in `store` when given, scored when
-/// it ends and sent to the hub. An attempt that cannot be opened is the error; everything
+/// `mcap` with `device` and `observer`; as `who`'s attempt in `store` when given (let in as
+/// the [`Admitted`]), scored when it ends and sent to the hub. An attempt that cannot be opened is the error; everything
 /// after it is in the result (the attempt is ended whatever happens to its session).
 pub fn run_blocking(
     rt: &tokio::runtime::Runtime,
     prepared: Prepared,
     device: Box<dyn HapticDevice>,
-    who: Option<(&AttemptStore<'_>, &AttemptSpec)>,
+    who: Option<(&AttemptStore<'_>, &AttemptSpec, &Admitted)>,
     mcap: &Path,
     observer: Option<Box<dyn RecordObserver>>,
 ) -> Result<RunResult, StationError> {
-    let (trainee, exercise) = who.map_or(("", ""), |(_, w)| (&*w.trainee, &*w.exercise));
+    let (trainee, exercise) = who.map_or(("", ""), |(_, w, _)| (&*w.trainee, &*w.exercise));
     let provenance = prepared.provenance(trainee, exercise, device.name());
     let open = match who {
-        Some((at, w)) => Some(rt.block_on(OpenAttempt::start(at.store, w, mcap))?),
+        Some((at, w, admitted)) => {
+            Some(rt.block_on(OpenAttempt::start(at.store, w, admitted, mcap))?)
+        }
         None => None,
     };
     let mut recorded = prepared.record(device, &provenance, mcap, observer);
     let observer = finish_observer(&mut recorded);
-    let (Some(open), Some((at, _))) = (open, who) else {
+    let (Some(open), Some((at, _, _))) = (open, who) else {
         return Ok(RunResult {
             recorded,
             attempt: None,

@@ -30,7 +30,7 @@ use cutlab_sim::scene::Viewpoint;
 use tokio::sync::watch;
 
 use crate::StationError;
-use crate::attempt::{self, Finished};
+use crate::attempt::Finished;
 use crate::attempt_run::{self, AttemptSpec, OpenAttempt, PlanSource, Prepared, RunSettings};
 use crate::view::{EchoSource, ViewFeed, ViewPublisher};
 
@@ -365,12 +365,21 @@ pub async fn start(
     request: StartRequest,
     input: Input,
 ) -> Result<Running, StationError> {
-    let (exercise, expert_plan) = attempt::exercise_named(&store, &request.exercise).await?;
-    attempt::check_open(&store, &request.trainee, &exercise).await?;
+    let mode = |guided: bool| Some(if guided { "guided" } else { "exam" }.to_owned());
+    let mut who = AttemptSpec {
+        exercise: request.exercise.clone(),
+        trainee: request.trainee.clone(),
+        expert: false,
+        mode: mode(request.guided),
+        device: String::new(),
+    };
+    let admitted = who.admit(&store).await?;
+    let exercise = &admitted.exercise;
     let guided = request.guided && !exercise.exam_only;
-    let force_limit_newtons = force_limit(&store, &exercise, &expert_plan, input.class()).await?;
+    let force_limit_newtons = force_limit(&store, exercise, &admitted.plan, input.class()).await?;
     // building and settling the tissue takes a while: off the async threads
     let (scene, run) = (exercise.scene.clone(), settings.run_settings());
+    let expert_plan = admitted.plan.clone();
     let prepared = tokio::task::spawn_blocking(move || {
         Prepared::new(&scene, &run, PlanSource::Exercise(&expert_plan))
     })
@@ -405,14 +414,9 @@ pub async fn start(
         .recordings_dir
         .join(format!("station-{}-{nanos}", request.trainee));
     let mcap = attempt_run::session_mcap(&dir)?;
-    let who = AttemptSpec {
-        exercise: request.exercise.clone(),
-        trainee: request.trainee.clone(),
-        expert: false,
-        mode: Some(if guided { "guided" } else { "exam" }.to_owned()),
-        device: named.unwrap_or_else(|| device.name().to_owned()),
-    };
-    let open = OpenAttempt::start(&store, &who, &mcap).await?;
+    who.mode = mode(guided);
+    who.device = named.unwrap_or_else(|| device.name().to_owned());
+    let open = OpenAttempt::start(&store, &who, &admitted, &mcap).await?;
     let attempt = open.id;
     let provenance = prepared.provenance(&request.trainee, &request.exercise, device.name());
     let echo = pointer

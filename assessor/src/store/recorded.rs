@@ -2,8 +2,8 @@
 //! an attempt scored from its recording ([`cutlab_scoring::from_recording`]).
 
 use cutlab_recorder::Recording;
-use cutlab_scoring::MetricSet;
 use cutlab_scoring::from_recording::assess_recording;
+use cutlab_scoring::{ExercisePlan, MetricSet};
 
 use super::{Attempt, Outcome, Role, Store, User};
 use crate::error::{AssessError, Result};
@@ -44,7 +44,19 @@ impl Store {
     ) -> Result<(Outcome, MetricSet)> {
         let a = self.get_attempt(attempt_id).await?;
         let plan = self.exercise_plan(a.exercise_id).await?;
-        let (values, note) = assess_recording(rec, &plan)?;
+        self.score_recording_against(attempt_id, rec, &plan).await
+    }
+
+    /// [`Store::score_recording`] against `plan`, the attempt's exercise's plan already loaded
+    /// (the run that started the attempt holds it).
+    pub async fn score_recording_against(
+        &self,
+        attempt_id: i64,
+        rec: &Recording,
+        plan: &ExercisePlan,
+    ) -> Result<(Outcome, MetricSet)> {
+        let a = self.get_attempt(attempt_id).await?;
+        let (values, note) = assess_recording(rec, plan)?;
         // an attempt assessed from a file takes the device its recording names (whose class
         // picks the thresholds)
         if a.device.is_none()
