@@ -310,12 +310,12 @@ impl Session {
                     .into(),
             ));
         }
-        let dt_nanos = (self.sim.settings.time_step_s * 1e9).round() as u64;
-        let ticks_per_step = (dt_nanos / config.period_nanos).max(1);
-        if ticks_per_step * config.period_nanos != dt_nanos {
+        let time_step_nanos = (self.sim.settings.time_step_s * 1e9).round() as u64;
+        let ticks_per_step = (time_step_nanos / config.period_nanos).max(1);
+        if ticks_per_step * config.period_nanos != time_step_nanos {
             return Err(HapticsError::Config(format!(
                 "the simulation step ({} ns) must be a whole number of servo periods ({} ns)",
-                dt_nanos, config.period_nanos
+                time_step_nanos, config.period_nanos
             )));
         }
         let ticks = (config.duration_s * 1e9 / config.period_nanos as f64).round() as u64;

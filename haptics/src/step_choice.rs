@@ -141,7 +141,7 @@ impl Session {
     /// Settles `scene` at the simulation step `step` asks for: the scene's own, a fixed one
     /// (the scene is changed to it, which checks it against the scene's rules), or the one
     /// [`Self::choose_real_time_step`] measures with [`AUTO_BUDGET`] (returned with what it
-    /// measured).
+    /// measured). The scene returned holds the step the session runs at.
     pub fn at_time_step(
         scene: Scene,
         step: TimeStep,
@@ -154,6 +154,11 @@ impl Session {
         let choice = match step {
             TimeStep::Auto => Some(session.choose_real_time_step(AUTO_BUDGET)?),
             TimeStep::Scene | TimeStep::Fixed(_) => None,
+        };
+        // the scene says the step the session runs at, whoever chose it
+        let scene = match &choice {
+            Some(c) => scene.with_time_step(c.time_step_s)?,
+            None => scene,
         };
         Ok((scene, session, choice))
     }
@@ -280,6 +285,32 @@ mod tests {
         assert_eq!(s.sim.step_index(), 0);
         assert!(s.choose_real_time_step(0.0).is_err());
         assert!(s.choose_real_time_step(f64::NAN).is_err());
+    }
+
+    /// Whoever chooses the step, the scene and the session agree on it: one value, not a
+    /// scene's default beside a session's choice.
+    #[test]
+    fn the_scene_holds_the_step_the_session_runs_at() {
+        let scene = || {
+            Scene::load(
+                "chest-wall",
+                BuildOptions {
+                    min_tets: Some(500),
+                },
+            )
+            .expect("scene")
+        };
+        let own = scene().spec.solver.time_step_s;
+        for step in [TimeStep::Scene, TimeStep::Fixed(2e-3), TimeStep::Auto] {
+            let (scene, session, choice) = Session::at_time_step(scene(), step).expect("settled");
+            let running = session.sim.settings.time_step_s;
+            assert_eq!(scene.spec.solver.time_step_s, running, "{step}");
+            match step {
+                TimeStep::Scene => assert_eq!(running, own),
+                TimeStep::Fixed(dt) => assert_eq!(running, dt),
+                TimeStep::Auto => assert_eq!(running, choice.expect("a choice").time_step_s),
+            }
+        }
     }
 
     #[test]

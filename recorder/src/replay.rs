@@ -217,7 +217,7 @@ pub fn stepper_for(meta: &SessionMeta) -> Result<SessionStepper, RecorderError> 
     })?;
     // the session's step, when it ran with another than its scene's (`--time-step-ms`)
     let time_step_s = meta.time_step_nanos as f64 / 1e9;
-    let scene = if scene.solver.time_step_s == time_step_s {
+    let scene = if scene.spec.solver.time_step_s == time_step_s {
         scene
     } else {
         scene

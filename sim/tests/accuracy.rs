@@ -236,7 +236,7 @@ fn fem_chest_wall(min_tets: usize, material: FemMaterial) -> Simulation {
     )
     .expect("built-in scene");
     let model = scene.model.clone().with_fem(&[(0, material)]).expect("fem");
-    Simulation::new(model, scene.solver)
+    Simulation::new(model, scene.spec.solver)
 }
 
 #[test]

@@ -97,29 +97,30 @@ impl RunSettings {
         Ok(())
     }
 
-    /// The recording's settings at the simulation step `step_s`: a keyframe every
+    /// The recording's settings at the simulation step `time_step_s`: a keyframe every
     /// `keyframe_every_s` (to the nearest step), the surface at least `surface_hz` often.
-    pub fn record_settings(&self, step_s: f64) -> RecordSettings {
+    pub fn record_settings(&self, time_step_s: f64) -> RecordSettings {
         RecordSettings {
             tap: TapSettings {
-                keyframe_every_steps: self.keyframe_every_steps(step_s),
-                surface_every_steps: surface_every_steps(self.surface_hz, step_s),
+                keyframe_every_steps: self.keyframe_every_steps(time_step_s),
+                surface_every_steps: surface_every_steps(self.surface_hz, time_step_s),
                 ..TapSettings::default()
             },
             writer: WriterOptions::default(),
         }
     }
 
-    fn keyframe_every_steps(&self, step_s: f64) -> u64 {
-        ((self.keyframe_every_s / step_s).round() as u64).max(1)
+    fn keyframe_every_steps(&self, time_step_s: f64) -> u64 {
+        ((self.keyframe_every_s / time_step_s).round() as u64).max(1)
     }
 }
 
-/// The surface recorded every this many steps of `step_s`, so at least `hz` often (0: never).
-/// A ratio within 1e-9 of a whole number is that number (10 Hz at 1 ms: every 100th step).
-fn surface_every_steps(hz: f64, step_s: f64) -> u64 {
+/// The surface recorded every this many steps of `time_step_s`, so at least `hz` often
+/// (0: never). A ratio within 1e-9 of a whole number is that number (10 Hz at 1 ms: every
+/// 100th step).
+fn surface_every_steps(hz: f64, time_step_s: f64) -> u64 {
     if hz > 0.0 {
-        ((1.0 / (hz * step_s) * (1.0 + 1e-9)).floor() as u64).max(1)
+        ((1.0 / (hz * time_step_s) * (1.0 + 1e-9)).floor() as u64).max(1)
     } else {
         0
     }
@@ -188,13 +189,13 @@ impl Prepared {
             ),
             PlanSource::AcrossScene => (across(&built, &session), Vec::new()),
         };
-        let step_s = session.sim.settings.time_step_s;
+        let time_step_s = session.sim.settings.time_step_s;
         let mut config = SessionConfig {
             clock: settings.clock,
             duration_s: settings.duration_s,
             realtime_priority: settings.realtime_priority,
             // the surface BVH is built again at every keyframe, so a replay can resume at each
-            collider_rebuild_every_steps: settings.keyframe_every_steps(step_s),
+            collider_rebuild_every_steps: settings.keyframe_every_steps(time_step_s),
             ..SessionConfig::default()
         };
         config.render = config.render.with_scene_cut(&built.spec);
@@ -453,8 +454,9 @@ pub struct RunResult {
 
 /// One attempt run on this thread (`rt` runs the store's steps): `prepared` recorded to
 /// `mcap` with `device` and `observer`; as `who`'s attempt in `store` when given (let in as
-/// the [`Admitted`]), scored when it ends and sent to the hub. An attempt that cannot be opened is the error; everything
-/// after it is in the result (the attempt is ended whatever happens to its session).
+/// the [`Admitted`]), scored when it ends and sent to the hub. An attempt that cannot be
+/// opened is the error; everything after it is in the result (the attempt is ended whatever
+/// happens to its session).
 pub fn run_blocking(
     rt: &tokio::runtime::Runtime,
     prepared: Prepared,

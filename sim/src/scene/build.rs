@@ -8,7 +8,7 @@ use crate::fem::FemMaterial;
 use crate::generate::{self, GridCells};
 use crate::io::ReadNote;
 use crate::model::{Material, Model};
-use crate::solver::{Simulation, SolverSettings};
+use crate::solver::Simulation;
 use crate::{Point3, TetMesh, Vector3};
 
 const MM: f64 = 1e-3;
@@ -34,8 +34,6 @@ pub struct Scene {
     pub targets: Vec<Target>,
     /// The spec's viewpoint (in millimetres), if it gives one.
     pub viewpoint: Option<Viewpoint>,
-    /// The solver settings of the spec's `[solver]` table.
-    pub solver: SolverSettings,
     /// What the reader left out of the scene's mesh file (vertices no tetrahedron uses,
     /// undeclared TetGen values), for the user to hear about; empty for other meshes.
     pub read_notes: Vec<ReadNote>,
@@ -75,7 +73,6 @@ impl Scene {
                 ),
             });
         }
-        self.solver.time_step_s = time_step_s;
         self.spec.solver.time_step_s = time_step_s;
         Ok(self)
     }
@@ -178,7 +175,6 @@ impl Scene {
         Ok(Self {
             targets: spec.targets.clone(),
             viewpoint: spec.viewpoint.clone(),
-            solver: spec.solver,
             read_notes,
             model,
             spec,
@@ -187,7 +183,7 @@ impl Scene {
 
     /// A simulation of this scene, at rest in the reference positions (not yet settled).
     pub fn simulation(&self) -> Simulation {
-        Simulation::new(self.model.clone(), self.solver)
+        Simulation::new(self.model.clone(), self.spec.solver)
     }
 }
 
