@@ -86,6 +86,16 @@ pub struct Classification {
     pub forced: usize,
 }
 
+/// What [`Resolver::resolve`] has done so far: the vertices on the plane, the edges forced to
+/// split, the vertices moved and those pushed off the plane.
+#[derive(Default)]
+struct Progress {
+    on_plane: BTreeSet<u32>,
+    forced: BTreeSet<[u32; 2]>,
+    moved: Vec<(u32, Point3, Point3)>,
+    pushed: BTreeSet<u32>,
+}
+
 pub struct Resolver<'a> {
     pub mesh: &'a TetMesh,
     pub x: &'a mut [Point3],
@@ -400,8 +410,33 @@ impl Resolver<'_> {
     /// Classifies, then moves vertices and forces splits until every candidate tetrahedron
     /// is either fully cut or not cut.
     pub fn resolve(&mut self) -> Classification {
-        // Vertices of this stroke's cut that drifted a little off the plane (as the wound opens)
-        // count as on it, so that the open wound is not cut again.
+        let mut p = Progress {
+            on_plane: self.stroke_vertices_on_plane(),
+            ..Progress::default()
+        };
+        let max_rounds = 4 * self.candidates.len() + 16;
+        for _ in 0..max_rounds {
+            let c = self.classify(&p.on_plane, &p.forced);
+            let wanted = self.wanted_moves(&c);
+            if wanted.is_empty() || !self.apply_round(&c, wanted, &mut p) {
+                return Classification {
+                    moved: p.moved,
+                    forced: p.forced.len(),
+                    ..c
+                };
+            }
+        }
+        let c = self.classify(&p.on_plane, &p.forced);
+        Classification {
+            moved: p.moved,
+            forced: p.forced.len(),
+            ..c
+        }
+    }
+
+    /// Vertices of this stroke's cut that drifted a little off the plane (as the wound opens)
+    /// count as on it, so that the open wound is not cut again.
+    fn stroke_vertices_on_plane(&self) -> BTreeSet<u32> {
         let mut on_plane: BTreeSet<u32> = BTreeSet::new();
         for &t in self.candidates {
             for &v in &self.mesh.tets()[t as usize] {
@@ -416,149 +451,138 @@ impl Resolver<'_> {
                 }
             }
         }
-        let mut forced = BTreeSet::new();
-        let mut moved = Vec::new();
-        let mut pushed = BTreeSet::new();
-        let max_rounds = 4 * self.candidates.len() + 16;
-        for _ in 0..max_rounds {
-            let c = self.classify(&on_plane, &forced);
-            // Wanted moves, in order: slivers first, then incomplete intersections.
-            let mut wanted: Vec<(u32, Option<[u32; 2]>)> = Vec::new();
-            // (a crossing just past B counts too: the vertex beside it joins the cut, as in 1.
-            // below, or a layer of vertices just beyond the blade's tip would stay off the
-            // plane, no face of that layer would lie on it, and the cut would never separate)
-            for cr in c
-                .crossings
-                .values()
-                .filter(|cr| cr.split || self.within_reach(cr))
-            {
-                if cr.t < self.snap || (cr.t <= 0.5 && self.near_plane(cr.edge[0])) {
-                    wanted.push((cr.edge[0], None));
-                } else if cr.t > 1.0 - self.snap || self.near_plane(cr.edge[1]) {
-                    wanted.push((cr.edge[1], None));
-                }
+        on_plane
+    }
+
+    /// The moves classification `c` wants, in order: slivers first (a vertex, `None`), then
+    /// incomplete intersections (a vertex of a crossing edge that should not be split, with
+    /// the edge).
+    fn wanted_moves(&self, c: &Classification) -> Vec<(u32, Option<[u32; 2]>)> {
+        let mut wanted: Vec<(u32, Option<[u32; 2]>)> = Vec::new();
+        // (a crossing just past B counts too: the vertex beside it joins the cut, as in 1.
+        // below, or a layer of vertices just beyond the blade's tip would stay off the
+        // plane, no face of that layer would lie on it, and the cut would never separate)
+        for cr in c
+            .crossings
+            .values()
+            .filter(|cr| cr.split || self.within_reach(cr))
+        {
+            if cr.t < self.snap || (cr.t <= 0.5 && self.near_plane(cr.edge[0])) {
+                wanted.push((cr.edge[0], None));
+            } else if cr.t > 1.0 - self.snap || self.near_plane(cr.edge[1]) {
+                wanted.push((cr.edge[1], None));
             }
-            for &t in self.candidates {
-                let tet = self.mesh.tets()[t as usize];
-                let edges: Vec<&Crossing> = TET_EDGES
+        }
+        for &t in self.candidates {
+            let tet = self.mesh.tets()[t as usize];
+            let edges: Vec<&Crossing> = TET_EDGES
+                .iter()
+                .filter_map(|&l| c.crossings.get(&edge_key(&tet, l)))
+                .collect();
+            let splits = edges.iter().filter(|e| e.split).count();
+            if splits == 0 || splits == edges.len() {
+                continue;
+            }
+            for e in edges.iter().filter(|e| !e.split) {
+                // the paper moves the vertex outside C; when both (or neither) project
+                // outside, the one nearer the plane
+                let out = e
+                    .edge
+                    .map(|v| !self.plane.contains_projection(&self.x[v as usize], 0.0));
+                let near = match out {
+                    [true, false] => e.edge[0],
+                    [false, true] => e.edge[1],
+                    _ if e.t < 0.5 => e.edge[0],
+                    _ => e.edge[1],
+                };
+                wanted.push((near, Some(e.edge)));
+            }
+        }
+        wanted
+    }
+
+    /// Applies every `wanted` move whose tetrahedra no other move of this round touched (so
+    /// the moves are independent); whether anything changed.
+    fn apply_round(
+        &mut self,
+        c: &Classification,
+        wanted: Vec<(u32, Option<[u32; 2]>)>,
+        p: &mut Progress,
+    ) -> bool {
+        let mut changed = false;
+        let mut done = BTreeSet::new();
+        let mut touched: BTreeSet<u32> = BTreeSet::new();
+        let topo = self.mesh.topology();
+        for (v, edge) in wanted {
+            if p.on_plane.contains(&v) || !done.insert((v, edge)) {
+                continue;
+            }
+            let free = |w: u32, touched: &BTreeSet<u32>| {
+                topo.vertex_tets
+                    .row(w as usize)
                     .iter()
-                    .filter_map(|&l| c.crossings.get(&edge_key(&tet, l)))
-                    .collect();
-                let splits = edges.iter().filter(|e| e.split).count();
-                if splits == 0 || splits == edges.len() {
-                    continue;
-                }
-                for e in edges.iter().filter(|e| !e.split) {
-                    // the paper moves the vertex outside C; when both (or neither) project
-                    // outside, the one nearer the plane
-                    let out = e
-                        .edge
-                        .map(|v| !self.plane.contains_projection(&self.x[v as usize], 0.0));
-                    let near = match out {
-                        [true, false] => e.edge[0],
-                        [false, true] => e.edge[1],
-                        _ if e.t < 0.5 => e.edge[0],
-                        _ => e.edge[1],
-                    };
-                    wanted.push((near, Some(e.edge)));
-                }
+                    .all(|t| !touched.contains(t))
+            };
+            if edge.is_some_and(|e| !free(e[0], &touched) || !free(e[1], &touched))
+                || !free(v, &touched)
+            {
+                continue;
             }
-            if wanted.is_empty() {
-                return Classification {
-                    moved,
-                    forced: forced.len(),
-                    ..c
-                };
+            if let Some(e) =
+                edge.filter(|e| self.within_reach(&c.crossings[e]) && self.splittable(*e))
+            {
+                // the crossing lies just past B: split it (the cut reaches a little
+                // further) rather than pull a vertex across half an element
+                if p.forced.insert(e) {
+                    touched.extend(topo.vertex_tets.row(e[0] as usize));
+                    touched.extend(topo.vertex_tets.row(e[1] as usize));
+                    changed = true;
+                }
+                continue;
             }
-            // Apply every wanted move whose tetrahedra no other move of this round touched
-            // (so the moves are independent), then classify again.
-            let mut changed = false;
-            let mut done = BTreeSet::new();
-            let mut touched: BTreeSet<u32> = BTreeSet::new();
-            let topo = self.mesh.topology();
-            for (v, edge) in wanted {
-                if on_plane.contains(&v) || !done.insert((v, edge)) {
+            if self.apply(v, self.movement(v, c), &mut p.moved) {
+                p.on_plane.insert(v);
+                touched.extend(topo.vertex_tets.row(v as usize));
+                changed = true;
+                continue;
+            }
+            if edge.is_none() && self.near_plane(v) {
+                // within the snapping distance but not free to move (held, on a crease,
+                // or its tetrahedra would flatten): the cut passes through it as it
+                // stands, off the plane by less than the snapping distance
+                p.on_plane.insert(v);
+                touched.extend(topo.vertex_tets.row(v as usize));
+                changed = true;
+                continue;
+            }
+            if edge.is_none()
+                && !p.pushed.contains(&v)
+                && self.apply(v, self.push_away(v, c), &mut p.moved)
+            {
+                // a sliver whose vertex cannot move onto the plane: pushed off instead
+                p.pushed.insert(v);
+                touched.extend(topo.vertex_tets.row(v as usize));
+                changed = true;
+                continue;
+            }
+            if let Some(e) = edge {
+                let other = if e[0] == v { e[1] } else { e[0] };
+                if p.on_plane.contains(&other) {
                     continue;
                 }
-                let free = |w: u32, touched: &BTreeSet<u32>| {
-                    topo.vertex_tets
-                        .row(w as usize)
-                        .iter()
-                        .all(|t| !touched.contains(t))
-                };
-                if edge.is_some_and(|e| !free(e[0], &touched) || !free(e[1], &touched))
-                    || !free(v, &touched)
-                {
-                    continue;
-                }
-                if let Some(e) =
-                    edge.filter(|e| self.within_reach(&c.crossings[e]) && self.splittable(*e))
-                {
-                    // the crossing lies just past B: split it (the cut reaches a little
-                    // further) rather than pull a vertex across half an element
-                    if forced.insert(e) {
-                        touched.extend(topo.vertex_tets.row(e[0] as usize));
-                        touched.extend(topo.vertex_tets.row(e[1] as usize));
-                        changed = true;
-                    }
-                    continue;
-                }
-                if self.apply(v, self.movement(v, &c), &mut moved) {
-                    on_plane.insert(v);
-                    touched.extend(topo.vertex_tets.row(v as usize));
+                if self.apply(other, self.movement(other, c), &mut p.moved) {
+                    p.on_plane.insert(other);
+                    touched.extend(topo.vertex_tets.row(other as usize));
                     changed = true;
                     continue;
                 }
-                if edge.is_none() && self.near_plane(v) {
-                    // within the snapping distance but not free to move (held, on a crease,
-                    // or its tetrahedra would flatten): the cut passes through it as it
-                    // stands, off the plane by less than the snapping distance
-                    on_plane.insert(v);
-                    touched.extend(topo.vertex_tets.row(v as usize));
+                if self.splittable(e) && p.forced.insert(e) {
+                    touched.extend(topo.vertex_tets.row(e[0] as usize));
+                    touched.extend(topo.vertex_tets.row(e[1] as usize));
                     changed = true;
-                    continue;
                 }
-                if edge.is_none()
-                    && !pushed.contains(&v)
-                    && self.apply(v, self.push_away(v, &c), &mut moved)
-                {
-                    // a sliver whose vertex cannot move onto the plane: pushed off instead
-                    pushed.insert(v);
-                    touched.extend(topo.vertex_tets.row(v as usize));
-                    changed = true;
-                    continue;
-                }
-                if let Some(e) = edge {
-                    let other = if e[0] == v { e[1] } else { e[0] };
-                    if on_plane.contains(&other) {
-                        continue;
-                    }
-                    if self.apply(other, self.movement(other, &c), &mut moved) {
-                        on_plane.insert(other);
-                        touched.extend(topo.vertex_tets.row(other as usize));
-                        changed = true;
-                        continue;
-                    }
-                    if self.splittable(e) && forced.insert(e) {
-                        touched.extend(topo.vertex_tets.row(e[0] as usize));
-                        touched.extend(topo.vertex_tets.row(e[1] as usize));
-                        changed = true;
-                    }
-                }
-            }
-            if !changed {
-                return Classification {
-                    moved,
-                    forced: forced.len(),
-                    ..c
-                };
             }
         }
-        let c = self.classify(&on_plane, &forced);
-        Classification {
-            moved,
-            forced: forced.len(),
-            ..c
-        }
+        changed
     }
 }
