@@ -92,15 +92,19 @@ fn reachable_names_without(crate_name: &str, skipped: &[&str]) -> BTreeSet<Strin
 const FORBIDDEN_BELOW_RECORDER: [&str; 7] =
     ["tokio", "sqlx", "axum", "mcap", "rerun", "re_sdk", "hyper"];
 
+/// Which of `forbidden` are among `deps`.
+fn forbidden_among<'a>(deps: &BTreeSet<String>, forbidden: &[&'a str]) -> Vec<&'a str> {
+    forbidden
+        .iter()
+        .copied()
+        .filter(|f| deps.contains(*f))
+        .collect()
+}
+
 #[test]
 fn sim_and_haptics_are_free_of_runtime_database_web_and_recording_crates() {
     for krate in ["cutlab-sim", "cutlab-haptics"] {
-        let deps = reachable_names(krate);
-        let bad: Vec<&str> = FORBIDDEN_BELOW_RECORDER
-            .iter()
-            .copied()
-            .filter(|f| deps.contains(*f))
-            .collect();
+        let bad = forbidden_among(&reachable_names(krate), &FORBIDDEN_BELOW_RECORDER);
         assert!(
             bad.is_empty(),
             "{krate} depends (maybe indirectly) on {bad:?}"
@@ -130,11 +134,7 @@ fn scoring_is_free_of_database_store_and_server_crates() {
         deps.contains("cutlab-sim") && deps.contains("parry3d-f64"),
         "the check sees scoring's real dependencies: {deps:?}"
     );
-    let bad: Vec<&str> = FORBIDDEN_IN_SCORING
-        .iter()
-        .copied()
-        .filter(|f| deps.contains(*f))
-        .collect();
+    let bad = forbidden_among(&deps, &FORBIDDEN_IN_SCORING);
     assert!(
         bad.is_empty(),
         "cutlab-scoring depends (maybe indirectly) on {bad:?}"
