@@ -19,7 +19,7 @@ use cutlab_sim::Vector3;
 use cutlab_sim::io::PointData;
 use cutlab_sim::solver::LocalisationSettings;
 use cutlab_sim::stats::Summary;
-use cutlab_station::attempt::Finished;
+use cutlab_station::attempt::{Admitted, Finished};
 use cutlab_station::attempt_run::{
     self, AttemptSpec, AttemptStore, PlanSource, Prepared, RunResult, RunSettings,
 };
@@ -155,14 +155,14 @@ pub fn run_session(
     };
     let source = admitted
         .as_ref()
-        .map_or(PlanSource::AcrossScene, |a| PlanSource::Exercise(&a.plan));
+        .map_or(PlanSource::AcrossScene, |a| PlanSource::Exercise(a.plan()));
     let scene = match (&o.scene, &admitted) {
         (Some(s), _) => s.clone(),
-        (None, Some(a)) => a.exercise.scene.clone(),
+        (None, Some(a)) => a.exercise().scene.clone(),
         (None, None) => DEFAULT_SCENE.into(),
     };
     let prepared = Prepared::new(&scene, &o.run, source);
-    if let Some(e) = admitted.as_ref().map(|a| &a.exercise) {
+    if let Some(e) = admitted.as_ref().map(Admitted::exercise) {
         // the scene as given or as it names itself
         let built = prepared.as_ref().ok().map(|p| p.scene.spec.name.as_str());
         if e.scene != scene && built != Some(e.scene.as_str()) {

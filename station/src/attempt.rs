@@ -16,53 +16,57 @@ use cutlab_sim::{Point3, Vector3};
 
 use crate::StationError;
 
-/// An exercise and its expert plan, by the exercise's name.
-pub async fn exercise_named(
-    store: &Store,
-    name: &str,
-) -> Result<(Exercise, ExercisePlan), StationError> {
-    let e = store.exercise_by_name(name).await?;
-    let plan = store.exercise_plan(e.id).await?;
-    Ok((e, plan))
-}
-
-/// Refuses `trainee`'s session of `exercise` while it is locked to them in a curriculum with
-/// progression ([`Store::exercise_access`]); instructors and admins are never held back.
-async fn check_open(store: &Store, trainee: &str, exercise: &Exercise) -> Result<(), StationError> {
-    let user = store.trainee_named(trainee).await?;
-    if user.role != Role::Trainee {
-        return Ok(());
-    }
-    let access = store.exercise_access(user.id, exercise.id).await?;
-    match access.locked_message(&exercise.name) {
-        Some(why) => Err(StationError::Locked(why)),
-        None => Ok(()),
-    }
-}
-
-/// An attempt let in: its exercise and plan (loaded once for the whole run), open to its
-/// trainee. Only [`admit`] makes one, so no attempt starts without the curriculum's lock
-/// checked.
+/// An attempt let in: its trainee, its exercise and plan (loaded once for the whole run),
+/// open to the trainee. Only [`admit`] makes one, so no attempt starts without the
+/// curriculum's lock checked.
 #[derive(Debug, Clone)]
 pub struct Admitted {
-    pub exercise: Exercise,
-    pub plan: ExercisePlan,
+    trainee_id: i64,
+    exercise: Exercise,
+    plan: ExercisePlan,
+}
+
+impl Admitted {
+    /// The trainee's user id (a new name became a trainee).
+    pub fn trainee_id(&self) -> i64 {
+        self.trainee_id
+    }
+
+    pub fn exercise(&self) -> &Exercise {
+        &self.exercise
+    }
+
+    /// The exercise's expert plan, the attempt is scored against.
+    pub fn plan(&self) -> &ExercisePlan {
+        &self.plan
+    }
 }
 
 /// Lets `trainee`'s attempt at the exercise named `exercise` in, or says why not: an unknown
-/// exercise, or one locked to them ([`StationError::Locked`], in the words the station shows).
-/// An expert's reference attempt is not a trainee's progression and is never held back.
+/// exercise, or one locked to them in a curriculum with progression
+/// ([`Store::exercise_access`]; [`StationError::Locked`], in the words the station shows).
+/// Instructors and admins are never held back, nor is an expert's reference attempt (not a
+/// trainee's progression). A new name becomes a trainee.
 pub async fn admit(
     store: &Store,
     exercise: &str,
     trainee: &str,
     expert: bool,
 ) -> Result<Admitted, StationError> {
-    let (exercise, plan) = exercise_named(store, exercise).await?;
-    if !expert {
-        check_open(store, trainee, &exercise).await?;
+    let exercise = store.exercise_by_name(exercise).await?;
+    let plan = store.exercise_plan(exercise.id).await?;
+    let user = store.trainee_named(trainee).await?;
+    if !expert && user.role == Role::Trainee {
+        let access = store.exercise_access(user.id, exercise.id).await?;
+        if let Some(why) = access.locked_message(&exercise.name) {
+            return Err(StationError::Locked(why));
+        }
     }
-    Ok(Admitted { exercise, plan })
+    Ok(Admitted {
+        trainee_id: user.id,
+        exercise,
+        plan,
+    })
 }
 
 /// What the exercise's hand follows projected onto the session's tissue (33 points evenly

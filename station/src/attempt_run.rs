@@ -383,12 +383,11 @@ impl OpenAttempt {
     ) -> Result<Self, StationError> {
         // held until the attempt has ended
         let lock = AttemptLock::hold(mcap)?;
-        let trainee = store.trainee_named(&who.trainee).await?;
         let recording = mcap.display().to_string();
         let id = store
             .start_attempt(
-                trainee.id,
-                admitted.exercise.id,
+                admitted.trainee_id(),
+                admitted.exercise().id,
                 Some(&recording),
                 who.expert,
             )
@@ -400,7 +399,7 @@ impl OpenAttempt {
         Ok(Self {
             id,
             lock,
-            plan: admitted.plan.clone(),
+            plan: admitted.plan().clone(),
         })
     }
 

@@ -374,12 +374,12 @@ pub async fn start(
         device: String::new(),
     };
     let admitted = who.admit(&store).await?;
-    let exercise = &admitted.exercise;
+    let exercise = admitted.exercise();
     let guided = request.guided && !exercise.exam_only;
-    let force_limit_newtons = force_limit(&store, exercise, &admitted.plan, input.class()).await?;
+    let force_limit_newtons = force_limit(&store, exercise, admitted.plan(), input.class()).await?;
     // building and settling the tissue takes a while: off the async threads
     let (scene, run) = (exercise.scene.clone(), settings.run_settings());
-    let expert_plan = admitted.plan.clone();
+    let expert_plan = admitted.plan().clone();
     let prepared = tokio::task::spawn_blocking(move || {
         Prepared::new(&scene, &run, PlanSource::Exercise(&expert_plan))
     })
