@@ -273,7 +273,7 @@ enum RecordingCommand {
 enum SceneCommand {
     /// Counts, volume, mass, bounding box and mesh quality of a scene or mesh file.
     Info {
-        /// A built-in scene (chest-wall, sheet, bar), a scene file (.toml/.json) or a mesh file.
+        /// A built-in scene (chest-wall, sheet, bar, body-wall, skin-block, thorax, gauze), a scene file (.toml/.json) or a mesh file.
         scene: String,
         /// Resolution of a generated mesh: at least this many tetrahedra.
         #[arg(long)]
@@ -350,7 +350,7 @@ fn stdout_errors_end_quietly() {
 /// `cutlab session`'s arguments.
 #[derive(Debug, clap::Args)]
 struct SessionArgs {
-    /// A built-in scene (chest-wall, sheet, bar, body-wall, skin-block) or a scene/mesh file; by
+    /// A built-in scene (chest-wall, sheet, bar, body-wall, skin-block, thorax, gauze) or a scene/mesh file; by
     /// default the exercise's (with `--exercise`), else chest-wall.
     #[arg(long)]
     scene: Option<String>,

@@ -58,6 +58,7 @@ pub mod cut_stress;
 pub mod error;
 pub mod fem;
 pub mod generate;
+pub mod grasp;
 pub mod hash;
 pub mod io;
 pub mod mesh;

@@ -285,26 +285,7 @@ pub fn patch_test(
                     "patch test did not settle: {report:?}"
                 )));
             }
-            let n = sim.model.vertex_count();
-            let mut f = vec![Vector3::zeros(); n];
-            let zero = vec![Vector3::zeros(); n];
-            match &sim.model.fem {
-                Some(fem) => crate::fem::solve::total_forces(
-                    &sim.model,
-                    fem,
-                    &sim.state.positions,
-                    &zero,
-                    &zero,
-                    &mut f,
-                ),
-                None => crate::solver::forces::total_forces(
-                    &sim.model,
-                    &sim.state.positions,
-                    &zero,
-                    &zero,
-                    &mut f,
-                ),
-            }
+            let f = sim.forces_at(&vec![Vector3::zeros(); sim.model.vertex_count()]);
             let u = sim
                 .state
                 .positions

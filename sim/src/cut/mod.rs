@@ -13,6 +13,7 @@ mod fragment;
 mod pattern;
 mod polygon;
 mod resolve;
+mod scissors;
 mod separate;
 mod specimen;
 mod stop;
@@ -24,6 +25,7 @@ pub use cutter::{Cutter, CutterResume, CutterResumeError, EndedStroke};
 pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
+pub use scissors::{CLOSURE_SPACING_M, Scissors};
 pub use specimen::Specimen;
 pub use stop::{BladeStop, STOP_MARGIN_M, stop_on_uncuttable};
 

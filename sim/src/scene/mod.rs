@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use crate::ReadError;
 
 /// Built-in scenes: name and TOML text.
-pub const BUILTIN: [(&str, &str); 7] = [
+pub const BUILTIN: [(&str, &str); 8] = [
     ("chest-wall", include_str!("../../scenes/chest-wall.toml")),
     (
         "chest-wall-fem",
@@ -27,6 +27,7 @@ pub const BUILTIN: [(&str, &str); 7] = [
     ("body-wall", include_str!("../../scenes/body-wall.toml")),
     ("skin-block", include_str!("../../scenes/skin-block.toml")),
     ("thorax", include_str!("../../scenes/thorax.toml")),
+    ("gauze", include_str!("../../scenes/gauze.toml")),
 ];
 
 /// Why a scene could not be loaded or built.

@@ -254,6 +254,28 @@ impl Simulation {
         }
     }
 
+    /// The force on every particle at the current positions and `velocities` (N): springs or
+    /// elements, their dampers, gravity; no external force. Held particles included: theirs
+    /// is what holds them (see [`crate::grasp`]).
+    pub fn forces_at(&self, velocities: &[Vector3]) -> Vec<Vector3> {
+        let n = self.model.vertex_count();
+        let mut out = vec![Vector3::zeros(); n];
+        let zero = vec![Vector3::zeros(); n];
+        let x = &self.state.positions;
+        match &self.model.fem {
+            Some(fem) => {
+                crate::fem::solve::total_forces(&self.model, fem, x, velocities, &zero, &mut out)
+            }
+            None => forces::total_forces(&self.model, x, velocities, &zero, &mut out),
+        }
+        out
+    }
+
+    /// [`Self::forces_at`] the state's velocities.
+    pub fn particle_forces(&self) -> Vec<Vector3> {
+        self.forces_at(&self.state.velocities)
+    }
+
     /// Steps taken so far.
     pub fn step_index(&self) -> u64 {
         self.step_index

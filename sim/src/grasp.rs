@@ -1,0 +1,191 @@
+//! A grasper's jaws closed on tissue (issue 66): the second hand, which holds, lifts and pulls
+//! while the other cuts.
+//!
+//! Closing the jaws at the pose `world_from_jaw` takes hold of every free particle within
+//! `jaw_radius_m` of the jaws' centre (the bite: through a thin sheet's whole thickness, a fold
+//! of a thick one's surface). Each held particle keeps its place in the jaws' frame,
+//!
+//! `x_i = world_from_jaw * p_i`, `p_i = jaw_from_world(closing) * x_i(closing)`,
+//!
+//! and is moved there, held (infinite mass to the integrators), whenever the jaws move
+//! ([`Grasp::carry`]); its velocity is the jaws' displacement over the step, so the dampers
+//! between held and free particles see the pull's rate.
+//!
+//! The tissue pulls on the jaws with the total force on the held particles,
+//!
+//! `f_pull = sum_{i held} (f_int,i + m_i g)`,
+//!
+//! the force the springs (or elements) and dampers joining them to the tissue, and gravity on
+//! them, exert: what the grasper's hand feels. It is the reaction of the held tissue: with
+//! the tissue at rest, the pull on the jaws and on every other held particle (a sheet's rim)
+//! sum to the tissue's weight, as Newton's third law demands. Past `slip_force_newtons` the
+//! tissue slips out of the jaws ([`Grasp::slips`]); opening them lets go ([`Grasp::release`]):
+//! the particles are free again with their masses and relax under the tissue's forces.
+
+use nalgebra::Isometry3;
+
+use crate::solver::Simulation;
+use crate::{Point3, Vector3};
+
+/// How a grasper takes hold.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GraspSettings {
+    /// Free particles within this distance of the jaws' centre are held, m.
+    pub jaw_radius_m: f64,
+    /// A pull on the jaws stronger than this makes the tissue slip out of them, N.
+    pub slip_force_newtons: f64,
+}
+
+impl Default for GraspSettings {
+    /// Jaws of a 5 mm laparoscopic grasper (a bite of 3 mm radius); the tissue slips past 4 N.
+    fn default() -> Self {
+        Self {
+            jaw_radius_m: 0.003,
+            slip_force_newtons: 4.0,
+        }
+    }
+}
+
+/// Why the jaws took nothing.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GraspError {
+    /// The jaws' pose or the settings are not finite, or the radius is not positive.
+    #[error("the jaws' pose and radius must be finite and the radius positive")]
+    Invalid,
+    /// No free particle lies within the jaws.
+    #[error("nothing within {radius_mm:.1} mm of the jaws")]
+    NothingInJaws {
+        /// The jaws' radius, mm.
+        radius_mm: f64,
+    },
+}
+
+/// Tissue held in closed jaws.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grasp {
+    /// The held particles, ascending.
+    vertices: Vec<u32>,
+    /// Each held particle in the jaws' frame, m.
+    in_jaw_m: Vec<Point3>,
+    /// Where the jaws are now.
+    world_from_jaw: Isometry3<f64>,
+    settings: GraspSettings,
+}
+
+impl Grasp {
+    /// Closes the jaws at `world_from_jaw` on `sim`'s tissue: every free particle within
+    /// the jaws' radius is held where it is.
+    pub fn close(
+        sim: &mut Simulation,
+        world_from_jaw: Isometry3<f64>,
+        settings: GraspSettings,
+    ) -> Result<Self, GraspError> {
+        let r = settings.jaw_radius_m;
+        let pose_finite = world_from_jaw
+            .translation
+            .vector
+            .iter()
+            .all(|c| c.is_finite())
+            && world_from_jaw.rotation.coords.iter().all(|c| c.is_finite());
+        if !(pose_finite && r.is_finite() && r > 0.0) {
+            return Err(GraspError::Invalid);
+        }
+        let centre = Point3::from(world_from_jaw.translation.vector);
+        let vertices: Vec<u32> = (0..sim.model.vertex_count() as u32)
+            .filter(|&v| {
+                !sim.model.held[v as usize]
+                    && (sim.state.positions[v as usize] - centre).norm() <= r
+            })
+            .collect();
+        if vertices.is_empty() {
+            return Err(GraspError::NothingInJaws { radius_mm: r * 1e3 });
+        }
+        let jaw_from_world = world_from_jaw.inverse();
+        let in_jaw_m = vertices
+            .iter()
+            .map(|&v| jaw_from_world * sim.state.positions[v as usize])
+            .collect();
+        sim.edit(|model, _| {
+            for &v in &vertices {
+                model.held[v as usize] = true;
+                model.inv_mass[v as usize] = 0.0;
+            }
+        });
+        sim.wake(vertices.iter().copied());
+        Ok(Self {
+            vertices,
+            in_jaw_m,
+            world_from_jaw,
+            settings,
+        })
+    }
+
+    /// The held particles, ascending.
+    pub fn vertices(&self) -> &[u32] {
+        &self.vertices
+    }
+
+    /// Where the jaws are, as last carried.
+    pub fn world_from_jaw(&self) -> &Isometry3<f64> {
+        &self.world_from_jaw
+    }
+
+    /// Moves the jaws to `world_from_jaw`, carrying the held tissue with them: each held
+    /// particle to its place in the jaws, its velocity the displacement over one step. A
+    /// non-finite pose is ignored (the jaws stay where they were) and `false` returned.
+    pub fn carry(&mut self, sim: &mut Simulation, world_from_jaw: Isometry3<f64>) -> bool {
+        let finite = world_from_jaw
+            .translation
+            .vector
+            .iter()
+            .all(|c| c.is_finite())
+            && world_from_jaw.rotation.coords.iter().all(|c| c.is_finite());
+        if !finite {
+            return false;
+        }
+        let dt = sim.settings.time_step_s;
+        for (&v, p) in self.vertices.iter().zip(&self.in_jaw_m) {
+            let v = v as usize;
+            if v >= sim.model.vertex_count() {
+                continue;
+            }
+            let to = world_from_jaw * p;
+            sim.state.velocities[v] = (to - sim.state.positions[v]) / dt;
+            sim.state.positions[v] = to;
+        }
+        self.world_from_jaw = world_from_jaw;
+        sim.wake(self.vertices.iter().copied());
+        true
+    }
+
+    /// The tissue's pull on the jaws, N: the total force on the held particles (see the
+    /// module's documentation).
+    pub fn pull_newtons(&self, sim: &Simulation) -> Vector3 {
+        let forces = sim.particle_forces();
+        self.vertices
+            .iter()
+            .filter_map(|&v| forces.get(v as usize))
+            .sum()
+    }
+
+    /// Whether a pull of `pull_newtons` pulls the tissue out of the jaws.
+    pub fn slips(&self, pull_newtons: &Vector3) -> bool {
+        pull_newtons.norm() > self.settings.slip_force_newtons
+    }
+
+    /// Opens the jaws: the held particles are free again, with their masses and the
+    /// velocities they were carried at.
+    pub fn release(self, sim: &mut Simulation) {
+        sim.edit(|model, _| {
+            for &v in &self.vertices {
+                let v = v as usize;
+                if v < model.vertex_count() && model.mass[v] > 0.0 {
+                    model.held[v] = false;
+                    model.inv_mass[v] = 1.0 / model.mass[v];
+                }
+            }
+        });
+        sim.wake(self.vertices.iter().copied());
+    }
+}
