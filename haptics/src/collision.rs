@@ -282,9 +282,7 @@ impl SurfaceCollider {
                 plane_point: h.point,
                 plane_normal: h.normal,
                 stiffness_newtons_per_m: self.stiffness_at(sim, h),
-                cut_entry: None,
-                wound: None,
-                blade_stop: None,
+                ..ContactModel::default()
             },
             _ => ContactModel {
                 published: true,

@@ -5,6 +5,10 @@ use crate::{Point3, Rotation, Vector3};
 /// Button bit: the blade is engaged (the trainee means to cut).
 pub const BUTTON_BLADE: u32 = 1;
 
+/// Button bit of a grasper: its jaws are closed (the second hand holds what is between them;
+/// the pose's tip is the jaws' centre).
+pub const BUTTON_JAWS: u32 = 2;
+
 /// Pose of the scalpel: its tip in the world, its orientation and its buttons.
 ///
 /// Tool frame: origin at the blade's tip, +z along the cutting edge towards the handle, +x the
@@ -45,6 +49,19 @@ impl ToolPose {
     /// tip, in the world.
     pub fn blade_heel(&self, blade_length_m: f64) -> Point3 {
         self.tip_in_world + self.edge_direction() * blade_length_m
+    }
+
+    /// Whether a grasper's jaws are closed.
+    pub fn jaws_closed(&self) -> bool {
+        self.buttons & BUTTON_JAWS != 0
+    }
+
+    /// The pose as a rigid transform, `world_from_tool` placed at the tip.
+    pub fn isometry(&self) -> nalgebra::Isometry3<f64> {
+        nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(self.tip_in_world.coords),
+            self.world_from_tool,
+        )
     }
 
     /// Whether the blade is engaged (may cut).

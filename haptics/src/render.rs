@@ -60,6 +60,9 @@ pub struct ContactModel {
     /// (`cutlab_sim::cut::Cutter::stop`). The tip is pushed back to it as from a hard
     /// surface, at the renderer's largest stiffness.
     pub blade_stop: Option<(Point3, Vector3)>,
+    /// While the grasper's jaws hold tissue: its pull on them, N
+    /// (`cutlab_sim::grasp::Grasp::pull_newtons`); zero otherwise.
+    pub grasp_pull_newtons: Vector3,
 }
 
 /// See [`ContactModel::wound`].
@@ -87,6 +90,7 @@ impl Default for ContactModel {
             cut_entry: None,
             wound: None,
             blade_stop: None,
+            grasp_pull_newtons: Vector3::zeros(),
         }
     }
 }
@@ -562,9 +566,7 @@ mod tests {
             plane_point: Point3::origin(),
             plane_normal: Vector3::z(),
             stiffness_newtons_per_m: k,
-            cut_entry: None,
-            wound: None,
-            blade_stop: None,
+            ..ContactModel::default()
         }
     }
 

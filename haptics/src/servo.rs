@@ -76,6 +76,9 @@ pub struct ServoSample {
     pub pose: ToolPose,
     /// What the force renderer produced.
     pub render: RenderOutput,
+    /// The second hand's grasper, when the session has one: its pose (the last good one
+    /// when its device failed), the jaws' centre at the tip.
+    pub grasper: Option<ToolPose>,
 }
 
 /// Something the log should hear about, sent from the servo thread without allocating.
@@ -243,6 +246,20 @@ impl Backoff {
     }
 }
 
+/// The force on the grasper's hand: the held tissue's pull on the jaws the simulation
+/// published, at most `max_newtons` (nothing while the jaws hold nothing).
+fn grasp_force(contact: &ContactModel, max_newtons: f64) -> Vector3 {
+    let pull = contact.grasp_pull_newtons;
+    let n = pull.norm();
+    if n.is_finite() && n > max_newtons && n > 0.0 {
+        pull * (max_newtons / n)
+    } else if n.is_finite() {
+        pull
+    } else {
+        Vector3::zeros()
+    }
+}
+
 /// Sleeps until `spin` before `deadline`, then spins to it.
 fn wait_until(deadline: Instant, spin: Duration) {
     loop {
@@ -282,10 +299,12 @@ fn try_realtime() -> Result<(), RealtimeError> {
     .map_err(RealtimeError::Os)
 }
 
-/// Starts the servo thread (named `cutlab-servo`).
+/// Starts the servo thread (named `cutlab-servo`): `device` holds the scalpel, `grasper` (a
+/// second device, read and written in the same tick) the second hand's grasper.
 pub fn spawn<D: HapticDevice + 'static>(
     config: ServoConfig,
     mut device: D,
+    mut grasper: Option<Box<dyn HapticDevice>>,
     mut renderer: ForceRenderer,
     mut links: ServoLinks,
 ) -> std::io::Result<std::thread::JoinHandle<(ServoReport, D)>> {
@@ -318,6 +337,7 @@ pub fn spawn<D: HapticDevice + 'static>(
         let spin = Duration::from_nanos(config.spin_nanos);
         let tps = config.ticks_per_step.max(1);
         let mut last_pose = ToolPose::default();
+        let mut last_grasper = ToolPose::default();
         let mut last_tip: Option<Point3> = None;
         let mut previous_faults = 0u8;
         let mut previous_gain = 1.0;
@@ -356,6 +376,15 @@ pub fn spawn<D: HapticDevice + 'static>(
             let out = renderer.update(tick, read, &contact);
             // a device that fails to take the force is noticed by its next read
             let _ = device.write_force(out.force_newtons);
+            let grasper_pose = grasper.as_mut().map(|g| {
+                if let Ok(p) = g.read(tick, time_s)
+                    && p.is_finite()
+                {
+                    last_grasper = p;
+                }
+                let _ = g.write_force(grasp_force(&contact, g.limits().max_force_newtons));
+                last_grasper
+            });
 
             report.max_force_newtons = report.max_force_newtons.max(out.force_newtons.norm());
             out.force_newtons.iter().for_each(|&c| force_hash.f64(c));
@@ -383,7 +412,7 @@ pub fn spawn<D: HapticDevice + 'static>(
             }
             previous_faults = out.faults;
             previous_gain = out.gain;
-            let sample = ServoSample { tick, pose: last_pose, render: out };
+            let sample = ServoSample { tick, pose: last_pose, render: out, grasper: grasper_pose };
             if links.samples.push(sample).is_err() {
                 report.dropped_samples += 1;
             }
@@ -402,6 +431,9 @@ pub fn spawn<D: HapticDevice + 'static>(
         report.tick_work_nanos.truncate(done);
         report.non_finite_count = renderer.non_finite_count;
         let _ = device.write_force(Vector3::zeros());
+        if let Some(g) = &mut grasper {
+            let _ = g.write_force(Vector3::zeros());
+        }
         (report, device)
     })
 }

@@ -329,6 +329,19 @@ impl Session {
         config: &SessionConfig,
         tap: Option<RecordTap>,
     ) -> Result<SessionReport, HapticsError> {
+        self.run_two_handed(device, None, config, tap)
+    }
+
+    /// [`Self::run_recorded`] with a second hand: `grasper`'s device read and its force
+    /// written in the same servo tick as the scalpel's, its jaws holding the tissue while
+    /// closed ([`crate::stepper`]).
+    pub fn run_two_handed(
+        self,
+        device: Box<dyn HapticDevice>,
+        grasper: Option<Box<dyn HapticDevice>>,
+        config: &SessionConfig,
+        tap: Option<RecordTap>,
+    ) -> Result<SessionReport, HapticsError> {
         let (render, ticks_per_step, ticks) = self.checked(config, device.limits())?;
 
         let (contact_in, contact_out) = triple_buffer::triple_buffer(&ContactModel::default());
@@ -398,6 +411,7 @@ impl Session {
         let servo_thread = match servo::spawn(
             servo_config,
             device,
+            grasper,
             ForceRenderer::new(render).with_blade_length(config.blade_length_m),
             links,
         ) {

@@ -8,6 +8,7 @@
 
 use cutlab_sim::TetMesh;
 use cutlab_sim::cut::{self, Blade, CutError, CutEvent, Cutter, CutterResume};
+use cutlab_sim::grasp::{Grasp, GraspSettings};
 use cutlab_sim::hash::Fnv1a;
 use cutlab_sim::model::State;
 use cutlab_sim::solver::{ResumeState, Simulation};
@@ -46,6 +47,18 @@ pub struct StepperStats {
     /// `cutlab_sim::cut::Cutter::stop`).
     #[serde(default)]
     pub blade_stops: u64,
+    /// Closures of the grasper's jaws that took hold of tissue.
+    #[serde(default)]
+    pub grasps: u64,
+    /// Times the held tissue slipped out of the jaws, pulled past their hold.
+    #[serde(default)]
+    pub grasp_slips: u64,
+    /// The strongest pull of held tissue on the jaws, N.
+    #[serde(default)]
+    pub max_grasp_pull_newtons: f64,
+    /// Steps the jaws held tissue.
+    #[serde(default)]
+    pub grasp_steps: u64,
 }
 
 /// What one step did.
@@ -97,6 +110,12 @@ pub struct SessionStepper {
     collider_fresh: bool,
     /// What reports each harm once.
     damage: DamageWatch,
+    /// What the grasper's jaws hold.
+    grasp: Option<Grasp>,
+    /// The grasper's jaws were closed at the last step (closed jaws take hold only as they
+    /// close).
+    jaws_closed: bool,
+    grasp_settings: GraspSettings,
 }
 
 /// What a [`SessionStepper`] carries from one step to the next beyond the simulation's state
@@ -127,6 +146,12 @@ pub struct StepperResume {
     /// where nothing was harmed).
     #[serde(default, skip_serializing_if = "DamageWatch::is_clear")]
     pub damage: DamageWatch,
+    /// What the grasper's jaws hold (absent where nothing is held).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grasp: Option<Grasp>,
+    /// The grasper's jaws were closed.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub jaws_closed: bool,
 }
 
 impl SessionStepper {
@@ -152,6 +177,9 @@ impl SessionStepper {
             rebuild_every_steps: config.collider_rebuild_every_steps,
             collider_fresh: false,
             damage: DamageWatch::default(),
+            grasp: None,
+            jaws_closed: false,
+            grasp_settings: GraspSettings::default(),
         }
     }
 
@@ -174,6 +202,8 @@ impl SessionStepper {
             wound: self.wound,
             stats: self.stats,
             damage: self.damage.clone(),
+            grasp: self.grasp.clone(),
+            jaws_closed: self.jaws_closed,
         })
     }
 
@@ -228,6 +258,9 @@ impl SessionStepper {
         {
             return Err(invalid("the last cut's tip is not finite".into()));
         }
+        if !r.grasp.as_ref().is_none_or(|g| g.fits(n)) {
+            return Err(invalid("the grasp does not fit the mesh".into()));
+        }
         let mut cutter = self.cutter.clone();
         cutter
             .resume(&r.cutter, n)
@@ -243,6 +276,8 @@ impl SessionStepper {
         self.wound = r.wound;
         self.stats = r.stats;
         self.damage = r.damage.clone();
+        self.grasp = r.grasp.clone();
+        self.jaws_closed = r.jaws_closed;
         self.steps = r.steps;
         self.collider_fresh = true;
         Ok(())
@@ -279,10 +314,59 @@ impl SessionStepper {
         }
     }
 
+    /// The second hand, before the step: jaws closing take hold of the tissue between them,
+    /// closed ones carry what they hold to their pose, opening ones let go.
+    fn hold(&mut self, sample: &ServoSample) {
+        let Some(jaws) = sample.grasper else {
+            return;
+        };
+        let closed = jaws.jaws_closed();
+        match &mut self.grasp {
+            Some(grasp) if closed => {
+                grasp.carry(&mut self.sim, jaws.isometry());
+            }
+            Some(_) => {
+                if let Some(grasp) = self.grasp.take() {
+                    grasp.release(&mut self.sim);
+                }
+            }
+            None if closed && !self.jaws_closed => {
+                // jaws closed on nothing hold nothing until they open and close again
+                if let Ok(grasp) = Grasp::close(&mut self.sim, jaws.isometry(), self.grasp_settings)
+                {
+                    self.stats.grasps += 1;
+                    self.grasp = Some(grasp);
+                }
+            }
+            None => {}
+        }
+        self.jaws_closed = closed;
+    }
+
+    /// The second hand, after the step: the held tissue's pull on the jaws, and the tissue
+    /// let go where it pulls past the jaws' hold.
+    fn pull_on_jaws(&mut self) -> Vector3 {
+        let Some(grasp) = &self.grasp else {
+            return Vector3::zeros();
+        };
+        let pull = grasp.pull_newtons(&self.sim);
+        self.stats.grasp_steps += 1;
+        self.stats.max_grasp_pull_newtons = self.stats.max_grasp_pull_newtons.max(pull.norm());
+        if grasp.slips(&pull) || !pull.iter().all(|c| c.is_finite()) {
+            self.stats.grasp_slips += 1;
+            if let Some(grasp) = self.grasp.take() {
+                grasp.release(&mut self.sim);
+            }
+            return Vector3::zeros();
+        }
+        pull
+    }
+
     /// One simulation step driven by `sample`.
     pub fn step(&mut self, sample: &ServoSample) -> StepOutput {
         let render = sample.render;
         self.push_on_tissue(sample);
+        self.hold(sample);
         // Cutting while the renderer says the blade is in the tissue; it went in where the
         // contact model it rendered from was, or, put back into the last cut's wound, where
         // that cut went in.
@@ -351,6 +435,7 @@ impl SessionStepper {
         }
 
         let stepped = self.sim.step();
+        let grasp_pull_newtons = self.pull_on_jaws();
         let rejected = match &stepped {
             Ok(report) => {
                 self.stats.cg_iterations += report.cg_iterations as u64;
@@ -391,6 +476,7 @@ impl SessionStepper {
             self.collider
                 .contact_model(&self.sim, &probes, self.reach_m, sample.tick, pressed);
         contact.at_heel = contact.valid && hit.as_ref().is_some_and(|(probe, _)| *probe == 1);
+        contact.grasp_pull_newtons = grasp_pull_newtons;
         contact.cut_entry = self.cut_entry.and_then(|h| self.entry_now(&h));
         contact.blade_stop = self
             .cutter

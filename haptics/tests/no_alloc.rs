@@ -33,7 +33,7 @@ fn a_servo_tick_does_not_allocate() {
         let contact = *contact_out.read();
         let time_s = tick as f64 * 1e-3;
         let read = trainee.read(tick, time_s);
-        let _ = network.read(tick, time_s);
+        let second = network.read(tick, time_s).ok();
         let out = renderer.update(tick, read, &contact);
         let _ = trainee.write_force(out.force_newtons);
         let _ = network.write_force(out.force_newtons);
@@ -41,6 +41,7 @@ fn a_servo_tick_does_not_allocate() {
             tick,
             pose: read.unwrap_or_default(),
             render: out,
+            grasper: second,
         });
         // the simulation side, here in the same thread: take the sample, publish a model
         if let Ok(s) = samples_out.pop() {
@@ -52,9 +53,8 @@ fn a_servo_tick_does_not_allocate() {
                 plane_point: Point3::origin(),
                 plane_normal: Vector3::z(),
                 stiffness_newtons_per_m: 300.0,
-                cut_entry: None,
-                wound: None,
-                blade_stop: None,
+                grasp_pull_newtons: Vector3::new(0.0, 0.0, -0.2),
+                ..ContactModel::default()
             });
         }
         out

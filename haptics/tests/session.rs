@@ -251,6 +251,7 @@ fn the_simulation_finds_the_surface_under_the_blades_heel() {
                     proxy: tip,
                     ..RenderOutput::default()
                 },
+                grasper: None,
             })
             .contact
     };

@@ -40,6 +40,15 @@ pub const STATE_HASH: &str = "/sim/state_hash";
 pub const KEYFRAME: &str = "/sim/keyframe";
 pub const SURFACE: &str = "/tissue/surface";
 pub const DAMAGE: &str = "/sim/damage";
+/// The second hand's grasper: its pose (a `PoseInFrame`, the jaws' centre) and its state
+/// (JSON [`GrasperStateMsg`]), written only by a session with a grasper.
+pub const GRASPER_POSE: &str = "/tool/grasper/pose";
+pub const GRASPER_STATE: &str = "/tool/grasper/state";
+/// The grasper's state channel: schema name and JSON schema.
+pub const GRASPER_STATE_SCHEMA: (&str, &str) = (
+    "cutlab.GrasperState",
+    r#"{"type":"object","properties":{"tick":{"type":"integer"},"buttons":{"type":"integer"}}}"#,
+);
 
 /// Frame of every pose and surface: the tissue's world frame.
 pub const WORLD_FRAME: &str = "world";
@@ -94,6 +103,14 @@ pub struct ToolStateMsg {
     pub buttons: u32,
     pub faults: u8,
     pub gain: f64,
+}
+
+/// `/tool/grasper/state`: the grasper's buttons at one tick ([`cutlab_haptics::pose::BUTTON_JAWS`]:
+/// the jaws closed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GrasperStateMsg {
+    pub tick: u64,
+    pub buttons: u32,
 }
 
 /// The contact mode as written.
@@ -155,6 +172,7 @@ impl ToolStateMsg {
                 faults: self.faults,
                 gain: self.gain,
             },
+            grasper: None,
         }
     }
 }

@@ -133,6 +133,7 @@ mod tests {
                     faults,
                     ..RenderOutput::default()
                 },
+                grasper: None,
             },
         )
     }

@@ -13,7 +13,7 @@ use std::path::Path;
 
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::ServoSample;
-use cutlab_haptics::{Point3, Rotation};
+use cutlab_haptics::{Point3, Rotation, ToolPose};
 use foxglove::Decode;
 use mcap::records::Record;
 
@@ -47,6 +47,10 @@ pub struct Recording {
     /// Pose of every recorded tick: `(tick, tip, world_from_tool)`.
     pub poses: Vec<(u64, Point3, Rotation)>,
     pub tool_states: Vec<ToolStateMsg>,
+    /// The grasper's poses (tick, jaws' centre, orientation), in a session with one.
+    pub grasper_poses: Vec<(u64, Point3, Rotation)>,
+    /// The grasper's states, in a session with one.
+    pub grasper_states: Vec<channels::GrasperStateMsg>,
     pub steps: Vec<SimStepMsg>,
     pub topology: Vec<TopologyMsg>,
     pub hashes: Vec<StateHashMsg>,
@@ -144,7 +148,7 @@ impl Recording {
         data: &[u8],
     ) -> Result<(), RecorderError> {
         match topic {
-            channels::POSE => {
+            channels::POSE | channels::GRASPER_POSE => {
                 let msg = foxglove::messages::PoseInFrame::decode(data)
                     .map_err(|e| malformed(topic, log_time, e))?;
                 let (tip, rotation) =
@@ -153,8 +157,13 @@ impl Recording {
                     .meta
                     .as_ref()
                     .map_or(1_000_000, |m| m.period_nanos.max(1));
-                self.poses.push((log_time / period, tip, rotation));
+                let pose = (log_time / period, tip, rotation);
+                match topic {
+                    channels::POSE => self.poses.push(pose),
+                    _ => self.grasper_poses.push(pose),
+                }
             }
+            channels::GRASPER_STATE => self.grasper_states.push(parse(topic, log_time, data)?),
             channels::TOOL_STATE => self.tool_states.push(parse(topic, log_time, data)?),
             channels::SIM_STEP => self.steps.push(parse(topic, log_time, data)?),
             channels::TOPOLOGY => self.topology.push(parse(topic, log_time, data)?),
@@ -206,13 +215,39 @@ impl Recording {
     }
 
     /// The servo sample of every recorded tick, by tick (a tick needs both its pose and its
-    /// tool state).
+    /// tool state; its grasper, in a session with one, both the grasper's pose and state).
     pub fn samples(&self) -> BTreeMap<u64, ServoSample> {
         let poses: HashMap<u64, (Point3, Rotation)> =
             self.poses.iter().map(|&(t, p, r)| (t, (p, r))).collect();
+        let grasper_poses: HashMap<u64, (Point3, Rotation)> = self
+            .grasper_poses
+            .iter()
+            .map(|&(t, p, r)| (t, (p, r)))
+            .collect();
+        let grasper: HashMap<u64, ToolPose> = self
+            .grasper_states
+            .iter()
+            .filter_map(|s| {
+                grasper_poses
+                    .get(&s.tick)
+                    .map(|&(tip_in_world, world_from_tool)| {
+                        let pose = ToolPose {
+                            tip_in_world,
+                            world_from_tool,
+                            buttons: s.buttons,
+                        };
+                        (s.tick, pose)
+                    })
+            })
+            .collect();
         self.tool_states
             .iter()
-            .filter_map(|s| poses.get(&s.tick).map(|&(p, r)| (s.tick, s.sample(p, r))))
+            .filter_map(|s| {
+                let &(tip, rotation) = poses.get(&s.tick)?;
+                let mut sample = s.sample(tip, rotation);
+                sample.grasper = grasper.get(&s.tick).copied();
+                Some((s.tick, sample))
+            })
             .collect()
     }
 

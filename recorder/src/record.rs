@@ -56,6 +56,26 @@ pub fn run_recorded(
     settings: RecordSettings,
     observer: Option<Box<dyn RecordObserver>>,
 ) -> Result<RecordedSession, RecorderError> {
+    let hands = (device, None);
+    run_recorded_two_handed(
+        session, hands, config, provenance, plan, scene_spec, path, settings, observer,
+    )
+}
+
+/// [`run_recorded`] with a second hand: `hands` the scalpel's device and the grasper's,
+/// whose pose and state go to their own channels (`/tool/grasper/...`).
+#[allow(clippy::too_many_arguments)]
+pub fn run_recorded_two_handed(
+    session: Session,
+    (device, grasper): (Box<dyn HapticDevice>, Option<Box<dyn HapticDevice>>),
+    config: &SessionConfig,
+    provenance: &Provenance,
+    plan: Option<&Plan>,
+    scene_spec: &cutlab_sim::scene::SceneSpec,
+    path: &Path,
+    settings: RecordSettings,
+    observer: Option<Box<dyn RecordObserver>>,
+) -> Result<RecordedSession, RecorderError> {
     let meta = meta_of(&session, config, provenance, settings);
     let mut attachments = vec![(
         channels::SCENE_ATTACHMENT,
@@ -71,7 +91,7 @@ pub fn run_recorded(
         path: path.to_owned(),
         error: source,
     })?;
-    let report = session.run_recorded(device, config, Some(tap));
+    let report = session.run_two_handed(device, grasper, config, Some(tap));
     let (sink, observer) = writer
         .join()
         .map_err(|_| RecorderError::Encode("the recorder thread panicked".into()))??;

@@ -64,6 +64,8 @@ struct Ids {
     keyframe: u16,
     surface: u16,
     damage: u16,
+    /// The grasper's pose and state channels, added with its first tick.
+    grasper: Option<(u16, u16)>,
 }
 
 /// An MCAP file being written.
@@ -217,6 +219,7 @@ impl<W: Write + Seek> McapSink<W> {
                 keyframe,
                 surface,
                 damage,
+                grasper: None,
             },
             period_nanos: meta.period_nanos,
             sequence: 0,
@@ -267,6 +270,30 @@ impl<W: Write + Seek> McapSink<W> {
         self.write(channel_id, topic, tick)
     }
 
+    /// The grasper's channels, added the first time a tick has a grasper.
+    fn grasper_channels(&mut self) -> Result<(u16, u16), RecorderError> {
+        if let Some(ids) = self.ids.grasper {
+            return Ok(ids);
+        }
+        let no_meta = BTreeMap::new();
+        let schema = protobuf_schema::<foxglove::messages::PoseInFrame>()?;
+        let id = self
+            .writer
+            .add_schema(&schema.name, &schema.encoding, &schema.data)?;
+        let pose = self
+            .writer
+            .add_channel(id, channels::GRASPER_POSE, "protobuf", &no_meta)?;
+        let (name, json_schema) = channels::GRASPER_STATE_SCHEMA;
+        let id = self
+            .writer
+            .add_schema(name, "jsonschema", json_schema.as_bytes())?;
+        let state = self
+            .writer
+            .add_channel(id, channels::GRASPER_STATE, "json", &no_meta)?;
+        self.ids.grasper = Some((pose, state));
+        Ok((pose, state))
+    }
+
     /// Records one servo tick: the pose and what the servo loop rendered.
     pub fn on_tick(&mut self, sample: &ServoSample) -> Result<(), RecorderError> {
         let began = Instant::now();
@@ -283,6 +310,20 @@ impl<W: Write + Seek> McapSink<W> {
             sample.tick,
             &ToolStateMsg::of(sample),
         )?;
+        if let Some(grasper) = &sample.grasper {
+            let (pose, state) = self.grasper_channels()?;
+            self.write_protobuf(
+                pose,
+                channels::GRASPER_POSE,
+                sample.tick,
+                &channels::pose_message(grasper, time),
+            )?;
+            let msg = channels::GrasperStateMsg {
+                tick: sample.tick,
+                buttons: grasper.buttons,
+            };
+            self.write_json(state, channels::GRASPER_STATE, sample.tick, &msg)?;
+        }
         self.stats.busy_s += began.elapsed().as_secs_f64();
         self.flush_if_due()
     }

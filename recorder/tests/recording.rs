@@ -914,3 +914,99 @@ fn the_last_keyframe_can_be_resumed_wherever_the_session_ends() {
     let (stepper, tick) = replay::stepper_at_last_keyframe(&rec).expect("resumed");
     assert_eq!((tick, stepper.steps()), (last.tick, steps));
 }
+
+/// Two hands on the gauze: the expert's scalpel across the pad while a grasper hand holds it
+/// 8 mm beside the line and draws it 4 mm up. The grasper's pose and jaws go to their own
+/// channels; the replay, from the start and seeking to a keyframe while the jaws hold, runs
+/// both hands again bit for bit.
+#[test]
+fn a_two_handed_session_records_the_grasper_and_replays_bit_exact() {
+    use cutlab_haptics::device::{GraspPlan, GrasperHand};
+    let scene = Scene::load("gauze", BuildOptions::default()).expect("scene");
+    let session = Session::new(&scene).expect("session");
+    let plan = session.plan_across_top(0.04, 0.0015).expect("plan");
+    let preset = Skill::preset("expert").expect("preset");
+    let scalpel = Box::new(SyntheticTrainee::new("expert", plan.clone(), preset, 5).expect("hand"));
+    let hold_m = plan.line_m[plan.line_m.len() / 2] + cutlab_haptics::Vector3::new(0.0, 0.008, 0.0);
+    let grasp = GraspPlan {
+        hold_m,
+        pull_m: cutlab_haptics::Vector3::new(0.0, 0.0, 0.004),
+        up: cutlab_haptics::Vector3::z(),
+        release_s: Some(4.5),
+    };
+    let grasper = Box::new(GrasperHand::new(grasp, 5).expect("grasper"));
+    let config = SessionConfig {
+        duration_s: 5.0,
+        ..SessionConfig::default()
+    };
+    let dir = temp_dir("two-hands");
+    let path = dir.path().join("session.mcap");
+    let provenance = Provenance {
+        scene: "gauze".into(),
+        min_tets: None,
+        seed: 5,
+        trainee: "t".into(),
+        exercise: "e".into(),
+        device: "expert".into(),
+    };
+    let r = record::run_recorded_two_handed(
+        session,
+        (scalpel, Some(grasper)),
+        &config,
+        &provenance,
+        Some(&plan),
+        &scene.spec,
+        &path,
+        record_settings(500, 0),
+        None,
+    )
+    .expect("recorded session");
+    let report = r.report.expect("session ran");
+    let stats = report.stats;
+    assert_eq!(stats.grasps, 1, "{stats:?}");
+    assert_eq!(stats.grasp_slips, 0, "{stats:?}");
+    // held from 1.2 s to 4.5 s, at 1 ms steps
+    assert!((3200..=3400).contains(&stats.grasp_steps), "{stats:?}");
+    assert!(stats.max_grasp_pull_newtons > 0.01, "{stats:?}");
+    assert!(stats.cut_steps > 0, "{stats:?}");
+    // released at the end: nothing of the pad is held but its clips
+    let sim = &report.simulation;
+    let clips = Session::new(&scene).expect("session").sim.model.held;
+    let held_now = sim.model.held.iter().filter(|h| **h).count();
+    assert_eq!(held_now, clips.iter().filter(|h| **h).count());
+
+    let rec = Recording::open(&path).expect("readable");
+    assert_eq!(rec.grasper_poses.len() as u64, report.servo.ticks);
+    let closed = rec
+        .grasper_states
+        .iter()
+        .filter(|s| s.buttons & cutlab_haptics::pose::BUTTON_JAWS != 0)
+        .count();
+    assert!((3200..=3400).contains(&closed), "{closed} ticks closed");
+    let replayed = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
+    assert!(replayed.verified(), "{:?}", replayed.first_divergence);
+    assert_eq!(replayed.final_hash.state, report.state_hash);
+    // a keyframe while the jaws hold (2.5 s): resumed with its grasp, on to the end
+    let seek = replay::replay(
+        &rec,
+        ReplayOptions {
+            from_s: Some(2.7),
+            ..ReplayOptions::default()
+        },
+    )
+    .expect("replay runs");
+    let resumed = seek.resumed_at.expect("resumed at a keyframe");
+    let held_there = rec
+        .keyframes
+        .iter()
+        .find(|k| k.step == resumed.step)
+        .and_then(|k| k.resume.as_ref())
+        .is_some_and(|r| r.grasp.is_some());
+    assert!(
+        held_there,
+        "the keyframe at step {} holds the grasp",
+        resumed.step
+    );
+    assert!(seek.verified(), "{:?}", seek.first_divergence);
+    assert_eq!(seek.final_hash, replayed.final_hash);
+}

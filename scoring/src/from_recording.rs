@@ -395,7 +395,15 @@ mod tests {
                 faults: 0,
                 gain: 1.0,
             };
-            samples.insert(tick, ServoSample { tick, pose, render });
+            samples.insert(
+                tick,
+                ServoSample {
+                    tick,
+                    pose,
+                    render,
+                    grasper: None,
+                },
+            );
         }
         samples
     }

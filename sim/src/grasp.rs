@@ -62,7 +62,7 @@ pub enum GraspError {
 }
 
 /// Tissue held in closed jaws.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Grasp {
     /// The held particles, ascending.
     vertices: Vec<u32>,
@@ -119,6 +119,18 @@ impl Grasp {
             world_from_jaw,
             settings,
         })
+    }
+
+    /// Whether the grasp fits a mesh of `vertex_count` particles with every number finite
+    /// (a grasp read back from a recording's keyframe).
+    pub fn fits(&self, vertex_count: usize) -> bool {
+        self.vertices.len() == self.in_jaw_m.len()
+            && self.vertices.iter().all(|&v| (v as usize) < vertex_count)
+            && self
+                .in_jaw_m
+                .iter()
+                .all(|p| p.iter().all(|c| c.is_finite()))
+            && isometry_is_finite(&self.world_from_jaw)
     }
 
     /// The held particles, ascending.
@@ -188,4 +200,10 @@ impl Grasp {
         });
         sim.wake(self.vertices.iter().copied());
     }
+}
+
+/// Whether every number of `pose` is finite.
+fn isometry_is_finite(pose: &Isometry3<f64>) -> bool {
+    pose.translation.vector.iter().all(|c| c.is_finite())
+        && pose.rotation.coords.iter().all(|c| c.is_finite())
 }

@@ -209,6 +209,7 @@ mod tests {
                 faults: 0,
                 gain: 1.0,
             },
+            grasper: None,
         }
     }
 

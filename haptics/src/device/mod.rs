@@ -2,6 +2,7 @@
 
 mod choice;
 mod csv;
+mod grasper_hand;
 pub mod igtl;
 pub mod pointer;
 mod pointer_hand;
@@ -12,6 +13,7 @@ mod trainee;
 
 pub use choice::{Choice, Planning};
 pub use csv::CsvDevice;
+pub use grasper_hand::{GraspPlan, GrasperHand};
 pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
 pub use pointer_hand::{HandKind, PointerHand, STEADY_PACE_M_PER_S};

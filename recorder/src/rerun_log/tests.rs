@@ -62,6 +62,7 @@ fn sample(tick: u64) -> ServoSample {
             },
             gain: 1.0,
         },
+        grasper: None,
     }
 }
 
