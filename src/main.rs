@@ -411,9 +411,45 @@ struct SessionArgs {
     /// `on` (also plain `--localise`), `off`.
     #[arg(long, value_enum, default_value_t = Localise::Auto, num_args = 0..=1, default_missing_value = "on")]
     localise: Localise,
+    /// A second hand on a grasper: where its jaws close on the tissue, mm (`X,Y,Z`). The hand
+    /// reaches there, closes the jaws at 1.2 s, draws the tissue by `--grasp-pull-mm` and holds
+    /// it (its pose, jaws and pull are recorded).
+    #[arg(long, value_parser = parse_mm3, value_name = "X,Y,Z")]
+    grasp_at_mm: Option<[f64; 3]>,
+    /// How far and where the grasper draws the held tissue, mm (`DX,DY,DZ`).
+    #[arg(long, value_parser = parse_mm3, value_name = "DX,DY,DZ", default_value = "0,0,5", requires = "grasp_at_mm")]
+    grasp_pull_mm: [f64; 3],
+    /// When the grasper opens its jaws and lifts away, s (default: it holds to the end).
+    #[arg(long, requires = "grasp_at_mm")]
+    grasp_release_s: Option<f64>,
+}
+
+/// Three finite numbers in millimetres, `X,Y,Z`.
+fn parse_mm3(text: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|c| c.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{text:?}: three numbers X,Y,Z in mm ({e})"))?;
+    match v.as_slice() {
+        &[x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!("{text:?}: three finite numbers X,Y,Z in mm")),
+    }
 }
 
 impl SessionArgs {
+    /// The second hand's grasp, when asked for.
+    fn grasp(&self) -> Option<cutlab_haptics::device::GraspPlan> {
+        let [x, y, z] = self.grasp_at_mm?;
+        let [dx, dy, dz] = self.grasp_pull_mm;
+        Some(cutlab_haptics::device::GraspPlan {
+            hold_m: cutlab_sim::Point3::new(x, y, z) * 1e-3,
+            pull_m: cutlab_sim::Vector3::new(dx, dy, dz) * 1e-3,
+            up: cutlab_sim::Vector3::z(),
+            release_s: self.grasp_release_s,
+        })
+    }
+
     /// The session's options; an attempt in the database `db` when a trainee is named.
     fn options(
         self,
@@ -421,6 +457,7 @@ impl SessionArgs {
         recordings: Option<String>,
         hub: Option<cutlab_station::sync::Hub>,
     ) -> session::Options {
+        let grasp = self.grasp();
         session::Options {
             scene: self.scene,
             device: self.device,
@@ -433,6 +470,7 @@ impl SessionArgs {
                 keyframe_every_s: self.keyframe_every,
                 surface_hz: self.surface_hz,
                 seed: self.seed,
+                grasp,
                 igtl: self.igtl.options(),
             },
             out: self.out,

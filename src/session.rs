@@ -330,6 +330,15 @@ fn print_report(
         r.servo.dropped_samples,
         r.stats.rejected_steps
     );
+    if o.run.grasp.is_some() {
+        println!(
+            "  grasper: {} grasp(s), held {:.2} s, strongest pull {:.2} N, slipped {} time(s)",
+            r.stats.grasps,
+            r.stats.grasp_steps as f64 * r.simulation.settings.time_step_s,
+            r.stats.max_grasp_pull_newtons,
+            r.stats.grasp_slips
+        );
+    }
     if r.servo.blade_entries == 0 {
         println!(
             "  the blade never entered the tissue: the largest push, {:.2} N, stayed under the scene's cut threshold of {:.2} N (`cut_threshold_newtons`), and the tip never pressed {:.1} mm in (`cut_depth_mm`), with the blade engaged",
@@ -430,6 +439,10 @@ fn write_outputs(
                        "max_deviation": p.max_deviation_us, "missed_deadlines": p.missed_deadlines, "max_lateness": p.max_lateness_us },
         "sim_step_us": f.step_us, "cg_iterations_per_step": f.cg_per_step, "speed": r.speed(), "wall_s": r.wall_s,
         "state_hash": format!("{:016x}", r.state_hash), "force_hash": format!("{:016x}", r.servo.force_hash),
+        "grasper": o.run.grasp.map(|_| serde_json::json!({
+            "grasps": r.stats.grasps, "held_s": r.stats.grasp_steps as f64 * r.simulation.settings.time_step_s,
+            "max_pull_newtons": r.stats.max_grasp_pull_newtons, "slips": r.stats.grasp_slips,
+        })),
     });
     write_json(&o.out.join("summary.json"), &summary)?;
     let mut steps = String::with_capacity(16 * r.tick_of_step.len() + 16);

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
-    CsvDevice, DeviceSpec, HapticDevice, IgtlDevice, IgtlOptions, PointerHand, StylusHand,
+    CsvDevice, DeviceSpec, GraspPlan, GrasperHand, HapticDevice, IgtlDevice, IgtlOptions, PointerHand, StylusHand,
     SyntheticTrainee,
 };
 use cutlab_haptics::plan::Plan;
@@ -53,6 +53,9 @@ pub struct RunSettings {
     pub seed: u64,
     /// How an OpenIGTLink device sends the force back.
     pub igtl: IgtlOptions,
+    /// The second hand: a synthetic grasper holding the tissue as this plans (`None`: one
+    /// hand).
+    pub grasp: Option<GraspPlan>,
 }
 
 impl Default for RunSettings {
@@ -67,6 +70,7 @@ impl Default for RunSettings {
             surface_hz: 0.0,
             seed: 0,
             igtl: IgtlOptions::default(),
+            grasp: None,
         }
     }
 }
@@ -288,9 +292,17 @@ impl Prepared {
         observer: Option<Box<dyn RecordObserver>>,
     ) -> Result<RecordedSession, StationError> {
         let settings = self.settings.record_settings(self.time_step_s());
-        Ok(record::run_recorded(
+        let grasper = match self.settings.grasp {
+            Some(plan) => {
+                let hand = GrasperHand::new(plan, self.settings.seed)
+                    .map_err(|e| StationError::Settings(format!("the grasper: {e}")))?;
+                Some(Box::new(hand) as Box<dyn HapticDevice>)
+            }
+            None => None,
+        };
+        Ok(record::run_recorded_two_handed(
             self.session,
-            device,
+            (device, grasper),
             &self.config,
             provenance,
             self.plan.as_ref().ok(),

@@ -106,6 +106,8 @@ impl StationSettings {
             surface_hz: self.view_hz,
             seed: self.seed,
             igtl: self.igtl.clone(),
+            // the station's page gives one hand yet (issue 66)
+            grasp: None,
         }
     }
 
