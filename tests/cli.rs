@@ -882,3 +882,74 @@ fn a_session_of_a_locked_exercise_is_refused_in_the_stations_words_until_opened(
     assert!(ok, "{err}");
     assert!(out.join("session.mcap").is_file());
 }
+
+/// A second hand on a grasper from the command line: it holds the gauze beside the scalpel's
+/// line, its grasp is said and summarised, the recording replays bit-exact; bad grasps are
+/// refused before anything runs.
+#[test]
+fn a_session_with_a_grasper_holds_the_gauze_and_replays_bit_exact() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = dir.path().to_str().expect("utf-8");
+    let (ok, stdout, err) = cutlab(&[
+        "session",
+        "--scene",
+        "gauze",
+        "--device",
+        "expert",
+        "--duration",
+        "2",
+        "--clock",
+        "virtual",
+        "--grasp-at-mm",
+        "50,58,0.8",
+        "--grasp-pull-mm",
+        "0,0,4",
+        "--out",
+        out,
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("grasper: 1 grasp(s), held 0.8"), "{stdout}");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("summary.json")).expect("summary"),
+    )
+    .expect("json");
+    let grasper = &summary["grasper"];
+    assert_eq!(grasper["grasps"], 1, "{summary}");
+    assert!(
+        grasper["max_pull_newtons"]
+            .as_f64()
+            .is_some_and(|n| n > 0.0),
+        "{summary}"
+    );
+    let mcap = dir.path().join("session.mcap");
+    let (ok, stdout, err) = cutlab(&["replay", mcap.to_str().expect("utf-8")]);
+    assert!(
+        ok && stdout.contains("verified: the replay is bit-exact"),
+        "{stdout}{err}"
+    );
+
+    for (args, says) in [
+        (vec!["--grasp-at-mm", "50,nan,0.8"], "three finite numbers"),
+        (vec!["--grasp-at-mm", "50,58"], "three finite numbers"),
+        (vec!["--grasp-pull-mm", "0,0,4"], "--grasp-at-mm"),
+        (
+            vec!["--grasp-at-mm", "50,58,0.8", "--grasp-release-s=-1"],
+            "release time",
+        ),
+    ] {
+        let mut all = vec![
+            "session",
+            "--scene",
+            "gauze",
+            "--duration",
+            "1",
+            "--clock",
+            "virtual",
+            "--out",
+            out,
+        ];
+        all.extend(args);
+        let (ok, _, err) = cutlab(&all);
+        assert!(!ok && err.contains(says), "{all:?}: {err}");
+    }
+}

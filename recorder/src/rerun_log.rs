@@ -69,6 +69,8 @@ pub mod paths {
     pub const SCALPEL: &str = "world/scalpel";
     pub const BLADE: &str = "world/scalpel/blade";
     pub const PROXY: &str = "world/proxy";
+    /// The second hand's grasper: its jaws' centre, open (grey) or closed (blue).
+    pub const GRASPER: &str = "world/grasper";
     pub const TISSUE: &str = "world/tissue";
     pub const PLAN: &str = "world/plan";
     pub const EVENTS: &str = "events";
@@ -507,6 +509,19 @@ impl RerunSink {
                 .with_radii([rerun::Radius::new_ui_points(4.0)])
                 .with_colors([color]),
         )?;
+        if let Some(g) = &sample.grasper {
+            let color = if g.jaws_closed() {
+                rerun::Color::from_rgb(40, 110, 230)
+            } else {
+                rerun::Color::from_rgb(150, 150, 150)
+            };
+            self.rec.log(
+                paths::GRASPER,
+                &rerun::Points3D::new([f32x3(&g.tip_in_world)])
+                    .with_radii([rerun::Radius::new_ui_points(7.0)])
+                    .with_colors([color]),
+            )?;
+        }
         Ok(())
     }
 

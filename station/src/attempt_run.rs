@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
-    CsvDevice, DeviceSpec, GraspPlan, GrasperHand, HapticDevice, IgtlDevice, IgtlOptions, PointerHand, StylusHand,
-    SyntheticTrainee,
+    CsvDevice, DeviceSpec, GraspPlan, GrasperHand, HapticDevice, IgtlDevice, IgtlOptions,
+    PointerHand, StylusHand, SyntheticTrainee,
 };
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::Clock;

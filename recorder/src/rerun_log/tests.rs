@@ -62,7 +62,16 @@ fn sample(tick: u64) -> ServoSample {
             },
             gain: 1.0,
         },
-        grasper: None,
+        // the second hand beside it, its jaws closed half the time
+        grasper: Some(ToolPose {
+            tip_in_world: tip + Vector3::new(0.0, 0.01, 0.0),
+            world_from_tool: Rotation::identity(),
+            buttons: if tick % 2000 >= 1000 {
+                cutlab_haptics::pose::BUTTON_JAWS
+            } else {
+                0
+            },
+        }),
     }
 }
 
@@ -318,6 +327,7 @@ fn rrd_of_a_synthetic_session_decodes_with_every_entity_and_every_tick() {
         Some(1 + transforms)
     );
     assert_eq!(decoded.rows.get(paths::PROXY).copied(), Some(transforms));
+    assert_eq!(decoded.rows.get(paths::GRASPER).copied(), Some(transforms));
     assert_eq!(decoded.rows.get(paths::BLADE).copied(), Some(1));
     assert_eq!(decoded.rows.get(paths::PLAN).copied(), Some(1));
 }
