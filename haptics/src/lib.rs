@@ -43,7 +43,7 @@ pub mod tap;
 pub use device::{DeviceFault, DeviceLimits, HapticDevice};
 pub use error::HapticsError;
 pub use pose::ToolPose;
-pub use session::{Session, SessionConfig, SessionReport};
+pub use session::{Hands, Session, SessionConfig, SessionReport};
 pub use step_choice::{StepChoice, TimeStep};
 pub use stepper::{SessionStepper, StateHash, StepOutput};
 pub use tap::{RecordTap, SimRecord, TapFeed, TapSettings};

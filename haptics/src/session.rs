@@ -136,6 +136,37 @@ fn own_tick(n: u64, ticks_per_step: u64) -> u64 {
     (n + 1) * ticks_per_step - 1
 }
 
+/// The devices a session's hands hold: the scalpel's, and for a second hand a grasper's, read
+/// and written in the same servo tick, its jaws holding the tissue while closed
+/// ([`crate::stepper`]).
+#[allow(missing_debug_implementations)] // devices are not `Debug`
+pub struct Hands {
+    /// The scalpel's device.
+    pub scalpel: Box<dyn HapticDevice>,
+    /// The grasper's device, in a two-handed session.
+    pub grasper: Option<Box<dyn HapticDevice>>,
+}
+
+impl<D: HapticDevice + 'static> From<Box<D>> for Hands {
+    /// One hand, on the scalpel.
+    fn from(scalpel: Box<D>) -> Self {
+        Self {
+            scalpel,
+            grasper: None,
+        }
+    }
+}
+
+impl From<Box<dyn HapticDevice>> for Hands {
+    /// One hand, on the scalpel.
+    fn from(scalpel: Box<dyn HapticDevice>) -> Self {
+        Self {
+            scalpel,
+            grasper: None,
+        }
+    }
+}
+
 /// A scene ready for a session: settled, with its surface collider.
 #[derive(Debug)]
 pub struct Session {
@@ -324,26 +355,18 @@ impl Session {
         Ok((render, ticks_per_step, ticks))
     }
 
-    /// [`Self::run`], handing every tick and every simulation record to `tap` (a recorder).
+    /// [`Self::run`] with `hands` (the scalpel's device, or it and a grasper's), handing every
+    /// tick and every simulation record to `tap` (a recorder).
     pub fn run_recorded(
         self,
-        device: Box<dyn HapticDevice>,
+        hands: impl Into<Hands>,
         config: &SessionConfig,
         tap: Option<RecordTap>,
     ) -> Result<SessionReport, HapticsError> {
-        self.run_two_handed(device, None, config, tap)
-    }
-
-    /// [`Self::run_recorded`] with a second hand: `grasper`'s device read and its force
-    /// written in the same servo tick as the scalpel's, its jaws holding the tissue while
-    /// closed ([`crate::stepper`]).
-    pub fn run_two_handed(
-        self,
-        device: Box<dyn HapticDevice>,
-        grasper: Option<Box<dyn HapticDevice>>,
-        config: &SessionConfig,
-        tap: Option<RecordTap>,
-    ) -> Result<SessionReport, HapticsError> {
+        let Hands {
+            scalpel: device,
+            grasper,
+        } = hands.into();
         let (render, ticks_per_step, ticks) = self.checked(config, device.limits())?;
 
         let (contact_in, contact_out) = triple_buffer::triple_buffer(&ContactModel::default());

@@ -5,10 +5,9 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use cutlab_haptics::device::HapticDevice;
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::tap::{self, TapSettings};
-use cutlab_haptics::{HapticsError, Session, SessionConfig, SessionReport, StateHash};
+use cutlab_haptics::{Hands, HapticsError, Session, SessionConfig, SessionReport, StateHash};
 
 use crate::RecorderError;
 pub use crate::channels::Provenance;
@@ -42,32 +41,13 @@ impl std::fmt::Debug for RecordedSession {
     }
 }
 
-/// Runs `session` with `device`, recording it to `path` (MCAP), and every record to
-/// `observer` too.
+/// Runs `session` with `hands` (the scalpel's device, or it and a grasper's, whose pose and
+/// state go to their own channels, `/tool/grasper/...`), recording it to `path` (MCAP), and
+/// every record to `observer` too.
 #[allow(clippy::too_many_arguments)]
 pub fn run_recorded(
     session: Session,
-    device: Box<dyn HapticDevice>,
-    config: &SessionConfig,
-    provenance: &Provenance,
-    plan: Option<&Plan>,
-    scene_spec: &cutlab_sim::scene::SceneSpec,
-    path: &Path,
-    settings: RecordSettings,
-    observer: Option<Box<dyn RecordObserver>>,
-) -> Result<RecordedSession, RecorderError> {
-    let hands = (device, None);
-    run_recorded_two_handed(
-        session, hands, config, provenance, plan, scene_spec, path, settings, observer,
-    )
-}
-
-/// [`run_recorded`] with a second hand: `hands` the scalpel's device and the grasper's,
-/// whose pose and state go to their own channels (`/tool/grasper/...`).
-#[allow(clippy::too_many_arguments)]
-pub fn run_recorded_two_handed(
-    session: Session,
-    (device, grasper): (Box<dyn HapticDevice>, Option<Box<dyn HapticDevice>>),
+    hands: impl Into<Hands>,
     config: &SessionConfig,
     provenance: &Provenance,
     plan: Option<&Plan>,
@@ -91,7 +71,7 @@ pub fn run_recorded_two_handed(
         path: path.to_owned(),
         error: source,
     })?;
-    let report = session.run_two_handed(device, grasper, config, Some(tap));
+    let report = session.run_recorded(hands, config, Some(tap));
     let (sink, observer) = writer
         .join()
         .map_err(|_| RecorderError::Encode("the recorder thread panicked".into()))??;

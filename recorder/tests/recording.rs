@@ -949,9 +949,12 @@ fn a_two_handed_session_records_the_grasper_and_replays_bit_exact() {
         exercise: "e".into(),
         device: "expert".into(),
     };
-    let r = record::run_recorded_two_handed(
+    let r = record::run_recorded(
         session,
-        (scalpel, Some(grasper)),
+        cutlab_haptics::Hands {
+            scalpel,
+            grasper: Some(grasper),
+        },
         &config,
         &provenance,
         Some(&plan),

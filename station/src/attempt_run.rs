@@ -19,7 +19,7 @@ use cutlab_haptics::device::{
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::Clock;
 use cutlab_haptics::tap::TapSettings;
-use cutlab_haptics::{Session, SessionConfig, StepChoice, TimeStep};
+use cutlab_haptics::{Hands, Session, SessionConfig, StepChoice, TimeStep};
 use cutlab_recorder::record::{self, Provenance, RecordSettings, RecordedSession};
 use cutlab_recorder::writer::RecordObserver;
 use cutlab_recorder::{RecordedHand, Recording, RerunSink, RerunTarget, WriterOptions};
@@ -300,9 +300,12 @@ impl Prepared {
             }
             None => None,
         };
-        Ok(record::run_recorded_two_handed(
+        Ok(record::run_recorded(
             self.session,
-            (device, grasper),
+            Hands {
+                scalpel: device,
+                grasper,
+            },
             &self.config,
             provenance,
             self.plan.as_ref().ok(),
