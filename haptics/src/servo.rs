@@ -251,12 +251,12 @@ impl Backoff {
 fn grasp_force(contact: &ContactModel, max_newtons: f64) -> Vector3 {
     let pull = contact.grasp_pull_newtons;
     let n = pull.norm();
-    if n.is_finite() && n > max_newtons && n > 0.0 {
-        pull * (max_newtons / n)
-    } else if n.is_finite() {
-        pull
-    } else {
+    if !n.is_finite() {
         Vector3::zeros()
+    } else if n > max_newtons && n > 0.0 {
+        pull * (max_newtons / n)
+    } else {
+        pull
     }
 }
 

@@ -325,11 +325,7 @@ impl SessionStepper {
             Some(grasp) if closed => {
                 grasp.carry(&mut self.sim, jaws.isometry());
             }
-            Some(_) => {
-                if let Some(grasp) = self.grasp.take() {
-                    grasp.release(&mut self.sim);
-                }
-            }
+            Some(_) => self.let_go(),
             None if closed && !self.jaws_closed => {
                 // jaws closed on nothing hold nothing until they open and close again
                 if let Ok(grasp) = Grasp::close(&mut self.sim, jaws.isometry(), self.grasp_settings)
@@ -343,6 +339,13 @@ impl SessionStepper {
         self.jaws_closed = closed;
     }
 
+    /// The jaws open: what they held is free again.
+    fn let_go(&mut self) {
+        if let Some(grasp) = self.grasp.take() {
+            grasp.release(&mut self.sim);
+        }
+    }
+
     /// The second hand, after the step: the held tissue's pull on the jaws, and the tissue
     /// let go where it pulls past the jaws' hold.
     fn pull_on_jaws(&mut self) -> Vector3 {
@@ -354,9 +357,7 @@ impl SessionStepper {
         self.stats.max_grasp_pull_newtons = self.stats.max_grasp_pull_newtons.max(pull.norm());
         if grasp.slips(&pull) || !pull.iter().all(|c| c.is_finite()) {
             self.stats.grasp_slips += 1;
-            if let Some(grasp) = self.grasp.take() {
-                grasp.release(&mut self.sim);
-            }
+            self.let_go();
             return Vector3::zeros();
         }
         pull

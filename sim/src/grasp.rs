@@ -82,13 +82,7 @@ impl Grasp {
         settings: GraspSettings,
     ) -> Result<Self, GraspError> {
         let r = settings.jaw_radius_m;
-        let pose_finite = world_from_jaw
-            .translation
-            .vector
-            .iter()
-            .all(|c| c.is_finite())
-            && world_from_jaw.rotation.coords.iter().all(|c| c.is_finite());
-        if !(pose_finite && r.is_finite() && r > 0.0) {
+        if !(isometry_is_finite(&world_from_jaw) && r.is_finite() && r > 0.0) {
             return Err(GraspError::Invalid);
         }
         let centre = Point3::from(world_from_jaw.translation.vector);
@@ -147,13 +141,7 @@ impl Grasp {
     /// particle to its place in the jaws, its velocity the displacement over one step. A
     /// non-finite pose is ignored (the jaws stay where they were) and `false` returned.
     pub fn carry(&mut self, sim: &mut Simulation, world_from_jaw: Isometry3<f64>) -> bool {
-        let finite = world_from_jaw
-            .translation
-            .vector
-            .iter()
-            .all(|c| c.is_finite())
-            && world_from_jaw.rotation.coords.iter().all(|c| c.is_finite());
-        if !finite {
+        if !isometry_is_finite(&world_from_jaw) {
             return false;
         }
         let dt = sim.settings.time_step_s;
