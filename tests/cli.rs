@@ -927,6 +927,7 @@ fn a_session_with_a_grasper_holds_the_gauze_and_replays_bit_exact() {
         ok && stdout.contains("verified: the replay is bit-exact"),
         "{stdout}{err}"
     );
+    scored_with_the_second_hands_handling(dir.path(), &mcap);
 
     for (args, says) in [
         (vec!["--grasp-at-mm", "50,nan,0.8"], "three finite numbers"),
@@ -952,4 +953,62 @@ fn a_session_with_a_grasper_holds_the_gauze_and_replays_bit_exact() {
         let (ok, _, err) = cutlab(&all);
         assert!(!ok && err.contains(says), "{all:?}: {err}");
     }
+}
+
+/// The two-handed recording `mcap` scored as an attempt at a line across the gauze (a
+/// database in `dir`): the metrics say how the grasper held the tissue, and the trainee's
+/// xAPI statements carry them.
+fn scored_with_the_second_hands_handling(dir: &std::path::Path, mcap: &std::path::Path) {
+    let db = dir.join("cutlab.db");
+    let db = db.to_str().expect("utf-8");
+    let plan = dir.join("line.toml");
+    std::fs::write(
+        &plan,
+        "entry_m = [0.03, 0.05, 0.0008]\nexit_m = [0.07, 0.05, 0.0008]\ndepth_m = 0.0015\n\
+         viewpoint_m = [0.05, 0.05, 0.15]\n",
+    )
+    .expect("plan written");
+    let plan = plan.to_str().expect("utf-8");
+    let (ok, _, err) = cutlab(&[
+        "--db",
+        db,
+        "exercise",
+        "add",
+        "--name",
+        "gauze-line",
+        "--scene",
+        "gauze",
+        "--plan",
+        plan,
+    ]);
+    assert!(ok, "{err}");
+    let (ok, out, err) = cutlab(&[
+        "--db",
+        db,
+        "assess",
+        mcap.to_str().expect("utf-8"),
+        "--trainee",
+        "alice",
+        "--exercise",
+        "gauze-line",
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("json");
+    let metric = |key: &str| {
+        v["metrics"]
+            .as_array()
+            .and_then(|m| m.iter().find(|m| m["key"] == key))
+            .map(|m| m["value"].clone())
+            .unwrap_or_else(|| panic!("{key} missing: {v}"))
+    };
+    assert_eq!(metric("grasps"), 1.0, "{v}");
+    assert_eq!(metric("grasp_slips"), 0.0, "{v}");
+    assert!(
+        metric("peak_traction_n").as_f64().is_some_and(|n| n > 0.0),
+        "{v}"
+    );
+    let (ok, out, err) = cutlab(&["--db", db, "export", "xapi", "--trainee", "alice"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("/metric/peak_traction_n"), "{out}");
 }

@@ -76,9 +76,18 @@ pub struct ServoSample {
     pub pose: ToolPose,
     /// What the force renderer produced.
     pub render: RenderOutput,
-    /// The second hand's grasper, when the session has one: its pose (the last good one
-    /// when its device failed), the jaws' centre at the tip.
-    pub grasper: Option<ToolPose>,
+    /// The second hand's grasper, when the session has one.
+    pub grasper: Option<GrasperTick>,
+}
+
+/// The second hand's grasper at one tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GrasperTick {
+    /// Its pose (the last good one when its device failed), the jaws' centre at the tip.
+    pub pose: ToolPose,
+    /// The held tissue's pull on the jaws (N, world frame) as the simulation last published
+    /// it, before the device's force limit: zero while the jaws hold nothing.
+    pub pull_newtons: Vector3,
 }
 
 /// Something the log should hear about, sent from the servo thread without allocating.
@@ -376,14 +385,14 @@ pub fn spawn<D: HapticDevice + 'static>(
             let out = renderer.update(tick, read, &contact);
             // a device that fails to take the force is noticed by its next read
             let _ = device.write_force(out.force_newtons);
-            let grasper_pose = grasper.as_mut().map(|g| {
+            let grasper_tick = grasper.as_mut().map(|g| {
                 if let Ok(p) = g.read(tick, time_s)
                     && p.is_finite()
                 {
                     last_grasper = p;
                 }
                 let _ = g.write_force(grasp_force(&contact, g.limits().max_force_newtons));
-                last_grasper
+                GrasperTick { pose: last_grasper, pull_newtons: contact.grasp_pull_newtons }
             });
 
             report.max_force_newtons = report.max_force_newtons.max(out.force_newtons.norm());
@@ -412,7 +421,7 @@ pub fn spawn<D: HapticDevice + 'static>(
             }
             previous_faults = out.faults;
             previous_gain = out.gain;
-            let sample = ServoSample { tick, pose: last_pose, render: out, grasper: grasper_pose };
+            let sample = ServoSample { tick, pose: last_pose, render: out, grasper: grasper_tick };
             if links.samples.push(sample).is_err() {
                 report.dropped_samples += 1;
             }

@@ -317,7 +317,7 @@ impl SessionStepper {
     /// The second hand, before the step: jaws closing take hold of the tissue between them,
     /// closed ones carry what they hold to their pose, opening ones let go.
     fn hold(&mut self, sample: &ServoSample) {
-        let Some(jaws) = sample.grasper else {
+        let Some(jaws) = sample.grasper.map(|g| g.pose) else {
             return;
         };
         let closed = jaws.jaws_closed();

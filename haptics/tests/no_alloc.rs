@@ -6,7 +6,7 @@ use assert_no_alloc::{AllocDisabler, assert_no_alloc, reset_violation_count, vio
 use cutlab_haptics::device::{HapticDevice, IgtlDevice, Skill, SyntheticTrainee};
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::render::{ContactModel, ForceRenderer, RenderSettings};
-use cutlab_haptics::servo::ServoSample;
+use cutlab_haptics::servo::{GrasperTick, ServoSample};
 use cutlab_haptics::{Point3, Vector3};
 
 #[global_allocator]
@@ -33,7 +33,10 @@ fn a_servo_tick_does_not_allocate() {
         let contact = *contact_out.read();
         let time_s = tick as f64 * 1e-3;
         let read = trainee.read(tick, time_s);
-        let second = network.read(tick, time_s).ok();
+        let second = network.read(tick, time_s).ok().map(|pose| GrasperTick {
+            pose,
+            pull_newtons: contact.grasp_pull_newtons,
+        });
         let out = renderer.update(tick, read, &contact);
         let _ = trainee.write_force(out.force_newtons);
         let _ = network.write_force(out.force_newtons);

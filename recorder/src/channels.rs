@@ -47,7 +47,7 @@ pub const GRASPER_STATE: &str = "/tool/grasper/state";
 /// The grasper's state channel: schema name and JSON schema.
 pub const GRASPER_STATE_SCHEMA: (&str, &str) = (
     "cutlab.GrasperState",
-    r#"{"type":"object","properties":{"tick":{"type":"integer"},"buttons":{"type":"integer"}}}"#,
+    r#"{"type":"object","properties":{"tick":{"type":"integer"},"buttons":{"type":"integer"},"pull_newtons":{"type":"array","items":{"type":"number"}}}}"#,
 );
 
 /// Frame of every pose and surface: the tissue's world frame.
@@ -106,11 +106,14 @@ pub struct ToolStateMsg {
 }
 
 /// `/tool/grasper/state`: the grasper's buttons at one tick ([`cutlab_haptics::pose::BUTTON_JAWS`]:
-/// the jaws closed).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+/// the jaws closed) and the held tissue's pull on its jaws (N; zero while they hold nothing,
+/// and in recordings made before it was written).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct GrasperStateMsg {
     pub tick: u64,
     pub buttons: u32,
+    #[serde(default)]
+    pub pull_newtons: [f64; 3],
 }
 
 /// The contact mode as written.

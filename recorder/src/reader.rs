@@ -12,7 +12,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use cutlab_haptics::plan::Plan;
-use cutlab_haptics::servo::ServoSample;
+use cutlab_haptics::servo::{GrasperTick, ServoSample};
 use cutlab_haptics::{Point3, Rotation, ToolPose};
 use foxglove::Decode;
 use mcap::records::Record;
@@ -224,7 +224,7 @@ impl Recording {
             .iter()
             .map(|&(t, p, r)| (t, (p, r)))
             .collect();
-        let grasper: HashMap<u64, ToolPose> = self
+        let grasper: HashMap<u64, GrasperTick> = self
             .grasper_states
             .iter()
             .filter_map(|s| {
@@ -236,7 +236,8 @@ impl Recording {
                             world_from_tool,
                             buttons: s.buttons,
                         };
-                        (s.tick, pose)
+                        let pull_newtons = s.pull_newtons.into();
+                        (s.tick, GrasperTick { pose, pull_newtons })
                     })
             })
             .collect();

@@ -509,7 +509,7 @@ impl RerunSink {
                 .with_radii([rerun::Radius::new_ui_points(4.0)])
                 .with_colors([color]),
         )?;
-        if let Some(g) = &sample.grasper {
+        if let Some(g) = sample.grasper.map(|g| g.pose) {
             let color = if g.jaws_closed() {
                 rerun::Color::from_rgb(40, 110, 230)
             } else {

@@ -316,11 +316,12 @@ impl<W: Write + Seek> McapSink<W> {
                 pose,
                 channels::GRASPER_POSE,
                 sample.tick,
-                &channels::pose_message(grasper, time),
+                &channels::pose_message(&grasper.pose, time),
             )?;
             let msg = channels::GrasperStateMsg {
                 tick: sample.tick,
-                buttons: grasper.buttons,
+                buttons: grasper.pose.buttons,
+                pull_newtons: grasper.pull_newtons.into(),
             };
             self.write_json(state, channels::GRASPER_STATE, sample.tick, &msg)?;
         }

@@ -986,6 +986,20 @@ fn a_two_handed_session_records_the_grasper_and_replays_bit_exact() {
         .filter(|s| s.buttons & cutlab_haptics::pose::BUTTON_JAWS != 0)
         .count();
     assert!((3200..=3400).contains(&closed), "{closed} ticks closed");
+    // the held tissue's pull on the jaws, every tick they held it
+    let pulls: Vec<f64> = rec
+        .grasper_states
+        .iter()
+        .map(|s| cutlab_haptics::Vector3::from(s.pull_newtons).norm())
+        .collect();
+    let held = pulls.iter().filter(|p| **p > 0.0).count();
+    assert!((3200..=3400).contains(&held), "{held} ticks held");
+    let strongest = pulls.iter().copied().fold(0.0, f64::max);
+    assert!(
+        (strongest - stats.max_grasp_pull_newtons).abs() <= 0.02 * stats.max_grasp_pull_newtons,
+        "{strongest} N recorded, {} N simulated",
+        stats.max_grasp_pull_newtons
+    );
     let replayed = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
     assert!(replayed.verified(), "{:?}", replayed.first_divergence);
     assert_eq!(replayed.final_hash.state, report.state_hash);

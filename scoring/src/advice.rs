@@ -2,7 +2,8 @@
 //! table of metrics. From an attempt's metric results and its exercise's limits: the task
 //! not done first, then the deciding metrics that failed, the worst first (how far past its
 //! limit, in units of the expert margin), at most three; then the feedback-only metrics
-//! against the experts' reference ([`crate::proficiency::FEEDBACK_ONLY`]).
+//! against the experts' reference ([`crate::proficiency::FEEDBACK_ONLY`]), and how the
+//! second hand handled the tissue in an attempt made with a grasper.
 
 use crate::proficiency::{TASK_DONE_MIN_FRACTION, decides};
 
@@ -79,9 +80,10 @@ pub fn advice(results: &[MetricResult<'_>]) -> Advice {
         };
         format!("Within every limit: {what}.")
     });
+    // (only feedback-only metrics and the second hand's handling have words here)
     let feedback = results
         .iter()
-        .filter(|m| done && !decides(m.key))
+        .filter(|_| done)
         .filter_map(feedback_words)
         .collect();
     Advice {
@@ -261,6 +263,9 @@ fn field_failure(results: &[MetricResult<'_>]) -> String {
 
 /// A feedback-only metric against the experts' reference, in plain words.
 fn feedback_words(m: &MetricResult<'_>) -> Option<String> {
+    if let Some(said) = handling_words(m.key, m.value?) {
+        return Some(said);
+    }
     let (v, mean) = (m.value?, m.mean?);
     let relative = |what_more: &str, what_less: &str| {
         if !(mean.abs() > 0.0) {
@@ -290,6 +295,32 @@ fn feedback_words(m: &MetricResult<'_>) -> Option<String> {
     })
 }
 
+/// The second hand's handling of the tissue ([`crate::metrics::handling`]) in plain words,
+/// where it says something to do or to keep: it needs no experts' reference.
+fn handling_words(key: &str, v: f64) -> Option<String> {
+    Some(match key {
+        "countertraction_fraction" if v < 0.5 => format!(
+            "Countertraction: the other hand held the tissue drawn away from the blade during \
+             {:.0} % of the cut; keep it taut, pulling away from where you cut.",
+            v * 100.0
+        ),
+        "countertraction_fraction" => format!(
+            "Countertraction: the tissue was held drawn away from the blade during {:.0} % of \
+             the cut.",
+            v * 100.0
+        ),
+        "grasp_slips" if v > 0.0 => format!(
+            "The tissue slipped out of the grasper {v:.0} time(s): take a fuller bite and pull \
+             less hard."
+        ),
+        "time_traction_over_limit_s" if v > 0.0 => format!(
+            "The grasper pulled on the tissue past the force limit for {v:.1} s: such traction \
+             tears tissue; draw it more gently."
+        ),
+        _ => return None,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -310,6 +341,34 @@ mod tests {
             lower,
             upper,
         }
+    }
+
+    #[test]
+    fn the_second_hands_handling_is_said_without_an_experts_reference() {
+        let m = |key, value| MetricResult {
+            key,
+            value: Some(value),
+            passed: None,
+            mean: None,
+            lower: None,
+            upper: None,
+        };
+        let a = advice(&[
+            m("countertraction_fraction", 0.3),
+            m("grasp_slips", 2.0),
+            m("time_traction_over_limit_s", 0.0),
+        ]);
+        assert_eq!(a.feedback.len(), 2, "{a:?}");
+        assert!(
+            a.feedback[0].contains("during 30 % of the cut; keep it taut"),
+            "{a:?}"
+        );
+        assert!(
+            a.feedback[1].contains("slipped out of the grasper 2 time(s)"),
+            "{a:?}"
+        );
+        let good = advice(&[m("countertraction_fraction", 0.9)]);
+        assert!(!good.feedback[0].contains("keep it taut"), "{good:?}");
     }
 
     #[test]

@@ -12,7 +12,8 @@ use cutlab_sim::TetMesh;
 use crate::ScoreError;
 use crate::exercise::{ExercisePlan, HandLine};
 use crate::input::{
-    AttemptData, CutSample, DamageEvent, ForceSample, FreedPiece, PoseSample, SurfaceMesh,
+    AttemptData, CutSample, DamageEvent, ForceSample, FreedPiece, GrasperSample, PoseSample,
+    SurfaceMesh,
 };
 use crate::metrics::incision::depth_below_line;
 
@@ -71,7 +72,24 @@ pub fn attempt_data(rec: &Recording, plan: &ExercisePlan) -> Result<AttemptData,
         device: Some(meta.provenance.device.clone()),
         damage: damage_of(rec, period_s),
         retracted_surface: None,
+        grasper: grasper_of(&samples, period_s),
     })
+}
+
+/// The second hand's grasper at every recorded servo sample that has one.
+fn grasper_of(samples: &BTreeMap<u64, ServoSample>, period_s: f64) -> Vec<GrasperSample> {
+    samples
+        .values()
+        .filter_map(|s| {
+            let g = s.grasper?;
+            Some(GrasperSample {
+                t_s: s.tick as f64 * period_s,
+                jaws_m: g.pose.tip_in_world.coords.into(),
+                closed: g.pose.jaws_closed(),
+                pull_newtons: g.pull_newtons.into(),
+            })
+        })
+        .collect()
 }
 
 /// For a field plan with a retractor, the surface of the attempt's wound retracted

@@ -115,6 +115,30 @@ pub struct AttemptData {
     /// Harm done to tissue that should not be cut, in time order.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub damage: Vec<DamageEvent>,
+    /// The second hand's grasper in time order, when the attempt was made with one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub grasper: Vec<GrasperSample>,
+}
+
+/// The second hand's grasper at one instant.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GrasperSample {
+    /// Time since the start of the session (s).
+    pub t_s: f64,
+    /// The jaws' centre in world coordinates (m).
+    pub jaws_m: [f64; 3],
+    /// The jaws are closed.
+    pub closed: bool,
+    /// The held tissue's pull on the jaws (N, world coordinates): zero while they hold
+    /// nothing.
+    pub pull_newtons: [f64; 3],
+}
+
+impl GrasperSample {
+    /// Whether the jaws hold tissue (it pulls on them).
+    pub fn holds(&self) -> bool {
+        self.pull_newtons != [0.0; 3]
+    }
 }
 
 /// Harm done to tissue that should not be cut, as the session recorded it.

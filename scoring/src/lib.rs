@@ -32,6 +32,8 @@ pub use device_class::DeviceClass;
 pub use error::{Result, ScoreError};
 pub use exercise::{ExerciseKind, ExercisePlan, IncisionPlan, Kind};
 pub use from_recording::{UNTOUCHED_NOTE, attempt_data, touched_tissue};
-pub use input::{AttemptData, CutSample, ForceSample, FreedPiece, PoseSample, SurfaceMesh};
+pub use input::{
+    AttemptData, CutSample, ForceSample, FreedPiece, GrasperSample, PoseSample, SurfaceMesh,
+};
 pub use metrics::{Better, Metric, MetricSet, MetricValue};
 pub use proficiency::{CusumParams, Threshold, Thresholds, Verdict};

@@ -63,14 +63,17 @@ fn sample(tick: u64) -> ServoSample {
             gain: 1.0,
         },
         // the second hand beside it, its jaws closed half the time
-        grasper: Some(ToolPose {
-            tip_in_world: tip + Vector3::new(0.0, 0.01, 0.0),
-            world_from_tool: Rotation::identity(),
-            buttons: if tick % 2000 >= 1000 {
-                cutlab_haptics::pose::BUTTON_JAWS
-            } else {
-                0
+        grasper: Some(cutlab_haptics::servo::GrasperTick {
+            pose: ToolPose {
+                tip_in_world: tip + Vector3::new(0.0, 0.01, 0.0),
+                world_from_tool: Rotation::identity(),
+                buttons: if tick % 2000 >= 1000 {
+                    cutlab_haptics::pose::BUTTON_JAWS
+                } else {
+                    0
+                },
             },
+            pull_newtons: Vector3::zeros(),
         }),
     }
 }

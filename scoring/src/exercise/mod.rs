@@ -386,10 +386,18 @@ impl ExercisePlan {
         self.kind_plan().check()
     }
 
-    /// Every metric of the kind for one attempt. Errors only on an invalid plan; unusable
-    /// inputs give missing metrics.
+    /// Every metric of the kind for one attempt, and for an attempt made with a grasper the
+    /// tissue handling ([`crate::metrics::handling`]) after them. Errors only on an invalid
+    /// plan; unusable inputs give missing metrics.
     pub fn assess(&self, data: &AttemptData) -> Result<MetricSet> {
-        self.kind_plan().assess(data)
+        let kind = self.kind_plan();
+        let mut out = kind.assess(data)?;
+        if !data.grasper.is_empty() {
+            let mut values = crate::metrics::Values::default();
+            crate::metrics::handling::assess(data, kind.force_limit_n(), &mut values);
+            out.extend(values.collect(&crate::metrics::handling::metrics()));
+        }
+        Ok(out)
     }
 }
 

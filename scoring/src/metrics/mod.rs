@@ -13,6 +13,7 @@
 pub mod excision;
 pub mod exposure;
 pub mod field;
+pub mod handling;
 pub mod incision;
 pub mod motion;
 pub mod path;
@@ -455,14 +456,17 @@ const fn m(
 }
 
 /// Every metric of every kind of exercise, in report order: [`METRICS`] (the incision's and
-/// those every motion has), then [`pattern::METRICS`], [`excision::METRICS`], then the motion measures of imported
-/// kinematics ([`motion::METRICS`]).
+/// those every motion has), then [`pattern::METRICS`], [`excision::METRICS`],
+/// [`wound::METRICS`], the tissue handling of an attempt with a grasper
+/// ([`handling::METRICS`]), then the motion measures of imported kinematics
+/// ([`motion::METRICS`]).
 pub fn all() -> impl Iterator<Item = &'static Metric> {
     METRICS
         .iter()
         .chain(pattern::METRICS)
         .chain(excision::METRICS)
         .chain(wound::METRICS)
+        .chain(handling::METRICS)
         .chain(motion::METRICS)
 }
 
