@@ -1060,18 +1060,9 @@ async fn pattern_cut(
     shots: &Path,
     interrupt: bool,
 ) -> Result<(), fantoccini::error::CmdError> {
-    use cutlab_haptics::hand::Hand;
     let (mark, mm) = mark_on_page(c).await?;
     let uncut_vertices = vertices(c, "vertices").await?;
-    let along = length_px(&mark);
-    let mut hand = Hand::steady(along / mm, 7);
-    let mut line = mark.clone();
-    line.extend_from_slice(&mark[1..mark.len() * 8 / 100]);
-    let rest = [mark[0][0] - 140.0, mark[0][1] + 170.0];
-    let mut g = hand.approach(rest, line[0]);
-    let stroke_s = 1.08 * mm / 12.0;
-    g.extend(hand.stroke(&line, stroke_s, 1.0));
-    let half = g.len() - (stroke_s * 30.0) as usize;
+    let (mut hand, g, half, end) = round_the_mark(&mark, mm);
     c.perform_actions(as_actions(&g[..half])).await?;
     let shot = if interrupt {
         "station-pattern-reloaded-freed.png"
@@ -1104,12 +1095,34 @@ async fn pattern_cut(
         g[half..].to_vec()
     };
     c.perform_actions(as_actions(&rest_of_it)).await?;
-    let end = line[line.len() - 1];
     c.perform_actions(as_actions(&hand.withdraw(end, [60.0, -120.0], 0.5)))
         .await?;
     tokio::time::sleep(Duration::from_secs(2)).await;
     std::fs::write(shots.join(shot), c.screenshot().await?).expect("screenshot");
     c.release_actions().await
+}
+
+/// A steady hand round `mark` (on the page, `mm` long): a reach onto its start, the circle
+/// and 8 % more at about 12 mm a second, and the lift. The hand, its gestures, where in them
+/// the second half of the stroke begins, and where the stroke ends.
+fn round_the_mark(
+    mark: &[[f64; 2]],
+    mm: f64,
+) -> (
+    cutlab_haptics::hand::Hand,
+    Vec<cutlab_haptics::hand::Gesture>,
+    usize,
+    [f64; 2],
+) {
+    let mut hand = cutlab_haptics::hand::Hand::steady(length_px(mark) / mm, 7);
+    let mut line = mark.to_vec();
+    line.extend_from_slice(&mark[1..mark.len() * 8 / 100]);
+    let rest = [mark[0][0] - 140.0, mark[0][1] + 170.0];
+    let mut g = hand.approach(rest, line[0]);
+    let stroke_s = 1.08 * mm / 12.0;
+    g.extend(hand.stroke(&line, stroke_s, 1.0));
+    let half = g.len() - (stroke_s * 30.0) as usize;
+    (hand, g, half, line[line.len() - 1])
 }
 
 /// `window.cutlabStation[what]()`: a vertex count of the page's surfaces.
@@ -1290,6 +1303,17 @@ async fn start_as_ana(
     exercise: &str,
     mode: &str,
 ) -> Result<(), fantoccini::error::CmdError> {
+    start_as_ana_with(c, base, exercise, mode, &[]).await
+}
+
+/// [`start_as_ana`], with the start form's checkboxes `ticked` (their ids) ticked before Start.
+async fn start_as_ana_with(
+    c: &fantoccini::Client,
+    base: &str,
+    exercise: &str,
+    mode: &str,
+    ticked: &[&str],
+) -> Result<(), fantoccini::error::CmdError> {
     login(c, base, "ana", "trainee-demo").await?;
     c.goto(&format!("{base}/station")).await?;
     c.find(Locator::Css(&format!("option[value='{exercise}']")))
@@ -1300,6 +1324,11 @@ async fn start_as_ana(
         .await?
         .click()
         .await?;
+    for id in ticked {
+        let b = c.find(Locator::Id(id)).await?;
+        b.click().await?;
+        assert!(b.is_selected().await?, "#{id} is ticked");
+    }
     c.find(Locator::Id("start")).await?.click().await?;
     c.wait().for_element(Locator::Id("tissue")).await?;
     let title = c.find(Locator::Css("h1")).await?.text().await?;
@@ -1334,6 +1363,346 @@ async fn debrief(
     c.execute(shown, vec![]).await?;
     std::fs::write(shot, c.screenshot().await?).expect("screenshot");
     Ok(summary)
+}
+
+/// Two hands at the station, as FLS pattern cutting is done: dr-kim opens pattern cutting to
+/// ana early, and she starts it in exam mode with the second hand on (`#second-hand`). Her
+/// left hand's finger (a WebDriver touch source) takes hold of the sheet 10 mm outside the
+/// marked circle, holds still, draws it 8 mm further out over 1.6 s and keeps holding, with a
+/// finger's tremor; meanwhile her right hand's pen (a pen source in the same chain of
+/// actions, tick for tick, pressed to the planned depth) reaches in and goes round the mark
+/// at 60 Hz with a steady hand's tremor and drift. The pen lifts, then the finger. Half way
+/// round, the HUD says the grasper holds the sheet; the session ends by itself and the
+/// debrief measures the second hand (Grasps, Countertraction). Screenshots:
+/// `station-two-hands-holding.png` (half way round, holding), `station-two-hands-debrief.png`,
+/// `station-two-hands-handling.png` (the second hand's metrics); what `#grasper` said and
+/// the timings in `station-two-hands.txt`.
+#[test]
+fn a_grasper_on_touch_holds_the_sheet_while_the_pen_cuts_in_headless_chromium() {
+    let _one = ONE_AT_A_TIME
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if !browser_present() {
+        return;
+    }
+    let tmp = std::env::temp_dir().join(format!("cutlab-e2e-two-hands-{}", std::process::id()));
+    let (_server, port) = demo_server(&tmp);
+    let driver = chromedriver();
+    let (summary, metrics) = runtime().block_on(two_hands(port, &driver, &tmp));
+    for label in ["Grasps", "Countertraction"] {
+        assert!(
+            metrics.iter().any(|(name, _)| name == label),
+            "the debrief measures the second hand: no {label} in {metrics:?} ({summary})"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+}
+
+/// Ana's two-handed pattern cutting (see the test): the debrief's summary and its metrics
+/// (name, value with unit).
+async fn two_hands(
+    port: u16,
+    driver: &browser::Driver,
+    tmp: &Path,
+) -> (String, Vec<(String, String)>) {
+    let (base, shots) = (format!("http://127.0.0.1:{port}"), artefacts());
+    let c = chromium(driver, &tmp.join("profile-two-hands")).await;
+    let result = async {
+        login(&c, &base, "dr-kim", "instructor-demo").await?;
+        open_early(&c, &base, "ana", "pattern-cutting").await?;
+        c.delete_all_cookies().await?;
+        start_as_ana_with(&c, &base, "pattern-cutting", "exam", &["second-hand"]).await?;
+        let started = Instant::now();
+        let cut_s = two_handed_cut(&c, driver, &shots).await?;
+        let summary = debrief(&c, &shots.join("station-two-hands-debrief.png")).await?;
+        let debrief_s = started.elapsed().as_secs_f64();
+        let metrics = metrics_shown(&c, &shots.join("station-two-hands-handling.png")).await?;
+        let said = c
+            .execute(
+                "return [window.cutlabGrasperSaid, window.cutlabPointers]",
+                vec![],
+            )
+            .await?;
+        let note = format!(
+            "hold and cut {cut_s:.1} s, debrief {debrief_s:.1} s after Start\n\
+             #grasper said, and the canvas's pointer events: {said}\n{summary}\n{metrics:?}\n"
+        );
+        eprint!("{note}");
+        std::fs::write(shots.join("station-two-hands.txt"), note).expect("notes");
+        Ok::<_, fantoccini::error::CmdError>((summary, metrics))
+    }
+    .await;
+    let _ = c.close().await;
+    result.expect("the two-handed attempt")
+}
+
+/// The two hands on the page: in one chain of both sources' actions, the finger takes hold,
+/// holds still and draws the sheet out, then holds while the pen reaches in and goes half way
+/// round the mark; the HUD must say the grasper holds. Then the pen goes on round and lifts
+/// (a chain of its own: the finger holds still meanwhile, as chromedriver sends a touch
+/// pressed in an earlier Perform Actions no moves and no lift), and Release Actions lifts
+/// the finger. Returns how long the hold and the cut took, s.
+async fn two_handed_cut(
+    c: &fantoccini::Client,
+    driver: &browser::Driver,
+    shots: &Path,
+) -> Result<f64, fantoccini::error::CmdError> {
+    use cutlab_haptics::hand::{Gesture, Hand};
+    let (mark, mm) = mark_on_page(c).await?;
+    let open = watch_grasper(c).await?;
+    assert_eq!(
+        open.as_deref(),
+        Some("open"),
+        "the HUD shows the grasper, open"
+    );
+    let (grasp, drawn, pressure) = grasp_on_page(c).await?;
+    let (mut pen, g, half, end) = round_the_mark(&mark, mm);
+    let mut finger = Hand::steady(length_px(&mark) / mm, 11);
+    // the finger lands and holds still, draws the sheet 8 mm out (5 mm/s) and holds
+    let mut touch = vec![
+        Gesture::Move {
+            x: grasp[0],
+            y: grasp[1],
+            ms: 16,
+        },
+        Gesture::Press,
+    ];
+    touch.extend(finger.withdraw(grasp, [0.0, 0.0], 0.6));
+    touch.extend(finger.withdraw(grasp, [drawn[0] - grasp[0], drawn[1] - grasp[1]], 1.6));
+    touch.extend(finger.withdraw(drawn, [0.0, 0.0], 0.4));
+    // meanwhile the pen waits, then comes in and cuts half way round
+    let mut first = vec![Gesture::Wait { ms: 0 }; touch.len()];
+    first.extend_from_slice(&g[..half]);
+    touch.extend(still_beside(&mut finger, drawn, &g[..half]));
+    let started = Instant::now();
+    let both = vec![
+        w3c_source("finger", "touch", &touch, 0.0),
+        w3c_source("pen", "pen", &first, pressure),
+    ];
+    perform_w3c(c, driver, both).await?;
+    let (holding, said) = grasper_holding(c).await?;
+    std::fs::write(
+        shots.join("station-two-hands-holding.png"),
+        c.screenshot().await?,
+    )
+    .expect("screenshot");
+    assert!(
+        holding,
+        "the HUD says the grasper holds the sheet while the finger is down: #grasper said, \
+         and the canvas's pointer events: {said}"
+    );
+    let mut rest = g[half..].to_vec();
+    rest.extend(pen.withdraw(end, [60.0, -120.0], 0.5));
+    perform_w3c(c, driver, vec![w3c_source("pen", "pen", &rest, pressure)]).await?;
+    c.release_actions().await?;
+    Ok(started.elapsed().as_secs_f64())
+}
+
+/// Where the finger takes hold (page px), 10 mm outside the mark beyond its point furthest up
+/// and left on the page (away from the pen, which comes in from below left), and where it
+/// draws the sheet to, 8 mm further out; and the pen's pressure for the exercise's depth
+/// (full pressure sets 0.6 of the blade's reach).
+async fn grasp_on_page(
+    c: &fantoccini::Client,
+) -> Result<([f64; 2], [f64; 2], f64), fantoccini::error::CmdError> {
+    let v = c
+        .execute(
+            "const s = window.cutlabStation, m = s.config.marks[0], n = m.length;
+             const centre = [0, 1].map((k) => m.reduce((sum, p) => sum + p[k], 0) / n);
+             const px = m.map((p) => s.project(p));
+             let i = 0;
+             for (let k = 1; k < n; k++) if (px[k][0] + px[k][1] < px[i][0] + px[i][1]) i = k;
+             const d = [m[i][0] - centre[0], m[i][1] - centre[1]], r = Math.hypot(d[0], d[1]);
+             const out = (mm) => s.project([m[i][0] + d[0] / r * mm * 1e-3, m[i][1] + d[1] / r * mm * 1e-3, m[i][2]]);
+             return { grasp: out(10), drawn: out(18), pressure: s.config.start_depth_m / (0.6 * s.config.max_depth_m) };",
+            vec![],
+        )
+        .await?;
+    let at = |k: &str| [v[k][0].as_f64().expect("x"), v[k][1].as_f64().expect("y")];
+    let pressure = v["pressure"].as_f64().expect("the pen's pressure");
+    Ok((at("grasp"), at("drawn"), pressure.clamp(0.05, 1.0)))
+}
+
+/// Keeps what `#grasper` says from now on in `window.cutlabGrasperSaid` (once per state, a
+/// hold with its strongest pull), and counts the canvas's pointer downs, ups and cancels by
+/// pointer type in `window.cutlabPointers`. Returns what it says now (`None`: no `#grasper`).
+async fn watch_grasper(
+    c: &fantoccini::Client,
+) -> Result<Option<String>, fantoccini::error::CmdError> {
+    let now = c
+        .execute(
+            "const g = document.getElementById('grasper'), canvas = document.getElementById('tissue');
+             if (!g) return null;
+             const kind = (t) => t.split(' ')[0], pull = (t) => parseFloat(t.split(' ')[1]) || 0;
+             const said = window.cutlabGrasperSaid = [g.textContent], counts = window.cutlabPointers = {};
+             new MutationObserver(() => {
+               const t = g.textContent, last = said[said.length - 1];
+               if (kind(t) !== kind(last)) said.push(t);
+               else if (kind(t) === 'holding' && pull(t) > pull(last)) said[said.length - 1] = t;
+             }).observe(g, { childList: true, characterData: true, subtree: true });
+             for (const type of ['pointerdown', 'pointerup', 'pointercancel'])
+               canvas.addEventListener(type, (e) => { const k = e.pointerType + ' ' + type; counts[k] = (counts[k] || 0) + 1; });
+             return g.textContent;",
+            vec![],
+        )
+        .await?;
+    Ok(now.as_str().map(str::to_owned))
+}
+
+/// Whether `#grasper` has said `holding` (waiting up to 10 s for it), and
+/// `[what it said, the canvas's pointer events]` (see [`watch_grasper`]).
+async fn grasper_holding(
+    c: &fantoccini::Client,
+) -> Result<(bool, serde_json::Value), fantoccini::error::CmdError> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        let said = c
+            .execute(
+                "return [window.cutlabGrasperSaid, window.cutlabPointers]",
+                vec![],
+            )
+            .await?;
+        let holding = said[0].as_array().is_some_and(|s| {
+            s.iter()
+                .any(|t| t.as_str().is_some_and(|t| t.starts_with("holding")))
+        });
+        if holding || Instant::now() > deadline {
+            return Ok((holding, said));
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+/// The finger holding still at `at` while the other hand does `other`, tick for tick: a
+/// sample of its tremor where the other hand moves, nothing where it waits or presses.
+fn still_beside(
+    finger: &mut cutlab_haptics::hand::Hand,
+    at: [f64; 2],
+    other: &[cutlab_haptics::hand::Gesture],
+) -> Vec<cutlab_haptics::hand::Gesture> {
+    use cutlab_haptics::hand::Gesture;
+    let still = finger.withdraw(at, [0.0, 0.0], other.len() as f64 / finger.rate_hz);
+    let mut out: Vec<Gesture> = other
+        .iter()
+        .zip(still)
+        .map(|(o, s)| match (o, s) {
+            (Gesture::Move { .. }, Gesture::Move { x, y, .. }) => Gesture::Move { x, y, ms: 0 },
+            _ => Gesture::Wait { ms: 0 },
+        })
+        .collect();
+    out.resize(other.len(), Gesture::Wait { ms: 0 });
+    out
+}
+
+/// One hand's gestures as a W3C pointer input source `id` of `pointer_type` (`touch` or
+/// `pen`). Pressed, a pen presses at `pressure`, wavering 5 % either side at 1.3 Hz as a
+/// hand's press does; a finger presses at the driver's default.
+fn w3c_source(
+    id: &str,
+    pointer_type: &str,
+    gestures: &[cutlab_haptics::hand::Gesture],
+    pressure: f64,
+) -> serde_json::Value {
+    use cutlab_haptics::hand::Gesture;
+    use serde_json::json;
+    let (mut down, mut t_s) = (false, 0.0);
+    let actions: Vec<serde_json::Value> = gestures
+        .iter()
+        .map(|g| {
+            let mut a = match *g {
+                Gesture::Move { x, y, ms } => {
+                    t_s += ms as f64 * 1e-3;
+                    json!({ "type": "pointerMove", "duration": ms, "x": x.round(), "y": y.round(), "origin": "viewport" })
+                }
+                Gesture::Press => {
+                    down = true;
+                    json!({ "type": "pointerDown", "button": MOUSE_BUTTON_LEFT })
+                }
+                Gesture::Release => {
+                    down = false;
+                    json!({ "type": "pointerUp", "button": MOUSE_BUTTON_LEFT })
+                }
+                Gesture::Wait { ms } => {
+                    t_s += ms as f64 * 1e-3;
+                    return json!({ "type": "pause", "duration": ms });
+                }
+            };
+            if pointer_type == "pen" && down {
+                let wavering = 1.0 + 0.05 * (std::f64::consts::TAU * 1.3 * t_s).sin();
+                a["pressure"] = json!((pressure * wavering).clamp(0.0, 1.0));
+            }
+            a
+        })
+        .collect();
+    json!({ "type": "pointer", "id": id, "parameters": { "pointerType": pointer_type }, "actions": actions })
+}
+
+/// Perform Actions with `sources` (W3C input sources), posted to chromedriver as they are:
+/// fantoccini's `PenActions` cannot carry a pen's pressure (its pointer actions leave it out,
+/// and chromedriver then presses every pen at 0.5), and its `issue_cmd` takes a command
+/// written with the `http` crate, which this package does not depend on.
+async fn perform_w3c(
+    c: &fantoccini::Client,
+    driver: &browser::Driver,
+    sources: Vec<serde_json::Value>,
+) -> Result<(), fantoccini::error::CmdError> {
+    use std::io::{BufRead, BufReader, Read, Write};
+    let session = c.session_id().await?.expect("a WebDriver session");
+    let body = serde_json::json!({ "actions": sources }).to_string();
+    let port = driver.port;
+    let post = move || -> std::io::Result<(String, String)> {
+        let mut s = std::net::TcpStream::connect(("127.0.0.1", port))?;
+        write!(
+            s,
+            "POST /session/{session}/actions HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\
+             Content-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+            body.len()
+        )?;
+        let mut r = BufReader::new(s);
+        let (mut status, mut line, mut length) = (String::new(), String::new(), 0);
+        r.read_line(&mut status)?;
+        while r.read_line(&mut line)? > 2 {
+            if let Some(v) = line.to_ascii_lowercase().strip_prefix("content-length:") {
+                length = v.trim().parse().unwrap_or(0);
+            }
+            line.clear();
+        }
+        let mut answer = vec![0; length];
+        r.read_exact(&mut answer)?;
+        Ok((status, String::from_utf8_lossy(&answer).into_owned()))
+    };
+    let (status, answer) = tokio::task::spawn_blocking(post)
+        .await
+        .expect("the actions' request")
+        .map_err(fantoccini::error::CmdError::Lost)?;
+    assert!(
+        status.split(' ').nth(1) == Some("200"),
+        "chromedriver's answer to the actions: {status} {answer}"
+    );
+    Ok(())
+}
+
+/// The metrics the debrief lists (name, value and unit), once it lists them; screenshot to
+/// `shot` with the second hand's (from Grasps on) in view.
+async fn metrics_shown(
+    c: &fantoccini::Client,
+    shot: &Path,
+) -> Result<Vec<(String, String)>, fantoccini::error::CmdError> {
+    c.wait()
+        .at_most(Duration::from_secs(60))
+        .for_element(Locator::Css("#debrief-attempt table.metrics"))
+        .await?;
+    let rows = c
+        .execute(
+            "const rows = [...document.querySelectorAll('#debrief-attempt table.metrics tbody tr')];
+             const grasps = rows.find((r) => r.cells[0].textContent.startsWith('Grasps'));
+             if (grasps) grasps.scrollIntoView({ block: 'start' });
+             return rows.map((r) => [r.cells[0].textContent.replace(' *', ''), (r.cells[1].textContent + ' ' + r.cells[2].textContent).trim()]);",
+            vec![],
+        )
+        .await?;
+    std::fs::write(shot, c.screenshot().await?).expect("screenshot");
+    Ok(serde_json::from_value(rows).unwrap_or_default())
 }
 
 /// The mini-thoracotomy at the station in exam mode, as a surgeon places it: no line is drawn;

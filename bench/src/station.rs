@@ -230,6 +230,7 @@ fn request() -> StartRequest {
         exercise: BUILTIN_EXERCISE.into(),
         trainee: "ana".into(),
         guided: true,
+        second_hand: false,
     }
 }
 

@@ -283,29 +283,29 @@ impl Prepared {
         .map_err(|e| StationError::Settings(format!("starting the rerun log: {e}")))
     }
 
-    /// Runs the session with `device`, recorded to `mcap` (and to `observer`).
+    /// Runs the session with `hands` (a grasper the settings plan when they bring none),
+    /// recorded to `mcap` (and to `observer`).
     pub fn record(
         self,
-        device: Box<dyn HapticDevice>,
+        hands: impl Into<Hands>,
         provenance: &Provenance,
         mcap: &Path,
         observer: Option<Box<dyn RecordObserver>>,
     ) -> Result<RecordedSession, StationError> {
         let settings = self.settings.record_settings(self.time_step_s());
-        let grasper = match self.settings.grasp {
-            Some(plan) => {
+        let Hands { scalpel, grasper } = hands.into();
+        let grasper = match (grasper, self.settings.grasp) {
+            (Some(hand), _) => Some(hand),
+            (None, Some(plan)) => {
                 let hand = GrasperHand::new(plan, self.settings.seed)
                     .map_err(|e| StationError::Settings(format!("the grasper: {e}")))?;
                 Some(Box::new(hand) as Box<dyn HapticDevice>)
             }
-            None => None,
+            (None, None) => None,
         };
         Ok(record::run_recorded(
             self.session,
-            Hands {
-                scalpel: device,
-                grasper,
-            },
+            Hands { scalpel, grasper },
             &self.config,
             provenance,
             self.plan.as_ref().ok(),

@@ -7,7 +7,7 @@
 //! | kind | layout |
 //! |---|---|
 //! | [`KIND_TOPOLOGY`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles, u32 × vertices regions` |
-//! | [`KIND_FRAME`] | `u8 kind, u8 mode, u8 engaged, u8 faults, u32 vertices, u64 tick, f64 echo_ms, f32 × 3 tip_m, f32 × 4 world_from_tool (w, x, y, z), f32 × 3 force_newtons, f32 × 3 × vertices positions_m` |
+//! | [`KIND_FRAME`] | `u8 kind, u8 mode, u8 engaged, u8 faults, u32 vertices, u64 tick, f64 echo_ms, f32 × 3 tip_m, f32 × 4 world_from_tool (w, x, y, z), f32 × 3 force_newtons, u8 grasper (0 none, 1 open, 2 closed on nothing, 3 holding), 3 pad, f32 × 3 grasper_m, f32 grasper_pull_newtons, f32 × 3 × vertices positions_m` |
 //! | [`KIND_REST`] | `u8 kind, 3 pad, u32 vertices, u32 triangles, u32 × 3 × triangles, f32 × 3 × vertices positions_m` |
 //!
 //! The rest message comes first on every connection: the session's first surface, from which
@@ -32,7 +32,7 @@ pub const KIND_FRAME: u8 = 2;
 /// The kind byte of the rest surface's message.
 pub const KIND_REST: u8 = 3;
 /// Bytes of a frame before its positions.
-pub const FRAME_HEADER_BYTES: usize = 4 + 4 + 8 + 8 + 12 + 16 + 12;
+pub const FRAME_HEADER_BYTES: usize = 4 + 4 + 8 + 8 + 12 + 16 + 12 + 4 + 12 + 4;
 /// The longest text message the server reads from a page.
 pub const MAX_CLIENT_MESSAGE_BYTES: usize = 1024;
 /// The longest message the socket takes at all: a longer one closes the connection (the
@@ -87,15 +87,16 @@ pub fn encode_frame(frame: &ViewFrame) -> Vec<u8> {
     out.extend(u32_of(frame.positions_m.len() / 3).to_le_bytes());
     out.extend(frame.tick.to_le_bytes());
     out.extend(frame.echo_ms.to_le_bytes());
-    for x in frame
-        .tip_m
-        .iter()
-        .chain(&frame.world_from_tool_wxyz)
-        .chain(&frame.force_newtons)
-        .chain(&frame.positions_m)
-    {
-        out.extend(x.to_le_bytes());
-    }
+    let floats =
+        |out: &mut Vec<u8>, xs: &[f32]| xs.iter().for_each(|x| out.extend(x.to_le_bytes()));
+    floats(&mut out, &frame.tip_m);
+    floats(&mut out, &frame.world_from_tool_wxyz);
+    floats(&mut out, &frame.force_newtons);
+    let g = frame.grasper;
+    out.extend([g.map_or(0, |g| g.state()), 0, 0, 0]);
+    floats(&mut out, &g.map_or([0.0; 3], |g| g.jaws_m));
+    floats(&mut out, &[g.map_or(0.0, |g| g.pull_newtons)]);
+    floats(&mut out, &frame.positions_m);
     out
 }
 
@@ -110,6 +111,11 @@ pub enum ClientMessage {
     /// One pointer or pen sample: where the cursor meets the tissue and what the trainee does
     /// there (checked by the pointer device: a NaN faults it, an absurd value is dropped).
     Pointer(PointerSample),
+    /// One sample of the second hand's grasper (a touch, on a session started with a second
+    /// hand): the point under it on the tissue, the jaws lifted `-depth_m` off the surface,
+    /// closed while `blade_engaged` (the button or the touch is held). Checked as a pointer
+    /// sample is.
+    Grasper(PointerSample),
     /// The trainee pressed Stop.
     Stop {},
 }
@@ -150,6 +156,11 @@ mod tests {
             tip_m: [0.1, 0.2, 0.3],
             world_from_tool_wxyz: [1.0, 0.0, 0.0, 0.0],
             force_newtons: [0.0, 0.5, -1.0],
+            grasper: Some(crate::view::GrasperView {
+                jaws_m: [0.4, 0.5, 0.6],
+                closed: true,
+                pull_newtons: 0.25,
+            }),
             positions_m: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
         };
         let b = encode_frame(&frame);
@@ -161,6 +172,15 @@ mod tests {
         assert_eq!(f32_at(&b, 24), 0.1);
         assert_eq!(f32_at(&b, 36), 1.0);
         assert_eq!(f32_at(&b, 52 + 8), -1.0);
+        // the grasper holding (3), its jaws, its pull
+        assert_eq!(&b[64..68], &[3, 0, 0, 0]);
+        assert_eq!(f32_at(&b, 68), 0.4);
+        assert_eq!(f32_at(&b, 80), 0.25);
+        let without = encode_frame(&ViewFrame {
+            grasper: None,
+            ..frame.clone()
+        });
+        assert_eq!((without.len(), without[64]), (b.len(), 0));
         assert_eq!(FRAME_HEADER_BYTES % 4, 0);
         assert_eq!(f32_at(&b, FRAME_HEADER_BYTES), 1.0);
         assert_eq!(f32_at(&b, b.len() - 4), 6.0);
@@ -209,6 +229,11 @@ mod tests {
         )
         .expect("a sample");
         assert!(matches!(m, ClientMessage::Pointer(p) if p.blade_engaged && p.depth_m == 0.004));
+        let g = decode_client(
+            r#"{"type":"grasper","t_ms":5,"surface_in_world_m":[0,0,0],"depth_m":-0.004,"blade_engaged":true}"#,
+        )
+        .expect("a grasper sample");
+        assert!(matches!(g, ClientMessage::Grasper(p) if p.blade_engaged && p.depth_m == -0.004));
         assert_eq!(
             decode_client(r#"{"type":"stop"}"#).expect("stop"),
             ClientMessage::Stop {}

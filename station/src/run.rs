@@ -21,7 +21,7 @@ use cutlab_haptics::device::{
 };
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::{Clock, PeriodStats};
-use cutlab_haptics::{TimeStep, ToolPose, Vector3};
+use cutlab_haptics::{Hands, TimeStep, ToolPose, Vector3};
 use cutlab_recorder::RerunTarget;
 use cutlab_recorder::record::Provenance;
 use cutlab_recorder::writer::RecordObserver;
@@ -144,6 +144,9 @@ pub struct StartRequest {
     /// Guided (the plan shown on the tissue) or exam (nothing shown); an exam-only exercise
     /// runs as an exam whatever this says.
     pub guided: bool,
+    /// With the page's pointer: a second hand, the grasper, driven by the page's touch
+    /// ([`Running::grasper`]).
+    pub second_hand: bool,
 }
 
 /// How a running session is asked to end, and how it did. The pages that show it come and
@@ -299,6 +302,8 @@ pub struct Running {
     pub feed: ViewFeed,
     /// Where the page's samples go, when the page drives the session.
     pub pointer: Option<PointerFeed>,
+    /// Where the page's grasper samples go, when the session has a second hand.
+    pub grasper: Option<PointerFeed>,
     pub control: Arc<Control>,
     /// `None` while the session runs.
     pub ending: watch::Receiver<Option<Ending>>,
@@ -409,6 +414,13 @@ pub async fn start(
         Input::Spec(spec) => (prepared.device(&spec)?, None),
         Input::Device(make) => (make(&plan)?, None),
     };
+    let (grasper_device, grasper) = match (&pointer, request.second_hand) {
+        (Some(_), true) => {
+            let (device, feed) = PointerDevice::new(PointerOptions::grasper_above(&plan)?)?;
+            (Some(Box::new(device) as Box<dyn HapticDevice>), Some(feed))
+        }
+        _ => (None, None),
+    };
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
@@ -458,7 +470,10 @@ pub async fn start(
         .collect();
     let thread = SessionThread {
         prepared,
-        device,
+        hands: Hands {
+            scalpel: device,
+            grasper: grasper_device,
+        },
         provenance,
         mcap,
         observers,
@@ -494,6 +509,7 @@ pub async fn start(
         targets,
         feed,
         pointer,
+        grasper,
         control,
         ending,
         figures,
@@ -523,7 +539,7 @@ async fn force_limit(
 /// ended and queues it to the hub.
 struct SessionThread {
     prepared: Prepared,
-    device: Box<dyn HapticDevice>,
+    hands: Hands,
     provenance: Provenance,
     mcap: PathBuf,
     observers: Vec<Box<dyn RecordObserver>>,
@@ -544,7 +560,7 @@ impl SessionThread {
         let tets = self.prepared.scene.model.mesh.tet_count();
         let time_step_s = self.prepared.time_step_s();
         let mut recorded = self.prepared.record(
-            self.device,
+            self.hands,
             &self.provenance,
             &self.mcap,
             Some(Box::new(self.observers)),

@@ -48,8 +48,32 @@ pub struct ViewFrame {
     pub tip_m: [f32; 3],
     pub world_from_tool_wxyz: [f32; 4],
     pub force_newtons: [f32; 3],
+    /// The second hand's grasper, in a session with one.
+    pub grasper: Option<GrasperView>,
     /// The surface's vertices, `x, y, z` each, in the order of the current topology.
     pub positions_m: Vec<f32>,
+}
+
+/// The second hand's grasper in a frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GrasperView {
+    /// The jaws' centre, m.
+    pub jaws_m: [f32; 3],
+    /// The jaws are closed.
+    pub closed: bool,
+    /// The held tissue's pull on the jaws, N (0 while they hold nothing).
+    pub pull_newtons: f32,
+}
+
+impl GrasperView {
+    /// Its state as a frame carries it: 1 open, 2 closed on nothing, 3 holding tissue.
+    pub fn state(&self) -> u8 {
+        match (self.closed, self.pull_newtons > 0.0) {
+            (_, true) => 3,
+            (true, false) => 2,
+            (false, false) => 1,
+        }
+    }
 }
 
 /// What the slot holds: the frame and the topology its positions belong to.
@@ -140,6 +164,11 @@ impl ViewPublisher {
             tip_m: f32x3(s.pose.tip_in_world.coords.into()),
             world_from_tool_wxyz: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
             force_newtons: f32x3(s.render.force_newtons.into()),
+            grasper: s.grasper.map(|g| GrasperView {
+                jaws_m: f32x3(g.pose.tip_in_world.coords.into()),
+                closed: g.pose.jaws_closed(),
+                pull_newtons: g.pull_newtons.norm() as f32,
+            }),
             positions_m: flat_f32(vertices),
         };
         self.slot.send_modify(|state| {

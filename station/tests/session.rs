@@ -86,6 +86,7 @@ async fn a_station_session_is_seen_while_it_runs_and_scored_when_it_ends() {
         exercise: EXERCISE.into(),
         trainee: "ana".into(),
         guided: true,
+        second_hand: false,
     };
     // the station's own synthetic expert, picked by name as the page does
     let settings = StationSettings {
@@ -244,6 +245,7 @@ async fn stop_ends_the_session_early_and_a_lost_page_leaves_it_incomplete() {
         exercise: EXERCISE.into(),
         trainee: trainee.into(),
         guided: false,
+        second_hand: false,
     };
     let settings = settings(dir, 60.0);
     let running = set
@@ -328,11 +330,13 @@ async fn a_page_that_stops_sending_leaves_the_attempt_incomplete() {
         exercise: EXERCISE.into(),
         trainee: "ana".into(),
         guided: true,
+        second_hand: false,
     };
     let running = run::start(store.clone(), &settings, request, Input::Pointer)
         .await
         .expect("started");
     let feed = running.pointer.clone().expect("the page's pointer");
+    assert!(running.grasper.is_none(), "no second hand was asked for");
     let entry = running.plan.line_m[0];
     feed.push(PointerSample::new(1.0, entry.into(), 0.0, false))
         .expect("a sample");
@@ -369,6 +373,7 @@ async fn a_page_that_pauses_or_reconnects_keeps_its_attempt() {
         exercise: EXERCISE.into(),
         trainee: "ana".into(),
         guided: true,
+        second_hand: false,
     };
     let running = run::start(store.clone(), &settings, request, Input::Pointer)
         .await
@@ -421,6 +426,7 @@ async fn a_page_gone_past_the_absence_ends_its_attempt_incomplete() {
         exercise: EXERCISE.into(),
         trainee: "ana".into(),
         guided: false,
+        second_hand: false,
     };
     let running = run::start(store.clone(), &settings, request, Input::Device(expert()))
         .await
@@ -469,6 +475,7 @@ async fn an_exam_only_exercise_never_shows_its_plan_and_brings_its_force_limit()
                 exercise: exercise.into(),
                 trainee: "ana".into(),
                 guided,
+                second_hand: false,
             },
             Input::Device(expert()),
         )
@@ -500,6 +507,7 @@ async fn pattern_cutting_shows_its_mark_in_exam_mode_and_scores_the_freed_piece(
         exercise: cutlab_assessor::store::PATTERN_EXERCISE.into(),
         trainee: "ana".into(),
         guided: false,
+        second_hand: false,
     };
     // second in cutting-basics: locked until the incision is proficient
     let refused = run::start(store.clone(), &settings, request(), Input::Device(expert())).await;
@@ -592,6 +600,7 @@ async fn a_mini_thoracotomy_is_scored_on_its_retracted_field() {
         exercise: name.into(),
         trainee: "ana".into(),
         guided: false,
+        second_hand: false,
     };
     let running = run::start(store.clone(), &settings, request, Input::Device(expert()))
         .await
@@ -641,5 +650,84 @@ async fn a_mini_thoracotomy_is_scored_on_its_retracted_field() {
         heart > 100,
         "the heart shows through the retracted wound: {heart} pixels"
     );
+    store.close().await;
+}
+
+/// A page with a second hand: its touch closes the grasper 12 mm beside the line's middle,
+/// draws the tissue 4 mm further away and lifts it while the pen cuts the line, and lets go
+/// at the end. The frames show the jaws holding; the attempt is scored with the handling of
+/// the tissue. A session started without a second hand has no grasper to feed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_hand_on_the_pages_touch_holds_the_tissue_while_the_pen_cuts() {
+    use cutlab_haptics::device::PointerSample;
+    let dir_guard = temp_dir("two-hands");
+    let dir = dir_guard.path();
+    let store = store(dir).await;
+    let settings = StationSettings {
+        clock: Clock::Live,
+        ..settings(dir, 60.0)
+    };
+    let request = StartRequest {
+        exercise: EXERCISE.into(),
+        trainee: "ana".into(),
+        guided: true,
+        second_hand: true,
+    };
+    let running = run::start(store.clone(), &settings, request, Input::Pointer)
+        .await
+        .expect("started");
+    let (pen, touch) = (
+        running.pointer.clone().expect("the page's pointer"),
+        running.grasper.clone().expect("the page's grasper"),
+    );
+    let line = running.plan.line_m.clone();
+    let (a, b) = (line[0], line[line.len() - 1]);
+    let up = running.plan.normals[line.len() / 2];
+    let beside = up.cross(&(b - a)).normalize();
+    let hold = line[line.len() / 2] + beside * 0.012;
+    running.control.attach();
+    let mut feed = running.feed.clone();
+    let mut held_seen = false;
+    // 60 Hz: the touch lands and closes (0.3 s), draws 4 mm away and lifts 4 mm (0.5 s),
+    // then the pen cuts the line 4 mm deep (3 s) while the touch holds
+    let steps = 60 + line.len() * 6;
+    for k in 0..steps {
+        let t_ms = 1000.0 + 16.7 * k as f64;
+        let draw = (k.saturating_sub(18) as f64 / 30.0).min(1.0);
+        let jaws = hold + beside * (0.004 * draw);
+        let grasp = PointerSample::new(t_ms, jaws.into(), -0.004 * draw, k >= 12);
+        touch.push(grasp).expect("a grasper sample");
+        let along = line[(k.saturating_sub(60) / 6).min(line.len() - 1)];
+        let cutting = k >= 60;
+        let depth_m = if cutting { 0.004 } else { 0.0 };
+        let cut = PointerSample::new(t_ms, along.into(), depth_m, cutting);
+        pen.push(cut).expect("a pen sample");
+        tokio::time::sleep(Duration::from_millis(17)).await;
+        let frame = feed.borrow_and_update().frame.clone();
+        held_seen |= frame
+            .and_then(|f| f.grasper)
+            .is_some_and(|g| g.state() == 3);
+    }
+    assert!(held_seen, "the frames never showed the jaws holding");
+    let t_ms = 1000.0 + 16.7 * steps as f64;
+    touch
+        .push(PointerSample::new(t_ms, hold.into(), -0.004, false))
+        .expect("let go");
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    running.control.stop();
+    let Ending::Scored { attempt, .. } = ending(&running).await else {
+        panic!("the two-handed attempt is scored")
+    };
+    let metrics = store.attempt_metrics(attempt).await.expect("metrics");
+    let value = |key: &str| {
+        metrics
+            .iter()
+            .find(|m| m.metric == key)
+            .and_then(|m| m.value)
+            .unwrap_or_else(|| panic!("{key}: {metrics:?}"))
+    };
+    assert_eq!(value("grasps"), 1.0);
+    assert!(value("peak_traction_n") > 0.0);
+    assert!(value("countertraction_fraction") > 0.5, "{metrics:?}");
     store.close().await;
 }

@@ -21,7 +21,7 @@ pub fn station_ws(data: &[u8]) -> Outcome {
     let mut refused = None;
     for line in text.lines() {
         match decode_client(line) {
-            Ok(ClientMessage::Pointer(sample)) => {
+            Ok(ClientMessage::Pointer(sample) | ClientMessage::Grasper(sample)) => {
                 let _ = feed.push(sample);
             }
             Ok(ClientMessage::Stop {}) => {}

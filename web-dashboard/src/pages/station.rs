@@ -113,6 +113,9 @@ async fn choose(State(state): State<AppState>, user: CurrentUser) -> PageResult<
                         }
                     }
                 }
+                p {
+                    label { input type="checkbox" id="second-hand" name="second_hand" value="on"; " Second hand: a grasper on touch (with this page's pointer or pen): touch the tissue to close its jaws there, drag to draw the tissue, lift to let go" }
+                }
                 p class="muted" { "With the pointer: move it over the tissue; hold the button to engage the blade; the wheel (or pen pressure, or the ↑/↓ keys) sets the depth. With another device this page is its view. The session ends at Stop, at the time limit, or when you lift the blade out after cutting." }
                 button id="start" type="submit" { "Start" }
             }
@@ -175,6 +178,9 @@ struct StartForm {
     /// `pointer` (the default) or one of the station's devices as it prints.
     #[serde(default)]
     device: Option<String>,
+    /// Present (`on`) for a second hand: a grasper on the page's touch.
+    #[serde(default)]
+    second_hand: Option<String>,
 }
 
 /// `POST /station/start`: starts the session, then to its page.
@@ -201,6 +207,7 @@ async fn start(
         exercise: form.exercise,
         trainee,
         guided,
+        second_hand: form.second_hand.is_some(),
     };
     let running = cutlab_station::run::start(state.store().clone(), &settings, request, input)
         .await
@@ -224,6 +231,8 @@ fn config_json(r: &Running, driver: bool) -> String {
         "driver": driver,
         // the page's pointer drives the session (else another device does, the page views)
         "pointer": r.pointer.is_some(),
+        // the page's touch drives a second hand's grasper
+        "grasper": r.grasper.is_some(),
         "exercise": r.exercise,
         "trainee": r.trainee,
         "guided": r.guided,
@@ -302,6 +311,7 @@ async fn station(
                     div { "Blade depth " span id="blade-depth" { "–" } " (planned " (format!("{:.1}", r.plan.depth_m * 1e3)) " mm)" }
                     div { "Set depth " span id="depth" { "–" } }
                     @if !r.region_names.is_empty() { div { "Layer " span id="blade-layer" { "–" } } }
+                    @if r.grasper.is_some() { div { "Grasper " span id="grasper" { "open" } } }
                     canvas id="depth-gauge" width="120" height="150" title="The cut from the side: the surface at the top, the planned depth dashed green, the set depth dotted grey, the blade red below the surface" {}
                     @if driver && r.pointer.is_some() { div class="muted" { (format!("Wheel down or ↓: deeper; wheel up or ↑: shallower ({:.1} mm a step, to {:.0} mm).", (r.blade_length_m / 40.0).max(0.0005) * 1e3, r.blade_length_m * 1e3)) } }
                     div class="scale" { span id="scale-bar" {} " 10 mm" }
@@ -445,6 +455,12 @@ async fn serve(ws: WebSocket, r: Arc<Running>, driver: bool, logged_out: impl Fu
                     if let Some(p) = &r.pointer
                         && p.push(sample).is_err()
                     {
+                        dropped += 1;
+                    }
+                }
+                Ok(ClientMessage::Grasper(sample)) => {
+                    // a session without a second hand has no grasper to take it
+                    if r.grasper.as_ref().is_none_or(|g| g.push(sample).is_err()) {
                         dropped += 1;
                     }
                 }

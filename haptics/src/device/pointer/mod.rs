@@ -130,6 +130,10 @@ pub struct PointerOptions {
     /// count the move from it to the first sample, so above the planned entry is best: see
     /// [`Self::above_entry`]).
     pub rest_pose: ToolPose,
+    /// The button bit a sample's held button sets ([`PointerSample::blade_engaged`]):
+    /// [`crate::pose::BUTTON_BLADE`] for a scalpel, [`crate::pose::BUTTON_JAWS`] for a
+    /// grasper ([`Self::grasper_above`]).
+    pub button: u32,
 }
 
 impl Default for PointerOptions {
@@ -145,6 +149,7 @@ impl Default for PointerOptions {
                 tip_in_world: Point3::new(0.0, 0.0, 0.1),
                 ..ToolPose::default()
             },
+            button: crate::pose::BUTTON_BLADE,
         }
     }
 }
@@ -172,6 +177,27 @@ impl PointerOptions {
                 buttons: 0,
             },
             ..Self::default()
+        })
+    }
+
+    /// A grasper's: the jaws held closed while the button is ([`crate::pose::BUTTON_JAWS`]),
+    /// oriented as [`Self::above_entry`]'s scalpel (a negative depth lifts them off the
+    /// surface), at rest 30 mm above the middle of `plan`'s line, and waiting for its hand
+    /// as long as a session lasts (a second hand may stay off the tissue for minutes).
+    pub fn grasper_above(plan: &Plan) -> Result<Self, HapticsError> {
+        let scalpel = Self::above_entry(plan)?;
+        let middle = plan.line_m.len() / 2;
+        let (Some(&at), Some(&normal)) = (plan.line_m.get(middle), plan.normals.get(middle)) else {
+            return Err(HapticsError::Config("plan: no line".into()));
+        };
+        Ok(Self {
+            absence_s: 3600.0,
+            rest_pose: ToolPose {
+                tip_in_world: at + normal * 0.03,
+                ..scalpel.rest_pose
+            },
+            button: crate::pose::BUTTON_JAWS,
+            ..scalpel
         })
     }
 
@@ -307,7 +333,11 @@ impl PointerDevice {
             pose: ToolPose {
                 tip_in_world: surface - (rotation * Vector3::z()) * s.depth_m,
                 world_from_tool: rotation,
-                buttons: timeline::buttons(s.blade_engaged),
+                buttons: if s.blade_engaged {
+                    self.options.button
+                } else {
+                    0
+                },
             },
         }
     }

@@ -3,7 +3,6 @@
 
 use std::collections::VecDeque;
 
-use crate::pose::BUTTON_BLADE;
 use crate::{Point3, Rotation, ToolPose};
 
 /// A usable sample as a pose at a page time.
@@ -230,15 +229,11 @@ fn nlerp(a: &Rotation, b: &Rotation, u: f64) -> Rotation {
     Rotation::try_new(q, 1e-12).unwrap_or(*a)
 }
 
-/// The blade button's bits for `engaged`.
-pub(crate) fn buttons(engaged: bool) -> u32 {
-    if engaged { BUTTON_BLADE } else { 0 }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::Vector3;
+    use crate::pose::BUTTON_BLADE;
 
     fn at(t_ms: f64, x: f64) -> Keyed {
         Keyed {

@@ -7,7 +7,7 @@
   const canvas = document.getElementById("tissue");
   if (!canvas) return;
   const config = JSON.parse(canvas.dataset.config);
-  const KIND_TOPOLOGY = 1, KIND_FRAME = 2, KIND_REST = 3, FRAME_HEADER_BYTES = 64;
+  const KIND_TOPOLOGY = 1, KIND_FRAME = 2, KIND_REST = 3, FRAME_HEADER_BYTES = 84;
   const BLADE_LENGTH_M = 0.015, BLADE_WIDTH_M = 0.003;
   const status = (text) => { document.getElementById("status").textContent = text; };
 
@@ -248,6 +248,8 @@
       mode: view.getUint8(1), engaged: view.getUint8(2) === 1, faults: view.getUint8(3),
       tick: Number(view.getBigUint64(8, true)), echo: view.getFloat64(16, true),
       tip: f32(24, 3), rotation: f32(36, 4), force: f32(52, 3),
+      // the second hand's grasper: 0 none, 1 open, 2 closed on nothing, 3 holding
+      grasper: view.getUint8(64), jaws: f32(68, 3), pull: view.getFloat32(80, true),
       xyz: new Float32Array(view.buffer, FRAME_HEADER_BYTES, 3 * vertices),
     };
     fresh = true;
@@ -412,6 +414,7 @@
     for (const mark of config.marks || []) strip(mark, gl.LINE_STRIP, [0.12, 0.16, 0.55]);
     if (!config.plan && rest) strip(ruler(), gl.LINES, [0.95, 0.95, 0.95]);
     drawBlade(strip);
+    drawGrasper(strip);
     stats.draws += 1;
     stats.work_ms += performance.now() - started;
   }
@@ -439,6 +442,19 @@
       strip([tip, add(tip, scale(axis, Math.min(above.depth / Math.max(1e-6, dot(axis, up)), 4 * BLADE_LENGTH_M)))], gl.LINES, [1, 0.25, 0.2]);
     }
     strip([tip], gl.POINTS, latest.mode === 2 ? [1, 0.3, 0.2] : [0.9, 0.9, 0.95], 6);
+  }
+
+  // the second hand's grasper: its two jaws either side of their centre across the view, a
+  // shaft up from it; grey open, blue closed, bright blue holding tissue
+  function drawGrasper(strip) {
+    if (!latest.grasper) return;
+    const c = latest.jaws, { s } = basis(camera.eye, camera.target, camera.up);
+    const gap = latest.grasper === 1 ? 0.004 : 0.001, jaw = (k) => add(c, scale(s, k * gap));
+    const tint = [[0.6, 0.62, 0.66], [0.6, 0.62, 0.66], [0.25, 0.45, 0.8], [0.2, 0.55, 1]][latest.grasper];
+    gl.disable(gl.DEPTH_TEST);
+    strip([add(jaw(1), scale(up, 0.006)), jaw(1), add(jaw(-1), scale(up, 0.006)), jaw(-1)], gl.LINES, tint);
+    strip([add(c, scale(up, 0.006)), add(c, scale(up, 0.04))], gl.LINES, [0.3, 0.32, 0.36]);
+    strip([c], gl.POINTS, tint, 8);
   }
 
   // exam mode's landmarks: a ruler on the tissue, ticks every 10 mm along its two near
@@ -577,6 +593,7 @@
     gauge(above ? above.depth : null);
     layerShown = bladeLayer(f, above);
     show("blade-layer", "textContent", layerShown ?? "–");
+    if (f.grasper) show("grasper", "textContent", ["", "open", "closed on nothing", "holding " + f.pull.toFixed(2) + " N"][f.grasper]);
     if (!scaled) { scaled = true; scaleBar(); axesMarker(); }
     cutSeen = cutSeen || f.mode === 2;
   }
@@ -688,7 +705,41 @@
     lastSent = t_ms;
     socket.send(JSON.stringify({ type: "pointer", t_ms, surface_in_world_m: hit.point, depth_m: engaged ? depth : 0, blade_engaged: engaged }));
   }
+  // the second hand: a touch closes the grasper's jaws where it lands, drags the tissue
+  // along, lifts the jaws over 0.3 s once closed, and opens them when it lifts
+  const GRASP_LIFT_M = 0.004, LIFT_S = 0.3;
+  const grasp = { id: null, hit: null, closedAt: null, lastSent: 0 };
+  const isGrasper = (e) => config.grasper && e.pointerType === "touch";
+  function sendGrasper(t_ms) {
+    if (!grasp.hit || socket.readyState !== WebSocket.OPEN || !(t_ms > grasp.lastSent)) return;
+    grasp.lastSent = t_ms;
+    const closed = grasp.closedAt !== null;
+    const lift = closed ? GRASP_LIFT_M * Math.min(1, (performance.now() - grasp.closedAt) / (LIFT_S * 1e3)) : GRASP_LIFT_M;
+    socket.send(JSON.stringify({ type: "grasper", t_ms, surface_in_world_m: grasp.hit.point, depth_m: -lift, blade_engaged: closed }));
+  }
+  canvas.addEventListener("pointerdown", (event) => {
+    if (!isGrasper(event) || grasp.id !== null) return;
+    const h = pick(event); if (!h) return;
+    canvas.setPointerCapture(event.pointerId);
+    // the jaws come down open onto the point, then close
+    grasp.id = event.pointerId; grasp.hit = h; grasp.closedAt = null;
+    sendGrasper(event.timeStamp);
+    grasp.closedAt = performance.now();
+    sendGrasper(event.timeStamp + 0.5);
+  });
   canvas.addEventListener("pointermove", (event) => {
+    if (event.pointerId !== grasp.id) return;
+    const h = pick(event); if (h) { grasp.hit = h; sendGrasper(event.timeStamp); }
+  });
+  const letGo = (event) => {
+    if (event.pointerId !== grasp.id) return;
+    grasp.id = null; grasp.closedAt = null;
+    sendGrasper(event.timeStamp);
+  };
+  canvas.addEventListener("pointerup", letGo);
+  canvas.addEventListener("pointercancel", letGo);
+  canvas.addEventListener("pointermove", (event) => {
+    if (isGrasper(event)) return;
     const events = event.getCoalescedEvents ? event.getCoalescedEvents() : [event];
     for (const e of events.length ? events : [event]) {
       if (e.pointerType === "pen" && e.pressure > 0) depth = Math.min(DEPTH_MAX_M, e.pressure * 0.6 * DEPTH_MAX_M);
@@ -697,13 +748,16 @@
     }
   });
   canvas.addEventListener("pointerdown", (event) => {
-    if (event.button !== 0) return;
+    if (event.button !== 0 || isGrasper(event)) return;
     canvas.setPointerCapture(event.pointerId);
     engaged = true; releasedAt = null;
     const h = pick(event); if (h) hit = h;
     send(event.timeStamp);
   });
-  canvas.addEventListener("pointerup", (event) => { engaged = false; releasedAt = performance.now(); send(event.timeStamp); });
+  canvas.addEventListener("pointerup", (event) => {
+    if (isGrasper(event)) return;
+    engaged = false; releasedAt = performance.now(); send(event.timeStamp);
+  });
   canvas.addEventListener("wheel", (event) => {
     event.preventDefault();
     deeper(-Math.sign(event.deltaY) * DEPTH_STEP_M);
@@ -723,6 +777,8 @@
     requestAnimationFrame(heartbeat);
     const now = performance.now();
     if (now - lastSent > 100) send(now);
+    // the grasper's too, every 50 ms: its lift goes on while the touch holds still
+    if (grasp.hit && now - grasp.lastSent > 50) sendGrasper(now);
     if (cutSeen && !engaged && releasedAt !== null && performance.now() - releasedAt > 1500 && !ended) { stop(); releasedAt = null; }
   })();
 })();
