@@ -83,6 +83,12 @@ struct IgtlArgs {
     /// `ForceTo<reference frame>`, e.g. `ForceToRef`).
     #[arg(long, default_value = cutlab_haptics::device::igtl::FORCE_DEVICE_NAME)]
     force_name: String,
+    /// With an `igtl:PORT` device: a second tool on the same connection, the second hand's
+    /// grasper: the device name of its TRANSFORMs (e.g. `GrasperToRef`); a STRING named it
+    /// with `Jaws` appended closes (`1`) or opens (`0`) the jaws; its force goes back named
+    /// it with `Force` appended.
+    #[arg(long)]
+    igtl_grasper: Option<String>,
 }
 
 impl IgtlArgs {
@@ -90,6 +96,9 @@ impl IgtlArgs {
         cutlab_haptics::device::IgtlOptions {
             force_output: self.force_output,
             force_device_name: self.force_name,
+            grasper: self
+                .igtl_grasper
+                .map(|name| cutlab_haptics::device::IgtlToolNames::grasper(&name)),
         }
     }
 }

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::{DbLocation, Store};
-use cutlab_haptics::device::{DeviceSpec, HapticDevice};
+use cutlab_haptics::device::DeviceSpec;
 use cutlab_haptics::servo::{Clock, PeriodStats};
 use cutlab_haptics::{SessionReport, StepChoice};
 use cutlab_recorder::RerunTarget;
@@ -89,10 +89,19 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
     if let (DeviceSpec::Igtl(_), Some(d)) = (&o.device, &device) {
         println!(
             "OpenIGTLink device {} listening (TRANSFORM in, mm; {:?} {:?} out, N)",
-            d.name(),
+            d.scalpel.name(),
             o.run.igtl.force_output,
             o.run.igtl.force_device_name
         );
+        if let (Some(g), Some(names)) = (&d.grasper, &o.run.igtl.grasper) {
+            println!(
+                "  and a grasper, {}: TRANSFORM {:?}, jaws STRING {:?}, force {:?}",
+                g.name(),
+                names.pose,
+                names.jaws(),
+                names.force
+            );
+        }
     }
     let s = run_session(o, device)?;
     for note in &s.notes {
@@ -131,7 +140,7 @@ pub fn run(o: &Options) -> anyhow::Result<()> {
 /// `o` says, scored and sent to the hub. Prints nothing.
 pub fn run_session(
     o: &Options,
-    device: Option<Box<dyn HapticDevice>>,
+    device: Option<cutlab_haptics::Hands>,
 ) -> anyhow::Result<SessionRun> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -200,7 +209,7 @@ pub fn run_session(
         scene.spec.cut_depth_mm,
     );
     let step_choice = prepared.step_choice.clone();
-    let device_name = device.name().to_owned();
+    let device_name = device.scalpel.name().to_owned();
     let at = db.as_ref().map(|(store, recordings)| AttemptStore {
         store,
         recordings: recordings.as_ref(),

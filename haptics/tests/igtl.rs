@@ -41,7 +41,7 @@ fn wait_for(mut ok: impl FnMut() -> bool) -> bool {
 }
 
 /// Reads one force reply: the POINT's x y z.
-fn read_force(stream: &mut TcpStream) -> Vector3 {
+fn read_force(stream: &mut impl Read) -> Vector3 {
     let mut reply = [0u8; HEADER_BYTES + POINT_ELEMENT_BYTES];
     stream.read_exact(&mut reply).expect("force reply");
     let f = |k: usize| {
@@ -336,4 +336,121 @@ fn pyigtl_client_reads_the_force_as_a_transform() {
             .load(std::sync::atomic::Ordering::Relaxed),
         0
     );
+}
+
+/// A packet of `message_type` named `name` with `body`.
+fn packet(message_type: &str, name: &str, body: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    Header::write(message_type, name, 0, body, &mut out);
+    out.extend_from_slice(body);
+    out
+}
+
+/// A TRANSFORM named `name`: identity rotation, translation in mm.
+fn named_transform(name: &str, t_mm: [f64; 3]) -> Vec<u8> {
+    let mut out = Vec::new();
+    encode_transform(
+        name,
+        &(Point3::from(t_mm) * 1e-3),
+        &Rotation::identity(),
+        0,
+        &mut out,
+    );
+    out
+}
+
+/// A STRING named `name` saying `text` (US-ASCII).
+fn string_packet(name: &str, text: &str) -> Vec<u8> {
+    let mut body = 3u16.to_be_bytes().to_vec();
+    body.extend((text.len() as u16).to_be_bytes());
+    body.extend(text.as_bytes());
+    packet("STRING", name, &body)
+}
+
+/// Reads one force reply: its device name and the POINT's x y z.
+fn read_named_force(stream: &mut TcpStream) -> (String, Vector3) {
+    let mut reply = [0u8; HEADER_BYTES + POINT_ELEMENT_BYTES];
+    stream.read_exact(&mut reply).expect("force reply");
+    let header =
+        Header::parse(reply[..HEADER_BYTES].try_into().expect("a header")).expect("header");
+    let name = String::from_utf8_lossy(header.device_name()).into_owned();
+    (name, read_force(&mut std::io::Cursor::new(reply)))
+}
+
+/// Two tools on one connection, told apart by name: the scalpel's TRANSFORMs and its force as
+/// before, the grasper's TRANSFORMs (named `Grasper`) its own device's, its jaws closed and
+/// opened by the STRING `GrasperJaws`, its force back as `GrasperForce`.
+#[test]
+fn a_second_tool_by_name_is_the_graspers_with_its_jaws_and_its_own_force() {
+    use cutlab_haptics::device::igtl::IgtlToolNames;
+    let options = IgtlOptions {
+        grasper: Some(IgtlToolNames::grasper("Grasper")),
+        ..IgtlOptions::default()
+    };
+    let mut device =
+        IgtlDevice::listen_with("127.0.0.1:0".parse().expect("address"), options).expect("listen");
+    let mut grasper = device.take_grasper().expect("a grasper");
+    assert!(device.take_grasper().is_none(), "taken once");
+    device.write_force(Vector3::new(0.25, 0.0, 0.0)).ok();
+    grasper.write_force(Vector3::new(0.0, 0.0, -0.5)).ok();
+    let mut s = TcpStream::connect(device.address()).expect("connect");
+    s.write_all(&named_transform("StylusToRef", [10.0, 20.0, 30.0]))
+        .expect("send");
+    let (name, f) = read_named_force(&mut s);
+    assert_eq!((name.as_str(), f), ("Force", Vector3::new(0.25, 0.0, 0.0)));
+    s.write_all(&named_transform("Grasper", [40.0, 50.0, 60.0]))
+        .expect("send");
+    let (name, f) = read_named_force(&mut s);
+    assert_eq!(
+        (name.as_str(), f),
+        ("GrasperForce", Vector3::new(0.0, 0.0, -0.5))
+    );
+    let at = |d: &mut dyn HapticDevice, x_m: f64, closed: bool| {
+        wait_for(|| {
+            d.read(0, 0.0)
+                .is_ok_and(|p| (p.tip_in_world.x - x_m).abs() < 1e-6 && p.jaws_closed() == closed)
+        })
+    };
+    assert!(
+        at(&mut grasper, 0.04, false),
+        "the grasper's pose, jaws open"
+    );
+    assert!(
+        device
+            .read(0, 0.0)
+            .is_ok_and(|p| (p.tip_in_world.x - 0.01).abs() < 1e-6 && p.blade_engaged())
+    );
+    // the jaws close on their STRING and open again on it; the scalpel's stays as it was
+    s.write_all(&string_packet("GrasperJaws", "1"))
+        .expect("send");
+    s.write_all(&named_transform("Grasper", [41.0, 50.0, 60.0]))
+        .expect("send");
+    read_named_force(&mut s);
+    assert!(at(&mut grasper, 0.041, true), "closed");
+    s.write_all(&string_packet("GrasperJaws", "0"))
+        .expect("send");
+    s.write_all(&named_transform("Grasper", [42.0, 50.0, 60.0]))
+        .expect("send");
+    read_named_force(&mut s);
+    assert!(at(&mut grasper, 0.042, false), "open again");
+    assert!(
+        device
+            .read(0, 0.0)
+            .is_ok_and(|p| !p.jaws_closed() && p.blade_engaged())
+    );
+    // a STRING named for nothing is ignored, not taken for a button
+    s.write_all(&string_packet("Elsewhere", "0")).expect("send");
+    assert!(wait_for(|| device
+        .counters()
+        .ignored
+        .load(std::sync::atomic::Ordering::Relaxed)
+        >= 1));
+    // names that cannot be told apart or sent are refused
+    for bad in ["Force", "two words", ""] {
+        let options = IgtlOptions {
+            grasper: Some(IgtlToolNames::grasper(bad)),
+            ..IgtlOptions::default()
+        };
+        assert!(options.check().is_err(), "{bad:?}");
+    }
 }

@@ -231,10 +231,11 @@ impl Prepared {
 
     /// The device `spec` names: one that follows the plan is made for it (with the run's
     /// seed; a synthetic trainee places its own incision where the exercise leaves that to
-    /// the trainee); a file, a recording or a port is opened ([`open_device`]).
-    pub fn device(&self, spec: &DeviceSpec) -> Result<Box<dyn HapticDevice>, StationError> {
+    /// the trainee); a file, a recording or a port is opened ([`open_device`]: an
+    /// OpenIGTLink port brings the second tool it names).
+    pub fn device(&self, spec: &DeviceSpec) -> Result<Hands, StationError> {
         let seed = self.settings.seed;
-        Ok(match spec {
+        let device: Box<dyn HapticDevice> = match spec {
             DeviceSpec::Trainee { name, skill } => {
                 let chosen = match &self.chooses_from {
                     Some(p) => {
@@ -254,10 +255,11 @@ impl Prepared {
             DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, self.plan()?, seed)?),
             DeviceSpec::StylusHand(kind) => Box::new(StylusHand::new(*kind, self.plan()?, seed)?),
             DeviceSpec::Csv(_) | DeviceSpec::Recording(_) | DeviceSpec::Igtl(_) => {
-                open_device(spec, &self.settings.igtl)?
-                    .ok_or_else(|| StationError::NoSuchDevice(format!("{spec} follows no plan")))?
+                return open_device(spec, &self.settings.igtl)?
+                    .ok_or_else(|| StationError::NoSuchDevice(format!("{spec} follows no plan")));
             }
-        })
+        };
+        Ok(device.into())
     }
 
     /// Who did what, as the recording says it (a replay builds the same scene from it).
@@ -331,11 +333,8 @@ fn across(scene: &Scene, session: &Session) -> Result<Plan, String> {
 /// The device `spec` names when it needs no plan (a trajectory file, a recorded hand, an
 /// OpenIGTLink port), opened now so that a bad file or a busy port is said before the scene
 /// is built; `None` for a device that follows the plan.
-pub fn open_device(
-    spec: &DeviceSpec,
-    igtl: &IgtlOptions,
-) -> Result<Option<Box<dyn HapticDevice>>, StationError> {
-    Ok(Some(match spec {
+pub fn open_device(spec: &DeviceSpec, igtl: &IgtlOptions) -> Result<Option<Hands>, StationError> {
+    let device: Box<dyn HapticDevice> = match spec {
         DeviceSpec::Trainee { .. } | DeviceSpec::PointerHand(_) | DeviceSpec::StylusHand(_) => {
             return Ok(None);
         }
@@ -347,16 +346,24 @@ pub fn open_device(
             Box::new(RecordedHand::new(&recording)?)
         }
         DeviceSpec::Igtl(port) => {
-            let d = IgtlDevice::listen_with(SocketAddr::from(([0, 0, 0, 0], *port)), igtl.clone())?;
+            let mut d =
+                IgtlDevice::listen_with(SocketAddr::from(([0, 0, 0, 0], *port)), igtl.clone())?;
             tracing::info!(
                 "OpenIGTLink device listening on {} (TRANSFORM in, mm; force out as {:?} {:?}, N)",
                 d.address(),
                 igtl.force_output,
                 igtl.force_device_name
             );
-            Box::new(d)
+            let grasper = d
+                .take_grasper()
+                .map(|g| Box::new(g) as Box<dyn HapticDevice>);
+            return Ok(Some(Hands {
+                scalpel: Box::new(d),
+                grasper,
+            }));
         }
-    }))
+    };
+    Ok(Some(device.into()))
 }
 
 /// Whose attempt a run is, at which exercise.
@@ -474,20 +481,21 @@ pub struct RunResult {
 pub fn run_blocking(
     rt: &tokio::runtime::Runtime,
     prepared: Prepared,
-    device: Box<dyn HapticDevice>,
+    hands: impl Into<Hands>,
     who: Option<(&AttemptStore<'_>, &AttemptSpec, &Admitted)>,
     mcap: &Path,
     observer: Option<Box<dyn RecordObserver>>,
 ) -> Result<RunResult, StationError> {
     let (trainee, exercise) = who.map_or(("", ""), |(_, w, _)| (&*w.trainee, &*w.exercise));
-    let provenance = prepared.provenance(trainee, exercise, device.name());
+    let hands = hands.into();
+    let provenance = prepared.provenance(trainee, exercise, hands.scalpel.name());
     let open = match who {
         Some((at, w, admitted)) => {
             Some(rt.block_on(OpenAttempt::start(at.store, w, admitted, mcap))?)
         }
         None => None,
     };
-    let mut recorded = prepared.record(device, &provenance, mcap, observer);
+    let mut recorded = prepared.record(hands, &provenance, mcap, observer);
     let observer = finish_observer(&mut recorded);
     let (Some(open), Some((at, _, _))) = (open, who) else {
         return Ok(RunResult {

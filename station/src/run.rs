@@ -402,24 +402,29 @@ pub async fn start(
         Input::Spec(spec) => Some(spec.to_string()),
         Input::Device(_) => None,
     };
-    let (device, pointer): (Box<dyn HapticDevice>, Option<PointerFeed>) = match input {
+    let (hands, pointer): (Hands, Option<PointerFeed>) = match input {
         Input::Pointer => {
             let options = PointerOptions {
                 absence_s: settings.absence_s,
                 ..PointerOptions::above_entry(&plan)?
             };
             let (device, feed) = PointerDevice::new(options)?;
-            (Box::new(device), Some(feed))
+            (Box::new(device).into(), Some(feed))
         }
         Input::Spec(spec) => (prepared.device(&spec)?, None),
-        Input::Device(make) => (make(&plan)?, None),
+        Input::Device(make) => (make(&plan)?.into(), None),
     };
+    let Hands {
+        scalpel: device,
+        grasper: grasper_device,
+    } = hands;
+    // the page's touch, the second hand, beside its pointer
     let (grasper_device, grasper) = match (&pointer, request.second_hand) {
         (Some(_), true) => {
             let (device, feed) = PointerDevice::new(PointerOptions::grasper_above(&plan)?)?;
             (Some(Box::new(device) as Box<dyn HapticDevice>), Some(feed))
         }
-        _ => (None, None),
+        _ => (grasper_device, None),
     };
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)

@@ -351,6 +351,35 @@ pub struct IgtlOptions {
     /// Device name of the force message: 1 to 20 printable ASCII characters (default
     /// `Force`; PLUS needs `<Id>To<ToolReferenceFrame>`, e.g. `ForceToRef`).
     pub force_device_name: String,
+    /// A second tool on the same connection, the second hand's grasper
+    /// ([`IgtlDevice::take_grasper`]); `None`: every `TRANSFORM` is the scalpel's.
+    pub grasper: Option<IgtlToolNames>,
+}
+
+/// The names a second tool goes by on an OpenIGTLink connection.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IgtlToolNames {
+    /// Device name of its `TRANSFORM`s (PLUS: `<Id>To<ToolReferenceFrame>`, e.g.
+    /// `GrasperToRef`); a `STRING` named this with `Jaws` appended (`GrasperToRefJaws`)
+    /// and content `1` or `0` closes or opens its jaws.
+    pub pose: String,
+    /// Device name of its force message (sent as [`IgtlOptions::force_output`] says).
+    pub force: String,
+}
+
+impl IgtlToolNames {
+    /// A grasper whose poses come named `pose` and whose force goes back as `<pose>Force`.
+    pub fn grasper(pose: &str) -> Self {
+        Self {
+            pose: pose.to_owned(),
+            force: format!("{pose}Force"),
+        }
+    }
+
+    /// The device name of the `STRING` that opens and closes the jaws.
+    pub fn jaws(&self) -> String {
+        format!("{}Jaws", self.pose)
+    }
 }
 
 impl Default for IgtlOptions {
@@ -359,6 +388,7 @@ impl Default for IgtlOptions {
         Self {
             force_output: ForceOutput::Point,
             force_device_name: FORCE_DEVICE_NAME.to_owned(),
+            grasper: None,
         }
     }
 }
@@ -371,20 +401,33 @@ impl IgtlOptions {
         Self {
             force_output: ForceOutput::Transform,
             force_device_name: format!("ForceTo{reference_frame}"),
+            grasper: None,
         }
     }
 
-    /// Checks the device name (it must fit the header and be printable).
+    /// Checks the device names (each must fit the header and be printable, the grasper's
+    /// differ from the force's).
     pub fn check(&self) -> Result<(), HapticsError> {
-        let name = self.force_device_name.as_bytes();
-        if name.is_empty()
-            || name.len() > DEVICE_NAME_BYTES
-            || !name.iter().all(|b| b.is_ascii_graphic())
-        {
-            return Err(HapticsError::Config(format!(
-                "OpenIGTLink force device name {:?}: 1 to {DEVICE_NAME_BYTES} printable ASCII characters without spaces",
-                self.force_device_name
-            )));
+        let check = |what: &str, name: &str| {
+            let b = name.as_bytes();
+            if b.is_empty() || b.len() > DEVICE_NAME_BYTES || !b.iter().all(u8::is_ascii_graphic) {
+                return Err(HapticsError::Config(format!(
+                    "OpenIGTLink {what} device name {name:?}: 1 to {DEVICE_NAME_BYTES} printable ASCII characters without spaces"
+                )));
+            }
+            Ok(())
+        };
+        check("force", &self.force_device_name)?;
+        if let Some(g) = &self.grasper {
+            check("grasper", &g.pose)?;
+            check("grasper force", &g.force)?;
+            check("grasper jaws", &g.jaws())?;
+            if g.pose == self.force_device_name || g.force == self.force_device_name {
+                return Err(HapticsError::Config(format!(
+                    "OpenIGTLink grasper device name {:?}: the force message's name",
+                    g.pose
+                )));
+            }
         }
         Ok(())
     }
@@ -471,21 +514,103 @@ pub struct IgtlCounters {
     pub ignored: AtomicU64,
 }
 
+/// The servo loop's end of one tool: its latest pose, the force for it.
+#[derive(Debug)]
+struct ToolEnd {
+    poses: triple_buffer::Output<Received>,
+    forces: triple_buffer::Input<Vector3>,
+    connected: Arc<AtomicBool>,
+    epoch: Instant,
+}
+
+impl ToolEnd {
+    fn read(&mut self, stale_after_nanos: u64) -> Result<ToolPose, DeviceFault> {
+        let r = *self.poses.read();
+        if !self.connected.load(Ordering::Acquire) || r.at_nanos == 0 {
+            return Err(DeviceFault::Disconnected);
+        }
+        let now = self.epoch.elapsed().as_nanos() as u64;
+        let age_nanos = now.saturating_sub(r.at_nanos);
+        if age_nanos > stale_after_nanos {
+            return Err(DeviceFault::Stale { age_nanos });
+        }
+        Ok(r.pose)
+    }
+
+    fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
+        self.forces.write(force_newtons);
+        if self.connected.load(Ordering::Acquire) {
+            Ok(())
+        } else {
+            Err(DeviceFault::Disconnected)
+        }
+    }
+}
+
+/// The network thread's end of one tool: where its poses go, its force, its button.
+struct ToolSource {
+    poses: triple_buffer::Input<Received>,
+    forces: triple_buffer::Output<Vector3>,
+    button: u32,
+}
+
+/// A tool's two ends, its button's bit when its `STRING` says `1`, and its pose at first.
+fn tool_ends(connected: &Arc<AtomicBool>, epoch: Instant, button: u32) -> (ToolEnd, ToolSource) {
+    let (pose_in, poses) = triple_buffer::triple_buffer(&Received::default());
+    let (forces, force_out) = triple_buffer::triple_buffer(&Vector3::zeros());
+    let end = ToolEnd {
+        poses,
+        forces,
+        connected: connected.clone(),
+        epoch,
+    };
+    let source = ToolSource {
+        poses: pose_in,
+        forces: force_out,
+        button,
+    };
+    (end, source)
+}
+
 /// The OpenIGTLink device (see the module documentation).
 #[derive(Debug)]
 pub struct IgtlDevice {
     name: String,
     address: SocketAddr,
-    poses: triple_buffer::Output<Received>,
-    forces: triple_buffer::Input<Vector3>,
-    connected: Arc<AtomicBool>,
+    tool: ToolEnd,
     stop: Arc<AtomicBool>,
     counters: Arc<IgtlCounters>,
-    epoch: Instant,
     /// A pose older than this is stale.
     pub stale_after_nanos: u64,
     force_output: ForceOutput,
+    grasper: Option<IgtlGrasper>,
     thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// The second tool of an OpenIGTLink connection, the second hand's grasper
+/// ([`IgtlOptions::grasper`], [`IgtlDevice::take_grasper`]): its `TRANSFORM`s are its
+/// poses, its `STRING` closes the jaws ([`crate::pose::BUTTON_JAWS`]), its force goes back
+/// under its own name. It lives as long as the scalpel's device keeps the connection.
+#[derive(Debug)]
+pub struct IgtlGrasper {
+    name: String,
+    tool: ToolEnd,
+    /// A pose older than this is stale.
+    pub stale_after_nanos: u64,
+}
+
+impl HapticDevice for IgtlGrasper {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn read(&mut self, _tick: u64, _time_s: f64) -> Result<ToolPose, DeviceFault> {
+        self.tool.read(self.stale_after_nanos)
+    }
+
+    fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
+        self.tool.write_force(force_newtons)
+    }
 }
 
 impl IgtlDevice {
@@ -509,21 +634,32 @@ impl IgtlDevice {
         let listener = TcpListener::bind(address).map_err(listen_err)?;
         listener.set_nonblocking(true).map_err(listen_err)?;
         let address = listener.local_addr().map_err(listen_err)?;
-        let (pose_in, poses) = triple_buffer::triple_buffer(&Received::default());
-        let (forces, force_out) = triple_buffer::triple_buffer(&Vector3::zeros());
         let connected = Arc::new(AtomicBool::new(false));
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(IgtlCounters::default());
         let epoch = Instant::now();
+        let (tool, scalpel) = tool_ends(&connected, epoch, BUTTON_BLADE);
+        // the grasper's jaws open until its STRING says otherwise
+        let (grasper, second) = match &options.grasper {
+            Some(names) => {
+                let (end, source) = tool_ends(&connected, epoch, 0);
+                let device = IgtlGrasper {
+                    name: format!("igtl:{}/{}", address.port(), names.pose),
+                    tool: end,
+                    stale_after_nanos: 100_000_000,
+                };
+                (Some(device), Some((names.clone(), source)))
+            }
+            None => (None, None),
+        };
         let server = Server {
             listener,
-            poses: pose_in,
-            forces: force_out,
-            connected: connected.clone(),
+            scalpel,
+            second,
+            connected,
             stop: stop.clone(),
             counters: counters.clone(),
             epoch,
-            button: BUTTON_BLADE,
             force_output: options.force_output,
             force_device_name: options.force_device_name,
         };
@@ -537,16 +673,19 @@ impl IgtlDevice {
         Ok(Self {
             name: format!("igtl:{}", address.port()),
             address,
-            poses,
-            forces,
-            connected,
+            tool,
             stop,
             counters,
-            epoch,
             stale_after_nanos: 100_000_000,
             force_output: options.force_output,
+            grasper,
             thread: Some(thread),
         })
+    }
+
+    /// The second tool's device, once ([`IgtlOptions::grasper`]; `None` without one).
+    pub fn take_grasper(&mut self) -> Option<IgtlGrasper> {
+        self.grasper.take()
     }
 
     /// The kind of message the force goes back as.
@@ -566,7 +705,7 @@ impl IgtlDevice {
 
     /// Whether a client is connected now.
     pub fn is_connected(&self) -> bool {
-        self.connected.load(Ordering::Acquire)
+        self.tool.connected.load(Ordering::Acquire)
     }
 }
 
@@ -585,38 +724,24 @@ impl HapticDevice for IgtlDevice {
     }
 
     fn read(&mut self, _tick: u64, _time_s: f64) -> Result<ToolPose, DeviceFault> {
-        let r = *self.poses.read();
-        if !self.connected.load(Ordering::Acquire) || r.at_nanos == 0 {
-            return Err(DeviceFault::Disconnected);
-        }
-        let now = self.epoch.elapsed().as_nanos() as u64;
-        let age_nanos = now.saturating_sub(r.at_nanos);
-        if age_nanos > self.stale_after_nanos {
-            return Err(DeviceFault::Stale { age_nanos });
-        }
-        Ok(r.pose)
+        self.tool.read(self.stale_after_nanos)
     }
 
     fn write_force(&mut self, force_newtons: Vector3) -> Result<(), DeviceFault> {
-        self.forces.write(force_newtons);
-        if self.connected.load(Ordering::Acquire) {
-            Ok(())
-        } else {
-            Err(DeviceFault::Disconnected)
-        }
+        self.tool.write_force(force_newtons)
     }
 }
 
 /// The network side, on its own thread.
 struct Server {
     listener: TcpListener,
-    poses: triple_buffer::Input<Received>,
-    forces: triple_buffer::Output<Vector3>,
+    scalpel: ToolSource,
+    /// The second tool, by its names.
+    second: Option<(IgtlToolNames, ToolSource)>,
     connected: Arc<AtomicBool>,
     stop: Arc<AtomicBool>,
     counters: Arc<IgtlCounters>,
     epoch: Instant,
-    button: u32,
     force_output: ForceOutput,
     force_device_name: String,
 }
@@ -721,20 +846,19 @@ impl Server {
                 Fill::Idle | Fill::Closed => return,
             }
             match self.handle(&h, body) {
-                Ok(true) => {
-                    let force_newtons = *self.forces.read();
-                    self.force_output.encode(
-                        &self.force_device_name,
-                        &force_newtons,
-                        timestamp_now(),
-                        &mut reply,
-                    );
+                Ok(Some(second)) => {
+                    let (name, force_newtons) = match (&mut self.second, second) {
+                        (Some((names, tool)), true) => (names.force.as_str(), *tool.forces.read()),
+                        _ => (self.force_device_name.as_str(), *self.scalpel.forces.read()),
+                    };
+                    self.force_output
+                        .encode(name, &force_newtons, timestamp_now(), &mut reply);
                     if stream.write_all(&reply).is_err() {
                         return;
                     }
                     self.counters.forces_sent.fetch_add(1, Ordering::Relaxed);
                 }
-                Ok(false) => {}
+                Ok(None) => {}
                 Err(e) => {
                     self.counters.rejected.fetch_add(1, Ordering::Relaxed);
                     tracing::warn!(
@@ -746,39 +870,60 @@ impl Server {
         }
     }
 
-    /// Handles one checked message; true when a force reply is due.
-    fn handle(&mut self, h: &Header, body: &[u8]) -> Result<bool, PacketError> {
+    /// The tool a message named `name` is about: the second tool's by its names (its
+    /// `TRANSFORM` or its jaws' `STRING`), else the scalpel's; true for the second.
+    fn tool(&mut self, name: &[u8], jaws: bool) -> (&mut ToolSource, bool, u32) {
+        match &mut self.second {
+            Some((names, tool))
+                if (!jaws && name == names.pose.as_bytes())
+                    || (jaws && name == names.jaws().as_bytes()) =>
+            {
+                (tool, true, crate::pose::BUTTON_JAWS)
+            }
+            _ => (&mut self.scalpel, false, BUTTON_BLADE),
+        }
+    }
+
+    /// Handles one checked message; `Some(second)` when a force reply is due, for the
+    /// second tool or the scalpel.
+    fn handle(&mut self, h: &Header, body: &[u8]) -> Result<Option<bool>, PacketError> {
         let content = content(h, body)?;
+        let at_nanos = (self.epoch.elapsed().as_nanos() as u64).max(1);
         match h.message_type() {
             b"TRANSFORM" => {
                 let (tip, rotation) = decode_transform(content)?;
-                let at_nanos = (self.epoch.elapsed().as_nanos() as u64).max(1);
-                self.poses.write(Received {
+                let (tool, second, _) = self.tool(h.device_name(), false);
+                tool.poses.write(Received {
                     pose: ToolPose {
                         tip_in_world: tip,
                         world_from_tool: rotation,
-                        buttons: self.button,
+                        buttons: tool.button,
                     },
                     at_nanos,
                 });
                 self.counters.transforms.fetch_add(1, Ordering::Relaxed);
-                Ok(true)
+                Ok(Some(second))
             }
-            b"STRING" if h.device_name() == b"Button" => {
+            b"STRING" => {
+                let (tool, _, bit) = self.tool(h.device_name(), true);
+                if bit == BUTTON_BLADE && h.device_name() != b"Button" {
+                    self.counters.ignored.fetch_add(1, Ordering::Relaxed);
+                    return Ok(None);
+                }
                 if content.len() < 4 {
                     return Err(PacketError::Size(content.len()));
                 }
                 let n = u16::from_be_bytes([content[2], content[3]]) as usize;
                 match content.get(4..4 + n) {
-                    Some(b"1") => self.button = BUTTON_BLADE,
-                    Some(b"0") => self.button = 0,
+                    Some(b"1") => tool.button = bit,
+                    Some(b"0") => tool.button = 0,
                     _ => return Err(PacketError::Size(content.len())),
                 }
-                Ok(false)
+                Ok(None)
             }
             _ => {
                 self.counters.ignored.fetch_add(1, Ordering::Relaxed);
-                Ok(false)
+                Ok(None)
             }
         }
     }

@@ -14,7 +14,7 @@ mod trainee;
 pub use choice::{Choice, Planning};
 pub use csv::CsvDevice;
 pub use grasper_hand::{GraspPlan, GrasperHand};
-pub use igtl::{ForceOutput, IgtlDevice, IgtlOptions};
+pub use igtl::{ForceOutput, IgtlDevice, IgtlGrasper, IgtlOptions, IgtlToolNames};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
 pub use pointer_hand::{HandKind, PointerHand, STEADY_PACE_M_PER_S};
 pub use spec::DeviceSpec;

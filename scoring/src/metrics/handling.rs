@@ -19,7 +19,9 @@
 //!   tissue straight away from the blade, 0 across, -1 slackens it towards the blade;
 //! - countertraction: the share of the cutting time during which the jaws held the tissue
 //!   drawn at least [`DRAWN_M`] and away from the blade (`d · u > 0`);
-//! - the grasper's path: its jaws' path length, filtered as the blade's ([`super::path`]);
+//! - the grasper's path: its jaws' path length from their first closing on (the hand at
+//!   work; a tracked or touched grasper's place before it is not a reach it made), filtered
+//!   as the blade's ([`super::path`]), over the whole attempt when the jaws never closed;
 //! - bimanual balance and coordination of the blade and the jaws ([`super::motion::bimanual`]).
 
 use nalgebra::{Point3, Vector3};
@@ -100,7 +102,7 @@ pub const METRICS: &[Metric] = &[
         "m",
         Better::LowerIsBetter,
         false,
-        "distance travelled by the grasper's jaws (filtered)",
+        "distance travelled by the grasper's jaws from their first closing (filtered)",
     )
     .labelled("Grasper path length"),
 ];
@@ -269,7 +271,8 @@ pub(crate) fn assess(data: &AttemptData, limit_n: f64, values: &mut Values) {
         "the blade never cut",
         values,
     );
-    let jaws: Vec<PoseSample> = grasper
+    let at_work = grasper.iter().position(|s| s.closed).unwrap_or(0);
+    let jaws: Vec<PoseSample> = grasper[at_work..]
         .iter()
         .map(|s| PoseSample {
             t_s: s.t_s,
