@@ -438,6 +438,18 @@ fn a_second_tool_by_name_is_the_graspers_with_its_jaws_and_its_own_force() {
             .read(0, 0.0)
             .is_ok_and(|p| !p.jaws_closed() && p.blade_engaged())
     );
+    // the scalpel's own button is its STRING `Button`, apart from the jaws'
+    s.write_all(&string_packet("Button", "0")).expect("send");
+    s.write_all(&named_transform("StylusToRef", [11.0, 20.0, 30.0]))
+        .expect("send");
+    read_named_force(&mut s);
+    assert!(wait_for(|| device.read(0, 0.0).is_ok_and(|p| {
+        (p.tip_in_world.x - 0.011).abs() < 1e-6 && !p.blade_engaged() && !p.jaws_closed()
+    })));
+    assert!(
+        at(&mut grasper, 0.042, false),
+        "the jaws did not move with it"
+    );
     // a STRING named for nothing is ignored, not taken for a button
     s.write_all(&string_packet("Elsewhere", "0")).expect("send");
     assert!(wait_for(|| device

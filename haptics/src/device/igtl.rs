@@ -547,15 +547,23 @@ impl ToolEnd {
     }
 }
 
-/// The network thread's end of one tool: where its poses go, its force, its button.
+/// The network thread's end of one tool: where its poses go, its force, its button (the
+/// `STRING` named `button_name` sets `button` to `pressed` on `1`, to 0 on `0`).
 struct ToolSource {
     poses: triple_buffer::Input<Received>,
     forces: triple_buffer::Output<Vector3>,
     button: u32,
+    pressed: u32,
+    button_name: String,
 }
 
-/// A tool's two ends, its button's bit when its `STRING` says `1`, and its pose at first.
-fn tool_ends(connected: &Arc<AtomicBool>, epoch: Instant, button: u32) -> (ToolEnd, ToolSource) {
+/// A tool's two ends: its button's `STRING` named `button_name` presses `pressed`; the
+/// button starts as `button`.
+fn tool_ends(
+    connected: &Arc<AtomicBool>,
+    epoch: Instant,
+    (button_name, pressed, button): (String, u32, u32),
+) -> (ToolEnd, ToolSource) {
     let (pose_in, poses) = triple_buffer::triple_buffer(&Received::default());
     let (forces, force_out) = triple_buffer::triple_buffer(&Vector3::zeros());
     let end = ToolEnd {
@@ -568,6 +576,8 @@ fn tool_ends(connected: &Arc<AtomicBool>, epoch: Instant, button: u32) -> (ToolE
         poses: pose_in,
         forces: force_out,
         button,
+        pressed,
+        button_name,
     };
     (end, source)
 }
@@ -638,11 +648,17 @@ impl IgtlDevice {
         let stop = Arc::new(AtomicBool::new(false));
         let counters = Arc::new(IgtlCounters::default());
         let epoch = Instant::now();
-        let (tool, scalpel) = tool_ends(&connected, epoch, BUTTON_BLADE);
-        // the grasper's jaws open until its STRING says otherwise
+        // the blade engaged until its STRING says otherwise
+        let (tool, scalpel) = tool_ends(
+            &connected,
+            epoch,
+            ("Button".into(), BUTTON_BLADE, BUTTON_BLADE),
+        );
+        // the grasper's jaws open until theirs does
         let (grasper, second) = match &options.grasper {
             Some(names) => {
-                let (end, source) = tool_ends(&connected, epoch, 0);
+                let jaws = (names.jaws(), crate::pose::BUTTON_JAWS, 0);
+                let (end, source) = tool_ends(&connected, epoch, jaws);
                 let device = IgtlGrasper {
                     name: format!("igtl:{}/{}", address.port(), names.pose),
                     tool: end,
@@ -870,18 +886,21 @@ impl Server {
         }
     }
 
-    /// The tool a message named `name` is about: the second tool's by its names (its
-    /// `TRANSFORM` or its jaws' `STRING`), else the scalpel's; true for the second.
-    fn tool(&mut self, name: &[u8], jaws: bool) -> (&mut ToolSource, bool, u32) {
+    /// The tool a `TRANSFORM` named `name` moves: the second tool's by its name, else the
+    /// scalpel's; true for the second.
+    fn posed(&mut self, name: &[u8]) -> (&mut ToolSource, bool) {
         match &mut self.second {
-            Some((names, tool))
-                if (!jaws && name == names.pose.as_bytes())
-                    || (jaws && name == names.jaws().as_bytes()) =>
-            {
-                (tool, true, crate::pose::BUTTON_JAWS)
-            }
-            _ => (&mut self.scalpel, false, BUTTON_BLADE),
+            Some((names, tool)) if name == names.pose.as_bytes() => (tool, true),
+            _ => (&mut self.scalpel, false),
         }
+    }
+
+    /// The tool whose button a `STRING` named `name` sets, if any.
+    fn button_named(&mut self, name: &[u8]) -> Option<&mut ToolSource> {
+        let second = self.second.as_mut().map(|(_, tool)| tool);
+        std::iter::once(&mut self.scalpel)
+            .chain(second)
+            .find(|tool| tool.button_name.as_bytes() == name)
     }
 
     /// Handles one checked message; `Some(second)` when a force reply is due, for the
@@ -892,7 +911,7 @@ impl Server {
         match h.message_type() {
             b"TRANSFORM" => {
                 let (tip, rotation) = decode_transform(content)?;
-                let (tool, second, _) = self.tool(h.device_name(), false);
+                let (tool, second) = self.posed(h.device_name());
                 tool.poses.write(Received {
                     pose: ToolPose {
                         tip_in_world: tip,
@@ -905,17 +924,16 @@ impl Server {
                 Ok(Some(second))
             }
             b"STRING" => {
-                let (tool, _, bit) = self.tool(h.device_name(), true);
-                if bit == BUTTON_BLADE && h.device_name() != b"Button" {
+                let Some(tool) = self.button_named(h.device_name()) else {
                     self.counters.ignored.fetch_add(1, Ordering::Relaxed);
                     return Ok(None);
-                }
+                };
                 if content.len() < 4 {
                     return Err(PacketError::Size(content.len()));
                 }
                 let n = u16::from_be_bytes([content[2], content[3]]) as usize;
                 match content.get(4..4 + n) {
-                    Some(b"1") => tool.button = bit,
+                    Some(b"1") => tool.button = tool.pressed,
                     Some(b"0") => tool.button = 0,
                     _ => return Err(PacketError::Size(content.len())),
                 }
