@@ -11,15 +11,16 @@
 //!   cutting along a direction: [`scalpel_down`]) or each sample's quaternion.
 //! - Output: at tick time `s` the pose at page time `s + offset - delay` ([`PointerOptions::
 //!   delay_s`], 30 ms by default), linear between the two samples around it (tip), spherical
-//!   (orientation), the earlier sample's button; exactly a sample's pose at its time. Before
+//!   (orientation), the buttons held in either; exactly a sample's pose at its time. Before
 //!   the first sample: [`PointerOptions::rest_pose`], above the tissue, blade not engaged.
 //! - Clocks: the first sample anchors the page clock to the session clock (its page time plays
 //!   `delay` later). The two clocks drift and the network is uneven: when samples arrive after
 //!   the buffer ran dry (the page sent a burst, or stalled briefly, or its clock runs slower)
 //!   play goes on from the held pose and the latency grows by the gap, then drains at 5 %
 //!   faster play while more than `delay` is buffered; only when the newest sample is more than
-//!   [`PointerOptions::max_lag_s`] ahead of the cursor does the cursor skip forward. The
-//!   cursor never moves back. (Skipping forward at every burst moved the blade a burst's way
+//!   [`PointerOptions::max_lag_s`] ahead of the cursor does the cursor skip forward, and
+//!   never past a press or a release: it stops on the sample that changed the buttons, so a
+//!   stalled page's click still happens where the hand made it. The cursor never moves back. (Skipping forward at every burst moved the blade a burst's way
 //!   in one tick, and the cutting resistance, which follows the blade's speed, flipped between
 //!   0 and its full value.)
 //! - When samples stop the pose is held; after [`PointerOptions::timeout_s`] without a usable

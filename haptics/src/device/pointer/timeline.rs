@@ -140,7 +140,7 @@ impl Timeline {
                 let buffered_ms = newest_ms - natural_ms;
                 if arrived && buffered_ms > self.max_lag_ms {
                     out.reanchored = true;
-                    newest_ms - time_ms
+                    self.skip_to_ms(newest_ms) - time_ms + self.delay_ms
                 } else if arrived && self.dry {
                     out.reanchored = true;
                     self.cursor_ms - time_ms + self.delay_ms
@@ -169,6 +169,28 @@ impl Timeline {
         out.held = self.dry;
         self.cursor_ms = natural_ms.max(self.cursor_ms).min(newest_ms);
         out
+    }
+
+    /// Where a forward skip takes the cursor (page ms): `delay_ms` behind the newest sample,
+    /// or the first sample ahead of the cursor whose buttons differ from those at the cursor
+    /// when that comes sooner. A skip never passes a press or a release: the tick plays the
+    /// sample that changed them, exactly (a grasper closes where its hand closed it, a blade
+    /// engages where it was pressed), and the next arrival skips on from there.
+    fn skip_to_ms(&self, newest_ms: f64) -> f64 {
+        let to_ms = newest_ms - self.delay_ms;
+        let mut held = None;
+        for k in &self.samples {
+            if k.t_ms <= self.cursor_ms {
+                held = Some(k.pose.buttons);
+            } else if k.t_ms >= to_ms {
+                break;
+            } else if held.is_some_and(|b| b != k.pose.buttons) {
+                return k.t_ms;
+            } else {
+                held = Some(k.pose.buttons);
+            }
+        }
+        to_ms
     }
 
     /// The pose at the cursor: linear between the samples around it (tip), spherical
@@ -297,6 +319,38 @@ mod tests {
         // 5 ms later, 5 ms on (less than the delay buffered: no catch-up)
         line.advance(51.0, false);
         assert_eq!(line.pose().map(|p| p.tip_in_world.x), Some(1.5));
+    }
+
+    /// A page stalled for 600 ms sends what it took meanwhile at once, a press among it: the
+    /// cursor skips forward, but only as far as the press, which it plays exactly (where the
+    /// hand pressed, pressed); the next arrival skips on to the newest.
+    #[test]
+    fn a_skip_forward_stops_at_a_press() {
+        let mut line = Timeline::new(256, 30.0, 300.0);
+        line.push(at(1000.0, 0.0));
+        line.advance(0.0, true);
+        for (k, tick) in (1..=30).zip(1u32..) {
+            line.advance(f64::from(tick), false);
+            assert_eq!(line.pose().map(|p| p.buttons), Some(0), "tick {k}");
+        }
+        // the burst: pressed from 1205 ms on
+        for t in (1010..=1600).step_by(5) {
+            let mut k = at(f64::from(t), f64::from(t - 1000));
+            k.pose.buttons = if t >= 1205 { BUTTON_BLADE } else { 0 };
+            line.push(k);
+        }
+        let a = line.advance(31.0, true);
+        assert!(a.reanchored);
+        let pose = line.pose().expect("a pose");
+        assert_eq!((pose.tip_in_world.x, pose.buttons), (205.0, BUTTON_BLADE));
+        // a tick without samples plays on from the press
+        line.advance(32.0, false);
+        assert_eq!(line.pose().map(|p| p.tip_in_world.x), Some(206.0));
+        // the next arrival, still more than the largest lag ahead, skips on to the delay
+        // behind the newest
+        line.push(at(1605.0, 605.0));
+        line.advance(33.0, true);
+        assert_eq!(line.pose().map(|p| p.tip_in_world.x), Some(575.0));
     }
 
     /// A page a slow machine holds back to 7 samples a second: once settled, the cursor plays

@@ -710,22 +710,27 @@
   const GRASP_LIFT_M = 0.004, LIFT_S = 0.3;
   const grasp = { id: null, hit: null, closedAt: null, lastSent: 0 };
   const isGrasper = (e) => config.grasper && e.pointerType === "touch";
-  function sendGrasper(t_ms) {
+  // the lift follows the samples' own clock (an event's time stamp, or now for the
+  // heartbeat), so a page that handles its events late still lifts over 0.3 s of its samples
+  function sendGrasper(t_ms, liftM) {
     if (!grasp.hit || socket.readyState !== WebSocket.OPEN || !(t_ms > grasp.lastSent)) return;
     grasp.lastSent = t_ms;
     const closed = grasp.closedAt !== null;
-    const lift = closed ? GRASP_LIFT_M * Math.min(1, (performance.now() - grasp.closedAt) / (LIFT_S * 1e3)) : GRASP_LIFT_M;
+    const lift = liftM ?? (closed ? GRASP_LIFT_M * Math.min(1, Math.max(0, t_ms - grasp.closedAt) / (LIFT_S * 1e3)) : GRASP_LIFT_M);
     socket.send(JSON.stringify({ type: "grasper", t_ms, surface_in_world_m: grasp.hit.point, depth_m: -lift, blade_engaged: closed }));
   }
   canvas.addEventListener("pointerdown", (event) => {
     if (!isGrasper(event) || grasp.id !== null) return;
     const h = pick(event); if (!h) return;
     canvas.setPointerCapture(event.pointerId);
-    // the jaws come down open onto the point, then close
+    // the jaws come down open onto the point, then close there: open at the surface before
+    // closed at it, so no tick between the two samples closes them above it
+    const t = event.timeStamp;
     grasp.id = event.pointerId; grasp.hit = h; grasp.closedAt = null;
-    sendGrasper(event.timeStamp);
-    grasp.closedAt = performance.now();
-    sendGrasper(event.timeStamp + 0.5);
+    sendGrasper(t);
+    sendGrasper(t + 0.5, 0);
+    grasp.closedAt = t + 1;
+    sendGrasper(t + 1);
   });
   canvas.addEventListener("pointermove", (event) => {
     if (event.pointerId !== grasp.id) return;
