@@ -420,6 +420,11 @@ struct SessionArgs {
     /// `on` (also plain `--localise`), `off`.
     #[arg(long, value_enum, default_value_t = Localise::Auto, num_args = 0..=1, default_missing_value = "on")]
     localise: Localise,
+    /// A synthetic trainee uses both hands: its other hand's grasper holds the tissue beside
+    /// the incision and draws it as its skill does (an expert close beside the line, away
+    /// from it and up, to the end; a novice far off, towards the line, letting go part way).
+    #[arg(long, conflicts_with = "grasp_at_mm")]
+    second_hand: bool,
     /// A second hand on a grasper: where its jaws close on the tissue, mm (`X,Y,Z`). The hand
     /// reaches there, closes the jaws at 1.2 s, draws the tissue by `--grasp-pull-mm` and holds
     /// it (its pose, jaws and pull are recorded).
@@ -480,6 +485,7 @@ impl SessionArgs {
                 surface_hz: self.surface_hz,
                 seed: self.seed,
                 grasp,
+                second_hand: self.second_hand,
                 igtl: self.igtl.options(),
             },
             out: self.out,

@@ -937,6 +937,14 @@ fn a_session_with_a_grasper_holds_the_gauze_and_replays_bit_exact() {
             vec!["--grasp-at-mm", "50,58,0.8", "--grasp-release-s=-1"],
             "release time",
         ),
+        (
+            vec!["--second-hand", "--grasp-at-mm", "50,58,0.8"],
+            "cannot be used with",
+        ),
+        (
+            vec!["--second-hand", "--device", "pointer:steady"],
+            "a synthetic trainee's",
+        ),
     ] {
         let mut all = vec![
             "session",

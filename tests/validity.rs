@@ -53,6 +53,9 @@ fn cutlab(db: &Path, args: &[&str]) -> String {
 enum Exercise {
     /// No exercise: the default scene's own incision, scored as `chest-wall-incision`.
     Incision,
+    /// The default scene's own incision as [`Exercise::Incision`], the trainee's other hand
+    /// giving countertraction with a grasper (`--second-hand`).
+    TwoHanded,
     /// `pattern-cutting` on the sheet at its own size, recorded as an attempt of `trainee`.
     Pattern,
     /// `body-wall-incision` on the CT's body wall at its scene's 10 ms step.
@@ -74,6 +77,11 @@ impl Exercise {
             Exercise::Incision => {
                 let duration = if skill == "expert" { "6" } else { "15" };
                 strings(&["--min-tets", MIN_TETS, "--duration", duration])
+            }
+            Exercise::TwoHanded => {
+                let mut args = Exercise::Incision.args(skill, seed);
+                args.push("--second-hand".into());
+                args
             }
             // the expert cuts the circle free in about 8 s; a novice has not in 30 s
             Exercise::Pattern => {
@@ -302,6 +310,80 @@ fn every_novice_scores_below_every_expert_and_fails_the_expert_thresholds() {
     assert!(
         novice.iter().all(|n| !n.1),
         "every novice fails the expert-derived thresholds"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The synthetic trainees with both hands on the incision, 10 seeds per level: the handling
+/// metrics of the other hand (issue 66) tell the levels apart. Every expert holds the tissue
+/// drawn away from the blade for most of the cut and every novice for less of it than any
+/// expert; the mean countertraction goes expert > intermediate > novice; the experts draw
+/// away from the blade and the novices towards it.
+#[test]
+fn two_handed_experts_give_countertraction_and_novices_do_not() {
+    let dir = std::env::temp_dir().join(format!("cutlab-validity-hands-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let db = dir.join("validity.db");
+    let handling = |skill: &str| -> Vec<[f64; 3]> {
+        record_seeds(&db, &dir, skill, SEEDS, Exercise::TwoHanded)
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let v = assess_at(
+                    &db,
+                    f,
+                    "chest-wall-incision",
+                    &format!("{skill}-{k}"),
+                    false,
+                );
+                let metric = |key: &str| {
+                    v["metrics"]
+                        .as_array()
+                        .and_then(|m| m.iter().find(|m| m["key"] == key))
+                        .and_then(|m| m["value"].as_f64())
+                        .unwrap_or_else(|| panic!("{key} of {skill} seed {k}: {v}"))
+                };
+                [
+                    metric("grasps"),
+                    metric("countertraction_fraction"),
+                    metric("traction_alignment"),
+                ]
+            })
+            .collect()
+    };
+    let (expert, intermediate, novice) = (
+        handling("expert"),
+        handling("intermediate"),
+        handling("novice"),
+    );
+    eprintln!(
+        "[grasps, countertraction, traction direction]\nexpert {expert:.2?}\n\
+         intermediate {intermediate:.2?}\nnovice {novice:.2?}"
+    );
+    let all = || expert.iter().chain(&intermediate).chain(&novice);
+    assert!(all().all(|h| h[0] == 1.0), "one grasp each");
+    assert!(
+        expert.iter().all(|h| h[1] > 0.5 && h[2] > 0.5),
+        "every expert draws away for most of the cut: {expert:?}"
+    );
+    let least_expert = expert.iter().map(|h| h[1]).fold(f64::INFINITY, f64::min);
+    assert!(
+        novice.iter().all(|h| h[1] < least_expert),
+        "every novice's countertraction below every expert's: {novice:?}"
+    );
+    let mean = |v: &[[f64; 3]], i: usize| v.iter().map(|h| h[i]).sum::<f64>() / v.len() as f64;
+    assert!(
+        mean(&expert, 1) > mean(&intermediate, 1) && mean(&intermediate, 1) > mean(&novice, 1),
+        "mean countertraction {:.2} > {:.2} > {:.2}",
+        mean(&expert, 1),
+        mean(&intermediate, 1),
+        mean(&novice, 1)
+    );
+    assert!(
+        mean(&novice, 2) < 0.0 && mean(&expert, 2) > mean(&novice, 2),
+        "the novices draw towards the blade: {:.2} vs the experts' {:.2}",
+        mean(&novice, 2),
+        mean(&expert, 2)
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -14,7 +14,7 @@ use cutlab_assessor::recordings::RecordingStore;
 use cutlab_assessor::store::Store;
 use cutlab_haptics::device::{
     CsvDevice, DeviceSpec, GraspPlan, GrasperHand, HapticDevice, IgtlDevice, IgtlOptions,
-    PointerHand, StylusHand, SyntheticTrainee,
+    PointerHand, Skill, StylusHand, SyntheticTrainee,
 };
 use cutlab_haptics::plan::Plan;
 use cutlab_haptics::servo::Clock;
@@ -56,6 +56,9 @@ pub struct RunSettings {
     /// The second hand: a synthetic grasper holding the tissue as this plans (`None`: one
     /// hand).
     pub grasp: Option<GraspPlan>,
+    /// A synthetic trainee uses both hands: its other hand's grasper gives countertraction
+    /// beside the incision as its skill does ([`cutlab_haptics::device::Traction`]).
+    pub second_hand: bool,
 }
 
 impl Default for RunSettings {
@@ -71,6 +74,7 @@ impl Default for RunSettings {
             seed: 0,
             igtl: IgtlOptions::default(),
             grasp: None,
+            second_hand: false,
         }
     }
 }
@@ -235,6 +239,12 @@ impl Prepared {
     /// OpenIGTLink port brings the second tool it names).
     pub fn device(&self, spec: &DeviceSpec) -> Result<Hands, StationError> {
         let seed = self.settings.seed;
+        if self.settings.second_hand && !matches!(spec, DeviceSpec::Trainee { .. }) {
+            return Err(StationError::Settings(format!(
+                "a second hand of its own is a synthetic trainee's (expert, intermediate, \
+                 novice, level:L), not {spec}'s"
+            )));
+        }
         let device: Box<dyn HapticDevice> = match spec {
             DeviceSpec::Trainee { name, skill } => {
                 let chosen = match &self.chooses_from {
@@ -247,10 +257,13 @@ impl Prepared {
                     Some(plan) => plan,
                     None => self.plan()?.clone(),
                 };
-                Box::new(
-                    SyntheticTrainee::new(name, plan, *skill, seed)?
-                        .expecting_cut_of(&self.config.render),
-                )
+                let grasper = self.trainees_other_hand(&plan, skill)?;
+                let scalpel = SyntheticTrainee::new(name, plan, *skill, seed)?
+                    .expecting_cut_of(&self.config.render);
+                return Ok(Hands {
+                    scalpel: Box::new(scalpel),
+                    grasper,
+                });
             }
             DeviceSpec::PointerHand(kind) => Box::new(PointerHand::new(*kind, self.plan()?, seed)?),
             DeviceSpec::StylusHand(kind) => Box::new(StylusHand::new(*kind, self.plan()?, seed)?),
@@ -260,6 +273,25 @@ impl Prepared {
             }
         };
         Ok(device.into())
+    }
+
+    /// A synthetic trainee's other hand, when the settings ask for both: a grasper giving
+    /// its `skill`'s countertraction beside `plan`'s incision.
+    fn trainees_other_hand(
+        &self,
+        plan: &Plan,
+        skill: &Skill,
+    ) -> Result<Option<Box<dyn HapticDevice>>, StationError> {
+        if !self.settings.second_hand {
+            return Ok(None);
+        }
+        let length_m: f64 = plan.line_m.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        let stroke_s = length_m / skill.cut_speed_m_per_s.max(1e-6);
+        let seed = self.settings.seed;
+        let hand = GraspPlan::countertraction(plan, &skill.traction, stroke_s, seed)
+            .and_then(|grasp| GrasperHand::new(grasp, seed))
+            .map_err(|e| StationError::Settings(format!("the trainee's other hand: {e}")))?;
+        Ok(Some(Box::new(hand)))
     }
 
     /// Who did what, as the recording says it (a replay builds the same scene from it).

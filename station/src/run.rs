@@ -106,8 +106,9 @@ impl StationSettings {
             surface_hz: self.view_hz,
             seed: self.seed,
             igtl: self.igtl.clone(),
-            // the station's page gives one hand yet (issue 66)
+            // the page's second hand is a pointer feed of its own (a touch), not a plan
             grasp: None,
+            second_hand: false,
         }
     }
 

@@ -23,6 +23,74 @@ pub struct GraspPlan {
     pub release_s: Option<f64>,
 }
 
+/// How a synthetic trainee's other hand gives countertraction beside an incision: where its
+/// grasper takes hold and how it draws the tissue (part of a [`Skill`](super::Skill)). An
+/// expert holds close beside the line and draws the tissue away from it and up, so the
+/// incision opens under the blade, for the whole cut; a novice holds far off, draws weakly
+/// or towards the line, and lets go part way.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Traction {
+    /// How far beside the incision's middle the jaws close, m.
+    pub beside_m: f64,
+    /// How far the held tissue is drawn away from the incision, m (negative: towards it).
+    pub away_m: f64,
+    /// How far the held tissue is lifted, m.
+    pub lift_m: f64,
+    /// How long the jaws hold once closed, as a share of the stroke's expected time (1 or
+    /// more: to the session's end).
+    pub hold_share: f64,
+}
+
+impl GraspPlan {
+    /// The grasp of a hand giving `traction` beside `plan`'s incision: the jaws close
+    /// `beside_m` to the left of the line's middle (the surface normal crossed with the
+    /// line's direction there), shifted up to 2 mm along the line by `seed`, draw the tissue
+    /// `away_m` further to that side and `lift_m` along the normal, and open after
+    /// `hold_share` of `stroke_s` (the stroke's expected time, s). An error names what is
+    /// wrong when the line has no middle with a direction.
+    pub fn countertraction(
+        plan: &crate::plan::Plan,
+        traction: &Traction,
+        stroke_s: f64,
+        seed: u64,
+    ) -> Result<Self, String> {
+        let (at, up, along) = halfway(plan)
+            .ok_or("the plan's line has no middle with a direction to hold the tissue beside")?;
+        let side = up
+            .cross(&along)
+            .try_normalize(1e-12)
+            .ok_or("the plan's line has no direction across its normal at its middle")?;
+        let mut rng = Rng::new(seed ^ 0x7472_6163_7469_6f6e);
+        let shift_m = (rng.uniform() - 0.5) * 4e-3;
+        Ok(Self {
+            hold_m: at + along * shift_m + side * traction.beside_m,
+            pull_m: side * traction.away_m + up * traction.lift_m,
+            up,
+            release_s: (traction.hold_share < 1.0)
+                .then(|| REACH_S + PAUSE_S + traction.hold_share * stroke_s.max(0.0)),
+        })
+    }
+}
+
+/// The point half way along `plan`'s line, its normal there (linear between the segment's
+/// ends, unit) and the segment's direction (unit); `None` for a line without length.
+fn halfway(plan: &crate::plan::Plan) -> Option<(Point3, Vector3, Vector3)> {
+    let line = &plan.line_m;
+    let total_m: f64 = line.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let mut left_m = 0.5 * total_m;
+    for (k, w) in line.windows(2).enumerate() {
+        let length_m = (w[1] - w[0]).norm();
+        if length_m > 1e-12 && left_m <= length_m {
+            let u = left_m / length_m;
+            let (a, b) = (plan.normals.get(k)?, plan.normals.get(k + 1)?);
+            let up = (a * (1.0 - u) + b * u).try_normalize(1e-12)?;
+            return Some((w[0] + (w[1] - w[0]) * u, up, (w[1] - w[0]) / length_m));
+        }
+        left_m -= length_m;
+    }
+    None
+}
+
 /// From above the hold point down to it, s.
 const REACH_S: f64 = 1.0;
 /// The pause before the jaws close, s.
@@ -141,6 +209,34 @@ impl HapticDevice for GrasperHand {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Beside the line's middle to its left, drawn further left and up; the expert holds to
+    /// the end, a hand that lets go does so after its share of the stroke; a line without a
+    /// direction is refused.
+    #[test]
+    fn countertraction_holds_beside_the_line_and_draws_away() {
+        let line = crate::plan::Plan::flat_across_x(0.004);
+        let traction = Traction {
+            beside_m: 0.01,
+            away_m: 0.004,
+            lift_m: 0.002,
+            hold_share: 0.5,
+        };
+        let g = GraspPlan::countertraction(&line, &traction, 6.0, 3).expect("a grasp");
+        // the line runs along +x with +z up: its left is +y
+        assert!((g.hold_m.y - 0.01).abs() < 1e-12 && g.hold_m.x.abs() <= 2e-3);
+        assert!((g.pull_m - Vector3::new(0.0, 0.004, 0.002)).norm() < 1e-12);
+        assert_eq!(g.release_s, Some(REACH_S + PAUSE_S + 3.0));
+        let to_the_end = Traction {
+            hold_share: 1.0,
+            ..traction
+        };
+        let g = GraspPlan::countertraction(&line, &to_the_end, 6.0, 3).expect("a grasp");
+        assert_eq!(g.release_s, None);
+        let mut point = line.clone();
+        point.line_m = vec![Point3::origin(); 2];
+        assert!(GraspPlan::countertraction(&point, &traction, 6.0, 3).is_err());
+    }
 
     fn plan() -> GraspPlan {
         GraspPlan {

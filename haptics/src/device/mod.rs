@@ -13,7 +13,7 @@ mod trainee;
 
 pub use choice::{Choice, Planning};
 pub use csv::CsvDevice;
-pub use grasper_hand::{GraspPlan, GrasperHand};
+pub use grasper_hand::{GraspPlan, GrasperHand, Traction};
 pub use igtl::{ForceOutput, IgtlDevice, IgtlGrasper, IgtlOptions, IgtlToolNames};
 pub use pointer::{PointerDevice, PointerFeed, PointerOptions, PointerSample};
 pub use pointer_hand::{HandKind, PointerHand, STEADY_PACE_M_PER_S};

@@ -13,7 +13,7 @@
 //! it presses on, slowly and at most [`MAX_PRESS_M`] deeper, until the blade gives; over the
 //! first part of the stroke it comes back up to the planned depth.
 
-use super::{DeviceFault, HapticDevice, Planning};
+use super::{DeviceFault, HapticDevice, Planning, Traction};
 use crate::plan::Plan;
 use cutlab_sim::rng::Rng;
 
@@ -45,6 +45,8 @@ pub struct Skill {
     pub approach_angle_error_rad: f64,
     /// How it chooses an incision where the exercise leaves the choice to the trainee.
     pub planning: Planning,
+    /// How its other hand gives countertraction, when it uses both.
+    pub traction: Traction,
 }
 
 impl Skill {
@@ -67,6 +69,12 @@ impl Skill {
                 overshoot_m: 0.5e-3,
                 approach_angle_error_rad: 2.0 * deg,
                 planning: Planning::EXPERT,
+                traction: Traction {
+                    beside_m: 10e-3,
+                    away_m: 4e-3,
+                    lift_m: 2e-3,
+                    hold_share: 2.0,
+                },
             },
             "intermediate" => Self {
                 tremor_amplitude_m: 0.15e-3,
@@ -80,6 +88,12 @@ impl Skill {
                 overshoot_m: 2.0e-3,
                 approach_angle_error_rad: 6.0 * deg,
                 planning: Planning::INTERMEDIATE,
+                traction: Traction {
+                    beside_m: 14e-3,
+                    away_m: 1.5e-3,
+                    lift_m: 1e-3,
+                    hold_share: 0.8,
+                },
             },
             "novice" => Self {
                 tremor_amplitude_m: 0.4e-3,
@@ -93,6 +107,12 @@ impl Skill {
                 overshoot_m: 5.0e-3,
                 approach_angle_error_rad: 12.0 * deg,
                 planning: Planning::NOVICE,
+                traction: Traction {
+                    beside_m: 20e-3,
+                    away_m: -1.5e-3,
+                    lift_m: 0.5e-3,
+                    hold_share: 0.45,
+                },
             },
             _ => return None,
         })
@@ -124,6 +144,12 @@ impl Skill {
             overshoot_m: mix(a.overshoot_m, b.overshoot_m),
             approach_angle_error_rad: mix(a.approach_angle_error_rad, b.approach_angle_error_rad),
             planning: Planning::mix(&a.planning, &b.planning, t),
+            traction: Traction {
+                beside_m: mix(a.traction.beside_m, b.traction.beside_m),
+                away_m: mix(a.traction.away_m, b.traction.away_m),
+                lift_m: mix(a.traction.lift_m, b.traction.lift_m),
+                hold_share: mix(a.traction.hold_share, b.traction.hold_share),
+            },
         })
     }
 }
