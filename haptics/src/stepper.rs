@@ -400,6 +400,8 @@ impl SessionStepper {
             };
             let regions_before = DamageWatch::watches_cuts(&self.sim.model)
                 .then(|| self.sim.model.mesh.regions().to_vec());
+            let in_jaws = self.grasp.as_ref().map_or(&[][..], |g| g.vertices());
+            self.cutter.hold_in_jaws(in_jaws);
             let advanced = self.cutter.advance(&mut self.sim, blade);
             let stop = self.cutter.stop().map(|s| s.region);
             self.stats.blade_stops += u64::from(stop.is_some());
@@ -414,6 +416,9 @@ impl SessionStepper {
                     self.stats.tets_split += ev.tets_removed.len() as u64;
                     self.stats.fragments_reattached += ev.fragments_reattached as u64;
                     self.stats.specimens += ev.specimens.len() as u64;
+                    if let Some(grasp) = &mut self.grasp {
+                        grasp.adopt_splits(&ev.vertices_split);
+                    }
                     if let Err(e) = self.collider.rebuild(&self.sim) {
                         tracing::error!("rebuilding the surface after a cut failed: {e}");
                     }

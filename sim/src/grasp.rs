@@ -127,6 +127,33 @@ impl Grasp {
             && isometry_is_finite(&self.world_from_jaw)
     }
 
+    /// Takes the copies a cut split off held particles (`splits`, of the cut's event) into
+    /// the jaws as well: a copy stands where its original stood, so it keeps the original's
+    /// place in the jaws, and the jaws carry, feel and let go of both sides of a cut through
+    /// their bite (a copy left out stayed held where the cut made it, for good).
+    pub fn adopt_splits(&mut self, splits: &[crate::cut::SplitVertex]) {
+        let adopted: Vec<(u32, Point3)> = splits
+            .iter()
+            .filter_map(|s| {
+                let k = self.vertices.binary_search(&s.original).ok()?;
+                Some((s.copy, self.in_jaw_m[k]))
+            })
+            .collect();
+        if adopted.is_empty() {
+            return;
+        }
+        let mut all: Vec<(u32, Point3)> = self
+            .vertices
+            .iter()
+            .copied()
+            .zip(self.in_jaw_m.iter().copied())
+            .chain(adopted)
+            .collect();
+        all.sort_unstable_by_key(|&(v, _)| v);
+        all.dedup_by_key(|&mut (v, _)| v);
+        (self.vertices, self.in_jaw_m) = all.into_iter().unzip();
+    }
+
     /// The held particles, ascending.
     pub fn vertices(&self) -> &[u32] {
         &self.vertices

@@ -1,7 +1,7 @@
 //! The second hand's instruments on the gauze (issue 66): a grasper holds and pulls, scissors
 //! shear, a scalpel cuts the thin pad through in one pass.
 
-use cutlab_sim::cut::{Cutter, Scissors};
+use cutlab_sim::cut::{Cutter, Scissors, Specimen};
 use cutlab_sim::grasp::{Grasp, GraspError, GraspSettings};
 use cutlab_sim::mesh::pieces;
 use cutlab_sim::scene::{BuildOptions, Scene};
@@ -173,23 +173,96 @@ fn jaws_on_nothing_or_at_no_place_take_nothing_and_change_nothing() {
 /// Closures round a regular polygon of `sides` about the pad's centre, radius `r_m`, each
 /// from one corner to the next (a millimetre past it); steps between cuts as a hand closes.
 fn cut_polygon_with_scissors(sim: &mut Simulation, sides: usize, r_m: f64) -> (usize, usize) {
+    let (freed, closures) = cut_polygon(sim, None, sides, r_m);
+    (freed.len(), closures)
+}
+
+/// As [`cut_polygon_with_scissors`], the jaws holding `grasp` meanwhile when there is one (the
+/// cutter told before each closure, the grasp taking the copies the closure split off what
+/// it holds): the specimens freed, and the closures made.
+fn cut_polygon(
+    sim: &mut Simulation,
+    mut grasp: Option<&mut Grasp>,
+    sides: usize,
+    r_m: f64,
+) -> (Vec<Specimen>, usize) {
     let corner = |k: usize| {
         let a = std::f64::consts::TAU * k as f64 / sides as f64;
         Point3::new(0.05 + r_m * a.cos(), 0.05 + r_m * a.sin(), MID_Z)
     };
     let mut cutter = Cutter::default();
-    let (mut freed, mut closures) = (0, 0);
+    let (mut freed, mut closures) = (Vec::new(), 0);
     for k in 0..sides {
         let (a, b) = (corner(k), corner(k + 1));
         let mut scissors = Scissors::laparoscopic(a, b - a, Vector3::z().cross(&(b - a)));
         scissors.blade_length_m = (b - a).norm() + 0.001;
+        if let Some(g) = grasp.as_deref() {
+            cutter.hold_in_jaws(g.vertices());
+        }
         let events = scissors
             .close(sim, &mut cutter, 2)
             .expect("the closure cuts");
-        freed += events.iter().map(|e| e.specimens.len()).sum::<usize>();
+        for e in &events {
+            if let Some(g) = grasp.as_deref_mut() {
+                g.adopt_splits(&e.vertices_split);
+            }
+            freed.extend(e.specimens.iter().cloned());
+        }
         closures += 1;
     }
     (freed, closures)
+}
+
+/// FLS pattern cutting as it is done: the grasper holds the disc while the scissors go round
+/// it. The jaws anchor nothing: the last closure frees the disc, which stays in the jaws
+/// where it was (not set aside), free but for them, and rises when they lift it; the pad
+/// stays on its clips.
+#[test]
+fn a_disc_held_in_the_jaws_is_freed_and_stays_in_them() {
+    let mut sim = gauze();
+    let centre = Point3::new(0.05, 0.05, MID_Z);
+    let mut grasp = Grasp::close(&mut sim, jaws_at(centre), GraspSettings::default())
+        .expect("the jaws close on the pad");
+    let (freed, closures) = cut_polygon(&mut sim, Some(&mut grasp), 10, 0.02);
+    assert_eq!(closures, 10);
+    assert_eq!(freed.len(), 1, "one disc freed by ten closures: {freed:?}");
+    let disc = &freed[0];
+    assert!(disc.in_jaws && disc.lift_m == [0.0; 3], "{disc:?}");
+    assert!(
+        grasp
+            .vertices()
+            .iter()
+            .all(|v| disc.vertices.binary_search(v).is_ok()),
+        "the jaws hold the disc"
+    );
+    let free = disc
+        .vertices
+        .iter()
+        .filter(|&&v| !sim.model.held[v as usize])
+        .count();
+    assert!(
+        free + grasp.vertices().len() == disc.vertices.len(),
+        "the disc is free but for the jaws: {free} free of {}",
+        disc.vertices.len()
+    );
+    let in_disc = |v: u32| disc.vertices.binary_search(&v).is_ok();
+    let mean_z = |sim: &Simulation, disc: bool| {
+        let zs: Vec<f64> = (0..sim.model.vertex_count() as u32)
+            .filter(|&v| in_disc(v) == disc)
+            .map(|v| sim.state.positions[v as usize].z)
+            .collect();
+        zs.iter().sum::<f64>() / zs.len() as f64
+    };
+    let (disc_z, pad_z) = (mean_z(&sim, true), mean_z(&sim, false));
+    lift(&mut sim, &mut grasp, centre, 0.01, 20);
+    for _ in 0..40 {
+        sim.step().expect("a step");
+    }
+    assert!(sim.state.is_finite());
+    let rose_m = mean_z(&sim, true) - disc_z;
+    assert!(rose_m > 0.003, "the disc rose {} mm with the jaws", rose_m * 1e3);
+    let pad_m = (mean_z(&sim, false) - pad_z).abs();
+    assert!(pad_m < 0.0005, "the pad moved {} mm", pad_m * 1e3);
 }
 
 #[test]

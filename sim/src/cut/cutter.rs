@@ -41,6 +41,8 @@ pub struct Cutter {
     ended: Option<(VecDeque<Blade>, StrokeVertices)>,
     /// Where the last pose stopped on uncuttable tissue.
     stop: Option<BladeStop>,
+    /// The particles a grasper's jaws hold, ascending (see [`Self::hold_in_jaws`]).
+    in_jaws: Vec<u32>,
 }
 
 /// A [`Cutter`]'s state between two steps (see [`Cutter::resume_state`]).
@@ -102,7 +104,17 @@ impl Cutter {
             stroke: StrokeVertices::default(),
             ended: None,
             stop: None,
+            in_jaws: Vec::new(),
         }
+    }
+
+    /// The particles a grasper's jaws hold now (ascending; empty: none): they anchor
+    /// nothing, so a piece the cut frees that only they hold is freed and stays in the jaws
+    /// ([`super::Specimen::in_jaws`]). Whoever holds the grasp tells the cutter before each
+    /// pose; it is not part of [`Self::resume_state`].
+    pub fn hold_in_jaws(&mut self, vertices: &[u32]) {
+        self.in_jaws.clear();
+        self.in_jaws.extend_from_slice(vertices);
     }
 
     /// Ends the current stroke (the blade left the tissue): the next pose starts a new one,
@@ -259,7 +271,14 @@ impl Cutter {
                 continue;
             }
             let lift_m = blade.edge_direction.normalize() * self.specimen_lift_m;
-            return cut_remembering(sim, &polygon, &self.options, &mut self.stroke, lift_m);
+            return cut_remembering(
+                sim,
+                &polygon,
+                &self.options,
+                &mut self.stroke,
+                lift_m,
+                &self.in_jaws,
+            );
         }
     }
 }

@@ -275,19 +275,22 @@ pub fn cut(
         options,
         &mut StrokeVertices::default(),
         Vector3::zeros(),
+        &[],
     )
 }
 
 /// [`cut`] as one step of a stroke: vertices of the stroke's cut (`stroke`) that drifted a
 /// little off the plane count as on it, and `stroke` learns this step's cut vertices. A piece
 /// the cut frees is moved by `lift_m` and held there (a [`Specimen`]; [`cut`] leaves it where
-/// it is).
+/// it is), unless a grasper's jaws hold it: the particles `in_jaws` (ascending) anchor
+/// nothing, and a piece they hold stays in them.
 pub fn cut_remembering(
     sim: &mut Simulation,
     polygon: &CutPolygon,
     options: &CutOptions,
     stroke: &mut StrokeVertices,
     lift_m: Vector3,
+    in_jaws: &[u32],
 ) -> Result<CutEvent, CutError> {
     let Some(mut pending) = PendingCut::begin(sim, polygon, options, stroke) else {
         return Ok(CutEvent::default());
@@ -302,7 +305,7 @@ pub fn cut_remembering(
         return Ok(pending.into_event());
     }
     pending.split_vertices();
-    pending.into_commit(lift_m)?.apply(sim, stroke)
+    pending.into_commit(lift_m, in_jaws)?.apply(sim, stroke)
 }
 
 /// The cut mesh being built, as the fragment flood sees it.

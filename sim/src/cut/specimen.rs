@@ -8,6 +8,10 @@
 //! between them), so the tissue feels nothing of it; it stays in the mesh, with its mass, so
 //! the vertex and tetrahedron ids of the recording and the replay are kept, and the cut's
 //! event lists it (its tetrahedra, vertices, volume and surface) for whoever reads its shape.
+//!
+//! A grasper's jaws do not anchor the tissue: a piece held only by them is freed as well
+//! (the disc of FLS pattern cutting, held in the grasper as the scissors finish the circle),
+//! and stays in the jaws where it is ([`Specimen::in_jaws`]).
 
 use serde::{Deserialize, Serialize};
 
@@ -27,6 +31,10 @@ pub struct Specimen {
     pub surface_m2: f64,
     /// How far it was lifted out of the wound, m.
     pub lift_m: [f64; 3],
+    /// A grasper's jaws held it when it was freed: it stays in them, where it was, instead
+    /// of being lifted aside (`lift_m` is zero).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub in_jaws: bool,
 }
 
 /// The pieces of `mesh` no vertex of which is `held`, of at least `min_volume_m3`, while
@@ -56,6 +64,7 @@ pub(super) fn freed(
                 tets: p.tets.clone(),
                 vertices,
                 volume_m3: p.volume_m3,
+                in_jaws: false,
             }
         })
         .collect()

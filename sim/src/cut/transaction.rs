@@ -547,7 +547,7 @@ impl<'a> PendingCut<'a> {
     /// The new mesh, and the tets whose masses and springs the commit derives again; a piece
     /// the cut freed is lifted by `lift_m` (see [`Commit::lift_specimens`]). The simulation is
     /// no longer borrowed: the [`Commit`] owns everything.
-    pub(super) fn into_commit(self, lift_m: Vector3) -> Result<Commit, CutError> {
+    pub(super) fn into_commit(self, lift_m: Vector3, in_jaws: &[u32]) -> Result<Commit, CutError> {
         let mesh = self.mesh;
         let old_tet_count = mesh.tet_count();
         let mut event = self.event;
@@ -601,7 +601,7 @@ impl<'a> PendingCut<'a> {
         };
         if !self.vertex_splits.is_empty() {
             let min_volume_m3 = self.options.fragment_volume_m3.max(f64::MIN_POSITIVE);
-            commit.lift_specimens(min_volume_m3, lift_m);
+            commit.lift_specimens(min_volume_m3, lift_m, in_jaws);
         }
         commit.dirty.sort_unstable();
         commit.dirty.dedup();
@@ -633,10 +633,37 @@ pub(super) struct Commit {
 impl Commit {
     /// A piece the cut freed (of at least `min_volume_m3`) is lifted out of the wound by
     /// `lift_m`, aside, and held there, at rest; its tets' masses and springs are derived
-    /// again.
-    fn lift_specimens(&mut self, min_volume_m3: f64, lift_m: Vector3) {
-        self.event.specimens = specimen::freed(&self.mesh, &self.held, min_volume_m3, lift_m);
-        for s in &self.event.specimens {
+    /// again. The particles in a grasper's jaws (`in_jaws`, ascending, and the copies this
+    /// cut split from them) anchor nothing: a piece held only by the jaws is freed too, and
+    /// stays in them.
+    fn lift_specimens(&mut self, min_volume_m3: f64, lift_m: Vector3, in_jaws: &[u32]) {
+        let mut jaws = in_jaws.to_vec();
+        jaws.extend(
+            self.event
+                .vertices_split
+                .iter()
+                .filter(|s| in_jaws.binary_search(&s.original).is_ok())
+                .map(|s| s.copy),
+        );
+        jaws.sort_unstable();
+        let mut anchors = std::borrow::Cow::Borrowed(&self.held[..]);
+        if !jaws.is_empty() {
+            let a = anchors.to_mut();
+            for &v in &jaws {
+                if let Some(h) = a.get_mut(v as usize) {
+                    *h = false;
+                }
+            }
+        }
+        let mut specimens = specimen::freed(&self.mesh, &anchors, min_volume_m3, lift_m);
+        for s in &mut specimens {
+            if s.vertices.iter().any(|v| jaws.binary_search(v).is_ok()) {
+                s.in_jaws = true;
+                s.lift_m = [0.0; 3];
+            }
+        }
+        self.event.specimens = specimens;
+        for s in self.event.specimens.iter().filter(|s| !s.in_jaws) {
             let moved = Vector3::from(s.lift_m);
             for &v in &s.vertices {
                 self.held[v as usize] = true;
