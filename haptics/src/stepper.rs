@@ -418,6 +418,9 @@ impl SessionStepper {
                     self.stats.specimens += ev.specimens.len() as u64;
                     if let Some(grasp) = &mut self.grasp {
                         grasp.adopt_splits(&ev.vertices_split);
+                        for s in ev.specimens.iter().filter(|s| s.in_jaws) {
+                            grasp.take_hold_of(&mut self.sim, &s.vertices);
+                        }
                     }
                     if let Err(e) = self.collider.rebuild(&self.sim) {
                         tracing::error!("rebuilding the surface after a cut failed: {e}");

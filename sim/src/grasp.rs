@@ -154,6 +154,43 @@ impl Grasp {
         (self.vertices, self.in_jaw_m) = all.into_iter().unzip();
     }
 
+    /// Takes hold of `vertices` too, where they are (a piece a cut freed in the jaws: the
+    /// jaws carry it whole from then on, and a later cut does not free it again). Particles
+    /// held already, by the jaws or the scene, and ids past the mesh are left as they are.
+    pub fn take_hold_of(&mut self, sim: &mut Simulation, vertices: &[u32]) {
+        let jaw_from_world = self.world_from_jaw.inverse();
+        let new: Vec<u32> = vertices
+            .iter()
+            .copied()
+            .filter(|&v| {
+                (v as usize) < sim.model.vertex_count()
+                    && !sim.model.held[v as usize]
+                    && self.vertices.binary_search(&v).is_err()
+            })
+            .collect();
+        if new.is_empty() {
+            return;
+        }
+        sim.edit(|model, _| {
+            for &v in &new {
+                model.held[v as usize] = true;
+                model.inv_mass[v as usize] = 0.0;
+            }
+        });
+        let mut all: Vec<(u32, Point3)> = self
+            .vertices
+            .iter()
+            .copied()
+            .zip(self.in_jaw_m.iter().copied())
+            .chain(
+                new.iter()
+                    .map(|&v| (v, jaw_from_world * sim.state.positions[v as usize])),
+            )
+            .collect();
+        all.sort_unstable_by_key(|&(v, _)| v);
+        (self.vertices, self.in_jaw_m) = all.into_iter().unzip();
+    }
+
     /// The held particles, ascending.
     pub fn vertices(&self) -> &[u32] {
         &self.vertices

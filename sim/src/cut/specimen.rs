@@ -11,7 +11,8 @@
 //!
 //! A grasper's jaws do not anchor the tissue: a piece held only by them is freed as well
 //! (the disc of FLS pattern cutting, held in the grasper as the scissors finish the circle),
-//! and stays in the jaws where it is ([`Specimen::in_jaws`]).
+//! and stays in the jaws where it is ([`Specimen::in_jaws`]); a piece wholly in the jaws is
+//! not freed again.
 
 use serde::{Deserialize, Serialize};
 
@@ -32,7 +33,8 @@ pub struct Specimen {
     /// How far it was lifted out of the wound, m.
     pub lift_m: [f64; 3],
     /// A grasper's jaws held it when it was freed: it stays in them, where it was, instead
-    /// of being lifted aside (`lift_m` is zero).
+    /// of being lifted aside (`lift_m` is zero); whoever holds the grasp takes it into the
+    /// jaws whole (`Grasp::take_hold_of`), and a later cut does not free it again.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub in_jaws: bool,
 }

@@ -601,7 +601,7 @@ impl<'a> PendingCut<'a> {
         };
         if !self.vertex_splits.is_empty() {
             let min_volume_m3 = self.options.fragment_volume_m3.max(f64::MIN_POSITIVE);
-            commit.lift_specimens(min_volume_m3, lift_m, in_jaws);
+            commit.lift_specimens(min_volume_m3, lift_m, in_jaws, mesh.vertex_count());
         }
         commit.dirty.sort_unstable();
         commit.dirty.dedup();
@@ -635,8 +635,15 @@ impl Commit {
     /// `lift_m`, aside, and held there, at rest; its tets' masses and springs are derived
     /// again. The particles in a grasper's jaws (`in_jaws`, ascending, and the copies this
     /// cut split from them) anchor nothing: a piece held only by the jaws is freed too, and
-    /// stays in them.
-    fn lift_specimens(&mut self, min_volume_m3: f64, lift_m: Vector3, in_jaws: &[u32]) {
+    /// stays in them; one whose particles from before the cut (`old_vertices` of them) were
+    /// all in the jaws already was freed by an earlier cut, and is not freed again.
+    fn lift_specimens(
+        &mut self,
+        min_volume_m3: f64,
+        lift_m: Vector3,
+        in_jaws: &[u32],
+        old_vertices: usize,
+    ) {
         let mut jaws = in_jaws.to_vec();
         jaws.extend(
             self.event
@@ -656,6 +663,14 @@ impl Commit {
             }
         }
         let mut specimens = specimen::freed(&self.mesh, &anchors, min_volume_m3, lift_m);
+        // a piece wholly in the jaws before this cut was freed by an earlier one (and taken
+        // into them): this cut's new particles on it do not make it freed again
+        specimens.retain(|s| {
+            !s.vertices
+                .iter()
+                .filter(|&&v| (v as usize) < old_vertices)
+                .all(|v| jaws.binary_search(v).is_ok())
+        });
         for s in &mut specimens {
             if s.vertices.iter().any(|v| jaws.binary_search(v).is_ok()) {
                 s.in_jaws = true;
