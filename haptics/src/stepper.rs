@@ -417,7 +417,7 @@ impl SessionStepper {
                     self.stats.fragments_reattached += ev.fragments_reattached as u64;
                     self.stats.specimens += ev.specimens.len() as u64;
                     if let Some(grasp) = &mut self.grasp {
-                        grasp.adopt_splits(&ev.vertices_split);
+                        grasp.adopt_cut(&mut self.sim, &ev);
                         for s in ev.specimens.iter().filter(|s| s.in_jaws) {
                             grasp.take_hold_of(&mut self.sim, &s.vertices);
                         }

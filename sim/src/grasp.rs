@@ -127,31 +127,45 @@ impl Grasp {
             && isometry_is_finite(&self.world_from_jaw)
     }
 
-    /// Takes the copies a cut split off held particles (`splits`, of the cut's event) into
-    /// the jaws as well: a copy stands where its original stood, so it keeps the original's
-    /// place in the jaws, and the jaws carry, feel and let go of both sides of a cut through
-    /// their bite (a copy left out stayed held where the cut made it, for good).
-    pub fn adopt_splits(&mut self, splits: &[crate::cut::SplitVertex]) {
-        let adopted: Vec<(u32, Point3)> = splits
-            .iter()
-            .filter_map(|s| {
-                let k = self.vertices.binary_search(&s.original).ok()?;
-                Some((s.copy, self.in_jaw_m[k]))
-            })
-            .collect();
-        if adopted.is_empty() {
-            return;
-        }
-        let mut all: Vec<(u32, Point3)> = self
+    /// Takes into the jaws what a cut (`event`) made of the tissue in them: the copies it
+    /// split off held particles (a copy stands where its original stood, so it keeps the
+    /// original's place in the jaws) and the particles it created on edges between two held
+    /// ones (at their place between the two). The jaws carry, feel and let go of both sides
+    /// of a cut through their bite (a copy left out stayed held where the cut made it, for
+    /// good), and a piece taken whole stays whole in them.
+    pub fn adopt_cut(&mut self, sim: &mut Simulation, event: &crate::cut::CutEvent) {
+        // the created particles first: a split may copy one of them
+        let mut held: std::collections::BTreeMap<u32, Point3> = self
             .vertices
             .iter()
             .copied()
             .zip(self.in_jaw_m.iter().copied())
-            .chain(adopted)
             .collect();
-        all.sort_unstable_by_key(|&(v, _)| v);
-        all.dedup_by_key(|&mut (v, _)| v);
-        (self.vertices, self.in_jaw_m) = all.into_iter().unzip();
+        let before = held.len();
+        let mut created = Vec::new();
+        for c in &event.vertices_created {
+            if let (Some(&pa), Some(&pb)) = (held.get(&c.edge[0]), held.get(&c.edge[1])) {
+                held.insert(c.id, pa + (pb - pa) * c.t);
+                created.push(c.id);
+            }
+        }
+        for s in &event.vertices_split {
+            if let Some(&p) = held.get(&s.original) {
+                held.insert(s.copy, p);
+            }
+        }
+        if held.len() == before {
+            return;
+        }
+        sim.edit(|model, _| {
+            for &v in &created {
+                if let Some(h) = model.held.get_mut(v as usize) {
+                    *h = true;
+                    model.inv_mass[v as usize] = 0.0;
+                }
+            }
+        });
+        (self.vertices, self.in_jaw_m) = held.into_iter().unzip();
     }
 
     /// Takes hold of `vertices` too, where they are (a piece a cut freed in the jaws: the

@@ -205,7 +205,7 @@ fn cut_polygon(
             .expect("the closure cuts");
         for e in &events {
             if let Some(g) = grasp.as_deref_mut() {
-                g.adopt_splits(&e.vertices_split);
+                g.adopt_cut(sim, e);
                 for s in e.specimens.iter().filter(|s| s.in_jaws) {
                     g.take_hold_of(sim, &s.vertices);
                 }
