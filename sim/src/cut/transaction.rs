@@ -666,10 +666,12 @@ impl Commit {
         // a piece wholly in the jaws before this cut was freed by an earlier one (and taken
         // into them): this cut's new particles on it do not make it freed again
         specimens.retain(|s| {
-            !s.vertices
+            let mut old = s
+                .vertices
                 .iter()
                 .filter(|&&v| (v as usize) < old_vertices)
-                .all(|v| jaws.binary_search(v).is_ok())
+                .peekable();
+            old.peek().is_none() || !old.all(|v| jaws.binary_search(v).is_ok())
         });
         for s in &mut specimens {
             if s.vertices.iter().any(|v| jaws.binary_search(v).is_ok()) {
