@@ -100,12 +100,7 @@ impl Grasp {
             .iter()
             .map(|&v| jaw_from_world * sim.state.positions[v as usize])
             .collect();
-        sim.edit(|model, _| {
-            for &v in &vertices {
-                model.held[v as usize] = true;
-                model.inv_mass[v as usize] = 0.0;
-            }
-        });
+        hold(sim, &vertices);
         sim.wake(vertices.iter().copied());
         Ok(Self {
             vertices,
@@ -157,14 +152,7 @@ impl Grasp {
         if held.len() == before {
             return;
         }
-        sim.edit(|model, _| {
-            for &v in &created {
-                if let Some(h) = model.held.get_mut(v as usize) {
-                    *h = true;
-                    model.inv_mass[v as usize] = 0.0;
-                }
-            }
-        });
+        hold(sim, &created);
         (self.vertices, self.in_jaw_m) = held.into_iter().unzip();
     }
 
@@ -185,13 +173,8 @@ impl Grasp {
         if new.is_empty() {
             return;
         }
-        sim.edit(|model, _| {
-            for &v in &new {
-                model.held[v as usize] = true;
-                model.inv_mass[v as usize] = 0.0;
-            }
-        });
-        let mut all: Vec<(u32, Point3)> = self
+        hold(sim, &new);
+        let held: std::collections::BTreeMap<u32, Point3> = self
             .vertices
             .iter()
             .copied()
@@ -201,8 +184,7 @@ impl Grasp {
                     .map(|&v| (v, jaw_from_world * sim.state.positions[v as usize])),
             )
             .collect();
-        all.sort_unstable_by_key(|&(v, _)| v);
-        (self.vertices, self.in_jaw_m) = all.into_iter().unzip();
+        (self.vertices, self.in_jaw_m) = held.into_iter().unzip();
     }
 
     /// The held particles, ascending.
@@ -266,6 +248,18 @@ impl Grasp {
         });
         sim.wake(self.vertices.iter().copied());
     }
+}
+
+/// Holds `vertices` (ids in the mesh): infinite mass to the integrators.
+fn hold(sim: &mut Simulation, vertices: &[u32]) {
+    sim.edit(|model, _| {
+        for &v in vertices {
+            if let Some(h) = model.held.get_mut(v as usize) {
+                *h = true;
+                model.inv_mass[v as usize] = 0.0;
+            }
+        }
+    });
 }
 
 /// Whether every number of `pose` is finite.
