@@ -13,7 +13,9 @@
 //! - the solve's error `e(tau)`: CG to relative residual `tau` against the reference, at `h`.
 //!
 //! The budget is `e(tau) <= e_int / 10`; the loosest `tau` within it is printed beside the
-//! CG iterations per step and the steps' time. Runs are compared only where their cuts made
+//! CG iterations per step and the steps' time. The same for the solve's velocity floor `v`
+//! (it stops at the latest when `|r| <= v sqrt(sum m_i^2)`, which decides the steps near
+//! rest), at the scene's tolerance. Runs are compared only where their cuts made
 //! the same tetrahedra (the cutter works on the deformed tissue, so a different solve could
 //! split differently); otherwise the row says so.
 
@@ -29,6 +31,14 @@ use serde::Serialize;
 
 /// The tolerances tried, tightest first.
 pub const TOLERANCES: [f64; 5] = [1e-3, 3e-3, 1e-2, 3e-2, 1e-1];
+/// The velocity floors tried, m/s, tightest first (the first is the solver's default).
+pub const FLOORS: [f64; 5] = [
+    cutlab_sim::solver::VELOCITY_FLOOR_M_PER_S,
+    1e-9,
+    1e-8,
+    1e-7,
+    1e-6,
+];
 /// The reference runs' tolerance.
 const REFERENCE_TOLERANCE: f64 = 1e-10;
 /// How much of the expert's line is cut, m.
@@ -55,12 +65,19 @@ pub struct BudgetRow {
     within_budget: Option<f64>,
     /// The scene's tolerance now.
     scene_tolerance: f64,
+    /// Per velocity floor, at the scene's tolerance: the same figures.
+    floors: Vec<ToleranceRow>,
+    /// The loosest velocity floor within a tenth of the integrator's error.
+    floor_within_budget: Option<f64>,
+    /// The scene's velocity floor now, m/s.
+    scene_floor: f64,
 }
 
-/// One tolerance's figures.
+/// One tolerance's or velocity floor's figures.
 #[derive(Debug, Serialize)]
 pub struct ToleranceRow {
-    tolerance: f64,
+    /// The relative tolerance, or the velocity floor in m/s.
+    value: f64,
     /// `None`: the cuts split differently from the reference's.
     error: Option<f64>,
     cg_per_step: f64,
@@ -93,37 +110,51 @@ pub fn run(json: bool) -> anyhow::Result<()> {
     );
     println!("|---|---|---:|---:|---:|---:|---:|---:|---|");
     for r in &rows {
-        for t in &r.tolerances {
-            let within = match (t.error, r.integration_error) {
-                (Some(e), Some(i)) => if e <= 0.1 * i { "yes" } else { "no" }.to_owned(),
-                _ => "split differently".to_owned(),
-            };
-            println!(
-                "| {} | {} | {} | {} | {:.0e}{} | {} | {:.1} | {:.0} | {within} |",
-                r.exercise,
-                r.scene,
-                r.time_step_ms,
-                r.integration_error
-                    .map_or("-".into(), |e| format!("{e:.1e}")),
-                t.tolerance,
-                if t.tolerance == r.scene_tolerance {
-                    " (scene)"
-                } else {
-                    ""
-                },
-                t.error.map_or("-".into(), |e| format!("{e:.1e}")),
-                t.cg_per_step,
-                t.step_us,
-            );
-        }
-        println!(
-            "| {} | | | | loosest within budget: {} | | | | |",
-            r.exercise,
-            r.within_budget
-                .map_or("none".into(), |t| format!("{t:.0e}"))
-        );
+        print_rows(r, &r.tolerances, r.scene_tolerance);
+        print_loosest(r, "tolerance", r.within_budget);
+    }
+    println!();
+    println!(
+        "| exercise | scene | step ms | integrator error | velocity floor m/s (at the scene's tolerance) | solve error | CG per step | step us | within budget |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---|");
+    for r in &rows {
+        print_rows(r, &r.floors, r.scene_floor);
+        print_loosest(r, "velocity floor", r.floor_within_budget);
     }
     Ok(())
+}
+
+/// One scene's rows of one table (by tolerance or by velocity floor; `scene` the scene's own).
+fn print_rows(r: &BudgetRow, rows: &[ToleranceRow], scene: f64) {
+    for t in rows {
+        let within = match (t.error, r.integration_error) {
+            (Some(e), Some(i)) => if e <= 0.1 * i { "yes" } else { "no" }.to_owned(),
+            _ => "split differently".to_owned(),
+        };
+        println!(
+            "| {} | {} | {} | {} | {:.0e}{} | {} | {:.1} | {:.0} | {within} |",
+            r.exercise,
+            r.scene,
+            r.time_step_ms,
+            r.integration_error
+                .map_or("-".into(), |e| format!("{e:.1e}")),
+            t.value,
+            if t.value == scene { " (scene)" } else { "" },
+            t.error.map_or("-".into(), |e| format!("{e:.1e}")),
+            t.cg_per_step,
+            t.step_us,
+        );
+    }
+}
+
+/// The line under a scene's rows: the loosest `what` within budget.
+fn print_loosest(r: &BudgetRow, what: &str, loosest: Option<f64>) {
+    println!(
+        "| {} | | | | loosest {what} within budget: {} | | | | |",
+        r.exercise,
+        loosest.map_or("none".into(), |t| format!("{t:.0e}"))
+    );
 }
 
 /// The budget of `b`'s scene, cut along `b`'s expert line.
@@ -134,10 +165,13 @@ fn scene_budget(b: &cutlab_assessor::store::Builtin) -> anyhow::Result<BudgetRow
     let up = Vector3::from(hand.normal);
     let line: Vec<Point3> = hand.line_m.iter().map(|&p| Point3::from(p)).collect();
     let stations = along(&line, CUT_LENGTH_M, CUT_STEP_M);
-    let cut =
-        |dt: f64, tolerance: f64| run_once(&scene, dt, tolerance, &stations, &up, hand.depth_m);
-    let reference = cut(h, REFERENCE_TOLERANCE)?;
-    let half = cut(h / 2.0, REFERENCE_TOLERANCE)?;
+    let cut = |dt: f64, tolerance: f64, floor: f64| {
+        let solve = (tolerance, floor);
+        run_once(&scene, dt, solve, &stations, &up, hand.depth_m)
+    };
+    let floor_0 = FLOORS[0];
+    let reference = cut(h, REFERENCE_TOLERANCE, floor_0)?;
+    let half = cut(h / 2.0, REFERENCE_TOLERANCE, floor_0)?;
     let scale = reference
         .positions
         .iter()
@@ -154,23 +188,31 @@ fn scene_budget(b: &cutlab_assessor::store::Builtin) -> anyhow::Result<BudgetRow
         })
     };
     let integration_error = error(&half);
-    let mut tolerances = Vec::new();
-    for tolerance in TOLERANCES {
-        let r = cut(h, tolerance)?;
-        tolerances.push(ToleranceRow {
-            tolerance,
-            error: error(&r),
-            cg_per_step: r.cg_per_step,
-            step_us: r.step_us,
-        });
-    }
-    let within_budget = integration_error.and_then(|i| {
-        tolerances
-            .iter()
-            .filter(|t| t.error.is_some_and(|e| e <= 0.1 * i))
-            .map(|t| t.tolerance)
-            .fold(None, |a: Option<f64>, t| Some(a.map_or(t, |a| a.max(t))))
-    });
+    let scene_tolerance = scene.spec.solver.cg_relative_tolerance;
+    let rows = |solves: &mut dyn Iterator<Item = (f64, f64)>, by_floor: bool| {
+        let mut out = Vec::new();
+        for (tolerance, floor) in solves {
+            let r = cut(h, tolerance, floor)?;
+            out.push(ToleranceRow {
+                value: if by_floor { floor } else { tolerance },
+                error: error(&r),
+                cg_per_step: r.cg_per_step,
+                step_us: r.step_us,
+            });
+        }
+        anyhow::Ok(out)
+    };
+    let tolerances = rows(&mut TOLERANCES.into_iter().map(|t| (t, floor_0)), false)?;
+    let floors = rows(&mut FLOORS.into_iter().map(|f| (scene_tolerance, f)), true)?;
+    let loosest = |rows: &[ToleranceRow]| {
+        integration_error.and_then(|i| {
+            rows.iter()
+                .filter(|t| t.error.is_some_and(|e| e <= 0.1 * i))
+                .map(|t| t.value)
+                .fold(None, |a: Option<f64>, t| Some(a.map_or(t, |a| a.max(t))))
+        })
+    };
+    let (within_budget, floor_within_budget) = (loosest(&tolerances), loosest(&floors));
     Ok(BudgetRow {
         exercise: b.name,
         scene: b.scene,
@@ -178,7 +220,10 @@ fn scene_budget(b: &cutlab_assessor::store::Builtin) -> anyhow::Result<BudgetRow
         integration_error,
         tolerances,
         within_budget,
-        scene_tolerance: scene.spec.solver.cg_relative_tolerance,
+        scene_tolerance,
+        floors,
+        floor_within_budget,
+        scene_floor: scene.spec.solver.cg_velocity_floor_m_per_s,
     })
 }
 
@@ -206,11 +251,12 @@ fn largest_change(a: &[Point3], b: &[Point3]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Settles `scene` at step `dt` and cuts through `stations` with CG tolerance `tolerance`.
+/// Settles `scene` at step `dt` and cuts through `stations` with CG tolerance and velocity
+/// floor `(tolerance, floor_m_per_s)`.
 fn run_once(
     scene: &Scene,
     dt: f64,
-    tolerance: f64,
+    (tolerance, floor_m_per_s): (f64, f64),
     stations: &[Point3],
     up: &Vector3,
     depth_m: f64,
@@ -219,6 +265,7 @@ fn run_once(
     sim.settle(StaticSettings::default());
     let settled = sim.state.positions.clone();
     sim.settings.cg_relative_tolerance = tolerance;
+    sim.settings.cg_velocity_floor_m_per_s = floor_m_per_s;
     sim.settings.cg_max_iterations = 20_000;
     let per_cut = ((CUT_STEP_M / SPEED_M_PER_S) / dt).round().max(1.0) as usize;
     let relax = (RELAX_S / dt).round() as usize;

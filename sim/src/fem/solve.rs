@@ -23,7 +23,9 @@ use crate::mesh::TET_EDGES;
 use crate::model::{Model, State};
 use crate::solver::explicit::critical_time_step;
 use crate::solver::forces::max_free_force;
-use crate::solver::implicit::{apply_velocity_change, extrapolate_warm_start, velocity_floor};
+use crate::solver::implicit::{
+    VELOCITY_FLOOR_M_PER_S, apply_velocity_change, extrapolate_warm_start, velocity_floor,
+};
 use crate::solver::statics::line_search;
 use crate::solver::system::{self, CgReport, CgScratch, CgSettings, ElementSystem, Sym3};
 use crate::solver::{StaticReport, StaticSettings};
@@ -189,7 +191,8 @@ pub fn implicit_step(
     let particles = model.particles();
     let settings = CgSettings {
         relative_tolerance,
-        absolute_tolerance: velocity_floor(&particles),
+        absolute_tolerance: velocity_floor(&particles, VELOCITY_FLOOR_M_PER_S),
+        velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
         max_iterations,
     };
     let report = system::solve_from_span(sys, &model.held, rhs, dv, [p1, p2, p3], settings, cg);
@@ -334,6 +337,7 @@ pub fn statics(
             let settings = CgSettings {
                 relative_tolerance: 1e-8,
                 absolute_tolerance: 0.0,
+                velocity_floor_m_per_s: 0.0,
                 max_iterations: 10 * n.max(100),
             };
             let report = system::solve(&sys, &model.held, &f, &mut dx, settings, &mut cg);

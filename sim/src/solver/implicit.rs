@@ -215,7 +215,9 @@ fn step_on(
     }
     guess.clear();
     let cg = CgSettings {
-        absolute_tolerance: cg.absolute_tolerance.max(velocity_floor(model)),
+        absolute_tolerance: cg
+            .absolute_tolerance
+            .max(velocity_floor(model, cg.velocity_floor_m_per_s)),
         ..cg
     };
     let report = if guessed {
@@ -441,9 +443,9 @@ pub(crate) fn extrapolate_warm_start(
     *history = (*history + 1).min(4);
 }
 
-/// The absolute floor of the CG residual, `VELOCITY_FLOOR_M_PER_S sqrt(sum m_i^2)` over the free
-/// particles (see [`VELOCITY_FLOOR_M_PER_S`]).
-pub(crate) fn velocity_floor(model: &Particles<'_>) -> f64 {
+/// The absolute floor of the CG residual, `v_floor sqrt(sum m_i^2)` over the free particles,
+/// with `v_floor` the larger of `floor_m_per_s` and [`VELOCITY_FLOOR_M_PER_S`].
+pub(crate) fn velocity_floor(model: &Particles<'_>, floor_m_per_s: f64) -> f64 {
     let mass_norm = model
         .mass
         .iter()
@@ -452,7 +454,7 @@ pub(crate) fn velocity_floor(model: &Particles<'_>) -> f64 {
         .map(|(m, _)| m * m)
         .sum::<f64>()
         .sqrt();
-    VELOCITY_FLOOR_M_PER_S * mass_norm
+    floor_m_per_s.max(VELOCITY_FLOOR_M_PER_S) * mass_norm
 }
 
 /// `v += dv`, then `x += h v`, for the free particles (the end of an implicit Euler step).
@@ -477,13 +479,13 @@ mod tests {
     use crate::scene::{BuildOptions, Scene};
     use crate::solver::SolverSettings;
 
-    /// Five steps of the chest wall at 20k tets (over `PARALLEL_MIN_PARTICLES`) pressed on its
+    /// Five steps of the chest wall at 64k tets (over `PARALLEL_MIN_PARTICLES`) pressed on its
     /// top, from rest, on a pool of `threads`, with the assembly split or not: the positions.
     fn pressed_steps(threads: usize, split: bool) -> Vec<crate::Point3> {
         let scene = Scene::load(
             "chest-wall",
             BuildOptions {
-                min_tets: Some(20_000),
+                min_tets: Some(64_000),
             },
         )
         .expect("built-in scene");
@@ -511,6 +513,7 @@ mod tests {
         let cg = CgSettings {
             relative_tolerance: settings.cg_relative_tolerance,
             absolute_tolerance: 0.0,
+            velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
             max_iterations: settings.cg_max_iterations,
         };
         let mut scratch = ImplicitScratch::default();
@@ -550,7 +553,7 @@ mod tests {
         let start = Scene::load(
             "chest-wall",
             BuildOptions {
-                min_tets: Some(20_000),
+                min_tets: Some(64_000),
             },
         )
         .expect("built-in scene");
@@ -588,6 +591,7 @@ mod tests {
         let cg = CgSettings {
             relative_tolerance: 1e-10,
             absolute_tolerance: 0.0,
+            velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
             max_iterations: 500,
         };
         let from_rest = State::at_rest(&scene.model.mesh);

@@ -18,6 +18,7 @@ pub(crate) mod system;
 
 use serde::{Deserialize, Serialize};
 
+pub use implicit::VELOCITY_FLOOR_M_PER_S;
 pub use localise::{LocalisationError, LocalisationSettings};
 pub use resume::{RegionResume, ResumeError, ResumeState, WarmStart};
 pub use statics::{StaticReport, StaticSettings};
@@ -79,6 +80,11 @@ pub struct SolverSettings {
     /// keeps the solver's error far below the integrator's own (the figures are in
     /// `docs/design/solver.md`, "The tolerance").
     pub cg_relative_tolerance: f64,
+    /// The velocity, in m/s, below which the implicit CG need not resolve the step's velocity
+    /// change: it stops at the latest when `|r| <= floor sqrt(sum m_i^2)`. The default,
+    /// [`VELOCITY_FLOOR_M_PER_S`], only keeps the solve from chasing round-off; a
+    /// scene may set the loosest floor within its error budget (`cutlab bench budget`).
+    pub cg_velocity_floor_m_per_s: f64,
     /// The most iterations the implicit CG may take in one solve.
     pub cg_max_iterations: usize,
     /// Simulate only near the scalpel and the disturbance it causes (see [`localise`]);
@@ -93,6 +99,7 @@ impl Default for SolverSettings {
             time_step_s: 1e-3,
             explicit_safety: 0.9,
             cg_relative_tolerance: 1e-3,
+            cg_velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
             cg_max_iterations: 500,
             localisation: None,
         }
@@ -111,6 +118,9 @@ pub enum SettingsError {
     /// The CG tolerance is outside `(0, 1)`.
     #[error("cg_relative_tolerance must be in (0, 1), got {0}")]
     CgTolerance(f64),
+    /// The CG's velocity floor is negative or not finite.
+    #[error("cg_velocity_floor_m_per_s must be finite and at least 0, got {0}")]
+    CgVelocityFloor(f64),
     /// The CG may take no iteration.
     #[error("cg_max_iterations must be at least 1")]
     CgMaxIterations,
@@ -130,6 +140,11 @@ impl SolverSettings {
         }
         if !(self.cg_relative_tolerance > 0.0 && self.cg_relative_tolerance < 1.0) {
             return Err(SettingsError::CgTolerance(self.cg_relative_tolerance));
+        }
+        if !(self.cg_velocity_floor_m_per_s >= 0.0 && self.cg_velocity_floor_m_per_s.is_finite()) {
+            return Err(SettingsError::CgVelocityFloor(
+                self.cg_velocity_floor_m_per_s,
+            ));
         }
         if self.cg_max_iterations == 0 {
             return Err(SettingsError::CgMaxIterations);
@@ -562,6 +577,7 @@ impl Simulation {
         CgSettings {
             relative_tolerance: self.settings.cg_relative_tolerance,
             absolute_tolerance: 0.0,
+            velocity_floor_m_per_s: self.settings.cg_velocity_floor_m_per_s,
             max_iterations: self.settings.cg_max_iterations,
         }
     }

@@ -56,7 +56,7 @@ pub use operator::{BlockSystem, ElementSystem, SpringSystem};
 /// Systems with at least this many particles sweep their two halves on two threads (fewer:
 /// on one, in the same order, with the same result). Below it a half sweep is too short to be
 /// worth waking another thread for (`docs/design/solver.md`).
-pub const PARALLEL_MIN_PARTICLES: usize = 4_000;
+pub const PARALLEL_MIN_PARTICLES: usize = 12_000;
 
 /// The threads the solver's sweeps may use: rayon's (one per core; `RAYON_NUM_THREADS=1` for
 /// one). Systems of [`PARALLEL_MIN_PARTICLES`] or more use two of them.
