@@ -639,4 +639,70 @@ mod tests {
         );
         assert_eq!(report.iterations, plain.iterations);
     }
+
+    /// The chest wall pressed on its top for 20 steps, then let go for 200, with the solve's
+    /// velocity floor `floor_m_per_s`: the CG iterations of the steps after the release, the
+    /// final positions and the largest displacement from the settled state on the way.
+    fn released(floor_m_per_s: f64) -> (usize, Vec<crate::Point3>, f64) {
+        let scene = Scene::load("chest-wall", BuildOptions::default()).expect("built-in scene");
+        let mut sim = scene.simulation();
+        sim.settings.cg_velocity_floor_m_per_s = floor_m_per_s;
+        sim.settings.localisation = None;
+        sim.settings.check().expect("settings in range");
+        sim.settle(crate::solver::StaticSettings::default());
+        let settled = sim.state.positions.clone();
+        let free = |i: &u32| !sim.model.held[*i as usize];
+        let top = (0..settled.len() as u32)
+            .filter(free)
+            .map(|i| settled[i as usize].z)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let pressed: Vec<u32> = (0..settled.len() as u32)
+            .filter(|i| free(i) && settled[*i as usize].z > top - 2e-3)
+            .collect();
+        assert!(!pressed.is_empty());
+        for &v in &pressed {
+            sim.add_external_force(v, Vector3::new(0.0, 0.0, -0.002));
+        }
+        let mut moved: f64 = 0.0;
+        let mut iterations = 0;
+        for k in 0..220 {
+            if k == 20 {
+                sim.clear_external_forces();
+            }
+            let report = sim.step().expect("a step");
+            iterations += if k >= 20 { report.cg_iterations } else { 0 };
+            let now = (sim.state.positions.iter().zip(&settled))
+                .map(|(a, b)| (a - b).norm())
+                .fold(0.0, f64::max);
+            moved = moved.max(now);
+        }
+        (iterations, sim.state.positions.clone(), moved)
+    }
+
+    /// A velocity floor of 1 um/s spares the solve iterations as the tissue comes to rest,
+    /// and moves it by far less than the integrator's own error (2e-3 of the largest
+    /// displacement on this scene, `cutlab bench budget`).
+    #[test]
+    fn a_velocity_floor_spares_iterations_near_rest_within_the_budget() {
+        let (tight_iterations, tight, moved) = released(VELOCITY_FLOOR_M_PER_S);
+        let (loose_iterations, loose, _) = released(1e-6);
+        assert!(
+            loose_iterations < tight_iterations,
+            "{loose_iterations} against {tight_iterations}"
+        );
+        let apart = tight
+            .iter()
+            .zip(&loose)
+            .map(|(a, b)| (a - b).norm())
+            .fold(0.0, f64::max);
+        assert!(
+            moved > 0.0 && apart <= 0.1 * 1.8e-3 * moved,
+            "{apart} of {moved}"
+        );
+        let mut bad = SolverSettings::default();
+        for floor in [-1e-9, f64::NAN, f64::INFINITY] {
+            bad.cg_velocity_floor_m_per_s = floor;
+            assert!(bad.check().is_err(), "{floor} accepted");
+        }
+    }
 }
