@@ -105,22 +105,28 @@ pub fn run(json: bool) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
-    println!(
-        "| exercise | scene | step ms | integrator error | tolerance | solve error | CG per step | step us | within budget |"
-    );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---|");
-    for r in &rows {
-        print_rows(r, &r.tolerances, r.scene_tolerance);
-        print_loosest(r, "tolerance", r.within_budget);
-    }
-    println!();
-    println!(
-        "| exercise | scene | step ms | integrator error | velocity floor m/s (at the scene's tolerance) | solve error | CG per step | step us | within budget |"
-    );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|---|");
-    for r in &rows {
-        print_rows(r, &r.floors, r.scene_floor);
-        print_loosest(r, "velocity floor", r.floor_within_budget);
+    type Table = fn(&BudgetRow) -> (&[ToleranceRow], f64, Option<f64>);
+    let tables: [(&str, &str, Table); 2] = [
+        ("tolerance", "tolerance", |r| {
+            (&r.tolerances, r.scene_tolerance, r.within_budget)
+        }),
+        (
+            "velocity floor m/s (at the scene's tolerance)",
+            "velocity floor",
+            |r| (&r.floors, r.scene_floor, r.floor_within_budget),
+        ),
+    ];
+    for (column, what, table) in tables {
+        println!(
+            "| exercise | scene | step ms | integrator error | {column} | solve error | CG per step | step us | within budget |"
+        );
+        println!("|---|---|---:|---:|---:|---:|---:|---:|---|");
+        for r in &rows {
+            let (values, scene, loosest) = table(r);
+            print_rows(r, values, scene);
+            print_loosest(r, what, loosest);
+        }
+        println!();
     }
     Ok(())
 }
