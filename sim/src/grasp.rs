@@ -24,6 +24,7 @@
 
 use nalgebra::Isometry3;
 
+use crate::cut::MadeFrom;
 use crate::solver::Simulation;
 use crate::{Point3, Vector3};
 
@@ -129,28 +130,26 @@ impl Grasp {
     /// of a cut through their bite (a copy left out stayed held where the cut made it, for
     /// good), and a piece taken whole stays whole in them.
     pub fn adopt_cut(&mut self, sim: &mut Simulation, event: &crate::cut::CutEvent) {
-        // the created particles first: a split may copy one of them
+        let made = event.made_from(&self.vertices);
+        if made.is_empty() {
+            return;
+        }
         let mut held: std::collections::BTreeMap<u32, Point3> = self
             .vertices
             .iter()
             .copied()
             .zip(self.in_jaw_m.iter().copied())
             .collect();
-        let before = held.len();
         let mut created = Vec::new();
-        for c in &event.vertices_created {
-            if let (Some(&pa), Some(&pb)) = (held.get(&c.edge[0]), held.get(&c.edge[1])) {
-                held.insert(c.id, pa + (pb - pa) * c.t);
-                created.push(c.id);
-            }
-        }
-        for s in &event.vertices_split {
-            if let Some(&p) = held.get(&s.original) {
-                held.insert(s.copy, p);
-            }
-        }
-        if held.len() == before {
-            return;
+        for (v, from) in made {
+            let in_jaw = match from {
+                MadeFrom::Between { a, b, t } => {
+                    created.push(v);
+                    held[&a] + (held[&b] - held[&a]) * t
+                }
+                MadeFrom::CopyOf(original) => held[&original],
+            };
+            held.insert(v, in_jaw);
         }
         hold(sim, &created);
         (self.vertices, self.in_jaw_m) = held.into_iter().unzip();

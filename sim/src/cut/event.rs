@@ -98,4 +98,82 @@ impl CutEvent {
             && self.vertices_split.is_empty()
             && self.specimens.is_empty()
     }
+
+    /// The particles this cut made of the set `of` (ascending ids: the particles in a
+    /// grasper's jaws), in the order made: those it created on an edge between two of the
+    /// set, then the copies it split off any of the set or of those just made. A grasper's
+    /// jaws hold both sides of a cut through their bite, so what the cut made of their
+    /// tissue is in them too.
+    pub fn made_from(&self, of: &[u32]) -> Vec<(u32, MadeFrom)> {
+        let mut set: std::collections::BTreeSet<u32> = of.iter().copied().collect();
+        let mut made = Vec::new();
+        for c in &self.vertices_created {
+            let [a, b] = c.edge;
+            if set.contains(&a) && set.contains(&b) {
+                set.insert(c.id);
+                made.push((c.id, MadeFrom::Between { a, b, t: c.t }));
+            }
+        }
+        for s in &self.vertices_split {
+            if set.contains(&s.original) {
+                set.insert(s.copy);
+                made.push((s.copy, MadeFrom::CopyOf(s.original)));
+            }
+        }
+        made
+    }
+}
+
+/// What a cut made a particle of ([`CutEvent::made_from`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MadeFrom {
+    /// Created on the edge `a`-`b`, at `t` from 0 at `a` to 1 at `b`.
+    Between {
+        /// The edge's first end.
+        a: u32,
+        /// The edge's second end.
+        b: u32,
+        /// Where along the edge.
+        t: f64,
+    },
+    /// Split off this particle: a copy standing where it stood.
+    CopyOf(u32),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn what_a_cut_made_of_a_set_is_its_edges_created_and_the_copies_of_those_and_it() {
+        let created = |id, edge, t| CreatedVertex { id, edge, t };
+        let split = |original, copy| SplitVertex { original, copy };
+        let event = CutEvent {
+            vertices_created: vec![
+                created(10, [1, 2], 0.25),
+                created(11, [2, 7], 0.5),
+                created(12, [7, 8], 0.5),
+            ],
+            vertices_split: vec![split(1, 20), split(10, 21), split(7, 22), split(21, 23)],
+            ..CutEvent::default()
+        };
+        assert_eq!(
+            event.made_from(&[1, 2]),
+            vec![
+                (
+                    10,
+                    MadeFrom::Between {
+                        a: 1,
+                        b: 2,
+                        t: 0.25
+                    }
+                ),
+                (20, MadeFrom::CopyOf(1)),
+                (21, MadeFrom::CopyOf(10)),
+                (23, MadeFrom::CopyOf(21)),
+            ],
+            "one end outside the set makes nothing of an edge, nor does a split of another"
+        );
+        assert!(event.made_from(&[]).is_empty());
+    }
 }

@@ -22,7 +22,7 @@ mod transaction;
 use std::collections::BTreeMap;
 
 pub use cutter::{Cutter, CutterResume, CutterResumeError, EndedStroke};
-pub use event::{CreatedVertex, CutEvent, MovedVertex, SplitVertex};
+pub use event::{CreatedVertex, CutEvent, MadeFrom, MovedVertex, SplitVertex};
 pub use pattern::{Children, Quad, QuadKey, TetSplit, prism};
 pub use polygon::{Blade, CutPolygon};
 pub use scissors::{CLOSURE_SPACING_M, Scissors};

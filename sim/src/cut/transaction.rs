@@ -633,8 +633,8 @@ pub(super) struct Commit {
 impl Commit {
     /// A piece the cut freed (of at least `min_volume_m3`) is lifted out of the wound by
     /// `lift_m`, aside, and held there, at rest; its tets' masses and springs are derived
-    /// again. The particles in a grasper's jaws (`in_jaws`, ascending, and the copies this
-    /// cut split from them) anchor nothing: a piece held only by the jaws is freed too, and
+    /// again. The particles in a grasper's jaws (`in_jaws`, ascending, and what this cut
+    /// made of them: [`CutEvent::made_from`]) anchor nothing: a piece held only by the jaws is freed too, and
     /// stays in them; one whose particles from before the cut (`old_vertices` of them) were
     /// all in the jaws already was freed by an earlier cut, and is not freed again.
     fn lift_specimens(
@@ -645,13 +645,7 @@ impl Commit {
         old_vertices: usize,
     ) {
         let mut jaws = in_jaws.to_vec();
-        jaws.extend(
-            self.event
-                .vertices_split
-                .iter()
-                .filter(|s| in_jaws.binary_search(&s.original).is_ok())
-                .map(|s| s.copy),
-        );
+        jaws.extend(self.event.made_from(in_jaws).into_iter().map(|(v, _)| v));
         jaws.sort_unstable();
         let mut anchors = std::borrow::Cow::Borrowed(&self.held[..]);
         if !jaws.is_empty() {
