@@ -49,9 +49,8 @@ fn artefacts() -> PathBuf {
     dir
 }
 
-/// The browser flows run one at a time: each starts a server that simulates the demo's
-/// attempts and a browser, and side by side on two cores the rerun viewer's wasm took longer
-/// than the flows allow.
+/// The browser flows run one at a time: each starts a server and a browser, and side by side
+/// on two cores the rerun viewer's wasm took longer than the flows allow.
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Whether the browser is here (a missing one fails the test when `CUTLAB_E2E` is set).
@@ -69,21 +68,51 @@ fn browser_present() -> bool {
     missing.is_empty()
 }
 
-/// `cutlab serve --demo` on a fresh database in `tmp`, and its port.
+/// `cutlab serve --demo` on a fresh copy of the demo's database in `tmp`, and its port.
 fn demo_server(tmp: &Path) -> (Proc, u16) {
     let _ = std::fs::remove_dir_all(tmp);
     std::fs::create_dir_all(tmp).expect("temp dir");
+    copy_database(demo_template(), tmp);
+    serve_demo(tmp, Duration::from_secs(120))
+}
+
+/// `cutlab serve --demo` on `dir/cutlab.db`, once its port answers.
+fn serve_demo(dir: &Path, timeout: Duration) -> (Proc, u16) {
     let port = free_port();
     let mut server = cutlab(
-        &tmp.join("cutlab.db"),
+        &dir.join("cutlab.db"),
         &["serve", "--demo", "--addr", &format!("127.0.0.1:{port}")],
     )
     .stdout(Stdio::null())
     .spawn()
     .expect("cutlab serve");
-    // (--demo first simulates the demo's attempts: about a minute)
-    wait_for_port(port, "cutlab serve", &mut server, Duration::from_secs(600));
+    wait_for_port(port, "cutlab serve", &mut server, timeout);
     (Proc(server), port)
+}
+
+/// The demo's database with its simulated attempts (about a minute), made once for all the
+/// flows of this run: each flow serves a copy of it (`--demo` then finds the demo there and
+/// only serves). The copies' attempts keep pointing at the recordings here.
+fn demo_template() -> &'static Path {
+    static TEMPLATE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    TEMPLATE.get_or_init(|| {
+        let dir = artefacts().join("demo-template");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("demo template dir");
+        // (killed once it serves: SQLite's write-ahead log is copied with the database)
+        drop(serve_demo(&dir, Duration::from_secs(600)));
+        dir
+    })
+}
+
+/// Copies the SQLite database `cutlab.db` of `from` (with its write-ahead log) into `to`.
+fn copy_database(from: &Path, to: &Path) {
+    for name in ["cutlab.db", "cutlab.db-wal", "cutlab.db-shm"] {
+        let source = from.join(name);
+        if source.exists() {
+            std::fs::copy(&source, to.join(name)).expect("copying the demo's database");
+        }
+    }
 }
 
 /// chromedriver.
