@@ -195,12 +195,13 @@ fn scene_budget(b: &cutlab_assessor::store::Builtin) -> anyhow::Result<BudgetRow
     };
     let integration_error = error(&half);
     let scene_tolerance = scene.spec.solver.cg_relative_tolerance;
-    let rows = |solves: &mut dyn Iterator<Item = (f64, f64)>, by_floor: bool| {
+    // each row's solve: (the row's value, the relative tolerance, the velocity floor)
+    let rows = |solves: &mut dyn Iterator<Item = (f64, f64, f64)>| {
         let mut out = Vec::new();
-        for (tolerance, floor) in solves {
+        for (value, tolerance, floor) in solves {
             let r = cut(h, tolerance, floor)?;
             out.push(ToleranceRow {
-                value: if by_floor { floor } else { tolerance },
+                value,
                 error: error(&r),
                 cg_per_step: r.cg_per_step,
                 step_us: r.step_us,
@@ -208,8 +209,8 @@ fn scene_budget(b: &cutlab_assessor::store::Builtin) -> anyhow::Result<BudgetRow
         }
         anyhow::Ok(out)
     };
-    let tolerances = rows(&mut TOLERANCES.into_iter().map(|t| (t, floor_0)), false)?;
-    let floors = rows(&mut FLOORS.into_iter().map(|f| (scene_tolerance, f)), true)?;
+    let tolerances = rows(&mut TOLERANCES.into_iter().map(|t| (t, t, floor_0)))?;
+    let floors = rows(&mut FLOORS.into_iter().map(|f| (f, scene_tolerance, f)))?;
     let loosest = |rows: &[ToleranceRow]| {
         integration_error.and_then(|i| {
             rows.iter()
