@@ -317,3 +317,41 @@ fn one_closure_shears_the_pad_along_the_blades_only() {
     assert!(bad.close(&mut sim, &mut cutter, 2).is_err());
     assert_eq!(sim.model.mesh.tet_count(), tets);
 }
+
+/// The disc freed in the jaws and let go of is a free piece of the mesh; later cuts, beside
+/// it on the pad or through it, do not free it (or its halves) again.
+#[test]
+fn a_disc_let_go_of_is_not_freed_again_by_later_cuts() {
+    let mut sim = gauze();
+    let centre = Point3::new(0.05, 0.05, MID_Z);
+    let mut grasp = Grasp::close(&mut sim, jaws_at(centre), GraspSettings::default())
+        .expect("the jaws close on the pad");
+    let (freed, _) = cut_polygon(&mut sim, Some(&mut grasp), 10, 0.02);
+    assert_eq!(freed.len(), 1, "the disc freed once");
+    grasp.release(&mut sim);
+    for _ in 0..5 {
+        sim.step().expect("a step");
+    }
+    let mut cutter = Cutter::default();
+    // beside the disc on the pad, then across the disc's middle
+    for (pivot, along) in [
+        (Point3::new(0.08, 0.015, MID_Z), Vector3::y()),
+        (Point3::new(0.04, 0.05, MID_Z), Vector3::x()),
+    ] {
+        let scissors = Scissors::laparoscopic(pivot, along, Vector3::z().cross(&along));
+        let events = scissors
+            .close(&mut sim, &mut cutter, 2)
+            .expect("the closure cuts");
+        assert!(
+            events.iter().any(|e| !e.vertices_split.is_empty()),
+            "it cut"
+        );
+        let again: Vec<f64> = events
+            .iter()
+            .flat_map(|e| &e.specimens)
+            .map(|s| s.volume_m3 * 1e9)
+            .collect();
+        assert!(again.is_empty(), "freed again, mm^3: {again:?}");
+    }
+    assert!(sim.state.is_finite());
+}

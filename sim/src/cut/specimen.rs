@@ -11,8 +11,9 @@
 //!
 //! A grasper's jaws do not anchor the tissue: a piece held only by them is freed as well
 //! (the disc of FLS pattern cutting, held in the grasper as the scissors finish the circle),
-//! and stays in the jaws where it is ([`Specimen::in_jaws`]); a piece wholly in the jaws is
-//! not freed again.
+//! and stays in the jaws where it is ([`Specimen::in_jaws`]). Only a piece joined to the held
+//! tissue before the cut is freed by it: one freed earlier (in the jaws, or let go of since)
+//! is not freed again, whether a cut passes elsewhere or through it.
 
 use serde::{Deserialize, Serialize};
 

@@ -12,7 +12,8 @@ use super::{
     fragments_of, resolve, separate, sorted_difference, specimen,
 };
 use crate::mesh::{
-    TET_EDGES, TET_FACES, TetMesh, edge_key, sorted_pair, sorted_triple, tet_signed_volume,
+    TET_EDGES, TET_FACES, TetMesh, anchored, edge_key, sorted_pair, sorted_triple,
+    tet_signed_volume,
 };
 use crate::model::Model;
 use crate::solver::Simulation;
@@ -601,7 +602,7 @@ impl<'a> PendingCut<'a> {
         };
         if !self.vertex_splits.is_empty() {
             let min_volume_m3 = self.options.fragment_volume_m3.max(f64::MIN_POSITIVE);
-            commit.lift_specimens(min_volume_m3, lift_m, in_jaws, mesh.vertex_count());
+            commit.lift_specimens(min_volume_m3, lift_m, in_jaws, mesh);
         }
         commit.dirty.sort_unstable();
         commit.dirty.dedup();
@@ -634,15 +635,16 @@ impl Commit {
     /// A piece the cut freed (of at least `min_volume_m3`) is lifted out of the wound by
     /// `lift_m`, aside, and held there, at rest; its tets' masses and springs are derived
     /// again. The particles in a grasper's jaws (`in_jaws`, ascending, and what this cut
-    /// made of them: [`CutEvent::made_from`]) anchor nothing: a piece held only by the jaws is freed too, and
-    /// stays in them; one whose particles from before the cut (`old_vertices` of them) were
-    /// all in the jaws already was freed by an earlier cut, and is not freed again.
+    /// made of them: [`CutEvent::made_from`]) anchor nothing: a piece held only by the jaws
+    /// is freed too, and stays in them. A piece that was apart from the held tissue in the
+    /// mesh `before` this cut (freed by an earlier one, in the jaws or let go of since) is
+    /// not freed again.
     fn lift_specimens(
         &mut self,
         min_volume_m3: f64,
         lift_m: Vector3,
         in_jaws: &[u32],
-        old_vertices: usize,
+        before: &TetMesh,
     ) {
         let mut jaws = in_jaws.to_vec();
         jaws.extend(self.event.made_from(in_jaws).into_iter().map(|(v, _)| v));
@@ -657,16 +659,14 @@ impl Commit {
             }
         }
         let mut specimens = specimen::freed(&self.mesh, &anchors, min_volume_m3, lift_m);
-        // a piece wholly in the jaws before this cut was freed by an earlier one (and taken
-        // into them): this cut's new particles on it do not make it freed again
-        specimens.retain(|s| {
-            let mut old = s
-                .vertices
-                .iter()
-                .filter(|&&v| (v as usize) < old_vertices)
-                .peekable();
-            old.peek().is_none() || !old.all(|v| jaws.binary_search(v).is_ok())
-        });
+        if !specimens.is_empty() {
+            let n = before.vertex_count();
+            let was_anchored = anchored(before, &anchors[..n.min(anchors.len())]);
+            specimens.retain(|s| {
+                let mut old = s.vertices.iter().filter(|&&v| (v as usize) < n).peekable();
+                old.peek().is_none() || old.any(|&v| was_anchored[v as usize])
+            });
+        }
         for s in &mut specimens {
             if s.vertices.iter().any(|v| jaws.binary_search(v).is_ok()) {
                 s.in_jaws = true;

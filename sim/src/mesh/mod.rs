@@ -13,7 +13,7 @@ pub use geometry::{
     bounding_box, dihedral_angles, tet_signed_volume, tet_volume_gradients, triangle_normal,
 };
 pub use grid::PointGrid;
-pub use pieces::{Piece, has_free_piece, pieces};
+pub use pieces::{Piece, anchored, has_free_piece, pieces};
 pub use quality::QualityStats;
 pub use quality::tet_mu;
 pub use topology::{Csr, NONE, TET_EDGES, TET_FACES, Topology, non_manifold_edges};

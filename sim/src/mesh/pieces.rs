@@ -35,9 +35,8 @@ fn forest(mesh: &TetMesh) -> Vec<u32> {
     parent
 }
 
-/// True when some piece of `mesh` holds no vertex `held` (cheaper than [`pieces`]: no
-/// volumes, no lists).
-pub fn has_free_piece(mesh: &TetMesh, held: &[bool]) -> bool {
+/// The union-find forest of `mesh` and, per root, whether its piece holds a vertex `held`.
+fn held_roots(mesh: &TetMesh, held: &[bool]) -> (Vec<u32>, Vec<bool>) {
     let mut parent = forest(mesh);
     let mut root_held = vec![false; mesh.vertex_count()];
     for (v, &h) in held.iter().enumerate().take(mesh.vertex_count()) {
@@ -46,9 +45,25 @@ pub fn has_free_piece(mesh: &TetMesh, held: &[bool]) -> bool {
             root_held[r as usize] = true;
         }
     }
+    (parent, root_held)
+}
+
+/// True when some piece of `mesh` holds no vertex `held` (cheaper than [`pieces`]: no
+/// volumes, no lists).
+pub fn has_free_piece(mesh: &TetMesh, held: &[bool]) -> bool {
+    let (mut parent, root_held) = held_roots(mesh, held);
     mesh.tets()
         .iter()
         .any(|tet| !root_held[find(&mut parent, tet[0]) as usize])
+}
+
+/// Per vertex of `mesh`, whether its piece holds a vertex `held` (a vertex of no
+/// tetrahedron is a piece of its own).
+pub fn anchored(mesh: &TetMesh, held: &[bool]) -> Vec<bool> {
+    let (mut parent, root_held) = held_roots(mesh, held);
+    (0..mesh.vertex_count() as u32)
+        .map(|v| root_held[find(&mut parent, v) as usize])
+        .collect()
 }
 
 /// The pieces of `mesh`, largest volume first; `held[v]` tells whether vertex `v` is held.
