@@ -310,7 +310,6 @@ impl QuadraticStatics {
         let settings = CgSettings {
             relative_tolerance,
             absolute_tolerance: 0.0,
-            velocity_floor_m_per_s: 0.0,
             max_iterations: 20 * n.max(100),
         };
         let report = system::solve(

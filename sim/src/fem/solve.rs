@@ -23,9 +23,7 @@ use crate::mesh::TET_EDGES;
 use crate::model::{Model, State};
 use crate::solver::explicit::critical_time_step;
 use crate::solver::forces::max_free_force;
-use crate::solver::implicit::{
-    VELOCITY_FLOOR_M_PER_S, apply_velocity_change, extrapolate_warm_start, velocity_floor,
-};
+use crate::solver::implicit::{ImplicitSolve, apply_velocity_change, extrapolate_warm_start};
 use crate::solver::statics::line_search;
 use crate::solver::system::{self, CgReport, CgScratch, CgSettings, ElementSystem, Sym3};
 use crate::solver::{StaticReport, StaticSettings};
@@ -152,15 +150,13 @@ fn add_blocks(
 }
 
 /// One implicit Euler step of `h` seconds.
-#[allow(clippy::too_many_arguments)]
 pub fn implicit_step(
     model: &Model,
     fem: &FemModel,
     state: &mut State,
     external: &[Vector3],
     h: f64,
-    relative_tolerance: f64,
-    max_iterations: usize,
+    solve: ImplicitSolve,
     scratch: &mut FemScratch,
 ) -> CgReport {
     let n = model.vertex_count();
@@ -189,12 +185,7 @@ pub fn implicit_step(
     sys.prepare_held(&model.held, &[]);
     extrapolate_warm_start(dv, [p1, p2, p3], history);
     let particles = model.particles();
-    let settings = CgSettings {
-        relative_tolerance,
-        absolute_tolerance: velocity_floor(&particles, VELOCITY_FLOOR_M_PER_S),
-        velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
-        max_iterations,
-    };
+    let settings = solve.cg_for(&particles);
     let report = system::solve_from_span(sys, &model.held, rhs, dv, [p1, p2, p3], settings, cg);
     apply_velocity_change(&particles, state, dv, h);
     report
@@ -337,7 +328,6 @@ pub fn statics(
             let settings = CgSettings {
                 relative_tolerance: 1e-8,
                 absolute_tolerance: 0.0,
-                velocity_floor_m_per_s: 0.0,
                 max_iterations: 10 * n.max(100),
             };
             let report = system::solve(&sys, &model.held, &f, &mut dx, settings, &mut cg);

@@ -52,16 +52,41 @@ pub struct ImplicitScratch {
     pub(crate) guess: Vec<Option<Vector3>>,
 }
 
+/// How an implicit step solves for its velocity change: the CG's settings, and the velocity
+/// below which the change need not be resolved (m/s, at least [`VELOCITY_FLOOR_M_PER_S`]):
+/// with the step's masses it raises the CG's absolute tolerance ([`velocity_floor`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImplicitSolve {
+    /// The conjugate gradient's settings.
+    pub cg: CgSettings,
+    /// The velocity floor, m/s.
+    pub velocity_floor_m_per_s: f64,
+}
+
+impl ImplicitSolve {
+    /// The CG's settings for a step of `model`'s particles: the absolute tolerance raised to
+    /// the velocity floor with their masses.
+    pub(crate) fn cg_for(&self, model: &Particles<'_>) -> CgSettings {
+        CgSettings {
+            absolute_tolerance: self
+                .cg
+                .absolute_tolerance
+                .max(velocity_floor(model, self.velocity_floor_m_per_s)),
+            ..self.cg
+        }
+    }
+}
+
 /// One backward-Euler step of `h` seconds.
 pub fn step(
     model: &Particles<'_>,
     state: &mut State,
     external: &[Vector3],
     h: f64,
-    cg: CgSettings,
+    solve: ImplicitSolve,
     scratch: &mut ImplicitScratch,
 ) -> CgReport {
-    step_on(model, state, external, h, cg, scratch, true)
+    step_on(model, state, external, h, solve, scratch, true)
 }
 
 /// [`step`], with the assembly split in two on large systems where `split` (see below).
@@ -70,7 +95,7 @@ fn step_on(
     state: &mut State,
     external: &[Vector3],
     h: f64,
-    cg: CgSettings,
+    solve: ImplicitSolve,
     scratch: &mut ImplicitScratch,
     split: bool,
 ) -> CgReport {
@@ -214,12 +239,7 @@ fn step_on(
         }
     }
     guess.clear();
-    let cg = CgSettings {
-        absolute_tolerance: cg
-            .absolute_tolerance
-            .max(velocity_floor(model, cg.velocity_floor_m_per_s)),
-        ..cg
-    };
+    let cg = solve.cg_for(model);
     let report = if guessed {
         system::solve(sys, model.held, rhs, dv, cg, cg_scratch)
     } else {
@@ -510,11 +530,13 @@ mod tests {
             })
             .collect();
         let settings = SolverSettings::default();
-        let cg = CgSettings {
-            relative_tolerance: settings.cg_relative_tolerance,
-            absolute_tolerance: 0.0,
+        let solve = ImplicitSolve {
+            cg: CgSettings {
+                relative_tolerance: settings.cg_relative_tolerance,
+                absolute_tolerance: 0.0,
+                max_iterations: settings.cg_max_iterations,
+            },
             velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
-            max_iterations: settings.cg_max_iterations,
         };
         let mut scratch = ImplicitScratch::default();
         let pool = rayon::ThreadPoolBuilder::new()
@@ -528,7 +550,7 @@ mod tests {
                     &mut state,
                     &external,
                     settings.time_step_s,
-                    cg,
+                    solve,
                     &mut scratch,
                     split,
                 );
@@ -588,11 +610,13 @@ mod tests {
         let n = particles.vertex_count();
         let external = vec![Vector3::new(0.0, 0.0, -0.01); n];
         let settings = SolverSettings::default();
-        let cg = CgSettings {
-            relative_tolerance: 1e-10,
-            absolute_tolerance: 0.0,
+        let solve = ImplicitSolve {
+            cg: CgSettings {
+                relative_tolerance: 1e-10,
+                absolute_tolerance: 0.0,
+                max_iterations: 500,
+            },
             velocity_floor_m_per_s: VELOCITY_FLOOR_M_PER_S,
-            max_iterations: 500,
         };
         let from_rest = State::at_rest(&scene.model.mesh);
         let (mut state, mut scratch) = (from_rest.clone(), ImplicitScratch::default());
@@ -601,7 +625,7 @@ mod tests {
             &mut state,
             &external,
             settings.time_step_s,
-            cg,
+            solve,
             &mut scratch,
         );
         assert!(plain.converged && plain.iterations > 5, "{plain:?}");
@@ -614,7 +638,7 @@ mod tests {
             &mut again,
             &external,
             settings.time_step_s,
-            cg,
+            solve,
             &mut guessed,
         );
         assert!(report.converged && report.iterations <= 1, "{report:?}");
@@ -634,7 +658,7 @@ mod tests {
             &mut third,
             &external,
             settings.time_step_s,
-            cg,
+            solve,
             &mut unknown,
         );
         assert_eq!(report.iterations, plain.iterations);

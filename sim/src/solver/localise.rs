@@ -38,9 +38,9 @@ use crate::{Point3, Vector3};
 
 use super::StepError;
 use super::forces::spring_force;
-use super::implicit::{self, ImplicitScratch};
+use super::implicit::{self, ImplicitScratch, ImplicitSolve};
 use super::resume::{RegionResume, ResumeError, check_ids};
-use super::system::{CgReport, CgSettings};
+use super::system::CgReport;
 
 /// Thresholds of the localisation (the `[solver.localisation]` table of a scene file).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -406,7 +406,7 @@ impl ActiveRegion {
         loaded: &[u32],
         settings: &LocalisationSettings,
         h: f64,
-        cg: CgSettings,
+        solve: ImplicitSolve,
     ) -> Result<(CgReport, u32), StepError> {
         self.ensure(model, state, settings);
         self.pin(model, state, loaded, settings);
@@ -423,7 +423,7 @@ impl ActiveRegion {
         let mut solves = 0;
         for round in 1..=settings.max_growth_rounds {
             solves = round;
-            let report = self.solve(model, state, external, h, cg)?;
+            let report = self.solve(model, state, external, h, solve)?;
             total = CgReport {
                 iterations: total.iterations + report.iterations,
                 ..report
@@ -487,7 +487,7 @@ impl ActiveRegion {
         state: &State,
         external: &[Vector3],
         h: f64,
-        cg: CgSettings,
+        solve: ImplicitSolve,
     ) -> Result<CgReport, StepError> {
         for (l, &g) in self.global_of.iter().enumerate() {
             let g = g as usize;
@@ -510,7 +510,7 @@ impl ActiveRegion {
             &mut self.state,
             &self.external,
             h,
-            cg,
+            solve,
             &mut self.implicit,
         );
         if !report.relative_residual.is_finite() {

@@ -500,18 +500,14 @@ impl Simulation {
                 }
             }
             (Integrator::ImplicitEuler, Some(fem)) => {
-                let (tol, max_it) = (
-                    self.settings.cg_relative_tolerance,
-                    self.settings.cg_max_iterations,
-                );
+                let solve = self.implicit_solve();
                 let r = crate::fem::solve::implicit_step(
                     &self.model,
                     fem,
                     &mut self.state,
                     &self.external_forces,
                     dt,
-                    tol,
-                    max_it,
+                    solve,
                     &mut self.scratch.fem,
                 );
                 report.substeps = 1;
@@ -531,13 +527,13 @@ impl Simulation {
                 );
             }
             (Integrator::ImplicitEuler, None) => {
-                let cg = self.cg_settings();
+                let solve = self.implicit_solve();
                 let r = implicit::step(
                     &self.model.particles(),
                     &mut self.state,
                     &self.external_forces,
                     dt,
-                    cg,
+                    solve,
                     &mut self.scratch.implicit,
                 );
                 report.substeps = 1;
@@ -571,14 +567,16 @@ impl Simulation {
         Ok(report)
     }
 
-    /// The implicit solve's CG settings (the relative tolerance; the absolute floor is the
-    /// integrator's).
-    fn cg_settings(&self) -> CgSettings {
-        CgSettings {
-            relative_tolerance: self.settings.cg_relative_tolerance,
-            absolute_tolerance: 0.0,
+    /// The implicit solve's settings (the relative tolerance and the velocity floor; the
+    /// absolute floor is the integrator's, from the floor and the masses).
+    fn implicit_solve(&self) -> implicit::ImplicitSolve {
+        implicit::ImplicitSolve {
+            cg: CgSettings {
+                relative_tolerance: self.settings.cg_relative_tolerance,
+                absolute_tolerance: 0.0,
+                max_iterations: self.settings.cg_max_iterations,
+            },
             velocity_floor_m_per_s: self.settings.cg_velocity_floor_m_per_s,
-            max_iterations: self.settings.cg_max_iterations,
         }
     }
 
@@ -616,7 +614,7 @@ impl Simulation {
         self.loaded.sort_unstable();
         self.loaded.dedup();
         self.check_external_forces(self.loaded.iter().copied())?;
-        let (h, cg) = (self.settings.time_step_s, self.cg_settings());
+        let (h, solve) = (self.settings.time_step_s, self.implicit_solve());
         let (r, solves) = self.region.step(
             &self.model,
             &mut self.state,
@@ -624,7 +622,7 @@ impl Simulation {
             &self.loaded,
             localisation,
             h,
-            cg,
+            solve,
         )?;
         self.step_index += 1;
         Ok(StepReport {

@@ -102,7 +102,6 @@ pub fn solve_loaded(
         let cg = CgSettings {
             relative_tolerance: 1e-10,
             absolute_tolerance: 0.0,
-            velocity_floor_m_per_s: 0.0,
             max_iterations: 10 * n.max(100),
         };
         cg_total += system::solve(&sys, &model.held, &f, &mut dx, cg, &mut cg_scratch).iterations;

@@ -19,10 +19,6 @@ pub struct CgSettings {
     pub relative_tolerance: f64,
     /// In the units of `b`; zero for a purely relative tolerance.
     pub absolute_tolerance: f64,
-    /// For an implicit step's solve (the CG itself does not read it): a velocity, in m/s,
-    /// that with the step's masses raises `absolute_tolerance` to at least
-    /// `velocity_floor_m_per_s sqrt(sum m_i^2)` (see `solver::implicit::velocity_floor`).
-    pub velocity_floor_m_per_s: f64,
     /// The most iterations the solve may take.
     pub max_iterations: usize,
 }

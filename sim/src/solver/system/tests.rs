@@ -64,7 +64,6 @@ fn ssor_and_jacobi_solve_the_same_system() {
     let settings = CgSettings {
         relative_tolerance: 1e-10,
         absolute_tolerance: 0.0,
-        velocity_floor_m_per_s: 0.0,
         max_iterations: 1000,
     };
     let n = b.len();
@@ -122,7 +121,6 @@ fn one_thread_or_two_give_the_same_bits() {
     let settings = CgSettings {
         relative_tolerance: 1e-8,
         absolute_tolerance: 0.0,
-        velocity_floor_m_per_s: 0.0,
         max_iterations: 1000,
     };
     // the solve from `start` (and the span of `more`) on one thread and on two: the same
@@ -208,7 +206,6 @@ fn a_start_from_a_span_is_the_best_of_its_combinations() {
     let tight = CgSettings {
         relative_tolerance: 1e-12,
         absolute_tolerance: 0.0,
-        velocity_floor_m_per_s: 0.0,
         max_iterations: 1000,
     };
     let mut exact = vec![Vector3::zeros(); n];
@@ -296,7 +293,6 @@ fn springs_in_any_order_and_orientation_give_the_same_solution() {
     let settings = CgSettings {
         relative_tolerance: 1e-10,
         absolute_tolerance: 0.0,
-        velocity_floor_m_per_s: 0.0,
         max_iterations: 1000,
     };
     let n = b.len();
@@ -402,7 +398,6 @@ fn general_blocks_are_solved_with_either_preconditioner() {
     let settings = CgSettings {
         relative_tolerance: 1e-12,
         absolute_tolerance: 0.0,
-        velocity_floor_m_per_s: 0.0,
         max_iterations: 1_000,
     };
     let mut solutions = Vec::new();
