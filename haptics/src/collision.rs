@@ -232,8 +232,8 @@ impl SurfaceCollider {
 
     /// The contact model around the surface point nearest the tool: of the closest surface
     /// points to `probes` (the proxy, the blade's heel), the one the tool is deepest below or
-    /// nearest above (signed distance along the surface's normal, the first on a tie). Valid
-    /// when that surface point is within `reach_m`. Returns the model and the hit with the
+    /// nearest above (signed distance along the surface's normal, the first on a tie), among
+    /// those within `reach_m`; valid when there is one. Returns the model and the hit with the
     /// index of its probe.
     ///
     /// `pressed`: the contact the tool is pressing on, if it is. A contact follows the surface
@@ -266,6 +266,11 @@ impl SurfaceCollider {
                         ..*was
                     };
                 }
+                // (a probe out of reach touches nothing: its signed distance to the plane of
+                // a far surface says nothing of the tool, and it must not hide a near one)
+                if h.distance_m > reach_m {
+                    continue;
+                }
                 let d = signed(p, &h);
                 if best.as_ref().is_none_or(|(b, _, _)| d < *b) {
                     best = Some((d, i, h));
@@ -274,7 +279,7 @@ impl SurfaceCollider {
         }
         let hit = best.map(|(_, i, h)| (i, h));
         let model = match hit.as_ref().map(|(_, h)| h) {
-            Some(h) if h.distance_m <= reach_m => ContactModel {
+            Some(h) => ContactModel {
                 published: true,
                 source_tick,
                 at_heel: false,
@@ -389,5 +394,59 @@ mod tests {
             "pressed, the top, moved: {m:?} {hit:?}"
         );
         assert_eq!(hit.expect("hit").1.vertices, top.vertices);
+    }
+
+    /// A long blade pressed into the mouth of its wound: the tip between the wound's walls, the
+    /// heel far above the tissue. The heel's closest surface point is on a wall's top edge far
+    /// away, and its signed distance along that wall's normal is a small sideways offset that
+    /// may be below the tip's; it must not be taken for the contact (before, it was, and being
+    /// out of reach it left the blade in "free space": the re-pressed blade did not cut).
+    #[test]
+    fn a_probe_out_of_reach_does_not_hide_the_tips_contact_in_a_wound() {
+        let scene = Scene::load(
+            concat!(env!("CARGO_MANIFEST_DIR"), "/tests/block.toml"),
+            BuildOptions {
+                min_tets: Some(1500),
+            },
+        )
+        .expect("block");
+        let mut sim = scene.simulation();
+        let (lo, hi) = sim.model.mesh.bounding_box();
+        let (cy, top) = (0.5 * (lo.y + hi.y) + 0.0003, hi.z);
+        let mut cutter = cutlab_sim::cut::Cutter::new(cutlab_sim::cut::CutOptions::default());
+        for k in 0..=80 {
+            let x = lo.x + 0.015 + 0.03 * f64::from(k) / 80.0;
+            let blade = cutlab_sim::cut::blade(Point3::new(x, cy, top - 0.008), Vector3::z(), 0.06);
+            match cutter.advance(&mut sim, blade) {
+                Ok(_) | Err(cutlab_sim::cut::CutError::Unresolved(_)) => {}
+                Err(e) => panic!("step {k}: {e}"),
+            }
+            sim.step().expect("step");
+        }
+        cutter.end_stroke();
+        for _ in 0..300 {
+            sim.step().expect("settling");
+        }
+        let c = SurfaceCollider::build(&sim).expect("collider");
+        let reach_m = 0.02;
+        let signed = |p: &Point3, h: &SurfaceHit| (p - h.point).dot(&h.normal);
+        let mut heel_below_tip = 0;
+        for i in 0..40 {
+            for (depth_mm, lean_mm) in [(1.0, -0.5), (2.0, -0.25), (3.0, 0.25), (4.0, 0.5)] {
+                let x = lo.x + 0.02 + 0.02 * f64::from(i) / 40.0;
+                let tip = Point3::new(x, cy, top - depth_mm * 1e-3);
+                let heel = tip + Vector3::new(0.0, lean_mm * 1e-3, 0.06);
+                let (Some(t), Some(h)) = (c.closest(&tip), c.closest(&heel)) else {
+                    panic!("no surface near {tip:?} or {heel:?}");
+                };
+                heel_below_tip += usize::from(signed(&heel, &h) < signed(&tip, &t));
+                let (m, hit) = c.contact_model(&sim, &[tip, heel], reach_m, 1, None);
+                assert!(
+                    m.valid && hit.is_some_and(|(probe, _)| probe == 0),
+                    "tip {tip:?} ({t:?}) heel {heel:?} ({h:?}): {m:?}"
+                );
+            }
+        }
+        assert!(heel_below_tip > 0, "the case never arose");
     }
 }
