@@ -1741,9 +1741,11 @@ async fn metrics_shown(
 /// wall, and draws 50 mm along the space at 10 mm/s with a steady hand. Half way, the HUD
 /// names the layer the blade is in; then she switches to another tab for 2 s and the page is
 /// reloaded mid-cut, and she presses again where she was and goes on. The heart shows
-/// through the opening; the retracted field shows it, and the attempt passes. Screenshots:
+/// through the opening; she sets the retractor (R) to see it better, and ends with Stop; the
+/// retracted field shows it, and the attempt passes. Screenshots:
 /// `station-thoracotomy-mid-cut.png`, `station-thoracotomy-reloaded.png`,
-/// `station-thoracotomy-done.png`, `station-thoracotomy-debrief.png`,
+/// `station-thoracotomy-done.png`, `station-thoracotomy-retracted.png`,
+/// `station-thoracotomy-debrief.png`,
 /// `station-thoracotomy-field.png` (the debrief's picture of the field as scored).
 #[test]
 fn a_mini_thoracotomy_placed_from_the_landmarks_passes_at_the_station_in_headless_chromium() {
@@ -1869,6 +1871,19 @@ async fn thoracotomy(port: u16, driver: &browser::Driver, tmp: &Path) -> (String
         c.perform_actions(as_actions(&away)).await?;
         let done = shots.join("station-thoracotomy-done.png");
         std::fs::write(done, c.screenshot().await?).expect("screenshot");
+        // the retractor set into the incision (the R key): the wound opens onto the heart;
+        // then Stop ends the attempt (with the retractor set it waits for it)
+        c.perform_actions(key('r', 1)).await?;
+        until(
+            &c,
+            "document.getElementById('retract').getAttribute('aria-pressed') === 'true'",
+            Duration::from_secs(5),
+        )
+        .await?;
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        let retracted = shots.join("station-thoracotomy-retracted.png");
+        std::fs::write(retracted, c.screenshot().await?).expect("screenshot");
+        c.find(Locator::Id("stop")).await?.click().await?;
         let summary = debrief(&c, &shots.join("station-thoracotomy-debrief.png")).await?;
         // the debrief's picture of the field as scored: the retracted wound from the viewpoint
         until(

@@ -34,6 +34,7 @@ pub mod landmarks;
 pub mod plan;
 pub mod pose;
 pub mod render;
+pub mod retraction;
 pub mod servo;
 pub mod session;
 pub mod step_choice;

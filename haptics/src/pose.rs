@@ -9,6 +9,10 @@ pub const BUTTON_BLADE: u32 = 1;
 /// the pose's tip is the jaws' centre).
 pub const BUTTON_JAWS: u32 = 2;
 
+/// Button bit of the scalpel's device: the trainee holds a wound retractor set in the
+/// incision ([`crate::retraction`]).
+pub const BUTTON_RETRACT: u32 = 4;
+
 /// Pose of the scalpel: its tip in the world, its orientation and its buttons.
 ///
 /// Tool frame: origin at the blade's tip, +z along the cutting edge towards the handle, +x the

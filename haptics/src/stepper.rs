@@ -15,7 +15,9 @@ use cutlab_sim::solver::{ResumeState, Simulation};
 
 use crate::collision::{SurfaceCollider, SurfaceHit};
 use crate::damage::{DamageWatch, TissueDamage};
+use crate::pose::BUTTON_RETRACT;
 use crate::render::{ContactModel, Mode, WOUND_REACH_M, Wound};
+use crate::retraction::WoundRetraction;
 use crate::servo::ServoSample;
 use crate::session::{Session, SessionConfig};
 use crate::{HapticsError, Point3, Vector3};
@@ -59,6 +61,9 @@ pub struct StepperStats {
     /// Steps the jaws held tissue.
     #[serde(default)]
     pub grasp_steps: u64,
+    /// Times the trainee set the wound retractor.
+    #[serde(default)]
+    pub retractions: u64,
 }
 
 /// What one step did.
@@ -116,6 +121,8 @@ pub struct SessionStepper {
     /// close).
     jaws_closed: bool,
     grasp_settings: GraspSettings,
+    /// The wound retractor the trainee sets.
+    retraction: WoundRetraction,
 }
 
 /// What a [`SessionStepper`] carries from one step to the next beyond the simulation's state
@@ -152,6 +159,10 @@ pub struct StepperResume {
     /// The grasper's jaws were closed.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub jaws_closed: bool,
+    /// The wound retractor: the incision so far and the opening while set (absent in
+    /// recordings made before it was kept).
+    #[serde(default)]
+    pub retraction: WoundRetraction,
 }
 
 impl SessionStepper {
@@ -180,6 +191,7 @@ impl SessionStepper {
             grasp: None,
             jaws_closed: false,
             grasp_settings: GraspSettings::default(),
+            retraction: WoundRetraction::default(),
         }
     }
 
@@ -204,6 +216,7 @@ impl SessionStepper {
             damage: self.damage.clone(),
             grasp: self.grasp.clone(),
             jaws_closed: self.jaws_closed,
+            retraction: self.retraction.clone(),
         })
     }
 
@@ -261,6 +274,9 @@ impl SessionStepper {
         if !r.grasp.as_ref().is_none_or(|g| g.fits(n)) {
             return Err(invalid("the grasp does not fit the mesh".into()));
         }
+        if !r.retraction.fits(n) {
+            return Err(invalid("the retractor does not fit the mesh".into()));
+        }
         let mut cutter = self.cutter.clone();
         cutter
             .resume(&r.cutter, n)
@@ -278,6 +294,7 @@ impl SessionStepper {
         self.damage = r.damage.clone();
         self.grasp = r.grasp.clone();
         self.jaws_closed = r.jaws_closed;
+        self.retraction = r.retraction.clone();
         self.steps = r.steps;
         self.collider_fresh = true;
         Ok(())
@@ -393,6 +410,9 @@ impl SessionStepper {
                 self.stats.cut_length_m += (tip - p).norm();
             }
             self.last_cut_tip = Some(tip);
+            if let Some(entry) = &self.cut_entry {
+                self.retraction.note_cut(&tip, &entry.point, &entry.normal);
+            }
             let blade = cut::Blade {
                 tip,
                 edge_direction: sample.pose.edge_direction(),
@@ -443,6 +463,8 @@ impl SessionStepper {
             self.damage.blade_out();
         }
 
+        let retract = sample.pose.buttons & BUTTON_RETRACT != 0;
+        self.stats.retractions += u64::from(self.retraction.update(&mut self.sim, retract));
         let stepped = self.sim.step();
         let grasp_pull_newtons = self.pull_on_jaws();
         let rejected = match &stepped {

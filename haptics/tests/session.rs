@@ -397,3 +397,113 @@ fn a_person_at_the_pointer_cuts_the_chest_wall_in_one_stroke_along_the_whole_lin
         assert_eq!(r.stats.failed_cuts, 0, "{what}");
     }
 }
+
+/// The wound retractor the trainee sets: held on the scalpel's button, it spreads the
+/// incision the session cut to 20 mm at its middle (the faces' particles held there), and
+/// let go it takes its grip out and the wound closes again (here to about half: the faces
+/// stand 10 mm apart a second later, 1.9 mm before it was set).
+#[test]
+fn the_retractor_set_in_the_incision_spreads_it_and_let_go_the_wound_closes() {
+    use cutlab_haptics::pose::{BUTTON_BLADE, BUTTON_RETRACT};
+    use cutlab_haptics::render::{ContactModel, ForceRenderer, RenderSettings};
+    use cutlab_haptics::retraction::RETRACTOR_WIDTH_M;
+    use cutlab_haptics::servo::ServoSample;
+    use cutlab_haptics::{Point3, Rotation, SessionStepper, ToolPose};
+    let config = SessionConfig::default();
+    let fine = Scene::load(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/tests/block.toml"),
+        BuildOptions {
+            min_tets: Some(15_000),
+        },
+    )
+    .expect("block scene");
+    let mut stepper = SessionStepper::new(Session::new(&fine).expect("session"), &config);
+    let mut renderer =
+        ForceRenderer::new(RenderSettings::default()).with_blade_length(config.blade_length_m);
+    let (lo, hi) = stepper.sim.model.mesh.bounding_box();
+    let (cx, cy, top) = (0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), hi.z);
+    let lerp = |a: f64, b: f64, f: f64| a + (b - a) * f.clamp(0.0, 1.0);
+    // (x from the middle, depth below the top, buttons) at tick t: a 30 mm incision 8 mm
+    // deep, the lift, then the retractor held for 0.8 s and let go
+    let hand = |t: f64| -> (f64, f64, u32) {
+        match t {
+            t if t < 300.0 => (-0.015, lerp(-0.001, 0.008, t / 300.0), BUTTON_BLADE),
+            t if t < 2300.0 => (
+                lerp(-0.015, 0.015, (t - 300.0) / 2000.0),
+                0.008,
+                BUTTON_BLADE,
+            ),
+            t if t < 2600.0 => (0.015, lerp(0.008, -0.005, (t - 2300.0) / 300.0), 0),
+            t if t < 3400.0 => (0.015, -0.005, BUTTON_RETRACT),
+            _ => (0.015, -0.005, 0),
+        }
+    };
+    // the particles over the line's middle the retractor holds (not the block's rim), and how
+    // far apart across the line those of them stand
+    let gripped = |stepper: &SessionStepper| -> Vec<usize> {
+        let x = &stepper.sim.state.positions;
+        (0..x.len())
+            .filter(|&v| stepper.sim.model.held[v])
+            .filter(|&v| (x[v].x - cx).abs() < 0.002 && (x[v].y - cy).abs() < 0.015)
+            .collect()
+    };
+    let spread = |x: &[Point3], ids: &[usize]| {
+        let ys = ids.iter().map(|&v| x[v].y);
+        ys.clone().fold(f64::MIN, f64::max) - ys.fold(f64::MAX, f64::min)
+    };
+    let mut contact = ContactModel::default();
+    let (mut open_gap, mut held_while_open, mut faces, mut before) =
+        (0.0, 0, Vec::new(), Vec::new());
+    for tick in 0..4400u64 {
+        let (dx, depth, buttons) = hand(tick as f64);
+        let pose = ToolPose {
+            tip_in_world: Point3::new(cx + dx, cy, top - depth),
+            world_from_tool: Rotation::identity(),
+            buttons,
+        };
+        let render = renderer.update(tick, Ok(pose), &contact);
+        let sample = ServoSample {
+            tick,
+            pose,
+            render,
+            grasper: None,
+        };
+        contact = stepper.step(&sample).contact;
+        if tick == 2599 {
+            before = stepper.sim.state.positions.clone();
+        }
+        if tick == 3399 {
+            faces = gripped(&stepper);
+            open_gap = spread(&stepper.sim.state.positions, &faces);
+            held_while_open = stepper.sim.model.held.iter().filter(|&&h| h).count();
+        }
+    }
+    let (unset_gap, closed_gap) = (
+        spread(&before, &faces),
+        spread(&stepper.sim.state.positions, &faces),
+    );
+    let held_after = stepper.sim.model.held.iter().filter(|&&h| h).count();
+    assert_eq!(stepper.stats.retractions, 1, "{:?}", stepper.stats);
+    assert!(
+        stepper.stats.cut_length_m > 0.025,
+        "the incision: {:?}",
+        stepper.stats
+    );
+    assert!(
+        faces.len() >= 4 && (open_gap - RETRACTOR_WIDTH_M).abs() < 0.0015,
+        "set, the wound's faces over its middle ({} particles) stand {:.1} mm apart",
+        faces.len(),
+        open_gap * 1e3
+    );
+    assert!(
+        held_while_open > held_after + 20,
+        "the retractor's grip ({held_while_open} held, {held_after} after) is taken out"
+    );
+    assert!(
+        closed_gap < 0.6 * open_gap,
+        "let go, the wound closes: its faces {:.1} mm apart, were {:.1} mm open and {:.1} mm before",
+        closed_gap * 1e3,
+        open_gap * 1e3,
+        unset_gap * 1e3
+    );
+}

@@ -1027,3 +1027,92 @@ fn a_two_handed_session_records_the_grasper_and_replays_bit_exact() {
     assert!(seek.verified(), "{:?}", seek.first_divergence);
     assert_eq!(seek.final_hash, replayed.final_hash);
 }
+
+/// A session in which the trainee sets the wound retractor (the scalpel's retract button)
+/// into a line cut through the sheet and takes it out again: recorded, it replays bit for
+/// bit from the start and from a keyframe taken while the retractor holds the wound open.
+#[test]
+fn a_session_with_the_retractor_set_replays_bit_exact_from_a_keyframe_in_it() {
+    let dir = temp_dir("retract");
+    let trajectory = dir.path().join("retract.csv");
+    // x, y, z of the tip and the buttons at t: in 0.2 s through the sheet at x = 30 mm, along
+    // to 70 mm in 1.6 s, lifted, the retractor held from 2.2 to 3.4 s, then let go
+    let rows: Vec<String> = [
+        (0.0, 0.030, 0.004, 0),
+        (0.2, 0.030, -0.002, 1),
+        (1.8, 0.070, -0.002, 1),
+        (2.0, 0.070, 0.006, 0),
+        (2.2, 0.070, 0.006, 4),
+        (3.4, 0.070, 0.006, 4),
+        (3.45, 0.070, 0.006, 0),
+    ]
+    .iter()
+    .map(|(t, x, z, b)| format!("{t}, {x}, 0.0503, {z}, 1, 0, 0, 0, {b}"))
+    .collect();
+    let header = "t_s, x_m, y_m, z_m, qw, qx, qy, qz, button";
+    std::fs::write(&trajectory, format!("{header}\n{}\n", rows.join("\n"))).expect("written");
+    let scene = Scene::load("sheet", BuildOptions::default()).expect("scene");
+    let session = Session::new(&scene).expect("session");
+    let device =
+        Box::new(cutlab_haptics::device::CsvDevice::open(&trajectory).expect("a valid trajectory"));
+    let config = SessionConfig {
+        duration_s: 4.0,
+        collider_rebuild_every_steps: 500,
+        ..SessionConfig::default()
+    };
+    let path = dir.path().join("session.mcap");
+    let provenance = Provenance {
+        scene: "sheet".into(),
+        min_tets: None,
+        seed: 0,
+        trainee: "t".into(),
+        exercise: "e".into(),
+        device: format!("csv:{}", trajectory.display()),
+    };
+    let r = record::run_recorded(
+        session,
+        device,
+        &config,
+        &provenance,
+        None,
+        &scene.spec,
+        &path,
+        record_settings(500, 0),
+        None,
+    )
+    .expect("recorded session");
+    let report = r.report.expect("session ran");
+    assert_eq!(report.stats.retractions, 1, "{:?}", report.stats);
+    let rec = Recording::open(&path).expect("readable");
+    let open = rec
+        .keyframes
+        .iter()
+        .find(|k| {
+            k.resume
+                .as_ref()
+                .is_some_and(|s| s.retraction.opening.is_some())
+        })
+        .expect("a keyframe with the retractor set");
+    let replayed = replay::replay(&rec, ReplayOptions::default()).expect("replay runs");
+    assert!(replayed.verified(), "{:?}", replayed.first_divergence);
+    let from_s = (open.tick + 1) as f64 * 1e-3 + 0.1;
+    let seek = replay::replay(
+        &rec,
+        ReplayOptions {
+            from_s: Some(from_s),
+            ..ReplayOptions::default()
+        },
+    )
+    .expect("replay runs");
+    assert!(
+        seek.resumed_at.is_some_and(|k| k.tick == open.tick),
+        "{:?}",
+        seek.resumed_at
+    );
+    assert!(
+        seek.verified() && seek.keyframes_checked >= 2,
+        "{:?} ({} keyframes)",
+        seek.first_divergence,
+        seek.keyframes_checked
+    );
+}

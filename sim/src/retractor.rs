@@ -44,7 +44,7 @@ pub struct Retractor {
 }
 
 /// The particles a [`Retractor`] holds and where it carries them.
-#[derive(Debug, Clone, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Grip {
     /// Held particles.
     pub vertices: Vec<u32>,
@@ -182,9 +182,32 @@ impl Retractor {
     /// carried linearly, step by step) and keeps it open for [`HOLD_S`] more. The particles
     /// stay held. Returns the grip.
     pub fn open(&self, sim: &mut Simulation) -> Result<Grip, StepError> {
-        let steps = |s: f64| (s / sim.settings.time_step_s).round() as usize;
-        let (ramp_steps, hold_steps) = (steps(RAMP_S), steps(HOLD_S));
-        let grip = self.grip(sim);
+        let hold_steps = (HOLD_S / sim.settings.time_step_s).round() as usize;
+        let mut opening = self.set(sim);
+        for _ in 0..opening.ramp_steps {
+            opening.carry(sim);
+            sim.step()?;
+        }
+        for _ in 0..hold_steps {
+            sim.step()?;
+        }
+        Ok(opening.grip)
+    }
+
+    /// Sets the retractor into a running simulation: grips the wound (not the particles
+    /// already held: clips, the other hand's jaws) and holds what it gripped where it is. The
+    /// [`Opening`] then carries them open over [`RAMP_S`] of the simulation's steps, one
+    /// [`Opening::carry`] before each step, and holds them until [`Opening::release`].
+    pub fn set(&self, sim: &mut Simulation) -> Opening {
+        let all = self.grip(sim);
+        let free: Vec<usize> = (0..all.vertices.len())
+            .filter(|&i| !sim.model.held[all.vertices[i] as usize])
+            .collect();
+        let grip = Grip {
+            vertices: free.iter().map(|&i| all.vertices[i]).collect(),
+            from_m: free.iter().map(|&i| all.from_m[i]).collect(),
+            to_m: free.iter().map(|&i| all.to_m[i]).collect(),
+        };
         sim.edit(|model, _| {
             for &v in &grip.vertices {
                 model.held[v as usize] = true;
@@ -192,19 +215,73 @@ impl Retractor {
             }
         });
         sim.wake(grip.vertices.iter().copied());
-        let ramp = ramp_steps.max(1);
-        for k in 1..=ramp {
-            let f = k as f64 / ramp as f64;
-            for (i, &v) in grip.vertices.iter().enumerate() {
-                sim.state.positions[v as usize] =
-                    grip.from_m[i] + (grip.to_m[i] - grip.from_m[i]) * f;
+        let ramp_steps = ((RAMP_S / sim.settings.time_step_s).round() as u32).max(1);
+        Opening {
+            grip,
+            steps: 0,
+            ramp_steps,
+        }
+    }
+}
+
+/// A [`Retractor`] set into a running simulation ([`Retractor::set`]): what it grips and how
+/// far it has opened.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Opening {
+    /// The particles held and where the open retractor holds them.
+    pub grip: Grip,
+    /// The steps carried so far.
+    pub steps: u32,
+    /// The steps the opening takes ([`RAMP_S`]).
+    pub ramp_steps: u32,
+}
+
+impl Opening {
+    /// Before a step: carries the gripped particles on along the ramp, linearly from where
+    /// they were gripped to where the open retractor holds them (at rest once open).
+    pub fn carry(&mut self, sim: &mut Simulation) {
+        if self.steps >= self.ramp_steps {
+            return;
+        }
+        self.steps += 1;
+        let f = f64::from(self.steps) / f64::from(self.ramp_steps);
+        let g = &self.grip;
+        for (i, &v) in g.vertices.iter().enumerate() {
+            if let Some(p) = sim.state.positions.get_mut(v as usize) {
+                *p = g.from_m[i] + (g.to_m[i] - g.from_m[i]) * f;
                 sim.state.velocities[v as usize] = Vector3::zeros();
             }
-            sim.step()?;
         }
-        for _ in 0..hold_steps {
-            sim.step()?;
-        }
-        Ok(grip)
+    }
+
+    /// Whether it has opened to its width.
+    pub fn is_open(&self) -> bool {
+        self.steps >= self.ramp_steps
+    }
+
+    /// Takes the retractor out: the gripped particles are free again, with their masses.
+    pub fn release(self, sim: &mut Simulation) {
+        sim.edit(|model, _| {
+            for &v in &self.grip.vertices {
+                let v = v as usize;
+                if v < model.vertex_count() && model.mass[v] > 0.0 {
+                    model.held[v] = false;
+                    model.inv_mass[v] = 1.0 / model.mass[v];
+                }
+            }
+        });
+        sim.wake(self.grip.vertices.iter().copied());
+    }
+
+    /// Whether its particles are in a mesh of `vertex_count` and its numbers finite.
+    pub fn fits(&self, vertex_count: usize) -> bool {
+        let g = &self.grip;
+        g.vertices.len() == g.from_m.len()
+            && g.vertices.len() == g.to_m.len()
+            && g.vertices.iter().all(|&v| (v as usize) < vertex_count)
+            && g.from_m
+                .iter()
+                .chain(&g.to_m)
+                .all(|p| p.iter().all(|c| c.is_finite()))
     }
 }

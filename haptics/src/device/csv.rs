@@ -11,8 +11,8 @@
 //!
 //! `t_s` is the time since the session started (seconds, strictly increasing, finite, >= 0);
 //! `x_m y_m z_m` the blade's tip in the world (metres); `qw qx qy qz` the tool's orientation
-//! (`world_from_tool`, any non-zero length: normalised on reading); `button` 0 or 1 (1: blade
-//! engaged). Between rows the position is interpolated linearly and the orientation by
+//! (`world_from_tool`, any non-zero length: normalised on reading); `button` the buttons' bits:
+//! 0, 1 (the blade engaged), 4 (the wound retractor held) or 5 (both). Between rows the position is interpolated linearly and the orientation by
 //! normalised linear interpolation; before the first row the first pose holds, after the last
 //! the last.
 
@@ -20,7 +20,7 @@ use std::path::Path;
 
 use super::track::PoseTrack;
 use super::{DeviceFault, HapticDevice};
-use crate::pose::BUTTON_BLADE;
+use crate::pose::{BUTTON_BLADE, BUTTON_RETRACT};
 use crate::{HapticsError, Point3, Rotation, ToolPose, Vector3};
 
 /// The header line the format requires (spaces around the commas are optional).
@@ -142,10 +142,12 @@ impl CsvDevice {
             let buttons = match fields[8] {
                 "0" => 0,
                 "1" => BUTTON_BLADE,
+                "4" => BUTTON_RETRACT,
+                "5" => BUTTON_BLADE | BUTTON_RETRACT,
                 other => {
                     return Err(err(
                         line,
-                        format!("column 9 (button): expected 0 or 1, got `{other}`"),
+                        format!("column 9 (button): expected 0, 1, 4 or 5, got `{other}`"),
                     ));
                 }
             };
@@ -289,7 +291,7 @@ mod tests {
             ),
             (
                 "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n0, 0, 0, 0, 1, 0, 0, 0, 2\n",
-                "expected 0 or 1",
+                "expected 0, 1, 4 or 5",
             ),
             (
                 "t_s,x_m,y_m,z_m,qw,qx,qy,qz,button\n-1, 0, 0, 0, 1, 0, 0, 0, 0\n",

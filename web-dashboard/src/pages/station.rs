@@ -233,6 +233,9 @@ fn config_json(r: &Running, driver: bool) -> String {
         "pointer": r.pointer.is_some(),
         // the page's touch drives a second hand's grasper
         "grasper": r.grasper.is_some(),
+        // the trainee may set a wound retractor (a scene with something behind the tissue
+        // to expose: a field exercise)
+        "retractor": r.pointer.is_some() && !r.targets.is_empty(),
         "exercise": r.exercise,
         "trainee": r.trainee,
         "guided": r.guided,
@@ -317,6 +320,9 @@ async fn station(
                     div class="scale" { span id="scale-bar" {} " 10 mm" }
                     canvas id="axes" width="64" height="64" title="The world's axes as this view shows them: x red, y green, z blue (the frame of the recording and the replay)" {}
                     div { "Mode " span id="mode" { (if r.guided { "guided" } else { "exam" }) } }
+                    @if driver && r.pointer.is_some() && !r.targets.is_empty() {
+                        button id="retract" type="button" aria-pressed="false" title="A soft-tissue retractor set into your incision spreads it 20 mm, as for a mini-thoracotomy" { "Set the retractor (R)" }
+                    }
                     @if driver { button id="stop" type="button" { "Stop" } }
                     @else { p class="muted" { "Live view (read only)." } }
                     div id="status" class="muted" {}

@@ -338,6 +338,10 @@ impl PointerDevice {
                     self.options.button
                 } else {
                     0
+                } | if s.retractor && self.options.button == crate::pose::BUTTON_BLADE {
+                    crate::pose::BUTTON_RETRACT
+                } else {
+                    0
                 },
             },
         }

@@ -41,6 +41,10 @@ pub struct PointerSample {
     /// [`super::PointerOrientation::PerSample`].
     #[serde(default)]
     pub world_from_tool_xyzw: Option<[f64; 4]>,
+    /// The trainee holds the wound retractor set (the scalpel's
+    /// [`crate::pose::BUTTON_RETRACT`]; a grasper's sample ignores it).
+    #[serde(default)]
+    pub retractor: bool,
 }
 
 /// What the checks made of a sample, before its time is compared with the last one's.
@@ -64,6 +68,7 @@ impl PointerSample {
             blade_engaged,
             pressure: None,
             world_from_tool_xyzw: None,
+            retractor: false,
         }
     }
 

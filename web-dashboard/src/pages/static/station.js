@@ -684,7 +684,7 @@
   if (!config.pointer) { document.getElementById("depth").textContent = "by the device"; return; }
 
   // ---- the trainee's input: the point under the pointer on the tissue, depth, button ----
-  let hit = null, engaged = false, lastSent = 0;
+  let hit = null, engaged = false, lastSent = 0, retracting = false;
   document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   function ray(event) {
     const r = canvas.getBoundingClientRect();
@@ -703,8 +703,21 @@
   function send(t_ms) {
     if (!hit || socket.readyState !== WebSocket.OPEN || !(t_ms > lastSent)) return;
     lastSent = t_ms;
-    socket.send(JSON.stringify({ type: "pointer", t_ms, surface_in_world_m: hit.point, depth_m: engaged ? depth : 0, blade_engaged: engaged }));
+    socket.send(JSON.stringify({ type: "pointer", t_ms, surface_in_world_m: hit.point, depth_m: engaged ? depth : 0, blade_engaged: engaged, retractor: retracting }));
   }
+  // the wound retractor (a field exercise): set into the incision while on, spreading it
+  // 20 mm; the attempt then waits for Stop rather than ending after the blade's lift
+  const retractButton = document.getElementById("retract");
+  function toggleRetractor() {
+    if (!config.retractor) return;
+    retracting = !retracting;
+    retractButton.setAttribute("aria-pressed", String(retracting));
+    retractButton.textContent = retracting ? "Take the retractor out (R)" : "Set the retractor (R)";
+    status(retracting ? "Retractor set in the incision: the wound opens 20 mm. Stop when you have seen the field." : "Retractor out: the wound closes.");
+    if (retracting) releasedAt = null;
+    send(performance.now());
+  }
+  if (retractButton) retractButton.addEventListener("click", toggleRetractor);
   // the second hand: a touch closes the grasper's jaws where it lands, drags the tissue
   // along, lifts the jaws over 0.3 s once closed, and opens them when it lifts
   const GRASP_LIFT_M = 0.004, LIFT_S = 0.3;
@@ -771,6 +784,7 @@
   window.addEventListener("keydown", (event) => {
     if (event.key === "ArrowUp") deeper(-DEPTH_STEP_M);
     else if (event.key === "ArrowDown") deeper(DEPTH_STEP_M);
+    else if (event.key === "r" || event.key === "R") { toggleRetractor(); return; }
     else return;
     document.getElementById("depth").textContent = (depth * 1e3).toFixed(1) + " mm";
   });
@@ -784,6 +798,8 @@
     if (now - lastSent > 100) send(now);
     // the grasper's too, every 50 ms: its lift goes on while the touch holds still
     if (grasp.hit && now - grasp.lastSent > 50) sendGrasper(now);
-    if (cutSeen && !engaged && releasedAt !== null && performance.now() - releasedAt > 1500 && !ended) { stop(); releasedAt = null; }
+    // (a page with a retractor waits longer: time to set it after the lift)
+    const autoStopMs = config.retractor ? 5000 : 1500;
+    if (cutSeen && !engaged && !retracting && releasedAt !== null && performance.now() - releasedAt > autoStopMs && !ended) { stop(); releasedAt = null; }
   })();
 })();
