@@ -816,20 +816,17 @@ fn circle_through_the_sheet(path: &Path) -> f64 {
     t
 }
 
-#[test]
-fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_exact() {
-    let dir = temp_dir("circle");
-    let trajectory = dir.path().join("circle.csv");
-    let duration_s = circle_through_the_sheet(&trajectory) + 0.5;
+/// Records a session on the sheet played from the CSV `trajectory` into `path`.
+fn record_sheet_from_csv(
+    trajectory: &Path,
+    config: &SessionConfig,
+    settings: RecordSettings,
+    path: &Path,
+) -> cutlab_haptics::SessionReport {
     let scene = Scene::load("sheet", BuildOptions::default()).expect("scene");
     let session = Session::new(&scene).expect("session");
     let device =
-        Box::new(cutlab_haptics::device::CsvDevice::open(&trajectory).expect("a valid trajectory"));
-    let config = SessionConfig {
-        duration_s,
-        ..SessionConfig::default()
-    };
-    let path = dir.path().join("session.mcap");
+        Box::new(cutlab_haptics::device::CsvDevice::open(trajectory).expect("a valid trajectory"));
     let provenance = Provenance {
         scene: "sheet".into(),
         min_tets: None,
@@ -838,20 +835,32 @@ fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_
         exercise: "e".into(),
         device: format!("csv:{}", trajectory.display()),
     };
-    let settings = record_settings(5000, 0);
     let r = record::run_recorded(
         session,
         device,
-        &config,
+        config,
         &provenance,
         None,
         &scene.spec,
-        &path,
+        path,
         settings,
         None,
     )
     .expect("recorded session");
-    let report = r.report.expect("session ran");
+    r.report.expect("session ran")
+}
+
+#[test]
+fn a_closed_circle_through_the_sheet_frees_a_specimen_recorded_and_replayed_bit_exact() {
+    let dir = temp_dir("circle");
+    let trajectory = dir.path().join("circle.csv");
+    let duration_s = circle_through_the_sheet(&trajectory) + 0.5;
+    let config = SessionConfig {
+        duration_s,
+        ..SessionConfig::default()
+    };
+    let path = dir.path().join("session.mcap");
+    let report = record_sheet_from_csv(&trajectory, &config, record_settings(5000, 0), &path);
     assert_eq!(report.stats.specimens, 1, "{:?}", report.stats);
     // the whole sheet and the disc, no fragment
     let sim = &report.simulation;
@@ -1051,37 +1060,13 @@ fn a_session_with_the_retractor_set_replays_bit_exact_from_a_keyframe_in_it() {
     .collect();
     let header = "t_s, x_m, y_m, z_m, qw, qx, qy, qz, button";
     std::fs::write(&trajectory, format!("{header}\n{}\n", rows.join("\n"))).expect("written");
-    let scene = Scene::load("sheet", BuildOptions::default()).expect("scene");
-    let session = Session::new(&scene).expect("session");
-    let device =
-        Box::new(cutlab_haptics::device::CsvDevice::open(&trajectory).expect("a valid trajectory"));
     let config = SessionConfig {
         duration_s: 4.0,
         collider_rebuild_every_steps: 500,
         ..SessionConfig::default()
     };
     let path = dir.path().join("session.mcap");
-    let provenance = Provenance {
-        scene: "sheet".into(),
-        min_tets: None,
-        seed: 0,
-        trainee: "t".into(),
-        exercise: "e".into(),
-        device: format!("csv:{}", trajectory.display()),
-    };
-    let r = record::run_recorded(
-        session,
-        device,
-        &config,
-        &provenance,
-        None,
-        &scene.spec,
-        &path,
-        record_settings(500, 0),
-        None,
-    )
-    .expect("recorded session");
-    let report = r.report.expect("session ran");
+    let report = record_sheet_from_csv(&trajectory, &config, record_settings(500, 0), &path);
     assert_eq!(report.stats.retractions, 1, "{:?}", report.stats);
     let rec = Recording::open(&path).expect("readable");
     let open = rec
