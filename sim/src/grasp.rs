@@ -101,7 +101,7 @@ impl Grasp {
             .iter()
             .map(|&v| jaw_from_world * sim.state.positions[v as usize])
             .collect();
-        hold(sim, &vertices);
+        sim.hold(&vertices);
         sim.wake(vertices.iter().copied());
         Ok(Self {
             vertices,
@@ -151,7 +151,7 @@ impl Grasp {
             };
             held.insert(v, in_jaw);
         }
-        hold(sim, &created);
+        sim.hold(&created);
         (self.vertices, self.in_jaw_m) = held.into_iter().unzip();
     }
 
@@ -172,7 +172,7 @@ impl Grasp {
         if new.is_empty() {
             return;
         }
-        hold(sim, &new);
+        sim.hold(&new);
         let held: std::collections::BTreeMap<u32, Point3> = self
             .vertices
             .iter()
@@ -236,29 +236,8 @@ impl Grasp {
     /// Opens the jaws: the held particles are free again, with their masses and the
     /// velocities they were carried at.
     pub fn release(self, sim: &mut Simulation) {
-        sim.edit(|model, _| {
-            for &v in &self.vertices {
-                let v = v as usize;
-                if v < model.vertex_count() && model.mass[v] > 0.0 {
-                    model.held[v] = false;
-                    model.inv_mass[v] = 1.0 / model.mass[v];
-                }
-            }
-        });
-        sim.wake(self.vertices.iter().copied());
+        sim.let_go(&self.vertices);
     }
-}
-
-/// Holds `vertices` (ids in the mesh): infinite mass to the integrators.
-fn hold(sim: &mut Simulation, vertices: &[u32]) {
-    sim.edit(|model, _| {
-        for &v in vertices {
-            if let Some(h) = model.held.get_mut(v as usize) {
-                *h = true;
-                model.inv_mass[v as usize] = 0.0;
-            }
-        }
-    });
 }
 
 /// Whether every number of `pose` is finite.

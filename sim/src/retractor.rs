@@ -111,7 +111,8 @@ impl Retractor {
         0.5 * self.width_m * (1.0 - u * u).max(0.0).sqrt()
     }
 
-    /// Grips the wound's faces in `sim`'s current mesh and state.
+    /// Grips the wound's faces in `sim`'s current mesh and state (not the particles already
+    /// held: clips, the other hand's jaws).
     pub fn grip(&self, sim: &Simulation) -> Grip {
         let model = &sim.model;
         let rest = model.mesh.positions();
@@ -130,7 +131,7 @@ impl Retractor {
         let mut grip = Grip::default();
         for (v, p) in rest.iter().enumerate() {
             let normal = faces[v];
-            if on_bone[v] || normal == Vector3::zeros() {
+            if on_bone[v] || model.held[v] || normal == Vector3::zeros() {
                 continue;
             }
             let Some(st) = self.station(p).filter(|st| st.offset_m.abs() < FACE_BAND_M) else {
@@ -194,26 +195,13 @@ impl Retractor {
         Ok(opening.grip)
     }
 
-    /// Sets the retractor into a running simulation: grips the wound (not the particles
-    /// already held: clips, the other hand's jaws) and holds what it gripped where it is. The
+    /// Sets the retractor into a running simulation: grips the wound ([`Self::grip`]) and
+    /// holds what it gripped where it is. The
     /// [`Opening`] then carries them open over [`RAMP_S`] of the simulation's steps, one
     /// [`Opening::carry`] before each step, and holds them until [`Opening::release`].
     pub fn set(&self, sim: &mut Simulation) -> Opening {
-        let all = self.grip(sim);
-        let free: Vec<usize> = (0..all.vertices.len())
-            .filter(|&i| !sim.model.held[all.vertices[i] as usize])
-            .collect();
-        let grip = Grip {
-            vertices: free.iter().map(|&i| all.vertices[i]).collect(),
-            from_m: free.iter().map(|&i| all.from_m[i]).collect(),
-            to_m: free.iter().map(|&i| all.to_m[i]).collect(),
-        };
-        sim.edit(|model, _| {
-            for &v in &grip.vertices {
-                model.held[v as usize] = true;
-                model.inv_mass[v as usize] = 0.0;
-            }
-        });
+        let grip = self.grip(sim);
+        sim.hold(&grip.vertices);
         sim.wake(grip.vertices.iter().copied());
         let ramp_steps = ((RAMP_S / sim.settings.time_step_s).round() as u32).max(1);
         Opening {
@@ -254,23 +242,9 @@ impl Opening {
         }
     }
 
-    /// Whether it has opened to its width.
-    pub fn is_open(&self) -> bool {
-        self.steps >= self.ramp_steps
-    }
-
     /// Takes the retractor out: the gripped particles are free again, with their masses.
     pub fn release(self, sim: &mut Simulation) {
-        sim.edit(|model, _| {
-            for &v in &self.grip.vertices {
-                let v = v as usize;
-                if v < model.vertex_count() && model.mass[v] > 0.0 {
-                    model.held[v] = false;
-                    model.inv_mass[v] = 1.0 / model.mass[v];
-                }
-            }
-        });
-        sim.wake(self.grip.vertices.iter().copied());
+        sim.let_go(&self.grip.vertices);
     }
 
     /// Whether its particles are in a mesh of `vertex_count` and its numbers finite.

@@ -382,6 +382,34 @@ impl Simulation {
         self.region.focus.extend_from_slice(points);
     }
 
+    /// Holds `vertices` where they are: infinite mass to the integrators (a grasper's jaws,
+    /// a retractor's grip). Ids past the mesh are skipped.
+    pub fn hold(&mut self, vertices: &[u32]) {
+        self.edit(|model, _| {
+            for &v in vertices {
+                if let Some(h) = model.held.get_mut(v as usize) {
+                    *h = true;
+                    model.inv_mass[v as usize] = 0.0;
+                }
+            }
+        });
+    }
+
+    /// Lets held `vertices` go: free again, with their masses, and awake. Ids past the mesh
+    /// and massless particles are skipped.
+    pub fn let_go(&mut self, vertices: &[u32]) {
+        self.edit(|model, _| {
+            for &v in vertices {
+                let v = v as usize;
+                if v < model.vertex_count() && model.mass[v] > 0.0 {
+                    model.held[v] = false;
+                    model.inv_mass[v] = 1.0 / model.mass[v];
+                }
+            }
+        });
+        self.wake(vertices.iter().copied());
+    }
+
     /// Wakes `vertices` for the next localised step (e.g. those a cut touched); nothing
     /// when the simulation is not localised.
     pub fn wake(&mut self, vertices: impl IntoIterator<Item = u32>) {
