@@ -4,9 +4,11 @@
 //! wound closes again.
 //!
 //! The incision it is set along is the span of the cuts on the skin: each cut's tip projected
-//! along the normal where its stroke went in onto the skin's plane there, the two projected
-//! points farthest apart kept (each new point replaces the end it lies farther from when that
-//! makes the span longer). The retractor's `up` is the first stroke's entry normal.
+//! onto the skin's plane where the first stroke went in (along its normal, the retractor's
+//! `up`), the two projected points farthest apart kept (each new point replaces the end it
+//! lies farther from when that makes the span longer). A later stroke may go in inside the
+//! wound (a blade pressed again after a reload enters on a wall, deep down); its own entry
+//! plane would put the span's end down there.
 
 use cutlab_sim::retractor::{Opening, Retractor};
 use cutlab_sim::solver::Simulation;
@@ -42,17 +44,18 @@ pub struct WoundRetraction {
 }
 
 impl WoundRetraction {
-    /// A cut at `tip` of a stroke that went in at `entry` with the outward `normal` there.
+    /// A cut at `tip` of a stroke that went in at `entry` with the outward `normal` there
+    /// (which set the skin's plane if it is the first).
     pub fn note_cut(&mut self, tip: &Point3, entry: &Point3, normal: &Vector3) {
-        let on_skin = tip - normal * (tip - entry).dot(normal);
         let Some(inc) = &mut self.incision else {
             self.incision = Some(Incision {
-                ends_m: [on_skin; 2],
+                ends_m: [tip - normal * (tip - entry).dot(normal); 2],
                 up: *normal,
             });
             return;
         };
         let [a, b] = inc.ends_m;
+        let on_skin = tip - inc.up * (tip - a).dot(&inc.up);
         let span = (b - a).norm();
         if (on_skin - a).norm() > span.max((on_skin - b).norm()) {
             inc.ends_m[1] = on_skin;
@@ -125,5 +128,16 @@ mod tests {
         r.note_cut(&Point3::new(-0.01, 0.0, -0.02), &entry, &up);
         let xs = r.incision.expect("an incision").ends_m.map(|p| p.x);
         assert!(xs.contains(&-0.01) && xs.contains(&0.03), "{xs:?}");
+        // a stroke that went in on a wall inside the wound, 30 mm down (its normal across the
+        // wound) lengthens the span on the skin, not down there
+        let wall = (Point3::new(0.03, 0.0, -0.02), Vector3::y());
+        r.note_cut(&Point3::new(0.05, 0.0, -0.03), &wall.0, &wall.1);
+        let inc = r.incision.expect("an incision");
+        assert!(
+            inc.ends_m.iter().any(|p| (p.x - 0.05).abs() < 1e-12)
+                && inc.ends_m.iter().all(|p| (p.z - 0.01).abs() < 1e-15),
+            "{:?}",
+            inc.ends_m
+        );
     }
 }
